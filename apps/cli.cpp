@@ -1,0 +1,67 @@
+#include "cli.hpp"
+
+#include <algorithm>
+#include <cstdio>
+#include <unistd.h>
+#include <utility>
+#include <vector>
+
+namespace tsah::cli {
+
+namespace {
+std::vector<std::pair<int, CommandSetup>>& registry() {
+  static std::vector<std::pair<int, CommandSetup>> commands;
+  return commands;
+}
+}  // namespace
+
+bool registerCommand(int order, CommandSetup setup) {
+  registry().emplace_back(order, std::move(setup));
+  return true;
+}
+
+void setupAllCommands(CLI::App& app) {
+  auto& commands = registry();
+  std::stable_sort(commands.begin(), commands.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (auto& [order, setup] : commands) setup(app);
+}
+
+bool progressEnabled() {
+  static const bool enabled = ::isatty(STDERR_FILENO) == 1;
+  return enabled;
+}
+
+Progress::Progress(std::string label)
+    : label_(std::move(label)), start_(std::chrono::steady_clock::now()), last_(start_) {}
+
+Progress::~Progress() {
+  if (active_) std::fputs("\r\033[K", stderr);
+}
+
+double Progress::elapsedSeconds() const {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+}
+
+void Progress::update(std::size_t done, std::size_t total) {
+  message(std::to_string(done) + "/" + std::to_string(total));
+}
+
+void Progress::message(const std::string& text) {
+  if (!progressEnabled()) return;
+  const auto now = std::chrono::steady_clock::now();
+  if (active_ && now - last_ < std::chrono::milliseconds(100)) return;
+  last_ = now;
+  active_ = true;
+  std::fprintf(stderr, "\r\033[K%s: %s  %.1fs", label_.c_str(), text.c_str(), elapsedSeconds());
+  std::fflush(stderr);
+}
+
+anim::Animation loadInput(const std::string& input, anim::LoadOptions options) {
+  Progress progress("loading " + input);
+  if (!options.progress)
+    options.progress = [&](std::size_t done, std::size_t total) { progress.update(done, total); };
+  return anim::load(input, options);
+}
+
+}  // namespace tsah::cli

@@ -1,0 +1,54 @@
+#pragma once
+// Shared pieces of the `tsah` subcommands: self-registration, input loading with progress,
+// progress lines on stderr (only on a terminal), and the CLI's error type.
+#include <CLI/CLI.hpp>
+#include <chrono>
+#include <functional>
+#include <stdexcept>
+#include <string>
+
+#include "anim/animation.hpp"
+#include "anim/load.hpp"
+
+namespace tsah::cli {
+
+// A user-facing error: main prints "tsah: <message>" and exits with status 1.
+class UsageError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+using CommandSetup = std::function<void(CLI::App& app)>;
+// Registers a subcommand; `order` sorts the help listing. Returns true (for static initializers).
+bool registerCommand(int order, CommandSetup setup);
+void setupAllCommands(CLI::App& app);
+
+// True when stderr is a terminal: progress output is shown only then.
+bool progressEnabled();
+
+// Prints a rewriting progress line on stderr ("label: done/total  elapsed"), at most ~10 times/s.
+class Progress {
+ public:
+  explicit Progress(std::string label);
+  ~Progress();
+  void update(std::size_t done, std::size_t total);
+  void message(const std::string& text);  // free-form progress text
+  double elapsedSeconds() const;
+
+ private:
+  std::string label_;
+  std::chrono::steady_clock::time_point start_, last_;
+  bool active_ = false;
+};
+
+// Loads any input form (see anim::load) with a progress line for long imports.
+anim::Animation loadInput(const std::string& input, anim::LoadOptions options = {});
+
+}  // namespace tsah::cli
+
+#define TSAH_CLI_CONCAT_(a, b) a##b
+#define TSAH_CLI_CONCAT(a, b) TSAH_CLI_CONCAT_(a, b)
+// Use once per cmd_*.cpp: TSAH_REGISTER_COMMAND(order, [](CLI::App& app) { ... });
+#define TSAH_REGISTER_COMMAND(order, ...)                                   \
+  [[maybe_unused]] static const bool TSAH_CLI_CONCAT(tsahCommand_, __LINE__) = \
+      ::tsah::cli::registerCommand(order, __VA_ARGS__)

@@ -1,0 +1,93 @@
+#pragma once
+// The animation model: constant triangle connectivity plus keyframed vertex positions.
+//
+// Positions are stored once, as float32, one contiguous block of vertexCount*3 floats per keyframe
+// (x0 y0 z0 x1 y1 z1 ...). The topology is stored once for all frames. Positions at any time are the
+// linear interpolation of the two neighbouring keyframes; before the first / after the last keyframe
+// they are clamped.
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace anim {
+
+struct Bounds {
+  std::array<float, 3> min{+3.402823466e38f, +3.402823466e38f, +3.402823466e38f};
+  std::array<float, 3> max{-3.402823466e38f, -3.402823466e38f, -3.402823466e38f};
+
+  bool empty() const { return min[0] > max[0]; }
+  void extend(const float* p) {
+    for (int a = 0; a < 3; ++a) {
+      if (p[a] < min[a]) min[a] = p[a];
+      if (p[a] > max[a]) max[a] = p[a];
+    }
+  }
+  void extend(const Bounds& b) {
+    if (b.empty()) return;
+    extend(b.min.data());
+    extend(b.max.data());
+  }
+};
+
+class Animation {
+ public:
+  Animation() = default;
+  // indices: 3 per triangle, each < vertexCount. positions: times.size() blocks of vertexCount*3.
+  // times: strictly increasing keyframe times. Throws anim::Error when the sizes disagree, an
+  // index is out of range, times are not increasing, or a coordinate is NaN/Inf.
+  Animation(std::vector<uint32_t> indices, uint32_t vertexCount, std::vector<float> positions,
+            std::vector<double> times, std::string name = {});
+
+  const std::string& name() const { return name_; }
+  void setName(std::string name) { name_ = std::move(name); }
+
+  uint32_t vertexCount() const { return vertexCount_; }
+  uint32_t triangleCount() const { return static_cast<uint32_t>(indices_.size() / 3); }
+  uint32_t keyframeCount() const { return static_cast<uint32_t>(times_.size()); }
+  // Triangles whose three vertices span no area in the first keyframe (kept, only counted).
+  uint32_t degenerateTriangleCount() const { return degenerate_; }
+
+  std::span<const uint32_t> indices() const { return indices_; }
+  std::span<const double> times() const { return times_; }
+  std::span<const float> keyframe(uint32_t k) const;
+  std::span<const float> allPositions() const { return positions_; }
+  double startTime() const { return times_.empty() ? 0.0 : times_.front(); }
+  double endTime() const { return times_.empty() ? 0.0 : times_.back(); }
+
+  // Vertex positions at time t (linear interpolation, clamped to the time range).
+  void positionsAt(double t, std::span<float> out) const;
+  std::vector<float> positionsAt(double t) const;
+
+  Bounds keyframeBounds(uint32_t k) const;
+  Bounds boundsAt(double t) const;
+  // Bounds over every keyframe (and so over every interpolated frame).
+  Bounds bounds() const;
+
+  // n times spread uniformly over [startTime, endTime], both ends included (n==1: the start).
+  std::vector<double> uniformTimes(uint32_t n) const;
+  // A new animation with n keyframes at uniformTimes(n): the paper's representative frames
+  // (default 5) or evaluation frames (default 50).
+  Animation resample(uint32_t n) const;
+  // The part of the animation between t0 and t1 (clamped), keyframes at t0, t1 and every original
+  // keyframe strictly between them.
+  Animation segment(double t0, double t1) const;
+
+  // Memory held by the positions and topology, in bytes.
+  std::size_t memoryBytes() const;
+
+ private:
+  // Index of the keyframe at or before t and the blend weight towards the next one.
+  void locate(double t, uint32_t& k, float& alpha) const;
+
+  std::string name_;
+  std::vector<uint32_t> indices_;
+  uint32_t vertexCount_ = 0;
+  std::vector<float> positions_;
+  std::vector<double> times_;
+  uint32_t degenerate_ = 0;
+};
+
+}  // namespace anim

@@ -1,0 +1,30 @@
+#pragma once
+// One entry point for every input form the toolkit accepts.
+#include <functional>
+#include <string>
+
+#include "anim/animation.hpp"
+
+namespace anim {
+
+struct LoadOptions {
+  // Sampling rate for formats that store continuous animation (AFF, skeletal, morph targets);
+  // 0 means the format's own frame rate / frame count.
+  double fps = 0.0;
+  // Which animation clip to bake when a file holds several (name or index); empty: the first.
+  std::string clip;
+  // Called as work progresses (done, total); may be empty. Libraries never print.
+  std::function<void(std::size_t done, std::size_t total)> progress;
+};
+
+// Loads INPUT, which may be:
+//  - a .tanim file (the native binary format),
+//  - a JSON manifest (.json) listing mesh files with optional times,
+//  - a directory of mesh files (sorted by frame number, so 10 comes after 9),
+//  - a printf pattern such as frames/walk_%04d.obj, or a glob such as 'frames/*.obj',
+//  - a single mesh in a format OpenMesh reads (OBJ, PLY, OFF, STL, OM): a one-frame animation,
+//  - a BART .aff scene or an animated model (MD2, glTF, FBX, Collada) where those importers exist.
+// Throws anim::ImportError naming the file and the problem.
+Animation load(const std::string& input, const LoadOptions& options = {});
+
+}  // namespace anim

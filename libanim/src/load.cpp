@@ -1,0 +1,46 @@
+#include "anim/load.hpp"
+
+#include <algorithm>
+#include <filesystem>
+#include <system_error>
+
+#include "anim/error.hpp"
+#include "anim/mesh_sequence.hpp"
+#include "anim/tanim.hpp"
+
+namespace anim {
+
+namespace {
+
+std::string lowerExtension(const std::string& path) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  return ext;
+}
+
+std::string stemName(const std::string& input) {
+  std::filesystem::path p(input);
+  if (p.filename().empty()) p = p.parent_path();
+  return p.stem().string();
+}
+
+}  // namespace
+
+Animation load(const std::string& input, const LoadOptions& options) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (input.empty()) throw ImportError("<input>", "empty input path");
+  if (input.find('%') != std::string::npos || input.find_first_of("*?[") != std::string::npos)
+    return importSequence(listFrames(input), options, stemName(fs::path(input).parent_path().string()));
+  if (fs::is_directory(input, ec)) return importSequence(listFrames(input), options, stemName(input));
+  if (!fs::exists(input, ec)) throw ImportError(input, "no such file or directory");
+  const std::string ext = lowerExtension(input);
+  if (ext == ".tanim") return loadTanim(input);
+  if (ext == ".json") return importSequence(readManifest(input), options, stemName(input));
+  if (isMeshFile(input)) return importSequence(FrameList{{input}, {}}, options, stemName(input));
+  throw ImportError(input, "unknown input format '" + ext +
+                               "' (expected .tanim, .json manifest, a mesh file, a directory, a "
+                               "printf pattern or a glob)");
+}
+
+}  // namespace anim
