@@ -138,7 +138,9 @@ Animation Animation::resample(uint32_t n) const {
   std::vector<float> pos(perFrame * n);
   for (uint32_t i = 0; i < n; ++i)
     positionsAt(t[i], std::span<float>(pos).subspan(i * perFrame, perFrame));
-  return Animation(indices_, vertexCount_, std::move(pos), std::move(t), name_);
+  Animation result(indices_, vertexCount_, std::move(pos), std::move(t), name_);
+  result.camera_ = camera_;
+  return result;
 }
 
 Animation Animation::segment(double t0, double t1) const {
@@ -153,7 +155,9 @@ Animation Animation::segment(double t0, double t1) const {
   std::vector<float> pos(perFrame * t.size());
   for (std::size_t i = 0; i < t.size(); ++i)
     positionsAt(t[i], std::span<float>(pos).subspan(i * perFrame, perFrame));
-  return Animation(indices_, vertexCount_, std::move(pos), std::move(t), name_);
+  Animation result(indices_, vertexCount_, std::move(pos), std::move(t), name_);
+  result.camera_ = camera_;
+  return result;
 }
 
 std::size_t Animation::memoryBytes() const {

@@ -32,6 +32,15 @@ struct Bounds {
   }
 };
 
+// A keyed camera (e.g. a BART scene's camera path): the default view of `tsah trace` for this input.
+struct CameraKey {
+  double time = 0.0;
+  std::array<float, 3> eye{0, 0, 0};
+  std::array<float, 3> lookAt{0, 0, -1};
+  std::array<float, 3> up{0, 1, 0};
+  float fovyDegrees = 45.0f;
+};
+
 class Animation {
  public:
   Animation() = default;
@@ -75,6 +84,10 @@ class Animation {
   // keyframe strictly between them.
   Animation segment(double t0, double t1) const;
 
+  // Optional camera path stored with the scene (sorted by time); empty when the input has none.
+  std::span<const CameraKey> cameraPath() const { return camera_; }
+  void setCameraPath(std::vector<CameraKey> keys) { camera_ = std::move(keys); }
+
   // Memory held by the positions and topology, in bytes.
   std::size_t memoryBytes() const;
 
@@ -88,6 +101,7 @@ class Animation {
   std::vector<float> positions_;
   std::vector<double> times_;
   uint32_t degenerate_ = 0;
+  std::vector<CameraKey> camera_;
 };
 
 }  // namespace anim
