@@ -1,0 +1,70 @@
+// tsah info INPUT [--json]: what an input holds.
+#include <cstdio>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+
+#include "cli.hpp"
+
+namespace {
+
+nlohmann::json describe(const anim::Animation& a, double loadSeconds) {
+  const anim::Bounds b = a.bounds();
+  const anim::Bounds b0 = a.keyframeBounds(0);
+  nlohmann::json j;
+  j["name"] = a.name();
+  j["frames"] = a.keyframeCount();
+  j["triangles"] = a.triangleCount();
+  j["vertices"] = a.vertexCount();
+  j["degenerate_triangles"] = a.degenerateTriangleCount();
+  j["time"] = {a.startTime(), a.endTime()};
+  j["bounds"] = {{b.min[0], b.min[1], b.min[2]}, {b.max[0], b.max[1], b.max[2]}};
+  j["first_frame_bounds"] = {{b0.min[0], b0.min[1], b0.min[2]}, {b0.max[0], b0.max[1], b0.max[2]}};
+  j["camera_keys"] = a.cameraPath().size();
+  j["memory_bytes"] = a.memoryBytes();
+  j["load_s"] = loadSeconds;
+  return j;
+}
+
+void printText(const nlohmann::json& j) {
+  auto triple = [](const nlohmann::json& v) {
+    char buf[96];
+    std::snprintf(buf, sizeof buf, "(%.4g, %.4g, %.4g)", v[0].get<double>(), v[1].get<double>(), v[2].get<double>());
+    return std::string(buf);
+  };
+  std::printf("name        %s\n", j["name"].get<std::string>().c_str());
+  std::printf("keyframes   %u\n", j["frames"].get<unsigned>());
+  std::printf("triangles   %u (%u degenerate)\n", j["triangles"].get<unsigned>(), j["degenerate_triangles"].get<unsigned>());
+  std::printf("vertices    %u\n", j["vertices"].get<unsigned>());
+  std::printf("time        %g .. %g\n", j["time"][0].get<double>(), j["time"][1].get<double>());
+  std::printf("bounds      %s .. %s\n", triple(j["bounds"][0]).c_str(), triple(j["bounds"][1]).c_str());
+  std::printf("frame 0     %s .. %s\n", triple(j["first_frame_bounds"][0]).c_str(), triple(j["first_frame_bounds"][1]).c_str());
+  if (j["camera_keys"].get<std::size_t>() > 0)
+    std::printf("camera      %zu keys\n", j["camera_keys"].get<std::size_t>());
+  std::printf("memory      %.1f MiB\n", double(j["memory_bytes"].get<std::size_t>()) / (1024.0 * 1024.0));
+  std::printf("loaded in   %.3f s\n", j["load_s"].get<double>());
+}
+
+}  // namespace
+
+TSAH_REGISTER_COMMAND(10, [](CLI::App& app) {
+  auto* sub = app.add_subcommand("info", "Print what an input holds (animation or .tbvh file)");
+  struct Options {
+    std::string input;
+    bool json = false;
+  };
+  auto opt = std::make_shared<Options>();
+  sub->add_option("INPUT", opt->input,
+                  "Animation (mesh file, directory, 'pattern_%04d.obj', quoted glob, .json manifest, "
+                  ".tanim) or a .tbvh tree")
+      ->required();
+  sub->add_flag("--json", opt->json, "Print one JSON object");
+  sub->callback([opt] {
+    tsah::cli::Progress timer("info");
+    const anim::Animation a = tsah::cli::loadInput(opt->input);
+    const nlohmann::json j = describe(a, timer.elapsedSeconds());
+    if (opt->json)
+      std::printf("%s\n", j.dump().c_str());
+    else
+      printText(j);
+  });
+});

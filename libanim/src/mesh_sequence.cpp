@@ -1,0 +1,379 @@
+#include "anim/mesh_sequence.hpp"
+
+#include <OpenMesh/Core/IO/MeshIO.hh>
+#include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>
+#include <OpenMesh/Core/System/omstream.hh>
+
+#include <algorithm>
+#include <atomic>
+#include <cctype>
+#include <charconv>
+#include <cmath>
+#include <filesystem>
+#include <glob.h>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <regex>
+#include <sstream>
+#include <thread>
+
+#include "anim/binary_io.hpp"
+#include "anim/error.hpp"
+
+namespace anim {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string lower(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  return s;
+}
+
+// Fans a polygon (n >= 3 vertex indices) into triangles.
+void fanTriangulate(std::span<const uint32_t> polygon, std::vector<uint32_t>& out) {
+  for (std::size_t i = 1; i + 1 < polygon.size(); ++i) {
+    out.push_back(polygon[0]);
+    out.push_back(polygon[i]);
+    out.push_back(polygon[i + 1]);
+  }
+}
+
+// OBJ is the format of every real sequence, so it gets a dedicated reader: exact vertex and face
+// order (no merging or dropping of non-manifold faces as a half-edge mesh would do), and fast.
+MeshFrame readObj(const std::string& path) {
+  const std::vector<uint8_t> bytes = readFile(path);
+  const char* p = reinterpret_cast<const char*>(bytes.data());
+  const char* end = p + bytes.size();
+  MeshFrame mesh;
+  std::vector<uint32_t> polygon;
+  std::size_t line = 1;
+  auto fail = [&](const std::string& what) -> void {
+    throw ImportError(path, "line " + std::to_string(line) + ": " + what);
+  };
+  auto skipSpaces = [&] {
+    while (p < end && (*p == ' ' || *p == '\t' || *p == '\r')) ++p;
+  };
+  auto skipLine = [&] {
+    while (p < end && *p != '\n') ++p;
+  };
+  while (p < end) {
+    skipSpaces();
+    if (p < end && *p == 'v' && p + 1 < end && (p[1] == ' ' || p[1] == '\t')) {
+      p += 2;
+      for (int a = 0; a < 3; ++a) {
+        skipSpaces();
+        float value = 0.0f;
+        auto [next, ec] = std::from_chars(p, end, value);
+        if (ec != std::errc()) fail("vertex needs three numeric coordinates");
+        mesh.positions.push_back(value);
+        p = next;
+      }
+    } else if (p < end && *p == 'f' && p + 1 < end && (p[1] == ' ' || p[1] == '\t')) {
+      p += 2;
+      polygon.clear();
+      const long vertexCount = long(mesh.positions.size() / 3);
+      for (;;) {
+        skipSpaces();
+        if (p >= end || *p == '\n' || *p == '#') break;
+        long index = 0;
+        auto [next, ec] = std::from_chars(p, end, index);
+        if (ec != std::errc()) fail("face entry is not a vertex index");
+        p = next;
+        while (p < end && *p == '/') {  // skip /vt/vn
+          ++p;
+          long ignored;
+          auto [n2, ec2] = std::from_chars(p, end, ignored);
+          if (ec2 == std::errc()) p = n2;
+        }
+        if (index < 0) index = vertexCount + index + 1;  // relative index
+        if (index < 1 || index > vertexCount)
+          fail("face references vertex " + std::to_string(index) + " but " +
+               std::to_string(vertexCount) + " are defined");
+        polygon.push_back(uint32_t(index - 1));
+      }
+      if (polygon.size() < 3) fail("face with fewer than 3 vertices");
+      ++mesh.faceCount;
+      if (polygon.size() > 3) ++mesh.polygonsTriangulated;
+      fanTriangulate(polygon, mesh.indices);
+    }
+    skipLine();
+    if (p < end) ++p;
+    ++line;
+  }
+  if (mesh.positions.empty()) throw ImportError(path, "no vertices");
+  return mesh;
+}
+
+// Everything else through OpenMesh. Its messages (e.g. dropped non-manifold faces) are captured:
+// a face OpenMesh could not add would silently change the topology, so that is an error.
+MeshFrame readWithOpenMesh(const std::string& path) {
+  using Mesh = OpenMesh::PolyMesh_ArrayKernelT<>;
+  Mesh mesh;
+  std::ostringstream messages;
+  static std::mutex openMeshStreams;  // omerr/omlog are global
+  bool ok;
+  {
+    std::lock_guard lock(openMeshStreams);
+    omerr().connect(messages);
+    omlog().disable();
+    omout().disable();
+    OpenMesh::IO::Options options;
+    ok = OpenMesh::IO::read_mesh(mesh, path, options);
+    omerr().disconnect(messages);
+  }
+  if (!ok) throw ImportError(path, "OpenMesh cannot read this file");
+  if (messages.str().find("complex") != std::string::npos)
+    throw ImportError(path, "has non-manifold faces that the mesh reader drops; convert it to OBJ");
+  MeshFrame out;
+  out.positions.reserve(mesh.n_vertices() * 3);
+  for (auto v : mesh.vertices()) {
+    const auto& q = mesh.point(v);
+    out.positions.insert(out.positions.end(), {q[0], q[1], q[2]});
+  }
+  std::vector<uint32_t> polygon;
+  for (auto f : mesh.faces()) {
+    polygon.clear();
+    for (auto v : mesh.fv_range(f)) polygon.push_back(uint32_t(v.idx()));
+    ++out.faceCount;
+    if (polygon.size() > 3) ++out.polygonsTriangulated;
+    fanTriangulate(polygon, out.indices);
+  }
+  if (out.positions.empty()) throw ImportError(path, "no vertices");
+  return out;
+}
+
+bool isHiddenOrBackup(const fs::path& p) {
+  const std::string name = p.filename().string();
+  return name.empty() || name[0] == '.' || name.back() == '~';
+}
+
+// printf pattern -> regex over file names, e.g. walk_%04d.obj -> walk_(\d{4,}).obj
+std::regex patternToRegex(const std::string& filePattern, const std::string& spec) {
+  std::string re;
+  bool sawNumber = false;
+  for (std::size_t i = 0; i < filePattern.size(); ++i) {
+    const char c = filePattern[i];
+    if (c == '%') {
+      if (i + 1 < filePattern.size() && filePattern[i + 1] == '%') {
+        re += "%";
+        ++i;
+        continue;
+      }
+      std::size_t j = i + 1;
+      bool zeroPad = false;
+      if (j < filePattern.size() && filePattern[j] == '0') zeroPad = true;
+      int width = 0;
+      while (j < filePattern.size() && std::isdigit(static_cast<unsigned char>(filePattern[j])))
+        width = width * 10 + (filePattern[j++] - '0');
+      if (j >= filePattern.size() || filePattern[j] != 'd' || sawNumber)
+        throw ImportError(spec, "frame pattern must contain exactly one %d-style number (e.g. %04d)");
+      re += zeroPad && width > 0 ? "(\\d{" + std::to_string(width) + ",})" : "(\\d+)";
+      sawNumber = true;
+      i = j;
+    } else if (std::string("\\^$.|?*+()[]{}").find(c) != std::string::npos) {
+      re += '\\';
+      re += c;
+    } else {
+      re += c;
+    }
+  }
+  if (!sawNumber) throw ImportError(spec, "frame pattern has no %d");
+  return std::regex(re);
+}
+
+}  // namespace
+
+bool isMeshFile(const std::string& path) {
+  const std::string ext = lower(fs::path(path).extension().string());
+  return ext == ".obj" || ext == ".ply" || ext == ".off" || ext == ".stl" || ext == ".om";
+}
+
+MeshFrame readMesh(const std::string& path) {
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) throw ImportError(path, "no such file");
+  if (lower(fs::path(path).extension().string()) == ".obj") return readObj(path);
+  return readWithOpenMesh(path);
+}
+
+bool naturalLess(const std::string& a, const std::string& b) {
+  std::size_t i = 0, j = 0;
+  while (i < a.size() && j < b.size()) {
+    const bool da = std::isdigit(static_cast<unsigned char>(a[i]));
+    const bool db = std::isdigit(static_cast<unsigned char>(b[j]));
+    if (da && db) {
+      std::size_t ie = i, je = j;
+      while (ie < a.size() && std::isdigit(static_cast<unsigned char>(a[ie]))) ++ie;
+      while (je < b.size() && std::isdigit(static_cast<unsigned char>(b[je]))) ++je;
+      // Compare by value: strip leading zeros, then longer means larger.
+      std::size_t is = i, js = j;
+      while (is + 1 < ie && a[is] == '0') ++is;
+      while (js + 1 < je && b[js] == '0') ++js;
+      if (ie - is != je - js) return ie - is < je - js;
+      const int c = a.compare(is, ie - is, b, js, je - js);
+      if (c != 0) return c < 0;
+      i = ie;
+      j = je;
+    } else {
+      if (a[i] != b[j]) return a[i] < b[j];
+      ++i;
+      ++j;
+    }
+  }
+  return a.size() - i < b.size() - j;
+}
+
+FrameList listFrames(const std::string& spec) {
+  FrameList list;
+  std::error_code ec;
+  if (spec.find('%') != std::string::npos) {
+    const fs::path p(spec);
+    const fs::path dir = p.has_parent_path() ? p.parent_path() : fs::path(".");
+    if (!fs::is_directory(dir, ec)) throw ImportError(spec, "folder " + dir.string() + " does not exist");
+    const std::regex re = patternToRegex(p.filename().string(), spec);
+    std::vector<std::pair<unsigned long long, std::string>> numbered;
+    for (const auto& entry : fs::directory_iterator(dir, ec)) {
+      std::smatch m;
+      const std::string name = entry.path().filename().string();
+      if (entry.is_regular_file() && std::regex_match(name, m, re))
+        numbered.emplace_back(std::stoull(m[1].str()), entry.path().string());
+    }
+    std::sort(numbered.begin(), numbered.end());
+    for (auto& [n, file] : numbered) list.files.push_back(std::move(file));
+  } else if (spec.find_first_of("*?[") != std::string::npos) {
+    glob_t g{};
+    const int rc = ::glob(spec.c_str(), 0, nullptr, &g);
+    if (rc == 0)
+      for (std::size_t i = 0; i < g.gl_pathc; ++i)
+        if (fs::is_regular_file(g.gl_pathv[i], ec) && !isHiddenOrBackup(g.gl_pathv[i]))
+          list.files.emplace_back(g.gl_pathv[i]);
+    ::globfree(&g);
+    std::sort(list.files.begin(), list.files.end(), naturalLess);
+  } else if (fs::is_directory(spec, ec)) {
+    for (const auto& entry : fs::directory_iterator(spec, ec))
+      if (entry.is_regular_file() && isMeshFile(entry.path().string()) && !isHiddenOrBackup(entry.path()))
+        list.files.push_back(entry.path().string());
+    std::sort(list.files.begin(), list.files.end(), naturalLess);
+  } else {
+    throw ImportError(spec, "not a frame pattern, glob or directory");
+  }
+  if (list.files.empty()) throw ImportError(spec, "matches no mesh files");
+  return list;
+}
+
+FrameList readManifest(const std::string& path) {
+  const std::vector<uint8_t> bytes = readFile(path, std::size_t(1) << 28);
+  nlohmann::json doc;
+  try {
+    doc = nlohmann::json::parse(bytes.begin(), bytes.end());
+  } catch (const nlohmann::json::parse_error& e) {
+    throw ImportError(path, std::string("invalid JSON: ") + e.what());
+  }
+  const nlohmann::json* frames = &doc;
+  if (doc.is_object()) {
+    if (!doc.contains("frames")) throw ImportError(path, "manifest object has no \"frames\" array");
+    frames = &doc["frames"];
+  }
+  if (!frames->is_array() || frames->empty())
+    throw ImportError(path, "manifest \"frames\" must be a non-empty array");
+  const fs::path base = fs::path(path).parent_path();
+  FrameList list;
+  std::size_t withTime = 0;
+  for (std::size_t i = 0; i < frames->size(); ++i) {
+    const auto& f = (*frames)[i];
+    std::string file;
+    if (f.is_string()) {
+      file = f.get<std::string>();
+    } else if (f.is_object() && f.contains("file") && f["file"].is_string()) {
+      file = f["file"].get<std::string>();
+      if (f.contains("time")) {
+        if (!f["time"].is_number()) throw ImportError(path, "frame " + std::to_string(i) + ": \"time\" is not a number");
+        list.times.push_back(f["time"].get<double>());
+        ++withTime;
+      }
+    } else {
+      throw ImportError(path, "frame " + std::to_string(i) + " is neither a file name nor {\"file\": ...}");
+    }
+    const fs::path fp(file);
+    list.files.push_back(fp.is_absolute() ? fp.string() : (base / fp).string());
+  }
+  if (withTime != 0 && withTime != list.files.size())
+    throw ImportError(path, "times given for " + std::to_string(withTime) + " of " +
+                                std::to_string(list.files.size()) + " frames: give all or none");
+  return list;
+}
+
+Animation importSequence(const FrameList& frames, const LoadOptions& options, std::string name) {
+  const std::size_t n = frames.files.size();
+  if (n == 0) throw Error(name + ": no frames");
+  if (!frames.times.empty() && frames.times.size() != n) throw Error(name + ": times do not match frames");
+
+  const MeshFrame first = readMesh(frames.files[0]);
+  const std::size_t perFrame = first.positions.size();
+  std::vector<float> positions(perFrame * n);
+  std::copy(first.positions.begin(), first.positions.end(), positions.begin());
+
+  // Read the other frames in parallel; each checks its topology against the first frame.
+  std::atomic<std::size_t> next{1}, done{1};
+  std::mutex errorMutex;
+  std::exception_ptr firstError;
+  std::size_t firstErrorFrame = n;
+  auto worker = [&] {
+    for (std::size_t i = next++; i < n; i = next++) {
+      try {
+        MeshFrame m = readMesh(frames.files[i]);
+        if (m.positions.size() != perFrame)
+          throw ImportError(frames.files[i], "has " + std::to_string(m.positions.size() / 3) +
+                                                 " vertices but the first frame (" + frames.files[0] +
+                                                 ") has " + std::to_string(perFrame / 3));
+        if (m.indices != first.indices) {
+          if (m.indices.size() != first.indices.size())
+            throw ImportError(frames.files[i], "has " + std::to_string(m.indices.size() / 3) +
+                                                   " triangles but the first frame (" + frames.files[0] +
+                                                   ") has " + std::to_string(first.indices.size() / 3));
+          const auto mismatch = std::mismatch(m.indices.begin(), m.indices.end(), first.indices.begin());
+          throw ImportError(frames.files[i],
+                            "triangle " + std::to_string((mismatch.first - m.indices.begin()) / 3) +
+                                " differs from the first frame (" + frames.files[0] + ")");
+        }
+        std::copy(m.positions.begin(), m.positions.end(), positions.begin() + std::ptrdiff_t(i * perFrame));
+      } catch (...) {
+        std::lock_guard lock(errorMutex);
+        if (i < firstErrorFrame) {  // report the first differing file, whatever the thread timing
+          firstErrorFrame = i;
+          firstError = std::current_exception();
+        }
+      }
+      const std::size_t d = ++done;
+      if (options.progress) {
+        std::lock_guard lock(errorMutex);
+        options.progress(d, n);
+      }
+    }
+  };
+  const unsigned threads = std::max(1u, std::min<unsigned>(std::thread::hardware_concurrency(), unsigned(n - 1)));
+  std::vector<std::thread> pool;
+  for (unsigned t = 1; t < threads; ++t) pool.emplace_back(worker);
+  worker();
+  for (auto& t : pool) t.join();
+  if (firstError) std::rethrow_exception(firstError);
+
+  std::vector<double> times = frames.times;
+  if (times.empty())
+    for (std::size_t i = 0; i < n; ++i) times.push_back(double(i));
+  for (std::size_t i = 1; i < times.size(); ++i)
+    if (!(times[i] > times[i - 1]))
+      throw ImportError(frames.files[i], "frame time " + std::to_string(times[i]) +
+                                             " is not after the previous frame's");
+  if (first.indices.empty()) throw ImportError(frames.files[0], "has no faces");
+  // The Animation constructor checks NaN/Inf; name the frame file in that message.
+  for (std::size_t i = 0; i < positions.size(); ++i)
+    if (!std::isfinite(positions[i]))
+      throw ImportError(frames.files[i / perFrame],
+                        "vertex " + std::to_string((i % perFrame) / 3) + " has a NaN or infinite coordinate");
+  return Animation(first.indices, uint32_t(perFrame / 3), std::move(positions), std::move(times),
+                   std::move(name));
+}
+
+}  // namespace anim

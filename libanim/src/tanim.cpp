@@ -1,0 +1,155 @@
+#include "anim/tanim.hpp"
+
+#include <array>
+#include <cmath>
+#include <cstring>
+
+#include "anim/binary_io.hpp"
+#include "anim/error.hpp"
+
+namespace anim {
+
+// Layout: see docs/tanim-format.md. All integers little-endian.
+namespace {
+
+constexpr std::array<char, 8> kMagic{'T', 'S', 'A', 'H', 'A', 'N', 'I', 'M'};
+constexpr uint32_t kVersion = 1;
+constexpr std::size_t kMaxName = 4096;
+constexpr std::size_t kMaxCameraKeys = 1u << 20;
+
+struct Header {
+  std::array<char, 8> magic;
+  uint32_t version;
+  uint32_t flags;  // reserved, 0
+  uint32_t vertexCount;
+  uint32_t triangleCount;
+  uint32_t keyframeCount;
+  uint32_t cameraKeyCount;
+  uint32_t nameBytes;
+  uint32_t reserved;
+  uint64_t payloadBytes;
+  uint32_t payloadCrc;
+  uint32_t reserved2[2];
+  uint32_t headerCrc;  // CRC-32 of the 60 bytes before it
+};
+static_assert(sizeof(Header) == 64);
+
+struct CameraRecord {
+  double time;
+  float eye[3], lookAt[3], up[3];
+  float fovyDegrees;
+};
+static_assert(sizeof(CameraRecord) == 48);
+
+constexpr std::size_t padTo8(std::size_t n) { return (n + 7) & ~std::size_t(7); }
+
+// Payload size for the given counts, or 0 when it would overflow 64 bits.
+uint64_t payloadSize(const Header& h) {
+  uint64_t positionBytes;
+  if (__builtin_mul_overflow(uint64_t(h.keyframeCount) * h.vertexCount, uint64_t(12), &positionBytes)) return 0;
+  uint64_t size = padTo8(h.nameBytes) + uint64_t(h.keyframeCount) * 8 + uint64_t(h.triangleCount) * 12 +
+                  uint64_t(h.cameraKeyCount) * 48;
+  if (__builtin_add_overflow(size, positionBytes, &size)) return 0;
+  return size;
+}
+
+}  // namespace
+
+std::vector<uint8_t> encodeTanim(const Animation& a) {
+  const std::string& name = a.name().size() > kMaxName ? a.name().substr(0, kMaxName) : a.name();
+  Header h{};
+  h.magic = kMagic;
+  h.version = kVersion;
+  h.vertexCount = a.vertexCount();
+  h.triangleCount = a.triangleCount();
+  h.keyframeCount = a.keyframeCount();
+  h.cameraKeyCount = static_cast<uint32_t>(a.cameraPath().size());
+  h.nameBytes = static_cast<uint32_t>(name.size());
+  h.payloadBytes = payloadSize(h);
+
+  ByteWriter payload;
+  payload.append(name.data(), name.size());
+  const uint64_t zero = 0;
+  payload.append(&zero, padTo8(name.size()) - name.size());
+  payload.writeArray(a.times());
+  payload.writeArray(a.indices());
+  payload.writeArray(a.allPositions());
+  for (const CameraKey& k : a.cameraPath()) {
+    CameraRecord r{};
+    r.time = k.time;
+    std::memcpy(r.eye, k.eye.data(), sizeof r.eye);
+    std::memcpy(r.lookAt, k.lookAt.data(), sizeof r.lookAt);
+    std::memcpy(r.up, k.up.data(), sizeof r.up);
+    r.fovyDegrees = k.fovyDegrees;
+    payload.write(r);
+  }
+  h.payloadCrc = crc32(payload.buffer().data(), payload.buffer().size());
+  h.headerCrc = crc32(&h, offsetof(Header, headerCrc));
+
+  ByteWriter out;
+  out.write(h);
+  out.append(payload.buffer().data(), payload.buffer().size());
+  return std::move(out.buffer());
+}
+
+Animation decodeTanim(std::span<const uint8_t> bytes, const std::string& file) {
+  ByteReader in(bytes, file);
+  const Header h = in.read<Header>("header");
+  if (h.magic != kMagic) throw ImportError(file, "not a .tanim file (bad magic)");
+  if (crc32(&h, offsetof(Header, headerCrc)) != h.headerCrc)
+    throw ImportError(file, "header checksum mismatch (corrupt file)");
+  if (h.version != kVersion)
+    throw ImportError(file, "unsupported .tanim version " + std::to_string(h.version) +
+                                " (this build reads version " + std::to_string(kVersion) + ")");
+  if (h.keyframeCount == 0) throw ImportError(file, "no keyframes");
+  if (h.nameBytes > kMaxName) throw ImportError(file, "name length " + std::to_string(h.nameBytes) + " is absurd");
+  if (h.cameraKeyCount > kMaxCameraKeys)
+    throw ImportError(file, "camera key count " + std::to_string(h.cameraKeyCount) + " is absurd");
+  const uint64_t expected = payloadSize(h);
+  if (expected == 0 || expected != h.payloadBytes)
+    throw ImportError(file, "header counts (" + std::to_string(h.vertexCount) + " vertices, " +
+                                std::to_string(h.triangleCount) + " triangles, " +
+                                std::to_string(h.keyframeCount) + " keyframes) do not match the payload size");
+  if (h.payloadBytes != in.remaining())
+    throw ImportError(file, "file holds " + std::to_string(in.remaining()) + " payload bytes, header says " +
+                                std::to_string(h.payloadBytes) + (h.payloadBytes > in.remaining() ? " (truncated)" : ""));
+  const auto payload = bytes.subspan(in.offset());
+  if (crc32(payload.data(), payload.size()) != h.payloadCrc)
+    throw ImportError(file, "payload checksum mismatch (corrupt file)");
+
+  const auto nameBytes = in.bytes(padTo8(h.nameBytes), "name");
+  std::string name(reinterpret_cast<const char*>(nameBytes.data()), h.nameBytes);
+  std::vector<double> times;
+  std::vector<uint32_t> indices;
+  std::vector<float> positions;
+  in.readArray(times, h.keyframeCount, "keyframe times");
+  in.readArray(indices, std::size_t(h.triangleCount) * 3, "triangle indices");
+  in.readArray(positions, std::size_t(h.keyframeCount) * h.vertexCount * 3, "positions");
+  std::vector<CameraKey> camera(h.cameraKeyCount);
+  for (auto& k : camera) {
+    const auto r = in.read<CameraRecord>("camera key");
+    k.time = r.time;
+    std::memcpy(k.eye.data(), r.eye, sizeof r.eye);
+    std::memcpy(k.lookAt.data(), r.lookAt, sizeof r.lookAt);
+    std::memcpy(k.up.data(), r.up, sizeof r.up);
+    k.fovyDegrees = r.fovyDegrees;
+    if (!std::isfinite(k.time) || !std::isfinite(k.fovyDegrees))
+      throw ImportError(file, "camera key has a non-finite value");
+  }
+  try {
+    Animation a(std::move(indices), h.vertexCount, std::move(positions), std::move(times), std::move(name));
+    a.setCameraPath(std::move(camera));
+    return a;
+  } catch (const ImportError& e) {
+    // Re-label consistency errors (index range, times, NaN) with this file's name.
+    throw ImportError(file, std::string("invalid contents: ") + e.what());
+  }
+}
+
+void saveTanim(const Animation& animation, const std::string& path) {
+  writeFileAtomically(path, encodeTanim(animation));
+}
+
+Animation loadTanim(const std::string& path) { return decodeTanim(readFile(path), path); }
+
+}  // namespace anim
