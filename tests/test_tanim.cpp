@@ -1,0 +1,103 @@
+#include <gtest/gtest.h>
+
+#include <cstring>
+
+#include "anim/binary_io.hpp"
+#include "anim/error.hpp"
+#include "anim/generators.hpp"
+#include "anim/tanim.hpp"
+#include "test_support.hpp"
+
+namespace {
+
+anim::Animation sample() {
+  anim::GeneratorOptions o;
+  o.triangles = 300;
+  o.frames = 4;
+  o.seed = 7;
+  anim::Animation a = anim::generate(anim::GeneratorKind::Explode, o);
+  anim::CameraKey k;
+  k.time = 1.5;
+  k.eye = {1, 2, 3};
+  k.fovyDegrees = 50;
+  a.setCameraPath({k});
+  return a;
+}
+
+void expectSame(const anim::Animation& a, const anim::Animation& b) {
+  EXPECT_EQ(a.name(), b.name());
+  ASSERT_EQ(a.vertexCount(), b.vertexCount());
+  ASSERT_EQ(a.triangleCount(), b.triangleCount());
+  ASSERT_EQ(a.keyframeCount(), b.keyframeCount());
+  EXPECT_TRUE(std::equal(a.indices().begin(), a.indices().end(), b.indices().begin()));
+  EXPECT_TRUE(std::equal(a.times().begin(), a.times().end(), b.times().begin()));
+  EXPECT_EQ(0, std::memcmp(a.allPositions().data(), b.allPositions().data(), a.allPositions().size_bytes()));
+  ASSERT_EQ(a.cameraPath().size(), b.cameraPath().size());
+  for (std::size_t i = 0; i < a.cameraPath().size(); ++i) {
+    EXPECT_EQ(a.cameraPath()[i].time, b.cameraPath()[i].time);
+    EXPECT_EQ(a.cameraPath()[i].eye, b.cameraPath()[i].eye);
+    EXPECT_EQ(a.cameraPath()[i].fovyDegrees, b.cameraPath()[i].fovyDegrees);
+  }
+}
+
+TEST(Crc32, KnownValue) {
+  EXPECT_EQ(anim::crc32("123456789", 9), 0xCBF43926u);
+  // Continuing a CRC over two pieces equals the CRC of the whole.
+  EXPECT_EQ(anim::crc32("6789", 4, anim::crc32("12345", 5)), 0xCBF43926u);
+}
+
+TEST(Tanim, RoundTripInMemoryAndOnDisk) {
+  const auto a = sample();
+  const auto bytes = anim::encodeTanim(a);
+  expectSame(a, anim::decodeTanim(bytes, "mem"));
+  const auto path = (tsah::test::scratchDir() / "a.tanim").string();
+  anim::saveTanim(a, path);
+  expectSame(a, anim::loadTanim(path));
+  // The atomic writer leaves no temporary behind.
+  std::size_t files = 0;
+  for ([[maybe_unused]] auto& e : std::filesystem::directory_iterator(std::filesystem::path(path).parent_path())) ++files;
+  EXPECT_EQ(files, 1u);
+}
+
+TEST(Tanim, EveryTruncationIsRejected) {
+  const auto bytes = anim::encodeTanim(sample());
+  for (std::size_t n = 0; n < bytes.size(); n += 1 + n / 16) {
+    std::vector<uint8_t> cut(bytes.begin(), bytes.begin() + std::ptrdiff_t(n));
+    EXPECT_THROW(anim::decodeTanim(cut, "cut.tanim"), anim::ImportError) << "length " << n;
+  }
+}
+
+TEST(Tanim, CorruptionIsDetected) {
+  const auto bytes = anim::encodeTanim(sample());
+  uint64_t state = 12345;
+  for (int trial = 0; trial < 2000; ++trial) {
+    auto copy = bytes;
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    const std::size_t at = (state >> 33) % copy.size();
+    copy[at] ^= uint8_t(1u << ((state >> 20) % 8));
+    EXPECT_THROW(anim::decodeTanim(copy, "flip.tanim"), anim::ImportError) << "byte " << at;
+  }
+}
+
+TEST(Tanim, HostileCountsWithValidChecksumsAreRejectedWithoutHugeAllocation) {
+  auto bytes = anim::encodeTanim(sample());
+  // Patch the vertex count to an absurd value and recompute the header CRC, as an attacker would.
+  uint32_t absurd = 0xfffffff0u;
+  std::memcpy(bytes.data() + 16, &absurd, 4);
+  const uint32_t crc = anim::crc32(bytes.data(), 60);
+  std::memcpy(bytes.data() + 60, &crc, 4);
+  try {
+    anim::decodeTanim(bytes, "hostile.tanim");
+    FAIL();
+  } catch (const anim::ImportError& e) {
+    EXPECT_NE(std::string(e.what()).find("hostile.tanim"), std::string::npos);
+  }
+}
+
+TEST(Tanim, MissingFileAndWrongMagic) {
+  EXPECT_THROW(anim::loadTanim("/nonexistent/x.tanim"), anim::ImportError);
+  std::vector<uint8_t> junk(200, 'x');
+  EXPECT_THROW(anim::decodeTanim(junk, "junk.tanim"), anim::ImportError);
+}
+
+}  // namespace
