@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <system_error>
 
+#include "anim/bart.hpp"
 #include "anim/error.hpp"
 #include "anim/mesh_sequence.hpp"
 #include "anim/tanim.hpp"
@@ -36,6 +37,13 @@ Animation load(const std::string& input, const LoadOptions& options) {
   if (!fs::exists(input, ec)) throw ImportError(input, "no such file or directory");
   const std::string ext = lowerExtension(input);
   if (ext == ".tanim") return loadTanim(input);
+  if (ext == ".aff") {
+    BartOptions bart;
+    bart.fps = options.fps;
+    bart.warning = options.warning;
+    bart.progress = options.progress;
+    return importBart(input, bart);
+  }
   if (ext == ".json") return importSequence(readManifest(input), options, stemName(input));
   if (isMeshFile(input)) return importSequence(FrameList{{input}, {}}, options, stemName(input));
   throw ImportError(input, "unknown input format '" + ext +

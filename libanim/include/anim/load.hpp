@@ -15,6 +15,8 @@ struct LoadOptions {
   std::string clip;
   // Called as work progresses (done, total); may be empty. Libraries never print.
   std::function<void(std::size_t done, std::size_t total)> progress;
+  // Called with each non-fatal finding of an importer (skipped materials, ...); may be empty.
+  std::function<void(const std::string&)> warning;
 };
 
 // Loads INPUT, which may be:
