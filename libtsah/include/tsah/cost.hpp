@@ -1,0 +1,62 @@
+#pragma once
+// The paper's cost model (Section 4): the per-frame SAH cost of a tree normalized by the root area
+// (Eq. 1) and the temporal SAH over several frames (Eq. 2-4).
+//
+//   C_i     = (cT * sum_inner S_N(i) + cI * sum_leaves j_N * S_N(i)) / S_i
+//   C~^k    = sum_i C_i^(k+1) / sum_i C_i^k        (k = 0: the plain average)
+//
+// A frame whose root box has zero area (every triangle collapsed to one point or line) has no
+// meaningful area ratios; its cost is defined as the limit of a uniformly shrinking scene, where
+// every ray that reaches the root visits every node: cT * inner + cI * primitives.
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "tsah/bvh.hpp"
+
+namespace tsah {
+
+struct CostModel {
+  float ct = 3.0f;  // cost of traversing an interior node
+  float ci = 2.0f;  // cost of intersecting one triangle
+};
+
+// Eq. 1 for one frame of the boxes stored in the tree (frame < bvh.frameCount).
+double frameCost(const Bvh& bvh, uint32_t frame, const CostModel& model = {});
+// Eq. 1 for every frame stored in the tree.
+std::vector<double> frameCosts(const Bvh& bvh, const CostModel& model = {});
+
+// Eq. 3: the T-SAH cost of per-frame costs with exponent k (k >= 0). 0 for no frames.
+double temporalCost(std::span<const double> frameCosts, int k);
+// The frame weights of Eq. 2, w_i = C_i^k, scaled so that they sum to 1 (all equal for k = 0 or
+// when every cost is 0).
+std::vector<double> temporalWeights(std::span<const double> frameCosts, int k);
+
+// The cost of one frame of the animation for a fixed tree topology: refits the tree to that frame's
+// primitive boxes (in a buffer owned by the evaluator) and evaluates Eq. 1. Works for any frame,
+// not only the representative ones stored in the tree. Allocates only on construction; one
+// evaluator per thread.
+class FrameCostEvaluator {
+ public:
+  explicit FrameCostEvaluator(const Bvh& bvh, CostModel model = {});
+
+  // primBoxes: one box per primitive (bvh.primCount() of them), indexed by primitive id.
+  double cost(std::span<const Aabb> primBoxes);
+  // The node boxes of the last cost() call, indexed by node.
+  std::span<const Aabb> nodeBoxes() const { return boxes_; }
+
+ private:
+  struct Step {
+    uint32_t node;
+    uint32_t a, b;       // children, or the primitive range [a, a+b) for a leaf
+    bool leaf;
+  };
+  const Bvh* bvh_;
+  CostModel model_;
+  std::vector<Step> postOrder_;  // children before parents
+  std::vector<Aabb> boxes_;
+  uint32_t innerCount_ = 0;
+  uint64_t primTotal_ = 0;
+};
+
+}  // namespace tsah
