@@ -2,6 +2,7 @@
 #include <cstdio>
 
 #include "anim/generators.hpp"
+#include "anim/obj_writer.hpp"
 #include "anim/tanim.hpp"
 #include "cli.hpp"
 
@@ -17,7 +18,9 @@ TSAH_REGISTER_COMMAND(20, [](CLI::App& app) {
                                      "swap (two groups pass through each other)")
       ->required()
       ->check(CLI::IsMember({"explode", "wave", "swap"}));
-  sub->add_option("-o,--output", opt->output, "Output .tanim file")->required();
+  sub->add_option("-o,--output", opt->output,
+                  "Output: a .tanim file, or an OBJ sequence pattern such as frames/f_%04d.obj")
+      ->required();
   sub->add_option("--triangles", opt->triangles, "Approximate triangle count")->capture_default_str();
   sub->add_option("--frames", opt->frames, "Keyframes")->capture_default_str();
   sub->add_option("--seed", opt->seed, "Random seed")->capture_default_str();
@@ -27,7 +30,10 @@ TSAH_REGISTER_COMMAND(20, [](CLI::App& app) {
     g.frames = opt->frames;
     g.seed = opt->seed;
     const anim::Animation a = anim::generate(anim::parseGeneratorKind(opt->kind), g);
-    anim::saveTanim(a, opt->output);
+    if (opt->output.find('%') != std::string::npos)
+      anim::saveObjSequence(a, opt->output);
+    else
+      anim::saveTanim(a, opt->output);
     std::printf("%s: %s, %u triangles, %u vertices, %u keyframes\n", opt->output.c_str(), opt->kind.c_str(),
                 a.triangleCount(), a.vertexCount(), a.keyframeCount());
   });

@@ -1,0 +1,14 @@
+#pragma once
+// Writes an animation as an OBJ frame sequence (one file per keyframe, same faces in every file),
+// the form most users' tools exchange.
+#include <string>
+
+#include "anim/animation.hpp"
+
+namespace anim {
+
+// `pattern` holds one printf number, e.g. "out/wave_%04d.obj"; frames are numbered from 1.
+// Each file is written atomically. Returns the number of files written.
+std::size_t saveObjSequence(const Animation& animation, const std::string& pattern);
+
+}  // namespace anim

@@ -1,0 +1,45 @@
+#include "anim/obj_writer.hpp"
+
+#include <cstdio>
+#include <filesystem>
+#include <string>
+
+#include "anim/binary_io.hpp"
+#include "anim/error.hpp"
+
+namespace anim {
+
+std::size_t saveObjSequence(const Animation& a, const std::string& pattern) {
+  const auto percent = pattern.find('%');
+  if (percent == std::string::npos || pattern.find('%', percent + 1) != std::string::npos ||
+      pattern.find('d', percent) == std::string::npos)
+    throw Error(pattern + ": output pattern needs exactly one %d-style number, e.g. frames/f_%04d.obj");
+  std::string faces;
+  const auto idx = a.indices();
+  char line[128];
+  for (std::size_t t = 0; t < idx.size(); t += 3) {
+    std::snprintf(line, sizeof line, "f %u %u %u\n", idx[t] + 1, idx[t + 1] + 1, idx[t + 2] + 1);
+    faces += line;
+  }
+  for (uint32_t k = 0; k < a.keyframeCount(); ++k) {
+    std::string text = "# " + a.name() + " keyframe " + std::to_string(k) + " time " +
+                       std::to_string(a.times()[k]) + "\n";
+    const auto p = a.keyframe(k);
+    for (std::size_t v = 0; v < p.size(); v += 3) {
+      std::snprintf(line, sizeof line, "v %.9g %.9g %.9g\n", double(p[v]), double(p[v + 1]), double(p[v + 2]));
+      text += line;
+    }
+    text += faces;
+    char name[4096];
+    std::snprintf(name, sizeof name, pattern.c_str(), int(k + 1));
+    if (k == 0) {
+      const auto parent = std::filesystem::path(name).parent_path();
+      std::error_code ec;
+      if (!parent.empty()) std::filesystem::create_directories(parent, ec);
+    }
+    writeFileAtomically(name, std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
+  }
+  return a.keyframeCount();
+}
+
+}  // namespace anim
