@@ -71,8 +71,10 @@ std::vector<uint8_t> readFile(const std::string& path, std::size_t maxBytes) {
 void writeFileAtomically(const std::string& path, std::span<const uint8_t> bytes) {
   namespace fs = std::filesystem;
   const fs::path target(path);
-  const fs::path tmp = target.parent_path() /
-                       ("." + target.filename().string() + ".tmp." + std::to_string(::getpid()));
+  std::string tmpName = target.filename().string();  // hidden sibling: .NAME.tmp.PID
+  tmpName.insert(0, 1, '.');
+  tmpName.append(".tmp.").append(std::to_string(::getpid()));
+  const fs::path tmp = target.parent_path() / tmpName;
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     if (!out) throw Error(path + ": cannot create " + tmp.string());
