@@ -1,0 +1,61 @@
+#pragma once
+// The image the runtimes produce for a frame (the paper's Table 2 workload): per pixel one primary
+// ray (closest hit), N ambient-occlusion rays (cosine hemisphere, any hit, limited length) and M
+// shadow rays towards an area light (any hit). Each ray type is traced in its own pass over the
+// image so its rate can be measured alone, as separate GPU kernels would be. An optional ground
+// plane (analytic, not in the BVH) receives shadows and occlusion from the animated mesh.
+#include <cstdint>
+
+#include "tsah/camera.hpp"
+#include "tsah/cpu_runtime.hpp"
+#include "tsah/image.hpp"
+
+namespace tsah {
+
+struct SceneLighting {
+  Vec3 lightCenter{0, 10, 0};
+  float lightRadius = 1.0f;    // spherical area light, sampled as a disk facing the shaded point
+  float aoDistance = 1.0f;     // maximum length of ambient-occlusion rays
+  float epsilon = 1e-4f;       // offset of secondary ray origins along the normal (scene units)
+  bool ground = true;          // a plane below the scene
+  Vec3 up{0, 1, 0};            // scene up: the ground's normal and the sky's zenith
+  float groundHeight = 0.0f;   // the plane is dot(p, up) == groundHeight
+  float groundScale = 1.0f;    // size of the ground's checker squares
+  Vec3 sceneCenter{0, 0, 0};   // for the ground's fade into the horizon
+  float sceneRadius = 1.0f;
+};
+
+// Lighting fitted to a box (the animation's bounds over all frames) seen by camera: an area light
+// above the scene, in front of and to the side of the camera so shadows fall visibly; AO rays up
+// to aoFraction of the box diagonal; the ground just below the box.
+SceneLighting fitLighting(const Aabb& bounds, const Camera& camera, Vec3 up = {0, 1, 0}, float aoFraction = 0.1f,
+                          bool ground = true);
+
+struct RenderSettings {
+  uint32_t width = 1024, height = 768;
+  uint32_t aoSamples = 8;
+  uint32_t shadowSamples = 2;
+  uint32_t frame = 0;  // enters the per-pixel random numbers
+  uint32_t seed = 1;
+};
+
+struct RayPassStats {
+  uint64_t rays = 0;
+  double ms = 0.0;
+  double mraysPerSecond() const { return ms > 0.0 ? double(rays) / (ms * 1e3) : 0.0; }
+};
+
+struct RenderStats {
+  RayPassStats primary, ao, shadow;
+  double shadeMs = 0.0;  // turning the passes' results into pixels (not ray tracing)
+  RayPassStats total() const {
+    return {primary.rays + ao.rays + shadow.rays, primary.ms + ao.ms + shadow.ms};
+  }
+};
+
+// Renders the runtime's current frame into image (resized to the settings). Deterministic: the same
+// inputs give the same image for any thread count. Throws anim::Error for an empty image size.
+RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const SceneLighting& lighting,
+                        const RenderSettings& settings, Image& image);
+
+}  // namespace tsah
