@@ -463,8 +463,8 @@ InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const Primitive
   record(0);
 
   const uint32_t nodeCount = session.bvh().nodeCount();
-  const auto batchSize = static_cast<uint32_t>(
-      std::max(1.0, std::round(config_.batchFraction * double(nodeCount))));
+  const auto batchSize = static_cast<uint32_t>(std::max(
+      {1.0, double(config_.minBatchSize), std::round(config_.batchFraction * double(nodeCount))}));
   double best = session.cost();
   uint32_t withoutImprovement = 0;
   bool anyEligible = true;

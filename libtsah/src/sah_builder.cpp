@@ -18,6 +18,11 @@ bool finite(const Aabb& b) {
          std::isfinite(b.hi.x) && std::isfinite(b.hi.y) && std::isfinite(b.hi.z);
 }
 
+// Distance of a split from the middle (times 2, to stay integral).
+inline uint32_t balance(uint32_t split, uint32_t size) {
+  return split * 2 > size ? split * 2 - size : size - split * 2;
+}
+
 struct Task {
   uint32_t node, begin, end;
 };
@@ -92,7 +97,11 @@ Bvh SweepSahBuilder::build(std::span<const Aabb> boxes) const {
       for (uint32_t i = 1; i < size; ++i) {
         left.extend(boxes[ids[i - 1]]);
         const double cost = double(left.area()) * i + double(rightArea[i]) * (size - i);
-        if (cost < bestCost) {
+        // Equal costs (e.g. identical boxes): prefer the more balanced split, so duplicates do not
+        // degenerate into a deep chain.
+        const bool better = cost < bestCost ||
+                            (cost == bestCost && balance(i, size) < balance(bestSplit, size));
+        if (better) {
           bestCost = cost;
           bestAxis = axis;
           bestSplit = i;

@@ -45,6 +45,9 @@ class InsertionOptimizer {
     Selection selection = Selection::MetropolisHastings;
     uint64_t seed = 1;
     double batchFraction = 0.02;            // steps per batch, as a fraction of the node count
+    // At least this many steps per batch: on small trees 2% is a handful of steps, and three such
+    // batches without improvement would end the run long before it converged.
+    uint32_t minBatchSize = 64;
     uint32_t batchesWithoutImprovement = 3; // stop after this many batches that did not lower C~^k
     // A batch "lowers" the cost when it ends below (1 - minImprovement) times the best cost so far.
     double minImprovement = 0.0;

@@ -1,0 +1,162 @@
+// LeafCollapser: valid compacted trees, never a higher cost, and for k = 0 exactly the optimum over
+// all collapse choices (checked against an independent recursion).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <functional>
+#include <random>
+#include <vector>
+
+#include "tsah/cost.hpp"
+#include "tsah/insertion_optimizer.hpp"
+#include "tsah/leaf_collapser.hpp"
+#include "tsah/sah_builder.hpp"
+
+namespace {
+
+using tsah::Bvh;
+using tsah::LeafCollapser;
+
+tsah::PrimitiveBoxes randomMovingBoxes(uint32_t triangles, uint32_t frames, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> pos(-20.0f, 20.0f), small(-1.0f, 1.0f), vel(-2.0f, 2.0f);
+  std::vector<uint32_t> indices;
+  std::vector<float> positions(std::size_t(frames) * triangles * 9);
+  for (uint32_t i = 0; i < triangles * 3; ++i) indices.push_back(i);
+  for (uint32_t t = 0; t < triangles; ++t) {
+    const float c[3] = {pos(rng), pos(rng), pos(rng)};
+    const float v[3] = {vel(rng), vel(rng), vel(rng)};
+    for (uint32_t corner = 0; corner < 3; ++corner) {
+      const float o[3] = {small(rng), small(rng), small(rng)};
+      for (uint32_t f = 0; f < frames; ++f)
+        for (int a = 0; a < 3; ++a)
+          positions[(std::size_t(f) * triangles * 3 + t * 3 + corner) * 3 + a] =
+              c[a] + o[a] + v[a] * float(f);
+    }
+  }
+  return tsah::triangleBoxes(indices, positions, frames);
+}
+
+Bvh optimizedTree(const tsah::PrimitiveBoxes& prims, int k) {
+  Bvh bvh = tsah::SweepSahBuilder().build(prims.frame(0));
+  tsah::InsertionOptimizer::Config config;
+  config.k = k;
+  config.maxBatches = 5;
+  return tsah::InsertionOptimizer(config).optimize(std::move(bvh), prims).bvh;
+}
+
+void expectCompactLayout(const Bvh& bvh) {
+  EXPECT_EQ(bvh.root, 0u);
+  uint32_t nextPrim = 0;
+  // Depth-first, left first: leaves appear in primId order, children are adjacent.
+  std::function<void(uint32_t)> visit = [&](uint32_t n) {
+    const tsah::BvhNode& node = bvh.nodes[n];
+    if (node.isLeaf()) {
+      EXPECT_EQ(node.primBegin, nextPrim);
+      nextPrim += node.primCount;
+      return;
+    }
+    EXPECT_EQ(node.right, node.left + 1);
+    EXPECT_GT(node.left, n);
+    visit(node.left);
+    visit(node.right);
+  };
+  visit(bvh.root);
+  EXPECT_EQ(nextPrim, bvh.primCount());
+}
+
+// The cheapest k = 0 cost over every set of collapse choices, by plain recursion.
+double optimalMeanCost(const Bvh& bvh, uint32_t maxLeaf, double ct, double ci) {
+  std::vector<double> factor(bvh.frameCount);
+  for (uint32_t f = 0; f < bvh.frameCount; ++f)
+    factor[f] = 1.0 / (bvh.frameCount * double(bvh.box(bvh.root, f).area()));
+  std::function<std::pair<double, uint32_t>(uint32_t)> best = [&](uint32_t n) -> std::pair<double, uint32_t> {
+    const tsah::BvhNode& node = bvh.nodes[n];
+    double area = 0;
+    for (uint32_t f = 0; f < bvh.frameCount; ++f) area += factor[f] * bvh.box(n, f).area();
+    if (node.isLeaf()) return {ci * node.primCount * area, node.primCount};
+    const auto l = best(node.left), r = best(node.right);
+    const uint32_t count = l.second + r.second;
+    double cost = ct * area + l.first + r.first;
+    if (count <= maxLeaf) cost = std::min(cost, ci * count * area);
+    return {cost, count};
+  };
+  return best(bvh.root).first;
+}
+
+TEST(LeafCollapser, NeverRaisesTheCostAndKeepsTheTreeValid) {
+  for (uint32_t seed : {1u, 2u, 3u}) {
+    for (int k : {0, 2, 4}) {
+      for (uint32_t maxLeaf : {2u, 4u, 8u}) {
+        const tsah::PrimitiveBoxes prims = randomMovingBoxes(300, 3, seed);
+        const Bvh tree = optimizedTree(prims, k);
+        const double before = tsah::temporalCost(tsah::frameCosts(tree), k);
+        const Bvh collapsed = LeafCollapser({{}, maxLeaf, k}).collapse(tree);
+        const auto problem = tsah::validate(collapsed, &prims);
+        ASSERT_FALSE(problem.has_value()) << *problem;
+        const double after = tsah::temporalCost(tsah::frameCosts(collapsed), k);
+        EXPECT_LE(after, before * (1 + 1e-12)) << "k=" << k << " maxLeaf=" << maxLeaf;
+        EXPECT_LT(collapsed.nodeCount(), tree.nodeCount());
+        for (const tsah::BvhNode& node : collapsed.nodes) {
+          if (node.isLeaf()) {
+            EXPECT_LE(node.primCount, maxLeaf);
+          }
+        }
+        expectCompactLayout(collapsed);
+        EXPECT_EQ(collapsed.frameCount, 3u);
+      }
+    }
+  }
+}
+
+TEST(LeafCollapser, KZeroFindsTheOptimalCollapse) {
+  for (const tsah::CostModel model : {tsah::CostModel{}, tsah::CostModel{1.0f, 1.0f}, tsah::CostModel{10.0f, 1.0f}}) {
+    const tsah::PrimitiveBoxes prims = randomMovingBoxes(200, 2, 9);
+    const Bvh tree = optimizedTree(prims, 0);
+    const Bvh collapsed = LeafCollapser({model, 6, 0}).collapse(tree);
+    const double after = tsah::temporalCost(tsah::frameCosts(collapsed, model), 0);
+    const double optimum = optimalMeanCost(tree, 6, model.ct, model.ci);
+    EXPECT_NEAR(after, optimum, 1e-9 * optimum);
+  }
+}
+
+TEST(LeafCollapser, CostConstantsDecideTheLeafSize) {
+  const tsah::PrimitiveBoxes prims = randomMovingBoxes(400, 1, 4);
+  const Bvh tree = optimizedTree(prims, 0);
+  // Expensive traversal: many primitives per leaf. Expensive intersection: hardly any collapse.
+  const Bvh coarse = LeafCollapser({{30.0f, 1.0f}, 8, 0}).collapse(tree);
+  const Bvh fine = LeafCollapser({{1.0f, 30.0f}, 8, 0}).collapse(tree);
+  EXPECT_LT(coarse.leafCount(), 400u / 4);
+  EXPECT_EQ(fine.leafCount(), 400u);
+  // Leaf size 1 changes nothing but the numbering.
+  const Bvh same = LeafCollapser({{}, 1, 0}).collapse(tree);
+  EXPECT_EQ(same.nodeCount(), tree.nodeCount());
+  EXPECT_NEAR(tsah::frameCost(same, 0), tsah::frameCost(tree, 0), 1e-9 * tsah::frameCost(tree, 0));
+}
+
+TEST(LeafCollapser, CompactPreservesTheTree) {
+  const tsah::PrimitiveBoxes prims = randomMovingBoxes(150, 2, 5);
+  const Bvh tree = optimizedTree(prims, 0);
+  const Bvh compacted = LeafCollapser::compact(tree);
+  ASSERT_FALSE(tsah::validate(compacted, &prims).has_value());
+  expectCompactLayout(compacted);
+  EXPECT_EQ(compacted.nodeCount(), tree.nodeCount());
+  EXPECT_EQ(compacted.depth(), tree.depth());
+  const auto a = tsah::frameCosts(tree), b = tsah::frameCosts(compacted);
+  for (std::size_t f = 0; f < a.size(); ++f) EXPECT_NEAR(a[f], b[f], 1e-12 * a[f]);
+  // Flagging the root collapses everything into one leaf.
+  std::vector<uint8_t> flags(tree.nodeCount(), 0);
+  flags[tree.root] = 1;
+  const Bvh one = LeafCollapser::compact(tree, flags);
+  ASSERT_EQ(one.nodeCount(), 1u);
+  EXPECT_EQ(one.nodes[0].primCount, 150u);
+  EXPECT_FALSE(tsah::validate(one, &prims).has_value());
+}
+
+TEST(LeafCollapser, EmptyTreeAndBadConfig) {
+  EXPECT_TRUE(LeafCollapser().collapse(Bvh{}).nodes.empty());
+  EXPECT_THROW(LeafCollapser({{}, 0, 0}), std::invalid_argument);
+  EXPECT_THROW(LeafCollapser({{}, 8, -2}), std::invalid_argument);
+}
+
+}  // namespace
