@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <exception>
 #include <filesystem>
@@ -255,6 +256,18 @@ std::vector<CameraKey> cameraPath(const ParsedScene& scene, const std::vector<do
   return keys;
 }
 
+std::string byteSize(long double bytes) {
+  const char* units[] = {"bytes", "KiB", "MiB", "GiB", "TiB"};
+  int u = 0;
+  while (bytes >= 1024 && u < 4) {
+    bytes /= 1024;
+    ++u;
+  }
+  char text[64];
+  std::snprintf(text, sizeof text, u == 0 ? "%.0Lf %s" : "%.1Lf %s", bytes, units[u]);
+  return text;
+}
+
 std::string skippedSummary(const ParsedScene& s) {
   std::vector<std::string> parts;
   auto add = [&](uint64_t n, const char* one, const char* many) {
@@ -281,9 +294,8 @@ Animation sample(const ParsedScene& scene, const std::string& path, const BartOp
   const long double bytes = (long double)perFrame * sizeof(float) * (long double)times.size();
   if (bytes > (long double)options.maxPositionBytes)
     throw ImportError(path, std::to_string(times.size()) + " frames x " + std::to_string(flat.vertexCount) +
-                                " vertices need " + std::to_string(uint64_t(bytes / (1 << 20))) +
-                                " MiB of keyframe positions, more than the limit of " +
-                                std::to_string(options.maxPositionBytes >> 20) + " MiB; sample fewer frames");
+                                " vertices need " + byteSize(bytes) + " of keyframe positions, more than the limit of " +
+                                byteSize((long double)options.maxPositionBytes) + "; sample fewer frames");
 
   // World transforms and positions of everything that never moves, computed once.
   const std::size_t nodeCount = flat.nodes.size();

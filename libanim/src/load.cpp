@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <system_error>
 
+#include "anim/assimp_import.hpp"
 #include "anim/bart.hpp"
 #include "anim/error.hpp"
 #include "anim/mesh_sequence.hpp"
@@ -44,6 +45,7 @@ Animation load(const std::string& input, const LoadOptions& options) {
     bart.progress = options.progress;
     return importBart(input, bart);
   }
+  if (isModelFile(input)) return importModel(input, options);
   if (ext == ".json") return importSequence(readManifest(input), options, stemName(input));
   if (isMeshFile(input)) return importSequence(FrameList{{input}, {}}, options, stemName(input));
   throw ImportError(input, "unknown input format '" + ext +
