@@ -17,9 +17,23 @@ enum class SurfaceKind : uint32_t { None = 0, Mesh = 1, Ground = 2 };
 // What the primary pass found at a pixel; the secondary passes start from it.
 struct Surface {
   Vec3 position;  // already offset along the normal
-  Vec3 normal;    // unit, facing the camera
+  Vec3 normal;    // geometric, unit, facing the camera: secondary rays leave on this side
   SurfaceKind kind = SurfaceKind::None;
+  uint32_t tri = 0;  // mesh hits: triangle and barycentrics, for the smooth shading normal
+  float u = 0.0f, v = 0.0f;
 };
+
+// Area-weighted vertex normals of the current frame (for shading only; rays use face normals).
+std::vector<Vec3> vertexNormals(const BvhView& bvh, uint32_t triangles, uint32_t vertices) {
+  std::vector<Vec3> n(vertices, Vec3{0, 0, 0});
+  for (uint32_t t = 0; t < triangles; ++t) {
+    const uint32_t* tri = bvh.indices + 3 * std::size_t(t);
+    const Vec3 v0 = bvh.vertex(tri[0]);
+    const Vec3 face = cross(bvh.vertex(tri[1]) - v0, bvh.vertex(tri[2]) - v0);
+    for (int k = 0; k < 3; ++k) n[tri[k]] = n[tri[k]] + face;
+  }
+  return n;
+}
 
 double msSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
@@ -35,7 +49,7 @@ constexpr uint32_t kDimAo = 0, kDimShadow = 2;
 
 Vec3 skyColor(Vec3 dir, Vec3 up) {
   const float h = dot(dir, up);
-  const Vec3 horizon{0.86f, 0.89f, 0.93f}, zenith{0.42f, 0.58f, 0.84f}, below{0.40f, 0.39f, 0.37f};
+  const Vec3 horizon{0.80f, 0.85f, 0.91f}, zenith{0.30f, 0.48f, 0.78f}, below{0.40f, 0.39f, 0.37f};
   if (h < 0.0f) return mix(horizon, below, std::min(1.0f, -h * 4.0f));
   return mix(horizon, zenith, std::sqrt(h));
 }
@@ -125,7 +139,7 @@ RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const S
           Vec3 n = normalize(cross(v1 - v0, v2 - v0));
           if (dot(n, ray.dir) > 0.0f) n = n * -1.0f;
           const Vec3 p = v0 * (1.0f - hit.u - hit.v) + v1 * hit.u + v2 * hit.v;
-          s = {p + n * lighting.epsilon, n, SurfaceKind::Mesh};
+          s = {p + n * lighting.epsilon, n, SurfaceKind::Mesh, hit.tri, hit.u, hit.v};
         } else if (tGround < 3.402823466e38f) {
           s = {ray.org + ray.dir * tGround + up * lighting.epsilon, up, SurfaceKind::Ground};
         }
@@ -198,6 +212,7 @@ RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const S
 
   // Shading: diffuse sun with soft shadows + sky light scaled by ambient occlusion.
   start = std::chrono::steady_clock::now();
+  const std::vector<Vec3> normals = vertexNormals(bvh, runtime.triangleCount(), runtime.vertexCount());
   const Vec3 meshAlbedo{0.78f, 0.60f, 0.44f};
   const Vec3 sun{1.00f, 0.94f, 0.84f};
   runtime.parallelFor(height, 4, [&](std::size_t y0, std::size_t y1) {
@@ -210,23 +225,30 @@ RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const S
           color = skyColor(cam.ray(float(x) + 0.5f, float(y) + 0.5f).dir, up);
         } else {
           Vec3 albedo = meshAlbedo;
+          Vec3 shading = s.normal;
           float fade = 0.0f;
+          if (s.kind == SurfaceKind::Mesh) {
+            const uint32_t* tri = bvh.indices + 3 * std::size_t(s.tri);
+            const Vec3 smooth = normalize(normals[tri[0]] * (1.0f - s.u - s.v) + normals[tri[1]] * s.u +
+                                          normals[tri[2]] * s.v);
+            shading = dot(smooth, s.normal) < 0.0f ? smooth * -1.0f : smooth;
+          }
           if (s.kind == SurfaceKind::Ground) {
             Vec3 t, b;
             orthonormalBasis(up, t, b);
             const Vec3 rel = s.position - lighting.sceneCenter;
             const auto cu = int32_t(std::floor(dot(rel, t) / lighting.groundScale));
             const auto cv = int32_t(std::floor(dot(rel, b) / lighting.groundScale));
-            albedo = ((cu + cv) & 1) ? Vec3{0.70f, 0.70f, 0.68f} : Vec3{0.58f, 0.58f, 0.57f};
+            albedo = ((cu + cv) & 1) ? Vec3{0.62f, 0.60f, 0.56f} : Vec3{0.50f, 0.49f, 0.46f};
             const float d = length(rel) / (6.0f * lighting.sceneRadius);
             fade = 1.0f - std::exp(-d * d);
           }
           const Vec3 toLight = normalize(lighting.lightCenter - s.position);
-          const float diffuse = std::max(0.0f, dot(s.normal, toLight)) * visibility[i];
-          const Vec3 sky = skyColor(normalize(s.normal + up * 0.5f), up) * 0.75f;
-          const Vec3 lit = sky * ao[i] + sun * (0.85f * diffuse);
+          const float diffuse = std::max(0.0f, dot(shading, toLight)) * visibility[i];
+          const Vec3 sky = skyColor(normalize(shading + up * 0.5f), up) * 0.6f;
+          const Vec3 lit = sky * ao[i] + sun * diffuse;
           color = mul(albedo, lit);
-          if (fade > 0.0f) color = mix(color, Vec3{0.86f, 0.89f, 0.93f}, fade);  // into the horizon
+          if (fade > 0.0f) color = mix(color, Vec3{0.80f, 0.85f, 0.91f}, fade);  // into the horizon
         }
         uint8_t* px = image.pixel(x, uint32_t(y));
         px[0] = toSrgb8(color.x);
