@@ -1,0 +1,86 @@
+# CLI smoke tests for the runtime commands: optimize -> info -> export -> trace, and one-line errors.
+set(W ${TSAH_CLI_WORK})
+
+add_test(NAME cli.trace.setup.generate
+         COMMAND tsah generate explode -o ${W}/trace_explode.tanim --triangles 1500 --frames 6 --seed 5)
+set_tests_properties(cli.trace.setup.generate PROPERTIES FIXTURES_SETUP trace_anim)
+add_test(NAME cli.trace.setup.other
+         COMMAND tsah generate wave -o ${W}/trace_wave.tanim --triangles 1500 --frames 4 --seed 5)
+set_tests_properties(cli.trace.setup.other PROPERTIES FIXTURES_SETUP trace_other)
+add_test(NAME cli.trace.setup.optimize
+         COMMAND tsah optimize ${W}/trace_explode.tanim -o ${W}/trace_explode.tbvh --frames 3 --eval-frames 5)
+set_tests_properties(cli.trace.setup.optimize PROPERTIES FIXTURES_REQUIRED trace_anim FIXTURES_SETUP trace_tree)
+
+# tsah info on a .tbvh file.
+add_test(NAME cli.trace.info.json COMMAND tsah info ${W}/trace_explode.tbvh --json)
+set_tests_properties(cli.trace.info.json PROPERTIES FIXTURES_REQUIRED trace_tree
+  PASS_REGULAR_EXPRESSION "\"format\":\"tbvh\".*\"triangles\":[0-9]+")
+
+# tsah export: renderer buffers and the C header.
+add_test(NAME cli.trace.export COMMAND tsah export ${W}/trace_explode.tbvh ${W}/trace_explode.tanim --frame 2
+                                       -o ${W}/trace_export)
+set_tests_properties(cli.trace.export PROPERTIES FIXTURES_REQUIRED trace_tree FIXTURES_SETUP trace_exported
+  PASS_REGULAR_EXPRESSION "wrote .*trace_export: [0-9]+ nodes, [0-9]+ Woop triangles")
+add_test(NAME cli.trace.export.header COMMAND ${CMAKE_COMMAND} -E cat ${W}/trace_export/tsah_scene.h)
+set_tests_properties(cli.trace.export.header PROPERTIES FIXTURES_REQUIRED trace_exported
+  PASS_REGULAR_EXPRESSION "TSAH_NODE_COUNT [0-9]+u.*TSAH_ROOT_REF")
+add_test(NAME cli.trace.export.frame COMMAND tsah export ${W}/trace_explode.tbvh ${W}/trace_explode.tanim --frame 6
+                                             -o ${W}/trace_export_bad)
+set_tests_properties(cli.trace.export.frame PROPERTIES FIXTURES_REQUIRED trace_tree
+  PASS_REGULAR_EXPRESSION "^tsah: --frame 6 is out of range")
+
+# tsah trace: PNG per frame and per-frame statistics.
+add_test(NAME cli.trace.json COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --frames 2
+                                     --width 64 --height 48 --ao 4 --shadow 1 --out ${W}/trace_png --json)
+set_tests_properties(cli.trace.json PROPERTIES FIXTURES_REQUIRED trace_tree FIXTURES_SETUP trace_png
+  PASS_REGULAR_EXPRESSION
+  "\"average\":{.*\"mrays_per_s\":{\"ao\":.*\"primary\":.*\"shadow\":.*\"total\":.*\"device\":\"cpu\".*\"frames\":\\[{.*\"update_ms\"")
+add_test(NAME cli.trace.png COMMAND ${CMAKE_COMMAND} -E md5sum ${W}/trace_png/frame_0001.png)
+set_tests_properties(cli.trace.png PROPERTIES FIXTURES_REQUIRED trace_png PASS_REGULAR_EXPRESSION "frame_0001.png")
+add_test(NAME cli.trace.text COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --frames 2
+                                     --width 32 --height 24 --no-images --no-ground)
+set_tests_properties(cli.trace.text PROPERTIES FIXTURES_REQUIRED trace_tree
+  PASS_REGULAR_EXPRESSION "update_ms +trace_ms +total_ms.*avg +- +[0-9.]+")
+foreach(method binned sweep)
+  add_test(NAME cli.trace.rebuild.${method}
+           COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --frames 2 --width 32 --height 24
+                   --no-images --rebuild ${method} --json)
+  set_tests_properties(cli.trace.rebuild.${method} PROPERTIES FIXTURES_REQUIRED trace_tree
+    PASS_REGULAR_EXPRESSION "\"build_ms\":[0-9.e+-]+.*\"rebuild\":\"${method}\"")
+endforeach()
+file(WRITE ${W}/trace_camera.json
+  "{\"keys\": [{\"time\": 0, \"eye\": [0, 1, 6], \"look_at\": [0, 0, 0], \"fov\": 50},\n"
+  "           {\"time\": 5, \"eye\": [6, 1, 0], \"look_at\": [0, 0, 0], \"up\": [0, 1, 0]}]}\n")
+add_test(NAME cli.trace.camera.file COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --frames 2
+                                            --width 32 --height 24 --no-images --camera ${W}/trace_camera.json)
+set_tests_properties(cli.trace.camera.file PROPERTIES FIXTURES_REQUIRED trace_tree
+  PASS_REGULAR_EXPRESSION "camera .*trace_camera.json")
+add_test(NAME cli.trace.camera.args COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --frames 1
+                                            --width 32 --height 24 --no-images --eye 0,2,8 --look-at 0,0,0 --fov 40)
+set_tests_properties(cli.trace.camera.args PROPERTIES FIXTURES_REQUIRED trace_tree
+  PASS_REGULAR_EXPRESSION "camera command line")
+
+# Errors: one line, non-zero exit.
+add_test(NAME cli.trace.error.cuda COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --device cuda)
+set_tests_properties(cli.trace.error.cuda PROPERTIES FIXTURES_REQUIRED trace_tree
+  PASS_REGULAR_EXPRESSION "^tsah: the GPU runtime is not built[^\n]*\n$")
+add_test(NAME cli.trace.error.cuda.status COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --device cuda)
+set_tests_properties(cli.trace.error.cuda.status PROPERTIES FIXTURES_REQUIRED trace_tree WILL_FAIL TRUE)
+add_test(NAME cli.trace.error.mismatch COMMAND tsah trace ${W}/trace_wave.tanim ${W}/trace_explode.tbvh --frames 1)
+set_tests_properties(cli.trace.error.mismatch PROPERTIES FIXTURES_REQUIRED "trace_tree;trace_other"
+  PASS_REGULAR_EXPRESSION "^tsah: .*trace_explode.tbvh was not built for .*trace_wave.tanim: ")
+add_test(NAME cli.trace.error.mismatch.status COMMAND tsah trace ${W}/trace_wave.tanim ${W}/trace_explode.tbvh)
+set_tests_properties(cli.trace.error.mismatch.status PROPERTIES FIXTURES_REQUIRED "trace_tree;trace_other"
+  WILL_FAIL TRUE)
+file(WRITE ${W}/trace_garbage.tbvh "TSAHBVH-this is not a tree")
+add_test(NAME cli.trace.error.corrupt COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_garbage.tbvh)
+set_tests_properties(cli.trace.error.corrupt PROPERTIES FIXTURES_REQUIRED trace_anim
+  PASS_REGULAR_EXPRESSION "^tsah: .*trace_garbage.tbvh: .*(bad magic|truncated)[^\n]*\n$")
+add_test(NAME cli.trace.error.eye COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --eye 1,2)
+set_tests_properties(cli.trace.error.eye PROPERTIES FIXTURES_REQUIRED trace_tree
+  PASS_REGULAR_EXPRESSION "^tsah: --eye and --look-at go together")
+file(WRITE ${W}/trace_badcamera.json "{\"eye\": [0, 0, 1], \"look_at\": [0, 0, 1]}")
+add_test(NAME cli.trace.error.camera COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh
+                                             --camera ${W}/trace_badcamera.json)
+set_tests_properties(cli.trace.error.camera PROPERTIES FIXTURES_REQUIRED trace_tree
+  PASS_REGULAR_EXPRESSION "^tsah: .*trace_badcamera.json: camera: eye and look-at point coincide")
