@@ -4,10 +4,12 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <limits>
 #include <set>
 #include <system_error>
+#include <unordered_map>
 
 #include "anim/binary_io.hpp"
 #include "anim/error.hpp"
@@ -179,6 +181,34 @@ void addTriangle(Geometry& g, uint32_t a, uint32_t b, uint32_t c) {
   g.indices.push_back(c);
 }
 
+// Merges vertices of one block at exactly the same position: they share the block's transform, so
+// they stay together in every frame (AFF meshes and polygons repeat shared corners).
+void weldVertices(Geometry& g) {
+  struct KeyHash {
+    std::size_t operator()(const std::array<uint32_t, 3>& k) const {
+      return std::size_t((uint64_t(k[0]) * 0x9E3779B97F4A7C15ull) ^ (uint64_t(k[1]) * 0xC2B2AE3D27D4EB4Full) ^ k[2]);
+    }
+  };
+  std::unordered_map<std::array<uint32_t, 3>, uint32_t, KeyHash> seen;
+  seen.reserve(g.vertexCount());
+  std::vector<uint32_t> remap(g.vertexCount());
+  std::vector<float> kept;
+  kept.reserve(g.positions.size());
+  for (uint32_t v = 0; v < g.vertexCount(); ++v) {
+    std::array<uint32_t, 3> key;
+    for (int a = 0; a < 3; ++a) {
+      const float x = g.positions[3 * v + a] + 0.0f;  // -0 and +0 are one position
+      std::memcpy(&key[a], &x, 4);
+    }
+    const auto [it, inserted] = seen.emplace(key, uint32_t(kept.size() / 3));
+    if (inserted) kept.insert(kept.end(), g.positions.begin() + 3 * v, g.positions.begin() + 3 * v + 3);
+    remap[v] = it->second;
+  }
+  if (kept.size() == g.positions.size()) return;
+  for (uint32_t& i : g.indices) i = remap[i];
+  g.positions = std::move(kept);
+}
+
 // T * R * S of a static transform: scale, then rotate `degrees` about `axis`, then translate.
 Affine staticTransform(const V3& scale, const V3& axis, double degrees, const V3& translation, Tokens& tokens) {
   const double len = length(axis);
@@ -316,6 +346,7 @@ class Parser {
   }
 
   void closeBlock(Block& b, Tokens& tk) {
+    weldVertices(b.geometry);
     uint64_t vertices = b.geometry.vertexCount(), triangles = b.geometry.indices.size() / 3, blocks = 1;
     vertices = saturatingAdd(vertices, 3 * uint64_t(b.animated.size()));
     triangles = saturatingAdd(triangles, b.animated.size());
