@@ -69,6 +69,18 @@ TEST(OtherFormats, OffThroughOpenMesh) {
   EXPECT_EQ(a.keyframeCount(), 1u);
 }
 
+TEST(OtherFormats, NonManifoldFacesAreAnErrorNotSilentlyDropped) {
+  // Three triangles on one edge: a half-edge mesh cannot hold the third, so the topology would change.
+  const auto dir = tsah::test::scratchDir();
+  writeText(dir / "nm.off", "OFF\n5 3 0\n0 0 0\n1 0 0\n0 1 0\n0 -1 0\n0 0 1\n3 0 1 2\n3 0 1 3\n3 0 1 4\n");
+  try {
+    anim::load((dir / "nm.off").string());
+    FAIL() << "expected an error";
+  } catch (const anim::ImportError& e) {
+    EXPECT_NE(std::string(e.what()).find("non-manifold"), std::string::npos) << e.what();
+  }
+}
+
 class Sequence : public ::testing::Test {
  protected:
   void SetUp() override {

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <filesystem>
 #include <glob.h>
+#include <iostream>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <regex>
@@ -111,20 +112,29 @@ MeshFrame readObj(const std::string& path) {
 MeshFrame readWithOpenMesh(const std::string& path) {
   using Mesh = OpenMesh::PolyMesh_ArrayKernelT<>;
   Mesh mesh;
-  std::ostringstream messages;
-  static std::mutex openMeshStreams;  // omerr/omlog are global
+  // omerr/omlog are process-wide: connect them once to one captured stream (OpenMesh never frees a
+  // connection, so connecting per call would leak) and serialize reads through OpenMesh.
+  static std::mutex openMeshStreams;
+  static std::ostringstream messages;
   bool ok;
+  std::string complaints;
   {
     std::lock_guard lock(openMeshStreams);
-    omerr().connect(messages);
-    omlog().disable();
-    omout().disable();
+    static const bool connected = [] {
+      omerr().connect(messages);
+      omerr().disconnect(std::cerr);  // libraries never print (OpenMesh drops this target unfreed)
+      omlog().disable();
+      omout().disable();
+      return true;
+    }();
+    (void)connected;
+    messages.str("");
     OpenMesh::IO::Options options;
     ok = OpenMesh::IO::read_mesh(mesh, path, options);
-    omerr().disconnect(messages);
+    complaints = messages.str();
   }
   if (!ok) throw ImportError(path, "OpenMesh cannot read this file");
-  if (messages.str().find("complex") != std::string::npos)
+  if (complaints.find("complex") != std::string::npos)
     throw ImportError(path, "has non-manifold faces that the mesh reader drops; convert it to OBJ");
   MeshFrame out;
   out.positions.reserve(mesh.n_vertices() * 3);
