@@ -1,0 +1,409 @@
+// tsah_gpu_bench: the paper's Table 2 on the GPU, as one JSON object on stdout.
+//
+//   tsah_gpu_bench (--input FILE | --generate KIND:TRIANGLES:FRAMES)
+//                  [--tree NAME=FILE.tbvh]... [--sah0] [--rebuild lbvh,hlbvh-sah|none]
+//                  [--frames 50] [--width 1024] [--height 768] [--ao 8] [--shadow 2]
+//                  [--traversal persistent|simple|both] [--no-render] [--cpu-compare]
+//                  [--image-dir DIR] [--builder sweep|binned]
+//
+// For every tree (from .tbvh files, or SAH0 built here: sweep SAH on the first frame, collapsed to
+// at most 8 triangles per leaf) and every GPU rebuild method, over `frames` times spread uniformly
+// over the animation: per-frame update ms (interpolation + refit + Woop; for rebuilds interpolation
+// + build + collapse + Woop, and the bare build without collapse and Woop), trace MRays/s of the
+// primary, ambient-occlusion and shadow passes, and the total ms of the frame. Timings are CUDA
+// events (device time); summaries give mean, median, min and max.
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "anim/binary_io.hpp"
+#include "anim/error.hpp"
+#include "anim/generators.hpp"
+#include "anim/load.hpp"
+#include "tsah/binned_sah_builder.hpp"
+#include "tsah/bvh_file.hpp"
+#include "tsah/camera.hpp"
+#include "tsah/cpu_runtime.hpp"
+#include "tsah/leaf_collapser.hpp"
+#include "tsah/renderer.hpp"
+#include "tsah/sah_builder.hpp"
+#include "tsah_cuda/device.hpp"
+#include "tsah_cuda/gpu_runtime.hpp"
+
+namespace {
+
+using nlohmann::json;
+namespace tc = tsah::cuda;
+
+struct Options {
+  std::string input, generate;
+  std::vector<std::string> trees;
+  bool sah0 = false;
+  std::string rebuild = "lbvh,hlbvh-sah";
+  uint32_t frames = 50, width = 1024, height = 768, ao = 8, shadow = 2;
+  std::string traversal = "persistent";
+  bool noRender = false, cpuCompare = false;
+  std::string imageDir;
+  std::string builder = "sweep";
+};
+
+json summary(std::vector<double> v) {
+  if (v.empty()) return json::object();
+  std::sort(v.begin(), v.end());
+  double sum = 0.0;
+  for (double x : v) sum += x;
+  const std::size_t n = v.size();
+  const double median = n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+  return {{"mean", sum / double(n)}, {"median", median}, {"min", v.front()}, {"max", v.back()}};
+}
+
+double seconds(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+anim::Animation loadAnimation(const Options& opt, json& info) {
+  if (!opt.generate.empty()) {
+    // KIND:TRIANGLES:FRAMES
+    std::stringstream ss(opt.generate);
+    std::string kind, tris, frames;
+    std::getline(ss, kind, ':');
+    std::getline(ss, tris, ':');
+    std::getline(ss, frames, ':');
+    anim::GeneratorOptions g;
+    try {
+      g.triangles = uint32_t(std::stoul(tris));
+      g.frames = uint32_t(std::stoul(frames));
+    } catch (const std::exception&) {
+      throw anim::Error("--generate expects KIND:TRIANGLES:FRAMES, got '" + opt.generate + "'");
+    }
+    info["generated"] = opt.generate;
+    return anim::generate(anim::parseGeneratorKind(kind), g);
+  }
+  info["file"] = opt.input;
+  return anim::load(opt.input);
+}
+
+tsah::FlatBvh buildSah0(const anim::Animation& a, const std::string& builder) {
+  std::vector<tsah::Aabb> boxes(a.triangleCount());
+  tsah::triangleBoxes(a.indices(), a.keyframe(0), boxes);
+  tsah::Bvh bvh;
+  if (builder == "binned") {
+    tsah::BinnedSahBuilder::Config c;
+    c.maxLeafSize = 8;
+    bvh = tsah::BinnedSahBuilder(c).build(boxes);
+  } else {
+    tsah::LeafCollapser::Config c;
+    c.maxLeafSize = 8;
+    bvh = tsah::LeafCollapser(c).collapse(tsah::SweepSahBuilder().build(boxes));
+  }
+  return tsah::flattenBvh(bvh);
+}
+
+struct Scene {
+  tsah::Camera camera;
+  tsah::SceneLighting lighting;
+  tsah::RenderSettings settings;
+};
+
+// Accumulates one method's per-frame figures.
+struct FrameSeries {
+  std::vector<double> update, interpolate, refit, woop, build, bareBuild, total;
+  std::vector<double> primary, ao, shadow, all;  // MRays/s per frame
+  uint64_t rays[3] = {0, 0, 0};
+  double traceMs[3] = {0, 0, 0};
+
+  void addRender(const tsah::RenderStats& s, const tc::GpuRenderTimings& g, double updateMs) {
+    primary.push_back(s.primary.mraysPerSecond());
+    ao.push_back(s.ao.mraysPerSecond());
+    shadow.push_back(s.shadow.mraysPerSecond());
+    all.push_back(s.total().mraysPerSecond());
+    const tsah::RayPassStats passes[3] = {s.primary, s.ao, s.shadow};
+    for (int i = 0; i < 3; ++i) {
+      rays[i] += passes[i].rays;
+      traceMs[i] += passes[i].ms;
+    }
+    total.push_back(updateMs + g.totalMs);
+  }
+
+  json traceJson() const {
+    json j;
+    const char* names[3] = {"primary", "ao", "shadow"};
+    uint64_t allRays = 0;
+    double allMs = 0.0;
+    for (int i = 0; i < 3; ++i) {
+      j[names[i]] = {{"rays_per_frame", rays[i] / std::max<std::size_t>(1, primary.size())},
+                     {"mrays_per_s", traceMs[i] > 0 ? double(rays[i]) / (traceMs[i] * 1e3) : 0.0},
+                     {"ms_per_frame", traceMs[i] / double(std::max<std::size_t>(1, primary.size()))}};
+      allRays += rays[i];
+      allMs += traceMs[i];
+    }
+    j["primary"]["per_frame_mrays_per_s"] = summary(primary);
+    j["ao"]["per_frame_mrays_per_s"] = summary(ao);
+    j["shadow"]["per_frame_mrays_per_s"] = summary(shadow);
+    j["all"] = {{"mrays_per_s", allMs > 0 ? double(allRays) / (allMs * 1e3) : 0.0},
+                {"ms_per_frame", allMs / double(std::max<std::size_t>(1, primary.size()))}};
+    return j;
+  }
+};
+
+json runRefit(const std::string& name, const tsah::FlatBvh& tree, const anim::Animation& a,
+              const std::vector<double>& times, const Scene& scene, const Options& opt, bool persistent) {
+  tc::GpuRuntime rt(tree, a, {0, persistent});
+  const double mtris = double(a.triangleCount()) / 1e6;
+  tsah::RenderSettings settings = scene.settings;
+  // Warm-up: module load, allocations, first-touch of the ray buffers.
+  rt.updateAt(times.front());
+  if (!opt.noRender) tc::renderFrameGpu(rt, scene.camera, scene.lighting, settings, nullptr);
+
+  FrameSeries s;
+  for (uint32_t f = 0; f < times.size(); ++f) {
+    const tc::UpdateTimings u = rt.updateAt(times[f]);
+    s.update.push_back(u.totalMs());
+    s.interpolate.push_back(u.interpolateMs);
+    s.refit.push_back(u.refitMs);
+    s.woop.push_back(u.woopMs);
+    if (opt.noRender) {
+      s.total.push_back(u.totalMs());
+      continue;
+    }
+    settings.frame = f;
+    tc::GpuRenderTimings g;
+    const tsah::RenderStats r = tc::renderFrameGpu(rt, scene.camera, scene.lighting, settings, nullptr, &g);
+    s.addRender(r, g, u.totalMs());
+  }
+  json j;
+  j["name"] = name;
+  j["kind"] = "refit";
+  j["traversal"] = persistent ? "persistent" : "simple";
+  j["tree"] = {{"interior_nodes", tree.interiorCount}, {"leaves", tree.leafCount}, {"depth", tree.depth}};
+  j["update_ms"] = summary(s.update);
+  j["update_ms_per_million_triangles"] = summary([&] {
+    std::vector<double> v;
+    for (double x : s.update) v.push_back(x / mtris);
+    return v;
+  }());
+  j["interpolate_ms"] = summary(s.interpolate);
+  j["refit_ms"] = summary(s.refit);
+  j["woop_ms"] = summary(s.woop);
+  if (!opt.noRender) j["trace"] = s.traceJson();
+  j["total_ms"] = summary(s.total);
+  j["per_frame"] = {{"update_ms", s.update}, {"total_ms", s.total}, {"ao_mrays_per_s", s.ao}};
+  return j;
+}
+
+json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim::Animation& a,
+                const std::vector<double>& times, const Scene& scene, const Options& opt, bool persistent) {
+  tc::GpuRuntime rt(tree, a, {0, persistent});
+  const double mtris = double(a.triangleCount()) / 1e6;
+  tsah::RenderSettings settings = scene.settings;
+  tc::RebuildOptions bare;
+  bare.method = method;
+  bare.collapse = false;
+  bare.woop = false;
+  tc::RebuildOptions full;
+  full.method = method;
+  rt.rebuildAt(times.front(), bare);  // warm-up (allocations, CUB, module load)
+  rt.rebuildAt(times.front(), full);
+  if (!opt.noRender) tc::renderFrameGpu(rt, scene.camera, scene.lighting, settings, nullptr);
+
+  FrameSeries s;
+  std::vector<double> morton, sort, hierarchy, top, bottomUp, collapseWoop, clusters, leaves, depth, ratio;
+  for (uint32_t f = 0; f < times.size(); ++f) {
+    const tc::RebuildTimings b = rt.rebuildAt(times[f], bare);
+    s.bareBuild.push_back(b.buildMs());
+    const tc::RebuildTimings t = rt.rebuildAt(times[f], full);
+    s.build.push_back(t.buildMs() + t.woopMs);
+    ratio.push_back((t.buildMs() + t.woopMs) / b.buildMs());
+    s.update.push_back(t.totalMs());
+    s.interpolate.push_back(t.interpolateMs);
+    morton.push_back(t.mortonMs);
+    sort.push_back(t.sortMs);
+    hierarchy.push_back(t.hierarchyMs);
+    top.push_back(t.topMs);
+    bottomUp.push_back(t.bottomUpMs);
+    s.woop.push_back(t.woopMs);
+    clusters.push_back(t.clusters);
+    leaves.push_back(t.leaves);
+    depth.push_back(t.depth);
+    if (opt.noRender) {
+      s.total.push_back(t.totalMs());
+      continue;
+    }
+    settings.frame = f;
+    tc::GpuRenderTimings g;
+    const tsah::RenderStats r = tc::renderFrameGpu(rt, scene.camera, scene.lighting, settings, nullptr, &g);
+    s.addRender(r, g, t.totalMs());
+  }
+  json j;
+  j["name"] = tc::rebuildMethodName(method);
+  j["kind"] = "rebuild";
+  j["traversal"] = persistent ? "persistent" : "simple";
+  j["bare_build_ms"] = summary(s.bareBuild);
+  j["build_collapse_woop_ms"] = summary(s.build);
+  j["collapse_woop_over_bare"] = summary(ratio);
+  j["bare_build_ms_per_million_triangles"] = summary([&] {
+    std::vector<double> v;
+    for (double x : s.bareBuild) v.push_back(x / mtris);
+    return v;
+  }());
+  j["phases_ms"] = {{"morton", summary(morton)},       {"sort", summary(sort)},
+                    {"hierarchy", summary(hierarchy)}, {"cluster_tree", summary(top)},
+                    {"bottom_up", summary(bottomUp)},  {"woop", summary(s.woop)}};
+  j["update_ms"] = summary(s.update);
+  j["interpolate_ms"] = summary(s.interpolate);
+  j["tree"] = {{"leaves", summary(leaves)}, {"depth", summary(depth)}};
+  if (method == tc::RebuildMethod::HlbvhSah) j["tree"]["clusters"] = summary(clusters);
+  if (!opt.noRender) j["trace"] = s.traceJson();
+  j["total_ms"] = summary(s.total);
+  j["per_frame"] = {{"update_ms", s.update}, {"bare_build_ms", s.bareBuild}, {"total_ms", s.total}};
+  return j;
+}
+
+// One frame on the CPU renderer and on the GPU: how far apart the images are.
+json compareWithCpu(const tsah::FlatBvh& tree, const anim::Animation& a, double t, const Scene& scene,
+                    const Options& opt) {
+  tsah::CpuRuntime cpu(tree, {a.indices().begin(), a.indices().end()}, a.vertexCount());
+  tc::GpuRuntime gpu(tree, a);
+  cpu.update(a.positionsAt(t));
+  gpu.updateAt(t);
+  tsah::Image cpuImage, gpuImage;
+  const auto start = std::chrono::steady_clock::now();
+  const tsah::RenderStats cs = tsah::renderFrame(cpu, scene.camera, scene.lighting, scene.settings, cpuImage);
+  const double cpuSeconds = seconds(start);
+  const tsah::RenderStats gs = tc::renderFrameGpu(gpu, scene.camera, scene.lighting, scene.settings, gpuImage);
+  const tsah::ImageDifference d = tsah::compareImages(cpuImage, gpuImage, 16);
+  if (!opt.imageDir.empty()) {
+    std::filesystem::create_directories(opt.imageDir);
+    tsah::savePng(opt.imageDir + "/cpu.png", cpuImage);
+    tsah::savePng(opt.imageDir + "/gpu.png", gpuImage);
+  }
+  return {{"mean_abs", d.meanAbs},
+          {"max_abs", d.maxAbs},
+          {"fraction_above_16", d.fractionAbove},
+          {"cpu_threads", cpu.threadCount()},
+          {"cpu_seconds", cpuSeconds},
+          {"cpu_mrays_per_s", cs.total().mraysPerSecond()},
+          {"rays_cpu", {cs.primary.rays, cs.ao.rays, cs.shadow.rays}},
+          {"rays_gpu", {gs.primary.rays, gs.ao.rays, gs.shadow.rays}}};
+}
+
+void run(const Options& opt) {
+  if (opt.input.empty() == opt.generate.empty()) throw anim::Error("give exactly one of --input and --generate");
+  if (!tc::deviceAvailable()) throw anim::Error("no CUDA device");
+  const tc::DeviceInfo dev = tc::describeDevice(0);
+  json out;
+  out["device"] = {{"name", dev.name},
+                   {"compute_capability", std::to_string(dev.computeMajor) + "." + std::to_string(dev.computeMinor)},
+                   {"multiprocessors", dev.multiprocessors},
+                   {"memory_gib", double(dev.globalMemoryBytes) / double(1ull << 30)},
+                   {"cuda_runtime", dev.runtimeVersion},
+                   {"cuda_driver", dev.driverVersion}};
+
+  json input;
+  auto start = std::chrono::steady_clock::now();
+  const anim::Animation a = loadAnimation(opt, input);
+  input["load_seconds"] = seconds(start);
+  input["triangles"] = a.triangleCount();
+  input["vertices"] = a.vertexCount();
+  input["keyframes"] = a.keyframeCount();
+  out["input"] = input;
+
+  const uint32_t frames = std::max<uint32_t>(1, opt.frames);
+  const std::vector<double> times = a.uniformTimes(frames);
+  Scene scene;
+  scene.settings.width = opt.width;
+  scene.settings.height = opt.height;
+  scene.settings.aoSamples = opt.ao;
+  scene.settings.shadowSamples = opt.shadow;
+  const anim::Bounds ab = a.bounds();
+  tsah::Aabb bounds;
+  bounds.extend(tsah::Vec3{ab.min[0], ab.min[1], ab.min[2]});
+  bounds.extend(tsah::Vec3{ab.max[0], ab.max[1], ab.max[2]});
+  scene.camera = tsah::fitCamera(bounds, {0, 1, 0}, 45.0f, float(opt.width) / float(opt.height));
+  scene.lighting = tsah::fitLighting(bounds, scene.camera);
+  out["settings"] = {{"frames", frames},       {"width", opt.width},   {"height", opt.height},
+                     {"ao_samples", opt.ao},   {"shadow_samples", opt.shadow},
+                     {"traversal", opt.traversal}, {"render", !opt.noRender}};
+
+  // Trees: files, then SAH0 built here.
+  std::vector<std::pair<std::string, tsah::FlatBvh>> trees;
+  for (const std::string& spec : opt.trees) {
+    const auto eq = spec.find('=');
+    const std::string name = eq == std::string::npos ? spec : spec.substr(0, eq);
+    const std::string path = eq == std::string::npos ? spec : spec.substr(eq + 1);
+    tsah::BvhBuildInfo info;
+    trees.emplace_back(name, tsah::decodeFlatBvhFile(anim::readFile(path), path, &info));
+    if (info.topologyHash != 0 && info.topologyHash != tsah::topologyHash(a.indices()))
+      throw anim::Error(path + ": the tree was built for another animation (topology hash differs)");
+  }
+  json builds = json::object();
+  if (opt.sah0 || trees.empty()) {
+    start = std::chrono::steady_clock::now();
+    trees.emplace_back("sah0", buildSah0(a, opt.builder));
+    builds["sah0"] = {{"builder", opt.builder + " + collapse(8)"}, {"seconds", seconds(start)}};
+  }
+  out["cpu_builds"] = builds;
+
+  std::vector<bool> modes;
+  if (opt.traversal == "persistent" || opt.traversal == "both") modes.push_back(true);
+  if (opt.traversal == "simple" || opt.traversal == "both") modes.push_back(false);
+  if (modes.empty()) throw anim::Error("--traversal must be persistent, simple or both");
+
+  json methods = json::array();
+  for (bool persistent : modes)
+    for (const auto& [name, tree] : trees) methods.push_back(runRefit(name, tree, a, times, scene, opt, persistent));
+  if (opt.rebuild != "none") {
+    std::stringstream ss(opt.rebuild);
+    std::string m;
+    while (std::getline(ss, m, ','))
+      for (bool persistent : modes)
+        methods.push_back(runRebuild(tc::parseRebuildMethod(m), trees.front().second, a, times, scene, opt, persistent));
+  }
+  out["methods"] = methods;
+  if (opt.cpuCompare) out["cpu_compare"] = compareWithCpu(trees.front().second, a, times.front(), scene, opt);
+  std::cout << out.dump(1) << std::endl;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"tsah_gpu_bench: GPU update, rebuild and trace figures as one JSON object"};
+  Options opt;
+  app.add_option("--input", opt.input, "Animation file (.tanim or anything tsah reads)");
+  app.add_option("--generate", opt.generate, "Generated animation KIND:TRIANGLES:FRAMES (explode, wave, swap)");
+  app.add_option("--tree", opt.trees, "NAME=FILE.tbvh, a tree to refit (repeatable)");
+  app.add_flag("--sah0", opt.sah0, "Also build SAH0 here (the default when no --tree is given)");
+  app.add_option("--builder", opt.builder, "SAH0 builder: sweep (+ leaf collapse) or binned")
+      ->check(CLI::IsMember({"sweep", "binned"}));
+  app.add_option("--rebuild", opt.rebuild, "GPU rebuild methods, comma separated, or none");
+  app.add_option("--frames", opt.frames, "Frames timed, uniform over the animation (default 50)");
+  app.add_option("--width", opt.width, "Image width (default 1024)");
+  app.add_option("--height", opt.height, "Image height (default 768)");
+  app.add_option("--ao", opt.ao, "Ambient-occlusion rays per pixel (default 8)");
+  app.add_option("--shadow", opt.shadow, "Shadow rays per pixel (default 2)");
+  app.add_option("--traversal", opt.traversal, "persistent, simple or both");
+  app.add_flag("--no-render", opt.noRender, "Time the updates and rebuilds only");
+  app.add_flag("--cpu-compare", opt.cpuCompare, "Render the first frame on the CPU too and compare the images");
+  app.add_option("--image-dir", opt.imageDir, "Where --cpu-compare writes cpu.png and gpu.png");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  try {
+    run(opt);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "tsah_gpu_bench: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

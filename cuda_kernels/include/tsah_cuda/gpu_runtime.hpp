@@ -1,0 +1,147 @@
+#pragma once
+// The GPU runtime: the CUDA counterpart of tsah::CpuRuntime + tsah::renderFrame.
+//
+// The animation's topology and ALL of its keyframes are uploaded once. Per frame, on the device:
+//   updateAt(t):  vertex interpolation between the two neighbouring keyframes (anim::Animation::
+//                 positionsAt's formula), bottom-up refit of the uploaded tree (atomic counter per
+//                 node), Woop triangles;
+//   rebuildAt(t): the per-frame rebuild baselines instead of the refit: LBVH (30-bit Morton codes,
+//                 Karras 2012; the paper's HLBVH-med) or HLBVH-SAH (SAH over the clusters of the top
+//                 15 Morton bits, spatial median below), then leaf collapse (<= 8 triangles) and Woop;
+//   renderFrameGpu: primary (closest hit), ambient-occlusion and shadow rays (any hit) with the
+//                 CPU renderer's random numbers and shading.
+// Every phase is timed with CUDA events. Positions, boxes and Woop triangles of updateAt are
+// bit-identical to the CPU runtime's; hits agree up to ties between triangles at equal distance.
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string_view>
+#include <vector>
+
+#include "anim/animation.hpp"
+#include "tsah/bvh.hpp"
+#include "tsah/cost.hpp"
+#include "tsah/flat_bvh.hpp"
+#include "tsah/image.hpp"
+#include "tsah/ray.hpp"
+#include "tsah/renderer.hpp"
+#include "tsah/woop.hpp"
+#include "tsah_cuda/device.hpp"
+
+namespace tsah::cuda {
+
+// Device time of one refit update, in milliseconds (CUDA events).
+struct UpdateTimings {
+  double interpolateMs = 0.0;  // update(positions): the upload instead
+  double refitMs = 0.0;
+  double woopMs = 0.0;
+  double totalMs() const { return interpolateMs + refitMs + woopMs; }
+};
+
+enum class RebuildMethod { Lbvh, HlbvhSah };
+const char* rebuildMethodName(RebuildMethod method);  // "lbvh", "hlbvh-sah"
+RebuildMethod parseRebuildMethod(std::string_view name);  // throws anim::Error for anything else
+
+struct RebuildOptions {
+  RebuildMethod method = RebuildMethod::Lbvh;
+  // Leaf collapse with LeafCollapser's rule for one frame (k = 0): bottom-up, a subtree of at most
+  // maxLeafSize triangles becomes one leaf when cI * n * area <= its cost as it is. false: one
+  // triangle per leaf (the "bare" build).
+  bool collapse = true;
+  uint32_t maxLeafSize = 8;
+  CostModel cost;
+  // Woop triangles of the new tree (tracing needs them; false only to time the bare build).
+  bool woop = true;
+};
+
+// Device time of one rebuild, in milliseconds (CUDA events), and what was built.
+struct RebuildTimings {
+  double interpolateMs = 0.0;  // rebuildAt: positions of the frame (rebuild(positions): upload)
+  double mortonMs = 0.0;       // triangle boxes, centroid bounds, Morton codes
+  double sortMs = 0.0;         // CUB radix sort of the 30-bit codes
+  double hierarchyMs = 0.0;    // Karras radix tree (HLBVH-SAH: and the 15-bit clusters)
+  double topMs = 0.0;          // HLBVH-SAH: SAH tree over the clusters, reordering of the triangles
+  double bottomUpMs = 0.0;     // boxes bottom-up (and the collapse), GpuBvhNode output
+  double woopMs = 0.0;
+  uint32_t clusters = 0;       // HLBVH-SAH only
+  uint32_t interiorNodes = 0, leaves = 0, depth = 0;
+  // The tree without interpolation and Woop (the "bare build" when collapse is off).
+  double buildMs() const { return mortonMs + sortMs + hierarchyMs + topMs + bottomUpMs; }
+  double totalMs() const { return interpolateMs + buildMs() + woopMs; }
+};
+
+// Device time of a rendered frame beyond the ray passes of RenderStats.
+struct GpuRenderTimings {
+  double generateMs = 0.0;  // ray generation, surfaces of the primary hits
+  double shadeMs = 0.0;     // pixel colours
+  double downloadMs = 0.0;  // image to the host (0 when no image was asked for)
+  double totalMs = 0.0;     // first to last event of the frame, ray passes included
+};
+
+class GpuRuntime {
+ public:
+  struct Config {
+    int device = 0;
+    // Aila-Laine persistent warps fetching rays from a global counter; false: one thread per ray.
+    bool persistentTraversal = true;
+  };
+
+  // tree: the topology to refit (frame 0's block; its boxes are recomputed by updateAt). Throws
+  // anim::Error when the tree does not match the animation, is invalid, or is deeper than the
+  // traversal stack allows, and CudaError when the device fails.
+  GpuRuntime(const FlatBvh& tree, const anim::Animation& animation, Config config);
+  GpuRuntime(const FlatBvh& tree, const anim::Animation& animation);
+  ~GpuRuntime();
+  GpuRuntime(const GpuRuntime&) = delete;
+  GpuRuntime& operator=(const GpuRuntime&) = delete;
+
+  // The uploaded tree refitted to the animation at time t (clamped to its range), Woop triangles
+  // recomputed; tracing uses it afterwards.
+  UpdateTimings updateAt(double time);
+  // The same for positions given by the host (vertexCount * 3 floats), as CpuRuntime::update.
+  UpdateTimings update(std::span<const float> positions);
+  // A new tree for the animation at time t (or for the given positions); tracing uses it until the
+  // next update. The uploaded tree is kept.
+  RebuildTimings rebuildAt(double time, const RebuildOptions& options = {});
+  RebuildTimings rebuild(std::span<const float> positions, const RebuildOptions& options = {});
+
+  bool tracingRebuiltTree() const;
+  uint32_t triangleCount() const;
+  uint32_t vertexCount() const;
+  const DeviceInfo& device() const;
+  const Config& config() const;
+
+  // Host copies of the current state (each synchronizes).
+  std::vector<float> downloadPositions() const;
+  std::vector<WoopTriangle> downloadWoop() const;  // per slot of the traced tree
+  // The traced tree with this frame's boxes (frameCount 1): the uploaded topology in its canonical
+  // order after an update, the canonical form of the rebuilt tree after a rebuild.
+  FlatBvh downloadTree() const;
+  // The last rebuilt tree as a tsah::Bvh (one frame of boxes), exactly as built on the device.
+  Bvh downloadRebuiltTree() const;
+  Aabb bounds() const;  // of the traced tree
+
+  // Traces host rays against the traced tree (closest hit / any hit). stats: ray count and the
+  // traversal kernel's device time.
+  std::vector<Hit> closestHits(std::span<const Ray> rays, RayPassStats* stats = nullptr);
+  std::vector<uint8_t> anyHits(std::span<const Ray> rays, RayPassStats* stats = nullptr);
+
+  struct Impl;
+
+ private:
+  friend RenderStats renderFrameGpu(GpuRuntime&, const Camera&, const SceneLighting&, const RenderSettings&, Image*,
+                                    GpuRenderTimings*);
+  std::unique_ptr<Impl> impl_;
+};
+
+// tsah::renderFrame on the GPU for the runtime's current frame: the same passes, random numbers and
+// shading. image == nullptr skips the download (benchmarks). Throws anim::Error for an empty image
+// size or an invalid camera, as the CPU renderer does.
+RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const SceneLighting& lighting,
+                           const RenderSettings& settings, Image* image, GpuRenderTimings* timings = nullptr);
+inline RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const SceneLighting& lighting,
+                                  const RenderSettings& settings, Image& image, GpuRenderTimings* timings = nullptr) {
+  return renderFrameGpu(runtime, camera, lighting, settings, &image, timings);
+}
+
+}  // namespace tsah::cuda

@@ -1,0 +1,51 @@
+#pragma once
+// Plain data shared by the host code and the kernels of the GPU runtime (no CUDA syntax here, so
+// the C++ compiler reads it too).
+#include <cstdint>
+#include <type_traits>
+
+#include "tsah/aabb.hpp"
+#include "tsah/gpu_layout.hpp"
+#include "tsah/ray.hpp"
+#include "tsah/woop.hpp"
+
+namespace tsah::cuda::detail {
+
+inline constexpr uint32_t kNoParent = 0xffffffffu;
+
+// The root of the tree being traced, kept in device memory because the refit and the rebuilds
+// compute it on the device (no round trip to the host between update and trace).
+struct alignas(16) RootInfo {
+  Aabb box;                    // the whole tree
+  int32_t ref = makeLeafRef(0);  // node 0.. or a leaf reference (the whole tree is one leaf)
+  uint32_t count = 0;          // triangles of the root when it is a leaf, else 0
+  uint32_t interiorCount = 0;  // reachable interior nodes (rebuilt trees)
+  uint32_t depth = 0;          // depth of the deepest leaf (rebuilt trees)
+};
+static_assert(sizeof(RootInfo) == 48 && std::is_trivially_copyable_v<RootInfo>);
+
+// Everything a traversal reads; device pointers only, passed to kernels by value.
+struct TraceScene {
+  const GpuBvhNode* nodes = nullptr;
+  const WoopTriangle* woop = nullptr;   // per slot
+  const uint32_t* triIndex = nullptr;   // slot -> triangle id
+  const uint32_t* indices = nullptr;    // 3 per triangle id
+  const float* positions = nullptr;     // xyz per vertex, this frame
+  const RootInfo* root = nullptr;
+};
+
+// A leaf of an uploaded tree as the refit sees it: where its box goes (interior node * 2 + side,
+// kNoParent for a tree that is one leaf) and its triangle slots.
+struct LeafRecord {
+  uint32_t parentSlot;
+  uint32_t first;
+  uint32_t count;
+};
+
+struct TraceLaunch {
+  bool persistent = true;   // Aila-Laine persistent warps fetching rays from a global counter
+  uint32_t blockSize = 128;
+  uint32_t blocks = 0;      // persistent: resident blocks (0: from the occupancy calculator)
+};
+
+}  // namespace tsah::cuda::detail

@@ -1,0 +1,38 @@
+#pragma once
+// A fixed set of CUDA events recorded on one stream; elapsed device time between any two of them.
+#include <cuda_runtime_api.h>
+
+#include <cstddef>
+#include <vector>
+
+#include "tsah_cuda/cuda_check.hpp"
+
+namespace tsah::cuda::detail {
+
+class EventTimer {
+ public:
+  explicit EventTimer(std::size_t count) : events_(count, nullptr) {
+    for (auto& e : events_) CUDA_CHECK(cudaEventCreate(&e));
+  }
+  ~EventTimer() {
+    for (auto e : events_)
+      if (e) cudaEventDestroy(e);
+  }
+  EventTimer(const EventTimer&) = delete;
+  EventTimer& operator=(const EventTimer&) = delete;
+
+  std::size_t size() const { return events_.size(); }
+  void record(std::size_t i, cudaStream_t stream) { CUDA_CHECK(cudaEventRecord(events_.at(i), stream)); }
+  void wait(std::size_t i) { CUDA_CHECK(cudaEventSynchronize(events_.at(i))); }
+  // Device milliseconds from event a to event b; both must have completed (wait on the later one).
+  double ms(std::size_t a, std::size_t b) const {
+    float v = 0.0f;
+    CUDA_CHECK(cudaEventElapsedTime(&v, events_.at(a), events_.at(b)));
+    return double(v);
+  }
+
+ private:
+  std::vector<cudaEvent_t> events_;
+};
+
+}  // namespace tsah::cuda::detail

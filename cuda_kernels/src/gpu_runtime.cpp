@@ -1,0 +1,301 @@
+#include "tsah_cuda/gpu_runtime.hpp"
+
+#include <algorithm>
+#include <string>
+
+#include "anim/error.hpp"
+#include "kernels.hpp"
+#include "runtime_impl.hpp"
+#include "tsah/traversal.hpp"
+
+namespace tsah::cuda {
+
+namespace {
+
+// The keyframe at or before t and the blend weight towards the next one: anim::Animation's rule
+// (clamped at both ends), so positions match Animation::positionsAt exactly.
+void locate(const std::vector<double>& times, double t, uint32_t& k, float& alpha) {
+  if (times.size() == 1 || t <= times.front()) {
+    k = 0;
+    alpha = 0.0f;
+    return;
+  }
+  if (t >= times.back()) {
+    k = static_cast<uint32_t>(times.size() - 1);
+    alpha = 0.0f;
+    return;
+  }
+  const auto it = std::upper_bound(times.begin(), times.end(), t);
+  k = static_cast<uint32_t>(it - times.begin()) - 1;
+  alpha = static_cast<float>((t - times[k]) / (times[k + 1] - times[k]));
+}
+
+}  // namespace
+
+const char* rebuildMethodName(RebuildMethod method) {
+  return method == RebuildMethod::Lbvh ? "lbvh" : "hlbvh-sah";
+}
+
+RebuildMethod parseRebuildMethod(std::string_view name) {
+  if (name == "lbvh") return RebuildMethod::Lbvh;
+  if (name == "hlbvh-sah" || name == "hlbvh") return RebuildMethod::HlbvhSah;
+  throw anim::Error("unknown GPU rebuild method '" + std::string(name) + "' (expected lbvh or hlbvh-sah)");
+}
+
+GpuRuntime::Impl::Impl(const FlatBvh& tree, const anim::Animation& animation, Config cfg) : config(cfg) {
+  triangles = animation.triangleCount();
+  vertices = animation.vertexCount();
+  if (triangles == 0) throw anim::Error("GPU runtime: the animation has no triangles");
+  if (animation.keyframeCount() == 0) throw anim::Error("GPU runtime: the animation has no keyframes");
+  if (tree.triangleCount() != triangles)
+    throw anim::Error("GPU runtime: the tree holds " + std::to_string(tree.triangleCount()) +
+                      " triangles, the animation " + std::to_string(triangles));
+  const auto idx = animation.indices();
+  for (uint32_t v : idx)
+    if (v >= vertices) throw anim::Error("GPU runtime: a triangle refers to a vertex out of range");
+
+  // Keep frame 0's block only, as CpuRuntime does: the boxes are recomputed by every update.
+  topology.frameCount = 1;
+  topology.interiorCount = tree.interiorCount;
+  topology.leafCount = tree.leafCount;
+  topology.depth = tree.depth;
+  topology.rootRef = tree.rootRef;
+  topology.rootCount = tree.rootCount;
+  const auto block = tree.frameNodes(0);
+  topology.nodes.assign(block.begin(), block.end());
+  topology.rootBoxes = {tree.rootBoxes.empty() ? Aabb{} : tree.rootBoxes[0]};
+  topology.triIndex = tree.triIndex;
+  if (auto problem = validateFlatBvh(topology)) throw anim::Error("GPU runtime: invalid tree: " + *problem);
+  if (topology.depth > kTraversalStackSize)
+    throw anim::Error("GPU runtime: tree depth " + std::to_string(topology.depth) +
+                      " exceeds the traversal stack of " + std::to_string(kTraversalStackSize));
+
+  // Parents of interior nodes and the leaves, for the bottom-up refit.
+  std::vector<uint32_t> parent(topology.interiorCount, detail::kNoParent);
+  std::vector<detail::LeafRecord> leafRecords;
+  leafRecords.reserve(topology.leafCount);
+  if (topology.interiorCount == 0) {
+    leafRecords.push_back({detail::kNoParent, 0, topology.rootCount});
+  } else {
+    for (uint32_t i = 0; i < topology.interiorCount; ++i) {
+      const GpuBvhNode& n = topology.nodes[i];
+      for (int c = 0; c < 2; ++c) {
+        const int32_t ref = n.childRef(c);
+        const uint32_t slot = (i << 1) | uint32_t(c);
+        if (isLeafRef(ref))
+          leafRecords.push_back({slot, leafFirstSlot(ref), n.childCount(c)});
+        else
+          parent[uint32_t(ref)] = slot;
+      }
+    }
+  }
+
+  CUDA_CHECK(cudaSetDevice(config.device));
+  device = describeDevice(config.device);
+  CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
+  times.assign(animation.times().begin(), animation.times().end());
+  keyframes = DeviceBuffer<float>(animation.allPositions(), stream);
+  indices = DeviceBuffer<uint32_t>(idx, stream);
+  positions.resize(std::size_t(vertices) * 3);
+  nodes = DeviceBuffer<GpuBvhNode>(std::span<const GpuBvhNode>(topology.nodes), stream);
+  nodeParent = DeviceBuffer<uint32_t>(std::span<const uint32_t>(parent), stream);
+  counters.resize(topology.interiorCount);
+  triIndex = DeviceBuffer<uint32_t>(std::span<const uint32_t>(topology.triIndex), stream);
+  leaves = DeviceBuffer<detail::LeafRecord>(std::span<const detail::LeafRecord>(leafRecords), stream);
+  detail::RootInfo r;
+  r.box = topology.rootBoxes[0];
+  r.ref = topology.rootRef;
+  r.count = topology.rootCount;
+  r.interiorCount = topology.interiorCount;
+  r.depth = topology.depth;
+  root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&r, 1), stream);
+  woop.resize(triangles);
+  words.resize(8);
+  CUDA_CHECK(cudaStreamSynchronize(stream));
+}
+
+GpuRuntime::Impl::~Impl() {
+  if (stream) {
+    cudaStreamSynchronize(stream);
+    cudaStreamDestroy(stream);
+  }
+}
+
+detail::TraceScene GpuRuntime::Impl::scene() const {
+  detail::TraceScene s;
+  s.nodes = tracingRebuilt ? rebuilder->nodes() : nodes.data();
+  s.woop = woop.data();
+  s.triIndex = tracingRebuilt ? rebuilder->triIndex() : triIndex.data();
+  s.indices = indices.data();
+  s.positions = positions.data();
+  s.root = tracingRebuilt ? rebuilder->root() : root.data();
+  return s;
+}
+
+void GpuRuntime::Impl::requireTraceable() const {
+  if (!woopValid)
+    throw anim::Error("GPU runtime: nothing to trace yet (call update/updateAt, or rebuild with Woop triangles)");
+}
+
+void GpuRuntime::Impl::refitAndWoop(UpdateTimings& timings) {
+  counters.fillBytes(0, stream);
+  detail::launchRefit(nodes.data(), nodeParent.data(), leaves.data(), uint32_t(leaves.size()), triIndex.data(),
+                      indices.data(), positions.data(), counters.data(), root.data(), stream);
+  events.record(2, stream);
+  detail::launchWoop(triIndex.data(), triangles, indices.data(), positions.data(), woop.data(), stream);
+  events.record(3, stream);
+  events.wait(3);
+  timings.interpolateMs = events.ms(0, 1);
+  timings.refitMs = events.ms(1, 2);
+  timings.woopMs = events.ms(2, 3);
+  tracingRebuilt = false;
+  woopValid = true;
+}
+
+GpuRuntime::GpuRuntime(const FlatBvh& tree, const anim::Animation& animation, Config config)
+    : impl_(std::make_unique<Impl>(tree, animation, config)) {}
+GpuRuntime::GpuRuntime(const FlatBvh& tree, const anim::Animation& animation)
+    : GpuRuntime(tree, animation, Config{}) {}
+GpuRuntime::~GpuRuntime() = default;
+
+UpdateTimings GpuRuntime::updateAt(double time) {
+  Impl& m = *impl_;
+  uint32_t k;
+  float alpha;
+  locate(m.times, time, k, alpha);
+  const std::size_t perFrame = std::size_t(m.vertices) * 3;
+  const float* a = m.keyframes.data() + k * perFrame;
+  const float* b = alpha == 0.0f ? a : m.keyframes.data() + (k + 1) * perFrame;
+  UpdateTimings timings;
+  m.events.record(0, m.stream);
+  detail::launchInterpolate(a, b, alpha, m.positions.data(), perFrame, m.stream);
+  m.events.record(1, m.stream);
+  m.refitAndWoop(timings);
+  return timings;
+}
+
+UpdateTimings GpuRuntime::update(std::span<const float> positions) {
+  Impl& m = *impl_;
+  if (positions.size() != std::size_t(m.vertices) * 3)
+    throw anim::Error("GPU runtime: got " + std::to_string(positions.size()) + " coordinates, expected " +
+                      std::to_string(std::size_t(m.vertices) * 3));
+  UpdateTimings timings;
+  m.events.record(0, m.stream);
+  m.positions.upload(positions, m.stream);
+  m.events.record(1, m.stream);
+  m.refitAndWoop(timings);
+  return timings;
+}
+
+RebuildTimings GpuRuntime::rebuildAt(double time, const RebuildOptions& options) {
+  Impl& m = *impl_;
+  uint32_t k;
+  float alpha;
+  locate(m.times, time, k, alpha);
+  const std::size_t perFrame = std::size_t(m.vertices) * 3;
+  const float* a = m.keyframes.data() + k * perFrame;
+  const float* b = alpha == 0.0f ? a : m.keyframes.data() + (k + 1) * perFrame;
+  m.events.record(0, m.stream);
+  detail::launchInterpolate(a, b, alpha, m.positions.data(), perFrame, m.stream);
+  m.events.record(1, m.stream);
+  if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles);
+  m.woopValid = false;
+  m.tracingRebuilt = true;
+  RebuildTimings timings = m.rebuilder->build(m.indices.data(), m.positions.data(), options, m.woop.data(), m.stream);
+  timings.interpolateMs = m.events.ms(0, 1);
+  m.woopValid = options.woop;
+  return timings;
+}
+
+RebuildTimings GpuRuntime::rebuild(std::span<const float> positions, const RebuildOptions& options) {
+  Impl& m = *impl_;
+  if (positions.size() != std::size_t(m.vertices) * 3)
+    throw anim::Error("GPU runtime: got " + std::to_string(positions.size()) + " coordinates, expected " +
+                      std::to_string(std::size_t(m.vertices) * 3));
+  m.events.record(0, m.stream);
+  m.positions.upload(positions, m.stream);
+  m.events.record(1, m.stream);
+  if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles);
+  m.woopValid = false;
+  m.tracingRebuilt = true;
+  RebuildTimings timings = m.rebuilder->build(m.indices.data(), m.positions.data(), options, m.woop.data(), m.stream);
+  timings.interpolateMs = m.events.ms(0, 1);
+  m.woopValid = options.woop;
+  return timings;
+}
+
+bool GpuRuntime::tracingRebuiltTree() const { return impl_->tracingRebuilt; }
+uint32_t GpuRuntime::triangleCount() const { return impl_->triangles; }
+uint32_t GpuRuntime::vertexCount() const { return impl_->vertices; }
+const DeviceInfo& GpuRuntime::device() const { return impl_->device; }
+const GpuRuntime::Config& GpuRuntime::config() const { return impl_->config; }
+
+std::vector<float> GpuRuntime::downloadPositions() const { return impl_->positions.download(impl_->stream); }
+
+std::vector<WoopTriangle> GpuRuntime::downloadWoop() const { return impl_->woop.download(impl_->stream); }
+
+FlatBvh GpuRuntime::downloadTree() const {
+  const Impl& m = *impl_;
+  if (m.tracingRebuilt) return flattenBvh(downloadRebuiltTree());
+  FlatBvh flat = m.topology;
+  flat.nodes = m.nodes.download(m.stream);
+  flat.rootBoxes = {m.root.download(m.stream)[0].box};
+  return flat;
+}
+
+Bvh GpuRuntime::downloadRebuiltTree() const {
+  const Impl& m = *impl_;
+  if (!m.rebuilder || !m.rebuilder->built()) throw anim::Error("GPU runtime: no tree has been rebuilt");
+  return m.rebuilder->download(m.stream);
+}
+
+Aabb GpuRuntime::bounds() const {
+  const Impl& m = *impl_;
+  detail::RootInfo r;
+  CUDA_CHECK(cudaMemcpyAsync(&r, m.scene().root, sizeof r, cudaMemcpyDeviceToHost, m.stream));
+  CUDA_CHECK(cudaStreamSynchronize(m.stream));
+  return r.box;
+}
+
+namespace {
+
+template <typename Result>
+std::vector<Result> traceHostRays(GpuRuntime::Impl& m, std::span<const Ray> rays, bool anyHit, RayPassStats* stats) {
+  m.requireTraceable();
+  std::vector<Result> out(rays.size());
+  if (rays.empty()) {
+    if (stats) *stats = {};
+    return out;
+  }
+  if (rays.size() > 0xffffffffu) throw anim::Error("GPU runtime: too many rays in one call");
+  const auto count = static_cast<uint32_t>(rays.size());
+  m.rays.reserve(count);
+  m.rays.upload(rays, m.stream);
+  if (anyHit)
+    m.occluded.reserve(count);
+  else
+    m.hits.reserve(count);
+  m.words.fillBytes(0, m.stream);
+  m.events.record(0, m.stream);
+  detail::launchTrace(m.scene(), m.rays.data(), count, anyHit ? nullptr : m.hits.data(),
+                      anyHit ? m.occluded.data() : nullptr, m.words.data(), m.traceLaunch(), m.stream);
+  m.events.record(1, m.stream);
+  m.events.wait(1);
+  if (stats) *stats = {count, m.events.ms(0, 1)};
+  void* src = anyHit ? static_cast<void*>(m.occluded.data()) : static_cast<void*>(m.hits.data());
+  CUDA_CHECK(cudaMemcpyAsync(out.data(), src, out.size() * sizeof(Result), cudaMemcpyDeviceToHost, m.stream));
+  CUDA_CHECK(cudaStreamSynchronize(m.stream));
+  return out;
+}
+
+}  // namespace
+
+std::vector<Hit> GpuRuntime::closestHits(std::span<const Ray> rays, RayPassStats* stats) {
+  return traceHostRays<Hit>(*impl_, rays, false, stats);
+}
+
+std::vector<uint8_t> GpuRuntime::anyHits(std::span<const Ray> rays, RayPassStats* stats) {
+  return traceHostRays<uint8_t>(*impl_, rays, true, stats);
+}
+
+}  // namespace tsah::cuda

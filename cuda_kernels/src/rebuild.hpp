@@ -1,0 +1,73 @@
+#pragma once
+// The per-frame GPU rebuild baselines (host side; kernels in rebuild.cu).
+//
+//  LBVH:      triangle boxes and centroid bounds -> 30-bit Morton codes -> CUB radix sort ->
+//             Karras (2012) radix tree -> bottom-up boxes with atomic counters, where the leaf
+//             collapse is decided and the GpuBvhNode of every interior node is written.
+//  HLBVH-SAH: the same Morton codes and radix tree; the runs of equal top-15-bit prefixes are the
+//             clusters (their subtrees of the radix tree are the spatial-median bottom levels); a
+//             binned SAH tree over the clusters replaces the radix tree above them (Garanzha et al.
+//             2011), built by persistent blocks taking nodes from a queue; the triangles are then
+//             reordered so that every subtree of the final tree covers a contiguous slot range, and
+//             the same bottom-up pass collapses and writes the nodes.
+// Nodes are indexed by the radix tree (0 .. n-2) and, for HLBVH-SAH, the cluster tree after them;
+// nodes collapsed into leaves or replaced by the cluster tree stay in the array unreferenced.
+#include <cuda_runtime_api.h>
+
+#include <cstdint>
+
+#include "device_types.hpp"
+#include "event_timer.hpp"
+#include "tsah/bvh.hpp"
+#include "tsah_cuda/device_buffer.hpp"
+#include "tsah_cuda/gpu_runtime.hpp"
+
+namespace tsah::cuda::detail {
+
+class GpuRebuilder {
+ public:
+  explicit GpuRebuilder(uint32_t triangles);
+  ~GpuRebuilder();
+  GpuRebuilder(const GpuRebuilder&) = delete;
+  GpuRebuilder& operator=(const GpuRebuilder&) = delete;
+
+  // Builds a tree over the triangles (indices: 3 per triangle) at the given device positions.
+  // Writes woop (one per slot) when options.woop. Synchronizes at the end (timings, tree size).
+  RebuildTimings build(const uint32_t* indices, const float* positions, const RebuildOptions& options,
+                       WoopTriangle* woop, cudaStream_t stream);
+
+  const GpuBvhNode* nodes() const { return nodes_.data(); }
+  const uint32_t* triIndex() const { return slotTri_.data(); }
+  const RootInfo* root() const { return root_.data(); }
+  bool built() const { return built_; }
+
+  // The last tree as a tsah::Bvh (one frame of boxes: the child boxes stored in the nodes).
+  Bvh download(cudaStream_t stream) const;
+
+ private:
+  uint32_t n_;
+  bool built_ = false;
+  EventTimer events_;
+  // Per triangle (by id) and per slot.
+  DeviceBuffer<Aabb> triBox_;
+  DeviceBuffer<uint32_t> mortonIn_, mortonOut_, idsIn_, sortedIds_, slotTri_, leafParent_;
+  DeviceBuffer<int32_t> centroidBounds_;  // 6 order-preserving ints: min xyz, min -xyz
+  // Per interior node (radix tree, then cluster tree).
+  DeviceBuffer<int2> children_;
+  DeviceBuffer<uint32_t> nodeParent_, counters_;
+  DeviceBuffer<uint4> nodeInfo_;  // 3 x uint4 per node, see rebuild.cu
+  DeviceBuffer<GpuBvhNode> nodes_;
+  DeviceBuffer<RootInfo> root_;
+  // HLBVH-SAH.
+  DeviceBuffer<uint32_t> headFlags_, clusterOf_, clusterBegin_, clusterEnd_, clusterCell_, clusterParent_,
+      orderA_, orderB_, finalOrder_, newBegin_, slotMap_, leafParentRadix_, queueWords_, taskReady_;
+  DeviceBuffer<int32_t> clusterRoot_;
+  DeviceBuffer<Aabb> clusterBox_;
+  DeviceBuffer<uint4> tasks_;
+  DeviceBuffer<uint2> nodeRange_;
+  // CUB scratch.
+  DeviceBuffer<unsigned char> cubTemp_;
+  int topBlocks_ = 0;
+};
+
+}  // namespace tsah::cuda::detail

@@ -1,0 +1,61 @@
+#pragma once
+// GpuRuntime's state (shared by gpu_runtime.cpp and render.cu).
+#include <cuda_runtime_api.h>
+
+#include <memory>
+#include <vector>
+
+#include "device_types.hpp"
+#include "event_timer.hpp"
+#include "rebuild.hpp"
+#include "tsah_cuda/device_buffer.hpp"
+#include "tsah_cuda/gpu_runtime.hpp"
+
+namespace tsah::cuda {
+
+struct GpuRuntime::Impl {
+  Impl(const FlatBvh& tree, const anim::Animation& animation, Config config);
+  ~Impl();
+  Impl(const Impl&) = delete;
+  Impl& operator=(const Impl&) = delete;
+
+  detail::TraceScene scene() const;
+  detail::TraceLaunch traceLaunch() const { return {config.persistentTraversal, 128, 0}; }
+  // Throws unless there is a traceable frame (an update or a rebuild with Woop triangles).
+  void requireTraceable() const;
+  void refitAndWoop(UpdateTimings& timings);  // events 1..3 (event 0 marks the start)
+
+  Config config;
+  DeviceInfo device;
+  cudaStream_t stream = nullptr;
+  detail::EventTimer events{16};
+
+  uint32_t triangles = 0, vertices = 0;
+  std::vector<double> times;             // keyframe times
+  DeviceBuffer<float> keyframes;         // every keyframe, vertices * 3 floats each
+  DeviceBuffer<uint32_t> indices;        // 3 per triangle
+  DeviceBuffer<float> positions;         // the current frame
+
+  // The uploaded tree (canonical order, one block of nodes).
+  FlatBvh topology;                      // host copy of its structure
+  DeviceBuffer<GpuBvhNode> nodes;
+  DeviceBuffer<uint32_t> nodeParent, counters, triIndex;
+  DeviceBuffer<detail::LeafRecord> leaves;
+  DeviceBuffer<detail::RootInfo> root;
+
+  DeviceBuffer<WoopTriangle> woop;       // per slot of the traced tree
+  bool woopValid = false;
+  bool tracingRebuilt = false;
+  std::unique_ptr<detail::GpuRebuilder> rebuilder;
+
+  // Scratch of the ray queries and the renderer, grown on demand.
+  DeviceBuffer<uint32_t> words;          // ray counters, ray counts
+  DeviceBuffer<Ray> rays;
+  DeviceBuffer<Hit> hits;
+  DeviceBuffer<uint8_t> occluded, shadowOccluded;
+  DeviceBuffer<Ray> shadowRays;
+  DeviceBuffer<float4> surfaces;         // 2 per pixel: position + kind, normal
+  DeviceBuffer<uint8_t> image;
+};
+
+}  // namespace tsah::cuda

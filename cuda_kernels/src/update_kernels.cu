@@ -1,0 +1,132 @@
+// The per-frame update of an uploaded tree: vertex interpolation, bottom-up refit, Woop triangles.
+// Compiled with -fmad=false (see CMakeLists.txt) so every result is bit-identical to the CPU path.
+#include <cuda/atomic>
+
+#include "kernels.hpp"
+#include "launch.hpp"
+
+namespace tsah::cuda::detail {
+
+namespace {
+
+__global__ void interpolateKernel(const float* __restrict__ a, const float* __restrict__ b, float alpha,
+                                  float* __restrict__ out, std::size_t count) {
+  // Same operations and rounding as anim::Animation::positionsAt: beta * a + alpha * b.
+  const float beta = 1.0f - alpha;
+  const std::size_t stride = std::size_t(gridDim.x) * blockDim.x;
+  const std::size_t quads = count / 4;
+  const float4* a4 = reinterpret_cast<const float4*>(a);
+  const float4* b4 = reinterpret_cast<const float4*>(b);
+  float4* o4 = reinterpret_cast<float4*>(out);
+  for (std::size_t i = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x; i < quads; i += stride) {
+    const float4 x = __ldg(a4 + i), y = __ldg(b4 + i);
+    o4[i] = make_float4(__fadd_rn(__fmul_rn(beta, x.x), __fmul_rn(alpha, y.x)),
+                        __fadd_rn(__fmul_rn(beta, x.y), __fmul_rn(alpha, y.y)),
+                        __fadd_rn(__fmul_rn(beta, x.z), __fmul_rn(alpha, y.z)),
+                        __fadd_rn(__fmul_rn(beta, x.w), __fmul_rn(alpha, y.w)));
+  }
+  for (std::size_t i = quads * 4 + std::size_t(blockIdx.x) * blockDim.x + threadIdx.x; i < count; i += stride)
+    out[i] = __fadd_rn(__fmul_rn(beta, a[i]), __fmul_rn(alpha, b[i]));
+}
+
+__device__ __forceinline__ Vec3 loadVertex(const float* __restrict__ p, uint32_t v) {
+  return {__ldg(p + 3 * std::size_t(v)), __ldg(p + 3 * std::size_t(v) + 1), __ldg(p + 3 * std::size_t(v) + 2)};
+}
+
+__device__ __forceinline__ void writeChildBox(GpuBvhNode* node, int side, const Aabb& b) {
+  float* f = reinterpret_cast<float*>(node);
+  // Layout (gpu_layout.hpp): n0xy, n1xy, nz; child 1's x/y start at float 4, z boxes at 8 / 10.
+  const int xy = side == 0 ? 0 : 4, z = side == 0 ? 8 : 10;
+  f[xy + 0] = b.lo.x;
+  f[xy + 1] = b.hi.x;
+  f[xy + 2] = b.lo.y;
+  f[xy + 3] = b.hi.y;
+  f[z + 0] = b.lo.z;
+  f[z + 1] = b.hi.z;
+}
+
+__device__ __forceinline__ Aabb readChildBox(const GpuBvhNode* node, int side) {
+  // Written by another thread of this launch: read through L2 (never a stale L1 line).
+  const float* f = reinterpret_cast<const float*>(node);
+  const int xy = side == 0 ? 0 : 4, z = side == 0 ? 8 : 10;
+  Aabb b;
+  b.lo = {__ldcg(f + xy + 0), __ldcg(f + xy + 2), __ldcg(f + z + 0)};
+  b.hi = {__ldcg(f + xy + 1), __ldcg(f + xy + 3), __ldcg(f + z + 1)};
+  return b;
+}
+
+__global__ void refitKernel(GpuBvhNode* __restrict__ nodes, const uint32_t* __restrict__ nodeParent,
+                            const LeafRecord* __restrict__ leaves, uint32_t leafCount,
+                            const uint32_t* __restrict__ triIndex, const uint32_t* __restrict__ indices,
+                            const float* __restrict__ positions, uint32_t* __restrict__ counters,
+                            RootInfo* __restrict__ root) {
+  const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= leafCount) return;
+  const LeafRecord leaf = leaves[i];
+  Aabb box;
+  for (uint32_t s = leaf.first; s < leaf.first + leaf.count; ++s) {
+    const uint32_t* tri = indices + 3 * std::size_t(__ldg(triIndex + s));
+    box.extend(loadVertex(positions, __ldg(tri)));
+    box.extend(loadVertex(positions, __ldg(tri + 1)));
+    box.extend(loadVertex(positions, __ldg(tri + 2)));
+  }
+  uint32_t slot = leaf.parentSlot;
+  // Walk up: the second thread to arrive at a node has both child boxes and carries on.
+  while (slot != kNoParent) {
+    const uint32_t node = slot >> 1;
+    const int side = int(slot & 1);
+    writeChildBox(nodes + node, side, box);
+    ::cuda::atomic_ref<uint32_t, ::cuda::thread_scope_device> arrivals(counters[node]);
+    if (arrivals.fetch_add(1, ::cuda::memory_order_acq_rel) == 0) return;  // the sibling finishes the node
+    box.extend(readChildBox(nodes + node, 1 - side));
+    slot = nodeParent[node];
+  }
+  root->box = box;
+}
+
+__global__ void woopKernel(const uint32_t* __restrict__ triIndex, uint32_t slots, const uint32_t* __restrict__ indices,
+                           const float* __restrict__ positions, WoopTriangle* __restrict__ woop) {
+  const uint32_t s = blockIdx.x * blockDim.x + threadIdx.x;
+  if (s >= slots) return;
+  const uint32_t* tri = indices + 3 * std::size_t(__ldg(triIndex + s));
+  const WoopTriangle w = makeWoopTriangle(loadVertex(positions, __ldg(tri)), loadVertex(positions, __ldg(tri + 1)),
+                                          loadVertex(positions, __ldg(tri + 2)));
+  float4* out = reinterpret_cast<float4*>(woop + s);
+  out[0] = make_float4(w.r0.x, w.r0.y, w.r0.z, w.r0.w);
+  out[1] = make_float4(w.r1.x, w.r1.y, w.r1.z, w.r1.w);
+  out[2] = make_float4(w.r2.x, w.r2.y, w.r2.z, w.r2.w);
+}
+
+}  // namespace
+
+void launchInterpolate(const float* a, const float* b, float alpha, float* out, std::size_t count,
+                       cudaStream_t stream) {
+  if (count == 0) return;
+  if (alpha == 0.0f) {  // positionsAt copies the keyframe
+    CUDA_CHECK(cudaMemcpyAsync(out, a, count * sizeof(float), cudaMemcpyDeviceToDevice, stream));
+    return;
+  }
+  const uint32_t block = 256;
+  interpolateKernel<<<gridFor(count / 4 + 1, block), block, 0, stream>>>(a, b, alpha, out, count);
+  CUDA_CHECK_LAUNCH("interpolateKernel");
+}
+
+void launchRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
+                 const uint32_t* triIndex, const uint32_t* indices, const float* positions, uint32_t* counters,
+                 RootInfo* root, cudaStream_t stream) {
+  if (leafCount == 0) return;
+  const uint32_t block = 128;
+  refitKernel<<<gridFor(leafCount, block), block, 0, stream>>>(nodes, nodeParent, leaves, leafCount, triIndex,
+                                                               indices, positions, counters, root);
+  CUDA_CHECK_LAUNCH("refitKernel");
+}
+
+void launchWoop(const uint32_t* triIndex, uint32_t slots, const uint32_t* indices, const float* positions,
+                WoopTriangle* woop, cudaStream_t stream) {
+  if (slots == 0) return;
+  const uint32_t block = 128;
+  woopKernel<<<gridFor(slots, block), block, 0, stream>>>(triIndex, slots, indices, positions, woop);
+  CUDA_CHECK_LAUNCH("woopKernel");
+}
+
+}  // namespace tsah::cuda::detail
