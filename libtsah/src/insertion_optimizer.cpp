@@ -1,6 +1,7 @@
 #include "tsah/insertion_optimizer.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cassert>
 #include <chrono>
 #include <cmath>
@@ -8,6 +9,10 @@
 #include <stdexcept>
 #include <string>
 #include <utility>
+
+#if defined(__SSE2__)
+#include <immintrin.h>
+#endif
 
 #include "random.hpp"
 
@@ -32,15 +37,31 @@ struct QueueEntry {
   float induced;
   uint32_t node;
 };
-// Min-heap on the induced cost (std heap algorithms build max-heaps).
-inline bool laterInQueue(const QueueEntry& a, const QueueEntry& b) { return a.induced > b.induced; }
 
 }  // namespace
 
+// Node records are packed for the search: one 24-byte header followed by the node's boxes of all
+// frames, so a visited node costs one or two neighbouring cache lines. The header is stored in an
+// Aabb slot (6 x 4 bytes) through std::bit_cast, which keeps the storage a plain array of boxes.
+//   lo.x left child   lo.y right child   lo.z A(N)   hi.x Delta_N   hi.y parent   hi.z leaf flag
 struct InsertionSession::Impl {
   InsertionOptimizer::Config config;
-  Bvh bvh;
   uint32_t frames = 1;
+  uint32_t nodeCount = 0;
+  std::size_t stride = 2;          // slots per node record: header + frames boxes
+  std::vector<Aabb> records;
+  uint32_t root = 0;
+  std::vector<uint32_t> interior;  // interior nodes: a fixed set (N and P are reused as parents)
+  // Node selection proposes interior nodes by the thousand: their Delta_N lives in this compact
+  // mirror of the headers (by position in `interior`), so a proposal touches one small array.
+  struct Proposal {
+    uint32_t node;
+    float delta;
+  };
+  std::vector<Proposal> proposals;
+  std::vector<uint32_t> proposalIndex;  // node -> position in `proposals` (interior nodes only)
+  Bvh shape;                       // leaves' primitive ranges, primIds; the topology when materialized
+  mutable bool shapeCurrent = true;
 
   // Per frame.
   std::vector<double> rootArea;    // S_i (constant: the root box is the union of all primitives)
@@ -52,40 +73,55 @@ struct InsertionSession::Impl {
   uint64_t innerCount = 0, primTotal = 0;
   double currentCost = 0.0;
 
-  // Per node.
-  std::vector<float> area;   // A(N)
-  std::vector<float> delta;  // Delta_N (Metropolis-Hastings target, up to a constant)
-
-  // Step state: undo log of every node touched, per-frame change of the interior area sum.
-  struct Saved {
-    uint32_t node;
-    BvhNode data;
-    float area, delta;
-  };
-  std::vector<Saved> undoLog;
-  std::vector<Aabb> undoBoxes;
+  // Step state: undo log of every node record touched, per-frame change of the interior area sum.
+  std::vector<uint32_t> undoNodes;
+  std::vector<Aabb> undoRecords;
   std::vector<uint32_t> touchedInStep;
   uint32_t stepStamp = 0;
   uint32_t savedRoot = 0;
   std::vector<double> stepAreaChange;
   std::vector<double> candidateCost;
   std::vector<Aabb> scratchBoxes;
-  std::vector<QueueEntry> queue;
+  std::vector<QueueEntry> heap;
 
   Rng rng;
   uint32_t chainNode = kInvalidIndex;  // last node accepted by the Metropolis-Hastings chain
   uint64_t steps = 0, accepted = 0;
 
   Impl(Bvh tree, const PrimitiveBoxes& prims, const InsertionOptimizer::Config& cfg)
-      : config(cfg), bvh(std::move(tree)), rng(cfg.seed) {
+      : config(cfg), shape(std::move(tree)), rng(cfg.seed) {
     if (config.k < 0) throw std::invalid_argument("InsertionOptimizer: the exponent k must be >= 0");
     if (prims.frameCount == 0) throw std::invalid_argument("InsertionOptimizer: no frames");
-    if (prims.primCount != bvh.primCount())
+    if (prims.primCount != shape.primCount())
       throw std::invalid_argument("InsertionOptimizer: the tree holds " +
-                                  std::to_string(bvh.primCount()) + " primitives, the boxes " +
+                                  std::to_string(shape.primCount()) + " primitives, the boxes " +
                                   std::to_string(prims.primCount));
-    refit(bvh, prims);
+    refit(shape, prims);
     frames = prims.frameCount;
+    nodeCount = shape.nodeCount();
+    stride = std::size_t(frames) + 1;
+    root = shape.root;
+    records.resize(std::size_t(nodeCount) * stride + 1);  // + a padding slot for 4-lane loads
+    for (uint32_t n = 0; n < nodeCount; ++n) {
+      const BvhNode& node = shape.nodes[n];
+      setLeft(n, node.left);
+      setRight(n, node.right);
+      setParent(n, node.parent);
+      header(n).hi.z = std::bit_cast<float>(uint32_t(node.isLeaf()));
+      std::copy_n(&shape.box(n, 0), frames, box(n));
+      if (node.isLeaf()) primTotal += node.primCount;
+      else interior.push_back(n);
+    }
+    innerCount = interior.size();
+    proposalIndex.assign(nodeCount, kInvalidIndex);
+    for (std::size_t i = 0; i < interior.size(); ++i) {
+      proposals.push_back({interior[i], 0.0f});
+      proposalIndex[interior[i]] = static_cast<uint32_t>(i);
+    }
+    shape.boxes.clear();
+    shape.boxes.shrink_to_fit();
+    shapeCurrent = false;
+
     rootArea.assign(frames, 0.0);
     innerArea.assign(frames, 0.0);
     leafArea.assign(frames, 0.0);
@@ -95,18 +131,53 @@ struct InsertionSession::Impl {
     stepAreaChange.assign(frames, 0.0);
     candidateCost.assign(frames, 0.0);
     scratchBoxes.resize(frames);
-    area.assign(bvh.nodes.size(), 0.0f);
-    delta.assign(bvh.nodes.size(), 0.0f);
-    touchedInStep.assign(bvh.nodes.size(), 0);
-    for (const BvhNode& node : bvh.nodes) {
-      if (node.isLeaf()) primTotal += node.primCount;
-      else ++innerCount;
-    }
-    refresh(/*firstTime=*/true);
+    touchedInStep.assign(nodeCount, 0);
+    heap.reserve(256);
+    refresh(/*weights=*/true);
   }
 
-  const Aabb* boxes(uint32_t n) const { return bvh.boxes.data() + std::size_t(n) * frames; }
-  Aabb* boxes(uint32_t n) { return bvh.boxes.data() + std::size_t(n) * frames; }
+  // ---- node records ----
+  Aabb& header(uint32_t n) { return records[std::size_t(n) * stride]; }
+  const Aabb& header(uint32_t n) const { return records[std::size_t(n) * stride]; }
+  Aabb* box(uint32_t n) { return records.data() + std::size_t(n) * stride + 1; }
+  const Aabb* box(uint32_t n) const { return records.data() + std::size_t(n) * stride + 1; }
+  uint32_t left(uint32_t n) const { return std::bit_cast<uint32_t>(header(n).lo.x); }
+  uint32_t right(uint32_t n) const { return std::bit_cast<uint32_t>(header(n).lo.y); }
+  float area(uint32_t n) const { return header(n).lo.z; }
+  float delta(uint32_t n) const { return header(n).hi.x; }
+  void setDelta(uint32_t n, float d) {
+    header(n).hi.x = d;
+    if (proposalIndex[n] != kInvalidIndex) proposals[proposalIndex[n]].delta = d;
+  }
+  uint32_t parent(uint32_t n) const { return std::bit_cast<uint32_t>(header(n).hi.y); }
+  bool isLeaf(uint32_t n) const { return std::bit_cast<uint32_t>(header(n).hi.z) != 0; }
+  void setLeft(uint32_t n, uint32_t v) { header(n).lo.x = std::bit_cast<float>(v); }
+  void setRight(uint32_t n, uint32_t v) { header(n).lo.y = std::bit_cast<float>(v); }
+  void setParent(uint32_t n, uint32_t v) { header(n).hi.y = std::bit_cast<float>(v); }
+  void prefetch(uint32_t n) const {
+    const char* p = reinterpret_cast<const char*>(&header(n));
+    for (std::size_t offset = 0; offset < stride * sizeof(Aabb); offset += 64) __builtin_prefetch(p + offset);
+  }
+
+  // The tree as a Bvh (topology from the records, primitive ranges and ids from the input).
+  const Bvh& materialize() const {
+    if (shapeCurrent) return shape;
+    Bvh& out = const_cast<Bvh&>(shape);
+    out.root = root;
+    out.frameCount = frames;
+    out.boxes.resize(std::size_t(nodeCount) * frames);
+    for (uint32_t n = 0; n < nodeCount; ++n) {
+      BvhNode& node = out.nodes[n];
+      node.parent = parent(n);
+      if (!isLeaf(n)) {
+        node.left = left(n);
+        node.right = right(n);
+      }
+      std::copy_n(box(n), frames, &out.box(n, 0));
+    }
+    shapeCurrent = true;
+    return shape;
+  }
 
   double costOf(std::span<const double> costs) const { return temporalCost(costs, config.k); }
 
@@ -118,73 +189,77 @@ struct InsertionSession::Impl {
   }
 
   void updateNodeCaches(uint32_t n) {
-    const Aabb* b = boxes(n);
+    const Aabb* b = box(n);
     float a = 0.0f, d = 0.0f;
     for (uint32_t f = 0; f < frames; ++f) {
       const float s = b[f].area();
       a += areaFactor[f] * s;
       d += deltaFactor[f] * s;
     }
-    area[n] = a;
-    delta[n] = d;
+    header(n).lo.z = a;
+    setDelta(n, d);
   }
 
-  void refresh(bool firstTime = false) {
+  // Recomputes the frame costs from the boxes; with `weights`, also w_i and every node's A and Delta.
+  void refresh(bool weights) {
     std::fill(innerArea.begin(), innerArea.end(), 0.0);
     std::fill(leafArea.begin(), leafArea.end(), 0.0);
-    for (uint32_t n = 0; n < bvh.nodeCount(); ++n) {
-      const BvhNode& node = bvh.nodes[n];
-      const Aabb* b = boxes(n);
-      if (node.isLeaf())
-        for (uint32_t f = 0; f < frames; ++f) leafArea[f] += double(b[f].area()) * node.primCount;
-      else
+    for (uint32_t n = 0; n < nodeCount; ++n) {
+      const Aabb* b = box(n);
+      if (isLeaf(n)) {
+        const double count = shape.nodes[n].primCount;
+        for (uint32_t f = 0; f < frames; ++f) leafArea[f] += double(b[f].area()) * count;
+      } else {
         for (uint32_t f = 0; f < frames; ++f) innerArea[f] += b[f].area();
+      }
     }
     for (uint32_t f = 0; f < frames; ++f) {
-      rootArea[f] = boxes(bvh.root)[f].area();
+      rootArea[f] = box(root)[f].area();
       computeFrameCost(f);
     }
     currentCost = costOf(frameCost);
-    // With k = 0 the weights never change: the cached areas stay valid.
-    if (!firstTime && config.k == 0) return;
+    if (!weights) return;
     const std::vector<double> w = temporalWeights(frameCost, config.k);
     for (uint32_t f = 0; f < frames; ++f) {
       deltaFactor[f] = float(w[f]);
       areaFactor[f] = rootArea[f] > 0.0 ? float(w[f] / rootArea[f]) : 0.0f;
     }
-    for (uint32_t n = 0; n < bvh.nodeCount(); ++n) updateNodeCaches(n);
+    for (uint32_t n = 0; n < nodeCount; ++n) updateNodeCaches(n);
+  }
+
+  // After a batch: the frame costs are tracked exactly step by step, so only k > 0 needs work (new
+  // weights, hence new cached areas).
+  void endBatch() {
+    if (config.k > 0) refresh(true);
+    else currentCost = costOf(frameCost);
   }
 
   bool eligible(uint32_t n) const {
-    if (n >= bvh.nodes.size()) return false;
-    const BvhNode& node = bvh.nodes[n];
-    return !node.isLeaf() && node.parent != kInvalidIndex && bvh.nodes[node.parent].parent != kInvalidIndex;
+    if (n >= nodeCount || isLeaf(n) || n == root) return false;
+    return parent(n) != root;
   }
 
   // ---- undo log ----
   void save(uint32_t n) {
     if (touchedInStep[n] == stepStamp) return;
     touchedInStep[n] = stepStamp;
-    undoLog.push_back({n, bvh.nodes[n], area[n], delta[n]});
-    const Aabb* b = boxes(n);
-    undoBoxes.insert(undoBoxes.end(), b, b + frames);
+    undoNodes.push_back(n);
+    const Aabb* r = &header(n);
+    undoRecords.insert(undoRecords.end(), r, r + stride);
   }
 
   void undo() {
-    for (std::size_t e = 0; e < undoLog.size(); ++e) {
-      const Saved& s = undoLog[e];
-      bvh.nodes[s.node] = s.data;
-      area[s.node] = s.area;
-      delta[s.node] = s.delta;
-      std::copy_n(undoBoxes.data() + e * frames, frames, boxes(s.node));
+    for (std::size_t e = 0; e < undoNodes.size(); ++e) {
+      const uint32_t n = undoNodes[e];
+      std::copy_n(undoRecords.data() + e * stride, stride, &header(n));
+      setDelta(n, delta(n));
     }
-    bvh.root = savedRoot;
+    root = savedRoot;
   }
 
-  void replaceChild(uint32_t parent, uint32_t oldChild, uint32_t newChild) {
-    BvhNode& p = bvh.nodes[parent];
-    if (p.left == oldChild) p.left = newChild;
-    else p.right = newChild;
+  void replaceChild(uint32_t p, uint32_t oldChild, uint32_t newChild) {
+    if (left(p) == oldChild) setLeft(p, newChild);
+    else setRight(p, newChild);
   }
 
   // Recomputes boxes from the children upwards, stopping at the first node whose boxes did not
@@ -192,10 +267,9 @@ struct InsertionSession::Impl {
   void refitUpward(uint32_t n) {
     Aabb* fresh = scratchBoxes.data();
     while (n != kInvalidIndex) {
-      const BvhNode& node = bvh.nodes[n];
-      const Aabb* l = boxes(node.left);
-      const Aabb* r = boxes(node.right);
-      Aabb* b = boxes(n);
+      const Aabb* l = box(left(n));
+      const Aabb* r = box(right(n));
+      Aabb* b = box(n);
       bool changed = false;
       for (uint32_t f = 0; f < frames; ++f) {
         fresh[f] = merge(l[f], r[f]);
@@ -211,47 +285,101 @@ struct InsertionSession::Impl {
         a += areaFactor[f] * after;
         d += deltaFactor[f] * after;
       }
-      area[n] = a;
-      delta[n] = d;
-      n = node.parent;
+      header(n).lo.z = a;
+      setDelta(n, d);
+      n = parent(n);
     }
   }
 
-  // Weighted multi-frame area of the union of node x's boxes and the given boxes.
+  // Weighted multi-frame area of the union of node x's boxes and the given boxes (from `records`).
   float unionCost(uint32_t x, const Aabb* c) const {
-    const Aabb* b = boxes(x);
+    const Aabb* b = box(x);
+#if defined(__SSE2__)
+    // One box per iteration: [lo.x lo.y lo.z hi.x] and [hi.x hi.y hi.z next] as two 4-lane loads
+    // (the record array ends in a padding slot, so the last load stays inside it); lane 3 carries
+    // no area and is dropped at the end.
+    const float* pb = &b[0].lo.x;
+    const float* pc = &c[0].lo.x;
+    __m128 sum = _mm_setzero_ps();
+    for (uint32_t f = 0; f < frames; ++f, pb += 6, pc += 6) {
+      const __m128 lo = _mm_min_ps(_mm_loadu_ps(pb), _mm_loadu_ps(pc));
+      const __m128 hi = _mm_max_ps(_mm_loadu_ps(pb + 3), _mm_loadu_ps(pc + 3));
+      const __m128 d = _mm_sub_ps(hi, lo);
+      const __m128 rotated = _mm_shuffle_ps(d, d, _MM_SHUFFLE(3, 0, 2, 1));  // dy dz dx
+      sum = _mm_add_ps(sum, _mm_mul_ps(_mm_mul_ps(d, rotated), _mm_set1_ps(areaFactor[f])));
+    }
+    alignas(16) float lanes[4];
+    _mm_store_ps(lanes, sum);
+    return 2.0f * (lanes[0] + lanes[1] + lanes[2]);
+#else
     float sum = 0.0f;
     for (uint32_t f = 0; f < frames; ++f) sum += areaFactor[f] * unionArea(b[f], c[f]);
     return sum;
+#endif
   }
 
-  // Branch-and-bound: the node X for which making c a sibling of X raises the cost least.
+  void push(QueueEntry e) {
+    heap.push_back(e);
+    std::size_t i = heap.size() - 1;
+    while (i > 0) {
+      const std::size_t up = (i - 1) / 2;
+      if (heap[up].induced <= e.induced) break;
+      heap[i] = heap[up];
+      i = up;
+    }
+    heap[i] = e;
+  }
+
+  QueueEntry pop() {
+    const QueueEntry top = heap.front();
+    const QueueEntry last = heap.back();
+    heap.pop_back();
+    const std::size_t size = heap.size();
+    if (size == 0) return top;
+    std::size_t i = 0;
+    for (;;) {
+      std::size_t child = 2 * i + 1;
+      if (child >= size) break;
+      if (child + 1 < size && heap[child + 1].induced < heap[child].induced) ++child;
+      if (last.induced <= heap[child].induced) break;
+      heap[i] = heap[child];
+      i = child;
+    }
+    heap[i] = last;
+    return top;
+  }
+
+  // Branch-and-bound: the node X for which making c a sibling of X raises the cost least. A queue
+  // entry (induced, X) means X's children are still to be examined, each with that induced cost
+  // (the growth of X and its ancestors); both children are evaluated together when X comes out.
   uint32_t findBestSibling(uint32_t c) {
-    const Aabb* cb = boxes(c);
-    const float areaC = area[c];
-    float best = std::numeric_limits<float>::infinity();
-    uint32_t bestNode = bvh.root;
-    queue.clear();
-    queue.push_back({0.0f, bvh.root});
-    while (!queue.empty()) {
-      std::pop_heap(queue.begin(), queue.end(), laterInQueue);
-      const QueueEntry top = queue.back();
-      queue.pop_back();
-      if (top.induced + areaC >= best) break;  // every entry left has at least this induced cost
-      const uint32_t x = top.node;
-      const float total = top.induced + unionCost(x, cb);
-      if (total < best) {
-        best = total;
-        bestNode = x;
+    const Aabb* cb = box(c);
+    const float areaC = area(c);
+    uint32_t bestNode = root;
+    float best = unionCost(root, cb);
+    heap.clear();
+    if (!isLeaf(root)) {
+      const float induced = best - area(root);
+      if (induced + areaC < best) push({induced, root});
+    }
+    while (!heap.empty()) {
+      const QueueEntry top = pop();
+      // A child's direct cost is at least A(c): nothing left in the queue can beat `best`.
+      if (top.induced + areaC >= best) break;
+      const uint32_t children[2] = {left(top.node), right(top.node)};
+      for (const uint32_t x : children) {
+        const float total = top.induced + unionCost(x, cb);
+        if (total < best) {
+          best = total;
+          bestNode = x;
+        }
+        if (isLeaf(x)) continue;
+        const float induced = total - area(x);  // x grows by (union - A(x)) when c goes below it
+        if (induced + areaC >= best) continue;
+        push({induced, x});
+        prefetch(left(x));
+        prefetch(right(x));
       }
-      const BvhNode& node = bvh.nodes[x];
-      if (node.isLeaf()) continue;
-      const float induced = total - area[x];  // x grows by (union - A(x)) when c goes below it
-      if (induced + areaC >= best) continue;
-      queue.push_back({induced, node.left});
-      std::push_heap(queue.begin(), queue.end(), laterInQueue);
-      queue.push_back({induced, node.right});
-      std::push_heap(queue.begin(), queue.end(), laterInQueue);
     }
     return bestNode;
   }
@@ -259,24 +387,21 @@ struct InsertionSession::Impl {
   // Makes the detached subtree c a child of the free node q, with the best sibling X in the tree.
   void insert(uint32_t c, uint32_t q) {
     const uint32_t x = findBestSibling(c);
-    const uint32_t xp = bvh.nodes[x].parent;
+    const uint32_t xp = parent(x);
     save(x);
     save(q);
     save(c);
     if (xp != kInvalidIndex) save(xp);
-    BvhNode& node = bvh.nodes[q];
-    node.parent = xp;
-    node.left = x;
-    node.right = c;
-    node.primBegin = 0;
-    node.primCount = 0;
-    bvh.nodes[x].parent = q;
-    bvh.nodes[c].parent = q;
-    if (xp == kInvalidIndex) bvh.root = q;
+    setParent(q, xp);
+    setLeft(q, x);
+    setRight(q, c);
+    setParent(x, q);
+    setParent(c, q);
+    if (xp == kInvalidIndex) root = q;
     else replaceChild(xp, x, q);
-    Aabb* b = boxes(q);
-    const Aabb* xb = boxes(x);
-    const Aabb* cb = boxes(c);
+    Aabb* b = box(q);
+    const Aabb* xb = box(x);
+    const Aabb* cb = box(c);
     for (uint32_t f = 0; f < frames; ++f) {
       b[f] = merge(xb[f], cb[f]);
       stepAreaChange[f] += b[f].area();
@@ -293,28 +418,27 @@ struct InsertionSession::Impl {
       std::fill(touchedInStep.begin(), touchedInStep.end(), 0);
       stepStamp = 1;
     }
-    undoLog.clear();
-    undoBoxes.clear();
-    savedRoot = bvh.root;
+    shapeCurrent = false;
+    undoNodes.clear();
+    undoRecords.clear();
+    savedRoot = root;
     std::fill(stepAreaChange.begin(), stepAreaChange.end(), 0.0);
 
-    const uint32_t p = bvh.nodes[n].parent;
-    const uint32_t g = bvh.nodes[p].parent;
-    const uint32_t s = bvh.nodes[p].left == n ? bvh.nodes[p].right : bvh.nodes[p].left;
-    uint32_t first = bvh.nodes[n].left, second = bvh.nodes[n].right;
+    const uint32_t p = parent(n);
+    const uint32_t g = parent(p);
+    const uint32_t s = left(p) == n ? right(p) : left(p);
+    uint32_t first = left(n), second = right(n);
     for (uint32_t touched : {n, p, g, s, first, second}) save(touched);
 
     // Detach N and P: the sibling takes P's place, the interior areas of N and P leave the cost.
     for (uint32_t f = 0; f < frames; ++f)
-      stepAreaChange[f] -= double(boxes(n)[f].area()) + double(boxes(p)[f].area());
+      stepAreaChange[f] -= double(box(n)[f].area()) + double(box(p)[f].area());
     replaceChild(g, p, s);
-    bvh.nodes[s].parent = g;
+    setParent(s, g);
     refitUpward(g);
 
     // Reinsert N's children, the larger first, reusing N and P as their new parents.
-    if (area[second] > area[first]) std::swap(first, second);
-    bvh.nodes[first].parent = kInvalidIndex;
-    bvh.nodes[second].parent = kInvalidIndex;
+    if (area(second) > area(first)) std::swap(first, second);
     insert(first, n);
     insert(second, p);
 
@@ -334,37 +458,44 @@ struct InsertionSession::Impl {
     return true;
   }
 
-  // Uniform over eligible nodes by rejection; a scan from a random start when they are rare.
+  // Uniform over eligible nodes: interior nodes by rejection of the root and its children.
+  // Returns the position in `proposals`, or kInvalidIndex when no node is eligible.
+  uint32_t uniformProposal() {
+    const auto count = static_cast<uint32_t>(proposals.size());
+    if (count < 4) {  // too few interior nodes for the rejection loop to be sure to end
+      for (uint32_t i = 0; i < count; ++i)
+        if (eligible(proposals[i].node)) return i;
+      return kInvalidIndex;
+    }
+    const uint32_t rootLeft = left(root), rootRight = right(root);
+    for (;;) {
+      const uint32_t i = rng.below(count);
+      const uint32_t n = proposals[i].node;
+      if (n != root && n != rootLeft && n != rootRight) return i;
+    }
+  }
+
   uint32_t uniformEligible() {
-    const auto count = static_cast<uint32_t>(bvh.nodes.size());
-    if (count == 0) return kInvalidIndex;
-    for (uint32_t attempt = 0; attempt < 64; ++attempt) {
-      const uint32_t n = rng.below(count);
-      if (eligible(n)) return n;
-    }
-    const uint32_t start = rng.below(count);
-    for (uint32_t i = 0; i < count; ++i) {
-      const uint32_t n = (start + i) % count;
-      if (eligible(n)) return n;
-    }
-    return kInvalidIndex;
+    const uint32_t i = uniformProposal();
+    return i == kInvalidIndex ? kInvalidIndex : proposals[i].node;
   }
 
   uint32_t selectMetropolisHastings() {
-    if (chainNode == kInvalidIndex || chainNode >= bvh.nodes.size()) {
+    if (chainNode == kInvalidIndex) {
       chainNode = uniformEligible();
       return chainNode;
     }
     // Independent chain: propose uniformly, accept with min(1, Delta_new / Delta_current); go on
     // until a node other than the last accepted one is accepted (re-optimizing the same node
     // would find the same position again).
-    const float current = delta[chainNode];
-    const uint64_t limit = 64 * uint64_t(bvh.nodes.size()) + 4096;  // only tiny trees get near it
+    const float current = delta(chainNode);
+    const uint64_t limit = 64 * uint64_t(nodeCount) + 4096;  // only tiny trees get near it
     uint32_t proposal = kInvalidIndex;
     for (uint64_t i = 0; i < limit; ++i) {
-      proposal = uniformEligible();
-      if (proposal == kInvalidIndex) return kInvalidIndex;
-      const float d = delta[proposal];
+      const uint32_t p = uniformProposal();
+      if (p == kInvalidIndex) return kInvalidIndex;
+      proposal = proposals[p].node;
+      const float d = proposals[p].delta;
       const bool accept = d >= current || rng.uniform() * double(current) < double(d);
       if (accept && proposal != chainNode) break;
     }
@@ -389,11 +520,10 @@ struct InsertionSession::Impl {
       uint32_t node;
     };
     std::vector<Candidate> candidates;
-    for (uint32_t n = 0; n < bvh.nodeCount(); ++n) {
+    for (uint32_t n : interior) {
       if (!eligible(n)) continue;
-      const BvhNode& node = bvh.nodes[n];
-      const double a = area[n];
-      const double l = area[node.left], r = area[node.right];
+      const double a = area(n);
+      const double l = area(left(n)), r = area(right(n));
       const double tiny = 1e-30;
       const double mSum = a / std::max(0.5 * (l + r), tiny);
       const double mMin = a / std::max(std::min(l, r), tiny);
@@ -423,11 +553,15 @@ uint32_t InsertionSession::selectNode() { return impl_->selectNode(); }
 std::vector<uint32_t> InsertionSession::batchSortNodes(uint32_t count) const {
   return impl_->batchSortNodes(count);
 }
-void InsertionSession::refresh() { impl_->refresh(); }
+void InsertionSession::refresh() { impl_->refresh(true); }
+void InsertionSession::endBatch() { impl_->endBatch(); }
 double InsertionSession::cost() const { return impl_->currentCost; }
 std::span<const double> InsertionSession::frameCosts() const { return impl_->frameCost; }
-const Bvh& InsertionSession::bvh() const { return impl_->bvh; }
-Bvh InsertionSession::release() { return std::move(impl_->bvh); }
+const Bvh& InsertionSession::bvh() const { return impl_->materialize(); }
+Bvh InsertionSession::release() {
+  impl_->materialize();
+  return std::move(impl_->shape);
+}
 uint64_t InsertionSession::steps() const { return impl_->steps; }
 uint64_t InsertionSession::acceptedSteps() const { return impl_->accepted; }
 
@@ -487,7 +621,7 @@ InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const Primitive
         if (limited && (i & 31) == 31 && elapsed() >= config_.timeLimitSeconds) break;
       }
     }
-    session.refresh();
+    session.endBatch();
     record(batch);
     const double cost = session.cost();
     if (cost < best * (1.0 - config_.minImprovement)) {

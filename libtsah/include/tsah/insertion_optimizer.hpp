@@ -50,7 +50,9 @@ class InsertionOptimizer {
     uint32_t minBatchSize = 64;
     uint32_t batchesWithoutImprovement = 3; // stop after this many batches that did not lower C~^k
     // A batch "lowers" the cost when it ends below (1 - minImprovement) times the best cost so far.
-    double minImprovement = 0.0;
+    // 1e-5 ends the long tail of ever smaller gains (0.05% of the cost on Sibenik, 7x the time);
+    // 0 waits for batches with no reduction at all.
+    double minImprovement = 1e-5;
     double timeLimitSeconds = 0.0;          // 0: no limit
     uint32_t maxBatches = 0;                // 0: no limit
     std::function<void(const BatchRecord&)> progress;  // called after every batch
@@ -101,8 +103,12 @@ class InsertionSession {
   // The (at most) count eligible nodes with the highest inefficiency measure
   // M = M_sum * M_min * M_area of Bittner 2013 over weighted multi-frame areas, highest first.
   std::vector<uint32_t> batchSortNodes(uint32_t count) const;
-  // Recomputes every frame cost from the node boxes and, for k > 0, the weights w_i = C_i^k.
+  // Recomputes every frame cost from the node boxes, the weights w_i = C_i^k and the cached
+  // weighted areas.
   void refresh();
+  // What the optimizer does after a batch: new weights for k > 0 (the frame costs themselves are
+  // tracked exactly step by step, so k = 0 needs nothing).
+  void endBatch();
 
   double cost() const;                        // C~^k of the current frame costs
   std::span<const double> frameCosts() const;  // C_i, kept up to date step by step

@@ -1,0 +1,182 @@
+// tsah optimize INPUT -o OUT.tbvh [--method tsah|sah0|sahstar] [--k K] [--frames N]
+//   [--eval-frames M] [--selection mh|random|batch] [--seed S] [--ct 3] [--ci 2] [--max-leaf 8]
+//   [--time-limit SEC] [--threads T] [--json]
+// Builds one tree for the whole animation, writes it as .tbvh and reports its cost over the
+// evaluation frames.
+#include <cstdio>
+#include <map>
+#include <memory>
+#include <nlohmann/json.hpp>
+
+#include "cli.hpp"
+#include "tsah/baselines.hpp"
+#include "tsah/bvh_file.hpp"
+
+namespace {
+
+struct Options {
+  std::string input, output;
+  std::string method = "tsah";
+  int k = 0;
+  uint32_t frames = 5;
+  uint32_t evalFrames = 50;
+  std::string selection = "mh";
+  uint64_t seed = 1;
+  float ct = 3.0f, ci = 2.0f;
+  uint32_t maxLeaf = 8;
+  double timeLimit = 0.0;
+  unsigned threads = 0;
+  bool json = false;
+};
+
+const std::map<std::string, tsah::InsertionOptimizer::Selection> kSelections = {
+    {"mh", tsah::InsertionOptimizer::Selection::MetropolisHastings},
+    {"random", tsah::InsertionOptimizer::Selection::Uniform},
+    {"batch", tsah::InsertionOptimizer::Selection::BatchSort},
+};
+
+// The evaluation frames of an animation, produced on demand (any number of them, in parallel).
+tsah::FrameSource evaluationFrames(const anim::Animation& a, const std::vector<double>& times) {
+  tsah::FrameSource source;
+  source.frameCount = static_cast<uint32_t>(times.size());
+  source.primCount = a.triangleCount();
+  source.fill = [&a, times](uint32_t frame, std::span<tsah::Aabb> out) {
+    const std::vector<float> positions = a.positionsAt(times[frame]);
+    tsah::triangleBoxes(a.indices(), positions, out);
+  };
+  return source;
+}
+
+void run(const Options& opt) {
+  const tsah::MethodSpec method = tsah::MethodSpec::parse(opt.method == "tsah" ? "tsah" + std::to_string(opt.k)
+                                                                               : opt.method);
+  const anim::Animation a = tsah::cli::loadInput(opt.input);
+  if (a.triangleCount() == 0) throw tsah::cli::UsageError(opt.input + ": no triangles to build a tree over");
+  // A static input has one frame: resampling it would only repeat that frame.
+  const bool animated = a.keyframeCount() > 1;
+  const uint32_t frames = animated ? opt.frames : 1;
+  const uint32_t evalFrames = animated ? opt.evalFrames : 1;
+  const anim::Animation rep = a.resample(frames);
+  const tsah::PrimitiveBoxes repBoxes = tsah::triangleBoxes(rep.indices(), rep.allPositions(), frames);
+
+  tsah::cli::Progress progress("optimize " + method.name());
+  tsah::BaselineConfig config;
+  config.cost = {opt.ct, opt.ci};
+  config.maxLeafSize = opt.maxLeaf;
+  config.threads = opt.threads;
+  config.optimizer.selection = kSelections.at(opt.selection);
+  config.optimizer.seed = opt.seed;
+  config.optimizer.timeLimitSeconds = opt.timeLimit;
+  config.progress = [&](const std::string& message) { progress.message(message); };
+
+  tsah::InsertionOptimizer::Result details;
+  const double start = progress.elapsedSeconds();
+  const tsah::Bvh bvh = tsah::buildMethod(method, repBoxes, config, &details);
+  const double buildSeconds = progress.elapsedSeconds() - start;
+
+  progress.message("evaluating " + std::to_string(evalFrames) + " frames");
+  const std::vector<double> perFrame =
+      tsah::evaluateFrames(bvh, evaluationFrames(a, a.uniformTimes(evalFrames)), config.cost, opt.threads);
+  double average = 0.0, maximum = 0.0;
+  for (double c : perFrame) {
+    average += c / double(perFrame.size());
+    maximum = std::max(maximum, c);
+  }
+
+  tsah::BvhBuildInfo info;
+  info.method = method.method == tsah::Method::TSah ? "tsah" : method.name();
+  info.selection = method.method == tsah::Method::Sah0 ? "none" : opt.selection;
+  info.k = method.k;
+  info.representativeFrames = frames;
+  info.seed = opt.seed;
+  info.ct = opt.ct;
+  info.ci = opt.ci;
+  info.maxLeafSize = opt.maxLeaf;
+  info.buildSeconds = buildSeconds;
+  info.timeStart = a.startTime();
+  info.timeEnd = a.endTime();
+  info.triangleCount = a.triangleCount();
+  info.vertexCount = a.vertexCount();
+  info.topologyHash = tsah::topologyHash(a.indices());
+  tsah::saveBvhFile(opt.output, bvh, info);
+
+  nlohmann::json j;
+  j["input"] = opt.input;
+  j["output"] = opt.output;
+  j["method"] = info.method;
+  j["k"] = info.k;
+  j["selection"] = info.selection;
+  j["seed"] = opt.seed;
+  j["frames"] = frames;
+  j["eval_frames"] = evalFrames;
+  j["triangles"] = a.triangleCount();
+  j["nodes"] = bvh.nodeCount();
+  j["leaves"] = bvh.leafCount();
+  j["depth"] = bvh.depth();
+  j["max_leaf"] = opt.maxLeaf;
+  j["build_s"] = buildSeconds;
+  j["cost"] = {{"average", average}, {"maximum", maximum}, {"per_frame", perFrame}};
+  if (method.method == tsah::Method::TSah) {
+    nlohmann::json history = nlohmann::json::array();
+    for (const auto& r : details.history)
+      history.push_back({{"batch", r.batch}, {"cost", r.cost}, {"average", r.averageCost},
+                         {"elapsed_s", r.elapsedSeconds}, {"steps", r.steps}});
+    j["optimization"] = {{"initial_cost", details.initialCost},
+                         {"final_cost", details.finalCost},
+                         {"batches", details.history.empty() ? 0 : details.history.size() - 1},
+                         {"steps", details.steps},
+                         {"accepted_steps", details.acceptedSteps},
+                         {"seconds", details.seconds},
+                         {"time_limit_reached", details.timeLimitReached},
+                         {"history", history}};
+  }
+  progress.message("done");
+  if (opt.json) {
+    std::printf("%s\n", j.dump().c_str());
+    return;
+  }
+  std::printf("%s: %s tree, %u triangles, %u nodes, %u leaves, depth %u\n", opt.output.c_str(),
+              method.name().c_str(), a.triangleCount(), bvh.nodeCount(), bvh.leafCount(), bvh.depth());
+  if (method.method == tsah::Method::TSah)
+    std::printf("optimization: T-SAH cost %.3f -> %.3f over %u frames in %zu batches (%.2f s)\n",
+                details.initialCost, details.finalCost, frames,
+                details.history.empty() ? std::size_t(0) : details.history.size() - 1, details.seconds);
+  std::printf("build %.2f s; cost over %u evaluation frames: average %.3f, maximum %.3f\n", buildSeconds,
+              evalFrames, average, maximum);
+}
+
+}  // namespace
+
+TSAH_REGISTER_COMMAND(40, [](CLI::App& app) {
+  auto* sub = app.add_subcommand("optimize", "Build one BVH for the whole animation (T-SAH, SAH0 or SAH*) as .tbvh");
+  auto opt = std::make_shared<Options>();
+  sub->add_option("INPUT", opt->input, "Animation or static mesh (any input `tsah info` reads)")->required();
+  sub->add_option("-o,--output", opt->output, "Output .tbvh file")->required();
+  sub->add_option("--method", opt->method, "tsah (one tree optimized for all frames), sah0 (frame 0, refit) or sahstar (best over time)")
+      ->check(CLI::IsMember({"tsah", "sah0", "sahstar"}))
+      ->capture_default_str();
+  sub->add_option("--k", opt->k, "T-SAH exponent: 0 optimizes the average cost, larger values the worst frames")
+      ->check(CLI::Range(0, 16))
+      ->capture_default_str();
+  sub->add_option("--frames", opt->frames, "Representative frames, uniform in time")
+      ->check(CLI::Range(1u, 1000u))
+      ->capture_default_str();
+  sub->add_option("--eval-frames", opt->evalFrames, "Evaluation frames for the reported cost, uniform in time")
+      ->check(CLI::Range(1u, 100000u))
+      ->capture_default_str();
+  sub->add_option("--selection", opt->selection, "Node selection: mh (Metropolis-Hastings), random, batch (batch sorting)")
+      ->check(CLI::IsMember({"mh", "random", "batch"}))
+      ->capture_default_str();
+  sub->add_option("--seed", opt->seed, "Random seed (same seed, same tree)")->capture_default_str();
+  sub->add_option("--ct", opt->ct, "Cost of traversing a node")->check(CLI::PositiveNumber)->capture_default_str();
+  sub->add_option("--ci", opt->ci, "Cost of intersecting a triangle")->check(CLI::PositiveNumber)->capture_default_str();
+  sub->add_option("--max-leaf", opt->maxLeaf, "Largest leaf after collapse (1: one triangle per leaf)")
+      ->check(CLI::Range(1u, 256u))
+      ->capture_default_str();
+  sub->add_option("--time-limit", opt->timeLimit, "Stop each optimization after this many seconds (0: none)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sub->add_option("--threads", opt->threads, "Worker threads (0: all cores)")->capture_default_str();
+  sub->add_flag("--json", opt->json, "Print one JSON object");
+  sub->callback([opt] { run(*opt); });
+});
