@@ -24,6 +24,7 @@ struct Options {
   std::string selection = "mh";
   uint64_t seed = 1;
   double timeLimit = 0.0;
+  double minImprovement = tsah::InsertionOptimizer::Config{}.minImprovement;
   unsigned threads = 0;
   bool json = false;
 };
@@ -81,6 +82,7 @@ void run(const Options& opt) {
   config.optimizer.selection = kSelections.at(opt.selection);
   config.optimizer.seed = opt.seed;
   config.optimizer.timeLimitSeconds = opt.timeLimit;
+  config.optimizer.minImprovement = opt.minImprovement;
   config.progress = [&](const std::string& message) { progress.message(message); };
   const std::vector<tsah::MethodResult> results =
       tsah::compareMethods(methods, repBoxes, evaluationFrames(a, a.uniformTimes(evalFrames)), config);
@@ -138,6 +140,10 @@ TSAH_REGISTER_COMMAND(45, [](CLI::App& app) {
   sub->add_option("--seed", opt->seed, "Random seed")->capture_default_str();
   sub->add_option("--time-limit", opt->timeLimit, "Stop each optimization after this many seconds (0: none)")
       ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sub->add_option("--min-improvement", opt->minImprovement,
+                  "Stop after 3 batches that lower the cost by less than this fraction each (0: by nothing)")
+      ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   sub->add_option("--threads", opt->threads, "Worker threads (0: all cores)")->capture_default_str();
   sub->add_flag("--json", opt->json, "Print one JSON object");

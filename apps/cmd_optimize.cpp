@@ -25,6 +25,7 @@ struct Options {
   float ct = 3.0f, ci = 2.0f;
   uint32_t maxLeaf = 8;
   double timeLimit = 0.0;
+  double minImprovement = tsah::InsertionOptimizer::Config{}.minImprovement;
   unsigned threads = 0;
   bool json = false;
 };
@@ -67,6 +68,7 @@ void run(const Options& opt) {
   config.optimizer.selection = kSelections.at(opt.selection);
   config.optimizer.seed = opt.seed;
   config.optimizer.timeLimitSeconds = opt.timeLimit;
+  config.optimizer.minImprovement = opt.minImprovement;
   config.progress = [&](const std::string& message) { progress.message(message); };
 
   tsah::InsertionOptimizer::Result details;
@@ -175,6 +177,10 @@ TSAH_REGISTER_COMMAND(40, [](CLI::App& app) {
       ->capture_default_str();
   sub->add_option("--time-limit", opt->timeLimit, "Stop each optimization after this many seconds (0: none)")
       ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sub->add_option("--min-improvement", opt->minImprovement,
+                  "Stop after 3 batches that lower the cost by less than this fraction each (0: by nothing)")
+      ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   sub->add_option("--threads", opt->threads, "Worker threads (0: all cores)")->capture_default_str();
   sub->add_flag("--json", opt->json, "Print one JSON object");

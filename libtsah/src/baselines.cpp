@@ -8,6 +8,8 @@
 #include <mutex>
 #include <stdexcept>
 #include <thread>
+#include <tuple>
+#include <utility>
 
 #include "tsah/leaf_collapser.hpp"
 #include "tsah/sah_builder.hpp"
@@ -179,6 +181,24 @@ Bvh buildOptimizedSah(std::span<const Aabb> frame, const BaselineConfig& config,
   return collapseLeaves(result.bvh, config, 0);
 }
 
+namespace {
+
+// One SAH* candidate: the optimized SAH tree of representative frame f, refitted to every
+// representative frame, with its average cost over them.
+std::pair<Bvh, double> sahStarCandidate(const PrimitiveBoxes& rep, uint32_t f, const BaselineConfig& config) {
+  Bvh tree = buildOptimizedSah(rep.frame(f), config, derivedSeed(config.optimizer.seed, 1, f));
+  refit(tree, rep);
+  const double average = temporalCost(frameCosts(tree, config.cost), 0);
+  return {std::move(tree), average};
+}
+
+// The candidate with the lowest average (the first of equal ones).
+std::size_t bestCandidate(const std::vector<double>& average) {
+  return std::size_t(std::min_element(average.begin(), average.end()) - average.begin());
+}
+
+}  // namespace
+
 Bvh buildSahStar(const PrimitiveBoxes& rep, const BaselineConfig& config) {
   checkFrames(rep);
   ProgressSink progress(config);
@@ -186,15 +206,10 @@ Bvh buildSahStar(const PrimitiveBoxes& rep, const BaselineConfig& config) {
   std::vector<double> average(rep.frameCount);
   std::atomic<uint32_t> done{0};
   parallelFor(rep.frameCount, workerCount(config.threads, rep.frameCount), [&](std::size_t f, unsigned) {
-    Bvh tree = buildOptimizedSah(rep.frame(uint32_t(f)), config,
-                                 derivedSeed(config.optimizer.seed, 1, f));
-    refit(tree, rep);
-    average[f] = temporalCost(frameCosts(tree, config.cost), 0);
-    trees[f] = std::move(tree);
+    std::tie(trees[f], average[f]) = sahStarCandidate(rep, uint32_t(f), config);
     progress("sahstar: " + std::to_string(++done) + "/" + std::to_string(rep.frameCount) + " frames");
   });
-  const auto best = std::min_element(average.begin(), average.end()) - average.begin();
-  return std::move(trees[std::size_t(best)]);
+  return std::move(trees[bestCandidate(average)]);
 }
 
 Bvh buildTSah(const PrimitiveBoxes& rep, int k, const BaselineConfig& config,
@@ -255,49 +270,100 @@ std::vector<MethodResult> compareMethods(std::span<const MethodSpec> methods, co
   if (evaluation.primCount != rep.primCount)
     throw std::invalid_argument("evaluation frames and representative frames differ in primitive count");
   ProgressSink progress(config);
-  std::vector<MethodResult> results(methods.size());
-  std::vector<Bvh> trees(methods.size());
-  const unsigned workers = workerCount(config.threads, evaluation.frameCount);
+  // Workers report through the one sink above (one message at a time); per-batch optimizer
+  // callbacks would come from several threads at once, so they are not forwarded here.
+  BaselineConfig inner = config;
+  inner.progress = [&progress](const std::string& message) { progress(message); };
+  inner.optimizer.progress = nullptr;
+  const std::size_t count = methods.size();
+  std::vector<MethodResult> results(count);
+  std::vector<Bvh> trees(count);
+  std::vector<std::vector<Bvh>> candidates(count);         // SAH*: one tree per representative frame
+  std::vector<std::vector<double>> candidateAverage(count);
 
-  for (std::size_t m = 0; m < methods.size(); ++m) {
-    MethodResult& result = results[m];
-    result.name = methods[m].name();
-    const auto start = Clock::now();
-    if (methods[m].method != Method::SahRebuild) {
-      trees[m] = buildMethod(methods[m], rep, config);
-      result.buildSeconds = secondsSince(start);
-      continue;
-    }
-    // SAH-rebuild: an optimized tree for every evaluation frame, measured on that frame only.
-    result.perFrame.assign(evaluation.frameCount, 0.0);
-    std::vector<std::vector<Aabb>> boxes(workers, std::vector<Aabb>(evaluation.primCount));
-    std::atomic<uint32_t> done{0};
-    parallelFor(evaluation.frameCount, workers, [&](std::size_t f, unsigned w) {
-      evaluation.fill(uint32_t(f), boxes[w]);
-      const Bvh tree = buildOptimizedSah(boxes[w], config, derivedSeed(config.optimizer.seed, 2, f));
-      result.perFrame[f] = frameCost(tree, 0, config.cost);
-      progress("rebuild: " + std::to_string(++done) + "/" + std::to_string(evaluation.frameCount) +
-               " frames");
-    });
-    result.buildSeconds = secondsSince(start);
+  // Every independent piece of work is one task: a T-SAH or SAH0 tree, one SAH* candidate, one
+  // SAH-rebuild frame. The longest (T-SAH) go first so the workers finish together.
+  struct Task {
+    std::size_t method;
+    uint32_t index;
+  };
+  std::vector<Task> tasks;
+  for (std::size_t m = 0; m < count; ++m) {
+    results[m].name = methods[m].name();
+    if (methods[m].method == Method::TSah) tasks.push_back({m, 0});
   }
+  for (std::size_t m = 0; m < count; ++m) {
+    switch (methods[m].method) {
+      case Method::SahStar:
+        candidates[m].resize(rep.frameCount);
+        candidateAverage[m].resize(rep.frameCount);
+        for (uint32_t f = 0; f < rep.frameCount; ++f) tasks.push_back({m, f});
+        break;
+      case Method::SahRebuild:
+        results[m].perFrame.assign(evaluation.frameCount, 0.0);
+        for (uint32_t f = 0; f < evaluation.frameCount; ++f) tasks.push_back({m, f});
+        break;
+      case Method::Sah0:
+        tasks.push_back({m, 0});
+        break;
+      case Method::TSah:
+        break;
+    }
+  }
+
+  // Build time of a method: the sum of its tasks' times, i.e. what one thread would take.
+  std::vector<double> taskSeconds(tasks.size(), 0.0);
+  const unsigned workers = workerCount(config.threads, tasks.size());
+  std::vector<std::vector<Aabb>> frameBoxes(workers, std::vector<Aabb>(evaluation.primCount));
+  std::atomic<std::size_t> done{0};
+  parallelFor(tasks.size(), workers, [&](std::size_t t, unsigned w) {
+    const Task task = tasks[t];
+    const MethodSpec& method = methods[task.method];
+    const auto start = Clock::now();
+    switch (method.method) {
+      case Method::Sah0:
+      case Method::TSah:
+        trees[task.method] = buildMethod(method, rep, inner);
+        break;
+      case Method::SahStar:
+        std::tie(candidates[task.method][task.index], candidateAverage[task.method][task.index]) =
+            sahStarCandidate(rep, task.index, inner);
+        break;
+      case Method::SahRebuild: {
+        evaluation.fill(task.index, frameBoxes[w]);
+        const Bvh tree =
+            buildOptimizedSah(frameBoxes[w], inner, derivedSeed(config.optimizer.seed, 2, task.index));
+        results[task.method].perFrame[task.index] = frameCost(tree, 0, config.cost);
+        break;
+      }
+    }
+    taskSeconds[t] = secondsSince(start);
+    progress("built " + std::to_string(++done) + "/" + std::to_string(tasks.size()) + " trees (" +
+             results[task.method].name + ")");
+  });
+  for (std::size_t t = 0; t < tasks.size(); ++t) results[tasks[t].method].buildSeconds += taskSeconds[t];
+  for (std::size_t m = 0; m < count; ++m)
+    if (methods[m].method == Method::SahStar)
+      trees[m] = std::move(candidates[m][bestCandidate(candidateAverage[m])]);
 
   // Every single-tree method on every evaluation frame, computing each frame's boxes once.
   std::vector<std::size_t> single;
-  for (std::size_t m = 0; m < methods.size(); ++m)
+  for (std::size_t m = 0; m < count; ++m)
     if (methods[m].method != Method::SahRebuild) {
       single.push_back(m);
       results[m].perFrame.assign(evaluation.frameCount, 0.0);
     }
   if (!single.empty()) {
-    std::vector<std::vector<FrameCostEvaluator>> evaluators(workers);
+    const unsigned evalWorkers = workerCount(config.threads, evaluation.frameCount);
+    std::vector<std::vector<FrameCostEvaluator>> evaluators(evalWorkers);
     for (auto& perWorker : evaluators)
       for (std::size_t m : single) perWorker.emplace_back(trees[m], config.cost);
-    std::vector<std::vector<Aabb>> boxes(workers, std::vector<Aabb>(evaluation.primCount));
-    parallelFor(evaluation.frameCount, workers, [&](std::size_t f, unsigned w) {
-      evaluation.fill(uint32_t(f), boxes[w]);
+    frameBoxes.resize(std::max<std::size_t>(frameBoxes.size(), evalWorkers), std::vector<Aabb>(evaluation.primCount));
+    progress("evaluating " + std::to_string(evaluation.frameCount) + " frames");
+    parallelFor(evaluation.frameCount, evalWorkers, [&](std::size_t f, unsigned w) {
+      evaluation.fill(uint32_t(f), frameBoxes[w]);
       for (std::size_t i = 0; i < single.size(); ++i)
-        results[single[i]].perFrame[f] = evaluators[w][i].cost(boxes[w]);
+        results[single[i]].perFrame[f] = evaluators[w][i].cost(frameBoxes[w]);
     });
   }
   for (MethodResult& result : results) {
