@@ -13,6 +13,18 @@ double degenerateFrameCost(uint64_t innerCount, uint64_t primCount, const CostMo
   return double(model.ct) * double(innerCount) + double(model.ci) * double(primCount);
 }
 
+// x^k for a small non-negative integer k, by squaring (std::pow is far slower, and this runs after
+// every optimizer step).
+double integerPower(double x, int k) {
+  double result = 1.0;
+  while (k > 0) {
+    if (k & 1) result *= x;
+    x *= x;
+    k >>= 1;
+  }
+  return result;
+}
+
 }  // namespace
 
 double frameCost(const Bvh& bvh, uint32_t frame, const CostModel& model) {
@@ -49,10 +61,15 @@ double temporalCost(std::span<const double> frameCosts, int k) {
   double largest = 0.0;
   for (double c : frameCosts) largest = std::max(largest, c);
   if (!(largest > 0.0)) return 0.0;
+  if (k == 0) {
+    double sum = 0.0;
+    for (double c : frameCosts) sum += c;
+    return sum / double(frameCosts.size());
+  }
   double numerator = 0.0, denominator = 0.0;
   for (double c : frameCosts) {
     const double x = c / largest;
-    const double xk = std::pow(x, k);
+    const double xk = integerPower(x, k);
     numerator += xk * x;
     denominator += xk;
   }
@@ -67,7 +84,7 @@ std::vector<double> temporalWeights(std::span<const double> frameCosts, int k) {
   for (double c : frameCosts) largest = std::max(largest, c);
   double total = 0.0;
   for (std::size_t i = 0; i < frameCosts.size(); ++i) {
-    weights[i] = (k == 0 || !(largest > 0.0)) ? 1.0 : std::pow(frameCosts[i] / largest, k);
+    weights[i] = (k == 0 || !(largest > 0.0)) ? 1.0 : integerPower(frameCosts[i] / largest, k);
     total += weights[i];
   }
   if (!(total > 0.0)) {  // every frame cost 0 with k > 0: weigh them equally
