@@ -3,6 +3,7 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
+#include "bvh_info.hpp"
 #include "cli.hpp"
 
 namespace {
@@ -59,6 +60,10 @@ TSAH_REGISTER_COMMAND(10, [](CLI::App& app) {
       ->required();
   sub->add_flag("--json", opt->json, "Print one JSON object");
   sub->callback([opt] {
+    if (tsah::cli::looksLikeBvhFile(opt->input)) {
+      tsah::cli::describeBvhFile(opt->input, opt->json);
+      return;
+    }
     tsah::cli::Progress timer("info");
     const anim::Animation a = tsah::cli::loadInput(opt->input);
     const nlohmann::json j = describe(a, timer.elapsedSeconds());
