@@ -11,12 +11,14 @@ namespace tsah::cuda::detail {
 
 class EventTimer {
  public:
-  explicit EventTimer(std::size_t count) : events_(count, nullptr) {
+  EventTimer() = default;  // no events: touches no device
+  explicit EventTimer(std::size_t count) { create(count); }
+  ~EventTimer() { destroy(); }
+  // Replaces the events by `count` new ones (on the current device).
+  void create(std::size_t count) {
+    destroy();
+    events_.assign(count, nullptr);
     for (auto& e : events_) CUDA_CHECK(cudaEventCreate(&e));
-  }
-  ~EventTimer() {
-    for (auto e : events_)
-      if (e) cudaEventDestroy(e);
   }
   EventTimer(const EventTimer&) = delete;
   EventTimer& operator=(const EventTimer&) = delete;
@@ -32,6 +34,11 @@ class EventTimer {
   }
 
  private:
+  void destroy() noexcept {
+    for (auto e : events_)
+      if (e) cudaEventDestroy(e);
+    events_.clear();
+  }
   std::vector<cudaEvent_t> events_;
 };
 

@@ -93,9 +93,11 @@ GpuRuntime::Impl::Impl(const FlatBvh& tree, const anim::Animation& animation, Co
   CUDA_CHECK(cudaSetDevice(config.device));
   device = describeDevice(config.device);
   CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
+  events.create(16);
   times.assign(animation.times().begin(), animation.times().end());
   keyframes = DeviceBuffer<float>(animation.allPositions(), stream);
   indices = DeviceBuffer<uint32_t>(idx, stream);
+  hostIndices.assign(idx.begin(), idx.end());
   positions.resize(std::size_t(vertices) * 3);
   nodes = DeviceBuffer<GpuBvhNode>(std::span<const GpuBvhNode>(topology.nodes), stream);
   nodeParent = DeviceBuffer<uint32_t>(std::span<const uint32_t>(parent), stream);
@@ -119,6 +121,18 @@ GpuRuntime::Impl::~Impl() {
     cudaStreamSynchronize(stream);
     cudaStreamDestroy(stream);
   }
+}
+
+void GpuRuntime::Impl::buildVertexTriangles() {
+  std::vector<uint32_t> offsets(std::size_t(vertices) + 1, 0);
+  for (uint32_t v : hostIndices) ++offsets[v + 1];
+  for (uint32_t v = 0; v < vertices; ++v) offsets[v + 1] += offsets[v];
+  std::vector<uint32_t> tris(hostIndices.size());
+  std::vector<uint32_t> fill(offsets.begin(), offsets.end() - 1);
+  for (std::size_t i = 0; i < hostIndices.size(); ++i) tris[fill[hostIndices[i]]++] = uint32_t(i / 3);
+  vertexTriOffsets = DeviceBuffer<uint32_t>(std::span<const uint32_t>(offsets), stream);
+  vertexTris = DeviceBuffer<uint32_t>(std::span<const uint32_t>(tris), stream);
+  normals.resize(std::size_t(vertices) * 3);
 }
 
 detail::TraceScene GpuRuntime::Impl::scene() const {

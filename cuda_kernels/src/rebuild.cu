@@ -53,12 +53,17 @@ __device__ __forceinline__ float warpMin(float v) {
 
 // --- Morton codes ------------------------------------------------------------------------------
 
-__global__ void triangleBoxesKernel(const uint32_t* __restrict__ indices, const float* __restrict__ positions,
-                                    uint32_t n, Aabb* __restrict__ triBox, int* __restrict__ centroidBounds) {
-  const uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
-  // Centroid bounds as six minima: lo.xyz and -hi.xyz. Lanes past the end contribute nothing.
+constexpr int kBoxBlock = 256;
+
+// Triangle boxes, and the bounds of their centroids: each block reduces its share in registers and
+// shared memory and adds one atomic per bound (few blocks, so the atomics do not serialize).
+__global__ void __launch_bounds__(kBoxBlock) triangleBoxesKernel(const uint32_t* __restrict__ indices,
+                                                                const float* __restrict__ positions, uint32_t n,
+                                                                Aabb* __restrict__ triBox,
+                                                                int* __restrict__ centroidBounds) {
+  // Centroid bounds as six minima: lo.xyz and -hi.xyz.
   float m[6] = {3.0e38f, 3.0e38f, 3.0e38f, 3.0e38f, 3.0e38f, 3.0e38f};
-  if (t < n) {
+  for (uint32_t t = blockIdx.x * blockDim.x + threadIdx.x; t < n; t += gridDim.x * blockDim.x) {
     const uint32_t* tri = indices + 3 * std::size_t(t);
     Aabb b;
     b.extend(loadVertex(positions, __ldg(tri)));
@@ -66,13 +71,22 @@ __global__ void triangleBoxesKernel(const uint32_t* __restrict__ indices, const 
     b.extend(loadVertex(positions, __ldg(tri + 2)));
     triBox[t] = b;
     const Vec3 c = b.center();
-    m[0] = c.x, m[1] = c.y, m[2] = c.z, m[3] = -c.x, m[4] = -c.y, m[5] = -c.z;
+    m[0] = fminf(m[0], c.x), m[1] = fminf(m[1], c.y), m[2] = fminf(m[2], c.z);
+    m[3] = fminf(m[3], -c.x), m[4] = fminf(m[4], -c.y), m[5] = fminf(m[5], -c.z);
   }
+  __shared__ float partial[kBoxBlock / 32][6];
+  const int lane = int(threadIdx.x & 31u), warp = int(threadIdx.x >> 5);
 #pragma unroll
-  for (int k = 0; k < 6; ++k) m[k] = warpMin(m[k]);
-  if ((threadIdx.x & 31u) == 0 && t < n)
-#pragma unroll
-    for (int k = 0; k < 6; ++k) atomicMin(centroidBounds + k, orderedInt(m[k]));
+  for (int k = 0; k < 6; ++k) {
+    m[k] = warpMin(m[k]);
+    if (lane == 0) partial[warp][k] = m[k];
+  }
+  __syncthreads();
+  if (threadIdx.x < 6) {
+    float v = partial[0][threadIdx.x];
+    for (int w = 1; w < kBoxBlock / 32; ++w) v = fminf(v, partial[w][threadIdx.x]);
+    atomicMin(centroidBounds + threadIdx.x, orderedInt(v));
+  }
 }
 
 // 10 bits spread to every third bit.
@@ -291,9 +305,10 @@ __device__ __forceinline__ float boxArea(float lx, float ly, float lz, float hx,
   return 2.0f * (dx * dy + dy * dz + dz * dx);
 }
 
-// The SAH tree over the clusters, top-down. Persistent blocks take nodes from a queue (every block
-// is resident, so waiting for a node that another block will push cannot deadlock); a node with
-// m clusters is split on the 32^3 grid of the cluster prefixes: bins are the grid cells of the
+// The SAH tree over the clusters, top-down. Persistent blocks take nodes from a queue in order; a
+// block waits until its node has been pushed by the block that split the parent (which holds an
+// earlier slot and is running, so the wait ends whether or not every block is resident). A node
+// with m clusters is split on the 32^3 grid of the cluster prefixes: bins are the grid cells of the
 // node's cell range on each axis, the best of the bin boundaries by the SAH (triangle counts times
 // areas) wins, and the clusters are partitioned stably. A node is named by its split position
 // (begin + left count - 1), which is unique, so the tree is the same whichever block builds what.
@@ -318,8 +333,13 @@ __global__ void __launch_bounds__(kTopBlock) clusterTreeKernel(TopParams p) {
     if (tid == 0) {
       const uint32_t idx = atomicAdd(p.words + kQueueHead, 1u);
       if (idx < taskCount) {
+        // Slot idx is filled by a block holding an earlier slot, and only running blocks hold
+        // slots, so this wait always ends. The bound turns a bug into a launch error, not a hang.
         ::cuda::atomic_ref<uint32_t, ::cuda::thread_scope_device> ready(p.taskReady[idx]);
-        while (ready.load(::cuda::memory_order_acquire) == 0) __nanosleep(64);
+        for (uint32_t spins = 0; ready.load(::cuda::memory_order_acquire) == 0; ++spins) {
+          if (spins == (1u << 30)) __trap();
+          __nanosleep(64);
+        }
         task = __ldcg(p.tasks + idx);
       }
       taskIndex = idx;
@@ -693,8 +713,7 @@ int residentBlocks(Kernel kernel, int blockSize) {
   CUDA_CHECK(cudaGetDevice(&device));
   CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
   CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&perSm, kernel, blockSize, 0));
-  // Every block must be resident (they wait on each other); more than a few per multiprocessor
-  // only adds blocks spinning on the queue.
+  // More than a few blocks per multiprocessor would only add blocks spinning on the queue.
   return std::max(1, sms * std::min(4, std::max(1, perSm)));
 }
 
@@ -740,6 +759,10 @@ GpuRebuilder::GpuRebuilder(uint32_t triangles) : n_(triangles), events_(8) {
   CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, scanBytes, headFlags_.data(), clusterOf_.data(), int64_t(n)));
   cubTemp_.resize(std::max<std::size_t>({sortBytes, scanBytes, 1}));
   topBlocks_ = residentBlocks(clusterTreeKernel, kTopBlock);
+  int device = 0, sms = 0;
+  CUDA_CHECK(cudaGetDevice(&device));
+  CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
+  boxBlocks_ = 8 * sms;
 }
 
 GpuRebuilder::~GpuRebuilder() = default;
@@ -756,8 +779,8 @@ RebuildTimings GpuRebuilder::build(const uint32_t* indices, const float* positio
   events_.record(0, stream);
   // Morton codes over the centroid bounds.
   centroidBounds_.fillBytes(0x7f, stream);
-  triangleBoxesKernel<<<gridFor(n, block), block, 0, stream>>>(indices, positions, n, triBox_.data(),
-                                                               centroidBounds_.data());
+  triangleBoxesKernel<<<std::min<unsigned>(gridFor(n, kBoxBlock), unsigned(boxBlocks_)), kBoxBlock, 0, stream>>>(
+      indices, positions, n, triBox_.data(), centroidBounds_.data());
   CUDA_CHECK_LAUNCH("triangleBoxesKernel");
   mortonKernel<<<gridFor(n, block), block, 0, stream>>>(triBox_.data(), n, centroidBounds_.data(), mortonIn_.data(),
                                                         idsIn_.data());

@@ -68,6 +68,7 @@ class GpuRebuilder {
   // CUB scratch.
   DeviceBuffer<unsigned char> cubTemp_;
   int topBlocks_ = 0;
+  int boxBlocks_ = 0;
 };
 
 }  // namespace tsah::cuda::detail

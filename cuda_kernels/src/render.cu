@@ -4,7 +4,8 @@
 // Compiled with -fmad=false, and normalizing with IEEE square roots and divisions, so camera rays,
 // surfaces and secondary rays are computed with the CPU's exact roundings; only cosf/sinf/powf/expf
 // (used by the sample warps and the sRGB curve) can differ from the C library in the last bit.
-// The shading helpers of renderer.cpp live in its anonymous namespace, so they are repeated here.
+// The shading of renderer.cpp lives in its anonymous namespace, so it is repeated here (kernels
+// surfaceKernel, vertexNormalsKernel, shadeKernel): keep the two in step.
 #include <cuda/atomic>
 
 #include "anim/error.hpp"
@@ -96,7 +97,8 @@ __global__ void surfaceKernel(Frame f, const Hit* __restrict__ hits, const uint3
   if (j >= f.padded) return;
   uint32_t x, y;
   Vec3 position{0, 0, 0}, normal{0, 0, 1};
-  uint32_t kind = kNone;
+  uint32_t kind = kNone, tri = 0;
+  float u = 0.0f, v = 0.0f;
   if (pixelOf(f, j, x, y)) {
     const Ray ray = cameraRay(f.cam, float(x) + 0.5f, float(y) + 0.5f);
     const Hit hit = hits[j];
@@ -110,33 +112,43 @@ __global__ void surfaceKernel(Frame f, const Hit* __restrict__ hits, const uint3
       }
     }
     if (hit.valid() && hit.t <= tGround) {
-      const uint32_t* tri = indices + 3 * std::size_t(hit.tri);
-      const Vec3 v0 = loadVertex(positions, tri[0]), v1 = loadVertex(positions, tri[1]),
-                 v2 = loadVertex(positions, tri[2]);
+      const uint32_t* t3 = indices + 3 * std::size_t(hit.tri);
+      const Vec3 v0 = loadVertex(positions, t3[0]), v1 = loadVertex(positions, t3[1]),
+                 v2 = loadVertex(positions, t3[2]);
       Vec3 n = normalizeExact(cross(v1 - v0, v2 - v0));
       if (dot(n, ray.dir) > 0.0f) n = n * -1.0f;
       const Vec3 p = v0 * (1.0f - hit.u - hit.v) + v1 * hit.u + v2 * hit.v;
       position = p + n * f.light.epsilon;
       normal = n;
       kind = kMesh;
+      tri = hit.tri;
+      u = hit.u;
+      v = hit.v;
     } else if (tGround < 3.402823466e38f) {
       position = ray.org + ray.dir * tGround + up * f.light.epsilon;
       normal = up;
       kind = kGround;
     }
   }
-  surfaces[2 * std::size_t(j)] = make_float4(position.x, position.y, position.z, __uint_as_float(kind));
-  surfaces[2 * std::size_t(j) + 1] = make_float4(normal.x, normal.y, normal.z, 0.0f);
+  float4* out = surfaces + 3 * std::size_t(j);
+  out[0] = make_float4(position.x, position.y, position.z, __uint_as_float(kind));
+  out[1] = make_float4(normal.x, normal.y, normal.z, __uint_as_float(tri));
+  out[2] = make_float4(u, v, 0.0f, 0.0f);
 }
 
+// What the primary pass found at a pixel (renderer.cpp's Surface).
 struct Surface {
-  Vec3 position, normal;
+  Vec3 position;  // already offset along the normal
+  Vec3 normal;    // geometric, unit, facing the camera
   uint32_t kind;
+  uint32_t tri;   // mesh hits: triangle and barycentrics, for the smooth shading normal
+  float u, v;
 };
 
 __device__ __forceinline__ Surface loadSurface(const float4* surfaces, uint32_t j) {
-  const float4 a = surfaces[2 * std::size_t(j)], b = surfaces[2 * std::size_t(j) + 1];
-  return {{a.x, a.y, a.z}, {b.x, b.y, b.z}, __float_as_uint(a.w)};
+  const float4* p = surfaces + 3 * std::size_t(j);
+  const float4 a = p[0], b = p[1], c = p[2];
+  return {{a.x, a.y, a.z}, {b.x, b.y, b.z}, __float_as_uint(a.w), __float_as_uint(b.w), c.x, c.y};
 }
 
 __device__ __forceinline__ uint32_t pixelIndex(const Frame& f, uint32_t x, uint32_t y) { return y * f.width + x; }
@@ -195,13 +207,32 @@ __global__ void shadowRaysKernel(Frame f, const float4* __restrict__ surfaces, R
   countRays(words + kShadowRays, valid);
 }
 
+// Area-weighted vertex normals of the current frame (renderer.cpp's vertexNormals, for shading
+// only): each vertex sums the face normals of its triangles in increasing triangle order, as the
+// CPU loop does, so the sums are bit-identical. vertexTris: the triangles of each vertex (CSR).
+__global__ void vertexNormalsKernel(uint32_t vertices, const uint32_t* __restrict__ offsets,
+                                    const uint32_t* __restrict__ vertexTris, const uint32_t* __restrict__ indices,
+                                    const float* __restrict__ positions, float* __restrict__ normals) {
+  const uint32_t vtx = blockIdx.x * blockDim.x + threadIdx.x;
+  if (vtx >= vertices) return;
+  Vec3 n{0, 0, 0};
+  for (uint32_t k = offsets[vtx]; k < offsets[vtx + 1]; ++k) {
+    const uint32_t* t3 = indices + 3 * std::size_t(vertexTris[k]);
+    const Vec3 v0 = loadVertex(positions, t3[0]);
+    n = n + cross(loadVertex(positions, t3[1]) - v0, loadVertex(positions, t3[2]) - v0);
+  }
+  normals[3 * std::size_t(vtx)] = n.x;
+  normals[3 * std::size_t(vtx) + 1] = n.y;
+  normals[3 * std::size_t(vtx) + 2] = n.z;
+}
+
 // renderer.cpp's shading.
 __device__ __forceinline__ Vec3 mix(Vec3 a, Vec3 b, float s) { return a + (b - a) * s; }
 __device__ __forceinline__ Vec3 mul(Vec3 a, Vec3 b) { return {a.x * b.x, a.y * b.y, a.z * b.z}; }
 
 __device__ Vec3 skyColor(Vec3 dir, Vec3 up) {
   const float h = dot(dir, up);
-  const Vec3 horizon{0.86f, 0.89f, 0.93f}, zenith{0.42f, 0.58f, 0.84f}, below{0.40f, 0.39f, 0.37f};
+  const Vec3 horizon{0.80f, 0.85f, 0.91f}, zenith{0.30f, 0.48f, 0.78f}, below{0.40f, 0.39f, 0.37f};
   if (h < 0.0f) return mix(horizon, below, fminf(1.0f, -h * 4.0f));
   return mix(horizon, zenith, sqrtf(h));
 }
@@ -214,6 +245,7 @@ __device__ uint8_t toSrgb8(float linear) {
 
 __global__ void shadeKernel(Frame f, const float4* __restrict__ surfaces, const uint8_t* __restrict__ aoOccluded,
                             const uint8_t* __restrict__ shadowOccluded, const uint8_t* __restrict__ shadowTraced,
+                            const uint32_t* __restrict__ indices, const float* __restrict__ normals,
                             uint8_t* __restrict__ image) {
   const uint32_t j = blockIdx.x * blockDim.x + threadIdx.x;
   if (j >= f.padded) return;
@@ -242,23 +274,30 @@ __global__ void shadeKernel(Frame f, const float4* __restrict__ surfaces, const 
     const Vec3 meshAlbedo{0.78f, 0.60f, 0.44f};
     const Vec3 sun{1.00f, 0.94f, 0.84f};
     Vec3 albedo = meshAlbedo;
+    Vec3 shading = s.normal;
     float fade = 0.0f;
+    if (s.kind == kMesh) {
+      const uint32_t* t3 = indices + 3 * std::size_t(s.tri);
+      const Vec3 smooth = normalizeExact(loadVertex(normals, t3[0]) * (1.0f - s.u - s.v) +
+                                         loadVertex(normals, t3[1]) * s.u + loadVertex(normals, t3[2]) * s.v);
+      shading = dot(smooth, s.normal) < 0.0f ? smooth * -1.0f : smooth;
+    }
     if (s.kind == kGround) {
       Vec3 t, b;
       orthonormalBasis(up, t, b);
       const Vec3 rel = s.position - f.light.sceneCenter;
       const auto cu = int32_t(floorf(dot(rel, t) / f.light.groundScale));
       const auto cv = int32_t(floorf(dot(rel, b) / f.light.groundScale));
-      albedo = ((cu + cv) & 1) ? Vec3{0.70f, 0.70f, 0.68f} : Vec3{0.58f, 0.58f, 0.57f};
+      albedo = ((cu + cv) & 1) ? Vec3{0.62f, 0.60f, 0.56f} : Vec3{0.50f, 0.49f, 0.46f};
       const float d = sqrtf(dot(rel, rel)) / (6.0f * f.light.sceneRadius);
       fade = 1.0f - expf(-d * d);
     }
     const Vec3 toLight = normalizeExact(f.light.lightCenter - s.position);
-    const float diffuse = fmaxf(0.0f, dot(s.normal, toLight)) * visibility;
-    const Vec3 sky = skyColor(normalizeExact(s.normal + up * 0.5f), up) * 0.75f;
-    const Vec3 lit = sky * ao + sun * (0.85f * diffuse);
+    const float diffuse = fmaxf(0.0f, dot(shading, toLight)) * visibility;
+    const Vec3 sky = skyColor(normalizeExact(shading + up * 0.5f), up) * 0.6f;
+    const Vec3 lit = sky * ao + sun * diffuse;
     color = mul(albedo, lit);
-    if (fade > 0.0f) color = mix(color, Vec3{0.86f, 0.89f, 0.93f}, fade);
+    if (fade > 0.0f) color = mix(color, Vec3{0.80f, 0.85f, 0.91f}, fade);  // into the horizon
   }
   uint8_t* px = image + 3 * std::size_t(pixelIndex(f, x, y));
   px[0] = toSrgb8(color.x);
@@ -293,7 +332,7 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
 
   m.rays.reserve(std::max<uint64_t>(padded, aoRays));
   m.hits.reserve(padded);
-  m.surfaces.reserve(2 * padded);
+  m.surfaces.reserve(3 * padded);
   m.occluded.reserve(std::max<uint64_t>(aoRays, 1));
   m.shadowRays.reserve(std::max<uint64_t>(shadowRays, 1));
   m.shadowOccluded.reserve(std::max<uint64_t>(2 * shadowRays, 2));  // results, then "traced" flags
@@ -336,8 +375,14 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   detail::launchTrace(scene, m.shadowRays.data(), uint32_t(shadowRays), nullptr, m.shadowOccluded.data(),
                       m.words.data() + kShadowCounter, launch, stream);
   ev.record(6, stream);
+  if (m.vertexTris.empty()) m.buildVertexTriangles();
+  vertexNormalsKernel<<<detail::gridFor(m.vertices, block), block, 0, stream>>>(
+      m.vertices, m.vertexTriOffsets.data(), m.vertexTris.data(), m.indices.data(), m.positions.data(),
+      m.normals.data());
+  CUDA_CHECK_LAUNCH("vertexNormalsKernel");
   shadeKernel<<<detail::gridFor(padded, block), block, 0, stream>>>(f, m.surfaces.data(), m.occluded.data(),
                                                                     m.shadowOccluded.data(), shadowTraced,
+                                                                    m.indices.data(), m.normals.data(),
                                                                     m.image.data());
   CUDA_CHECK_LAUNCH("shadeKernel");
   ev.record(7, stream);

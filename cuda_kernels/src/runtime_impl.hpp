@@ -24,14 +24,17 @@ struct GpuRuntime::Impl {
   // Throws unless there is a traceable frame (an update or a rebuild with Woop triangles).
   void requireTraceable() const;
   void refitAndWoop(UpdateTimings& timings);  // events 1..3 (event 0 marks the start)
+  // The triangles of every vertex in increasing order (once, at the first render).
+  void buildVertexTriangles();
 
   Config config;
   DeviceInfo device;
   cudaStream_t stream = nullptr;
-  detail::EventTimer events{16};
+  detail::EventTimer events;  // created once the device is chosen
 
   uint32_t triangles = 0, vertices = 0;
   std::vector<double> times;             // keyframe times
+  std::vector<uint32_t> hostIndices;     // for buildVertexTriangles
   DeviceBuffer<float> keyframes;         // every keyframe, vertices * 3 floats each
   DeviceBuffer<uint32_t> indices;        // 3 per triangle
   DeviceBuffer<float> positions;         // the current frame
@@ -54,7 +57,9 @@ struct GpuRuntime::Impl {
   DeviceBuffer<Hit> hits;
   DeviceBuffer<uint8_t> occluded, shadowOccluded;
   DeviceBuffer<Ray> shadowRays;
-  DeviceBuffer<float4> surfaces;         // 2 per pixel: position + kind, normal
+  DeviceBuffer<float4> surfaces;         // 3 per pixel: position + kind, normal + triangle, u v
+  DeviceBuffer<uint32_t> vertexTriOffsets, vertexTris;  // triangles of each vertex (CSR), for normals
+  DeviceBuffer<float> normals;           // smooth shading normals of the current frame
   DeviceBuffer<uint8_t> image;
 };
 

@@ -11,22 +11,12 @@ namespace {
 
 __global__ void interpolateKernel(const float* __restrict__ a, const float* __restrict__ b, float alpha,
                                   float* __restrict__ out, std::size_t count) {
-  // Same operations and rounding as anim::Animation::positionsAt: beta * a + alpha * b.
+  // Same operations and rounding as anim::Animation::positionsAt: beta * a + alpha * b. Scalar
+  // accesses: a keyframe starts wherever vertices * 3 floats put it, not on a 16-byte boundary.
   const float beta = 1.0f - alpha;
   const std::size_t stride = std::size_t(gridDim.x) * blockDim.x;
-  const std::size_t quads = count / 4;
-  const float4* a4 = reinterpret_cast<const float4*>(a);
-  const float4* b4 = reinterpret_cast<const float4*>(b);
-  float4* o4 = reinterpret_cast<float4*>(out);
-  for (std::size_t i = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x; i < quads; i += stride) {
-    const float4 x = __ldg(a4 + i), y = __ldg(b4 + i);
-    o4[i] = make_float4(__fadd_rn(__fmul_rn(beta, x.x), __fmul_rn(alpha, y.x)),
-                        __fadd_rn(__fmul_rn(beta, x.y), __fmul_rn(alpha, y.y)),
-                        __fadd_rn(__fmul_rn(beta, x.z), __fmul_rn(alpha, y.z)),
-                        __fadd_rn(__fmul_rn(beta, x.w), __fmul_rn(alpha, y.w)));
-  }
-  for (std::size_t i = quads * 4 + std::size_t(blockIdx.x) * blockDim.x + threadIdx.x; i < count; i += stride)
-    out[i] = __fadd_rn(__fmul_rn(beta, a[i]), __fmul_rn(alpha, b[i]));
+  for (std::size_t i = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x; i < count; i += stride)
+    out[i] = __fadd_rn(__fmul_rn(beta, __ldg(a + i)), __fmul_rn(alpha, __ldg(b + i)));
 }
 
 __device__ __forceinline__ Vec3 loadVertex(const float* __restrict__ p, uint32_t v) {
@@ -107,7 +97,7 @@ void launchInterpolate(const float* a, const float* b, float alpha, float* out, 
     return;
   }
   const uint32_t block = 256;
-  interpolateKernel<<<gridFor(count / 4 + 1, block), block, 0, stream>>>(a, b, alpha, out, count);
+  interpolateKernel<<<gridFor(count, block), block, 0, stream>>>(a, b, alpha, out, count);
   CUDA_CHECK_LAUNCH("interpolateKernel");
 }
 

@@ -82,8 +82,10 @@ class GpuRuntime {
  public:
   struct Config {
     int device = 0;
-    // Aila-Laine persistent warps fetching rays from a global counter; false: one thread per ray.
-    bool persistentTraversal = true;
+    // true: Aila-Laine persistent warps fetching rays from a global counter (with dynamic fetch);
+    // false: one thread per ray, the same while-while loop. On the H200 one thread per ray was
+    // faster (docs/cuda-runtime.md), so it is the default.
+    bool persistentTraversal = false;
   };
 
   // tree: the topology to refit (frame 0's block; its boxes are recomputed by updateAt). Throws
