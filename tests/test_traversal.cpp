@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <algorithm>
 #include <random>
 
@@ -293,6 +294,47 @@ TEST(Traversal, WoopFastPathClassifiesLikeWatertight) {
     decidedFast += r.fellBack ? 0 : 1;
   }
   EXPECT_GT(decidedFast, uint32_t(cases / 4));  // the check must cover fast-path decisions too
+}
+
+// The two-child slab test (SSE on x86) gives bit-identical results to the scalar box test.
+TEST(Traversal, ChildBoxTestEqualsScalarBoxTest) {
+  std::mt19937 rng(21);
+  std::uniform_real_distribution<float> c(-4.0f, 4.0f), u01(0.0f, 1.0f);
+  auto randomBox = [&] {
+    tsah::Aabb b;
+    b.extend(Vec3{c(rng), c(rng), c(rng)});
+    const int flat = static_cast<int>(rng() % 4);  // sometimes flat along one axis
+    Vec3 size{u01(rng), u01(rng), u01(rng)};
+    if (flat < 3) size[flat] = 0.0f;
+    b.extend(b.lo + size);
+    return b;
+  };
+  for (int i = 0; i < 200000; ++i) {
+    tsah::GpuBvhNode node{};
+    const tsah::Aabb b0 = randomBox(), b1 = randomBox();
+    node.setChildBox(0, b0);
+    node.setChildBox(1, b1);
+    tsah::Ray ray;
+    ray.org = {c(rng), c(rng), c(rng)};
+    ray.dir = randomUnit(rng);
+    if (i % 5 == 0) ray.dir[static_cast<int>(rng() % 3)] = 0.0f;  // axis-parallel components
+    if (i % 7 == 0) ray.org = b0.lo;                            // origin on a slab plane
+    ray.tmin = i % 3 == 0 ? 0.5f * u01(rng) : 0.0f;
+    ray.tmax = i % 2 == 0 ? 10.0f * u01(rng) : 3.4e38f;
+    const tsah::RayPrep prep = tsah::prepareRay(ray);
+    float s0, s1, v0, v1;
+    const bool h0 = tsah::intersectBox(prep, b0, ray.tmin, ray.tmax, s0);
+    const bool h1 = tsah::intersectBox(prep, b1, ray.tmin, ray.tmax, s1);
+    const int mask = tsah::intersectChildren(tsah::prepareNodeRay(prep), node, ray.tmin, ray.tmax, v0, v1);
+    ASSERT_EQ(mask & 1, h0 ? 1 : 0) << i;
+    ASSERT_EQ((mask >> 1) & 1, h1 ? 1 : 0) << i;
+    if (h0) {
+      ASSERT_EQ(0, std::memcmp(&s0, &v0, 4)) << i;
+    }
+    if (h1) {
+      ASSERT_EQ(0, std::memcmp(&s1, &v1, 4)) << i;
+    }
+  }
 }
 
 TEST(Traversal, DegenerateTrianglesAreNeverHit) {
