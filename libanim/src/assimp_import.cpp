@@ -44,7 +44,6 @@ struct Quat {
 };
 // Row-major 3x4 affine transform (last column: translation).
 using Affine = std::array<double, 12>;
-constexpr Affine kIdentity{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
 
 Affine multiply(const Affine& a, const Affine& b) {
   Affine r;
