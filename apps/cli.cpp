@@ -61,6 +61,10 @@ anim::Animation loadInput(const std::string& input, anim::LoadOptions options) {
   Progress progress("loading " + input);
   if (!options.progress)
     options.progress = [&](std::size_t done, std::size_t total) { progress.update(done, total); };
+  // Importer warnings (skipped materials, transforms without keys, ...) go to stderr, one line each,
+  // so stdout stays a clean result (--json).
+  if (!options.warning)
+    options.warning = [](const std::string& text) { std::fprintf(stderr, "tsah: warning: %s\n", text.c_str()); };
   return anim::load(input, options);
 }
 
