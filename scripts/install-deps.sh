@@ -8,7 +8,7 @@ set -euo pipefail
 packages=(
   build-essential cmake pkg-config git xz-utils file
   libopenmesh-dev libglm-dev libcli11-dev nlohmann-json3-dev
-  libtbb-dev libstb-dev libassimp-dev assimp-testmodels
+  libtbb-dev libstb-dev libassimp-dev zlib1g-dev assimp-testmodels
   libgtest-dev googletest
   python3
 )
