@@ -7,8 +7,9 @@
 #           (data.tar.xz: SCENE.tanim and SCENE-{sah0,sahstar,tsah}.tbvh made with tsah resample /
 #           tsah optimize)
 #   run:    device tool, carry [".gpu"], command: bash cuda_kernels/bench/device_run.sh [STEPS]
-# STEPS (default "tests memcheck scenes scaling") picks what runs. Results go to $OUT (at most 8
-# files): tests.log, memcheck.log, bench-SCENE.json, bench-wave1m.json, cpu.png, gpu.png.
+# STEPS (default "tests memcheck scenes scaling") picks what runs; "nographs" adds runs without CUDA
+# graphs. Results go to $OUT (at most 8 files come back): tests.log, memcheck.log, bench-*.json, and
+# with IMAGES=1 cpu.png and gpu.png of the CPU/GPU comparison.
 set -u
 steps=${1:-tests memcheck scenes scaling}
 scenes=${SCENES:-horse-gallop horse-collapse samba}
@@ -55,7 +56,7 @@ if has scenes; then
     trees=""
     for m in sah0 sahstar tsah; do [ -f "data/$s-$m.tbvh" ] && trees="$trees --tree $m=data/$s-$m.tbvh"; done
     extra=""
-    [ "$s" = horse-gallop ] && extra="--cpu-compare --image-dir $out --traversal both"
+    [ "$s" = horse-gallop ] && extra="--cpu-compare --traversal both ${IMAGES:+--image-dir $out}"
     start=$SECONDS
     timeout 300 ./bin/tsah_gpu_bench --input "data/$s.tanim" $trees --frames 50 $extra > "$out/bench-$s.json" 2> "$out/bench-$s.err"
     echo "bench $s: rc=$? in $((SECONDS - start)) s"; cat "$out/bench-$s.err"; rm -f "$out/bench-$s.err"
@@ -68,6 +69,14 @@ if has scaling; then
   echo "bench wave 1M: rc=$? in $((SECONDS - start)) s"; cat "$out/wave.err"; rm -f "$out/wave.err"
 fi
 
+if has nographs; then  # the same without CUDA graphs: what the launches cost
+  start=$SECONDS
+  timeout 300 ./bin/tsah_gpu_bench --input data/horse-gallop.tanim --tree tsah=data/horse-gallop-tsah.tbvh --frames 50 \
+    --no-graphs > "$out/bench-nographs-horse-gallop.json"
+  timeout 300 ./bin/tsah_gpu_bench --generate wave:1000000:4 --frames 4 --no-graphs > "$out/bench-nographs-wave1m.json"
+  echo "no graphs: rc=$? in $((SECONDS - start)) s"
+fi
+
 # A short table for the reply's tail.
 python3 - "$out" <<'PY'
 import json, glob, sys, os
@@ -76,7 +85,7 @@ for f in sorted(glob.glob(os.path.join(sys.argv[1], "bench-*.json"))):
         d = json.load(open(f))
     except Exception as e:
         print(os.path.basename(f), "unreadable:", e); continue
-    print(os.path.basename(f), d["device"]["name"], d["input"]["triangles"], "triangles")
+    print(os.path.basename(f), d["device"]["name"], d["input"]["triangles"], "triangles, graphs", d["settings"].get("graphs"))
     for m in d["methods"]:
         tr = m.get("trace", {})
         upd = m["update_ms"]["mean"]

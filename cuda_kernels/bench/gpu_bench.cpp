@@ -3,7 +3,7 @@
 //   tsah_gpu_bench (--input FILE | --generate KIND:TRIANGLES:FRAMES)
 //                  [--tree NAME=FILE.tbvh]... [--sah0] [--rebuild lbvh,hlbvh-sah|none]
 //                  [--frames 50] [--width 1024] [--height 768] [--ao 8] [--shadow 2]
-//                  [--traversal persistent|simple|both] [--no-render] [--cpu-compare]
+//                  [--traversal simple|persistent|both] [--no-graphs] [--no-render] [--cpu-compare]
 //                  [--image-dir DIR] [--builder sweep|binned]
 //
 // For every tree (from .tbvh files, or SAH0 built here: sweep SAH on the first frame, collapsed to
@@ -50,8 +50,8 @@ struct Options {
   bool sah0 = false;
   std::string rebuild = "lbvh,hlbvh-sah";
   uint32_t frames = 50, width = 1024, height = 768, ao = 8, shadow = 2;
-  std::string traversal = "persistent";
-  bool noRender = false, cpuCompare = false;
+  std::string traversal = "simple";
+  bool noRender = false, cpuCompare = false, noGraphs = false;
   std::string imageDir;
   std::string builder = "sweep";
 };
@@ -157,7 +157,7 @@ struct FrameSeries {
 
 json runRefit(const std::string& name, const tsah::FlatBvh& tree, const anim::Animation& a,
               const std::vector<double>& times, const Scene& scene, const Options& opt, bool persistent) {
-  tc::GpuRuntime rt(tree, a, {0, persistent});
+  tc::GpuRuntime rt(tree, a, {0, persistent, !opt.noGraphs});
   const double mtris = double(a.triangleCount()) / 1e6;
   tsah::RenderSettings settings = scene.settings;
   // Warm-up: module load, allocations, first-touch of the ray buffers.
@@ -202,7 +202,7 @@ json runRefit(const std::string& name, const tsah::FlatBvh& tree, const anim::An
 
 json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim::Animation& a,
                 const std::vector<double>& times, const Scene& scene, const Options& opt, bool persistent) {
-  tc::GpuRuntime rt(tree, a, {0, persistent});
+  tc::GpuRuntime rt(tree, a, {0, persistent, !opt.noGraphs});
   const double mtris = double(a.triangleCount()) / 1e6;
   tsah::RenderSettings settings = scene.settings;
   tc::RebuildOptions bare;
@@ -332,7 +332,7 @@ void run(const Options& opt) {
   scene.lighting = tsah::fitLighting(bounds, scene.camera);
   out["settings"] = {{"frames", frames},       {"width", opt.width},   {"height", opt.height},
                      {"ao_samples", opt.ao},   {"shadow_samples", opt.shadow},
-                     {"traversal", opt.traversal}, {"render", !opt.noRender}};
+                     {"traversal", opt.traversal}, {"render", !opt.noRender}, {"graphs", !opt.noGraphs}};
 
   // Trees: files, then SAH0 built here.
   std::vector<std::pair<std::string, tsah::FlatBvh>> trees;
@@ -390,7 +390,8 @@ int main(int argc, char** argv) {
   app.add_option("--height", opt.height, "Image height (default 768)");
   app.add_option("--ao", opt.ao, "Ambient-occlusion rays per pixel (default 8)");
   app.add_option("--shadow", opt.shadow, "Shadow rays per pixel (default 2)");
-  app.add_option("--traversal", opt.traversal, "persistent, simple or both");
+  app.add_option("--traversal", opt.traversal, "simple (one thread per ray, the default), persistent or both");
+  app.add_flag("--no-graphs", opt.noGraphs, "Launch every kernel instead of replaying CUDA graphs");
   app.add_flag("--no-render", opt.noRender, "Time the updates and rebuilds only");
   app.add_flag("--cpu-compare", opt.cpuCompare, "Render the first frame on the CPU too and compare the images");
   app.add_option("--image-dir", opt.imageDir, "Where --cpu-compare writes cpu.png and gpu.png");

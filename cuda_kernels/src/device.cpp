@@ -9,6 +9,9 @@
 namespace tsah::cuda {
 
 void throwCudaError(cudaError_t code, const char* call, const char* file, int line) {
+  // Reset the runtime's last error, so that a later launch check does not report this one again
+  // (a sticky error, one that breaks the context, stays regardless).
+  (void)cudaGetLastError();
   const char* slash = std::strrchr(file, '/');
   throw CudaError(code, std::string("CUDA error in ") + call + " (" + (slash ? slash + 1 : file) + ":" +
                             std::to_string(line) + "): " + cudaGetErrorName(code) + ": " + cudaGetErrorString(code));

@@ -42,6 +42,14 @@ struct LeafRecord {
   uint32_t count;
 };
 
+// Which keyframes the interpolation blends, read by the kernel from device memory so that one
+// captured CUDA graph serves every frame. Offsets are in floats.
+struct alignas(16) FrameParams {
+  uint64_t a = 0, b = 0;
+  float alpha = 0.0f;
+  uint32_t pad[3] = {0, 0, 0};
+};
+
 struct TraceLaunch {
   bool persistent = true;   // Aila-Laine persistent warps fetching rays from a global counter
   uint32_t blockSize = 128;

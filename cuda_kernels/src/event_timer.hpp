@@ -24,7 +24,17 @@ class EventTimer {
   EventTimer& operator=(const EventTimer&) = delete;
 
   std::size_t size() const { return events_.size(); }
-  void record(std::size_t i, cudaStream_t stream) { CUDA_CHECK(cudaEventRecord(events_.at(i), stream)); }
+  // Inside a stream capture the record must be "external" to become an event-record node of the
+  // graph (a plain record only adds a dependency there), so graph launches are timed too; outside
+  // a capture that flag is refused.
+  void record(std::size_t i, cudaStream_t stream) {
+    cudaStreamCaptureStatus status = cudaStreamCaptureStatusNone;
+    CUDA_CHECK(cudaStreamIsCapturing(stream, &status));
+    if (status == cudaStreamCaptureStatusActive)
+      CUDA_CHECK(cudaEventRecordWithFlags(events_.at(i), stream, cudaEventRecordExternal));
+    else
+      CUDA_CHECK(cudaEventRecord(events_.at(i), stream));
+  }
   void wait(std::size_t i) { CUDA_CHECK(cudaEventSynchronize(events_.at(i))); }
   // Device milliseconds from event a to event b; both must have completed (wait on the later one).
   double ms(std::size_t a, std::size_t b) const {

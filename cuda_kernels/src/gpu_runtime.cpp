@@ -1,6 +1,7 @@
 #include "tsah_cuda/gpu_runtime.hpp"
 
 #include <algorithm>
+#include <new>
 #include <string>
 
 #include "anim/error.hpp"
@@ -94,6 +95,10 @@ GpuRuntime::Impl::Impl(const FlatBvh& tree, const anim::Animation& animation, Co
   device = describeDevice(config.device);
   CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
   events.create(16);
+  void* pinned = nullptr;
+  CUDA_CHECK(cudaHostAlloc(&pinned, sizeof(detail::FrameParams), cudaHostAllocDefault));
+  hostParams = new (pinned) detail::FrameParams{};
+  frameParams.resize(1);
   times.assign(animation.times().begin(), animation.times().end());
   keyframes = DeviceBuffer<float>(animation.allPositions(), stream);
   indices = DeviceBuffer<uint32_t>(idx, stream);
@@ -117,10 +122,50 @@ GpuRuntime::Impl::Impl(const FlatBvh& tree, const anim::Animation& animation, Co
 }
 
 GpuRuntime::Impl::~Impl() {
-  if (stream) {
-    cudaStreamSynchronize(stream);
-    cudaStreamDestroy(stream);
+  if (stream) cudaStreamSynchronize(stream);
+  if (updateGraph) cudaGraphExecDestroy(updateGraph);
+  for (const auto& g : rebuildGraphs) cudaGraphExecDestroy(g.exec);
+  if (hostParams) cudaFreeHost(hostParams);
+  if (stream) cudaStreamDestroy(stream);
+}
+
+template <typename Enqueue>
+cudaGraphExec_t GpuRuntime::Impl::capture(Enqueue&& enqueue) {
+  CUDA_CHECK(cudaStreamBeginCapture(stream, cudaStreamCaptureModeThreadLocal));
+  try {
+    enqueue();
+  } catch (...) {
+    cudaGraph_t broken = nullptr;
+    cudaStreamEndCapture(stream, &broken);
+    if (broken) cudaGraphDestroy(broken);
+    throw;
   }
+  cudaGraph_t graph = nullptr;
+  CUDA_CHECK(cudaStreamEndCapture(stream, &graph));
+  cudaGraphExec_t exec = nullptr;
+  const cudaError_t status = cudaGraphInstantiate(&exec, graph, 0);
+  cudaGraphDestroy(graph);
+  CUDA_CHECK(status);
+  return exec;
+}
+
+void GpuRuntime::Impl::setFrame(double time) {
+  uint32_t k;
+  float alpha;
+  locate(times, time, k, alpha);
+  const uint64_t perFrame = uint64_t(vertices) * 3;
+  hostParams->a = k * perFrame;
+  hostParams->b = (alpha == 0.0f ? k : k + 1) * perFrame;
+  hostParams->alpha = alpha;
+}
+
+void GpuRuntime::Impl::enqueueInterpolation() {
+  events.record(0, stream);
+  CUDA_CHECK(cudaMemcpyAsync(frameParams.data(), hostParams, sizeof(detail::FrameParams), cudaMemcpyHostToDevice,
+                             stream));
+  detail::launchInterpolateFrame(keyframes.data(), frameParams.data(), positions.data(), std::size_t(vertices) * 3,
+                                 stream);
+  events.record(1, stream);
 }
 
 void GpuRuntime::Impl::buildVertexTriangles() {
@@ -151,19 +196,24 @@ void GpuRuntime::Impl::requireTraceable() const {
     throw anim::Error("GPU runtime: nothing to trace yet (call update/updateAt, or rebuild with Woop triangles)");
 }
 
-void GpuRuntime::Impl::refitAndWoop(UpdateTimings& timings) {
+void GpuRuntime::Impl::enqueueRefitAndWoop() {
   counters.fillBytes(0, stream);
   detail::launchRefit(nodes.data(), nodeParent.data(), leaves.data(), uint32_t(leaves.size()), triIndex.data(),
                       indices.data(), positions.data(), counters.data(), root.data(), stream);
   events.record(2, stream);
   detail::launchWoop(triIndex.data(), triangles, indices.data(), positions.data(), woop.data(), stream);
   events.record(3, stream);
+}
+
+UpdateTimings GpuRuntime::Impl::finishUpdate() {
+  UpdateTimings timings;
   events.wait(3);
   timings.interpolateMs = events.ms(0, 1);
   timings.refitMs = events.ms(1, 2);
   timings.woopMs = events.ms(2, 3);
   tracingRebuilt = false;
   woopValid = true;
+  return timings;
 }
 
 GpuRuntime::GpuRuntime(const FlatBvh& tree, const anim::Animation& animation, Config config)
@@ -174,18 +224,18 @@ GpuRuntime::~GpuRuntime() = default;
 
 UpdateTimings GpuRuntime::updateAt(double time) {
   Impl& m = *impl_;
-  uint32_t k;
-  float alpha;
-  locate(m.times, time, k, alpha);
-  const std::size_t perFrame = std::size_t(m.vertices) * 3;
-  const float* a = m.keyframes.data() + k * perFrame;
-  const float* b = alpha == 0.0f ? a : m.keyframes.data() + (k + 1) * perFrame;
-  UpdateTimings timings;
-  m.events.record(0, m.stream);
-  detail::launchInterpolate(a, b, alpha, m.positions.data(), perFrame, m.stream);
-  m.events.record(1, m.stream);
-  m.refitAndWoop(timings);
-  return timings;
+  m.setFrame(time);
+  auto enqueue = [&] {
+    m.enqueueInterpolation();
+    m.enqueueRefitAndWoop();
+  };
+  if (m.config.useGraphs) {
+    if (!m.updateGraph) m.updateGraph = m.capture(enqueue);
+    CUDA_CHECK(cudaGraphLaunch(m.updateGraph, m.stream));
+  } else {
+    enqueue();
+  }
+  return m.finishUpdate();
 }
 
 UpdateTimings GpuRuntime::update(std::span<const float> positions) {
@@ -193,29 +243,45 @@ UpdateTimings GpuRuntime::update(std::span<const float> positions) {
   if (positions.size() != std::size_t(m.vertices) * 3)
     throw anim::Error("GPU runtime: got " + std::to_string(positions.size()) + " coordinates, expected " +
                       std::to_string(std::size_t(m.vertices) * 3));
-  UpdateTimings timings;
   m.events.record(0, m.stream);
   m.positions.upload(positions, m.stream);
   m.events.record(1, m.stream);
-  m.refitAndWoop(timings);
-  return timings;
+  m.enqueueRefitAndWoop();
+  return m.finishUpdate();
 }
+
+namespace {
+
+bool sameOptions(const RebuildOptions& a, const RebuildOptions& b) {
+  return a.method == b.method && a.collapse == b.collapse && a.maxLeafSize == b.maxLeafSize &&
+         a.cost.ct == b.cost.ct && a.cost.ci == b.cost.ci && a.woop == b.woop;
+}
+
+}  // namespace
 
 RebuildTimings GpuRuntime::rebuildAt(double time, const RebuildOptions& options) {
   Impl& m = *impl_;
-  uint32_t k;
-  float alpha;
-  locate(m.times, time, k, alpha);
-  const std::size_t perFrame = std::size_t(m.vertices) * 3;
-  const float* a = m.keyframes.data() + k * perFrame;
-  const float* b = alpha == 0.0f ? a : m.keyframes.data() + (k + 1) * perFrame;
-  m.events.record(0, m.stream);
-  detail::launchInterpolate(a, b, alpha, m.positions.data(), perFrame, m.stream);
-  m.events.record(1, m.stream);
+  if (options.maxLeafSize == 0) throw anim::Error("GPU rebuild: maxLeafSize must be at least 1");
   if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles);
+  m.setFrame(time);
   m.woopValid = false;
   m.tracingRebuilt = true;
-  RebuildTimings timings = m.rebuilder->build(m.indices.data(), m.positions.data(), options, m.woop.data(), m.stream);
+  auto enqueue = [&] {
+    m.enqueueInterpolation();
+    m.rebuilder->enqueue(m.indices.data(), m.positions.data(), options, m.woop.data(), m.stream);
+  };
+  if (m.config.useGraphs) {
+    auto it = std::find_if(m.rebuildGraphs.begin(), m.rebuildGraphs.end(),
+                           [&](const Impl::RebuildGraph& g) { return sameOptions(g.options, options); });
+    if (it == m.rebuildGraphs.end()) {
+      m.rebuildGraphs.push_back({options, m.capture(enqueue)});
+      it = m.rebuildGraphs.end() - 1;
+    }
+    CUDA_CHECK(cudaGraphLaunch(it->exec, m.stream));
+  } else {
+    enqueue();
+  }
+  RebuildTimings timings = m.rebuilder->collect(options);
   timings.interpolateMs = m.events.ms(0, 1);
   m.woopValid = options.woop;
   return timings;

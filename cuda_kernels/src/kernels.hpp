@@ -10,9 +10,10 @@
 
 namespace tsah::cuda::detail {
 
-// out[i] = (1 - alpha) * a[i] + alpha * b[i], rounded exactly as anim::Animation::positionsAt does
-// (alpha == 0 copies a).
-void launchInterpolate(const float* a, const float* b, float alpha, float* out, std::size_t count, cudaStream_t stream);
+// out[i] = (1 - alpha) * a[i] + alpha * b[i] for a = keyframes + params->a, b = keyframes + params->b,
+// rounded exactly as anim::Animation::positionsAt does (alpha == 0 copies a).
+void launchInterpolateFrame(const float* keyframes, const FrameParams* params, float* out, std::size_t count,
+                            cudaStream_t stream);
 
 // Bottom-up refit of an uploaded tree: one thread per leaf record, atomic counters per interior node
 // (must be zero on entry); writes every child box, and root->box.

@@ -767,13 +767,12 @@ GpuRebuilder::GpuRebuilder(uint32_t triangles) : n_(triangles), events_(8) {
 
 GpuRebuilder::~GpuRebuilder() = default;
 
-RebuildTimings GpuRebuilder::build(const uint32_t* indices, const float* positions, const RebuildOptions& options,
-                                   WoopTriangle* woop, cudaStream_t stream) {
+void GpuRebuilder::enqueue(const uint32_t* indices, const float* positions, const RebuildOptions& options,
+                           WoopTriangle* woop, cudaStream_t stream) {
   if (options.maxLeafSize == 0) throw anim::Error("GPU rebuild: maxLeafSize must be at least 1");
   const bool hlbvh = options.method == RebuildMethod::HlbvhSah;
   const uint32_t n = n_;
   const unsigned block = 256;
-  RebuildTimings timings;
   built_ = false;
 
   events_.record(0, stream);
@@ -811,10 +810,8 @@ RebuildTimings GpuRebuilder::build(const uint32_t* indices, const float* positio
                      hlbvh ? nodeRange_.data() : nullptr, clusterOf_.data(), clusterRoot_.data()};
     karrasKernel<<<gridFor(n - 1, block), block, 0, stream>>>(keys, n, out);
     CUDA_CHECK_LAUNCH("karrasKernel");
-  } else {
-    const uint32_t none = kNoParent;
-    CUDA_CHECK(cudaMemcpyAsync(hlbvh ? leafParentRadix_.data() : leafParent_.data(), &none, sizeof none,
-                               cudaMemcpyHostToDevice, stream));
+  } else {  // one triangle: no interior node; 0xff bytes are kNoParent
+    CUDA_CHECK(cudaMemsetAsync(hlbvh ? leafParentRadix_.data() : leafParent_.data(), 0xff, sizeof(uint32_t), stream));
   }
   events_.record(3, stream);
 
@@ -873,6 +870,11 @@ RebuildTimings GpuRebuilder::build(const uint32_t* indices, const float* positio
 
   if (options.woop) launchWoop(slotTri_.data(), n, indices, positions, woop, stream);
   events_.record(6, stream);
+}
+
+RebuildTimings GpuRebuilder::collect(const RebuildOptions& options) {
+  const bool hlbvh = options.method == RebuildMethod::HlbvhSah;
+  RebuildTimings timings;
   events_.wait(6);
 
   timings.mortonMs = events_.ms(0, 1);
@@ -896,6 +898,12 @@ RebuildTimings GpuRebuilder::build(const uint32_t* indices, const float* positio
                       " levels deep, more than the traversal stack of " + std::to_string(kTraversalStackSize));
   built_ = true;
   return timings;
+}
+
+RebuildTimings GpuRebuilder::build(const uint32_t* indices, const float* positions, const RebuildOptions& options,
+                                   WoopTriangle* woop, cudaStream_t stream) {
+  enqueue(indices, positions, options, woop, stream);
+  return collect(options);
 }
 
 Bvh GpuRebuilder::download(cudaStream_t stream) const {

@@ -35,6 +35,12 @@ class GpuRebuilder {
   // Writes woop (one per slot) when options.woop. Synchronizes at the end (timings, tree size).
   RebuildTimings build(const uint32_t* indices, const float* positions, const RebuildOptions& options,
                        WoopTriangle* woop, cudaStream_t stream);
+  // build() in two halves: enqueue() only puts work on the stream (no host synchronization, no
+  // pageable copies, so it can be captured into a CUDA graph); collect() waits for it and reads the
+  // timings and the size of the tree.
+  void enqueue(const uint32_t* indices, const float* positions, const RebuildOptions& options, WoopTriangle* woop,
+               cudaStream_t stream);
+  RebuildTimings collect(const RebuildOptions& options);
 
   const GpuBvhNode* nodes() const { return nodes_.data(); }
   const uint32_t* triIndex() const { return slotTri_.data(); }

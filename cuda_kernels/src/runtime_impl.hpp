@@ -23,9 +23,19 @@ struct GpuRuntime::Impl {
   detail::TraceLaunch traceLaunch() const { return {config.persistentTraversal, 128, 0}; }
   // Throws unless there is a traceable frame (an update or a rebuild with Woop triangles).
   void requireTraceable() const;
-  void refitAndWoop(UpdateTimings& timings);  // events 1..3 (event 0 marks the start)
+  // Refit and Woop on the stream (events 2 and 3 after them); finishUpdate waits and reads the
+  // timings (events 0..3).
+  void enqueueRefitAndWoop();
+  UpdateTimings finishUpdate();
   // The triangles of every vertex in increasing order (once, at the first render).
   void buildVertexTriangles();
+  // Puts the interpolation of time t on the stream (events 0 and 1 around it): keyframe choice in
+  // hostParams, copied to frameParams by the stream, so the same work can be captured once.
+  void setFrame(double time);
+  void enqueueInterpolation();
+  // Captures what `enqueue` puts on the stream into an executable graph.
+  template <typename Enqueue>
+  cudaGraphExec_t capture(Enqueue&& enqueue);
 
   Config config;
   DeviceInfo device;
@@ -38,6 +48,14 @@ struct GpuRuntime::Impl {
   DeviceBuffer<float> keyframes;         // every keyframe, vertices * 3 floats each
   DeviceBuffer<uint32_t> indices;        // 3 per triangle
   DeviceBuffer<float> positions;         // the current frame
+  detail::FrameParams* hostParams = nullptr;  // pinned
+  DeviceBuffer<detail::FrameParams> frameParams;
+  cudaGraphExec_t updateGraph = nullptr;
+  struct RebuildGraph {
+    RebuildOptions options;
+    cudaGraphExec_t exec;
+  };
+  std::vector<RebuildGraph> rebuildGraphs;
 
   // The uploaded tree (canonical order, one block of nodes).
   FlatBvh topology;                      // host copy of its structure

@@ -9,14 +9,21 @@ namespace tsah::cuda::detail {
 
 namespace {
 
-__global__ void interpolateKernel(const float* __restrict__ a, const float* __restrict__ b, float alpha,
-                                  float* __restrict__ out, std::size_t count) {
+__global__ void interpolateFrameKernel(const float* __restrict__ keyframes, const FrameParams* __restrict__ params,
+                                       float* __restrict__ out, std::size_t count) {
+  const FrameParams p = *params;
+  const float* a = keyframes + p.a;
+  const float* b = keyframes + p.b;
   // Same operations and rounding as anim::Animation::positionsAt: beta * a + alpha * b. Scalar
   // accesses: a keyframe starts wherever vertices * 3 floats put it, not on a 16-byte boundary.
-  const float beta = 1.0f - alpha;
   const std::size_t stride = std::size_t(gridDim.x) * blockDim.x;
+  if (p.alpha == 0.0f) {  // positionsAt copies the keyframe (1 * x + 0 * y would turn -0 into +0)
+    for (std::size_t i = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x; i < count; i += stride) out[i] = __ldg(a + i);
+    return;
+  }
+  const float beta = 1.0f - p.alpha;
   for (std::size_t i = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x; i < count; i += stride)
-    out[i] = __fadd_rn(__fmul_rn(beta, __ldg(a + i)), __fmul_rn(alpha, __ldg(b + i)));
+    out[i] = __fadd_rn(__fmul_rn(beta, __ldg(a + i)), __fmul_rn(p.alpha, __ldg(b + i)));
 }
 
 __device__ __forceinline__ Vec3 loadVertex(const float* __restrict__ p, uint32_t v) {
@@ -89,16 +96,12 @@ __global__ void woopKernel(const uint32_t* __restrict__ triIndex, uint32_t slots
 
 }  // namespace
 
-void launchInterpolate(const float* a, const float* b, float alpha, float* out, std::size_t count,
-                       cudaStream_t stream) {
+void launchInterpolateFrame(const float* keyframes, const FrameParams* params, float* out, std::size_t count,
+                            cudaStream_t stream) {
   if (count == 0) return;
-  if (alpha == 0.0f) {  // positionsAt copies the keyframe
-    CUDA_CHECK(cudaMemcpyAsync(out, a, count * sizeof(float), cudaMemcpyDeviceToDevice, stream));
-    return;
-  }
   const uint32_t block = 256;
-  interpolateKernel<<<gridFor(count, block), block, 0, stream>>>(a, b, alpha, out, count);
-  CUDA_CHECK_LAUNCH("interpolateKernel");
+  interpolateFrameKernel<<<gridFor(count, block), block, 0, stream>>>(keyframes, params, out, count);
+  CUDA_CHECK_LAUNCH("interpolateFrameKernel");
 }
 
 void launchRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,

@@ -86,6 +86,10 @@ class GpuRuntime {
     // false: one thread per ray, the same while-while loop. On the H200 one thread per ray was
     // faster (docs/cuda-runtime.md), so it is the default.
     bool persistentTraversal = false;
+    // updateAt and rebuildAt replay a CUDA graph captured at their first call (one per rebuild
+    // configuration) instead of launching each kernel: the device then runs the frame's kernels
+    // back to back instead of waiting for the host between launches of small kernels.
+    bool useGraphs = true;
   };
 
   // tree: the topology to refit (frame 0's block; its boxes are recomputed by updateAt). Throws
