@@ -201,7 +201,7 @@ __global__ void karrasKernel(const uint32_t* __restrict__ keys, uint32_t n, Karr
 // --- HLBVH-SAH clusters ------------------------------------------------------------------------
 
 // Cluster words: clusterCount, queue head, queue tail.
-enum QueueWord { kClusterCount = 0, kQueueHead = 1, kQueueTail = 2, kQueueWords = 4 };
+enum QueueWord { kClusterCount = 0, kQueueHead = 1, kQueueTail = 2, kTasksDone = 3, kQueueWords = 4 };
 
 __global__ void clusterHeadsKernel(const uint32_t* __restrict__ keys, uint32_t n, uint32_t* __restrict__ heads) {
   const uint32_t s = blockIdx.x * blockDim.x + threadIdx.x;
@@ -246,6 +246,7 @@ __global__ void clusterSetupKernel(const uint32_t* __restrict__ keys, uint32_t n
     out.words[kClusterCount] = clusters;
     out.words[kQueueHead] = 0;
     out.words[kQueueTail] = clusters >= 2 ? 1u : 0u;
+    out.words[kTasksDone] = 0;
     if (clusters >= 2) {  // the root task: every cluster, read from orderA
       out.tasks[0] = make_uint4(0u, clusters, kNoParent, 0u);
       out.taskReady[0] = 1u;  // the builder starts after this kernel: no ordering needed
@@ -305,93 +306,81 @@ __device__ __forceinline__ float boxArea(float lx, float ly, float lz, float hx,
   return 2.0f * (dx * dy + dy * dz + dz * dx);
 }
 
-// The SAH tree over the clusters, top-down. Persistent blocks take nodes from a queue in order; a
-// block waits until its node has been pushed by the block that split the parent (which holds an
-// earlier slot and is running, so the wait ends whether or not every block is resident). A node
-// with m clusters is split on the 32^3 grid of the cluster prefixes: bins are the grid cells of the
-// node's cell range on each axis, the best of the bin boundaries by the SAH (triangle counts times
-// areas) wins, and the clusters are partitioned stably. A node is named by its split position
-// (begin + left count - 1), which is unique, so the tree is the same whichever block builds what.
+// The SAH tree over the clusters, top-down, by persistent blocks. A block splits a node and goes
+// on with one child itself (the larger; work first, so the deepest chain of splits runs without
+// hand-offs) and pushes the other onto a queue that idle blocks take from in order. A block waiting
+// for a queue slot is either served by a block that is running (it holds an earlier slot or a
+// local child) or released when every node is done, so the waits always end, resident or not.
+// A node with m clusters is split on the 32^3 grid of the cluster prefixes: the bins are the 32
+// cells of each axis (empty bins only repeat a neighbour's split), the best bin boundary by the
+// SAH (triangle counts times areas) wins, and the clusters are partitioned stably. A node is named
+// by its split position (begin + left count - 1), which is unique, so the tree is the same
+// whichever block builds what.
 __global__ void __launch_bounds__(kTopBlock) clusterTreeKernel(TopParams p) {
   using BlockScan = cub::BlockScan<uint32_t, kTopBlock>;
   __shared__ typename BlockScan::TempStorage scanStorage;
   __shared__ uint32_t binTris[3][kTopBins], binClusters[3][kTopBins];
   __shared__ int binBox[3][kTopBins][6];  // ordered ints: min lo.xyz, min -hi.xyz
-  __shared__ int cellLo[3], cellHi[3];
   __shared__ float bestCost[3];
   __shared__ int bestBin[3];
   __shared__ uint32_t bestLeft[3];
-  __shared__ uint32_t taskIndex;
-  __shared__ uint4 task;
+  __shared__ uint4 task;          // (begin, end, parent slot, which order buffer holds the range)
+  __shared__ bool haveTask;
+  __shared__ uint32_t single[2];  // the cluster of a side that holds only one
 
   const uint32_t clusters = p.words[kClusterCount];
   if (clusters < 2) return;
   const uint32_t taskCount = clusters - 1;  // interior nodes of a binary tree over the clusters
   const int tid = int(threadIdx.x), lane = tid & 31, warp = tid >> 5;
+  bool keepLocal = false;  // thread 0's: `task` already holds the next node (a child of the last)
 
   for (;;) {
-    if (tid == 0) {
+    if (tid == 0 && !keepLocal) {
+      // Take the next queue slot; wait for its node, or stop once every node is done.
+      haveTask = false;
       const uint32_t idx = atomicAdd(p.words + kQueueHead, 1u);
       if (idx < taskCount) {
-        // Slot idx is filled by a block holding an earlier slot, and only running blocks hold
-        // slots, so this wait always ends. The bound turns a bug into a launch error, not a hang.
         ::cuda::atomic_ref<uint32_t, ::cuda::thread_scope_device> ready(p.taskReady[idx]);
-        for (uint32_t spins = 0; ready.load(::cuda::memory_order_acquire) == 0; ++spins) {
-          if (spins == (1u << 30)) __trap();
+        ::cuda::atomic_ref<uint32_t, ::cuda::thread_scope_device> done(p.words[kTasksDone]);
+        for (uint32_t spins = 0;; ++spins) {
+          if (ready.load(::cuda::memory_order_acquire) != 0) {
+            task = __ldcg(p.tasks + idx);
+            haveTask = true;
+            break;
+          }
+          if (done.load(::cuda::memory_order_acquire) == taskCount) break;
+          if (spins == (1u << 30)) __trap();  // a bug, not a wait: fail the launch instead of hanging
           __nanosleep(64);
         }
-        task = __ldcg(p.tasks + idx);
       }
-      taskIndex = idx;
     }
     for (int k = tid; k < 3 * kTopBins; k += kTopBlock) {
       (&binTris[0][0])[k] = 0;
       (&binClusters[0][0])[k] = 0;
       for (int c = 0; c < 6; ++c) (&binBox[0][0][0])[k * 6 + c] = kOrderedHuge;
     }
-    if (tid < 3) {
-      cellLo[tid] = kTopBins - 1;
-      cellHi[tid] = 0;
-    }
     __syncthreads();
-    if (taskIndex >= taskCount) return;
+    if (!haveTask) return;
     const uint32_t begin = task.x, end = task.y, parentSlot = task.z, parity = task.w;
     const uint32_t* src = parity ? p.orderB : p.orderA;
     uint32_t* dst = parity ? p.orderA : p.orderB;
 
-    // Cell range of the node's clusters on each axis.
-    {
-      int lo[3] = {kTopBins - 1, kTopBins - 1, kTopBins - 1}, hi[3] = {0, 0, 0};
-      for (uint32_t q = begin + tid; q < end; q += kTopBlock) {
-        const uint32_t cell = __ldg(p.clusterCell + __ldcg(src + q));
-        for (int a = 0; a < 3; ++a) {
-          lo[a] = min(lo[a], int(cellAxis(cell, a)));
-          hi[a] = max(hi[a], int(cellAxis(cell, a)));
-        }
-      }
-      for (int a = 0; a < 3; ++a) {
-        for (int o = 16; o > 0; o >>= 1) {
-          lo[a] = min(lo[a], __shfl_xor_sync(0xffffffffu, lo[a], o));
-          hi[a] = max(hi[a], __shfl_xor_sync(0xffffffffu, hi[a], o));
-        }
-        if (lane == 0) {
-          atomicMin(cellLo + a, lo[a]);
-          atomicMax(cellHi + a, hi[a]);
-        }
-      }
-    }
-    __syncthreads();
-
-    // Bins: triangle and cluster counts, boxes.
+    // Bins: triangle and cluster counts, boxes. The first cluster of each thread stays in registers
+    // for the partition (nodes of up to kTopBlock clusters are read once).
+    uint32_t firstCluster = 0, firstCell = 0;
     for (uint32_t q = begin + tid; q < end; q += kTopBlock) {
       const uint32_t c = __ldcg(src + q);
       const uint32_t cell = __ldg(p.clusterCell + c);
+      if (q < begin + kTopBlock) {
+        firstCluster = c;
+        firstCell = cell;
+      }
       const uint32_t tris = __ldg(p.clusterEnd + c) - __ldg(p.clusterBegin + c);
       const Aabb b = loadBox(p.clusterBox, c);
       const int v[6] = {orderedInt(b.lo.x), orderedInt(b.lo.y), orderedInt(b.lo.z),
                         orderedInt(-b.hi.x), orderedInt(-b.hi.y), orderedInt(-b.hi.z)};
       for (int a = 0; a < 3; ++a) {
-        const int bin = int(cellAxis(cell, a)) - cellLo[a];
+        const uint32_t bin = cellAxis(cell, a);
         atomicAdd(&binTris[a][bin], tris);
         atomicAdd(&binClusters[a][bin], 1u);
         for (int k = 0; k < 6; ++k) atomicMin(&binBox[a][bin][k], v[k]);
@@ -402,11 +391,9 @@ __global__ void __launch_bounds__(kTopBlock) clusterTreeKernel(TopParams p) {
     // One warp per axis, one lane per bin: prefix (left) and suffix (right) sums and boxes.
     if (warp < 3) {
       const int a = warp;
-      const int bins = cellHi[a] - cellLo[a] + 1;
-      const bool in = lane < bins;
       float L[6], R[6];
-      uint32_t lt = in ? binTris[a][lane] : 0u, lc = in ? binClusters[a][lane] : 0u;
-      for (int k = 0; k < 6; ++k) L[k] = in ? orderedFloat(binBox[a][lane][k]) : 3.0e38f;
+      uint32_t lt = binTris[a][lane], lc = binClusters[a][lane];
+      for (int k = 0; k < 6; ++k) L[k] = orderedFloat(binBox[a][lane][k]);
       uint32_t rt = lt;
       for (int k = 0; k < 6; ++k) R[k] = L[k];
       for (int o = 1; o < 32; o <<= 1) {
@@ -432,7 +419,7 @@ __global__ void __launch_bounds__(kTopBlock) clusterTreeKernel(TopParams p) {
       float r[6];
       for (int k = 0; k < 6; ++k) r[k] = __shfl_down_sync(0xffffffffu, R[k], 1);
       float cost = 3.0e38f;
-      if (lane + 1 < bins && lt > 0 && rightTris > 0)
+      if (lane + 1 < kTopBins && lt > 0 && rightTris > 0)
         cost = boxArea(L[0], L[1], L[2], -L[3], -L[4], -L[5]) * float(lt) +
                boxArea(r[0], r[1], r[2], -r[3], -r[4], -r[5]) * float(rightTris);
       // Lowest cost, then lowest bin.
@@ -458,21 +445,30 @@ __global__ void __launch_bounds__(kTopBlock) clusterTreeKernel(TopParams p) {
     int axis = 0;
     for (int a = 1; a < 3; ++a)
       if (bestCost[a] < bestCost[axis]) axis = a;
-    const int splitBin = bestBin[axis] + cellLo[axis];
+    const int splitBin = bestBin[axis];
     const uint32_t leftCount = bestLeft[axis];
+    const uint32_t rightCount = end - begin - leftCount;
 
     // Stable partition of the node's clusters into the other order buffer.
     uint32_t leftSoFar = 0;
     for (uint32_t chunk = begin; chunk < end; chunk += kTopBlock) {
       const uint32_t q = chunk + uint32_t(tid);
       const bool valid = q < end;
-      const uint32_t c = valid ? __ldcg(src + q) : 0u;
-      const uint32_t isLeft = valid && int(cellAxis(__ldg(p.clusterCell + c), axis)) <= splitBin ? 1u : 0u;
+      uint32_t c = 0, cell = 0;
+      if (valid) {
+        const bool cached = chunk == begin;
+        c = cached ? firstCluster : __ldcg(src + q);
+        cell = cached ? firstCell : __ldg(p.clusterCell + c);
+      }
+      const uint32_t isLeft = valid && int(cellAxis(cell, axis)) <= splitBin ? 1u : 0u;
       uint32_t before, total;
       BlockScan(scanStorage).ExclusiveSum(isLeft, before, total);
       if (valid) {
         const uint32_t leftIndex = leftSoFar + before;
-        dst[isLeft ? begin + leftIndex : begin + leftCount + (q - begin - leftIndex)] = c;
+        const uint32_t at = isLeft ? begin + leftIndex : begin + leftCount + (q - begin - leftIndex);
+        dst[at] = c;
+        if (isLeft && leftCount == 1) single[0] = c;
+        if (!isLeft && rightCount == 1) single[1] = c;
       }
       leftSoFar += total;
       __syncthreads();  // scanStorage is reused
@@ -485,17 +481,21 @@ __global__ void __launch_bounds__(kTopBlock) clusterTreeKernel(TopParams p) {
       p.nodeParent[node] = parentSlot;
       if (parentSlot != kNoParent)
         reinterpret_cast<int32_t*>(p.children + (parentSlot >> 1))[parentSlot & 1] = int32_t(node);
-      const uint32_t rightCount = end - begin - leftCount;
       const uint32_t ranges[2][2] = {{begin, begin + leftCount}, {begin + leftCount, end}};
       const uint32_t counts[2] = {leftCount, rightCount};
+      // The larger child stays with this block, the other goes to the queue.
+      const int local = counts[1] > counts[0] ? 1 : 0;
+      keepLocal = false;
       for (int side = 0; side < 2; ++side) {
         const uint32_t slot = (node << 1) | uint32_t(side);
         if (counts[side] == 1) {
-          const uint32_t q = ranges[side][0];
-          const uint32_t c = __ldcg(dst + q);
-          p.finalOrder[q] = c;
+          const uint32_t c = single[side];
+          p.finalOrder[ranges[side][0]] = c;
           p.clusterParent[c] = slot;
           reinterpret_cast<int32_t*>(p.children + node)[side] = __ldg(p.clusterRoot + c);
+        } else if (side == local) {
+          task = make_uint4(ranges[side][0], ranges[side][1], slot, 1u - parity);
+          keepLocal = true;
         } else {
           const uint32_t at = atomicAdd(p.words + kQueueTail, 1u);
           p.tasks[at] = make_uint4(ranges[side][0], ranges[side][1], slot, 1u - parity);
@@ -503,8 +503,11 @@ __global__ void __launch_bounds__(kTopBlock) clusterTreeKernel(TopParams p) {
           ready.store(1u, ::cuda::memory_order_release);
         }
       }
+      ::cuda::atomic_ref<uint32_t, ::cuda::thread_scope_device> done(p.words[kTasksDone]);
+      done.fetch_add(1u, ::cuda::memory_order_release);
+      haveTask = keepLocal;
     }
-    __syncthreads();  // `task` and the bins are overwritten by the next round
+    __syncthreads();  // `task`, the bins and haveTask are overwritten by the next round
   }
 }
 
