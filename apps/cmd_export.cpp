@@ -11,7 +11,6 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <nlohmann/json.hpp>
 #include <string>
 
 #include "anim/binary_io.hpp"
@@ -27,7 +26,7 @@ std::span<const uint8_t> bytesOf(std::span<const T> values) {
   return {reinterpret_cast<const uint8_t*>(values.data()), values.size_bytes()};
 }
 
-std::string hexFloat(float v) {
+std::string cFloatLiteral(float v) {
   char buf[48];
   std::snprintf(buf, sizeof buf, "%.9gf", double(v));
   return buf;
@@ -93,8 +92,8 @@ static_assert(sizeof(TsahWoopTriangle) == 48, "TsahWoopTriangle must be 48 bytes
   std::snprintf(hash, sizeof hash, "%08xu", info.topologyHash);
   h += std::string(hash) + "\n";
   h += "/* Scene bounds of this frame. */\n";
-  h += "#define TSAH_BOUNDS_LO {" + hexFloat(b.lo.x) + ", " + hexFloat(b.lo.y) + ", " + hexFloat(b.lo.z) + "}\n";
-  h += "#define TSAH_BOUNDS_HI {" + hexFloat(b.hi.x) + ", " + hexFloat(b.hi.y) + ", " + hexFloat(b.hi.z) + "}\n";
+  h += "#define TSAH_BOUNDS_LO {" + cFloatLiteral(b.lo.x) + ", " + cFloatLiteral(b.lo.y) + ", " + cFloatLiteral(b.lo.z) + "}\n";
+  h += "#define TSAH_BOUNDS_HI {" + cFloatLiteral(b.hi.x) + ", " + cFloatLiteral(b.hi.y) + ", " + cFloatLiteral(b.hi.z) + "}\n";
   h += "\n#endif /* TSAH_SCENE_H */\n";
   return h;
 }
