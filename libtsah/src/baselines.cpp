@@ -2,7 +2,7 @@
 
 #include <algorithm>
 #include <atomic>
-#include <chrono>
+#include <ctime>
 #include <exception>
 #include <limits>
 #include <mutex>
@@ -18,10 +18,11 @@ namespace tsah {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-double secondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
+// CPU time of the calling thread: what a task costs on one core, whatever else shares the machine.
+double threadCpuSeconds() {
+  timespec t{};
+  if (clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t) != 0) return 0.0;
+  return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
 }
 
 unsigned workerCount(unsigned requested, std::size_t tasks) {
@@ -311,7 +312,7 @@ std::vector<MethodResult> compareMethods(std::span<const MethodSpec> methods, co
     }
   }
 
-  // Build time of a method: the sum of its tasks' times, i.e. what one thread would take.
+  // Build time of a method: the sum of its tasks' CPU times, i.e. what one core would take.
   std::vector<double> taskSeconds(tasks.size(), 0.0);
   const unsigned workers = workerCount(config.threads, tasks.size());
   std::vector<std::vector<Aabb>> frameBoxes(workers, std::vector<Aabb>(evaluation.primCount));
@@ -319,7 +320,7 @@ std::vector<MethodResult> compareMethods(std::span<const MethodSpec> methods, co
   parallelFor(tasks.size(), workers, [&](std::size_t t, unsigned w) {
     const Task task = tasks[t];
     const MethodSpec& method = methods[task.method];
-    const auto start = Clock::now();
+    const double start = threadCpuSeconds();
     switch (method.method) {
       case Method::Sah0:
       case Method::TSah:
@@ -337,7 +338,7 @@ std::vector<MethodResult> compareMethods(std::span<const MethodSpec> methods, co
         break;
       }
     }
-    taskSeconds[t] = secondsSince(start);
+    taskSeconds[t] = threadCpuSeconds() - start;
     progress("built " + std::to_string(++done) + "/" + std::to_string(tasks.size()) + " trees (" +
              results[task.method].name + ")");
   });

@@ -83,8 +83,9 @@ std::vector<double> evaluateFrames(const Bvh& bvh, const FrameSource& frames, co
 
 struct MethodResult {
   std::string name;
-  // Time to build on one thread (rebuild: all of its trees; SAH*: all candidates): the methods run
-  // side by side on the worker threads, each piece timed on its own thread.
+  // Time to build on one core (rebuild: all of its trees; SAH*: all candidates): the methods run
+  // side by side on the worker threads, each piece measured as the CPU time of its thread, so the
+  // figure does not depend on the thread count or on other load on the machine.
   double buildSeconds = 0.0;
   double average = 0.0, maximum = 0.0;
   std::vector<double> perFrame;  // cost at every evaluation frame
