@@ -4,34 +4,13 @@
 #include <new>
 #include <string>
 
+#include "anim/animation.hpp"
 #include "anim/error.hpp"
 #include "kernels.hpp"
 #include "runtime_impl.hpp"
 #include "tsah/traversal.hpp"
 
 namespace tsah::cuda {
-
-namespace {
-
-// The keyframe at or before t and the blend weight towards the next one: anim::Animation's rule
-// (clamped at both ends), so positions match Animation::positionsAt exactly.
-void locate(const std::vector<double>& times, double t, uint32_t& k, float& alpha) {
-  if (times.size() == 1 || t <= times.front()) {
-    k = 0;
-    alpha = 0.0f;
-    return;
-  }
-  if (t >= times.back()) {
-    k = static_cast<uint32_t>(times.size() - 1);
-    alpha = 0.0f;
-    return;
-  }
-  const auto it = std::upper_bound(times.begin(), times.end(), t);
-  k = static_cast<uint32_t>(it - times.begin()) - 1;
-  alpha = static_cast<float>((t - times[k]) / (times[k + 1] - times[k]));
-}
-
-}  // namespace
 
 const char* rebuildMethodName(RebuildMethod method) {
   return method == RebuildMethod::Lbvh ? "lbvh" : "hlbvh-sah";
@@ -150,9 +129,7 @@ cudaGraphExec_t GpuRuntime::Impl::capture(Enqueue&& enqueue) {
 }
 
 void GpuRuntime::Impl::setFrame(double time) {
-  uint32_t k;
-  float alpha;
-  locate(times, time, k, alpha);
+  const auto [k, alpha] = anim::keyframeBlend(times, time);
   const uint64_t perFrame = uint64_t(vertices) * 3;
   hostParams->a = k * perFrame;
   hostParams->b = (alpha == 0.0f ? k : k + 1) * perFrame;

@@ -63,26 +63,16 @@ std::span<const float> Animation::keyframe(uint32_t k) const {
   return std::span<const float>(positions_).subspan(std::size_t(k) * n, n);
 }
 
-void Animation::locate(double t, uint32_t& k, float& alpha) const {
-  if (times_.size() == 1 || t <= times_.front()) {
-    k = 0;
-    alpha = 0.0f;
-    return;
-  }
-  if (t >= times_.back()) {
-    k = keyframeCount() - 1;
-    alpha = 0.0f;
-    return;
-  }
-  const auto it = std::upper_bound(times_.begin(), times_.end(), t);  // first time > t
-  k = static_cast<uint32_t>(it - times_.begin()) - 1;
-  alpha = static_cast<float>((t - times_[k]) / (times_[k + 1] - times_[k]));
+KeyframeBlend keyframeBlend(std::span<const double> times, double t) {
+  if (times.size() <= 1 || t <= times.front()) return {0, 0.0f};
+  if (t >= times.back()) return {static_cast<uint32_t>(times.size() - 1), 0.0f};
+  const auto it = std::upper_bound(times.begin(), times.end(), t);  // first time > t
+  const auto k = static_cast<uint32_t>(it - times.begin()) - 1;
+  return {k, static_cast<float>((t - times[k]) / (times[k + 1] - times[k]))};
 }
 
 void Animation::positionsAt(double t, std::span<float> out) const {
-  uint32_t k;
-  float alpha;
-  locate(t, k, alpha);
+  const auto [k, alpha] = keyframeBlend(times_, t);
   const auto a = keyframe(k);
   if (alpha == 0.0f) {
     std::copy(a.begin(), a.end(), out.begin());

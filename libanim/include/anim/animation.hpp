@@ -32,6 +32,15 @@ struct Bounds {
   }
 };
 
+// Where time t falls among keyframe times: positions are (1 - alpha) * keyframe k + alpha * keyframe
+// k+1 (alpha == 0 when t is at or outside the ends, which are clamped). The one rule every runtime
+// (CPU and GPU) interpolates with, so their positions agree bit for bit.
+struct KeyframeBlend {
+  uint32_t k = 0;
+  float alpha = 0.0f;
+};
+KeyframeBlend keyframeBlend(std::span<const double> times, double t);
+
 // A keyed camera (e.g. a BART scene's camera path): the default view of `tsah trace` for this input.
 struct CameraKey {
   double time = 0.0;
@@ -92,9 +101,6 @@ class Animation {
   std::size_t memoryBytes() const;
 
  private:
-  // Index of the keyframe at or before t and the blend weight towards the next one.
-  void locate(double t, uint32_t& k, float& alpha) const;
-
   std::string name_;
   std::vector<uint32_t> indices_;
   uint32_t vertexCount_ = 0;
