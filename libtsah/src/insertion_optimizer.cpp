@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <bit>
-#include <cassert>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -10,7 +9,10 @@
 #include <string>
 #include <utility>
 
-#if defined(__SSE2__)
+// SSE2 (every x86-64) computes the union areas 4 lanes at a time; TSAH_SCALAR_SEARCH or another
+// architecture takes the plain loop.
+#if defined(__SSE2__) && !defined(TSAH_SCALAR_SEARCH)
+#define TSAH_SSE_SEARCH 1
 #include <immintrin.h>
 #endif
 
@@ -25,6 +27,7 @@ inline bool sameBox(const Aabb& a, const Aabb& b) {
          a.hi.y == b.hi.y && a.hi.z == b.hi.z;
 }
 
+#if !defined(TSAH_SSE_SEARCH)
 // Surface area of the union of two boxes, without building the union box first.
 inline float unionArea(const Aabb& a, const Aabb& b) {
   const float dx = std::max(a.hi.x, b.hi.x) - std::min(a.lo.x, b.lo.x);
@@ -32,6 +35,7 @@ inline float unionArea(const Aabb& a, const Aabb& b) {
   const float dz = std::max(a.hi.z, b.hi.z) - std::min(a.lo.z, b.lo.z);
   return 2.0f * (dx * dy + dy * dz + dz * dx);
 }
+#endif
 
 struct QueueEntry {
   float induced;
@@ -294,7 +298,7 @@ struct InsertionSession::Impl {
   // Weighted multi-frame area of the union of node x's boxes and the given boxes (from `records`).
   float unionCost(uint32_t x, const Aabb* c) const {
     const Aabb* b = box(x);
-#if defined(__SSE2__)
+#if defined(TSAH_SSE_SEARCH)
     // One box per iteration: [lo.x lo.y lo.z hi.x] and [hi.x hi.y hi.z next] as two 4-lane loads
     // (the record array ends in a padding slot, so the last load stays inside it); lane 3 carries
     // no area and is dropped at the end.
