@@ -11,6 +11,7 @@ packages=(
   libtbb-dev libstb-dev libassimp-dev zlib1g-dev assimp-testmodels
   libgtest-dev googletest
   python3
+  libembree-dev gnuplot-nox   # tsah bench: the CPU peer (optional at build time) and its plots
 )
 
 missing=()
