@@ -8,38 +8,17 @@
 
 #include "tsah/cost.hpp"
 #include "tsah/sah_builder.hpp"
+#include "test_support.hpp"
 
 namespace {
 
 using tsah::Aabb;
 using tsah::Bvh;
 
-// Random moving triangles: frameCount blocks of vertex positions, 3 vertices per triangle.
-struct Scene {
-  std::vector<uint32_t> indices;
-  std::vector<float> positions;
-  uint32_t frames = 0;
-};
+using Scene = tsah::test::MovingTriangles;
 
 Scene randomScene(uint32_t triangles, uint32_t frames, uint32_t seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> pos(-20.0f, 20.0f), small(-1.0f, 1.0f), vel(-3.0f, 3.0f);
-  Scene s;
-  s.frames = frames;
-  const uint32_t vertices = triangles * 3;
-  for (uint32_t i = 0; i < vertices; ++i) s.indices.push_back(i);
-  s.positions.resize(std::size_t(frames) * vertices * 3);
-  for (uint32_t t = 0; t < triangles; ++t) {
-    const float c[3] = {pos(rng), pos(rng), pos(rng)};
-    const float v[3] = {vel(rng), vel(rng), vel(rng)};
-    for (uint32_t corner = 0; corner < 3; ++corner) {
-      const float o[3] = {small(rng), small(rng), small(rng)};
-      for (uint32_t f = 0; f < frames; ++f)
-        for (int a = 0; a < 3; ++a)
-          s.positions[(std::size_t(f) * vertices + t * 3 + corner) * 3 + a] = c[a] + o[a] + v[a] * float(f);
-    }
-  }
-  return s;
+  return tsah::test::randomMovingTriangles(triangles, frames, seed, 3.0f);
 }
 
 // Eq. 1 by recursion from the root (independent of the node array order).

@@ -11,6 +11,7 @@
 #include "tsah/insertion_optimizer.hpp"
 #include "tsah/leaf_collapser.hpp"
 #include "tsah/sah_builder.hpp"
+#include "test_support.hpp"
 
 namespace {
 
@@ -18,23 +19,7 @@ using tsah::Bvh;
 using tsah::LeafCollapser;
 
 tsah::PrimitiveBoxes randomMovingBoxes(uint32_t triangles, uint32_t frames, uint32_t seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> pos(-20.0f, 20.0f), small(-1.0f, 1.0f), vel(-2.0f, 2.0f);
-  std::vector<uint32_t> indices;
-  std::vector<float> positions(std::size_t(frames) * triangles * 9);
-  for (uint32_t i = 0; i < triangles * 3; ++i) indices.push_back(i);
-  for (uint32_t t = 0; t < triangles; ++t) {
-    const float c[3] = {pos(rng), pos(rng), pos(rng)};
-    const float v[3] = {vel(rng), vel(rng), vel(rng)};
-    for (uint32_t corner = 0; corner < 3; ++corner) {
-      const float o[3] = {small(rng), small(rng), small(rng)};
-      for (uint32_t f = 0; f < frames; ++f)
-        for (int a = 0; a < 3; ++a)
-          positions[(std::size_t(f) * triangles * 3 + t * 3 + corner) * 3 + a] =
-              c[a] + o[a] + v[a] * float(f);
-    }
-  }
-  return tsah::triangleBoxes(indices, positions, frames);
+  return tsah::test::randomMovingTriangles(triangles, frames, seed, 2.0f).boxes();
 }
 
 Bvh optimizedTree(const tsah::PrimitiveBoxes& prims, int k) {

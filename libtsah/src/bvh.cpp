@@ -53,11 +53,9 @@ uint32_t Bvh::depth() const {
   return deepest;
 }
 
-namespace {
-
-// Nodes in an order where every child comes before its parent.
-std::vector<uint32_t> postOrder(const Bvh& bvh) {
+std::vector<uint32_t> childrenFirstOrder(const Bvh& bvh) {
   std::vector<uint32_t> order;
+  if (bvh.nodes.empty()) return order;
   order.reserve(bvh.nodes.size());
   std::vector<uint32_t> stack{bvh.root};
   while (!stack.empty()) {
@@ -73,13 +71,11 @@ std::vector<uint32_t> postOrder(const Bvh& bvh) {
   return order;
 }
 
-}  // namespace
-
 void refit(Bvh& bvh, const PrimitiveBoxes& prims) {
   if (bvh.nodes.empty()) return;
   bvh.frameCount = prims.frameCount;
   bvh.boxes.assign(bvh.nodes.size() * std::size_t(prims.frameCount), Aabb{});
-  for (uint32_t n : postOrder(bvh)) {
+  for (uint32_t n : childrenFirstOrder(bvh)) {
     const BvhNode& node = bvh.nodes[n];
     for (uint32_t f = 0; f < prims.frameCount; ++f) {
       Aabb b;

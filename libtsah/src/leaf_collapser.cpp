@@ -6,29 +6,6 @@
 
 namespace tsah {
 
-namespace {
-
-// Nodes reachable from the root, every child before its parent.
-std::vector<uint32_t> childrenFirst(const Bvh& bvh) {
-  std::vector<uint32_t> order;
-  order.reserve(bvh.nodes.size());
-  std::vector<uint32_t> stack{bvh.root};
-  while (!stack.empty()) {
-    const uint32_t n = stack.back();
-    stack.pop_back();
-    order.push_back(n);
-    const BvhNode& node = bvh.nodes[n];
-    if (!node.isLeaf()) {
-      stack.push_back(node.left);
-      stack.push_back(node.right);
-    }
-  }
-  std::reverse(order.begin(), order.end());
-  return order;
-}
-
-}  // namespace
-
 LeafCollapser::LeafCollapser(Config config) : config_(config) {
   if (config_.maxLeafSize == 0) throw std::invalid_argument("LeafCollapser: maxLeafSize must be >= 1");
   if (config_.k < 0) throw std::invalid_argument("LeafCollapser: the exponent k must be >= 0");
@@ -96,7 +73,7 @@ Bvh LeafCollapser::collapseWithWeights(const Bvh& bvh, std::span<const double> w
   std::vector<uint32_t> count(bvh.nodes.size(), 0);
   std::vector<double> cost(bvh.nodes.size(), 0.0);  // cost of the subtree as it will be kept
   std::vector<uint8_t> asLeaf(bvh.nodes.size(), 0);
-  for (uint32_t n : childrenFirst(bvh)) {
+  for (uint32_t n : childrenFirstOrder(bvh)) {
     const BvhNode& node = bvh.nodes[n];
     double area = 0.0;
     for (uint32_t f = 0; f < frames; ++f) area += factor[f] * bvh.box(n, f).area();

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
+#include <random>
 #include <unistd.h>
 
 namespace tsah::test {
@@ -44,6 +45,27 @@ std::filesystem::path scratchDir() {
   fs::remove_all(dir);
   fs::create_directories(dir);
   return dir;
+}
+
+MovingTriangles randomMovingTriangles(uint32_t triangles, uint32_t frames, uint32_t seed, float maxSpeed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> pos(-20.0f, 20.0f), small(-1.0f, 1.0f), vel(-maxSpeed, maxSpeed);
+  MovingTriangles s;
+  s.frames = frames;
+  const uint32_t vertices = triangles * 3;
+  for (uint32_t i = 0; i < vertices; ++i) s.indices.push_back(i);
+  s.positions.resize(std::size_t(frames) * vertices * 3);
+  for (uint32_t t = 0; t < triangles; ++t) {
+    const float c[3] = {pos(rng), pos(rng), pos(rng)};
+    const float v[3] = {vel(rng), vel(rng), vel(rng)};
+    for (uint32_t corner = 0; corner < 3; ++corner) {
+      const float o[3] = {small(rng), small(rng), small(rng)};
+      for (uint32_t f = 0; f < frames; ++f)
+        for (int a = 0; a < 3; ++a)
+          s.positions[(std::size_t(f) * vertices + t * 3 + corner) * 3 + a] = c[a] + o[a] + v[a] * float(f);
+    }
+  }
+  return s;
 }
 
 }  // namespace tsah::test

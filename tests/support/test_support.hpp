@@ -1,7 +1,11 @@
 #pragma once
 // Helpers shared by the test executables.
+#include <cstdint>
 #include <filesystem>
 #include <string>
+#include <vector>
+
+#include "tsah/bvh.hpp"
 
 namespace tsah::test {
 
@@ -14,5 +18,17 @@ std::filesystem::path unpackedData(const std::string& archive, const std::string
 
 // A fresh empty directory under the system temp dir, unique to the running test.
 std::filesystem::path scratchDir();
+
+// Random small triangles (3 own vertices each) moving with random constant velocities, so a grouping
+// made on frame 0 degrades over time: the standard input of the optimizer and cost tests.
+// positions holds `frames` blocks of triangles*3 vertices (xyz).
+struct MovingTriangles {
+  std::vector<uint32_t> indices;
+  std::vector<float> positions;
+  uint32_t frames = 0;
+
+  PrimitiveBoxes boxes() const { return triangleBoxes(indices, positions, frames); }
+};
+MovingTriangles randomMovingTriangles(uint32_t triangles, uint32_t frames, uint32_t seed, float maxSpeed);
 
 }  // namespace tsah::test

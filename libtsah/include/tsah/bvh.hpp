@@ -62,6 +62,9 @@ struct Bvh {
   uint32_t depth() const;
 };
 
+// The nodes reachable from the root, every child before its parent (the order of bottom-up passes).
+std::vector<uint32_t> childrenFirstOrder(const Bvh& bvh);
+
 // Recomputes every node box from the primitive boxes, bottom-up, for all frames of prims
 // (bvh.frameCount becomes prims.frameCount).
 void refit(Bvh& bvh, const PrimitiveBoxes& prims);
