@@ -57,7 +57,23 @@ void Progress::message(const std::string& text) {
   std::fflush(stderr);
 }
 
+anim::LoadOptions& commandLineLoadOptions() {
+  static anim::LoadOptions options;
+  return options;
+}
+
+void addLoadOptions(CLI::App& app) {
+  app.fallthrough();
+  app.add_option("--fps", commandLineLoadOptions().fps,
+                 "Sampling rate for BART scenes and animated models (default: the file's own frames)")
+      ->check(CLI::Range(0.0, 10000.0));
+  app.add_option("--clip", commandLineLoadOptions().clip,
+                 "Animation clip to bake when a model holds several (name or index)");
+}
+
 anim::Animation loadInput(const std::string& input, anim::LoadOptions options) {
+  if (options.fps == 0.0) options.fps = commandLineLoadOptions().fps;
+  if (options.clip.empty()) options.clip = commandLineLoadOptions().clip;
   Progress progress("loading " + input);
   if (!options.progress)
     options.progress = [&](std::size_t done, std::size_t total) { progress.update(done, total); };

@@ -41,6 +41,12 @@ class Progress {
   bool active_ = false;
 };
 
+// Import settings given on the command line (--fps, --clip: options of every subcommand that reads
+// an animation); loadInput starts from them.
+anim::LoadOptions& commandLineLoadOptions();
+// Adds --fps and --clip to the top-level app; with fallthrough they may follow any subcommand.
+void addLoadOptions(CLI::App& app);
+
 // Loads any input form (see anim::load) with a progress line for long imports.
 anim::Animation loadInput(const std::string& input, anim::LoadOptions options = {});
 

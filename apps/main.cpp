@@ -10,6 +10,7 @@ int main(int argc, char** argv) {
                "export it and trace every frame with only a refit."};
   app.set_version_flag("--version", std::string("tsah ") + TSAH_VERSION);
   app.require_subcommand(1);
+  tsah::cli::addLoadOptions(app);
   tsah::cli::setupAllCommands(app);
   try {
     app.parse(argc, argv);
