@@ -72,6 +72,8 @@ TEST(Animation, UniformResampling) {
   EXPECT_EQ(a.resample(50).keyframeCount(), 50u);
   EXPECT_EQ(a.uniformTimes(1).size(), 1u);
   EXPECT_THROW(a.resample(0), anim::Error);
+  // 4e9 frames x 4 vertices would need ~190 GB: refused up front with a clear error, not OOM-killed.
+  EXPECT_THROW(a.resample(4'000'000'000u), anim::Error);
 }
 
 TEST(Animation, SegmentKeepsInteriorKeyframes) {

@@ -5,10 +5,21 @@
 #include <string>
 
 #include "anim/error.hpp"
+#include <unistd.h>
 
 namespace anim {
 
 namespace {
+
+// Refuses an allocation larger than the machine's physical memory up front: with overcommit a huge
+// vector would "succeed" and the process be killed later while filling it.
+void checkFitsInMemory(std::size_t bytes, const std::string& who, const std::string& what) {
+  const long pages = ::sysconf(_SC_PHYS_PAGES), pageSize = ::sysconf(_SC_PAGE_SIZE);
+  const double physical = pages > 0 && pageSize > 0 ? double(pages) * double(pageSize) : 1e18;
+  if (double(bytes) > physical)
+    throw Error(who + ": " + what + " would need " + std::to_string(bytes >> 20) + " MiB, more than this machine's " +
+                std::to_string(uint64_t(physical) >> 20) + " MiB of memory");
+}
 
 bool triangleIsDegenerate(const float* a, const float* b, const float* c) {
   const double e1[3] = {double(b[0]) - a[0], double(b[1]) - a[1], double(b[2]) - a[2]};
@@ -125,6 +136,7 @@ Animation Animation::resample(uint32_t n) const {
     for (uint32_t i = 0; i < n; ++i) t[i] = startTime() + i;
   }
   const std::size_t perFrame = std::size_t(vertexCount_) * 3;
+  checkFitsInMemory(perFrame * n * sizeof(float), name_, std::to_string(n) + " frames");
   std::vector<float> pos(perFrame * n);
   for (uint32_t i = 0; i < n; ++i)
     positionsAt(t[i], std::span<float>(pos).subspan(i * perFrame, perFrame));
