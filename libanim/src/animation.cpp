@@ -130,13 +130,14 @@ std::vector<double> Animation::uniformTimes(uint32_t n) const {
 
 Animation Animation::resample(uint32_t n) const {
   if (n == 0) throw Error(name_ + ": cannot resample to 0 frames");
+  checkFitsInMemory(std::size_t(n) * (std::size_t(vertexCount_) * 3 * sizeof(float) + sizeof(double)), name_,
+                    std::to_string(n) + " frames");
   std::vector<double> t = uniformTimes(n);
   if (n > 1 && !(endTime() > startTime())) {
     // A one-keyframe animation sampled n times: frames at 0,1,...; the geometry stays the same.
     for (uint32_t i = 0; i < n; ++i) t[i] = startTime() + i;
   }
   const std::size_t perFrame = std::size_t(vertexCount_) * 3;
-  checkFitsInMemory(perFrame * n * sizeof(float), name_, std::to_string(n) + " frames");
   std::vector<float> pos(perFrame * n);
   for (uint32_t i = 0; i < n; ++i)
     positionsAt(t[i], std::span<float>(pos).subspan(i * perFrame, perFrame));
