@@ -9,21 +9,9 @@
 #include "tsah/camera.hpp"
 #include "tsah/cpu_runtime.hpp"
 #include "tsah/image.hpp"
+#include "tsah/shading.hpp"  // SceneLighting and the per-pixel math
 
 namespace tsah {
-
-struct SceneLighting {
-  Vec3 lightCenter{0, 10, 0};
-  float lightRadius = 1.0f;    // spherical area light, sampled as a disk facing the shaded point
-  float aoDistance = 1.0f;     // maximum length of ambient-occlusion rays
-  float epsilon = 1e-4f;       // offset of secondary ray origins along the normal (scene units)
-  bool ground = true;          // a plane below the scene
-  Vec3 up{0, 1, 0};            // scene up: the ground's normal and the sky's zenith
-  float groundHeight = 0.0f;   // the plane is dot(p, up) == groundHeight
-  float groundScale = 1.0f;    // size of the ground's checker squares
-  Vec3 sceneCenter{0, 0, 0};   // for the ground's fade into the horizon
-  float sceneRadius = 1.0f;
-};
 
 // Lighting fitted to a box (the animation's bounds over all frames) seen by camera: an area light
 // above the scene, in front of and to the side of the camera so shadows fall visibly; AO rays up

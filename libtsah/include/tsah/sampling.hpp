@@ -2,11 +2,14 @@
 // Deterministic per-sample random numbers and the sample warps the renderers use. A sample's
 // numbers are a hash of (seed, frame, pixel, sample, dimension), so images do not depend on the
 // thread count or the order in which pixels are processed, and the CPU and GPU runtimes can draw
-// the same numbers.
+// the same numbers. The float functions (sqrtf, cosf, sinf) are the C library's on the host and
+// CUDA's on the device: sqrtf is correctly rounded on both, cosf/sinf may differ in the last bit.
+#include <cmath>
 #include <cstdint>
 
 #include "tsah/aabb.hpp"
 #include "tsah/hd.hpp"
+#include "tsah/ray.hpp"  // fmaxf_
 
 namespace tsah {
 
@@ -33,16 +36,13 @@ TSAH_HD float sampleUniform(const SampleKey& key, uint32_t sample, uint32_t dime
   return float(h >> 8) * (1.0f / 16777216.0f);
 }
 
+// v / |v| with an IEEE square root and division on host and device alike (CUDA's rsqrtf would
+// round differently), so CPU and GPU renderers compute the same directions; (0, 0, 1) for a zero
+// or non-finite length.
 TSAH_HD Vec3 normalize(Vec3 v) {
   const float len2 = dot(v, v);
   if (!(len2 > 0.0f)) return {0.0f, 0.0f, 1.0f};
-  float inv = 1.0f;
-#if defined(__CUDA_ARCH__)
-  inv = rsqrtf(len2);
-#else
-  inv = 1.0f / __builtin_sqrtf(len2);
-#endif
-  return v * inv;
+  return v * (1.0f / sqrtf(len2));
 }
 
 // An orthonormal basis (t, b, n) around unit vector n (Duff et al. 2017, branchless).
@@ -52,14 +52,6 @@ TSAH_HD void orthonormalBasis(Vec3 n, Vec3& t, Vec3& b) {
   const float c = n.x * n.y * a;
   t = {1.0f + sign * n.x * n.x * a, sign * c, -sign * n.x};
   b = {c, sign + n.y * n.y * a, -n.y};
-}
-
-TSAH_HD float sqrtf_(float x) {
-#if defined(__CUDA_ARCH__)
-  return sqrtf(x);
-#else
-  return __builtin_sqrtf(x);
-#endif
 }
 
 // Cosine-weighted direction in the hemisphere around unit normal n (Malley: a uniform disk point
@@ -77,12 +69,8 @@ TSAH_HD Vec3 cosineHemisphere(Vec3 n, float u1, float u2) {
       phi = 2.0f * kPi4 - kPi4 * (a / b);
     }
   }
-#if defined(__CUDA_ARCH__)
   const float x = r * cosf(phi), y = r * sinf(phi);
-#else
-  const float x = r * __builtin_cosf(phi), y = r * __builtin_sinf(phi);
-#endif
-  const float z = sqrtf_(fmaxf_(0.0f, 1.0f - x * x - y * y));
+  const float z = sqrtf(fmaxf_(0.0f, 1.0f - x * x - y * y));
   Vec3 t, bt;
   orthonormalBasis(n, t, bt);
   return t * x + bt * y + n * z;
@@ -92,13 +80,9 @@ TSAH_HD Vec3 cosineHemisphere(Vec3 n, float u1, float u2) {
 TSAH_HD Vec3 sampleDisk(Vec3 c, Vec3 axis, float r, float u1, float u2) {
   Vec3 t, b;
   orthonormalBasis(axis, t, b);
-  const float rad = r * sqrtf_(u1);
+  const float rad = r * sqrtf(u1);
   const float phi = 6.28318530718f * u2;
-#if defined(__CUDA_ARCH__)
   return c + t * (rad * cosf(phi)) + b * (rad * sinf(phi));
-#else
-  return c + t * (rad * __builtin_cosf(phi)) + b * (rad * __builtin_sinf(phi));
-#endif
 }
 
 }  // namespace tsah
