@@ -122,7 +122,7 @@ void checkDeviceAndRebuild(const TraceOptions& opt) {
   if (opt.device != "cuda") return;
 #if TSAH_HAVE_CUDA
   if (!tsah::cuda::deviceAvailable())
-    throw UsageError("no CUDA device found (the CUDA driver reports none, or CUDA_VISIBLE_DEVICES hides them); "
+    throw UsageError("no CUDA device found (no GPU, no NVIDIA driver, or CUDA_VISIBLE_DEVICES hides them); "
                      "use --device cpu");
 #else
   throw UsageError("the GPU runtime is not built in this version of tsah (configure with a CUDA compiler to "

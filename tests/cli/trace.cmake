@@ -61,11 +61,7 @@ set_tests_properties(cli.trace.camera.args PROPERTIES FIXTURES_REQUIRED trace_tr
   PASS_REGULAR_EXPRESSION "camera command line")
 
 # Errors: one line, non-zero exit.
-add_test(NAME cli.trace.error.cuda COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --device cuda)
-set_tests_properties(cli.trace.error.cuda PROPERTIES FIXTURES_REQUIRED trace_tree
-  PASS_REGULAR_EXPRESSION "^tsah: the GPU runtime is not built[^\n]*\n$")
-add_test(NAME cli.trace.error.cuda.status COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --device cuda)
-set_tests_properties(cli.trace.error.cuda.status PROPERTIES FIXTURES_REQUIRED trace_tree WILL_FAIL TRUE)
+# --device cuda (built or not, with or without a GPU): trace_cuda.cmake.
 add_test(NAME cli.trace.error.mismatch COMMAND tsah trace ${W}/trace_wave.tanim ${W}/trace_explode.tbvh --frames 1)
 set_tests_properties(cli.trace.error.mismatch PROPERTIES FIXTURES_REQUIRED "trace_tree;trace_other"
   PASS_REGULAR_EXPRESSION "^tsah: .*trace_explode.tbvh was not built for .*trace_wave.tanim: ")
