@@ -1,11 +1,10 @@
 // tsah::renderFrame on the GPU: the same three ray passes (primary closest hit, ambient occlusion,
-// shadows), the same per-sample random numbers and the same shading, one kernel per step.
+// shadows), one kernel per step. The per-pixel math (camera rays, the primary surface, the AO and
+// shadow rays, vertex normals, shading) is libtsah's shading.hpp, which the CPU renderer uses too.
 //
-// Compiled with -fmad=false, and normalizing with IEEE square roots and divisions, so camera rays,
-// surfaces and secondary rays are computed with the CPU's exact roundings; only cosf/sinf/powf/expf
-// (used by the sample warps and the sRGB curve) can differ from the C library in the last bit.
-// The shading of renderer.cpp lives in its anonymous namespace, so it is repeated here (kernels
-// surfaceKernel, vertexNormalsKernel, shadeKernel): keep the two in step.
+// Compiled with -fmad=false, so that math rounds exactly as on the CPU (see shading.hpp); only
+// cosf/sinf/powf/expf (the sample warps and the sRGB curve) can differ from the C library in the
+// last bit.
 #include <cuda/atomic>
 
 #include "anim/error.hpp"
@@ -13,7 +12,7 @@
 #include "launch.hpp"
 #include "runtime_impl.hpp"
 #include "tsah/camera.hpp"
-#include "tsah/sampling.hpp"
+#include "tsah/shading.hpp"
 
 namespace tsah::cuda {
 
@@ -23,8 +22,6 @@ using detail::RootInfo;
 
 // Pixels are processed in tiles of 8 x 4 (one warp), so a warp's primary rays are coherent.
 constexpr uint32_t kTileW = 8, kTileH = 4;
-constexpr uint32_t kDimAo = 0, kDimShadow = 2;  // renderer.cpp's sample dimensions
-enum SurfaceKind : uint32_t { kNone = 0, kMesh = 1, kGround = 2 };
 enum Word : uint32_t { kAoRays = 0, kShadowRays = 1, kPrimaryCounter = 2, kAoCounter = 3, kShadowCounter = 4 };
 
 struct Frame {
@@ -42,20 +39,10 @@ __device__ __forceinline__ bool pixelOf(const Frame& f, uint32_t j, uint32_t& x,
   return x < f.width && y < f.height;
 }
 
-// normalize() of sampling.hpp with the host's arithmetic (it uses rsqrtf on the device).
-__device__ __forceinline__ Vec3 normalizeExact(Vec3 v) {
-  const float len2 = dot(v, v);
-  if (!(len2 > 0.0f)) return {0.0f, 0.0f, 1.0f};
-  return v * (1.0f / sqrtf(len2));
-}
+__device__ __forceinline__ uint32_t pixelIndex(const Frame& f, uint32_t x, uint32_t y) { return y * f.width + x; }
 
-__device__ __forceinline__ Ray cameraRay(const CameraRays& c, float px, float py) {
-  Ray r;
-  r.org = c.eye;
-  r.dir = normalizeExact(c.corner + c.dx * px + c.dy * py);
-  r.tmin = 0.0f;
-  r.tmax = 3.402823466e38f;
-  return r;
+__device__ __forceinline__ Ray cameraRay(const Frame& f, uint32_t x, uint32_t y) {
+  return f.cam.ray(float(x) + 0.5f, float(y) + 0.5f);
 }
 
 __device__ __forceinline__ Ray noRay() {
@@ -79,168 +66,93 @@ __device__ __forceinline__ void countRays(uint32_t* word, bool valid) {
   if (valid && lane == uint32_t(__ffs(mask) - 1)) atomicAdd(word, uint32_t(__popc(mask)));
 }
 
-__device__ __forceinline__ Vec3 loadVertex(const float* p, uint32_t v) {
-  return {p[3 * std::size_t(v)], p[3 * std::size_t(v) + 1], p[3 * std::size_t(v) + 2]};
+// A Surface as three float4 per padded pixel (coalesced 16-byte accesses).
+__device__ __forceinline__ void storeSurface(float4* surfaces, uint32_t j, const Surface& s) {
+  float4* out = surfaces + 3 * std::size_t(j);
+  out[0] = make_float4(s.position.x, s.position.y, s.position.z, __uint_as_float(uint32_t(s.kind)));
+  out[1] = make_float4(s.normal.x, s.normal.y, s.normal.z, __uint_as_float(s.tri));
+  out[2] = make_float4(s.u, s.v, 0.0f, 0.0f);
+}
+
+__device__ __forceinline__ Surface loadSurface(const float4* surfaces, uint32_t j) {
+  const float4* p = surfaces + 3 * std::size_t(j);
+  const float4 a = p[0], b = p[1], c = p[2];
+  return {{a.x, a.y, a.z}, {b.x, b.y, b.z}, SurfaceKind(__float_as_uint(a.w)), __float_as_uint(b.w), c.x, c.y};
 }
 
 __global__ void primaryRaysKernel(Frame f, Ray* __restrict__ rays) {
   const uint32_t j = blockIdx.x * blockDim.x + threadIdx.x;
   if (j >= f.padded) return;
   uint32_t x, y;
-  storeRay(rays, j, pixelOf(f, j, x, y) ? cameraRay(f.cam, float(x) + 0.5f, float(y) + 0.5f) : noRay());
+  storeRay(rays, j, pixelOf(f, j, x, y) ? cameraRay(f, x, y) : noRay());
 }
 
-// The primary pass's surface (renderer.cpp): mesh hit or the analytic ground, offset along the normal.
+// The primary pass's surface: mesh hit or the analytic ground, offset along the normal.
 __global__ void surfaceKernel(Frame f, const Hit* __restrict__ hits, const uint32_t* __restrict__ indices,
                               const float* __restrict__ positions, float4* __restrict__ surfaces) {
   const uint32_t j = blockIdx.x * blockDim.x + threadIdx.x;
   if (j >= f.padded) return;
   uint32_t x, y;
-  Vec3 position{0, 0, 0}, normal{0, 0, 1};
-  uint32_t kind = kNone, tri = 0;
-  float u = 0.0f, v = 0.0f;
-  if (pixelOf(f, j, x, y)) {
-    const Ray ray = cameraRay(f.cam, float(x) + 0.5f, float(y) + 0.5f);
-    const Hit hit = hits[j];
-    const Vec3 up = f.light.up;
-    float tGround = 3.402823466e38f;
-    if (f.light.ground) {
-      const float denom = dot(ray.dir, up);
-      if (denom < 0.0f) {
-        const float t = (f.light.groundHeight - dot(ray.org, up)) / denom;
-        if (t > 0.0f) tGround = t;
-      }
-    }
-    if (hit.valid() && hit.t <= tGround) {
-      const uint32_t* t3 = indices + 3 * std::size_t(hit.tri);
-      const Vec3 v0 = loadVertex(positions, t3[0]), v1 = loadVertex(positions, t3[1]),
-                 v2 = loadVertex(positions, t3[2]);
-      Vec3 n = normalizeExact(cross(v1 - v0, v2 - v0));
-      if (dot(n, ray.dir) > 0.0f) n = n * -1.0f;
-      const Vec3 p = v0 * (1.0f - hit.u - hit.v) + v1 * hit.u + v2 * hit.v;
-      position = p + n * f.light.epsilon;
-      normal = n;
-      kind = kMesh;
-      tri = hit.tri;
-      u = hit.u;
-      v = hit.v;
-    } else if (tGround < 3.402823466e38f) {
-      position = ray.org + ray.dir * tGround + up * f.light.epsilon;
-      normal = up;
-      kind = kGround;
-    }
-  }
-  float4* out = surfaces + 3 * std::size_t(j);
-  out[0] = make_float4(position.x, position.y, position.z, __uint_as_float(kind));
-  out[1] = make_float4(normal.x, normal.y, normal.z, __uint_as_float(tri));
-  out[2] = make_float4(u, v, 0.0f, 0.0f);
+  Surface s;
+  if (pixelOf(f, j, x, y)) s = primarySurface(cameraRay(f, x, y), hits[j], indices, positions, f.light);
+  storeSurface(surfaces, j, s);
 }
 
-// What the primary pass found at a pixel (renderer.cpp's Surface).
-struct Surface {
-  Vec3 position;  // already offset along the normal
-  Vec3 normal;    // geometric, unit, facing the camera
-  uint32_t kind;
-  uint32_t tri;   // mesh hits: triangle and barycentrics, for the smooth shading normal
-  float u, v;
+// Secondary ray r of a pass with `samples` rays per padded pixel: its pixel's surface, random-number
+// key and sample index; valid when the pixel is in the image and its primary ray found a surface.
+struct SecondarySample {
+  Surface surface;
+  SampleKey key;
+  uint32_t sample;
+  bool valid;
 };
 
-__device__ __forceinline__ Surface loadSurface(const float4* surfaces, uint32_t j) {
-  const float4* p = surfaces + 3 * std::size_t(j);
-  const float4 a = p[0], b = p[1], c = p[2];
-  return {{a.x, a.y, a.z}, {b.x, b.y, b.z}, __float_as_uint(a.w), __float_as_uint(b.w), c.x, c.y};
+__device__ __forceinline__ SecondarySample secondarySample(const Frame& f, const float4* surfaces, uint64_t r,
+                                                           uint32_t samples) {
+  const uint32_t j = uint32_t(r / samples);
+  uint32_t x, y;
+  const bool inside = pixelOf(f, j, x, y);
+  SecondarySample out{loadSurface(surfaces, j), f.base, uint32_t(r % samples), false};
+  out.key.pixel = pixelIndex(f, x, y);
+  out.valid = inside && out.surface.kind != SurfaceKind::None;
+  return out;
 }
-
-__device__ __forceinline__ uint32_t pixelIndex(const Frame& f, uint32_t x, uint32_t y) { return y * f.width + x; }
 
 __global__ void aoRaysKernel(Frame f, const float4* __restrict__ surfaces, Ray* __restrict__ rays,
                              uint32_t* __restrict__ words) {
   const uint64_t r = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  const uint64_t total = uint64_t(f.padded) * f.aoSamples;
-  if (r >= total) return;
-  const uint32_t j = uint32_t(r / f.aoSamples), k = uint32_t(r % f.aoSamples);
-  uint32_t x, y;
-  const bool inside = pixelOf(f, j, x, y);
-  const Surface s = loadSurface(surfaces, j);
-  const bool valid = inside && s.kind != kNone;
-  Ray ray = noRay();
-  if (valid) {
-    SampleKey key = f.base;
-    key.pixel = pixelIndex(f, x, y);
-    ray.org = s.position;
-    ray.dir = cosineHemisphere(s.normal, sampleUniform(key, k, kDimAo), sampleUniform(key, k, kDimAo + 1));
-    ray.tmin = 0.0f;
-    ray.tmax = f.light.aoDistance;
-  }
-  storeRay(rays, r, ray);
-  countRays(words + kAoRays, valid);
+  if (r >= uint64_t(f.padded) * f.aoSamples) return;
+  const SecondarySample p = secondarySample(f, surfaces, r, f.aoSamples);
+  storeRay(rays, r, p.valid ? aoRay(p.surface, p.key, p.sample, f.light.aoDistance) : noRay());
+  countRays(words + kAoRays, p.valid);
 }
 
 __global__ void shadowRaysKernel(Frame f, const float4* __restrict__ surfaces, Ray* __restrict__ rays,
                                  uint8_t* __restrict__ traced, uint32_t* __restrict__ words) {
   const uint64_t r = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  const uint64_t total = uint64_t(f.padded) * f.shadowSamples;
-  if (r >= total) return;
-  const uint32_t j = uint32_t(r / f.shadowSamples), k = uint32_t(r % f.shadowSamples);
-  uint32_t x, y;
-  const bool inside = pixelOf(f, j, x, y);
-  const Surface s = loadSurface(surfaces, j);
-  Ray ray = noRay();
-  bool valid = false;
-  if (inside && s.kind != kNone) {
-    SampleKey key = f.base;
-    key.pixel = pixelIndex(f, x, y);
-    const Vec3 axis = normalizeExact(f.light.lightCenter - s.position);
-    const Vec3 q = sampleDisk(f.light.lightCenter, axis, f.light.lightRadius, sampleUniform(key, k, kDimShadow),
-                              sampleUniform(key, k, kDimShadow + 1));
-    const Vec3 dir = q - s.position;
-    if (dot(dir, s.normal) > 0.0f) {  // a light point behind the surface: no ray, not lit
-      ray.org = s.position;
-      ray.dir = dir;
-      ray.tmin = 0.0f;
-      ray.tmax = 1.0f;
-      valid = true;
-    }
-  }
-  storeRay(rays, r, ray);
+  if (r >= uint64_t(f.padded) * f.shadowSamples) return;
+  const SecondarySample p = secondarySample(f, surfaces, r, f.shadowSamples);
+  Ray ray;
+  // A light point behind the surface: no ray, not lit.
+  const bool valid = p.valid && shadowRay(p.surface, f.light, p.key, p.sample, ray);
+  storeRay(rays, r, valid ? ray : noRay());
   traced[r] = valid ? 1 : 0;
   countRays(words + kShadowRays, valid);
 }
 
-// Area-weighted vertex normals of the current frame (renderer.cpp's vertexNormals, for shading
-// only): each vertex sums the face normals of its triangles in increasing triangle order, as the
-// CPU loop does, so the sums are bit-identical. vertexTris: the triangles of each vertex (CSR).
+// Vertex normals for shading: each vertex sums the face normals of its triangles in increasing
+// triangle order, as the CPU loop does, so the sums are bit-identical. vertexTris: the triangles of
+// each vertex (CSR).
 __global__ void vertexNormalsKernel(uint32_t vertices, const uint32_t* __restrict__ offsets,
                                     const uint32_t* __restrict__ vertexTris, const uint32_t* __restrict__ indices,
                                     const float* __restrict__ positions, float* __restrict__ normals) {
   const uint32_t vtx = blockIdx.x * blockDim.x + threadIdx.x;
   if (vtx >= vertices) return;
   Vec3 n{0, 0, 0};
-  for (uint32_t k = offsets[vtx]; k < offsets[vtx + 1]; ++k) {
-    const uint32_t* t3 = indices + 3 * std::size_t(vertexTris[k]);
-    const Vec3 v0 = loadVertex(positions, t3[0]);
-    n = n + cross(loadVertex(positions, t3[1]) - v0, loadVertex(positions, t3[2]) - v0);
-  }
+  for (uint32_t k = offsets[vtx]; k < offsets[vtx + 1]; ++k) n = n + faceNormal(indices, positions, vertexTris[k]);
   normals[3 * std::size_t(vtx)] = n.x;
   normals[3 * std::size_t(vtx) + 1] = n.y;
   normals[3 * std::size_t(vtx) + 2] = n.z;
-}
-
-// renderer.cpp's shading.
-__device__ __forceinline__ Vec3 mix(Vec3 a, Vec3 b, float s) { return a + (b - a) * s; }
-__device__ __forceinline__ Vec3 mul(Vec3 a, Vec3 b) { return {a.x * b.x, a.y * b.y, a.z * b.z}; }
-
-__device__ Vec3 skyColor(Vec3 dir, Vec3 up) {
-  const float h = dot(dir, up);
-  const Vec3 horizon{0.80f, 0.85f, 0.91f}, zenith{0.30f, 0.48f, 0.78f}, below{0.40f, 0.39f, 0.37f};
-  if (h < 0.0f) return mix(horizon, below, fminf(1.0f, -h * 4.0f));
-  return mix(horizon, zenith, sqrtf(h));
-}
-
-__device__ uint8_t toSrgb8(float linear) {
-  const float c = fminf(fmaxf(linear, 0.0f), 1.0f);
-  const float s = c <= 0.0031308f ? 12.92f * c : 1.055f * powf(c, 1.0f / 2.4f) - 0.055f;
-  return static_cast<uint8_t>(lroundf(s * 255.0f));
 }
 
 __global__ void shadeKernel(Frame f, const float4* __restrict__ surfaces, const uint8_t* __restrict__ aoOccluded,
@@ -252,57 +164,17 @@ __global__ void shadeKernel(Frame f, const float4* __restrict__ surfaces, const 
   uint32_t x, y;
   if (!pixelOf(f, j, x, y)) return;
   const Surface s = loadSurface(surfaces, j);
-  const Vec3 up = f.light.up;
-  Vec3 color;
-  if (s.kind == kNone) {
-    color = skyColor(cameraRay(f.cam, float(x) + 0.5f, float(y) + 0.5f).dir, up);
-  } else {
-    float ao = 1.0f, visibility = 1.0f;
-    if (f.aoSamples > 0) {
-      uint32_t occluded = 0;
-      for (uint32_t k = 0; k < f.aoSamples; ++k) occluded += aoOccluded[std::size_t(j) * f.aoSamples + k];
-      ao = 1.0f - float(occluded) / float(f.aoSamples);
+  uint32_t occluded = 0, visible = 0;
+  if (s.kind != SurfaceKind::None) {
+    for (uint32_t k = 0; k < f.aoSamples; ++k) occluded += aoOccluded[std::size_t(j) * f.aoSamples + k];
+    for (uint32_t k = 0; k < f.shadowSamples; ++k) {
+      const std::size_t r = std::size_t(j) * f.shadowSamples + k;
+      visible += shadowTraced[r] && !shadowOccluded[r] ? 1u : 0u;
     }
-    if (f.shadowSamples > 0) {
-      uint32_t visible = 0;
-      for (uint32_t k = 0; k < f.shadowSamples; ++k) {
-        const std::size_t r = std::size_t(j) * f.shadowSamples + k;
-        visible += shadowTraced[r] && !shadowOccluded[r] ? 1u : 0u;
-      }
-      visibility = float(visible) / float(f.shadowSamples);
-    }
-    const Vec3 meshAlbedo{0.78f, 0.60f, 0.44f};
-    const Vec3 sun{1.00f, 0.94f, 0.84f};
-    Vec3 albedo = meshAlbedo;
-    Vec3 shading = s.normal;
-    float fade = 0.0f;
-    if (s.kind == kMesh) {
-      const uint32_t* t3 = indices + 3 * std::size_t(s.tri);
-      const Vec3 smooth = normalizeExact(loadVertex(normals, t3[0]) * (1.0f - s.u - s.v) +
-                                         loadVertex(normals, t3[1]) * s.u + loadVertex(normals, t3[2]) * s.v);
-      shading = dot(smooth, s.normal) < 0.0f ? smooth * -1.0f : smooth;
-    }
-    if (s.kind == kGround) {
-      Vec3 t, b;
-      orthonormalBasis(up, t, b);
-      const Vec3 rel = s.position - f.light.sceneCenter;
-      const auto cu = int32_t(floorf(dot(rel, t) / f.light.groundScale));
-      const auto cv = int32_t(floorf(dot(rel, b) / f.light.groundScale));
-      albedo = ((cu + cv) & 1) ? Vec3{0.62f, 0.60f, 0.56f} : Vec3{0.50f, 0.49f, 0.46f};
-      const float d = sqrtf(dot(rel, rel)) / (6.0f * f.light.sceneRadius);
-      fade = 1.0f - expf(-d * d);
-    }
-    const Vec3 toLight = normalizeExact(f.light.lightCenter - s.position);
-    const float diffuse = fmaxf(0.0f, dot(shading, toLight)) * visibility;
-    const Vec3 sky = skyColor(normalizeExact(shading + up * 0.5f), up) * 0.6f;
-    const Vec3 lit = sky * ao + sun * diffuse;
-    color = mul(albedo, lit);
-    if (fade > 0.0f) color = mix(color, Vec3{0.80f, 0.85f, 0.91f}, fade);  // into the horizon
   }
-  uint8_t* px = image + 3 * std::size_t(pixelIndex(f, x, y));
-  px[0] = toSrgb8(color.x);
-  px[1] = toSrgb8(color.y);
-  px[2] = toSrgb8(color.z);
+  const Vec3 color = pixelColor(s, cameraRay(f, x, y), aoFactor(occluded, f.aoSamples),
+                                lightVisibility(visible, f.shadowSamples), indices, normals, f.light);
+  storeSrgb8(image + 3 * std::size_t(pixelIndex(f, x, y)), color);
 }
 
 }  // namespace

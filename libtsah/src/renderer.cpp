@@ -36,6 +36,29 @@ double msSince(std::chrono::steady_clock::time_point start) {
 
 float length(Vec3 v) { return std::sqrt(dot(v, v)); }
 
+// A secondary-ray pass over the image (surfaces: one per pixel, rows of `width`), in parallel over
+// rows: castRays(pixel, surface, sample key), called for every pixel whose primary ray found a
+// surface, returns how many rays it traced.
+template <class CastRays>
+RayPassStats surfacePass(const CpuRuntime& runtime, uint32_t width, const std::vector<Surface>& surfaces,
+                         SampleKey base, const CastRays& castRays) {
+  std::atomic<uint64_t> rays{0};
+  const auto start = std::chrono::steady_clock::now();
+  runtime.parallelFor(surfaces.size() / width, 1, [&](std::size_t y0, std::size_t y1) {
+    uint64_t local = 0;
+    for (std::size_t y = y0; y < y1; ++y)
+      for (uint32_t x = 0; x < width; ++x) {
+        const std::size_t i = y * width + x;
+        if (surfaces[i].kind == SurfaceKind::None) continue;
+        SampleKey key = base;
+        key.pixel = uint32_t(i);
+        local += castRays(i, surfaces[i], key);
+      }
+    rays += local;
+  });
+  return {rays.load(), msSince(start)};
+}
+
 }  // namespace
 
 SceneLighting fitLighting(const Aabb& bounds, const Camera& camera, Vec3 up, float aoFraction, bool ground) {
@@ -105,53 +128,28 @@ RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const S
   stats.primary = {rays.load(), msSince(start)};
 
   // Pass 2: ambient occlusion, any hit within aoDistance.
-  rays = 0;
-  start = std::chrono::steady_clock::now();
   if (settings.aoSamples > 0)
-    runtime.parallelFor(height, 1, [&](std::size_t y0, std::size_t y1) {
-      uint64_t local = 0;
-      for (std::size_t y = y0; y < y1; ++y)
-        for (uint32_t x = 0; x < width; ++x) {
-          const std::size_t i = y * width + x;
-          const Surface& s = surfaces[i];
-          if (s.kind == SurfaceKind::None) continue;
-          SampleKey key = base;
-          key.pixel = uint32_t(i);
-          uint32_t occluded = 0;
-          for (uint32_t k = 0; k < settings.aoSamples; ++k)
-            occluded += anyHit(bvh, aoRay(s, key, k, lighting.aoDistance)) ? 1u : 0u;
-          local += settings.aoSamples;
-          ao[i] = aoFactor(occluded, settings.aoSamples);
-        }
-      rays += local;
+    stats.ao = surfacePass(runtime, width, surfaces, base, [&](std::size_t i, const Surface& s, SampleKey key) {
+      uint32_t occluded = 0;
+      for (uint32_t k = 0; k < settings.aoSamples; ++k)
+        occluded += anyHit(bvh, aoRay(s, key, k, lighting.aoDistance)) ? 1u : 0u;
+      ao[i] = aoFactor(occluded, settings.aoSamples);
+      return settings.aoSamples;
     });
-  stats.ao = {rays.load(), msSince(start)};
 
   // Pass 3: shadow rays to points on the area light, any hit on the segment.
-  rays = 0;
-  start = std::chrono::steady_clock::now();
   if (settings.shadowSamples > 0)
-    runtime.parallelFor(height, 1, [&](std::size_t y0, std::size_t y1) {
-      uint64_t local = 0;
-      for (std::size_t y = y0; y < y1; ++y)
-        for (uint32_t x = 0; x < width; ++x) {
-          const std::size_t i = y * width + x;
-          const Surface& s = surfaces[i];
-          if (s.kind == SurfaceKind::None) continue;
-          SampleKey key = base;
-          key.pixel = uint32_t(i);
-          uint32_t visible = 0;
-          for (uint32_t k = 0; k < settings.shadowSamples; ++k) {
-            Ray ray;
-            if (!shadowRay(s, lighting, key, k, ray)) continue;  // the light point is behind the surface
-            ++local;
-            visible += anyHit(bvh, ray) ? 0u : 1u;
-          }
-          visibility[i] = lightVisibility(visible, settings.shadowSamples);
-        }
-      rays += local;
+    stats.shadow = surfacePass(runtime, width, surfaces, base, [&](std::size_t i, const Surface& s, SampleKey key) {
+      uint32_t visible = 0, cast = 0;
+      for (uint32_t k = 0; k < settings.shadowSamples; ++k) {
+        Ray ray;
+        if (!shadowRay(s, lighting, key, k, ray)) continue;  // the light point is behind the surface
+        ++cast;
+        visible += anyHit(bvh, ray) ? 0u : 1u;
+      }
+      visibility[i] = lightVisibility(visible, settings.shadowSamples);
+      return cast;
     });
-  stats.shadow = {rays.load(), msSince(start)};
 
   // Shading: diffuse sun with soft shadows + sky light scaled by ambient occlusion.
   start = std::chrono::steady_clock::now();
