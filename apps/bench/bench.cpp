@@ -1,0 +1,370 @@
+#include "bench/bench.hpp"
+
+#include <sys/utsname.h>
+
+#include <chrono>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+#include "anim/error.hpp"
+#include "anim/load.hpp"
+#include "bench/embree_peer.hpp"
+#include "bench/runtime_bench.hpp"
+#include "bench/segments.hpp"
+#include "tsah/baselines.hpp"
+#include "tsah/camera.hpp"
+#include "tsah/image.hpp"
+
+#ifndef TSAH_VERSION
+#define TSAH_VERSION "unknown"
+#endif
+
+namespace tsah::bench {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+double secondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// The first line of /proc/cpuinfo or /etc/os-release that starts with `key`, its value unquoted.
+std::string fileValue(const char* path, const std::string& key, char separator) {
+  std::ifstream in(path);
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind(key, 0) != 0) continue;
+    const std::size_t at = line.find(separator);
+    if (at == std::string::npos) continue;
+    std::string value = line.substr(at + 1);
+    while (!value.empty() && (value.front() == ' ' || value.front() == '\t' || value.front() == '"')) value.erase(0, 1);
+    while (!value.empty() && (value.back() == ' ' || value.back() == '"')) value.pop_back();
+    return value;
+  }
+  return {};
+}
+
+// Half size (2x2 box filter) for the report's picture; small images stay as they are.
+Image halfSize(const Image& in) {
+  if (in.width < 512) return in;
+  Image out(in.width / 2, in.height / 2);
+  for (uint32_t y = 0; y < out.height; ++y)
+    for (uint32_t x = 0; x < out.width; ++x)
+      for (int c = 0; c < 3; ++c) {
+        const unsigned sum = in.pixel(2 * x, 2 * y)[c] + in.pixel(2 * x + 1, 2 * y)[c] + in.pixel(2 * x, 2 * y + 1)[c] +
+                             in.pixel(2 * x + 1, 2 * y + 1)[c];
+        out.pixel(x, y)[c] = static_cast<uint8_t>((sum + 2) / 4);
+      }
+  return out;
+}
+
+const std::vector<std::string> kTable1Methods = {"rebuild", "sahstar", "sah0", "tsah0", "tsah2", "tsah4"};
+
+tsah::BaselineConfig baselineConfig(const BenchOptions& o, const BenchProgress& progress) {
+  tsah::BaselineConfig config;
+  config.cost = {o.ct, o.ci};
+  config.maxLeafSize = o.maxLeaf;
+  config.threads = o.threads;
+  config.optimizer.seed = o.seed;
+  config.progress = [progress](const std::string& message) { progress(message, true); };
+  return config;
+}
+
+nlohmann::json historyJson(const InsertionOptimizer::Result& r) {
+  nlohmann::json history = nlohmann::json::array();
+  for (const auto& b : r.history)
+    history.push_back({{"batch", b.batch}, {"elapsed_s", b.elapsedSeconds}, {"average", b.averageCost}, {"cost", b.cost},
+                       {"steps", b.steps}});
+  return history;
+}
+
+double mean(const std::vector<double>& v) {
+  double s = 0.0;
+  for (double x : v) s += x / double(v.size());
+  return v.empty() ? 0.0 : s;
+}
+double maximum(const std::vector<double>& v) {
+  double m = 0.0;
+  for (double x : v) m = std::max(m, x);
+  return m;
+}
+
+}  // namespace
+
+std::string methodLabel(const std::string& id) {
+  if (id == "rebuild") return "SAH-rebuild";
+  if (id == "sahstar") return "SAH*";
+  if (id == "sah0") return "SAH0";
+  if (id.rfind("tsah", 0) == 0) return "T-SAH k=" + id.substr(4);
+  return id;
+}
+
+nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const fs::path& outDir,
+                          const BenchProgress& progress) {
+  auto say = [&](const std::string& m) { progress(scene.name + ": " + m, false); };
+  nlohmann::json j;
+  j["name"] = scene.name;
+  j["input"] = scene.input;
+  j["kind"] = scene.kind;
+  j["origin"] = scene.origin;
+
+  // --- Load ---------------------------------------------------------------------------------
+  say("loading " + scene.input);
+  auto start = std::chrono::steady_clock::now();
+  std::vector<std::string> warnings;
+  anim::LoadOptions load;
+  load.fps = o.fps;
+  load.clip = o.clip;
+  load.warning = [&warnings](const std::string& w) { warnings.push_back(w); };
+  anim::Animation a = anim::load(scene.input, load);
+  j["load_s"] = secondsSince(start);
+  j["warnings"] = warnings;
+  if (a.keyframeCount() < 2) throw NotAnAnimation(scene.input + ": one keyframe (a static scene, not an animation)");
+  if (a.triangleCount() == 0) throw anim::Error(scene.input + ": no triangles");
+  j["triangles"] = a.triangleCount();
+  j["vertices"] = a.vertexCount();
+  j["keyframes"] = a.keyframeCount();
+  j["time_start"] = a.startTime();
+  j["time_end"] = a.endTime();
+  say(std::to_string(a.triangleCount()) + " triangles, " + std::to_string(a.keyframeCount()) + " keyframes");
+
+  const anim::Animation rep = a.resample(o.frames);
+  const PrimitiveBoxes repBoxes = triangleBoxes(rep.indices(), rep.allPositions(), o.frames);
+  const std::vector<double> evalTimes = a.uniformTimes(o.evalFrames);
+  FrameSource evaluation;
+  evaluation.frameCount = o.evalFrames;
+  evaluation.primCount = a.triangleCount();
+  evaluation.fill = [&a, &evalTimes](uint32_t frame, std::span<Aabb> out) {
+    const std::vector<float> positions = a.positionsAt(evalTimes[frame]);
+    triangleBoxes(a.indices(), positions, out);
+  };
+  const BaselineConfig config = baselineConfig(o, progress);
+
+  // --- Table 1 ------------------------------------------------------------------------------
+  say("Table 1: SAH-rebuild, SAH*, SAH0, T-SAH k=0/2/4 over " + std::to_string(o.evalFrames) + " frames");
+  start = std::chrono::steady_clock::now();
+  std::vector<MethodSpec> specs;
+  for (const std::string& id : kTable1Methods) specs.push_back(MethodSpec::parse(id));
+  const std::vector<MethodResult> table1 = compareMethods(specs, repBoxes, evaluation, config);
+  nlohmann::json t1;
+  t1["frames"] = o.frames;
+  t1["eval_frames"] = o.evalFrames;
+  t1["eval_times"] = evalTimes;
+  t1["wall_s"] = secondsSince(start);
+  t1["methods"] = nlohmann::json::array();
+  for (std::size_t m = 0; m < table1.size(); ++m)
+    t1["methods"].push_back({{"name", kTable1Methods[m]},
+                             {"label", methodLabel(kTable1Methods[m])},
+                             {"build_s", table1[m].buildSeconds},
+                             {"average", table1[m].average},
+                             {"maximum", table1[m].maximum},
+                             {"per_frame", table1[m].perFrame}});
+  j["table1"] = t1;
+
+  // --- Trees for the runtime, convergence of the three node selections ------------------------
+  // The Metropolis-Hastings run is the T-SAH k=0 tree of Table 1 (same seed, same tree).
+  using Selection = InsertionOptimizer::Selection;
+  const std::vector<std::pair<std::string, Selection>> selections = {
+      {"mh", Selection::MetropolisHastings}, {"random", Selection::Uniform}, {"batch", Selection::BatchSort}};
+  Bvh tsahTree;
+  j["convergence"] = nlohmann::json::array();
+  for (const auto& [id, selection] : selections) {
+    if (id != "mh" && !o.convergence) continue;
+    say("T-SAH k=0 optimization, " + id + " node selection");
+    BaselineConfig c = config;
+    c.optimizer.selection = selection;
+    InsertionOptimizer::Result details;
+    start = std::chrono::steady_clock::now();
+    Bvh tree = buildTSah(repBoxes, 0, c, &details);
+    const double wall = secondsSince(start);
+    j["convergence"].push_back({{"selection", id},
+                                {"label", id == "mh"       ? "Metropolis-Hastings"
+                                          : id == "random" ? "random"
+                                                           : "batch sorting"},
+                                {"initial_cost", details.initialCost},
+                                {"final_cost", details.finalCost},
+                                {"seconds", details.seconds},
+                                {"build_wall_s", wall},
+                                {"steps", details.steps},
+                                {"accepted_steps", details.acceptedSteps},
+                                {"history", historyJson(details)}});
+    if (id == "mh") tsahTree = std::move(tree);
+  }
+  say("SAH0 and SAH* trees for the runtime");
+  const Bvh sah0Tree = buildSah0(repBoxes, config);
+  const Bvh sahStarTree = buildSahStar(repBoxes, config);
+
+  // --- Segments -------------------------------------------------------------------------------
+  std::vector<SegmentTree> segmentTrees;
+  if (o.segments > 1) {
+    say("T-SAH k=0 for " + std::to_string(o.segments) + " equal-time segments");
+    start = std::chrono::steady_clock::now();
+    segmentTrees = buildSegmentTrees(a, o.segments, o.frames, MethodSpec::parse("tsah0"), config);
+    const double wall = secondsSince(start);
+    const std::vector<double> costs = evaluateSegmentTrees(a, segmentTrees, evalTimes, config.cost, o.threads);
+    const std::vector<double>& one = table1[3].perFrame;  // tsah0
+    nlohmann::json parts = nlohmann::json::array();
+    double build = 0.0;
+    for (const SegmentTree& s : segmentTrees) {
+      parts.push_back({{"time_start", s.segment.start},
+                       {"time_end", s.segment.end},
+                       {"build_s", s.buildSeconds},
+                       {"nodes", s.bvh.nodeCount()},
+                       {"optimized_cost", s.optimization.finalCost}});
+      build += s.buildSeconds;
+    }
+    j["segments"] = {{"count", o.segments},
+                     {"parts", parts},
+                     {"build_s", build},
+                     {"wall_s", wall},
+                     {"one_tree", {{"build_s", table1[3].buildSeconds}, {"average", mean(one)}, {"maximum", maximum(one)}}},
+                     {"k_trees", {{"average", mean(costs)}, {"maximum", maximum(costs)}, {"per_frame", costs}}}};
+  }
+
+  // --- Runtime ----------------------------------------------------------------------------------
+  RuntimeSetup setup;
+  setup.times = a.uniformTimes(o.traceFrames);
+  const anim::Bounds ab = a.bounds();
+  Aabb bounds;
+  bounds.extend(Vec3{ab.min[0], ab.min[1], ab.min[2]});
+  bounds.extend(Vec3{ab.max[0], ab.max[1], ab.max[2]});
+  const Vec3 up{0, 1, 0};
+  std::vector<anim::CameraKey> path(a.cameraPath().begin(), a.cameraPath().end());
+  const Camera fitted = fitCamera(bounds, up, 45.0f, float(o.width) / float(o.height));
+  setup.camera = [path, fitted](double t) { return path.empty() ? fitted : cameraAt(path, t); };
+  setup.lighting = fitLighting(bounds, setup.camera(setup.times.front()), up, 0.1f, o.ground);
+  setup.settings.width = o.width;
+  setup.settings.height = o.height;
+  setup.settings.aoSamples = o.aoRays;
+  setup.settings.shadowSamples = o.shadowRays;
+  setup.settings.seed = static_cast<uint32_t>(o.seed);
+  setup.threads = o.threads;
+  setup.progress = [&](const std::string& m) { progress(scene.name + ": " + m, true); };
+
+  const bool gpu = o.device == "cuda";
+  RefitTrees sah0{"sah0", "SAH0 refit", {&sah0Tree}, {}};
+  RefitTrees sahStar{"sahstar", "SAH* refit", {&sahStarTree}, {}};
+  RefitTrees tsah{"tsah0", "T-SAH k=0 refit", {&tsahTree}, {}};
+  RefitTrees segmented{"tsah0-seg" + std::to_string(o.segments),
+                       "T-SAH k=0 refit, " + std::to_string(o.segments) + " trees",
+                       {},
+                       {}};
+  for (const SegmentTree& s : segmentTrees) {
+    segmented.trees.push_back(&s.bvh);
+    segmented.segments.push_back(s.segment);
+  }
+  say(std::string("Table 2 on the ") + (gpu ? "GPU" : "CPU") + ": " + std::to_string(setup.times.size()) + " frames at " +
+      std::to_string(o.width) + "x" + std::to_string(o.height) + ", 1 primary + " + std::to_string(o.aoRays) + " AO + " +
+      std::to_string(o.shadowRays) + " shadow rays per pixel");
+  nlohmann::json runtime;
+  runtime["device"] = gpu ? "cuda" : "cpu";
+  runtime["frames"] = setup.times.size();
+  runtime["width"] = o.width;
+  runtime["height"] = o.height;
+  runtime["ao_rays"] = o.aoRays;
+  runtime["shadow_rays"] = o.shadowRays;
+  runtime["ground"] = o.ground;
+  runtime["camera"] = path.empty() ? "fitted to the animation bounds" : "the animation's camera path";
+  runtime["methods"] = nlohmann::json::array();
+  start = std::chrono::steady_clock::now();
+  Image picture;
+  const uint32_t pictureFrame = static_cast<uint32_t>(setup.times.size() / 2);
+  std::vector<RefitTrees> refits = {sah0, sahStar, tsah};
+  if (!segmentTrees.empty()) refits.push_back(segmented);
+  for (const RefitTrees& r : refits) {
+    Image* image = r.name == "tsah0" ? &picture : nullptr;
+    const RuntimeMethod m =
+        gpu ? runGpuRefit(a, r, setup, image, pictureFrame) : runCpuRefit(a, r, setup, image, pictureFrame);
+    runtime["methods"].push_back(toJson(m));
+  }
+  if (gpu) {
+    for (const char* method : {"lbvh", "hlbvh-sah"})
+      runtime["methods"].push_back(toJson(runGpuRebuild(a, tsahTree, method, config.cost, o.maxLeaf, setup)));
+  } else {
+    for (CpuRebuild kind : {CpuRebuild::Sweep, CpuRebuild::Binned})
+      runtime["methods"].push_back(toJson(runCpuRebuild(a, tsahTree, kind, config.cost, o.maxLeaf, setup)));
+  }
+  runtime["wall_s"] = secondsSince(start);
+  j["runtime"] = runtime;
+  if (picture.width > 0) {
+    std::error_code ec;
+    fs::create_directories(outDir / "images", ec);
+    const std::string file = "images/" + scene.name + ".png";
+    savePng((outDir / file).string(), halfSize(picture));
+    j["image"] = {{"file", file},
+                  {"time", setup.times[pictureFrame]},
+                  {"method", "tsah0"},
+                  {"note", picture.width >= 512 ? "traced at full size, stored at half size" : "as traced"}};
+  }
+
+  // --- Embree peer (CPU) ------------------------------------------------------------------------
+  nlohmann::json peer;
+  peer["status"] = embreeStatus();
+  if (!gpu && o.embree && embreeAvailable()) {
+    say("the toolkit's T-SAH refit against Embree on the same rays");
+    start = std::chrono::steady_clock::now();
+    peer["frames"] = setup.times.size();
+    peer["methods"] = nlohmann::json::array();
+    for (const RuntimeMethod& m : runEmbreeComparison(a, tsahTree, "tsah0", "toolkit: T-SAH k=0 refit", setup))
+      peer["methods"].push_back(toJson(m));
+    peer["wall_s"] = secondsSince(start);
+  } else if (gpu) {
+    peer["skipped"] = "the Embree peer runs with --device cpu";
+  } else if (!o.embree) {
+    peer["skipped"] = "--no-embree";
+  }
+  j["embree"] = peer;
+  say("done");
+  return j;
+}
+
+nlohmann::json machineJson(bool withGpu) {
+  nlohmann::json m;
+  std::string cpu = fileValue("/proc/cpuinfo", "model name", ':');
+  m["cpu"] = cpu.empty() ? "unknown" : cpu;
+  m["logical_cores"] = std::thread::hardware_concurrency();
+  const std::string memory = fileValue("/proc/meminfo", "MemTotal", ':');  // "24531232 kB"
+  if (!memory.empty()) m["memory_gib"] = std::stod(memory) / (1024.0 * 1024.0);
+  m["os"] = fileValue("/etc/os-release", "PRETTY_NAME", '=');
+  struct utsname u;
+  if (::uname(&u) == 0) m["kernel"] = std::string(u.sysname) + " " + u.release + " " + u.machine;
+  if (withGpu) m["gpu"] = gpuJson();
+  return m;
+}
+
+nlohmann::json versionsJson() {
+  nlohmann::json v;
+  v["tsah"] = TSAH_VERSION;
+#if defined(__clang__)
+  v["compiler"] = std::string("clang ") + __clang_version__;
+#elif defined(__GNUC__)
+  v["compiler"] = std::string("GCC ") + __VERSION__;
+#else
+  v["compiler"] = "unknown";
+#endif
+#ifdef NDEBUG
+  v["build"] = "optimized (NDEBUG)";
+#else
+  v["build"] = "debug (assertions on)";
+#endif
+  v["embree"] = embreeStatus();
+#if TSAH_HAVE_CUDA
+  v["cuda_runtime_built"] = true;
+#else
+  v["cuda_runtime_built"] = false;
+#endif
+  return v;
+}
+
+nlohmann::json optionsJson(const BenchOptions& o) {
+  return {{"device", o.device},     {"quick", o.quick},          {"seed", o.seed},
+          {"frames", o.frames},     {"eval_frames", o.evalFrames}, {"trace_frames", o.traceFrames},
+          {"width", o.width},       {"height", o.height},        {"ao_rays", o.aoRays},
+          {"shadow_rays", o.shadowRays}, {"ground", o.ground},   {"max_leaf", o.maxLeaf},
+          {"ct", o.ct},             {"ci", o.ci},                {"segments", o.segments},
+          {"threads", o.threads},   {"embree", o.embree},        {"convergence", o.convergence}};
+}
+
+}  // namespace tsah::bench

@@ -1,0 +1,69 @@
+#pragma once
+// `tsah bench`: the paper's evaluation on one scene at a time, as one JSON object per scene (the
+// layout is documented in docs/bench.md; report.hpp turns it into results.md and the plots).
+//
+// Per scene:
+//   table1       SAH-rebuild, SAH*, SAH0, T-SAH k=0/2/4 (tsah::compareMethods): build time, average
+//                and maximum cost over the evaluation frames, the cost of every evaluation frame
+//   convergence  the T-SAH (k=0) optimization with Metropolis-Hastings, random and batch-sort
+//                node selection: cost after every batch against time (the paper's Figure 3)
+//   segments     K T-SAH trees for K equal-time parts versus one tree (the paper's BART Museum*)
+//   runtime      per-frame update + trace with the renderer's workload: refit of SAH0, SAH*, T-SAH
+//                and the K segment trees versus per-frame rebuilds (CPU: sweep and binned SAH;
+//                GPU: LBVH and HLBVH-SAH)
+//   embree       CPU only: the toolkit's T-SAH refit against Embree rebuilds and refit on the same rays
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "bench/data_scan.hpp"
+
+namespace tsah::bench {
+
+struct BenchOptions {
+  std::string device = "cpu";   // cpu or cuda (the runtime part)
+  bool quick = false;           // smoke run: the caller sets the smaller sizes below
+  uint64_t seed = 1;            // optimizer seed (and per-pixel random numbers)
+  uint32_t frames = 5;          // representative frames
+  uint32_t evalFrames = 50;     // evaluation frames of the cost tables
+  uint32_t traceFrames = 50;    // frames traced per runtime method
+  uint32_t width = 1024, height = 768;
+  uint32_t aoRays = 8, shadowRays = 2;
+  bool ground = false;          // the analytic ground plane (the paper traces the mesh only)
+  uint32_t maxLeaf = 8;
+  float ct = 3.0f, ci = 2.0f;
+  uint32_t segments = 3;        // K of the segmented T-SAH (1: skip)
+  unsigned threads = 0;         // CPU threads (0: all cores)
+  bool embree = true;           // run the Embree peer when built with it (CPU device only)
+  bool convergence = true;      // run the three node selections for the convergence plot
+  double fps = 0.0;             // import: sampling rate of continuous animations (0: the file's own)
+  std::string clip;             // import: the animation clip of a multi-clip model (empty: the first)
+};
+
+// Progress: `detail` messages are frequent (optimizer batches) and may be thinned out by the caller.
+using BenchProgress = std::function<void(const std::string& message, bool detail)>;
+
+// Thrown by benchScene for an input that is not an animation (one keyframe): the scene is skipped.
+class NotAnAnimation : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Runs the benchmark on one scene. The traced picture of the T-SAH refit (middle frame, half size
+// when large) goes to outDir/images/<scene>.png. Throws anim::Error for unreadable inputs.
+nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& options, const std::filesystem::path& outDir,
+                          const BenchProgress& progress);
+
+// The machine (CPU model, cores, memory, OS; the GPU when withGpu), the versions (tsah, compiler,
+// Embree, CUDA) and the options, for results.json.
+nlohmann::json machineJson(bool withGpu);
+nlohmann::json versionsJson();
+nlohmann::json optionsJson(const BenchOptions& options);
+
+// The label the report prints for a cost-table method id (rebuild -> SAH-rebuild, tsah2 -> T-SAH k=2).
+std::string methodLabel(const std::string& id);
+
+}  // namespace tsah::bench

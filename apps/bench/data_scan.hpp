@@ -1,0 +1,69 @@
+#pragma once
+// Finding the benchmark's scenes: every real animation in a data folder, read as it is laid out
+// (archives included), or inputs named on the command line.
+//
+// In a data folder:
+//   *.tar.xz, *.txz, *.tar   unpacked into the cache folder (never into the data folder), then scanned
+//   NAME.xz                  decompressed into the cache when NAME is an animation format; a
+//                            compressed single static mesh (.obj/.off/.ply/.stl) is skipped
+//   a folder of >= 2 meshes  an OBJ/PLY/OFF/STL sequence, named after the folder
+//   a folder of *.aff        BART scenes: every .aff with an animation range (`a`) that no other .aff
+//                            of the folder includes and whose includes all exist; named after the
+//                            folder when it holds one such scene, else after the file
+//   *.md2, *.tanim, *.gltf, *.glb, *.fbx, *.dae   one scene each, named after the file
+//   single static meshes     skipped (not animations)
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace tsah::bench {
+
+struct SceneSource {
+  std::string name;    // short name used on the command line and in the report (horse-gallop, robot)
+  std::string input;   // what anim::load reads (a folder, .aff, .md2, .tanim, ...)
+  std::string kind;    // sequence, bart, md2, tanim, model
+  std::string origin;  // where it came from in the data folder (an archive, a file), or the path given
+};
+
+struct SkippedEntry {
+  std::string path;
+  std::string reason;
+};
+
+struct DataScan {
+  std::vector<SceneSource> scenes;  // sorted by name, names unique
+  std::vector<SkippedEntry> skipped;
+};
+
+struct ScanOptions {
+  std::filesystem::path cache;  // archives are unpacked below this folder (created when needed)
+  std::function<void(const std::string&)> progress;  // "unpacking X" messages; may be empty
+};
+
+// Scans a data folder as described above. Throws anim::Error when the folder does not exist or an
+// archive cannot be unpacked.
+DataScan scanDataFolder(const std::filesystem::path& folder, const ScanOptions& options);
+
+// The BART scene files of a folder of .aff files (file names, sorted); files that look like scenes
+// but include a missing file are added to `skipped` with the reason.
+std::vector<std::string> bartSceneFiles(const std::filesystem::path& folder, std::vector<SkippedEntry>* skipped = nullptr);
+
+// True when the folder holds at least two mesh files of one format (an animation as a frame sequence).
+bool isFrameSequenceFolder(const std::filesystem::path& folder);
+
+// Unpacks a .tar.xz/.txz/.tar archive (or decompresses a single .xz file) into a folder below
+// `cache` named after the archive and its size and modification time, so a changed archive is
+// unpacked again and an unchanged one only once. Unpacks into a staging folder first and renames
+// it, so an interrupted run never leaves a half-unpacked cache behind. Returns the folder (for a
+// single .xz file: the decompressed file). Throws anim::Error when tar/xz fail.
+std::filesystem::path unpackArchive(const std::filesystem::path& archive, const std::filesystem::path& cache);
+
+// A scene for an input named on the command line (a file or folder anim::load reads).
+SceneSource explicitScene(const std::filesystem::path& input);
+
+// The data folder to use: `given` when not empty, else $TSAH_DATA_DIR, else ../shared/data next to
+// the source checkout the program was built from, else ../shared/data relative to the working folder.
+std::filesystem::path defaultDataFolder(const std::string& given, const std::string& sourceDir);
+
+}  // namespace tsah::bench

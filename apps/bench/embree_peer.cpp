@@ -1,0 +1,155 @@
+// Embree 3 as the CPU peer (built only when CMake finds Embree).
+#include "bench/embree_peer.hpp"
+
+#include <embree3/rtcore.h>
+
+#include <chrono>
+#include <cstring>
+#include <limits>
+#include <mutex>
+
+#include "anim/error.hpp"
+
+namespace tsah::bench {
+
+struct EmbreePeer::Impl {
+  RTCDevice device = nullptr;
+  RTCScene scene = nullptr;
+  RTCGeometry geometry = nullptr;
+  float* vertices = nullptr;
+  uint32_t vertexCount = 0;
+  std::mutex errorMutex;
+  std::string error;  // the first error Embree reported
+
+  void check(const char* what) {
+    const RTCError code = rtcGetDeviceError(device);
+    if (code == RTC_ERROR_NONE) return;
+    std::lock_guard<std::mutex> lock(errorMutex);
+    throw anim::Error(std::string("Embree: ") + what + " failed" + (error.empty() ? "" : ": " + error));
+  }
+};
+
+const char* EmbreePeer::modeName(Mode mode) {
+  switch (mode) {
+    case Mode::RebuildMedium: return "embree-medium";
+    case Mode::RebuildHigh: return "embree-high";
+    case Mode::Refit: return "embree-refit";
+  }
+  return "embree";
+}
+
+EmbreePeer::EmbreePeer(std::span<const uint32_t> indices, uint32_t vertexCount, Mode mode, unsigned threads)
+    : impl_(std::make_unique<Impl>()) {
+  Impl& m = *impl_;
+  m.vertexCount = vertexCount;
+  const std::string config = threads > 0 ? "threads=" + std::to_string(threads) : std::string();
+  m.device = rtcNewDevice(config.empty() ? nullptr : config.c_str());
+  if (!m.device) throw anim::Error("Embree: cannot create a device (rtcNewDevice)");
+  rtcSetDeviceErrorFunction(
+      m.device,
+      [](void* user, RTCError, const char* message) {
+        auto* impl = static_cast<Impl*>(user);
+        std::lock_guard<std::mutex> lock(impl->errorMutex);
+        if (impl->error.empty() && message) impl->error = message;
+      },
+      &m);
+  m.scene = rtcNewScene(m.device);
+  // Refit needs the two-level mode (scene quality LOW), the only one in which Embree honours a
+  // per-geometry build quality; the rebuilds use one BVH over all triangles of the given quality.
+  switch (mode) {
+    case Mode::RebuildMedium: rtcSetSceneBuildQuality(m.scene, RTC_BUILD_QUALITY_MEDIUM); break;
+    case Mode::RebuildHigh: rtcSetSceneBuildQuality(m.scene, RTC_BUILD_QUALITY_HIGH); break;
+    case Mode::Refit:
+      rtcSetSceneBuildQuality(m.scene, RTC_BUILD_QUALITY_LOW);
+      rtcSetSceneFlags(m.scene, RTC_SCENE_FLAG_DYNAMIC);
+      break;
+  }
+  m.geometry = rtcNewGeometry(m.device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  if (mode == Mode::Refit) rtcSetGeometryBuildQuality(m.geometry, RTC_BUILD_QUALITY_REFIT);
+  m.vertices = static_cast<float*>(rtcSetNewGeometryBuffer(m.geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                                           3 * sizeof(float), vertexCount));
+  auto* tris = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(m.geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                              3 * sizeof(uint32_t), indices.size() / 3));
+  m.check("creating the triangle geometry");
+  if (!m.vertices || !tris) throw anim::Error("Embree: cannot allocate the geometry buffers");
+  std::memcpy(tris, indices.data(), indices.size_bytes());
+  std::memset(m.vertices, 0, std::size_t(vertexCount) * 3 * sizeof(float));
+  rtcCommitGeometry(m.geometry);
+  rtcAttachGeometry(m.scene, m.geometry);
+  m.check("attaching the geometry");
+}
+
+EmbreePeer::~EmbreePeer() {
+  if (impl_->geometry) rtcReleaseGeometry(impl_->geometry);
+  if (impl_->scene) rtcReleaseScene(impl_->scene);
+  if (impl_->device) rtcReleaseDevice(impl_->device);
+}
+
+double EmbreePeer::update(std::span<const float> positions) {
+  Impl& m = *impl_;
+  if (positions.size() != std::size_t(m.vertexCount) * 3)
+    throw anim::Error("Embree peer: expected " + std::to_string(std::size_t(m.vertexCount) * 3) + " coordinates, got " +
+                      std::to_string(positions.size()));
+  const auto start = std::chrono::steady_clock::now();
+  std::memcpy(m.vertices, positions.data(), positions.size_bytes());
+  rtcUpdateGeometryBuffer(m.geometry, RTC_BUFFER_TYPE_VERTEX, 0);
+  rtcCommitGeometry(m.geometry);
+  rtcCommitScene(m.scene);
+  const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  m.check("committing the scene");
+  return ms;
+}
+
+BatchTracer EmbreePeer::tracer() const {
+  const RTCScene scene = impl_->scene;
+  BatchTracer tracer;
+  tracer.closest = [scene](const std::vector<Ray>& rays, std::size_t first, std::size_t count, uint64_t& hits) {
+    RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    for (std::size_t i = first; i < first + count; ++i) {
+      const Ray& r = rays[i];
+      RTCRayHit rh;
+      rh.ray.org_x = r.org.x;
+      rh.ray.org_y = r.org.y;
+      rh.ray.org_z = r.org.z;
+      rh.ray.tnear = r.tmin;
+      rh.ray.dir_x = r.dir.x;
+      rh.ray.dir_y = r.dir.y;
+      rh.ray.dir_z = r.dir.z;
+      rh.ray.time = 0.0f;
+      rh.ray.tfar = r.tmax;
+      rh.ray.mask = 0xffffffffu;
+      rh.ray.id = 0;
+      rh.ray.flags = 0;
+      rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+      rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+      rtcIntersect1(scene, &context, &rh);
+      hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID ? 1u : 0u;
+    }
+  };
+  tracer.occluded = [scene](const std::vector<Ray>& rays, std::size_t first, std::size_t count, uint64_t& occluded) {
+    RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    for (std::size_t i = first; i < first + count; ++i) {
+      const Ray& r = rays[i];
+      RTCRay ray;
+      ray.org_x = r.org.x;
+      ray.org_y = r.org.y;
+      ray.org_z = r.org.z;
+      ray.tnear = r.tmin;
+      ray.dir_x = r.dir.x;
+      ray.dir_y = r.dir.y;
+      ray.dir_z = r.dir.z;
+      ray.time = 0.0f;
+      ray.tfar = r.tmax;
+      ray.mask = 0xffffffffu;
+      ray.id = 0;
+      ray.flags = 0;
+      rtcOccluded1(scene, &context, &ray);
+      occluded += ray.tfar < 0.0f ? 1u : 0u;  // Embree sets tfar to -inf for an occluded ray
+    }
+  };
+  return tracer;
+}
+
+}  // namespace tsah::bench

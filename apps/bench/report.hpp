@@ -1,0 +1,39 @@
+#pragma once
+// Turning results.json into results.md and PNG plots. Everything here reads the JSON alone, so
+// `tsah bench --report-only DIR` can redo the report of a run made elsewhere (the GPU machine has
+// no gnuplot).
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace tsah::bench {
+
+// results.md: machine, options, commands, then per scene Table 1 and Table 2 (with the paper's
+// figures beside them where results.json holds them), the segmenting experiment, the Embree
+// comparison with a sentence on where each wins, and links to the plots listed in results["plots"].
+std::string renderMarkdown(const nlohmann::json& results);
+
+struct PlotOutcome {
+  bool made = false;
+  std::string status;               // "gnuplot 5.4 patchlevel 4" or why plots were skipped
+  std::vector<std::string> files;   // PNGs relative to the output folder
+};
+
+// Writes per scene plots/<scene>-cost.png (cost per evaluation frame per method: the paper's
+// Figure 4 left), -convergence.png (average cost against optimization time for the three node
+// selections: Figure 3), -total.png and -speed.png (total frame time and trace speed per frame per
+// runtime method: Figures 5 and 6) and, with Embree results, -embree.png; each from a data file and
+// a gnuplot script kept next to it. Skipped (with the reason in status) when gnuplot is missing.
+PlotOutcome makePlots(const nlohmann::json& results, const std::filesystem::path& outDir);
+
+// "gnuplot 5.4 patchlevel 4", or empty when gnuplot cannot be run.
+std::string gnuplotVersion();
+
+// Number formatting of the report: costs and seconds with 2 decimals, milliseconds and rates with
+// 3 significant digits or more ("0.0412", "3.85", "41.2", "412", "4120").
+std::string formatFixed(double value, int decimals);
+std::string formatSignificant(double value);
+
+}  // namespace tsah::bench

@@ -1,0 +1,96 @@
+#pragma once
+// The runtime half of the benchmark (the paper's Table 2, Figures 5 and 6): every frame is updated
+// (refit of one tree, or of the tree of the frame's segment, or a rebuild) and traced with the
+// renderer's workload (1 primary, N ambient-occlusion and M shadow rays per pixel), on the CPU
+// (CpuRuntime + renderFrame) or on the GPU (GpuRuntime + renderFrameGpu, when built with CUDA).
+// The CPU side also runs the Embree peer on the same frames and rays.
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "anim/animation.hpp"
+#include "bench/segments.hpp"
+#include "tsah/binned_sah_builder.hpp"
+#include "tsah/bvh.hpp"
+#include "tsah/camera.hpp"
+#include "tsah/image.hpp"
+#include "tsah/renderer.hpp"
+
+namespace tsah::bench {
+
+// What every runtime method traces: the frames, the view and the ray workload.
+struct RuntimeSetup {
+  std::vector<double> times;                     // animation time of each traced frame
+  std::function<Camera(double time)> camera;     // the camera at a time
+  SceneLighting lighting;
+  RenderSettings settings;                       // image size, AO/shadow rays, seed (frame is set per frame)
+  unsigned threads = 0;                          // CPU worker threads (0: all cores)
+  std::function<void(const std::string&)> progress;
+};
+
+// One frame of one method.
+struct FrameTiming {
+  double time = 0.0;
+  double updateMs = 0.0;  // interpolation + refit + Woop, or interpolation + rebuild (+ refit/Woop)
+  double traceMs = 0.0;   // the three ray passes
+  double totalMs = 0.0;   // CPU: update + trace; GPU: update + the whole rendered frame on the device
+  RenderStats rays;       // rays and milliseconds per pass
+};
+
+// One row of Table 2 (or of the Embree comparison).
+struct RuntimeMethod {
+  std::string name;   // sah0, sahstar, tsah0, tsah0-seg3, rebuild-sweep, rebuild-binned, lbvh, hlbvh-sah, embree-*
+  std::string label;  // as the report prints it
+  std::string update; // "refit" or "rebuild"
+  std::vector<FrameTiming> frames;
+  nlohmann::json extra = nlohmann::json::object();  // method-specific figures (agreement with the toolkit, ...)
+};
+
+// The JSON of a method: name, label, update, average {update_ms, trace_ms, total_ms, mrays_per_s
+// {primary, ao, shadow, total}, rays_per_frame {...}} (times: means over frames; rates: all rays of
+// a type over all time spent on that type) and per_frame arrays (time, update_ms, trace_ms,
+// total_ms, mrays_per_s).
+nlohmann::json toJson(const RuntimeMethod& method);
+
+// Trees a refit method traces: one tree for the whole animation, or one per segment.
+struct RefitTrees {
+  std::string name, label;
+  std::vector<const Bvh*> trees;      // one, or one per segment
+  std::vector<TimeSegment> segments;  // empty for a single tree, else one per tree
+};
+
+// CPU: per frame interpolate, refit (+ Woop), renderFrame. When image is given, the frame at
+// imageFrame is kept in it (the rendered picture of this method).
+RuntimeMethod runCpuRefit(const anim::Animation& animation, const RefitTrees& trees, const RuntimeSetup& setup,
+                          Image* image = nullptr, uint32_t imageFrame = 0);
+
+enum class CpuRebuild { Sweep, Binned };
+// CPU: per frame interpolate and build a new tree (sweep SAH + leaf collapse, or binned SAH, with
+// leaves of at most maxLeaf triangles), then refit/Woop it and renderFrame.
+RuntimeMethod runCpuRebuild(const anim::Animation& animation, const Bvh& initialTree, CpuRebuild builder,
+                            const CostModel& cost, uint32_t maxLeaf, const RuntimeSetup& setup);
+
+// CPU peer: the toolkit's CPU runtime refitting `tree` against Embree (a rebuild per frame with
+// medium and high quality, and refit), all on the same frames and the same rays (made once per
+// frame with makeRayBatch from the toolkit's refitted tree). The first method is the toolkit's
+// (name given), then one per Embree mode; each method's extra holds how many primary hits, AO and
+// shadow occlusions differ from the toolkit's. Empty when the bench was built without Embree.
+std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& animation, const Bvh& tree,
+                                               const std::string& name, const std::string& label,
+                                               const RuntimeSetup& setup);
+
+// GPU (built with CUDA): per frame GpuRuntime::updateAt (interpolation, refit, Woop on the device)
+// and renderFrameGpu. Throws anim::Error when the bench was built without CUDA or no device exists.
+RuntimeMethod runGpuRefit(const anim::Animation& animation, const RefitTrees& trees, const RuntimeSetup& setup,
+                          Image* image = nullptr, uint32_t imageFrame = 0);
+// GPU: per frame GpuRuntime::rebuildAt (lbvh or hlbvh-sah, collapse to maxLeaf, Woop) and renderFrameGpu.
+RuntimeMethod runGpuRebuild(const anim::Animation& animation, const Bvh& initialTree, const std::string& method,
+                            const CostModel& cost, uint32_t maxLeaf, const RuntimeSetup& setup);
+// The GPU as JSON (name, memory, compute capability, driver and runtime versions), or null without CUDA.
+nlohmann::json gpuJson();
+bool gpuAvailable();
+
+}  // namespace tsah::bench

@@ -1,0 +1,125 @@
+// The GPU side of the runtime benchmark: GpuRuntime + renderFrameGpu per method (built with CUDA).
+#include <memory>
+
+#include "anim/error.hpp"
+#include "bench/runtime_bench.hpp"
+#include "tsah/flat_bvh.hpp"
+
+#if TSAH_HAVE_CUDA
+#include "tsah_cuda/device.hpp"
+#include "tsah_cuda/gpu_runtime.hpp"
+#endif
+
+namespace tsah::bench {
+
+#if TSAH_HAVE_CUDA
+
+namespace {
+
+void report(const RuntimeSetup& setup, const std::string& label, std::size_t frame) {
+  if (setup.progress && (frame == 0 || (frame + 1) % 10 == 0 || frame + 1 == setup.times.size()))
+    setup.progress(label + ": frame " + std::to_string(frame + 1) + "/" + std::to_string(setup.times.size()));
+}
+
+void requireDevice() {
+  if (!cuda::deviceAvailable()) throw anim::Error("--device cuda: no CUDA device is available on this machine");
+}
+
+// Renders the current frame: the ray passes (device time of the traversal kernels) and the whole
+// frame on the device; the image is downloaded only when asked for, in a separate untimed render.
+void renderTimed(cuda::GpuRuntime& gpu, const RuntimeSetup& setup, double t, const RenderSettings& settings,
+                 FrameTiming& ft, Image* image) {
+  cuda::GpuRenderTimings timings;
+  ft.rays = cuda::renderFrameGpu(gpu, setup.camera(t), setup.lighting, settings, nullptr, &timings);
+  ft.traceMs = ft.rays.total().ms;
+  ft.totalMs = ft.updateMs + timings.totalMs;
+  if (image) cuda::renderFrameGpu(gpu, setup.camera(t), setup.lighting, settings, image, nullptr);
+}
+
+}  // namespace
+
+bool gpuAvailable() { return cuda::deviceAvailable(); }
+
+nlohmann::json gpuJson() {
+  if (!cuda::deviceAvailable()) return nullptr;
+  const cuda::DeviceInfo d = cuda::describeDevice(0);
+  return {{"name", d.name},
+          {"compute_capability", std::to_string(d.computeMajor) + "." + std::to_string(d.computeMinor)},
+          {"multiprocessors", d.multiprocessors},
+          {"memory_mib", double(d.globalMemoryBytes) / (1024.0 * 1024.0)},
+          {"driver_version", d.driverVersion},
+          {"runtime_version", d.runtimeVersion}};
+}
+
+RuntimeMethod runGpuRefit(const anim::Animation& a, const RefitTrees& trees, const RuntimeSetup& setup, Image* image,
+                          uint32_t imageFrame) {
+  requireDevice();
+  std::vector<std::unique_ptr<cuda::GpuRuntime>> runtimes;
+  for (const Bvh* tree : trees.trees) runtimes.push_back(std::make_unique<cuda::GpuRuntime>(flattenBvh(*tree), a));
+  RenderSettings settings = setup.settings;
+  // Warm-up (untimed): the first update and render of a runtime capture its CUDA graphs.
+  for (auto& gpu : runtimes) {
+    gpu->updateAt(setup.times.front());
+    cuda::renderFrameGpu(*gpu, setup.camera(setup.times.front()), setup.lighting, settings, nullptr, nullptr);
+  }
+  RuntimeMethod m{trees.name, trees.label, "refit", {}, nlohmann::json::object()};
+  for (std::size_t f = 0; f < setup.times.size(); ++f) {
+    report(setup, trees.label, f);
+    const double t = setup.times[f];
+    cuda::GpuRuntime& gpu = *runtimes[trees.segments.empty() ? 0 : segmentOf(trees.segments, t)];
+    FrameTiming ft;
+    ft.time = t;
+    ft.updateMs = gpu.updateAt(t).totalMs();
+    settings.frame = static_cast<uint32_t>(f);
+    renderTimed(gpu, setup, t, settings, ft, image && f == imageFrame ? image : nullptr);
+    m.frames.push_back(ft);
+  }
+  return m;
+}
+
+RuntimeMethod runGpuRebuild(const anim::Animation& a, const Bvh& initialTree, const std::string& method,
+                            const CostModel& cost, uint32_t maxLeaf, const RuntimeSetup& setup) {
+  requireDevice();
+  cuda::RebuildOptions options;
+  options.method = cuda::parseRebuildMethod(method);
+  options.collapse = true;
+  options.maxLeafSize = maxLeaf;
+  options.cost = cost;
+  cuda::GpuRuntime gpu(flattenBvh(initialTree), a);
+  RenderSettings settings = setup.settings;
+  gpu.rebuildAt(setup.times.front(), options);  // warm-up: captures the rebuild's graph
+  cuda::renderFrameGpu(gpu, setup.camera(setup.times.front()), setup.lighting, settings, nullptr, nullptr);
+  RuntimeMethod m;
+  m.name = method;
+  m.label = options.method == cuda::RebuildMethod::Lbvh ? "LBVH rebuild (HLBVH-med)" : "HLBVH-SAH rebuild";
+  m.update = "rebuild";
+  for (std::size_t f = 0; f < setup.times.size(); ++f) {
+    report(setup, m.label, f);
+    const double t = setup.times[f];
+    FrameTiming ft;
+    ft.time = t;
+    const cuda::RebuildTimings r = gpu.rebuildAt(t, options);
+    ft.updateMs = r.totalMs();
+    settings.frame = static_cast<uint32_t>(f);
+    renderTimed(gpu, setup, t, settings, ft, nullptr);
+    m.frames.push_back(ft);
+  }
+  return m;
+}
+
+#else  // no CUDA
+
+bool gpuAvailable() { return false; }
+nlohmann::json gpuJson() { return nullptr; }
+
+RuntimeMethod runGpuRefit(const anim::Animation&, const RefitTrees&, const RuntimeSetup&, Image*, uint32_t) {
+  throw anim::Error("--device cuda: this tsah was built without the CUDA runtime");
+}
+RuntimeMethod runGpuRebuild(const anim::Animation&, const Bvh&, const std::string&, const CostModel&, uint32_t,
+                            const RuntimeSetup&) {
+  throw anim::Error("--device cuda: this tsah was built without the CUDA runtime");
+}
+
+#endif
+
+}  // namespace tsah::bench

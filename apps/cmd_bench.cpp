@@ -1,0 +1,287 @@
+// tsah bench [SCENES...] [--data DIR] [--device cpu|cuda] [--out DIR] [--quick] [--seed S]
+//   [--frames N] [--eval-frames M] [--trace-frames T] ...
+// The paper's evaluation (Tables 1 and 2, Figures 3-6), the segmenting experiment and the Embree
+// peer on every real animation of the data folder (or the scenes named), into OUT/results.json,
+// OUT/results.md and OUT/plots/*.png. The work is in apps/bench/; this file is the command line.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <nlohmann/json.hpp>
+
+#include "anim/binary_io.hpp"
+#include "anim/error.hpp"
+#include "bench/bench.hpp"
+#include "bench/data_scan.hpp"
+#include "bench/paper.hpp"
+#include "bench/report.hpp"
+#include "bench/runtime_bench.hpp"
+#include "cli.hpp"
+
+#ifndef TSAH_SOURCE_DIR
+#define TSAH_SOURCE_DIR ""
+#endif
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+using tsah::cli::UsageError;
+
+struct Options {
+  std::vector<std::string> scenes;
+  std::string data, out = "bench", cache;
+  std::vector<std::string> notes;
+  tsah::bench::BenchOptions bench;
+  bool list = false, reportOnly = false, noEmbree = false, noConvergence = false;
+};
+
+// Progress on stderr, one line per message with the elapsed time; frequent detail messages
+// (optimizer batches, frames) at most every 10 seconds.
+class ProgressLog {
+ public:
+  void operator()(const std::string& message, bool detail) {
+    const auto now = std::chrono::steady_clock::now();
+    if (detail && now - lastDetail_ < std::chrono::seconds(10)) return;
+    if (detail) lastDetail_ = now;
+    const double s = std::chrono::duration<double>(now - start_).count();
+    std::fprintf(stderr, "[bench %7.1fs] %s\n", s, message.c_str());
+    std::fflush(stderr);
+  }
+
+ private:
+  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+  std::chrono::steady_clock::time_point lastDetail_{};
+};
+
+std::string nowText() {
+  const std::time_t t = std::time(nullptr);
+  char text[64];
+  std::strftime(text, sizeof text, "%Y-%m-%d %H:%M:%S %Z", std::localtime(&t));
+  return text;
+}
+
+// The command line as typed (Linux: /proc/self/cmdline), the program shown as `tsah`.
+std::string commandLine() {
+  std::ifstream in("/proc/self/cmdline", std::ios::binary);
+  std::string all((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::string out;
+  std::size_t start = 0;
+  bool first = true;
+  while (start < all.size()) {
+    std::size_t end = all.find('\0', start);
+    if (end == std::string::npos) end = all.size();
+    std::string arg = all.substr(start, end - start);
+    if (first) arg = "tsah";
+    if (arg.find_first_of(" \t'\"$") != std::string::npos) arg = "'" + arg + "'";
+    out += (first ? "" : " ") + arg;
+    first = false;
+    start = end + 1;
+  }
+  return out.empty() ? "tsah bench" : out;
+}
+
+void writeText(const fs::path& path, const std::string& text) {
+  anim::writeFileAtomically(path.string(), std::span(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
+}
+
+void writeReport(const fs::path& out, const json& results) {
+  writeText(out / "results.json", results.dump(1) + "\n");
+  writeText(out / "results.md", tsah::bench::renderMarkdown(results));
+}
+
+void makePlotsInto(json& results, const fs::path& out, ProgressLog& log) {
+  log("plots", false);
+  const tsah::bench::PlotOutcome plots = tsah::bench::makePlots(results, out);
+  results["plots"] = {{"status", plots.status}, {"files", plots.files}};
+  log("plots: " + plots.status, false);
+}
+
+void reportOnly(const Options& opt) {
+  ProgressLog log;
+  const fs::path out = opt.out;
+  const std::string file = (out / "results.json").string();
+  const std::vector<uint8_t> bytes = anim::readFile(file, std::size_t(1) << 30);
+  json results;
+  try {
+    results = json::parse(bytes.begin(), bytes.end());
+  } catch (const json::exception& e) {
+    throw anim::ImportError(file, std::string("not valid JSON: ") + e.what());
+  }
+  if (!results.is_object() || !results.contains("scenes")) throw anim::ImportError(file, "not a tsah bench results file");
+  makePlotsInto(results, out, log);
+  writeReport(out, results);
+  std::printf("%s\n%s\n", (out / "results.md").c_str(), (out / "results.json").c_str());
+}
+
+void run(Options opt, CLI::App* sub) {
+  using namespace tsah::bench;
+  if (opt.reportOnly) return reportOnly(opt);
+  BenchOptions& b = opt.bench;
+  b.embree = !opt.noEmbree;
+  b.convergence = !opt.noConvergence;
+  const anim::LoadOptions& load = tsah::cli::commandLineLoadOptions();
+  b.fps = load.fps;
+  b.clip = load.clip;
+  // --quick: a smoke run; options given explicitly keep their values.
+  auto given = [sub](const char* name) { return sub->get_option(name)->count() > 0; };
+  if (b.quick) {
+    if (!given("--eval-frames")) b.evalFrames = 10;
+    if (!given("--trace-frames")) b.traceFrames = 3;
+    if (!given("--width")) b.width = 192;
+    if (!given("--height")) b.height = 144;
+  }
+  if (b.device == "cuda" && !gpuAvailable())
+    throw UsageError(versionsJson()["cuda_runtime_built"].get<bool>()
+                         ? "--device cuda: no CUDA device is available on this machine"
+                         : "--device cuda: this tsah was built without the CUDA runtime");
+  ProgressLog log;
+  const fs::path out = opt.out;
+  const fs::path cache = opt.cache.empty() ? out / "cache" : fs::path(opt.cache);
+
+  // Scenes: paths given, names of the data folder's scenes, or every scene found there.
+  std::vector<SceneSource> scenes;
+  DataScan scan;
+  bool scanned = false;
+  fs::path dataFolder;
+  auto scanData = [&] {
+    if (scanned) return;
+    dataFolder = defaultDataFolder(opt.data, TSAH_SOURCE_DIR);
+    log("scanning " + dataFolder.string(), false);
+    scan = scanDataFolder(dataFolder, {cache, [&](const std::string& m) { log(m, false); }});
+    scanned = true;
+  };
+  for (const std::string& s : opt.scenes) {
+    std::error_code ec;
+    if (fs::exists(s, ec)) {
+      scenes.push_back(explicitScene(s));
+      continue;
+    }
+    scanData();
+    const auto it = std::find_if(scan.scenes.begin(), scan.scenes.end(), [&](const SceneSource& x) { return x.name == s; });
+    if (it == scan.scenes.end()) {
+      std::string names;
+      for (const SceneSource& x : scan.scenes) names += (names.empty() ? "" : ", ") + x.name;
+      throw UsageError("no scene '" + s + "': not a file or folder, and not a scene of " + dataFolder.string() +
+                       " (" + (names.empty() ? "none found" : names) + ")");
+    }
+    scenes.push_back(*it);
+  }
+  if (opt.scenes.empty()) {
+    scanData();
+    scenes = scan.scenes;
+    if (scenes.empty()) throw UsageError(dataFolder.string() + ": no animations found");
+  }
+  if (opt.list) {
+    for (const SceneSource& s : scenes) std::printf("%-16s %-9s %s\n", s.name.c_str(), s.kind.c_str(), s.input.c_str());
+    for (const SkippedEntry& s : scan.skipped) std::printf("%-16s %-9s %s (%s)\n", "-", "skipped", s.path.c_str(), s.reason.c_str());
+    return;
+  }
+
+  std::error_code ec;
+  fs::create_directories(out, ec);
+  if (ec || !fs::is_directory(out)) throw anim::Error(out.string() + ": cannot create the output folder");
+  json results;
+  results["tool"] = "tsah bench";
+  results["command"] = commandLine();
+  results["started"] = nowText();
+  results["machine"] = machineJson(b.device == "cuda");
+  json versions = versionsJson();
+  versions["gnuplot"] = gnuplotVersion();
+  results["versions"] = versions;
+  results["options"] = optionsJson(b);
+  results["seed"] = b.seed;
+  results["data"] = {{"folder", scanned ? dataFolder.string() : ""}, {"cache", cache.string()}};
+  results["paper_source"] = kPaperSource;
+  json notes = json::array();
+  if (b.quick) notes.push_back("--quick: a smoke run with small images and few frames; not for comparison");
+  if (b.traceFrames < 50 && !b.quick)
+    notes.push_back("the runtime part (Table 2 and the Embree comparison) traced " + std::to_string(b.traceFrames) +
+                    " frames per method (--trace-frames " + std::to_string(b.traceFrames) +
+                    "), fewer than the default 50, uniform over each animation");
+  for (const std::string& n : opt.notes) notes.push_back(n);
+  results["notes"] = notes;
+  results["scenes"] = json::array();
+  results["failed"] = json::array();
+  results["skipped"] = json::array();
+  for (const SkippedEntry& s : scan.skipped) results["skipped"].push_back({{"path", s.path}, {"reason", s.reason}});
+
+  const auto started = std::chrono::steady_clock::now();
+  log("benchmarking " + std::to_string(scenes.size()) + " scene(s) on the " + b.device + " into " + out.string(), false);
+  for (const SceneSource& scene : scenes) {
+    const auto start = std::chrono::steady_clock::now();
+    try {
+      json j = benchScene(scene, b, out, [&](const std::string& m, bool detail) { log(m, detail); });
+      j["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      if (const PaperScene* p = findPaperScene(scene.name, j["triangles"].get<uint32_t>(), false)) j["paper"] = paperJson(*p);
+      results["scenes"].push_back(j);
+    } catch (const NotAnAnimation& e) {
+      results["skipped"].push_back({{"path", scene.input}, {"reason", e.what()}});
+      log(scene.name + ": skipped: " + e.what(), false);
+    } catch (const std::bad_alloc&) {
+      results["failed"].push_back({{"path", scene.input}, {"reason", "out of memory"}});
+      log(scene.name + ": failed: out of memory", false);
+    } catch (const std::exception& e) {
+      results["failed"].push_back({{"path", scene.input}, {"reason", e.what()}});
+      log(scene.name + ": failed: " + e.what(), false);
+    }
+    results["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+    writeReport(out, results);  // after every scene, so a long run can be read while it goes on
+  }
+  results["finished"] = nowText();
+  makePlotsInto(results, out, log);
+  writeReport(out, results);
+  if (results["scenes"].empty()) throw anim::Error("no scene could be benchmarked (see " + (out / "results.md").string() + ")");
+  std::printf("%s\n%s\n", (out / "results.md").c_str(), (out / "results.json").c_str());
+}
+
+}  // namespace
+
+TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
+  auto* sub = app.add_subcommand("bench", "The paper's Tables 1 and 2, Figures 3-6, segments and the Embree peer on "
+                                          "real animations: results.json, results.md, plots");
+  auto opt = std::make_shared<Options>();
+  tsah::bench::BenchOptions& b = opt->bench;
+  sub->add_option("SCENES", opt->scenes,
+                  "Scene names of the data folder (see --list) or inputs (any form `tsah info` reads); default: every "
+                  "animation in the data folder");
+  sub->add_option("--data", opt->data,
+                  "Data folder (default: $TSAH_DATA_DIR, else ../shared/data next to the source checkout)");
+  sub->add_option("--device", b.device, "Where the runtime part runs: cpu, or cuda (the GPU runtime)")
+      ->check(CLI::IsMember({"cpu", "cuda"}))
+      ->capture_default_str();
+  sub->add_option("--out", opt->out, "Output folder: results.json, results.md, plots/, images/")->capture_default_str();
+  sub->add_option("--cache", opt->cache, "Where archives of the data folder are unpacked (default: OUT/cache)");
+  sub->add_flag("--quick", b.quick, "Smoke run: 10 evaluation frames, 3 traced frames of 192x144 (explicit options win)");
+  sub->add_option("--seed", b.seed, "Seed of the optimizations and of the per-pixel random numbers")->capture_default_str();
+  sub->add_option("--frames", b.frames, "Representative frames of every optimization")
+      ->check(CLI::Range(1u, 1000u))
+      ->capture_default_str();
+  sub->add_option("--eval-frames", b.evalFrames, "Evaluation frames of the cost tables")
+      ->check(CLI::Range(1u, 100000u))
+      ->capture_default_str();
+  sub->add_option("--trace-frames", b.traceFrames, "Frames traced per runtime method")
+      ->check(CLI::Range(1u, 100000u))
+      ->capture_default_str();
+  sub->add_option("--width", b.width, "Image width")->check(CLI::Range(1u, 16384u))->capture_default_str();
+  sub->add_option("--height", b.height, "Image height")->check(CLI::Range(1u, 16384u))->capture_default_str();
+  sub->add_option("--ao", b.aoRays, "Ambient-occlusion rays per pixel")->check(CLI::Range(0u, 1024u))->capture_default_str();
+  sub->add_option("--shadow", b.shadowRays, "Shadow rays per pixel")->check(CLI::Range(0u, 1024u))->capture_default_str();
+  sub->add_flag("--ground", b.ground, "Add the analytic ground plane (the paper traces the meshes alone)");
+  sub->add_option("--max-leaf", b.maxLeaf, "Largest leaf of every tree")->check(CLI::Range(1u, 256u))->capture_default_str();
+  sub->add_option("--ct", b.ct, "Cost of traversing a node")->check(CLI::PositiveNumber)->capture_default_str();
+  sub->add_option("--ci", b.ci, "Cost of intersecting a triangle")->check(CLI::PositiveNumber)->capture_default_str();
+  sub->add_option("--segments", b.segments, "K of the segmented T-SAH (K trees for K equal-time parts; 1: skip)")
+      ->check(CLI::Range(1u, 64u))
+      ->capture_default_str();
+  sub->add_option("--threads", b.threads, "CPU worker threads (0: all cores)")->capture_default_str();
+  sub->add_flag("--no-embree", opt->noEmbree, "Skip the Embree peer");
+  sub->add_flag("--no-convergence", opt->noConvergence, "Skip the random and batch-sort optimizations of the convergence plot");
+  sub->add_option("--note", opt->notes, "A note for results.md (repeatable), e.g. what else ran on the machine");
+  sub->add_flag("--list", opt->list, "List the scenes found (and skipped) and exit");
+  sub->add_flag("--report-only", opt->reportOnly, "Only redo results.md and the plots from OUT/results.json");
+  sub->callback([opt, sub] { run(*opt, sub); });
+});
