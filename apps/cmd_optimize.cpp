@@ -1,13 +1,16 @@
 // tsah optimize INPUT -o OUT.tbvh [--method tsah|sah0|sahstar] [--k K] [--frames N]
 //   [--eval-frames M] [--selection mh|random|batch] [--seed S] [--ct 3] [--ci 2] [--max-leaf 8]
-//   [--time-limit SEC] [--threads T] [--json]
+//   [--time-limit SEC] [--threads T] [--segments K] [--json]
 // Builds one tree for the whole animation, writes it as .tbvh and reports its cost over the
-// evaluation frames.
+// evaluation frames. With --segments K > 1: K trees, one per equal-time part of the animation
+// (the paper's BART Museum*), written as OUT_seg0.tbvh ... OUT_seg<K-1>.tbvh; each file's time
+// range is its part, and a frame is meant to be traced with the tree whose range holds it.
 #include <cstdio>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 
+#include "bench/segments.hpp"
 #include "cli.hpp"
 #include "tsah/baselines.hpp"
 #include "tsah/bvh_file.hpp"
@@ -27,6 +30,7 @@ struct Options {
   double timeLimit = 0.0;
   double minImprovement = tsah::InsertionOptimizer::Config{}.minImprovement;
   unsigned threads = 0;
+  uint32_t segments = 1;
   bool json = false;
 };
 
@@ -46,6 +50,114 @@ tsah::FrameSource evaluationFrames(const anim::Animation& a, const std::vector<d
     tsah::triangleBoxes(a.indices(), positions, out);
   };
   return source;
+}
+
+tsah::BvhBuildInfo buildInfo(const Options& opt, const tsah::MethodSpec& method, const anim::Animation& a,
+                             uint32_t frames, double buildSeconds, double timeStart, double timeEnd) {
+  tsah::BvhBuildInfo info;
+  info.method = method.method == tsah::Method::TSah ? "tsah" : method.name();
+  info.selection = method.method == tsah::Method::Sah0 ? "none" : opt.selection;
+  info.k = method.k;
+  info.representativeFrames = frames;
+  info.seed = opt.seed;
+  info.ct = opt.ct;
+  info.ci = opt.ci;
+  info.maxLeafSize = opt.maxLeaf;
+  info.buildSeconds = buildSeconds;
+  info.timeStart = timeStart;
+  info.timeEnd = timeEnd;
+  info.triangleCount = a.triangleCount();
+  info.vertexCount = a.vertexCount();
+  info.topologyHash = tsah::topologyHash(a.indices());
+  return info;
+}
+
+nlohmann::json optimizationJson(const tsah::InsertionOptimizer::Result& details) {
+  nlohmann::json history = nlohmann::json::array();
+  for (const auto& r : details.history)
+    history.push_back({{"batch", r.batch}, {"cost", r.cost}, {"average", r.averageCost},
+                       {"elapsed_s", r.elapsedSeconds}, {"steps", r.steps}});
+  return {{"initial_cost", details.initialCost},
+          {"final_cost", details.finalCost},
+          {"batches", details.history.empty() ? 0 : details.history.size() - 1},
+          {"steps", details.steps},
+          {"accepted_steps", details.acceptedSteps},
+          {"seconds", details.seconds},
+          {"time_limit_reached", details.timeLimitReached},
+          {"history", history}};
+}
+
+std::pair<double, double> averageAndMaximum(const std::vector<double>& costs) {
+  double average = 0.0, maximum = 0.0;
+  for (double c : costs) {
+    average += c / double(costs.size());
+    maximum = std::max(maximum, c);
+  }
+  return {average, maximum};
+}
+
+// --segments K: K trees for K equal-time parts; all are built before any file is written, so a
+// failure leaves no partial set behind.
+void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim::Animation& a, uint32_t frames,
+                 uint32_t evalFrames, const tsah::BaselineConfig& config, tsah::cli::Progress& progress) {
+  progress.message("building " + std::to_string(opt.segments) + " trees");
+  const std::vector<tsah::bench::SegmentTree> trees =
+      tsah::bench::buildSegmentTrees(a, opt.segments, frames, method, config);
+  progress.message("evaluating " + std::to_string(evalFrames) + " frames");
+  const std::vector<double> times = a.uniformTimes(evalFrames);
+  const std::vector<double> perFrame = tsah::bench::evaluateSegmentTrees(a, trees, times, config.cost, opt.threads);
+  std::vector<tsah::bench::TimeSegment> parts;
+  for (const auto& t : trees) parts.push_back(t.segment);
+  std::vector<std::vector<double>> partCosts(trees.size());
+  for (std::size_t i = 0; i < times.size(); ++i) partCosts[tsah::bench::segmentOf(parts, times[i])].push_back(perFrame[i]);
+
+  nlohmann::json segments = nlohmann::json::array();
+  for (uint32_t s = 0; s < trees.size(); ++s) {
+    const tsah::bench::SegmentTree& t = trees[s];
+    const std::string path = tsah::bench::segmentPath(opt.output, s);
+    tsah::saveBvhFile(path, t.bvh, buildInfo(opt, method, a, frames, t.buildSeconds, t.segment.start, t.segment.end));
+    const auto [average, maximum] = averageAndMaximum(partCosts[s]);
+    nlohmann::json j = {{"index", s},
+                        {"output", path},
+                        {"time_start", t.segment.start},
+                        {"time_end", t.segment.end},
+                        {"nodes", t.bvh.nodeCount()},
+                        {"leaves", t.bvh.leafCount()},
+                        {"depth", t.bvh.depth()},
+                        {"build_s", t.buildSeconds},
+                        {"eval_frames", partCosts[s].size()},
+                        {"cost", {{"average", average}, {"maximum", maximum}}}};
+    if (method.method == tsah::Method::TSah) j["optimization"] = optimizationJson(t.optimization);
+    segments.push_back(j);
+  }
+  const auto [average, maximum] = averageAndMaximum(perFrame);
+  progress.message("done");
+  if (opt.json) {
+    nlohmann::json j;
+    j["input"] = opt.input;
+    j["output"] = opt.output;
+    j["method"] = method.method == tsah::Method::TSah ? "tsah" : method.name();
+    j["k"] = method.k;
+    j["selection"] = method.method == tsah::Method::Sah0 ? "none" : opt.selection;
+    j["seed"] = opt.seed;
+    j["frames"] = frames;
+    j["eval_frames"] = evalFrames;
+    j["triangles"] = a.triangleCount();
+    j["max_leaf"] = opt.maxLeaf;
+    j["cost"] = {{"average", average}, {"maximum", maximum}, {"per_frame", perFrame}};
+    j["segments"] = segments;
+    std::printf("%s\n", j.dump().c_str());
+    return;
+  }
+  std::printf("%s: %u trees for %u equal-time parts, %s, %u triangles\n", opt.output.c_str(), opt.segments,
+              opt.segments, method.name().c_str(), a.triangleCount());
+  for (const nlohmann::json& s : segments)
+    std::printf("  %s: t %.4g .. %.4g, %u nodes, build %.2f s, cost over %zu evaluation frames: average %.3f, maximum %.3f\n",
+                s["output"].get<std::string>().c_str(), s["time_start"].get<double>(), s["time_end"].get<double>(),
+                s["nodes"].get<uint32_t>(), s["build_s"].get<double>(), s["eval_frames"].get<std::size_t>(),
+                s["cost"]["average"].get<double>(), s["cost"]["maximum"].get<double>());
+  std::printf("cost over %u evaluation frames, each with the tree of its part: average %.3f, maximum %.3f\n", evalFrames,
+              average, maximum);
 }
 
 void run(const Options& opt) {
@@ -71,6 +183,11 @@ void run(const Options& opt) {
   config.optimizer.minImprovement = opt.minImprovement;
   config.progress = [&](const std::string& message) { progress.message(message); };
 
+  if (opt.segments > 1) {
+    if (!animated) throw tsah::cli::UsageError(opt.input + ": --segments needs an animation (this input has one frame)");
+    return runSegments(opt, method, a, frames, evalFrames, config, progress);
+  }
+
   tsah::InsertionOptimizer::Result details;
   const double start = progress.elapsedSeconds();
   const tsah::Bvh bvh = tsah::buildMethod(method, repBoxes, config, &details);
@@ -79,27 +196,9 @@ void run(const Options& opt) {
   progress.message("evaluating " + std::to_string(evalFrames) + " frames");
   const std::vector<double> perFrame =
       tsah::evaluateFrames(bvh, evaluationFrames(a, a.uniformTimes(evalFrames)), config.cost, opt.threads);
-  double average = 0.0, maximum = 0.0;
-  for (double c : perFrame) {
-    average += c / double(perFrame.size());
-    maximum = std::max(maximum, c);
-  }
+  const auto [average, maximum] = averageAndMaximum(perFrame);
 
-  tsah::BvhBuildInfo info;
-  info.method = method.method == tsah::Method::TSah ? "tsah" : method.name();
-  info.selection = method.method == tsah::Method::Sah0 ? "none" : opt.selection;
-  info.k = method.k;
-  info.representativeFrames = frames;
-  info.seed = opt.seed;
-  info.ct = opt.ct;
-  info.ci = opt.ci;
-  info.maxLeafSize = opt.maxLeaf;
-  info.buildSeconds = buildSeconds;
-  info.timeStart = a.startTime();
-  info.timeEnd = a.endTime();
-  info.triangleCount = a.triangleCount();
-  info.vertexCount = a.vertexCount();
-  info.topologyHash = tsah::topologyHash(a.indices());
+  const tsah::BvhBuildInfo info = buildInfo(opt, method, a, frames, buildSeconds, a.startTime(), a.endTime());
   tsah::saveBvhFile(opt.output, bvh, info);
 
   nlohmann::json j;
@@ -119,18 +218,7 @@ void run(const Options& opt) {
   j["build_s"] = buildSeconds;
   j["cost"] = {{"average", average}, {"maximum", maximum}, {"per_frame", perFrame}};
   if (method.method == tsah::Method::TSah) {
-    nlohmann::json history = nlohmann::json::array();
-    for (const auto& r : details.history)
-      history.push_back({{"batch", r.batch}, {"cost", r.cost}, {"average", r.averageCost},
-                         {"elapsed_s", r.elapsedSeconds}, {"steps", r.steps}});
-    j["optimization"] = {{"initial_cost", details.initialCost},
-                         {"final_cost", details.finalCost},
-                         {"batches", details.history.empty() ? 0 : details.history.size() - 1},
-                         {"steps", details.steps},
-                         {"accepted_steps", details.acceptedSteps},
-                         {"seconds", details.seconds},
-                         {"time_limit_reached", details.timeLimitReached},
-                         {"history", history}};
+    j["optimization"] = optimizationJson(details);
   }
   progress.message("done");
   if (opt.json) {
@@ -183,6 +271,10 @@ TSAH_REGISTER_COMMAND(40, [](CLI::App& app) {
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   sub->add_option("--threads", opt->threads, "Worker threads (0: all cores)")->capture_default_str();
+  sub->add_option("--segments", opt->segments,
+                  "K > 1: one tree per equal-time part of the animation, written as OUT_seg0 ... OUT_seg<K-1>")
+      ->check(CLI::Range(1u, 1000u))
+      ->capture_default_str();
   sub->add_flag("--json", opt->json, "Print one JSON object");
   sub->callback([opt] { run(*opt); });
 });
