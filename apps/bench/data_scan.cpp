@@ -163,8 +163,9 @@ struct Scanner {
       if (!e.is_regular_file()) continue;
       const std::string ext = lower(p.extension().string());
       if (isTarArchive(name)) {
-        if (options.progress) options.progress("unpacking " + shown(p));
-        const fs::path unpacked = unpackArchive(p, options.cache);
+        const fs::path unpacked = unpackArchive(p, options.cache, [&] {
+          if (options.progress) options.progress("unpacking " + shown(p));
+        });
         scanFolder(unpacked, shown(p), depth + 1);
       } else if (ext == ".xz") {
         const fs::path inner = p.stem();
@@ -172,8 +173,10 @@ struct Scanner {
         if (isMeshExtension(innerExt)) {
           skip(p, "a single static mesh, not an animation");
         } else if (const std::string kind = animationKind(innerExt); !kind.empty() && kind != "bart") {
-          if (options.progress) options.progress("decompressing " + shown(p));
-          add(inner.stem().string(), unpackArchive(p, options.cache), kind, shown(p));
+          const fs::path file = unpackArchive(p, options.cache, [&] {
+            if (options.progress) options.progress("decompressing " + shown(p));
+          });
+          add(inner.stem().string(), file, kind, shown(p));
         } else {
           skip(p, "compressed file of an unknown kind");
         }
@@ -220,7 +223,7 @@ std::vector<std::string> bartSceneFiles(const fs::path& folder, std::vector<Skip
   return scenes;
 }
 
-fs::path unpackArchive(const fs::path& archive, const fs::path& cache) {
+fs::path unpackArchive(const fs::path& archive, const fs::path& cache, const std::function<void()>& onUnpack) {
   std::error_code ec;
   const auto size = fs::file_size(archive, ec);
   if (ec) throw anim::Error(archive.string() + ": cannot be read (" + ec.message() + ")");
@@ -237,6 +240,7 @@ fs::path unpackArchive(const fs::path& archive, const fs::path& cache) {
   const fs::path result = tar ? target : target / base;
   if (fs::exists(target / ".complete", ec)) return result;
 
+  if (onUnpack) onUnpack();
   fs::create_directories(cache, ec);
   if (ec) throw anim::Error(cache.string() + ": cannot create the cache folder (" + ec.message() + ")");
   const fs::path staging = cache / (".staging-" + base + "-" + std::to_string(::getpid()));

@@ -38,7 +38,7 @@ struct DataScan {
 
 struct ScanOptions {
   std::filesystem::path cache;  // archives are unpacked below this folder (created when needed)
-  std::function<void(const std::string&)> progress;  // "unpacking X" messages; may be empty
+  std::function<void(const std::string&)> progress;  // "unpacking X" when an archive is unpacked; may be empty
 };
 
 // Scans a data folder as described above. Throws anim::Error when the folder does not exist or an
@@ -56,8 +56,10 @@ bool isFrameSequenceFolder(const std::filesystem::path& folder);
 // `cache` named after the archive and its size and modification time, so a changed archive is
 // unpacked again and an unchanged one only once. Unpacks into a staging folder first and renames
 // it, so an interrupted run never leaves a half-unpacked cache behind. Returns the folder (for a
-// single .xz file: the decompressed file). Throws anim::Error when tar/xz fail.
-std::filesystem::path unpackArchive(const std::filesystem::path& archive, const std::filesystem::path& cache);
+// single .xz file: the decompressed file). onUnpack is called just before real work starts (not
+// when the cached copy is used). Throws anim::Error when tar/xz fail.
+std::filesystem::path unpackArchive(const std::filesystem::path& archive, const std::filesystem::path& cache,
+                                    const std::function<void()>& onUnpack = {});
 
 // A scene for an input named on the command line (a file or folder anim::load reads).
 SceneSource explicitScene(const std::filesystem::path& input);

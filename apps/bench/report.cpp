@@ -532,7 +532,7 @@ PlotOutcome makePlots(const json& results, const fs::path& outDir) {
         series.push_back(s);
       }
       emit("convergence", "T-SAH k=0 optimization by node selection (cf. paper Figure 3)", "optimization time [s]",
-           "average cost over the representative frames", series, false);
+           "average cost over the representative frames (one triangle per leaf)", series, false);
     }
     auto runtimeSeries = [&](const json& methods, const char* key) {
       std::vector<Series> series;

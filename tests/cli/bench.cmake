@@ -1,0 +1,146 @@
+# tsah bench and tsah optimize --segments: CLI smoke tests on a small generated scene (no real data
+# needed), and the link of the bench module's unit tests (tests/test_bench*.cpp) to it.
+set(W ${TSAH_CLI_WORK})
+
+foreach(source ${TSAH_TEST_SOURCES})
+  get_filename_component(name ${source} NAME_WE)
+  if(name MATCHES "^test_bench")
+    target_link_libraries(${name} PRIVATE tsah_bench)
+  endif()
+endforeach()
+
+add_test(NAME cli.bench.input
+         COMMAND tsah generate explode -o ${W}/bench_explode.tanim --triangles 300 --frames 6 --seed 3)
+set_tests_properties(cli.bench.input PROPERTIES FIXTURES_SETUP bench_input)
+
+# The whole bench on an explicit input, --quick and tiny images: every part runs, both files hold
+# the expected keys (checked by the script below), plots are made or skipped with a reason.
+add_test(NAME cli.bench.quick
+         COMMAND tsah bench ${W}/bench_explode.tanim --quick --width 48 --height 36 --eval-frames 6 --trace-frames 2
+                 --threads 2 --seed 9 --out ${W}/bench_out --note "CLI smoke test")
+set_tests_properties(cli.bench.quick PROPERTIES FIXTURES_REQUIRED bench_input FIXTURES_SETUP bench_results
+  PASS_REGULAR_EXPRESSION "bench_out/results.md\n.*bench_out/results.json\n")
+
+file(WRITE ${W}/bench_check.cmake [=[
+foreach(f results.json results.md)
+  if(NOT EXISTS ${OUT}/${f})
+    message(FATAL_ERROR "${OUT}/${f} is missing")
+  endif()
+endforeach()
+file(READ ${OUT}/results.json json)
+macro(expect_key)
+  string(JSON value ERROR_VARIABLE error GET "${json}" ${ARGN})
+  if(error)
+    message(FATAL_ERROR "results.json: ${ARGN}: ${error}")
+  endif()
+endmacro()
+foreach(key command started finished machine versions options seed scenes plots notes paper_source)
+  expect_key(${key})
+endforeach()
+expect_key(machine cpu)
+expect_key(machine logical_cores)
+expect_key(versions tsah)
+expect_key(versions compiler)
+expect_key(versions embree)
+expect_key(options seed)
+expect_key(plots status)
+string(JSON seed GET "${json}" options seed)
+if(NOT seed EQUAL 9)
+  message(FATAL_ERROR "results.json: options.seed is ${seed}, not 9")
+endif()
+string(JSON scenes LENGTH "${json}" scenes)
+if(NOT scenes EQUAL 1)
+  message(FATAL_ERROR "results.json: ${scenes} scenes, expected 1")
+endif()
+string(JSON name GET "${json}" scenes 0 name)
+if(NOT name STREQUAL "bench_explode")
+  message(FATAL_ERROR "results.json: scene named '${name}'")
+endif()
+foreach(key triangles keyframes table1 convergence segments runtime embree image wall_s)
+  expect_key(scenes 0 ${key})
+endforeach()
+string(JSON methods LENGTH "${json}" scenes 0 table1 methods)
+if(NOT methods EQUAL 6)
+  message(FATAL_ERROR "Table 1 has ${methods} methods, expected 6")
+endif()
+foreach(i RANGE 5)
+  foreach(key name label build_s average maximum per_frame)
+    expect_key(scenes 0 table1 methods ${i} ${key})
+  endforeach()
+  string(JSON frames LENGTH "${json}" scenes 0 table1 methods ${i} per_frame)
+  if(NOT frames EQUAL 6)
+    message(FATAL_ERROR "Table 1 method ${i}: ${frames} frames, expected 6")
+  endif()
+endforeach()
+string(JSON selections LENGTH "${json}" scenes 0 convergence)
+if(NOT selections EQUAL 3)
+  message(FATAL_ERROR "convergence: ${selections} node selections, expected 3")
+endif()
+string(JSON methods LENGTH "${json}" scenes 0 runtime methods)
+if(NOT methods EQUAL 6)
+  message(FATAL_ERROR "Table 2 has ${methods} methods, expected 6 (SAH0, SAH*, T-SAH, T-SAH x3, two rebuilds)")
+endif()
+foreach(key update_ms trace_ms total_ms mrays_per_s rays_per_frame)
+  expect_key(scenes 0 runtime methods 2 average ${key})
+endforeach()
+expect_key(scenes 0 runtime methods 2 per_frame total_ms)
+expect_key(scenes 0 segments k_trees average)
+expect_key(scenes 0 embree status)
+file(READ ${OUT}/results.md md)
+foreach(text "# tsah bench: results" "## bench_explode" "**Table 1**" "**Table 2**" "**Segments**" "| T-SAH k=0 |"
+             "| SAH-rebuild |" "CLI smoke test" "Source of the paper's figures")
+  string(FIND "${md}" "${text}" at)
+  if(at EQUAL -1)
+    message(FATAL_ERROR "results.md lacks '${text}'")
+  endif()
+endforeach()
+string(JSON plots GET "${json}" plots status)
+if(plots MATCHES "^skipped" AND NOT plots MATCHES "gnuplot is not installed")
+  message(FATAL_ERROR "plots skipped for another reason: ${plots}")
+endif()
+]=])
+add_test(NAME cli.bench.files
+         COMMAND ${CMAKE_COMMAND} -DOUT=${W}/bench_out -P ${W}/bench_check.cmake)
+set_tests_properties(cli.bench.files PROPERTIES FIXTURES_REQUIRED bench_results)
+
+# The report alone, again from results.json.
+add_test(NAME cli.bench.report_only COMMAND tsah bench --report-only --out ${W}/bench_out)
+set_tests_properties(cli.bench.report_only PROPERTIES FIXTURES_REQUIRED bench_results
+  PASS_REGULAR_EXPRESSION "bench_out/results.md\n")
+
+# Errors: one line, non-zero.
+file(MAKE_DIRECTORY ${W}/bench_empty_data)
+add_test(NAME cli.bench.no_scenes COMMAND tsah bench --data ${W}/bench_empty_data --out ${W}/bench_none)
+set_tests_properties(cli.bench.no_scenes PROPERTIES WILL_FAIL TRUE)
+add_test(NAME cli.bench.no_scenes_message COMMAND tsah bench --data ${W}/bench_empty_data --out ${W}/bench_none)
+set_tests_properties(cli.bench.no_scenes_message PROPERTIES
+  PASS_REGULAR_EXPRESSION "tsah: .*bench_empty_data: no animations found\n$")
+add_test(NAME cli.bench.unknown_scene COMMAND tsah bench no-such-scene --data ${W}/bench_empty_data --out ${W}/bench_none)
+set_tests_properties(cli.bench.unknown_scene PROPERTIES
+  PASS_REGULAR_EXPRESSION "tsah: no scene 'no-such-scene': not a file or folder, and not a scene of .*bench_empty_data \\(none found\\)")
+add_test(NAME cli.bench.report_only_missing COMMAND tsah bench --report-only --out ${W}/bench_none_here)
+set_tests_properties(cli.bench.report_only_missing PROPERTIES PASS_REGULAR_EXPRESSION "^tsah: .*results.json")
+add_test(NAME cli.bench.no_gpu
+         COMMAND tsah bench ${W}/bench_explode.tanim --device cuda --quick --out ${W}/bench_gpu_none)
+set_tests_properties(cli.bench.no_gpu PROPERTIES FIXTURES_REQUIRED bench_input
+  PASS_REGULAR_EXPRESSION "^tsah: --device cuda: (this tsah was built without the CUDA runtime|no CUDA device is available on this machine)\n$")
+
+# tsah optimize --segments K: K files with their parts' time ranges, the report per part.
+add_test(NAME cli.segments.json
+         COMMAND tsah optimize ${W}/bench_explode.tanim -o ${W}/seg.tbvh --segments 3 --eval-frames 12 --json)
+set_tests_properties(cli.segments.json PROPERTIES FIXTURES_REQUIRED bench_input FIXTURES_SETUP bench_segments
+  PASS_REGULAR_EXPRESSION "\"segments\":\\[\\{.*\"index\":0,.*\"output\":\"[^\"]*seg_seg0.tbvh\".*\"time_end\":[0-9.]+,\"time_start\":0\\.0\\},\\{.*\"index\":1,.*seg_seg1.tbvh.*\\{.*\"index\":2,.*seg_seg2.tbvh\".*\"time_end\":5\\.0,")
+add_test(NAME cli.segments.info COMMAND tsah info ${W}/seg_seg2.tbvh)
+set_tests_properties(cli.segments.info PROPERTIES FIXTURES_REQUIRED bench_segments
+  PASS_REGULAR_EXPRESSION "time 3\\.3+ \\.\\. 5\n")
+add_test(NAME cli.segments.trace
+         COMMAND tsah trace ${W}/bench_explode.tanim ${W}/seg_seg1.tbvh --frames 2 --width 16 --height 12 --no-images)
+set_tests_properties(cli.segments.trace PROPERTIES FIXTURES_REQUIRED bench_segments)
+add_test(NAME cli.segments.text
+         COMMAND tsah optimize ${W}/bench_explode.tanim -o ${W}/segtext.tbvh --segments 2 --method sah0)
+set_tests_properties(cli.segments.text PROPERTIES FIXTURES_REQUIRED bench_input
+  PASS_REGULAR_EXPRESSION "segtext.tbvh: 2 trees for 2 equal-time parts, sah0.*\n  .*segtext_seg0.tbvh: t 0 \\.\\. 2\\.5,.*\n  .*segtext_seg1.tbvh: t 2\\.5 \\.\\. 5,.*\ncost over 50 evaluation frames, each with the tree of its part: average [0-9.]+, maximum [0-9.]+\n")
+file(WRITE ${W}/seg_static.obj "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+add_test(NAME cli.segments.static COMMAND tsah optimize ${W}/seg_static.obj -o ${W}/seg_static.tbvh --segments 2)
+set_tests_properties(cli.segments.static PROPERTIES
+  PASS_REGULAR_EXPRESSION "^tsah: .*seg_static.obj: --segments needs an animation \\(this input has one frame\\)\n$")

@@ -1,0 +1,151 @@
+// The bench's ray batches (bench/ray_batch.hpp) hold exactly the rays renderFrame traces, are traced
+// correctly in parallel chunks, and Embree (bench/embree_peer.hpp, when built) finds what the
+// toolkit finds on them, after rebuilds and after refits.
+#include <gtest/gtest.h>
+
+#include <cstring>
+
+#include "anim/error.hpp"
+#include "anim/generators.hpp"
+#include "bench/embree_peer.hpp"
+#include "bench/ray_batch.hpp"
+#include "tsah/baselines.hpp"
+#include "tsah/flat_bvh.hpp"
+#include "tsah/traversal.hpp"
+
+namespace {
+
+struct Scene {
+  anim::Animation a;
+  tsah::Bvh tree;
+  tsah::Aabb bounds;
+
+  explicit Scene(anim::GeneratorKind kind) {
+    anim::GeneratorOptions g;
+    g.triangles = 1500;
+    g.frames = 6;
+    g.seed = 11;
+    a = anim::generate(kind, g);
+    const anim::Animation rep = a.resample(3);
+    tsah::BaselineConfig config;
+    config.threads = 2;
+    tree = tsah::buildSah0(tsah::triangleBoxes(rep.indices(), rep.allPositions(), 3), config);
+    const anim::Bounds b = a.bounds();
+    bounds.extend(tsah::Vec3{b.min[0], b.min[1], b.min[2]});
+    bounds.extend(tsah::Vec3{b.max[0], b.max[1], b.max[2]});
+  }
+  tsah::CpuRuntime runtime() const {
+    return tsah::CpuRuntime(tsah::flattenBvh(tree), {a.indices().begin(), a.indices().end()}, a.vertexCount(), {2});
+  }
+};
+
+tsah::RenderSettings smallSettings(uint32_t frame) {
+  tsah::RenderSettings s;
+  s.width = 64;
+  s.height = 48;
+  s.aoSamples = 5;
+  s.shadowSamples = 3;
+  s.frame = frame;
+  s.seed = 7;
+  return s;
+}
+
+TEST(BenchRays, TheBatchHoldsTheRenderersRaysAndTracesLikeOneLoop) {
+  const Scene scene(anim::GeneratorKind::Wave);
+  tsah::CpuRuntime rt = scene.runtime();
+  for (bool ground : {false, true}) {
+    for (uint32_t frame : {0u, 4u}) {
+      rt.update(scene.a.positionsAt(scene.a.times()[frame]));
+      const tsah::Camera camera = tsah::fitCamera(scene.bounds, {0, 1, 0}, 45.0f, 64.0f / 48.0f);
+      const tsah::SceneLighting lighting = tsah::fitLighting(scene.bounds, camera, {0, 1, 0}, 0.1f, ground);
+      const tsah::RenderSettings settings = smallSettings(frame);
+      tsah::Image image;
+      const tsah::RenderStats stats = tsah::renderFrame(rt, camera, lighting, settings, image);
+      const tsah::bench::RayBatch batch = tsah::bench::makeRayBatch(rt, camera, lighting, settings);
+      EXPECT_EQ(batch.primary.size(), stats.primary.rays) << "ground " << ground << " frame " << frame;
+      EXPECT_EQ(batch.ao.size(), stats.ao.rays) << "ground " << ground << " frame " << frame;
+      EXPECT_EQ(batch.shadow.size(), stats.shadow.rays) << "ground " << ground << " frame " << frame;
+      EXPECT_GT(batch.ao.size(), 0u);
+      EXPECT_GT(batch.shadow.size(), 0u);
+      // Made again: the same rays (deterministic whatever the scheduling).
+      const tsah::bench::RayBatch again = tsah::bench::makeRayBatch(rt, camera, lighting, settings);
+      ASSERT_EQ(again.ao.size(), batch.ao.size());
+      EXPECT_EQ(std::memcmp(again.ao.data(), batch.ao.data(), batch.ao.size() * sizeof(tsah::Ray)), 0);
+      ASSERT_EQ(again.shadow.size(), batch.shadow.size());
+      EXPECT_EQ(std::memcmp(again.shadow.data(), batch.shadow.data(), batch.shadow.size() * sizeof(tsah::Ray)), 0);
+
+      const tsah::bench::BatchTrace t = tsah::bench::traceBatch(rt, batch, tsah::bench::toolkitTracer(rt));
+      uint64_t hits = 0, aoOccluded = 0, shadowOccluded = 0;
+      const tsah::BvhView view = rt.view();
+      for (const tsah::Ray& r : batch.primary) hits += tsah::closestHit(view, r).valid();
+      for (const tsah::Ray& r : batch.ao) aoOccluded += tsah::anyHit(view, r);
+      for (const tsah::Ray& r : batch.shadow) shadowOccluded += tsah::anyHit(view, r);
+      EXPECT_EQ(t.primaryHits, hits);
+      EXPECT_EQ(t.aoOccluded, aoOccluded);
+      EXPECT_EQ(t.shadowOccluded, shadowOccluded);
+      EXPECT_EQ(t.total().rays, batch.rays());
+      EXPECT_GT(hits, 0u);
+      EXPECT_GT(aoOccluded, 0u);
+    }
+  }
+}
+
+#if TSAH_HAVE_EMBREE
+TEST(BenchRays, EmbreeFindsWhatTheToolkitFindsAfterRebuildsAndRefits) {
+  // Fragments flying apart: a stale (not refitted) tree would miss most of them in later frames.
+  const Scene scene(anim::GeneratorKind::Explode);
+  tsah::CpuRuntime rt = scene.runtime();
+  using Mode = tsah::bench::EmbreePeer::Mode;
+  for (Mode mode : {Mode::RebuildMedium, Mode::RebuildHigh, Mode::Refit}) {
+    tsah::bench::EmbreePeer peer(scene.a.indices(), scene.a.vertexCount(), mode, 2);
+    for (uint32_t frame : {0u, 3u, 5u}) {
+      const std::vector<float> positions = scene.a.positionsAt(scene.a.times()[frame]);
+      rt.update(positions);
+      EXPECT_GE(peer.update(positions), 0.0);
+      // Framed on this frame's fragments, so that most pixels see some.
+      const anim::Bounds b = scene.a.boundsAt(scene.a.times()[frame]);
+      tsah::Aabb now;
+      now.extend(tsah::Vec3{b.min[0], b.min[1], b.min[2]});
+      now.extend(tsah::Vec3{b.max[0], b.max[1], b.max[2]});
+      const tsah::Camera camera = tsah::fitCamera(now, {0, 1, 0}, 45.0f, 64.0f / 48.0f);
+      const tsah::SceneLighting lighting = tsah::fitLighting(now, camera, {0, 1, 0}, 0.1f, false);
+      const tsah::bench::RayBatch batch = tsah::bench::makeRayBatch(rt, camera, lighting, smallSettings(frame));
+      const auto own = tsah::bench::traceBatch(rt, batch, tsah::bench::toolkitTracer(rt));
+      const auto other = tsah::bench::traceBatch(rt, batch, peer.tracer());
+      ASSERT_GT(own.primaryHits, 10u) << "frame " << frame;
+      // Both are correct ray tracers; they may differ only on rays that graze an edge.
+      const auto close = [](uint64_t x, uint64_t y, uint64_t of) {
+        return std::max(x, y) - std::min(x, y) <= std::max<uint64_t>(2, of / 500);
+      };
+      const char* name = tsah::bench::EmbreePeer::modeName(mode);
+      EXPECT_TRUE(close(own.primaryHits, other.primaryHits, batch.primary.size()))
+          << name << " frame " << frame << ": " << own.primaryHits << " vs " << other.primaryHits;
+      EXPECT_TRUE(close(own.aoOccluded, other.aoOccluded, batch.ao.size()))
+          << name << " frame " << frame << ": " << own.aoOccluded << " vs " << other.aoOccluded;
+      EXPECT_TRUE(close(own.shadowOccluded, other.shadowOccluded, batch.shadow.size()))
+          << name << " frame " << frame << ": " << own.shadowOccluded << " vs " << other.shadowOccluded;
+      // Rays aimed at every 7th triangle's centroid hit something, for both.
+      std::vector<tsah::Ray> aimed;
+      const auto idx = scene.a.indices();
+      for (uint32_t t = 0; t < scene.a.triangleCount(); t += 7) {
+        tsah::Vec3 c{0, 0, 0};
+        for (int k = 0; k < 3; ++k)
+          c = c + tsah::Vec3{positions[3 * idx[3 * t + k]], positions[3 * idx[3 * t + k] + 1],
+                             positions[3 * idx[3 * t + k] + 2]} * (1.0f / 3.0f);
+        aimed.push_back({camera.eye, 0.0f, c - camera.eye, 1.001f});
+      }
+      uint64_t hits = 0;
+      peer.tracer().closest(aimed, 0, aimed.size(), hits);
+      EXPECT_EQ(hits, aimed.size()) << name << " frame " << frame;
+    }
+    EXPECT_THROW(peer.update(std::vector<float>(3)), anim::Error);
+  }
+}
+#else
+TEST(BenchRays, EmbreeIsReportedMissing) {
+  EXPECT_FALSE(tsah::bench::embreeAvailable());
+  EXPECT_NE(tsah::bench::embreeStatus().find("missing"), std::string::npos);
+}
+#endif
+
+}  // namespace
