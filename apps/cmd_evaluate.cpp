@@ -4,11 +4,11 @@
 // The paper's Table 1 for one input: build time, average and maximum cost of every method over the
 // evaluation frames, each tree refitted to every frame (SAH-rebuild: one tree per frame).
 #include <cstdio>
-#include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "animation_frames.hpp"
 #include "cli.hpp"
 #include "tsah/baselines.hpp"
 
@@ -29,11 +29,6 @@ struct Options {
   bool json = false;
 };
 
-const std::map<std::string, tsah::InsertionOptimizer::Selection> kSelections = {
-    {"mh", tsah::InsertionOptimizer::Selection::MetropolisHastings},
-    {"random", tsah::InsertionOptimizer::Selection::Uniform},
-    {"batch", tsah::InsertionOptimizer::Selection::BatchSort},
-};
 
 std::vector<tsah::MethodSpec> parseMethods(const std::string& list, std::vector<std::string>& names) {
   std::vector<tsah::MethodSpec> methods;
@@ -52,16 +47,6 @@ std::vector<tsah::MethodSpec> parseMethods(const std::string& list, std::vector<
   return methods;
 }
 
-tsah::FrameSource evaluationFrames(const anim::Animation& a, const std::vector<double>& times) {
-  tsah::FrameSource source;
-  source.frameCount = static_cast<uint32_t>(times.size());
-  source.primCount = a.triangleCount();
-  source.fill = [&a, times](uint32_t frame, std::span<tsah::Aabb> out) {
-    const std::vector<float> positions = a.positionsAt(times[frame]);
-    tsah::triangleBoxes(a.indices(), positions, out);
-  };
-  return source;
-}
 
 void run(const Options& opt) {
   std::vector<std::string> names;  // as written in --methods (e.g. "tsah" stays "tsah")
@@ -79,13 +64,13 @@ void run(const Options& opt) {
   config.cost = {opt.ct, opt.ci};
   config.maxLeafSize = opt.maxLeaf;
   config.threads = opt.threads;
-  config.optimizer.selection = kSelections.at(opt.selection);
+  config.optimizer.selection = tsah::cli::parseSelection(opt.selection);
   config.optimizer.seed = opt.seed;
   config.optimizer.timeLimitSeconds = opt.timeLimit;
   config.optimizer.minImprovement = opt.minImprovement;
   config.progress = [&](const std::string& message) { progress.message(message); };
   const std::vector<tsah::MethodResult> results =
-      tsah::compareMethods(methods, repBoxes, evaluationFrames(a, a.uniformTimes(evalFrames)), config);
+      tsah::compareMethods(methods, repBoxes, tsah::cli::animationFrames(a, a.uniformTimes(evalFrames)), config);
 
   nlohmann::json j;
   j["input"] = opt.input;

@@ -6,11 +6,11 @@
 // (the paper's BART Museum*), written as OUT_seg0.tbvh ... OUT_seg<K-1>.tbvh; each file's time
 // range is its part, and a frame is meant to be traced with the tree whose range holds it.
 #include <cstdio>
-#include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 
 #include "bench/segments.hpp"
+#include "animation_frames.hpp"
 #include "cli.hpp"
 #include "tsah/baselines.hpp"
 #include "tsah/bvh_file.hpp"
@@ -34,23 +34,7 @@ struct Options {
   bool json = false;
 };
 
-const std::map<std::string, tsah::InsertionOptimizer::Selection> kSelections = {
-    {"mh", tsah::InsertionOptimizer::Selection::MetropolisHastings},
-    {"random", tsah::InsertionOptimizer::Selection::Uniform},
-    {"batch", tsah::InsertionOptimizer::Selection::BatchSort},
-};
 
-// The evaluation frames of an animation, produced on demand (any number of them, in parallel).
-tsah::FrameSource evaluationFrames(const anim::Animation& a, const std::vector<double>& times) {
-  tsah::FrameSource source;
-  source.frameCount = static_cast<uint32_t>(times.size());
-  source.primCount = a.triangleCount();
-  source.fill = [&a, times](uint32_t frame, std::span<tsah::Aabb> out) {
-    const std::vector<float> positions = a.positionsAt(times[frame]);
-    tsah::triangleBoxes(a.indices(), positions, out);
-  };
-  return source;
-}
 
 tsah::BvhBuildInfo buildInfo(const Options& opt, const tsah::MethodSpec& method, const anim::Animation& a,
                              uint32_t frames, double buildSeconds, double timeStart, double timeEnd) {
@@ -177,7 +161,7 @@ void run(const Options& opt) {
   config.cost = {opt.ct, opt.ci};
   config.maxLeafSize = opt.maxLeaf;
   config.threads = opt.threads;
-  config.optimizer.selection = kSelections.at(opt.selection);
+  config.optimizer.selection = tsah::cli::parseSelection(opt.selection);
   config.optimizer.seed = opt.seed;
   config.optimizer.timeLimitSeconds = opt.timeLimit;
   config.optimizer.minImprovement = opt.minImprovement;
@@ -195,7 +179,7 @@ void run(const Options& opt) {
 
   progress.message("evaluating " + std::to_string(evalFrames) + " frames");
   const std::vector<double> perFrame =
-      tsah::evaluateFrames(bvh, evaluationFrames(a, a.uniformTimes(evalFrames)), config.cost, opt.threads);
+      tsah::evaluateFrames(bvh, tsah::cli::animationFrames(a, a.uniformTimes(evalFrames)), config.cost, opt.threads);
   const auto [average, maximum] = averageAndMaximum(perFrame);
 
   const tsah::BvhBuildInfo info = buildInfo(opt, method, a, frames, buildSeconds, a.startTime(), a.endTime());

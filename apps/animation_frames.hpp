@@ -1,0 +1,20 @@
+#pragma once
+// Glue between anim::Animation and libtsah's builders shared by the commands: frames of an
+// animation as a lazily filled tsah::FrameSource, and the node-selection names of the CLI.
+#include <string>
+#include <vector>
+
+#include "anim/animation.hpp"
+#include "tsah/baselines.hpp"
+#include "tsah/insertion_optimizer.hpp"
+
+namespace tsah::cli {
+
+// Triangle boxes of `animation` at each of `times`, produced on demand (in parallel by the caller).
+// The animation must outlive the returned source.
+FrameSource animationFrames(const anim::Animation& animation, std::vector<double> times);
+
+// "mh", "random", "batch" -> the optimizer's node selection; throws UsageError for anything else.
+InsertionOptimizer::Selection parseSelection(const std::string& name);
+
+}  // namespace tsah::cli
