@@ -1,6 +1,7 @@
 #include "bench/report.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -91,8 +92,9 @@ void machineSection(std::ostringstream& md, const json& results) {
        << (int(num(g, "driver_version")) % 1000) / 10 << ", runtime " << int(num(g, "runtime_version")) / 1000 << "."
        << (int(num(g, "runtime_version")) % 1000) / 10 << ").";
   }
-  md << "\n\n**Build:** tsah " << str(v, "tsah") << ", " << str(v, "compiler") << ", " << str(v, "build")
-     << "; Embree: " << str(v, "embree") << ".\n\n";
+  const std::string embree = str(v, "embree");
+  md << "\n\n**Build:** tsah " << str(v, "tsah") << ", " << str(v, "compiler") << ", " << str(v, "build") << "; "
+     << (!embree.empty() && std::isdigit(static_cast<unsigned char>(embree[0])) ? "Embree " + embree : embree) << ".\n\n";
   md << "**Settings:** " << num(o, "frames") << " representative frames, " << num(o, "eval_frames")
      << " evaluation frames (Table 1); runtime " << num(o, "trace_frames") << " frames per method at "
      << num(o, "width") << "×" << num(o, "height") << ", 1 primary + " << num(o, "ao_rays") << " AO + "
