@@ -133,13 +133,7 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   const anim::Animation rep = a.resample(o.frames);
   const PrimitiveBoxes repBoxes = triangleBoxes(rep.indices(), rep.allPositions(), o.frames);
   const std::vector<double> evalTimes = a.uniformTimes(o.evalFrames);
-  FrameSource evaluation;
-  evaluation.frameCount = o.evalFrames;
-  evaluation.primCount = a.triangleCount();
-  evaluation.fill = [&a, &evalTimes](uint32_t frame, std::span<Aabb> out) {
-    const std::vector<float> positions = a.positionsAt(evalTimes[frame]);
-    triangleBoxes(a.indices(), positions, out);
-  };
+  const FrameSource evaluation = animationFrameSource(a, evalTimes);
   const BaselineConfig config = baselineConfig(o, progress);
 
   // --- Table 1 ------------------------------------------------------------------------------
@@ -273,18 +267,21 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   const uint32_t pictureFrame = static_cast<uint32_t>(setup.times.size() / 2);
   std::vector<RefitTrees> refits = {sah0, sahStar, tsah};
   if (!segmentTrees.empty()) refits.push_back(segmented);
-  for (const RefitTrees& r : refits) {
-    Image* image = r.name == "tsah0" ? &picture : nullptr;
-    const RuntimeMethod m =
-        gpu ? runGpuRefit(a, r, setup, image, pictureFrame) : runCpuRefit(a, r, setup, image, pictureFrame);
-    runtime["methods"].push_back(toJson(m));
-  }
   if (gpu) {
+    for (const RefitTrees& r : refits)
+      runtime["methods"].push_back(toJson(runGpuRefit(a, r, setup, r.name == "tsah0" ? &picture : nullptr, pictureFrame)));
     for (const char* method : {"lbvh", "hlbvh-sah"})
       runtime["methods"].push_back(toJson(runGpuRebuild(a, tsahTree, method, config.cost, o.maxLeaf, setup)));
+    runtime["schedule"] = "method by method (device times from CUDA events)";
   } else {
-    for (CpuRebuild kind : {CpuRebuild::Sweep, CpuRebuild::Binned})
-      runtime["methods"].push_back(toJson(runCpuRebuild(a, tsahTree, kind, config.cost, o.maxLeaf, setup)));
+    std::vector<CpuMethodSpec> cpuMethods;
+    for (const RefitTrees& r : refits) cpuMethods.push_back({r, std::nullopt});
+    cpuMethods.push_back({{"rebuild-sweep", "sweep SAH rebuild", {&tsahTree}, {}}, CpuRebuild::Sweep});
+    cpuMethods.push_back({{"rebuild-binned", "binned SAH rebuild", {&tsahTree}, {}}, CpuRebuild::Binned});
+    runtime["schedule"] = "frame by frame: every method on a frame before the next, in an order rotated every frame";
+    const std::size_t tsahIndex = 2;  // cpuMethods: sah0, sahstar, tsah0, ...
+    for (const RuntimeMethod& m : runCpuMethods(a, cpuMethods, config.cost, o.maxLeaf, setup, &picture, tsahIndex, pictureFrame))
+      runtime["methods"].push_back(toJson(m));
   }
   runtime["wall_s"] = secondsSince(start);
   j["runtime"] = runtime;

@@ -6,6 +6,7 @@
 // The CPU side also runs the Embree peer on the same frames and rays.
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -62,16 +63,22 @@ struct RefitTrees {
   std::vector<TimeSegment> segments;  // empty for a single tree, else one per tree
 };
 
-// CPU: per frame interpolate, refit (+ Woop), renderFrame. When image is given, the frame at
-// imageFrame is kept in it (the rendered picture of this method).
-RuntimeMethod runCpuRefit(const anim::Animation& animation, const RefitTrees& trees, const RuntimeSetup& setup,
-                          Image* image = nullptr, uint32_t imageFrame = 0);
-
 enum class CpuRebuild { Sweep, Binned };
-// CPU: per frame interpolate and build a new tree (sweep SAH + leaf collapse, or binned SAH, with
-// leaves of at most maxLeaf triangles), then refit/Woop it and renderFrame.
-RuntimeMethod runCpuRebuild(const anim::Animation& animation, const Bvh& initialTree, CpuRebuild builder,
-                            const CostModel& cost, uint32_t maxLeaf, const RuntimeSetup& setup);
+
+// One runtime method on the CPU: the refit of its tree(s), or a rebuild every frame.
+struct CpuMethodSpec {
+  RefitTrees trees;                   // refit: one tree or the segment trees; rebuild: trees[0] starts
+  std::optional<CpuRebuild> rebuild;  // set: a new tree every frame (sweep SAH + leaf collapse, or binned SAH)
+};
+
+// CPU: per frame and method interpolate, refit (+ Woop) or rebuild, then renderFrame. The methods
+// run frame by frame, all of them on a frame before the next (in an order rotated every frame),
+// so a machine whose load changes during the run (other jobs) slows every method alike instead of
+// whichever happened to run then. When image is given, the frame imageFrame of method imageMethod
+// is kept in it.
+std::vector<RuntimeMethod> runCpuMethods(const anim::Animation& animation, const std::vector<CpuMethodSpec>& methods,
+                                         const CostModel& cost, uint32_t maxLeaf, const RuntimeSetup& setup,
+                                         Image* image = nullptr, std::size_t imageMethod = 0, uint32_t imageFrame = 0);
 
 // CPU peer: the toolkit's CPU runtime refitting `tree` against Embree (a rebuild per frame with
 // medium and high quality, and refit), all on the same frames and the same rays (made once per

@@ -82,78 +82,81 @@ nlohmann::json toJson(const RuntimeMethod& m) {
   return j;
 }
 
-RuntimeMethod runCpuRefit(const anim::Animation& a, const RefitTrees& trees, const RuntimeSetup& setup, Image* image,
-                          uint32_t imageFrame) {
-  std::vector<std::unique_ptr<CpuRuntime>> runtimes;
-  for (const Bvh* tree : trees.trees) runtimes.push_back(makeRuntime(a, *tree, setup.threads));
-  startWorkers(*runtimes.front());
-  RuntimeMethod m{trees.name, trees.label, "refit", {}, nlohmann::json::object()};
-  std::vector<float> positions(std::size_t(a.vertexCount()) * 3);
-  Image scratch;
-  RenderSettings settings = setup.settings;
-  for (std::size_t f = 0; f < setup.times.size(); ++f) {
-    report(setup, trees.label, f);
-    const double t = setup.times[f];
-    CpuRuntime& rt = *runtimes[trees.segments.empty() ? 0 : segmentOf(trees.segments, t)];
-    FrameTiming ft;
-    ft.time = t;
-    const auto start = std::chrono::steady_clock::now();
-    a.positionsAt(t, positions);
-    rt.update(positions);
-    ft.updateMs = msSince(start);
-    settings.frame = static_cast<uint32_t>(f);
-    Image& target = image && f == imageFrame ? *image : scratch;
-    ft.rays = renderFrame(rt, setup.camera(t), setup.lighting, settings, target);
-    ft.traceMs = ft.rays.total().ms;
-    ft.totalMs = ft.updateMs + ft.traceMs;
-    m.frames.push_back(ft);
-  }
-  return m;
-}
+namespace {
 
-RuntimeMethod runCpuRebuild(const anim::Animation& a, const Bvh& initialTree, CpuRebuild kind, const CostModel& cost,
-                            uint32_t maxLeaf, const RuntimeSetup& setup) {
-  CpuRuntime::TreeBuilder builder;
-  RuntimeMethod m;
-  m.update = "rebuild";
+// One method's state during the frame-by-frame run.
+struct CpuRunner {
+  RuntimeMethod result;
+  std::vector<std::unique_ptr<CpuRuntime>> runtimes;  // one, or one per segment
+  std::vector<TimeSegment> segments;
+  CpuRuntime::TreeBuilder builder;                    // set for rebuilds
+  std::vector<float> positions;
+  Image scratch;
+};
+
+CpuRuntime::TreeBuilder rebuildBuilder(CpuRebuild kind, const CostModel& cost, uint32_t maxLeaf) {
   if (kind == CpuRebuild::Binned) {
     BinnedSahBuilder::Config c;
     c.cost = cost;
     c.maxLeafSize = maxLeaf;
-    builder = [c](std::span<const Aabb> boxes) { return BinnedSahBuilder(c).build(boxes); };
-    m.name = "rebuild-binned";
-    m.label = "binned SAH rebuild";
-  } else {
-    SweepSahBuilder::Config s;
-    s.cost = cost;
-    LeafCollapser::Config l;
-    l.cost = cost;
-    l.maxLeafSize = maxLeaf;
-    builder = [s, l](std::span<const Aabb> boxes) { return LeafCollapser(l).collapse(SweepSahBuilder(s).build(boxes)); };
-    m.name = "rebuild-sweep";
-    m.label = "sweep SAH rebuild";
+    return [c](std::span<const Aabb> boxes) { return BinnedSahBuilder(c).build(boxes); };
   }
-  auto rt = makeRuntime(a, initialTree, setup.threads);
-  startWorkers(*rt);
-  std::vector<float> positions(std::size_t(a.vertexCount()) * 3);
-  Image scratch;
+  SweepSahBuilder::Config s;
+  s.cost = cost;
+  LeafCollapser::Config l;
+  l.cost = cost;
+  l.maxLeafSize = maxLeaf;
+  return [s, l](std::span<const Aabb> boxes) { return LeafCollapser(l).collapse(SweepSahBuilder(s).build(boxes)); };
+}
+
+}  // namespace
+
+std::vector<RuntimeMethod> runCpuMethods(const anim::Animation& a, const std::vector<CpuMethodSpec>& specs,
+                                         const CostModel& cost, uint32_t maxLeaf, const RuntimeSetup& setup, Image* image,
+                                         std::size_t imageMethod, uint32_t imageFrame) {
+  std::vector<CpuRunner> runners(specs.size());
+  for (std::size_t m = 0; m < specs.size(); ++m) {
+    const CpuMethodSpec& spec = specs[m];
+    CpuRunner& r = runners[m];
+    r.result = {spec.trees.name, spec.trees.label, spec.rebuild ? "rebuild" : "refit", {}, nlohmann::json::object()};
+    for (const Bvh* tree : spec.trees.trees) {
+      r.runtimes.push_back(makeRuntime(a, *tree, setup.threads));
+      if (spec.rebuild) break;  // a rebuild replaces the tree anyway
+    }
+    r.segments = spec.rebuild ? std::vector<TimeSegment>{} : spec.trees.segments;
+    if (spec.rebuild) r.builder = rebuildBuilder(*spec.rebuild, cost, maxLeaf);
+    r.positions.resize(std::size_t(a.vertexCount()) * 3);
+    startWorkers(*r.runtimes.front());
+  }
   RenderSettings settings = setup.settings;
   for (std::size_t f = 0; f < setup.times.size(); ++f) {
-    report(setup, m.label, f);
+    if (setup.progress && (f == 0 || (f + 1) % 10 == 0 || f + 1 == setup.times.size()))
+      setup.progress("all methods: frame " + std::to_string(f + 1) + "/" + std::to_string(setup.times.size()));
     const double t = setup.times[f];
-    FrameTiming ft;
-    ft.time = t;
-    const auto start = std::chrono::steady_clock::now();
-    a.positionsAt(t, positions);
-    rt->rebuild(positions, builder);
-    ft.updateMs = msSince(start);
     settings.frame = static_cast<uint32_t>(f);
-    ft.rays = renderFrame(*rt, setup.camera(t), setup.lighting, settings, scratch);
-    ft.traceMs = ft.rays.total().ms;
-    ft.totalMs = ft.updateMs + ft.traceMs;
-    m.frames.push_back(ft);
+    for (std::size_t k = 0; k < runners.size(); ++k) {
+      const std::size_t m = (k + f) % runners.size();  // rotated: no method is always first or last
+      CpuRunner& r = runners[m];
+      CpuRuntime& rt = *r.runtimes[r.segments.empty() ? 0 : segmentOf(r.segments, t)];
+      FrameTiming ft;
+      ft.time = t;
+      const auto start = std::chrono::steady_clock::now();
+      a.positionsAt(t, r.positions);
+      if (r.builder)
+        rt.rebuild(r.positions, r.builder);
+      else
+        rt.update(r.positions);
+      ft.updateMs = msSince(start);
+      Image& target = image && m == imageMethod && f == imageFrame ? *image : r.scratch;
+      ft.rays = renderFrame(rt, setup.camera(t), setup.lighting, settings, target);
+      ft.traceMs = ft.rays.total().ms;
+      ft.totalMs = ft.updateMs + ft.traceMs;
+      r.result.frames.push_back(ft);
+    }
   }
-  return m;
+  std::vector<RuntimeMethod> out;
+  for (CpuRunner& r : runners) out.push_back(std::move(r.result));
+  return out;
 }
 
 std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const Bvh& tree, const std::string& name,

@@ -53,6 +53,16 @@ std::vector<SegmentTree> buildSegmentTrees(const anim::Animation& animation, uin
   return trees;
 }
 
+FrameSource animationFrameSource(const anim::Animation& animation, std::vector<double> times) {
+  FrameSource source;
+  source.frameCount = static_cast<uint32_t>(times.size());
+  source.primCount = animation.triangleCount();
+  source.fill = [&animation, times = std::move(times)](uint32_t frame, std::span<Aabb> out) {
+    triangleBoxes(animation.indices(), animation.positionsAt(times[frame]), out);
+  };
+  return source;
+}
+
 std::vector<double> evaluateSegmentTrees(const anim::Animation& animation, std::span<const SegmentTree> trees,
                                          std::span<const double> times, const CostModel& cost, unsigned threads) {
   std::vector<TimeSegment> segments;
@@ -67,14 +77,7 @@ std::vector<double> evaluateSegmentTrees(const anim::Animation& animation, std::
         where.push_back(i);
       }
     if (mine.empty()) continue;
-    FrameSource source;
-    source.frameCount = static_cast<uint32_t>(mine.size());
-    source.primCount = animation.triangleCount();
-    source.fill = [&animation, &mine](uint32_t frame, std::span<Aabb> out) {
-      const std::vector<float> positions = animation.positionsAt(mine[frame]);
-      triangleBoxes(animation.indices(), positions, out);
-    };
-    const std::vector<double> c = evaluateFrames(trees[s].bvh, source, cost, threads);
+    const std::vector<double> c = evaluateFrames(trees[s].bvh, animationFrameSource(animation, mine), cost, threads);
     for (std::size_t j = 0; j < c.size(); ++j) costs[where[j]] = c[j];
   }
   return costs;

@@ -1,0 +1,90 @@
+// The CPU runtime benchmark (bench/runtime_bench.hpp runCpuMethods): every method traces every
+// frame with the same workload, frame by frame, and keeps the picture asked for.
+#include <gtest/gtest.h>
+
+#include "anim/generators.hpp"
+#include "bench/runtime_bench.hpp"
+#include "tsah/baselines.hpp"
+#include "tsah/flat_bvh.hpp"
+
+namespace {
+
+TEST(BenchRuntime, EveryMethodTracesEveryFrameWithTheSameRays) {
+  anim::GeneratorOptions g;
+  g.triangles = 1200;
+  g.frames = 5;
+  g.seed = 4;
+  const anim::Animation a = anim::generate(anim::GeneratorKind::Swap, g);
+  const anim::Animation rep = a.resample(3);
+  const tsah::PrimitiveBoxes boxes = tsah::triangleBoxes(rep.indices(), rep.allPositions(), 3);
+  tsah::BaselineConfig config;
+  config.threads = 2;
+  const tsah::Bvh sah0 = tsah::buildSah0(boxes, config);
+  const tsah::Bvh tsah0 = tsah::buildTSah(boxes, 0, config);
+  const auto parts = tsah::bench::buildSegmentTrees(a, 2, 3, tsah::MethodSpec::parse("tsah0"), config);
+
+  tsah::bench::RuntimeSetup setup;
+  setup.times = a.uniformTimes(4);
+  const anim::Bounds b = a.bounds();
+  tsah::Aabb bounds;
+  bounds.extend(tsah::Vec3{b.min[0], b.min[1], b.min[2]});
+  bounds.extend(tsah::Vec3{b.max[0], b.max[1], b.max[2]});
+  const tsah::Camera camera = tsah::fitCamera(bounds, {0, 1, 0}, 45.0f, 48.0f / 36.0f);
+  setup.camera = [camera](double) { return camera; };
+  setup.lighting = tsah::fitLighting(bounds, camera, {0, 1, 0}, 0.1f, false);
+  setup.settings.width = 48;
+  setup.settings.height = 36;
+  setup.settings.aoSamples = 3;
+  setup.settings.shadowSamples = 2;
+  setup.threads = 2;
+  std::vector<std::string> progress;
+  setup.progress = [&](const std::string& m) { progress.push_back(m); };
+
+  using tsah::bench::CpuMethodSpec;
+  using tsah::bench::CpuRebuild;
+  std::vector<CpuMethodSpec> specs = {
+      {{"sah0", "SAH0 refit", {&sah0}, {}}, std::nullopt},
+      {{"tsah0", "T-SAH refit", {&tsah0}, {}}, std::nullopt},
+      {{"tsah0-seg2", "T-SAH, 2 trees", {&parts[0].bvh, &parts[1].bvh}, {parts[0].segment, parts[1].segment}}, std::nullopt},
+      {{"rebuild-sweep", "sweep", {&tsah0}, {}}, CpuRebuild::Sweep},
+      {{"rebuild-binned", "binned", {&tsah0}, {}}, CpuRebuild::Binned},
+  };
+  tsah::Image picture;
+  const auto methods = tsah::bench::runCpuMethods(a, specs, config.cost, 8, setup, &picture, 1, 2);
+  ASSERT_EQ(methods.size(), specs.size());
+  EXPECT_FALSE(progress.empty());
+  for (std::size_t m = 0; m < methods.size(); ++m) {
+    EXPECT_EQ(methods[m].name, specs[m].trees.name);
+    EXPECT_EQ(methods[m].update, specs[m].rebuild ? "rebuild" : "refit");
+    ASSERT_EQ(methods[m].frames.size(), setup.times.size());
+    for (std::size_t f = 0; f < setup.times.size(); ++f) {
+      const tsah::bench::FrameTiming& ft = methods[m].frames[f];
+      EXPECT_EQ(ft.time, setup.times[f]);
+      EXPECT_GT(ft.updateMs, 0.0);
+      EXPECT_DOUBLE_EQ(ft.traceMs, ft.rays.total().ms);
+      EXPECT_DOUBLE_EQ(ft.totalMs, ft.updateMs + ft.traceMs);
+      // Exact tracers on the same frame: every tree finds the same surfaces, so the same rays.
+      const tsah::RenderStats& first = methods[0].frames[f].rays;
+      EXPECT_EQ(ft.rays.primary.rays, 48u * 36u);
+      EXPECT_EQ(ft.rays.ao.rays, first.ao.rays) << methods[m].name << " frame " << f;
+      EXPECT_EQ(ft.rays.shadow.rays, first.shadow.rays) << methods[m].name << " frame " << f;
+    }
+  }
+  EXPECT_GT(methods[0].frames[0].rays.ao.rays, 0u);
+
+  // The picture is T-SAH's frame 2, as a runtime of that tree renders it.
+  tsah::CpuRuntime rt(tsah::flattenBvh(tsah0), {a.indices().begin(), a.indices().end()}, a.vertexCount(), {2});
+  rt.update(a.positionsAt(setup.times[2]));
+  tsah::RenderSettings settings = setup.settings;
+  settings.frame = 2;
+  tsah::Image expected;
+  tsah::renderFrame(rt, camera, setup.lighting, settings, expected);
+  ASSERT_EQ(picture.width, 48u);
+  EXPECT_EQ(picture.rgb, expected.rgb);
+
+  const nlohmann::json j = tsah::bench::toJson(methods[2]);
+  EXPECT_EQ(j["name"], "tsah0-seg2");
+  EXPECT_EQ(j["per_frame"]["total_ms"].size(), 4u);
+}
+
+}  // namespace
