@@ -29,10 +29,12 @@ void startWorkers(const CpuRuntime& rt) {
   rt.parallelFor(rt.threadCount() * 4, 1, [](std::size_t, std::size_t) {});  // before anything is timed
 }
 
+#if TSAH_HAVE_EMBREE
 void report(const RuntimeSetup& setup, const std::string& label, std::size_t frame) {
   if (setup.progress && (frame == 0 || (frame + 1) % 10 == 0 || frame + 1 == setup.times.size()))
     setup.progress(label + ": frame " + std::to_string(frame + 1) + "/" + std::to_string(setup.times.size()));
 }
+#endif
 
 std::unique_ptr<CpuRuntime> makeRuntime(const anim::Animation& a, const Bvh& tree, unsigned threads) {
   return std::make_unique<CpuRuntime>(flattenBvh(tree), std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
