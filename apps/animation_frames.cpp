@@ -1,6 +1,6 @@
 #include "animation_frames.hpp"
 
-#include "cli.hpp"
+#include <stdexcept>
 
 namespace tsah::cli {
 
@@ -20,7 +20,7 @@ InsertionOptimizer::Selection parseSelection(const std::string& name) {
   if (name == "mh") return Selection::MetropolisHastings;
   if (name == "random") return Selection::Uniform;
   if (name == "batch") return Selection::BatchSort;
-  throw UsageError("unknown node selection '" + name + "' (expected mh, random or batch)");
+  throw std::invalid_argument("unknown node selection '" + name + "' (expected mh, random or batch)");
 }
 
 }  // namespace tsah::cli

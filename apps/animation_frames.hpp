@@ -14,7 +14,7 @@ namespace tsah::cli {
 // The animation must outlive the returned source.
 FrameSource animationFrames(const anim::Animation& animation, std::vector<double> times);
 
-// "mh", "random", "batch" -> the optimizer's node selection; throws UsageError for anything else.
+// "mh", "random", "batch" -> the optimizer's node selection; throws std::invalid_argument for anything else.
 InsertionOptimizer::Selection parseSelection(const std::string& name);
 
 }  // namespace tsah::cli

@@ -11,6 +11,7 @@
 #include "anim/load.hpp"
 #include "bench/embree_peer.hpp"
 #include "bench/runtime_bench.hpp"
+#include "animation_frames.hpp"
 #include "bench/segments.hpp"
 #include "tsah/baselines.hpp"
 #include "tsah/camera.hpp"
@@ -133,7 +134,7 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   const anim::Animation rep = a.resample(o.frames);
   const PrimitiveBoxes repBoxes = triangleBoxes(rep.indices(), rep.allPositions(), o.frames);
   const std::vector<double> evalTimes = a.uniformTimes(o.evalFrames);
-  const FrameSource evaluation = animationFrameSource(a, evalTimes);
+  const FrameSource evaluation = tsah::cli::animationFrames(a, evalTimes);
   const BaselineConfig config = baselineConfig(o, progress);
 
   // --- Table 1 ------------------------------------------------------------------------------

@@ -1,5 +1,7 @@
 #include "bench/segments.hpp"
 
+#include "animation_frames.hpp"
+
 #include <chrono>
 #include <filesystem>
 #include <stdexcept>
@@ -53,16 +55,6 @@ std::vector<SegmentTree> buildSegmentTrees(const anim::Animation& animation, uin
   return trees;
 }
 
-FrameSource animationFrameSource(const anim::Animation& animation, std::vector<double> times) {
-  FrameSource source;
-  source.frameCount = static_cast<uint32_t>(times.size());
-  source.primCount = animation.triangleCount();
-  source.fill = [&animation, times = std::move(times)](uint32_t frame, std::span<Aabb> out) {
-    triangleBoxes(animation.indices(), animation.positionsAt(times[frame]), out);
-  };
-  return source;
-}
-
 std::vector<double> evaluateSegmentTrees(const anim::Animation& animation, std::span<const SegmentTree> trees,
                                          std::span<const double> times, const CostModel& cost, unsigned threads) {
   std::vector<TimeSegment> segments;
@@ -77,7 +69,7 @@ std::vector<double> evaluateSegmentTrees(const anim::Animation& animation, std::
         where.push_back(i);
       }
     if (mine.empty()) continue;
-    const std::vector<double> c = evaluateFrames(trees[s].bvh, animationFrameSource(animation, mine), cost, threads);
+    const std::vector<double> c = evaluateFrames(trees[s].bvh, tsah::cli::animationFrames(animation, mine), cost, threads);
     for (std::size_t j = 0; j < c.size(); ++j) costs[where[j]] = c[j];
   }
   return costs;

@@ -41,10 +41,6 @@ struct SegmentTree {
 std::vector<SegmentTree> buildSegmentTrees(const anim::Animation& animation, uint32_t segmentCount, uint32_t frames,
                                            const MethodSpec& method, const BaselineConfig& config);
 
-// The triangle boxes of the animation at each of `times`, made on demand (the evaluation frames of
-// the cost tables). The animation must outlive the source.
-FrameSource animationFrameSource(const anim::Animation& animation, std::vector<double> times);
-
 // Eq. 1 at each of `times`, every frame evaluated with the tree of its part (refitted to it).
 std::vector<double> evaluateSegmentTrees(const anim::Animation& animation, std::span<const SegmentTree> trees,
                                          std::span<const double> times, const CostModel& cost, unsigned threads = 0);
