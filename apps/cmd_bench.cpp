@@ -112,6 +112,9 @@ void reportOnly(const Options& opt) {
     throw anim::ImportError(file, std::string("not valid JSON: ") + e.what());
   }
   if (!results.is_object() || !results.contains("scenes")) throw anim::ImportError(file, "not a tsah bench results file");
+  // Notes given now annotate the finished run (what was learned after it, e.g. about the machine).
+  if (!results.contains("notes") || !results["notes"].is_array()) results["notes"] = json::array();
+  for (const std::string& n : opt.notes) results["notes"].push_back("(added after the run with --report-only) " + n);
   makePlotsInto(results, out, log);
   writeReport(out, results);
   std::printf("%s\n%s\n", (out / "results.md").c_str(), (out / "results.json").c_str());
@@ -280,7 +283,9 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
   sub->add_option("--threads", b.threads, "CPU worker threads (0: all cores)")->capture_default_str();
   sub->add_flag("--no-embree", opt->noEmbree, "Skip the Embree peer");
   sub->add_flag("--no-convergence", opt->noConvergence, "Skip the random and batch-sort optimizations of the convergence plot");
-  sub->add_option("--note", opt->notes, "A note for results.md (repeatable), e.g. what else ran on the machine");
+  sub->add_option("--note", opt->notes,
+                  "A note for results.md (repeatable), e.g. what else ran on the machine; with --report-only it is "
+                  "added to the finished run");
   sub->add_flag("--list", opt->list, "List the scenes found (and skipped) and exit");
   sub->add_flag("--report-only", opt->reportOnly, "Only redo results.md and the plots from OUT/results.json");
   sub->callback([opt, sub] { run(*opt, sub); });

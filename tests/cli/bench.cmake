@@ -103,10 +103,19 @@ add_test(NAME cli.bench.files
          COMMAND ${CMAKE_COMMAND} -DOUT=${W}/bench_out -P ${W}/bench_check.cmake)
 set_tests_properties(cli.bench.files PROPERTIES FIXTURES_REQUIRED bench_results)
 
-# The report alone, again from results.json.
-add_test(NAME cli.bench.report_only COMMAND tsah bench --report-only --out ${W}/bench_out)
-set_tests_properties(cli.bench.report_only PROPERTIES FIXTURES_REQUIRED bench_results
+# The report alone, again from results.json, with a note added after the run.
+add_test(NAME cli.bench.report_only COMMAND tsah bench --report-only --out ${W}/bench_out --note "seen later")
+set_tests_properties(cli.bench.report_only PROPERTIES FIXTURES_REQUIRED bench_results FIXTURES_SETUP bench_report
   PASS_REGULAR_EXPRESSION "bench_out/results.md\n")
+file(WRITE ${W}/bench_note.cmake [=[
+file(READ ${OUT}/results.md md)
+string(FIND "${md}" "- (added after the run with --report-only) seen later" at)
+if(at EQUAL -1)
+  message(FATAL_ERROR "results.md lacks the note added with --report-only")
+endif()
+]=])
+add_test(NAME cli.bench.report_note COMMAND ${CMAKE_COMMAND} -DOUT=${W}/bench_out -P ${W}/bench_note.cmake)
+set_tests_properties(cli.bench.report_note PROPERTIES FIXTURES_REQUIRED bench_report)
 
 # Errors: one line, non-zero.
 file(MAKE_DIRECTORY ${W}/bench_empty_data)
