@@ -256,6 +256,8 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
   sub->add_option("--device", b.device, "Where the runtime part runs: cpu, or cuda (the GPU runtime)")
       ->check(CLI::IsMember({"cpu", "cuda"}))
       ->capture_default_str();
+  sub->add_option("--layout", b.layout, "cuda: node layout of the refitted trees, bvh2 or cwbvh (default: the runtime's)")
+      ->check(CLI::IsMember({"bvh2", "cwbvh"}));
   sub->add_option("--out", opt->out, "Output folder: results.json, results.md, plots/, images/")->capture_default_str();
   sub->add_option("--cache", opt->cache, "Where archives of the data folder are unpacked (default: OUT/cache)");
   sub->add_flag("--quick", b.quick, "Smoke run: 10 evaluation frames, 3 traced frames of 192x144 (explicit options win)");

@@ -103,6 +103,7 @@ std::vector<anim::CameraKey> loadCameraFile(const std::string& path) {
 
 struct TraceOptions {
   std::string input, bvh, device = "cpu", out = "trace", camera, eye, lookAt, up = "0,1,0", rebuild = "none";
+  std::string layout;  // GPU node layout of the refitted tree: bvh2 or cwbvh (empty: the runtime's default)
   uint32_t frames = 0, width = 1024, height = 768, ao = 8, shadow = 2, threads = 0, seed = 1;
   float fov = 45.0f, aoDistance = 0.0f, aoFraction = 0.1f;
   bool json = false, noImages = false, noGround = false;
@@ -119,6 +120,10 @@ void checkDeviceAndRebuild(const TraceOptions& opt) {
   if (opt.device == "cuda" && isCpuRebuild(opt.rebuild))
     throw UsageError("--rebuild " + opt.rebuild + " is a CPU rebuild: use it with --device cpu "
                      "(the GPU rebuilds are lbvh and hlbvh-sah)");
+  if (!opt.layout.empty() && opt.layout != "bvh2" && opt.layout != "cwbvh")
+    throw UsageError("--layout must be bvh2 or cwbvh");
+  if (opt.device != "cuda" && !opt.layout.empty())
+    throw UsageError("--layout chooses the GPU node layout: use it with --device cuda");
   if (opt.device != "cuda") return;
 #if TSAH_HAVE_CUDA
   if (!tsah::cuda::deviceAvailable())
@@ -227,8 +232,8 @@ tsah::CpuRuntime::TreeBuilder cpuRebuilder(const std::string& rebuild, const tsa
 class GpuFrameRuntime final : public FrameRuntime {
  public:
   GpuFrameRuntime(const tsah::FlatBvh& tree, const anim::Animation& animation,
-                  std::optional<tsah::cuda::RebuildOptions> rebuild)
-      : runtime_(tree, animation), rebuild_(rebuild) {}
+                  std::optional<tsah::cuda::RebuildOptions> rebuild, tsah::cuda::GpuRuntime::Config config)
+      : runtime_(tree, animation, config), rebuild_(rebuild) {}
 
   void warmUp(double time, const tsah::Camera& camera, const tsah::SceneLighting& lighting,
               const tsah::RenderSettings& settings) override {
@@ -253,7 +258,9 @@ class GpuFrameRuntime final : public FrameRuntime {
     return tsah::cuda::renderFrameGpu(runtime_, camera, lighting, settings, image);
   }
 
-  std::string summary() const override { return "GPU " + runtime_.device().name; }
+  std::string summary() const override {
+    return "GPU " + runtime_.device().name + ", " + tsah::cuda::treeLayoutName(runtime_.config().layout) + " layout";
+  }
   void describe(nlohmann::json& out) const override {
     const tsah::cuda::DeviceInfo& d = runtime_.device();
     out["device"] = d.name;
@@ -264,6 +271,7 @@ class GpuFrameRuntime final : public FrameRuntime {
                   {"cuda_runtime", d.runtimeVersion},
                   {"cuda_driver", d.driverVersion}};
     out["timer"] = "CUDA events (device time)";
+    out["layout"] = tsah::cuda::treeLayoutName(runtime_.config().layout);
   }
 
  private:
@@ -285,7 +293,9 @@ std::unique_ptr<FrameRuntime> makeRuntime(const TraceOptions& opt, const tsah::F
       rebuild->maxLeafSize = maxLeaf;
       rebuild->cost = cost;
     }
-    return std::make_unique<GpuFrameRuntime>(tree, a, rebuild);
+    tsah::cuda::GpuRuntime::Config config;
+    if (!opt.layout.empty()) config.layout = tsah::cuda::parseTreeLayout(opt.layout);
+    return std::make_unique<GpuFrameRuntime>(tree, a, rebuild, config);
   }
 #endif
   return std::make_unique<CpuFrameRuntime>(tree, a, opt.threads, cpuRebuilder(opt.rebuild, cost, maxLeaf));
@@ -501,6 +511,9 @@ TSAH_REGISTER_COMMAND(70, [](CLI::App& app) {
   sub->add_option("BVH", opt->bvh, "Tree from `tsah optimize` (.tbvh) built for this animation")->required();
   sub->add_option("--device", opt->device, "cpu (default) or cuda (the GPU runtime, when built and a GPU is present)")
       ->check(CLI::IsMember({"cpu", "cuda"}));
+  sub->add_option("--layout", opt->layout,
+                  "GPU node layout of the refitted tree: bvh2 (binary) or cwbvh (compressed 8-wide); "
+                  "default: the runtime's (see docs/cwbvh.md)");
   sub->add_option("--frames", opt->frames,
                   "Frames to trace, uniform over the animation's time range (default: one per keyframe, at most 50)");
   sub->add_option("--width", opt->width, "Image width (default 1024)")->check(CLI::Range(1u, 16384u));

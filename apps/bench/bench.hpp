@@ -25,6 +25,7 @@ namespace tsah::bench {
 
 struct BenchOptions {
   std::string device = "cpu";   // cpu or cuda (the runtime part)
+  std::string layout;           // cuda: node layout of the refitted trees, bvh2 or cwbvh (empty: the runtime's default)
   bool quick = false;           // smoke run: the caller sets the smaller sizes below
   uint64_t seed = 1;            // optimizer seed (and per-pixel random numbers)
   uint32_t frames = 5;          // representative frames

@@ -52,10 +52,13 @@ nlohmann::json gpuJson() {
 }
 
 RuntimeMethod runGpuRefit(const anim::Animation& a, const RefitTrees& trees, const RuntimeSetup& setup, Image* image,
-                          uint32_t imageFrame) {
+                          uint32_t imageFrame, const std::string& layout) {
   requireDevice();
+  cuda::GpuRuntime::Config config;
+  if (!layout.empty()) config.layout = cuda::parseTreeLayout(layout);
   std::vector<std::unique_ptr<cuda::GpuRuntime>> runtimes;
-  for (const Bvh* tree : trees.trees) runtimes.push_back(std::make_unique<cuda::GpuRuntime>(flattenBvh(*tree), a));
+  for (const Bvh* tree : trees.trees)
+    runtimes.push_back(std::make_unique<cuda::GpuRuntime>(flattenBvh(*tree), a, config));
   RenderSettings settings = setup.settings;
   // Warm-up (untimed): the first update and render of a runtime capture its CUDA graphs.
   for (auto& gpu : runtimes) {
@@ -112,7 +115,8 @@ RuntimeMethod runGpuRebuild(const anim::Animation& a, const Bvh& initialTree, co
 bool gpuAvailable() { return false; }
 nlohmann::json gpuJson() { return nullptr; }
 
-RuntimeMethod runGpuRefit(const anim::Animation&, const RefitTrees&, const RuntimeSetup&, Image*, uint32_t) {
+RuntimeMethod runGpuRefit(const anim::Animation&, const RefitTrees&, const RuntimeSetup&, Image*, uint32_t,
+                          const std::string&) {
   throw anim::Error("--device cuda: this tsah was built without the CUDA runtime");
 }
 RuntimeMethod runGpuRebuild(const anim::Animation&, const Bvh&, const std::string&, const CostModel&, uint32_t,

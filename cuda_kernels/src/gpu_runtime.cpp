@@ -6,6 +6,7 @@
 
 #include "anim/animation.hpp"
 #include "anim/error.hpp"
+#include "cwbvh_kernels.hpp"
 #include "kernels.hpp"
 #include "runtime_impl.hpp"
 #include "tsah/traversal.hpp"
@@ -14,6 +15,14 @@ namespace tsah::cuda {
 
 const char* rebuildMethodName(RebuildMethod method) {
   return method == RebuildMethod::Lbvh ? "lbvh" : "hlbvh-sah";
+}
+
+const char* treeLayoutName(TreeLayout layout) { return layout == TreeLayout::Bvh2 ? "bvh2" : "cwbvh"; }
+
+TreeLayout parseTreeLayout(std::string_view name) {
+  if (name == "bvh2") return TreeLayout::Bvh2;
+  if (name == "cwbvh") return TreeLayout::Cwbvh;
+  throw anim::Error("unknown tree layout '" + std::string(name) + "' (expected bvh2 or cwbvh)");
 }
 
 RebuildMethod parseRebuildMethod(std::string_view name) {
@@ -97,6 +106,7 @@ GpuRuntime::Impl::Impl(const FlatBvh& tree, const anim::Animation& animation, Co
   root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&r, 1), stream);
   woop.resize(triangles);
   words.resize(8);
+  if (config.layout == TreeLayout::Cwbvh) uploadCwbvh(tree);
   CUDA_CHECK(cudaStreamSynchronize(stream));
 }
 
@@ -157,7 +167,40 @@ void GpuRuntime::Impl::buildVertexTriangles() {
   normals.resize(std::size_t(vertices) * 3);
 }
 
+// The 8-wide collapse over all frames of the given tree (WideCollapser), its compressed layout,
+// and what the per-frame refit needs on the device.
+void GpuRuntime::Impl::uploadCwbvh(const FlatBvh& tree) {
+  cwbvh = std::make_unique<Cwbvh>();
+  Cwbvh& c = *cwbvh;
+  c.host = buildCwbvh(tree);
+  c.nodes = DeviceBuffer<CwbvhNode>(std::span<const CwbvhNode>(c.host.nodes), stream);
+  c.exact.resize(c.host.exactBoxes.size());
+  c.parentSlot = DeviceBuffer<uint32_t>(std::span<const uint32_t>(c.host.parentSlot), stream);
+  c.counters.resize(c.host.nodes.size());
+  c.triIndex = DeviceBuffer<uint32_t>(std::span<const uint32_t>(c.host.triIndex), stream);
+  c.leaves = DeviceBuffer<CwbvhLeaf>(std::span<const CwbvhLeaf>(c.host.leaves), stream);
+  detail::RootInfo r;
+  r.box = c.host.rootBox;
+  r.ref = c.host.rootRef;
+  r.count = c.host.rootCount;
+  r.interiorCount = c.host.nodeCount();
+  r.depth = c.host.depth;
+  c.root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&r, 1), stream);
+}
+
 detail::TraceScene GpuRuntime::Impl::scene() const {
+  if (cwbvh && !tracingRebuilt) {
+    detail::TraceScene s;
+    s.woop = woop.data();
+    s.triIndex = cwbvh->triIndex.data();
+    s.indices = indices.data();
+    s.positions = positions.data();
+    s.root = cwbvh->root.data();
+    s.cwbvhNodes = cwbvh->nodes.data();
+    s.cwbvhRootRef = cwbvh->host.rootRef;
+    s.cwbvhRootCount = cwbvh->host.rootCount;
+    return s;
+  }
   detail::TraceScene s;
   s.nodes = tracingRebuilt ? rebuilder->nodes() : nodes.data();
   s.woop = woop.data();
@@ -174,6 +217,17 @@ void GpuRuntime::Impl::requireTraceable() const {
 }
 
 void GpuRuntime::Impl::enqueueRefitAndWoop() {
+  if (cwbvh) {  // refit + re-quantize the compressed layout, Woop triangles per slot of it
+    Cwbvh& c = *cwbvh;
+    c.counters.fillBytes(0, stream);
+    detail::launchCwbvhRefit(c.nodes.data(), c.exact.data(), c.parentSlot.data(), c.leaves.data(),
+                             uint32_t(c.leaves.size()), c.triIndex.data(), indices.data(), positions.data(),
+                             c.counters.data(), c.root.data(), stream);
+    events.record(2, stream);
+    detail::launchWoop(c.triIndex.data(), triangles, indices.data(), positions.data(), woop.data(), stream);
+    events.record(3, stream);
+    return;
+  }
   counters.fillBytes(0, stream);
   detail::launchRefit(nodes.data(), nodeParent.data(), leaves.data(), uint32_t(leaves.size()), triIndex.data(),
                       indices.data(), positions.data(), counters.data(), root.data(), stream);
@@ -291,8 +345,15 @@ std::vector<float> GpuRuntime::downloadPositions() const { return impl_->positio
 
 std::vector<WoopTriangle> GpuRuntime::downloadWoop() const { return impl_->woop.download(impl_->stream); }
 
+std::vector<CwbvhNode> GpuRuntime::downloadCwbvhNodes() const {
+  if (!impl_->cwbvh) throw anim::Error("GPU runtime: the tree is not in the compressed wide layout");
+  return impl_->cwbvh->nodes.download(impl_->stream);
+}
+
 FlatBvh GpuRuntime::downloadTree() const {
   const Impl& m = *impl_;
+  if (m.cwbvh && !m.tracingRebuilt)
+    throw anim::Error("GPU runtime: downloadTree gives the binary layout; this runtime traces the compressed one");
   if (m.tracingRebuilt) return flattenBvh(downloadRebuiltTree());
   FlatBvh flat = m.topology;
   flat.nodes = m.nodes.download(m.stream);

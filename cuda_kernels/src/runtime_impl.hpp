@@ -8,6 +8,7 @@
 #include "device_types.hpp"
 #include "event_timer.hpp"
 #include "rebuild.hpp"
+#include "tsah/cwbvh_build.hpp"
 #include "tsah_cuda/device_buffer.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 
@@ -63,6 +64,19 @@ struct GpuRuntime::Impl {
   DeviceBuffer<uint32_t> nodeParent, counters, triIndex;
   DeviceBuffer<detail::LeafRecord> leaves;
   DeviceBuffer<detail::RootInfo> root;
+
+  // The compressed 8-wide layout of the uploaded tree (Config::layout == cwbvh), refitted and
+  // re-quantized by every update; woop then holds its slots' triangles.
+  struct Cwbvh {
+    CwbvhTree host;                      // topology (and frame-0 quantization) as built on the host
+    DeviceBuffer<CwbvhNode> nodes;
+    DeviceBuffer<Aabb> exact;            // nodes * 8 exact child boxes of the current frame
+    DeviceBuffer<uint32_t> parentSlot, counters, triIndex;
+    DeviceBuffer<CwbvhLeaf> leaves;
+    DeviceBuffer<detail::RootInfo> root;
+  };
+  std::unique_ptr<Cwbvh> cwbvh;
+  void uploadCwbvh(const FlatBvh& tree);
 
   DeviceBuffer<WoopTriangle> woop;       // per slot of the traced tree
   bool woopValid = false;

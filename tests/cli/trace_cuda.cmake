@@ -33,6 +33,10 @@ add_trace_error_test(rebuild.gpu_on_cpu.hlbvh "--rebuild hlbvh-sah is a GPU rebu
                      --rebuild hlbvh-sah)
 add_trace_error_test(rebuild.cpu_on_gpu "--rebuild binned is a CPU rebuild: use it with --device cpu" ""
                      --device cuda --rebuild binned)
+# --layout chooses the GPU node layout: bvh2 or cwbvh, with --device cuda only.
+add_trace_error_test(layout.on_cpu "--layout chooses the GPU node layout: use it with --device cuda" ""
+                     --layout cwbvh)
+add_trace_error_test(layout.unknown "--layout must be bvh2 or cwbvh" "" --device cuda --layout bvh8)
 
 if(TSAH_HAVE_CUDA)
   add_trace_error_test(no_device "no CUDA device found" "CUDA_VISIBLE_DEVICES=-1" --device cuda)

@@ -21,6 +21,7 @@
 // for a child on the + side of the node along axis a. A ray whose direction has sign bits `oct`
 // (bit a set when dir[a] < 0) visits the hit children in increasing order of slot ^ oct, i.e.
 // roughly near to far.
+#include <cstddef>
 #include <cstdint>
 #include <cstring>
 #include <type_traits>
@@ -30,6 +31,13 @@
 #include "tsah/hd.hpp"
 #include "tsah/ray.hpp"
 #include "tsah/woop.hpp"
+
+// Unrolls the loops over a node's eight slots on the GPU (the node then stays in registers).
+#if defined(__CUDA_ARCH__)
+#define TSAH_CWBVH_UNROLL _Pragma("unroll")
+#else
+#define TSAH_CWBVH_UNROLL
+#endif
 
 namespace tsah {
 
@@ -139,6 +147,7 @@ TSAH_HD uint32_t cwbvhQuantizeHi(float hi, float p, uint32_t e) {
 // finite boxes (a plane beyond the float range decodes to +-inf, which still contains it).
 TSAH_HD Aabb cwbvhQuantize(CwbvhNode& n, const Aabb* boxes) {
   Aabb all;
+  TSAH_CWBVH_UNROLL
   for (uint32_t s = 0; s < kCwbvhWidth; ++s)
     if (!n.isEmpty(s)) all.extend(boxes[s]);
   n.px = all.lo.x;
@@ -151,6 +160,7 @@ TSAH_HD Aabb cwbvhQuantize(CwbvhNode& n, const Aabb* boxes) {
   n.ey = uint8_t(ey);
   n.ez = uint8_t(ez);
   const uint32_t e[3] = {ex, ey, ez};
+  TSAH_CWBVH_UNROLL
   for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
     for (int a = 0; a < 3; ++a) {
       if (n.isEmpty(s)) {
@@ -205,17 +215,46 @@ struct CwbvhView {
   Aabb rootBox;
 };
 
-// How a traversal loads a node: plain loads on the CPU, read-only cache on the GPU.
-TSAH_HD CwbvhNode cwbvhLoadNode(const CwbvhNode* nodes, uint32_t i) {
+// The node as the traversal reads it: 20 words, with every field taken out by a constant byte
+// offset, so that on the GPU (slot loop unrolled) the node lives in registers.
+struct CwbvhNodeWords {
+  uint32_t w[20];
+
+  TSAH_HD uint32_t byteAt(uint32_t offset) const { return (w[offset >> 2] >> (8u * (offset & 3u))) & 0xffu; }
+  TSAH_HD float floatAt(uint32_t word) const {
 #if defined(__CUDA_ARCH__)
-  CwbvhNode n;
-  const uint4* src = reinterpret_cast<const uint4*>(nodes + i);
-  uint4* dst = reinterpret_cast<uint4*>(&n);
-  for (int k = 0; k < 5; ++k) dst[k] = __ldg(src + k);
-  return n;
+    return __uint_as_float(w[word]);
 #else
-  return nodes[i];
+    float f;
+    std::memcpy(&f, &w[word], sizeof f);
+    return f;
 #endif
+  }
+  TSAH_HD uint32_t meta(uint32_t slot) const { return byteAt(24 + slot); }
+  TSAH_HD uint32_t qlo(uint32_t axis, uint32_t slot) const { return byteAt(32 + 8 * axis + slot); }
+  TSAH_HD uint32_t qhi(uint32_t axis, uint32_t slot) const { return byteAt(56 + 8 * axis + slot); }
+};
+static_assert(offsetof(CwbvhNode, ex) == 12 && offsetof(CwbvhNode, triCount) == 15 &&
+              offsetof(CwbvhNode, childBase) == 16 && offsetof(CwbvhNode, triBase) == 20 &&
+              offsetof(CwbvhNode, meta) == 24 && offsetof(CwbvhNode, qlo) == 32 && offsetof(CwbvhNode, qhi) == 56);
+
+// How a traversal loads a node: plain loads on the CPU, read-only cache on the GPU.
+TSAH_HD CwbvhNodeWords cwbvhLoadNode(const CwbvhNode* nodes, uint32_t i) {
+  CwbvhNodeWords n;
+#if defined(__CUDA_ARCH__)
+  const uint4* src = reinterpret_cast<const uint4*>(nodes + i);
+#pragma unroll
+  for (int k = 0; k < 5; ++k) {
+    const uint4 v = __ldg(src + k);
+    n.w[4 * k] = v.x;
+    n.w[4 * k + 1] = v.y;
+    n.w[4 * k + 2] = v.z;
+    n.w[4 * k + 3] = v.w;
+  }
+#else
+  std::memcpy(n.w, nodes + i, sizeof n.w);
+#endif
+  return n;
 }
 
 TSAH_HD WoopTriangle cwbvhLoadWoop(const WoopTriangle* woop, uint32_t s) {
@@ -297,22 +336,21 @@ TSAH_HD Hit cwbvhTraverse(const CwbvhView& v, const Ray& ray) {
     const uint32_t slot = key ^ oct;
     const uint32_t imask = group.bits >> 8;
     const uint32_t nodeIndex = group.base + cwbvhPopc(imask & ((1u << slot) - 1u));
-    const CwbvhNode n = cwbvhLoadNode(v.nodes, nodeIndex);
-
-    const float sx = cwbvhStep(n.ex), sy = cwbvhStep(n.ey), sz = cwbvhStep(n.ez);
+    const CwbvhNodeWords n = cwbvhLoadNode(v.nodes, nodeIndex);
+    const Vec3 p{n.floatAt(0), n.floatAt(1), n.floatAt(2)};
+    const float sx = cwbvhStep(n.byteAt(12)), sy = cwbvhStep(n.byteAt(13)), sz = cwbvhStep(n.byteAt(14));
     uint32_t childHits = 0, childInterior = 0;
     uint64_t starts = 0, hitLeaves = 0;
+    TSAH_CWBVH_UNROLL
     for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
-      const uint32_t m = n.meta[s];
+      const uint32_t m = n.meta(s);
       if (m == 0) continue;
       const bool interior = (m & kCwbvhInterior) != 0;
       if (interior) childInterior |= 1u << s;
       else starts |= 1ull << (m & 0x3fu);
       Aabb b;
-      b.lo = {cwbvhDecode(n.px, n.qlo[0][s], sx), cwbvhDecode(n.py, n.qlo[1][s], sy),
-              cwbvhDecode(n.pz, n.qlo[2][s], sz)};
-      b.hi = {cwbvhDecode(n.px, n.qhi[0][s], sx), cwbvhDecode(n.py, n.qhi[1][s], sy),
-              cwbvhDecode(n.pz, n.qhi[2][s], sz)};
+      b.lo = {cwbvhDecode(p.x, n.qlo(0, s), sx), cwbvhDecode(p.y, n.qlo(1, s), sy), cwbvhDecode(p.z, n.qlo(2, s), sz)};
+      b.hi = {cwbvhDecode(p.x, n.qhi(0, s), sx), cwbvhDecode(p.y, n.qhi(1, s), sy), cwbvhDecode(p.z, n.qhi(2, s), sz)};
       if (!intersectBox(prep, b, ray.tmin, tmax, tEntry)) continue;
       if (interior) childHits |= 1u << (s ^ oct);
       else hitLeaves |= 1ull << (m & 0x3fu);
@@ -322,9 +360,9 @@ TSAH_HD Hit cwbvhTraverse(const CwbvhView& v, const Ray& ray) {
     while (hitLeaves != 0 && !done) {
       const uint32_t first = cwbvhLowestBit(hitLeaves);
       hitLeaves &= hitLeaves - 1;
-      const uint32_t end = cwbvhLeafEnd(starts, first, n.triCount);
+      const uint32_t end = cwbvhLeafEnd(starts, first, n.byteAt(15));
       for (uint32_t o = first; o < end; ++o) {
-        if (cwbvhTriangle(v, ray, prep, n.triBase + o, tmax, hit) && AnyHit) {
+        if (cwbvhTriangle(v, ray, prep, n.w[5] + o, tmax, hit) && AnyHit) {
           done = true;
           break;
         }
@@ -333,7 +371,7 @@ TSAH_HD Hit cwbvhTraverse(const CwbvhView& v, const Ray& ray) {
     if (done) break;
     if (childHits != 0) {
       if ((group.bits & 0xffu) != 0) stack[sp++] = group;
-      group = {n.childBase, childHits | (childInterior << 8)};
+      group = {n.w[4], childHits | (childInterior << 8)};
     }
   }
   if (hit.valid()) hit.tri = cwbvhLoadU32(v.triIndex + hit.tri);
