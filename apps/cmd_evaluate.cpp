@@ -8,9 +8,9 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "animation_frames.hpp"
 #include "cli.hpp"
 #include "tsah/baselines.hpp"
+#include "tsah/pipeline.hpp"
 
 namespace {
 
@@ -53,24 +53,22 @@ void run(const Options& opt) {
   const std::vector<tsah::MethodSpec> methods = parseMethods(opt.methods, names);
   const anim::Animation a = tsah::cli::loadInput(opt.input);
   if (a.triangleCount() == 0) throw tsah::cli::UsageError(opt.input + ": no triangles to build a tree over");
-  const bool animated = a.keyframeCount() > 1;
-  const uint32_t frames = animated ? opt.frames : 1;
-  const uint32_t evalFrames = animated ? opt.evalFrames : 1;
-  const anim::Animation rep = a.resample(frames);
-  const tsah::PrimitiveBoxes repBoxes = tsah::triangleBoxes(rep.indices(), rep.allPositions(), frames);
+  const uint32_t frames = tsah::framesFor(a, opt.frames);
+  const uint32_t evalFrames = tsah::framesFor(a, opt.evalFrames);
 
   tsah::cli::Progress progress("evaluate");
-  tsah::BaselineConfig config;
-  config.cost = {opt.ct, opt.ci};
-  config.maxLeafSize = opt.maxLeaf;
-  config.threads = opt.threads;
-  config.optimizer.selection = tsah::cli::parseSelection(opt.selection);
-  config.optimizer.seed = opt.seed;
-  config.optimizer.timeLimitSeconds = opt.timeLimit;
-  config.optimizer.minImprovement = opt.minImprovement;
-  config.progress = [&](const std::string& message) { progress.message(message); };
-  const std::vector<tsah::MethodResult> results =
-      tsah::compareMethods(methods, repBoxes, tsah::cli::animationFrames(a, a.uniformTimes(evalFrames)), config);
+  tsah::TreeOptions treeOpt;
+  treeOpt.frames = opt.frames;
+  treeOpt.selection = opt.selection;
+  treeOpt.seed = opt.seed;
+  treeOpt.ct = opt.ct;
+  treeOpt.ci = opt.ci;
+  treeOpt.maxLeaf = opt.maxLeaf;
+  treeOpt.timeLimit = opt.timeLimit;
+  treeOpt.minImprovement = opt.minImprovement;
+  treeOpt.threads = opt.threads;
+  treeOpt.progress = [&](const std::string& message) { progress.message(message); };
+  const std::vector<tsah::MethodResult> results = tsah::compareOnAnimation(a, methods, treeOpt, opt.evalFrames);
 
   nlohmann::json j;
   j["input"] = opt.input;

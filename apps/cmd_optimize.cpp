@@ -14,6 +14,7 @@
 #include "cli.hpp"
 #include "tsah/baselines.hpp"
 #include "tsah/bvh_file.hpp"
+#include "tsah/pipeline.hpp"
 
 namespace {
 
@@ -36,24 +37,21 @@ struct Options {
 
 
 
-tsah::BvhBuildInfo buildInfo(const Options& opt, const tsah::MethodSpec& method, const anim::Animation& a,
-                             uint32_t frames, double buildSeconds, double timeStart, double timeEnd) {
-  tsah::BvhBuildInfo info;
-  info.method = method.method == tsah::Method::TSah ? "tsah" : method.name();
-  info.selection = method.method == tsah::Method::Sah0 ? "none" : opt.selection;
-  info.k = method.k;
-  info.representativeFrames = frames;
-  info.seed = opt.seed;
-  info.ct = opt.ct;
-  info.ci = opt.ci;
-  info.maxLeafSize = opt.maxLeaf;
-  info.buildSeconds = buildSeconds;
-  info.timeStart = timeStart;
-  info.timeEnd = timeEnd;
-  info.triangleCount = a.triangleCount();
-  info.vertexCount = a.vertexCount();
-  info.topologyHash = tsah::topologyHash(a.indices());
-  return info;
+// The library's options for the command line's.
+tsah::TreeOptions treeOptions(const Options& opt) {
+  tsah::TreeOptions t;
+  t.method = opt.method;
+  t.k = opt.k;
+  t.frames = opt.frames;
+  t.selection = opt.selection;
+  t.seed = opt.seed;
+  t.ct = opt.ct;
+  t.ci = opt.ci;
+  t.maxLeaf = opt.maxLeaf;
+  t.timeLimit = opt.timeLimit;
+  t.minImprovement = opt.minImprovement;
+  t.threads = opt.threads;
+  return t;
 }
 
 nlohmann::json optimizationJson(const tsah::InsertionOptimizer::Result& details) {
@@ -82,8 +80,9 @@ std::pair<double, double> averageAndMaximum(const std::vector<double>& costs) {
 
 // --segments K: K trees for K equal-time parts; all are built before any file is written, so a
 // failure leaves no partial set behind.
-void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim::Animation& a, uint32_t frames,
+void runSegments(const Options& opt, const tsah::TreeOptions& treeOpt, const anim::Animation& a, uint32_t frames,
                  uint32_t evalFrames, const tsah::BaselineConfig& config, tsah::cli::Progress& progress) {
+  const tsah::MethodSpec method = treeOpt.methodSpec();
   progress.message("building " + std::to_string(opt.segments) + " trees");
   const std::vector<tsah::bench::SegmentTree> trees =
       tsah::bench::buildSegmentTrees(a, opt.segments, frames, method, config);
@@ -99,7 +98,7 @@ void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim:
   for (uint32_t s = 0; s < trees.size(); ++s) {
     const tsah::bench::SegmentTree& t = trees[s];
     const std::string path = tsah::bench::segmentPath(opt.output, s);
-    tsah::saveBvhFile(path, t.bvh, buildInfo(opt, method, a, frames, t.buildSeconds, t.segment.start, t.segment.end));
+    tsah::saveBvhFile(path, t.bvh, tsah::treeBuildInfo(treeOpt, a, frames, t.buildSeconds, t.segment.start, t.segment.end));
     const auto [average, maximum] = averageAndMaximum(partCosts[s]);
     nlohmann::json j = {{"index", s},
                         {"output", path},
@@ -145,44 +144,32 @@ void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim:
 }
 
 void run(const Options& opt) {
-  const tsah::MethodSpec method = tsah::MethodSpec::parse(opt.method == "tsah" ? "tsah" + std::to_string(opt.k)
-                                                                               : opt.method);
+  tsah::TreeOptions treeOpt = treeOptions(opt);
+  const tsah::MethodSpec method = treeOpt.methodSpec();
   const anim::Animation a = tsah::cli::loadInput(opt.input);
   if (a.triangleCount() == 0) throw tsah::cli::UsageError(opt.input + ": no triangles to build a tree over");
   // A static input has one frame: resampling it would only repeat that frame.
-  const bool animated = a.keyframeCount() > 1;
-  const uint32_t frames = animated ? opt.frames : 1;
-  const uint32_t evalFrames = animated ? opt.evalFrames : 1;
-  const anim::Animation rep = a.resample(frames);
-  const tsah::PrimitiveBoxes repBoxes = tsah::triangleBoxes(rep.indices(), rep.allPositions(), frames);
+  const uint32_t frames = tsah::framesFor(a, opt.frames);
+  const uint32_t evalFrames = tsah::framesFor(a, opt.evalFrames);
 
   tsah::cli::Progress progress("optimize " + method.name());
-  tsah::BaselineConfig config;
-  config.cost = {opt.ct, opt.ci};
-  config.maxLeafSize = opt.maxLeaf;
-  config.threads = opt.threads;
-  config.optimizer.selection = tsah::cli::parseSelection(opt.selection);
-  config.optimizer.seed = opt.seed;
-  config.optimizer.timeLimitSeconds = opt.timeLimit;
-  config.optimizer.minImprovement = opt.minImprovement;
-  config.progress = [&](const std::string& message) { progress.message(message); };
+  treeOpt.progress = [&](const std::string& message) { progress.message(message); };
 
   if (opt.segments > 1) {
-    if (!animated) throw tsah::cli::UsageError(opt.input + ": --segments needs an animation (this input has one frame)");
-    return runSegments(opt, method, a, frames, evalFrames, config, progress);
+    if (a.keyframeCount() <= 1)
+      throw tsah::cli::UsageError(opt.input + ": --segments needs an animation (this input has one frame)");
+    return runSegments(opt, treeOpt, a, frames, evalFrames, treeOpt.baselineConfig(), progress);
   }
 
-  tsah::InsertionOptimizer::Result details;
-  const double start = progress.elapsedSeconds();
-  const tsah::Bvh bvh = tsah::buildMethod(method, repBoxes, config, &details);
-  const double buildSeconds = progress.elapsedSeconds() - start;
+  const tsah::OptimizedTree tree = tsah::optimizeAnimation(a, treeOpt);
+  const tsah::Bvh& bvh = tree.bvh;
+  const tsah::InsertionOptimizer::Result& details = tree.optimization;
+  const tsah::BvhBuildInfo& info = tree.info;
+  const double buildSeconds = info.buildSeconds;
 
   progress.message("evaluating " + std::to_string(evalFrames) + " frames");
-  const std::vector<double> perFrame =
-      tsah::evaluateFrames(bvh, tsah::cli::animationFrames(a, a.uniformTimes(evalFrames)), config.cost, opt.threads);
+  const std::vector<double> perFrame = tsah::evaluateAnimation(bvh, a, evalFrames, {opt.ct, opt.ci}, opt.threads);
   const auto [average, maximum] = averageAndMaximum(perFrame);
-
-  const tsah::BvhBuildInfo info = buildInfo(opt, method, a, frames, buildSeconds, a.startTime(), a.endTime());
   tsah::saveBvhFile(opt.output, bvh, info);
 
   nlohmann::json j;
