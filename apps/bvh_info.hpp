@@ -6,6 +6,7 @@
 
 #include "anim/animation.hpp"
 #include "tsah/bvh_file.hpp"
+#include "tsah/pipeline.hpp"
 
 namespace tsah::cli {
 
@@ -19,9 +20,7 @@ nlohmann::json describeBvh(const tsah::FlatBvh& flat, const tsah::BvhBuildInfo& 
 // stdout: aligned text, or one JSON object when json is true.
 void describeBvhFile(const std::string& path, bool json);
 
-// Throws anim::Error with one clear line when the animation is not the one the tree was built for
-// (triangle count, vertex count or topology hash differ).
-void checkTreeMatchesAnimation(const tsah::BvhBuildInfo& info, const std::string& bvhPath, const anim::Animation& a,
-                               const std::string& animationPath);
+// The library's check that a tree was built for an animation (tsah/pipeline.hpp).
+using tsah::checkTreeMatchesAnimation;
 
 }  // namespace tsah::cli
