@@ -9,8 +9,8 @@ namespace tsah {
 namespace {
 
 // cT * inner + cI * primitives: the cost of a frame whose root has no area (see cost.hpp).
-double degenerateFrameCost(uint64_t innerCount, uint64_t primCount, const CostModel& model) {
-  return double(model.ct) * double(innerCount) + double(model.ci) * double(primCount);
+CostParts degenerateFrameCost(uint64_t innerCount, uint64_t primCount, const CostModel& model) {
+  return {double(model.ct) * double(innerCount), double(model.ci) * double(primCount), 1.0};
 }
 
 // x^k for a small non-negative integer k, by squaring (std::pow is far slower, and this runs after
@@ -44,8 +44,8 @@ double frameCost(const Bvh& bvh, uint32_t frame, const CostModel& model) {
     }
   }
   const double rootArea = bvh.box(bvh.root, frame).area();
-  if (!(rootArea > 0.0)) return degenerateFrameCost(innerCount, primCount, model);
-  return (model.ct * inner + model.ci * leaves) / rootArea;
+  if (!(rootArea > 0.0)) return degenerateFrameCost(innerCount, primCount, model).total();
+  return CostParts{model.ct * inner, model.ci * leaves, rootArea}.total();
 }
 
 std::vector<double> frameCosts(const Bvh& bvh, const CostModel& model) {
@@ -118,8 +118,8 @@ FrameCostEvaluator::FrameCostEvaluator(const Bvh& bvh, CostModel model) : bvh_(&
   std::reverse(postOrder_.begin(), postOrder_.end());
 }
 
-double FrameCostEvaluator::cost(std::span<const Aabb> primBoxes) {
-  if (postOrder_.empty()) return 0.0;
+CostParts FrameCostEvaluator::costParts(std::span<const Aabb> primBoxes) {
+  if (postOrder_.empty()) return {0.0, 0.0, 1.0};
   if (primBoxes.size() != bvh_->primIds.size())
     throw std::invalid_argument("FrameCostEvaluator: expected " +
                                 std::to_string(bvh_->primIds.size()) + " primitive boxes, got " +
@@ -139,7 +139,7 @@ double FrameCostEvaluator::cost(std::span<const Aabb> primBoxes) {
   }
   const double rootArea = boxes_[bvh_->root].area();
   if (!(rootArea > 0.0)) return degenerateFrameCost(innerCount_, primTotal_, model_);
-  return (model_.ct * inner + model_.ci * leaves) / rootArea;
+  return {model_.ct * inner, model_.ci * leaves, rootArea};
 }
 
 }  // namespace tsah
