@@ -145,8 +145,9 @@ std::string encodeBoxViewMtl() {
   char line[96];
   for (uint32_t b = 0; b <= kBoxViewBands; ++b) {
     const auto c = boxViewColour(b);
-    std::snprintf(line, sizeof line, "newmtl %s%u\nKd %.3f %.3f %.3f\n", b == kBoxViewMeshBand ? "mesh" : "band",
-                  b == kBoxViewMeshBand ? 0u : b, c[0] / 255.0, c[1] / 255.0, c[2] / 255.0);
+    const std::string name = b == kBoxViewMeshBand ? "mesh" : "band" + std::to_string(b);
+    std::snprintf(line, sizeof line, "newmtl %s\nKd %.3f %.3f %.3f\n", name.c_str(), c[0] / 255.0, c[1] / 255.0,
+                  c[2] / 255.0);
     mtl += line;
   }
   return mtl;
