@@ -7,12 +7,16 @@
 #include "anim/animation.hpp"
 #include "tsah/baselines.hpp"
 #include "tsah/insertion_optimizer.hpp"
+#include "tsah/segmentation.hpp"
 
 namespace tsah::cli {
 
 // Triangle boxes of `animation` at each of `times`, produced on demand (in parallel by the caller).
 // The animation must outlive the returned source.
 FrameSource animationFrames(const anim::Animation& animation, std::vector<double> times);
+
+// The animation as the segmentation sees it (triangle boxes at any time); must outlive the result.
+Timeline animationTimeline(const anim::Animation& animation);
 
 // "mh", "random", "batch" -> the optimizer's node selection; throws std::invalid_argument for anything else.
 InsertionOptimizer::Selection parseSelection(const std::string& name);
