@@ -37,6 +37,12 @@ FrameSource animationFrames(const anim::Animation& animation, std::vector<double
   return source;
 }
 
+Timeline animationTimeline(const anim::Animation& animation) {
+  return Timeline::fromTriangles(animation.indices(), animation.vertexCount(), animation.startTime(),
+                                 animation.endTime(),
+                                 [&animation](double t, std::span<float> out) { animation.positionsAt(t, out); });
+}
+
 InsertionOptimizer::Selection parseSelection(const std::string& name) {
   using Selection = InsertionOptimizer::Selection;
   if (name == "mh") return Selection::MetropolisHastings;

@@ -18,6 +18,7 @@
 #include "tsah/cpu_runtime.hpp"
 #include "tsah/insertion_optimizer.hpp"
 #include "tsah/ray.hpp"
+#include "tsah/segmentation.hpp"
 
 namespace tsah {
 
@@ -45,6 +46,9 @@ struct TreeOptions {
 // Frames of `animation` at each of `times` as a lazily filled FrameSource (triangle boxes). The
 // animation must outlive the source.
 FrameSource animationFrames(const anim::Animation& animation, std::vector<double> times);
+
+// The animation as the segmentation sees it (triangle boxes at any time); must outlive the result.
+Timeline animationTimeline(const anim::Animation& animation);
 
 // "mh", "random", "batch" -> the optimizer's node selection; throws std::invalid_argument otherwise.
 InsertionOptimizer::Selection parseSelection(const std::string& name);
