@@ -83,25 +83,6 @@ void describeBvhFile(const std::string& path, bool json) {
   std::printf("build time    %.3f s\n", info.buildSeconds);
 }
 
-void checkTreeMatchesAnimation(const tsah::BvhBuildInfo& info, const std::string& bvhPath, const anim::Animation& a,
-                               const std::string& animationPath) {
-  auto fail = [&](const std::string& what) {
-    throw anim::Error(bvhPath + " was not built for " + animationPath + ": " + what);
-  };
-  if (info.triangleCount != a.triangleCount())
-    fail("the tree has " + std::to_string(info.triangleCount) + " triangles, the animation " +
-         std::to_string(a.triangleCount()));
-  if (info.vertexCount != a.vertexCount())
-    fail("the tree was built for " + std::to_string(info.vertexCount) + " vertices, the animation has " +
-         std::to_string(a.vertexCount()));
-  const uint32_t hash = topologyHash(a.indices());
-  if (info.topologyHash != hash) {
-    char buf[64];
-    std::snprintf(buf, sizeof buf, "topology hash %08x, the animation's is %08x", info.topologyHash, hash);
-    fail(std::string(buf) + " (same counts, different triangles)");
-  }
-}
-
 }  // namespace tsah::cli
 
 namespace tsah::cli {

@@ -6,6 +6,7 @@
 
 #include "anim/animation.hpp"
 #include "tsah/bvh_file.hpp"
+#include "tsah/pipeline.hpp"
 
 namespace tsah::cli {
 
@@ -25,9 +26,8 @@ void describeBvhFile(const std::string& path, bool json);
 // aligned table or one JSON object.
 void describeTreeOverAnimation(const std::string& bvhPath, const std::string& animationPath, uint32_t frames, bool json);
 
-// Throws anim::Error with one clear line when the animation is not the one the tree was built for
-// (triangle count, vertex count or topology hash differ).
-void checkTreeMatchesAnimation(const tsah::BvhBuildInfo& info, const std::string& bvhPath, const anim::Animation& a,
-                               const std::string& animationPath);
+
+// The library's check that a tree was built for an animation (tsah/pipeline.hpp).
+using tsah::checkTreeMatchesAnimation;
 
 }  // namespace tsah::cli
