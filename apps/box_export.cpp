@@ -25,6 +25,9 @@ std::shared_ptr<BoxExportOptions> addBoxExportOptions(CLI::App& sub) {
   sub.add_option("--max-depth", o->maxDepth, "Boxes at this depth or shallower");
   sub.add_option("--min-share", o->minShare, "Boxes whose own share of the frame's cost is at least this many percent")
       ->check(CLI::Range(0.0, 100.0));
+  sub.add_option("--min-growth", o->minGrowth,
+                 "Boxes that grow at least this much over the animation (largest over smallest share of the scene)")
+      ->check(CLI::Range(1.0, 1e30));
   sub.add_option("--bar-width", o->barWidth, "Bar thickness (default: 1/1000 of the scene's diagonal)")
       ->check(CLI::PositiveNumber);
   sub.add_option("--growth-frames", o->growthFrames, "Frames over the animation that measure growth (default 50)")
@@ -47,7 +50,7 @@ void exportBoxes(const BoxExportOptions& o, const tsah::FlatBvh& flat, const tsa
   tsah::triangleBoxes(a.indices(), positions, prims);
   const tsah::FrameBoxes frame = tsah::frameBoxes(bvh, prims, model);
   std::vector<double> growth;
-  if (o.colour == "growth")
+  if (o.colour == "growth" || o.minGrowth > 0.0)
     growth = tsah::evaluateTreeQuality(bvh, animationFrames(a, a.uniformTimes(o.growthFrames)), model).nodeGrowth;
 
   tsah::BoxViewOptions view;
@@ -56,9 +59,10 @@ void exportBoxes(const BoxExportOptions& o, const tsah::FlatBvh& flat, const tsa
   view.minDepth = o.minDepth;
   view.maxDepth = o.maxDepth;
   view.minCostShare = o.minShare / 100.0;
+  view.minGrowth = o.minGrowth;
   view.barWidth = o.barWidth;
   tsah::BoxMesh mesh = tsah::buildBoxView(bvh, frame, growth, view);
-  if (mesh.boxCount == 0) throw UsageError("no box of the tree passes the depth and --min-share filters");
+  if (mesh.boxCount == 0) throw UsageError("no box of the tree passes the depth, --min-share and --min-growth filters");
   if (o.withMesh) tsah::addMeshToBoxView(mesh, a.indices(), positions);
 
   std::error_code ec;

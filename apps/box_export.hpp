@@ -17,6 +17,7 @@ struct BoxExportOptions {
   std::string style = "bars", colour = "depth";
   uint32_t minDepth = 0, maxDepth = 1000000;
   double minShare = 0.0;  // percent of the frame's cost
+  double minGrowth = 0.0;
   float barWidth = 0.0f;
   uint32_t growthFrames = 50;
   bool withMesh = false;

@@ -86,6 +86,12 @@ TEST(BoxView, GrowthBandsAreLog2) {
   EXPECT_EQ(m.bands.front(), 2);
   growth[r.bvh.root] = 1e9;
   EXPECT_EQ(tsah::buildBoxView(r.bvh, r.frame, growth, o).bands.front(), tsah::kBoxViewBands - 1);
+  // The growth filter keeps the growing nodes only.
+  o.maxDepth = 10;
+  o.minGrowth = 3.0;
+  growth[r.bvh.nodes[r.bvh.root].left] = 3.0;
+  EXPECT_EQ(tsah::buildBoxView(r.bvh, r.frame, growth, o).boxCount, 2u);
+  EXPECT_THROW(tsah::buildBoxView(r.bvh, r.frame, {}, o), std::invalid_argument);
 }
 
 TEST(BoxView, PlyAndObjFilesParseBack) {

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <stdexcept>
 
 namespace tsah {
 
@@ -81,11 +82,14 @@ BoxMesh buildBoxView(const Bvh& bvh, const FrameBoxes& frame, std::span<const do
                      const BoxViewOptions& o) {
   BoxMesh m;
   if (bvh.nodes.empty()) return m;
+  if ((o.colour == BoxViewOptions::Colour::Growth || o.minGrowth > 0.0) && nodeGrowth.size() != bvh.nodes.size())
+    throw std::invalid_argument("buildBoxView: growth colours or filters need one growth value per node");
   const std::vector<uint32_t> depth = nodeDepths(bvh);
   std::vector<uint32_t> chosen;
   for (uint32_t i = 0; i < bvh.nodeCount(); ++i)
     if (depth[i] != kInvalidIndex && depth[i] >= o.minDepth && depth[i] <= o.maxDepth &&
-        frame.costShare[i] >= o.minCostShare && !frame.boxes[i].empty())
+        frame.costShare[i] >= o.minCostShare && (o.minGrowth <= 0.0 || nodeGrowth[i] >= o.minGrowth) &&
+        !frame.boxes[i].empty())
       chosen.push_back(i);
   if (chosen.empty()) return m;
   m.minDepth = depth[chosen.front()];

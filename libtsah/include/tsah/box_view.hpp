@@ -1,6 +1,6 @@
 #pragma once
-// A tree's boxes as a mesh that any viewer opens: selected by depth range and share of the frame's
-// cost, coloured in bands by depth or by growth over the animation, drawn as thin bars along every
+// A tree's boxes as a mesh that any viewer opens: selected by depth range, share of the frame's cost
+// and growth over the animation, coloured in bands by depth or by growth over the animation, drawn as thin bars along every
 // box edge (triangles: every viewer shows them) or as line segments (OBJ `l`, PLY `edge`).
 // Written as binary PLY with vertex colours or as OBJ with one material per colour band.
 #include <array>
@@ -28,6 +28,7 @@ struct BoxViewOptions {
   Colour colour = Colour::Depth;
   uint32_t minDepth = 0, maxDepth = std::numeric_limits<uint32_t>::max();
   double minCostShare = 0.0;  // keep nodes whose own share of the frame's cost is at least this
+  double minGrowth = 0.0;     // keep nodes whose growth is at least this (needs nodeGrowth when > 0)
   float barWidth = 0.0f;      // bar thickness; 0: 1/1000 of the root box's diagonal
 };
 
@@ -41,7 +42,8 @@ struct BoxMesh {
 };
 
 // Depth bands spread the drawn depth range over the 8 bands; growth bands are log2 of the node's
-// growth (band 0: below 2x, band 7: 128x or more). nodeGrowth may be empty for depth colouring.
+// growth (band 0: below 2x, band 7: 128x or more). nodeGrowth (by node, TreeQuality::nodeGrowth)
+// may be empty when neither the colour nor the filter uses it.
 BoxMesh buildBoxView(const Bvh& bvh, const FrameBoxes& frame, std::span<const double> nodeGrowth,
                      const BoxViewOptions& options);
 
