@@ -20,6 +20,13 @@ nlohmann::json describeBvh(const tsah::FlatBvh& flat, const tsah::BvhBuildInfo& 
 // stdout: aligned text, or one JSON object when json is true.
 void describeBvhFile(const std::string& path, bool json);
 
+// `tsah info TREE ANIMATION`: the tree's shape and, for each of `frames` uniformly spaced frames of
+// the animation (0: every keyframe), its cost with the interior/leaf split, the area-weighted mean
+// depth and size of the leaves and the growth of the root's children (tsah/tree_quality.hpp), as an
+// aligned table or one JSON object.
+void describeTreeOverAnimation(const std::string& bvhPath, const std::string& animationPath, uint32_t frames, bool json);
+
+
 // The library's check that a tree was built for an animation (tsah/pipeline.hpp).
 using tsah::checkTreeMatchesAnimation;
 
