@@ -1,5 +1,6 @@
 // Uses the installed tsah library: loads an animation, optimizes one T-SAH tree for all of its
-// frames, writes and reads it as .tbvh, refits it to the middle frame and traces a few rays.
+// frames, writes and reads it as .tbvh, refits it to the middle frame and traces a few rays (on the
+// CPU, and on the GPU too when tsah was built with CUDA and a device is present).
 // usage: tsah_consumer ANIMATION OUT.tbvh
 #include <cstdio>
 #include <exception>
@@ -9,6 +10,10 @@
 #include <tsah/bvh_file.hpp>
 #include <tsah/cpu_runtime.hpp>
 #include <tsah/pipeline.hpp>
+#if defined(CONSUMER_WITH_CUDA)
+#include <tsah_cuda/device.hpp>
+#include <tsah_cuda/gpu_runtime.hpp>
+#endif
 
 int main(int argc, char** argv) try {
   if (argc != 3) {
@@ -51,6 +56,16 @@ int main(int argc, char** argv) try {
       std::printf("ray %zu: triangle %u at t = %.5f (u %.4f, v %.4f)\n", i, hits[i].tri, hits[i].t, hits[i].u, hits[i].v);
     else
       std::printf("ray %zu: no hit\n", i);
+#if defined(CONSUMER_WITH_CUDA)
+  if (tsah::cuda::deviceAvailable()) {
+    tsah::cuda::GpuRuntime gpu(tsah::flattenBvh(file.bvh), animation);
+    gpu.update(p);
+    const std::vector<tsah::Hit> gpuHits = gpu.closestHits(rays);
+    for (std::size_t i = 0; i < gpuHits.size(); ++i) std::printf("gpu ray %zu: triangle %d\n", i, int(gpuHits[i].tri));
+  } else {
+    std::printf("no CUDA device: GPU runtime not used\n");
+  }
+#endif
   return 0;
 } catch (const std::exception& e) {
   std::fprintf(stderr, "tsah_consumer: %s\n", e.what());

@@ -151,3 +151,26 @@ def test_gpu_matches_cpu(wave):
         assert same.mean() > 0.999  # the runtimes agree up to ties between triangles at equal distance
         np.testing.assert_allclose(a["t"], b["t"], rtol=1e-5)
         np.testing.assert_array_equal(cpu.occluded(origins, directions), gpu.occluded(origins, directions))
+
+
+def test_rejected_calls_do_not_leak(wave):
+    """Thousands of rejected calls leave the process's peak memory where it was."""
+    import resource
+    animation, tree = wave
+    runtime = tsah.CpuRuntime(tree, animation)
+    o, d = np.zeros((1000, 3), np.float32), np.ones((1000, 3), np.float32)
+    calls = [lambda: runtime.trace(o.astype(np.int64), d), lambda: runtime.trace(o[:, :2], d),
+             lambda: runtime.occluded(o, d, tmax=np.ones(3)), lambda: tsah.read_tree("/nonexistent.tbvh"),
+             lambda: tsah.Animation(np.array([[0, 1, -1]]), animation.positions),
+             lambda: tsah.Animation(np.array([[0, 1, 10**6]]), animation.positions)]
+
+    def reject(rounds):
+        for _ in range(rounds):
+            for call in calls:
+                with pytest.raises((TypeError, ValueError, tsah.Error)):
+                    call()
+
+    reject(300)
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    reject(1500)  # 9,000 rejected calls: a leak of 100 bytes each would show as 0.9 MB
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 512  # KB
