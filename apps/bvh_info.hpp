@@ -6,6 +6,7 @@
 
 #include "anim/animation.hpp"
 #include "tsah/bvh_file.hpp"
+#include "tsah/tree_set.hpp"
 
 namespace tsah::cli {
 
@@ -16,7 +17,8 @@ bool looksLikeBvhFile(const std::string& path);
 nlohmann::json describeBvh(const tsah::FlatBvh& flat, const tsah::BvhBuildInfo& info);
 
 // Loads and validates `path` (throws anim::ImportError naming the file) and prints its header on
-// stdout: aligned text, or one JSON object when json is true.
+// stdout: aligned text, or one JSON object when json is true. A tree set (version 2) prints the
+// set's header and then each tree with the time range it is used for.
 void describeBvhFile(const std::string& path, bool json);
 
 // Throws anim::Error with one clear line when the animation is not the one the tree was built for
