@@ -53,23 +53,13 @@ nlohmann::json describeBvh(const tsah::FlatBvh& flat, const tsah::BvhBuildInfo& 
   return j;
 }
 
-void describeBvhFile(const std::string& path, bool json) {
-  const std::vector<uint8_t> bytes = anim::readFile(path);
-  BvhBuildInfo info;
-  const FlatBvh flat = decodeFlatBvhFile(bytes, path, &info);
-  nlohmann::json j = describeBvh(flat, info);
-  j["file"] = path;
-  j["file_bytes"] = bytes.size();
-  if (json) {
-    std::printf("%s\n", j.dump().c_str());
-    return;
-  }
+namespace {
+
+void printTree(const nlohmann::json& j, const tsah::BvhBuildInfo& info, const FlatBvh& flat) {
   char hash[16];
   std::snprintf(hash, sizeof hash, "%08x", info.topologyHash);
   const auto& lo = j["bounds_frame0"][0];
   const auto& hi = j["bounds_frame0"][1];
-  std::printf("file          %s (%zu bytes, .tbvh v%u, Aila-Laine 64-byte nodes)\n", path.c_str(), bytes.size(),
-              kTbvhVersion);
   std::printf("method        %s (selection %s, k=%d, seed %llu)\n", info.method.c_str(), info.selection.c_str(), info.k,
               static_cast<unsigned long long>(info.seed));
   std::printf("cost          cT=%g cI=%g, max leaf size %u\n", double(info.ct), double(info.ci), info.maxLeafSize);
@@ -81,6 +71,61 @@ void describeBvhFile(const std::string& path, bool json) {
   std::printf("bounds        (%.4g, %.4g, %.4g) .. (%.4g, %.4g, %.4g) in the first box set\n", lo[0].get<double>(),
               lo[1].get<double>(), lo[2].get<double>(), hi[0].get<double>(), hi[1].get<double>(), hi[2].get<double>());
   std::printf("build time    %.3f s\n", info.buildSeconds);
+}
+
+}  // namespace
+
+void describeBvhFile(const std::string& path, bool json) {
+  const std::vector<uint8_t> bytes = anim::readFile(path);
+  const TreeSet set = decodeTreeSetFile(bytes, path);
+  if (set.version == kTbvhVersion) {
+    nlohmann::json j = describeBvh(set.trees[0], set.builds[0]);
+    j["file"] = path;
+    j["file_bytes"] = bytes.size();
+    if (json) {
+      std::printf("%s\n", j.dump().c_str());
+      return;
+    }
+    std::printf("file          %s (%zu bytes, .tbvh v%u, Aila-Laine 64-byte nodes)\n", path.c_str(), bytes.size(),
+                kTbvhVersion);
+    printTree(j, set.builds[0], set.trees[0]);
+    return;
+  }
+  nlohmann::json j;
+  j["format"] = "tbvh-set";
+  j["version"] = set.version;
+  j["file"] = path;
+  j["file_bytes"] = bytes.size();
+  j["trees"] = set.size();
+  j["segmentation"] = set.info.segmentation;
+  j["overlap"] = set.info.overlap;
+  if (set.info.budget > 0) j["budget"] = {{"value", set.info.budget}, {"relative", set.info.budgetRelative}};
+  j["time"] = {set.ranges.front().start, set.ranges.back().end};
+  j["parts"] = nlohmann::json::array();
+  for (uint32_t s = 0; s < set.size(); ++s) {
+    nlohmann::json p = describeBvh(set.trees[s], set.builds[s]);
+    p["index"] = s;
+    p["used"] = {s == 0 ? set.ranges[0].start : switchTime(set.ranges, s - 1),
+                 s + 1 == set.size() ? set.ranges[s].end : switchTime(set.ranges, s)};
+    j["parts"].push_back(p);
+  }
+  if (json) {
+    std::printf("%s\n", j.dump().c_str());
+    return;
+  }
+  std::printf("file          %s (%zu bytes, .tbvh v%u tree set, Aila-Laine 64-byte nodes)\n", path.c_str(),
+              bytes.size(), set.version);
+  std::printf("set           %u trees, %s segmentation, time %g .. %g, overlap %g", set.size(),
+              set.info.segmentation.c_str(), set.ranges.front().start, set.ranges.back().end, set.info.overlap);
+  if (set.info.budget > 0)
+    std::printf(", budget %g%s", set.info.budget, set.info.budgetRelative ? "x the per-frame optimized cost" : " (cost)");
+  std::printf("\n");
+  for (uint32_t s = 0; s < set.size(); ++s) {
+    const nlohmann::json& p = j["parts"][s];
+    std::printf("\ntree %u        used for t %g .. %g (the runtimes switch in the middle of an overlap)\n", s,
+                p["used"][0].get<double>(), p["used"][1].get<double>());
+    printTree(p, set.builds[s], set.trees[s]);
+  }
 }
 
 }  // namespace tsah::cli

@@ -277,8 +277,14 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
   sub->add_option("--max-leaf", b.maxLeaf, "Largest leaf of every tree")->check(CLI::Range(1u, 256u))->capture_default_str();
   sub->add_option("--ct", b.ct, "Cost of traversing a node")->check(CLI::PositiveNumber)->capture_default_str();
   sub->add_option("--ci", b.ci, "Cost of intersecting a triangle")->check(CLI::PositiveNumber)->capture_default_str();
-  sub->add_option("--segments", b.segments, "K of the segmented T-SAH (K trees for K equal-time parts; 1: skip)")
+  sub->add_option("--segments", b.segments,
+                  "K of the segmented T-SAH: K equal-time parts and the count mode with K trees (1: skip)")
       ->check(CLI::Range(1u, 64u))
+      ->capture_default_str();
+  sub->add_option("--budget", b.budget,
+                  "Budget mode: the fewest trees keeping every evaluation frame within this factor of SAH-rebuild "
+                  "(0: skip)")
+      ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
   sub->add_option("--threads", b.threads, "CPU worker threads (0: all cores)")->capture_default_str();
   sub->add_flag("--no-embree", opt->noEmbree, "Skip the Embree peer");

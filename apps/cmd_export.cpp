@@ -110,7 +110,8 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
     unsigned threads = 0;
   };
   auto opt = std::make_shared<Options>();
-  sub->add_option("BVH", opt->bvh, "Tree from `tsah optimize` (.tbvh)")->required();
+  sub->add_option("BVH", opt->bvh, "Tree or tree set from `tsah optimize` (.tbvh; a set exports the tree of the frame's part)")
+      ->required();
   sub->add_option("ANIMATION", opt->input, "The animation the tree was built for")->required();
   auto* frameOpt = sub->add_option("--frame", opt->frame, "Keyframe index of the animation (default 0)");
   sub->add_option("--time", opt->time, "Animation time instead of a keyframe (interpolated)")->excludes(frameOpt);
@@ -120,11 +121,10 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
   const auto boxes = tsah::cli::addBoxExportOptions(*sub);
   sub->callback([opt, boxes] {
     namespace fs = std::filesystem;
-    tsah::BvhBuildInfo info;
-    const std::vector<uint8_t> bytes = anim::readFile(opt->bvh);
-    const tsah::FlatBvh flat = tsah::decodeFlatBvhFile(bytes, opt->bvh, &info);
+    // A tree set exports the tree of the frame's part (tsah::treeIndexAt), as the runtimes use it.
+    const tsah::TreeSet set = tsah::decodeTreeSetFile(anim::readFile(opt->bvh), opt->bvh);
     const anim::Animation a = tsah::cli::loadInput(opt->input);
-    tsah::cli::checkTreeMatchesAnimation(info, opt->bvh, a, opt->input);
+    tsah::cli::checkTreeMatchesAnimation(set.builds.front(), opt->bvh, a, opt->input);
 
     std::vector<float> positions;
     double time;
@@ -143,9 +143,14 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
       positions.assign(k.begin(), k.end());
     }
 
-    if (boxes->enabled) return tsah::cli::exportBoxes(*boxes, flat, info, a, time, positions, opt->out);
+    if (boxes->enabled) {
+      const uint32_t part = tsah::treeIndexAt(set.ranges, time);
+      return tsah::cli::exportBoxes(*boxes, set.trees[part], set.builds[part], a, time, positions, opt->out);
+    }
 
-    tsah::CpuRuntime rt(flat, {a.indices().begin(), a.indices().end()}, a.vertexCount(), {opt->threads});
+    tsah::CpuRuntime rt(set, {a.indices().begin(), a.indices().end()}, a.vertexCount(), {opt->threads});
+    const uint32_t part = rt.selectTreeAt(time);
+    const tsah::BvhBuildInfo& info = set.builds[part];
     rt.update(positions);
 
     std::error_code ec;
@@ -164,5 +169,8 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
                               {reinterpret_cast<const uint8_t*>(header.data()), header.size()});
     std::printf("wrote %s: %u nodes, %u Woop triangles, %u vertices (time %g) + tsah_scene.h\n", opt->out.c_str(),
                 rt.tree().interiorCount, rt.triangleCount(), rt.vertexCount(), time);
+    if (set.size() > 1)
+      std::printf("tree %u of the set's %u: the tree of this time's part (t %g .. %g)\n", part, set.size(),
+                  set.ranges[part].start, set.ranges[part].end);
   });
 });

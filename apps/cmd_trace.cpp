@@ -16,6 +16,7 @@
 #include "anim/binary_io.hpp"
 #include "anim/error.hpp"
 #include "bvh_info.hpp"
+#include "tsah/tree_set.hpp"
 #include "cli.hpp"
 #include "tsah/binned_sah_builder.hpp"
 #include "tsah/camera.hpp"
@@ -148,16 +149,17 @@ class FrameRuntime {
   // image == nullptr: the picture is not needed (--no-images).
   virtual tsah::RenderStats render(const tsah::Camera& camera, const tsah::SceneLighting& lighting,
                                    const tsah::RenderSettings& settings, tsah::Image* image) = 0;
+  virtual uint32_t currentTree() const = 0;           // of a tree set: the one the last update refitted
   virtual std::string summary() const = 0;            // for the text output's first line
   virtual void describe(nlohmann::json& out) const = 0;  // "device" and what else identifies it
 };
 
 class CpuFrameRuntime final : public FrameRuntime {
  public:
-  CpuFrameRuntime(const tsah::FlatBvh& tree, const anim::Animation& animation, uint32_t threads,
+  CpuFrameRuntime(const tsah::TreeSet& trees, const anim::Animation& animation, uint32_t threads,
                   tsah::CpuRuntime::TreeBuilder builder)
       : animation_(animation),
-        runtime_(tree, {animation.indices().begin(), animation.indices().end()}, animation.vertexCount(), {threads}),
+        runtime_(trees, {animation.indices().begin(), animation.indices().end()}, animation.vertexCount(), {threads}),
         builder_(std::move(builder)),
         positions_(std::size_t(animation.vertexCount()) * 3) {}
 
@@ -176,6 +178,7 @@ class CpuFrameRuntime final : public FrameRuntime {
       u.refitMs = t.refitMs;
     } else {
       const auto s = std::chrono::steady_clock::now();
+      runtime_.selectTreeAt(time);
       runtime_.update(positions_);
       u.refitMs = msSince(s);
     }
@@ -188,6 +191,7 @@ class CpuFrameRuntime final : public FrameRuntime {
     return tsah::renderFrame(runtime_, camera, lighting, settings, image ? *image : scratch_);
   }
 
+  uint32_t currentTree() const override { return runtime_.currentTree(); }
   std::string summary() const override { return std::to_string(runtime_.threadCount()) + " CPU threads"; }
   void describe(nlohmann::json& out) const override {
     out["device"] = "cpu";
@@ -226,9 +230,9 @@ tsah::CpuRuntime::TreeBuilder cpuRebuilder(const std::string& rebuild, const tsa
 #if TSAH_HAVE_CUDA
 class GpuFrameRuntime final : public FrameRuntime {
  public:
-  GpuFrameRuntime(const tsah::FlatBvh& tree, const anim::Animation& animation,
+  GpuFrameRuntime(const tsah::TreeSet& trees, const anim::Animation& animation,
                   std::optional<tsah::cuda::RebuildOptions> rebuild)
-      : runtime_(tree, animation), rebuild_(rebuild) {}
+      : runtime_(trees, animation, tsah::cuda::GpuRuntime::Config{}), rebuild_(rebuild) {}
 
   void warmUp(double time, const tsah::Camera& camera, const tsah::SceneLighting& lighting,
               const tsah::RenderSettings& settings) override {
@@ -253,6 +257,7 @@ class GpuFrameRuntime final : public FrameRuntime {
     return tsah::cuda::renderFrameGpu(runtime_, camera, lighting, settings, image);
   }
 
+  uint32_t currentTree() const override { return runtime_.currentTree(); }
   std::string summary() const override { return "GPU " + runtime_.device().name; }
   void describe(nlohmann::json& out) const override {
     const tsah::cuda::DeviceInfo& d = runtime_.device();
@@ -272,7 +277,7 @@ class GpuFrameRuntime final : public FrameRuntime {
 };
 #endif
 
-std::unique_ptr<FrameRuntime> makeRuntime(const TraceOptions& opt, const tsah::FlatBvh& tree,
+std::unique_ptr<FrameRuntime> makeRuntime(const TraceOptions& opt, const tsah::TreeSet& trees,
                                           const tsah::BvhBuildInfo& info, const anim::Animation& a) {
   const tsah::CostModel cost{info.ct, info.ci};
   const uint32_t maxLeaf = std::max(1u, info.maxLeafSize);
@@ -285,15 +290,16 @@ std::unique_ptr<FrameRuntime> makeRuntime(const TraceOptions& opt, const tsah::F
       rebuild->maxLeafSize = maxLeaf;
       rebuild->cost = cost;
     }
-    return std::make_unique<GpuFrameRuntime>(tree, a, rebuild);
+    return std::make_unique<GpuFrameRuntime>(trees, a, rebuild);
   }
 #endif
-  return std::make_unique<CpuFrameRuntime>(tree, a, opt.threads, cpuRebuilder(opt.rebuild, cost, maxLeaf));
+  return std::make_unique<CpuFrameRuntime>(trees, a, opt.threads, cpuRebuilder(opt.rebuild, cost, maxLeaf));
 }
 
 struct FrameResult {
   uint32_t frame = 0;
   double time = 0.0;
+  uint32_t tree = 0;  // of a tree set: the tree of the frame's part
   FrameUpdate update;
   tsah::RenderStats render;
   double pngMs = 0.0;
@@ -324,12 +330,13 @@ void runTrace(const TraceOptions& opt) {
   const tsah::Vec3 up = parseVec3(opt.up, "--up");
   if (!(tsah::dot(up, up) > 0.0f)) throw UsageError("--up must not be zero");
 
-  // Inputs: the tree is validated completely by the reader; then it must match the animation.
-  tsah::BvhBuildInfo info;
-  const tsah::FlatBvh flat = tsah::decodeFlatBvhFile(anim::readFile(opt.bvh), opt.bvh, &info);
+  // Inputs: the tree (or tree set: each frame refits the tree of its part) is validated completely
+  // by the reader; then it must match the animation.
+  const tsah::TreeSet trees = tsah::decodeTreeSetFile(anim::readFile(opt.bvh), opt.bvh);
+  const tsah::BvhBuildInfo& info = trees.builds.front();
   const anim::Animation a = tsah::cli::loadInput(opt.input);
   tsah::cli::checkTreeMatchesAnimation(info, opt.bvh, a, opt.input);
-  const std::unique_ptr<FrameRuntime> rt = makeRuntime(opt, flat, info, a);
+  const std::unique_ptr<FrameRuntime> rt = makeRuntime(opt, trees, info, a);
 
   const uint32_t frameCount = opt.frames ? opt.frames : std::min<uint32_t>(a.keyframeCount(), 50);
   const std::vector<double> times = a.uniformTimes(frameCount);
@@ -378,7 +385,9 @@ void runTrace(const TraceOptions& opt) {
 
   const bool rebuilds = opt.rebuild != "none";
   const std::string mode =
-      rebuilds ? "rebuild " + opt.rebuild + (isGpuRebuild(opt.rebuild) ? " (GPU)" : " (CPU)") : "refit";
+      rebuilds ? "rebuild " + opt.rebuild + (isGpuRebuild(opt.rebuild) ? " (GPU)" : " (CPU)")
+               : trees.size() > 1 ? "refit of the tree of each frame's part (" + std::to_string(trees.size()) + " trees)"
+                                  : "refit";
   if (!opt.json)
     std::printf("%u frames, %ux%u, %u AO + %u shadow rays per pixel, %s, %s, camera %s\n", frameCount, opt.width,
                 opt.height, opt.ao, opt.shadow, rt->summary().c_str(), mode.c_str(), cameraSource.c_str());
@@ -391,6 +400,7 @@ void runTrace(const TraceOptions& opt) {
     r.frame = f;
     r.time = times[f];
     r.update = rt->update(r.time);
+    r.tree = rt->currentTree();
     settings.frame = f;
     r.render = rt->render(cameraAt(r.time), lighting, settings, opt.noImages ? nullptr : &image);
     if (!opt.noImages) {
@@ -427,6 +437,7 @@ void runTrace(const TraceOptions& opt) {
     out["animation"] = opt.input;
     out["bvh"] = opt.bvh;
     out["method"] = info.method;
+    out["trees"] = trees.size();
     out["rebuild"] = opt.rebuild;
     out["width"] = opt.width;
     out["height"] = opt.height;
@@ -441,6 +452,7 @@ void runTrace(const TraceOptions& opt) {
       nlohmann::json j;
       j["frame"] = r.frame;
       j["time"] = r.time;
+      if (!rebuilds) j["tree"] = r.tree;
       j["update_ms"] = r.update.updateMs;
       j["interpolate_ms"] = r.update.interpolateMs;
       j["refit_ms"] = r.update.refitMs;

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "anim/generators.hpp"
+#include "animation_frames.hpp"
 #include "bench/runtime_bench.hpp"
 #include "tsah/baselines.hpp"
 #include "tsah/flat_bvh.hpp"
@@ -21,7 +22,12 @@ TEST(BenchRuntime, EveryMethodTracesEveryFrameWithTheSameRays) {
   config.threads = 2;
   const tsah::Bvh sah0 = tsah::buildSah0(boxes, config);
   const tsah::Bvh tsah0 = tsah::buildTSah(boxes, 0, config);
-  const auto parts = tsah::bench::buildSegmentTrees(a, 2, 3, tsah::MethodSpec::parse("tsah0"), config);
+  tsah::SegmentationConfig sc;
+  sc.representativeFrames = 3;
+  sc.evaluationFrames = 4;
+  sc.baseline = config;
+  const tsah::SegmentationResult parts = tsah::evaluateParts(
+      tsah::cli::animationTimeline(a), tsah::equalTimeRanges(a.startTime(), a.endTime(), 2), sc);
 
   tsah::bench::RuntimeSetup setup;
   setup.times = a.uniformTimes(4);
@@ -45,7 +51,7 @@ TEST(BenchRuntime, EveryMethodTracesEveryFrameWithTheSameRays) {
   std::vector<CpuMethodSpec> specs = {
       {{"sah0", "SAH0 refit", {&sah0}, {}}, std::nullopt},
       {{"tsah0", "T-SAH refit", {&tsah0}, {}}, std::nullopt},
-      {{"tsah0-seg2", "T-SAH, 2 trees", {&parts[0].bvh, &parts[1].bvh}, {parts[0].segment, parts[1].segment}}, std::nullopt},
+      {{"tsah0-seg2", "T-SAH, 2 trees", {&parts.trees[0], &parts.trees[1]}, parts.buildRanges}, std::nullopt},
       {{"rebuild-sweep", "sweep", {&tsah0}, {}}, CpuRebuild::Sweep},
       {{"rebuild-binned", "binned", {&tsah0}, {}}, CpuRebuild::Binned},
   };

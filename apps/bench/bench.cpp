@@ -81,17 +81,6 @@ nlohmann::json historyJson(const InsertionOptimizer::Result& r) {
   return history;
 }
 
-double mean(const std::vector<double>& v) {
-  double s = 0.0;
-  for (double x : v) s += x / double(v.size());
-  return v.empty() ? 0.0 : s;
-}
-double maximum(const std::vector<double>& v) {
-  double m = 0.0;
-  for (double x : v) m = std::max(m, x);
-  return m;
-}
-
 }  // namespace
 
 std::string methodLabel(const std::string& id) {
@@ -191,31 +180,20 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   const Bvh sah0Tree = buildSah0(repBoxes, config);
   const Bvh sahStarTree = buildSahStar(repBoxes, config);
 
-  // --- Segments -------------------------------------------------------------------------------
-  std::vector<SegmentTree> segmentTrees;
-  if (o.segments > 1) {
-    say("T-SAH k=0 for " + std::to_string(o.segments) + " equal-time segments");
-    start = std::chrono::steady_clock::now();
-    segmentTrees = buildSegmentTrees(a, o.segments, o.frames, MethodSpec::parse("tsah0"), config);
-    const double wall = secondsSince(start);
-    const std::vector<double> costs = evaluateSegmentTrees(a, segmentTrees, evalTimes, config.cost, o.threads);
-    const std::vector<double>& one = table1[3].perFrame;  // tsah0
-    nlohmann::json parts = nlohmann::json::array();
-    double build = 0.0;
-    for (const SegmentTree& s : segmentTrees) {
-      parts.push_back({{"time_start", s.segment.start},
-                       {"time_end", s.segment.end},
-                       {"build_s", s.buildSeconds},
-                       {"nodes", s.bvh.nodeCount()},
-                       {"optimized_cost", s.optimization.finalCost}});
-      build += s.buildSeconds;
-    }
-    j["segments"] = {{"count", o.segments},
-                     {"parts", parts},
-                     {"build_s", build},
-                     {"wall_s", wall},
-                     {"one_tree", {{"build_s", table1[3].buildSeconds}, {"average", mean(one)}, {"maximum", maximum(one)}}},
-                     {"k_trees", {{"average", mean(costs)}, {"maximum", maximum(costs)}, {"per_frame", costs}}}};
+  // --- Segments: equal-time parts, count and budget modes (tsah/segmentation.hpp) -------------
+  SegmentExperiment experiment;
+  experiment.count = o.segments;
+  experiment.budget = o.budget;
+  experiment.frames = o.frames;
+  experiment.evalFrames = o.evalFrames;
+  experiment.rebuildCosts = table1[0].perFrame;  // kTable1Methods[0]: SAH-rebuild
+  experiment.oneTreeCosts = table1[3].perFrame;  // tsah0
+  experiment.oneTreeBuildSeconds = table1[3].buildSeconds;
+  SegmentRuns segmentRuns;
+  if (o.segments > 1 || o.budget > 0.0) {
+    nlohmann::json segments;
+    segmentRuns = runSegmentExperiment(a, experiment, config, segments, say);
+    j["segments"] = segments;
   }
 
   // --- Runtime ----------------------------------------------------------------------------------
@@ -242,14 +220,13 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   RefitTrees sah0{"sah0", "SAH0 refit", {&sah0Tree}, {}};
   RefitTrees sahStar{"sahstar", "SAH* refit", {&sahStarTree}, {}};
   RefitTrees tsah{"tsah0", "T-SAH k=0 refit", {&tsahTree}, {}};
-  RefitTrees segmented{"tsah0-seg" + std::to_string(o.segments),
-                       "T-SAH k=0 refit, " + std::to_string(o.segments) + " trees",
-                       {},
-                       {}};
-  for (const SegmentTree& s : segmentTrees) {
-    segmented.trees.push_back(&s.bvh);
-    segmented.segments.push_back(s.segment);
-  }
+  // Tree sets: one runtime per method switches to the tree of each frame's part.
+  auto setOf = [](const std::string& name, const std::string& label, const SegmentationResult& r) {
+    RefitTrees t{name, label, {}, r.buildRanges};
+    for (const Bvh& tree : r.trees) t.trees.push_back(&tree);
+    return t;
+  };
+  const std::string k = std::to_string(o.segments);
   say(std::string("Table 2 on the ") + (gpu ? "GPU" : "CPU") + ": " + std::to_string(setup.times.size()) + " frames at " +
       std::to_string(o.width) + "x" + std::to_string(o.height) + ", 1 primary + " + std::to_string(o.aoRays) + " AO + " +
       std::to_string(o.shadowRays) + " shadow rays per pixel");
@@ -267,7 +244,14 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   Image picture;
   const uint32_t pictureFrame = static_cast<uint32_t>(setup.times.size() / 2);
   std::vector<RefitTrees> refits = {sah0, sahStar, tsah};
-  if (!segmentTrees.empty()) refits.push_back(segmented);
+  if (!segmentRuns.equal.trees.empty())
+    refits.push_back(setOf("tsah0-seg" + k, "T-SAH k=0 refit, " + k + " equal-time trees", segmentRuns.equal));
+  if (!segmentRuns.count.trees.empty())
+    refits.push_back(setOf("tsah0-count" + k, "T-SAH k=0 refit, " + k + " trees (count mode)", segmentRuns.count));
+  if (!segmentRuns.budget.trees.empty())
+    refits.push_back(setOf("tsah0-budget",
+                           "T-SAH k=0 refit, budget mode (" + std::to_string(segmentRuns.budget.trees.size()) + " trees)",
+                           segmentRuns.budget));
   if (gpu) {
     for (const RefitTrees& r : refits)
       runtime["methods"].push_back(toJson(runGpuRefit(a, r, setup, r.name == "tsah0" ? &picture : nullptr, pictureFrame)));
@@ -361,7 +345,7 @@ nlohmann::json optionsJson(const BenchOptions& o) {
           {"frames", o.frames},     {"eval_frames", o.evalFrames}, {"trace_frames", o.traceFrames},
           {"width", o.width},       {"height", o.height},        {"ao_rays", o.aoRays},
           {"shadow_rays", o.shadowRays}, {"ground", o.ground},   {"max_leaf", o.maxLeaf},
-          {"ct", o.ct},             {"ci", o.ci},                {"segments", o.segments},
+          {"ct", o.ct},             {"ci", o.ci},                {"segments", o.segments},   {"budget", o.budget},
           {"threads", o.threads},   {"embree", o.embree},        {"convergence", o.convergence}};
 }
 

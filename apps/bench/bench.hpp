@@ -7,7 +7,8 @@
 //                and maximum cost over the evaluation frames, the cost of every evaluation frame
 //   convergence  the T-SAH (k=0) optimization with Metropolis-Hastings, random and batch-sort
 //                node selection: cost after every batch against time (the paper's Figure 3)
-//   segments     K T-SAH trees for K equal-time parts versus one tree (the paper's BART Museum*)
+//   segments     K T-SAH trees for K equal-time parts (the paper's BART Museum*), K trees with split
+//                points chosen by the count mode, and the budget mode, versus one tree
 //   runtime      per-frame update + trace with the renderer's workload: refit of SAH0, SAH*, T-SAH
 //                and the K segment trees versus per-frame rebuilds (CPU: sweep and binned SAH;
 //                GPU: LBVH and HLBVH-SAH)
@@ -35,7 +36,8 @@ struct BenchOptions {
   bool ground = false;          // the analytic ground plane (the paper traces the mesh only)
   uint32_t maxLeaf = 8;
   float ct = 3.0f, ci = 2.0f;
-  uint32_t segments = 3;        // K of the segmented T-SAH (1: skip)
+  uint32_t segments = 3;        // K of the equal-time parts and of the count mode (1: skip)
+  double budget = 1.05;         // budget mode: factor of SAH-rebuild's cost per evaluation frame (0: skip)
   unsigned threads = 0;         // CPU threads (0: all cores)
   bool embree = true;           // run the Embree peer when built with it (CPU device only)
   bool convergence = true;      // run the three node selections for the convergence plot

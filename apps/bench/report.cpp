@@ -183,7 +183,8 @@ void segmentsSection(std::ostringstream& md, const json& scene) {
   const json* one = runtimeMethod(scene, "tsah0");
   const json* many = runtimeMethod(scene, "tsah0-seg" + std::to_string(k));
   md << "**Segments** (T-SAH k=0: one tree for the whole animation vs " << k
-     << " trees, each optimized for one equal-time part; every frame refits the tree of its part)\n\n"
+     << " trees for equal-time parts or with split points chosen by the count mode, and the budget mode's "
+        "fewest trees; every frame refits the tree of its part)\n\n"
      << "| trees | build [s] | cost | max cost | update [ms] | trace [MRays/s] | total [ms] |\n"
      << "|---|--:|--:|--:|--:|--:|--:|\n";
   auto row = [&](const std::string& label, const json& cost, double build, const json* rt) {
@@ -196,8 +197,28 @@ void segmentsSection(std::ostringstream& md, const json& scene) {
       md << " | | |\n";
   };
   row("1", s["one_tree"], num(s["one_tree"], "build_s"), one);
-  row(std::to_string(k), s["k_trees"], num(s, "build_s"), many);
-  md << "\n(build: one tree = CPU seconds of the optimizing thread; " << k << " trees = wall seconds of their builds)\n\n";
+  if (s.contains("k_trees")) row(std::to_string(k) + ", equal time", s["k_trees"], num(s, "build_s"), many);
+  if (s.contains("count_mode"))
+    row(std::to_string(k) + ", count mode", s["count_mode"], num(s["count_mode"], "build_s"),
+        runtimeMethod(scene, "tsah0-count" + std::to_string(k)));
+  if (s.contains("budget_mode")) {
+    const json& b = s["budget_mode"];
+    row(std::to_string(int(num(b, "trees"))) + ", budget " + formatSignificant(num(b, "budget")) + "x", b,
+        num(b, "build_s"), runtimeMethod(scene, "tsah0-budget"));
+  }
+  md << "\n(build: one tree = CPU seconds of the optimizing thread; sets = wall seconds of their trees' builds";
+  for (const char* mode : {"count_mode", "budget_mode"})
+    if (s.contains(mode)) {
+      const json& m = s[mode];
+      md << "; " << (std::string(mode) == "count_mode" ? "count" : "budget") << " mode: split times";
+      for (const json& t : m["split_times"]) md << " " << formatSignificant(t.get<double>());
+      md << ", search " << formatFixed(num(m, "search_s"), 1) << " s over " << int(num(m, "candidate_trees"))
+         << " candidate trees";
+      if (m.contains("peak_ratio_to_rebuild"))
+        md << ", peak/average cost ratio to SAH-rebuild " << formatFixed(num(m, "peak_ratio_to_rebuild"), 3) << " / "
+           << formatFixed(num(m, "average_ratio_to_rebuild"), 3);
+    }
+  md << ")\n\n";
 }
 
 // Toolkit vs Embree: where each wins, in one paragraph of facts.

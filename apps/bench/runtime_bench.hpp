@@ -13,12 +13,12 @@
 #include <nlohmann/json.hpp>
 
 #include "anim/animation.hpp"
-#include "bench/segments.hpp"
 #include "tsah/binned_sah_builder.hpp"
 #include "tsah/bvh.hpp"
 #include "tsah/camera.hpp"
 #include "tsah/image.hpp"
 #include "tsah/renderer.hpp"
+#include "tsah/tree_set.hpp"
 
 namespace tsah::bench {
 
@@ -56,12 +56,16 @@ struct RuntimeMethod {
 // total_ms, mrays_per_s).
 nlohmann::json toJson(const RuntimeMethod& method);
 
-// Trees a refit method traces: one tree for the whole animation, or one per segment.
+// Trees a refit method traces: one tree for the whole animation, or a tree set (one runtime that
+// refits the tree of each frame's part, tsah::treeIndexAt).
 struct RefitTrees {
   std::string name, label;
-  std::vector<const Bvh*> trees;      // one, or one per segment
-  std::vector<TimeSegment> segments;  // empty for a single tree, else one per tree
+  std::vector<const Bvh*> trees;   // one, or one per part
+  std::vector<TimeRange> ranges;   // empty for a single tree, else each tree's time range
 };
+
+// The trees as a tsah::TreeSet (a single tree gets the animation's range).
+TreeSet treeSetOf(const RefitTrees& trees, const anim::Animation& animation);
 
 enum class CpuRebuild { Sweep, Binned };
 

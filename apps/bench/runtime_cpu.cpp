@@ -43,6 +43,14 @@ std::unique_ptr<CpuRuntime> makeRuntime(const anim::Animation& a, const Bvh& tre
 
 }  // namespace
 
+TreeSet treeSetOf(const RefitTrees& trees, const anim::Animation& a) {
+  TreeSet set;
+  for (const Bvh* tree : trees.trees) set.trees.push_back(flattenBvh(*tree));
+  set.ranges = trees.ranges;
+  if (set.ranges.empty()) set.ranges = {{a.startTime(), a.endTime()}};
+  return set;
+}
+
 nlohmann::json toJson(const RuntimeMethod& m) {
   nlohmann::json j;
   j["name"] = m.name;
@@ -89,8 +97,7 @@ namespace {
 // One method's state during the frame-by-frame run.
 struct CpuRunner {
   RuntimeMethod result;
-  std::vector<std::unique_ptr<CpuRuntime>> runtimes;  // one, or one per segment
-  std::vector<TimeSegment> segments;
+  std::unique_ptr<CpuRuntime> runtime;                // refit: the tree or tree set; rebuild: the initial tree
   CpuRuntime::TreeBuilder builder;                    // set for rebuilds
   std::vector<float> positions;
   Image scratch;
@@ -121,14 +128,15 @@ std::vector<RuntimeMethod> runCpuMethods(const anim::Animation& a, const std::ve
     const CpuMethodSpec& spec = specs[m];
     CpuRunner& r = runners[m];
     r.result = {spec.trees.name, spec.trees.label, spec.rebuild ? "rebuild" : "refit", {}, nlohmann::json::object()};
-    for (const Bvh* tree : spec.trees.trees) {
-      r.runtimes.push_back(makeRuntime(a, *tree, setup.threads));
-      if (spec.rebuild) break;  // a rebuild replaces the tree anyway
-    }
-    r.segments = spec.rebuild ? std::vector<TimeSegment>{} : spec.trees.segments;
+    if (spec.rebuild)
+      r.runtime = makeRuntime(a, *spec.trees.trees.front(), setup.threads);  // a rebuild replaces it anyway
+    else
+      r.runtime = std::make_unique<CpuRuntime>(treeSetOf(spec.trees, a),
+                                               std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
+                                               a.vertexCount(), CpuRuntime::Config{setup.threads});
     if (spec.rebuild) r.builder = rebuildBuilder(*spec.rebuild, cost, maxLeaf);
     r.positions.resize(std::size_t(a.vertexCount()) * 3);
-    startWorkers(*r.runtimes.front());
+    startWorkers(*r.runtime);
   }
   RenderSettings settings = setup.settings;
   for (std::size_t f = 0; f < setup.times.size(); ++f) {
@@ -139,15 +147,17 @@ std::vector<RuntimeMethod> runCpuMethods(const anim::Animation& a, const std::ve
     for (std::size_t k = 0; k < runners.size(); ++k) {
       const std::size_t m = (k + f) % runners.size();  // rotated: no method is always first or last
       CpuRunner& r = runners[m];
-      CpuRuntime& rt = *r.runtimes[r.segments.empty() ? 0 : segmentOf(r.segments, t)];
+      CpuRuntime& rt = *r.runtime;
       FrameTiming ft;
       ft.time = t;
       const auto start = std::chrono::steady_clock::now();
       a.positionsAt(t, r.positions);
-      if (r.builder)
+      if (r.builder) {
         rt.rebuild(r.positions, r.builder);
-      else
+      } else {
+        rt.selectTreeAt(t);  // a tree set: the tree of this frame's part
         rt.update(r.positions);
+      }
       ft.updateMs = msSince(start);
       Image& target = image && m == imageMethod && f == imageFrame ? *image : r.scratch;
       ft.rays = renderFrame(rt, setup.camera(t), setup.lighting, settings, target);

@@ -14,7 +14,7 @@
 namespace tsah::cuda {
 
 struct GpuRuntime::Impl {
-  Impl(const FlatBvh& tree, const anim::Animation& animation, Config config);
+  Impl(const TreeSet& set, const anim::Animation& animation, Config config);
   ~Impl();
   Impl(const Impl&) = delete;
   Impl& operator=(const Impl&) = delete;
@@ -50,19 +50,29 @@ struct GpuRuntime::Impl {
   DeviceBuffer<float> positions;         // the current frame
   detail::FrameParams* hostParams = nullptr;  // pinned
   DeviceBuffer<detail::FrameParams> frameParams;
-  cudaGraphExec_t updateGraph = nullptr;
   struct RebuildGraph {
     RebuildOptions options;
     cudaGraphExec_t exec;
   };
   std::vector<RebuildGraph> rebuildGraphs;
 
-  // The uploaded tree (canonical order, one block of nodes).
-  FlatBvh topology;                      // host copy of its structure
-  DeviceBuffer<GpuBvhNode> nodes;
-  DeviceBuffer<uint32_t> nodeParent, counters, triIndex;
-  DeviceBuffer<detail::LeafRecord> leaves;
-  DeviceBuffer<detail::RootInfo> root;
+  // The uploaded trees (canonical order, one block of nodes each): one, or a tree set's K, all
+  // uploaded once; updateAt refits the tree of the frame's part (tsah::treeIndexAt over ranges).
+  struct DeviceTree {
+    FlatBvh topology;                    // host copy of its structure
+    DeviceBuffer<GpuBvhNode> nodes;
+    DeviceBuffer<uint32_t> nodeParent, counters, triIndex;
+    DeviceBuffer<detail::LeafRecord> leaves;
+    DeviceBuffer<detail::RootInfo> root;
+    cudaGraphExec_t updateGraph = nullptr;  // updateAt's graph for this tree (captured at first use)
+  };
+  // Validates one tree against the animation and uploads it.
+  void uploadTree(const FlatBvh& tree);
+  DeviceTree& tree() { return trees[current]; }
+  const DeviceTree& tree() const { return trees[current]; }
+  std::vector<DeviceTree> trees;
+  std::vector<TimeRange> ranges;         // one per tree
+  uint32_t current = 0;                  // the tree that update/updateAt refit and tracing reads
 
   DeviceBuffer<WoopTriangle> woop;       // per slot of the traced tree
   bool woopValid = false;
