@@ -67,6 +67,7 @@ TSAH_REGISTER_COMMAND(10, [](CLI::App& app) {
   sub->callback([opt] {
     if (!opt->animation.empty())  // tsah info TREE ANIMATION: the tree over the animation's frames
       return tsah::cli::describeTreeOverAnimation(opt->input, opt->animation, opt->frames, opt->json);
+    if (opt->frames) throw tsah::cli::UsageError("--frames needs a tree and its animation: tsah info TREE ANIMATION");
     if (tsah::cli::looksLikeBvhFile(opt->input)) {
       tsah::cli::describeBvhFile(opt->input, opt->json);
       return;

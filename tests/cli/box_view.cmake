@@ -27,3 +27,6 @@ set_tests_properties(cli.info.tree_over_animation.json PROPERTIES FIXTURES_REQUI
 add_test(NAME cli.info.tree_over_other_animation COMMAND tsah info ${W}/trace_explode.tbvh ${W}/trace_wave.tanim)
 set_tests_properties(cli.info.tree_over_other_animation PROPERTIES FIXTURES_REQUIRED "trace_tree;trace_other"
   PASS_REGULAR_EXPRESSION "^tsah: .*was not built for .*trace_wave.tanim.*\n$")
+add_test(NAME cli.info.frames_without_animation COMMAND tsah info ${W}/trace_explode.tbvh --frames 3)
+set_tests_properties(cli.info.frames_without_animation PROPERTIES FIXTURES_REQUIRED trace_tree
+  PASS_REGULAR_EXPRESSION "^tsah: --frames needs a tree and its animation.*\n$")
