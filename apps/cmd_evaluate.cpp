@@ -1,6 +1,6 @@
 // tsah evaluate INPUT [--methods sah0,sahstar,tsah0,tsah2,tsah4,rebuild] [--frames 5]
-//   [--eval-frames 50] [--max-leaf 8] [--ct 3] [--ci 2] [--selection mh] [--seed S]
-//   [--time-limit SEC] [--threads T] [--json]
+//   [--eval-frames 50] [--max-leaf 8] [--ct 3] [--ci 2] [--optimizer parallel|sequential]
+//   [--selection mh] [--seed S] [--time-limit SEC] [--threads T] [--json]
 // The paper's Table 1 for one input: build time, average and maximum cost of every method over the
 // evaluation frames, each tree refitted to every frame (SAH-rebuild: one tree per frame).
 #include <cstdio>
@@ -10,6 +10,7 @@
 
 #include "animation_frames.hpp"
 #include "cli.hpp"
+#include "optimizer_options.hpp"
 #include "tsah/baselines.hpp"
 
 namespace {
@@ -17,18 +18,9 @@ namespace {
 struct Options {
   std::string input;
   std::string methods = "sah0,sahstar,tsah0,tsah2,tsah4,rebuild";
-  uint32_t frames = 5;
-  uint32_t evalFrames = 50;
-  uint32_t maxLeaf = 8;
-  float ct = 3.0f, ci = 2.0f;
-  std::string selection = "mh";
-  uint64_t seed = 1;
-  double timeLimit = 0.0;
-  double minImprovement = tsah::InsertionOptimizer::Config{}.minImprovement;
-  unsigned threads = 0;
   bool json = false;
+  tsah::cli::OptimizerOptions common;  // shared with `tsah optimize`
 };
-
 
 std::vector<tsah::MethodSpec> parseMethods(const std::string& list, std::vector<std::string>& names) {
   std::vector<tsah::MethodSpec> methods;
@@ -54,21 +46,14 @@ void run(const Options& opt) {
   const anim::Animation a = tsah::cli::loadInput(opt.input);
   if (a.triangleCount() == 0) throw tsah::cli::UsageError(opt.input + ": no triangles to build a tree over");
   const bool animated = a.keyframeCount() > 1;
-  const uint32_t frames = animated ? opt.frames : 1;
-  const uint32_t evalFrames = animated ? opt.evalFrames : 1;
+  const uint32_t frames = animated ? opt.common.frames : 1;
+  const uint32_t evalFrames = animated ? opt.common.evalFrames : 1;
   const anim::Animation rep = a.resample(frames);
   const tsah::PrimitiveBoxes repBoxes = tsah::triangleBoxes(rep.indices(), rep.allPositions(), frames);
 
   tsah::cli::Progress progress("evaluate");
-  tsah::BaselineConfig config;
-  config.cost = {opt.ct, opt.ci};
-  config.maxLeafSize = opt.maxLeaf;
-  config.threads = opt.threads;
-  config.optimizer.selection = tsah::cli::parseSelection(opt.selection);
-  config.optimizer.seed = opt.seed;
-  config.optimizer.timeLimitSeconds = opt.timeLimit;
-  config.optimizer.minImprovement = opt.minImprovement;
-  config.progress = [&](const std::string& message) { progress.message(message); };
+  const tsah::BaselineConfig config =
+      opt.common.baselineConfig([&](const std::string& message) { progress.message(message); });
   const std::vector<tsah::MethodResult> results =
       tsah::compareMethods(methods, repBoxes, tsah::cli::animationFrames(a, a.uniformTimes(evalFrames)), config);
 
@@ -77,9 +62,9 @@ void run(const Options& opt) {
   j["triangles"] = a.triangleCount();
   j["frames"] = frames;
   j["eval_frames"] = evalFrames;
-  j["max_leaf"] = opt.maxLeaf;
-  j["ct"] = opt.ct;
-  j["ci"] = opt.ci;
+  j["max_leaf"] = opt.common.maxLeaf;
+  j["ct"] = opt.common.ct;
+  j["ci"] = opt.common.ci;
   j["methods"] = nlohmann::json::array();
   for (std::size_t m = 0; m < results.size(); ++m)
     j["methods"].push_back({{"name", names[m]},
@@ -93,7 +78,7 @@ void run(const Options& opt) {
     return;
   }
   std::printf("%s: %u triangles, %u representative frames, %u evaluation frames, cT=%g cI=%g, max leaf %u\n",
-              opt.input.c_str(), a.triangleCount(), frames, evalFrames, double(opt.ct), double(opt.ci), opt.maxLeaf);
+              opt.input.c_str(), a.triangleCount(), frames, evalFrames, double(opt.common.ct), double(opt.common.ci), opt.common.maxLeaf);
   std::printf("%-10s %10s %10s %10s\n", "method", "build [s]", "cost", "max cost");
   for (std::size_t m = 0; m < results.size(); ++m)
     std::printf("%-10s %10.2f %10.2f %10.2f\n", names[m].c_str(), results[m].buildSeconds, results[m].average,
@@ -108,29 +93,7 @@ TSAH_REGISTER_COMMAND(45, [](CLI::App& app) {
   sub->add_option("INPUT", opt->input, "Animation or static mesh (any input `tsah info` reads)")->required();
   sub->add_option("--methods", opt->methods, "Comma-separated: sah0, sahstar, rebuild, tsah<k> (tsah0, tsah2, ...)")
       ->capture_default_str();
-  sub->add_option("--frames", opt->frames, "Representative frames, uniform in time")
-      ->check(CLI::Range(1u, 1000u))
-      ->capture_default_str();
-  sub->add_option("--eval-frames", opt->evalFrames, "Evaluation frames, uniform in time")
-      ->check(CLI::Range(1u, 100000u))
-      ->capture_default_str();
-  sub->add_option("--max-leaf", opt->maxLeaf, "Largest leaf after collapse, for every method (1: one triangle per leaf)")
-      ->check(CLI::Range(1u, 256u))
-      ->capture_default_str();
-  sub->add_option("--ct", opt->ct, "Cost of traversing a node")->check(CLI::PositiveNumber)->capture_default_str();
-  sub->add_option("--ci", opt->ci, "Cost of intersecting a triangle")->check(CLI::PositiveNumber)->capture_default_str();
-  sub->add_option("--selection", opt->selection, "Node selection of every optimization: mh, random, batch")
-      ->check(CLI::IsMember({"mh", "random", "batch"}))
-      ->capture_default_str();
-  sub->add_option("--seed", opt->seed, "Random seed")->capture_default_str();
-  sub->add_option("--time-limit", opt->timeLimit, "Stop each optimization after this many seconds (0: none)")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sub->add_option("--min-improvement", opt->minImprovement,
-                  "Stop after 3 batches that lower the cost by less than this fraction each (0: by nothing)")
-      ->check(CLI::Range(0.0, 1.0))
-      ->capture_default_str();
-  sub->add_option("--threads", opt->threads, "Worker threads (0: all cores)")->capture_default_str();
+  opt->common.addTo(*sub);
   sub->add_flag("--json", opt->json, "Print one JSON object");
   sub->callback([opt] { run(*opt); });
 });

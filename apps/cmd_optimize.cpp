@@ -1,6 +1,6 @@
 // tsah optimize INPUT -o OUT.tbvh [--method tsah|sah0|sahstar] [--k K] [--frames N]
-//   [--eval-frames M] [--selection mh|random|batch] [--seed S] [--ct 3] [--ci 2] [--max-leaf 8]
-//   [--time-limit SEC] [--threads T] [--segments K] [--json]
+//   [--eval-frames M] [--optimizer parallel|sequential] [--selection mh|random|batch] [--seed S]
+//   [--ct 3] [--ci 2] [--max-leaf 8] [--time-limit SEC] [--threads T] [--segments K] [--json]
 // Builds one tree for the whole animation, writes it as .tbvh and reports its cost over the
 // evaluation frames. With --segments K > 1: K trees, one per equal-time part of the animation
 // (the paper's BART Museum*), written as OUT_seg0.tbvh ... OUT_seg<K-1>.tbvh; each file's time
@@ -12,6 +12,7 @@
 #include "bench/segments.hpp"
 #include "animation_frames.hpp"
 #include "cli.hpp"
+#include "optimizer_options.hpp"
 #include "tsah/baselines.hpp"
 #include "tsah/bvh_file.hpp"
 
@@ -21,32 +22,29 @@ struct Options {
   std::string input, output;
   std::string method = "tsah";
   int k = 0;
-  uint32_t frames = 5;
-  uint32_t evalFrames = 50;
-  std::string selection = "mh";
-  uint64_t seed = 1;
-  float ct = 3.0f, ci = 2.0f;
-  uint32_t maxLeaf = 8;
-  double timeLimit = 0.0;
-  double minImprovement = tsah::InsertionOptimizer::Config{}.minImprovement;
-  unsigned threads = 0;
   uint32_t segments = 1;
   bool json = false;
+  tsah::cli::OptimizerOptions common;  // shared with `tsah evaluate`
 };
 
-
+// How the tree's nodes were chosen for optimization: "none" (SAH0), "parallel" (parallel
+// reinsertion) or the sequential optimizer's node selection.
+std::string selectionLabel(const Options& opt, const tsah::MethodSpec& method) {
+  if (method.method == tsah::Method::Sah0) return "none";
+  return opt.common.optimizer == "parallel" ? "parallel" : opt.common.selection;
+}
 
 tsah::BvhBuildInfo buildInfo(const Options& opt, const tsah::MethodSpec& method, const anim::Animation& a,
                              uint32_t frames, double buildSeconds, double timeStart, double timeEnd) {
   tsah::BvhBuildInfo info;
   info.method = method.method == tsah::Method::TSah ? "tsah" : method.name();
-  info.selection = method.method == tsah::Method::Sah0 ? "none" : opt.selection;
+  info.selection = selectionLabel(opt, method);
   info.k = method.k;
   info.representativeFrames = frames;
-  info.seed = opt.seed;
-  info.ct = opt.ct;
-  info.ci = opt.ci;
-  info.maxLeafSize = opt.maxLeaf;
+  info.seed = opt.common.seed;
+  info.ct = opt.common.ct;
+  info.ci = opt.common.ci;
+  info.maxLeafSize = opt.common.maxLeaf;
   info.buildSeconds = buildSeconds;
   info.timeStart = timeStart;
   info.timeEnd = timeEnd;
@@ -89,7 +87,7 @@ void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim:
       tsah::bench::buildSegmentTrees(a, opt.segments, frames, method, config);
   progress.message("evaluating " + std::to_string(evalFrames) + " frames");
   const std::vector<double> times = a.uniformTimes(evalFrames);
-  const std::vector<double> perFrame = tsah::bench::evaluateSegmentTrees(a, trees, times, config.cost, opt.threads);
+  const std::vector<double> perFrame = tsah::bench::evaluateSegmentTrees(a, trees, times, config.cost, opt.common.threads);
   std::vector<tsah::bench::TimeSegment> parts;
   for (const auto& t : trees) parts.push_back(t.segment);
   std::vector<std::vector<double>> partCosts(trees.size());
@@ -122,12 +120,13 @@ void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim:
     j["output"] = opt.output;
     j["method"] = method.method == tsah::Method::TSah ? "tsah" : method.name();
     j["k"] = method.k;
-    j["selection"] = method.method == tsah::Method::Sah0 ? "none" : opt.selection;
-    j["seed"] = opt.seed;
+    j["selection"] = selectionLabel(opt, method);
+    j["optimizer"] = opt.common.optimizer;
+    j["seed"] = opt.common.seed;
     j["frames"] = frames;
     j["eval_frames"] = evalFrames;
     j["triangles"] = a.triangleCount();
-    j["max_leaf"] = opt.maxLeaf;
+    j["max_leaf"] = opt.common.maxLeaf;
     j["cost"] = {{"average", average}, {"maximum", maximum}, {"per_frame", perFrame}};
     j["segments"] = segments;
     std::printf("%s\n", j.dump().c_str());
@@ -151,21 +150,13 @@ void run(const Options& opt) {
   if (a.triangleCount() == 0) throw tsah::cli::UsageError(opt.input + ": no triangles to build a tree over");
   // A static input has one frame: resampling it would only repeat that frame.
   const bool animated = a.keyframeCount() > 1;
-  const uint32_t frames = animated ? opt.frames : 1;
-  const uint32_t evalFrames = animated ? opt.evalFrames : 1;
+  const uint32_t frames = animated ? opt.common.frames : 1;
+  const uint32_t evalFrames = animated ? opt.common.evalFrames : 1;
   const anim::Animation rep = a.resample(frames);
   const tsah::PrimitiveBoxes repBoxes = tsah::triangleBoxes(rep.indices(), rep.allPositions(), frames);
 
   tsah::cli::Progress progress("optimize " + method.name());
-  tsah::BaselineConfig config;
-  config.cost = {opt.ct, opt.ci};
-  config.maxLeafSize = opt.maxLeaf;
-  config.threads = opt.threads;
-  config.optimizer.selection = tsah::cli::parseSelection(opt.selection);
-  config.optimizer.seed = opt.seed;
-  config.optimizer.timeLimitSeconds = opt.timeLimit;
-  config.optimizer.minImprovement = opt.minImprovement;
-  config.progress = [&](const std::string& message) { progress.message(message); };
+  tsah::BaselineConfig config = opt.common.baselineConfig([&](const std::string& message) { progress.message(message); });
 
   if (opt.segments > 1) {
     if (!animated) throw tsah::cli::UsageError(opt.input + ": --segments needs an animation (this input has one frame)");
@@ -179,7 +170,7 @@ void run(const Options& opt) {
 
   progress.message("evaluating " + std::to_string(evalFrames) + " frames");
   const std::vector<double> perFrame =
-      tsah::evaluateFrames(bvh, tsah::cli::animationFrames(a, a.uniformTimes(evalFrames)), config.cost, opt.threads);
+      tsah::evaluateFrames(bvh, tsah::cli::animationFrames(a, a.uniformTimes(evalFrames)), config.cost, opt.common.threads);
   const auto [average, maximum] = averageAndMaximum(perFrame);
 
   const tsah::BvhBuildInfo info = buildInfo(opt, method, a, frames, buildSeconds, a.startTime(), a.endTime());
@@ -191,14 +182,15 @@ void run(const Options& opt) {
   j["method"] = info.method;
   j["k"] = info.k;
   j["selection"] = info.selection;
-  j["seed"] = opt.seed;
+  j["optimizer"] = opt.common.optimizer;
+  j["seed"] = opt.common.seed;
   j["frames"] = frames;
   j["eval_frames"] = evalFrames;
   j["triangles"] = a.triangleCount();
   j["nodes"] = bvh.nodeCount();
   j["leaves"] = bvh.leafCount();
   j["depth"] = bvh.depth();
-  j["max_leaf"] = opt.maxLeaf;
+  j["max_leaf"] = opt.common.maxLeaf;
   j["build_s"] = buildSeconds;
   j["cost"] = {{"average", average}, {"maximum", maximum}, {"per_frame", perFrame}};
   if (method.method == tsah::Method::TSah) {
@@ -212,9 +204,10 @@ void run(const Options& opt) {
   std::printf("%s: %s tree, %u triangles, %u nodes, %u leaves, depth %u\n", opt.output.c_str(),
               method.name().c_str(), a.triangleCount(), bvh.nodeCount(), bvh.leafCount(), bvh.depth());
   if (method.method == tsah::Method::TSah)
-    std::printf("optimization: T-SAH cost %.3f -> %.3f over %u frames in %zu batches (%.2f s)\n",
-                details.initialCost, details.finalCost, frames,
-                details.history.empty() ? std::size_t(0) : details.history.size() - 1, details.seconds);
+    std::printf("optimization (%s): T-SAH cost %.3f -> %.3f over %u frames in %zu %s (%.2f s)\n",
+                opt.common.optimizer.c_str(), details.initialCost, details.finalCost, frames,
+                details.history.empty() ? std::size_t(0) : details.history.size() - 1,
+                opt.common.optimizer == "parallel" ? "rounds" : "batches", details.seconds);
   std::printf("build %.2f s; cost over %u evaluation frames: average %.3f, maximum %.3f\n", buildSeconds,
               evalFrames, average, maximum);
 }
@@ -232,29 +225,7 @@ TSAH_REGISTER_COMMAND(40, [](CLI::App& app) {
   sub->add_option("--k", opt->k, "T-SAH exponent: 0 optimizes the average cost, larger values the worst frames")
       ->check(CLI::Range(0, 16))
       ->capture_default_str();
-  sub->add_option("--frames", opt->frames, "Representative frames, uniform in time")
-      ->check(CLI::Range(1u, 1000u))
-      ->capture_default_str();
-  sub->add_option("--eval-frames", opt->evalFrames, "Evaluation frames for the reported cost, uniform in time")
-      ->check(CLI::Range(1u, 100000u))
-      ->capture_default_str();
-  sub->add_option("--selection", opt->selection, "Node selection: mh (Metropolis-Hastings), random, batch (batch sorting)")
-      ->check(CLI::IsMember({"mh", "random", "batch"}))
-      ->capture_default_str();
-  sub->add_option("--seed", opt->seed, "Random seed (same seed, same tree)")->capture_default_str();
-  sub->add_option("--ct", opt->ct, "Cost of traversing a node")->check(CLI::PositiveNumber)->capture_default_str();
-  sub->add_option("--ci", opt->ci, "Cost of intersecting a triangle")->check(CLI::PositiveNumber)->capture_default_str();
-  sub->add_option("--max-leaf", opt->maxLeaf, "Largest leaf after collapse (1: one triangle per leaf)")
-      ->check(CLI::Range(1u, 256u))
-      ->capture_default_str();
-  sub->add_option("--time-limit", opt->timeLimit, "Stop each optimization after this many seconds (0: none)")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sub->add_option("--min-improvement", opt->minImprovement,
-                  "Stop after 3 batches that lower the cost by less than this fraction each (0: by nothing)")
-      ->check(CLI::Range(0.0, 1.0))
-      ->capture_default_str();
-  sub->add_option("--threads", opt->threads, "Worker threads (0: all cores)")->capture_default_str();
+  opt->common.addTo(*sub);
   sub->add_option("--segments", opt->segments,
                   "K > 1: one tree per equal-time part of the animation, written as OUT_seg0 ... OUT_seg<K-1>")
       ->check(CLI::Range(1u, 1000u))
