@@ -19,7 +19,7 @@ struct OptimizerOptions {
   uint32_t evalFrames = 50;  // evaluation frames
   uint32_t maxLeaf = 8;
   float ct = 3.0f, ci = 2.0f;
-  std::string optimizer = "parallel";  // sequential | parallel
+  std::string optimizer = "sequential";  // sequential | parallel
   std::string selection = "mh";        // node selection of the sequential optimizer
   uint64_t seed = 1;
   double timeLimit = 0.0;

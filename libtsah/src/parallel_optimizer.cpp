@@ -43,6 +43,7 @@ struct Scratch {
   std::vector<Aabb> moving, without, other, fresh;
   std::vector<QueueEntry> heap;
   std::vector<Move> found;  // improving moves found by this thread in the current round
+  uint64_t searched = 0;    // searches by this thread in the current round
   explicit Scratch(uint32_t frames) : moving(frames), without(frames), other(frames), fresh(frames) {}
 };
 
@@ -83,7 +84,16 @@ struct ReinsertionSession::Impl {
   std::vector<float> areaFactor;
   double currentCost = 0.0;
   std::vector<uint8_t> taken;  // per node: touched by a winning move of this round
-  uint64_t searches = 0, applied = 0, roundIndex = 0;
+  // Focus: a node whose last search found nothing is searched again only once a move has touched
+  // it or one of its nearest ancestors since (the boxes its search depends on most).
+  std::vector<uint32_t> changedIn;   // per node: the last round in which an applied move touched it
+  std::vector<uint32_t> quietSince;  // per node: the round its search last found nothing (0: none)
+  bool focused = true;               // false: every sampled node is searched (a full round)
+  // How far up a focused round looks for changes: the root lies on every path and changes in
+  // almost every round, so only the nearest ancestors count.
+  static constexpr uint32_t kFocusLevels = 4;
+  uint64_t searches = 0, applied = 0;
+  uint32_t roundIndex = 0;
   tbb::task_arena arena;
   tbb::enumerable_thread_specific<Scratch> scratch;
 
@@ -113,6 +123,8 @@ struct ReinsertionSession::Impl {
     frameCost.assign(frames, 0.0);
     areaFactor.assign(frames, 0.0f);
     taken.assign(nodeCount, 0);
+    changedIn.assign(nodeCount, 0);
+    quietSince.assign(nodeCount, 0);
     arena.execute([&] {
       refitAll();
       refresh();
@@ -254,9 +266,16 @@ struct ReinsertionSession::Impl {
     return p != kInvalidIndex && p != root;
   }
 
-  // Every eligible node is searched in a round with probability candidateFraction.
+  // Every eligible node is sampled in a round with probability candidateFraction; in a focused round
+  // a sampled node whose last search found nothing is skipped unless its path to the root changed.
   bool isCandidate(uint32_t n) const {
-    return eligible(n) && sampleOf(config.seed, roundIndex, n) < parallel.candidateFraction;
+    if (!eligible(n) || sampleOf(config.seed, roundIndex, n) >= parallel.candidateFraction) return false;
+    const uint32_t quiet = quietSince[n];
+    if (!focused || quiet == 0) return true;
+    uint32_t a = n;
+    for (uint32_t level = 0; level <= kFocusLevels && a != kInvalidIndex; ++level, a = links[a].parent)
+      if (changedIn[a] >= quiet) return true;
+    return false;
   }
 
   // ---- search ----
@@ -428,22 +447,27 @@ struct ReinsertionSession::Impl {
     for (uint32_t n = p; n != m.lca; n = links[n].parent) refitNode(n, s);
   }
 
-  RoundStats round() {
+  RoundStats round(bool focusedRound) {
+    focused = focusedRound;
     RoundStats stats;
     ++roundIndex;
     arena.execute([&] {
       // 1-2. Candidates and their searches.
-      for (Scratch& s : scratch) s.found.clear();
+      for (Scratch& s : scratch) {
+        s.found.clear();
+        s.searched = 0;
+      }
       tbb::parallel_for(tbb::blocked_range<uint32_t>(0, nodeCount, 512), [&](const auto& range) {
         Scratch& s = scratch.local();
         for (uint32_t n = range.begin(); n != range.end(); ++n) {
           if (!isCandidate(n)) continue;
           const Move m = search(n, s);
+          ++s.searched;
+          quietSince[n] = m.node == kInvalidIndex ? roundIndex : 0;
           if (m.node != kInvalidIndex) s.found.push_back(m);
         }
       });
-      for (uint32_t n = 0; n < nodeCount; ++n)
-        stats.candidates += isCandidate(n);
+      for (Scratch& s : scratch) stats.candidates += s.searched;
       std::vector<Move> moves;
       for (Scratch& s : scratch) moves.insert(moves.end(), s.found.begin(), s.found.end());
       tbb::parallel_sort(moves.begin(), moves.end(), higherPriority);
@@ -487,7 +511,10 @@ struct ReinsertionSession::Impl {
       stats.applied = accepted.size();
 
       // 5. Apply, then refit the touched paths (disjoint between moves).
-      tbb::parallel_for(std::size_t(0), accepted.size(), [&](std::size_t i) { apply(accepted[i]); });
+      tbb::parallel_for(std::size_t(0), accepted.size(), [&](std::size_t i) {
+        forEachTouched(accepted[i], [&](uint32_t n) { changedIn[n] = roundIndex; });
+        apply(accepted[i]);
+      });
       tbb::parallel_for(std::size_t(0), accepted.size(),
                         [&](std::size_t i) { refitPaths(accepted[i], grandparents[i], scratch.local()); });
     });
@@ -533,7 +560,7 @@ ReinsertionSession::~ReinsertionSession() = default;
 ReinsertionSession::ReinsertionSession(ReinsertionSession&&) noexcept = default;
 ReinsertionSession& ReinsertionSession::operator=(ReinsertionSession&&) noexcept = default;
 
-ReinsertionSession::RoundStats ReinsertionSession::round() { return impl_->round(); }
+ReinsertionSession::RoundStats ReinsertionSession::round(bool focused) { return impl_->round(focused); }
 void ReinsertionSession::endRound() { impl_->endRound(); }
 double ReinsertionSession::cost() const { return impl_->currentCost; }
 std::span<const double> ReinsertionSession::frameCosts() const { return impl_->frameCost; }
@@ -580,14 +607,19 @@ ParallelReinsertionOptimizer::Result ParallelReinsertionOptimizer::optimize(Bvh 
   record(0);
   double best = session.cost();
   uint32_t withoutImprovement = 0;
+  bool focused = true;
   for (uint32_t round = 1;; ++round) {
-    const ReinsertionSession::RoundStats stats = session.round();
+    const ReinsertionSession::RoundStats stats = session.round(focused);
     session.endRound();
     record(round);
     const double cost = session.cost();
     withoutImprovement = cost < best * (1.0 - config_.minImprovement) ? 0 : withoutImprovement + 1;
     best = std::min(best, cost);
-    if (stats.candidates == 0 || withoutImprovement >= config_.batchesWithoutImprovement) break;
+    // Stalled focused rounds get one full round before the run ends: nodes skipped as quiet may
+    // have found new places after changes elsewhere.
+    const bool stalled = stats.candidates == 0 || withoutImprovement >= config_.batchesWithoutImprovement;
+    if (stalled && !focused) break;
+    focused = !stalled;
     if (config_.maxBatches && round >= config_.maxBatches) break;
     if (config_.timeLimitSeconds > 0.0 && elapsed() >= config_.timeLimitSeconds) {
       result.timeLimitReached = true;

@@ -69,7 +69,7 @@ struct BaselineConfig {
   // cost model and k are replaced by `cost` and the method's k; single-frame optimizations get
   // derived seeds.
   InsertionOptimizer::Config optimizer;
-  OptimizerKind optimizerKind = OptimizerKind::Parallel;
+  OptimizerKind optimizerKind = OptimizerKind::Sequential;
   ParallelReinsertionOptimizer::Parallel parallel;  // settings of the parallel optimizer (its threads)
   unsigned threads = 0;  // worker threads for independent trees and frames; 0: all cores
   // Progress messages (which method, which frame, optimizer batches). May be called from worker

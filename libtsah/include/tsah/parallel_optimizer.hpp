@@ -17,9 +17,11 @@
 //      it lowers C~^k (for k > 0 the weights are an approximation, as in the sequential optimizer);
 //   5. apply and refit the touched paths for every representative frame (parallel);
 //   6. after the round: new frame weights for k > 0.
-// The run stops after `batchesWithoutImprovement` rounds that did not lower C~^k by the relative
-// `minImprovement` (the sequential optimizer's rule, with rounds for batches). Results depend on
-// the seed only, not on the thread count.
+// Rounds are focused: a node whose last search found nothing is searched again only after a move
+// touched it or one of its nearest ancestors. The run stops after `batchesWithoutImprovement` rounds that
+// did not lower C~^k by the relative `minImprovement` (the sequential optimizer's rule, with rounds
+// for batches) followed by one full round that did not either. Results depend on the seed only, not
+// on the thread count.
 //
 // Memory: interior nodes hold one box per frame; leaves read the caller's primitive boxes, which
 // must outlive the optimization.
@@ -80,7 +82,10 @@ class ReinsertionSession {
   ReinsertionSession(ReinsertionSession&&) noexcept;
   ReinsertionSession& operator=(ReinsertionSession&&) noexcept;
 
-  RoundStats round();
+  // One round. Focused (the optimizer's default): a node whose last search found nothing is
+  // searched again only after a move touched it or one of its 4 nearest ancestors; a full round searches
+  // every sampled node.
+  RoundStats round(bool focused = true);
   // After a round: new weights for k > 0 from costs recomputed from the boxes (k = 0: nothing).
   void endRound();
 
