@@ -37,6 +37,7 @@ struct BenchOptions {
   float ct = 3.0f, ci = 2.0f;
   uint32_t segments = 3;        // K of the segmented T-SAH (1: skip)
   unsigned threads = 0;         // CPU threads (0: all cores)
+  std::string optimizer = "sequential";  // optimizer of SAH*, SAH-rebuild and T-SAH: sequential | parallel
   bool embree = true;           // run the Embree peer when built with it (CPU device only)
   bool convergence = true;      // run the three node selections for the convergence plot
   double fps = 0.0;             // import: sampling rate of continuous animations (0: the file's own)

@@ -527,14 +527,13 @@ struct ReinsertionSession::Impl {
     if (config.k > 0) arena.execute([&] { refresh(); });
   }
 
-  Bvh materialize() const {
+  // The topology as a Bvh without boxes (frameCount 0).
+  Bvh topology() const {
     Bvh out;
-    out.frameCount = frames;
+    out.frameCount = 0;
     out.root = root;
     out.primIds = primIds;
     out.nodes.resize(nodeCount);
-    out.boxes.resize(std::size_t(nodeCount) * frames);
-    std::vector<Aabb> buffer(frames);
     for (uint32_t n = 0; n < nodeCount; ++n) {
       BvhNode& node = out.nodes[n];
       node.parent = links[n].parent;
@@ -545,8 +544,6 @@ struct ReinsertionSession::Impl {
         node.left = links[n].left;
         node.right = links[n].right;
       }
-      const Aabb* b = boxesOf(n, buffer);
-      std::copy_n(b, frames, &out.box(n, 0));
     }
     return out;
   }
@@ -564,10 +561,17 @@ ReinsertionSession::RoundStats ReinsertionSession::round(bool focused) { return 
 void ReinsertionSession::endRound() { impl_->endRound(); }
 double ReinsertionSession::cost() const { return impl_->currentCost; }
 std::span<const double> ReinsertionSession::frameCosts() const { return impl_->frameCost; }
-Bvh ReinsertionSession::bvh() const { return impl_->materialize(); }
+Bvh ReinsertionSession::bvh() const {
+  Bvh out = impl_->topology();
+  refit(out, *impl_->prims);
+  return out;
+}
+// The session's boxes are freed before the tree's are computed: the two are never held together.
 Bvh ReinsertionSession::release() {
-  Bvh out = impl_->materialize();
+  const PrimitiveBoxes& prims = *impl_->prims;
+  Bvh out = impl_->topology();
   impl_.reset();
+  refit(out, prims);
   return out;
 }
 uint64_t ReinsertionSession::searches() const { return impl_->searches; }
