@@ -15,6 +15,11 @@ FrameSource animationFrames(const anim::Animation& animation, std::vector<double
   return source;
 }
 
+PrimitiveBoxes representativeBoxes(const anim::Animation& animation, uint32_t frames) {
+  const anim::Animation rep = animation.resample(frames);
+  return triangleBoxes(rep.indices(), rep.allPositions(), frames);
+}
+
 InsertionOptimizer::Selection parseSelection(const std::string& name) {
   using Selection = InsertionOptimizer::Selection;
   if (name == "mh") return Selection::MetropolisHastings;

@@ -14,6 +14,10 @@ namespace tsah::cli {
 // The animation must outlive the returned source.
 FrameSource animationFrames(const anim::Animation& animation, std::vector<double> times);
 
+// The triangle boxes of `frames` representative frames, uniform in time (the resampled animation
+// is freed before returning, so it is never held alongside the tree being built).
+PrimitiveBoxes representativeBoxes(const anim::Animation& animation, uint32_t frames);
+
 // "mh", "random", "batch" -> the optimizer's node selection; throws std::invalid_argument for anything else.
 InsertionOptimizer::Selection parseSelection(const std::string& name);
 

@@ -48,11 +48,7 @@ void run(const Options& opt) {
   const bool animated = a.keyframeCount() > 1;
   const uint32_t frames = animated ? opt.common.frames : 1;
   const uint32_t evalFrames = animated ? opt.common.evalFrames : 1;
-  // The resampled animation is needed only for its boxes: it is gone before the tree is built.
-  const tsah::PrimitiveBoxes repBoxes = [&] {
-    const anim::Animation rep = a.resample(frames);
-    return tsah::triangleBoxes(rep.indices(), rep.allPositions(), frames);
-  }();
+  const tsah::PrimitiveBoxes repBoxes = tsah::cli::representativeBoxes(a, frames);
 
   tsah::cli::Progress progress("evaluate");
   const tsah::BaselineConfig config =

@@ -7,7 +7,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <queue>
 #include <stdexcept>
 #include <string>
 #include <utility>
