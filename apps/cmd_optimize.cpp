@@ -203,10 +203,10 @@ void run(const Options& opt) {
   std::printf("%s: %s tree, %u triangles, %u nodes, %u leaves, depth %u\n", opt.output.c_str(),
               method.name().c_str(), a.triangleCount(), bvh.nodeCount(), bvh.leafCount(), bvh.depth());
   if (method.method == tsah::Method::TSah)
-    std::printf("optimization (%s): T-SAH cost %.3f -> %.3f over %u frames in %zu %s (%.2f s)\n",
-                opt.common.optimizer.c_str(), details.initialCost, details.finalCost, frames,
+    std::printf("optimization: T-SAH cost %.3f -> %.3f over %u frames in %zu %s (%.2f s, %s optimizer)\n",
+                details.initialCost, details.finalCost, frames,
                 details.history.empty() ? std::size_t(0) : details.history.size() - 1,
-                opt.common.optimizer == "parallel" ? "rounds" : "batches", details.seconds);
+                opt.common.optimizer == "parallel" ? "rounds" : "batches", details.seconds, opt.common.optimizer.c_str());
   std::printf("build %.2f s; cost over %u evaluation frames: average %.3f, maximum %.3f\n", buildSeconds,
               evalFrames, average, maximum);
 }
