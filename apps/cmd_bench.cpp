@@ -287,6 +287,10 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
       ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
   sub->add_option("--threads", b.threads, "CPU worker threads (0: all cores)")->capture_default_str();
+  sub->add_option("--optimizer", b.optimizer,
+                  "Optimizer of SAH*, SAH-rebuild and T-SAH: sequential (the paper's) or parallel (all cores)")
+      ->check(CLI::IsMember({"sequential", "parallel"}))
+      ->capture_default_str();
   sub->add_flag("--no-embree", opt->noEmbree, "Skip the Embree peer");
   sub->add_flag("--no-convergence", opt->noConvergence, "Skip the random and batch-sort optimizations of the convergence plot");
   sub->add_option("--note", opt->notes,

@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "cli.hpp"
+#include "optimizer_options.hpp"
 #include "tsah/baselines.hpp"
 #include "tsah/pipeline.hpp"
 
@@ -90,29 +91,7 @@ TSAH_REGISTER_COMMAND(45, [](CLI::App& app) {
   sub->add_option("INPUT", opt->input, "Animation or static mesh (any input `tsah info` reads)")->required();
   sub->add_option("--methods", opt->methods, "Comma-separated: sah0, sahstar, rebuild, tsah<k> (tsah0, tsah2, ...)")
       ->capture_default_str();
-  sub->add_option("--frames", opt->tree.frames, "Representative frames, uniform in time")
-      ->check(CLI::Range(1u, 1000u))
-      ->capture_default_str();
-  sub->add_option("--eval-frames", opt->evalFrames, "Evaluation frames, uniform in time")
-      ->check(CLI::Range(1u, 100000u))
-      ->capture_default_str();
-  sub->add_option("--max-leaf", opt->tree.maxLeaf, "Largest leaf after collapse, for every method (1: one triangle per leaf)")
-      ->check(CLI::Range(1u, 256u))
-      ->capture_default_str();
-  sub->add_option("--ct", opt->tree.ct, "Cost of traversing a node")->check(CLI::PositiveNumber)->capture_default_str();
-  sub->add_option("--ci", opt->tree.ci, "Cost of intersecting a triangle")->check(CLI::PositiveNumber)->capture_default_str();
-  sub->add_option("--selection", opt->tree.selection, "Node selection of every optimization: mh, random, batch")
-      ->check(CLI::IsMember({"mh", "random", "batch"}))
-      ->capture_default_str();
-  sub->add_option("--seed", opt->tree.seed, "Random seed")->capture_default_str();
-  sub->add_option("--time-limit", opt->tree.timeLimit, "Stop each optimization after this many seconds (0: none)")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sub->add_option("--min-improvement", opt->tree.minImprovement,
-                  "Stop after 3 batches that lower the cost by less than this fraction each (0: by nothing)")
-      ->check(CLI::Range(0.0, 1.0))
-      ->capture_default_str();
-  sub->add_option("--threads", opt->tree.threads, "Worker threads (0: all cores)")->capture_default_str();
+  tsah::cli::addTreeOptions(*sub, opt->tree, opt->evalFrames);
   sub->add_flag("--json", opt->json, "Print one JSON object");
   sub->callback([opt] { run(*opt); });
 });

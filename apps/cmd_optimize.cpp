@@ -13,6 +13,7 @@
 
 #include "animation_frames.hpp"
 #include "cli.hpp"
+#include "optimizer_options.hpp"
 #include "tsah/baselines.hpp"
 #include "tsah/bvh_file.hpp"
 #include "tsah/pipeline.hpp"
@@ -225,6 +226,7 @@ void run(const Options& opt) {
   j["output"] = opt.output;
   j["method"] = info.method;
   j["k"] = info.k;
+  j["optimizer"] = opt.tree.optimizer;
   j["selection"] = info.selection;
   j["seed"] = opt.tree.seed;
   j["frames"] = frames;
@@ -267,29 +269,7 @@ TSAH_REGISTER_COMMAND(40, [](CLI::App& app) {
   sub->add_option("--k", opt->tree.k, "T-SAH exponent: 0 optimizes the average cost, larger values the worst frames")
       ->check(CLI::Range(0, 16))
       ->capture_default_str();
-  sub->add_option("--frames", opt->tree.frames, "Representative frames, uniform in time")
-      ->check(CLI::Range(1u, 1000u))
-      ->capture_default_str();
-  sub->add_option("--eval-frames", opt->evalFrames, "Evaluation frames for the reported cost, uniform in time")
-      ->check(CLI::Range(1u, 100000u))
-      ->capture_default_str();
-  sub->add_option("--selection", opt->tree.selection, "Node selection: mh (Metropolis-Hastings), random, batch (batch sorting)")
-      ->check(CLI::IsMember({"mh", "random", "batch"}))
-      ->capture_default_str();
-  sub->add_option("--seed", opt->tree.seed, "Random seed (same seed, same tree)")->capture_default_str();
-  sub->add_option("--ct", opt->tree.ct, "Cost of traversing a node")->check(CLI::PositiveNumber)->capture_default_str();
-  sub->add_option("--ci", opt->tree.ci, "Cost of intersecting a triangle")->check(CLI::PositiveNumber)->capture_default_str();
-  sub->add_option("--max-leaf", opt->tree.maxLeaf, "Largest leaf after collapse (1: one triangle per leaf)")
-      ->check(CLI::Range(1u, 256u))
-      ->capture_default_str();
-  sub->add_option("--time-limit", opt->tree.timeLimit, "Stop each optimization after this many seconds (0: none)")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sub->add_option("--min-improvement", opt->tree.minImprovement,
-                  "Stop after 3 batches that lower the cost by less than this fraction each (0: by nothing)")
-      ->check(CLI::Range(0.0, 1.0))
-      ->capture_default_str();
-  sub->add_option("--threads", opt->tree.threads, "Worker threads (0: all cores)")->capture_default_str();
+  tsah::cli::addTreeOptions(*sub, opt->tree, opt->evalFrames);
   sub->add_option("--segments", opt->segments,
                   "K > 1: a set of K trees with split points minimizing the average cost (the peak with --k > 0); "
                   "auto: the fewest trees within --budget; written as one .tbvh tree set")

@@ -69,6 +69,8 @@ tsah::BaselineConfig baselineConfig(const BenchOptions& o, const BenchProgress& 
   config.maxLeafSize = o.maxLeaf;
   config.threads = o.threads;
   config.optimizer.seed = o.seed;
+  config.optimizerKind = parseOptimizerKind(o.optimizer);
+  config.parallel.threads = o.threads;
   config.progress = [progress](const std::string& message) { progress(message, true); };
   return config;
 }
@@ -346,7 +348,8 @@ nlohmann::json optionsJson(const BenchOptions& o) {
           {"width", o.width},       {"height", o.height},        {"ao_rays", o.aoRays},
           {"shadow_rays", o.shadowRays}, {"ground", o.ground},   {"max_leaf", o.maxLeaf},
           {"ct", o.ct},             {"ci", o.ci},                {"segments", o.segments},   {"budget", o.budget},
-          {"threads", o.threads},   {"embree", o.embree},        {"convergence", o.convergence}};
+          {"threads", o.threads},   {"embree", o.embree},        {"convergence", o.convergence},
+          {"optimizer", o.optimizer}};
 }
 
 }  // namespace tsah::bench

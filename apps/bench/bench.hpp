@@ -39,6 +39,7 @@ struct BenchOptions {
   uint32_t segments = 3;        // K of the equal-time parts and of the count mode (1: skip)
   double budget = 1.05;         // budget mode: factor of SAH-rebuild's cost per evaluation frame (0: skip)
   unsigned threads = 0;         // CPU threads (0: all cores)
+  std::string optimizer = "sequential";  // optimizer of SAH*, SAH-rebuild and T-SAH: sequential | parallel
   bool embree = true;           // run the Embree peer when built with it (CPU device only)
   bool convergence = true;      // run the three node selections for the convergence plot
   double fps = 0.0;             // import: sampling rate of continuous animations (0: the file's own)

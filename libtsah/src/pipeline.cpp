@@ -22,6 +22,8 @@ BaselineConfig TreeOptions::baselineConfig() const {
   config.optimizer.seed = seed;
   config.optimizer.timeLimitSeconds = timeLimit;
   config.optimizer.minImprovement = minImprovement;
+  config.optimizerKind = parseOptimizerKind(optimizer);
+  config.parallel.threads = threads;
   config.progress = progress;
   return config;
 }
@@ -66,7 +68,8 @@ BvhBuildInfo treeBuildInfo(const TreeOptions& options, const anim::Animation& an
   const MethodSpec method = options.methodSpec();
   BvhBuildInfo info;
   info.method = method.method == Method::TSah ? "tsah" : method.name();
-  info.selection = method.method == Method::Sah0 ? "none" : options.selection;
+  // How nodes were chosen for optimization: none (SAH0), parallel (reinsertion) or the selection.
+  info.selection = method.method == Method::Sah0 ? "none" : options.optimizer == "parallel" ? "parallel" : options.selection;
   info.k = method.k;
   info.representativeFrames = frames;
   info.seed = options.seed;

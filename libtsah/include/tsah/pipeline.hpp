@@ -27,7 +27,8 @@ struct TreeOptions {
   std::string method = "tsah";  // tsah, sah0 or sahstar (evaluate also takes rebuild, tsah<k>)
   int k = 0;                    // T-SAH exponent of method "tsah"
   uint32_t frames = 5;          // representative frames, uniform in time
-  std::string selection = "mh"; // node selection: mh, random, batch
+  std::string optimizer = "sequential";  // sequential (the paper's insertion) or parallel (reinsertion)
+  std::string selection = "mh"; // node selection of the sequential optimizer: mh, random, batch
   uint64_t seed = 1;
   float ct = 3.0f, ci = 2.0f;
   uint32_t maxLeaf = 8;         // largest leaf after collapse
@@ -39,7 +40,7 @@ struct TreeOptions {
   // "tsah" with k -> tsah<k>; anything else as MethodSpec::parse reads it (throws std::invalid_argument).
   MethodSpec methodSpec() const;
   // The builders' settings (cost, leaf size, optimizer selection/seed/limits, threads, progress).
-  // Throws std::invalid_argument for an unknown selection.
+  // Throws std::invalid_argument for an unknown optimizer or selection.
   BaselineConfig baselineConfig() const;
 };
 
