@@ -254,6 +254,15 @@ WideBvh WideCollapser::collapse(const Bvh& bvh) const {
   return buildWide(bvh, CollapsePlan(bvh, config_, areaWeights(bvh, w), true), config_.width);
 }
 
+WideCollapser::Config wideCollapseConfig(const BvhBuildInfo& info, uint32_t width) {
+  WideCollapser::Config c;
+  c.width = width;
+  c.cost = {info.ct, info.ci};
+  c.k = std::max(0, info.k);
+  c.maxLeafSize = std::max(1u, info.maxLeafSize);
+  return c;
+}
+
 double wideFrameCost(const WideBvh& wide, uint32_t frame, const CostModel& model) {
   if (frame >= wide.frameCount) throw anim::Error("wide cost: frame index out of range");
   double inner = 0.0, leaves = 0.0;

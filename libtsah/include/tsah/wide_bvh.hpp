@@ -30,6 +30,7 @@
 #include <vector>
 
 #include "tsah/bvh.hpp"
+#include "tsah/bvh_file.hpp"
 #include "tsah/cost.hpp"
 #include "tsah/gpu_layout.hpp"  // the child reference encoding (makeLeafRef, leafFirstSlot)
 
@@ -113,6 +114,9 @@ class WideCollapser {
  private:
   Config config_;
 };
+
+// The collapse a tree file asks for: its cost constants, T-SAH exponent and maximum leaf size.
+WideCollapser::Config wideCollapseConfig(const BvhBuildInfo& info, uint32_t width = 8);
 
 // Eq. 1 of the paper for the wide tree in one of its frames: (cT * sum over interior nodes of
 // S_N(i) + cI * sum over leaves of j_N * S_N(i)) / S_i, with the degenerate-frame rule of cost.hpp.
