@@ -71,6 +71,7 @@ inline bool intersectLeaf(const WideView<V::N>& bvh, const Ray& ray, const RayPr
     const auto inRange = V::gt(tt, tmin) & V::lt(tt, V::set1(tmax));
     const V r0abs = V::abs(V::load(pk.row[0])) + V::abs(V::load(pk.row[1])) + V::abs(V::load(pk.row[2]));
     const auto grazing = V::andNot(inRange, V::lt(V::abs(dz), V::set1(1e-12f) * r0abs));
+    if (!((V::bits(inRange) | V::bits(grazing)) & used)) continue;  // no lane can hit: skip the rest
     // Barycentrics and their error bounds (woop.hpp's intersectTriangle).
     const V du = dotRow(r.dir, pk, 1), dv = dotRow(r.dir, pk, 2);
     const V b0 = (V::load(pk.row[7]) + dotRow(r.org, pk, 1)) + tt * du;
@@ -171,6 +172,18 @@ inline Hit traverse(const WideView<V::N>& bvh, const Ray& ray) {
           count = node.count[c0];
           continue;
         }
+        if (AnyHit) {
+          // Occlusion: any hit ends the ray, and most occlusion rays find none, so sorting buys
+          // nothing (Embree does not sort for occlusion either): push the entered children as
+          // they come, continue with the first.
+          ref = node.ref[c0];
+          count = node.count[c0];
+          for (; mask; mask &= mask - 1) {
+            const uint32_t c = uint32_t(__builtin_ctz(mask));
+            stack[sp++] = {node.ref[c], node.count[c], 0.0f};
+          }
+          continue;
+        }
         alignas(32) float dist[N];
         V::store(dist, tn);
         // Push every entered child, keeping the pushed block sorted far to near; take the nearest.
@@ -198,7 +211,7 @@ inline Hit traverse(const WideView<V::N>& bvh, const Ray& ray) {
     do {
       if (sp == 0) return hit;
       --sp;
-    } while (stack[sp].t > tmax * kSlabFarScale);
+    } while (!AnyHit && stack[sp].t > tmax * kSlabFarScale);  // any hit: tmax never shrinks
     ref = stack[sp].ref;
     count = stack[sp].count;
   }
