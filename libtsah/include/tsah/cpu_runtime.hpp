@@ -52,7 +52,7 @@ class CpuRuntime {
     uint32_t threads = 0;  // worker threads; 0 (or more than the hardware has): one per hardware thread
     CpuLayout layout = CpuLayout::Bvh2;
     std::optional<SimdIsa> isa;  // wide layouts: the kernels to use (default: the best supported)
-    WideCollapser::Config collapse;  // wide layouts: cost constants, k, leaf size (width = the layout's)
+    WideCollapser::Config collapse;  // wide layouts: cost constants, k, leaf size (width, leafPacket: the layout's)
   };
 
   // Builds a tree over one frame of triangle boxes (indexed by triangle id); used by rebuild().
