@@ -252,7 +252,7 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
     write("indices.bin", bytesOf(rt.indices()));
     write("vertices.bin", bytesOf(rt.positions()));
     write("tsah_scene.h", {reinterpret_cast<const uint8_t*>(header.data()), header.size()});
-    std::printf("wrote %s: %s, %zu nodes, %zu Woop %s, %u vertices (time %g) + tsah_scene.h\n", opt->out.c_str(),
-                opt->layout.c_str(), nodes, woop, opt->layout == "bvh2" ? "triangles" : "packets", rt.vertexCount(), time);
+    std::printf("wrote %s: %zu nodes, %zu Woop %s, %u vertices (time %g, %s layout) + tsah_scene.h\n", opt->out.c_str(),
+                nodes, woop, opt->layout == "bvh2" ? "triangles" : "packets", rt.vertexCount(), time, opt->layout.c_str());
   });
 });
