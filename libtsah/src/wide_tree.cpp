@@ -74,21 +74,54 @@ WideTree<N>::WideTree(const WideBvh& w, uint32_t threads) {
 
 template <uint32_t N>
 Aabb WideTree<N>::refitLeaf(uint32_t firstPacket, uint32_t count, const float* p, const uint32_t* indices) {
-  Aabb box;
-  for (uint32_t i = 0; i < count; ++i) {
-    WoopPacket<N>& pk = packets_[firstPacket + i / N];
-    const uint32_t slot = pk.slot[i % N];
-    const uint32_t* tri = indices + 3 * std::size_t(triIndex_[slot]);
-    const Vec3 v0{p[3 * tri[0]], p[3 * tri[0] + 1], p[3 * tri[0] + 2]};
-    const Vec3 v1{p[3 * tri[1]], p[3 * tri[1] + 1], p[3 * tri[1] + 2]};
-    const Vec3 v2{p[3 * tri[2]], p[3 * tri[2] + 1], p[3 * tri[2] + 2]};
-    pk.set(i % N, makeWoopTriangle(v0, v1, v2), slot);
-    box.extend(v0);
-    box.extend(v1);
-    box.extend(v2);
+  float lo[3] = {3.402823466e38f, 3.402823466e38f, 3.402823466e38f};
+  float hi[3] = {-3.402823466e38f, -3.402823466e38f, -3.402823466e38f};
+  for (uint32_t first = 0; first < count; first += N) {
+    WoopPacket<N>& pk = packets_[firstPacket + first / N];
+    const uint32_t lanes = count - first < N ? count - first : N;
+    for (uint32_t lane = 0; lane < lanes; ++lane) {
+      const uint32_t* tri = indices + 3 * std::size_t(triIndex_[pk.slot[lane]]);
+      const float* v[3] = {p + 3 * std::size_t(tri[0]), p + 3 * std::size_t(tri[1]), p + 3 * std::size_t(tri[2])};
+      const WoopTriangle w = makeWoopTriangle({v[0][0], v[0][1], v[0][2]}, {v[1][0], v[1][1], v[1][2]},
+                                              {v[2][0], v[2][1], v[2][2]});
+      const float rows[12] = {w.r0.x, w.r0.y, w.r0.z, w.r0.w, w.r1.x, w.r1.y, w.r1.z, w.r1.w,
+                              w.r2.x, w.r2.y, w.r2.z, w.r2.w};
+      for (int r = 0; r < 12; ++r) pk.row[r][lane] = rows[r];
+      for (int k = 0; k < 3; ++k)
+        for (int a = 0; a < 3; ++a) {
+          lo[a] = v[k][a] < lo[a] ? v[k][a] : lo[a];
+          hi[a] = v[k][a] > hi[a] ? v[k][a] : hi[a];
+        }
+    }
   }
+  Aabb box;
+  box.lo = {lo[0], lo[1], lo[2]};
+  box.hi = {hi[0], hi[1], hi[2]};
   return box;
 }
+
+namespace {
+
+// The union of a node's children (unused slots hold the empty box), lane by lane.
+template <uint32_t N>
+Aabb nodeBounds(const WideSoaNode<N>& node) {
+  float b[6];
+  for (int r = 0; r < 3; ++r) {
+    float lo = node.box[r][0], hi = node.box[r + 3][0];
+    for (uint32_t c = 1; c < N; ++c) {
+      lo = node.box[r][c] < lo ? node.box[r][c] : lo;
+      hi = node.box[r + 3][c] > hi ? node.box[r + 3][c] : hi;
+    }
+    b[r] = lo;
+    b[r + 3] = hi;
+  }
+  Aabb box;
+  box.lo = {b[0], b[1], b[2]};
+  box.hi = {b[3], b[4], b[5]};
+  return box;
+}
+
+}  // namespace
 
 template <uint32_t N>
 void WideTree<N>::refitNode(uint32_t i, const float* positions, const uint32_t* indices) {
@@ -96,7 +129,7 @@ void WideTree<N>::refitNode(uint32_t i, const float* positions, const uint32_t* 
   for (uint32_t c = 0; c < N && usedSlot(node, c); ++c) {
     const int32_t ref = node.ref[c];
     node.setChildBox(c, isLeafRef(ref) ? refitLeaf(leafFirstSlot(ref), node.count[c], positions, indices)
-                                       : nodes_[static_cast<uint32_t>(ref)].bounds());
+                                       : nodeBounds(nodes_[static_cast<uint32_t>(ref)]));
   }
 }
 
@@ -113,7 +146,7 @@ void WideTree<N>::refit(const float* positions, const uint32_t* indices, const P
     }
   });
   for (uint32_t i : topNodes_) refitNode(i, positions, indices);
-  rootBox_ = nodes_[0].bounds();
+  rootBox_ = nodeBounds(nodes_[0]);
 }
 
 template <uint32_t N>
