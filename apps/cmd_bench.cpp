@@ -16,6 +16,7 @@
 #include "anim/error.hpp"
 #include "bench/bench.hpp"
 #include "bench/data_scan.hpp"
+#include "bench/embree_peer.hpp"
 #include "bench/paper.hpp"
 #include "bench/report.hpp"
 #include "bench/runtime_bench.hpp"
@@ -125,6 +126,9 @@ void run(Options opt, CLI::App* sub) {
   if (opt.reportOnly) return reportOnly(opt);
   BenchOptions& b = opt.bench;
   b.embree = !opt.noEmbree;
+  if (b.embreeOnly && (opt.noEmbree || b.device != "cpu"))
+    throw UsageError("--embree-only runs the CPU comparison with Embree: not with --no-embree or --device cuda");
+  if (b.embreeOnly && !embreeAvailable()) throw UsageError("--embree-only: " + embreeStatus());
   b.convergence = !opt.noConvergence;
   const anim::LoadOptions& load = tsah::cli::commandLineLoadOptions();
   b.fps = load.fps;
@@ -292,6 +296,14 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
       ->check(CLI::IsMember({"sequential", "parallel"}))
       ->capture_default_str();
   sub->add_flag("--no-embree", opt->noEmbree, "Skip the Embree peer");
+  sub->add_flag("--embree-only", b.embreeOnly,
+                "Only the T-SAH tree and the toolkit (bvh2/bvh4/bvh8) vs Embree comparison: no Tables 1 and 2, "
+                "no convergence runs, no segments");
+  sub->add_option("--layout", b.layout,
+                  "CPU tree layout of Table 2 and the default of the Embree comparison: bvh2, bvh4, bvh8, or auto "
+                  "(the widest the processor's SIMD kernels support)")
+      ->check(CLI::IsMember({"auto", "bvh2", "bvh4", "bvh8"}))
+      ->capture_default_str();
   sub->add_flag("--no-convergence", opt->noConvergence, "Skip the random and batch-sort optimizations of the convergence plot");
   sub->add_option("--note", opt->notes,
                   "A note for results.md (repeatable), e.g. what else ran on the machine; with --report-only it is "

@@ -104,6 +104,7 @@ std::vector<anim::CameraKey> loadCameraFile(const std::string& path) {
 
 struct TraceOptions {
   std::string input, bvh, device = "cpu", out = "trace", camera, eye, lookAt, up = "0,1,0", rebuild = "none";
+  std::string layout = "auto", isa = "auto";  // CPU: tree layout and SIMD kernels
   uint32_t frames = 0, width = 1024, height = 768, ao = 8, shadow = 2, threads = 0, seed = 1;
   float fov = 45.0f, aoDistance = 0.0f, aoFraction = 0.1f;
   bool json = false, noImages = false, noGround = false;
@@ -120,6 +121,8 @@ void checkDeviceAndRebuild(const TraceOptions& opt) {
   if (opt.device == "cuda" && isCpuRebuild(opt.rebuild))
     throw UsageError("--rebuild " + opt.rebuild + " is a CPU rebuild: use it with --device cpu "
                      "(the GPU rebuilds are lbvh and hlbvh-sah)");
+  if (opt.device == "cuda" && (opt.layout != "auto" && opt.layout != "bvh2"))
+    throw UsageError("--layout " + opt.layout + " is a CPU layout; the GPU runtime traces the binary tree");
   if (opt.device != "cuda") return;
 #if TSAH_HAVE_CUDA
   if (!tsah::cuda::deviceAvailable())
@@ -156,10 +159,10 @@ class FrameRuntime {
 
 class CpuFrameRuntime final : public FrameRuntime {
  public:
-  CpuFrameRuntime(const tsah::TreeSet& trees, const anim::Animation& animation, uint32_t threads,
+  CpuFrameRuntime(const tsah::TreeSet& trees, const anim::Animation& animation, const tsah::CpuRuntime::Config& config,
                   tsah::CpuRuntime::TreeBuilder builder)
       : animation_(animation),
-        runtime_(trees, {animation.indices().begin(), animation.indices().end()}, animation.vertexCount(), {threads}),
+        runtime_(trees, {animation.indices().begin(), animation.indices().end()}, animation.vertexCount(), config),
         builder_(std::move(builder)),
         positions_(std::size_t(animation.vertexCount()) * 3) {}
 
@@ -192,11 +195,23 @@ class CpuFrameRuntime final : public FrameRuntime {
   }
 
   uint32_t currentTree() const override { return runtime_.currentTree(); }
-  std::string summary() const override { return std::to_string(runtime_.threadCount()) + " CPU threads"; }
+  std::string summary() const override {
+    const tsah::LayoutInfo& l = runtime_.layoutInfo();
+    std::string s = std::to_string(runtime_.threadCount()) + " CPU threads, " + tsah::layoutName(l.layout);
+    if (l.layout != tsah::CpuLayout::Bvh2) s += std::string(" (") + tsah::isaName(l.isa) + ")";
+    char cost[96];
+    std::snprintf(cost, sizeof cost, ", T-SAH cost %.2f (binary %.2f)", l.layoutCost, l.binaryCost);
+    return s + cost;
+  }
   void describe(nlohmann::json& out) const override {
+    const tsah::LayoutInfo& l = runtime_.layoutInfo();
     out["device"] = "cpu";
     out["threads"] = runtime_.threadCount();
     out["timer"] = "host steady clock";
+    out["layout"] = tsah::layoutName(l.layout);
+    if (l.layout != tsah::CpuLayout::Bvh2) out["isa"] = tsah::isaName(l.isa);
+    out["tree"] = {{"interior_nodes", l.interiorNodes}, {"leaves", l.leaves}, {"depth", l.depth},
+                   {"tsah_cost", l.layoutCost}, {"binary_tsah_cost", l.binaryCost}};
   }
 
  private:
@@ -293,7 +308,11 @@ std::unique_ptr<FrameRuntime> makeRuntime(const TraceOptions& opt, const tsah::T
     return std::make_unique<GpuFrameRuntime>(trees, a, rebuild);
   }
 #endif
-  return std::make_unique<CpuFrameRuntime>(trees, a, opt.threads, cpuRebuilder(opt.rebuild, cost, maxLeaf));
+  tsah::CpuRuntime::Config config(opt.threads);
+  config.layout = opt.layout == "auto" ? tsah::fastestLayout() : *tsah::parseLayout(opt.layout);
+  if (opt.isa != "auto") config.isa = tsah::parseIsa(opt.isa);
+  config.collapse = tsah::wideCollapseConfig(info);
+  return std::make_unique<CpuFrameRuntime>(trees, a, config, cpuRebuilder(opt.rebuild, cost, maxLeaf));
 }
 
 struct FrameResult {
@@ -534,6 +553,12 @@ TSAH_REGISTER_COMMAND(70, [](CLI::App& app) {
   sub->add_option("--up", opt->up, "Scene up direction x,y,z (default 0,1,0)");
   sub->add_option("--fov", opt->fov, "Vertical field of view in degrees (default 45)");
   sub->add_option("--threads", opt->threads, "CPU worker threads (0: all cores)");
+  sub->add_option("--layout", opt->layout,
+                  "CPU tree layout: bvh2 (the binary tree), bvh4 or bvh8 (wide trees collapsed from it at load time); "
+                  "default auto: the widest the processor's SIMD kernels support")
+      ->check(CLI::IsMember({"auto", "bvh2", "bvh4", "bvh8"}));
+  sub->add_option("--isa", opt->isa, "CPU SIMD kernels of a wide layout: sse, avx2 or avx512 (default auto: the best)")
+      ->check(CLI::IsMember({"auto", "sse", "avx2", "avx512"}));
   sub->add_option("--seed", opt->seed, "Seed of the per-pixel random numbers (default 1)");
   sub->add_flag("--json", opt->json, "Print one JSON object {device, frames: [...], average: {...}}");
   sub->callback([opt] { runTrace(*opt); });

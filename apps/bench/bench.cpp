@@ -129,25 +129,28 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   const BaselineConfig config = baselineConfig(o, progress);
 
   // --- Table 1 ------------------------------------------------------------------------------
-  say("Table 1: SAH-rebuild, SAH*, SAH0, T-SAH k=0/2/4 over " + std::to_string(o.evalFrames) + " frames");
-  start = std::chrono::steady_clock::now();
-  std::vector<MethodSpec> specs;
-  for (const std::string& id : kTable1Methods) specs.push_back(MethodSpec::parse(id));
-  const std::vector<MethodResult> table1 = compareMethods(specs, repBoxes, evaluation, config);
-  nlohmann::json t1;
-  t1["frames"] = o.frames;
-  t1["eval_frames"] = o.evalFrames;
-  t1["eval_times"] = evalTimes;
-  t1["wall_s"] = secondsSince(start);
-  t1["methods"] = nlohmann::json::array();
-  for (std::size_t m = 0; m < table1.size(); ++m)
-    t1["methods"].push_back({{"name", kTable1Methods[m]},
-                             {"label", methodLabel(kTable1Methods[m])},
-                             {"build_s", table1[m].buildSeconds},
-                             {"average", table1[m].average},
-                             {"maximum", table1[m].maximum},
-                             {"per_frame", table1[m].perFrame}});
-  j["table1"] = t1;
+  std::vector<MethodResult> table1;
+  if (!o.embreeOnly) {
+    say("Table 1: SAH-rebuild, SAH*, SAH0, T-SAH k=0/2/4 over " + std::to_string(o.evalFrames) + " frames");
+    start = std::chrono::steady_clock::now();
+    std::vector<MethodSpec> specs;
+    for (const std::string& id : kTable1Methods) specs.push_back(MethodSpec::parse(id));
+    table1 = compareMethods(specs, repBoxes, evaluation, config);
+    nlohmann::json t1;
+    t1["frames"] = o.frames;
+    t1["eval_frames"] = o.evalFrames;
+    t1["eval_times"] = evalTimes;
+    t1["wall_s"] = secondsSince(start);
+    t1["methods"] = nlohmann::json::array();
+    for (std::size_t m = 0; m < table1.size(); ++m)
+      t1["methods"].push_back({{"name", kTable1Methods[m]},
+                               {"label", methodLabel(kTable1Methods[m])},
+                               {"build_s", table1[m].buildSeconds},
+                               {"average", table1[m].average},
+                               {"maximum", table1[m].maximum},
+                               {"per_frame", table1[m].perFrame}});
+    j["table1"] = t1;
+  }
 
   // --- Trees for the runtime, convergence of the three node selections ------------------------
   // The Metropolis-Hastings run is the T-SAH k=0 tree of Table 1 (same seed, same tree).
@@ -157,7 +160,7 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   Bvh tsahTree;
   j["convergence"] = nlohmann::json::array();
   for (const auto& [id, selection] : selections) {
-    if (id != "mh" && !o.convergence) continue;
+    if (id != "mh" && (!o.convergence || o.embreeOnly)) continue;
     say("T-SAH k=0 optimization, " + id + " node selection");
     BaselineConfig c = config;
     c.optimizer.selection = selection;
@@ -179,8 +182,8 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
     if (id == "mh") tsahTree = std::move(tree);
   }
   say("SAH0 and SAH* trees for the runtime");
-  const Bvh sah0Tree = buildSah0(repBoxes, config);
-  const Bvh sahStarTree = buildSahStar(repBoxes, config);
+  const Bvh sah0Tree = o.embreeOnly ? Bvh{} : buildSah0(repBoxes, config);
+  const Bvh sahStarTree = o.embreeOnly ? Bvh{} : buildSahStar(repBoxes, config);
 
   // --- Segments: equal-time parts, count and budget modes (tsah/segmentation.hpp) -------------
   SegmentExperiment experiment;
@@ -192,7 +195,7 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   experiment.oneTreeCosts = table1[3].perFrame;  // tsah0
   experiment.oneTreeBuildSeconds = table1[3].buildSeconds;
   SegmentRuns segmentRuns;
-  if (o.segments > 1 || o.budget > 0.0) {
+  if ((o.segments > 1 || o.budget > 0.0) && !o.embreeOnly) {
     nlohmann::json segments;
     segmentRuns = runSegmentExperiment(a, experiment, config, segments, say);
     j["segments"] = segments;
@@ -216,6 +219,9 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   setup.settings.shadowSamples = o.shadowRays;
   setup.settings.seed = static_cast<uint32_t>(o.seed);
   setup.threads = o.threads;
+  setup.layout = o.layout == "auto" ? fastestLayout() : parseLayout(o.layout).value_or(CpuLayout::Bvh2);
+  setup.collapse.cost = config.cost;
+  setup.collapse.maxLeafSize = o.maxLeaf;
   setup.progress = [&](const std::string& m) { progress(scene.name + ": " + m, true); };
 
   const bool gpu = o.device == "cuda";
@@ -234,6 +240,7 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
       std::to_string(o.shadowRays) + " shadow rays per pixel");
   nlohmann::json runtime;
   runtime["device"] = gpu ? "cuda" : "cpu";
+  if (!gpu) runtime["layout"] = layoutName(setup.layout);
   runtime["frames"] = setup.times.size();
   runtime["width"] = o.width;
   runtime["height"] = o.height;
@@ -254,7 +261,9 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
     refits.push_back(setOf("tsah0-budget",
                            "T-SAH k=0 refit, budget mode (" + std::to_string(segmentRuns.budget.trees.size()) + " trees)",
                            segmentRuns.budget));
-  if (gpu) {
+  if (o.embreeOnly) {
+    runtime["skipped"] = "--embree-only";
+  } else if (gpu) {
     for (const RefitTrees& r : refits)
       runtime["methods"].push_back(toJson(runGpuRefit(a, r, setup, r.name == "tsah0" ? &picture : nullptr, pictureFrame)));
     for (const char* method : {"lbvh", "hlbvh-sah"})
@@ -271,7 +280,7 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
       runtime["methods"].push_back(toJson(m));
   }
   runtime["wall_s"] = secondsSince(start);
-  j["runtime"] = runtime;
+  if (!o.embreeOnly) j["runtime"] = runtime;
   if (picture.width > 0) {
     std::error_code ec;
     fs::create_directories(outDir / "images", ec);
@@ -349,7 +358,8 @@ nlohmann::json optionsJson(const BenchOptions& o) {
           {"shadow_rays", o.shadowRays}, {"ground", o.ground},   {"max_leaf", o.maxLeaf},
           {"ct", o.ct},             {"ci", o.ci},                {"segments", o.segments},   {"budget", o.budget},
           {"threads", o.threads},   {"embree", o.embree},        {"convergence", o.convergence},
-          {"optimizer", o.optimizer}};
+          {"optimizer", o.optimizer},
+          {"layout", o.layout},     {"embree_only", o.embreeOnly}};
 }
 
 }  // namespace tsah::bench
