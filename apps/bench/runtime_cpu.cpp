@@ -127,7 +127,7 @@ std::vector<RuntimeMethod> runCpuMethods(const anim::Animation& a, const std::ve
     }
     r.segments = spec.rebuild ? std::vector<TimeSegment>{} : spec.trees.segments;
     if (spec.rebuild) r.builder = rebuildBuilder(*spec.rebuild, cost, maxLeaf);
-    r.positions.resize(std::size_t(a.vertexCount()) * 3);
+    r.positions = a.positionsAt(a.startTime());  // static vertices once; each frame writes the moving ones
     startWorkers(*r.runtimes.front());
   }
   RenderSettings settings = setup.settings;
@@ -143,7 +143,7 @@ std::vector<RuntimeMethod> runCpuMethods(const anim::Animation& a, const std::ve
       FrameTiming ft;
       ft.time = t;
       const auto start = std::chrono::steady_clock::now();
-      a.positionsAt(t, r.positions);
+      a.movingPositionsAt(t, r.positions);
       if (r.builder)
         rt.rebuild(r.positions, r.builder);
       else
@@ -182,7 +182,7 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const B
   }
   // Differences in what the rays found, Embree vs the toolkit, summed over the frames.
   std::vector<std::array<int64_t, 3>> differences(peers.size(), {0, 0, 0});
-  std::vector<float> positions(std::size_t(a.vertexCount()) * 3);
+  std::vector<float> positions = a.positionsAt(a.startTime());  // static vertices once
   RenderSettings settings = setup.settings;
   for (std::size_t f = 0; f < setup.times.size(); ++f) {
     report(setup, "toolkit vs Embree", f);
@@ -190,7 +190,7 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const B
     settings.frame = static_cast<uint32_t>(f);
     // Every method's update includes the same interpolation of the frame's vertices.
     auto start = std::chrono::steady_clock::now();
-    a.positionsAt(t, positions);
+    a.movingPositionsAt(t, positions);
     const double interpolateMs = msSince(start);
 
     // The toolkit: refit + Woop, then the batch (rays made from its primary hits, untimed).

@@ -8,6 +8,7 @@
 #include "anim/bart.hpp"
 #include "anim/error.hpp"
 #include "anim/mesh_sequence.hpp"
+#include "anim/scene.hpp"
 #include "anim/tanim.hpp"
 
 namespace anim {
@@ -46,6 +47,7 @@ Animation load(const std::string& input, const LoadOptions& options) {
     return importBart(input, bart);
   }
   if (isModelFile(input)) return importModel(input, options);
+  if (ext == ".json" && isSceneFile(input)) return loadScene(input, options);
   if (ext == ".json") return importSequence(readManifest(input), options, stemName(input));
   if (isMeshFile(input)) return importSequence(FrameList{{input}, {}}, options, stemName(input));
   throw ImportError(input, "unknown input format '" + ext +
