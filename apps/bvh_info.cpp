@@ -6,6 +6,9 @@
 
 #include "anim/binary_io.hpp"
 #include "anim/error.hpp"
+#include "animation_frames.hpp"
+#include "cli.hpp"
+#include "tsah/tree_quality.hpp"
 
 namespace tsah::cli {
 
@@ -80,23 +83,79 @@ void describeBvhFile(const std::string& path, bool json) {
   std::printf("build time    %.3f s\n", info.buildSeconds);
 }
 
-void checkTreeMatchesAnimation(const tsah::BvhBuildInfo& info, const std::string& bvhPath, const anim::Animation& a,
-                               const std::string& animationPath) {
-  auto fail = [&](const std::string& what) {
-    throw anim::Error(bvhPath + " was not built for " + animationPath + ": " + what);
-  };
-  if (info.triangleCount != a.triangleCount())
-    fail("the tree has " + std::to_string(info.triangleCount) + " triangles, the animation " +
-         std::to_string(a.triangleCount()));
-  if (info.vertexCount != a.vertexCount())
-    fail("the tree was built for " + std::to_string(info.vertexCount) + " vertices, the animation has " +
-         std::to_string(a.vertexCount()));
-  const uint32_t hash = topologyHash(a.indices());
-  if (info.topologyHash != hash) {
-    char buf[64];
-    std::snprintf(buf, sizeof buf, "topology hash %08x, the animation's is %08x", info.topologyHash, hash);
-    fail(std::string(buf) + " (same counts, different triangles)");
+}  // namespace tsah::cli
+
+namespace tsah::cli {
+
+namespace {
+
+nlohmann::json treeQualityJson(const TreeShape& shape, const TreeQuality& quality, std::span<const double> times) {
+  nlohmann::json j;
+  j["shape"] = {{"interior_nodes", shape.innerCount}, {"leaves", shape.leafCount},
+                {"depth", shape.depth},               {"smallest_leaf", shape.smallestLeaf},
+                {"largest_leaf", shape.largestLeaf},  {"mean_leaf_size", shape.meanLeafSize},
+                {"leaves_of_size", shape.leavesOfSize}};
+  double sum = 0.0, largest = 0.0;
+  nlohmann::json rows = nlohmann::json::array();
+  for (std::size_t f = 0; f < quality.frames.size(); ++f) {
+    const FrameQuality& q = quality.frames[f];
+    rows.push_back({{"time", times[f]},
+                    {"cost", q.cost.total()},
+                    {"inner_cost", q.cost.inner()},
+                    {"leaf_cost", q.cost.leaves()},
+                    {"mean_leaf_depth", q.meanLeafDepth},
+                    {"mean_leaf_size", q.meanLeafSize},
+                    {"root_child_growth", {q.rootChildGrowth[0], q.rootChildGrowth[1]}}});
+    sum += q.cost.total();
+    largest = std::max(largest, q.cost.total());
   }
+  j["frames"] = rows;
+  j["average_cost"] = quality.frames.empty() ? 0.0 : sum / double(quality.frames.size());
+  j["max_cost"] = largest;
+  return j;
+}
+
+}  // namespace
+
+void describeTreeOverAnimation(const std::string& bvhPath, const std::string& animationPath, uint32_t frames,
+                               bool json) {
+  BvhBuildInfo info;
+  const FlatBvh flat = decodeFlatBvhFile(anim::readFile(bvhPath), bvhPath, &info);
+  const anim::Animation a = loadInput(animationPath);
+  checkTreeMatchesAnimation(info, bvhPath, a, animationPath);
+  const Bvh bvh = unflattenBvh(flat);
+  std::vector<double> times = frames ? a.uniformTimes(frames) : std::vector<double>(a.times().begin(), a.times().end());
+  const TreeShape shape = treeShape(bvh);
+  const TreeQuality quality = evaluateTreeQuality(bvh, animationFrames(a, times), {info.ct, info.ci});
+  nlohmann::json j = treeQualityJson(shape, quality, times);
+  j["tree"] = bvhPath;
+  j["animation"] = animationPath;
+  j["method"] = info.method;
+  j["ct"] = info.ct;
+  j["ci"] = info.ci;
+  if (json) {
+    std::printf("%s\n", j.dump().c_str());
+    return;
+  }
+  std::printf("tree        %s (%s, k=%d, %u representative frames, cT=%g cI=%g)\n", bvhPath.c_str(), info.method.c_str(),
+              info.k, info.representativeFrames, double(info.ct), double(info.ci));
+  std::printf("animation   %s (%zu frames evaluated, time %g .. %g)\n", animationPath.c_str(), times.size(),
+              times.front(), times.back());
+  std::printf("shape       %u interior, %u leaves, depth %u, leaves of %u..%u triangles (mean %.2f)\n", shape.innerCount,
+              shape.leafCount, shape.depth, shape.smallestLeaf, shape.largestLeaf, shape.meanLeafSize);
+  std::string sizes;
+  for (std::size_t s = 1; s < shape.leavesOfSize.size(); ++s)
+    if (shape.leavesOfSize[s]) sizes += "  " + std::to_string(s) + ":" + std::to_string(shape.leavesOfSize[s]);
+  std::printf("leaf sizes %s\n\n", sizes.c_str());
+  std::printf("%6s %10s %9s %9s %9s %10s %9s %9s %9s\n", "frame", "time", "cost", "inner", "leaf", "leaf depth",
+              "leaf size", "child 0", "child 1");
+  for (std::size_t f = 0; f < quality.frames.size(); ++f) {
+    const FrameQuality& q = quality.frames[f];
+    std::printf("%6zu %10.4g %9.3f %9.3f %9.3f %10.2f %9.2f %9.3f %9.3f\n", f, times[f], q.cost.total(), q.cost.inner(),
+                q.cost.leaves(), q.meanLeafDepth, q.meanLeafSize, q.rootChildGrowth[0], q.rootChildGrowth[1]);
+  }
+  std::printf("\naverage cost %.3f, maximum %.3f (Eq. 1; child columns: area of the root's children over frame 0's)\n",
+              j["average_cost"].get<double>(), j["max_cost"].get<double>());
 }
 
 }  // namespace tsah::cli

@@ -15,6 +15,7 @@
 
 #include "anim/binary_io.hpp"
 #include "anim/error.hpp"
+#include "box_export.hpp"
 #include "bvh_info.hpp"
 #include "cli.hpp"
 #include "tsah/cpu_runtime.hpp"
@@ -113,9 +114,11 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
   sub->add_option("ANIMATION", opt->input, "The animation the tree was built for")->required();
   auto* frameOpt = sub->add_option("--frame", opt->frame, "Keyframe index of the animation (default 0)");
   sub->add_option("--time", opt->time, "Animation time instead of a keyframe (interpolated)")->excludes(frameOpt);
-  sub->add_option("-o,--out", opt->out, "Output folder (created if missing)")->required();
+  sub->add_option("-o,--out", opt->out, "Output folder (created if missing); with --boxes a .ply or .obj file")
+      ->required();
   sub->add_option("--threads", opt->threads, "Worker threads (0: all cores)");
-  sub->callback([opt] {
+  const auto boxes = tsah::cli::addBoxExportOptions(*sub);
+  sub->callback([opt, boxes] {
     namespace fs = std::filesystem;
     tsah::BvhBuildInfo info;
     const std::vector<uint8_t> bytes = anim::readFile(opt->bvh);
@@ -139,6 +142,8 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
       const auto k = a.keyframe(uint32_t(frame));
       positions.assign(k.begin(), k.end());
     }
+
+    if (boxes->enabled) return tsah::cli::exportBoxes(*boxes, flat, info, a, time, positions, opt->out);
 
     tsah::CpuRuntime rt(flat, {a.indices().begin(), a.indices().end()}, a.vertexCount(), {opt->threads});
     rt.update(positions);

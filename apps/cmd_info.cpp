@@ -89,7 +89,8 @@ nlohmann::json describeScene(const anim::BakedScene& baked, double fps) {
 TSAH_REGISTER_COMMAND(10, [](CLI::App& app) {
   auto* sub = app.add_subcommand("info", "Print what an input holds (animation or .tbvh file)");
   struct Options {
-    std::string input;
+    std::string input, animation;
+    uint32_t frames = 0;
     bool json = false;
   };
   auto opt = std::make_shared<Options>();
@@ -97,8 +98,14 @@ TSAH_REGISTER_COMMAND(10, [](CLI::App& app) {
                   "Animation (mesh file, directory, 'pattern_%04d.obj', quoted glob, .json manifest, "
                   ".tanim, scene .json) or a .tbvh tree")
       ->required();
+  sub->add_option("ANIMATION", opt->animation,
+                  "With a .tbvh INPUT: the animation it was built for; prints per-frame quality figures");
+  sub->add_option("--frames", opt->frames, "With ANIMATION: this many uniformly spaced frames (default: every keyframe)")
+      ->check(CLI::Range(1u, 1000000u));
   sub->add_flag("--json", opt->json, "Print one JSON object");
   sub->callback([opt] {
+    if (!opt->animation.empty())  // tsah info TREE ANIMATION: the tree over the animation's frames
+      return tsah::cli::describeTreeOverAnimation(opt->input, opt->animation, opt->frames, opt->json);
     if (tsah::cli::looksLikeBvhFile(opt->input)) {
       tsah::cli::describeBvhFile(opt->input, opt->json);
       return;

@@ -14,47 +14,19 @@
 #include "cli.hpp"
 #include "tsah/baselines.hpp"
 #include "tsah/bvh_file.hpp"
+#include "tsah/pipeline.hpp"
 
 namespace {
 
 struct Options {
+  tsah::TreeOptions tree;  // method, k, frames, selection, seed, ct, ci, maxLeaf, limits, threads
   std::string input, output;
-  std::string method = "tsah";
-  int k = 0;
-  uint32_t frames = 5;
   uint32_t evalFrames = 50;
-  std::string selection = "mh";
-  uint64_t seed = 1;
-  float ct = 3.0f, ci = 2.0f;
-  uint32_t maxLeaf = 8;
-  double timeLimit = 0.0;
-  double minImprovement = tsah::InsertionOptimizer::Config{}.minImprovement;
-  unsigned threads = 0;
   uint32_t segments = 1;
   bool json = false;
 };
 
 
-
-tsah::BvhBuildInfo buildInfo(const Options& opt, const tsah::MethodSpec& method, const anim::Animation& a,
-                             uint32_t frames, double buildSeconds, double timeStart, double timeEnd) {
-  tsah::BvhBuildInfo info;
-  info.method = method.method == tsah::Method::TSah ? "tsah" : method.name();
-  info.selection = method.method == tsah::Method::Sah0 ? "none" : opt.selection;
-  info.k = method.k;
-  info.representativeFrames = frames;
-  info.seed = opt.seed;
-  info.ct = opt.ct;
-  info.ci = opt.ci;
-  info.maxLeafSize = opt.maxLeaf;
-  info.buildSeconds = buildSeconds;
-  info.timeStart = timeStart;
-  info.timeEnd = timeEnd;
-  info.triangleCount = a.triangleCount();
-  info.vertexCount = a.vertexCount();
-  info.topologyHash = tsah::topologyHash(a.indices());
-  return info;
-}
 
 nlohmann::json optimizationJson(const tsah::InsertionOptimizer::Result& details) {
   nlohmann::json history = nlohmann::json::array();
@@ -82,14 +54,15 @@ std::pair<double, double> averageAndMaximum(const std::vector<double>& costs) {
 
 // --segments K: K trees for K equal-time parts; all are built before any file is written, so a
 // failure leaves no partial set behind.
-void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim::Animation& a, uint32_t frames,
+void runSegments(const Options& opt, const tsah::TreeOptions& treeOpt, const anim::Animation& a, uint32_t frames,
                  uint32_t evalFrames, const tsah::BaselineConfig& config, tsah::cli::Progress& progress) {
+  const tsah::MethodSpec method = treeOpt.methodSpec();
   progress.message("building " + std::to_string(opt.segments) + " trees");
   const std::vector<tsah::bench::SegmentTree> trees =
       tsah::bench::buildSegmentTrees(a, opt.segments, frames, method, config);
   progress.message("evaluating " + std::to_string(evalFrames) + " frames");
   const std::vector<double> times = a.uniformTimes(evalFrames);
-  const std::vector<double> perFrame = tsah::bench::evaluateSegmentTrees(a, trees, times, config.cost, opt.threads);
+  const std::vector<double> perFrame = tsah::bench::evaluateSegmentTrees(a, trees, times, config.cost, opt.tree.threads);
   std::vector<tsah::bench::TimeSegment> parts;
   for (const auto& t : trees) parts.push_back(t.segment);
   std::vector<std::vector<double>> partCosts(trees.size());
@@ -99,7 +72,7 @@ void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim:
   for (uint32_t s = 0; s < trees.size(); ++s) {
     const tsah::bench::SegmentTree& t = trees[s];
     const std::string path = tsah::bench::segmentPath(opt.output, s);
-    tsah::saveBvhFile(path, t.bvh, buildInfo(opt, method, a, frames, t.buildSeconds, t.segment.start, t.segment.end));
+    tsah::saveBvhFile(path, t.bvh, tsah::treeBuildInfo(treeOpt, a, frames, t.buildSeconds, t.segment.start, t.segment.end));
     const auto [average, maximum] = averageAndMaximum(partCosts[s]);
     nlohmann::json j = {{"index", s},
                         {"output", path},
@@ -122,12 +95,12 @@ void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim:
     j["output"] = opt.output;
     j["method"] = method.method == tsah::Method::TSah ? "tsah" : method.name();
     j["k"] = method.k;
-    j["selection"] = method.method == tsah::Method::Sah0 ? "none" : opt.selection;
-    j["seed"] = opt.seed;
+    j["selection"] = method.method == tsah::Method::Sah0 ? "none" : opt.tree.selection;
+    j["seed"] = opt.tree.seed;
     j["frames"] = frames;
     j["eval_frames"] = evalFrames;
     j["triangles"] = a.triangleCount();
-    j["max_leaf"] = opt.maxLeaf;
+    j["max_leaf"] = opt.tree.maxLeaf;
     j["cost"] = {{"average", average}, {"maximum", maximum}, {"per_frame", perFrame}};
     j["segments"] = segments;
     std::printf("%s\n", j.dump().c_str());
@@ -145,44 +118,32 @@ void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim:
 }
 
 void run(const Options& opt) {
-  const tsah::MethodSpec method = tsah::MethodSpec::parse(opt.method == "tsah" ? "tsah" + std::to_string(opt.k)
-                                                                               : opt.method);
+  tsah::TreeOptions treeOpt = opt.tree;
+  const tsah::MethodSpec method = treeOpt.methodSpec();
   const anim::Animation a = tsah::cli::loadInput(opt.input);
   if (a.triangleCount() == 0) throw tsah::cli::UsageError(opt.input + ": no triangles to build a tree over");
   // A static input has one frame: resampling it would only repeat that frame.
-  const bool animated = a.keyframeCount() > 1;
-  const uint32_t frames = animated ? opt.frames : 1;
-  const uint32_t evalFrames = animated ? opt.evalFrames : 1;
-  const anim::Animation rep = a.resample(frames);
-  const tsah::PrimitiveBoxes repBoxes = tsah::triangleBoxes(rep.indices(), rep.allPositions(), frames);
+  const uint32_t frames = tsah::framesFor(a, opt.tree.frames);
+  const uint32_t evalFrames = tsah::framesFor(a, opt.evalFrames);
 
   tsah::cli::Progress progress("optimize " + method.name());
-  tsah::BaselineConfig config;
-  config.cost = {opt.ct, opt.ci};
-  config.maxLeafSize = opt.maxLeaf;
-  config.threads = opt.threads;
-  config.optimizer.selection = tsah::cli::parseSelection(opt.selection);
-  config.optimizer.seed = opt.seed;
-  config.optimizer.timeLimitSeconds = opt.timeLimit;
-  config.optimizer.minImprovement = opt.minImprovement;
-  config.progress = [&](const std::string& message) { progress.message(message); };
+  treeOpt.progress = [&](const std::string& message) { progress.message(message); };
 
   if (opt.segments > 1) {
-    if (!animated) throw tsah::cli::UsageError(opt.input + ": --segments needs an animation (this input has one frame)");
-    return runSegments(opt, method, a, frames, evalFrames, config, progress);
+    if (a.keyframeCount() <= 1)
+      throw tsah::cli::UsageError(opt.input + ": --segments needs an animation (this input has one frame)");
+    return runSegments(opt, treeOpt, a, frames, evalFrames, treeOpt.baselineConfig(), progress);
   }
 
-  tsah::InsertionOptimizer::Result details;
-  const double start = progress.elapsedSeconds();
-  const tsah::Bvh bvh = tsah::buildMethod(method, repBoxes, config, &details);
-  const double buildSeconds = progress.elapsedSeconds() - start;
+  const tsah::OptimizedTree tree = tsah::optimizeAnimation(a, treeOpt);
+  const tsah::Bvh& bvh = tree.bvh;
+  const tsah::InsertionOptimizer::Result& details = tree.optimization;
+  const tsah::BvhBuildInfo& info = tree.info;
+  const double buildSeconds = info.buildSeconds;
 
   progress.message("evaluating " + std::to_string(evalFrames) + " frames");
-  const std::vector<double> perFrame =
-      tsah::evaluateFrames(bvh, tsah::cli::animationFrames(a, a.uniformTimes(evalFrames)), config.cost, opt.threads);
+  const std::vector<double> perFrame = tsah::evaluateAnimation(bvh, a, evalFrames, {opt.tree.ct, opt.tree.ci}, opt.tree.threads);
   const auto [average, maximum] = averageAndMaximum(perFrame);
-
-  const tsah::BvhBuildInfo info = buildInfo(opt, method, a, frames, buildSeconds, a.startTime(), a.endTime());
   tsah::saveBvhFile(opt.output, bvh, info);
 
   nlohmann::json j;
@@ -191,14 +152,14 @@ void run(const Options& opt) {
   j["method"] = info.method;
   j["k"] = info.k;
   j["selection"] = info.selection;
-  j["seed"] = opt.seed;
+  j["seed"] = opt.tree.seed;
   j["frames"] = frames;
   j["eval_frames"] = evalFrames;
   j["triangles"] = a.triangleCount();
   j["nodes"] = bvh.nodeCount();
   j["leaves"] = bvh.leafCount();
   j["depth"] = bvh.depth();
-  j["max_leaf"] = opt.maxLeaf;
+  j["max_leaf"] = opt.tree.maxLeaf;
   j["build_s"] = buildSeconds;
   j["cost"] = {{"average", average}, {"maximum", maximum}, {"per_frame", perFrame}};
   if (method.method == tsah::Method::TSah) {
@@ -226,35 +187,35 @@ TSAH_REGISTER_COMMAND(40, [](CLI::App& app) {
   auto opt = std::make_shared<Options>();
   sub->add_option("INPUT", opt->input, "Animation or static mesh (any input `tsah info` reads)")->required();
   sub->add_option("-o,--output", opt->output, "Output .tbvh file")->required();
-  sub->add_option("--method", opt->method, "tsah (one tree optimized for all frames), sah0 (frame 0, refit) or sahstar (best over time)")
+  sub->add_option("--method", opt->tree.method, "tsah (one tree optimized for all frames), sah0 (frame 0, refit) or sahstar (best over time)")
       ->check(CLI::IsMember({"tsah", "sah0", "sahstar"}))
       ->capture_default_str();
-  sub->add_option("--k", opt->k, "T-SAH exponent: 0 optimizes the average cost, larger values the worst frames")
+  sub->add_option("--k", opt->tree.k, "T-SAH exponent: 0 optimizes the average cost, larger values the worst frames")
       ->check(CLI::Range(0, 16))
       ->capture_default_str();
-  sub->add_option("--frames", opt->frames, "Representative frames, uniform in time")
+  sub->add_option("--frames", opt->tree.frames, "Representative frames, uniform in time")
       ->check(CLI::Range(1u, 1000u))
       ->capture_default_str();
   sub->add_option("--eval-frames", opt->evalFrames, "Evaluation frames for the reported cost, uniform in time")
       ->check(CLI::Range(1u, 100000u))
       ->capture_default_str();
-  sub->add_option("--selection", opt->selection, "Node selection: mh (Metropolis-Hastings), random, batch (batch sorting)")
+  sub->add_option("--selection", opt->tree.selection, "Node selection: mh (Metropolis-Hastings), random, batch (batch sorting)")
       ->check(CLI::IsMember({"mh", "random", "batch"}))
       ->capture_default_str();
-  sub->add_option("--seed", opt->seed, "Random seed (same seed, same tree)")->capture_default_str();
-  sub->add_option("--ct", opt->ct, "Cost of traversing a node")->check(CLI::PositiveNumber)->capture_default_str();
-  sub->add_option("--ci", opt->ci, "Cost of intersecting a triangle")->check(CLI::PositiveNumber)->capture_default_str();
-  sub->add_option("--max-leaf", opt->maxLeaf, "Largest leaf after collapse (1: one triangle per leaf)")
+  sub->add_option("--seed", opt->tree.seed, "Random seed (same seed, same tree)")->capture_default_str();
+  sub->add_option("--ct", opt->tree.ct, "Cost of traversing a node")->check(CLI::PositiveNumber)->capture_default_str();
+  sub->add_option("--ci", opt->tree.ci, "Cost of intersecting a triangle")->check(CLI::PositiveNumber)->capture_default_str();
+  sub->add_option("--max-leaf", opt->tree.maxLeaf, "Largest leaf after collapse (1: one triangle per leaf)")
       ->check(CLI::Range(1u, 256u))
       ->capture_default_str();
-  sub->add_option("--time-limit", opt->timeLimit, "Stop each optimization after this many seconds (0: none)")
+  sub->add_option("--time-limit", opt->tree.timeLimit, "Stop each optimization after this many seconds (0: none)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
-  sub->add_option("--min-improvement", opt->minImprovement,
+  sub->add_option("--min-improvement", opt->tree.minImprovement,
                   "Stop after 3 batches that lower the cost by less than this fraction each (0: by nothing)")
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
-  sub->add_option("--threads", opt->threads, "Worker threads (0: all cores)")->capture_default_str();
+  sub->add_option("--threads", opt->tree.threads, "Worker threads (0: all cores)")->capture_default_str();
   sub->add_option("--segments", opt->segments,
                   "K > 1: one tree per equal-time part of the animation, written as OUT_seg0 ... OUT_seg<K-1>")
       ->check(CLI::Range(1u, 1000u))

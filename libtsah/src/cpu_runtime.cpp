@@ -38,6 +38,28 @@ CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint3
   if (indices_.size() % 3 != 0) throw anim::Error("runtime: the index array is not a multiple of 3");
   for (uint32_t v : indices_)
     if (v >= vertexCount_) throw anim::Error("runtime: a triangle refers to a vertex out of range");
+  setTree(topologyOf(tree));
+  positions_.assign(std::size_t(vertexCount_) * 3, 0.0f);
+}
+
+namespace {
+
+const FlatBvh& firstTree(const TreeSet& set) {
+  if (set.trees.empty() || set.ranges.size() != set.trees.size())
+    throw anim::Error("runtime: the tree set holds no trees (or not one time range per tree)");
+  return set.trees.front();
+}
+
+}  // namespace
+
+CpuRuntime::CpuRuntime(const TreeSet& set, std::vector<uint32_t> indices, uint32_t vertexCount, Config config)
+    : CpuRuntime(firstTree(set), std::move(indices), vertexCount, config) {
+  if (set.size() == 1) return;
+  for (const FlatBvh& tree : set.trees) setTrees_.push_back(topologyOf(tree));
+  setRanges_ = set.ranges;
+}
+
+FlatBvh CpuRuntime::topologyOf(const FlatBvh& tree) const {
   if (tree.triangleCount() != triangleCount())
     throw anim::Error("runtime: the tree holds " + std::to_string(tree.triangleCount()) +
                       " triangles, the animation " + std::to_string(triangleCount()));
@@ -54,8 +76,20 @@ CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint3
   one.rootBoxes = {tree.rootBoxes.empty() ? Aabb{} : tree.rootBoxes[0]};
   one.triIndex = tree.triIndex;
   if (auto problem = validateFlatBvh(one)) throw anim::Error("runtime: invalid tree: " + *problem);
-  setTree(std::move(one));
-  positions_.assign(std::size_t(vertexCount_) * 3, 0.0f);
+  if (one.depth > kTraversalStackSize)
+    throw anim::Error("runtime: tree depth " + std::to_string(one.depth) + " exceeds the traversal stack of " +
+                      std::to_string(kTraversalStackSize));
+  return one;
+}
+
+uint32_t CpuRuntime::selectTreeAt(double time) {
+  if (setTrees_.empty()) return 0;
+  const uint32_t index = treeIndexAt(setRanges_, time);
+  if (index != current_) {
+    setTree(setTrees_[index]);
+    current_ = index;
+  }
+  return index;
 }
 
 CpuRuntime::~CpuRuntime() = default;
@@ -179,6 +213,8 @@ CpuRuntime::RebuildTimings CpuRuntime::rebuild(std::span<const float> positions,
     flat.frameCount = 1;
   }
   setTree(std::move(flat));
+  setTrees_.clear();  // the rebuilt tree replaces the set
+  current_ = 0;
   timings.flattenMs = msSince(start);
   start = std::chrono::steady_clock::now();
   refitAndWoop();

@@ -12,6 +12,7 @@
 #include "tsah/bvh.hpp"
 #include "tsah/flat_bvh.hpp"
 #include "tsah/traversal.hpp"
+#include "tsah/tree_set.hpp"
 #include "tsah/woop.hpp"
 
 namespace tsah {
@@ -37,6 +38,9 @@ class CpuRuntime {
   // not match the triangle count, is invalid, or is deeper than the traversal stack allows.
   CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint32_t vertexCount, Config config);
   CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint32_t vertexCount);
+  // A tree set: every tree is checked as above and kept; selectTreeAt picks the one to refit and
+  // trace (tree 0 until then). Throws anim::Error for an empty set.
+  CpuRuntime(const TreeSet& set, std::vector<uint32_t> indices, uint32_t vertexCount, Config config);
   ~CpuRuntime();
   CpuRuntime(const CpuRuntime&) = delete;
   CpuRuntime& operator=(const CpuRuntime&) = delete;
@@ -47,6 +51,12 @@ class CpuRuntime {
   // Takes this frame's positions and replaces the tree by builder(triangle boxes), then refits as
   // update() does (which also computes the Woop triangles).
   RebuildTimings rebuild(std::span<const float> positions, const TreeBuilder& builder);
+  // Makes the tree of the part holding `time` (tsah::treeIndexAt: boundaries and overlaps included)
+  // the current one and returns its index; update() must follow before tracing. A runtime made from
+  // one tree, or after a rebuild, keeps its tree and returns 0.
+  uint32_t selectTreeAt(double time);
+  uint32_t treeCount() const { return setTrees_.empty() ? 1u : static_cast<uint32_t>(setTrees_.size()); }
+  uint32_t currentTree() const { return current_; }
 
   BvhView view() const;
   const FlatBvh& tree() const { return tree_; }  // one frame of boxes: the current one
@@ -63,6 +73,7 @@ class CpuRuntime {
 
  private:
   void setTree(FlatBvh tree);
+  FlatBvh topologyOf(const FlatBvh& tree) const;  // frame 0's block, validated against this runtime
   void setPositions(std::span<const float> positions);
   void refitAndWoop();
   void refitNode(uint32_t node);
@@ -79,6 +90,10 @@ class CpuRuntime {
   // them (descending index, children before parents) on one thread.
   std::vector<std::pair<uint32_t, uint32_t>> subtreeTasks_;
   std::vector<uint32_t> topNodes_;
+  // Tree set: every tree's topology and time range; current_ indexes them (0 for a single tree).
+  std::vector<FlatBvh> setTrees_;
+  std::vector<TimeRange> setRanges_;
+  uint32_t current_ = 0;
 };
 
 }  // namespace tsah
