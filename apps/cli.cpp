@@ -1,6 +1,10 @@
 #include "cli.hpp"
 
+#include "bench/data_scan.hpp"
+
 #include <algorithm>
+#include <cstdlib>
+#include <filesystem>
 #include <cstdio>
 #include <unistd.h>
 #include <utility>
@@ -57,6 +61,19 @@ void Progress::message(const std::string& text) {
   std::fflush(stderr);
 }
 
+std::function<std::string(const std::string&)> dataPathResolver(const std::string& dataFolder,
+                                                                const std::string& cache) {
+  const std::filesystem::path data = tsah::bench::defaultDataFolder(dataFolder, TSAH_SOURCE_DIR);
+  std::filesystem::path unpacked = cache;
+  if (unpacked.empty()) {
+    if (const char* c = std::getenv("TSAH_CACHE_DIR"); c && *c) unpacked = c;
+    else if (const char* x = std::getenv("XDG_CACHE_HOME"); x && *x) unpacked = std::filesystem::path(x) / "tsah";
+    else if (const char* h = std::getenv("HOME"); h && *h) unpacked = std::filesystem::path(h) / ".cache" / "tsah";
+    else unpacked = std::filesystem::temp_directory_path() / "tsah-cache";
+  }
+  return [data, unpacked](const std::string& rel) { return tsah::bench::resolveDataPath(data, unpacked, rel); };
+}
+
 anim::LoadOptions& commandLineLoadOptions() {
   static anim::LoadOptions options;
   return options;
@@ -81,6 +98,7 @@ anim::Animation loadInput(const std::string& input, anim::LoadOptions options) {
   // so stdout stays a clean result (--json).
   if (!options.warning)
     options.warning = [](const std::string& text) { std::fprintf(stderr, "tsah: warning: %s\n", text.c_str()); };
+  if (!options.resolveDataPath) options.resolveDataPath = dataPathResolver();
   return anim::load(input, options);
 }
 

@@ -44,6 +44,11 @@ class Progress {
 // Import settings given on the command line (--fps, --clip: options of every subcommand that reads
 // an animation); loadInput starts from them.
 anim::LoadOptions& commandLineLoadOptions();
+// Resolves scenes' "data:" paths against the data folder (given, else $TSAH_DATA_DIR, else
+// ../shared/data), unpacking archives into `cache` (given, else $TSAH_CACHE_DIR, else
+// $XDG_CACHE_HOME/tsah or ~/.cache/tsah). loadInput uses it unless its options have one.
+std::function<std::string(const std::string&)> dataPathResolver(const std::string& dataFolder = {},
+                                                                const std::string& cache = {});
 // Adds --fps and --clip to the top-level app; with fallthrough they may follow any subcommand.
 void addLoadOptions(CLI::App& app);
 

@@ -20,6 +20,7 @@
 #include "bench/paper.hpp"
 #include "bench/report.hpp"
 #include "bench/runtime_bench.hpp"
+#include "anim/scene.hpp"
 #include "cli.hpp"
 
 #ifndef TSAH_SOURCE_DIR
@@ -34,6 +35,7 @@ using tsah::cli::UsageError;
 
 struct Options {
   std::vector<std::string> scenes;
+  std::string sceneDir;  // composed scenes (*.json scene files, docs/scenes.md) benchmarked with the data
   std::string data, out = "bench", cache;
   std::vector<std::string> notes;
   tsah::bench::BenchOptions bench;
@@ -161,6 +163,7 @@ void run(Options opt, CLI::App* sub) {
     scan = scanDataFolder(dataFolder, {cache, [&](const std::string& m) { log(m, false); }});
     scanned = true;
   };
+  b.resolveDataPath = tsah::cli::dataPathResolver(opt.data, cache.string());
   for (const std::string& s : opt.scenes) {
     std::error_code ec;
     if (fs::exists(s, ec)) {
@@ -180,7 +183,20 @@ void run(Options opt, CLI::App* sub) {
   if (opt.scenes.empty()) {
     scanData();
     scenes = scan.scenes;
-    if (scenes.empty()) throw UsageError(dataFolder.string() + ": no animations found");
+    if (scenes.empty() && opt.sceneDir.empty()) throw UsageError(dataFolder.string() + ": no animations found");
+  }
+  if (!opt.sceneDir.empty()) {
+    std::vector<std::string> files;
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(opt.sceneDir, ec))
+      if (e.path().extension() == ".json" && anim::isSceneFile(e.path().string())) files.push_back(e.path().string());
+    if (ec) throw UsageError(opt.sceneDir + ": cannot read the scene folder (" + ec.message() + ")");
+    std::sort(files.begin(), files.end());
+    for (const std::string& f : files) {
+      SceneSource s = explicitScene(f);
+      s.kind = "scene";
+      scenes.push_back(s);
+    }
   }
   if (opt.list) {
     for (const SceneSource& s : scenes) std::printf("%-16s %-9s %s\n", s.name.c_str(), s.kind.c_str(), s.input.c_str());
@@ -261,6 +277,9 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
       ->check(CLI::IsMember({"cpu", "cuda"}))
       ->capture_default_str();
   sub->add_option("--out", opt->out, "Output folder: results.json, results.md, plots/, images/")->capture_default_str();
+  sub->add_option("--scene-dir", opt->sceneDir,
+                  "Also bench every scene file (*.json, docs/scenes.md) of this folder, e.g. samples/scenes/bench; "
+                  "their data: paths resolve against --data");
   sub->add_option("--cache", opt->cache, "Where archives of the data folder are unpacked (default: OUT/cache)");
   sub->add_flag("--quick", b.quick, "Smoke run: 10 evaluation frames, 3 traced frames of 192x144 (explicit options win)");
   sub->add_option("--seed", b.seed, "Seed of the optimizations and of the per-pixel random numbers")->capture_default_str();

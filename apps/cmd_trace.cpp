@@ -164,7 +164,7 @@ class CpuFrameRuntime final : public FrameRuntime {
       : animation_(animation),
         runtime_(trees, {animation.indices().begin(), animation.indices().end()}, animation.vertexCount(), config),
         builder_(std::move(builder)),
-        positions_(std::size_t(animation.vertexCount()) * 3) {}
+        positions_(animation.positionsAt(animation.startTime())) {}
 
   void warmUp(double, const tsah::Camera&, const tsah::SceneLighting&, const tsah::RenderSettings&) override {
     runtime_.parallelFor(runtime_.threadCount() * 4, 1, [](std::size_t, std::size_t) {});
@@ -173,7 +173,7 @@ class CpuFrameRuntime final : public FrameRuntime {
   FrameUpdate update(double time) override {
     FrameUpdate u;
     const auto start = std::chrono::steady_clock::now();
-    animation_.positionsAt(time, positions_);
+    animation_.movingPositionsAt(time, positions_);  // the static vertices are in place since construction
     u.interpolateMs = msSince(start);
     if (builder_) {
       const auto t = runtime_.rebuild(positions_, builder_);

@@ -87,8 +87,7 @@ void expectSameAnimation(const anim::Animation& a, const anim::Animation& b) {
   ASSERT_EQ(a.keyframeCount(), b.keyframeCount());
   EXPECT_TRUE(std::equal(a.indices().begin(), a.indices().end(), b.indices().begin(), b.indices().end()));
   EXPECT_TRUE(std::equal(a.times().begin(), a.times().end(), b.times().begin(), b.times().end()));
-  EXPECT_TRUE(std::equal(a.allPositions().begin(), a.allPositions().end(), b.allPositions().begin(),
-                         b.allPositions().end()));
+  EXPECT_EQ(a.allPositions(), b.allPositions());
 }
 
 TEST(PointCache, HandWrittenPc2LittleEndian) {
@@ -145,7 +144,7 @@ TEST(PointCache, RoundTripThroughBothEncoders) {
     const anim::PointCache c = anim::decodePointCache(bytes, "x", f);
     EXPECT_EQ(c.pointCount, a.vertexCount());
     EXPECT_TRUE(std::equal(c.times.begin(), c.times.end(), a.times().begin(), a.times().end()));
-    EXPECT_TRUE(std::equal(c.positions.begin(), c.positions.end(), a.allPositions().begin(), a.allPositions().end()));
+    EXPECT_EQ(std::vector<float>(c.positions.begin(), c.positions.end()), a.allPositions());
   }
 }
 

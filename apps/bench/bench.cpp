@@ -109,6 +109,7 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   anim::LoadOptions load;
   load.fps = o.fps;
   load.clip = o.clip;
+  load.resolveDataPath = o.resolveDataPath;
   load.warning = [&warnings](const std::string& w) { warnings.push_back(w); };
   anim::Animation a = anim::load(scene.input, load);
   j["load_s"] = secondsSince(start);

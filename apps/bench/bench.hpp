@@ -46,6 +46,7 @@ struct BenchOptions {
   bool convergence = true;      // run the three node selections for the convergence plot
   double fps = 0.0;             // import: sampling rate of continuous animations (0: the file's own)
   std::string clip;             // import: the animation clip of a multi-clip model (empty: the first)
+  std::function<std::string(const std::string&)> resolveDataPath;  // import: scenes' "data:" paths
 };
 
 // Progress: `detail` messages are frequent (optimizer batches) and may be thinned out by the caller.

@@ -42,10 +42,16 @@ GpuRuntime::Impl::Impl(const TreeSet& set, const anim::Animation& animation, Con
   hostParams = new (pinned) detail::FrameParams{};
   frameParams.resize(1);
   times.assign(animation.times().begin(), animation.times().end());
-  keyframes = DeviceBuffer<float>(animation.allPositions(), stream);
+  // Only the moving vertices are keyed on the device; the static ones are uploaded once into
+  // `positions` and never written by the per-frame interpolation.
+  movingVertices = animation.movingVertexCount();
+  keyframes = DeviceBuffer<float>(animation.motion(), stream);
+  movingIds = DeviceBuffer<uint32_t>(animation.movingVertices(), stream);
+  hostRest.assign(animation.restPositions().begin(), animation.restPositions().end());
   indices = DeviceBuffer<uint32_t>(idx, stream);
   hostIndices.assign(idx.begin(), idx.end());
   positions.resize(std::size_t(vertices) * 3);
+  if (!hostRest.empty()) positions.upload(std::span<const float>(hostRest), stream);
   trees.reserve(set.trees.size());
   for (const FlatBvh& t : set.trees) uploadTree(t);
   ranges = set.ranges;
@@ -142,7 +148,7 @@ cudaGraphExec_t GpuRuntime::Impl::capture(Enqueue&& enqueue) {
 
 void GpuRuntime::Impl::setFrame(double time) {
   const auto [k, alpha] = anim::keyframeBlend(times, time);
-  const uint64_t perFrame = uint64_t(vertices) * 3;
+  const uint64_t perFrame = uint64_t(movingVertices) * 3;
   hostParams->a = k * perFrame;
   hostParams->b = (alpha == 0.0f ? k : k + 1) * perFrame;
   hostParams->alpha = alpha;
@@ -152,9 +158,15 @@ void GpuRuntime::Impl::enqueueInterpolation() {
   events.record(0, stream);
   CUDA_CHECK(cudaMemcpyAsync(frameParams.data(), hostParams, sizeof(detail::FrameParams), cudaMemcpyHostToDevice,
                              stream));
-  detail::launchInterpolateFrame(keyframes.data(), frameParams.data(), positions.data(), std::size_t(vertices) * 3,
-                                 stream);
+  detail::launchInterpolateFrame(keyframes.data(), movingIds.size() ? movingIds.data() : nullptr, frameParams.data(),
+                                 positions.data(), movingVertices, stream);
   events.record(1, stream);
+}
+
+void GpuRuntime::Impl::restoreStaticPositions() {
+  if (restInPlace) return;
+  if (!hostRest.empty()) positions.upload(std::span<const float>(hostRest), stream);
+  restInPlace = true;
 }
 
 void GpuRuntime::Impl::buildVertexTriangles() {
@@ -238,6 +250,7 @@ UpdateTimings GpuRuntime::updateAt(double time) {
   Impl& m = *impl_;
   m.current = treeIndexAt(m.ranges, time);
   m.setFrame(time);
+  m.restoreStaticPositions();
   auto enqueue = [&] {
     m.enqueueInterpolation();
     m.enqueueRefitAndWoop();
@@ -259,6 +272,7 @@ UpdateTimings GpuRuntime::update(std::span<const float> positions) {
                       std::to_string(std::size_t(m.vertices) * 3));
   m.events.record(0, m.stream);
   m.positions.upload(positions, m.stream);
+  m.restInPlace = false;
   m.events.record(1, m.stream);
   m.enqueueRefitAndWoop();
   return m.finishUpdate();
@@ -278,6 +292,7 @@ RebuildTimings GpuRuntime::rebuildAt(double time, const RebuildOptions& options)
   if (options.maxLeafSize == 0) throw anim::Error("GPU rebuild: maxLeafSize must be at least 1");
   if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles);
   m.setFrame(time);
+  m.restoreStaticPositions();
   m.woopValid = false;
   m.tracingRebuilt = true;
   auto enqueue = [&] {
@@ -308,6 +323,7 @@ RebuildTimings GpuRuntime::rebuild(std::span<const float> positions, const Rebui
                       std::to_string(std::size_t(m.vertices) * 3));
   m.events.record(0, m.stream);
   m.positions.upload(positions, m.stream);
+  m.restInPlace = false;
   m.events.record(1, m.stream);
   if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles);
   m.woopValid = false;

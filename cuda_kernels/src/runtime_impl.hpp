@@ -33,6 +33,9 @@ struct GpuRuntime::Impl {
   // hostParams, copied to frameParams by the stream, so the same work can be captured once.
   void setFrame(double time);
   void enqueueInterpolation();
+  // Puts the static vertices' rest positions back into `positions` when an update from host
+  // positions overwrote them (the interpolation writes only the moving vertices).
+  void restoreStaticPositions();
   // Captures what `enqueue` puts on the stream into an executable graph.
   template <typename Enqueue>
   cudaGraphExec_t capture(Enqueue&& enqueue);
@@ -45,7 +48,11 @@ struct GpuRuntime::Impl {
   uint32_t triangles = 0, vertices = 0;
   std::vector<double> times;             // keyframe times
   std::vector<uint32_t> hostIndices;     // for buildVertexTriangles
-  DeviceBuffer<float> keyframes;         // every keyframe, vertices * 3 floats each
+  uint32_t movingVertices = 0;           // vertices that move; the others keep their rest position
+  DeviceBuffer<float> keyframes;         // every keyframe of the moving vertices, movingVertices * 3 floats each
+  DeviceBuffer<uint32_t> movingIds;      // ascending ids of the moving vertices; empty when every vertex moves
+  std::vector<float> hostRest;           // rest positions of every vertex; empty when every vertex moves
+  bool restInPlace = true;               // `positions` holds the rest positions of the static vertices
   DeviceBuffer<uint32_t> indices;        // 3 per triangle
   DeviceBuffer<float> positions;         // the current frame
   detail::FrameParams* hostParams = nullptr;  // pinned

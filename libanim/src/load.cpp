@@ -9,6 +9,7 @@
 #include "anim/error.hpp"
 #include "anim/mesh_sequence.hpp"
 #include "anim/point_cache.hpp"
+#include "anim/scene.hpp"
 #include "anim/tanim.hpp"
 
 namespace anim {
@@ -51,6 +52,7 @@ Animation load(const std::string& input, const LoadOptions& options) {
   if (pointCacheFormat(input))
     throw ImportError(input, "a point cache holds positions only: name a mesh of the same points with it, as "
                              "mesh.obj+" + fs::path(input).filename().string());
+  if (ext == ".json" && isSceneFile(input)) return loadScene(input, options);
   if (ext == ".json") {
     if (const auto pair = readPointCacheManifest(input)) return importPointCache(*pair, options);
     return importSequence(readManifest(input), options, stemName(input));

@@ -163,7 +163,8 @@ std::vector<uint8_t> encodePc2(const Animation& a) {
   out.write(start);
   out.write(rate);
   out.write(int32_t(n));
-  out.writeArray(a.allPositions());
+  const std::vector<float> positions = a.allPositions();
+  out.writeArray(std::span<const float>(positions));
   return std::move(out.buffer());
 }
 
