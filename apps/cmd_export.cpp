@@ -111,7 +111,8 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
   auto opt = std::make_shared<Options>();
   sub->add_option("BVH", opt->bvh, "Tree from `tsah optimize` (.tbvh)")->required();
   sub->add_option("ANIMATION", opt->input, "The animation the tree was built for")->required();
-  auto* frameOpt = sub->add_option("--frame", opt->frame, "Keyframe index of the animation (default 0)");
+  auto* frameOpt = sub->add_option("--frame", opt->frame, "Keyframe index of the animation (default 0)")
+                       ->check(CLI::NonNegativeNumber);
   sub->add_option("--time", opt->time, "Animation time instead of a keyframe (interpolated)")->excludes(frameOpt);
   sub->add_option("-o,--out", opt->out, "Output folder (created if missing)")->required();
   sub->add_option("--threads", opt->threads, "Worker threads (0: all cores)");

@@ -2,24 +2,15 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <string>
 
+#include "anim/binary_io.hpp"
 #include "anim/error.hpp"
-#include <unistd.h>
 
 namespace anim {
 
 namespace {
-
-// Refuses an allocation larger than the machine's physical memory up front: with overcommit a huge
-// vector would "succeed" and the process be killed later while filling it.
-void checkFitsInMemory(std::size_t bytes, const std::string& who, const std::string& what) {
-  const long pages = ::sysconf(_SC_PHYS_PAGES), pageSize = ::sysconf(_SC_PAGE_SIZE);
-  const double physical = pages > 0 && pageSize > 0 ? double(pages) * double(pageSize) : 1e18;
-  if (double(bytes) > physical)
-    throw Error(who + ": " + what + " would need " + std::to_string(bytes >> 20) + " MiB, more than this machine's " +
-                std::to_string(uint64_t(physical) >> 20) + " MiB of memory");
-}
 
 bool triangleIsDegenerate(const float* a, const float* b, const float* c) {
   const double e1[3] = {double(b[0]) - a[0], double(b[1]) - a[1], double(b[2]) - a[2]};
@@ -30,6 +21,20 @@ bool triangleIsDegenerate(const float* a, const float* b, const float* c) {
 }
 
 }  // namespace
+
+std::size_t firstBadCoordinate(std::span<const float> positions) {
+  for (std::size_t i = 0; i < positions.size(); ++i)
+    if (!(std::fabs(positions[i]) <= kMaxCoordinate)) return i;  // NaN fails the comparison too
+  return positions.size();
+}
+
+std::string describeBadCoordinate(float value) {
+  if (!std::isfinite(value)) return "has a NaN or infinite coordinate";
+  char text[128];
+  std::snprintf(text, sizeof text, "has coordinate %g, beyond the supported magnitude %g", double(value),
+                double(kMaxCoordinate));
+  return std::string(text) + " (surface areas would overflow)";
+}
 
 Animation::Animation(std::vector<uint32_t> indices, uint32_t vertexCount,
                      std::vector<float> positions, std::vector<double> times, std::string name)
@@ -57,12 +62,11 @@ Animation::Animation(std::vector<uint32_t> indices, uint32_t vertexCount,
     if (i > 0 && !(times_[i] > times_[i - 1]))
       throw ImportError(who, "keyframe times are not strictly increasing at keyframe " + std::to_string(i));
   }
-  for (std::size_t i = 0; i < positions_.size(); ++i)
-    if (!std::isfinite(positions_[i])) {
-      const std::size_t perFrame = std::size_t(vertexCount_) * 3;
-      throw ImportError(who, "keyframe " + std::to_string(i / perFrame) + " vertex " +
-                                 std::to_string((i % perFrame) / 3) + " has a NaN or infinite coordinate");
-    }
+  if (const std::size_t bad = firstBadCoordinate(positions_); bad < positions_.size()) {
+    const std::size_t perFrame = std::size_t(vertexCount_) * 3;
+    throw ImportError(who, "keyframe " + std::to_string(bad / perFrame) + " vertex " +
+                               std::to_string((bad % perFrame) / 3) + " " + describeBadCoordinate(positions_[bad]));
+  }
   const float* p = positions_.data();
   for (std::size_t t = 0; t < indices_.size(); t += 3)
     if (triangleIsDegenerate(p + 3 * indices_[t], p + 3 * indices_[t + 1], p + 3 * indices_[t + 2]))
@@ -130,8 +134,8 @@ std::vector<double> Animation::uniformTimes(uint32_t n) const {
 
 Animation Animation::resample(uint32_t n) const {
   if (n == 0) throw Error(name_ + ": cannot resample to 0 frames");
-  checkFitsInMemory(std::size_t(n) * (std::size_t(vertexCount_) * 3 * sizeof(float) + sizeof(double)), name_,
-                    std::to_string(n) + " frames");
+  requireMemory(uint64_t(n) * (uint64_t(vertexCount_) * 3 * sizeof(float) + sizeof(double)), name_,
+                "resampling to " + std::to_string(n) + " frames of " + std::to_string(vertexCount_) + " vertices");
   std::vector<double> t = uniformTimes(n);
   if (n > 1 && !(endTime() > startTime())) {
     // A one-keyframe animation sampled n times: frames at 0,1,...; the geometry stays the same.

@@ -2,6 +2,7 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <regex>
 #include <string>
 
 #include "anim/binary_io.hpp"
@@ -10,13 +11,18 @@
 namespace anim {
 
 std::size_t saveObjSequence(const Animation& a, const std::string& pattern) {
-  const auto percent = pattern.find('%');
-  if (percent == std::string::npos || pattern.find('%', percent + 1) != std::string::npos ||
-      pattern.find('d', percent) == std::string::npos)
+  // Exactly one %d-style conversion (%d, %4d, %04d) and no other '%': the pattern becomes a printf
+  // format, so anything else (%s, %n) would be undefined behaviour.
+  static const std::regex valid("[^%]*%0?[0-9]{0,3}d[^%]*");
+  if (!std::regex_match(pattern, valid))
     throw Error(pattern + ": output pattern needs exactly one %d-style number, e.g. frames/f_%04d.obj");
+  requireExtension(pattern, ".obj", "OBJ sequence");
   std::string faces;
   const auto idx = a.indices();
   char line[128];
+  // All frames appear together or none: a failure half-way (a full disk) must not leave a shorter
+  // sequence behind that reads as a valid animation.
+  AtomicFileSet files;
   for (std::size_t t = 0; t < idx.size(); t += 3) {
     std::snprintf(line, sizeof line, "f %u %u %u\n", idx[t] + 1, idx[t + 1] + 1, idx[t + 2] + 1);
     faces += line;
@@ -37,8 +43,9 @@ std::size_t saveObjSequence(const Animation& a, const std::string& pattern) {
       std::error_code ec;
       if (!parent.empty()) std::filesystem::create_directories(parent, ec);
     }
-    writeFileAtomically(name, std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
+    files.write(name, std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
   }
+  files.commit();
   return a.keyframeCount();
 }
 
