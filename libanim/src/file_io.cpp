@@ -133,7 +133,7 @@ void removeInFlight() {
 
 }  // namespace
 
-InputFile::InputFile(const std::string& path) {
+InputFile::InputFile(const std::string& path, bool protect) {
   // O_NONBLOCK: opening a FIFO without a writer would otherwise block before fstat can refuse it.
   fd_ = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
   if (fd_ < 0) {
@@ -149,7 +149,7 @@ InputFile::InputFile(const std::string& path) {
   ::fcntl(fd_, F_SETFL, ::fcntl(fd_, F_GETFL) & ~O_NONBLOCK);
   size_ = std::size_t(st.st_size);
   std::lock_guard lock(registry().mutex);
-  if (registry().protectInputs) registry().inputs.insert({st.st_dev, st.st_ino});
+  if (protect && registry().protectInputs) registry().inputs.insert({st.st_dev, st.st_ino});
 }
 
 InputFile::~InputFile() {
@@ -158,8 +158,9 @@ InputFile::~InputFile() {
 
 void checkInputFile(const std::string& path) { InputFile check(path); }
 
-std::vector<uint8_t> readFile(const std::string& path, std::size_t maxBytes) {
-  InputFile in(path);
+namespace {
+std::vector<uint8_t> readWhole(const std::string& path, std::size_t maxBytes, bool protect) {
+  InputFile in(path, protect);
   if (in.size() > maxBytes)
     throw ImportError(path, "file is " + std::to_string(in.size()) + " bytes, more than the limit of " +
                                 std::to_string(maxBytes));
@@ -173,6 +174,13 @@ std::vector<uint8_t> readFile(const std::string& path, std::size_t maxBytes) {
     done += std::size_t(n);
   }
   return bytes;
+}
+}  // namespace
+
+std::vector<uint8_t> readFile(const std::string& path, std::size_t maxBytes) { return readWhole(path, maxBytes, true); }
+
+std::vector<uint8_t> readFileForUpdate(const std::string& path, std::size_t maxBytes) {
+  return readWhole(path, maxBytes, false);
 }
 
 void protectInputs(bool on) {

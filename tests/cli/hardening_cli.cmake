@@ -77,3 +77,22 @@ tsah_hard_fixture(hard.memory.resample hard_large)
 foreach(t hard.out.tree_not_tbvh hard.out.resample_not_tanim hard.fps_nan)
   tsah_hard_fixture(${t} hard_anim)
 endforeach()
+
+# ---- Determinism: the same seed and thread count give byte-identical trees, for every method ------
+foreach(variant "tsah;mh" "tsah;random" "tsah;batch" "sah0;mh" "sahstar;mh")
+  list(GET variant 0 method)
+  list(GET variant 1 selection)
+  set(tag ${method}_${selection})
+  foreach(run 1 2)
+    add_test(NAME hard.det.${tag}.${run}
+             COMMAND tsah optimize ${A} -o ${H}/det_${tag}_${run}.tbvh --method ${method} --selection ${selection}
+                     --seed 7 --threads 2 --frames 3 --eval-frames 3)
+    set_tests_properties(hard.det.${tag}.${run} PROPERTIES FIXTURES_REQUIRED hard_anim FIXTURES_SETUP det_${tag})
+  endforeach()
+  # The build time field differs between runs; everything else (tree, options, checksum of the
+  # tree part) must not: compare the files with that field masked by tsah info --json of both.
+  add_test(NAME hard.det.${tag}
+           COMMAND ${CMAKE_COMMAND} -DA=${H}/det_${tag}_1.tbvh -DB=${H}/det_${tag}_2.tbvh
+                   -P ${PROJECT_SOURCE_DIR}/tests/support/compare_trees.cmake)
+  set_tests_properties(hard.det.${tag} PROPERTIES FIXTURES_REQUIRED det_${tag})
+endforeach()

@@ -85,7 +85,7 @@ class ByteWriter {
 // project goes through this (readFile, and checkInputFile for libraries that open files themselves).
 class InputFile {
  public:
-  explicit InputFile(const std::string& path);
+  explicit InputFile(const std::string& path, bool protect = true);
   ~InputFile();
   InputFile(const InputFile&) = delete;
   InputFile& operator=(const InputFile&) = delete;
@@ -103,6 +103,8 @@ void checkInputFile(const std::string& path);
 // Reads a whole file; throws ImportError when it is missing, not a regular file, unreadable or
 // larger than maxBytes.
 std::vector<uint8_t> readFile(const std::string& path, std::size_t maxBytes = std::size_t(1) << 36);
+// readFile for a file the command means to rewrite (a report updated in place): not protected.
+std::vector<uint8_t> readFileForUpdate(const std::string& path, std::size_t maxBytes);
 
 // When on (the command line turns it on), every file opened as an input is remembered and the
 // writers below refuse to replace one of them: `optimize a.tanim -o a.tanim` must not destroy a.tanim.
