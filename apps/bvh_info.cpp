@@ -2,7 +2,8 @@
 
 #include <algorithm>
 #include <cstdio>
-#include <fstream>
+#include <filesystem>
+#include <unistd.h>
 
 #include "anim/binary_io.hpp"
 #include "anim/error.hpp"
@@ -13,9 +14,12 @@
 namespace tsah::cli {
 
 bool looksLikeBvhFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec) || std::filesystem::is_directory(path, ec)) return false;  // sequences
+  const anim::InputFile in(path);  // a FIFO or device is refused here instead of blocking
   char magic[8] = {};
-  return in.read(magic, sizeof magic) && std::string(magic, 7) == "TSAHBVH" && magic[7] == '\0';
+  return ::pread(in.fd(), magic, sizeof magic, 0) == ssize_t(sizeof magic) && std::string(magic, 7) == "TSAHBVH" &&
+         magic[7] == '\0';
 }
 
 nlohmann::json describeBvh(const tsah::FlatBvh& flat, const tsah::BvhBuildInfo& info) {

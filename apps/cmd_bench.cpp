@@ -107,7 +107,7 @@ void reportOnly(const Options& opt) {
   ProgressLog log;
   const fs::path out = opt.out;
   const std::string file = (out / "results.json").string();
-  const std::vector<uint8_t> bytes = anim::readFile(file, std::size_t(1) << 30);
+  const std::vector<uint8_t> bytes = anim::readFileForUpdate(file, std::size_t(1) << 30);  // rewritten below
   json results;
   try {
     results = json::parse(bytes.begin(), bytes.end());

@@ -180,7 +180,8 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
   sub->add_option("BVH", opt->bvh, "Tree or tree set from `tsah optimize` (.tbvh; a set exports the tree of the frame's part)")
       ->required();
   sub->add_option("ANIMATION", opt->input, "The animation the tree was built for")->required();
-  auto* frameOpt = sub->add_option("--frame", opt->frame, "Keyframe index of the animation (default 0)");
+  auto* frameOpt = sub->add_option("--frame", opt->frame, "Keyframe index of the animation (default 0)")
+                       ->check(CLI::NonNegativeNumber);
   sub->add_option("--time", opt->time, "Animation time instead of a keyframe (interpolated)")->excludes(frameOpt);
   sub->add_option("-o,--out", opt->out, "Output folder (created if missing); with --boxes a .ply or .obj file")
       ->required();

@@ -16,6 +16,7 @@
 #include "anim/binary_io.hpp"
 #include "anim/error.hpp"
 #include "bvh_info.hpp"
+#include "camera_file.hpp"
 #include "tsah/tree_set.hpp"
 #include "cli.hpp"
 #include "tsah/binned_sah_builder.hpp"
@@ -47,59 +48,6 @@ tsah::Vec3 parseVec3(const std::string& text, const std::string& option) {
   for (float x : v)
     if (!std::isfinite(x)) throw UsageError(option + ": coordinates must be finite");
   return {v[0], v[1], v[2]};
-}
-
-tsah::Vec3 jsonVec3(const nlohmann::json& j, const std::string& file, const char* key) {
-  if (!j.contains(key) || !j[key].is_array() || j[key].size() != 3 || !j[key][0].is_number() ||
-      !j[key][1].is_number() || !j[key][2].is_number())
-    throw anim::ImportError(file, std::string("'") + key + "' must be an array of three numbers");
-  return {j[key][0].get<float>(), j[key][1].get<float>(), j[key][2].get<float>()};
-}
-
-// A camera file: {"eye": [x,y,z], "look_at": [x,y,z], "up": [x,y,z], "fov": degrees} for a fixed
-// camera, or {"keys": [{"time": t, "eye": ..., "look_at": ..., "up": ..., "fov": ...}, ...]} for a path.
-std::vector<anim::CameraKey> loadCameraFile(const std::string& path) {
-  const std::vector<uint8_t> bytes = anim::readFile(path, std::size_t(1) << 24);
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(bytes.begin(), bytes.end());
-  } catch (const nlohmann::json::exception& e) {
-    throw anim::ImportError(path, std::string("not valid JSON: ") + e.what());
-  }
-  auto key = [&](const nlohmann::json& k) {
-    if (!k.is_object()) throw anim::ImportError(path, "a camera must be a JSON object");
-    anim::CameraKey c;
-    const tsah::Vec3 eye = jsonVec3(k, path, "eye"), at = jsonVec3(k, path, "look_at");
-    const tsah::Vec3 up = k.contains("up") ? jsonVec3(k, path, "up") : tsah::Vec3{0, 1, 0};
-    c.eye = {eye.x, eye.y, eye.z};
-    c.lookAt = {at.x, at.y, at.z};
-    c.up = {up.x, up.y, up.z};
-    if (k.contains("fov")) {
-      if (!k["fov"].is_number()) throw anim::ImportError(path, "'fov' must be a number (degrees)");
-      c.fovyDegrees = k["fov"].get<float>();
-    }
-    if (k.contains("time")) {
-      if (!k["time"].is_number()) throw anim::ImportError(path, "'time' must be a number");
-      c.time = k["time"].get<double>();
-    }
-    tsah::Camera check{eye, at, up, c.fovyDegrees};
-    try {
-      tsah::validateCamera(check);
-    } catch (const anim::Error& e) {
-      throw anim::ImportError(path, e.what());
-    }
-    return c;
-  };
-  std::vector<anim::CameraKey> keys;
-  if (j.is_object() && j.contains("keys")) {
-    if (!j["keys"].is_array() || j["keys"].empty()) throw anim::ImportError(path, "'keys' must be a non-empty array");
-    for (const auto& k : j["keys"]) keys.push_back(key(k));
-    for (std::size_t i = 1; i < keys.size(); ++i)
-      if (!(keys[i].time > keys[i - 1].time)) throw anim::ImportError(path, "camera key times must increase");
-  } else {
-    keys.push_back(key(j));
-  }
-  return keys;
 }
 
 struct TraceOptions {
@@ -371,7 +319,7 @@ void runTrace(const TraceOptions& opt) {
   std::string cameraSource;
   tsah::Camera fixedCamera;
   if (!opt.camera.empty()) {
-    path = loadCameraFile(opt.camera);
+    path = tsah::cli::loadCameraFile(opt.camera);
     cameraSource = opt.camera;
   } else if (!opt.eye.empty()) {
     fixedCamera = {parseVec3(opt.eye, "--eye"), parseVec3(opt.lookAt, "--look-at"), up, opt.fov};

@@ -2,10 +2,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <string>
 
 #include <cstring>
 
+#include "anim/binary_io.hpp"
 #include "anim/error.hpp"
 #include "anim/memory.hpp"
 
@@ -22,6 +24,20 @@ bool triangleIsDegenerate(const float* a, const float* b, const float* c) {
 }
 
 }  // namespace
+
+std::size_t firstBadCoordinate(std::span<const float> positions) {
+  for (std::size_t i = 0; i < positions.size(); ++i)
+    if (!(std::fabs(positions[i]) <= kMaxCoordinate)) return i;  // NaN fails the comparison too
+  return positions.size();
+}
+
+std::string describeBadCoordinate(float value) {
+  if (!std::isfinite(value)) return "has a NaN or infinite coordinate";
+  char text[128];
+  std::snprintf(text, sizeof text, "has coordinate %g, beyond the supported magnitude %g", double(value),
+                double(kMaxCoordinate));
+  return std::string(text) + " (surface areas would overflow)";
+}
 
 Animation::Animation(std::vector<uint32_t> indices, uint32_t vertexCount,
                      std::vector<float> positions, std::vector<double> times, std::string name)
@@ -82,16 +98,14 @@ void Animation::validate() {
     if (i > 0 && !(times_[i] > times_[i - 1]))
       throw ImportError(who, "keyframe times are not strictly increasing at keyframe " + std::to_string(i));
   }
-  for (std::size_t i = 0; i < rest_.size(); ++i)
-    if (!std::isfinite(rest_[i]))
-      throw ImportError(who, "static vertex " + std::to_string(i / 3) + " has a NaN or infinite coordinate");
-  for (std::size_t i = 0; i < motion_.size(); ++i)
-    if (!std::isfinite(motion_[i])) {
-      const std::size_t perFrame = std::size_t(movingCount_) * 3;
-      const std::size_t m = (i % perFrame) / 3;
-      throw ImportError(who, "keyframe " + std::to_string(i / perFrame) + " vertex " +
-                                 std::to_string(allMoving() ? m : moving_[m]) + " has a NaN or infinite coordinate");
-    }
+  if (const std::size_t bad = firstBadCoordinate(rest_); bad < rest_.size())
+    throw ImportError(who, "static vertex " + std::to_string(bad / 3) + " " + describeBadCoordinate(rest_[bad]));
+  if (const std::size_t bad = firstBadCoordinate(motion_); bad < motion_.size()) {
+    const std::size_t perFrame = std::size_t(movingCount_) * 3;
+    const std::size_t m = (bad % perFrame) / 3;
+    throw ImportError(who, "keyframe " + std::to_string(bad / perFrame) + " vertex " +
+                               std::to_string(allMoving() ? m : moving_[m]) + " " + describeBadCoordinate(motion_[bad]));
+  }
   degenerate_ = 0;
   const float* p0 = allMoving() ? motion_.data() : rest_.data();  // keyframe 0 of every vertex
   for (std::size_t t = 0; t < indices_.size(); t += 3)

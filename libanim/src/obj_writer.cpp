@@ -2,6 +2,7 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <regex>
 #include <string>
 
 #include "anim/binary_io.hpp"
@@ -41,11 +42,16 @@ void writeText(const std::string& path, const std::string& text) {
 }  // namespace
 
 std::size_t saveObjSequence(const Animation& a, const std::string& pattern) {
-  const auto percent = pattern.find('%');
-  if (percent == std::string::npos || pattern.find('%', percent + 1) != std::string::npos ||
-      pattern.find('d', percent) == std::string::npos)
+  // Exactly one %d-style conversion (%d, %4d, %04d) and no other '%': the pattern becomes a printf
+  // format, so anything else (%s, %n) would be undefined behaviour.
+  static const std::regex valid("[^%]*%0?[0-9]{0,3}d[^%]*");
+  if (!std::regex_match(pattern, valid))
     throw Error(pattern + ": output pattern needs exactly one %d-style number, e.g. frames/f_%04d.obj");
+  requireExtension(pattern, ".obj", "OBJ sequence");
   const std::string faces = faceLines(a);
+  // All frames appear together or none: a failure half-way (a full disk) must not leave a shorter
+  // sequence behind that reads as a valid animation.
+  AtomicFileSet files;
   for (uint32_t k = 0; k < a.keyframeCount(); ++k) {
     char name[4096];
     std::snprintf(name, sizeof name, pattern.c_str(), int(k + 1));
@@ -54,8 +60,10 @@ std::size_t saveObjSequence(const Animation& a, const std::string& pattern) {
       std::error_code ec;
       if (!parent.empty()) std::filesystem::create_directories(parent, ec);
     }
-    writeText(name, objText(a, k, faces));
+    const std::string text = objText(a, k, faces);
+    files.write(name, std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
   }
+  files.commit();
   return a.keyframeCount();
 }
 

@@ -171,6 +171,7 @@ Animation decodeTanim(std::span<const uint8_t> bytes, const std::string& file) {
 }
 
 void saveTanim(const Animation& animation, const std::string& path) {
+  requireExtension(path, ".tanim", "animation");
   writeFileAtomically(path, encodeTanim(animation));
 }
 

@@ -179,6 +179,7 @@ BvhFile decodeBvhFile(std::span<const uint8_t> bytes, const std::string& file) {
 }
 
 void saveBvhFile(const std::string& path, const Bvh& bvh, const BvhBuildInfo& info) {
+  anim::requireExtension(path, ".tbvh", "tree");
   const std::vector<uint8_t> bytes = encodeBvhFile(bvh, info);
   anim::writeFileAtomically(path, bytes);
 }

@@ -52,6 +52,15 @@ struct CameraKey {
   float fovyDegrees = 45.0f;
 };
 
+// Largest coordinate magnitude accepted anywhere: a box of this extent still has a finite surface
+// area in float (3 * (2e18)^2 << 3.4e38), with room for the sums of costs. Larger coordinates (or
+// NaN/Inf) are refused at import, naming the first offending vertex.
+inline constexpr float kMaxCoordinate = 1e18f;
+// Index of the first coordinate that is NaN, infinite or beyond kMaxCoordinate; size() if none.
+std::size_t firstBadCoordinate(std::span<const float> positions);
+// "has a NaN or infinite coordinate" / "has coordinate 3e+38, beyond ..." for that coordinate.
+std::string describeBadCoordinate(float value);
+
 class Animation {
  public:
   Animation() = default;
