@@ -187,16 +187,16 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   const Bvh sahStarTree = o.embreeOnly ? Bvh{} : buildSahStar(repBoxes, config);
 
   // --- Segments: equal-time parts, count and budget modes (tsah/segmentation.hpp) -------------
-  SegmentExperiment experiment;
-  experiment.count = o.segments;
-  experiment.budget = o.budget;
-  experiment.frames = o.frames;
-  experiment.evalFrames = o.evalFrames;
-  experiment.rebuildCosts = table1[0].perFrame;  // kTable1Methods[0]: SAH-rebuild
-  experiment.oneTreeCosts = table1[3].perFrame;  // tsah0
-  experiment.oneTreeBuildSeconds = table1[3].buildSeconds;
   SegmentRuns segmentRuns;
-  if ((o.segments > 1 || o.budget > 0.0) && !o.embreeOnly) {
+  if ((o.segments > 1 || o.budget > 0.0) && !o.embreeOnly) {  // --embree-only has no Table 1
+    SegmentExperiment experiment;
+    experiment.count = o.segments;
+    experiment.budget = o.budget;
+    experiment.frames = o.frames;
+    experiment.evalFrames = o.evalFrames;
+    experiment.rebuildCosts = table1[0].perFrame;  // kTable1Methods[0]: SAH-rebuild
+    experiment.oneTreeCosts = table1[3].perFrame;  // tsah0
+    experiment.oneTreeBuildSeconds = table1[3].buildSeconds;
     nlohmann::json segments;
     segmentRuns = runSegmentExperiment(a, experiment, config, segments, say);
     j["segments"] = segments;

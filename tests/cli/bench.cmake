@@ -187,3 +187,11 @@ file(WRITE ${W}/seg_static.obj "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
 add_test(NAME cli.segments.static COMMAND tsah optimize ${W}/seg_static.obj -o ${W}/seg_static.tbvh --segments 2)
 set_tests_properties(cli.segments.static PROPERTIES
   PASS_REGULAR_EXPRESSION "^tsah: .*seg_static.obj: --segments needs an animation \\(this input has one frame\\)\n$")
+
+# --embree-only: no Table 1, no segments; only the T-SAH tree traced in every layout (and Embree
+# when it was found). A crash here once came from the segment experiment reading Table 1's rows.
+add_test(NAME cli.bench.embree-only
+         COMMAND tsah bench ${W}/bench_explode.tanim --embree-only --quick --width 48 --height 36 --trace-frames 2
+                 --out ${W}/bench_embree_only)
+set_tests_properties(cli.bench.embree-only PROPERTIES FIXTURES_REQUIRED bench_input
+  PASS_REGULAR_EXPRESSION "bench_embree_only/results.json")
