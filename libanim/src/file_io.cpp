@@ -11,7 +11,6 @@
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <mutex>
 #include <set>
 #include <thread>
@@ -192,26 +191,6 @@ void requireExtension(const std::string& path, const std::string& extension, con
   std::string ext = fs::path(path).extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
   if (ext != extension) throw Error(path + ": " + what + " files must end in " + extension);
-}
-
-void requireMemory(uint64_t bytes, const std::string& who, const std::string& what) {
-  // MemAvailable (+ free swap) is what can be allocated now; physical memory when /proc is absent.
-  uint64_t available = 0;
-  std::ifstream meminfo("/proc/meminfo");
-  std::string key;
-  uint64_t kib = 0;
-  std::string unit;
-  while (meminfo >> key >> kib) {
-    if (key == "MemAvailable:" || key == "SwapFree:") available += kib * 1024;
-    std::getline(meminfo, unit);
-  }
-  if (available == 0) {
-    const long pages = ::sysconf(_SC_PHYS_PAGES), pageSize = ::sysconf(_SC_PAGE_SIZE);
-    available = pages > 0 && pageSize > 0 ? uint64_t(pages) * uint64_t(pageSize) : UINT64_MAX;
-  }
-  if (bytes > available)
-    throw Error(who + ": " + what + " needs " + std::to_string((bytes + (1u << 20) - 1) >> 20) + " MiB, but only " +
-                std::to_string(available >> 20) + " MiB of memory are available");
 }
 
 void writeFileAtomically(const std::string& path, std::span<const uint8_t> bytes) {

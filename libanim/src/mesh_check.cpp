@@ -12,6 +12,7 @@
 #include "anim/animation.hpp"
 #include "anim/binary_io.hpp"
 #include "anim/error.hpp"
+#include "anim/memory.hpp"
 
 namespace anim {
 

@@ -20,6 +20,7 @@
 
 #include "anim/binary_io.hpp"
 #include "anim/error.hpp"
+#include "anim/memory.hpp"
 #include "mesh_check.hpp"
 
 namespace anim {

@@ -114,11 +114,6 @@ void protectInputs(bool on);
 // written as x.tanim would later be read as an animation: "PATH: WHAT files must end in .EXT".
 void requireExtension(const std::string& path, const std::string& extension, const std::string& what);
 
-// Throws anim::Error before an allocation of `bytes` that cannot fit in the memory available now
-// (with overcommit a huge vector would "succeed" and the process be killed while filling it):
-// "WHO: WHAT needs N MiB, but only M MiB of memory are available".
-void requireMemory(uint64_t bytes, const std::string& who, const std::string& what);
-
 // Writes bytes to `path` through a temporary file in the same folder and a rename; on any failure
 // (or SIGINT/SIGTERM once installInterruptCleanup ran) the temporary is removed and anim::Error is
 // thrown naming the path and the reason.
