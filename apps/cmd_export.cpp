@@ -227,8 +227,8 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
     config.isa = tsah::SimdIsa::Sse;  // the layout does not depend on the kernels; sse runs everywhere...
     if (config.layout == tsah::CpuLayout::Bvh8) config.isa.reset();  // ...but has no 8-wide kernels
     config.collapse = tsah::wideCollapseConfig(info);
-    tsah::CpuRuntime rt(set, {a.indices().begin(), a.indices().end()}, a.vertexCount(), config);
-    rt.selectTreeAt(time);
+    // Only the part's tree: a runtime over the whole set would collapse every tree of it.
+    tsah::CpuRuntime rt(set.trees[part], {a.indices().begin(), a.indices().end()}, a.vertexCount(), config);
     rt.update(positions);
 
     std::error_code ec;
