@@ -8,24 +8,18 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "animation_frames.hpp"
 #include "cli.hpp"
+#include "optimizer_options.hpp"
 #include "tsah/baselines.hpp"
+#include "tsah/pipeline.hpp"
 
 namespace {
 
 struct Options {
+  tsah::TreeOptions tree;  // method, k, frames, selection, seed, ct, ci, maxLeaf, limits, threads
   std::string input;
   std::string methods = "sah0,sahstar,tsah0,tsah2,tsah4,rebuild";
-  uint32_t frames = 5;
   uint32_t evalFrames = 50;
-  uint32_t maxLeaf = 8;
-  float ct = 3.0f, ci = 2.0f;
-  std::string selection = "mh";
-  uint64_t seed = 1;
-  double timeLimit = 0.0;
-  double minImprovement = tsah::InsertionOptimizer::Config{}.minImprovement;
-  unsigned threads = 0;
   bool json = false;
 };
 
@@ -53,33 +47,22 @@ void run(const Options& opt) {
   const std::vector<tsah::MethodSpec> methods = parseMethods(opt.methods, names);
   const anim::Animation a = tsah::cli::loadInput(opt.input);
   if (a.triangleCount() == 0) throw tsah::cli::UsageError(opt.input + ": no triangles to build a tree over");
-  const bool animated = a.keyframeCount() > 1;
-  const uint32_t frames = animated ? opt.frames : 1;
-  const uint32_t evalFrames = animated ? opt.evalFrames : 1;
-  const anim::Animation rep = a.resample(frames);
-  const tsah::PrimitiveBoxes repBoxes = tsah::triangleBoxes(rep.indices(), rep.allPositions(), frames);
+  const uint32_t frames = tsah::framesFor(a, opt.tree.frames);
+  const uint32_t evalFrames = tsah::framesFor(a, opt.evalFrames);
 
   tsah::cli::Progress progress("evaluate");
-  tsah::BaselineConfig config;
-  config.cost = {opt.ct, opt.ci};
-  config.maxLeafSize = opt.maxLeaf;
-  config.threads = opt.threads;
-  config.optimizer.selection = tsah::cli::parseSelection(opt.selection);
-  config.optimizer.seed = opt.seed;
-  config.optimizer.timeLimitSeconds = opt.timeLimit;
-  config.optimizer.minImprovement = opt.minImprovement;
-  config.progress = [&](const std::string& message) { progress.message(message); };
-  const std::vector<tsah::MethodResult> results =
-      tsah::compareMethods(methods, repBoxes, tsah::cli::animationFrames(a, a.uniformTimes(evalFrames)), config);
+  tsah::TreeOptions treeOpt = opt.tree;
+  treeOpt.progress = [&](const std::string& message) { progress.message(message); };
+  const std::vector<tsah::MethodResult> results = tsah::compareOnAnimation(a, methods, treeOpt, opt.evalFrames);
 
   nlohmann::json j;
   j["input"] = opt.input;
   j["triangles"] = a.triangleCount();
   j["frames"] = frames;
   j["eval_frames"] = evalFrames;
-  j["max_leaf"] = opt.maxLeaf;
-  j["ct"] = opt.ct;
-  j["ci"] = opt.ci;
+  j["max_leaf"] = opt.tree.maxLeaf;
+  j["ct"] = opt.tree.ct;
+  j["ci"] = opt.tree.ci;
   j["methods"] = nlohmann::json::array();
   for (std::size_t m = 0; m < results.size(); ++m)
     j["methods"].push_back({{"name", names[m]},
@@ -93,7 +76,7 @@ void run(const Options& opt) {
     return;
   }
   std::printf("%s: %u triangles, %u representative frames, %u evaluation frames, cT=%g cI=%g, max leaf %u\n",
-              opt.input.c_str(), a.triangleCount(), frames, evalFrames, double(opt.ct), double(opt.ci), opt.maxLeaf);
+              opt.input.c_str(), a.triangleCount(), frames, evalFrames, double(opt.tree.ct), double(opt.tree.ci), opt.tree.maxLeaf);
   std::printf("%-10s %10s %10s %10s\n", "method", "build [s]", "cost", "max cost");
   for (std::size_t m = 0; m < results.size(); ++m)
     std::printf("%-10s %10.2f %10.2f %10.2f\n", names[m].c_str(), results[m].buildSeconds, results[m].average,
@@ -108,29 +91,7 @@ TSAH_REGISTER_COMMAND(45, [](CLI::App& app) {
   sub->add_option("INPUT", opt->input, "Animation or static mesh (any input `tsah info` reads)")->required();
   sub->add_option("--methods", opt->methods, "Comma-separated: sah0, sahstar, rebuild, tsah<k> (tsah0, tsah2, ...)")
       ->capture_default_str();
-  sub->add_option("--frames", opt->frames, "Representative frames, uniform in time")
-      ->check(CLI::Range(1u, 1000u))
-      ->capture_default_str();
-  sub->add_option("--eval-frames", opt->evalFrames, "Evaluation frames, uniform in time")
-      ->check(CLI::Range(1u, 100000u))
-      ->capture_default_str();
-  sub->add_option("--max-leaf", opt->maxLeaf, "Largest leaf after collapse, for every method (1: one triangle per leaf)")
-      ->check(CLI::Range(1u, 256u))
-      ->capture_default_str();
-  sub->add_option("--ct", opt->ct, "Cost of traversing a node")->check(CLI::PositiveNumber)->capture_default_str();
-  sub->add_option("--ci", opt->ci, "Cost of intersecting a triangle")->check(CLI::PositiveNumber)->capture_default_str();
-  sub->add_option("--selection", opt->selection, "Node selection of every optimization: mh, random, batch")
-      ->check(CLI::IsMember({"mh", "random", "batch"}))
-      ->capture_default_str();
-  sub->add_option("--seed", opt->seed, "Random seed")->capture_default_str();
-  sub->add_option("--time-limit", opt->timeLimit, "Stop each optimization after this many seconds (0: none)")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  sub->add_option("--min-improvement", opt->minImprovement,
-                  "Stop after 3 batches that lower the cost by less than this fraction each (0: by nothing)")
-      ->check(CLI::Range(0.0, 1.0))
-      ->capture_default_str();
-  sub->add_option("--threads", opt->threads, "Worker threads (0: all cores)")->capture_default_str();
+  tsah::cli::addTreeOptions(*sub, opt->tree, opt->evalFrames);
   sub->add_flag("--json", opt->json, "Print one JSON object");
   sub->callback([opt] { run(*opt); });
 });

@@ -60,7 +60,7 @@ std::vector<double> randomWeights(uint32_t frames, std::mt19937& rng) {
 // The cheapest sum_i w_i C_i over every wide tree made of the binary tree's nodes, by enumerating
 // every (cost, slot count) a subtree can hand to its parent. Independent of the collapser's DP.
 double bruteForceOptimum(const Bvh& bvh, std::vector<double> weights, uint32_t width, uint32_t maxLeaf,
-                         const tsah::CostModel& model) {
+                         const tsah::CostModel& model, uint32_t packet) {
   double total = 0;
   for (double w : weights) total += w;
   auto area = [&](uint32_t n) {
@@ -78,7 +78,8 @@ double bruteForceOptimum(const Bvh& bvh, std::vector<double> weights, uint32_t w
     const auto& node = bvh.nodes[n];
     const double a = area(n);
     std::vector<Option> out;
-    if (node.isLeaf() || count(n) <= maxLeaf) out.push_back({double(model.ci) * double(count(n)) * a, 1});
+    const double tests = double((count(n) + packet - 1) / packet);
+    if (node.isLeaf() || count(n) <= maxLeaf) out.push_back({double(model.ci) * tests * a, 1});
     if (node.isLeaf()) return out;
     for (const Option& l : options(node.left))
       for (const Option& r : options(node.right)) {
@@ -106,13 +107,16 @@ TEST(WideBvh, MatchesBruteForceOptimumOnSmallRandomTrees) {
         WideCollapser::Config config;
         config.width = width;
         config.maxLeafSize = maxLeaf;
+        config.leafPacket = trial % 3 == 0 ? 4 : 1;
         config.cost = {trial % 2 ? 3.0f : 1.0f, 2.0f};
         double reached = 0;
         const WideBvh wide = WideCollapser(config).collapse(bvh, weights, &reached);
         ASSERT_EQ(tsah::validateWide(wide, &boxes), std::nullopt);
-        const double expected = bruteForceOptimum(bvh, weights, width, maxLeaf, config.cost);
+        const double expected = bruteForceOptimum(bvh, weights, width, maxLeaf, config.cost, config.leafPacket);
         EXPECT_NEAR(reached, expected, 1e-9 * expected) << "trial " << trial << " width " << width;
-        EXPECT_NEAR(tsah::wideWeightedCost(wide, weights, config.cost), expected, 1e-5 * expected);
+        if (config.leafPacket == 1) {  // wideWeightedCost is Eq. 1: one test per triangle
+          EXPECT_NEAR(tsah::wideWeightedCost(wide, weights, config.cost), expected, 1e-5 * expected);
+        }
         for (const tsah::WideChild& c : wide.children) {
           if (c.isLeaf()) {
             EXPECT_TRUE(c.count <= maxLeaf || c.count <= 3);  // 3: the largest binary leaf

@@ -31,19 +31,51 @@ RebuildMethod parseRebuildMethod(std::string_view name) {
   throw anim::Error("unknown GPU rebuild method '" + std::string(name) + "' (expected lbvh or hlbvh-sah)");
 }
 
-GpuRuntime::Impl::Impl(const FlatBvh& tree, const anim::Animation& animation, Config cfg) : config(cfg) {
+GpuRuntime::Impl::Impl(const TreeSet& set, const anim::Animation& animation, Config cfg) : config(cfg) {
   triangles = animation.triangleCount();
   vertices = animation.vertexCount();
   if (triangles == 0) throw anim::Error("GPU runtime: the animation has no triangles");
   if (animation.keyframeCount() == 0) throw anim::Error("GPU runtime: the animation has no keyframes");
-  if (tree.triangleCount() != triangles)
-    throw anim::Error("GPU runtime: the tree holds " + std::to_string(tree.triangleCount()) +
-                      " triangles, the animation " + std::to_string(triangles));
+  if (set.trees.empty() || set.ranges.size() != set.trees.size())
+    throw anim::Error("GPU runtime: the tree set holds no trees (or not one time range per tree)");
   const auto idx = animation.indices();
   for (uint32_t v : idx)
     if (v >= vertices) throw anim::Error("GPU runtime: a triangle refers to a vertex out of range");
 
+  CUDA_CHECK(cudaSetDevice(config.device));
+  device = describeDevice(config.device);
+  CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
+  events.create(16);
+  void* pinned = nullptr;
+  CUDA_CHECK(cudaHostAlloc(&pinned, sizeof(detail::FrameParams), cudaHostAllocDefault));
+  hostParams = new (pinned) detail::FrameParams{};
+  frameParams.resize(1);
+  times.assign(animation.times().begin(), animation.times().end());
+  // Only the moving vertices are keyed on the device; the static ones are uploaded once into
+  // `positions` and never written by the per-frame interpolation.
+  movingVertices = animation.movingVertexCount();
+  keyframes = DeviceBuffer<float>(animation.motion(), stream);
+  movingIds = DeviceBuffer<uint32_t>(animation.movingVertices(), stream);
+  hostRest.assign(animation.restPositions().begin(), animation.restPositions().end());
+  indices = DeviceBuffer<uint32_t>(idx, stream);
+  hostIndices.assign(idx.begin(), idx.end());
+  positions.resize(std::size_t(vertices) * 3);
+  if (!hostRest.empty()) positions.upload(std::span<const float>(hostRest), stream);
+  trees.reserve(set.trees.size());
+  for (const FlatBvh& t : set.trees) uploadTree(t);
+  ranges = set.ranges;
+  woop.resize(triangles);
+  words.resize(8);
+  CUDA_CHECK(cudaStreamSynchronize(stream));
+}
+
+void GpuRuntime::Impl::uploadTree(const FlatBvh& tree) {
+  if (tree.triangleCount() != triangles)
+    throw anim::Error("GPU runtime: the tree holds " + std::to_string(tree.triangleCount()) +
+                      " triangles, the animation " + std::to_string(triangles));
+  DeviceTree& d = trees.emplace_back();
   // Keep frame 0's block only, as CpuRuntime does: the boxes are recomputed by every update.
+  FlatBvh& topology = d.topology;
   topology.frameCount = 1;
   topology.interiorCount = tree.interiorCount;
   topology.leafCount = tree.leafCount;
@@ -78,41 +110,27 @@ GpuRuntime::Impl::Impl(const FlatBvh& tree, const anim::Animation& animation, Co
       }
     }
   }
-
-  CUDA_CHECK(cudaSetDevice(config.device));
-  device = describeDevice(config.device);
-  CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
-  events.create(16);
-  void* pinned = nullptr;
-  CUDA_CHECK(cudaHostAlloc(&pinned, sizeof(detail::FrameParams), cudaHostAllocDefault));
-  hostParams = new (pinned) detail::FrameParams{};
-  frameParams.resize(1);
-  times.assign(animation.times().begin(), animation.times().end());
-  keyframes = DeviceBuffer<float>(animation.allPositions(), stream);
-  indices = DeviceBuffer<uint32_t>(idx, stream);
-  hostIndices.assign(idx.begin(), idx.end());
-  positions.resize(std::size_t(vertices) * 3);
-  nodes = DeviceBuffer<GpuBvhNode>(std::span<const GpuBvhNode>(topology.nodes), stream);
-  nodeParent = DeviceBuffer<uint32_t>(std::span<const uint32_t>(parent), stream);
-  counters.resize(topology.interiorCount);
-  triIndex = DeviceBuffer<uint32_t>(std::span<const uint32_t>(topology.triIndex), stream);
-  leaves = DeviceBuffer<detail::LeafRecord>(std::span<const detail::LeafRecord>(leafRecords), stream);
+  d.nodes = DeviceBuffer<GpuBvhNode>(std::span<const GpuBvhNode>(topology.nodes), stream);
+  d.nodeParent = DeviceBuffer<uint32_t>(std::span<const uint32_t>(parent), stream);
+  d.counters.resize(topology.interiorCount);
+  d.triIndex = DeviceBuffer<uint32_t>(std::span<const uint32_t>(topology.triIndex), stream);
+  d.leaves = DeviceBuffer<detail::LeafRecord>(std::span<const detail::LeafRecord>(leafRecords), stream);
   detail::RootInfo r;
   r.box = topology.rootBoxes[0];
   r.ref = topology.rootRef;
   r.count = topology.rootCount;
   r.interiorCount = topology.interiorCount;
   r.depth = topology.depth;
-  root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&r, 1), stream);
-  woop.resize(triangles);
-  words.resize(8);
-  if (config.layout == TreeLayout::Cwbvh) uploadCwbvh(tree);
+  d.root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&r, 1), stream);
+  if (config.layout == TreeLayout::Cwbvh) d.cwbvh = uploadCwbvh(tree, stream);
+  // The host vectors above are freed when this returns: finish their uploads first.
   CUDA_CHECK(cudaStreamSynchronize(stream));
 }
 
 GpuRuntime::Impl::~Impl() {
   if (stream) cudaStreamSynchronize(stream);
-  if (updateGraph) cudaGraphExecDestroy(updateGraph);
+  for (const DeviceTree& t : trees)
+    if (t.updateGraph) cudaGraphExecDestroy(t.updateGraph);
   for (const auto& g : rebuildGraphs) cudaGraphExecDestroy(g.exec);
   if (hostParams) cudaFreeHost(hostParams);
   if (stream) cudaStreamDestroy(stream);
@@ -140,7 +158,7 @@ cudaGraphExec_t GpuRuntime::Impl::capture(Enqueue&& enqueue) {
 
 void GpuRuntime::Impl::setFrame(double time) {
   const auto [k, alpha] = anim::keyframeBlend(times, time);
-  const uint64_t perFrame = uint64_t(vertices) * 3;
+  const uint64_t perFrame = uint64_t(movingVertices) * 3;
   hostParams->a = k * perFrame;
   hostParams->b = (alpha == 0.0f ? k : k + 1) * perFrame;
   hostParams->alpha = alpha;
@@ -150,9 +168,15 @@ void GpuRuntime::Impl::enqueueInterpolation() {
   events.record(0, stream);
   CUDA_CHECK(cudaMemcpyAsync(frameParams.data(), hostParams, sizeof(detail::FrameParams), cudaMemcpyHostToDevice,
                              stream));
-  detail::launchInterpolateFrame(keyframes.data(), frameParams.data(), positions.data(), std::size_t(vertices) * 3,
-                                 stream);
+  detail::launchInterpolateFrame(keyframes.data(), movingIds.size() ? movingIds.data() : nullptr, frameParams.data(),
+                                 positions.data(), movingVertices, stream);
   events.record(1, stream);
+}
+
+void GpuRuntime::Impl::restoreStaticPositions() {
+  if (restInPlace) return;
+  if (!hostRest.empty()) positions.upload(std::span<const float>(hostRest), stream);
+  restInPlace = true;
 }
 
 void GpuRuntime::Impl::buildVertexTriangles() {
@@ -169,8 +193,8 @@ void GpuRuntime::Impl::buildVertexTriangles() {
 
 // The 8-wide collapse over all frames of the given tree (WideCollapser), its compressed layout,
 // and what the per-frame refit needs on the device.
-void GpuRuntime::Impl::uploadCwbvh(const FlatBvh& tree) {
-  cwbvh = std::make_unique<Cwbvh>();
+std::unique_ptr<GpuRuntime::Impl::Cwbvh> GpuRuntime::Impl::uploadCwbvh(const FlatBvh& tree, cudaStream_t stream) {
+  auto cwbvh = std::make_unique<Cwbvh>();
   Cwbvh& c = *cwbvh;
   c.host = buildCwbvh(tree);
   c.nodes = DeviceBuffer<CwbvhNode>(std::span<const CwbvhNode>(c.host.nodes), stream);
@@ -186,10 +210,11 @@ void GpuRuntime::Impl::uploadCwbvh(const FlatBvh& tree) {
   r.interiorCount = c.host.nodeCount();
   r.depth = c.host.depth;
   c.root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&r, 1), stream);
+  return cwbvh;
 }
 
 detail::TraceScene GpuRuntime::Impl::scene() const {
-  if (cwbvh && !tracingRebuilt) {
+  if (const Cwbvh* cwbvh = tree().cwbvh.get(); cwbvh && !tracingRebuilt) {
     detail::TraceScene s;
     s.woop = woop.data();
     s.triIndex = cwbvh->triIndex.data();
@@ -202,12 +227,12 @@ detail::TraceScene GpuRuntime::Impl::scene() const {
     return s;
   }
   detail::TraceScene s;
-  s.nodes = tracingRebuilt ? rebuilder->nodes() : nodes.data();
+  s.nodes = tracingRebuilt ? rebuilder->nodes() : tree().nodes.data();
   s.woop = woop.data();
-  s.triIndex = tracingRebuilt ? rebuilder->triIndex() : triIndex.data();
+  s.triIndex = tracingRebuilt ? rebuilder->triIndex() : tree().triIndex.data();
   s.indices = indices.data();
   s.positions = positions.data();
-  s.root = tracingRebuilt ? rebuilder->root() : root.data();
+  s.root = tracingRebuilt ? rebuilder->root() : tree().root.data();
   return s;
 }
 
@@ -217,8 +242,9 @@ void GpuRuntime::Impl::requireTraceable() const {
 }
 
 void GpuRuntime::Impl::enqueueRefitAndWoop() {
-  if (cwbvh) {  // refit + re-quantize the compressed layout, Woop triangles per slot of it
-    Cwbvh& c = *cwbvh;
+  DeviceTree& t = tree();
+  if (t.cwbvh) {  // refit + re-quantize the compressed layout, Woop triangles per slot of it
+    Cwbvh& c = *t.cwbvh;
     c.counters.fillBytes(0, stream);
     detail::launchCwbvhRefit(c.nodes.data(), c.exact.data(), c.parentSlot.data(), c.leaves.data(),
                              uint32_t(c.leaves.size()), c.triIndex.data(), indices.data(), positions.data(),
@@ -228,11 +254,11 @@ void GpuRuntime::Impl::enqueueRefitAndWoop() {
     events.record(3, stream);
     return;
   }
-  counters.fillBytes(0, stream);
-  detail::launchRefit(nodes.data(), nodeParent.data(), leaves.data(), uint32_t(leaves.size()), triIndex.data(),
-                      indices.data(), positions.data(), counters.data(), root.data(), stream);
+  t.counters.fillBytes(0, stream);
+  detail::launchRefit(t.nodes.data(), t.nodeParent.data(), t.leaves.data(), uint32_t(t.leaves.size()),
+                      t.triIndex.data(), indices.data(), positions.data(), t.counters.data(), t.root.data(), stream);
   events.record(2, stream);
-  detail::launchWoop(triIndex.data(), triangles, indices.data(), positions.data(), woop.data(), stream);
+  detail::launchWoop(t.triIndex.data(), triangles, indices.data(), positions.data(), woop.data(), stream);
   events.record(3, stream);
 }
 
@@ -247,22 +273,47 @@ UpdateTimings GpuRuntime::Impl::finishUpdate() {
   return timings;
 }
 
+namespace {
+
+TreeSet setOfOne(const FlatBvh& tree, const anim::Animation& animation) {
+  TreeSet set;
+  set.trees = {tree};
+  set.ranges = {{animation.startTime(), animation.endTime()}};
+  return set;
+}
+
+}  // namespace
+
 GpuRuntime::GpuRuntime(const FlatBvh& tree, const anim::Animation& animation, Config config)
-    : impl_(std::make_unique<Impl>(tree, animation, config)) {}
+    : impl_(std::make_unique<Impl>(setOfOne(tree, animation), animation, config)) {}
+GpuRuntime::GpuRuntime(const TreeSet& set, const anim::Animation& animation, Config config)
+    : impl_(std::make_unique<Impl>(set, animation, config)) {}
 GpuRuntime::GpuRuntime(const FlatBvh& tree, const anim::Animation& animation)
     : GpuRuntime(tree, animation, Config{}) {}
 GpuRuntime::~GpuRuntime() = default;
 
+uint32_t GpuRuntime::selectTreeAt(double time) {
+  Impl& m = *impl_;
+  m.current = treeIndexAt(m.ranges, time);
+  return m.current;
+}
+
+uint32_t GpuRuntime::treeCount() const { return static_cast<uint32_t>(impl_->trees.size()); }
+uint32_t GpuRuntime::currentTree() const { return impl_->current; }
+
 UpdateTimings GpuRuntime::updateAt(double time) {
   Impl& m = *impl_;
+  m.current = treeIndexAt(m.ranges, time);
   m.setFrame(time);
+  m.restoreStaticPositions();
   auto enqueue = [&] {
     m.enqueueInterpolation();
     m.enqueueRefitAndWoop();
   };
   if (m.config.useGraphs) {
-    if (!m.updateGraph) m.updateGraph = m.capture(enqueue);
-    CUDA_CHECK(cudaGraphLaunch(m.updateGraph, m.stream));
+    cudaGraphExec_t& graph = m.tree().updateGraph;
+    if (!graph) graph = m.capture(enqueue);
+    CUDA_CHECK(cudaGraphLaunch(graph, m.stream));
   } else {
     enqueue();
   }
@@ -276,6 +327,7 @@ UpdateTimings GpuRuntime::update(std::span<const float> positions) {
                       std::to_string(std::size_t(m.vertices) * 3));
   m.events.record(0, m.stream);
   m.positions.upload(positions, m.stream);
+  m.restInPlace = false;
   m.events.record(1, m.stream);
   m.enqueueRefitAndWoop();
   return m.finishUpdate();
@@ -295,6 +347,7 @@ RebuildTimings GpuRuntime::rebuildAt(double time, const RebuildOptions& options)
   if (options.maxLeafSize == 0) throw anim::Error("GPU rebuild: maxLeafSize must be at least 1");
   if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles);
   m.setFrame(time);
+  m.restoreStaticPositions();
   m.woopValid = false;
   m.tracingRebuilt = true;
   auto enqueue = [&] {
@@ -325,6 +378,7 @@ RebuildTimings GpuRuntime::rebuild(std::span<const float> positions, const Rebui
                       std::to_string(std::size_t(m.vertices) * 3));
   m.events.record(0, m.stream);
   m.positions.upload(positions, m.stream);
+  m.restInPlace = false;
   m.events.record(1, m.stream);
   if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles);
   m.woopValid = false;
@@ -346,18 +400,19 @@ std::vector<float> GpuRuntime::downloadPositions() const { return impl_->positio
 std::vector<WoopTriangle> GpuRuntime::downloadWoop() const { return impl_->woop.download(impl_->stream); }
 
 std::vector<CwbvhNode> GpuRuntime::downloadCwbvhNodes() const {
-  if (!impl_->cwbvh) throw anim::Error("GPU runtime: the tree is not in the compressed wide layout");
-  return impl_->cwbvh->nodes.download(impl_->stream);
+  const Impl::Cwbvh* cwbvh = impl_->tree().cwbvh.get();
+  if (!cwbvh) throw anim::Error("GPU runtime: the tree is not in the compressed wide layout");
+  return cwbvh->nodes.download(impl_->stream);
 }
 
 FlatBvh GpuRuntime::downloadTree() const {
   const Impl& m = *impl_;
-  if (m.cwbvh && !m.tracingRebuilt)
+  if (m.tree().cwbvh && !m.tracingRebuilt)
     throw anim::Error("GPU runtime: downloadTree gives the binary layout; this runtime traces the compressed one");
   if (m.tracingRebuilt) return flattenBvh(downloadRebuiltTree());
-  FlatBvh flat = m.topology;
-  flat.nodes = m.nodes.download(m.stream);
-  flat.rootBoxes = {m.root.download(m.stream)[0].box};
+  FlatBvh flat = m.tree().topology;
+  flat.nodes = m.tree().nodes.download(m.stream);
+  flat.rootBoxes = {m.tree().root.download(m.stream)[0].box};
   return flat;
 }
 

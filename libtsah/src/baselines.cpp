@@ -116,6 +116,22 @@ void checkFrames(const PrimitiveBoxes& rep) {
 
 }  // namespace
 
+std::string optimizerKindName(OptimizerKind kind) {
+  return kind == OptimizerKind::Sequential ? "sequential" : "parallel";
+}
+
+OptimizerKind parseOptimizerKind(const std::string& name) {
+  if (name == "sequential") return OptimizerKind::Sequential;
+  if (name == "parallel") return OptimizerKind::Parallel;
+  throw std::invalid_argument("unknown optimizer '" + name + "' (expected sequential or parallel)");
+}
+
+InsertionOptimizer::Result optimizeTree(Bvh bvh, const PrimitiveBoxes& prims, const InsertionOptimizer::Config& settings,
+                                        const BaselineConfig& config) {
+  if (config.optimizerKind == OptimizerKind::Sequential) return InsertionOptimizer(settings).optimize(std::move(bvh), prims);
+  return ParallelReinsertionOptimizer(settings, config.parallel).optimize(std::move(bvh), prims);
+}
+
 FrameSource FrameSource::fromBoxes(const PrimitiveBoxes& boxes) {
   FrameSource source;
   source.frameCount = boxes.frameCount;
@@ -177,8 +193,7 @@ Bvh buildSah0(const PrimitiveBoxes& rep, const BaselineConfig& config) {
 Bvh buildOptimizedSah(std::span<const Aabb> frame, const BaselineConfig& config, uint64_t seed) {
   const PrimitiveBoxes boxes = singleFrame(frame);
   Bvh bvh = SweepSahBuilder({config.cost, 1}).build(frame);
-  InsertionOptimizer::Result result =
-      InsertionOptimizer(optimizerConfig(config, 0, seed)).optimize(std::move(bvh), boxes);
+  InsertionOptimizer::Result result = optimizeTree(std::move(bvh), boxes, optimizerConfig(config, 0, seed), config);
   return collapseLeaves(result.bvh, config, 0);
 }
 
@@ -225,7 +240,7 @@ Bvh buildTSah(const PrimitiveBoxes& rep, int k, const BaselineConfig& config,
     if (progress.active())
       progress(label + ": batch " + std::to_string(r.batch) + ", cost " + std::to_string(r.cost));
   };
-  InsertionOptimizer::Result result = InsertionOptimizer(oc).optimize(std::move(bvh), rep);
+  InsertionOptimizer::Result result = optimizeTree(std::move(bvh), rep, oc, config);
   Bvh collapsed = collapseLeaves(result.bvh, config, k);
   if (details) {
     *details = std::move(result);

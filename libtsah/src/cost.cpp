@@ -4,25 +4,16 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "tsah/cost_terms.hpp"
+
 namespace tsah {
 
 namespace {
 
-// cT * inner + cI * primitives: the cost of a frame whose root has no area (see cost.hpp).
-double degenerateFrameCost(uint64_t innerCount, uint64_t primCount, const CostModel& model) {
-  return double(model.ct) * double(innerCount) + double(model.ci) * double(primCount);
-}
-
-// x^k for a small non-negative integer k, by squaring (std::pow is far slower, and this runs after
-// every optimizer step).
-double integerPower(double x, int k) {
-  double result = 1.0;
-  while (k > 0) {
-    if (k & 1) result *= x;
-    x *= x;
-    k >>= 1;
-  }
-  return result;
+// cT * inner + cI * primitives: the cost of a frame whose root has no area (see cost.hpp), as parts
+// over a unit root area (the same value cost::frameCost gives).
+CostParts degenerateFrameCost(uint64_t innerCount, uint64_t primCount, const CostModel& model) {
+  return {double(model.ct) * double(innerCount), double(model.ci) * double(primCount), 1.0};
 }
 
 }  // namespace
@@ -43,9 +34,7 @@ double frameCost(const Bvh& bvh, uint32_t frame, const CostModel& model) {
       ++innerCount;
     }
   }
-  const double rootArea = bvh.box(bvh.root, frame).area();
-  if (!(rootArea > 0.0)) return degenerateFrameCost(innerCount, primCount, model);
-  return (model.ct * inner + model.ci * leaves) / rootArea;
+  return cost::frameCost(model.ct, model.ci, inner, leaves, bvh.box(bvh.root, frame).area(), innerCount, primCount);
 }
 
 std::vector<double> frameCosts(const Bvh& bvh, const CostModel& model) {
@@ -55,25 +44,8 @@ std::vector<double> frameCosts(const Bvh& bvh, const CostModel& model) {
 }
 
 double temporalCost(std::span<const double> frameCosts, int k) {
-  if (frameCosts.empty()) return 0.0;
   if (k < 0) throw std::invalid_argument("temporalCost: the exponent k must be >= 0");
-  // Scale by the largest cost so that C^k cannot overflow for large k; the ratio is unchanged.
-  double largest = 0.0;
-  for (double c : frameCosts) largest = std::max(largest, c);
-  if (!(largest > 0.0)) return 0.0;
-  if (k == 0) {
-    double sum = 0.0;
-    for (double c : frameCosts) sum += c;
-    return sum / double(frameCosts.size());
-  }
-  double numerator = 0.0, denominator = 0.0;
-  for (double c : frameCosts) {
-    const double x = c / largest;
-    const double xk = integerPower(x, k);
-    numerator += xk * x;
-    denominator += xk;
-  }
-  return denominator > 0.0 ? largest * numerator / denominator : 0.0;
+  return cost::temporalCost(frameCosts.data(), static_cast<uint32_t>(frameCosts.size()), k);
 }
 
 std::vector<double> temporalWeights(std::span<const double> frameCosts, int k) {
@@ -84,7 +56,7 @@ std::vector<double> temporalWeights(std::span<const double> frameCosts, int k) {
   for (double c : frameCosts) largest = std::max(largest, c);
   double total = 0.0;
   for (std::size_t i = 0; i < frameCosts.size(); ++i) {
-    weights[i] = (k == 0 || !(largest > 0.0)) ? 1.0 : integerPower(frameCosts[i] / largest, k);
+    weights[i] = (k == 0 || !(largest > 0.0)) ? 1.0 : cost::integerPower(frameCosts[i] / largest, k);
     total += weights[i];
   }
   if (!(total > 0.0)) {  // every frame cost 0 with k > 0: weigh them equally
@@ -118,8 +90,8 @@ FrameCostEvaluator::FrameCostEvaluator(const Bvh& bvh, CostModel model) : bvh_(&
   std::reverse(postOrder_.begin(), postOrder_.end());
 }
 
-double FrameCostEvaluator::cost(std::span<const Aabb> primBoxes) {
-  if (postOrder_.empty()) return 0.0;
+CostParts FrameCostEvaluator::costParts(std::span<const Aabb> primBoxes) {
+  if (postOrder_.empty()) return {0.0, 0.0, 1.0};
   if (primBoxes.size() != bvh_->primIds.size())
     throw std::invalid_argument("FrameCostEvaluator: expected " +
                                 std::to_string(bvh_->primIds.size()) + " primitive boxes, got " +
@@ -139,7 +111,7 @@ double FrameCostEvaluator::cost(std::span<const Aabb> primBoxes) {
   }
   const double rootArea = boxes_[bvh_->root].area();
   if (!(rootArea > 0.0)) return degenerateFrameCost(innerCount_, primTotal_, model_);
-  return (model_.ct * inner + model_.ci * leaves) / rootArea;
+  return {model_.ct * inner, model_.ci * leaves, rootArea};
 }
 
 }  // namespace tsah

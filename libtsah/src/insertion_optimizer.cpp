@@ -9,14 +9,9 @@
 #include <string>
 #include <utility>
 
-// SSE2 (every x86-64) computes the union areas 4 lanes at a time; TSAH_SCALAR_SEARCH or another
-// architecture takes the plain loop.
-#if defined(__SSE2__) && !defined(TSAH_SCALAR_SEARCH)
-#define TSAH_SSE_SEARCH 1
-#include <immintrin.h>
-#endif
-
 #include "random.hpp"
+#include "stop_rule.hpp"
+#include "tsah/cost_terms.hpp"
 
 namespace tsah {
 
@@ -26,16 +21,6 @@ inline bool sameBox(const Aabb& a, const Aabb& b) {
   return a.lo.x == b.lo.x && a.lo.y == b.lo.y && a.lo.z == b.lo.z && a.hi.x == b.hi.x &&
          a.hi.y == b.hi.y && a.hi.z == b.hi.z;
 }
-
-#if !defined(TSAH_SSE_SEARCH)
-// Surface area of the union of two boxes, without building the union box first.
-inline float unionArea(const Aabb& a, const Aabb& b) {
-  const float dx = std::max(a.hi.x, b.hi.x) - std::min(a.lo.x, b.lo.x);
-  const float dy = std::max(a.hi.y, b.hi.y) - std::min(a.lo.y, b.lo.y);
-  const float dz = std::max(a.hi.z, b.hi.z) - std::min(a.lo.z, b.lo.z);
-  return 2.0f * (dx * dy + dy * dz + dz * dx);
-}
-#endif
 
 struct QueueEntry {
   float induced;
@@ -105,7 +90,7 @@ struct InsertionSession::Impl {
     nodeCount = shape.nodeCount();
     stride = std::size_t(frames) + 1;
     root = shape.root;
-    records.resize(std::size_t(nodeCount) * stride + 1);  // + a padding slot for 4-lane loads
+    records.resize(std::size_t(nodeCount) * stride);
     for (uint32_t n = 0; n < nodeCount; ++n) {
       const BvhNode& node = shape.nodes[n];
       setLeft(n, node.left);
@@ -186,22 +171,14 @@ struct InsertionSession::Impl {
   double costOf(std::span<const double> costs) const { return temporalCost(costs, config.k); }
 
   void computeFrameCost(uint32_t f) {
-    frameCost[f] = rootArea[f] > 0.0
-                       ? (config.cost.ct * innerArea[f] + config.cost.ci * leafArea[f]) / rootArea[f]
-                       : double(config.cost.ct) * double(innerCount) +
-                             double(config.cost.ci) * double(primTotal);
+    frameCost[f] = cost::frameCost(config.cost.ct, config.cost.ci, innerArea[f], leafArea[f], rootArea[f],
+                                   innerCount, primTotal);
   }
 
+  // A(N) and Delta_N = sum_i (w_i / W) S_N(i): the same weighted area with other factors.
   void updateNodeCaches(uint32_t n) {
-    const Aabb* b = box(n);
-    float a = 0.0f, d = 0.0f;
-    for (uint32_t f = 0; f < frames; ++f) {
-      const float s = b[f].area();
-      a += areaFactor[f] * s;
-      d += deltaFactor[f] * s;
-    }
-    header(n).lo.z = a;
-    setDelta(n, d);
+    header(n).lo.z = cost::weightedArea(box(n), areaFactor.data(), frames);
+    setDelta(n, cost::weightedArea(box(n), deltaFactor.data(), frames));
   }
 
   // Recomputes the frame costs from the boxes; with `weights`, also w_i and every node's A and Delta.
@@ -226,7 +203,7 @@ struct InsertionSession::Impl {
     const std::vector<double> w = temporalWeights(frameCost, config.k);
     for (uint32_t f = 0; f < frames; ++f) {
       deltaFactor[f] = float(w[f]);
-      areaFactor[f] = rootArea[f] > 0.0 ? float(w[f] / rootArea[f]) : 0.0f;
+      areaFactor[f] = cost::areaFactor(w[f], rootArea[f]);
     }
     for (uint32_t n = 0; n < nodeCount; ++n) updateNodeCaches(n);
   }
@@ -281,45 +258,18 @@ struct InsertionSession::Impl {
       }
       if (!changed) return;
       save(n);
-      float a = 0.0f, d = 0.0f;
       for (uint32_t f = 0; f < frames; ++f) {
-        const float before = b[f].area(), after = fresh[f].area();
-        stepAreaChange[f] += double(after) - double(before);
+        stepAreaChange[f] += double(fresh[f].area()) - double(b[f].area());
         b[f] = fresh[f];
-        a += areaFactor[f] * after;
-        d += deltaFactor[f] * after;
       }
-      header(n).lo.z = a;
-      setDelta(n, d);
+      updateNodeCaches(n);
       n = parent(n);
     }
   }
 
   // Weighted multi-frame area of the union of node x's boxes and the given boxes (from `records`).
   float unionCost(uint32_t x, const Aabb* c) const {
-    const Aabb* b = box(x);
-#if defined(TSAH_SSE_SEARCH)
-    // One box per iteration: [lo.x lo.y lo.z hi.x] and [hi.x hi.y hi.z next] as two 4-lane loads
-    // (the record array ends in a padding slot, so the last load stays inside it); lane 3 carries
-    // no area and is dropped at the end.
-    const float* pb = &b[0].lo.x;
-    const float* pc = &c[0].lo.x;
-    __m128 sum = _mm_setzero_ps();
-    for (uint32_t f = 0; f < frames; ++f, pb += 6, pc += 6) {
-      const __m128 lo = _mm_min_ps(_mm_loadu_ps(pb), _mm_loadu_ps(pc));
-      const __m128 hi = _mm_max_ps(_mm_loadu_ps(pb + 3), _mm_loadu_ps(pc + 3));
-      const __m128 d = _mm_sub_ps(hi, lo);
-      const __m128 rotated = _mm_shuffle_ps(d, d, _MM_SHUFFLE(3, 0, 2, 1));  // dy dz dx
-      sum = _mm_add_ps(sum, _mm_mul_ps(_mm_mul_ps(d, rotated), _mm_set1_ps(areaFactor[f])));
-    }
-    alignas(16) float lanes[4];
-    _mm_store_ps(lanes, sum);
-    return 2.0f * (lanes[0] + lanes[1] + lanes[2]);
-#else
-    float sum = 0.0f;
-    for (uint32_t f = 0; f < frames; ++f) sum += areaFactor[f] * unionArea(b[f], c[f]);
-    return sum;
-#endif
+    return cost::weightedUnionArea(box(x), c, areaFactor.data(), frames);
   }
 
   void push(QueueEntry e) {
@@ -603,8 +553,7 @@ InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const Primitive
   const uint32_t nodeCount = session.bvh().nodeCount();
   const auto batchSize = static_cast<uint32_t>(std::max(
       {1.0, double(config_.minBatchSize), std::round(config_.batchFraction * double(nodeCount))}));
-  double best = session.cost();
-  uint32_t withoutImprovement = 0;
+  StallCounter stall(session.cost(), config_.minImprovement, config_.batchesWithoutImprovement);
   bool anyEligible = true;
   for (uint32_t batch = 1; anyEligible; ++batch) {
     if (config_.selection == Selection::BatchSort) {
@@ -627,15 +576,7 @@ InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const Primitive
     }
     session.endBatch();
     record(batch);
-    const double cost = session.cost();
-    if (cost < best * (1.0 - config_.minImprovement)) {
-      best = std::min(best, cost);
-      withoutImprovement = 0;
-    } else {
-      best = std::min(best, cost);
-      ++withoutImprovement;
-    }
-    if (withoutImprovement >= config_.batchesWithoutImprovement) break;
+    if (stall.stalledAfter(session.cost())) break;
     if (config_.maxBatches && batch >= config_.maxBatches) break;
     if (limited && elapsed() >= config_.timeLimitSeconds) {
       result.timeLimitReached = true;

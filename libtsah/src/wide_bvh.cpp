@@ -40,6 +40,9 @@ class CollapsePlan {
         dist_(bvh.nodes.size() * width_, kInfinity), distSplit_(bvh.nodes.size() * width_, 0),
         fewer_(bvh.nodes.size() * width_, 0), asLeaf_(bvh.nodes.size(), 0), count_(bvh.nodes.size(), 0) {
     const double ct = config.cost.ct, ci = config.cost.ci;
+    const uint32_t packet = config.leafPacket;
+    // Triangle tests of a leaf: one per packet of `packet` triangles (1: Eq. 1's one per triangle).
+    const auto tests = [packet](uint32_t count) { return double((count + packet - 1) / packet); };
     for (uint32_t n : childrenFirstOrder(bvh)) {
       const BvhNode& node = bvh.nodes[n];
       double area = areas.degenerate;
@@ -48,7 +51,7 @@ class CollapsePlan {
       if (node.isLeaf()) {
         count_[n] = node.primCount;
         asLeaf_[n] = 1;
-        std::fill(s, s + width_, ci * node.primCount * area);
+        std::fill(s, s + width_, ci * tests(node.primCount) * area);
         continue;
       }
       count_[n] = count_[node.left] + count_[node.right];
@@ -62,7 +65,7 @@ class CollapsePlan {
           const double c = l[k - 1] + r[i - k - 1];
           if (c < d[i - 1]) d[i - 1] = c, split[i - 1] = uint8_t(k);
         }
-      const double leaf = !keepBinary && count_[n] <= config.maxLeafSize ? ci * count_[n] * area : kInfinity;
+      const double leaf = !keepBinary && count_[n] <= config.maxLeafSize ? ci * tests(count_[n]) * area : kInfinity;
       const double interior = ct * area + d[width_ - 1];
       asLeaf_[n] = leaf < interior ? 1 : 0;
       s[0] = std::min(leaf, interior);
@@ -216,6 +219,7 @@ WideCollapser::WideCollapser(Config config) : config_(config) {
   if (config_.width < 2 || config_.width > kMaxWideWidth)
     throw anim::Error("wide collapse: the width must be 2 to " + std::to_string(kMaxWideWidth));
   if (config_.maxLeafSize < 1) throw anim::Error("wide collapse: the maximum leaf size must be at least 1");
+  if (config_.leafPacket < 1) throw anim::Error("wide collapse: the leaf packet must hold at least 1 triangle");
   if (config_.k < 0) throw anim::Error("wide collapse: the exponent k must be >= 0");
   if (!(config_.cost.ct >= 0.0f) || !(config_.cost.ci >= 0.0f))
     throw anim::Error("wide collapse: the cost constants must be >= 0");
@@ -252,6 +256,15 @@ WideBvh WideCollapser::collapse(const Bvh& bvh) const {
   if (bestCost <= binaryCost) return best;
   const std::vector<double> w = normalizedWeights(temporalWeights(binaryCosts, config_.k), bvh.frameCount);
   return buildWide(bvh, CollapsePlan(bvh, config_, areaWeights(bvh, w), true), config_.width);
+}
+
+WideCollapser::Config wideCollapseConfig(const BvhBuildInfo& info, uint32_t width) {
+  WideCollapser::Config c;
+  c.width = width;
+  c.cost = {info.ct, info.ci};
+  c.k = std::max(0, info.k);
+  c.maxLeafSize = std::max(1u, info.maxLeafSize);
+  return c;
 }
 
 double wideFrameCost(const WideBvh& wide, uint32_t frame, const CostModel& model) {

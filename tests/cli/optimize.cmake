@@ -91,3 +91,32 @@ add_test(NAME cli.optimize.error.nothing-written
          COMMAND ${CMAKE_COMMAND} -E cat ${W}/never.tbvh)
 set_tests_properties(cli.optimize.error.nothing-written PROPERTIES WILL_FAIL TRUE
   DEPENDS "cli.optimize.error.missing;cli.optimize.error.method;cli.optimize.error.k")
+
+# The parallel optimizer: recorded in the report and the file, the same tree for 1 and 2 threads.
+add_test(NAME cli.optimize.parallel
+         COMMAND tsah optimize ${W}/opt_swap.tanim -o ${W}/opt_par.tbvh --optimizer parallel --threads 2 --json)
+set_tests_properties(cli.optimize.parallel PROPERTIES FIXTURES_REQUIRED opt_input
+  PASS_REGULAR_EXPRESSION "\"optimizer\":\"parallel\".*\"selection\":\"parallel\"")
+file(WRITE ${W}/opt_par_threads.cmake [=[
+foreach(threads 1 2)
+  execute_process(COMMAND ${TSAH} optimize ${INPUT} -o ${OUT}_${threads}.tbvh --optimizer parallel --k 2
+                          --threads ${threads} --json
+                  OUTPUT_VARIABLE json_${threads} RESULT_VARIABLE status)
+  if(NOT status EQUAL 0)
+    message(FATAL_ERROR "tsah optimize failed: ${status}")
+  endif()
+  string(REGEX REPLACE "\"(build_s|elapsed_s|seconds)\":[0-9.e+-]+" "" json_${threads} "${json_${threads}}")
+  string(REGEX REPLACE "\"output\":\"[^\"]*\"" "" json_${threads} "${json_${threads}}")
+endforeach()
+if(NOT json_1 STREQUAL json_2)
+  message(FATAL_ERROR "1 and 2 threads, different results:\n${json_1}\n${json_2}")
+endif()
+]=])
+add_test(NAME cli.optimize.parallel.threads
+         COMMAND ${CMAKE_COMMAND} -DTSAH=$<TARGET_FILE:tsah> -DINPUT=${W}/opt_swap.tanim -DOUT=${W}/opt_par
+                 -P ${W}/opt_par_threads.cmake)
+set_tests_properties(cli.optimize.parallel.threads PROPERTIES FIXTURES_REQUIRED opt_input)
+add_test(NAME cli.evaluate.parallel
+         COMMAND tsah evaluate ${W}/opt_swap.tanim --methods sahstar,tsah0,rebuild --optimizer parallel --eval-frames 4 --json)
+set_tests_properties(cli.evaluate.parallel PROPERTIES FIXTURES_REQUIRED opt_input
+  PASS_REGULAR_EXPRESSION "\"name\":\"sahstar\".*\"name\":\"tsah0\".*\"name\":\"rebuild\"")

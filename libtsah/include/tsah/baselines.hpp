@@ -10,7 +10,8 @@
 //
 // Every tree is collapsed to adaptive leaves (maxLeafSize; 1 keeps one primitive per leaf) with the
 // cost of the frames it was built for, then evaluated by refitting it to each evaluation frame.
-// libtsah never sees an animation: frames arrive as primitive boxes or triangle positions.
+// The builders never see an animation: frames arrive as primitive boxes or triangle positions
+// (tsah/pipeline.hpp is the glue from an anim::Animation).
 #include <cstdint>
 #include <functional>
 #include <span>
@@ -20,6 +21,7 @@
 #include "tsah/bvh.hpp"
 #include "tsah/cost.hpp"
 #include "tsah/insertion_optimizer.hpp"
+#include "tsah/parallel_optimizer.hpp"
 
 namespace tsah {
 
@@ -51,12 +53,25 @@ struct MethodSpec {
   static MethodSpec parse(const std::string& name);
 };
 
+// Which optimizer improves the trees of SAH*, SAH-rebuild and T-SAH.
+enum class OptimizerKind {
+  Sequential,  // InsertionOptimizer: the paper's Metropolis-Hastings insertion optimizer, one thread
+  Parallel,    // ParallelReinsertionOptimizer: parallel reinsertion on all cores
+};
+
+// "sequential" or "parallel"; parseOptimizerKind throws std::invalid_argument for anything else.
+std::string optimizerKindName(OptimizerKind kind);
+OptimizerKind parseOptimizerKind(const std::string& name);
+
 struct BaselineConfig {
   CostModel cost;
   uint32_t maxLeafSize = 8;  // leaf collapse after building; 1 keeps one primitive per leaf
-  // Settings of every insertion optimization (SAH*, SAH-rebuild, T-SAH). Its cost model and k are
-  // replaced by `cost` and the method's k; single-frame optimizations get derived seeds.
+  // Settings of every optimization (SAH*, SAH-rebuild, T-SAH), whichever optimizer runs it. Its
+  // cost model and k are replaced by `cost` and the method's k; single-frame optimizations get
+  // derived seeds.
   InsertionOptimizer::Config optimizer;
+  OptimizerKind optimizerKind = OptimizerKind::Sequential;
+  ParallelReinsertionOptimizer::Parallel parallel;  // settings of the parallel optimizer (its threads)
   unsigned threads = 0;  // worker threads for independent trees and frames; 0: all cores
   // Progress messages (which method, which frame, optimizer batches). May be called from worker
   // threads, one call at a time.
@@ -76,6 +91,11 @@ Bvh buildMethod(const MethodSpec& method, const PrimitiveBoxes& rep, const Basel
 // An optimized SAH tree for one frame (sweep SAH, insertion optimization, collapse), as SAH* and
 // SAH-rebuild use it. frameCount = 1.
 Bvh buildOptimizedSah(std::span<const Aabb> frame, const BaselineConfig& config, uint64_t seed);
+
+// One optimization with the configured optimizer (config.optimizerKind), with `settings` (a copy
+// of config.optimizer with the method's k and seed).
+InsertionOptimizer::Result optimizeTree(Bvh bvh, const PrimitiveBoxes& prims, const InsertionOptimizer::Config& settings,
+                                        const BaselineConfig& config);
 
 // Eq. 1 per frame of `frames` after refitting the tree's topology to each of them.
 std::vector<double> evaluateFrames(const Bvh& bvh, const FrameSource& frames, const CostModel& cost,

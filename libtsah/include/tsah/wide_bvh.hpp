@@ -15,11 +15,12 @@
 // dynamic programme knows the cheapest way to represent n's subtree as
 //   - one leaf (all its triangles; allowed when there are at most maxLeafSize of them, and always
 //     for a leaf of the binary tree):                       cost cI * count * A(n)
+//     (cI * ceil(count / leafPacket) * A(n) when the leaf is tested leafPacket triangles at once)
 //   - one wide interior node (its children are at most `width` slots distributed over n's two
 //     binary children):                                     cost cT * A(n) + cost of the slots
 //   - i slots (i = 1..width) handed to the parent's wide node: n dissolves, its two binary
 //     children share the i slots.
-// The result minimises sum_i w_i * C_i (Eq. 1 of the paper, with the wide tree's interior nodes
+// With leafPacket = 1 the result minimises sum_i w_i * C_i (Eq. 1 of the paper, with the wide tree's interior nodes
 // and leaves) over every wide tree whose nodes are nodes of the binary tree; for k = 0 that is
 // exactly the average cost C~^0. The binary tree itself is one such tree (if its leaves fit), so
 // with equal constants the wide tree never costs more than the binary one.
@@ -30,6 +31,7 @@
 #include <vector>
 
 #include "tsah/bvh.hpp"
+#include "tsah/bvh_file.hpp"
 #include "tsah/cost.hpp"
 #include "tsah/gpu_layout.hpp"  // the child reference encoding (makeLeafRef, leafFirstSlot)
 
@@ -95,6 +97,9 @@ class WideCollapser {
     CostModel cost;            // cT per wide interior node visit, cI per triangle test (defaults 3, 2:
                                // the paper's constants, so the wide and binary costs compare)
     int k = 0;                 // T-SAH exponent of the frame weights w_i = C_i^k of the binary tree
+    uint32_t leafPacket = 1;   // triangles tested at once: a leaf of j costs cI * ceil(j / leafPacket)
+                               // (1: Eq. 1; the SIMD layouts use their width, since testing one
+                               // packet of N triangles costs about as much as testing one)
   };
 
   WideCollapser() = default;
@@ -113,6 +118,9 @@ class WideCollapser {
  private:
   Config config_;
 };
+
+// The collapse a tree file asks for: its cost constants, T-SAH exponent and maximum leaf size.
+WideCollapser::Config wideCollapseConfig(const BvhBuildInfo& info, uint32_t width = 8);
 
 // Eq. 1 of the paper for the wide tree in one of its frames: (cT * sum over interior nodes of
 // S_N(i) + cI * sum over leaves of j_N * S_N(i)) / S_i, with the degenerate-frame rule of cost.hpp.

@@ -1,0 +1,219 @@
+// ParallelReinsertionOptimizer and its round-level session: tree invariants and exact cost tracking
+// after every round, never above the start, determinism over seeds and thread counts, quality
+// against the sequential optimizer, the temporal grouping T-SAH must find, bad input.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <stdexcept>
+#include <vector>
+
+#include "test_support.hpp"
+#include "tsah/cost.hpp"
+#include "tsah/insertion_optimizer.hpp"
+#include "tsah/parallel_optimizer.hpp"
+#include "tsah/sah_builder.hpp"
+
+namespace {
+
+using tsah::Bvh;
+using tsah::ParallelReinsertionOptimizer;
+using tsah::ReinsertionSession;
+
+tsah::PrimitiveBoxes movingBoxes(uint32_t triangles, uint32_t frames, uint32_t seed) {
+  return tsah::test::randomMovingTriangles(triangles, frames, seed, 4.0f).boxes();
+}
+
+Bvh initialTree(const tsah::PrimitiveBoxes& prims) { return tsah::SweepSahBuilder().build(prims.frame(0)); }
+
+ParallelReinsertionOptimizer::Parallel settings(unsigned threads, double fraction = 0.5) {
+  ParallelReinsertionOptimizer::Parallel p;
+  p.threads = threads;
+  p.candidateFraction = fraction;
+  return p;
+}
+
+bool sameTree(const Bvh& a, const Bvh& b) {
+  if (a.root != b.root || a.nodes.size() != b.nodes.size() || a.primIds != b.primIds || a.boxes.size() != b.boxes.size())
+    return false;
+  for (std::size_t n = 0; n < a.nodes.size(); ++n) {
+    const tsah::BvhNode &x = a.nodes[n], &y = b.nodes[n];
+    if (x.parent != y.parent || x.left != y.left || x.right != y.right || x.primBegin != y.primBegin ||
+        x.primCount != y.primCount)
+      return false;
+  }
+  return true;
+}
+
+TEST(ReinsertionSession, InvariantsAndExactCostAfterEveryRound) {
+  for (uint32_t seed : {1u, 2u, 3u}) {
+    for (uint32_t frames : {1u, 4u}) {
+      for (int k : {0, 2}) {
+        const tsah::PrimitiveBoxes prims = movingBoxes(150 + 100 * seed, frames, seed);
+        ParallelReinsertionOptimizer::Config config;
+        config.k = k;
+        config.seed = seed;
+        ReinsertionSession session(initialTree(prims), prims, config, settings(2, seed == 3 ? 1.0 : 0.5));
+        const double start = session.cost();
+        double previous = start;
+        uint64_t applied = 0;
+        for (int round = 0; round < 12; ++round) {
+          const auto stats = session.round();
+          applied += stats.applied;
+          EXPECT_LE(stats.applied, stats.winners);
+          EXPECT_LE(stats.winners, stats.improving);
+          EXPECT_LE(stats.improving, stats.candidates);
+          const Bvh tree = session.bvh();
+          const auto problem = tsah::validate(tree, &prims);
+          ASSERT_FALSE(problem.has_value()) << "round " << round << ": " << *problem;
+          const std::vector<double> perFrame = tsah::frameCosts(tree);
+          for (uint32_t f = 0; f < frames; ++f)
+            ASSERT_NEAR(session.frameCosts()[f], perFrame[f], 1e-9 * perFrame[f]) << "round " << round;
+          const double expected = tsah::temporalCost(perFrame, k);
+          ASSERT_NEAR(session.cost(), expected, 1e-9 * expected) << "round " << round;
+          EXPECT_LE(session.cost(), previous * (1 + 1e-12)) << "a round raised the cost";
+          session.endRound();
+          EXPECT_NEAR(session.cost(), expected, 1e-9 * expected) << "new weights changed the cost";
+          previous = session.cost();
+        }
+        EXPECT_GT(applied, 0u);
+        EXPECT_LT(session.cost(), start);
+        EXPECT_EQ(session.appliedMoves(), applied);
+      }
+    }
+  }
+}
+
+// Moves the subtree l next to x (as the search's moves do, reusing l's parent), then refits.
+Bvh movedTree(Bvh bvh, uint32_t l, uint32_t x, const tsah::PrimitiveBoxes& prims) {
+  auto& nodes = bvh.nodes;
+  const auto replaceChild = [&](uint32_t parent, uint32_t from, uint32_t to) {
+    (nodes[parent].left == from ? nodes[parent].left : nodes[parent].right) = to;
+  };
+  const uint32_t p = nodes[l].parent, g = nodes[p].parent;
+  const uint32_t s = nodes[p].left == l ? nodes[p].right : nodes[p].left;
+  replaceChild(g, p, s);
+  nodes[s].parent = g;
+  const uint32_t xp = nodes[x].parent;
+  nodes[p].parent = xp;
+  nodes[p].left = x;
+  nodes[p].right = l;
+  nodes[x].parent = p;
+  nodes[l].parent = p;
+  if (xp == tsah::kInvalidIndex) bvh.root = p;
+  else replaceChild(xp, x, p);
+  tsah::refit(bvh, prims);
+  return bvh;
+}
+
+bool inSubtree(const Bvh& bvh, uint32_t node, uint32_t top) {
+  for (uint32_t n = node; n != tsah::kInvalidIndex; n = bvh.nodes[n].parent)
+    if (n == top) return true;
+  return false;
+}
+
+// Once a round searching every node finds nothing, no single move (any L, any X, tried by brute
+// force) lowers the cost: the branch-and-bound search misses no position.
+TEST(ReinsertionSession, ConvergedTreeHasNoImprovingSingleMove) {
+  for (uint32_t seed : {5u, 6u}) {
+    const tsah::PrimitiveBoxes prims = movingBoxes(40, 3, seed);
+    ReinsertionSession session(initialTree(prims), prims, {}, settings(2, 1.0));
+    int rounds = 0;
+    while (session.round().improving > 0 && ++rounds < 500) {
+    }
+    ASSERT_LT(rounds, 500);
+    const Bvh tree = session.bvh();
+    const double cost = session.cost();
+    for (uint32_t l = 0; l < tree.nodeCount(); ++l) {
+      const uint32_t p = tree.nodes[l].parent;
+      if (l == tree.root || p == tree.root) continue;
+      for (uint32_t x = 0; x < tree.nodeCount(); ++x) {
+        const uint32_t sibling = tree.nodes[p].left == l ? tree.nodes[p].right : tree.nodes[p].left;
+        if (x == p || x == sibling || inSubtree(tree, x, l)) continue;
+        const double moved = tsah::temporalCost(tsah::frameCosts(movedTree(tree, l, x, prims)), 0);
+        EXPECT_GE(moved, cost * (1 - 1e-6)) << "moving " << l << " next to " << x;
+      }
+    }
+  }
+}
+
+TEST(ParallelReinsertionOptimizer, NeverEndsAboveItsStartAndHistoryIsMonotone) {
+  for (int k : {0, 1, 4}) {
+    const tsah::PrimitiveBoxes prims = movingBoxes(800, 5, 7 + k);
+    ParallelReinsertionOptimizer::Config config;
+    config.k = k;
+    const auto result = ParallelReinsertionOptimizer(config, settings(2)).optimize(initialTree(prims), prims);
+    ASSERT_FALSE(tsah::validate(result.bvh, &prims).has_value());
+    EXPECT_LT(result.finalCost, result.initialCost);
+    ASSERT_GE(result.history.size(), 2u);
+    for (std::size_t i = 1; i < result.history.size(); ++i)
+      EXPECT_LE(result.history[i].cost, result.history[i - 1].cost * (1 + 1e-12));
+    EXPECT_NEAR(result.finalCost, tsah::temporalCost(tsah::frameCosts(result.bvh), k), 1e-9 * result.finalCost);
+    EXPECT_EQ(result.history.back().acceptedSteps, result.acceptedSteps);
+  }
+}
+
+TEST(ParallelReinsertionOptimizer, SameSeedSameTreeForAnyThreadCount) {
+  const tsah::PrimitiveBoxes prims = movingBoxes(1500, 3, 41);
+  ParallelReinsertionOptimizer::Config config;
+  config.seed = 99;
+  config.k = 2;
+  const auto one = ParallelReinsertionOptimizer(config, settings(1)).optimize(initialTree(prims), prims);
+  const auto again = ParallelReinsertionOptimizer(config, settings(1)).optimize(initialTree(prims), prims);
+  const auto two = ParallelReinsertionOptimizer(config, settings(2)).optimize(initialTree(prims), prims);
+  const auto four = ParallelReinsertionOptimizer(config, settings(4)).optimize(initialTree(prims), prims);
+  for (const auto* other : {&again, &two, &four}) {
+    EXPECT_TRUE(sameTree(one.bvh, other->bvh));
+    EXPECT_EQ(one.finalCost, other->finalCost);
+    EXPECT_EQ(one.acceptedSteps, other->acceptedSteps);
+  }
+  config.seed = 100;
+  const auto otherSeed = ParallelReinsertionOptimizer(config, settings(2)).optimize(initialTree(prims), prims);
+  EXPECT_FALSE(sameTree(one.bvh, otherSeed.bvh));
+}
+
+TEST(ParallelReinsertionOptimizer, WithinThreePercentOfTheSequentialOptimizer) {
+  for (uint32_t seed : {11u, 12u, 13u}) {
+    for (int k : {0, 2}) {
+      const tsah::PrimitiveBoxes prims = movingBoxes(2000, 5, seed);
+      tsah::InsertionOptimizer::Config config;
+      config.k = k;
+      config.seed = seed;
+      const auto sequential = tsah::InsertionOptimizer(config).optimize(initialTree(prims), prims);
+      const auto parallel = ParallelReinsertionOptimizer(config, settings(2)).optimize(initialTree(prims), prims);
+      std::printf("seed %u k %d: parallel / sequential = %.4f\n", seed, k, parallel.finalCost / sequential.finalCost);
+      EXPECT_LT(parallel.finalCost, 1.03 * sequential.finalCost)
+          << "seed " << seed << " k " << k << ": parallel " << parallel.finalCost << ", sequential "
+          << sequential.finalCost;
+    }
+  }
+}
+
+TEST(ParallelReinsertionOptimizer, LimitsTinyTreesAndBadInput) {
+  const tsah::PrimitiveBoxes prims = movingBoxes(2000, 2, 51);
+  ParallelReinsertionOptimizer::Config rounds;
+  rounds.maxBatches = 2;
+  const auto two = ParallelReinsertionOptimizer(rounds).optimize(initialTree(prims), prims);
+  EXPECT_EQ(two.history.size(), 3u);
+  ParallelReinsertionOptimizer::Config limited;
+  limited.timeLimitSeconds = 1e-9;
+  const auto once = ParallelReinsertionOptimizer(limited).optimize(initialTree(prims), prims);
+  EXPECT_TRUE(once.timeLimitReached);
+  EXPECT_EQ(once.history.size(), 2u);
+
+  for (uint32_t count : {1u, 2u, 3u}) {  // no eligible node: the tree comes back unchanged
+    const tsah::PrimitiveBoxes few = movingBoxes(count, 2, 60 + count);
+    const auto result = ParallelReinsertionOptimizer().optimize(initialTree(few), few);
+    EXPECT_FALSE(tsah::validate(result.bvh, &few).has_value());
+    EXPECT_EQ(result.acceptedSteps, 0u);
+  }
+
+  const tsah::PrimitiveBoxes other = movingBoxes(5, 2, 62);
+  EXPECT_THROW(ParallelReinsertionOptimizer().optimize(initialTree(prims), other), std::invalid_argument);
+  ParallelReinsertionOptimizer::Config negative;
+  negative.k = -1;
+  EXPECT_THROW(ParallelReinsertionOptimizer{negative}, std::invalid_argument);
+  EXPECT_THROW(ParallelReinsertionOptimizer({}, settings(1, 0.0)), std::invalid_argument);
+  EXPECT_THROW(ParallelReinsertionOptimizer({}, settings(1, 1.5)), std::invalid_argument);
+}
+
+}  // namespace
