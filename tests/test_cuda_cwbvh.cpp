@@ -20,6 +20,7 @@
 #include "tsah/sah_builder.hpp"
 #include "tsah/sampling.hpp"
 #include "tsah/traversal.hpp"
+#include "tsah/tree_set.hpp"
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 
@@ -144,6 +145,47 @@ TEST(CudaCwbvh, HitsEqualCpuReferenceAndBinaryGpu) {
     }
     EXPECT_GT(hits, 10000u);
     EXPECT_LE(ties, hits / 100) << "ties";
+  }
+}
+
+// A tree set in the compressed layout: every tree gets its own compressed nodes; updateAt traces the
+// tree of the frame's part, with the hits of the binary runtime over the same set.
+TEST(CudaCwbvh, TreeSetTracesTheTreeOfEachPartLikeTheBinaryLayout) {
+  REQUIRE_GPU();
+  const anim::Animation a = makeAnimation(anim::GeneratorKind::Explode, 4000, 6);
+  tsah::TreeSet set;
+  for (uint32_t k : {0u, 3u}) {
+    const tsah::PrimitiveBoxes boxes = tsah::triangleBoxes(a.indices(), a.allPositions(), a.keyframeCount());
+    tsah::LeafCollapser::Config c;
+    c.maxLeafSize = 8;
+    tsah::Bvh bvh = tsah::LeafCollapser(c).collapse(tsah::SweepSahBuilder().build(boxes.frame(k)));
+    tsah::refit(bvh, boxes);
+    set.trees.push_back(tsah::flattenBvh(bvh));
+  }
+  const double mid = 0.5 * (a.startTime() + a.endTime());
+  set.ranges = {{a.startTime(), mid}, {mid, a.endTime()}};
+  tc::GpuRuntime gpuWide(set, a, wide());
+  tc::GpuRuntime gpuBinary(set, a, tc::GpuRuntime::Config{});
+  for (double t : {a.startTime(), mid - 0.1, mid + 0.1, a.endTime()}) {
+    gpuWide.updateAt(t);
+    gpuBinary.updateAt(t);
+    ASSERT_EQ(gpuWide.currentTree(), set.treeAt(t)) << "t=" << t;
+    // The compressed nodes are those of the part's tree, refitted to t.
+    tsah::CwbvhTree host = tsah::buildCwbvh(set.trees[set.treeAt(t)]);
+    tsah::refitCwbvh(host, a.indices(), a.positionsAt(t));
+    const std::vector<tsah::CwbvhNode> nodes = gpuWide.downloadCwbvhNodes();
+    ASSERT_EQ(nodes.size(), host.nodes.size()) << "t=" << t;
+    EXPECT_EQ(std::memcmp(nodes.data(), host.nodes.data(), nodes.size() * sizeof(tsah::CwbvhNode)), 0) << "t=" << t;
+    const auto rays = randomRays(gpuBinary.bounds(), a, a.positionsAt(t), 5000, 3);
+    const auto wideHits = gpuWide.closestHits(rays), binaryHits = gpuBinary.closestHits(rays);
+    const auto wideAny = gpuWide.anyHits(rays), binaryAny = gpuBinary.anyHits(rays);
+    for (size_t i = 0; i < rays.size(); ++i) {
+      ASSERT_EQ(wideAny[i], binaryAny[i]) << "t=" << t << " ray " << i;
+      ASSERT_EQ(wideHits[i].valid(), binaryHits[i].valid()) << "t=" << t << " ray " << i;
+      if (wideHits[i].valid()) {
+        ASSERT_EQ(wideHits[i].t, binaryHits[i].t) << "t=" << t << " ray " << i;
+      }
+    }
   }
 }
 
