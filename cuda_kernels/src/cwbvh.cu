@@ -6,14 +6,11 @@
 
 #include "cwbvh_kernels.hpp"
 #include "launch.hpp"
+#include "triangle_boxes.cuh"
 
 namespace tsah::cuda::detail {
 
 namespace {
-
-__device__ __forceinline__ Vec3 vertexAt(const float* __restrict__ p, uint32_t v) {
-  return {__ldg(p + 3 * std::size_t(v)), __ldg(p + 3 * std::size_t(v) + 1), __ldg(p + 3 * std::size_t(v) + 2)};
-}
 
 __device__ __forceinline__ void storeBox(Aabb* b, const Aabb& box) {
   float* f = reinterpret_cast<float*>(b);
@@ -37,13 +34,7 @@ __global__ void cwbvhRefitKernel(CwbvhNode* __restrict__ nodes, Aabb* __restrict
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= leafCount) return;
   const CwbvhLeaf leaf = leaves[i];
-  Aabb box;
-  for (uint32_t s = leaf.first; s < leaf.first + leaf.count; ++s) {
-    const uint32_t* tri = indices + 3 * std::size_t(__ldg(triIndex + s));
-    box.extend(vertexAt(positions, __ldg(tri)));
-    box.extend(vertexAt(positions, __ldg(tri + 1)));
-    box.extend(vertexAt(positions, __ldg(tri + 2)));
-  }
+  Aabb box = leafBox(leaf.first, leaf.count, triIndex, indices, positions);
   uint32_t slot = leaf.nodeSlot;
   while (slot != kCwbvhNoParent) {
     const uint32_t node = slot / kCwbvhWidth;
