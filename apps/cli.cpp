@@ -99,6 +99,15 @@ void setupAllCommands(CLI::App& app) {
   hardenNumericOptions(app);
 }
 
+void checkLayoutForDevice(const std::string& layout, const std::string& device) {
+  const bool gpu = device == "cuda";
+  const bool ok = layout == "auto" || layout == "bvh2" ||
+                  (gpu ? layout == "cwbvh" : layout == "bvh4" || layout == "bvh8");
+  if (!ok)
+    throw UsageError("--layout " + layout + " is not a layout of --device " + device + " (" +
+                     (gpu ? "auto, bvh2 or cwbvh" : "auto, bvh2, bvh4 or bvh8") + ")");
+}
+
 bool progressEnabled() {
   static const bool enabled = ::isatty(STDERR_FILENO) == 1;
   return enabled;

@@ -34,6 +34,10 @@ void hardenNumericOptions(CLI::App& app);
 // A CLI11 message as one line with compact numbers ("0 to 1", not "0.000000 to 1.000000").
 std::string compactNumbers(const std::string& text);
 
+// --layout of trace and bench for --device (cpu or cuda): auto, or a layout that device traces
+// (cpu: bvh2, bvh4, bvh8; cuda: bvh2, cwbvh). Throws UsageError naming the device's layouts otherwise.
+void checkLayoutForDevice(const std::string& layout, const std::string& device);
+
 // True when stderr is a terminal: progress output is shown only then.
 bool progressEnabled();
 

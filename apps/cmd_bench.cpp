@@ -131,6 +131,7 @@ void run(Options opt, CLI::App* sub) {
   if (b.embreeOnly && (opt.noEmbree || b.device != "cpu"))
     throw UsageError("--embree-only runs the CPU comparison with Embree: not with --no-embree or --device cuda");
   if (b.embreeOnly && !embreeAvailable()) throw UsageError("--embree-only: " + embreeStatus());
+  tsah::cli::checkLayoutForDevice(b.layout, b.device);
   b.convergence = !opt.noConvergence;
   const anim::LoadOptions& load = tsah::cli::commandLineLoadOptions();
   b.fps = load.fps;
@@ -319,9 +320,10 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
                 "Only the T-SAH tree and the toolkit (bvh2/bvh4/bvh8) vs Embree comparison: no Tables 1 and 2, "
                 "no convergence runs, no segments");
   sub->add_option("--layout", b.layout,
-                  "CPU tree layout of Table 2 and the default of the Embree comparison: bvh2, bvh4, bvh8, or auto "
-                  "(the widest the processor's SIMD kernels support)")
-      ->check(CLI::IsMember({"auto", "bvh2", "bvh4", "bvh8"}))
+                  "Tree layout of Table 2: auto (the device's fastest: on the CPU the widest the processor's SIMD "
+                  "kernels support, also the default of the Embree comparison), CPU bvh2, bvh4 or bvh8, cuda bvh2 "
+                  "or cwbvh (compressed 8-wide)")
+      ->check(CLI::IsMember({"auto", "bvh2", "bvh4", "bvh8", "cwbvh"}))
       ->capture_default_str();
   sub->add_flag("--no-convergence", opt->noConvergence, "Skip the random and batch-sort optimizations of the convergence plot");
   sub->add_option("--note", opt->notes,

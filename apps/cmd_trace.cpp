@@ -52,7 +52,7 @@ tsah::Vec3 parseVec3(const std::string& text, const std::string& option) {
 
 struct TraceOptions {
   std::string input, bvh, device = "cpu", out = "trace", camera, eye, lookAt, up = "0,1,0", rebuild = "none";
-  std::string layout = "auto", isa = "auto";  // CPU: tree layout and SIMD kernels
+  std::string layout = "auto", isa = "auto";  // tree layout (CPU or GPU) and the CPU's SIMD kernels
   uint32_t frames = 0, width = 1024, height = 768, ao = 8, shadow = 2, threads = 0, seed = 1;
   float fov = 45.0f, aoDistance = 0.0f, aoFraction = 0.1f;
   bool json = false, noImages = false, noGround = false;
@@ -69,8 +69,7 @@ void checkDeviceAndRebuild(const TraceOptions& opt) {
   if (opt.device == "cuda" && isCpuRebuild(opt.rebuild))
     throw UsageError("--rebuild " + opt.rebuild + " is a CPU rebuild: use it with --device cpu "
                      "(the GPU rebuilds are lbvh and hlbvh-sah)");
-  if (opt.device == "cuda" && (opt.layout != "auto" && opt.layout != "bvh2"))
-    throw UsageError("--layout " + opt.layout + " is a CPU layout; the GPU runtime traces the binary tree");
+  tsah::cli::checkLayoutForDevice(opt.layout, opt.device);
   if (opt.device != "cuda") return;
 #if TSAH_HAVE_CUDA
   if (!tsah::cuda::deviceAvailable())
@@ -194,8 +193,8 @@ tsah::CpuRuntime::TreeBuilder cpuRebuilder(const std::string& rebuild, const tsa
 class GpuFrameRuntime final : public FrameRuntime {
  public:
   GpuFrameRuntime(const tsah::TreeSet& trees, const anim::Animation& animation,
-                  std::optional<tsah::cuda::RebuildOptions> rebuild)
-      : runtime_(trees, animation, tsah::cuda::GpuRuntime::Config{}), rebuild_(rebuild) {}
+                  std::optional<tsah::cuda::RebuildOptions> rebuild, tsah::cuda::GpuRuntime::Config config)
+      : runtime_(trees, animation, config), rebuild_(rebuild) {}
 
   void warmUp(double time, const tsah::Camera& camera, const tsah::SceneLighting& lighting,
               const tsah::RenderSettings& settings) override {
@@ -221,7 +220,9 @@ class GpuFrameRuntime final : public FrameRuntime {
   }
 
   uint32_t currentTree() const override { return runtime_.currentTree(); }
-  std::string summary() const override { return "GPU " + runtime_.device().name; }
+  std::string summary() const override {
+    return "GPU " + runtime_.device().name + ", " + tsah::cuda::treeLayoutName(runtime_.config().layout) + " layout";
+  }
   void describe(nlohmann::json& out) const override {
     const tsah::cuda::DeviceInfo& d = runtime_.device();
     out["device"] = d.name;
@@ -232,6 +233,7 @@ class GpuFrameRuntime final : public FrameRuntime {
                   {"cuda_runtime", d.runtimeVersion},
                   {"cuda_driver", d.driverVersion}};
     out["timer"] = "CUDA events (device time)";
+    out["layout"] = tsah::cuda::treeLayoutName(runtime_.config().layout);
   }
 
  private:
@@ -253,7 +255,9 @@ std::unique_ptr<FrameRuntime> makeRuntime(const TraceOptions& opt, const tsah::T
       rebuild->maxLeafSize = maxLeaf;
       rebuild->cost = cost;
     }
-    return std::make_unique<GpuFrameRuntime>(trees, a, rebuild);
+    tsah::cuda::GpuRuntime::Config config;
+    if (opt.layout != "auto") config.layout = tsah::cuda::parseTreeLayout(opt.layout);
+    return std::make_unique<GpuFrameRuntime>(trees, a, rebuild, config);
   }
 #endif
   tsah::CpuRuntime::Config config(opt.threads);
@@ -502,9 +506,10 @@ TSAH_REGISTER_COMMAND(70, [](CLI::App& app) {
   sub->add_option("--fov", opt->fov, "Vertical field of view in degrees (default 45)");
   sub->add_option("--threads", opt->threads, "CPU worker threads (0: all cores)");
   sub->add_option("--layout", opt->layout,
-                  "CPU tree layout: bvh2 (the binary tree), bvh4 or bvh8 (wide trees collapsed from it at load time); "
-                  "default auto: the widest the processor's SIMD kernels support")
-      ->check(CLI::IsMember({"auto", "bvh2", "bvh4", "bvh8"}));
+                  "Tree layout: CPU bvh2 (the binary tree), bvh4 or bvh8 (wide trees collapsed from it at load "
+                  "time); GPU bvh2 or cwbvh (compressed 8-wide, docs/cwbvh.md); default auto: on the CPU the widest "
+                  "the processor's SIMD kernels support, on the GPU the runtime's default")
+      ->check(CLI::IsMember({"auto", "bvh2", "bvh4", "bvh8", "cwbvh"}));
   sub->add_option("--isa", opt->isa, "CPU SIMD kernels of a wide layout: sse, avx2 or avx512 (default auto: the best)")
       ->check(CLI::IsMember({"auto", "sse", "avx2", "avx512"}));
   sub->add_option("--seed", opt->seed, "Seed of the per-pixel random numbers (default 1)");

@@ -241,7 +241,7 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
       std::to_string(o.shadowRays) + " shadow rays per pixel");
   nlohmann::json runtime;
   runtime["device"] = gpu ? "cuda" : "cpu";
-  if (!gpu) runtime["layout"] = layoutName(setup.layout);
+  runtime["layout"] = gpu ? (o.layout == "auto" ? "default" : o.layout) : layoutName(setup.layout);
   runtime["frames"] = setup.times.size();
   runtime["width"] = o.width;
   runtime["height"] = o.height;
@@ -266,7 +266,8 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
     runtime["skipped"] = "--embree-only";
   } else if (gpu) {
     for (const RefitTrees& r : refits)
-      runtime["methods"].push_back(toJson(runGpuRefit(a, r, setup, r.name == "tsah0" ? &picture : nullptr, pictureFrame)));
+      runtime["methods"].push_back(toJson(runGpuRefit(a, r, setup, r.name == "tsah0" ? &picture : nullptr, pictureFrame,
+                                                    o.layout == "auto" ? std::string() : o.layout)));
     for (const char* method : {"lbvh", "hlbvh-sah"})
       runtime["methods"].push_back(toJson(runGpuRebuild(a, tsahTree, method, config.cost, o.maxLeaf, setup)));
     runtime["schedule"] = "method by method (device times from CUDA events)";

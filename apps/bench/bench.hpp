@@ -42,7 +42,8 @@ struct BenchOptions {
   std::string optimizer = "sequential";  // optimizer of SAH*, SAH-rebuild and T-SAH: sequential | parallel
   bool embree = true;           // run the Embree peer when built with it (CPU device only)
   bool embreeOnly = false;      // only the T-SAH tree and the toolkit-vs-Embree comparison (no Tables 1/2)
-  std::string layout = "auto";  // CPU tree layout of the runtime part: bvh2, bvh4, bvh8 or auto (the fastest)
+  std::string layout = "auto";  // tree layout of the runtime part: auto (the device's fastest); CPU bvh2, bvh4,
+                                // bvh8; cuda bvh2 or cwbvh
   bool convergence = true;      // run the three node selections for the convergence plot
   double fps = 0.0;             // import: sampling rate of continuous animations (0: the file's own)
   std::string clip;             // import: the animation clip of a multi-clip model (empty: the first)

@@ -100,8 +100,9 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& animation,
 
 // GPU (built with CUDA): per frame GpuRuntime::updateAt (interpolation, refit, Woop on the device)
 // and renderFrameGpu. Throws anim::Error when the bench was built without CUDA or no device exists.
+// layout: "bvh2" or "cwbvh" (GpuRuntime::Config::layout), empty for the runtime's default.
 RuntimeMethod runGpuRefit(const anim::Animation& animation, const RefitTrees& trees, const RuntimeSetup& setup,
-                          Image* image = nullptr, uint32_t imageFrame = 0);
+                          Image* image = nullptr, uint32_t imageFrame = 0, const std::string& layout = {});
 // GPU: per frame GpuRuntime::rebuildAt (lbvh or hlbvh-sah, collapse to maxLeaf, Woop) and renderFrameGpu.
 RuntimeMethod runGpuRebuild(const anim::Animation& animation, const Bvh& initialTree, const std::string& method,
                             const CostModel& cost, uint32_t maxLeaf, const RuntimeSetup& setup);

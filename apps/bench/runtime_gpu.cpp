@@ -52,11 +52,13 @@ nlohmann::json gpuJson() {
 }
 
 RuntimeMethod runGpuRefit(const anim::Animation& a, const RefitTrees& trees, const RuntimeSetup& setup, Image* image,
-                          uint32_t imageFrame) {
+                          uint32_t imageFrame, const std::string& layout) {
   requireDevice();
+  cuda::GpuRuntime::Config config;
+  if (!layout.empty()) config.layout = cuda::parseTreeLayout(layout);
   // One runtime with every tree uploaded once; updateAt refits the tree of the frame's part.
   const TreeSet set = treeSetOf(trees, a);
-  cuda::GpuRuntime gpu(set, a, cuda::GpuRuntime::Config{});
+  cuda::GpuRuntime gpu(set, a, config);
   RenderSettings settings = setup.settings;
   // Warm-up (untimed): the first update of each tree captures its CUDA graph, the first render the
   // renderer's; a time inside each tree's part reaches every tree.
@@ -114,7 +116,8 @@ RuntimeMethod runGpuRebuild(const anim::Animation& a, const Bvh& initialTree, co
 bool gpuAvailable() { return false; }
 nlohmann::json gpuJson() { return nullptr; }
 
-RuntimeMethod runGpuRefit(const anim::Animation&, const RefitTrees&, const RuntimeSetup&, Image*, uint32_t) {
+RuntimeMethod runGpuRefit(const anim::Animation&, const RefitTrees&, const RuntimeSetup&, Image*, uint32_t,
+                          const std::string&) {
   throw anim::Error("--device cuda: this tsah was built without the CUDA runtime");
 }
 RuntimeMethod runGpuRebuild(const anim::Animation&, const Bvh&, const std::string&, const CostModel&, uint32_t,

@@ -3,7 +3,7 @@
 //   tsah_gpu_bench (--input FILE | --generate KIND:TRIANGLES:FRAMES)
 //                  [--tree NAME=FILE.tbvh]... [--sah0] [--rebuild lbvh,hlbvh-sah|none]
 //                  [--frames 50] [--width 1024] [--height 768] [--ao 8] [--shadow 2]
-//                  [--traversal simple|persistent|both] [--no-graphs] [--no-render] [--cpu-compare]
+//                  [--traversal simple|persistent|both] [--layout bvh2,cwbvh] [--no-graphs] [--no-render] [--cpu-compare]
 //                  [--image-dir DIR] [--builder sweep|binned]
 //
 // For every tree (from .tbvh files, or SAH0 built here: sweep SAH on the first frame, collapsed to
@@ -51,7 +51,8 @@ struct Options {
   std::string rebuild = "lbvh,hlbvh-sah";
   uint32_t frames = 50, width = 1024, height = 768, ao = 8, shadow = 2;
   std::string traversal = "simple";
-  bool noRender = false, cpuCompare = false, noGraphs = false;
+  std::string layout = "bvh2,cwbvh";  // layouts of the refitted trees, comma separated
+  bool noRender = false, cpuCompare = false, noGraphs = false, noFuse = false;
   std::string imageDir;
   std::string builder = "sweep";
 };
@@ -156,8 +157,11 @@ struct FrameSeries {
 };
 
 json runRefit(const std::string& name, const tsah::FlatBvh& tree, const anim::Animation& a,
-              const std::vector<double>& times, const Scene& scene, const Options& opt, bool persistent) {
-  tc::GpuRuntime rt(tree, a, {0, persistent, !opt.noGraphs});
+              const std::vector<double>& times, const Scene& scene, const Options& opt, bool persistent,
+              tc::TreeLayout layout) {
+  const auto setupStart = std::chrono::steady_clock::now();
+  tc::GpuRuntime rt(tree, a, {0, persistent, !opt.noGraphs, layout, !opt.noFuse});
+  const double setupSeconds = seconds(setupStart);
   const double mtris = double(a.triangleCount()) / 1e6;
   tsah::RenderSettings settings = scene.settings;
   // Warm-up: module load, allocations, first-touch of the ray buffers.
@@ -183,6 +187,8 @@ json runRefit(const std::string& name, const tsah::FlatBvh& tree, const anim::An
   json j;
   j["name"] = name;
   j["kind"] = "refit";
+  j["layout"] = tc::treeLayoutName(layout);
+  j["setup_seconds"] = setupSeconds;  // upload (and for cwbvh the 8-wide collapse + layout on the host)
   j["traversal"] = persistent ? "persistent" : "simple";
   j["tree"] = {{"interior_nodes", tree.interiorCount}, {"leaves", tree.leafCount}, {"depth", tree.depth}};
   j["update_ms"] = summary(s.update);
@@ -202,7 +208,7 @@ json runRefit(const std::string& name, const tsah::FlatBvh& tree, const anim::An
 
 json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim::Animation& a,
                 const std::vector<double>& times, const Scene& scene, const Options& opt, bool persistent) {
-  tc::GpuRuntime rt(tree, a, {0, persistent, !opt.noGraphs});
+  tc::GpuRuntime rt(tree, a, {0, persistent, !opt.noGraphs, tc::TreeLayout::Bvh2});
   const double mtris = double(a.triangleCount()) / 1e6;
   tsah::RenderSettings settings = scene.settings;
   tc::RebuildOptions bare;
@@ -270,9 +276,9 @@ json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim:
 
 // One frame on the CPU renderer and on the GPU: how far apart the images are.
 json compareWithCpu(const tsah::FlatBvh& tree, const anim::Animation& a, double t, const Scene& scene,
-                    const Options& opt) {
+                    const Options& opt, tc::TreeLayout layout) {
   tsah::CpuRuntime cpu(tree, {a.indices().begin(), a.indices().end()}, a.vertexCount());
-  tc::GpuRuntime gpu(tree, a);
+  tc::GpuRuntime gpu(tree, a, {0, false, true, layout});
   cpu.update(a.positionsAt(t));
   gpu.updateAt(t);
   tsah::Image cpuImage, gpuImage;
@@ -283,10 +289,11 @@ json compareWithCpu(const tsah::FlatBvh& tree, const anim::Animation& a, double 
   const tsah::ImageDifference d = tsah::compareImages(cpuImage, gpuImage, 16);
   if (!opt.imageDir.empty()) {
     std::filesystem::create_directories(opt.imageDir);
-    tsah::savePng(opt.imageDir + "/cpu.png", cpuImage);
-    tsah::savePng(opt.imageDir + "/gpu.png", gpuImage);
+    tsah::savePng(opt.imageDir + "/cpu.png", cpuImage);  // the same for every layout
+    tsah::savePng(opt.imageDir + "/gpu-" + tc::treeLayoutName(layout) + ".png", gpuImage);
   }
-  return {{"mean_abs", d.meanAbs},
+  return {{"layout", tc::treeLayoutName(layout)},
+          {"mean_abs", d.meanAbs},
           {"max_abs", d.maxAbs},
           {"fraction_above_16", d.fractionAbove},
           {"cpu_threads", cpu.threadCount()},
@@ -332,7 +339,8 @@ void run(const Options& opt) {
   scene.lighting = tsah::fitLighting(bounds, scene.camera);
   out["settings"] = {{"frames", frames},       {"width", opt.width},   {"height", opt.height},
                      {"ao_samples", opt.ao},   {"shadow_samples", opt.shadow},
-                     {"traversal", opt.traversal}, {"render", !opt.noRender}, {"graphs", !opt.noGraphs}};
+                     {"traversal", opt.traversal}, {"render", !opt.noRender}, {"graphs", !opt.noGraphs},
+                     {"fused_wide_passes", !opt.noFuse}};
 
   // Trees: files, then SAH0 built here.
   std::vector<std::pair<std::string, tsah::FlatBvh>> trees;
@@ -358,9 +366,21 @@ void run(const Options& opt) {
   if (opt.traversal == "simple" || opt.traversal == "both") modes.push_back(false);
   if (modes.empty()) throw anim::Error("--traversal must be persistent, simple or both");
 
+  std::vector<tc::TreeLayout> layouts;
+  {
+    std::stringstream ss(opt.layout);
+    std::string l;
+    while (std::getline(ss, l, ',')) layouts.push_back(tc::parseTreeLayout(l));
+  }
+  if (layouts.empty()) throw anim::Error("--layout needs bvh2, cwbvh or both");
+
   json methods = json::array();
-  for (bool persistent : modes)
-    for (const auto& [name, tree] : trees) methods.push_back(runRefit(name, tree, a, times, scene, opt, persistent));
+  for (tc::TreeLayout layout : layouts)
+    for (bool persistent : modes) {
+      if (layout == tc::TreeLayout::Cwbvh && persistent) continue;  // the wide kernel is one thread per ray
+      for (const auto& [name, tree] : trees)
+        methods.push_back(runRefit(name, tree, a, times, scene, opt, persistent, layout));
+    }
   if (opt.rebuild != "none") {
     std::stringstream ss(opt.rebuild);
     std::string m;
@@ -369,7 +389,11 @@ void run(const Options& opt) {
         methods.push_back(runRebuild(tc::parseRebuildMethod(m), trees.front().second, a, times, scene, opt, persistent));
   }
   out["methods"] = methods;
-  if (opt.cpuCompare) out["cpu_compare"] = compareWithCpu(trees.front().second, a, times.front(), scene, opt);
+  if (opt.cpuCompare) {
+    out["cpu_compare"] = json::array();
+    for (tc::TreeLayout layout : layouts)
+      out["cpu_compare"].push_back(compareWithCpu(trees.front().second, a, times.front(), scene, opt, layout));
+  }
   std::cout << out.dump(1) << std::endl;
 }
 
@@ -391,6 +415,8 @@ int main(int argc, char** argv) {
   app.add_option("--ao", opt.ao, "Ambient-occlusion rays per pixel (default 8)");
   app.add_option("--shadow", opt.shadow, "Shadow rays per pixel (default 2)");
   app.add_option("--traversal", opt.traversal, "simple (one thread per ray, the default), persistent or both");
+  app.add_option("--layout", opt.layout, "Layouts of the refitted trees: bvh2, cwbvh or both comma separated (default both)");
+  app.add_flag("--no-fuse", opt.noFuse, "cwbvh: separate ray generation and trace kernels (as bvh2) instead of fused passes");
   app.add_flag("--no-graphs", opt.noGraphs, "Launch every kernel instead of replaying CUDA graphs");
   app.add_flag("--no-render", opt.noRender, "Time the updates and rebuilds only");
   app.add_flag("--cpu-compare", opt.cpuCompare, "Render the first frame on the CPU too and compare the images");

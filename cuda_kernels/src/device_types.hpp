@@ -5,6 +5,7 @@
 #include <type_traits>
 
 #include "tsah/aabb.hpp"
+#include "tsah/cwbvh_layout.hpp"
 #include "tsah/gpu_layout.hpp"
 #include "tsah/ray.hpp"
 #include "tsah/woop.hpp"
@@ -32,6 +33,11 @@ struct TraceScene {
   const uint32_t* indices = nullptr;    // 3 per triangle id
   const float* positions = nullptr;     // xyz per vertex, this frame
   const RootInfo* root = nullptr;
+  // The compressed 8-wide layout (GpuRuntime::Config::layout == cwbvh): when set, the traversal
+  // runs over these nodes, and woop / triIndex above are per slot of that layout.
+  const CwbvhNode* cwbvhNodes = nullptr;
+  int32_t cwbvhRootRef = 0;
+  uint32_t cwbvhRootCount = 0;
 };
 
 // A leaf of an uploaded tree as the refit sees it: where its box goes (interior node * 2 + side,

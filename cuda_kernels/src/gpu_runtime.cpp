@@ -6,6 +6,7 @@
 
 #include "anim/animation.hpp"
 #include "anim/error.hpp"
+#include "cwbvh_kernels.hpp"
 #include "kernels.hpp"
 #include "runtime_impl.hpp"
 #include "tsah/traversal.hpp"
@@ -14,6 +15,14 @@ namespace tsah::cuda {
 
 const char* rebuildMethodName(RebuildMethod method) {
   return method == RebuildMethod::Lbvh ? "lbvh" : "hlbvh-sah";
+}
+
+const char* treeLayoutName(TreeLayout layout) { return layout == TreeLayout::Bvh2 ? "bvh2" : "cwbvh"; }
+
+TreeLayout parseTreeLayout(std::string_view name) {
+  if (name == "bvh2") return TreeLayout::Bvh2;
+  if (name == "cwbvh") return TreeLayout::Cwbvh;
+  throw anim::Error("unknown tree layout '" + std::string(name) + "' (expected bvh2 or cwbvh)");
 }
 
 RebuildMethod parseRebuildMethod(std::string_view name) {
@@ -113,6 +122,7 @@ void GpuRuntime::Impl::uploadTree(const FlatBvh& tree) {
   r.interiorCount = topology.interiorCount;
   r.depth = topology.depth;
   d.root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&r, 1), stream);
+  if (config.layout == TreeLayout::Cwbvh) d.cwbvh = uploadCwbvh(tree, stream);
   // The host vectors above are freed when this returns: finish their uploads first.
   CUDA_CHECK(cudaStreamSynchronize(stream));
 }
@@ -181,7 +191,41 @@ void GpuRuntime::Impl::buildVertexTriangles() {
   normals.resize(std::size_t(vertices) * 3);
 }
 
+// The 8-wide collapse over all frames of the given tree (WideCollapser), its compressed layout,
+// and what the per-frame refit needs on the device.
+std::unique_ptr<GpuRuntime::Impl::Cwbvh> GpuRuntime::Impl::uploadCwbvh(const FlatBvh& tree, cudaStream_t stream) {
+  auto cwbvh = std::make_unique<Cwbvh>();
+  Cwbvh& c = *cwbvh;
+  c.host = buildCwbvh(tree);
+  c.nodes = DeviceBuffer<CwbvhNode>(std::span<const CwbvhNode>(c.host.nodes), stream);
+  c.exact.resize(c.host.exactBoxes.size());
+  c.parentSlot = DeviceBuffer<uint32_t>(std::span<const uint32_t>(c.host.parentSlot), stream);
+  c.counters.resize(c.host.nodes.size());
+  c.triIndex = DeviceBuffer<uint32_t>(std::span<const uint32_t>(c.host.triIndex), stream);
+  c.leaves = DeviceBuffer<CwbvhLeaf>(std::span<const CwbvhLeaf>(c.host.leaves), stream);
+  detail::RootInfo r;
+  r.box = c.host.rootBox;
+  r.ref = c.host.rootRef;
+  r.count = c.host.rootCount;
+  r.interiorCount = c.host.nodeCount();
+  r.depth = c.host.depth;
+  c.root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&r, 1), stream);
+  return cwbvh;
+}
+
 detail::TraceScene GpuRuntime::Impl::scene() const {
+  if (const Cwbvh* cwbvh = tree().cwbvh.get(); cwbvh && !tracingRebuilt) {
+    detail::TraceScene s;
+    s.woop = woop.data();
+    s.triIndex = cwbvh->triIndex.data();
+    s.indices = indices.data();
+    s.positions = positions.data();
+    s.root = cwbvh->root.data();
+    s.cwbvhNodes = cwbvh->nodes.data();
+    s.cwbvhRootRef = cwbvh->host.rootRef;
+    s.cwbvhRootCount = cwbvh->host.rootCount;
+    return s;
+  }
   detail::TraceScene s;
   s.nodes = tracingRebuilt ? rebuilder->nodes() : tree().nodes.data();
   s.woop = woop.data();
@@ -199,6 +243,17 @@ void GpuRuntime::Impl::requireTraceable() const {
 
 void GpuRuntime::Impl::enqueueRefitAndWoop() {
   DeviceTree& t = tree();
+  if (t.cwbvh) {  // refit + re-quantize the compressed layout, Woop triangles per slot of it
+    Cwbvh& c = *t.cwbvh;
+    c.counters.fillBytes(0, stream);
+    detail::launchCwbvhRefit(c.nodes.data(), c.exact.data(), c.parentSlot.data(), c.leaves.data(),
+                             uint32_t(c.leaves.size()), c.triIndex.data(), indices.data(), positions.data(),
+                             c.counters.data(), c.root.data(), stream);
+    events.record(2, stream);
+    detail::launchWoop(c.triIndex.data(), triangles, indices.data(), positions.data(), woop.data(), stream);
+    events.record(3, stream);
+    return;
+  }
   t.counters.fillBytes(0, stream);
   detail::launchRefit(t.nodes.data(), t.nodeParent.data(), t.leaves.data(), uint32_t(t.leaves.size()),
                       t.triIndex.data(), indices.data(), positions.data(), t.counters.data(), t.root.data(), stream);
@@ -344,8 +399,16 @@ std::vector<float> GpuRuntime::downloadPositions() const { return impl_->positio
 
 std::vector<WoopTriangle> GpuRuntime::downloadWoop() const { return impl_->woop.download(impl_->stream); }
 
+std::vector<CwbvhNode> GpuRuntime::downloadCwbvhNodes() const {
+  const Impl::Cwbvh* cwbvh = impl_->tree().cwbvh.get();
+  if (!cwbvh) throw anim::Error("GPU runtime: the tree is not in the compressed wide layout");
+  return cwbvh->nodes.download(impl_->stream);
+}
+
 FlatBvh GpuRuntime::downloadTree() const {
   const Impl& m = *impl_;
+  if (m.tree().cwbvh && !m.tracingRebuilt)
+    throw anim::Error("GPU runtime: downloadTree gives the binary layout; this runtime traces the compressed one");
   if (m.tracingRebuilt) return flattenBvh(downloadRebuiltTree());
   FlatBvh flat = m.tree().topology;
   flat.nodes = m.tree().nodes.download(m.stream);

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "kernels.hpp"
+#include "triangle_boxes.cuh"
 #include "launch.hpp"
 #include "rebuild.hpp"
 #include "tsah/traversal.hpp"
@@ -33,10 +34,6 @@ __device__ __forceinline__ float orderedFloat(int i) { return __int_as_float(i >
 // 0x7f7f7f7f (what cudaMemset(0x7f) writes) as an ordered int is a huge positive float: the
 // starting value of a minimum.
 constexpr int kOrderedHuge = 0x7f7f7f7f;
-
-__device__ __forceinline__ Vec3 loadVertex(const float* __restrict__ p, uint32_t v) {
-  return {__ldg(p + 3 * std::size_t(v)), __ldg(p + 3 * std::size_t(v) + 1), __ldg(p + 3 * std::size_t(v) + 2)};
-}
 
 __device__ __forceinline__ Aabb loadBox(const Aabb* boxes, uint32_t i) {
   const float* f = reinterpret_cast<const float*>(boxes + i);
@@ -64,11 +61,8 @@ __global__ void __launch_bounds__(kBoxBlock) triangleBoxesKernel(const uint32_t*
   // Centroid bounds as six minima: lo.xyz and -hi.xyz.
   float m[6] = {3.0e38f, 3.0e38f, 3.0e38f, 3.0e38f, 3.0e38f, 3.0e38f};
   for (uint32_t t = blockIdx.x * blockDim.x + threadIdx.x; t < n; t += gridDim.x * blockDim.x) {
-    const uint32_t* tri = indices + 3 * std::size_t(t);
     Aabb b;
-    b.extend(loadVertex(positions, __ldg(tri)));
-    b.extend(loadVertex(positions, __ldg(tri + 1)));
-    b.extend(loadVertex(positions, __ldg(tri + 2)));
+    extendByTriangle(b, indices, positions, t);
     triBox[t] = b;
     const Vec3 c = b.center();
     m[0] = fminf(m[0], c.x), m[1] = fminf(m[1], c.y), m[2] = fminf(m[2], c.z);

@@ -8,6 +8,7 @@
 #include <cuda/atomic>
 
 #include "anim/error.hpp"
+#include "cwbvh_kernels.hpp"
 #include "kernels.hpp"
 #include "launch.hpp"
 #include "runtime_impl.hpp"
@@ -140,6 +141,55 @@ __global__ void shadowRaysKernel(Frame f, const float4* __restrict__ surfaces, R
   countRays(words + kShadowRays, valid);
 }
 
+// Fused passes for the compressed wide layout: each thread makes its ray and traces it at once
+// (cwbvhClosestHit / cwbvhAnyHit, the TSAH_HD traversal), so no ray or hit buffer is written and
+// read back (at 1024 x 768 with 8 AO rays that is about 0.4 GB of traffic per frame). Same rays,
+// same results as the separate kernels above.
+__device__ __forceinline__ CwbvhView wideView(CwbvhView v, const RootInfo* root) {
+  v.rootBox = root->box;
+  return v;
+}
+
+__global__ void __launch_bounds__(128) widePrimaryKernel(Frame f, CwbvhView view, const RootInfo* __restrict__ root,
+                                                          const uint32_t* __restrict__ indices,
+                                                          const float* __restrict__ positions,
+                                                          float4* __restrict__ surfaces) {
+  const uint32_t j = blockIdx.x * blockDim.x + threadIdx.x;
+  if (j >= f.padded) return;
+  uint32_t x, y;
+  Surface s;
+  if (pixelOf(f, j, x, y)) {
+    const Ray ray = cameraRay(f, x, y);
+    s = primarySurface(ray, cwbvhClosestHit(wideView(view, root), ray), indices, positions, f.light);
+  }
+  storeSurface(surfaces, j, s);
+}
+
+__global__ void __launch_bounds__(128) wideAoKernel(Frame f, CwbvhView view, const RootInfo* __restrict__ root,
+                                                     const float4* __restrict__ surfaces,
+                                                     uint8_t* __restrict__ occluded, uint32_t* __restrict__ words) {
+  const uint64_t r = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (r >= uint64_t(f.padded) * f.aoSamples) return;
+  const SecondarySample p = secondarySample(f, surfaces, r, f.aoSamples);
+  countRays(words + kAoRays, p.valid);
+  occluded[r] = p.valid && cwbvhAnyHit(wideView(view, root), aoRay(p.surface, p.key, p.sample, f.light.aoDistance))
+                    ? 1 : 0;
+}
+
+__global__ void __launch_bounds__(128) wideShadowKernel(Frame f, CwbvhView view, const RootInfo* __restrict__ root,
+                                                         const float4* __restrict__ surfaces,
+                                                         uint8_t* __restrict__ occluded, uint8_t* __restrict__ traced,
+                                                         uint32_t* __restrict__ words) {
+  const uint64_t r = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (r >= uint64_t(f.padded) * f.shadowSamples) return;
+  const SecondarySample p = secondarySample(f, surfaces, r, f.shadowSamples);
+  Ray ray;
+  const bool valid = p.valid && shadowRay(p.surface, f.light, p.key, p.sample, ray);
+  countRays(words + kShadowRays, valid);
+  traced[r] = valid ? 1 : 0;
+  occluded[r] = valid && cwbvhAnyHit(wideView(view, root), ray) ? 1 : 0;
+}
+
 // Vertex normals for shading: each vertex sums the face normals of its triangles in increasing
 // triangle order, as the CPU loop does, so the sums are bit-identical. vertexTris: the triangles of
 // each vertex (CSR).
@@ -202,11 +252,15 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   f.shadowSamples = settings.shadowSamples;
   f.base = {settings.seed, settings.frame, 0};
 
-  m.rays.reserve(std::max<uint64_t>(padded, aoRays));
-  m.hits.reserve(padded);
+  // Fused wide passes (Config::fuseWidePasses) need no ray or hit buffers.
+  const bool fused = m.scene().cwbvhNodes != nullptr && m.config.fuseWidePasses;
+  if (!fused) {
+    m.rays.reserve(std::max<uint64_t>(padded, aoRays));
+    m.hits.reserve(padded);
+  }
   m.surfaces.reserve(3 * padded);
   m.occluded.reserve(std::max<uint64_t>(aoRays, 1));
-  m.shadowRays.reserve(std::max<uint64_t>(shadowRays, 1));
+  if (!fused) m.shadowRays.reserve(std::max<uint64_t>(shadowRays, 1));
   m.shadowOccluded.reserve(std::max<uint64_t>(2 * shadowRays, 2));  // results, then "traced" flags
   m.image.reserve(std::size_t(f.width) * f.height * 3);
   uint8_t* shadowTraced = m.shadowOccluded.data() + shadowRays;
@@ -219,34 +273,60 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
 
   m.words.fillBytes(0, stream);
   ev.record(0, stream);
-  primaryRaysKernel<<<detail::gridFor(padded, block), block, 0, stream>>>(f, m.rays.data());
-  CUDA_CHECK_LAUNCH("primaryRaysKernel");
-  ev.record(1, stream);
-  detail::launchTrace(scene, m.rays.data(), f.padded, m.hits.data(), nullptr, m.words.data() + kPrimaryCounter, launch,
-                      stream);
-  ev.record(2, stream);
-  surfaceKernel<<<detail::gridFor(padded, block), block, 0, stream>>>(f, m.hits.data(), m.indices.data(),
-                                                                      m.positions.data(), m.surfaces.data());
-  CUDA_CHECK_LAUNCH("surfaceKernel");
-  if (aoRays > 0) {
-    aoRaysKernel<<<detail::gridFor(aoRays, block), block, 0, stream>>>(f, m.surfaces.data(), m.rays.data(),
-                                                                       m.words.data());
-    CUDA_CHECK_LAUNCH("aoRaysKernel");
+  if (fused) {
+    // Compressed wide layout: three fused passes (events 1/2, 3/4, 5/6 around them, so a pass's time
+    // includes making its rays).
+    const CwbvhView view = detail::cwbvhView(scene);
+    const unsigned wideBlock = 128;  // fixed by __launch_bounds__
+    ev.record(1, stream);
+    widePrimaryKernel<<<detail::gridFor(padded, wideBlock), wideBlock, 0, stream>>>(
+        f, view, scene.root, m.indices.data(), m.positions.data(), m.surfaces.data());
+    CUDA_CHECK_LAUNCH("widePrimaryKernel");
+    ev.record(2, stream);
+    ev.record(3, stream);
+    if (aoRays > 0) {
+      wideAoKernel<<<detail::gridFor(aoRays, wideBlock), wideBlock, 0, stream>>>(f, view, scene.root, m.surfaces.data(),
+                                                                                  m.occluded.data(), m.words.data());
+      CUDA_CHECK_LAUNCH("wideAoKernel");
+    }
+    ev.record(4, stream);
+    ev.record(5, stream);
+    if (shadowRays > 0) {
+      wideShadowKernel<<<detail::gridFor(shadowRays, wideBlock), wideBlock, 0, stream>>>(
+          f, view, scene.root, m.surfaces.data(), m.shadowOccluded.data(), shadowTraced, m.words.data());
+      CUDA_CHECK_LAUNCH("wideShadowKernel");
+    }
+    ev.record(6, stream);
+  } else {
+    primaryRaysKernel<<<detail::gridFor(padded, block), block, 0, stream>>>(f, m.rays.data());
+    CUDA_CHECK_LAUNCH("primaryRaysKernel");
+    ev.record(1, stream);
+    detail::launchTrace(scene, m.rays.data(), f.padded, m.hits.data(), nullptr, m.words.data() + kPrimaryCounter, launch,
+                        stream);
+    ev.record(2, stream);
+    surfaceKernel<<<detail::gridFor(padded, block), block, 0, stream>>>(f, m.hits.data(), m.indices.data(),
+                                                                        m.positions.data(), m.surfaces.data());
+    CUDA_CHECK_LAUNCH("surfaceKernel");
+    if (aoRays > 0) {
+      aoRaysKernel<<<detail::gridFor(aoRays, block), block, 0, stream>>>(f, m.surfaces.data(), m.rays.data(),
+                                                                         m.words.data());
+      CUDA_CHECK_LAUNCH("aoRaysKernel");
+    }
+    ev.record(3, stream);
+    detail::launchTrace(scene, m.rays.data(), uint32_t(aoRays), nullptr, m.occluded.data(), m.words.data() + kAoCounter,
+                        launch, stream);
+    ev.record(4, stream);
+    if (shadowRays > 0) {
+      shadowRaysKernel<<<detail::gridFor(shadowRays, block), block, 0, stream>>>(f, m.surfaces.data(),
+                                                                                 m.shadowRays.data(), shadowTraced,
+                                                                                 m.words.data());
+      CUDA_CHECK_LAUNCH("shadowRaysKernel");
+    }
+    ev.record(5, stream);
+    detail::launchTrace(scene, m.shadowRays.data(), uint32_t(shadowRays), nullptr, m.shadowOccluded.data(),
+                        m.words.data() + kShadowCounter, launch, stream);
+    ev.record(6, stream);
   }
-  ev.record(3, stream);
-  detail::launchTrace(scene, m.rays.data(), uint32_t(aoRays), nullptr, m.occluded.data(), m.words.data() + kAoCounter,
-                      launch, stream);
-  ev.record(4, stream);
-  if (shadowRays > 0) {
-    shadowRaysKernel<<<detail::gridFor(shadowRays, block), block, 0, stream>>>(f, m.surfaces.data(),
-                                                                               m.shadowRays.data(), shadowTraced,
-                                                                               m.words.data());
-    CUDA_CHECK_LAUNCH("shadowRaysKernel");
-  }
-  ev.record(5, stream);
-  detail::launchTrace(scene, m.shadowRays.data(), uint32_t(shadowRays), nullptr, m.shadowOccluded.data(),
-                      m.words.data() + kShadowCounter, launch, stream);
-  ev.record(6, stream);
   if (m.vertexTris.empty()) m.buildVertexTriangles();
   vertexNormalsKernel<<<detail::gridFor(m.vertices, block), block, 0, stream>>>(
       m.vertices, m.vertexTriOffsets.data(), m.vertexTris.data(), m.indices.data(), m.positions.data(),

@@ -8,6 +8,7 @@
 #include "device_types.hpp"
 #include "event_timer.hpp"
 #include "rebuild.hpp"
+#include "tsah/cwbvh_build.hpp"
 #include "tsah_cuda/device_buffer.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 
@@ -63,6 +64,16 @@ struct GpuRuntime::Impl {
   };
   std::vector<RebuildGraph> rebuildGraphs;
 
+  // The compressed 8-wide layout of one tree (Config::layout == cwbvh), refitted and re-quantized
+  // by every update; woop then holds its slots' triangles.
+  struct Cwbvh {
+    CwbvhTree host;                      // topology (and frame-0 quantization) as built on the host
+    DeviceBuffer<CwbvhNode> nodes;
+    DeviceBuffer<Aabb> exact;            // nodes * 8 exact child boxes of the current frame
+    DeviceBuffer<uint32_t> parentSlot, counters, triIndex;
+    DeviceBuffer<CwbvhLeaf> leaves;
+    DeviceBuffer<detail::RootInfo> root;
+  };
   // The uploaded trees (canonical order, one block of nodes each): one, or a tree set's K, all
   // uploaded once; updateAt refits the tree of the frame's part (tsah::treeIndexAt over ranges).
   struct DeviceTree {
@@ -72,14 +83,18 @@ struct GpuRuntime::Impl {
     DeviceBuffer<detail::LeafRecord> leaves;
     DeviceBuffer<detail::RootInfo> root;
     cudaGraphExec_t updateGraph = nullptr;  // updateAt's graph for this tree (captured at first use)
+    std::unique_ptr<Cwbvh> cwbvh;           // the compressed layout, when Config::layout == cwbvh
   };
-  // Validates one tree against the animation and uploads it.
+  // Validates one tree against the animation and uploads it (and its compressed layout).
   void uploadTree(const FlatBvh& tree);
+  // The 8-wide collapse over all frames of `tree`, its compressed layout and refit data on the device.
+  static std::unique_ptr<Cwbvh> uploadCwbvh(const FlatBvh& tree, cudaStream_t stream);
   DeviceTree& tree() { return trees[current]; }
   const DeviceTree& tree() const { return trees[current]; }
   std::vector<DeviceTree> trees;
   std::vector<TimeRange> ranges;         // one per tree
   uint32_t current = 0;                  // the tree that update/updateAt refit and tracing reads
+
 
   DeviceBuffer<WoopTriangle> woop;       // per slot of the traced tree
   bool woopValid = false;

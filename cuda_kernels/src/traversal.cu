@@ -5,6 +5,7 @@
 //
 // The box test and the triangle test are the CPU runtime's own (ray.hpp, woop.hpp: the same
 // arithmetic and the watertight fallback near edges), so hits agree with the CPU path.
+#include "cwbvh_kernels.hpp"
 #include "kernels.hpp"
 #include "launch.hpp"
 #include "tsah/traversal.hpp"
@@ -234,6 +235,10 @@ int traceBlocksPerMultiprocessor(bool anyHit, uint32_t blockSize) {
 void launchTrace(const TraceScene& scene, const Ray* rays, uint32_t count, Hit* hits, uint8_t* occluded,
                  uint32_t* rayCounter, const TraceLaunch& launch, cudaStream_t stream) {
   if (count == 0) return;
+  if (scene.cwbvhNodes) {  // the compressed wide layout: one thread per ray (cwbvh.cu)
+    launchCwbvhTrace(scene, rays, count, hits, occluded, stream);
+    return;
+  }
   const bool anyHit = hits == nullptr;
   if (anyHit && launch.persistent)
     launchTyped<true, true>(scene, rays, count, hits, occluded, rayCounter, launch, stream);

@@ -4,6 +4,7 @@
 
 #include "kernels.hpp"
 #include "launch.hpp"
+#include "triangle_boxes.cuh"
 
 namespace tsah::cuda::detail {
 
@@ -25,10 +26,6 @@ __global__ void interpolateFrameKernel(const float* __restrict__ keyframes, cons
     // alpha == 0: positionsAt copies the keyframe (1 * x + 0 * y would turn -0 into +0).
     out[dst] = p.alpha == 0.0f ? __ldg(a + i) : __fadd_rn(__fmul_rn(beta, __ldg(a + i)), __fmul_rn(p.alpha, __ldg(b + i)));
   }
-}
-
-__device__ __forceinline__ Vec3 loadVertex(const float* __restrict__ p, uint32_t v) {
-  return {__ldg(p + 3 * std::size_t(v)), __ldg(p + 3 * std::size_t(v) + 1), __ldg(p + 3 * std::size_t(v) + 2)};
 }
 
 __device__ __forceinline__ void writeChildBox(GpuBvhNode* node, int side, const Aabb& b) {
@@ -61,13 +58,7 @@ __global__ void refitKernel(GpuBvhNode* __restrict__ nodes, const uint32_t* __re
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= leafCount) return;
   const LeafRecord leaf = leaves[i];
-  Aabb box;
-  for (uint32_t s = leaf.first; s < leaf.first + leaf.count; ++s) {
-    const uint32_t* tri = indices + 3 * std::size_t(__ldg(triIndex + s));
-    box.extend(loadVertex(positions, __ldg(tri)));
-    box.extend(loadVertex(positions, __ldg(tri + 1)));
-    box.extend(loadVertex(positions, __ldg(tri + 2)));
-  }
+  Aabb box = leafBox(leaf.first, leaf.count, triIndex, indices, positions);
   uint32_t slot = leaf.parentSlot;
   // Walk up: the second thread to arrive at a node has both child boxes and carries on.
   while (slot != kNoParent) {

@@ -33,6 +33,11 @@ add_trace_error_test(rebuild.gpu_on_cpu.hlbvh "--rebuild hlbvh-sah is a GPU rebu
                      --rebuild hlbvh-sah)
 add_trace_error_test(rebuild.cpu_on_gpu "--rebuild binned is a CPU rebuild: use it with --device cpu" ""
                      --device cuda --rebuild binned)
+# --layout names a layout of the chosen device: the CPU's (bvh2, bvh4, bvh8) or the GPU's (bvh2, cwbvh).
+add_trace_error_test(layout.cwbvh_on_cpu "--layout cwbvh is not a layout of --device cpu \\(auto, bvh2, bvh4 or bvh8\\)" ""
+                     --layout cwbvh)
+add_trace_error_test(layout.bvh8_on_gpu "--layout bvh8 is not a layout of --device cuda \\(auto, bvh2 or cwbvh\\)" ""
+                     --device cuda --layout bvh8)
 
 if(TSAH_HAVE_CUDA)
   add_trace_error_test(no_device "no CUDA device found" "CUDA_VISIBLE_DEVICES=-1" --device cuda)

@@ -21,6 +21,7 @@
 #include "anim/animation.hpp"
 #include "tsah/bvh.hpp"
 #include "tsah/cost.hpp"
+#include "tsah/cwbvh_layout.hpp"
 #include "tsah/flat_bvh.hpp"
 #include "tsah/image.hpp"
 #include "tsah/ray.hpp"
@@ -38,6 +39,13 @@ struct UpdateTimings {
   double woopMs = 0.0;
   double totalMs() const { return interpolateMs + refitMs + woopMs; }
 };
+
+// The node layout the refitted tree is traced in: the binary Aila-Laine node (gpu_layout.hpp) or
+// the compressed 8-wide node (cwbvh_layout.hpp; the 8-wide T-SAH collapse of the uploaded tree,
+// re-quantized every frame).
+enum class TreeLayout { Bvh2, Cwbvh };
+const char* treeLayoutName(TreeLayout layout);       // "bvh2", "cwbvh"
+TreeLayout parseTreeLayout(std::string_view name);   // throws anim::Error for anything else
 
 enum class RebuildMethod { Lbvh, HlbvhSah };
 const char* rebuildMethodName(RebuildMethod method);  // "lbvh", "hlbvh-sah"
@@ -91,6 +99,11 @@ class GpuRuntime {
     // configuration) instead of launching each kernel: the device then runs the frame's kernels
     // back to back instead of waiting for the host between launches of small kernels.
     bool useGraphs = true;
+    // Layout of the refitted tree (rebuilt trees are traced in the binary layout).
+    TreeLayout layout = TreeLayout::Bvh2;
+    // Layout cwbvh: renderFrameGpu makes each ray in the kernel that traces it (three fused passes,
+    // no ray buffers); false runs the separate generation and trace kernels of the binary layout.
+    bool fuseWidePasses = true;
   };
 
   // tree: the topology to refit (frame 0's block; its boxes are recomputed by updateAt). Throws
@@ -136,6 +149,8 @@ class GpuRuntime {
   // The last rebuilt tree as a tsah::Bvh (one frame of boxes), exactly as built on the device.
   Bvh downloadRebuiltTree() const;
   Aabb bounds() const;  // of the traced tree
+  // Layout cwbvh: the compressed nodes of the last update (throws anim::Error for layout bvh2).
+  std::vector<CwbvhNode> downloadCwbvhNodes() const;
 
   // Traces host rays against the traced tree (closest hit / any hit). stats: ray count and the
   // traversal kernel's device time.

@@ -1,0 +1,115 @@
+// The compressed 8-wide BVH on the device: the per-frame refit + re-quantization and the traversal.
+// Both run libtsah's TSAH_HD code (cwbvh_layout.hpp: cwbvhQuantize, cwbvhClosestHit/AnyHit, the
+// box test of ray.hpp and the triangle test of woop.hpp), compiled with -fmad=false like the rest
+// of the per-frame path, so nodes equal tsah::refitCwbvh's and hits the CPU reference traversal's.
+#include <cuda/atomic>
+
+#include "cwbvh_kernels.hpp"
+#include "launch.hpp"
+#include "triangle_boxes.cuh"
+
+namespace tsah::cuda::detail {
+
+namespace {
+
+__device__ __forceinline__ void storeBox(Aabb* b, const Aabb& box) {
+  float* f = reinterpret_cast<float*>(b);
+  f[0] = box.lo.x, f[1] = box.lo.y, f[2] = box.lo.z, f[3] = box.hi.x, f[4] = box.hi.y, f[5] = box.hi.z;
+}
+
+__device__ __forceinline__ Aabb loadBoxL2(const Aabb* b) {
+  // Written by other threads of this launch: read through L2, never a stale L1 line.
+  const float* f = reinterpret_cast<const float*>(b);
+  Aabb box;
+  box.lo = {__ldcg(f), __ldcg(f + 1), __ldcg(f + 2)};
+  box.hi = {__ldcg(f + 3), __ldcg(f + 4), __ldcg(f + 5)};
+  return box;
+}
+
+__global__ void cwbvhRefitKernel(CwbvhNode* __restrict__ nodes, Aabb* __restrict__ exact,
+                                 const uint32_t* __restrict__ parentSlot, const CwbvhLeaf* __restrict__ leaves,
+                                 uint32_t leafCount, const uint32_t* __restrict__ triIndex,
+                                 const uint32_t* __restrict__ indices, const float* __restrict__ positions,
+                                 uint32_t* __restrict__ counters, RootInfo* __restrict__ root) {
+  const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= leafCount) return;
+  const CwbvhLeaf leaf = leaves[i];
+  Aabb box = leafBox(leaf.first, leaf.count, triIndex, indices, positions);
+  uint32_t slot = leaf.nodeSlot;
+  while (slot != kCwbvhNoParent) {
+    const uint32_t node = slot / kCwbvhWidth;
+    storeBox(exact + slot, box);
+    // The node's structure (triCount, child and triangle bases, meta) is never changed here.
+    uint4* raw = reinterpret_cast<uint4*>(nodes + node);
+    CwbvhNode n;
+    uint4* local = reinterpret_cast<uint4*>(&n);
+    local[1] = __ldcg(raw + 1);  // bases and meta
+    uint32_t occupied = 0;
+#pragma unroll
+    for (uint32_t s = 0; s < kCwbvhWidth; ++s) occupied += n.meta[s] != 0 ? 1u : 0u;
+    ::cuda::atomic_ref<uint32_t, ::cuda::thread_scope_device> arrivals(counters[node]);
+    if (arrivals.fetch_add(1, ::cuda::memory_order_acq_rel) + 1 != occupied) return;  // a later child finishes it
+    local[0] = __ldcg(raw);  // p and e (rewritten below) and triCount (kept)
+    Aabb boxes[kCwbvhWidth];
+#pragma unroll
+    for (uint32_t s = 0; s < kCwbvhWidth; ++s)
+      if (n.meta[s] != 0) boxes[s] = loadBoxL2(exact + std::size_t(node) * kCwbvhWidth + s);
+    box = cwbvhQuantize(n, boxes);
+    raw[0] = local[0];
+    raw[2] = local[2];
+    raw[3] = local[3];
+    raw[4] = local[4];
+    slot = parentSlot[node];
+  }
+  root->box = box;
+}
+
+__device__ __forceinline__ Ray loadRayVec(const Ray* rays, uint32_t i) {
+  const float4* p = reinterpret_cast<const float4*>(rays + i);
+  const float4 a = __ldg(p), b = __ldg(p + 1);
+  return Ray{{a.x, a.y, a.z}, a.w, {b.x, b.y, b.z}, b.w};
+}
+
+template <bool AnyHit>
+__global__ void __launch_bounds__(128) cwbvhTraceKernel(CwbvhView view, const RootInfo* __restrict__ root,
+                                                        const Ray* __restrict__ rays, uint32_t count,
+                                                        Hit* __restrict__ hits, uint8_t* __restrict__ occluded) {
+  const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= count) return;
+  view.rootBox = root->box;
+  const Ray ray = loadRayVec(rays, i);
+  if constexpr (AnyHit) {
+    occluded[i] = cwbvhAnyHit(view, ray) ? 1 : 0;
+  } else {
+    const Hit h = cwbvhClosestHit(view, ray);
+    reinterpret_cast<float4*>(hits)[i] = make_float4(h.t, h.u, h.v, __uint_as_float(h.tri));
+  }
+}
+
+}  // namespace
+
+void launchCwbvhRefit(CwbvhNode* nodes, Aabb* exact, const uint32_t* parentSlot, const CwbvhLeaf* leaves,
+                      uint32_t leafCount, const uint32_t* triIndex, const uint32_t* indices, const float* positions,
+                      uint32_t* counters, RootInfo* root, cudaStream_t stream) {
+  if (leafCount == 0) return;
+  const uint32_t block = 128;
+  cwbvhRefitKernel<<<gridFor(leafCount, block), block, 0, stream>>>(nodes, exact, parentSlot, leaves, leafCount,
+                                                                    triIndex, indices, positions, counters, root);
+  CUDA_CHECK_LAUNCH("cwbvhRefitKernel");
+}
+
+void launchCwbvhTrace(const TraceScene& scene, const Ray* rays, uint32_t count, Hit* hits, uint8_t* occluded,
+                      cudaStream_t stream) {
+  if (count == 0) return;
+  const CwbvhView view = cwbvhView(scene);
+  const unsigned block = 128;  // fixed by __launch_bounds__
+  if (hits) {
+    cwbvhTraceKernel<false><<<gridFor(count, block), block, 0, stream>>>(view, scene.root, rays, count, hits, nullptr);
+    CUDA_CHECK_LAUNCH("cwbvhTraceKernel<closest hit>");
+  } else {
+    cwbvhTraceKernel<true><<<gridFor(count, block), block, 0, stream>>>(view, scene.root, rays, count, nullptr, occluded);
+    CUDA_CHECK_LAUNCH("cwbvhTraceKernel<any hit>");
+  }
+}
+
+}  // namespace tsah::cuda::detail

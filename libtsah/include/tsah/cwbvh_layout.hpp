@@ -1,0 +1,394 @@
+#pragma once
+// The compressed 8-wide BVH node (Ylitie, Karras, Laine, "Efficient Incoherent Ray Traversal on
+// GPUs Through Compressed Wide BVHs", HPG 2017), its conservative quantization and the traversal
+// of it, shared by the CPU (reference, tests) and the CUDA runtime (TSAH_HD: one copy of the
+// arithmetic). docs/cwbvh.md describes the layout; cwbvh_build.hpp builds it from a WideBvh.
+//
+// One node is 80 bytes (five 16-byte loads):
+//   p[3]         float origin of the node's local grid (the lower corner of the union of its children)
+//   e[3]         biased power-of-two exponents: the grid step along axis a is 2^(e[a] - 127)
+//   triCount     triangles of the node's leaf children, slots [triBase, triBase + triCount) (<= 64)
+//   childBase    interior children are nodes childBase + rank, rank = interior children in lower slots
+//   triBase      first triangle slot of the node's leaf children
+//   meta[8]      per child slot: 0 empty, kCwbvhInterior, or kCwbvhLeaf | offset (the leaf's first
+//                triangle is triBase + offset; it ends where the next leaf of the node begins, or at
+//                triCount: leaves are stored in slot order)
+//   qlo/qhi      8-bit child box bounds per axis: lo = p + qlo * step, hi = p + qhi * step (float)
+// Quantization is conservative: the decoded box (computed exactly as the traversal decodes it)
+// contains the exact float box, so no ray misses a triangle that the binary tree's traversal hits.
+//
+// Children are placed in slots by direction (the paper's octant order): bit a of the slot is 1
+// for a child on the + side of the node along axis a. A ray whose direction has sign bits `oct`
+// (bit a set when dir[a] < 0) visits the hit children in increasing order of slot ^ oct, i.e.
+// roughly near to far.
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <type_traits>
+
+#include "tsah/aabb.hpp"
+#include "tsah/gpu_layout.hpp"
+#include "tsah/hd.hpp"
+#include "tsah/ray.hpp"
+#include "tsah/woop.hpp"
+
+// Unrolls the loops over a node's eight slots on the GPU (the node then stays in registers).
+#if defined(__CUDA_ARCH__)
+#define TSAH_CWBVH_UNROLL _Pragma("unroll")
+#else
+#define TSAH_CWBVH_UNROLL
+#endif
+
+namespace tsah {
+
+inline constexpr uint32_t kCwbvhWidth = 8;
+inline constexpr uint32_t kCwbvhMaxNodeTriangles = 64;  // bits of the triangle mask
+inline constexpr uint8_t kCwbvhInterior = 0x80;
+inline constexpr uint8_t kCwbvhLeaf = 0x40;  // | offset (0..63)
+
+struct alignas(16) CwbvhNode {
+  float px, py, pz;
+  uint8_t ex, ey, ez;
+  uint8_t triCount;
+  uint32_t childBase;
+  uint32_t triBase;
+  uint8_t meta[8];
+  uint8_t qlo[3][8];  // [axis][slot]
+  uint8_t qhi[3][8];
+
+  TSAH_HD bool isEmpty(uint32_t slot) const { return meta[slot] == 0; }
+  TSAH_HD bool isInterior(uint32_t slot) const { return (meta[slot] & kCwbvhInterior) != 0; }
+  TSAH_HD bool isLeaf(uint32_t slot) const { return (meta[slot] & 0xc0) == kCwbvhLeaf; }
+  TSAH_HD uint32_t leafOffset(uint32_t slot) const { return meta[slot] & 0x3fu; }
+};
+
+static_assert(sizeof(CwbvhNode) == 80 && alignof(CwbvhNode) == 16);
+static_assert(std::is_trivially_copyable_v<CwbvhNode> && std::is_standard_layout_v<CwbvhNode>);
+
+// 2^(e - 127) for a biased exponent 1..254 (a normal float power of two).
+TSAH_HD float cwbvhStep(uint32_t e) {
+#if defined(__CUDA_ARCH__)
+  return __int_as_float(int(e << 23));
+#else
+  const uint32_t bits = e << 23;
+  float f;
+  std::memcpy(&f, &bits, sizeof f);
+  return f;
+#endif
+}
+
+// The decoded plane: exactly what the traversal computes (q * step is exact: 8-bit q, power-of-two
+// step; the sum is one rounding), so the quantizer can check its own result.
+TSAH_HD float cwbvhDecode(float p, uint32_t q, float step) { return p + float(q) * step; }
+
+TSAH_HD Aabb cwbvhChildBox(const CwbvhNode& n, uint32_t slot) {
+  const float sx = cwbvhStep(n.ex), sy = cwbvhStep(n.ey), sz = cwbvhStep(n.ez);
+  Aabb b;
+  b.lo = {cwbvhDecode(n.px, n.qlo[0][slot], sx), cwbvhDecode(n.py, n.qlo[1][slot], sy),
+          cwbvhDecode(n.pz, n.qlo[2][slot], sz)};
+  b.hi = {cwbvhDecode(n.px, n.qhi[0][slot], sx), cwbvhDecode(n.py, n.qhi[1][slot], sy),
+          cwbvhDecode(n.pz, n.qhi[2][slot], sz)};
+  return b;
+}
+
+namespace detail {
+
+TSAH_HD uint32_t floatBits(float f) {
+#if defined(__CUDA_ARCH__)
+  return uint32_t(__float_as_int(f));
+#else
+  uint32_t u;
+  std::memcpy(&u, &f, sizeof u);
+  return u;
+#endif
+}
+
+// The smallest exponent (from an estimate, then upwards) whose 255 steps from p reach hi in float.
+TSAH_HD uint32_t cwbvhExponent(float p, float hi) {
+  const float d = (hi - p) * (1.0f / 255.0f);
+  uint32_t e = (floatBits(d) >> 23) & 0xffu;  // d >= 0: 2^(e-127) <= d < 2^(e-126)
+  if (!(d > 0.0f)) e = 1;                     // 0, or NaN
+  if (e < 1) e = 1;
+  if (e > 254) e = 254;
+  while (e < 254 && !(cwbvhDecode(p, 255, cwbvhStep(e)) >= hi)) ++e;
+  return e;
+}
+
+// floor / ceil of (x - p) / step clamped to 0..255, then moved until the decoded plane is on the
+// conservative side (and as tight as it can be).
+TSAH_HD uint32_t cwbvhGuess(float x, float p, uint32_t e) {
+  const float f = (x - p) * cwbvhStep(254 - e);  // 1 / step = 2^(127 - e) = step of 254 - e
+  if (!(f > 0.0f)) return 0;
+  if (!(f < 255.0f)) return 255;
+  return uint32_t(f);
+}
+
+TSAH_HD uint32_t cwbvhQuantizeLo(float lo, float p, uint32_t e) {
+  const float step = cwbvhStep(e);
+  uint32_t q = cwbvhGuess(lo, p, e);
+  while (q > 0 && !(cwbvhDecode(p, q, step) <= lo)) --q;
+  while (q < 255 && cwbvhDecode(p, q + 1, step) <= lo) ++q;
+  return q;
+}
+
+TSAH_HD uint32_t cwbvhQuantizeHi(float hi, float p, uint32_t e) {
+  const float step = cwbvhStep(e);
+  uint32_t q = cwbvhGuess(hi, p, e);
+  while (q < 255 && !(cwbvhDecode(p, q, step) >= hi)) ++q;
+  while (q > 0 && cwbvhDecode(p, q - 1, step) >= hi) --q;
+  return q;
+}
+
+}  // namespace detail
+
+// Sets p, e, qlo and qhi of node n from the exact boxes of its occupied slots (boxes[slot], read
+// only where meta[slot] != 0). Returns the union of those boxes (the node's exact box).
+// Conservative: cwbvhChildBox(n, s).contains(boxes[s]) for every occupied slot, for any finite
+// finite boxes (a plane beyond the float range decodes to +-inf, which still contains it).
+TSAH_HD Aabb cwbvhQuantize(CwbvhNode& n, const Aabb* boxes) {
+  Aabb all;
+  TSAH_CWBVH_UNROLL
+  for (uint32_t s = 0; s < kCwbvhWidth; ++s)
+    if (!n.isEmpty(s)) all.extend(boxes[s]);
+  n.px = all.lo.x;
+  n.py = all.lo.y;
+  n.pz = all.lo.z;
+  const uint32_t ex = detail::cwbvhExponent(all.lo.x, all.hi.x);
+  const uint32_t ey = detail::cwbvhExponent(all.lo.y, all.hi.y);
+  const uint32_t ez = detail::cwbvhExponent(all.lo.z, all.hi.z);
+  n.ex = uint8_t(ex);
+  n.ey = uint8_t(ey);
+  n.ez = uint8_t(ez);
+  const uint32_t e[3] = {ex, ey, ez};
+  TSAH_CWBVH_UNROLL
+  for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
+    for (int a = 0; a < 3; ++a) {
+      if (n.isEmpty(s)) {
+        n.qlo[a][s] = 255;  // an empty box; never read (meta says empty)
+        n.qhi[a][s] = 0;
+      } else {
+        n.qlo[a][s] = uint8_t(detail::cwbvhQuantizeLo(boxes[s].lo[a], all.lo[a], e[a]));
+        n.qhi[a][s] = uint8_t(detail::cwbvhQuantizeHi(boxes[s].hi[a], all.lo[a], e[a]));
+      }
+    }
+  }
+  return all;
+}
+
+// End (exclusive offset) of the leaf starting at `offset` in a node whose leaves start at the
+// offsets in `starts` (bit i set: a leaf begins at triBase + i).
+TSAH_HD uint32_t cwbvhLeafEnd(uint64_t starts, uint32_t offset, uint32_t triCount) {
+  const uint64_t above = offset >= 63 ? 0ull : starts & (~0ull << (offset + 1));
+  if (above == 0) return triCount;
+#if defined(__CUDA_ARCH__)
+  return uint32_t(__ffsll((long long)above) - 1);
+#else
+  return uint32_t(__builtin_ctzll(above));
+#endif
+}
+
+TSAH_HD uint32_t cwbvhPopc(uint32_t x) {
+#if defined(__CUDA_ARCH__)
+  return uint32_t(__popc(x));
+#else
+  return uint32_t(__builtin_popcount(x));
+#endif
+}
+
+TSAH_HD uint32_t cwbvhLowestBit(uint64_t x) {
+#if defined(__CUDA_ARCH__)
+  return uint32_t(__ffsll((long long)x) - 1);
+#else
+  return uint32_t(__builtin_ctzll(x));
+#endif
+}
+
+// Everything the traversal reads for one frame (pointers only; pass by value).
+struct CwbvhView {
+  const CwbvhNode* nodes = nullptr;
+  const WoopTriangle* woop = nullptr;   // per slot of the compressed layout
+  const uint32_t* triIndex = nullptr;   // slot -> triangle id
+  const uint32_t* indices = nullptr;    // 3 per triangle id
+  const float* positions = nullptr;     // xyz per vertex, this frame
+  int32_t rootRef = 0;                  // node 0, or a leaf reference when the tree is one leaf
+  uint32_t rootCount = 0;
+  Aabb rootBox;
+};
+
+// The node as the traversal reads it: 20 words, with every field taken out by a constant byte
+// offset, so that on the GPU (slot loop unrolled) the node lives in registers.
+struct CwbvhNodeWords {
+  uint32_t w[20];
+
+  TSAH_HD uint32_t byteAt(uint32_t offset) const { return (w[offset >> 2] >> (8u * (offset & 3u))) & 0xffu; }
+  TSAH_HD float floatAt(uint32_t word) const {
+#if defined(__CUDA_ARCH__)
+    return __uint_as_float(w[word]);
+#else
+    float f;
+    std::memcpy(&f, &w[word], sizeof f);
+    return f;
+#endif
+  }
+  TSAH_HD uint32_t meta(uint32_t slot) const { return byteAt(24 + slot); }
+  TSAH_HD uint32_t qlo(uint32_t axis, uint32_t slot) const { return byteAt(32 + 8 * axis + slot); }
+  TSAH_HD uint32_t qhi(uint32_t axis, uint32_t slot) const { return byteAt(56 + 8 * axis + slot); }
+};
+static_assert(offsetof(CwbvhNode, ex) == 12 && offsetof(CwbvhNode, triCount) == 15 &&
+              offsetof(CwbvhNode, childBase) == 16 && offsetof(CwbvhNode, triBase) == 20 &&
+              offsetof(CwbvhNode, meta) == 24 && offsetof(CwbvhNode, qlo) == 32 && offsetof(CwbvhNode, qhi) == 56);
+
+// How a traversal loads a node: plain loads on the CPU, read-only cache on the GPU.
+TSAH_HD CwbvhNodeWords cwbvhLoadNode(const CwbvhNode* nodes, uint32_t i) {
+  CwbvhNodeWords n;
+#if defined(__CUDA_ARCH__)
+  const uint4* src = reinterpret_cast<const uint4*>(nodes + i);
+#pragma unroll
+  for (int k = 0; k < 5; ++k) {
+    const uint4 v = __ldg(src + k);
+    n.w[4 * k] = v.x;
+    n.w[4 * k + 1] = v.y;
+    n.w[4 * k + 2] = v.z;
+    n.w[4 * k + 3] = v.w;
+  }
+#else
+  std::memcpy(n.w, nodes + i, sizeof n.w);
+#endif
+  return n;
+}
+
+TSAH_HD WoopTriangle cwbvhLoadWoop(const WoopTriangle* woop, uint32_t s) {
+#if defined(__CUDA_ARCH__)
+  const float4* p = reinterpret_cast<const float4*>(woop + s);
+  const float4 a = __ldg(p), b = __ldg(p + 1), c = __ldg(p + 2);
+  return {{a.x, a.y, a.z, a.w}, {b.x, b.y, b.z, b.w}, {c.x, c.y, c.z, c.w}};
+#else
+  return woop[s];
+#endif
+}
+
+TSAH_HD uint32_t cwbvhLoadU32(const uint32_t* p) {
+#if defined(__CUDA_ARCH__)
+  return __ldg(p);
+#else
+  return *p;
+#endif
+}
+
+// A group of interior children still to visit (the paper's node group): the children's base
+// index, their interior-slot mask and the hit children as bits of slot ^ oct.
+struct CwbvhNodeGroup {
+  uint32_t base;
+  uint32_t bits;  // hits in bits 0..7 (by slot ^ oct), interior mask in bits 8..15 (by slot)
+};
+
+namespace detail {
+
+// Tests triangle slot s; on a hit shortens tmax and records it (the slot; the caller maps it).
+TSAH_HD bool cwbvhTriangle(const CwbvhView& v, const Ray& ray, const RayPrep& prep, uint32_t s, float& tmax,
+                           Hit& hit) {
+  auto fetch = [&](Vec3& v0, Vec3& v1, Vec3& v2) {
+    const uint32_t* tri = v.indices + 3 * std::size_t(cwbvhLoadU32(v.triIndex + s));
+    const uint32_t a = cwbvhLoadU32(tri), b = cwbvhLoadU32(tri + 1), c = cwbvhLoadU32(tri + 2);
+    v0 = {v.positions[3 * a], v.positions[3 * a + 1], v.positions[3 * a + 2]};
+    v1 = {v.positions[3 * b], v.positions[3 * b + 1], v.positions[3 * b + 2]};
+    v2 = {v.positions[3 * c], v.positions[3 * c + 1], v.positions[3 * c + 2]};
+  };
+  float t, u, w;
+  if (!intersectTriangle(ray, prep, cwbvhLoadWoop(v.woop, s), tmax, fetch, t, u, w)) return false;
+  tmax = t;
+  hit.t = t;
+  hit.u = u;
+  hit.v = w;
+  hit.tri = s;
+  return true;
+}
+
+// The paper's stack-based traversal: a node's hit interior children become one node group
+// (visited in octant order), its hit leaves one triangle group, tested at once. The box test is
+// intersectBox (ray.hpp) on the decoded boxes, the triangle test intersectTriangle (woop.hpp).
+template <bool AnyHit, int StackSize>
+TSAH_HD Hit cwbvhTraverse(const CwbvhView& v, const Ray& ray) {
+  Hit hit;
+  const RayPrep prep = prepareRay(ray);
+  float tmax = ray.tmax;
+  float tEntry;
+  if (isLeafRef(v.rootRef)) {  // a tree that is one leaf (or empty)
+    if (v.rootCount == 0 || !intersectBox(prep, v.rootBox, ray.tmin, tmax, tEntry)) return hit;
+    const uint32_t first = leafFirstSlot(v.rootRef);
+    for (uint32_t s = first; s < first + v.rootCount; ++s)
+      if (cwbvhTriangle(v, ray, prep, s, tmax, hit) && AnyHit) break;
+    if (hit.valid()) hit.tri = cwbvhLoadU32(v.triIndex + hit.tri);
+    return hit;
+  }
+  const uint32_t oct = (ray.dir.x < 0.0f ? 1u : 0u) | (ray.dir.y < 0.0f ? 2u : 0u) | (ray.dir.z < 0.0f ? 4u : 0u);
+  CwbvhNodeGroup stack[StackSize];
+  int sp = 0;
+  // The root as a group of one: base 0, interior slot 0, hit key 0 ^ oct.
+  CwbvhNodeGroup group{0u, (1u << oct) | (1u << 8)};
+  for (;;) {
+    if ((group.bits & 0xffu) == 0) {
+      if (sp == 0) break;
+      group = stack[--sp];
+    }
+    const uint32_t key = cwbvhLowestBit(group.bits & 0xffu);
+    group.bits &= ~(1u << key);
+    const uint32_t slot = key ^ oct;
+    const uint32_t imask = group.bits >> 8;
+    const uint32_t nodeIndex = group.base + cwbvhPopc(imask & ((1u << slot) - 1u));
+    const CwbvhNodeWords n = cwbvhLoadNode(v.nodes, nodeIndex);
+    const Vec3 p{n.floatAt(0), n.floatAt(1), n.floatAt(2)};
+    const float sx = cwbvhStep(n.byteAt(12)), sy = cwbvhStep(n.byteAt(13)), sz = cwbvhStep(n.byteAt(14));
+    uint32_t childHits = 0, childInterior = 0;
+    uint64_t starts = 0, hitLeaves = 0;
+    TSAH_CWBVH_UNROLL
+    for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
+      const uint32_t m = n.meta(s);
+      if (m == 0) continue;
+      const bool interior = (m & kCwbvhInterior) != 0;
+      if (interior) childInterior |= 1u << s;
+      else starts |= 1ull << (m & 0x3fu);
+      Aabb b;
+      b.lo = {cwbvhDecode(p.x, n.qlo(0, s), sx), cwbvhDecode(p.y, n.qlo(1, s), sy), cwbvhDecode(p.z, n.qlo(2, s), sz)};
+      b.hi = {cwbvhDecode(p.x, n.qhi(0, s), sx), cwbvhDecode(p.y, n.qhi(1, s), sy), cwbvhDecode(p.z, n.qhi(2, s), sz)};
+      if (!intersectBox(prep, b, ray.tmin, tmax, tEntry)) continue;
+      if (interior) childHits |= 1u << (s ^ oct);
+      else hitLeaves |= 1ull << (m & 0x3fu);
+    }
+    // The triangle group: every triangle of the hit leaves.
+    bool done = false;
+    while (hitLeaves != 0 && !done) {
+      const uint32_t first = cwbvhLowestBit(hitLeaves);
+      hitLeaves &= hitLeaves - 1;
+      const uint32_t end = cwbvhLeafEnd(starts, first, n.byteAt(15));
+      for (uint32_t o = first; o < end; ++o) {
+        if (cwbvhTriangle(v, ray, prep, n.w[5] + o, tmax, hit) && AnyHit) {
+          done = true;
+          break;
+        }
+      }
+    }
+    if (done) break;
+    if (childHits != 0) {
+      if ((group.bits & 0xffu) != 0) stack[sp++] = group;
+      group = {n.w[4], childHits | (childInterior << 8)};
+    }
+  }
+  if (hit.valid()) hit.tri = cwbvhLoadU32(v.triIndex + hit.tri);
+  return hit;
+}
+
+}  // namespace detail
+
+// Stack entries: one per wide level at most (a node pushes its remaining group once), so the
+// binary tree's depth limit (kTraversalStackSize = 128) bounds it as well.
+inline constexpr int kCwbvhStackSize = 128;
+
+TSAH_HD Hit cwbvhClosestHit(const CwbvhView& v, const Ray& ray) {
+  return detail::cwbvhTraverse<false, kCwbvhStackSize>(v, ray);
+}
+TSAH_HD bool cwbvhAnyHit(const CwbvhView& v, const Ray& ray) {
+  return detail::cwbvhTraverse<true, kCwbvhStackSize>(v, ray).valid();
+}
+
+}  // namespace tsah

@@ -1,0 +1,245 @@
+// The compressed 8-wide layout on the GPU (GpuRuntime with Config::layout = cwbvh): the refitted
+// and re-quantized nodes equal tsah::refitCwbvh's byte for byte; closest and any hits equal the
+// CPU reference traversal of the same layout exactly, and the binary GPU path up to ties; rendered
+// images equal the binary path's and the CPU renderer's within the CPU/GPU tolerance. Skipped
+// without a device.
+#include <gtest/gtest.h>
+
+#if TSAH_HAVE_CUDA
+
+#include <cmath>
+#include <cstring>
+#include <random>
+
+#include "anim/error.hpp"
+#include "anim/generators.hpp"
+#include "tsah/cpu_runtime.hpp"
+#include "tsah/cwbvh_build.hpp"
+#include "tsah/leaf_collapser.hpp"
+#include "tsah/renderer.hpp"
+#include "tsah/sah_builder.hpp"
+#include "tsah/sampling.hpp"
+#include "tsah/traversal.hpp"
+#include "tsah/tree_set.hpp"
+#include "tsah_cuda/device.hpp"
+#include "tsah_cuda/gpu_runtime.hpp"
+
+namespace {
+
+using tsah::Vec3;
+namespace tc = tsah::cuda;
+
+#define REQUIRE_GPU() \
+  if (!tc::deviceAvailable()) GTEST_SKIP() << "no CUDA device"
+
+anim::Animation makeAnimation(anim::GeneratorKind kind, uint32_t triangles, uint32_t frames) {
+  anim::GeneratorOptions o;
+  o.triangles = triangles;
+  o.frames = frames;
+  return anim::generate(kind, o);
+}
+
+// Sweep SAH on the first keyframe, collapsed to leaves of up to 8 triangles, boxes of every keyframe.
+tsah::FlatBvh sahTree(const anim::Animation& a) {
+  const tsah::PrimitiveBoxes boxes = tsah::triangleBoxes(a.indices(), a.allPositions(), a.keyframeCount());
+  tsah::Bvh bvh = tsah::SweepSahBuilder().build(boxes.frame(0));
+  tsah::LeafCollapser::Config c;
+  c.maxLeafSize = 8;
+  bvh = tsah::LeafCollapser(c).collapse(bvh);
+  tsah::refit(bvh, boxes);
+  return tsah::flattenBvh(bvh);
+}
+
+tc::GpuRuntime::Config wide() {
+  tc::GpuRuntime::Config c;
+  c.layout = tc::TreeLayout::Cwbvh;
+  return c;
+}
+
+std::vector<tsah::Ray> randomRays(const tsah::Aabb& b, const anim::Animation& a, std::span<const float> pos,
+                                  uint32_t count, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> g;
+  std::uniform_real_distribution<float> u01(0, 1);
+  auto unit = [&] { return tsah::normalize(Vec3{g(rng), g(rng), g(rng)}); };
+  const float diag = std::sqrt(tsah::dot(b.extent(), b.extent()));
+  std::vector<tsah::Ray> rays(count);
+  for (uint32_t i = 0; i < count; ++i) {
+    tsah::Ray& r = rays[i];
+    if (i % 3 == 0) {  // from outside at a triangle
+      const uint32_t* tri = a.indices().data() + 3 * (rng() % a.triangleCount());
+      Vec3 c{0, 0, 0};
+      for (int k = 0; k < 3; ++k) c = c + Vec3{pos[3 * tri[k]], pos[3 * tri[k] + 1], pos[3 * tri[k] + 2]} * (1.0f / 3);
+      r.org = b.center() + unit() * diag;
+      r.dir = c - r.org;
+    } else {  // from inside, any direction
+      r.org = b.lo + Vec3{u01(rng) * b.extent().x, u01(rng) * b.extent().y, u01(rng) * b.extent().z};
+      r.dir = unit() * (0.1f + 3.0f * u01(rng));
+    }
+    r.tmin = i % 5 == 2 ? 0.01f * u01(rng) : 0.0f;
+    r.tmax = i % 4 == 0 ? 2.0f * u01(rng) : 3.4e38f;
+  }
+  return rays;
+}
+
+TEST(CudaCwbvh, NodesEqualHostRefitAtEveryTime) {
+  REQUIRE_GPU();
+  for (auto kind : {anim::GeneratorKind::Explode, anim::GeneratorKind::Wave}) {
+    const anim::Animation a = makeAnimation(kind, 6000, 6);
+    const tsah::FlatBvh tree = sahTree(a);
+    tc::GpuRuntime gpu(tree, a, wide());
+    tsah::CwbvhTree host = tsah::buildCwbvh(tree);
+    for (double t : {a.startTime(), 1.0, 2.5, a.endTime() + 1.0}) {
+      gpu.updateAt(t);
+      tsah::refitCwbvh(host, a.indices(), a.positionsAt(t));
+      ASSERT_EQ(tsah::validateCwbvh(host), std::nullopt);
+      const std::vector<tsah::CwbvhNode> nodes = gpu.downloadCwbvhNodes();
+      ASSERT_EQ(nodes.size(), host.nodes.size());
+      ASSERT_EQ(std::memcmp(nodes.data(), host.nodes.data(), nodes.size() * sizeof(tsah::CwbvhNode)), 0) << "t=" << t;
+      const tsah::Aabb b = gpu.bounds();
+      EXPECT_TRUE(b.contains(host.rootBox) && host.rootBox.contains(b));
+    }
+  }
+}
+
+TEST(CudaCwbvh, HitsEqualCpuReferenceAndBinaryGpu) {
+  REQUIRE_GPU();
+  for (auto kind : {anim::GeneratorKind::Explode, anim::GeneratorKind::Wave, anim::GeneratorKind::Swap}) {
+    const anim::Animation a = makeAnimation(kind, 8000, 6);
+    const tsah::FlatBvh tree = sahTree(a);
+    tc::GpuRuntime gpuWide(tree, a, wide());
+    tc::GpuRuntime gpuBinary(tree, a);
+    tsah::CwbvhTree host = tsah::buildCwbvh(tree);
+    uint32_t hits = 0, ties = 0;
+    for (double t : {0.0, 2.3}) {
+      gpuWide.updateAt(t);
+      gpuBinary.updateAt(t);
+      const auto pos = a.positionsAt(t);
+      tsah::refitCwbvh(host, a.indices(), pos);
+      std::vector<tsah::WoopTriangle> woop(host.triIndex.size());
+      for (size_t s = 0; s < woop.size(); ++s) {
+        const uint32_t* tri = a.indices().data() + 3 * std::size_t(host.triIndex[s]);
+        auto v = [&](uint32_t i) { return Vec3{pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]}; };
+        woop[s] = tsah::makeWoopTriangle(v(tri[0]), v(tri[1]), v(tri[2]));
+      }
+      EXPECT_EQ(std::memcmp(woop.data(), gpuWide.downloadWoop().data(), woop.size() * sizeof woop[0]), 0);
+      const tsah::CwbvhView view = host.view(woop.data(), a.indices().data(), pos.data());
+      const auto rays = randomRays(gpuBinary.bounds(), a, pos, 20000, 11);
+      const auto wideHits = gpuWide.closestHits(rays);
+      const auto binaryHits = gpuBinary.closestHits(rays);
+      const auto wideAny = gpuWide.anyHits(rays);
+      const auto binaryAny = gpuBinary.anyHits(rays);
+      for (size_t i = 0; i < rays.size(); ++i) {
+        // The GPU runs the reference code on the same data: bit-equal.
+        const tsah::Hit ref = tsah::cwbvhClosestHit(view, rays[i]);
+        ASSERT_EQ(std::memcmp(&ref, &wideHits[i], sizeof ref), 0) << "ray " << i;
+        ASSERT_EQ(wideAny[i] != 0, tsah::cwbvhAnyHit(view, rays[i])) << "ray " << i;
+        // Against the binary tree: the same hit or none; another triangle only at the same distance.
+        ASSERT_EQ(wideAny[i], binaryAny[i]) << "ray " << i;
+        ASSERT_EQ(wideHits[i].valid(), binaryHits[i].valid()) << "ray " << i;
+        if (!wideHits[i].valid()) continue;
+        ++hits;
+        ASSERT_EQ(wideHits[i].t, binaryHits[i].t) << "ray " << i;
+        if (wideHits[i].tri != binaryHits[i].tri) ++ties;
+      }
+    }
+    EXPECT_GT(hits, 10000u);
+    EXPECT_LE(ties, hits / 100) << "ties";
+  }
+}
+
+// A tree set in the compressed layout: every tree gets its own compressed nodes; updateAt traces the
+// tree of the frame's part, with the hits of the binary runtime over the same set.
+TEST(CudaCwbvh, TreeSetTracesTheTreeOfEachPartLikeTheBinaryLayout) {
+  REQUIRE_GPU();
+  const anim::Animation a = makeAnimation(anim::GeneratorKind::Explode, 4000, 6);
+  tsah::TreeSet set;
+  for (uint32_t k : {0u, 3u}) {
+    const tsah::PrimitiveBoxes boxes = tsah::triangleBoxes(a.indices(), a.allPositions(), a.keyframeCount());
+    tsah::LeafCollapser::Config c;
+    c.maxLeafSize = 8;
+    tsah::Bvh bvh = tsah::LeafCollapser(c).collapse(tsah::SweepSahBuilder().build(boxes.frame(k)));
+    tsah::refit(bvh, boxes);
+    set.trees.push_back(tsah::flattenBvh(bvh));
+  }
+  const double mid = 0.5 * (a.startTime() + a.endTime());
+  set.ranges = {{a.startTime(), mid}, {mid, a.endTime()}};
+  tc::GpuRuntime gpuWide(set, a, wide());
+  tc::GpuRuntime gpuBinary(set, a, tc::GpuRuntime::Config{});
+  for (double t : {a.startTime(), mid - 0.1, mid + 0.1, a.endTime()}) {
+    gpuWide.updateAt(t);
+    gpuBinary.updateAt(t);
+    ASSERT_EQ(gpuWide.currentTree(), set.treeAt(t)) << "t=" << t;
+    // The compressed nodes are those of the part's tree, refitted to t.
+    tsah::CwbvhTree host = tsah::buildCwbvh(set.trees[set.treeAt(t)]);
+    tsah::refitCwbvh(host, a.indices(), a.positionsAt(t));
+    const std::vector<tsah::CwbvhNode> nodes = gpuWide.downloadCwbvhNodes();
+    ASSERT_EQ(nodes.size(), host.nodes.size()) << "t=" << t;
+    EXPECT_EQ(std::memcmp(nodes.data(), host.nodes.data(), nodes.size() * sizeof(tsah::CwbvhNode)), 0) << "t=" << t;
+    const auto rays = randomRays(gpuBinary.bounds(), a, a.positionsAt(t), 5000, 3);
+    const auto wideHits = gpuWide.closestHits(rays), binaryHits = gpuBinary.closestHits(rays);
+    const auto wideAny = gpuWide.anyHits(rays), binaryAny = gpuBinary.anyHits(rays);
+    for (size_t i = 0; i < rays.size(); ++i) {
+      ASSERT_EQ(wideAny[i], binaryAny[i]) << "t=" << t << " ray " << i;
+      ASSERT_EQ(wideHits[i].valid(), binaryHits[i].valid()) << "t=" << t << " ray " << i;
+      if (wideHits[i].valid()) {
+        ASSERT_EQ(wideHits[i].t, binaryHits[i].t) << "t=" << t << " ray " << i;
+      }
+    }
+  }
+}
+
+TEST(CudaCwbvh, ImagesEqualBinaryAndCpu) {
+  REQUIRE_GPU();
+  const anim::Animation a = makeAnimation(anim::GeneratorKind::Explode, 20000, 5);
+  const tsah::FlatBvh tree = sahTree(a);
+  tsah::CpuRuntime cpu(tree, {a.indices().begin(), a.indices().end()}, a.vertexCount(), {2});
+  tc::GpuRuntime gpuWide(tree, a, wide());
+  tc::GpuRuntime gpuBinary(tree, a);
+  const anim::Bounds ab = a.bounds();
+  tsah::Aabb bounds;
+  bounds.extend(Vec3{ab.min[0], ab.min[1], ab.min[2]});
+  bounds.extend(Vec3{ab.max[0], ab.max[1], ab.max[2]});
+  tsah::RenderSettings settings;
+  settings.width = 203;
+  settings.height = 157;
+  settings.aoSamples = 5;
+  settings.shadowSamples = 3;
+  const tsah::Camera camera = tsah::fitCamera(bounds, {0, 1, 0}, 45.0f, float(settings.width) / float(settings.height));
+  const tsah::SceneLighting lighting = tsah::fitLighting(bounds, camera);
+  for (uint32_t frame : {0u, 3u}) {
+    settings.frame = frame;
+    const double t = a.uniformTimes(5)[frame];
+    cpu.update(a.positionsAt(t));
+    gpuWide.updateAt(t);
+    gpuBinary.updateAt(t);
+    tsah::Image cpuImage, wideImage, binaryImage;
+    const tsah::RenderStats c = tsah::renderFrame(cpu, camera, lighting, settings, cpuImage);
+    const tsah::RenderStats w = tc::renderFrameGpu(gpuWide, camera, lighting, settings, wideImage);
+    const tsah::RenderStats b = tc::renderFrameGpu(gpuBinary, camera, lighting, settings, binaryImage);
+    // Primary ties (another triangle at the same distance) change a pixel's normal, so the AO and
+    // shadow ray counts may differ slightly, as between the CPU and GPU renderers.
+    EXPECT_EQ(w.primary.rays, b.primary.rays);
+    EXPECT_NEAR(double(w.ao.rays), double(b.ao.rays), 0.002 * double(b.ao.rays) + 8);
+    EXPECT_NEAR(double(w.shadow.rays), double(b.shadow.rays), 0.002 * double(b.shadow.rays) + 8);
+    for (const tsah::Image* other : {&binaryImage, &cpuImage}) {
+      const tsah::ImageDifference d = tsah::compareImages(wideImage, *other, 16);
+      EXPECT_LT(d.meanAbs, 0.2) << "frame " << frame;
+      EXPECT_LT(d.fractionAbove, 0.002) << "frame " << frame;
+    }
+    EXPECT_GT(c.ao.rays, 0u);
+  }
+}
+
+TEST(CudaCwbvh, LayoutNames) {
+  EXPECT_EQ(tc::parseTreeLayout("cwbvh"), tc::TreeLayout::Cwbvh);
+  EXPECT_EQ(tc::parseTreeLayout("bvh2"), tc::TreeLayout::Bvh2);
+  EXPECT_STREQ(tc::treeLayoutName(tc::TreeLayout::Cwbvh), "cwbvh");
+  EXPECT_THROW(tc::parseTreeLayout("bvh8"), anim::Error);
+}
+
+}  // namespace
+
+#else
+TEST(CudaCwbvh, NotBuilt) { GTEST_SKIP() << "built without CUDA"; }
+#endif

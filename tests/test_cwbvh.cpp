@@ -1,0 +1,268 @@
+// The compressed 8-wide layout (cwbvh_layout.hpp, cwbvh_build.hpp): conservative quantization of
+// random, degenerate, huge and tiny boxes; every node of random and real trees across frames
+// contains its exact child boxes after the re-quantizing refit; the reference traversal of the
+// compressed layout returns the binary CPU traversal's hits (the GPU kernels run the same code).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "anim/error.hpp"
+#include "anim/generators.hpp"
+#include "anim/load.hpp"
+#include "tsah/cpu_runtime.hpp"
+#include "tsah/cwbvh_build.hpp"
+#include "tsah/sah_builder.hpp"
+#include "tsah/sampling.hpp"
+#include "tsah/traversal.hpp"
+#include "test_support.hpp"
+
+namespace {
+
+using tsah::Aabb;
+using tsah::CwbvhNode;
+using tsah::Vec3;
+
+// A node with `count` occupied slots (leaves) quantized over `boxes`; checks containment.
+void expectConservative(const std::vector<Aabb>& boxes) {
+  CwbvhNode n{};
+  for (uint32_t s = 0; s < boxes.size(); ++s) n.meta[s] = uint8_t(tsah::kCwbvhLeaf | s);
+  n.triCount = uint8_t(boxes.size());
+  const Aabb all = tsah::cwbvhQuantize(n, boxes.data());
+  for (uint32_t s = 0; s < boxes.size(); ++s) {
+    const Aabb q = tsah::cwbvhChildBox(n, s);
+    ASSERT_TRUE(q.contains(boxes[s])) << "slot " << s << " lo " << boxes[s].lo.x << " " << boxes[s].lo.y << " "
+                                      << boxes[s].lo.z << " hi " << boxes[s].hi.x << " " << boxes[s].hi.y << " "
+                                      << boxes[s].hi.z << " q.lo.x " << q.lo.x << " q.hi.x " << q.hi.x;
+    ASSERT_TRUE(all.contains(boxes[s]));
+  }
+}
+
+Aabb randomBox(std::mt19937& rng, float centreScale, float sizeScale) {
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f), s(0.0f, 1.0f);
+  Aabb b;
+  for (int a = 0; a < 3; ++a) {
+    const float c = u(rng) * centreScale;
+    const float h = s(rng) * sizeScale;
+    b.lo[a] = c - h;
+    b.hi[a] = c + h;
+  }
+  return b;
+}
+
+TEST(CwbvhQuantize, ContainsRandomDegenerateHugeAndTinyBoxes) {
+  std::mt19937 rng(7);
+  const float scales[][2] = {{1, 1},       {1000, 1},  {1e6f, 1e-3f}, {1e-30f, 1e-32f}, {1e30f, 1e35f},
+                             {1e37f, 1e38f}, {0, 1e-38f}, {5e4f, 0},     {1, 1e-7f}};
+  for (auto& sc : scales) {
+    for (int round = 0; round < 200; ++round) {
+      const uint32_t count = 1 + rng() % 8;
+      std::vector<Aabb> boxes(count);
+      for (Aabb& b : boxes) b = randomBox(rng, sc[0], sc[1] * float(rng() % 3));  // some flat / point boxes
+      expectConservative(boxes);
+    }
+  }
+  // The extremes of float: the whole range, one point, boxes far from their node's origin.
+  expectConservative({Aabb{{-3.4e38f, -3.4e38f, -3.4e38f}, {3.4e38f, 3.4e38f, 3.4e38f}}, Aabb{{0, 0, 0}, {0, 0, 0}}});
+  expectConservative({Aabb{{1, 2, 3}, {1, 2, 3}}});
+  expectConservative({Aabb{{-1e-38f, 0, 0}, {1e-38f, 1e-45f, 0}}, Aabb{{1e7f, 1e7f, 1e7f}, {1.0000001e7f, 1e7f, 1e7f}}});
+}
+
+TEST(CwbvhQuantize, GridIsTightForOrdinaryBoxes) {
+  // Quantization must not be conservative by giving up: a child a quarter of its node is at most
+  // a quarter plus two grid steps.
+  std::vector<Aabb> boxes = {Aabb{{0, 0, 0}, {1, 1, 1}}, Aabb{{3, 3, 3}, {4, 4, 4}}};
+  CwbvhNode n{};
+  n.meta[0] = tsah::kCwbvhLeaf;
+  n.meta[1] = tsah::kCwbvhLeaf | 1;
+  tsah::cwbvhQuantize(n, boxes.data());
+  const Aabb q = tsah::cwbvhChildBox(n, 0);
+  EXPECT_LE(q.hi.x, 1.0f + 2.0f * 4.0f / 255.0f);
+  EXPECT_EQ(q.lo.x, 0.0f);
+}
+
+// Woop triangles per slot of the compressed layout.
+std::vector<tsah::WoopTriangle> woopOf(const tsah::CwbvhTree& t, std::span<const uint32_t> idx,
+                                       std::span<const float> pos) {
+  std::vector<tsah::WoopTriangle> w(t.triIndex.size());
+  for (size_t s = 0; s < w.size(); ++s) {
+    const uint32_t* tri = idx.data() + 3 * std::size_t(t.triIndex[s]);
+    auto v = [&](uint32_t i) { return Vec3{pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]}; };
+    w[s] = tsah::makeWoopTriangle(v(tri[0]), v(tri[1]), v(tri[2]));
+  }
+  return w;
+}
+
+tsah::Bvh sahTreeOverFrames(std::span<const uint32_t> indices, std::span<const float> positions, uint32_t frames) {
+  const tsah::PrimitiveBoxes boxes = tsah::triangleBoxes(indices, positions, frames);
+  tsah::SweepSahBuilder::Config c;
+  c.maxLeafSize = 8;
+  tsah::Bvh bvh = tsah::SweepSahBuilder(c).build(boxes.frame(0));
+  tsah::refit(bvh, boxes);
+  return bvh;
+}
+
+// Structure and conservative boxes of the tree refitted to every frame.
+void checkAcrossFrames(tsah::CwbvhTree& t, std::span<const uint32_t> idx, std::span<const float> positions,
+                       uint32_t vertices, uint32_t frames) {
+  ASSERT_EQ(tsah::validateCwbvh(t), std::nullopt);
+  for (uint32_t f = 0; f < frames; ++f) {
+    const auto pos = positions.subspan(std::size_t(f) * vertices * 3, std::size_t(vertices) * 3);
+    tsah::refitCwbvh(t, idx, pos);
+    ASSERT_EQ(tsah::validateCwbvh(t), std::nullopt) << "frame " << f;
+    Aabb all;
+    for (uint32_t tri = 0; tri < idx.size() / 3; ++tri)
+      for (int k = 0; k < 3; ++k) {
+        const uint32_t v = idx[3 * tri + k];
+        all.extend(Vec3{pos[3 * v], pos[3 * v + 1], pos[3 * v + 2]});
+      }
+    ASSERT_TRUE(t.rootBox.contains(all) && all.contains(t.rootBox)) << "frame " << f;
+  }
+}
+
+TEST(CwbvhBuild, RandomTreesAcrossFramesStayConservative) {
+  for (uint32_t seed = 1; seed <= 4; ++seed) {
+    const auto m = tsah::test::randomMovingTriangles(300 * seed, 6, seed, 0.5f);
+    const tsah::Bvh bvh = sahTreeOverFrames(m.indices, m.positions, m.frames);
+    tsah::WideCollapser::Config c;
+    c.width = 8;
+    const tsah::WideBvh wide = tsah::WideCollapser(c).collapse(bvh);
+    tsah::CwbvhTree t = tsah::buildCwbvh(wide, 0);
+    ASSERT_EQ(t.triIndex.size(), m.indices.size() / 3);
+    ASSERT_EQ(t.nodeCount(), wide.nodeCount());
+    checkAcrossFrames(t, m.indices, m.positions, uint32_t(m.indices.size()), m.frames);
+  }
+}
+
+TEST(CwbvhBuild, RealAnimationAcrossFrames) {
+  const auto path = tsah::test::dataDir() / "md2" / "faerie.md2";
+  if (!std::filesystem::exists(path)) GTEST_SKIP() << "no " << path;
+  const anim::Animation a = anim::load(path.string());
+  const uint32_t frames = std::min<uint32_t>(a.keyframeCount(), 20);
+  const auto all = a.allPositions();
+  const std::span<const float> pos(all.data(), std::size_t(frames) * a.vertexCount() * 3);
+  const tsah::Bvh bvh = sahTreeOverFrames(a.indices(), pos, frames);
+  tsah::CwbvhTree t = tsah::buildCwbvh(tsah::flattenBvh(bvh));
+  checkAcrossFrames(t, a.indices(), pos, a.vertexCount(), frames);
+}
+
+TEST(CwbvhBuild, RefusesTooWideTreesAndOverfullNodes) {
+  const auto m = tsah::test::randomMovingTriangles(100, 1, 3, 0.0f);
+  const tsah::Bvh bvh = sahTreeOverFrames(m.indices, m.positions, 1);
+  tsah::WideCollapser::Config c;
+  c.width = 8;
+  tsah::WideBvh wide = tsah::WideCollapser(c).collapse(bvh);
+  wide.width = 9;
+  EXPECT_THROW(tsah::buildCwbvh(wide), anim::Error);
+  // Two leaf children of 50 triangles each: 100 triangles in one node.
+  tsah::WideBvh two;
+  two.rootRef = 0;
+  two.nodes = {{0, 2}};
+  two.children = {{tsah::makeLeafRef(0), 50}, {tsah::makeLeafRef(50), 50}};
+  two.primIds.resize(100);
+  for (uint32_t i = 0; i < 100; ++i) two.primIds[i] = i;
+  two.childBoxes = {Aabb{{0, 0, 0}, {1, 1, 1}}, Aabb{{1, 1, 1}, {2, 2, 2}}};
+  two.rootBoxes = {Aabb{{0, 0, 0}, {2, 2, 2}}};
+  EXPECT_THROW(tsah::buildCwbvh(two), anim::Error);
+}
+
+// Rays as in test_traversal: from outside at random triangles, from inside in any direction.
+std::vector<tsah::Ray> randomRays(const tsah::BvhView& v, uint32_t triangles, const Aabb& b, uint32_t count,
+                                  std::mt19937& rng) {
+  std::normal_distribution<float> g;
+  auto unit = [&] { return tsah::normalize(Vec3{g(rng), g(rng), g(rng)}); };
+  std::uniform_real_distribution<float> u01(0, 1);
+  const float diag = std::sqrt(tsah::dot(b.extent(), b.extent()));
+  std::vector<tsah::Ray> rays(count);
+  for (uint32_t i = 0; i < count; ++i) {
+    tsah::Ray& ray = rays[i];
+    if (i % 3 == 0) {
+      const uint32_t* tri = v.indices + 3 * (rng() % triangles);
+      const Vec3 target = (v.vertex(tri[0]) + v.vertex(tri[1]) + v.vertex(tri[2])) * (1.0f / 3.0f);
+      ray.org = b.center() + unit() * diag;
+      ray.dir = target - ray.org;
+    } else {
+      ray.org = b.lo + Vec3{u01(rng) * b.extent().x, u01(rng) * b.extent().y, u01(rng) * b.extent().z};
+      ray.dir = unit() * (0.1f + 3.0f * u01(rng));
+    }
+    ray.tmin = i % 5 == 2 ? 0.01f * u01(rng) : 0.0f;
+    ray.tmax = i % 4 == 0 ? u01(rng) * 2.0f : 3.4e38f;
+  }
+  return rays;
+}
+
+void compareWithBinary(const anim::Animation& a, uint32_t rayCount, uint32_t seed) {
+  const tsah::Bvh bvh = sahTreeOverFrames(a.indices(), a.allPositions(), a.keyframeCount());
+  const tsah::FlatBvh flat = tsah::flattenBvh(bvh);
+  tsah::CwbvhTree t = tsah::buildCwbvh(flat);
+  tsah::CpuRuntime rt(flat, {a.indices().begin(), a.indices().end()}, a.vertexCount(), {2});
+  std::mt19937 rng(seed);
+  uint32_t hits = 0, ties = 0;
+  for (double time : {a.startTime(), 0.37 * a.endTime(), a.endTime()}) {
+    const auto pos = a.positionsAt(time);
+    rt.update(pos);
+    tsah::refitCwbvh(t, a.indices(), pos);
+    const auto woop = woopOf(t, a.indices(), pos);
+    const tsah::CwbvhView cv = t.view(woop.data(), a.indices().data(), pos.data());
+    const tsah::BvhView bv = rt.view();
+    for (const tsah::Ray& ray : randomRays(bv, a.triangleCount(), rt.bounds(), rayCount, rng)) {
+      const tsah::Hit expect = tsah::closestHit(bv, ray);
+      const tsah::Hit got = tsah::cwbvhClosestHit(cv, ray);
+      ASSERT_EQ(expect.valid(), got.valid());
+      ASSERT_EQ(tsah::anyHit(bv, ray), tsah::cwbvhAnyHit(cv, ray));
+      if (!expect.valid()) continue;
+      ++hits;
+      // The same triangle test on the same Woop data: equal distances; a different triangle only
+      // where two lie at exactly that distance (shared edges and vertices).
+      ASSERT_EQ(expect.t, got.t);
+      if (expect.tri != got.tri) {
+        ++ties;
+        continue;
+      }
+      ASSERT_EQ(expect.u, got.u);
+      ASSERT_EQ(expect.v, got.v);
+    }
+  }
+  EXPECT_GT(hits, rayCount / 4);
+  EXPECT_LE(ties, hits / 100 + 5);
+}
+
+TEST(CwbvhTraversal, EqualsBinaryTraversal) {
+  anim::GeneratorOptions o;
+  o.triangles = 3000;
+  o.frames = 8;
+  compareWithBinary(anim::generate(anim::GeneratorKind::Explode, o), 3000, 1);
+  compareWithBinary(anim::generate(anim::GeneratorKind::Wave, o), 3000, 2);
+  compareWithBinary(anim::generate(anim::GeneratorKind::Swap, o), 3000, 3);
+}
+
+TEST(CwbvhTraversal, SingleLeafTree) {
+  const auto m = tsah::test::randomMovingTriangles(5, 2, 9, 0.1f);
+  const tsah::PrimitiveBoxes boxes = m.boxes();
+  tsah::Bvh bvh;
+  bvh.frameCount = 2;
+  bvh.nodes.resize(1);
+  bvh.nodes[0].primCount = 5;
+  bvh.primIds = {4, 2, 0, 1, 3};
+  bvh.boxes.resize(2);
+  tsah::refit(bvh, boxes);
+  tsah::CwbvhTree t = tsah::buildCwbvh(tsah::flattenBvh(bvh));
+  ASSERT_TRUE(tsah::isLeafRef(t.rootRef));
+  ASSERT_EQ(tsah::validateCwbvh(t), std::nullopt);
+  const std::span<const float> pos(m.positions.data(), 5 * 9);
+  tsah::refitCwbvh(t, m.indices, pos);
+  const auto woop = woopOf(t, m.indices, pos);
+  const tsah::CwbvhView v = t.view(woop.data(), m.indices.data(), pos.data());
+  for (uint32_t tri = 0; tri < 5; ++tri) {  // a ray through each triangle's centre hits something
+    Vec3 c{0, 0, 0};
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t i = m.indices[3 * tri + k];
+      c = c + Vec3{pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]} * (1.0f / 3.0f);
+    }
+    const tsah::Ray ray{c + Vec3{0, 0, 10}, 0.0f, Vec3{0, 0, -1}, 1e30f};
+    EXPECT_TRUE(tsah::cwbvhClosestHit(v, ray).valid());
+    EXPECT_TRUE(tsah::cwbvhAnyHit(v, ray));
+  }
+}
+
+}  // namespace
