@@ -70,26 +70,10 @@ GpuRuntime::Impl::Impl(const TreeSet& set, const anim::Animation& animation, Con
 }
 
 void GpuRuntime::Impl::uploadTree(const FlatBvh& tree) {
-  if (tree.triangleCount() != triangles)
-    throw anim::Error("GPU runtime: the tree holds " + std::to_string(tree.triangleCount()) +
-                      " triangles, the animation " + std::to_string(triangles));
+  FlatBvh topologyOfTree = runtimeTopology(tree, triangles, kTraversalStackSize, "GPU runtime");
   DeviceTree& d = trees.emplace_back();
-  // Keep frame 0's block only, as CpuRuntime does: the boxes are recomputed by every update.
-  FlatBvh& topology = d.topology;
-  topology.frameCount = 1;
-  topology.interiorCount = tree.interiorCount;
-  topology.leafCount = tree.leafCount;
-  topology.depth = tree.depth;
-  topology.rootRef = tree.rootRef;
-  topology.rootCount = tree.rootCount;
-  const auto block = tree.frameNodes(0);
-  topology.nodes.assign(block.begin(), block.end());
-  topology.rootBoxes = {tree.rootBoxes.empty() ? Aabb{} : tree.rootBoxes[0]};
-  topology.triIndex = tree.triIndex;
-  if (auto problem = validateFlatBvh(topology)) throw anim::Error("GPU runtime: invalid tree: " + *problem);
-  if (topology.depth > kTraversalStackSize)
-    throw anim::Error("GPU runtime: tree depth " + std::to_string(topology.depth) +
-                      " exceeds the traversal stack of " + std::to_string(kTraversalStackSize));
+  d.topology = std::move(topologyOfTree);
+  const FlatBvh& topology = d.topology;
 
   // Parents of interior nodes and the leaves, for the bottom-up refit.
   std::vector<uint32_t> parent(topology.interiorCount, detail::kNoParent);

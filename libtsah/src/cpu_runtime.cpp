@@ -142,26 +142,7 @@ CpuRuntime::CpuRuntime(const TreeSet& set, std::vector<uint32_t> indices, uint32
 }
 
 FlatBvh CpuRuntime::topologyOf(const FlatBvh& tree) const {
-  if (tree.triangleCount() != triangleCount())
-    throw anim::Error("runtime: the tree holds " + std::to_string(tree.triangleCount()) +
-                      " triangles, the animation " + std::to_string(triangleCount()));
-  // Keep only the first frame's block: update() recomputes the boxes anyway.
-  FlatBvh one;
-  one.frameCount = 1;
-  one.interiorCount = tree.interiorCount;
-  one.leafCount = tree.leafCount;
-  one.depth = tree.depth;
-  one.rootRef = tree.rootRef;
-  one.rootCount = tree.rootCount;
-  const auto block = tree.frameNodes(0);
-  one.nodes.assign(block.begin(), block.end());
-  one.rootBoxes = {tree.rootBoxes.empty() ? Aabb{} : tree.rootBoxes[0]};
-  one.triIndex = tree.triIndex;
-  if (auto problem = validateFlatBvh(one)) throw anim::Error("runtime: invalid tree: " + *problem);
-  if (one.depth > kTraversalStackSize)
-    throw anim::Error("runtime: tree depth " + std::to_string(one.depth) + " exceeds the traversal stack of " +
-                      std::to_string(kTraversalStackSize));
-  return one;
+  return runtimeTopology(tree, triangleCount(), kTraversalStackSize, "runtime");
 }
 
 uint32_t CpuRuntime::selectTreeAt(double time) {

@@ -237,4 +237,26 @@ std::vector<uint32_t> subtreeEnds(const FlatBvh& flat) {
   return end;
 }
 
+FlatBvh runtimeTopology(const FlatBvh& tree, uint32_t triangles, uint32_t maxDepth, const std::string& who) {
+  if (tree.triangleCount() != triangles)
+    throw anim::Error(who + ": the tree holds " + std::to_string(tree.triangleCount()) + " triangles, the animation " +
+                      std::to_string(triangles));
+  FlatBvh one;
+  one.frameCount = 1;
+  one.interiorCount = tree.interiorCount;
+  one.leafCount = tree.leafCount;
+  one.depth = tree.depth;
+  one.rootRef = tree.rootRef;
+  one.rootCount = tree.rootCount;
+  const auto block = tree.frameNodes(0);
+  one.nodes.assign(block.begin(), block.end());
+  one.rootBoxes = {tree.rootBoxes.empty() ? Aabb{} : tree.rootBoxes[0]};
+  one.triIndex = tree.triIndex;
+  if (auto problem = validateFlatBvh(one)) throw anim::Error(who + ": invalid tree: " + *problem);
+  if (one.depth > maxDepth)
+    throw anim::Error(who + ": tree depth " + std::to_string(one.depth) + " exceeds the traversal stack of " +
+                      std::to_string(maxDepth));
+  return one;
+}
+
 }  // namespace tsah

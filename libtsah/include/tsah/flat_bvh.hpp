@@ -52,6 +52,12 @@ Bvh unflattenBvh(const FlatBvh& flat);
 // Never allocates more than O(nodes + triangles) and never loops more than that.
 std::optional<std::string> validateFlatBvh(const FlatBvh& flat);
 
+// What a runtime (CPU or GPU) keeps of a tree it refits every frame: the structure with frame 0's
+// boxes only (each update recomputes them). Throws anim::Error, the message starting with `who`
+// ("runtime: ..."), unless the tree holds `triangles` triangles, is valid and is at most
+// `maxDepth` deep (the traversal stack).
+FlatBvh runtimeTopology(const FlatBvh& tree, uint32_t triangles, uint32_t maxDepth, const std::string& who);
+
 // For each interior node i, one past the last interior node of its subtree (canonical order).
 std::vector<uint32_t> subtreeEnds(const FlatBvh& flat);
 
