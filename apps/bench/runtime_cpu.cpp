@@ -200,7 +200,8 @@ std::vector<RuntimeMethod> runCpuMethods(const anim::Animation& a, const std::ve
 }
 
 std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const Bvh& tree, const std::string& name,
-                                               const std::string& label, const RuntimeSetup& setup) {
+                                               const std::string& label, const RuntimeSetup& setup,
+                                               const RefitTrees* set) {
   std::vector<RuntimeMethod> methods;
 #if TSAH_HAVE_EMBREE
   // One toolkit runtime per layout (the default first: the rays are made with it and every other
@@ -212,6 +213,18 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const B
     const std::string kernels = l.layout == CpuLayout::Bvh2 ? "" : std::string(", ") + isaName(l.isa);
     methods.push_back({name + "-" + layoutName(layout), label + ", " + layoutName(layout) + kernels, "refit", {},
                        {{"layout", layoutJson(*own.back())}, {"default_layout", layout == setup.layout}}});
+  }
+  if (set && set->trees.size() > 1) {  // the tree set: switches to each frame's tree
+    CpuRuntime::Config c(setup.threads);
+    c.layout = setup.layout;
+    c.collapse = setup.collapse;
+    own.push_back(std::make_unique<CpuRuntime>(treeSetOf(*set, a),
+                                               std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
+                                               a.vertexCount(), c));
+    const LayoutInfo& l = own.back()->layoutInfo();
+    const std::string kernels = l.layout == CpuLayout::Bvh2 ? "" : std::string(", ") + isaName(l.isa);
+    methods.push_back({set->name + "-" + layoutName(setup.layout), set->label + ", " + layoutName(setup.layout) + kernels,
+                       "refit", {}, {{"layout", layoutJson(*own.back())}, {"trees", set->trees.size()}}});
   }
   startWorkers(*own.front());
   using Mode = EmbreePeer::Mode;
@@ -244,6 +257,7 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const B
     std::vector<double> updateMs(own.size());
     for (std::size_t k = 0; k < own.size(); ++k) {
       start = std::chrono::steady_clock::now();
+      own[k]->selectTreeAt(t);  // a tree set: the tree of this frame's part (a single tree: no-op)
       own[k]->update(positions);
       updateMs[k] = interpolateMs + msSince(start);
     }
@@ -283,6 +297,7 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const B
   (void)name;
   (void)label;
   (void)setup;
+  (void)set;
 #endif
   return methods;
 }
