@@ -256,6 +256,7 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const B
     // hits (untimed), then every method traces it.
     std::vector<double> updateMs(own.size());
     for (std::size_t k = 0; k < own.size(); ++k) {
+      startWorkers(*own.front());  // every timed update starts with the workers awake, Embree's too
       start = std::chrono::steady_clock::now();
       own[k]->selectTreeAt(t);  // a tree set: the tree of this frame's part (a single tree: no-op)
       own[k]->update(positions);
@@ -271,6 +272,7 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const B
         ft.updateMs = updateMs[m];
         trace = traceBatch(*own.front(), batch, toolkitTracer(*own[m]));
       } else {
+        startWorkers(*own.front());
         ft.updateMs = interpolateMs + peers[m - own.size()]->update(positions);
         trace = traceBatch(*own.front(), batch, peers[m - own.size()]->tracer());
       }
