@@ -36,13 +36,29 @@ void report(const RuntimeSetup& setup, const std::string& label, std::size_t fra
 }
 #endif
 
-std::unique_ptr<CpuRuntime> makeRuntime(const anim::Animation& a, const Bvh& tree, const RuntimeSetup& setup,
-                                        CpuLayout layout) {
+CpuRuntime::Config runtimeConfig(const RuntimeSetup& setup, CpuLayout layout) {
   CpuRuntime::Config c(setup.threads);
   c.layout = layout;
   c.collapse = setup.collapse;
+  return c;
+}
+
+std::unique_ptr<CpuRuntime> makeRuntime(const anim::Animation& a, const Bvh& tree, const RuntimeSetup& setup,
+                                        CpuLayout layout) {
   return std::make_unique<CpuRuntime>(flattenBvh(tree), std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
-                                      a.vertexCount(), c);
+                                      a.vertexCount(), runtimeConfig(setup, layout));
+}
+
+// A tree set's runtime (each frame selects the tree of its part).
+std::unique_ptr<CpuRuntime> makeSetRuntime(const anim::Animation& a, const RefitTrees& trees, const RuntimeSetup& setup) {
+  return std::make_unique<CpuRuntime>(treeSetOf(trees, a), std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
+                                      a.vertexCount(), runtimeConfig(setup, setup.layout));
+}
+
+// "LABEL, bvh8, avx512": the layout and, for a wide one, its kernels.
+std::string layoutLabel(const std::string& label, const CpuRuntime& rt) {
+  const LayoutInfo& l = rt.layoutInfo();
+  return label + ", " + layoutName(l.layout) + (l.layout == CpuLayout::Bvh2 ? "" : std::string(", ") + isaName(l.isa));
 }
 
 // The toolkit's layouts for the Embree comparison: the default (fastest) one first.
@@ -155,12 +171,7 @@ std::vector<RuntimeMethod> runCpuMethods(const anim::Animation& a, const std::ve
     if (spec.rebuild) {
       r.runtime = makeRuntime(a, *spec.trees.trees.front(), setup, setup.layout);  // a rebuild replaces it anyway
     } else {
-      CpuRuntime::Config c(setup.threads);
-      c.layout = setup.layout;
-      c.collapse = setup.collapse;
-      r.runtime = std::make_unique<CpuRuntime>(treeSetOf(spec.trees, a),
-                                               std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
-                                               a.vertexCount(), c);
+      r.runtime = makeSetRuntime(a, spec.trees, setup);
     }
     if (spec.rebuild) r.builder = rebuildBuilder(*spec.rebuild, cost, maxLeaf);
     r.positions = a.positionsAt(a.startTime());  // static vertices once; each frame writes the moving ones
@@ -209,22 +220,13 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const B
   std::vector<std::unique_ptr<CpuRuntime>> own;
   for (CpuLayout layout : comparedLayouts(setup.layout)) {
     own.push_back(makeRuntime(a, tree, setup, layout));
-    const LayoutInfo& l = own.back()->layoutInfo();
-    const std::string kernels = l.layout == CpuLayout::Bvh2 ? "" : std::string(", ") + isaName(l.isa);
-    methods.push_back({name + "-" + layoutName(layout), label + ", " + layoutName(layout) + kernels, "refit", {},
+    methods.push_back({name + "-" + layoutName(layout), layoutLabel(label, *own.back()), "refit", {},
                        {{"layout", layoutJson(*own.back())}, {"default_layout", layout == setup.layout}}});
   }
   if (set && set->trees.size() > 1) {  // the tree set: switches to each frame's tree
-    CpuRuntime::Config c(setup.threads);
-    c.layout = setup.layout;
-    c.collapse = setup.collapse;
-    own.push_back(std::make_unique<CpuRuntime>(treeSetOf(*set, a),
-                                               std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
-                                               a.vertexCount(), c));
-    const LayoutInfo& l = own.back()->layoutInfo();
-    const std::string kernels = l.layout == CpuLayout::Bvh2 ? "" : std::string(", ") + isaName(l.isa);
-    methods.push_back({set->name + "-" + layoutName(setup.layout), set->label + ", " + layoutName(setup.layout) + kernels,
-                       "refit", {}, {{"layout", layoutJson(*own.back())}, {"trees", set->trees.size()}}});
+    own.push_back(makeSetRuntime(a, *set, setup));
+    methods.push_back({set->name + "-" + layoutName(setup.layout), layoutLabel(set->label, *own.back()), "refit", {},
+                       {{"layout", layoutJson(*own.back())}, {"trees", set->trees.size()}}});
   }
   startWorkers(*own.front());
   using Mode = EmbreePeer::Mode;
