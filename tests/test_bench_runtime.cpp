@@ -137,4 +137,37 @@ TEST(BenchRuntime, EmbreeComparisonTracesEveryLayoutWithTheSameResults) {
   }
 }
 
+TEST(BenchRuntime, EmbreeComparisonTracesTheTreeSetSwitchingTreesWithTheSameResults) {
+  if (!tsah::bench::embreeAvailable()) GTEST_SKIP() << tsah::bench::embreeStatus();
+  anim::GeneratorOptions g;
+  g.triangles = 900;
+  g.frames = 4;
+  const anim::Animation a = anim::generate(anim::GeneratorKind::Wave, g);
+  tsah::BaselineConfig config;
+  config.threads = 2;
+  const double mid = 0.5 * (a.startTime() + a.endTime());
+  auto treeOver = [&](double t0, double t1) {  // a T-SAH tree of two frames of [t0, t1]
+    std::vector<float> p = a.positionsAt(t0);
+    const std::vector<float> q = a.positionsAt(t1);
+    p.insert(p.end(), q.begin(), q.end());
+    return tsah::buildTSah(tsah::triangleBoxes(a.indices(), p, 2), 0, config);
+  };
+  const tsah::Bvh whole = treeOver(a.startTime(), a.endTime());
+  const tsah::Bvh first = treeOver(a.startTime(), mid), second = treeOver(mid, a.endTime());
+  const tsah::bench::RefitTrees set{"tsah0-count2", "two trees", {&first, &second}, {{a.startTime(), mid}, {mid, a.endTime()}}};
+  const tsah::bench::RuntimeSetup setup = smallSetup(a, 2);
+  const auto methods = tsah::bench::runEmbreeComparison(a, whole, "tsah0", "toolkit", setup, &set);
+  const auto it = std::find_if(methods.begin(), methods.end(),
+                               [](const auto& m) { return m.name.rfind("tsah0-count2-", 0) == 0; });
+  ASSERT_NE(it, methods.end());
+  EXPECT_EQ(it->name, std::string("tsah0-count2-") + tsah::layoutName(setup.layout));
+  EXPECT_EQ(it->extra["trees"], 2);
+  ASSERT_EQ(it->frames.size(), 2u);
+  EXPECT_EQ(it->frames[1].rays.ao.rays, methods[0].frames[1].rays.ao.rays);  // the same batch
+  const auto& d = it->extra["hits_minus_toolkit"];  // other trees over the same triangles: same answers
+  EXPECT_EQ(d["primary"], 0);
+  EXPECT_EQ(d["ao_occluded"], 0);
+  EXPECT_EQ(d["shadow_occluded"], 0);
+}
+
 }  // namespace

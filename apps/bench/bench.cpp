@@ -302,7 +302,15 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
     start = std::chrono::steady_clock::now();
     peer["frames"] = setup.times.size();
     peer["methods"] = nlohmann::json::array();
-    for (const RuntimeMethod& m : runEmbreeComparison(a, tsahTree, "tsah0", "toolkit: T-SAH k=0 refit", setup))
+    // The tree set of the count mode (K trees; computed here with --embree-only), traced as well.
+    SegmentationResult countSet = segmentRuns.count;
+    if (countSet.trees.empty() && o.segments > 1) {
+      say("count mode: split points for " + std::to_string(o.segments) + " trees (the toolkit's tree set)");
+      countSet = countModeTrees(a, o.segments, o.frames, o.evalFrames, config);
+    }
+    const RefitTrees set = setOf("tsah0-count" + k, "toolkit: T-SAH k=0 refit, " + k + " trees (count mode)", countSet);
+    for (const RuntimeMethod& m :
+         runEmbreeComparison(a, tsahTree, "tsah0", "toolkit: T-SAH k=0 refit", setup, countSet.trees.empty() ? nullptr : &set))
       peer["methods"].push_back(toJson(m));
     peer["wall_s"] = secondsSince(start);
   } else if (gpu) {

@@ -261,6 +261,13 @@ std::string embreeVerdict(const json& methods) {
     s << "Total frame time: the toolkit wins (" << formatSignificant(ownTotal) << " vs " << formatSignificant(peerTotal)
       << " ms for " << str(*quickest, "label") << ", " << formatFixed(100.0 * (peerTotal / ownTotal - 1.0), 0)
       << "% slower).";
+  for (const json& m : methods)  // the toolkit's tree set, when traced
+    if (m.contains("extra") && m["extra"].contains("trees") && refit) {
+      const double set = num(m["average"], "total_ms"), peer = num((*refit)["average"], "total_ms");
+      s << " With " << m["extra"]["trees"].get<int>() << " trees (" << str(m, "label") << ") a frame takes "
+        << formatSignificant(set) << " ms, Embree refit " << formatSignificant(peer) << " ms ("
+        << formatFixed(peer / set, 2) << "× the toolkit's).";
+    }
   return s.str();
 }
 

@@ -92,11 +92,13 @@ std::vector<RuntimeMethod> runCpuMethods(const anim::Animation& animation, const
 // and its kernels), against Embree (a rebuild per frame with medium and high quality, and refit),
 // all on the same frames and the same rays (made once per frame with makeRayBatch from the
 // toolkit's refitted tree in setup.layout). Every method after the first has in its extra how
-// many primary hits, AO and shadow occlusions differ from the first's. Empty when the bench was
-// built without Embree.
+// many primary hits, AO and shadow occlusions differ from the first's. With a tree set (`set`,
+// several trees), one more toolkit method in setup.layout refits and traces the tree of each
+// frame's part (named set->name, after the single-tree layouts). Empty when the bench was built
+// without Embree.
 std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& animation, const Bvh& tree,
                                                const std::string& name, const std::string& label,
-                                               const RuntimeSetup& setup);
+                                               const RuntimeSetup& setup, const RefitTrees* set = nullptr);
 
 // GPU (built with CUDA): per frame GpuRuntime::updateAt (interpolation, refit, Woop on the device)
 // and renderFrameGpu. Throws anim::Error when the bench was built without CUDA or no device exists.

@@ -36,13 +36,29 @@ void report(const RuntimeSetup& setup, const std::string& label, std::size_t fra
 }
 #endif
 
-std::unique_ptr<CpuRuntime> makeRuntime(const anim::Animation& a, const Bvh& tree, const RuntimeSetup& setup,
-                                        CpuLayout layout) {
+CpuRuntime::Config runtimeConfig(const RuntimeSetup& setup, CpuLayout layout) {
   CpuRuntime::Config c(setup.threads);
   c.layout = layout;
   c.collapse = setup.collapse;
+  return c;
+}
+
+std::unique_ptr<CpuRuntime> makeRuntime(const anim::Animation& a, const Bvh& tree, const RuntimeSetup& setup,
+                                        CpuLayout layout) {
   return std::make_unique<CpuRuntime>(flattenBvh(tree), std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
-                                      a.vertexCount(), c);
+                                      a.vertexCount(), runtimeConfig(setup, layout));
+}
+
+// A tree set's runtime (each frame selects the tree of its part).
+std::unique_ptr<CpuRuntime> makeSetRuntime(const anim::Animation& a, const RefitTrees& trees, const RuntimeSetup& setup) {
+  return std::make_unique<CpuRuntime>(treeSetOf(trees, a), std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
+                                      a.vertexCount(), runtimeConfig(setup, setup.layout));
+}
+
+// "LABEL, bvh8, avx512": the layout and, for a wide one, its kernels.
+std::string layoutLabel(const std::string& label, const CpuRuntime& rt) {
+  const LayoutInfo& l = rt.layoutInfo();
+  return label + ", " + layoutName(l.layout) + (l.layout == CpuLayout::Bvh2 ? "" : std::string(", ") + isaName(l.isa));
 }
 
 // The toolkit's layouts for the Embree comparison: the default (fastest) one first.
@@ -155,12 +171,7 @@ std::vector<RuntimeMethod> runCpuMethods(const anim::Animation& a, const std::ve
     if (spec.rebuild) {
       r.runtime = makeRuntime(a, *spec.trees.trees.front(), setup, setup.layout);  // a rebuild replaces it anyway
     } else {
-      CpuRuntime::Config c(setup.threads);
-      c.layout = setup.layout;
-      c.collapse = setup.collapse;
-      r.runtime = std::make_unique<CpuRuntime>(treeSetOf(spec.trees, a),
-                                               std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
-                                               a.vertexCount(), c);
+      r.runtime = makeSetRuntime(a, spec.trees, setup);
     }
     if (spec.rebuild) r.builder = rebuildBuilder(*spec.rebuild, cost, maxLeaf);
     r.positions = a.positionsAt(a.startTime());  // static vertices once; each frame writes the moving ones
@@ -200,7 +211,8 @@ std::vector<RuntimeMethod> runCpuMethods(const anim::Animation& a, const std::ve
 }
 
 std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const Bvh& tree, const std::string& name,
-                                               const std::string& label, const RuntimeSetup& setup) {
+                                               const std::string& label, const RuntimeSetup& setup,
+                                               const RefitTrees* set) {
   std::vector<RuntimeMethod> methods;
 #if TSAH_HAVE_EMBREE
   // One toolkit runtime per layout (the default first: the rays are made with it and every other
@@ -208,10 +220,13 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const B
   std::vector<std::unique_ptr<CpuRuntime>> own;
   for (CpuLayout layout : comparedLayouts(setup.layout)) {
     own.push_back(makeRuntime(a, tree, setup, layout));
-    const LayoutInfo& l = own.back()->layoutInfo();
-    const std::string kernels = l.layout == CpuLayout::Bvh2 ? "" : std::string(", ") + isaName(l.isa);
-    methods.push_back({name + "-" + layoutName(layout), label + ", " + layoutName(layout) + kernels, "refit", {},
+    methods.push_back({name + "-" + layoutName(layout), layoutLabel(label, *own.back()), "refit", {},
                        {{"layout", layoutJson(*own.back())}, {"default_layout", layout == setup.layout}}});
+  }
+  if (set && set->trees.size() > 1) {  // the tree set: switches to each frame's tree
+    own.push_back(makeSetRuntime(a, *set, setup));
+    methods.push_back({set->name + "-" + layoutName(setup.layout), layoutLabel(set->label, *own.back()), "refit", {},
+                       {{"layout", layoutJson(*own.back())}, {"trees", set->trees.size()}}});
   }
   startWorkers(*own.front());
   using Mode = EmbreePeer::Mode;
@@ -243,7 +258,9 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const B
     // hits (untimed), then every method traces it.
     std::vector<double> updateMs(own.size());
     for (std::size_t k = 0; k < own.size(); ++k) {
+      startWorkers(*own.front());  // every timed update starts with the workers awake, Embree's too
       start = std::chrono::steady_clock::now();
+      own[k]->selectTreeAt(t);  // a tree set: the tree of this frame's part (a single tree: no-op)
       own[k]->update(positions);
       updateMs[k] = interpolateMs + msSince(start);
     }
@@ -257,6 +274,7 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const B
         ft.updateMs = updateMs[m];
         trace = traceBatch(*own.front(), batch, toolkitTracer(*own[m]));
       } else {
+        startWorkers(*own.front());
         ft.updateMs = interpolateMs + peers[m - own.size()]->update(positions);
         trace = traceBatch(*own.front(), batch, peers[m - own.size()]->tracer());
       }
@@ -283,6 +301,7 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const B
   (void)name;
   (void)label;
   (void)setup;
+  (void)set;
 #endif
   return methods;
 }

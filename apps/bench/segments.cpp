@@ -42,15 +42,32 @@ nlohmann::json modeJson(const SegmentationResult& r, std::span<const double> reb
 
 }  // namespace
 
+namespace {
+
+SegmentationConfig tsahSegmentation(uint32_t frames, uint32_t evalFrames, const BaselineConfig& config) {
+  SegmentationConfig sc;
+  sc.method = MethodSpec::parse("tsah0");
+  sc.representativeFrames = frames;
+  sc.evaluationFrames = evalFrames;
+  sc.baseline = config;
+  return sc;
+}
+
+}  // namespace
+
+SegmentationResult countModeTrees(const anim::Animation& a, uint32_t count, uint32_t frames, uint32_t evalFrames,
+                                  const BaselineConfig& config) {
+  SegmentationConfig sc = tsahSegmentation(frames, evalFrames, config);
+  sc.mode = SegmentationConfig::Mode::Count;
+  sc.count = count;
+  return segmentTimeline(tsah::cli::animationTimeline(a), sc);
+}
+
 SegmentRuns runSegmentExperiment(const anim::Animation& a, const SegmentExperiment& e, const BaselineConfig& config,
                                  nlohmann::json& out, const std::function<void(const std::string&)>& say) {
   SegmentRuns runs;
   const Timeline timeline = tsah::cli::animationTimeline(a);
-  SegmentationConfig sc;
-  sc.method = MethodSpec::parse("tsah0");
-  sc.representativeFrames = e.frames;
-  sc.evaluationFrames = e.evalFrames;
-  sc.baseline = config;
+  SegmentationConfig sc = tsahSegmentation(e.frames, e.evalFrames, config);
   nlohmann::json j;
   j["count"] = e.count;
   j["one_tree"] = {{"build_s", e.oneTreeBuildSeconds},

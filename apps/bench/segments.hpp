@@ -40,4 +40,9 @@ SegmentRuns runSegmentExperiment(const anim::Animation& animation, const Segment
                                  const BaselineConfig& config, nlohmann::json& out,
                                  const std::function<void(const std::string&)>& say);
 
+// The count mode alone: K T-SAH k=0 trees with split points chosen by the library (what
+// `tsah optimize --segments K` makes), e.g. the toolkit's tree set in the Embree comparison.
+SegmentationResult countModeTrees(const anim::Animation& animation, uint32_t count, uint32_t frames,
+                                  uint32_t evalFrames, const BaselineConfig& config);
+
 }  // namespace tsah::bench

@@ -108,9 +108,9 @@ void CpuRuntime::setWideTree(const Bvh& binary, bool reportCosts) {
   info_.leaves = w.leafCount();
   info_.depth = w.depth();
   if (info_.layout == CpuLayout::Bvh4)
-    wide4_ = std::make_shared<WideTree<4>>(w, threads_->count);
+    wide4_ = std::make_shared<WideTree<4>>(w, threads_->count, info_.isa);
   else
-    wide8_ = std::make_shared<WideTree<8>>(w, threads_->count);
+    wide8_ = std::make_shared<WideTree<8>>(w, threads_->count, info_.isa);
 }
 
 namespace {

@@ -10,16 +10,18 @@
 namespace tsah::detail {
 
 // About 8 disjoint subtrees per thread (each a contiguous index range, refitted in parallel,
-// larger indices first) and the nodes above them, in descending order (refitted afterwards on one
-// thread, children before parents). interiorChildren(i, push) calls push(c) for every interior
-// child c of node i.
+// larger indices first; none split below minGrain nodes) and the nodes above them, in descending
+// order (refitted afterwards on one thread, children before parents). interiorChildren(i, push)
+// calls push(c) for every interior child c of node i. minGrain: 64 for a binary tree; a wide
+// node holds several binary nodes' work, so wide trees pass less.
 template <class InteriorChildren>
 void planParallelRefit(const std::vector<uint32_t>& ends, uint32_t threads, const InteriorChildren& interiorChildren,
-                       std::vector<std::pair<uint32_t, uint32_t>>& subtrees, std::vector<uint32_t>& top) {
+                       std::vector<std::pair<uint32_t, uint32_t>>& subtrees, std::vector<uint32_t>& top,
+                       uint32_t minGrain = 64) {
   subtrees.clear();
   top.clear();
   if (ends.empty()) return;
-  const uint32_t grain = std::max<uint32_t>(64, uint32_t(ends.size()) / (8 * std::max(1u, threads)));
+  const uint32_t grain = std::max<uint32_t>(minGrain, uint32_t(ends.size()) / (8 * std::max(1u, threads)));
   std::vector<uint32_t> stack{0};
   while (!stack.empty()) {
     const uint32_t i = stack.back();

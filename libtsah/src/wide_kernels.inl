@@ -217,6 +217,37 @@ inline Hit traverse(const WideView<V::N>& bvh, const Ray& ray) {
   }
 }
 
+// --- Refit: the Woop rows of one packet ------------------------------------------------------------
+// makeWoopTriangle's double-precision arithmetic (woopRowsDouble) on all N lanes at once, as GCC
+// vectors of N doubles (one AVX-512 register for 8 lanes; pairs / quads of registers below that).
+typedef double DoubleLanes4 __attribute__((vector_size(4 * sizeof(double))));
+typedef double DoubleLanes8 __attribute__((vector_size(8 * sizeof(double))));
+typedef float FloatLanes4 __attribute__((vector_size(4 * sizeof(float))));
+typedef float FloatLanes8 __attribute__((vector_size(8 * sizeof(float))));
+typedef int32_t IntLanes4 __attribute__((vector_size(4 * sizeof(int32_t))));
+typedef int32_t IntLanes8 __attribute__((vector_size(8 * sizeof(int32_t))));
+
+template <uint32_t N, class D, class F, class I>
+TSAH_KERNEL void woopRowsKernel(const float (*vertices)[N], uint32_t lanes, WoopPacket<N>& pk) {
+  D v[3][3];
+  for (int i = 0; i < 9; ++i) {
+    F f;
+    std::memcpy(&f, vertices[i], sizeof f);
+    v[i / 3][i % 3] = __builtin_convertvector(f, D);
+  }
+  D rows[12], nn;
+  woopRowsDouble(v[0], v[1], v[2], rows, nn);
+  I keep;  // all ones for the lanes that get their rows, zero for padding and degenerate triangles
+  for (uint32_t lane = 0; lane < N; ++lane) keep[lane] = lane < lanes && woopNondegenerate(nn[lane]) ? -1 : 0;
+  for (int r = 0; r < 12; ++r) {
+    const F f = __builtin_convertvector(rows[r], F);
+    I bits;
+    std::memcpy(&bits, &f, sizeof bits);
+    bits &= keep;
+    std::memcpy(pk.row[r], &bits, sizeof bits);
+  }
+}
+
 template <class V>
 TSAH_KERNEL Hit closestKernel(const WideView<V::N>& bvh, const Ray& ray) {
   return traverse<V, false>(bvh, ray);

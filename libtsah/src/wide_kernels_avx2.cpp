@@ -4,6 +4,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 
 #include "wide_kernels.hpp"
 
@@ -22,6 +23,8 @@ WideKernels avx2Kernels() {
   k.any4 = &isa_avx2::anyKernel<isa_avx2::V4>;
   k.closest8 = &isa_avx2::closestKernel<isa_avx2::V8>;
   k.any8 = &isa_avx2::anyKernel<isa_avx2::V8>;
+  k.woopRows4 = &isa_avx2::woopRowsKernel<4, isa_avx2::DoubleLanes4, isa_avx2::FloatLanes4, isa_avx2::IntLanes4>;
+  k.woopRows8 = &isa_avx2::woopRowsKernel<8, isa_avx2::DoubleLanes8, isa_avx2::FloatLanes8, isa_avx2::IntLanes8>;
   return k;
 }
 

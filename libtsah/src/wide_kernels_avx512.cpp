@@ -6,6 +6,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 
 #include "wide_kernels.hpp"
 
@@ -23,6 +24,8 @@ WideKernels avx512Kernels() {
   k.any4 = &isa_avx512::anyKernel<isa_avx512::V4>;
   k.closest8 = &isa_avx512::closestKernel<isa_avx512::V8>;
   k.any8 = &isa_avx512::anyKernel<isa_avx512::V8>;
+  k.woopRows4 = &isa_avx512::woopRowsKernel<4, isa_avx512::DoubleLanes4, isa_avx512::FloatLanes4, isa_avx512::IntLanes4>;
+  k.woopRows8 = &isa_avx512::woopRowsKernel<8, isa_avx512::DoubleLanes8, isa_avx512::FloatLanes8, isa_avx512::IntLanes8>;
   return k;
 }
 

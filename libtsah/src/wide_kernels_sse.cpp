@@ -3,6 +3,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 
 #include "wide_kernels.hpp"
 
@@ -18,6 +19,8 @@ WideKernels sseKernels() {
   k.isa = SimdIsa::Sse;
   k.closest4 = &isa_sse::closestKernel<isa_sse::V4>;
   k.any4 = &isa_sse::anyKernel<isa_sse::V4>;
+  k.woopRows4 = &isa_sse::woopRowsKernel<4, isa_sse::DoubleLanes4, isa_sse::FloatLanes4, isa_sse::IntLanes4>;
+  k.woopRows8 = &isa_sse::woopRowsKernel<8, isa_sse::DoubleLanes8, isa_sse::FloatLanes8, isa_sse::IntLanes8>;
   return k;
 }
 

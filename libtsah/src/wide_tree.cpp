@@ -27,7 +27,11 @@ bool usedSlot(const WideSoaNode<N>& node, uint32_t c) {
 }  // namespace
 
 template <uint32_t N>
-WideTree<N>::WideTree(const WideBvh& w, uint32_t threads) {
+WideTree<N>::WideTree(const WideBvh& w, uint32_t threads, SimdIsa isa) {
+  if constexpr (N == 4)
+    woopRows_ = wideKernels(isa).woopRows4;
+  else
+    woopRows_ = wideKernels(isa).woopRows8;
   if (w.width > N)
     throw anim::Error("wide tree: a " + std::to_string(w.width) + "-wide topology does not fit " + std::to_string(N) +
                       "-wide nodes");
@@ -69,7 +73,7 @@ WideTree<N>::WideTree(const WideBvh& w, uint32_t threads) {
         for (uint32_t c = 0; c < N; ++c)
           if (usedSlot(nodes_[i], c) && !isLeafRef(nodes_[i].ref[c])) push(static_cast<uint32_t>(nodes_[i].ref[c]));
       },
-      subtreeTasks_, topNodes_);
+      subtreeTasks_, topNodes_, 64 / N);  // a wide node: about N / 2 binary nodes' triangles and boxes
 }
 
 template <uint32_t N>
@@ -79,20 +83,19 @@ Aabb WideTree<N>::refitLeaf(uint32_t firstPacket, uint32_t count, const float* p
   for (uint32_t first = 0; first < count; first += N) {
     WoopPacket<N>& pk = packets_[firstPacket + first / N];
     const uint32_t lanes = count - first < N ? count - first : N;
-    for (uint32_t lane = 0; lane < lanes; ++lane) {
-      const uint32_t* tri = indices + 3 * std::size_t(triIndex_[pk.slot[lane]]);
-      const float* v[3] = {p + 3 * std::size_t(tri[0]), p + 3 * std::size_t(tri[1]), p + 3 * std::size_t(tri[2])};
-      const WoopTriangle w = makeWoopTriangle({v[0][0], v[0][1], v[0][2]}, {v[1][0], v[1][1], v[1][2]},
-                                              {v[2][0], v[2][1], v[2][2]});
-      const float rows[12] = {w.r0.x, w.r0.y, w.r0.z, w.r0.w, w.r1.x, w.r1.y, w.r1.z, w.r1.w,
-                              w.r2.x, w.r2.y, w.r2.z, w.r2.w};
-      for (int r = 0; r < 12; ++r) pk.row[r][lane] = rows[r];
-      for (int k = 0; k < 3; ++k)
+    alignas(32) float vertices[9][N];  // [3k + a][lane]: axis a of vertex k (padding lanes: lane 0's)
+    for (uint32_t lane = 0; lane < N; ++lane) {
+      const uint32_t* tri = indices + 3 * std::size_t(triIndex_[pk.slot[lane < lanes ? lane : 0]]);
+      for (int k = 0; k < 3; ++k) {
+        const float* vertex = p + 3 * std::size_t(tri[k]);
         for (int a = 0; a < 3; ++a) {
-          lo[a] = v[k][a] < lo[a] ? v[k][a] : lo[a];
-          hi[a] = v[k][a] > hi[a] ? v[k][a] : hi[a];
+          vertices[3 * k + a][lane] = vertex[a];
+          lo[a] = vertex[a] < lo[a] ? vertex[a] : lo[a];
+          hi[a] = vertex[a] > hi[a] ? vertex[a] : hi[a];
         }
+      }
     }
+    woopRows_(vertices, lanes, pk);  // all lanes at once, in the SIMD width of the kernels
   }
   Aabb box;
   box.lo = {lo[0], lo[1], lo[2]};

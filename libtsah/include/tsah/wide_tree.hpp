@@ -11,6 +11,7 @@
 
 #include "tsah/wide_bvh.hpp"
 #include "tsah/wide_layout.hpp"
+#include "tsah/wide_traversal.hpp"
 
 namespace tsah {
 
@@ -23,8 +24,9 @@ class WideTree {
 
   // topology.width must be at most N (a narrower topology leaves slots unused). Boxes and
   // triangles are zero until the first refit(). threads: how many workers refit() will run on (it
-  // plans about 8 subtrees per thread).
-  WideTree(const WideBvh& topology, uint32_t threads);
+  // plans about 8 subtrees per thread). isa: whose SIMD code computes the Woop rows (the results
+  // are the same for every one); throws anim::Error when it is not supported.
+  WideTree(const WideBvh& topology, uint32_t threads, SimdIsa isa = bestIsa());
 
   // This frame's vertices (xyz per vertex) and the triangles (3 vertex indices per triangle id).
   void refit(const float* positions, const uint32_t* indices, const ParallelFor& parallelFor);
@@ -42,6 +44,7 @@ class WideTree {
   Aabb refitLeaf(uint32_t firstPacket, uint32_t count, const float* positions, const uint32_t* indices);
   void refitNode(uint32_t node, const float* positions, const uint32_t* indices);
 
+  void (*woopRows_)(const float (*vertices)[N], uint32_t lanes, WoopPacket<N>& packet) = nullptr;
   std::vector<WideSoaNode<N>> nodes_;
   std::vector<WoopPacket<N>> packets_;
   std::vector<uint32_t> triIndex_;

@@ -36,24 +36,45 @@ static_assert(sizeof(Float4) == 16 && alignof(Float4) == 16);
 static_assert(sizeof(WoopTriangle) == 48 && alignof(WoopTriangle) == 16);
 static_assert(std::is_trivially_copyable_v<WoopTriangle> && std::is_standard_layout_v<WoopTriangle>);
 
+// The Woop rows of triangle (v0, v1, v2) in double precision, before rounding to float: rows[4r + c]
+// is component c of row r, and |n|^2 (the triangle is degenerate unless 1e-300 < |n|^2 <
+// 1e300) in nn. D is double, or a vector of doubles (GCC vector extension): the same operations lane by
+// lane, so a refit that computes several triangles at once gets the same bits as one at a time.
+template <class D>
+TSAH_HD void woopRowsDouble(const D v0[3], const D v1[3], const D v2[3], D rows[12], D& nn) {
+  const D e0[3] = {v0[0] - v2[0], v0[1] - v2[1], v0[2] - v2[2]};
+  const D e1[3] = {v1[0] - v2[0], v1[1] - v2[1], v1[2] - v2[2]};
+  const D n[3] = {e0[1] * e1[2] - e0[2] * e1[1], e0[2] * e1[0] - e0[0] * e1[2], e0[0] * e1[1] - e0[1] * e1[0]};
+  nn = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+  const D inv = 1.0 / nn;
+  const D a[3] = {(e1[1] * n[2] - e1[2] * n[1]) * inv, (e1[2] * n[0] - e1[0] * n[2]) * inv,
+                  (e1[0] * n[1] - e1[1] * n[0]) * inv};  // e1 x n
+  const D b[3] = {(n[1] * e0[2] - n[2] * e0[1]) * inv, (n[2] * e0[0] - n[0] * e0[2]) * inv,
+                  (n[0] * e0[1] - n[1] * e0[0]) * inv};  // n x e0
+  const D c[3] = {n[0] * inv, n[1] * inv, n[2] * inv};
+  for (int k = 0; k < 3; ++k) {
+    rows[k] = c[k];
+    rows[4 + k] = a[k];
+    rows[8 + k] = b[k];
+  }
+  rows[3] = c[0] * v2[0] + c[1] * v2[1] + c[2] * v2[2];
+  rows[7] = -(a[0] * v2[0] + a[1] * v2[1] + a[2] * v2[2]);
+  rows[11] = -(b[0] * v2[0] + b[1] * v2[1] + b[2] * v2[2]);
+}
+
+// False for a degenerate (or NaN) triangle, whose rows must be all zero.
+TSAH_HD bool woopNondegenerate(double nn) { return nn > 1e-300 && nn < 1e300; }
+
 // Computed in double precision, then rounded, so the rows are as accurate as float allows.
 TSAH_HD WoopTriangle makeWoopTriangle(Vec3 v0, Vec3 v1, Vec3 v2) {
-  const double e0[3] = {double(v0.x) - v2.x, double(v0.y) - v2.y, double(v0.z) - v2.z};
-  const double e1[3] = {double(v1.x) - v2.x, double(v1.y) - v2.y, double(v1.z) - v2.z};
-  const double n[3] = {e0[1] * e1[2] - e0[2] * e1[1], e0[2] * e1[0] - e0[0] * e1[2], e0[0] * e1[1] - e0[1] * e1[0]};
-  const double nn = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+  const double p0[3] = {v0.x, v0.y, v0.z}, p1[3] = {v1.x, v1.y, v1.z}, p2[3] = {v2.x, v2.y, v2.z};
+  double r[12], nn;
+  woopRowsDouble(p0, p1, p2, r, nn);
   WoopTriangle w{{0, 0, 0, 0}, {0, 0, 0, 0}, {0, 0, 0, 0}};
-  if (!(nn > 1e-300) || !(nn < 1e300)) return w;  // degenerate (or NaN): never hit
-  const double inv = 1.0 / nn;
-  const double a[3] = {(e1[1] * n[2] - e1[2] * n[1]) * inv, (e1[2] * n[0] - e1[0] * n[2]) * inv,
-                       (e1[0] * n[1] - e1[1] * n[0]) * inv};  // e1 x n
-  const double b[3] = {(n[1] * e0[2] - n[2] * e0[1]) * inv, (n[2] * e0[0] - n[0] * e0[2]) * inv,
-                       (n[0] * e0[1] - n[1] * e0[0]) * inv};  // n x e0
-  const double c[3] = {n[0] * inv, n[1] * inv, n[2] * inv};
-  const double p[3] = {v2.x, v2.y, v2.z};
-  w.r0 = {float(c[0]), float(c[1]), float(c[2]), float(c[0] * p[0] + c[1] * p[1] + c[2] * p[2])};
-  w.r1 = {float(a[0]), float(a[1]), float(a[2]), float(-(a[0] * p[0] + a[1] * p[1] + a[2] * p[2]))};
-  w.r2 = {float(b[0]), float(b[1]), float(b[2]), float(-(b[0] * p[0] + b[1] * p[1] + b[2] * p[2]))};
+  if (!woopNondegenerate(nn)) return w;  // degenerate (or NaN): never hit
+  w.r0 = {float(r[0]), float(r[1]), float(r[2]), float(r[3])};
+  w.r1 = {float(r[4]), float(r[5]), float(r[6]), float(r[7])};
+  w.r2 = {float(r[8]), float(r[9]), float(r[10]), float(r[11])};
   return w;
 }
 

@@ -1,0 +1,152 @@
+// The wide refit: the SIMD Woop rows of every instruction set equal makeWoopTriangle bit for bit
+// (degenerate triangles and padding lanes zero), and a refitted WideTree holds, for every leaf
+// lane, exactly its triangle's rows and, for every child, exactly the union of its contents,
+// however many threads refit it and whichever kernels compute the rows.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <random>
+
+#include "anim/generators.hpp"
+#include "tsah/sah_builder.hpp"
+#include "tsah/wide_bvh.hpp"
+#include "tsah/wide_tree.hpp"
+#include "tsah/woop.hpp"
+
+namespace {
+
+using tsah::SimdIsa;
+using tsah::Vec3;
+using tsah::WoopPacket;
+
+bool sameBits(float a, float b) { return std::memcmp(&a, &b, sizeof a) == 0; }
+
+// Random triangles of very different sizes and positions, with degenerate ones mixed in.
+std::vector<std::array<Vec3, 3>> testTriangles(uint32_t count, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::vector<std::array<Vec3, 3>> out;
+  for (uint32_t i = 0; i < count; ++i) {
+    const float scale = std::pow(10.0f, float(int(i % 9) - 4));  // 1e-4 .. 1e4
+    const Vec3 c{u(rng) * 100.0f, u(rng) * 100.0f, u(rng) * 100.0f};
+    std::array<Vec3, 3> t;
+    for (Vec3& v : t) v = {c.x + scale * u(rng), c.y + scale * u(rng), c.z + scale * u(rng)};
+    if (i % 7 == 3) t[2] = t[1];                               // two equal vertices
+    if (i % 11 == 5) t[2] = t[0] + (t[1] - t[0]) * 0.5f;       // collinear
+    if (i % 13 == 6) t[1] = t[2] = t[0];                       // a point
+    out.push_back(t);
+  }
+  return out;
+}
+
+template <uint32_t N>
+void checkRowKernel(SimdIsa isa) {
+  const tsah::WideKernels& k = tsah::wideKernels(isa);
+  void (*rows)(const float(*)[N], uint32_t, WoopPacket<N>&);
+  if constexpr (N == 4)
+    rows = k.woopRows4;
+  else
+    rows = k.woopRows8;
+  ASSERT_NE(rows, nullptr) << tsah::isaName(isa);
+  const auto tris = testTriangles(40 * N, 7);
+  for (uint32_t first = 0; first + N <= tris.size(); first += N) {
+    const uint32_t lanes = 1 + (first / N) % N;  // 1..N used lanes
+    alignas(32) float v[9][N];
+    for (uint32_t lane = 0; lane < N; ++lane)
+      for (int c = 0; c < 3; ++c)
+        for (int a = 0; a < 3; ++a) v[3 * c + a][lane] = tris[first + lane][c][a];
+    WoopPacket<N> pk;
+    std::memset(&pk, 0xff, sizeof pk);  // rows must be overwritten, padding included
+    rows(v, lanes, pk);
+    for (uint32_t lane = 0; lane < N; ++lane) {
+      const auto& t = tris[first + lane];
+      const tsah::WoopTriangle expected = lane < lanes ? tsah::makeWoopTriangle(t[0], t[1], t[2]) : tsah::WoopTriangle{};
+      const tsah::WoopTriangle got = pk.get(lane);
+      const float* e = &expected.r0.x;
+      const float* g = &got.r0.x;
+      for (int r = 0; r < 12; ++r)
+        ASSERT_TRUE(sameBits(e[r], g[r])) << tsah::isaName(isa) << " N=" << N << " triangle " << first + lane
+                                          << " row value " << r << ": " << g[r] << " vs " << e[r];
+    }
+  }
+}
+
+TEST(WideRefit, PacketRowsOfEveryInstructionSetEqualMakeWoopTriangle) {
+  for (SimdIsa isa : tsah::supportedIsas()) {
+    checkRowKernel<4>(isa);
+    checkRowKernel<8>(isa);
+  }
+}
+
+// Every lane of every leaf packet holds its triangle's rows, every child box the exact union of
+// its triangles' vertices or its child node's children.
+template <uint32_t N>
+void checkRefit(const tsah::WideTree<N>& tree, const float* p, const uint32_t* indices) {
+  const auto nodes = tree.nodes();
+  const auto packets = tree.packets();
+  const auto triIndex = tree.triIndex();
+  auto vertex = [&](uint32_t i) { return Vec3{p[3 * i], p[3 * i + 1], p[3 * i + 2]}; };
+  for (const auto& node : nodes)
+    for (uint32_t c = 0; c < N; ++c) {
+      const tsah::Aabb box = node.childBox(c);
+      if (node.ref[c] == 0 && node.count[c] == 0) continue;  // unused
+      tsah::Aabb expected;
+      if (tsah::isLeafRef(node.ref[c])) {
+        const uint32_t first = tsah::leafFirstSlot(node.ref[c]);
+        for (uint32_t i = 0; i < node.count[c]; ++i) {
+          const WoopPacket<N>& pk = packets[first + i / N];
+          const uint32_t* tri = indices + 3 * std::size_t(triIndex[pk.slot[i % N]]);
+          const tsah::WoopTriangle w = tsah::makeWoopTriangle(vertex(tri[0]), vertex(tri[1]), vertex(tri[2]));
+          const tsah::WoopTriangle got = pk.get(i % N);
+          ASSERT_EQ(std::memcmp(&w, &got, sizeof w), 0) << "leaf lane " << i;
+          for (int k = 0; k < 3; ++k) expected.extend(vertex(tri[k]));
+        }
+      } else {
+        expected = nodes[static_cast<uint32_t>(node.ref[c])].bounds();
+      }
+      for (int a = 0; a < 3; ++a) {
+        ASSERT_TRUE(sameBits(box.lo[a], expected.lo[a]));
+        ASSERT_TRUE(sameBits(box.hi[a], expected.hi[a]));
+      }
+    }
+}
+
+template <uint32_t N>
+void refitWithEveryThreadCountAndIsa(const anim::Animation& a, const tsah::WideBvh& w) {
+  const std::vector<uint32_t> indices(a.indices().begin(), a.indices().end());
+  for (double t : {a.startTime(), 0.5 * (a.startTime() + a.endTime()), a.endTime()}) {
+    const std::vector<float> p = a.positionsAt(t);
+    for (SimdIsa isa : tsah::supportedIsas())
+      for (uint32_t threads : {1u, 3u, 16u}) {
+        tsah::WideTree<N> tree(w, threads, isa);
+        tree.refit(p.data(), indices.data(), [](std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) {
+          for (std::size_t i = n; i-- > 0;) body(i, i + 1);  // tasks one by one, last first
+        });
+        SCOPED_TRACE(std::string(tsah::isaName(isa)) + " threads " + std::to_string(threads));
+        checkRefit(tree, p.data(), indices.data());
+        EXPECT_EQ(tree.bounds().lo.x, tree.nodes()[0].bounds().lo.x);
+      }
+  }
+}
+
+TEST(WideRefit, RefitHoldsExactRowsAndBoxesForEveryPlanAndInstructionSet) {
+  anim::GeneratorOptions o;
+  o.triangles = 3000;
+  o.frames = 4;
+  const anim::Animation a = anim::generate(anim::GeneratorKind::Wave, o);
+  const tsah::PrimitiveBoxes boxes = tsah::triangleBoxes(a.indices(), a.positionsAt(a.startTime()), 1);
+  const tsah::Bvh bvh = tsah::SweepSahBuilder().build(boxes.frame(0));
+  for (uint32_t width : {4u, 8u}) {
+    tsah::WideCollapser::Config c;
+    c.width = width;
+    c.leafPacket = width;
+    const tsah::WideBvh w = tsah::WideCollapser(c).collapse(bvh);
+    ASSERT_GT(w.nodeCount(), 20u);  // enough nodes for several refit tasks
+    if (width == 4)
+      refitWithEveryThreadCountAndIsa<4>(a, w);
+    else
+      refitWithEveryThreadCountAndIsa<8>(a, w);
+  }
+}
+
+}  // namespace
