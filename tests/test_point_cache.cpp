@@ -1,6 +1,6 @@
 // PC2 and MDD point caches: hand-written files in both byte orders, round trips through the
 // encoders and through files paired with a mesh, corrupt / truncated / absurd inputs, the input
-// forms of anim::load, and a replay of the fuzz seed corpora.
+// forms of anim::load (the fuzz seed corpora are replayed by test_fuzz_corpora).
 #include <gtest/gtest.h>
 
 #include <bit>
@@ -17,7 +17,6 @@
 #include "anim/mesh_sequence.hpp"
 #include "anim/obj_writer.hpp"
 #include "anim/point_cache.hpp"
-#include "fuzz_point_cache/point_cache_check.hpp"
 #include "test_support.hpp"
 
 namespace {
@@ -262,18 +261,6 @@ TEST(PointCache, EveryTruncationIsRejected) {
     for (std::size_t n = 0; n < bytes.size(); ++n)
       EXPECT_NE(errorOf(std::span(bytes).first(n), f), "") << "prefix of " << n << " bytes accepted";
   }
-}
-
-TEST(PointCache, SeedCorporaReplay) {
-  const fs::path root = fs::path(TSAH_SOURCE_DIR) / "tests" / "fuzz_point_cache";
-  std::size_t files = 0;
-  for (auto [folder, format] : {std::pair{"corpus_pc2", PointCacheFormat::Pc2}, {"corpus_mdd", PointCacheFormat::Mdd}})
-    for (const auto& entry : fs::directory_iterator(root / folder)) {
-      const auto bytes = anim::readFile(entry.path().string());
-      EXPECT_EQ(anim::fuzz::pointCacheFinding(bytes, format), std::nullopt) << entry.path();
-      ++files;
-    }
-  EXPECT_GE(files, 8u);
 }
 
 // Done-when check of issue 16: a PC2 written from samba reads back identically.
