@@ -1,0 +1,11 @@
+# Inputs the fuzzers found (scripts/fuzz.sh, docs/fuzzing.md), as command-line cases of
+# docs/bad-inputs.md: one "tsah: " line, the exit status, no hang. Uses tsah_expect_error and ${H}
+# of hardening.cmake (included before this file).
+file(WRITE ${H}/tri.obj "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+
+# Found while writing fuzz_scene: a scene whose time range at its rate needs 10^12 keyframes (it
+# filled the keyframe times until memory ran out); refused before the times are made.
+file(WRITE ${H}/long_scene.json [=[{"fps": 1e6, "time": [0, 1e6], "objects": [{"file": "tri.obj"}]}]=])
+tsah_expect_error(hard.scene.keyframes 1
+  "long_scene.json: the time range \\[0, 1e\\+06\\] at 1e\\+06 keyframes per second needs more than 2\\^32 keyframes"
+  info ${H}/long_scene.json)
