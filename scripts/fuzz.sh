@@ -73,7 +73,10 @@ for t in "${targets[@]}"; do
   found=$(find "$findings" -type f -newermt "@$start" | sed 's|.*/||' | tr '\n' ' ')
   if [ "$rc" != 0 ] || [ -n "$found" ]; then
     status=1
-    reason=$(grep -m1 -E 'ERROR: (AddressSanitizer|LeakSanitizer|libFuzzer)|runtime error:|terminate called|what\(\)' "$log" || true)
+    reason=""
+    for pattern in 'what\(\):' 'runtime error:' 'ERROR: (AddressSanitizer|LeakSanitizer|libFuzzer)'; do
+      [ -z "$reason" ] && reason=$(grep -m1 -E "$pattern" "$log" | sed 's/^ *//' | cut -c1-200 || true)
+    done
     found="exit $rc: ${found:-none written} ${reason:+— ${reason//|/\\|}}"
   fi
   rate=$(( ${execs:-0} / (elapsed > 0 ? elapsed : 1) ))

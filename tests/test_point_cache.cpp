@@ -221,6 +221,10 @@ TEST(PointCache, CorruptAndAbsurdFilesGiveOneLineErrors) {
   badSignature[5] = 'X';
   Bytes nanPc2 = pc2Header(3, 0, 1, 1);
   for (int i = 0; i < 9; ++i) nanPc2.f32(i == 4 ? std::numeric_limits<float>::quiet_NaN() : 1.0f);
+  // Fuzz finding (fuzz_pc2, fuzz_mdd): a coordinate past kMaxCoordinate was accepted here and refused
+  // later by the Animation under the cache's stem, not its file name.
+  Bytes hugePc2 = pc2Header(3, 0, 1, 1);
+  for (int i = 0; i < 9; ++i) hugePc2.f32(i == 4 ? 1e30f : 1.0f);
   Bytes extra = goodPc2;
   extra.f32(1.0f);
   Bytes nanTime = mddHeader(2, 1);
@@ -241,6 +245,8 @@ TEST(PointCache, CorruptAndAbsurdFilesGiveOneLineErrors) {
       {"huge mdd points", [] { Bytes b = mddHeader(1, INT32_MAX); return b.f32(0).data; }(), PointCacheFormat::Mdd, "truncated"},
       {"trailing bytes", extra.data, PointCacheFormat::Pc2, "4 bytes follow"},
       {"nan coordinate", nanPc2.data, PointCacheFormat::Pc2, "frame 0, point 1 has a NaN"},
+      {"huge coordinate", hugePc2.data, PointCacheFormat::Pc2,
+       "frame 0, point 1 has coordinate 1e+30, beyond the supported magnitude 1e+18"},
       {"nan time", nanTime.data, PointCacheFormat::Mdd, "non-finite time"},
       {"equal times", backwards.data, PointCacheFormat::Mdd, "is not after"},
       {"negative frames", mddHeader(-1, 3).data, PointCacheFormat::Mdd, "frame count -1 is absurd"},
