@@ -206,9 +206,20 @@ double readBinary(const uint8_t* p, int size, bool isFloat, bool isSigned, bool 
 
 DeclaredMesh checkPly(const std::string& path, std::span<const uint8_t> bytes) {
   const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
-  const std::size_t headerEnd = text.find("end_header");
-  if (text.substr(0, 3) != "ply" || headerEnd == std::string_view::npos)
-    throw ImportError(path, "not a PLY file (no 'ply' ... 'end_header' header)");
+  // The header ends at the first line that is end_header alone: OpenMesh reads the header word by
+  // word and, when end_header is glued to other text, loops forever at the end of the file.
+  std::size_t headerEnd = std::string_view::npos;
+  for (std::size_t at = text.find("\nend_header"); at != std::string_view::npos; at = text.find("\nend_header", at + 1)) {
+    std::size_t after = at + 11;
+    while (after < text.size() && (text[after] == ' ' || text[after] == '\t' || text[after] == '\r')) ++after;
+    if (after == text.size() || text[after] == '\n') {
+      headerEnd = at + 1;
+      break;
+    }
+  }
+  if (text.substr(0, 3) != "ply" || text.size() < 4 || (text[3] != '\n' && text[3] != '\r') ||
+      headerEnd == std::string_view::npos)
+    throw ImportError(path, "not a PLY file (no 'ply' line ... 'end_header' line)");
   std::size_t bodyStart = text.find('\n', headerEnd);
   bodyStart = bodyStart == std::string_view::npos ? bytes.size() : bodyStart + 1;
 

@@ -9,3 +9,9 @@ file(WRITE ${H}/long_scene.json [=[{"fps": 1e6, "time": [0, 1e6], "objects": [{"
 tsah_expect_error(hard.scene.keyframes 1
   "long_scene.json: the time range \\[0, 1e\\+06\\] at 1e\\+06 keyframes per second needs more than 2\\^32 keyframes"
   info ${H}/long_scene.json)
+
+# fuzz_mesh finding: a PLY whose end_header is glued to other text made OpenMesh's header reader loop
+# forever at the end of the file (`tsah info` hung); the header must end with an end_header line.
+file(WRITE ${H}/glued_header.ply "ply\nformat ascii 1.0*end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
+tsah_expect_error(hard.ply.glued_end_header 1
+  "glued_header.ply: not a PLY file \\(no 'ply' line ... 'end_header' line\\)" info ${H}/glued_header.ply)
