@@ -61,8 +61,14 @@ for tool in $tools; do
     rc=$?
     result=$(grep -hE 'ERROR SUMMARY|RACECHECK SUMMARY|LEAK SUMMARY' "$log" | tr '\n' ' ')
     [ "$rc" = 0 ] || status=1
-    # Test programs: how many tests ran rather than skipped (a skipped test checks nothing).
-    [[ $name == test_* ]] && result="$result; $(grep -hE '^\[  (PASSED|SKIPPED|FAILED) ' "$out/$tool-$name.out" | tr '\n' ' ')"
+    # Test programs: how many tests passed, failed or skipped (on a GPU machine a skipped test checks
+    # nothing, so it fails the run).
+    if [[ $name == test_* ]]; then
+      counts=$(grep -hE '^\[ +(PASSED|SKIPPED|FAILED) +\] [0-9]+ tests?' "$out/$tool-$name.out" | sed 's/[][]//g; s/  */ /g' | tr '\n' ';')
+      result="$result; $counts"
+      grep -qE '^\[ +SKIPPED +\] [0-9]+ test' "$out/$tool-$name.out" && status=1
+    fi
+    [ "$rc" = 0 ] || result="$result; $(grep -m1 -v '^=' "$out/$tool-$name.out" | cut -c1-160)"
     echo "| $tool | $name | $rc | ${result:-no summary (see $tool-$name.log)} |" >>"$summary"
   done
 done
