@@ -233,6 +233,11 @@ DeclaredMesh checkPly(const std::string& path, std::span<const uint8_t> bytes) {
       const std::string_view f = header.next();
       format = f == "ascii" ? Format::Ascii : f == "binary_little_endian" ? Format::Little
              : f == "binary_big_endian" ? Format::Big : throw ImportError(path, "unknown PLY format '" + std::string(f) + "'");
+      // OpenMesh reads the version as a number and loops forever when that fails.
+      const std::string_view version = header.next();
+      double v = 0;
+      if (!parseNumber(version, v) || v != 1.0)
+        throw ImportError(path, "unsupported PLY version '" + std::string(version) + "' (1.0 expected)");
       header.skipLine();
     } else if (word == "element") {
       PlyElement e;

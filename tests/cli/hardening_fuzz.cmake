@@ -15,3 +15,8 @@ tsah_expect_error(hard.scene.keyframes 1
 file(WRITE ${H}/glued_header.ply "ply\nformat ascii 1.0*end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
 tsah_expect_error(hard.ply.glued_end_header 1
   "glued_header.ply: not a PLY file \\(no 'ply' line ... 'end_header' line\\)" info ${H}/glued_header.ply)
+
+# fuzz_mesh finding: a PLY format line whose version is not a number made OpenMesh loop forever.
+file(WRITE ${H}/bad_version.ply "ply\nformat ascii one\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
+tsah_expect_error(hard.ply.bad_version 1 "bad_version.ply: unsupported PLY version 'one' \\(1.0 expected\\)"
+  info ${H}/bad_version.ply)
