@@ -3,9 +3,10 @@
 # build/fuzz) and runs them one after another, each until it has executed RUNS inputs or spent
 # SECONDS, whichever comes first; then writes a summary table (docs/fuzzing.md explains it).
 #
-#   scripts/fuzz.sh [--runs N] [--seconds S] [--build-only] [TARGET...]   (default: every target)
+#   scripts/fuzz.sh [--runs N] [--seconds S] [--build-only] [TARGET...] [-- LIBFUZZER_OPTION...]
 #
-# TARGET is an entry of tests/fuzz/entries.hpp (tanim, scene, ...). Seeds come from
+# TARGET is an entry of tests/fuzz/entries.hpp (tanim, scene, ...; default: all of them); options
+# after -- go to every fuzzer (e.g. -max_len=4096). Seeds come from
 # tests/fuzz/corpus/TARGET; what a run learns is kept in build/fuzz/corpus/TARGET and used by the
 # next run; crashes, leaks, timeouts and out-of-memory inputs go to build/fuzz/findings/TARGET/.
 # Fuzzers run under `nice -n 19`, one at a time (the machine is shared). Exit status 1 when any
@@ -17,12 +18,14 @@ runs=1000000
 seconds=600
 build_only=0
 targets=()
+extra=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --runs) runs="$2"; shift 2 ;;
     --seconds) seconds="$2"; shift 2 ;;
     --build-only) build_only=1; shift ;;
-    -h|--help) sed -n '2,12p' "$0"; exit 0 ;;
+    --) shift; extra=("$@"); break ;;
+    -h|--help) sed -n '2,14p' "$0"; exit 0 ;;
     -*) echo "fuzz.sh: unknown option $1" >&2; exit 2 ;;
     *) targets+=("$1"); shift ;;
   esac
@@ -46,7 +49,7 @@ summary=$out/summary.md
   echo "# Fuzz run $(date -u '+%Y-%m-%d %H:%M UTC')"
   echo
   echo "Machine: $(nproc) cores, $(sed -n 's/^model name\s*: //p' /proc/cpuinfo | head -1); $(clang++ --version | head -1);"
-  echo "budget per target: $runs executions or $seconds s; load average at the start: $(cut -d' ' -f1-3 /proc/loadavg)"
+  echo "budget per target: $runs executions or $seconds s${extra[*]:+; libFuzzer options: ${extra[*]}}; load average at the start: $(cut -d' ' -f1-3 /proc/loadavg)"
   echo
   echo "| target | executions | seconds | exec/s | cov | ft | corpus | peak RSS MB | findings |"
   echo "|---|--:|--:|--:|--:|--:|--:|--:|---|"
@@ -60,7 +63,7 @@ for t in "${targets[@]}"; do
   start=$(date +%s)
   set +e
   nice -n 19 "$out/tests/fuzz/fuzz_$t" -runs="$runs" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 \
-    -print_final_stats=1 -artifact_prefix="$findings/" "$work" "tests/fuzz/corpus/$t" >"$log" 2>&1
+    -print_final_stats=1 -artifact_prefix="$findings/" "${extra[@]}" "$work" "tests/fuzz/corpus/$t" >"$log" 2>&1
   rc=$?
   set -e
   elapsed=$(( $(date +%s) - start ))
