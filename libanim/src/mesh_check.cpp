@@ -44,6 +44,12 @@ class Tokens {
   void skipLine() {
     while (p_ < end_ && *p_ != '\n') ++p_;
   }
+  // Next token of the current line, or empty when the line ends first.
+  std::string_view nextOnLine() {
+    while (p_ < end_ && *p_ != '\n' && std::isspace(static_cast<unsigned char>(*p_))) ++p_;
+    if (p_ >= end_ || *p_ == '\n') return {};
+    return next();
+  }
   bool atEnd() const { return p_ >= end_; }
 
  private:
@@ -104,14 +110,21 @@ DeclaredMesh checkOff(const std::string& path, std::span<const uint8_t> bytes) {
     throw ImportError(path, "not an OFF file (the first word is not OFF)");
   if (magic.find('4') != std::string_view::npos || magic.find('n') != std::string_view::npos)
     throw ImportError(path, "4D and n-dimensional OFF files are not supported");
-  std::string_view word = in.next(true);
+  // OpenMesh reads the keyword line whole and the counts from the lines after it: anything else on
+  // the keyword line would make the two readers disagree about the counts.
+  std::string_view word = in.nextOnLine();
   const bool binary = word == "BINARY";
+  if (binary) word = in.nextOnLine();
+  if (!word.empty())
+    throw ImportError(path, "the " + std::string(magic) + " line holds '" + std::string(word) +
+                                "' after the keyword (the counts go on the next line)");
   uint64_t counts[3] = {};
   for (int i = 0; i < 3; ++i) {
-    if (binary || i > 0) word = in.next(true);
+    word = in.next(true);
     if (!parseCount(word, counts[i]))
       throw ImportError(path, "header needs the vertex, face and edge counts, got '" + std::string(word) + "'");
   }
+  if (counts[2] > 0xffffffffu) throw ImportError(path, "edge count " + std::to_string(counts[2]) + " is absurd");
   const DeclaredMesh declared{true, counts[0], counts[1]};
   if (binary) {  // binary OFF: 3 floats per vertex, at least 4 ints per face
     checkCounts(path, declared.vertices, declared.faces, 12, 16, bytes.size());

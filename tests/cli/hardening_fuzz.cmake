@@ -20,3 +20,10 @@ tsah_expect_error(hard.ply.glued_end_header 1
 file(WRITE ${H}/bad_version.ply "ply\nformat ascii one\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
 tsah_expect_error(hard.ply.bad_version 1 "bad_version.ply: unsupported PLY version 'one' \\(1.0 expected\\)"
   info ${H}/bad_version.ply)
+
+# fuzz_mesh finding: counts on the OFF keyword line (OpenMesh skips that line, so it read other numbers
+# as the counts and reserved gigabytes before failing).
+file(WRITE ${H}/counts_on_keyword_line.off "OFF 0\n0\n\n 04777777777777777\n1 0\n4 0 1 2 3\n")
+tsah_expect_error(hard.off.counts_on_keyword_line 1
+  "counts_on_keyword_line.off: the OFF line holds '0' after the keyword \\(the counts go on the next line\\)"
+  info ${H}/counts_on_keyword_line.off)
