@@ -239,40 +239,45 @@ DeclaredMesh checkPly(const std::string& path, std::span<const uint8_t> bytes) {
   enum class Format { Ascii, Little, Big } format = Format::Ascii;
   std::vector<PlyElement> elements;
   Tokens header(bytes.first(headerEnd), 3);
+  // Each statement is one line with exactly its words: OpenMesh reads the header word by word, so a
+  // missing word makes it take the next line's (at worst end_header) and loop forever at the end.
   for (std::string_view word = header.next(); !word.empty(); word = header.next()) {
     if (word == "comment" || word == "obj_info") {
       header.skipLine();
-    } else if (word == "format") {
-      const std::string_view f = header.next();
+      continue;
+    }
+    if (word == "format") {
+      const std::string_view f = header.nextOnLine();
       format = f == "ascii" ? Format::Ascii : f == "binary_little_endian" ? Format::Little
              : f == "binary_big_endian" ? Format::Big : throw ImportError(path, "unknown PLY format '" + std::string(f) + "'");
-      // OpenMesh reads the version as a number and loops forever when that fails.
-      const std::string_view version = header.next();
+      const std::string_view version = header.nextOnLine();
       double v = 0;
       if (!parseNumber(version, v) || v != 1.0)
         throw ImportError(path, "unsupported PLY version '" + std::string(version) + "' (1.0 expected)");
-      header.skipLine();
     } else if (word == "element") {
       PlyElement e;
-      e.name = std::string(header.next());
-      if (!parseCount(header.next(), e.count)) throw ImportError(path, "element " + e.name + " has no valid count");
+      e.name = std::string(header.nextOnLine());
+      if (!parseCount(header.nextOnLine(), e.count)) throw ImportError(path, "element " + e.name + " has no valid count");
       elements.push_back(std::move(e));
     } else if (word == "property") {
       if (elements.empty()) throw ImportError(path, "property before any element");
       PlyProperty p;
-      std::string_view t = header.next();
+      std::string_view t = header.nextOnLine();
       if (t == "list") {
         bool f;
-        if (!plyType(header.next(), p.countSize, f, p.countSigned) || f)
+        if (!plyType(header.nextOnLine(), p.countSize, f, p.countSigned) || f)
           throw ImportError(path, "bad list count type in the header");
-        t = header.next();
+        t = header.nextOnLine();
       }
       if (!plyType(t, p.size, p.isFloat, p.isSigned)) throw ImportError(path, "unknown property type '" + std::string(t) + "'");
-      p.name = std::string(header.next());
+      p.name = std::string(header.nextOnLine());
+      if (p.name.empty()) throw ImportError(path, "a property of element " + elements.back().name + " has no name");
       elements.back().properties.push_back(std::move(p));
     } else {
       throw ImportError(path, "unexpected header word '" + std::string(word) + "'");
     }
+    if (const std::string_view extra = header.nextOnLine(); !extra.empty())
+      throw ImportError(path, "unexpected header word '" + std::string(extra) + "' after the " + std::string(word) + " statement");
   }
   DeclaredMesh declared{true, 0, 0};
   uint64_t minBytes[2] = {0, 0};  // per vertex, per face

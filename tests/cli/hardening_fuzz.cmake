@@ -27,3 +27,9 @@ file(WRITE ${H}/counts_on_keyword_line.off "OFF 0\n0\n\n 04777777777777777\n1 0\
 tsah_expect_error(hard.off.counts_on_keyword_line 1
   "counts_on_keyword_line.off: the OFF line holds '0' after the keyword \\(the counts go on the next line\\)"
   info ${H}/counts_on_keyword_line.off)
+
+# fuzz_mesh finding: a PLY property line without its name made OpenMesh take end_header as the name
+# and loop forever; every header statement must hold its words on its own line.
+file(WRITE ${H}/unnamed_property.ply "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
+tsah_expect_error(hard.ply.unnamed_property 1 "unnamed_property.ply: a property of element face has no name"
+  info ${H}/unnamed_property.ply)
