@@ -5,6 +5,7 @@
 #include <cctype>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <vector>
@@ -322,8 +323,12 @@ DeclaredMesh checkPly(const std::string& path, std::span<const uint8_t> bytes) {
         }
         const double n = value(e.name, r, p.countSize, false, p.countSigned, "list length of " + p.name);
         const bool indices = isFace && (p.name == "vertex_indices" || p.name == "vertex_index");
-        if (!(n >= 0) || n != std::floor(n))
-          throw ImportError(path, e.name + " " + std::to_string(r) + ": bad list length " + std::to_string(n));
+        // A count type holds at most 2^32 - 1, but ASCII text can say anything (2e21 does not convert).
+        if (!(n >= 0) || n != std::floor(n) || n > 4294967295.0) {
+          char number[32];
+          std::snprintf(number, sizeof number, "%g", n);
+          throw ImportError(path, e.name + " " + std::to_string(r) + ": bad list length " + number);
+        }
         if (indices) checkFaceSize(path, r, uint64_t(n));
         if (format != Format::Ascii && !indices) {  // skip the list without reading each value
           uint64_t skip = 0;

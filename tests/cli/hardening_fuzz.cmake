@@ -33,3 +33,8 @@ tsah_expect_error(hard.off.counts_on_keyword_line 1
 file(WRITE ${H}/unnamed_property.ply "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
 tsah_expect_error(hard.ply.unnamed_property 1 "unnamed_property.ply: a property of element face has no name"
   info ${H}/unnamed_property.ply)
+
+# fuzz_mesh finding (UndefinedBehaviorSanitizer): an ASCII PLY list length of 2e21 was converted to an
+# integer that cannot hold it.
+file(WRITE ${H}/huge_list.ply "${PLY_HEAD}0 0 0\n1 0 0\n0 1 0\n1 1 0\n2e21 0 1 2\n3 1 3 2\n")
+tsah_expect_error(hard.ply.huge_list_length 1 "huge_list.ply: face 0: bad list length 2e\\+21" info ${H}/huge_list.ply)
