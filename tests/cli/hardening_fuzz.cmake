@@ -38,3 +38,9 @@ tsah_expect_error(hard.ply.unnamed_property 1 "unnamed_property.ply: a property 
 # integer that cannot hold it.
 file(WRITE ${H}/huge_list.ply "${PLY_HEAD}0 0 0\n1 0 0\n0 1 0\n1 1 0\n2e21 0 1 2\n3 1 3 2\n")
 tsah_expect_error(hard.ply.huge_list_length 1 "huge_list.ply: face 0: bad list length 2e\\+21" info ${H}/huge_list.ply)
+
+# TSAH_MEMORY_LIMIT_MB caps the memory the statements count as available (the scene fuzzer's budget,
+# or a container's share): a resample that fits the machine is refused under a 1 MiB cap.
+tsah_expect_error(hard.memory.limit_env 1 "more than the 1 MiB of memory available"
+  resample ${H}/a.tanim -o ${H}/never_limited.tanim --frames 100000)
+set_tests_properties(hard.memory.limit_env PROPERTIES ENVIRONMENT "TSAH_MEMORY_LIMIT_MB=1" FIXTURES_REQUIRED hard_anim)
