@@ -1,6 +1,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <stdexcept>
@@ -24,15 +25,20 @@ void requireOneLine(const char* what) {
 }
 
 const std::filesystem::path& scratchFolder() {
-  static const std::filesystem::path dir = [] {
+  // Never destroyed, so that the exit handler below can still name it.
+  static const std::filesystem::path* const dir = [] {
     std::error_code ec;
     const std::filesystem::path shm("/dev/shm");
     const auto base = std::filesystem::is_directory(shm, ec) ? shm : std::filesystem::temp_directory_path();
-    const auto d = base / ("tsah-fuzz-" + std::to_string(::getpid()));
-    std::filesystem::create_directories(d);
+    auto* d = new std::filesystem::path(base / ("tsah-fuzz-" + std::to_string(::getpid())));
+    std::filesystem::create_directories(*d);
+    std::atexit([] {  // nothing is left behind by test runs and fuzzer runs that end normally
+      std::error_code ignored;
+      std::filesystem::remove_all(scratchFolder(), ignored);
+    });
     return d;
   }();
-  return dir;
+  return *dir;
 }
 
 void writeBytes(const std::filesystem::path& path, std::span<const uint8_t> data) {
