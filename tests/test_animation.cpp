@@ -102,4 +102,12 @@ TEST(Animation, CountsDegenerateTriangles) {
   EXPECT_EQ(a.triangleCount(), 2u);
 }
 
+// Found while writing fuzz_scene: a scene's memory statement multiplies hostile counts; the size saturates
+// instead of wrapping around to a small number that would pass the check.
+TEST(Animation, MemoryBytesForSaturatesInsteadOfWrapping) {
+  const uint64_t big = uint64_t(1) << 32;
+  EXPECT_EQ(anim::Animation::memoryBytesFor(0, big, big, big), std::numeric_limits<std::size_t>::max());
+  EXPECT_EQ(anim::Animation::memoryBytesFor(1, 3, 3, 2), 12u + 2 * 3 * 12 + 2 * 8);
+}
+
 }  // namespace

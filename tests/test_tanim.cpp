@@ -101,3 +101,23 @@ TEST(Tanim, MissingFileAndWrongMagic) {
 }
 
 }  // namespace
+
+// Fuzz finding (fuzz_tanim): a stored name with a line break made a two-line error. Readers refuse
+// control characters in the name, writers replace them, and consistency errors name the file.
+TEST(Tanim, NameWithControlCharactersIsRefusedAndNeverWritten) {
+  anim::Animation a = sample();
+  a.setName("two\nlines");
+  std::vector<uint8_t> bytes = anim::encodeTanim(a);
+  EXPECT_EQ(anim::decodeTanim(bytes, "w.tanim").name(), "two_lines");
+  bytes[64 + 3] = '\n';  // the name starts the payload; repair both checksums as a hostile file would
+  const uint32_t payloadCrc = anim::crc32(bytes.data() + 64, bytes.size() - 64);
+  std::memcpy(bytes.data() + 48, &payloadCrc, 4);
+  const uint32_t headerCrc = anim::crc32(bytes.data(), 60);
+  std::memcpy(bytes.data() + 60, &headerCrc, 4);
+  try {
+    anim::decodeTanim(bytes, "n.tanim");
+    FAIL() << "accepted a name with a line break";
+  } catch (const anim::ImportError& e) {
+    EXPECT_STREQ(e.what(), "n.tanim: the animation name holds a control character (byte 10 at 3)");
+  }
+}

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <cstdio>
 #include <string>
 
@@ -294,8 +295,11 @@ Animation Animation::segment(double t0, double t1) const {
 
 std::size_t Animation::memoryBytesFor(uint64_t triangles, uint64_t vertices, uint64_t movingVertices,
                                       uint64_t keyframes) {
-  const uint64_t split = movingVertices < vertices ? vertices * 12 + movingVertices * 4 : 0;
-  return std::size_t(triangles * 12 + split + keyframes * movingVertices * 12 + keyframes * 8);
+  // In 128 bits, saturated: hostile counts (a scene's instances x keyframes) must not wrap to a small size.
+  __extension__ typedef unsigned __int128 Wide;
+  const Wide split = movingVertices < vertices ? Wide(vertices) * 12 + Wide(movingVertices) * 4 : 0;
+  const Wide bytes = Wide(triangles) * 12 + split + Wide(keyframes) * movingVertices * 12 + Wide(keyframes) * 8;
+  return bytes > std::numeric_limits<std::size_t>::max() ? std::numeric_limits<std::size_t>::max() : std::size_t(bytes);
 }
 
 std::size_t Animation::memoryBytes() const {

@@ -1,6 +1,8 @@
 #include "anim/memory.hpp"
 
+#include <cstdlib>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <unistd.h>
 
@@ -23,6 +25,22 @@ std::size_t meminfoBytes(const std::string& field) {
   return 0;
 }
 
+// $TSAH_MEMORY_LIMIT_MB, when it is a positive whole number: a cap on what is reported available
+// (a container's share of the machine, or a fuzzer's budget); 0 when unset or not a number.
+std::size_t memoryLimitBytes() {
+  const char* text = std::getenv("TSAH_MEMORY_LIMIT_MB");
+  if (!text || !*text) return 0;
+  char* end = nullptr;
+  const unsigned long long mib = std::strtoull(text, &end, 10);
+  if (*end != '\0' || mib == 0 || mib > (std::numeric_limits<std::size_t>::max() >> 20)) return 0;
+  return std::size_t(mib) << 20;
+}
+
+std::size_t capped(std::size_t bytes) {
+  const std::size_t limit = memoryLimitBytes();
+  return limit && limit < bytes ? limit : bytes;
+}
+
 std::size_t physicalMemoryBytes() {
   const long pages = ::sysconf(_SC_PHYS_PAGES), pageSize = ::sysconf(_SC_PAGE_SIZE);
   return pages > 0 && pageSize > 0 ? std::size_t(pages) * std::size_t(pageSize) : std::size_t(1) << 60;
@@ -32,13 +50,13 @@ std::size_t physicalMemoryBytes() {
 
 std::size_t availableMemoryBytes() {
   const std::size_t available = meminfoBytes("MemAvailable:");
-  return available ? available : physicalMemoryBytes();
+  return capped(available ? available : physicalMemoryBytes());
 }
 
 void requireMemory(uint64_t bytes, const std::string& who, const std::string& what) {
   // MemAvailable + free swap is what one allocation can still get now.
   const std::size_t memory = meminfoBytes("MemAvailable:");
-  const uint64_t available = memory ? uint64_t(memory) + meminfoBytes("SwapFree:") : physicalMemoryBytes();
+  const uint64_t available = capped(memory ? memory + meminfoBytes("SwapFree:") : physicalMemoryBytes());
   if (bytes > available)
     throw Error(who + ": " + what + " needs " + std::to_string((bytes + (1u << 20) - 1) >> 20) + " MiB, but only " +
                 std::to_string(available >> 20) + " MiB of memory are available");

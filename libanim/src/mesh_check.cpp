@@ -5,6 +5,7 @@
 #include <cctype>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <vector>
@@ -43,6 +44,12 @@ class Tokens {
   // values we check).
   void skipLine() {
     while (p_ < end_ && *p_ != '\n') ++p_;
+  }
+  // Next token of the current line, or empty when the line ends first.
+  std::string_view nextOnLine() {
+    while (p_ < end_ && *p_ != '\n' && std::isspace(static_cast<unsigned char>(*p_))) ++p_;
+    if (p_ >= end_ || *p_ == '\n') return {};
+    return next();
   }
   bool atEnd() const { return p_ >= end_; }
 
@@ -104,14 +111,21 @@ DeclaredMesh checkOff(const std::string& path, std::span<const uint8_t> bytes) {
     throw ImportError(path, "not an OFF file (the first word is not OFF)");
   if (magic.find('4') != std::string_view::npos || magic.find('n') != std::string_view::npos)
     throw ImportError(path, "4D and n-dimensional OFF files are not supported");
-  std::string_view word = in.next(true);
+  // OpenMesh reads the keyword line whole and the counts from the lines after it: anything else on
+  // the keyword line would make the two readers disagree about the counts.
+  std::string_view word = in.nextOnLine();
   const bool binary = word == "BINARY";
+  if (binary) word = in.nextOnLine();
+  if (!word.empty())
+    throw ImportError(path, "the " + std::string(magic) + " line holds '" + std::string(word) +
+                                "' after the keyword (the counts go on the next line)");
   uint64_t counts[3] = {};
   for (int i = 0; i < 3; ++i) {
-    if (binary || i > 0) word = in.next(true);
+    word = in.next(true);
     if (!parseCount(word, counts[i]))
       throw ImportError(path, "header needs the vertex, face and edge counts, got '" + std::string(word) + "'");
   }
+  if (counts[2] > 0xffffffffu) throw ImportError(path, "edge count " + std::to_string(counts[2]) + " is absurd");
   const DeclaredMesh declared{true, counts[0], counts[1]};
   if (binary) {  // binary OFF: 3 floats per vertex, at least 4 ints per face
     checkCounts(path, declared.vertices, declared.faces, 12, 16, bytes.size());
@@ -206,44 +220,65 @@ double readBinary(const uint8_t* p, int size, bool isFloat, bool isSigned, bool 
 
 DeclaredMesh checkPly(const std::string& path, std::span<const uint8_t> bytes) {
   const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
-  const std::size_t headerEnd = text.find("end_header");
-  if (text.substr(0, 3) != "ply" || headerEnd == std::string_view::npos)
-    throw ImportError(path, "not a PLY file (no 'ply' ... 'end_header' header)");
+  // The header ends at the first line that is end_header alone: OpenMesh reads the header word by
+  // word and, when end_header is glued to other text, loops forever at the end of the file.
+  std::size_t headerEnd = std::string_view::npos;
+  for (std::size_t at = text.find("\nend_header"); at != std::string_view::npos; at = text.find("\nend_header", at + 1)) {
+    std::size_t after = at + 11;
+    while (after < text.size() && (text[after] == ' ' || text[after] == '\t' || text[after] == '\r')) ++after;
+    if (after == text.size() || text[after] == '\n') {
+      headerEnd = at + 1;
+      break;
+    }
+  }
+  if (text.substr(0, 3) != "ply" || text.size() < 4 || (text[3] != '\n' && text[3] != '\r') ||
+      headerEnd == std::string_view::npos)
+    throw ImportError(path, "not a PLY file (no 'ply' line ... 'end_header' line)");
   std::size_t bodyStart = text.find('\n', headerEnd);
   bodyStart = bodyStart == std::string_view::npos ? bytes.size() : bodyStart + 1;
 
   enum class Format { Ascii, Little, Big } format = Format::Ascii;
   std::vector<PlyElement> elements;
   Tokens header(bytes.first(headerEnd), 3);
+  // Each statement is one line with exactly its words: OpenMesh reads the header word by word, so a
+  // missing word makes it take the next line's (at worst end_header) and loop forever at the end.
   for (std::string_view word = header.next(); !word.empty(); word = header.next()) {
     if (word == "comment" || word == "obj_info") {
       header.skipLine();
-    } else if (word == "format") {
-      const std::string_view f = header.next();
+      continue;
+    }
+    if (word == "format") {
+      const std::string_view f = header.nextOnLine();
       format = f == "ascii" ? Format::Ascii : f == "binary_little_endian" ? Format::Little
              : f == "binary_big_endian" ? Format::Big : throw ImportError(path, "unknown PLY format '" + std::string(f) + "'");
-      header.skipLine();
+      const std::string_view version = header.nextOnLine();
+      double v = 0;
+      if (!parseNumber(version, v) || v != 1.0)
+        throw ImportError(path, "unsupported PLY version '" + std::string(version) + "' (1.0 expected)");
     } else if (word == "element") {
       PlyElement e;
-      e.name = std::string(header.next());
-      if (!parseCount(header.next(), e.count)) throw ImportError(path, "element " + e.name + " has no valid count");
+      e.name = std::string(header.nextOnLine());
+      if (!parseCount(header.nextOnLine(), e.count)) throw ImportError(path, "element " + e.name + " has no valid count");
       elements.push_back(std::move(e));
     } else if (word == "property") {
       if (elements.empty()) throw ImportError(path, "property before any element");
       PlyProperty p;
-      std::string_view t = header.next();
+      std::string_view t = header.nextOnLine();
       if (t == "list") {
         bool f;
-        if (!plyType(header.next(), p.countSize, f, p.countSigned) || f)
+        if (!plyType(header.nextOnLine(), p.countSize, f, p.countSigned) || f)
           throw ImportError(path, "bad list count type in the header");
-        t = header.next();
+        t = header.nextOnLine();
       }
       if (!plyType(t, p.size, p.isFloat, p.isSigned)) throw ImportError(path, "unknown property type '" + std::string(t) + "'");
-      p.name = std::string(header.next());
+      p.name = std::string(header.nextOnLine());
+      if (p.name.empty()) throw ImportError(path, "a property of element " + elements.back().name + " has no name");
       elements.back().properties.push_back(std::move(p));
     } else {
       throw ImportError(path, "unexpected header word '" + std::string(word) + "'");
     }
+    if (const std::string_view extra = header.nextOnLine(); !extra.empty())
+      throw ImportError(path, "unexpected header word '" + std::string(extra) + "' after the " + std::string(word) + " statement");
   }
   DeclaredMesh declared{true, 0, 0};
   uint64_t minBytes[2] = {0, 0};  // per vertex, per face
@@ -288,8 +323,12 @@ DeclaredMesh checkPly(const std::string& path, std::span<const uint8_t> bytes) {
         }
         const double n = value(e.name, r, p.countSize, false, p.countSigned, "list length of " + p.name);
         const bool indices = isFace && (p.name == "vertex_indices" || p.name == "vertex_index");
-        if (!(n >= 0) || n != std::floor(n))
-          throw ImportError(path, e.name + " " + std::to_string(r) + ": bad list length " + std::to_string(n));
+        // A count type holds at most 2^32 - 1, but ASCII text can say anything (2e21 does not convert).
+        if (!(n >= 0) || n != std::floor(n) || n > 4294967295.0) {
+          char number[32];
+          std::snprintf(number, sizeof number, "%g", n);
+          throw ImportError(path, e.name + " " + std::to_string(r) + ": bad list length " + number);
+        }
         if (indices) checkFaceSize(path, r, uint64_t(n));
         if (format != Format::Ascii && !indices) {  // skip the list without reading each value
           uint64_t skip = 0;

@@ -56,12 +56,14 @@ std::vector<float> readPositions(ByteReader& in, uint32_t frames, uint32_t point
   return positions;
 }
 
-void checkFinite(const PointCache& cache, const std::string& file) {
+// Finite and within kMaxCoordinate, as every importer checks (the Animation would refuse it later,
+// without naming this file).
+void checkCoordinates(const PointCache& cache, const std::string& file) {
   const std::size_t perFrame = std::size_t(cache.pointCount) * 3;
-  for (std::size_t i = 0; i < cache.positions.size(); ++i)
-    if (!std::isfinite(cache.positions[i]))
-      throw ImportError(file, "frame " + std::to_string(i / perFrame) + ", point " +
-                                  std::to_string((i % perFrame) / 3) + " has a NaN or infinite coordinate");
+  const std::size_t i = firstBadCoordinate(cache.positions);
+  if (i < cache.positions.size())
+    throw ImportError(file, "frame " + std::to_string(i / perFrame) + ", point " + std::to_string((i % perFrame) / 3) +
+                                " " + describeBadCoordinate(cache.positions[i]));
 }
 
 void checkTimes(const std::vector<double>& times, const std::string& file) {
@@ -114,7 +116,7 @@ PointCache decodePc2(std::span<const uint8_t> bytes, const std::string& file) {
   cache.times.resize(samples);
   for (uint32_t i = 0; i < samples; ++i) cache.times[i] = double(start) + double(i) * double(rate);
   checkTimes(cache.times, file);
-  checkFinite(cache, file);
+  checkCoordinates(cache, file);
   return cache;
 }
 
@@ -135,7 +137,7 @@ PointCache decodeMdd(std::span<const uint8_t> bytes, const std::string& file) {
     cache.skippedRestFrame = true;
   }
   cache.positions = readPositions(in, frames, cache.pointCount, true);
-  checkFinite(cache, file);
+  checkCoordinates(cache, file);
   return cache;
 }
 

@@ -2,6 +2,7 @@
 // stored once.
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -120,10 +121,18 @@ std::pair<double, double> timeRange(const SceneDescription& scene, const std::ve
   return {0.0, end};
 }
 
+// Keyframes of the bake: start, every 1/fps after it below end, and end (one when end <= start).
+// Counted in floating point first, so a long range at a high rate is refused by the memory
+// statement instead of being discovered while the times are filled in.
+double bakeKeyframeCount(double start, double end, double fps) {
+  if (!(end > start)) return 1.0;
+  return std::max(std::ceil((end - start) * fps - 1e-9), 1.0) + 1.0;
+}
+
 std::vector<double> bakeTimes(double start, double end, double fps) {
   std::vector<double> times{start};
   if (!(end > start)) return times;
-  const double frames = std::ceil((end - start) * fps - 1e-9);
+  const double frames = bakeKeyframeCount(start, end, fps) - 1.0;
   for (double i = 1; i < frames; ++i) times.push_back(start + i / fps);
   times.push_back(end);
   return times;
@@ -140,11 +149,17 @@ BakedScene bakeScene(const std::string& path, const LoadOptions& options) {
   const std::vector<Source> sources = loadSources(scene, options, st.sourceBytes, baked.distinctSources);
   const auto [start, end] = timeRange(scene, sources);
   const double fps = options.fps > 0.0 ? options.fps : scene.fps;
-  const std::vector<double> times = bakeTimes(start, end, fps);
+  const double keyframes = bakeKeyframeCount(start, end, fps);
+  if (!(keyframes < 4294967296.0)) {
+    char text[160];
+    std::snprintf(text, sizeof text, "the time range [%g, %g] at %g keyframes per second needs more than 2^32 keyframes",
+                  start, end, fps);
+    throw ImportError(path, text);
+  }
 
   // The statement, object by object: the first object that takes the scene past the available
   // memory is the one named in the error.
-  st.keyframes = times.size();
+  st.keyframes = uint64_t(keyframes);
   st.availableBytes = availableMemoryBytes();
   uint64_t scratch = 0;
   for (std::size_t o = 0; o < scene.objects.size(); ++o) {
@@ -174,6 +189,8 @@ BakedScene bakeScene(const std::string& path, const LoadOptions& options) {
                                     mib(st.availableBytes) + " of memory available");
     baked.objects.push_back(std::move(r));
   }
+
+  const std::vector<double> times = bakeTimes(start, end, fps);
 
   // The bake: rest positions and triangles of every instance, then the moving vertices keyframe
   // by keyframe. Each source keeps one scratch frame whose static entries stay at rest.

@@ -1,5 +1,6 @@
 #include "anim/tanim.hpp"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstring>
@@ -59,10 +60,13 @@ uint64_t payloadSize(const Header& h) {
   return size;
 }
 
+bool isControl(char c) { return static_cast<unsigned char>(c) < 0x20 || c == 0x7f; }
+
 }  // namespace
 
 std::vector<uint8_t> encodeTanim(const Animation& a) {
-  const std::string& name = a.name().size() > kMaxName ? a.name().substr(0, kMaxName) : a.name();
+  std::string name = a.name().substr(0, kMaxName);
+  std::replace_if(name.begin(), name.end(), isControl, '_');  // readers refuse control characters
   Header h{};
   h.magic = kMagic;
   h.version = kVersion;
@@ -134,6 +138,11 @@ Animation decodeTanim(std::span<const uint8_t> bytes, const std::string& file) {
 
   const auto nameBytes = in.bytes(padTo8(h.nameBytes), "name");
   std::string name(reinterpret_cast<const char*>(nameBytes.data()), h.nameBytes);
+  // Names end up in messages and reports, which are one line each.
+  if (const auto bad = std::find_if(name.begin(), name.end(), isControl); bad != name.end())
+    throw ImportError(file, "the animation name holds a control character (byte " +
+                                std::to_string(static_cast<unsigned char>(*bad)) + " at " +
+                                std::to_string(bad - name.begin()) + ")");
   std::vector<double> times;
   std::vector<uint32_t> indices;
   std::vector<float> rest, positions;
@@ -157,17 +166,14 @@ Animation decodeTanim(std::span<const uint8_t> bytes, const std::string& file) {
     if (!std::isfinite(k.time) || !std::isfinite(k.fovyDegrees))
       throw ImportError(file, "camera key has a non-finite value");
   }
-  try {
-    Animation a = hasStaticPart(h) ? Animation::withStaticVertices(std::move(indices), std::move(rest), std::move(moving),
-                                                                   std::move(positions), std::move(times), std::move(name))
-                                   : Animation(std::move(indices), h.vertexCount, std::move(positions),
-                                               std::move(times), std::move(name));
-    a.setCameraPath(std::move(camera));
-    return a;
-  } catch (const ImportError& e) {
-    // Re-label consistency errors (index range, times, NaN) with this file's name.
-    throw ImportError(file, std::string("invalid contents: ") + e.what());
-  }
+  // The consistency checks (index range, times, NaN) name the file, never the stored name: that is
+  // free text, and a name holding a line break would break the one-line error.
+  Animation a = hasStaticPart(h) ? Animation::withStaticVertices(std::move(indices), std::move(rest), std::move(moving),
+                                                                 std::move(positions), std::move(times), file)
+                                 : Animation(std::move(indices), h.vertexCount, std::move(positions), std::move(times), file);
+  a.setName(std::move(name));
+  a.setCameraPath(std::move(camera));
+  return a;
 }
 
 void saveTanim(const Animation& animation, const std::string& path) {

@@ -79,14 +79,23 @@ foreach(t hard.out.tree_not_tbvh hard.out.resample_not_tanim hard.fps_nan)
 endforeach()
 
 # ---- Determinism: the same seed and thread count give byte-identical trees, for every method ------
-foreach(variant "tsah;mh" "tsah;random" "tsah;batch" "sah0;mh" "sahstar;mh")
+# Variants: method;selection[;tag suffix;extra options...] (the parallel optimizer, a tree set).
+foreach(variant "tsah;mh" "tsah;random" "tsah;batch" "sah0;mh" "sahstar;mh" "tsah;mh;parallel;--optimizer;parallel"
+                "tsah;mh;set;--segments;2" "tsah;mh;budget_set;--segments;auto")
   list(GET variant 0 method)
   list(GET variant 1 selection)
   set(tag ${method}_${selection})
+  set(extra "")
+  list(LENGTH variant fields)
+  if(fields GREATER 2)
+    list(GET variant 2 suffix)
+    set(tag ${tag}_${suffix})
+    list(SUBLIST variant 3 -1 extra)
+  endif()
   foreach(run 1 2)
     add_test(NAME hard.det.${tag}.${run}
              COMMAND tsah optimize ${A} -o ${H}/det_${tag}_${run}.tbvh --method ${method} --selection ${selection}
-                     --seed 7 --threads 2 --frames 3 --eval-frames 3)
+                     --seed 7 --threads 2 --frames 3 --eval-frames 3 ${extra})
     set_tests_properties(hard.det.${tag}.${run} PROPERTIES FIXTURES_REQUIRED hard_anim FIXTURES_SETUP det_${tag})
   endforeach()
   # The build time field differs between runs; everything else (tree, options, checksum of the

@@ -9,7 +9,8 @@
 namespace anim {
 
 // MemAvailable of /proc/meminfo (memory obtainable without swapping), or the physical memory
-// where that is not readable.
+// where that is not readable; at most $TSAH_MEMORY_LIMIT_MB MiB when that is set (a container's
+// share, or the fuzzers' budget). requireMemory below is capped the same way.
 std::size_t availableMemoryBytes();
 
 // Throws anim::Error "WHO: WHAT would need N MiB, more than the M MiB available" when bytes exceed

@@ -1,8 +1,7 @@
-#include "fuzz_entries.hpp"
-
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <stdexcept>
@@ -15,6 +14,8 @@
 #include "anim/mesh_sequence.hpp"
 #include "anim/tanim.hpp"
 #include "camera_file.hpp"
+#include "entries.hpp"
+#include "point_cache_check.hpp"
 
 namespace tsah::fuzz {
 
@@ -23,17 +24,35 @@ void requireOneLine(const char* what) {
     throw std::logic_error(std::string("error message is not one line: ") + what);
 }
 
-namespace {
-
-// Runs `parse`; anim::Error is a clean refusal (checked to be one line), other exceptions escape.
-template <typename F>
-void refuseCleanly(F&& parse) {
-  try {
-    parse();
-  } catch (const anim::Error& e) {
-    requireOneLine(e.what());
-  }
+const std::filesystem::path& scratchFolder() {
+  // Never destroyed, so that the exit handler below can still name it.
+  static const std::filesystem::path* const dir = [] {
+    std::error_code ec;
+    const std::filesystem::path shm("/dev/shm");
+    const auto base = std::filesystem::is_directory(shm, ec) ? shm : std::filesystem::temp_directory_path();
+    auto* d = new std::filesystem::path(base / ("tsah-fuzz-" + std::to_string(::getpid())));
+    std::filesystem::create_directories(*d);
+    std::atexit([] {  // nothing is left behind by test runs and fuzzer runs that end normally
+      std::error_code ignored;
+      std::filesystem::remove_all(scratchFolder(), ignored);
+    });
+    return d;
+  }();
+  return *dir;
 }
+
+void writeBytes(const std::filesystem::path& path, std::span<const uint8_t> data) {
+  std::FILE* f = std::fopen(path.c_str(), "wb");
+  if (!f) throw std::runtime_error("cannot write " + path.string());
+  const bool ok = std::fwrite(data.data(), 1, data.size(), f) == data.size();
+  if (std::fclose(f) != 0 || !ok) throw std::runtime_error("cannot write " + path.string());
+}
+
+void writeText(const std::filesystem::path& path, std::string_view text) {
+  writeBytes(path, {reinterpret_cast<const uint8_t*>(text.data()), text.size()});
+}
+
+namespace {
 
 void requireValidMesh(const anim::MeshFrame& m) {
   if (m.indices.size() % 3 != 0) throw std::logic_error("mesh: index count not a multiple of 3");
@@ -71,26 +90,15 @@ void obj(std::span<const uint8_t> data) {
   refuseCleanly([&] { requireValidMesh(anim::decodeObj(data, "fuzz.obj")); });
 }
 
-void openMesh(std::span<const uint8_t> data) {
+void mesh(std::span<const uint8_t> data) {
   if (data.empty()) return;
   static const char* const kExtensions[] = {".ply", ".off", ".stl", ".om"};
-  // OpenMesh reads from a path, so the input goes through a per-process file (in /dev/shm when
-  // available: no disk traffic) and the project's wrapper, readMesh.
-  static const std::string base = [] {
-    const std::filesystem::path shm("/dev/shm");
-    std::error_code ec;
-    const auto dir = std::filesystem::is_directory(shm, ec) ? shm : std::filesystem::temp_directory_path();
-    return (dir / ("tsah-fuzz-mesh-" + std::to_string(::getpid()))).string();
-  }();
-  const std::string path = base + kExtensions[data[0] % 4];
-  {
-    std::FILE* f = std::fopen(path.c_str(), "wb");
-    if (!f) throw std::runtime_error("cannot write " + path);
-    std::fwrite(data.data() + 1, 1, data.size() - 1, f);
-    std::fclose(f);
-  }
-  refuseCleanly([&] { requireValidMesh(anim::readMesh(path)); });
-  std::remove(path.c_str());
+  // OpenMesh reads from a path, so the input goes through a scratch file and the project's
+  // wrapper, readMesh.
+  const std::filesystem::path path = scratchFolder() / (std::string("mesh") + kExtensions[data[0] % 4]);
+  writeBytes(path, data.subspan(1));
+  refuseCleanly([&] { requireValidMesh(anim::readMesh(path.string())); });
+  std::filesystem::remove(path);
 }
 
 void md2(std::span<const uint8_t> data) {
@@ -115,5 +123,16 @@ void camera(std::span<const uint8_t> data) {
     if (tsah::cli::decodeCameraFile(data, "fuzz.json").empty()) throw std::logic_error("camera: no keys");
   });
 }
+
+namespace {
+
+void pointCache(std::span<const uint8_t> data, anim::PointCacheFormat format) {
+  if (const auto finding = anim::fuzz::pointCacheFinding(data, format)) throw std::logic_error(*finding);
+}
+
+}  // namespace
+
+void pc2(std::span<const uint8_t> data) { pointCache(data, anim::PointCacheFormat::Pc2); }
+void mdd(std::span<const uint8_t> data) { pointCache(data, anim::PointCacheFormat::Mdd); }
 
 }  // namespace tsah::fuzz

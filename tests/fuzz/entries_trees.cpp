@@ -1,0 +1,82 @@
+// Fuzz entries for tree files: the version 1 .tbvh reader and the tree-set reader (versions 1 and 2).
+// Byte 0 of an input selects checksum repairs, so mutations get past the CRCs to the structural
+// checks behind them; the rest is the file.
+#include <cstring>
+#include <stdexcept>
+#include <vector>
+
+#include "anim/binary_io.hpp"
+#include "entries.hpp"
+#include "tsah/bvh_file.hpp"
+#include "tsah/tree_set.hpp"
+
+namespace tsah::fuzz {
+
+namespace {
+
+uint64_t readU64(const std::vector<uint8_t>& b, std::size_t at) {
+  uint64_t v = 0;
+  std::memcpy(&v, b.data() + at, 8);
+  return v;
+}
+
+uint32_t readU32(const std::vector<uint8_t>& b, std::size_t at) {
+  uint32_t v = 0;
+  std::memcpy(&v, b.data() + at, 4);
+  return v;
+}
+
+// Sets the last 4 bytes of bytes[begin, begin + size) to the CRC-32 of the bytes before them.
+void repairCrc(std::vector<uint8_t>& bytes, uint64_t begin, uint64_t size) {
+  if (size < 4 || begin > bytes.size() || size > bytes.size() - begin) return;
+  const uint32_t crc = anim::crc32(bytes.data() + begin, size - 4);
+  std::memcpy(bytes.data() + begin + size - 4, &crc, 4);
+}
+
+void requireValidSet(const TreeSet& set) {
+  if (set.size() == 0 || set.ranges.size() != set.size() || set.builds.size() != set.size())
+    throw std::logic_error("treeset: accepted a set whose trees, ranges and builds disagree");
+  if (const auto problem = validateTimeRanges(set.ranges)) throw std::logic_error("treeset: accepted ranges: " + *problem);
+  for (const FlatBvh& tree : set.trees)
+    if (const auto problem = validateFlatBvh(tree)) throw std::logic_error("treeset: accepted a broken tree: " + *problem);
+}
+
+}  // namespace
+
+void tbvh(std::span<const uint8_t> data) {
+  if (data.empty()) return;
+  std::vector<uint8_t> bytes(data.begin() + 1, data.end());
+  if (data[0] & 1) repairCrc(bytes, 0, bytes.size());
+  refuseCleanly([&] {
+    const BvhFile file = decodeBvhFile(bytes, "fuzz.tbvh");
+    if (const auto problem = validate(file.bvh)) throw std::logic_error("tbvh: accepted a broken tree: " + *problem);
+    // An accepted file is canonical: writing it again gives the same bytes.
+    if (encodeBvhFile(file.bvh, file.info) != bytes) throw std::logic_error("tbvh: accepted file does not re-encode");
+  });
+}
+
+void treeset(std::span<const uint8_t> data) {
+  if (data.empty()) return;
+  std::vector<uint8_t> bytes(data.begin() + 1, data.end());
+  // Bit 1: repair each tree's own CRC as the table places it; bit 0: then the set's CRC.
+  if ((data[0] & 2) && bytes.size() >= kTbvhSetHeaderBytes && readU32(bytes, 8) == kTbvhSetVersion) {
+    const uint64_t count = readU32(bytes, 20);
+    for (uint64_t s = 0; s < count && kTbvhSetHeaderBytes + (s + 1) * kTbvhSetEntryBytes <= bytes.size(); ++s) {
+      const std::size_t entry = kTbvhSetHeaderBytes + s * kTbvhSetEntryBytes;
+      repairCrc(bytes, readU64(bytes, entry + 16), readU64(bytes, entry + 24));
+    }
+  }
+  if (data[0] & 1) repairCrc(bytes, 0, bytes.size());
+  refuseCleanly([&] {
+    const TreeSet set = decodeTreeSetFile(bytes, "fuzz.tbvh");
+    requireValidSet(set);
+    // A version 2 file that was accepted is canonical: the encoder writes the same bytes.
+    if (set.version != kTbvhSetVersion) return;
+    std::vector<Bvh> trees;
+    for (const FlatBvh& tree : set.trees) trees.push_back(unflattenBvh(tree));
+    if (encodeTreeSetFile(trees, set.builds, set.ranges, set.info) != bytes)
+      throw std::logic_error("treeset: accepted file does not re-encode");
+  });
+}
+
+}  // namespace tsah::fuzz
