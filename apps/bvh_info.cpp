@@ -2,17 +2,24 @@
 
 #include <algorithm>
 #include <cstdio>
-#include <fstream>
+#include <filesystem>
+#include <unistd.h>
 
 #include "anim/binary_io.hpp"
 #include "anim/error.hpp"
+#include "animation_frames.hpp"
+#include "cli.hpp"
+#include "tsah/tree_quality.hpp"
 
 namespace tsah::cli {
 
 bool looksLikeBvhFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec) || std::filesystem::is_directory(path, ec)) return false;  // sequences
+  const anim::InputFile in(path);  // a FIFO or device is refused here instead of blocking
   char magic[8] = {};
-  return in.read(magic, sizeof magic) && std::string(magic, 7) == "TSAHBVH" && magic[7] == '\0';
+  return ::pread(in.fd(), magic, sizeof magic, 0) == ssize_t(sizeof magic) && std::string(magic, 7) == "TSAHBVH" &&
+         magic[7] == '\0';
 }
 
 nlohmann::json describeBvh(const tsah::FlatBvh& flat, const tsah::BvhBuildInfo& info) {
@@ -50,23 +57,13 @@ nlohmann::json describeBvh(const tsah::FlatBvh& flat, const tsah::BvhBuildInfo& 
   return j;
 }
 
-void describeBvhFile(const std::string& path, bool json) {
-  const std::vector<uint8_t> bytes = anim::readFile(path);
-  BvhBuildInfo info;
-  const FlatBvh flat = decodeFlatBvhFile(bytes, path, &info);
-  nlohmann::json j = describeBvh(flat, info);
-  j["file"] = path;
-  j["file_bytes"] = bytes.size();
-  if (json) {
-    std::printf("%s\n", j.dump().c_str());
-    return;
-  }
+namespace {
+
+void printTree(const nlohmann::json& j, const tsah::BvhBuildInfo& info, const FlatBvh& flat) {
   char hash[16];
   std::snprintf(hash, sizeof hash, "%08x", info.topologyHash);
   const auto& lo = j["bounds_frame0"][0];
   const auto& hi = j["bounds_frame0"][1];
-  std::printf("file          %s (%zu bytes, .tbvh v%u, Aila-Laine 64-byte nodes)\n", path.c_str(), bytes.size(),
-              kTbvhVersion);
   std::printf("method        %s (selection %s, k=%d, seed %llu)\n", info.method.c_str(), info.selection.c_str(), info.k,
               static_cast<unsigned long long>(info.seed));
   std::printf("cost          cT=%g cI=%g, max leaf size %u\n", double(info.ct), double(info.ci), info.maxLeafSize);
@@ -80,23 +77,134 @@ void describeBvhFile(const std::string& path, bool json) {
   std::printf("build time    %.3f s\n", info.buildSeconds);
 }
 
-void checkTreeMatchesAnimation(const tsah::BvhBuildInfo& info, const std::string& bvhPath, const anim::Animation& a,
-                               const std::string& animationPath) {
-  auto fail = [&](const std::string& what) {
-    throw anim::Error(bvhPath + " was not built for " + animationPath + ": " + what);
-  };
-  if (info.triangleCount != a.triangleCount())
-    fail("the tree has " + std::to_string(info.triangleCount) + " triangles, the animation " +
-         std::to_string(a.triangleCount()));
-  if (info.vertexCount != a.vertexCount())
-    fail("the tree was built for " + std::to_string(info.vertexCount) + " vertices, the animation has " +
-         std::to_string(a.vertexCount()));
-  const uint32_t hash = topologyHash(a.indices());
-  if (info.topologyHash != hash) {
-    char buf[64];
-    std::snprintf(buf, sizeof buf, "topology hash %08x, the animation's is %08x", info.topologyHash, hash);
-    fail(std::string(buf) + " (same counts, different triangles)");
+}  // namespace
+
+void describeBvhFile(const std::string& path, bool json) {
+  const std::vector<uint8_t> bytes = anim::readFile(path);
+  const TreeSet set = decodeTreeSetFile(bytes, path);
+  if (set.version == kTbvhVersion) {
+    nlohmann::json j = describeBvh(set.trees[0], set.builds[0]);
+    j["file"] = path;
+    j["file_bytes"] = bytes.size();
+    if (json) {
+      std::printf("%s\n", j.dump().c_str());
+      return;
+    }
+    std::printf("file          %s (%zu bytes, .tbvh v%u, Aila-Laine 64-byte nodes)\n", path.c_str(), bytes.size(),
+                kTbvhVersion);
+    printTree(j, set.builds[0], set.trees[0]);
+    return;
   }
+  nlohmann::json j;
+  j["format"] = "tbvh-set";
+  j["version"] = set.version;
+  j["file"] = path;
+  j["file_bytes"] = bytes.size();
+  j["trees"] = set.size();
+  j["segmentation"] = set.info.segmentation;
+  j["overlap"] = set.info.overlap;
+  if (set.info.budget > 0) j["budget"] = {{"value", set.info.budget}, {"relative", set.info.budgetRelative}};
+  j["time"] = {set.ranges.front().start, set.ranges.back().end};
+  j["parts"] = nlohmann::json::array();
+  for (uint32_t s = 0; s < set.size(); ++s) {
+    nlohmann::json p = describeBvh(set.trees[s], set.builds[s]);
+    p["index"] = s;
+    p["used"] = {s == 0 ? set.ranges[0].start : switchTime(set.ranges, s - 1),
+                 s + 1 == set.size() ? set.ranges[s].end : switchTime(set.ranges, s)};
+    j["parts"].push_back(p);
+  }
+  if (json) {
+    std::printf("%s\n", j.dump().c_str());
+    return;
+  }
+  std::printf("file          %s (%zu bytes, .tbvh v%u tree set, Aila-Laine 64-byte nodes)\n", path.c_str(),
+              bytes.size(), set.version);
+  std::printf("set           %u trees, %s segmentation, time %g .. %g, overlap %g", set.size(),
+              set.info.segmentation.c_str(), set.ranges.front().start, set.ranges.back().end, set.info.overlap);
+  if (set.info.budget > 0)
+    std::printf(", budget %g%s", set.info.budget, set.info.budgetRelative ? "x the per-frame optimized cost" : " (cost)");
+  std::printf("\n");
+  for (uint32_t s = 0; s < set.size(); ++s) {
+    const nlohmann::json& p = j["parts"][s];
+    std::printf("\ntree %u        used for t %g .. %g (the runtimes switch in the middle of an overlap)\n", s,
+                p["used"][0].get<double>(), p["used"][1].get<double>());
+    printTree(p, set.builds[s], set.trees[s]);
+  }
+}
+
+}  // namespace tsah::cli
+
+namespace tsah::cli {
+
+namespace {
+
+nlohmann::json treeQualityJson(const TreeShape& shape, const TreeQuality& quality, std::span<const double> times) {
+  nlohmann::json j;
+  j["shape"] = {{"interior_nodes", shape.innerCount}, {"leaves", shape.leafCount},
+                {"depth", shape.depth},               {"smallest_leaf", shape.smallestLeaf},
+                {"largest_leaf", shape.largestLeaf},  {"mean_leaf_size", shape.meanLeafSize},
+                {"leaves_of_size", shape.leavesOfSize}};
+  double sum = 0.0, largest = 0.0;
+  nlohmann::json rows = nlohmann::json::array();
+  for (std::size_t f = 0; f < quality.frames.size(); ++f) {
+    const FrameQuality& q = quality.frames[f];
+    rows.push_back({{"time", times[f]},
+                    {"cost", q.cost.total()},
+                    {"inner_cost", q.cost.inner()},
+                    {"leaf_cost", q.cost.leaves()},
+                    {"mean_leaf_depth", q.meanLeafDepth},
+                    {"mean_leaf_size", q.meanLeafSize},
+                    {"root_child_growth", {q.rootChildGrowth[0], q.rootChildGrowth[1]}}});
+    sum += q.cost.total();
+    largest = std::max(largest, q.cost.total());
+  }
+  j["frames"] = rows;
+  j["average_cost"] = quality.frames.empty() ? 0.0 : sum / double(quality.frames.size());
+  j["max_cost"] = largest;
+  return j;
+}
+
+}  // namespace
+
+void describeTreeOverAnimation(const std::string& bvhPath, const std::string& animationPath, uint32_t frames,
+                               bool json) {
+  BvhBuildInfo info;
+  const FlatBvh flat = decodeFlatBvhFile(anim::readFile(bvhPath), bvhPath, &info);
+  const anim::Animation a = loadInput(animationPath);
+  checkTreeMatchesAnimation(info, bvhPath, a, animationPath);
+  const Bvh bvh = unflattenBvh(flat);
+  std::vector<double> times = frames ? a.uniformTimes(frames) : std::vector<double>(a.times().begin(), a.times().end());
+  const TreeShape shape = treeShape(bvh);
+  const TreeQuality quality = evaluateTreeQuality(bvh, animationFrames(a, times), {info.ct, info.ci});
+  nlohmann::json j = treeQualityJson(shape, quality, times);
+  j["tree"] = bvhPath;
+  j["animation"] = animationPath;
+  j["method"] = info.method;
+  j["ct"] = info.ct;
+  j["ci"] = info.ci;
+  if (json) {
+    std::printf("%s\n", j.dump().c_str());
+    return;
+  }
+  std::printf("tree        %s (%s, k=%d, %u representative frames, cT=%g cI=%g)\n", bvhPath.c_str(), info.method.c_str(),
+              info.k, info.representativeFrames, double(info.ct), double(info.ci));
+  std::printf("animation   %s (%zu frames evaluated, time %g .. %g)\n", animationPath.c_str(), times.size(),
+              times.front(), times.back());
+  std::printf("shape       %u interior, %u leaves, depth %u, leaves of %u..%u triangles (mean %.2f)\n", shape.innerCount,
+              shape.leafCount, shape.depth, shape.smallestLeaf, shape.largestLeaf, shape.meanLeafSize);
+  std::string sizes;
+  for (std::size_t s = 1; s < shape.leavesOfSize.size(); ++s)
+    if (shape.leavesOfSize[s]) sizes += "  " + std::to_string(s) + ":" + std::to_string(shape.leavesOfSize[s]);
+  std::printf("leaf sizes %s\n\n", sizes.c_str());
+  std::printf("%6s %10s %9s %9s %9s %10s %9s %9s %9s\n", "frame", "time", "cost", "inner", "leaf", "leaf depth",
+              "leaf size", "child 0", "child 1");
+  for (std::size_t f = 0; f < quality.frames.size(); ++f) {
+    const FrameQuality& q = quality.frames[f];
+    std::printf("%6zu %10.4g %9.3f %9.3f %9.3f %10.2f %9.2f %9.3f %9.3f\n", f, times[f], q.cost.total(), q.cost.inner(),
+                q.cost.leaves(), q.meanLeafDepth, q.meanLeafSize, q.rootChildGrowth[0], q.rootChildGrowth[1]);
+  }
+  std::printf("\naverage cost %.3f, maximum %.3f (Eq. 1; child columns: area of the root's children over frame 0's)\n",
+              j["average_cost"].get<double>(), j["max_cost"].get<double>());
 }
 
 }  // namespace tsah::cli

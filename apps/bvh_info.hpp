@@ -6,6 +6,8 @@
 
 #include "anim/animation.hpp"
 #include "tsah/bvh_file.hpp"
+#include "tsah/pipeline.hpp"
+#include "tsah/tree_set.hpp"
 
 namespace tsah::cli {
 
@@ -16,12 +18,17 @@ bool looksLikeBvhFile(const std::string& path);
 nlohmann::json describeBvh(const tsah::FlatBvh& flat, const tsah::BvhBuildInfo& info);
 
 // Loads and validates `path` (throws anim::ImportError naming the file) and prints its header on
-// stdout: aligned text, or one JSON object when json is true.
+// stdout: aligned text, or one JSON object when json is true. A tree set (version 2) prints the
+// set's header and then each tree with the time range it is used for.
 void describeBvhFile(const std::string& path, bool json);
 
-// Throws anim::Error with one clear line when the animation is not the one the tree was built for
-// (triangle count, vertex count or topology hash differ).
-void checkTreeMatchesAnimation(const tsah::BvhBuildInfo& info, const std::string& bvhPath, const anim::Animation& a,
-                               const std::string& animationPath);
+// `tsah info TREE ANIMATION`: the tree's shape and, for each of `frames` uniformly spaced frames of
+// the animation (0: every keyframe), its cost with the interior/leaf split, the area-weighted mean
+// depth and size of the leaves and the growth of the root's children (tsah/tree_quality.hpp), as an
+// aligned table or one JSON object.
+void describeTreeOverAnimation(const std::string& bvhPath, const std::string& animationPath, uint32_t frames, bool json);
+
+// The library's check that a tree was built for an animation (tsah/pipeline.hpp).
+using tsah::checkTreeMatchesAnimation;
 
 }  // namespace tsah::cli

@@ -1,6 +1,13 @@
 #include "cli.hpp"
 
+#include "bench/data_scan.hpp"
+
 #include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <regex>
 #include <cstdio>
 #include <unistd.h>
 #include <utility>
@@ -20,11 +27,76 @@ bool registerCommand(int order, CommandSetup setup) {
   return true;
 }
 
+namespace {
+
+// Parses a whole option value as a double (what CLI11 stores in a floating-point option).
+bool parseDouble(const std::string& text, double& value) {
+  char* end = nullptr;
+  errno = 0;
+  value = std::strtod(text.c_str(), &end);
+  return !text.empty() && end == text.c_str() + text.size();
+}
+
+// The checks every numeric option gets: CLI11's PositiveNumber and NonNegativeNumber let NaN through
+// (every comparison with NaN is false) and print DBL_MAX with 309 digits.
+std::string finiteCheck(std::string& text) {
+  double v = 0;
+  if (parseDouble(text, v) && !std::isfinite(v)) return "must be a finite number, got " + text;
+  return {};
+}
+std::function<std::string(std::string&)> lowerBound(bool strict) {
+  return [strict](std::string& text) -> std::string {
+    double v = 0;
+    const char* what = strict ? "must be a positive finite number, got " : "must be a non-negative finite number, got ";
+    if (!parseDouble(text, v) || !std::isfinite(v) || (strict ? !(v > 0) : !(v >= 0))) return what + text;
+    return {};
+  };
+}
+
+}  // namespace
+
+void hardenNumericOptions(CLI::App& app) {
+  for (CLI::Option* option : app.get_options()) {
+    // CLI11 2.1 keeps "POSITIVE"/"NONNEGATIVE" as the validators' descriptions, not their names.
+    for (int i = 0;; ++i) {
+      CLI::Validator* v = nullptr;
+      try {
+        v = option->get_validator(i);
+      } catch (const CLI::OptionNotFound&) {
+        break;
+      }
+      const std::string kind = v->get_description();
+      if (kind == "POSITIVE" || kind == "NONNEGATIVE") v->operation(lowerBound(kind == "POSITIVE"));
+    }
+    if (option->get_type_name().rfind("FLOAT", 0) == 0) option->check(CLI::Validator(finiteCheck, "", "FINITE"));
+  }
+  for (CLI::App* sub : app.get_subcommands({})) hardenNumericOptions(*sub);
+}
+
+std::string compactNumbers(const std::string& text) {
+  // CLI11 prints range limits with std::to_string ("0.000000", or DBL_MAX as 309 digits).
+  static const std::regex fixed("-?[0-9]+\\.[0-9]{6}");
+  std::string out;
+  auto begin = std::sregex_iterator(text.begin(), text.end(), fixed);
+  std::size_t last = 0;
+  for (auto it = begin; it != std::sregex_iterator(); ++it) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%g", std::strtod(it->str().c_str(), nullptr));
+    out.append(text, last, std::size_t(it->position()) - last).append(buf);
+    last = std::size_t(it->position() + it->length());
+  }
+  out.append(text, last);
+  std::replace(out.begin(), out.end(), '\n', ' ');
+  while (!out.empty() && out.back() == ' ') out.pop_back();
+  return out;
+}
+
 void setupAllCommands(CLI::App& app) {
   auto& commands = registry();
   std::stable_sort(commands.begin(), commands.end(),
                    [](const auto& a, const auto& b) { return a.first < b.first; });
   for (auto& [order, setup] : commands) setup(app);
+  hardenNumericOptions(app);
 }
 
 bool progressEnabled() {
@@ -57,6 +129,19 @@ void Progress::message(const std::string& text) {
   std::fflush(stderr);
 }
 
+std::function<std::string(const std::string&)> dataPathResolver(const std::string& dataFolder,
+                                                                const std::string& cache) {
+  const std::filesystem::path data = tsah::bench::defaultDataFolder(dataFolder, TSAH_SOURCE_DIR);
+  std::filesystem::path unpacked = cache;
+  if (unpacked.empty()) {
+    if (const char* c = std::getenv("TSAH_CACHE_DIR"); c && *c) unpacked = c;
+    else if (const char* x = std::getenv("XDG_CACHE_HOME"); x && *x) unpacked = std::filesystem::path(x) / "tsah";
+    else if (const char* h = std::getenv("HOME"); h && *h) unpacked = std::filesystem::path(h) / ".cache" / "tsah";
+    else unpacked = std::filesystem::temp_directory_path() / "tsah-cache";
+  }
+  return [data, unpacked](const std::string& rel) { return tsah::bench::resolveDataPath(data, unpacked, rel); };
+}
+
 anim::LoadOptions& commandLineLoadOptions() {
   static anim::LoadOptions options;
   return options;
@@ -81,6 +166,7 @@ anim::Animation loadInput(const std::string& input, anim::LoadOptions options) {
   // so stdout stays a clean result (--json).
   if (!options.warning)
     options.warning = [](const std::string& text) { std::fprintf(stderr, "tsah: warning: %s\n", text.c_str()); };
+  if (!options.resolveDataPath) options.resolveDataPath = dataPathResolver();
   return anim::load(input, options);
 }
 

@@ -12,7 +12,12 @@
 
 namespace tsah::cli {
 
-// A user-facing error: main prints "tsah: <message>" and exits with status 1.
+// Exit statuses (README): 0 success, 1 bad input or a failure while working, 2 a usage error (the
+// command line itself is wrong: unknown option, value out of range, conflicting choices).
+inline constexpr int kExitFailure = 1;
+inline constexpr int kExitUsage = 2;
+
+// A usage error: main prints "tsah: <message>" and exits with kExitUsage.
 class UsageError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
@@ -21,7 +26,13 @@ class UsageError : public std::runtime_error {
 using CommandSetup = std::function<void(CLI::App& app)>;
 // Registers a subcommand; `order` sorts the help listing. Returns true (for static initializers).
 bool registerCommand(int order, CommandSetup setup);
+// Registers every subcommand, then hardens its numeric options (hardenNumericOptions).
 void setupAllCommands(CLI::App& app);
+// Every floating-point option of app and its subcommands refuses NaN and infinities, and CLI11's
+// PositiveNumber / NonNegativeNumber checks are replaced by ones that refuse NaN and print the value.
+void hardenNumericOptions(CLI::App& app);
+// A CLI11 message as one line with compact numbers ("0 to 1", not "0.000000 to 1.000000").
+std::string compactNumbers(const std::string& text);
 
 // True when stderr is a terminal: progress output is shown only then.
 bool progressEnabled();
@@ -44,6 +55,11 @@ class Progress {
 // Import settings given on the command line (--fps, --clip: options of every subcommand that reads
 // an animation); loadInput starts from them.
 anim::LoadOptions& commandLineLoadOptions();
+// Resolves scenes' "data:" paths against the data folder (given, else $TSAH_DATA_DIR, else
+// ../shared/data), unpacking archives into `cache` (given, else $TSAH_CACHE_DIR, else
+// $XDG_CACHE_HOME/tsah or ~/.cache/tsah). loadInput uses it unless its options have one.
+std::function<std::string(const std::string&)> dataPathResolver(const std::string& dataFolder = {},
+                                                                const std::string& cache = {});
 // Adds --fps and --clip to the top-level app; with fallthrough they may follow any subcommand.
 void addLoadOptions(CLI::App& app);
 

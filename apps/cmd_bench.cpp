@@ -16,9 +16,11 @@
 #include "anim/error.hpp"
 #include "bench/bench.hpp"
 #include "bench/data_scan.hpp"
+#include "bench/embree_peer.hpp"
 #include "bench/paper.hpp"
 #include "bench/report.hpp"
 #include "bench/runtime_bench.hpp"
+#include "anim/scene.hpp"
 #include "cli.hpp"
 
 #ifndef TSAH_SOURCE_DIR
@@ -33,6 +35,7 @@ using tsah::cli::UsageError;
 
 struct Options {
   std::vector<std::string> scenes;
+  std::string sceneDir;  // composed scenes (*.json scene files, docs/scenes.md) benchmarked with the data
   std::string data, out = "bench", cache;
   std::vector<std::string> notes;
   tsah::bench::BenchOptions bench;
@@ -104,7 +107,7 @@ void reportOnly(const Options& opt) {
   ProgressLog log;
   const fs::path out = opt.out;
   const std::string file = (out / "results.json").string();
-  const std::vector<uint8_t> bytes = anim::readFile(file, std::size_t(1) << 30);
+  const std::vector<uint8_t> bytes = anim::readFileForUpdate(file, std::size_t(1) << 30);  // rewritten below
   json results;
   try {
     results = json::parse(bytes.begin(), bytes.end());
@@ -125,6 +128,9 @@ void run(Options opt, CLI::App* sub) {
   if (opt.reportOnly) return reportOnly(opt);
   BenchOptions& b = opt.bench;
   b.embree = !opt.noEmbree;
+  if (b.embreeOnly && (opt.noEmbree || b.device != "cpu"))
+    throw UsageError("--embree-only runs the CPU comparison with Embree: not with --no-embree or --device cuda");
+  if (b.embreeOnly && !embreeAvailable()) throw UsageError("--embree-only: " + embreeStatus());
   b.convergence = !opt.noConvergence;
   const anim::LoadOptions& load = tsah::cli::commandLineLoadOptions();
   b.fps = load.fps;
@@ -157,6 +163,7 @@ void run(Options opt, CLI::App* sub) {
     scan = scanDataFolder(dataFolder, {cache, [&](const std::string& m) { log(m, false); }});
     scanned = true;
   };
+  b.resolveDataPath = tsah::cli::dataPathResolver(opt.data, cache.string());
   for (const std::string& s : opt.scenes) {
     std::error_code ec;
     if (fs::exists(s, ec)) {
@@ -176,7 +183,20 @@ void run(Options opt, CLI::App* sub) {
   if (opt.scenes.empty()) {
     scanData();
     scenes = scan.scenes;
-    if (scenes.empty()) throw UsageError(dataFolder.string() + ": no animations found");
+    if (scenes.empty() && opt.sceneDir.empty()) throw UsageError(dataFolder.string() + ": no animations found");
+  }
+  if (!opt.sceneDir.empty()) {
+    std::vector<std::string> files;
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(opt.sceneDir, ec))
+      if (e.path().extension() == ".json" && anim::isSceneFile(e.path().string())) files.push_back(e.path().string());
+    if (ec) throw UsageError(opt.sceneDir + ": cannot read the scene folder (" + ec.message() + ")");
+    std::sort(files.begin(), files.end());
+    for (const std::string& f : files) {
+      SceneSource s = explicitScene(f);
+      s.kind = "scene";
+      scenes.push_back(s);
+    }
   }
   if (opt.list) {
     for (const SceneSource& s : scenes) std::printf("%-16s %-9s %s\n", s.name.c_str(), s.kind.c_str(), s.input.c_str());
@@ -257,6 +277,9 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
       ->check(CLI::IsMember({"cpu", "cuda"}))
       ->capture_default_str();
   sub->add_option("--out", opt->out, "Output folder: results.json, results.md, plots/, images/")->capture_default_str();
+  sub->add_option("--scene-dir", opt->sceneDir,
+                  "Also bench every scene file (*.json, docs/scenes.md) of this folder, e.g. samples/scenes/bench; "
+                  "their data: paths resolve against --data");
   sub->add_option("--cache", opt->cache, "Where archives of the data folder are unpacked (default: OUT/cache)");
   sub->add_flag("--quick", b.quick, "Smoke run: 10 evaluation frames, 3 traced frames of 192x144 (explicit options win)");
   sub->add_option("--seed", b.seed, "Seed of the optimizations and of the per-pixel random numbers")->capture_default_str();
@@ -277,8 +300,14 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
   sub->add_option("--max-leaf", b.maxLeaf, "Largest leaf of every tree")->check(CLI::Range(1u, 256u))->capture_default_str();
   sub->add_option("--ct", b.ct, "Cost of traversing a node")->check(CLI::PositiveNumber)->capture_default_str();
   sub->add_option("--ci", b.ci, "Cost of intersecting a triangle")->check(CLI::PositiveNumber)->capture_default_str();
-  sub->add_option("--segments", b.segments, "K of the segmented T-SAH (K trees for K equal-time parts; 1: skip)")
+  sub->add_option("--segments", b.segments,
+                  "K of the segmented T-SAH: K equal-time parts and the count mode with K trees (1: skip)")
       ->check(CLI::Range(1u, 64u))
+      ->capture_default_str();
+  sub->add_option("--budget", b.budget,
+                  "Budget mode: the fewest trees keeping every evaluation frame within this factor of SAH-rebuild "
+                  "(0: skip)")
+      ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
   sub->add_option("--threads", b.threads, "CPU worker threads (0: all cores)")->capture_default_str();
   sub->add_option("--optimizer", b.optimizer,
@@ -286,6 +315,14 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
       ->check(CLI::IsMember({"sequential", "parallel"}))
       ->capture_default_str();
   sub->add_flag("--no-embree", opt->noEmbree, "Skip the Embree peer");
+  sub->add_flag("--embree-only", b.embreeOnly,
+                "Only the T-SAH tree and the toolkit (bvh2/bvh4/bvh8) vs Embree comparison: no Tables 1 and 2, "
+                "no convergence runs, no segments");
+  sub->add_option("--layout", b.layout,
+                  "CPU tree layout of Table 2 and the default of the Embree comparison: bvh2, bvh4, bvh8, or auto "
+                  "(the widest the processor's SIMD kernels support)")
+      ->check(CLI::IsMember({"auto", "bvh2", "bvh4", "bvh8"}))
+      ->capture_default_str();
   sub->add_flag("--no-convergence", opt->noConvergence, "Skip the random and batch-sort optimizations of the convergence plot");
   sub->add_option("--note", opt->notes,
                   "A note for results.md (repeatable), e.g. what else ran on the machine; with --report-only it is "

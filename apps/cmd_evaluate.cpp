@@ -1,6 +1,6 @@
 // tsah evaluate INPUT [--methods sah0,sahstar,tsah0,tsah2,tsah4,rebuild] [--frames 5]
-//   [--eval-frames 50] [--max-leaf 8] [--ct 3] [--ci 2] [--optimizer parallel|sequential]
-//   [--selection mh] [--seed S] [--time-limit SEC] [--threads T] [--json]
+//   [--eval-frames 50] [--max-leaf 8] [--ct 3] [--ci 2] [--selection mh] [--seed S]
+//   [--time-limit SEC] [--threads T] [--json]
 // The paper's Table 1 for one input: build time, average and maximum cost of every method over the
 // evaluation frames, each tree refitted to every frame (SAH-rebuild: one tree per frame).
 #include <cstdio>
@@ -8,19 +8,21 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "animation_frames.hpp"
 #include "cli.hpp"
 #include "optimizer_options.hpp"
 #include "tsah/baselines.hpp"
+#include "tsah/pipeline.hpp"
 
 namespace {
 
 struct Options {
+  tsah::TreeOptions tree;  // method, k, frames, selection, seed, ct, ci, maxLeaf, limits, threads
   std::string input;
   std::string methods = "sah0,sahstar,tsah0,tsah2,tsah4,rebuild";
+  uint32_t evalFrames = 50;
   bool json = false;
-  tsah::cli::OptimizerOptions common;  // shared with `tsah optimize`
 };
+
 
 std::vector<tsah::MethodSpec> parseMethods(const std::string& list, std::vector<std::string>& names) {
   std::vector<tsah::MethodSpec> methods;
@@ -45,25 +47,22 @@ void run(const Options& opt) {
   const std::vector<tsah::MethodSpec> methods = parseMethods(opt.methods, names);
   const anim::Animation a = tsah::cli::loadInput(opt.input);
   if (a.triangleCount() == 0) throw tsah::cli::UsageError(opt.input + ": no triangles to build a tree over");
-  const bool animated = a.keyframeCount() > 1;
-  const uint32_t frames = animated ? opt.common.frames : 1;
-  const uint32_t evalFrames = animated ? opt.common.evalFrames : 1;
-  const tsah::PrimitiveBoxes repBoxes = tsah::cli::representativeBoxes(a, frames);
+  const uint32_t frames = tsah::framesFor(a, opt.tree.frames);
+  const uint32_t evalFrames = tsah::framesFor(a, opt.evalFrames);
 
   tsah::cli::Progress progress("evaluate");
-  const tsah::BaselineConfig config =
-      opt.common.baselineConfig([&](const std::string& message) { progress.message(message); });
-  const std::vector<tsah::MethodResult> results =
-      tsah::compareMethods(methods, repBoxes, tsah::cli::animationFrames(a, a.uniformTimes(evalFrames)), config);
+  tsah::TreeOptions treeOpt = opt.tree;
+  treeOpt.progress = [&](const std::string& message) { progress.message(message); };
+  const std::vector<tsah::MethodResult> results = tsah::compareOnAnimation(a, methods, treeOpt, opt.evalFrames);
 
   nlohmann::json j;
   j["input"] = opt.input;
   j["triangles"] = a.triangleCount();
   j["frames"] = frames;
   j["eval_frames"] = evalFrames;
-  j["max_leaf"] = opt.common.maxLeaf;
-  j["ct"] = opt.common.ct;
-  j["ci"] = opt.common.ci;
+  j["max_leaf"] = opt.tree.maxLeaf;
+  j["ct"] = opt.tree.ct;
+  j["ci"] = opt.tree.ci;
   j["methods"] = nlohmann::json::array();
   for (std::size_t m = 0; m < results.size(); ++m)
     j["methods"].push_back({{"name", names[m]},
@@ -77,7 +76,7 @@ void run(const Options& opt) {
     return;
   }
   std::printf("%s: %u triangles, %u representative frames, %u evaluation frames, cT=%g cI=%g, max leaf %u\n",
-              opt.input.c_str(), a.triangleCount(), frames, evalFrames, double(opt.common.ct), double(opt.common.ci), opt.common.maxLeaf);
+              opt.input.c_str(), a.triangleCount(), frames, evalFrames, double(opt.tree.ct), double(opt.tree.ci), opt.tree.maxLeaf);
   std::printf("%-10s %10s %10s %10s\n", "method", "build [s]", "cost", "max cost");
   for (std::size_t m = 0; m < results.size(); ++m)
     std::printf("%-10s %10.2f %10.2f %10.2f\n", names[m].c_str(), results[m].buildSeconds, results[m].average,
@@ -92,7 +91,7 @@ TSAH_REGISTER_COMMAND(45, [](CLI::App& app) {
   sub->add_option("INPUT", opt->input, "Animation or static mesh (any input `tsah info` reads)")->required();
   sub->add_option("--methods", opt->methods, "Comma-separated: sah0, sahstar, rebuild, tsah<k> (tsah0, tsah2, ...)")
       ->capture_default_str();
-  opt->common.addTo(*sub);
+  tsah::cli::addTreeOptions(*sub, opt->tree, opt->evalFrames);
   sub->add_flag("--json", opt->json, "Print one JSON object");
   sub->callback([opt] { run(*opt); });
 });

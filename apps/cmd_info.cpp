@@ -3,6 +3,7 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
+#include "anim/scene.hpp"
 #include "bvh_info.hpp"
 #include "cli.hpp"
 
@@ -21,6 +22,7 @@ nlohmann::json describe(const anim::Animation& a, double loadSeconds) {
   j["bounds"] = {{b.min[0], b.min[1], b.min[2]}, {b.max[0], b.max[1], b.max[2]}};
   j["first_frame_bounds"] = {{b0.min[0], b0.min[1], b0.min[2]}, {b0.max[0], b0.max[1], b0.max[2]}};
   j["camera_keys"] = a.cameraPath().size();
+  j["moving_vertices"] = a.movingVertexCount();
   j["memory_bytes"] = a.memoryBytes();
   j["load_s"] = loadSeconds;
   return j;
@@ -35,7 +37,7 @@ void printText(const nlohmann::json& j) {
   std::printf("name        %s\n", j["name"].get<std::string>().c_str());
   std::printf("keyframes   %u\n", j["frames"].get<unsigned>());
   std::printf("triangles   %u (%u degenerate)\n", j["triangles"].get<unsigned>(), j["degenerate_triangles"].get<unsigned>());
-  std::printf("vertices    %u\n", j["vertices"].get<unsigned>());
+  std::printf("vertices    %u (%u moving)\n", j["vertices"].get<unsigned>(), j["moving_vertices"].get<unsigned>());
   std::printf("time        %g .. %g\n", j["time"][0].get<double>(), j["time"][1].get<double>());
   std::printf("bounds      %s .. %s\n", triple(j["bounds"][0]).c_str(), triple(j["bounds"][1]).c_str());
   std::printf("frame 0     %s .. %s\n", triple(j["first_frame_bounds"][0]).c_str(), triple(j["first_frame_bounds"][1]).c_str());
@@ -43,6 +45,43 @@ void printText(const nlohmann::json& j) {
     std::printf("camera      %zu keys\n", j["camera_keys"].get<std::size_t>());
   std::printf("memory      %.1f MiB\n", double(j["memory_bytes"].get<std::size_t>()) / (1024.0 * 1024.0));
   std::printf("loaded in   %.3f s\n", j["load_s"].get<double>());
+  if (!j.contains("scene")) return;
+  const auto& s = j["scene"];
+  std::printf("scene       %zu objects, %u distinct sources, %u keyframes at %g fps\n", s["objects"].size(),
+              s["distinct_sources"].get<unsigned>(), j["frames"].get<unsigned>(), s["fps"].get<double>());
+  std::printf("  %-16s %9s %8s %12s %12s %6s  %s\n", "object", "instances", "subdiv", "triangles", "moving verts",
+              "keys", "file");
+  for (const auto& o : s["objects"])
+    std::printf("  %-16s %9u %8u %12llu %12llu %6u  %s\n", o["name"].get<std::string>().c_str(),
+                o["instances"].get<unsigned>(), o["subdivide"].get<unsigned>(),
+                (unsigned long long)o["triangles"].get<uint64_t>(), (unsigned long long)o["moving_vertices"].get<uint64_t>(),
+                o["source_keyframes"].get<unsigned>(), o["file"].get<std::string>().c_str());
+  const auto& m = s["statement"];
+  std::printf("statement   %.1f MiB baked animation + %.1f MiB sources; peak %.1f MiB of %.1f MiB available\n",
+              double(m["animation_bytes"].get<uint64_t>()) / 1048576.0, double(m["source_bytes"].get<uint64_t>()) / 1048576.0,
+              double(m["peak_bytes"].get<uint64_t>()) / 1048576.0, double(m["available_bytes"].get<uint64_t>()) / 1048576.0);
+}
+
+// The objects of a scene file, their instances and triangles, and the memory statement.
+nlohmann::json describeScene(const anim::BakedScene& baked, double fps) {
+  nlohmann::json s;
+  s["fps"] = fps;
+  s["distinct_sources"] = baked.distinctSources;
+  s["objects"] = nlohmann::json::array();
+  for (const anim::SceneObjectReport& o : baked.objects)
+    s["objects"].push_back({{"name", o.name},
+                            {"file", o.file},
+                            {"instances", o.instances},
+                            {"subdivide", o.subdivisionLevels},
+                            {"source_triangles", o.sourceTriangles},
+                            {"source_keyframes", o.sourceKeyframes},
+                            {"triangles", o.triangles},
+                            {"vertices", o.vertices},
+                            {"moving_vertices", o.movingVertices}});
+  const anim::SceneStatement& m = baked.statement;
+  s["statement"] = {{"animation_bytes", m.animationBytes}, {"source_bytes", m.sourceBytes},
+                    {"peak_bytes", m.peakBytes}, {"available_bytes", m.availableBytes}};
+  return s;
 }
 
 }  // namespace
@@ -50,23 +89,39 @@ void printText(const nlohmann::json& j) {
 TSAH_REGISTER_COMMAND(10, [](CLI::App& app) {
   auto* sub = app.add_subcommand("info", "Print what an input holds (animation or .tbvh file)");
   struct Options {
-    std::string input;
+    std::string input, animation;
+    uint32_t frames = 0;
     bool json = false;
   };
   auto opt = std::make_shared<Options>();
   sub->add_option("INPUT", opt->input,
                   "Animation (mesh file, directory, 'pattern_%04d.obj', quoted glob, .json manifest, "
-                  ".tanim) or a .tbvh tree")
+                  ".tanim, scene .json) or a .tbvh tree")
       ->required();
+  sub->add_option("ANIMATION", opt->animation,
+                  "With a .tbvh INPUT: the animation it was built for; prints per-frame quality figures");
+  sub->add_option("--frames", opt->frames, "With ANIMATION: this many uniformly spaced frames (default: every keyframe)")
+      ->check(CLI::Range(1u, 1000000u));
   sub->add_flag("--json", opt->json, "Print one JSON object");
   sub->callback([opt] {
+    if (!opt->animation.empty())  // tsah info TREE ANIMATION: the tree over the animation's frames
+      return tsah::cli::describeTreeOverAnimation(opt->input, opt->animation, opt->frames, opt->json);
+    if (opt->frames) throw tsah::cli::UsageError("--frames needs a tree and its animation: tsah info TREE ANIMATION");
     if (tsah::cli::looksLikeBvhFile(opt->input)) {
       tsah::cli::describeBvhFile(opt->input, opt->json);
       return;
     }
     tsah::cli::Progress timer("info");
-    const anim::Animation a = tsah::cli::loadInput(opt->input);
-    const nlohmann::json j = describe(a, timer.elapsedSeconds());
+    nlohmann::json j;
+    if (anim::isSceneFile(opt->input)) {
+      anim::LoadOptions load = tsah::cli::commandLineLoadOptions();
+      load.resolveDataPath = tsah::cli::dataPathResolver();
+      const anim::BakedScene baked = anim::bakeScene(opt->input, load);
+      j = describe(baked.animation, timer.elapsedSeconds());
+      j["scene"] = describeScene(baked, load.fps > 0.0 ? load.fps : baked.description.fps);
+    } else {
+      j = describe(tsah::cli::loadInput(opt->input), timer.elapsedSeconds());
+    }
     if (opt->json)
       std::printf("%s\n", j.dump().c_str());
     else

@@ -1,58 +1,41 @@
 // tsah optimize INPUT -o OUT.tbvh [--method tsah|sah0|sahstar] [--k K] [--frames N]
-//   [--eval-frames M] [--optimizer parallel|sequential] [--selection mh|random|batch] [--seed S]
-//   [--ct 3] [--ci 2] [--max-leaf 8] [--time-limit SEC] [--threads T] [--segments K] [--json]
+//   [--eval-frames M] [--selection mh|random|batch] [--seed S] [--ct 3] [--ci 2] [--max-leaf 8]
+//   [--time-limit SEC] [--threads T] [--segments K|auto] [--budget X | --budget-cost C]
+//   [--overlap S] [--reference-frames N] [--max-trees N] [--json]
 // Builds one tree for the whole animation, writes it as .tbvh and reports its cost over the
-// evaluation frames. With --segments K > 1: K trees, one per equal-time part of the animation
-// (the paper's BART Museum*), written as OUT_seg0.tbvh ... OUT_seg<K-1>.tbvh; each file's time
-// range is its part, and a frame is meant to be traced with the tree whose range holds it.
+// evaluation frames. With --segments K > 1 (count mode) or --segments auto (budget mode), a tree
+// set instead (docs/segmentation.md): K trees, or the fewest trees that keep every evaluation frame
+// within the budget, with split points chosen by tsah::segmentTimeline, written as one .tbvh set
+// file (version 2) that `tsah trace`, `export`, `info` and `bench` switch through by themselves.
 #include <cstdio>
 #include <memory>
 #include <nlohmann/json.hpp>
 
-#include "bench/segments.hpp"
 #include "animation_frames.hpp"
 #include "cli.hpp"
 #include "optimizer_options.hpp"
 #include "tsah/baselines.hpp"
 #include "tsah/bvh_file.hpp"
+#include "tsah/pipeline.hpp"
+#include "tsah/segmentation.hpp"
+#include "tsah/tree_set.hpp"
 
 namespace {
 
 struct Options {
+  tsah::TreeOptions tree;  // method, k, frames, selection, seed, ct, ci, maxLeaf, limits, threads
   std::string input, output;
-  std::string method = "tsah";
-  int k = 0;
-  uint32_t segments = 1;
+  uint32_t evalFrames = 50;
+  std::string segments = "1";  // K or "auto"
+  double budget = 0.0;         // relative budget (factor of the per-frame optimized cost)
+  double budgetCost = 0.0;     // absolute budget
+  double overlap = 0.0;
+  uint32_t referenceFrames = tsah::SegmentationConfig{}.referenceFrames;
+  uint32_t maxTrees = tsah::SegmentationConfig{}.maxTrees;
   bool json = false;
-  tsah::cli::OptimizerOptions common;  // shared with `tsah evaluate`
 };
 
-// How the tree's nodes were chosen for optimization: "none" (SAH0), "parallel" (parallel
-// reinsertion) or the sequential optimizer's node selection.
-std::string selectionLabel(const Options& opt, const tsah::MethodSpec& method) {
-  if (method.method == tsah::Method::Sah0) return "none";
-  return opt.common.optimizer == "parallel" ? "parallel" : opt.common.selection;
-}
 
-tsah::BvhBuildInfo buildInfo(const Options& opt, const tsah::MethodSpec& method, const anim::Animation& a,
-                             uint32_t frames, double buildSeconds, double timeStart, double timeEnd) {
-  tsah::BvhBuildInfo info;
-  info.method = method.method == tsah::Method::TSah ? "tsah" : method.name();
-  info.selection = selectionLabel(opt, method);
-  info.k = method.k;
-  info.representativeFrames = frames;
-  info.seed = opt.common.seed;
-  info.ct = opt.common.ct;
-  info.ci = opt.common.ci;
-  info.maxLeafSize = opt.common.maxLeaf;
-  info.buildSeconds = buildSeconds;
-  info.timeStart = timeStart;
-  info.timeEnd = timeEnd;
-  info.triangleCount = a.triangleCount();
-  info.vertexCount = a.vertexCount();
-  info.topologyHash = tsah::topologyHash(a.indices());
-  return info;
-}
 
 nlohmann::json optimizationJson(const tsah::InsertionOptimizer::Result& details) {
   nlohmann::json history = nlohmann::json::array();
@@ -78,101 +61,164 @@ std::pair<double, double> averageAndMaximum(const std::vector<double>& costs) {
   return {average, maximum};
 }
 
-// --segments K: K trees for K equal-time parts; all are built before any file is written, so a
-// failure leaves no partial set behind.
+// --segments K|auto: a tree set, written as one file after every tree is built.
 void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim::Animation& a, uint32_t frames,
                  uint32_t evalFrames, const tsah::BaselineConfig& config, tsah::cli::Progress& progress) {
-  progress.message("building " + std::to_string(opt.segments) + " trees");
-  const std::vector<tsah::bench::SegmentTree> trees =
-      tsah::bench::buildSegmentTrees(a, opt.segments, frames, method, config);
-  progress.message("evaluating " + std::to_string(evalFrames) + " frames");
-  const std::vector<double> times = a.uniformTimes(evalFrames);
-  const std::vector<double> perFrame = tsah::bench::evaluateSegmentTrees(a, trees, times, config.cost, opt.common.threads);
-  std::vector<tsah::bench::TimeSegment> parts;
-  for (const auto& t : trees) parts.push_back(t.segment);
-  std::vector<std::vector<double>> partCosts(trees.size());
-  for (std::size_t i = 0; i < times.size(); ++i) partCosts[tsah::bench::segmentOf(parts, times[i])].push_back(perFrame[i]);
-
-  nlohmann::json segments = nlohmann::json::array();
-  for (uint32_t s = 0; s < trees.size(); ++s) {
-    const tsah::bench::SegmentTree& t = trees[s];
-    const std::string path = tsah::bench::segmentPath(opt.output, s);
-    tsah::saveBvhFile(path, t.bvh, buildInfo(opt, method, a, frames, t.buildSeconds, t.segment.start, t.segment.end));
-    const auto [average, maximum] = averageAndMaximum(partCosts[s]);
-    nlohmann::json j = {{"index", s},
-                        {"output", path},
-                        {"time_start", t.segment.start},
-                        {"time_end", t.segment.end},
-                        {"nodes", t.bvh.nodeCount()},
-                        {"leaves", t.bvh.leafCount()},
-                        {"depth", t.bvh.depth()},
-                        {"build_s", t.buildSeconds},
-                        {"eval_frames", partCosts[s].size()},
-                        {"cost", {{"average", average}, {"maximum", maximum}}}};
-    if (method.method == tsah::Method::TSah) j["optimization"] = optimizationJson(t.optimization);
-    segments.push_back(j);
+  tsah::SegmentationConfig sc;
+  sc.method = method;
+  sc.representativeFrames = frames;
+  sc.evaluationFrames = evalFrames;
+  sc.overlap = opt.overlap;
+  sc.baseline = config;
+  sc.referenceFrames = opt.referenceFrames;
+  sc.maxTrees = opt.maxTrees;
+  tsah::TreeSetInfo setInfo;
+  setInfo.overlap = opt.overlap;
+  if (opt.segments == "auto") {
+    sc.mode = tsah::SegmentationConfig::Mode::Budget;
+    sc.budgetRelative = opt.budgetCost == 0.0;
+    sc.budget = sc.budgetRelative ? (opt.budget > 0.0 ? opt.budget : 1.05) : opt.budgetCost;
+    setInfo.segmentation = "budget";
+    setInfo.budget = sc.budget;
+    setInfo.budgetRelative = sc.budgetRelative;
+    progress.message("budget segmentation");
+  } else {
+    sc.mode = tsah::SegmentationConfig::Mode::Count;
+    sc.count = static_cast<uint32_t>(std::stoul(opt.segments));
+    setInfo.segmentation = method.k > 0 ? "count-peak" : "count";
+    progress.message("choosing split points for " + opt.segments + " trees");
   }
-  const auto [average, maximum] = averageAndMaximum(perFrame);
+  const tsah::SegmentationResult r = tsah::segmentTimeline(tsah::cli::animationTimeline(a), sc);
+
+  std::vector<tsah::BvhBuildInfo> builds;
+  nlohmann::json parts = nlohmann::json::array();
+  for (uint32_t s = 0; s < r.trees.size(); ++s) {
+    tsah::BvhBuildInfo info =
+        tsah::treeBuildInfo(opt.tree, a, frames, r.buildSeconds[s], r.buildRanges[s].start, r.buildRanges[s].end);
+    if (r.methods[s] == "sah-frame") {
+      info.method = "sah-frame";
+      info.k = 0;
+      info.representativeFrames = 1;
+    }
+    builds.push_back(info);
+    std::vector<double> mine;
+    for (std::size_t f = 0; f < r.times.size(); ++f)
+      if (tsah::treeIndexAt(r.parts, r.times[f]) == s) mine.push_back(r.costs[f]);
+    const auto [average, maximum] = averageAndMaximum(mine);
+    nlohmann::json j = {{"index", s},
+                        {"time_start", r.parts[s].start},
+                        {"time_end", r.parts[s].end},
+                        {"build_range", {r.buildRanges[s].start, r.buildRanges[s].end}},
+                        {"method", info.method},
+                        {"nodes", r.trees[s].nodeCount()},
+                        {"depth", r.trees[s].depth()},
+                        {"build_s", r.buildSeconds[s]},
+                        {"eval_frames", mine.size()},
+                        {"cost", {{"average", average}, {"maximum", maximum}}}};
+    if (r.methods[s] != "sah-frame" && method.method == tsah::Method::TSah)
+      j["optimization"] = optimizationJson(r.optimizations[s]);
+    parts.push_back(j);
+  }
+  tsah::saveTreeSetFile(opt.output, r.trees, builds, r.buildRanges, setInfo);
   progress.message("done");
+
+  nlohmann::json j;
+  j["input"] = opt.input;
+  j["output"] = opt.output;
+  j["segmentation"] = setInfo.segmentation;
+  j["method"] = method.method == tsah::Method::TSah ? "tsah" : method.name();
+  j["k"] = method.k;
+  j["seed"] = opt.tree.seed;
+  j["frames"] = frames;
+  j["eval_frames"] = evalFrames;
+  j["triangles"] = a.triangleCount();
+  j["trees"] = r.trees.size();
+  j["overlap"] = opt.overlap;
+  j["candidate_trees_built"] = r.treesBuilt;
+  j["search_s"] = r.searchSeconds;
+  j["cost"] = {{"average", r.average}, {"maximum", r.maximum}, {"per_frame", r.costs}};
+  if (sc.mode == tsah::SegmentationConfig::Mode::Budget) {
+    j["budget"] = {{"value", sc.budget},
+                   {"relative", sc.budgetRelative},
+                   {"met", r.budgetMet},
+                   {"bound_per_frame", r.bound},
+                   {"reference_s", r.referenceSeconds}};
+    if (sc.budgetRelative) {
+      double peakRatio = 0.0, ratioSum = 0.0, refSum = 0.0;
+      for (std::size_t f = 0; f < r.costs.size(); ++f) {
+        peakRatio = std::max(peakRatio, r.costs[f] / r.reference[f]);
+        ratioSum += r.costs[f];
+        refSum += r.reference[f];
+      }
+      j["budget"]["reference_per_frame"] = r.reference;
+      j["budget"]["peak_ratio"] = peakRatio;
+      j["budget"]["average_ratio"] = ratioSum / refSum;
+    }
+  }
+  j["parts"] = parts;
   if (opt.json) {
-    nlohmann::json j;
-    j["input"] = opt.input;
-    j["output"] = opt.output;
-    j["method"] = method.method == tsah::Method::TSah ? "tsah" : method.name();
-    j["k"] = method.k;
-    j["selection"] = selectionLabel(opt, method);
-    j["optimizer"] = opt.common.optimizer;
-    j["seed"] = opt.common.seed;
-    j["frames"] = frames;
-    j["eval_frames"] = evalFrames;
-    j["triangles"] = a.triangleCount();
-    j["max_leaf"] = opt.common.maxLeaf;
-    j["cost"] = {{"average", average}, {"maximum", maximum}, {"per_frame", perFrame}};
-    j["segments"] = segments;
     std::printf("%s\n", j.dump().c_str());
     return;
   }
-  std::printf("%s: %u trees for %u equal-time parts, %s, %u triangles\n", opt.output.c_str(), opt.segments,
-              opt.segments, method.name().c_str(), a.triangleCount());
-  for (const nlohmann::json& s : segments)
-    std::printf("  %s: t %.4g .. %.4g, %u nodes, build %.2f s, cost over %zu evaluation frames: average %.3f, maximum %.3f\n",
-                s["output"].get<std::string>().c_str(), s["time_start"].get<double>(), s["time_end"].get<double>(),
-                s["nodes"].get<uint32_t>(), s["build_s"].get<double>(), s["eval_frames"].get<std::size_t>(),
-                s["cost"]["average"].get<double>(), s["cost"]["maximum"].get<double>());
+  std::printf("%s: a set of %zu trees (%s segmentation, %s), %u triangles; %u candidate trees built in %.2f s\n",
+              opt.output.c_str(), r.trees.size(), setInfo.segmentation.c_str(), method.name().c_str(),
+              a.triangleCount(), r.treesBuilt, r.searchSeconds);
+  for (const nlohmann::json& p : parts)
+    std::printf("  tree %u: t %.4g .. %.4g (%s), %u nodes, build %.2f s, cost over %zu evaluation frames: average %.3f, maximum %.3f\n",
+                p["index"].get<uint32_t>(), p["time_start"].get<double>(), p["time_end"].get<double>(),
+                p["method"].get<std::string>().c_str(), p["nodes"].get<uint32_t>(), p["build_s"].get<double>(),
+                p["eval_frames"].get<std::size_t>(), p["cost"]["average"].get<double>(),
+                p["cost"]["maximum"].get<double>());
   std::printf("cost over %u evaluation frames, each with the tree of its part: average %.3f, maximum %.3f\n", evalFrames,
-              average, maximum);
+              r.average, r.maximum);
+  if (j.contains("budget")) {
+    if (sc.budgetRelative)
+      std::printf("budget %.3gx the per-frame optimized cost: %s; peak ratio %.4f, average ratio %.4f\n", sc.budget,
+                  r.budgetMet ? "met on every evaluation frame" : "MISSED on some evaluation frames",
+                  j["budget"]["peak_ratio"].get<double>(), j["budget"]["average_ratio"].get<double>());
+    else
+      std::printf("budget: cost <= %.4g: %s\n", sc.budget,
+                  r.budgetMet ? "met on every evaluation frame" : "MISSED on some evaluation frames");
+  }
 }
 
 void run(const Options& opt) {
-  const tsah::MethodSpec method = tsah::MethodSpec::parse(opt.method == "tsah" ? "tsah" + std::to_string(opt.k)
-                                                                               : opt.method);
+  tsah::TreeOptions treeOpt = opt.tree;
+  const tsah::MethodSpec method = treeOpt.methodSpec();
   const anim::Animation a = tsah::cli::loadInput(opt.input);
   if (a.triangleCount() == 0) throw tsah::cli::UsageError(opt.input + ": no triangles to build a tree over");
   // A static input has one frame: resampling it would only repeat that frame.
-  const bool animated = a.keyframeCount() > 1;
-  const uint32_t frames = animated ? opt.common.frames : 1;
-  const uint32_t evalFrames = animated ? opt.common.evalFrames : 1;
-  const tsah::PrimitiveBoxes repBoxes = tsah::cli::representativeBoxes(a, frames);
+  const uint32_t frames = tsah::framesFor(a, opt.tree.frames);
+  const uint32_t evalFrames = tsah::framesFor(a, opt.evalFrames);
 
   tsah::cli::Progress progress("optimize " + method.name());
-  tsah::BaselineConfig config = opt.common.baselineConfig([&](const std::string& message) { progress.message(message); });
+  treeOpt.progress = [&](const std::string& message) { progress.message(message); };
 
-  if (opt.segments > 1) {
-    if (!animated) throw tsah::cli::UsageError(opt.input + ": --segments needs an animation (this input has one frame)");
-    return runSegments(opt, method, a, frames, evalFrames, config, progress);
+  const bool budget = opt.budget > 0.0 || opt.budgetCost > 0.0;
+  if (opt.segments != "auto") {
+    const bool number = !opt.segments.empty() && opt.segments.size() < 5 &&
+                        opt.segments.find_first_not_of("0123456789") == std::string::npos;
+    if (!number || std::stoul(opt.segments) < 1 || std::stoul(opt.segments) > 1000)
+      throw tsah::cli::UsageError("--segments expects a number of trees (1..1000) or auto, got '" + opt.segments + "'");
+    if (budget) throw tsah::cli::UsageError("--budget and --budget-cost go with --segments auto");
+  }
+  if (opt.budget > 0.0 && opt.budgetCost > 0.0) throw tsah::cli::UsageError("give either --budget or --budget-cost");
+  if (opt.segments != "1") {
+    if (a.keyframeCount() <= 1)
+      throw tsah::cli::UsageError(opt.input + ": --segments needs an animation (this input has one frame)");
+    if (evalFrames < 2) throw tsah::cli::UsageError("--segments needs at least 2 --eval-frames");
+    return runSegments(opt, method, a, frames, evalFrames, treeOpt.baselineConfig(), progress);
   }
 
-  tsah::InsertionOptimizer::Result details;
-  const double start = progress.elapsedSeconds();
-  const tsah::Bvh bvh = tsah::buildMethod(method, repBoxes, config, &details);
-  const double buildSeconds = progress.elapsedSeconds() - start;
+  const tsah::OptimizedTree tree = tsah::optimizeAnimation(a, treeOpt);
+  const tsah::Bvh& bvh = tree.bvh;
+  const tsah::InsertionOptimizer::Result& details = tree.optimization;
+  const tsah::BvhBuildInfo& info = tree.info;
+  const double buildSeconds = info.buildSeconds;
 
   progress.message("evaluating " + std::to_string(evalFrames) + " frames");
-  const std::vector<double> perFrame =
-      tsah::evaluateFrames(bvh, tsah::cli::animationFrames(a, a.uniformTimes(evalFrames)), config.cost, opt.common.threads);
+  const std::vector<double> perFrame = tsah::evaluateAnimation(bvh, a, evalFrames, {opt.tree.ct, opt.tree.ci}, opt.tree.threads);
   const auto [average, maximum] = averageAndMaximum(perFrame);
-
-  const tsah::BvhBuildInfo info = buildInfo(opt, method, a, frames, buildSeconds, a.startTime(), a.endTime());
   tsah::saveBvhFile(opt.output, bvh, info);
 
   nlohmann::json j;
@@ -180,16 +226,16 @@ void run(const Options& opt) {
   j["output"] = opt.output;
   j["method"] = info.method;
   j["k"] = info.k;
+  j["optimizer"] = opt.tree.optimizer;
   j["selection"] = info.selection;
-  j["optimizer"] = opt.common.optimizer;
-  j["seed"] = opt.common.seed;
+  j["seed"] = opt.tree.seed;
   j["frames"] = frames;
   j["eval_frames"] = evalFrames;
   j["triangles"] = a.triangleCount();
   j["nodes"] = bvh.nodeCount();
   j["leaves"] = bvh.leafCount();
   j["depth"] = bvh.depth();
-  j["max_leaf"] = opt.common.maxLeaf;
+  j["max_leaf"] = opt.tree.maxLeaf;
   j["build_s"] = buildSeconds;
   j["cost"] = {{"average", average}, {"maximum", maximum}, {"per_frame", perFrame}};
   if (method.method == tsah::Method::TSah) {
@@ -203,10 +249,9 @@ void run(const Options& opt) {
   std::printf("%s: %s tree, %u triangles, %u nodes, %u leaves, depth %u\n", opt.output.c_str(),
               method.name().c_str(), a.triangleCount(), bvh.nodeCount(), bvh.leafCount(), bvh.depth());
   if (method.method == tsah::Method::TSah)
-    std::printf("optimization: T-SAH cost %.3f -> %.3f over %u frames in %zu %s (%.2f s, %s optimizer)\n",
+    std::printf("optimization: T-SAH cost %.3f -> %.3f over %u frames in %zu batches (%.2f s)\n",
                 details.initialCost, details.finalCost, frames,
-                details.history.empty() ? std::size_t(0) : details.history.size() - 1,
-                opt.common.optimizer == "parallel" ? "rounds" : "batches", details.seconds, opt.common.optimizer.c_str());
+                details.history.empty() ? std::size_t(0) : details.history.size() - 1, details.seconds);
   std::printf("build %.2f s; cost over %u evaluation frames: average %.3f, maximum %.3f\n", buildSeconds,
               evalFrames, average, maximum);
 }
@@ -218,16 +263,34 @@ TSAH_REGISTER_COMMAND(40, [](CLI::App& app) {
   auto opt = std::make_shared<Options>();
   sub->add_option("INPUT", opt->input, "Animation or static mesh (any input `tsah info` reads)")->required();
   sub->add_option("-o,--output", opt->output, "Output .tbvh file")->required();
-  sub->add_option("--method", opt->method, "tsah (one tree optimized for all frames), sah0 (frame 0, refit) or sahstar (best over time)")
+  sub->add_option("--method", opt->tree.method, "tsah (one tree optimized for all frames), sah0 (frame 0, refit) or sahstar (best over time)")
       ->check(CLI::IsMember({"tsah", "sah0", "sahstar"}))
       ->capture_default_str();
-  sub->add_option("--k", opt->k, "T-SAH exponent: 0 optimizes the average cost, larger values the worst frames")
+  sub->add_option("--k", opt->tree.k, "T-SAH exponent: 0 optimizes the average cost, larger values the worst frames")
       ->check(CLI::Range(0, 16))
       ->capture_default_str();
-  opt->common.addTo(*sub);
+  tsah::cli::addTreeOptions(*sub, opt->tree, opt->evalFrames);
   sub->add_option("--segments", opt->segments,
-                  "K > 1: one tree per equal-time part of the animation, written as OUT_seg0 ... OUT_seg<K-1>")
-      ->check(CLI::Range(1u, 1000u))
+                  "K > 1: a set of K trees with split points minimizing the average cost (the peak with --k > 0); "
+                  "auto: the fewest trees within --budget; written as one .tbvh tree set")
+      ->capture_default_str();
+  sub->add_option("--budget", opt->budget,
+                  "--segments auto: every evaluation frame's cost within this factor of a per-frame optimized SAH "
+                  "tree (default 1.05)")
+      ->check(CLI::Range(1.0, 100.0));
+  sub->add_option("--budget-cost", opt->budgetCost, "--segments auto: an absolute bound on every evaluation frame's cost")
+      ->check(CLI::PositiveNumber);
+  sub->add_option("--overlap", opt->overlap,
+                  "Seconds of overlap between consecutive trees (each built for its part widened by half of it; "
+                  "the runtimes switch in its middle)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sub->add_option("--reference-frames", opt->referenceFrames,
+                  "--budget: per-frame optimized SAH trees on this many evaluation frames, linear in between "
+                  "(0: every evaluation frame)")
+      ->capture_default_str();
+  sub->add_option("--max-trees", opt->maxTrees, "--segments auto: at most this many trees")
+      ->check(CLI::Range(1u, tsah::kTbvhMaxTrees))
       ->capture_default_str();
   sub->add_flag("--json", opt->json, "Print one JSON object");
   sub->callback([opt] { run(*opt); });

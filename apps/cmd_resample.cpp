@@ -1,25 +1,57 @@
-// tsah resample INPUT -o OUT.tanim [--frames N]
+// tsah resample INPUT -o OUT.tanim|OUT.pc2|OUT.mdd [--frames N] [--no-mesh]
 #include <cstdio>
+#include <filesystem>
 
+#include "anim/obj_writer.hpp"
+#include "anim/point_cache.hpp"
 #include "anim/tanim.hpp"
 #include "cli.hpp"
 
+namespace {
+
+// A point cache holds positions only: its topology goes next to it as OUT.obj (the first keyframe's
+// positions, the animation's point order), unless that file is the input's own mesh, which already
+// has this topology and is left untouched.
+std::string writeTopology(const anim::Animation& a, const std::string& cachePath, const std::string& input) {
+  namespace fs = std::filesystem;
+  const std::string mesh = fs::path(cachePath).replace_extension(".obj").string();
+  std::error_code ec;
+  if (const auto pair = anim::splitPointCacheInput(input); pair && fs::equivalent(mesh, pair->mesh, ec))
+    return mesh + " (the input's mesh, kept)";
+  anim::saveObjFrame(a, 0, mesh);
+  return mesh;
+}
+
+}  // namespace
+
 TSAH_REGISTER_COMMAND(30, [](CLI::App& app) {
-  auto* sub = app.add_subcommand("resample", "Resample an animation into N uniformly spaced frames (.tanim)");
+  auto* sub = app.add_subcommand(
+      "resample", "Resample an animation into N uniformly spaced frames (.tanim, or a .pc2/.mdd point cache)");
   struct Options {
     std::string input, output;
     uint32_t frames = 0;
+    bool noMesh = false;
   };
   auto opt = std::make_shared<Options>();
   sub->add_option("INPUT", opt->input, "Any animation input")->required();
-  sub->add_option("-o,--output", opt->output, "Output .tanim file")->required();
+  sub->add_option("-o,--output", opt->output,
+                  "Output: .tanim, or a point cache .pc2 / .mdd (with its topology as OUT.obj)")
+      ->required();
   sub->add_option("--frames", opt->frames, "Uniformly spaced frames over the time range (default: keep every keyframe)")
       ->check(CLI::Range(1u, 1000000u));
+  sub->add_flag("--no-mesh", opt->noMesh, "With a .pc2/.mdd output: do not write the topology OBJ next to it");
   sub->callback([opt] {
     const anim::Animation input = tsah::cli::loadInput(opt->input);
     const anim::Animation out = opt->frames ? input.resample(opt->frames) : input;
-    anim::saveTanim(out, opt->output);
-    std::printf("%s: %u keyframes (from %u), %u triangles, time %g .. %g\n", opt->output.c_str(),
-                out.keyframeCount(), input.keyframeCount(), out.triangleCount(), out.startTime(), out.endTime());
+    std::string extra;
+    if (anim::pointCacheFormat(opt->output)) {
+      anim::savePointCache(out, opt->output);
+      if (!opt->noMesh) extra = " + topology " + writeTopology(out, opt->output, opt->input);
+    } else {
+      anim::saveTanim(out, opt->output);
+    }
+    std::printf("%s: %u keyframes (from %u), %u triangles, time %g .. %g%s\n", opt->output.c_str(),
+                out.keyframeCount(), input.keyframeCount(), out.triangleCount(), out.startTime(), out.endTime(),
+                extra.c_str());
   });
 });

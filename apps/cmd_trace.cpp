@@ -16,6 +16,8 @@
 #include "anim/binary_io.hpp"
 #include "anim/error.hpp"
 #include "bvh_info.hpp"
+#include "camera_file.hpp"
+#include "tsah/tree_set.hpp"
 #include "cli.hpp"
 #include "tsah/binned_sah_builder.hpp"
 #include "tsah/camera.hpp"
@@ -48,61 +50,9 @@ tsah::Vec3 parseVec3(const std::string& text, const std::string& option) {
   return {v[0], v[1], v[2]};
 }
 
-tsah::Vec3 jsonVec3(const nlohmann::json& j, const std::string& file, const char* key) {
-  if (!j.contains(key) || !j[key].is_array() || j[key].size() != 3 || !j[key][0].is_number() ||
-      !j[key][1].is_number() || !j[key][2].is_number())
-    throw anim::ImportError(file, std::string("'") + key + "' must be an array of three numbers");
-  return {j[key][0].get<float>(), j[key][1].get<float>(), j[key][2].get<float>()};
-}
-
-// A camera file: {"eye": [x,y,z], "look_at": [x,y,z], "up": [x,y,z], "fov": degrees} for a fixed
-// camera, or {"keys": [{"time": t, "eye": ..., "look_at": ..., "up": ..., "fov": ...}, ...]} for a path.
-std::vector<anim::CameraKey> loadCameraFile(const std::string& path) {
-  const std::vector<uint8_t> bytes = anim::readFile(path, std::size_t(1) << 24);
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(bytes.begin(), bytes.end());
-  } catch (const nlohmann::json::exception& e) {
-    throw anim::ImportError(path, std::string("not valid JSON: ") + e.what());
-  }
-  auto key = [&](const nlohmann::json& k) {
-    if (!k.is_object()) throw anim::ImportError(path, "a camera must be a JSON object");
-    anim::CameraKey c;
-    const tsah::Vec3 eye = jsonVec3(k, path, "eye"), at = jsonVec3(k, path, "look_at");
-    const tsah::Vec3 up = k.contains("up") ? jsonVec3(k, path, "up") : tsah::Vec3{0, 1, 0};
-    c.eye = {eye.x, eye.y, eye.z};
-    c.lookAt = {at.x, at.y, at.z};
-    c.up = {up.x, up.y, up.z};
-    if (k.contains("fov")) {
-      if (!k["fov"].is_number()) throw anim::ImportError(path, "'fov' must be a number (degrees)");
-      c.fovyDegrees = k["fov"].get<float>();
-    }
-    if (k.contains("time")) {
-      if (!k["time"].is_number()) throw anim::ImportError(path, "'time' must be a number");
-      c.time = k["time"].get<double>();
-    }
-    tsah::Camera check{eye, at, up, c.fovyDegrees};
-    try {
-      tsah::validateCamera(check);
-    } catch (const anim::Error& e) {
-      throw anim::ImportError(path, e.what());
-    }
-    return c;
-  };
-  std::vector<anim::CameraKey> keys;
-  if (j.is_object() && j.contains("keys")) {
-    if (!j["keys"].is_array() || j["keys"].empty()) throw anim::ImportError(path, "'keys' must be a non-empty array");
-    for (const auto& k : j["keys"]) keys.push_back(key(k));
-    for (std::size_t i = 1; i < keys.size(); ++i)
-      if (!(keys[i].time > keys[i - 1].time)) throw anim::ImportError(path, "camera key times must increase");
-  } else {
-    keys.push_back(key(j));
-  }
-  return keys;
-}
-
 struct TraceOptions {
   std::string input, bvh, device = "cpu", out = "trace", camera, eye, lookAt, up = "0,1,0", rebuild = "none";
+  std::string layout = "auto", isa = "auto";  // CPU: tree layout and SIMD kernels
   uint32_t frames = 0, width = 1024, height = 768, ao = 8, shadow = 2, threads = 0, seed = 1;
   float fov = 45.0f, aoDistance = 0.0f, aoFraction = 0.1f;
   bool json = false, noImages = false, noGround = false;
@@ -119,6 +69,8 @@ void checkDeviceAndRebuild(const TraceOptions& opt) {
   if (opt.device == "cuda" && isCpuRebuild(opt.rebuild))
     throw UsageError("--rebuild " + opt.rebuild + " is a CPU rebuild: use it with --device cpu "
                      "(the GPU rebuilds are lbvh and hlbvh-sah)");
+  if (opt.device == "cuda" && (opt.layout != "auto" && opt.layout != "bvh2"))
+    throw UsageError("--layout " + opt.layout + " is a CPU layout; the GPU runtime traces the binary tree");
   if (opt.device != "cuda") return;
 #if TSAH_HAVE_CUDA
   if (!tsah::cuda::deviceAvailable())
@@ -148,18 +100,19 @@ class FrameRuntime {
   // image == nullptr: the picture is not needed (--no-images).
   virtual tsah::RenderStats render(const tsah::Camera& camera, const tsah::SceneLighting& lighting,
                                    const tsah::RenderSettings& settings, tsah::Image* image) = 0;
+  virtual uint32_t currentTree() const = 0;           // of a tree set: the one the last update refitted
   virtual std::string summary() const = 0;            // for the text output's first line
   virtual void describe(nlohmann::json& out) const = 0;  // "device" and what else identifies it
 };
 
 class CpuFrameRuntime final : public FrameRuntime {
  public:
-  CpuFrameRuntime(const tsah::FlatBvh& tree, const anim::Animation& animation, uint32_t threads,
+  CpuFrameRuntime(const tsah::TreeSet& trees, const anim::Animation& animation, const tsah::CpuRuntime::Config& config,
                   tsah::CpuRuntime::TreeBuilder builder)
       : animation_(animation),
-        runtime_(tree, {animation.indices().begin(), animation.indices().end()}, animation.vertexCount(), {threads}),
+        runtime_(trees, {animation.indices().begin(), animation.indices().end()}, animation.vertexCount(), config),
         builder_(std::move(builder)),
-        positions_(std::size_t(animation.vertexCount()) * 3) {}
+        positions_(animation.positionsAt(animation.startTime())) {}
 
   void warmUp(double, const tsah::Camera&, const tsah::SceneLighting&, const tsah::RenderSettings&) override {
     runtime_.parallelFor(runtime_.threadCount() * 4, 1, [](std::size_t, std::size_t) {});
@@ -168,7 +121,7 @@ class CpuFrameRuntime final : public FrameRuntime {
   FrameUpdate update(double time) override {
     FrameUpdate u;
     const auto start = std::chrono::steady_clock::now();
-    animation_.positionsAt(time, positions_);
+    animation_.movingPositionsAt(time, positions_);  // the static vertices are in place since construction
     u.interpolateMs = msSince(start);
     if (builder_) {
       const auto t = runtime_.rebuild(positions_, builder_);
@@ -176,6 +129,7 @@ class CpuFrameRuntime final : public FrameRuntime {
       u.refitMs = t.refitMs;
     } else {
       const auto s = std::chrono::steady_clock::now();
+      runtime_.selectTreeAt(time);
       runtime_.update(positions_);
       u.refitMs = msSince(s);
     }
@@ -188,11 +142,24 @@ class CpuFrameRuntime final : public FrameRuntime {
     return tsah::renderFrame(runtime_, camera, lighting, settings, image ? *image : scratch_);
   }
 
-  std::string summary() const override { return std::to_string(runtime_.threadCount()) + " CPU threads"; }
+  uint32_t currentTree() const override { return runtime_.currentTree(); }
+  std::string summary() const override {
+    const tsah::LayoutInfo& l = runtime_.layoutInfo();
+    std::string s = std::to_string(runtime_.threadCount()) + " CPU threads, " + tsah::layoutName(l.layout);
+    if (l.layout != tsah::CpuLayout::Bvh2) s += std::string(" (") + tsah::isaName(l.isa) + ")";
+    char cost[96];
+    std::snprintf(cost, sizeof cost, ", T-SAH cost %.2f (binary %.2f)", l.layoutCost, l.binaryCost);
+    return s + cost;
+  }
   void describe(nlohmann::json& out) const override {
+    const tsah::LayoutInfo& l = runtime_.layoutInfo();
     out["device"] = "cpu";
     out["threads"] = runtime_.threadCount();
     out["timer"] = "host steady clock";
+    out["layout"] = tsah::layoutName(l.layout);
+    if (l.layout != tsah::CpuLayout::Bvh2) out["isa"] = tsah::isaName(l.isa);
+    out["tree"] = {{"interior_nodes", l.interiorNodes}, {"leaves", l.leaves}, {"depth", l.depth},
+                   {"tsah_cost", l.layoutCost}, {"binary_tsah_cost", l.binaryCost}};
   }
 
  private:
@@ -226,9 +193,9 @@ tsah::CpuRuntime::TreeBuilder cpuRebuilder(const std::string& rebuild, const tsa
 #if TSAH_HAVE_CUDA
 class GpuFrameRuntime final : public FrameRuntime {
  public:
-  GpuFrameRuntime(const tsah::FlatBvh& tree, const anim::Animation& animation,
+  GpuFrameRuntime(const tsah::TreeSet& trees, const anim::Animation& animation,
                   std::optional<tsah::cuda::RebuildOptions> rebuild)
-      : runtime_(tree, animation), rebuild_(rebuild) {}
+      : runtime_(trees, animation, tsah::cuda::GpuRuntime::Config{}), rebuild_(rebuild) {}
 
   void warmUp(double time, const tsah::Camera& camera, const tsah::SceneLighting& lighting,
               const tsah::RenderSettings& settings) override {
@@ -253,6 +220,7 @@ class GpuFrameRuntime final : public FrameRuntime {
     return tsah::cuda::renderFrameGpu(runtime_, camera, lighting, settings, image);
   }
 
+  uint32_t currentTree() const override { return runtime_.currentTree(); }
   std::string summary() const override { return "GPU " + runtime_.device().name; }
   void describe(nlohmann::json& out) const override {
     const tsah::cuda::DeviceInfo& d = runtime_.device();
@@ -272,7 +240,7 @@ class GpuFrameRuntime final : public FrameRuntime {
 };
 #endif
 
-std::unique_ptr<FrameRuntime> makeRuntime(const TraceOptions& opt, const tsah::FlatBvh& tree,
+std::unique_ptr<FrameRuntime> makeRuntime(const TraceOptions& opt, const tsah::TreeSet& trees,
                                           const tsah::BvhBuildInfo& info, const anim::Animation& a) {
   const tsah::CostModel cost{info.ct, info.ci};
   const uint32_t maxLeaf = std::max(1u, info.maxLeafSize);
@@ -285,15 +253,20 @@ std::unique_ptr<FrameRuntime> makeRuntime(const TraceOptions& opt, const tsah::F
       rebuild->maxLeafSize = maxLeaf;
       rebuild->cost = cost;
     }
-    return std::make_unique<GpuFrameRuntime>(tree, a, rebuild);
+    return std::make_unique<GpuFrameRuntime>(trees, a, rebuild);
   }
 #endif
-  return std::make_unique<CpuFrameRuntime>(tree, a, opt.threads, cpuRebuilder(opt.rebuild, cost, maxLeaf));
+  tsah::CpuRuntime::Config config(opt.threads);
+  config.layout = opt.layout == "auto" ? tsah::fastestLayout() : *tsah::parseLayout(opt.layout);
+  if (opt.isa != "auto") config.isa = tsah::parseIsa(opt.isa);
+  config.collapse = tsah::wideCollapseConfig(info);
+  return std::make_unique<CpuFrameRuntime>(trees, a, config, cpuRebuilder(opt.rebuild, cost, maxLeaf));
 }
 
 struct FrameResult {
   uint32_t frame = 0;
   double time = 0.0;
+  uint32_t tree = 0;  // of a tree set: the tree of the frame's part
   FrameUpdate update;
   tsah::RenderStats render;
   double pngMs = 0.0;
@@ -324,12 +297,13 @@ void runTrace(const TraceOptions& opt) {
   const tsah::Vec3 up = parseVec3(opt.up, "--up");
   if (!(tsah::dot(up, up) > 0.0f)) throw UsageError("--up must not be zero");
 
-  // Inputs: the tree is validated completely by the reader; then it must match the animation.
-  tsah::BvhBuildInfo info;
-  const tsah::FlatBvh flat = tsah::decodeFlatBvhFile(anim::readFile(opt.bvh), opt.bvh, &info);
+  // Inputs: the tree (or tree set: each frame refits the tree of its part) is validated completely
+  // by the reader; then it must match the animation.
+  const tsah::TreeSet trees = tsah::decodeTreeSetFile(anim::readFile(opt.bvh), opt.bvh);
+  const tsah::BvhBuildInfo& info = trees.builds.front();
   const anim::Animation a = tsah::cli::loadInput(opt.input);
   tsah::cli::checkTreeMatchesAnimation(info, opt.bvh, a, opt.input);
-  const std::unique_ptr<FrameRuntime> rt = makeRuntime(opt, flat, info, a);
+  const std::unique_ptr<FrameRuntime> rt = makeRuntime(opt, trees, info, a);
 
   const uint32_t frameCount = opt.frames ? opt.frames : std::min<uint32_t>(a.keyframeCount(), 50);
   const std::vector<double> times = a.uniformTimes(frameCount);
@@ -345,7 +319,7 @@ void runTrace(const TraceOptions& opt) {
   std::string cameraSource;
   tsah::Camera fixedCamera;
   if (!opt.camera.empty()) {
-    path = loadCameraFile(opt.camera);
+    path = tsah::cli::loadCameraFile(opt.camera);
     cameraSource = opt.camera;
   } else if (!opt.eye.empty()) {
     fixedCamera = {parseVec3(opt.eye, "--eye"), parseVec3(opt.lookAt, "--look-at"), up, opt.fov};
@@ -378,7 +352,9 @@ void runTrace(const TraceOptions& opt) {
 
   const bool rebuilds = opt.rebuild != "none";
   const std::string mode =
-      rebuilds ? "rebuild " + opt.rebuild + (isGpuRebuild(opt.rebuild) ? " (GPU)" : " (CPU)") : "refit";
+      rebuilds ? "rebuild " + opt.rebuild + (isGpuRebuild(opt.rebuild) ? " (GPU)" : " (CPU)")
+               : trees.size() > 1 ? "refit of the tree of each frame's part (" + std::to_string(trees.size()) + " trees)"
+                                  : "refit";
   if (!opt.json)
     std::printf("%u frames, %ux%u, %u AO + %u shadow rays per pixel, %s, %s, camera %s\n", frameCount, opt.width,
                 opt.height, opt.ao, opt.shadow, rt->summary().c_str(), mode.c_str(), cameraSource.c_str());
@@ -391,6 +367,7 @@ void runTrace(const TraceOptions& opt) {
     r.frame = f;
     r.time = times[f];
     r.update = rt->update(r.time);
+    r.tree = rt->currentTree();
     settings.frame = f;
     r.render = rt->render(cameraAt(r.time), lighting, settings, opt.noImages ? nullptr : &image);
     if (!opt.noImages) {
@@ -427,6 +404,7 @@ void runTrace(const TraceOptions& opt) {
     out["animation"] = opt.input;
     out["bvh"] = opt.bvh;
     out["method"] = info.method;
+    out["trees"] = trees.size();
     out["rebuild"] = opt.rebuild;
     out["width"] = opt.width;
     out["height"] = opt.height;
@@ -441,6 +419,7 @@ void runTrace(const TraceOptions& opt) {
       nlohmann::json j;
       j["frame"] = r.frame;
       j["time"] = r.time;
+      if (!rebuilds) j["tree"] = r.tree;
       j["update_ms"] = r.update.updateMs;
       j["interpolate_ms"] = r.update.interpolateMs;
       j["refit_ms"] = r.update.refitMs;
@@ -522,6 +501,12 @@ TSAH_REGISTER_COMMAND(70, [](CLI::App& app) {
   sub->add_option("--up", opt->up, "Scene up direction x,y,z (default 0,1,0)");
   sub->add_option("--fov", opt->fov, "Vertical field of view in degrees (default 45)");
   sub->add_option("--threads", opt->threads, "CPU worker threads (0: all cores)");
+  sub->add_option("--layout", opt->layout,
+                  "CPU tree layout: bvh2 (the binary tree), bvh4 or bvh8 (wide trees collapsed from it at load time); "
+                  "default auto: the widest the processor's SIMD kernels support")
+      ->check(CLI::IsMember({"auto", "bvh2", "bvh4", "bvh8"}));
+  sub->add_option("--isa", opt->isa, "CPU SIMD kernels of a wide layout: sse, avx2 or avx512 (default auto: the best)")
+      ->check(CLI::IsMember({"auto", "sse", "avx2", "avx512"}));
   sub->add_option("--seed", opt->seed, "Seed of the per-pixel random numbers (default 1)");
   sub->add_flag("--json", opt->json, "Print one JSON object {device, frames: [...], average: {...}}");
   sub->callback([opt] { runTrace(*opt); });

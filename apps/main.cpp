@@ -3,9 +3,13 @@
 #include <exception>
 #include <new>
 
+#include "anim/binary_io.hpp"
 #include "cli.hpp"
 
 int main(int argc, char** argv) {
+  // Before any thread exists: SIGINT/SIGTERM remove the temporaries in flight (no partial files).
+  anim::installInterruptCleanup();
+  anim::protectInputs(true);  // an output may never replace one of the command's inputs
   CLI::App app{"tsah: build one BVH optimized for every frame of an animation (T-SAH), "
                "export it and trace every frame with only a refit."};
   app.set_version_flag("--version", std::string("tsah ") + TSAH_VERSION);
@@ -14,14 +18,22 @@ int main(int argc, char** argv) {
   tsah::cli::setupAllCommands(app);
   try {
     app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
+  } catch (const CLI::Success& e) {  // --help, --version
     return app.exit(e);
+  } catch (const CLI::RuntimeError& e) {  // a command's own exit status
+    return e.get_exit_code();
+  } catch (const CLI::ParseError& e) {
+    std::fprintf(stderr, "tsah: %s (tsah --help lists the options)\n", tsah::cli::compactNumbers(e.what()).c_str());
+    return tsah::cli::kExitUsage;
+  } catch (const tsah::cli::UsageError& e) {
+    std::fprintf(stderr, "tsah: %s\n", e.what());
+    return tsah::cli::kExitUsage;
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr, "tsah: out of memory\n");
-    return 1;
+    return tsah::cli::kExitFailure;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "tsah: %s\n", e.what());
-    return 1;
+    return tsah::cli::kExitFailure;
   }
   return 0;
 }

@@ -11,6 +11,7 @@ packages=(
   libtbb-dev libstb-dev libassimp-dev zlib1g-dev assimp-testmodels
   libgtest-dev googletest
   python3
+  python3-dev pybind11-dev python3-pybind11 python3-numpy python3-pytest   # the Python module, its tests
   libembree-dev gnuplot-nox   # tsah bench: the CPU peer (optional at build time) and its plots
 )
 

@@ -2,12 +2,35 @@
 // frame with the same workload, frame by frame, and keeps the picture asked for.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+
 #include "anim/generators.hpp"
+#include "animation_frames.hpp"
+#include "bench/embree_peer.hpp"
 #include "bench/runtime_bench.hpp"
 #include "tsah/baselines.hpp"
 #include "tsah/flat_bvh.hpp"
 
 namespace {
+
+// 48x36 pixels, 3 AO and 2 shadow rays per pixel, `frames` frames, a fixed fitted camera.
+tsah::bench::RuntimeSetup smallSetup(const anim::Animation& a, uint32_t frames) {
+  tsah::bench::RuntimeSetup setup;
+  setup.times = a.uniformTimes(frames);
+  const anim::Bounds b = a.bounds();
+  tsah::Aabb bounds;
+  bounds.extend(tsah::Vec3{b.min[0], b.min[1], b.min[2]});
+  bounds.extend(tsah::Vec3{b.max[0], b.max[1], b.max[2]});
+  const tsah::Camera camera = tsah::fitCamera(bounds, {0, 1, 0}, 45.0f, 48.0f / 36.0f);
+  setup.camera = [camera](double) { return camera; };
+  setup.lighting = tsah::fitLighting(bounds, camera, {0, 1, 0}, 0.1f, false);
+  setup.settings.width = 48;
+  setup.settings.height = 36;
+  setup.settings.aoSamples = 3;
+  setup.settings.shadowSamples = 2;
+  setup.threads = 2;
+  return setup;
+}
 
 TEST(BenchRuntime, EveryMethodTracesEveryFrameWithTheSameRays) {
   anim::GeneratorOptions g;
@@ -21,22 +44,15 @@ TEST(BenchRuntime, EveryMethodTracesEveryFrameWithTheSameRays) {
   config.threads = 2;
   const tsah::Bvh sah0 = tsah::buildSah0(boxes, config);
   const tsah::Bvh tsah0 = tsah::buildTSah(boxes, 0, config);
-  const auto parts = tsah::bench::buildSegmentTrees(a, 2, 3, tsah::MethodSpec::parse("tsah0"), config);
+  tsah::SegmentationConfig sc;
+  sc.representativeFrames = 3;
+  sc.evaluationFrames = 4;
+  sc.baseline = config;
+  const tsah::SegmentationResult parts = tsah::evaluateParts(
+      tsah::cli::animationTimeline(a), tsah::equalTimeRanges(a.startTime(), a.endTime(), 2), sc);
 
-  tsah::bench::RuntimeSetup setup;
-  setup.times = a.uniformTimes(4);
-  const anim::Bounds b = a.bounds();
-  tsah::Aabb bounds;
-  bounds.extend(tsah::Vec3{b.min[0], b.min[1], b.min[2]});
-  bounds.extend(tsah::Vec3{b.max[0], b.max[1], b.max[2]});
-  const tsah::Camera camera = tsah::fitCamera(bounds, {0, 1, 0}, 45.0f, 48.0f / 36.0f);
-  setup.camera = [camera](double) { return camera; };
-  setup.lighting = tsah::fitLighting(bounds, camera, {0, 1, 0}, 0.1f, false);
-  setup.settings.width = 48;
-  setup.settings.height = 36;
-  setup.settings.aoSamples = 3;
-  setup.settings.shadowSamples = 2;
-  setup.threads = 2;
+  tsah::bench::RuntimeSetup setup = smallSetup(a, 4);
+  const tsah::Camera camera = setup.camera(0.0);
   std::vector<std::string> progress;
   setup.progress = [&](const std::string& m) { progress.push_back(m); };
 
@@ -45,7 +61,7 @@ TEST(BenchRuntime, EveryMethodTracesEveryFrameWithTheSameRays) {
   std::vector<CpuMethodSpec> specs = {
       {{"sah0", "SAH0 refit", {&sah0}, {}}, std::nullopt},
       {{"tsah0", "T-SAH refit", {&tsah0}, {}}, std::nullopt},
-      {{"tsah0-seg2", "T-SAH, 2 trees", {&parts[0].bvh, &parts[1].bvh}, {parts[0].segment, parts[1].segment}}, std::nullopt},
+      {{"tsah0-seg2", "T-SAH, 2 trees", {&parts.trees[0], &parts.trees[1]}, parts.buildRanges}, std::nullopt},
       {{"rebuild-sweep", "sweep", {&tsah0}, {}}, CpuRebuild::Sweep},
       {{"rebuild-binned", "binned", {&tsah0}, {}}, CpuRebuild::Binned},
   };
@@ -85,6 +101,40 @@ TEST(BenchRuntime, EveryMethodTracesEveryFrameWithTheSameRays) {
   const nlohmann::json j = tsah::bench::toJson(methods[2]);
   EXPECT_EQ(j["name"], "tsah0-seg2");
   EXPECT_EQ(j["per_frame"]["total_ms"].size(), 4u);
+}
+
+TEST(BenchRuntime, EmbreeComparisonTracesEveryLayoutWithTheSameResults) {
+  if (!tsah::bench::embreeAvailable()) GTEST_SKIP() << tsah::bench::embreeStatus();
+  anim::GeneratorOptions g;
+  g.triangles = 900;
+  g.frames = 4;
+  const anim::Animation a = anim::generate(anim::GeneratorKind::Explode, g);
+  const anim::Animation rep = a.resample(3);
+  tsah::BaselineConfig config;
+  config.threads = 2;
+  const tsah::Bvh tree = tsah::buildTSah(tsah::triangleBoxes(rep.indices(), rep.allPositions(), 3), 0, config);
+  const tsah::bench::RuntimeSetup setup = smallSetup(a, 2);
+  const auto methods = tsah::bench::runEmbreeComparison(a, tree, "tsah0", "toolkit", setup);
+  std::vector<std::string> names;
+  for (const auto& m : methods) names.push_back(m.name);
+  ASSERT_FALSE(names.empty());
+  EXPECT_EQ(names[0], std::string("tsah0-") + tsah::layoutName(setup.layout));  // the default layout first
+  for (const char* n : {"tsah0-bvh2", "embree-medium", "embree-high", "embree-refit"})
+    EXPECT_NE(std::find(names.begin(), names.end(), n), names.end()) << n;
+  for (const auto& m : methods) {
+    ASSERT_EQ(m.frames.size(), 2u) << m.name;
+    EXPECT_EQ(m.frames[0].rays.ao.rays, methods[0].frames[0].rays.ao.rays);  // the same batch
+    if (m.name.rfind("tsah0-", 0) == 0 && m.name != names[0]) {
+      // Every toolkit layout finds exactly what the default one finds.
+      const auto& d = m.extra["hits_minus_toolkit"];
+      EXPECT_EQ(d["primary"], 0) << m.name;
+      EXPECT_EQ(d["ao_occluded"], 0) << m.name;
+      EXPECT_EQ(d["shadow_occluded"], 0) << m.name;
+    }
+    if (m.name.rfind("tsah0-", 0) == 0) {
+      EXPECT_EQ(m.extra["layout"]["layout"], m.name.substr(6));
+    }
+  }
 }
 
 }  // namespace

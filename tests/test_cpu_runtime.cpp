@@ -37,9 +37,12 @@ Scene makeScene(anim::GeneratorKind kind, uint32_t triangles) {
 }
 
 tsah::Image render(const Scene& s, double time, uint32_t threads, tsah::RenderSettings settings,
-                   tsah::RenderStats* stats = nullptr, bool ground = true) {
+                   tsah::RenderStats* stats = nullptr, bool ground = true,
+                   tsah::CpuLayout layout = tsah::CpuLayout::Bvh2) {
+  tsah::CpuRuntime::Config config(threads);
+  config.layout = layout;
   tsah::CpuRuntime rt(s.tree, {s.animation.indices().begin(), s.animation.indices().end()}, s.animation.vertexCount(),
-                      {threads});
+                      config);
   rt.update(s.animation.positionsAt(time));
   const float aspect = float(settings.width) / float(settings.height);
   const tsah::Camera cam = tsah::fitCamera(s.bounds, {0, 1, 0}, 45.0f, aspect);
@@ -102,20 +105,25 @@ TEST(CpuRuntime, RayAccounting) {
 // deliberately with TSAH_UPDATE_REFERENCE=1 after an intended change, and look at it.
 TEST(CpuRuntime, MatchesReferenceImage) {
   const Scene s = makeScene(anim::GeneratorKind::Wave, 2000);
-  const tsah::Image image = render(s, 2.5, 2, small(96, 72));
   const std::filesystem::path ref = std::filesystem::path(TSAH_SOURCE_DIR) / "tests/data/reference_wave_96x72.png";
   if (std::getenv("TSAH_UPDATE_REFERENCE")) {
-    tsah::savePng(ref.string(), image);
+    tsah::savePng(ref.string(), render(s, 2.5, 2, small(96, 72)));
     GTEST_SKIP() << "wrote " << ref;
   }
   ASSERT_TRUE(std::filesystem::exists(ref)) << ref << " is missing";
   const tsah::Image expected = tsah::loadPng(ref.string());
-  const tsah::ImageDifference d = tsah::compareImages(expected, image, 24);
-  // Tolerance for floating-point differences between compilers and libm versions.
-  EXPECT_LT(d.meanAbs, 1.5);
-  EXPECT_LT(d.fractionAbove, 0.01);
-  if (d.meanAbs >= 1.5 || d.fractionAbove >= 0.01)
-    tsah::savePng((tsah::test::scratchDir() / "actual.png").string(), image);
+  // Every layout this processor traces renders the reference picture.
+  for (tsah::CpuLayout layout : {tsah::CpuLayout::Bvh2, tsah::CpuLayout::Bvh4, tsah::CpuLayout::Bvh8}) {
+    if (!tsah::layoutSupported(layout)) continue;
+    const tsah::Image image = render(s, 2.5, 2, small(96, 72), nullptr, true, layout);
+    const tsah::ImageDifference d = tsah::compareImages(expected, image, 24);
+    // Tolerance for floating-point differences between compilers and libm versions.
+    EXPECT_LT(d.meanAbs, 1.5) << tsah::layoutName(layout);
+    EXPECT_LT(d.fractionAbove, 0.01) << tsah::layoutName(layout);
+    if (d.meanAbs >= 1.5 || d.fractionAbove >= 0.01)
+      tsah::savePng((tsah::test::scratchDir() / (std::string("actual-") + tsah::layoutName(layout) + ".png")).string(),
+                    image);
+  }
 }
 
 TEST(CpuRuntime, RejectsTreesDeeperThanTheStack) {

@@ -224,6 +224,51 @@ TEST(CudaRuntime, UpdateEqualsTheCpuRuntimeExactly) {
   }
 }
 
+// A scene with a big static part: a static environment (a generated mesh at rest) next to a moving
+// one, so the device keys only the moving vertices and must leave the static ones in place. The
+// update equals the CPU runtime's bit for bit, also after host positions overwrote the static part.
+TEST(CudaRuntime, UpdateOfAMostlyStaticSceneEqualsTheCpuRuntime) {
+  REQUIRE_GPU();
+  const auto still = makeAnimation(anim::GeneratorKind::Wave, 4000, 1, 3);
+  const auto mover = makeAnimation(anim::GeneratorKind::Explode, 1000, 5, 4);
+  std::vector<uint32_t> idx(still.indices().begin(), still.indices().end());
+  for (uint32_t v : mover.indices()) idx.push_back(v + still.vertexCount());
+  std::vector<float> pos;
+  const std::vector<float> rest = still.keyframe(0);
+  for (uint32_t k = 0; k < mover.keyframeCount(); ++k) {
+    pos.insert(pos.end(), rest.begin(), rest.end());
+    const auto m = mover.keyframe(k);
+    pos.insert(pos.end(), m.begin(), m.end());
+  }
+  const anim::Animation a(idx, still.vertexCount() + mover.vertexCount(), pos,
+                          {mover.times().begin(), mover.times().end()}, "mostly-static");
+  ASSERT_FALSE(a.allMoving());
+  ASSERT_LE(a.movingVertexCount(), mover.vertexCount());
+  const tsah::FlatBvh tree = sahTree(a, 8);
+  tsah::CpuRuntime cpu = cpuRuntime(tree, a);
+  for (bool graphs : {true, false}) {
+    tc::GpuRuntime::Config config;
+    config.useGraphs = graphs;
+    tc::GpuRuntime gpu(tree, a, config);
+    const double t0 = a.startTime(), t1 = a.endTime();
+    for (double t : {t0, t0 + 0.37 * (t1 - t0), a.times()[2], t1 + 1.0, t0 + 0.61 * (t1 - t0)}) {
+      // Host positions with a displaced static part first: updateAt must put the rest back.
+      std::vector<float> junk = a.positionsAt(t1);
+      for (float& x : junk) x += 1.0f;
+      gpu.update(junk);
+      const std::vector<float> expect = a.positionsAt(t);
+      cpu.update(expect);
+      gpu.updateAt(t);
+      const std::vector<float> got = gpu.downloadPositions();
+      ASSERT_EQ(0, std::memcmp(got.data(), expect.data(), expect.size() * sizeof(float))) << "positions at t=" << t;
+      const std::vector<tsah::WoopTriangle> woop = gpu.downloadWoop();
+      ASSERT_EQ(0, std::memcmp(woop.data(), cpu.woop().data(), woop.size() * sizeof(tsah::WoopTriangle)))
+          << "Woop triangles at t=" << t;
+      ASSERT_EQ(0, std::memcmp(&gpu.downloadTree().rootBoxes[0], &cpu.tree().rootBoxes[0], sizeof(tsah::Aabb)));
+    }
+  }
+}
+
 TEST(CudaRuntime, HitsEqualTheCpuTraversal) {
   REQUIRE_GPU();
   uint32_t seed = 11;

@@ -31,7 +31,7 @@ void expectSame(const anim::Animation& a, const anim::Animation& b) {
   ASSERT_EQ(a.keyframeCount(), b.keyframeCount());
   EXPECT_TRUE(std::equal(a.indices().begin(), a.indices().end(), b.indices().begin()));
   EXPECT_TRUE(std::equal(a.times().begin(), a.times().end(), b.times().begin()));
-  EXPECT_EQ(0, std::memcmp(a.allPositions().data(), b.allPositions().data(), a.allPositions().size_bytes()));
+  EXPECT_EQ(a.allPositions(), b.allPositions());
   ASSERT_EQ(a.cameraPath().size(), b.cameraPath().size());
   for (std::size_t i = 0; i < a.cameraPath().size(); ++i) {
     EXPECT_EQ(a.cameraPath()[i].time, b.cameraPath()[i].time);

@@ -83,17 +83,6 @@ nlohmann::json historyJson(const InsertionOptimizer::Result& r) {
   return history;
 }
 
-double mean(const std::vector<double>& v) {
-  double s = 0.0;
-  for (double x : v) s += x / double(v.size());
-  return v.empty() ? 0.0 : s;
-}
-double maximum(const std::vector<double>& v) {
-  double m = 0.0;
-  for (double x : v) m = std::max(m, x);
-  return m;
-}
-
 }  // namespace
 
 std::string methodLabel(const std::string& id) {
@@ -120,6 +109,7 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   anim::LoadOptions load;
   load.fps = o.fps;
   load.clip = o.clip;
+  load.resolveDataPath = o.resolveDataPath;
   load.warning = [&warnings](const std::string& w) { warnings.push_back(w); };
   anim::Animation a = anim::load(scene.input, load);
   j["load_s"] = secondsSince(start);
@@ -140,25 +130,28 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   const BaselineConfig config = baselineConfig(o, progress);
 
   // --- Table 1 ------------------------------------------------------------------------------
-  say("Table 1: SAH-rebuild, SAH*, SAH0, T-SAH k=0/2/4 over " + std::to_string(o.evalFrames) + " frames");
-  start = std::chrono::steady_clock::now();
-  std::vector<MethodSpec> specs;
-  for (const std::string& id : kTable1Methods) specs.push_back(MethodSpec::parse(id));
-  const std::vector<MethodResult> table1 = compareMethods(specs, repBoxes, evaluation, config);
-  nlohmann::json t1;
-  t1["frames"] = o.frames;
-  t1["eval_frames"] = o.evalFrames;
-  t1["eval_times"] = evalTimes;
-  t1["wall_s"] = secondsSince(start);
-  t1["methods"] = nlohmann::json::array();
-  for (std::size_t m = 0; m < table1.size(); ++m)
-    t1["methods"].push_back({{"name", kTable1Methods[m]},
-                             {"label", methodLabel(kTable1Methods[m])},
-                             {"build_s", table1[m].buildSeconds},
-                             {"average", table1[m].average},
-                             {"maximum", table1[m].maximum},
-                             {"per_frame", table1[m].perFrame}});
-  j["table1"] = t1;
+  std::vector<MethodResult> table1;
+  if (!o.embreeOnly) {
+    say("Table 1: SAH-rebuild, SAH*, SAH0, T-SAH k=0/2/4 over " + std::to_string(o.evalFrames) + " frames");
+    start = std::chrono::steady_clock::now();
+    std::vector<MethodSpec> specs;
+    for (const std::string& id : kTable1Methods) specs.push_back(MethodSpec::parse(id));
+    table1 = compareMethods(specs, repBoxes, evaluation, config);
+    nlohmann::json t1;
+    t1["frames"] = o.frames;
+    t1["eval_frames"] = o.evalFrames;
+    t1["eval_times"] = evalTimes;
+    t1["wall_s"] = secondsSince(start);
+    t1["methods"] = nlohmann::json::array();
+    for (std::size_t m = 0; m < table1.size(); ++m)
+      t1["methods"].push_back({{"name", kTable1Methods[m]},
+                               {"label", methodLabel(kTable1Methods[m])},
+                               {"build_s", table1[m].buildSeconds},
+                               {"average", table1[m].average},
+                               {"maximum", table1[m].maximum},
+                               {"per_frame", table1[m].perFrame}});
+    j["table1"] = t1;
+  }
 
   // --- Trees for the runtime, convergence of the three node selections ------------------------
   // The Metropolis-Hastings run is the T-SAH k=0 tree of Table 1 (same seed, same tree).
@@ -168,7 +161,7 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   Bvh tsahTree;
   j["convergence"] = nlohmann::json::array();
   for (const auto& [id, selection] : selections) {
-    if (id != "mh" && !o.convergence) continue;
+    if (id != "mh" && (!o.convergence || o.embreeOnly)) continue;
     say("T-SAH k=0 optimization, " + id + " node selection");
     BaselineConfig c = config;
     c.optimizer.selection = selection;
@@ -190,34 +183,23 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
     if (id == "mh") tsahTree = std::move(tree);
   }
   say("SAH0 and SAH* trees for the runtime");
-  const Bvh sah0Tree = buildSah0(repBoxes, config);
-  const Bvh sahStarTree = buildSahStar(repBoxes, config);
+  const Bvh sah0Tree = o.embreeOnly ? Bvh{} : buildSah0(repBoxes, config);
+  const Bvh sahStarTree = o.embreeOnly ? Bvh{} : buildSahStar(repBoxes, config);
 
-  // --- Segments -------------------------------------------------------------------------------
-  std::vector<SegmentTree> segmentTrees;
-  if (o.segments > 1) {
-    say("T-SAH k=0 for " + std::to_string(o.segments) + " equal-time segments");
-    start = std::chrono::steady_clock::now();
-    segmentTrees = buildSegmentTrees(a, o.segments, o.frames, MethodSpec::parse("tsah0"), config);
-    const double wall = secondsSince(start);
-    const std::vector<double> costs = evaluateSegmentTrees(a, segmentTrees, evalTimes, config.cost, o.threads);
-    const std::vector<double>& one = table1[3].perFrame;  // tsah0
-    nlohmann::json parts = nlohmann::json::array();
-    double build = 0.0;
-    for (const SegmentTree& s : segmentTrees) {
-      parts.push_back({{"time_start", s.segment.start},
-                       {"time_end", s.segment.end},
-                       {"build_s", s.buildSeconds},
-                       {"nodes", s.bvh.nodeCount()},
-                       {"optimized_cost", s.optimization.finalCost}});
-      build += s.buildSeconds;
-    }
-    j["segments"] = {{"count", o.segments},
-                     {"parts", parts},
-                     {"build_s", build},
-                     {"wall_s", wall},
-                     {"one_tree", {{"build_s", table1[3].buildSeconds}, {"average", mean(one)}, {"maximum", maximum(one)}}},
-                     {"k_trees", {{"average", mean(costs)}, {"maximum", maximum(costs)}, {"per_frame", costs}}}};
+  // --- Segments: equal-time parts, count and budget modes (tsah/segmentation.hpp) -------------
+  SegmentRuns segmentRuns;
+  if ((o.segments > 1 || o.budget > 0.0) && !o.embreeOnly) {  // --embree-only has no Table 1
+    SegmentExperiment experiment;
+    experiment.count = o.segments;
+    experiment.budget = o.budget;
+    experiment.frames = o.frames;
+    experiment.evalFrames = o.evalFrames;
+    experiment.rebuildCosts = table1[0].perFrame;  // kTable1Methods[0]: SAH-rebuild
+    experiment.oneTreeCosts = table1[3].perFrame;  // tsah0
+    experiment.oneTreeBuildSeconds = table1[3].buildSeconds;
+    nlohmann::json segments;
+    segmentRuns = runSegmentExperiment(a, experiment, config, segments, say);
+    j["segments"] = segments;
   }
 
   // --- Runtime ----------------------------------------------------------------------------------
@@ -238,25 +220,28 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   setup.settings.shadowSamples = o.shadowRays;
   setup.settings.seed = static_cast<uint32_t>(o.seed);
   setup.threads = o.threads;
+  setup.layout = o.layout == "auto" ? fastestLayout() : parseLayout(o.layout).value_or(CpuLayout::Bvh2);
+  setup.collapse.cost = config.cost;
+  setup.collapse.maxLeafSize = o.maxLeaf;
   setup.progress = [&](const std::string& m) { progress(scene.name + ": " + m, true); };
 
   const bool gpu = o.device == "cuda";
   RefitTrees sah0{"sah0", "SAH0 refit", {&sah0Tree}, {}};
   RefitTrees sahStar{"sahstar", "SAH* refit", {&sahStarTree}, {}};
   RefitTrees tsah{"tsah0", "T-SAH k=0 refit", {&tsahTree}, {}};
-  RefitTrees segmented{"tsah0-seg" + std::to_string(o.segments),
-                       "T-SAH k=0 refit, " + std::to_string(o.segments) + " trees",
-                       {},
-                       {}};
-  for (const SegmentTree& s : segmentTrees) {
-    segmented.trees.push_back(&s.bvh);
-    segmented.segments.push_back(s.segment);
-  }
+  // Tree sets: one runtime per method switches to the tree of each frame's part.
+  auto setOf = [](const std::string& name, const std::string& label, const SegmentationResult& r) {
+    RefitTrees t{name, label, {}, r.buildRanges};
+    for (const Bvh& tree : r.trees) t.trees.push_back(&tree);
+    return t;
+  };
+  const std::string k = std::to_string(o.segments);
   say(std::string("Table 2 on the ") + (gpu ? "GPU" : "CPU") + ": " + std::to_string(setup.times.size()) + " frames at " +
       std::to_string(o.width) + "x" + std::to_string(o.height) + ", 1 primary + " + std::to_string(o.aoRays) + " AO + " +
       std::to_string(o.shadowRays) + " shadow rays per pixel");
   nlohmann::json runtime;
   runtime["device"] = gpu ? "cuda" : "cpu";
+  if (!gpu) runtime["layout"] = layoutName(setup.layout);
   runtime["frames"] = setup.times.size();
   runtime["width"] = o.width;
   runtime["height"] = o.height;
@@ -269,8 +254,17 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   Image picture;
   const uint32_t pictureFrame = static_cast<uint32_t>(setup.times.size() / 2);
   std::vector<RefitTrees> refits = {sah0, sahStar, tsah};
-  if (!segmentTrees.empty()) refits.push_back(segmented);
-  if (gpu) {
+  if (!segmentRuns.equal.trees.empty())
+    refits.push_back(setOf("tsah0-seg" + k, "T-SAH k=0 refit, " + k + " equal-time trees", segmentRuns.equal));
+  if (!segmentRuns.count.trees.empty())
+    refits.push_back(setOf("tsah0-count" + k, "T-SAH k=0 refit, " + k + " trees (count mode)", segmentRuns.count));
+  if (!segmentRuns.budget.trees.empty())
+    refits.push_back(setOf("tsah0-budget",
+                           "T-SAH k=0 refit, budget mode (" + std::to_string(segmentRuns.budget.trees.size()) + " trees)",
+                           segmentRuns.budget));
+  if (o.embreeOnly) {
+    runtime["skipped"] = "--embree-only";
+  } else if (gpu) {
     for (const RefitTrees& r : refits)
       runtime["methods"].push_back(toJson(runGpuRefit(a, r, setup, r.name == "tsah0" ? &picture : nullptr, pictureFrame)));
     for (const char* method : {"lbvh", "hlbvh-sah"})
@@ -287,7 +281,7 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
       runtime["methods"].push_back(toJson(m));
   }
   runtime["wall_s"] = secondsSince(start);
-  j["runtime"] = runtime;
+  if (!o.embreeOnly) j["runtime"] = runtime;
   if (picture.width > 0) {
     std::error_code ec;
     fs::create_directories(outDir / "images", ec);
@@ -363,9 +357,10 @@ nlohmann::json optionsJson(const BenchOptions& o) {
           {"frames", o.frames},     {"eval_frames", o.evalFrames}, {"trace_frames", o.traceFrames},
           {"width", o.width},       {"height", o.height},        {"ao_rays", o.aoRays},
           {"shadow_rays", o.shadowRays}, {"ground", o.ground},   {"max_leaf", o.maxLeaf},
-          {"ct", o.ct},             {"ci", o.ci},                {"segments", o.segments},
+          {"ct", o.ct},             {"ci", o.ci},                {"segments", o.segments},   {"budget", o.budget},
           {"threads", o.threads},   {"embree", o.embree},        {"convergence", o.convergence},
-          {"optimizer", o.optimizer}};
+          {"optimizer", o.optimizer},
+          {"layout", o.layout},     {"embree_only", o.embreeOnly}};
 }
 
 }  // namespace tsah::bench

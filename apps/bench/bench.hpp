@@ -7,7 +7,8 @@
 //                and maximum cost over the evaluation frames, the cost of every evaluation frame
 //   convergence  the T-SAH (k=0) optimization with Metropolis-Hastings, random and batch-sort
 //                node selection: cost after every batch against time (the paper's Figure 3)
-//   segments     K T-SAH trees for K equal-time parts versus one tree (the paper's BART Museum*)
+//   segments     K T-SAH trees for K equal-time parts (the paper's BART Museum*), K trees with split
+//                points chosen by the count mode, and the budget mode, versus one tree
 //   runtime      per-frame update + trace with the renderer's workload: refit of SAH0, SAH*, T-SAH
 //                and the K segment trees versus per-frame rebuilds (CPU: sweep and binned SAH;
 //                GPU: LBVH and HLBVH-SAH)
@@ -35,13 +36,17 @@ struct BenchOptions {
   bool ground = false;          // the analytic ground plane (the paper traces the mesh only)
   uint32_t maxLeaf = 8;
   float ct = 3.0f, ci = 2.0f;
-  uint32_t segments = 3;        // K of the segmented T-SAH (1: skip)
+  uint32_t segments = 3;        // K of the equal-time parts and of the count mode (1: skip)
+  double budget = 1.05;         // budget mode: factor of SAH-rebuild's cost per evaluation frame (0: skip)
   unsigned threads = 0;         // CPU threads (0: all cores)
   std::string optimizer = "sequential";  // optimizer of SAH*, SAH-rebuild and T-SAH: sequential | parallel
   bool embree = true;           // run the Embree peer when built with it (CPU device only)
+  bool embreeOnly = false;      // only the T-SAH tree and the toolkit-vs-Embree comparison (no Tables 1/2)
+  std::string layout = "auto";  // CPU tree layout of the runtime part: bvh2, bvh4, bvh8 or auto (the fastest)
   bool convergence = true;      // run the three node selections for the convergence plot
   double fps = 0.0;             // import: sampling rate of continuous animations (0: the file's own)
   std::string clip;             // import: the animation clip of a multi-clip model (empty: the first)
+  std::function<std::string(const std::string&)> resolveDataPath;  // import: scenes' "data:" paths
 };
 
 // Progress: `detail` messages are frequent (optimizer batches) and may be thinned out by the caller.

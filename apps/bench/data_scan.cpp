@@ -300,6 +300,22 @@ SceneSource explicitScene(const fs::path& input) {
   return s;
 }
 
+std::string resolveDataPath(const fs::path& dataFolder, const fs::path& cache, const std::string& rel) {
+  fs::path at = dataFolder;
+  const fs::path relative(rel);
+  for (auto part = relative.begin(); part != relative.end(); ++part) {
+    at /= *part;
+    std::error_code ec;
+    if (!fs::is_regular_file(at, ec)) continue;
+    std::string name = at.filename().string();
+    std::transform(name.begin(), name.end(), name.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    const bool last = std::next(part) == relative.end();
+    if ((!last && isTarArchive(name)) || (last && endsWith(name, ".xz") && !isTarArchive(name)))
+      at = unpackArchive(at, cache);
+  }
+  return at.string();
+}
+
 fs::path defaultDataFolder(const std::string& given, const std::string& sourceDir) {
   if (!given.empty()) return given;
   if (const char* env = std::getenv("TSAH_DATA_DIR"); env && *env) return env;

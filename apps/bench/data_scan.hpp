@@ -61,6 +61,13 @@ bool isFrameSequenceFolder(const std::filesystem::path& folder);
 std::filesystem::path unpackArchive(const std::filesystem::path& archive, const std::filesystem::path& cache,
                                     const std::function<void()>& onUnpack = {});
 
+// Resolves a scene file's "data:REL" object path (docs/scenes.md) against the data folder: REL
+// may pass through an archive as if it were a folder (sequences/horse-gallop.tar.xz/horse-gallop)
+// or end at a compressed file (static/bunny00.off.xz); those are unpacked into `cache` once
+// (unpackArchive), never into the data folder.
+std::string resolveDataPath(const std::filesystem::path& dataFolder, const std::filesystem::path& cache,
+                            const std::string& rel);
+
 // A scene for an input named on the command line (a file or folder anim::load reads).
 SceneSource explicitScene(const std::filesystem::path& input);
 

@@ -14,7 +14,6 @@ RayBatch makeRayBatch(const CpuRuntime& runtime, const Camera& camera, const Sce
   const uint32_t width = settings.width, height = settings.height;
   const std::size_t pixels = std::size_t(width) * height;
   const CameraRays cam = cameraRays(camera, width, height);
-  const BvhView bvh = runtime.view();
   RayBatch batch;
   batch.primary.resize(pixels);
   std::vector<Surface> surfaces(pixels);
@@ -23,8 +22,8 @@ RayBatch makeRayBatch(const CpuRuntime& runtime, const Camera& camera, const Sce
       for (uint32_t x = 0; x < width; ++x) {
         const std::size_t i = y * width + x;
         batch.primary[i] = cam.ray(float(x) + 0.5f, float(y) + 0.5f);
-        surfaces[i] = primarySurface(batch.primary[i], closestHit(bvh, batch.primary[i]), bvh.indices, bvh.positions,
-                                     lighting);
+        surfaces[i] = primarySurface(batch.primary[i], runtime.closestHit(batch.primary[i]), runtime.indices().data(),
+                                     runtime.positions().data(), lighting);
       }
   });
   // Secondary rays in pixel order: AO rays at fixed offsets, shadow rays gathered per row.
@@ -87,12 +86,10 @@ BatchTrace traceBatch(const CpuRuntime& runtime, const RayBatch& batch, const Ba
 BatchTracer toolkitTracer(const CpuRuntime& runtime) {
   BatchTracer tracer;
   tracer.closest = [&runtime](const std::vector<Ray>& rays, std::size_t first, std::size_t count, uint64_t& hits) {
-    const BvhView bvh = runtime.view();
-    for (std::size_t i = first; i < first + count; ++i) hits += closestHit(bvh, rays[i]).valid() ? 1u : 0u;
+    for (std::size_t i = first; i < first + count; ++i) hits += runtime.closestHit(rays[i]).valid() ? 1u : 0u;
   };
   tracer.occluded = [&runtime](const std::vector<Ray>& rays, std::size_t first, std::size_t count, uint64_t& occluded) {
-    const BvhView bvh = runtime.view();
-    for (std::size_t i = first; i < first + count; ++i) occluded += anyHit(bvh, rays[i]) ? 1u : 0u;
+    for (std::size_t i = first; i < first + count; ++i) occluded += runtime.anyHit(rays[i]) ? 1u : 0u;
   };
   return tracer;
 }

@@ -47,7 +47,7 @@ struct BatchTracer {
 // alone (wall clock).
 BatchTrace traceBatch(const CpuRuntime& runtime, const RayBatch& batch, const BatchTracer& tracer);
 
-// The toolkit's own tracer: closestHit / anyHit on the runtime's current tree (tsah/traversal.hpp).
+// The toolkit's own tracer: CpuRuntime::closestHit / anyHit in the runtime's layout.
 BatchTracer toolkitTracer(const CpuRuntime& runtime);
 
 }  // namespace tsah::bench

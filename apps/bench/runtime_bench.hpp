@@ -13,12 +13,13 @@
 #include <nlohmann/json.hpp>
 
 #include "anim/animation.hpp"
-#include "bench/segments.hpp"
 #include "tsah/binned_sah_builder.hpp"
 #include "tsah/bvh.hpp"
 #include "tsah/camera.hpp"
+#include "tsah/cpu_runtime.hpp"
 #include "tsah/image.hpp"
 #include "tsah/renderer.hpp"
+#include "tsah/tree_set.hpp"
 
 namespace tsah::bench {
 
@@ -29,6 +30,8 @@ struct RuntimeSetup {
   SceneLighting lighting;
   RenderSettings settings;                       // image size, AO/shadow rays, seed (frame is set per frame)
   unsigned threads = 0;                          // CPU worker threads (0: all cores)
+  CpuLayout layout = fastestLayout();            // CPU: the layout every refit and rebuild traces
+  WideCollapser::Config collapse;                // CPU wide layouts: cost constants, k, leaf size
   std::function<void(const std::string&)> progress;
 };
 
@@ -56,12 +59,16 @@ struct RuntimeMethod {
 // total_ms, mrays_per_s).
 nlohmann::json toJson(const RuntimeMethod& method);
 
-// Trees a refit method traces: one tree for the whole animation, or one per segment.
+// Trees a refit method traces: one tree for the whole animation, or a tree set (one runtime that
+// refits the tree of each frame's part, tsah::treeIndexAt).
 struct RefitTrees {
   std::string name, label;
-  std::vector<const Bvh*> trees;      // one, or one per segment
-  std::vector<TimeSegment> segments;  // empty for a single tree, else one per tree
+  std::vector<const Bvh*> trees;   // one, or one per part
+  std::vector<TimeRange> ranges;   // empty for a single tree, else each tree's time range
 };
+
+// The trees as a tsah::TreeSet (a single tree gets the animation's range).
+TreeSet treeSetOf(const RefitTrees& trees, const anim::Animation& animation);
 
 enum class CpuRebuild { Sweep, Binned };
 
@@ -80,11 +87,13 @@ std::vector<RuntimeMethod> runCpuMethods(const anim::Animation& animation, const
                                          const CostModel& cost, uint32_t maxLeaf, const RuntimeSetup& setup,
                                          Image* image = nullptr, std::size_t imageMethod = 0, uint32_t imageFrame = 0);
 
-// CPU peer: the toolkit's CPU runtime refitting `tree` against Embree (a rebuild per frame with
-// medium and high quality, and refit), all on the same frames and the same rays (made once per
-// frame with makeRayBatch from the toolkit's refitted tree). The first method is the toolkit's
-// (name given), then one per Embree mode; each method's extra holds how many primary hits, AO and
-// shadow occlusions differ from the toolkit's. Empty when the bench was built without Embree.
+// CPU peer: the toolkit's CPU runtime refitting `tree`, in every layout the processor supports
+// (setup.layout first, then bvh8, bvh4, bvh2: methods NAME-bvhN, extra.layout describing the tree
+// and its kernels), against Embree (a rebuild per frame with medium and high quality, and refit),
+// all on the same frames and the same rays (made once per frame with makeRayBatch from the
+// toolkit's refitted tree in setup.layout). Every method after the first has in its extra how
+// many primary hits, AO and shadow occlusions differ from the first's. Empty when the bench was
+// built without Embree.
 std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& animation, const Bvh& tree,
                                                const std::string& name, const std::string& label,
                                                const RuntimeSetup& setup);

@@ -36,12 +36,44 @@ void report(const RuntimeSetup& setup, const std::string& label, std::size_t fra
 }
 #endif
 
-std::unique_ptr<CpuRuntime> makeRuntime(const anim::Animation& a, const Bvh& tree, unsigned threads) {
+std::unique_ptr<CpuRuntime> makeRuntime(const anim::Animation& a, const Bvh& tree, const RuntimeSetup& setup,
+                                        CpuLayout layout) {
+  CpuRuntime::Config c(setup.threads);
+  c.layout = layout;
+  c.collapse = setup.collapse;
   return std::make_unique<CpuRuntime>(flattenBvh(tree), std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
-                                      a.vertexCount(), CpuRuntime::Config{threads});
+                                      a.vertexCount(), c);
+}
+
+// The toolkit's layouts for the Embree comparison: the default (fastest) one first.
+std::vector<CpuLayout> comparedLayouts(CpuLayout first) {
+  std::vector<CpuLayout> out{first};
+  for (CpuLayout l : {CpuLayout::Bvh8, CpuLayout::Bvh4, CpuLayout::Bvh2})
+    if (l != first && layoutSupported(l)) out.push_back(l);
+  return out;
+}
+
+nlohmann::json layoutJson(const CpuRuntime& rt) {
+  const LayoutInfo& l = rt.layoutInfo();
+  nlohmann::json j = {{"layout", layoutName(l.layout)},
+                      {"interior_nodes", l.interiorNodes},
+                      {"leaves", l.leaves},
+                      {"depth", l.depth},
+                      {"tsah_cost", l.layoutCost},
+                      {"binary_tsah_cost", l.binaryCost}};
+  if (l.layout != CpuLayout::Bvh2) j["isa"] = isaName(l.isa);
+  return j;
 }
 
 }  // namespace
+
+TreeSet treeSetOf(const RefitTrees& trees, const anim::Animation& a) {
+  TreeSet set;
+  for (const Bvh* tree : trees.trees) set.trees.push_back(flattenBvh(*tree));
+  set.ranges = trees.ranges;
+  if (set.ranges.empty()) set.ranges = {{a.startTime(), a.endTime()}};
+  return set;
+}
 
 nlohmann::json toJson(const RuntimeMethod& m) {
   nlohmann::json j;
@@ -89,8 +121,7 @@ namespace {
 // One method's state during the frame-by-frame run.
 struct CpuRunner {
   RuntimeMethod result;
-  std::vector<std::unique_ptr<CpuRuntime>> runtimes;  // one, or one per segment
-  std::vector<TimeSegment> segments;
+  std::unique_ptr<CpuRuntime> runtime;                // refit: the tree or tree set; rebuild: the initial tree
   CpuRuntime::TreeBuilder builder;                    // set for rebuilds
   std::vector<float> positions;
   Image scratch;
@@ -121,14 +152,19 @@ std::vector<RuntimeMethod> runCpuMethods(const anim::Animation& a, const std::ve
     const CpuMethodSpec& spec = specs[m];
     CpuRunner& r = runners[m];
     r.result = {spec.trees.name, spec.trees.label, spec.rebuild ? "rebuild" : "refit", {}, nlohmann::json::object()};
-    for (const Bvh* tree : spec.trees.trees) {
-      r.runtimes.push_back(makeRuntime(a, *tree, setup.threads));
-      if (spec.rebuild) break;  // a rebuild replaces the tree anyway
+    if (spec.rebuild) {
+      r.runtime = makeRuntime(a, *spec.trees.trees.front(), setup, setup.layout);  // a rebuild replaces it anyway
+    } else {
+      CpuRuntime::Config c(setup.threads);
+      c.layout = setup.layout;
+      c.collapse = setup.collapse;
+      r.runtime = std::make_unique<CpuRuntime>(treeSetOf(spec.trees, a),
+                                               std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
+                                               a.vertexCount(), c);
     }
-    r.segments = spec.rebuild ? std::vector<TimeSegment>{} : spec.trees.segments;
     if (spec.rebuild) r.builder = rebuildBuilder(*spec.rebuild, cost, maxLeaf);
-    r.positions.resize(std::size_t(a.vertexCount()) * 3);
-    startWorkers(*r.runtimes.front());
+    r.positions = a.positionsAt(a.startTime());  // static vertices once; each frame writes the moving ones
+    startWorkers(*r.runtime);
   }
   RenderSettings settings = setup.settings;
   for (std::size_t f = 0; f < setup.times.size(); ++f) {
@@ -139,15 +175,17 @@ std::vector<RuntimeMethod> runCpuMethods(const anim::Animation& a, const std::ve
     for (std::size_t k = 0; k < runners.size(); ++k) {
       const std::size_t m = (k + f) % runners.size();  // rotated: no method is always first or last
       CpuRunner& r = runners[m];
-      CpuRuntime& rt = *r.runtimes[r.segments.empty() ? 0 : segmentOf(r.segments, t)];
+      CpuRuntime& rt = *r.runtime;
       FrameTiming ft;
       ft.time = t;
       const auto start = std::chrono::steady_clock::now();
-      a.positionsAt(t, r.positions);
-      if (r.builder)
+      a.movingPositionsAt(t, r.positions);
+      if (r.builder) {
         rt.rebuild(r.positions, r.builder);
-      else
+      } else {
+        rt.selectTreeAt(t);  // a tree set: the tree of this frame's part
         rt.update(r.positions);
+      }
       ft.updateMs = msSince(start);
       Image& target = image && m == imageMethod && f == imageFrame ? *image : r.scratch;
       ft.rays = renderFrame(rt, setup.camera(t), setup.lighting, settings, target);
@@ -165,14 +203,21 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const B
                                                const std::string& label, const RuntimeSetup& setup) {
   std::vector<RuntimeMethod> methods;
 #if TSAH_HAVE_EMBREE
-  auto rt = makeRuntime(a, tree, setup.threads);
-  startWorkers(*rt);
-  const BatchTracer toolkit = toolkitTracer(*rt);
+  // One toolkit runtime per layout (the default first: the rays are made with it and every other
+  // method's results are compared with its), then one Embree peer per mode.
+  std::vector<std::unique_ptr<CpuRuntime>> own;
+  for (CpuLayout layout : comparedLayouts(setup.layout)) {
+    own.push_back(makeRuntime(a, tree, setup, layout));
+    const LayoutInfo& l = own.back()->layoutInfo();
+    const std::string kernels = l.layout == CpuLayout::Bvh2 ? "" : std::string(", ") + isaName(l.isa);
+    methods.push_back({name + "-" + layoutName(layout), label + ", " + layoutName(layout) + kernels, "refit", {},
+                       {{"layout", layoutJson(*own.back())}, {"default_layout", layout == setup.layout}}});
+  }
+  startWorkers(*own.front());
   using Mode = EmbreePeer::Mode;
   std::vector<std::unique_ptr<EmbreePeer>> peers;
-  methods.push_back({name, label, "refit", {}, nlohmann::json::object()});
   for (Mode mode : {Mode::RebuildMedium, Mode::RebuildHigh, Mode::Refit}) {
-    peers.push_back(std::make_unique<EmbreePeer>(a.indices(), a.vertexCount(), mode, rt->threadCount()));
+    peers.push_back(std::make_unique<EmbreePeer>(a.indices(), a.vertexCount(), mode, own.front()->threadCount()));
     const std::string quality = mode == Mode::RebuildMedium ? "medium" : mode == Mode::RebuildHigh ? "high" : "refit";
     methods.push_back({EmbreePeer::modeName(mode),
                        mode == Mode::Refit ? "Embree refit" : "Embree rebuild (" + quality + ")",
@@ -180,9 +225,10 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const B
                        {},
                        {{"build_quality", quality}}});
   }
-  // Differences in what the rays found, Embree vs the toolkit, summed over the frames.
-  std::vector<std::array<int64_t, 3>> differences(peers.size(), {0, 0, 0});
-  std::vector<float> positions(std::size_t(a.vertexCount()) * 3);
+  // Differences in what the rays found, each method vs the default toolkit layout, over the frames.
+  const std::size_t others = own.size() - 1 + peers.size();
+  std::vector<std::array<int64_t, 3>> differences(others, {0, 0, 0});
+  std::vector<float> positions = a.positionsAt(a.startTime());  // static vertices once
   RenderSettings settings = setup.settings;
   for (std::size_t f = 0; f < setup.times.size(); ++f) {
     report(setup, "toolkit vs Embree", f);
@@ -190,39 +236,47 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const B
     settings.frame = static_cast<uint32_t>(f);
     // Every method's update includes the same interpolation of the frame's vertices.
     auto start = std::chrono::steady_clock::now();
-    a.positionsAt(t, positions);
+    a.movingPositionsAt(t, positions);
     const double interpolateMs = msSince(start);
 
-    // The toolkit: refit + Woop, then the batch (rays made from its primary hits, untimed).
-    FrameTiming own;
-    own.time = t;
-    start = std::chrono::steady_clock::now();
-    rt->update(positions);
-    own.updateMs = interpolateMs + msSince(start);
-    const RayBatch batch = makeRayBatch(*rt, setup.camera(t), setup.lighting, settings);
-    const BatchTrace ownTrace = traceBatch(*rt, batch, toolkit);
-    own.rays = {ownTrace.primary, ownTrace.ao, ownTrace.shadow, 0.0};
-    own.traceMs = ownTrace.total().ms;
-    own.totalMs = own.updateMs + own.traceMs;
-    methods[0].frames.push_back(own);
-
-    for (std::size_t p = 0; p < peers.size(); ++p) {
+    // The toolkit: refit + Woop per layout; the batch is made from the default layout's primary
+    // hits (untimed), then every method traces it.
+    std::vector<double> updateMs(own.size());
+    for (std::size_t k = 0; k < own.size(); ++k) {
+      start = std::chrono::steady_clock::now();
+      own[k]->update(positions);
+      updateMs[k] = interpolateMs + msSince(start);
+    }
+    const RayBatch batch = makeRayBatch(*own.front(), setup.camera(t), setup.lighting, settings);
+    BatchTrace reference;
+    for (std::size_t m = 0; m < own.size() + peers.size(); ++m) {
       FrameTiming ft;
       ft.time = t;
-      ft.updateMs = interpolateMs + peers[p]->update(positions);
-      const BatchTrace trace = traceBatch(*rt, batch, peers[p]->tracer());
+      BatchTrace trace;
+      if (m < own.size()) {
+        ft.updateMs = updateMs[m];
+        trace = traceBatch(*own.front(), batch, toolkitTracer(*own[m]));
+      } else {
+        ft.updateMs = interpolateMs + peers[m - own.size()]->update(positions);
+        trace = traceBatch(*own.front(), batch, peers[m - own.size()]->tracer());
+      }
       ft.rays = {trace.primary, trace.ao, trace.shadow, 0.0};
       ft.traceMs = trace.total().ms;
       ft.totalMs = ft.updateMs + ft.traceMs;
-      methods[p + 1].frames.push_back(ft);
-      differences[p][0] += int64_t(trace.primaryHits) - int64_t(ownTrace.primaryHits);
-      differences[p][1] += int64_t(trace.aoOccluded) - int64_t(ownTrace.aoOccluded);
-      differences[p][2] += int64_t(trace.shadowOccluded) - int64_t(ownTrace.shadowOccluded);
+      methods[m].frames.push_back(ft);
+      if (m == 0) {
+        reference = trace;
+        continue;
+      }
+      differences[m - 1][0] += int64_t(trace.primaryHits) - int64_t(reference.primaryHits);
+      differences[m - 1][1] += int64_t(trace.aoOccluded) - int64_t(reference.aoOccluded);
+      differences[m - 1][2] += int64_t(trace.shadowOccluded) - int64_t(reference.shadowOccluded);
     }
   }
-  for (std::size_t p = 0; p < peers.size(); ++p)
-    methods[p + 1].extra["hits_minus_toolkit"] = {
-        {"primary", differences[p][0]}, {"ao_occluded", differences[p][1]}, {"shadow_occluded", differences[p][2]}};
+  for (std::size_t m = 1; m < methods.size(); ++m)
+    methods[m].extra["hits_minus_toolkit"] = {{"primary", differences[m - 1][0]},
+                                              {"ao_occluded", differences[m - 1][1]},
+                                              {"shadow_occluded", differences[m - 1][2]}};
 #else
   (void)a;
   (void)tree;

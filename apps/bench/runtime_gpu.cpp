@@ -54,19 +54,21 @@ nlohmann::json gpuJson() {
 RuntimeMethod runGpuRefit(const anim::Animation& a, const RefitTrees& trees, const RuntimeSetup& setup, Image* image,
                           uint32_t imageFrame) {
   requireDevice();
-  std::vector<std::unique_ptr<cuda::GpuRuntime>> runtimes;
-  for (const Bvh* tree : trees.trees) runtimes.push_back(std::make_unique<cuda::GpuRuntime>(flattenBvh(*tree), a));
+  // One runtime with every tree uploaded once; updateAt refits the tree of the frame's part.
+  const TreeSet set = treeSetOf(trees, a);
+  cuda::GpuRuntime gpu(set, a, cuda::GpuRuntime::Config{});
   RenderSettings settings = setup.settings;
-  // Warm-up (untimed): the first update and render of a runtime capture its CUDA graphs.
-  for (auto& gpu : runtimes) {
-    gpu->updateAt(setup.times.front());
-    cuda::renderFrameGpu(*gpu, setup.camera(setup.times.front()), setup.lighting, settings, nullptr, nullptr);
+  // Warm-up (untimed): the first update of each tree captures its CUDA graph, the first render the
+  // renderer's; a time inside each tree's part reaches every tree.
+  for (uint32_t s = 0; s < set.size(); ++s) {
+    const double t = s == 0 ? setup.times.front() : switchTime(set.ranges, s - 1);
+    gpu.updateAt(t);
+    cuda::renderFrameGpu(gpu, setup.camera(t), setup.lighting, settings, nullptr, nullptr);
   }
   RuntimeMethod m{trees.name, trees.label, "refit", {}, nlohmann::json::object()};
   for (std::size_t f = 0; f < setup.times.size(); ++f) {
     report(setup, trees.label, f);
     const double t = setup.times[f];
-    cuda::GpuRuntime& gpu = *runtimes[trees.segments.empty() ? 0 : segmentOf(trees.segments, t)];
     FrameTiming ft;
     ft.time = t;
     ft.updateMs = gpu.updateAt(t).totalMs();

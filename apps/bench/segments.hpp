@@ -1,48 +1,43 @@
 #pragma once
-// Segmenting an animation (the paper's BART Museum* experiment): K trees, each optimized for one of
-// K consecutive equal-time parts of the animation; a frame is traced with the tree of its part.
+// The bench's segmentation experiment (tsah/segmentation.hpp does the work): for one scene, T-SAH
+// k=0 with K equal-time parts (the paper's BART Museum*), the count mode with the same K (split
+// points chosen by the library) and the budget mode (the fewest trees keeping every evaluation
+// frame within budget x the SAH-rebuild cost of Table 1), against one tree and the per-frame
+// rebuild: number of trees, split times, build and search time, average and peak cost.
 #include <cstdint>
+#include <functional>
 #include <span>
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "anim/animation.hpp"
 #include "tsah/baselines.hpp"
+#include "tsah/segmentation.hpp"
 
 namespace tsah::bench {
 
-struct TimeSegment {
-  double start = 0.0, end = 0.0;
+struct SegmentRuns {
+  SegmentationResult equal, count, budget;  // empty (no trees) when skipped
 };
 
-// count consecutive parts of [start, end] of equal length (the last ends exactly at end). Throws
-// std::invalid_argument when count is 0 or end < start.
-std::vector<TimeSegment> equalTimeSegments(double start, double end, uint32_t count);
-
-// The part that time t belongs to: the last one that starts at or before t (a time on a boundary
-// belongs to the later part); times outside [first start, last end] go to the first / last part.
-uint32_t segmentOf(std::span<const TimeSegment> segments, double t);
-
-// The file of part `index` of a multi-tree output: OUT.tbvh -> OUT_seg<index>.tbvh (the suffix goes
-// before the extension; a name without extension gets it appended).
-std::string segmentPath(const std::string& output, uint32_t index);
-
-struct SegmentTree {
-  TimeSegment segment;
-  Bvh bvh;                                  // boxes of the part's representative frames
-  uint32_t representativeFrames = 0;
-  double buildSeconds = 0.0;                // wall time of this part's build
-  InsertionOptimizer::Result optimization;  // T-SAH: the optimizer's report (bvh member empty)
+struct SegmentExperiment {
+  uint32_t count = 3;                // K of the equal-time parts and of the count mode (1: skip both)
+  double budget = 1.05;              // the budget mode's factor (0: skip)
+  uint32_t frames = 5;               // representative frames per part
+  uint32_t evalFrames = 50;
+  std::vector<double> rebuildCosts;  // SAH-rebuild at each evaluation frame: the budget's reference
+  std::vector<double> oneTreeCosts;  // the single T-SAH k=0 tree at each evaluation frame
+  double oneTreeBuildSeconds = 0.0;
 };
 
-// One tree per part: method (any single-tree method) built over `frames` representative frames
-// uniform in time within the part (both ends included). Throws std::invalid_argument for a method
-// that is not a single tree (rebuild) and when the animation has fewer than two keyframes.
-std::vector<SegmentTree> buildSegmentTrees(const anim::Animation& animation, uint32_t segmentCount, uint32_t frames,
-                                           const MethodSpec& method, const BaselineConfig& config);
-
-// Eq. 1 at each of `times`, every frame evaluated with the tree of its part (refitted to it).
-std::vector<double> evaluateSegmentTrees(const anim::Animation& animation, std::span<const SegmentTree> trees,
-                                         std::span<const double> times, const CostModel& cost, unsigned threads = 0);
+// Runs what `e` asks for; writes the "segments" JSON of the scene into `out` (keys: count, parts,
+// build_s, wall_s, one_tree, k_trees for the equal-time parts; count_mode and budget_mode with
+// trees, split_times, build_s, search_s, candidate_trees, average, maximum, per_frame and, for the
+// budget, ratios to the rebuild).
+SegmentRuns runSegmentExperiment(const anim::Animation& animation, const SegmentExperiment& e,
+                                 const BaselineConfig& config, nlohmann::json& out,
+                                 const std::function<void(const std::string&)>& say);
 
 }  // namespace tsah::bench

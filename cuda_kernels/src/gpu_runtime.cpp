@@ -22,19 +22,51 @@ RebuildMethod parseRebuildMethod(std::string_view name) {
   throw anim::Error("unknown GPU rebuild method '" + std::string(name) + "' (expected lbvh or hlbvh-sah)");
 }
 
-GpuRuntime::Impl::Impl(const FlatBvh& tree, const anim::Animation& animation, Config cfg) : config(cfg) {
+GpuRuntime::Impl::Impl(const TreeSet& set, const anim::Animation& animation, Config cfg) : config(cfg) {
   triangles = animation.triangleCount();
   vertices = animation.vertexCount();
   if (triangles == 0) throw anim::Error("GPU runtime: the animation has no triangles");
   if (animation.keyframeCount() == 0) throw anim::Error("GPU runtime: the animation has no keyframes");
-  if (tree.triangleCount() != triangles)
-    throw anim::Error("GPU runtime: the tree holds " + std::to_string(tree.triangleCount()) +
-                      " triangles, the animation " + std::to_string(triangles));
+  if (set.trees.empty() || set.ranges.size() != set.trees.size())
+    throw anim::Error("GPU runtime: the tree set holds no trees (or not one time range per tree)");
   const auto idx = animation.indices();
   for (uint32_t v : idx)
     if (v >= vertices) throw anim::Error("GPU runtime: a triangle refers to a vertex out of range");
 
+  CUDA_CHECK(cudaSetDevice(config.device));
+  device = describeDevice(config.device);
+  CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
+  events.create(16);
+  void* pinned = nullptr;
+  CUDA_CHECK(cudaHostAlloc(&pinned, sizeof(detail::FrameParams), cudaHostAllocDefault));
+  hostParams = new (pinned) detail::FrameParams{};
+  frameParams.resize(1);
+  times.assign(animation.times().begin(), animation.times().end());
+  // Only the moving vertices are keyed on the device; the static ones are uploaded once into
+  // `positions` and never written by the per-frame interpolation.
+  movingVertices = animation.movingVertexCount();
+  keyframes = DeviceBuffer<float>(animation.motion(), stream);
+  movingIds = DeviceBuffer<uint32_t>(animation.movingVertices(), stream);
+  hostRest.assign(animation.restPositions().begin(), animation.restPositions().end());
+  indices = DeviceBuffer<uint32_t>(idx, stream);
+  hostIndices.assign(idx.begin(), idx.end());
+  positions.resize(std::size_t(vertices) * 3);
+  if (!hostRest.empty()) positions.upload(std::span<const float>(hostRest), stream);
+  trees.reserve(set.trees.size());
+  for (const FlatBvh& t : set.trees) uploadTree(t);
+  ranges = set.ranges;
+  woop.resize(triangles);
+  words.resize(8);
+  CUDA_CHECK(cudaStreamSynchronize(stream));
+}
+
+void GpuRuntime::Impl::uploadTree(const FlatBvh& tree) {
+  if (tree.triangleCount() != triangles)
+    throw anim::Error("GPU runtime: the tree holds " + std::to_string(tree.triangleCount()) +
+                      " triangles, the animation " + std::to_string(triangles));
+  DeviceTree& d = trees.emplace_back();
   // Keep frame 0's block only, as CpuRuntime does: the boxes are recomputed by every update.
+  FlatBvh& topology = d.topology;
   topology.frameCount = 1;
   topology.interiorCount = tree.interiorCount;
   topology.leafCount = tree.leafCount;
@@ -69,40 +101,26 @@ GpuRuntime::Impl::Impl(const FlatBvh& tree, const anim::Animation& animation, Co
       }
     }
   }
-
-  CUDA_CHECK(cudaSetDevice(config.device));
-  device = describeDevice(config.device);
-  CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
-  events.create(16);
-  void* pinned = nullptr;
-  CUDA_CHECK(cudaHostAlloc(&pinned, sizeof(detail::FrameParams), cudaHostAllocDefault));
-  hostParams = new (pinned) detail::FrameParams{};
-  frameParams.resize(1);
-  times.assign(animation.times().begin(), animation.times().end());
-  keyframes = DeviceBuffer<float>(animation.allPositions(), stream);
-  indices = DeviceBuffer<uint32_t>(idx, stream);
-  hostIndices.assign(idx.begin(), idx.end());
-  positions.resize(std::size_t(vertices) * 3);
-  nodes = DeviceBuffer<GpuBvhNode>(std::span<const GpuBvhNode>(topology.nodes), stream);
-  nodeParent = DeviceBuffer<uint32_t>(std::span<const uint32_t>(parent), stream);
-  counters.resize(topology.interiorCount);
-  triIndex = DeviceBuffer<uint32_t>(std::span<const uint32_t>(topology.triIndex), stream);
-  leaves = DeviceBuffer<detail::LeafRecord>(std::span<const detail::LeafRecord>(leafRecords), stream);
+  d.nodes = DeviceBuffer<GpuBvhNode>(std::span<const GpuBvhNode>(topology.nodes), stream);
+  d.nodeParent = DeviceBuffer<uint32_t>(std::span<const uint32_t>(parent), stream);
+  d.counters.resize(topology.interiorCount);
+  d.triIndex = DeviceBuffer<uint32_t>(std::span<const uint32_t>(topology.triIndex), stream);
+  d.leaves = DeviceBuffer<detail::LeafRecord>(std::span<const detail::LeafRecord>(leafRecords), stream);
   detail::RootInfo r;
   r.box = topology.rootBoxes[0];
   r.ref = topology.rootRef;
   r.count = topology.rootCount;
   r.interiorCount = topology.interiorCount;
   r.depth = topology.depth;
-  root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&r, 1), stream);
-  woop.resize(triangles);
-  words.resize(8);
+  d.root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&r, 1), stream);
+  // The host vectors above are freed when this returns: finish their uploads first.
   CUDA_CHECK(cudaStreamSynchronize(stream));
 }
 
 GpuRuntime::Impl::~Impl() {
   if (stream) cudaStreamSynchronize(stream);
-  if (updateGraph) cudaGraphExecDestroy(updateGraph);
+  for (const DeviceTree& t : trees)
+    if (t.updateGraph) cudaGraphExecDestroy(t.updateGraph);
   for (const auto& g : rebuildGraphs) cudaGraphExecDestroy(g.exec);
   if (hostParams) cudaFreeHost(hostParams);
   if (stream) cudaStreamDestroy(stream);
@@ -130,7 +148,7 @@ cudaGraphExec_t GpuRuntime::Impl::capture(Enqueue&& enqueue) {
 
 void GpuRuntime::Impl::setFrame(double time) {
   const auto [k, alpha] = anim::keyframeBlend(times, time);
-  const uint64_t perFrame = uint64_t(vertices) * 3;
+  const uint64_t perFrame = uint64_t(movingVertices) * 3;
   hostParams->a = k * perFrame;
   hostParams->b = (alpha == 0.0f ? k : k + 1) * perFrame;
   hostParams->alpha = alpha;
@@ -140,9 +158,15 @@ void GpuRuntime::Impl::enqueueInterpolation() {
   events.record(0, stream);
   CUDA_CHECK(cudaMemcpyAsync(frameParams.data(), hostParams, sizeof(detail::FrameParams), cudaMemcpyHostToDevice,
                              stream));
-  detail::launchInterpolateFrame(keyframes.data(), frameParams.data(), positions.data(), std::size_t(vertices) * 3,
-                                 stream);
+  detail::launchInterpolateFrame(keyframes.data(), movingIds.size() ? movingIds.data() : nullptr, frameParams.data(),
+                                 positions.data(), movingVertices, stream);
   events.record(1, stream);
+}
+
+void GpuRuntime::Impl::restoreStaticPositions() {
+  if (restInPlace) return;
+  if (!hostRest.empty()) positions.upload(std::span<const float>(hostRest), stream);
+  restInPlace = true;
 }
 
 void GpuRuntime::Impl::buildVertexTriangles() {
@@ -159,12 +183,12 @@ void GpuRuntime::Impl::buildVertexTriangles() {
 
 detail::TraceScene GpuRuntime::Impl::scene() const {
   detail::TraceScene s;
-  s.nodes = tracingRebuilt ? rebuilder->nodes() : nodes.data();
+  s.nodes = tracingRebuilt ? rebuilder->nodes() : tree().nodes.data();
   s.woop = woop.data();
-  s.triIndex = tracingRebuilt ? rebuilder->triIndex() : triIndex.data();
+  s.triIndex = tracingRebuilt ? rebuilder->triIndex() : tree().triIndex.data();
   s.indices = indices.data();
   s.positions = positions.data();
-  s.root = tracingRebuilt ? rebuilder->root() : root.data();
+  s.root = tracingRebuilt ? rebuilder->root() : tree().root.data();
   return s;
 }
 
@@ -174,11 +198,12 @@ void GpuRuntime::Impl::requireTraceable() const {
 }
 
 void GpuRuntime::Impl::enqueueRefitAndWoop() {
-  counters.fillBytes(0, stream);
-  detail::launchRefit(nodes.data(), nodeParent.data(), leaves.data(), uint32_t(leaves.size()), triIndex.data(),
-                      indices.data(), positions.data(), counters.data(), root.data(), stream);
+  DeviceTree& t = tree();
+  t.counters.fillBytes(0, stream);
+  detail::launchRefit(t.nodes.data(), t.nodeParent.data(), t.leaves.data(), uint32_t(t.leaves.size()),
+                      t.triIndex.data(), indices.data(), positions.data(), t.counters.data(), t.root.data(), stream);
   events.record(2, stream);
-  detail::launchWoop(triIndex.data(), triangles, indices.data(), positions.data(), woop.data(), stream);
+  detail::launchWoop(t.triIndex.data(), triangles, indices.data(), positions.data(), woop.data(), stream);
   events.record(3, stream);
 }
 
@@ -193,22 +218,47 @@ UpdateTimings GpuRuntime::Impl::finishUpdate() {
   return timings;
 }
 
+namespace {
+
+TreeSet setOfOne(const FlatBvh& tree, const anim::Animation& animation) {
+  TreeSet set;
+  set.trees = {tree};
+  set.ranges = {{animation.startTime(), animation.endTime()}};
+  return set;
+}
+
+}  // namespace
+
 GpuRuntime::GpuRuntime(const FlatBvh& tree, const anim::Animation& animation, Config config)
-    : impl_(std::make_unique<Impl>(tree, animation, config)) {}
+    : impl_(std::make_unique<Impl>(setOfOne(tree, animation), animation, config)) {}
+GpuRuntime::GpuRuntime(const TreeSet& set, const anim::Animation& animation, Config config)
+    : impl_(std::make_unique<Impl>(set, animation, config)) {}
 GpuRuntime::GpuRuntime(const FlatBvh& tree, const anim::Animation& animation)
     : GpuRuntime(tree, animation, Config{}) {}
 GpuRuntime::~GpuRuntime() = default;
 
+uint32_t GpuRuntime::selectTreeAt(double time) {
+  Impl& m = *impl_;
+  m.current = treeIndexAt(m.ranges, time);
+  return m.current;
+}
+
+uint32_t GpuRuntime::treeCount() const { return static_cast<uint32_t>(impl_->trees.size()); }
+uint32_t GpuRuntime::currentTree() const { return impl_->current; }
+
 UpdateTimings GpuRuntime::updateAt(double time) {
   Impl& m = *impl_;
+  m.current = treeIndexAt(m.ranges, time);
   m.setFrame(time);
+  m.restoreStaticPositions();
   auto enqueue = [&] {
     m.enqueueInterpolation();
     m.enqueueRefitAndWoop();
   };
   if (m.config.useGraphs) {
-    if (!m.updateGraph) m.updateGraph = m.capture(enqueue);
-    CUDA_CHECK(cudaGraphLaunch(m.updateGraph, m.stream));
+    cudaGraphExec_t& graph = m.tree().updateGraph;
+    if (!graph) graph = m.capture(enqueue);
+    CUDA_CHECK(cudaGraphLaunch(graph, m.stream));
   } else {
     enqueue();
   }
@@ -222,6 +272,7 @@ UpdateTimings GpuRuntime::update(std::span<const float> positions) {
                       std::to_string(std::size_t(m.vertices) * 3));
   m.events.record(0, m.stream);
   m.positions.upload(positions, m.stream);
+  m.restInPlace = false;
   m.events.record(1, m.stream);
   m.enqueueRefitAndWoop();
   return m.finishUpdate();
@@ -241,6 +292,7 @@ RebuildTimings GpuRuntime::rebuildAt(double time, const RebuildOptions& options)
   if (options.maxLeafSize == 0) throw anim::Error("GPU rebuild: maxLeafSize must be at least 1");
   if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles);
   m.setFrame(time);
+  m.restoreStaticPositions();
   m.woopValid = false;
   m.tracingRebuilt = true;
   auto enqueue = [&] {
@@ -271,6 +323,7 @@ RebuildTimings GpuRuntime::rebuild(std::span<const float> positions, const Rebui
                       std::to_string(std::size_t(m.vertices) * 3));
   m.events.record(0, m.stream);
   m.positions.upload(positions, m.stream);
+  m.restInPlace = false;
   m.events.record(1, m.stream);
   if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles);
   m.woopValid = false;
@@ -294,9 +347,9 @@ std::vector<WoopTriangle> GpuRuntime::downloadWoop() const { return impl_->woop.
 FlatBvh GpuRuntime::downloadTree() const {
   const Impl& m = *impl_;
   if (m.tracingRebuilt) return flattenBvh(downloadRebuiltTree());
-  FlatBvh flat = m.topology;
-  flat.nodes = m.nodes.download(m.stream);
-  flat.rootBoxes = {m.root.download(m.stream)[0].box};
+  FlatBvh flat = m.tree().topology;
+  flat.nodes = m.tree().nodes.download(m.stream);
+  flat.rootBoxes = {m.tree().root.download(m.stream)[0].box};
   return flat;
 }
 

@@ -10,10 +10,12 @@
 
 namespace tsah::cuda::detail {
 
-// out[i] = (1 - alpha) * a[i] + alpha * b[i] for a = keyframes + params->a, b = keyframes + params->b,
-// rounded exactly as anim::Animation::positionsAt does (alpha == 0 copies a).
-void launchInterpolateFrame(const float* keyframes, const FrameParams* params, float* out, std::size_t count,
-                            cudaStream_t stream);
+// The moving vertices of the frame: for m < movingCount and c < 3, with i = 3m + c,
+// out[3 * v + c] = (1 - alpha) * a[i] + alpha * b[i], a = keyframes + params->a, b = keyframes + params->b,
+// v = movingIds[m] (or m when movingIds is null: every vertex moves); rounded exactly as
+// anim::Animation::positionsAt does (alpha == 0 copies a). Static vertices are not touched.
+void launchInterpolateFrame(const float* keyframes, const uint32_t* movingIds, const FrameParams* params, float* out,
+                            uint32_t movingCount, cudaStream_t stream);
 
 // Bottom-up refit of an uploaded tree: one thread per leaf record, atomic counters per interior node
 // (must be zero on entry); writes every child box, and root->box.

@@ -14,7 +14,7 @@
 namespace tsah::cuda {
 
 struct GpuRuntime::Impl {
-  Impl(const FlatBvh& tree, const anim::Animation& animation, Config config);
+  Impl(const TreeSet& set, const anim::Animation& animation, Config config);
   ~Impl();
   Impl(const Impl&) = delete;
   Impl& operator=(const Impl&) = delete;
@@ -33,6 +33,9 @@ struct GpuRuntime::Impl {
   // hostParams, copied to frameParams by the stream, so the same work can be captured once.
   void setFrame(double time);
   void enqueueInterpolation();
+  // Puts the static vertices' rest positions back into `positions` when an update from host
+  // positions overwrote them (the interpolation writes only the moving vertices).
+  void restoreStaticPositions();
   // Captures what `enqueue` puts on the stream into an executable graph.
   template <typename Enqueue>
   cudaGraphExec_t capture(Enqueue&& enqueue);
@@ -45,24 +48,38 @@ struct GpuRuntime::Impl {
   uint32_t triangles = 0, vertices = 0;
   std::vector<double> times;             // keyframe times
   std::vector<uint32_t> hostIndices;     // for buildVertexTriangles
-  DeviceBuffer<float> keyframes;         // every keyframe, vertices * 3 floats each
+  uint32_t movingVertices = 0;           // vertices that move; the others keep their rest position
+  DeviceBuffer<float> keyframes;         // every keyframe of the moving vertices, movingVertices * 3 floats each
+  DeviceBuffer<uint32_t> movingIds;      // ascending ids of the moving vertices; empty when every vertex moves
+  std::vector<float> hostRest;           // rest positions of every vertex; empty when every vertex moves
+  bool restInPlace = true;               // `positions` holds the rest positions of the static vertices
   DeviceBuffer<uint32_t> indices;        // 3 per triangle
   DeviceBuffer<float> positions;         // the current frame
   detail::FrameParams* hostParams = nullptr;  // pinned
   DeviceBuffer<detail::FrameParams> frameParams;
-  cudaGraphExec_t updateGraph = nullptr;
   struct RebuildGraph {
     RebuildOptions options;
     cudaGraphExec_t exec;
   };
   std::vector<RebuildGraph> rebuildGraphs;
 
-  // The uploaded tree (canonical order, one block of nodes).
-  FlatBvh topology;                      // host copy of its structure
-  DeviceBuffer<GpuBvhNode> nodes;
-  DeviceBuffer<uint32_t> nodeParent, counters, triIndex;
-  DeviceBuffer<detail::LeafRecord> leaves;
-  DeviceBuffer<detail::RootInfo> root;
+  // The uploaded trees (canonical order, one block of nodes each): one, or a tree set's K, all
+  // uploaded once; updateAt refits the tree of the frame's part (tsah::treeIndexAt over ranges).
+  struct DeviceTree {
+    FlatBvh topology;                    // host copy of its structure
+    DeviceBuffer<GpuBvhNode> nodes;
+    DeviceBuffer<uint32_t> nodeParent, counters, triIndex;
+    DeviceBuffer<detail::LeafRecord> leaves;
+    DeviceBuffer<detail::RootInfo> root;
+    cudaGraphExec_t updateGraph = nullptr;  // updateAt's graph for this tree (captured at first use)
+  };
+  // Validates one tree against the animation and uploads it.
+  void uploadTree(const FlatBvh& tree);
+  DeviceTree& tree() { return trees[current]; }
+  const DeviceTree& tree() const { return trees[current]; }
+  std::vector<DeviceTree> trees;
+  std::vector<TimeRange> ranges;         // one per tree
+  uint32_t current = 0;                  // the tree that update/updateAt refit and tracing reads
 
   DeviceBuffer<WoopTriangle> woop;       // per slot of the traced tree
   bool woopValid = false;

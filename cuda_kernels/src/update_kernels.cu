@@ -9,21 +9,22 @@ namespace tsah::cuda::detail {
 
 namespace {
 
-__global__ void interpolateFrameKernel(const float* __restrict__ keyframes, const FrameParams* __restrict__ params,
-                                       float* __restrict__ out, std::size_t count) {
+__global__ void interpolateFrameKernel(const float* __restrict__ keyframes, const uint32_t* __restrict__ movingIds,
+                                       const FrameParams* __restrict__ params, float* __restrict__ out,
+                                       std::size_t count) {
   const FrameParams p = *params;
   const float* a = keyframes + p.a;
   const float* b = keyframes + p.b;
   // Same operations and rounding as anim::Animation::positionsAt: beta * a + alpha * b. Scalar
-  // accesses: a keyframe starts wherever vertices * 3 floats put it, not on a 16-byte boundary.
+  // accesses: a keyframe starts wherever movingCount * 3 floats put it, not on a 16-byte boundary.
+  // count = 3 * movingCount; coordinate i belongs to moving vertex i / 3, written at its own vertex.
   const std::size_t stride = std::size_t(gridDim.x) * blockDim.x;
-  if (p.alpha == 0.0f) {  // positionsAt copies the keyframe (1 * x + 0 * y would turn -0 into +0)
-    for (std::size_t i = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x; i < count; i += stride) out[i] = __ldg(a + i);
-    return;
-  }
   const float beta = 1.0f - p.alpha;
-  for (std::size_t i = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x; i < count; i += stride)
-    out[i] = __fadd_rn(__fmul_rn(beta, __ldg(a + i)), __fmul_rn(p.alpha, __ldg(b + i)));
+  for (std::size_t i = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x; i < count; i += stride) {
+    const std::size_t dst = movingIds ? 3 * std::size_t(__ldg(movingIds + i / 3)) + i % 3 : i;
+    // alpha == 0: positionsAt copies the keyframe (1 * x + 0 * y would turn -0 into +0).
+    out[dst] = p.alpha == 0.0f ? __ldg(a + i) : __fadd_rn(__fmul_rn(beta, __ldg(a + i)), __fmul_rn(p.alpha, __ldg(b + i)));
+  }
 }
 
 __device__ __forceinline__ Vec3 loadVertex(const float* __restrict__ p, uint32_t v) {
@@ -96,11 +97,12 @@ __global__ void woopKernel(const uint32_t* __restrict__ triIndex, uint32_t slots
 
 }  // namespace
 
-void launchInterpolateFrame(const float* keyframes, const FrameParams* params, float* out, std::size_t count,
-                            cudaStream_t stream) {
+void launchInterpolateFrame(const float* keyframes, const uint32_t* movingIds, const FrameParams* params, float* out,
+                            uint32_t movingCount, cudaStream_t stream) {
+  const std::size_t count = std::size_t(movingCount) * 3;
   if (count == 0) return;
   const uint32_t block = 256;
-  interpolateFrameKernel<<<gridFor(count, block), block, 0, stream>>>(keyframes, params, out, count);
+  interpolateFrameKernel<<<gridFor(count, block), block, 0, stream>>>(keyframes, movingIds, params, out, count);
   CUDA_CHECK_LAUNCH("interpolateFrameKernel");
 }
 

@@ -2,24 +2,18 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <string>
 
+#include <cstring>
+
+#include "anim/binary_io.hpp"
 #include "anim/error.hpp"
-#include <unistd.h>
+#include "anim/memory.hpp"
 
 namespace anim {
 
 namespace {
-
-// Refuses an allocation larger than the machine's physical memory up front: with overcommit a huge
-// vector would "succeed" and the process be killed later while filling it.
-void checkFitsInMemory(std::size_t bytes, const std::string& who, const std::string& what) {
-  const long pages = ::sysconf(_SC_PHYS_PAGES), pageSize = ::sysconf(_SC_PAGE_SIZE);
-  const double physical = pages > 0 && pageSize > 0 ? double(pages) * double(pageSize) : 1e18;
-  if (double(bytes) > physical)
-    throw Error(who + ": " + what + " would need " + std::to_string(bytes >> 20) + " MiB, more than this machine's " +
-                std::to_string(uint64_t(physical) >> 20) + " MiB of memory");
-}
 
 bool triangleIsDegenerate(const float* a, const float* b, const float* c) {
   const double e1[3] = {double(b[0]) - a[0], double(b[1]) - a[1], double(b[2]) - a[2]};
@@ -31,21 +25,68 @@ bool triangleIsDegenerate(const float* a, const float* b, const float* c) {
 
 }  // namespace
 
+std::size_t firstBadCoordinate(std::span<const float> positions) {
+  for (std::size_t i = 0; i < positions.size(); ++i)
+    if (!(std::fabs(positions[i]) <= kMaxCoordinate)) return i;  // NaN fails the comparison too
+  return positions.size();
+}
+
+std::string describeBadCoordinate(float value) {
+  if (!std::isfinite(value)) return "has a NaN or infinite coordinate";
+  char text[128];
+  std::snprintf(text, sizeof text, "has coordinate %g, beyond the supported magnitude %g", double(value),
+                double(kMaxCoordinate));
+  return std::string(text) + " (surface areas would overflow)";
+}
+
 Animation::Animation(std::vector<uint32_t> indices, uint32_t vertexCount,
                      std::vector<float> positions, std::vector<double> times, std::string name)
     : name_(std::move(name)),
       indices_(std::move(indices)),
       vertexCount_(vertexCount),
-      positions_(std::move(positions)),
+      movingCount_(vertexCount),
+      motion_(std::move(positions)),
       times_(std::move(times)) {
+  validate();
+  compactStaticVertices();
+}
+
+Animation Animation::withStaticVertices(std::vector<uint32_t> indices, std::vector<float> rest,
+                                        std::vector<uint32_t> moving, std::vector<float> motion,
+                                        std::vector<double> times, std::string name) {
+  Animation a;
+  a.name_ = std::move(name);
+  const std::string who = a.name_.empty() ? std::string("animation") : a.name_;
+  if (rest.size() % 3 != 0 || rest.size() / 3 > 0xffffffffu)
+    throw ImportError(who, "rest position array holds " + std::to_string(rest.size()) + " floats, not 3 per vertex");
+  a.vertexCount_ = static_cast<uint32_t>(rest.size() / 3);
+  for (std::size_t i = 0; i < moving.size(); ++i)
+    if (moving[i] >= a.vertexCount_ || (i > 0 && moving[i] <= moving[i - 1]))
+      throw ImportError(who, "moving vertex ids are not ascending ids below the vertex count");
+  a.movingCount_ = static_cast<uint32_t>(moving.size());
+  a.indices_ = std::move(indices);
+  a.motion_ = std::move(motion);
+  a.times_ = std::move(times);
+  if (a.movingCount_ < a.vertexCount_) {
+    a.rest_ = std::move(rest);
+    a.moving_ = std::move(moving);
+  }
+  a.validate();
+  if (!a.allMoving())
+    for (uint32_t m = 0; m < a.movingCount_; ++m)
+      std::copy_n(a.motion_.data() + 3 * std::size_t(m), 3, a.rest_.data() + 3 * std::size_t(a.moving_[m]));
+  return a;
+}
+
+void Animation::validate() {
   const std::string who = name_.empty() ? std::string("animation") : name_;
   if (indices_.size() % 3 != 0)
     throw ImportError(who, "index count " + std::to_string(indices_.size()) + " is not a multiple of 3");
   if (times_.empty()) throw ImportError(who, "no keyframes");
-  if (positions_.size() != times_.size() * std::size_t(vertexCount_) * 3)
-    throw ImportError(who, "position array holds " + std::to_string(positions_.size()) +
+  if (motion_.size() != times_.size() * std::size_t(movingCount_) * 3)
+    throw ImportError(who, "position array holds " + std::to_string(motion_.size()) +
                                " floats, expected " + std::to_string(times_.size()) + " keyframes x " +
-                               std::to_string(vertexCount_) + " vertices x 3");
+                               std::to_string(movingCount_) + " vertices x 3");
   for (std::size_t i = 0; i < indices_.size(); ++i)
     if (indices_[i] >= vertexCount_)
       throw ImportError(who, "triangle " + std::to_string(i / 3) + " references vertex " +
@@ -57,21 +98,65 @@ Animation::Animation(std::vector<uint32_t> indices, uint32_t vertexCount,
     if (i > 0 && !(times_[i] > times_[i - 1]))
       throw ImportError(who, "keyframe times are not strictly increasing at keyframe " + std::to_string(i));
   }
-  for (std::size_t i = 0; i < positions_.size(); ++i)
-    if (!std::isfinite(positions_[i])) {
-      const std::size_t perFrame = std::size_t(vertexCount_) * 3;
-      throw ImportError(who, "keyframe " + std::to_string(i / perFrame) + " vertex " +
-                                 std::to_string((i % perFrame) / 3) + " has a NaN or infinite coordinate");
-    }
-  const float* p = positions_.data();
+  if (const std::size_t bad = firstBadCoordinate(rest_); bad < rest_.size())
+    throw ImportError(who, "static vertex " + std::to_string(bad / 3) + " " + describeBadCoordinate(rest_[bad]));
+  if (const std::size_t bad = firstBadCoordinate(motion_); bad < motion_.size()) {
+    const std::size_t perFrame = std::size_t(movingCount_) * 3;
+    const std::size_t m = (bad % perFrame) / 3;
+    throw ImportError(who, "keyframe " + std::to_string(bad / perFrame) + " vertex " +
+                               std::to_string(allMoving() ? m : moving_[m]) + " " + describeBadCoordinate(motion_[bad]));
+  }
+  degenerate_ = 0;
+  const float* p0 = allMoving() ? motion_.data() : rest_.data();  // keyframe 0 of every vertex
   for (std::size_t t = 0; t < indices_.size(); t += 3)
-    if (triangleIsDegenerate(p + 3 * indices_[t], p + 3 * indices_[t + 1], p + 3 * indices_[t + 2]))
+    if (triangleIsDegenerate(p0 + 3 * indices_[t], p0 + 3 * indices_[t + 1], p0 + 3 * indices_[t + 2]))
       ++degenerate_;
 }
 
-std::span<const float> Animation::keyframe(uint32_t k) const {
-  const std::size_t n = std::size_t(vertexCount_) * 3;
-  return std::span<const float>(positions_).subspan(std::size_t(k) * n, n);
+void Animation::compactStaticVertices() {
+  const std::size_t frames = times_.size();
+  if (frames < 2 || !allMoving()) return;
+  const std::size_t perFrame = std::size_t(vertexCount_) * 3;
+  std::vector<uint32_t> moving;
+  for (uint32_t v = 0; v < vertexCount_; ++v) {
+    const float* p = motion_.data() + 3 * std::size_t(v);
+    for (std::size_t k = 1; k < frames; ++k)
+      if (std::memcmp(p, p + k * perFrame, 3 * sizeof(float)) != 0) {
+        moving.push_back(v);
+        break;
+      }
+  }
+  const std::size_t split = memoryBytesFor(triangleCount(), vertexCount_, moving.size(), frames);
+  if (split >= memoryBytesFor(triangleCount(), vertexCount_, vertexCount_, frames)) return;
+  std::vector<float> motion(frames * moving.size() * 3);
+  for (std::size_t k = 0; k < frames; ++k)
+    for (std::size_t m = 0; m < moving.size(); ++m)
+      std::copy_n(motion_.data() + k * perFrame + 3 * std::size_t(moving[m]), 3, motion.data() + (k * moving.size() + m) * 3);
+  rest_.assign(motion_.begin(), motion_.begin() + std::ptrdiff_t(perFrame));
+  movingCount_ = static_cast<uint32_t>(moving.size());
+  moving_ = std::move(moving);
+  motion_ = std::move(motion);
+}
+
+std::span<const float> Animation::movingKeyframe(uint32_t k) const {
+  const std::size_t n = std::size_t(movingCount_) * 3;
+  return std::span<const float>(motion_).subspan(std::size_t(k) * n, n);
+}
+
+std::vector<float> Animation::keyframe(uint32_t k) const {
+  if (k >= keyframeCount()) throw Error(name_ + ": keyframe " + std::to_string(k) + " out of range");
+  std::vector<float> out = allMoving() ? std::vector<float>() : rest_;
+  out.resize(std::size_t(vertexCount_) * 3);
+  movingPositionsAt(times_[k], out);
+  return out;
+}
+
+std::vector<float> Animation::allPositions() const {
+  const std::size_t perFrame = std::size_t(vertexCount_) * 3;
+  std::vector<float> out(perFrame * keyframeCount());
+  for (uint32_t k = 0; k < keyframeCount(); ++k)
+    positionsAt(times_[k], std::span<float>(out).subspan(k * perFrame, perFrame));
+  return out;
 }
 
 KeyframeBlend keyframeBlend(std::span<const double> times, double t) {
@@ -82,16 +167,42 @@ KeyframeBlend keyframeBlend(std::span<const double> times, double t) {
   return {k, static_cast<float>((t - times[k]) / (times[k + 1] - times[k]))};
 }
 
-void Animation::positionsAt(double t, std::span<float> out) const {
+void Animation::interpolateMoving(double t, float* out, const uint32_t* scatter) const {
   const auto [k, alpha] = keyframeBlend(times_, t);
-  const auto a = keyframe(k);
-  if (alpha == 0.0f) {
-    std::copy(a.begin(), a.end(), out.begin());
+  const float* a = movingKeyframe(k).data();
+  const std::size_t n = std::size_t(movingCount_) * 3;
+  if (!scatter) {
+    if (alpha == 0.0f) {  // copies keyframe k (1 * x + 0 * y would turn -0 into +0)
+      std::copy_n(a, n, out);
+      return;
+    }
+    const float* b = movingKeyframe(k + 1).data();
+    const float beta = 1.0f - alpha;
+    for (std::size_t i = 0; i < n; ++i) out[i] = beta * a[i] + alpha * b[i];
     return;
   }
-  const auto b = keyframe(k + 1);
+  if (alpha == 0.0f) {
+    for (std::size_t m = 0; m < movingCount_; ++m) std::copy_n(a + 3 * m, 3, out + 3 * std::size_t(scatter[m]));
+    return;
+  }
+  const float* b = movingKeyframe(k + 1).data();
   const float beta = 1.0f - alpha;
-  for (std::size_t i = 0; i < a.size(); ++i) out[i] = beta * a[i] + alpha * b[i];
+  for (std::size_t m = 0; m < movingCount_; ++m) {
+    float* dst = out + 3 * std::size_t(scatter[m]);
+    for (std::size_t c = 0; c < 3; ++c) dst[c] = beta * a[3 * m + c] + alpha * b[3 * m + c];
+  }
+}
+
+void Animation::movingPositionsAt(double t, std::span<float> out) const {
+  if (out.size() != std::size_t(vertexCount_) * 3)
+    throw Error(name_ + ": position buffer holds " + std::to_string(out.size()) + " floats, expected " +
+                std::to_string(std::size_t(vertexCount_) * 3));
+  interpolateMoving(t, out.data(), allMoving() ? nullptr : moving_.data());
+}
+
+void Animation::positionsAt(double t, std::span<float> out) const {
+  if (!allMoving() && out.size() == rest_.size()) std::copy(rest_.begin(), rest_.end(), out.begin());
+  movingPositionsAt(t, out);
 }
 
 std::vector<float> Animation::positionsAt(double t) const {
@@ -100,9 +211,22 @@ std::vector<float> Animation::positionsAt(double t) const {
   return out;
 }
 
-Bounds Animation::keyframeBounds(uint32_t k) const {
+Bounds Animation::staticBounds() const {
   Bounds b;
-  const auto p = keyframe(k);
+  std::size_t m = 0;
+  for (uint32_t v = 0; v < vertexCount_ && !allMoving(); ++v) {
+    if (m < moving_.size() && moving_[m] == v) {
+      ++m;
+      continue;
+    }
+    b.extend(rest_.data() + 3 * std::size_t(v));
+  }
+  return b;
+}
+
+Bounds Animation::keyframeBounds(uint32_t k) const {
+  Bounds b = staticBounds();
+  const auto p = movingKeyframe(k);
   for (std::size_t i = 0; i < p.size(); i += 3) b.extend(p.data() + i);
   return b;
 }
@@ -115,8 +239,8 @@ Bounds Animation::boundsAt(double t) const {
 }
 
 Bounds Animation::bounds() const {
-  Bounds b;
-  for (uint32_t k = 0; k < keyframeCount(); ++k) b.extend(keyframeBounds(k));
+  Bounds b = staticBounds();
+  for (std::size_t i = 0; i < motion_.size(); i += 3) b.extend(motion_.data() + i);
   return b;
 }
 
@@ -128,22 +252,33 @@ std::vector<double> Animation::uniformTimes(uint32_t n) const {
   return t;
 }
 
+Animation Animation::sampledAt(std::vector<double> t) const {
+  const std::size_t perFrame = std::size_t(movingCount_) * 3;
+  std::vector<float> motion(perFrame * t.size());
+  for (std::size_t i = 0; i < t.size(); ++i) interpolateMoving(t[i], motion.data() + i * perFrame, nullptr);
+  Animation result;
+  result.name_ = name_;
+  result.indices_ = indices_;
+  result.vertexCount_ = vertexCount_;
+  result.movingCount_ = movingCount_;
+  result.rest_ = rest_;
+  result.moving_ = moving_;
+  result.motion_ = std::move(motion);
+  result.times_ = std::move(t);
+  result.degenerate_ = degenerate_;
+  result.camera_ = camera_;
+  return result;
+}
+
 Animation Animation::resample(uint32_t n) const {
   if (n == 0) throw Error(name_ + ": cannot resample to 0 frames");
-  checkFitsInMemory(std::size_t(n) * (std::size_t(vertexCount_) * 3 * sizeof(float) + sizeof(double)), name_,
-                    std::to_string(n) + " frames");
+  checkFitsInMemory(memoryBytesFor(triangleCount(), vertexCount_, movingCount_, n), name_, std::to_string(n) + " frames");
   std::vector<double> t = uniformTimes(n);
   if (n > 1 && !(endTime() > startTime())) {
     // A one-keyframe animation sampled n times: frames at 0,1,...; the geometry stays the same.
     for (uint32_t i = 0; i < n; ++i) t[i] = startTime() + i;
   }
-  const std::size_t perFrame = std::size_t(vertexCount_) * 3;
-  std::vector<float> pos(perFrame * n);
-  for (uint32_t i = 0; i < n; ++i)
-    positionsAt(t[i], std::span<float>(pos).subspan(i * perFrame, perFrame));
-  Animation result(indices_, vertexCount_, std::move(pos), std::move(t), name_);
-  result.camera_ = camera_;
-  return result;
+  return sampledAt(std::move(t));
 }
 
 Animation Animation::segment(double t0, double t1) const {
@@ -154,18 +289,18 @@ Animation Animation::segment(double t0, double t1) const {
   for (double k : times_)
     if (k > t0 && k < t1) t.push_back(k);
   if (t1 > t0) t.push_back(t1);
-  const std::size_t perFrame = std::size_t(vertexCount_) * 3;
-  std::vector<float> pos(perFrame * t.size());
-  for (std::size_t i = 0; i < t.size(); ++i)
-    positionsAt(t[i], std::span<float>(pos).subspan(i * perFrame, perFrame));
-  Animation result(indices_, vertexCount_, std::move(pos), std::move(t), name_);
-  result.camera_ = camera_;
-  return result;
+  return sampledAt(std::move(t));
+}
+
+std::size_t Animation::memoryBytesFor(uint64_t triangles, uint64_t vertices, uint64_t movingVertices,
+                                      uint64_t keyframes) {
+  const uint64_t split = movingVertices < vertices ? vertices * 12 + movingVertices * 4 : 0;
+  return std::size_t(triangles * 12 + split + keyframes * movingVertices * 12 + keyframes * 8);
 }
 
 std::size_t Animation::memoryBytes() const {
-  return indices_.size() * sizeof(uint32_t) + positions_.size() * sizeof(float) +
-         times_.size() * sizeof(double);
+  return indices_.size() * sizeof(uint32_t) + rest_.size() * sizeof(float) + moving_.size() * sizeof(uint32_t) +
+         motion_.size() * sizeof(float) + times_.size() * sizeof(double);
 }
 
 }  // namespace anim

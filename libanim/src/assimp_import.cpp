@@ -457,8 +457,7 @@ Animation bake(const aiScene* scene, const std::string& file, const LoadOptions&
 }
 
 const aiScene* readScene(Assimp::Importer& importer, const std::string& path) {
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) throw ImportError(path, "no such file");
+  checkInputFile(path);  // a FIFO or device would block or never end inside Assimp
   const aiScene* scene = importer.ReadFile(path, aiProcess_Triangulate | aiProcess_ValidateDataStructure);
   if (!scene) throw ImportError(path, std::string("cannot import: ") + importer.GetErrorString());
   if (scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE) throw ImportError(path, "the file holds an incomplete scene");

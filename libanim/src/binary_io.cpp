@@ -1,12 +1,6 @@
 #include "anim/binary_io.hpp"
 
 #include <array>
-#include <cerrno>
-#include <cstdio>
-#include <filesystem>
-#include <fstream>
-#include <system_error>
-#include <unistd.h>
 
 namespace anim {
 
@@ -61,52 +55,6 @@ const uint8_t* ByteReader::take(std::size_t n, const char* what) {
 void ByteWriter::append(const void* data, std::size_t size) {
   const auto* p = static_cast<const uint8_t*>(data);
   buf_.insert(buf_.end(), p, p + size);
-}
-
-std::vector<uint8_t> readFile(const std::string& path, std::size_t maxBytes) {
-  std::error_code ec;
-  if (std::filesystem::is_directory(path, ec)) throw ImportError(path, "is a directory, not a file");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw ImportError(path, "cannot open file");
-  in.seekg(0, std::ios::end);
-  const std::streamoff size = in.tellg();
-  if (size < 0) throw ImportError(path, "cannot determine the file size");
-  if (std::size_t(size) > maxBytes)
-    throw ImportError(path, "file is " + std::to_string(size) + " bytes, more than the limit of " +
-                                std::to_string(maxBytes));
-  in.seekg(0);
-  std::vector<uint8_t> bytes(static_cast<std::size_t>(size));
-  if (size > 0 && !in.read(reinterpret_cast<char*>(bytes.data()), size))
-    throw ImportError(path, "read error");
-  return bytes;
-}
-
-void writeFileAtomically(const std::string& path, std::span<const uint8_t> bytes) {
-  namespace fs = std::filesystem;
-  const fs::path target(path);
-  std::string tmpName = target.filename().string();  // hidden sibling: .NAME.tmp.PID
-  tmpName.insert(0, 1, '.');
-  tmpName.append(".tmp.").append(std::to_string(::getpid()));
-  const fs::path tmp = target.parent_path() / tmpName;
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) throw Error(path + ": cannot create " + tmp.string());
-    out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
-    out.flush();
-    if (!out) {
-      out.close();
-      std::error_code ignore;
-      fs::remove(tmp, ignore);
-      throw Error(path + ": write failed (disk full?)");
-    }
-  }
-  std::error_code ec;
-  fs::rename(tmp, target, ec);
-  if (ec) {
-    std::error_code ignore;
-    fs::remove(tmp, ignore);
-    throw Error(path + ": cannot rename the temporary file into place: " + ec.message());
-  }
 }
 
 }  // namespace anim

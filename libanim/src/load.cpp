@@ -8,6 +8,8 @@
 #include "anim/bart.hpp"
 #include "anim/error.hpp"
 #include "anim/mesh_sequence.hpp"
+#include "anim/point_cache.hpp"
+#include "anim/scene.hpp"
 #include "anim/tanim.hpp"
 
 namespace anim {
@@ -35,6 +37,7 @@ Animation load(const std::string& input, const LoadOptions& options) {
   if (input.find('%') != std::string::npos || input.find_first_of("*?[") != std::string::npos)
     return importSequence(listFrames(input), options, stemName(fs::path(input).parent_path().string()));
   if (fs::is_directory(input, ec)) return importSequence(listFrames(input), options, stemName(input));
+  if (const auto pair = splitPointCacheInput(input)) return importPointCache(*pair, options);  // mesh.obj+cache.pc2
   if (!fs::exists(input, ec)) throw ImportError(input, "no such file or directory");
   const std::string ext = lowerExtension(input);
   if (ext == ".tanim") return loadTanim(input);
@@ -46,7 +49,14 @@ Animation load(const std::string& input, const LoadOptions& options) {
     return importBart(input, bart);
   }
   if (isModelFile(input)) return importModel(input, options);
-  if (ext == ".json") return importSequence(readManifest(input), options, stemName(input));
+  if (pointCacheFormat(input))
+    throw ImportError(input, "a point cache holds positions only: name a mesh of the same points with it, as "
+                             "mesh.obj+" + fs::path(input).filename().string());
+  if (ext == ".json" && isSceneFile(input)) return loadScene(input, options);
+  if (ext == ".json") {
+    if (const auto pair = readPointCacheManifest(input)) return importPointCache(*pair, options);
+    return importSequence(readManifest(input), options, stemName(input));
+  }
   if (isMeshFile(input)) return importSequence(FrameList{{input}, {}}, options, stemName(input));
   throw ImportError(input, "unknown input format '" + ext +
                                "' (expected .tanim, .json manifest, a mesh file, a directory, a "

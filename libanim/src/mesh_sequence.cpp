@@ -20,6 +20,8 @@
 
 #include "anim/binary_io.hpp"
 #include "anim/error.hpp"
+#include "anim/memory.hpp"
+#include "mesh_check.hpp"
 
 namespace anim {
 
@@ -43,8 +45,9 @@ void fanTriangulate(std::span<const uint32_t> polygon, std::vector<uint32_t>& ou
 
 // OBJ is the format of every real sequence, so it gets a dedicated reader: exact vertex and face
 // order (no merging or dropping of non-manifold faces as a half-edge mesh would do), and fast.
-MeshFrame readObj(const std::string& path) {
-  const std::vector<uint8_t> bytes = readFile(path);
+}  // namespace
+
+MeshFrame decodeObj(std::span<const uint8_t> bytes, const std::string& path) {
   const char* p = reinterpret_cast<const char*>(bytes.data());
   const char* end = p + bytes.size();
   MeshFrame mesh;
@@ -107,9 +110,14 @@ MeshFrame readObj(const std::string& path) {
   return mesh;
 }
 
+namespace {
+
 // Everything else through OpenMesh. Its messages (e.g. dropped non-manifold faces) are captured:
 // a face OpenMesh could not add would silently change the topology, so that is an error.
+// Our own pass over the file first (mesh_check.hpp): OpenMesh drops faces that reference missing
+// vertices and allocates whatever a header claims; afterwards its counts must match the header's.
 MeshFrame readWithOpenMesh(const std::string& path) {
+  const DeclaredMesh declared = checkMeshFile(path, readFile(path));
   using Mesh = OpenMesh::PolyMesh_ArrayKernelT<>;
   Mesh mesh;
   // omerr/omlog are process-wide: connect them once to one captured stream (OpenMesh never frees a
@@ -136,6 +144,11 @@ MeshFrame readWithOpenMesh(const std::string& path) {
   if (!ok) throw ImportError(path, "OpenMesh cannot read this file");
   if (complaints.find("complex") != std::string::npos)
     throw ImportError(path, "has non-manifold faces that the mesh reader drops; convert it to OBJ");
+  if (declared.known && (mesh.n_vertices() != declared.vertices || mesh.n_faces() != declared.faces))
+    throw ImportError(path, "the mesh reader kept " + std::to_string(mesh.n_vertices()) + " of " +
+                                std::to_string(declared.vertices) + " vertices and " + std::to_string(mesh.n_faces()) +
+                                " of " + std::to_string(declared.faces) +
+                                " faces (it drops degenerate and non-manifold faces); convert it to OBJ");
   MeshFrame out;
   out.positions.reserve(mesh.n_vertices() * 3);
   for (auto v : mesh.vertices()) {
@@ -201,9 +214,7 @@ bool isMeshFile(const std::string& path) {
 }
 
 MeshFrame readMesh(const std::string& path) {
-  std::error_code ec;
-  if (!fs::is_regular_file(path, ec)) throw ImportError(path, "no such file");
-  if (lower(fs::path(path).extension().string()) == ".obj") return readObj(path);
+  if (lower(fs::path(path).extension().string()) == ".obj") return decodeObj(readFile(path), path);
   return readWithOpenMesh(path);
 }
 
@@ -272,13 +283,17 @@ FrameList listFrames(const std::string& spec) {
   return list;
 }
 
-FrameList readManifest(const std::string& path) {
-  const std::vector<uint8_t> bytes = readFile(path, std::size_t(1) << 28);
+FrameList readManifest(const std::string& path) { return decodeManifest(readFile(path, std::size_t(1) << 28), path); }
+
+FrameList decodeManifest(std::span<const uint8_t> bytes, const std::string& path) {
   nlohmann::json doc;
   try {
     doc = nlohmann::json::parse(bytes.begin(), bytes.end());
-  } catch (const nlohmann::json::parse_error& e) {
-    throw ImportError(path, std::string("invalid JSON: ") + e.what());
+  } catch (const nlohmann::json::exception& e) {  // parse_error, and out_of_range for 1e999
+    std::string what = e.what();
+    if (const auto end = what.find("] "); what.rfind("[json.exception", 0) == 0 && end != std::string::npos)
+      what.erase(0, end + 2);  // the library's "[json.exception.parse_error.101] " tag
+    throw ImportError(path, "invalid JSON: " + what);
   }
   const nlohmann::json* frames = &doc;
   if (doc.is_object()) {
@@ -321,6 +336,8 @@ Animation importSequence(const FrameList& frames, const LoadOptions& options, st
 
   const MeshFrame first = readMesh(frames.files[0]);
   const std::size_t perFrame = first.positions.size();
+  requireMemory(uint64_t(perFrame) * n * sizeof(float), name,
+                std::to_string(n) + " frames of " + std::to_string(perFrame / 3) + " vertices");
   std::vector<float> positions(perFrame * n);
   std::copy(first.positions.begin(), first.positions.end(), positions.begin());
 
@@ -376,12 +393,11 @@ Animation importSequence(const FrameList& frames, const LoadOptions& options, st
     if (!(times[i] > times[i - 1]))
       throw ImportError(frames.files[i], "frame time " + std::to_string(times[i]) +
                                              " is not after the previous frame's");
+  // The Animation constructor checks the coordinates too; name the frame file in that message.
+  if (const std::size_t bad = firstBadCoordinate(positions); bad < positions.size())
+    throw ImportError(frames.files[bad / perFrame],
+                      "vertex " + std::to_string((bad % perFrame) / 3) + " " + describeBadCoordinate(positions[bad]));
   if (first.indices.empty()) throw ImportError(frames.files[0], "has no faces");
-  // The Animation constructor checks NaN/Inf; name the frame file in that message.
-  for (std::size_t i = 0; i < positions.size(); ++i)
-    if (!std::isfinite(positions[i]))
-      throw ImportError(frames.files[i / perFrame],
-                        "vertex " + std::to_string((i % perFrame) / 3) + " has a NaN or infinite coordinate");
   return Animation(first.indices, uint32_t(perFrame / 3), std::move(positions), std::move(times),
                    std::move(name));
 }

@@ -2,6 +2,7 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <regex>
 #include <string>
 
 #include "anim/binary_io.hpp"
@@ -9,11 +10,9 @@
 
 namespace anim {
 
-std::size_t saveObjSequence(const Animation& a, const std::string& pattern) {
-  const auto percent = pattern.find('%');
-  if (percent == std::string::npos || pattern.find('%', percent + 1) != std::string::npos ||
-      pattern.find('d', percent) == std::string::npos)
-    throw Error(pattern + ": output pattern needs exactly one %d-style number, e.g. frames/f_%04d.obj");
+namespace {
+
+std::string faceLines(const Animation& a) {
   std::string faces;
   const auto idx = a.indices();
   char line[128];
@@ -21,15 +20,39 @@ std::size_t saveObjSequence(const Animation& a, const std::string& pattern) {
     std::snprintf(line, sizeof line, "f %u %u %u\n", idx[t] + 1, idx[t + 1] + 1, idx[t + 2] + 1);
     faces += line;
   }
+  return faces;
+}
+
+// One keyframe as OBJ text: a comment, the vertices (every float exactly: %.9g) and the faces.
+std::string objText(const Animation& a, uint32_t k, const std::string& faces) {
+  std::string text = "# " + a.name() + " keyframe " + std::to_string(k) + " time " + std::to_string(a.times()[k]) + "\n";
+  const auto p = a.keyframe(k);
+  char line[128];
+  for (std::size_t v = 0; v < p.size(); v += 3) {
+    std::snprintf(line, sizeof line, "v %.9g %.9g %.9g\n", double(p[v]), double(p[v + 1]), double(p[v + 2]));
+    text += line;
+  }
+  return text + faces;
+}
+
+void writeText(const std::string& path, const std::string& text) {
+  writeFileAtomically(path, std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
+}
+
+}  // namespace
+
+std::size_t saveObjSequence(const Animation& a, const std::string& pattern) {
+  // Exactly one %d-style conversion (%d, %4d, %04d) and no other '%': the pattern becomes a printf
+  // format, so anything else (%s, %n) would be undefined behaviour.
+  static const std::regex valid("[^%]*%0?[0-9]{0,3}d[^%]*");
+  if (!std::regex_match(pattern, valid))
+    throw Error(pattern + ": output pattern needs exactly one %d-style number, e.g. frames/f_%04d.obj");
+  requireExtension(pattern, ".obj", "OBJ sequence");
+  const std::string faces = faceLines(a);
+  // All frames appear together or none: a failure half-way (a full disk) must not leave a shorter
+  // sequence behind that reads as a valid animation.
+  AtomicFileSet files;
   for (uint32_t k = 0; k < a.keyframeCount(); ++k) {
-    std::string text = "# " + a.name() + " keyframe " + std::to_string(k) + " time " +
-                       std::to_string(a.times()[k]) + "\n";
-    const auto p = a.keyframe(k);
-    for (std::size_t v = 0; v < p.size(); v += 3) {
-      std::snprintf(line, sizeof line, "v %.9g %.9g %.9g\n", double(p[v]), double(p[v + 1]), double(p[v + 2]));
-      text += line;
-    }
-    text += faces;
     char name[4096];
     std::snprintf(name, sizeof name, pattern.c_str(), int(k + 1));
     if (k == 0) {
@@ -37,9 +60,18 @@ std::size_t saveObjSequence(const Animation& a, const std::string& pattern) {
       std::error_code ec;
       if (!parent.empty()) std::filesystem::create_directories(parent, ec);
     }
-    writeFileAtomically(name, std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
+    const std::string text = objText(a, k, faces);
+    files.write(name, std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
   }
+  files.commit();
   return a.keyframeCount();
+}
+
+void saveObjFrame(const Animation& a, uint32_t keyframe, const std::string& path) {
+  if (keyframe >= a.keyframeCount())
+    throw Error(path + ": keyframe " + std::to_string(keyframe) + " is out of range (" +
+                std::to_string(a.keyframeCount()) + " keyframes)");
+  writeText(path, objText(a, keyframe, faceLines(a)));
 }
 
 }  // namespace anim

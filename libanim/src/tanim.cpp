@@ -13,7 +13,7 @@ namespace anim {
 namespace {
 
 constexpr std::array<char, 8> kMagic{'T', 'S', 'A', 'H', 'A', 'N', 'I', 'M'};
-constexpr uint32_t kVersion = 1;
+constexpr uint32_t kVersion = 2;  // 2: static vertices stored once; version 1 is still read
 constexpr std::size_t kMaxName = 4096;
 constexpr std::size_t kMaxCameraKeys = 1u << 20;
 
@@ -26,7 +26,7 @@ struct Header {
   uint32_t keyframeCount;
   uint32_t cameraKeyCount;
   uint32_t nameBytes;
-  uint32_t reserved;
+  uint32_t movingVertexCount;  // version 2: M (== V when every vertex moves); version 1: 0
   uint64_t payloadBytes;
   uint32_t payloadCrc;
   uint32_t reserved2[2];
@@ -43,12 +43,18 @@ static_assert(sizeof(CameraRecord) == 48);
 
 constexpr std::size_t padTo8(std::size_t n) { return (n + 7) & ~std::size_t(7); }
 
+// Vertices stored per keyframe: all of them in version 1, the moving ones in version 2.
+uint32_t keyedVertices(const Header& h) { return h.version == 1 ? h.vertexCount : h.movingVertexCount; }
+// Version 2 stores rest positions (V*3 f32) and moving ids (M u32) when some vertices are static.
+bool hasStaticPart(const Header& h) { return h.version >= 2 && h.movingVertexCount < h.vertexCount; }
+
 // Payload size for the given counts, or 0 when it would overflow 64 bits.
 uint64_t payloadSize(const Header& h) {
   uint64_t positionBytes;
-  if (__builtin_mul_overflow(uint64_t(h.keyframeCount) * h.vertexCount, uint64_t(12), &positionBytes)) return 0;
+  if (__builtin_mul_overflow(uint64_t(h.keyframeCount) * keyedVertices(h), uint64_t(12), &positionBytes)) return 0;
   uint64_t size = padTo8(h.nameBytes) + uint64_t(h.keyframeCount) * 8 + uint64_t(h.triangleCount) * 12 +
                   uint64_t(h.cameraKeyCount) * 48;
+  if (hasStaticPart(h)) size += uint64_t(h.vertexCount) * 12 + padTo8(uint64_t(h.movingVertexCount) * 4);
   if (__builtin_add_overflow(size, positionBytes, &size)) return 0;
   return size;
 }
@@ -63,6 +69,7 @@ std::vector<uint8_t> encodeTanim(const Animation& a) {
   h.vertexCount = a.vertexCount();
   h.triangleCount = a.triangleCount();
   h.keyframeCount = a.keyframeCount();
+  h.movingVertexCount = a.movingVertexCount();
   h.cameraKeyCount = static_cast<uint32_t>(a.cameraPath().size());
   h.nameBytes = static_cast<uint32_t>(name.size());
   h.payloadBytes = payloadSize(h);
@@ -73,7 +80,12 @@ std::vector<uint8_t> encodeTanim(const Animation& a) {
   payload.append(&zero, padTo8(name.size()) - name.size());
   payload.writeArray(a.times());
   payload.writeArray(a.indices());
-  payload.writeArray(a.allPositions());
+  if (hasStaticPart(h)) {
+    payload.writeArray(a.restPositions());
+    payload.writeArray(a.movingVertices());
+    payload.append(&zero, padTo8(a.movingVertices().size_bytes()) - a.movingVertices().size_bytes());
+  }
+  payload.writeArray(a.motion());
   for (const CameraKey& k : a.cameraPath()) {
     CameraRecord r{};
     r.time = k.time;
@@ -98,9 +110,12 @@ Animation decodeTanim(std::span<const uint8_t> bytes, const std::string& file) {
   if (h.magic != kMagic) throw ImportError(file, "not a .tanim file (bad magic)");
   if (crc32(&h, offsetof(Header, headerCrc)) != h.headerCrc)
     throw ImportError(file, "header checksum mismatch (corrupt file)");
-  if (h.version != kVersion)
+  if (h.version != 1 && h.version != kVersion)
     throw ImportError(file, "unsupported .tanim version " + std::to_string(h.version) +
-                                " (this build reads version " + std::to_string(kVersion) + ")");
+                                " (this build reads versions 1 and " + std::to_string(kVersion) + ")");
+  if (h.version >= 2 && h.movingVertexCount > h.vertexCount)
+    throw ImportError(file, "moving vertex count " + std::to_string(h.movingVertexCount) + " exceeds the vertex count " +
+                                std::to_string(h.vertexCount));
   if (h.keyframeCount == 0) throw ImportError(file, "no keyframes");
   if (h.nameBytes > kMaxName) throw ImportError(file, "name length " + std::to_string(h.nameBytes) + " is absurd");
   if (h.cameraKeyCount > kMaxCameraKeys)
@@ -121,10 +136,16 @@ Animation decodeTanim(std::span<const uint8_t> bytes, const std::string& file) {
   std::string name(reinterpret_cast<const char*>(nameBytes.data()), h.nameBytes);
   std::vector<double> times;
   std::vector<uint32_t> indices;
-  std::vector<float> positions;
+  std::vector<float> rest, positions;
+  std::vector<uint32_t> moving;
   in.readArray(times, h.keyframeCount, "keyframe times");
   in.readArray(indices, std::size_t(h.triangleCount) * 3, "triangle indices");
-  in.readArray(positions, std::size_t(h.keyframeCount) * h.vertexCount * 3, "positions");
+  if (hasStaticPart(h)) {
+    in.readArray(rest, std::size_t(h.vertexCount) * 3, "rest positions");
+    in.readArray(moving, h.movingVertexCount, "moving vertex ids");
+    in.bytes(padTo8(moving.size() * 4) - moving.size() * 4, "padding");
+  }
+  in.readArray(positions, std::size_t(h.keyframeCount) * keyedVertices(h) * 3, "positions");
   std::vector<CameraKey> camera(h.cameraKeyCount);
   for (auto& k : camera) {
     const auto r = in.read<CameraRecord>("camera key");
@@ -137,7 +158,10 @@ Animation decodeTanim(std::span<const uint8_t> bytes, const std::string& file) {
       throw ImportError(file, "camera key has a non-finite value");
   }
   try {
-    Animation a(std::move(indices), h.vertexCount, std::move(positions), std::move(times), std::move(name));
+    Animation a = hasStaticPart(h) ? Animation::withStaticVertices(std::move(indices), std::move(rest), std::move(moving),
+                                                                   std::move(positions), std::move(times), std::move(name))
+                                   : Animation(std::move(indices), h.vertexCount, std::move(positions),
+                                               std::move(times), std::move(name));
     a.setCameraPath(std::move(camera));
     return a;
   } catch (const ImportError& e) {
@@ -147,6 +171,7 @@ Animation decodeTanim(std::span<const uint8_t> bytes, const std::string& file) {
 }
 
 void saveTanim(const Animation& animation, const std::string& path) {
+  requireExtension(path, ".tanim", "animation");
   writeFileAtomically(path, encodeTanim(animation));
 }
 

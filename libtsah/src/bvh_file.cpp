@@ -5,18 +5,22 @@
 #include <cstring>
 
 #include "anim/binary_io.hpp"
+#include "tbvh_io.hpp"
 
 namespace tsah {
 
 namespace {
 
-constexpr std::array<char, 8> kMagic = {'T', 'S', 'A', 'H', 'B', 'V', 'H', '\0'};
 constexpr uint32_t kNodeBytes = sizeof(GpuBvhNode);
 constexpr std::size_t kReservedWords = 4;  // header padding up to kTbvhHeaderBytes, written as 0
 
 static_assert(sizeof(Aabb) == 24);
 
-void writeName(anim::ByteWriter& w, const std::string& name, const char* what) {
+}  // namespace
+
+namespace detail {
+
+void writeTbvhName(anim::ByteWriter& w, const std::string& name, const char* what) {
   if (name.size() >= kTbvhNameBytes)
     throw anim::Error(std::string(".tbvh ") + what + " name '" + name + "' is longer than " +
                       std::to_string(kTbvhNameBytes - 1) + " characters");
@@ -28,7 +32,7 @@ void writeName(anim::ByteWriter& w, const std::string& name, const char* what) {
   w.write(field);
 }
 
-std::string readName(anim::ByteReader& r, const char* what) {
+std::string readTbvhName(anim::ByteReader& r, const char* what) {
   const auto field = r.read<std::array<char, kTbvhNameBytes>>(what);
   std::size_t len = 0;
   while (len < field.size() && field[len] != '\0') ++len;
@@ -40,7 +44,11 @@ std::string readName(anim::ByteReader& r, const char* what) {
   return std::string(field.data(), len);
 }
 
-}  // namespace
+}  // namespace detail
+
+using detail::kTbvhMagic;
+using detail::readTbvhName;
+using detail::writeTbvhName;
 
 uint32_t topologyHash(std::span<const uint32_t> indices) {
   return anim::crc32(indices.data(), indices.size_bytes());
@@ -55,7 +63,7 @@ std::vector<uint8_t> encodeBvhFile(const Bvh& bvh, const BvhBuildInfo& info) {
   anim::ByteWriter w;
   w.buffer().reserve(kTbvhHeaderBytes + flat.nodes.size() * kNodeBytes + flat.rootBoxes.size() * sizeof(Aabb) +
                      flat.triIndex.size() * 4 + 4);
-  w.write(kMagic);
+  w.write(kTbvhMagic);
   w.write(kTbvhVersion);
   w.write(kTbvhLayoutAilaLaine64);
   w.write(kTbvhHeaderBytes);
@@ -78,8 +86,8 @@ std::vector<uint8_t> encodeBvhFile(const Bvh& bvh, const BvhBuildInfo& info) {
   w.write(info.buildSeconds);
   w.write(info.timeStart);
   w.write(info.timeEnd);
-  writeName(w, info.method, "method");
-  writeName(w, info.selection, "selection");
+  writeTbvhName(w, info.method, "method");
+  writeTbvhName(w, info.selection, "selection");
   for (std::size_t i = 0; i < kReservedWords; ++i) w.write(uint32_t{0});
   if (w.buffer().size() != kTbvhHeaderBytes) throw anim::Error("internal: .tbvh header size mismatch");
   w.writeArray(std::span<const GpuBvhNode>(flat.nodes));
@@ -93,8 +101,10 @@ std::vector<uint8_t> encodeBvhFile(const Bvh& bvh, const BvhBuildInfo& info) {
 FlatBvh decodeFlatBvhFile(std::span<const uint8_t> bytes, const std::string& file, BvhBuildInfo* infoOut) {
   anim::ByteReader r(bytes, file);
   const auto magic = r.read<std::array<char, 8>>("magic");
-  if (magic != kMagic) r.fail("not a .tbvh file (bad magic)");
+  if (magic != kTbvhMagic) r.fail("not a .tbvh file (bad magic)");
   const auto version = r.read<uint32_t>("version");
+  if (version == 2)
+    r.fail("holds a tree set (.tbvh version 2): read it with the tree-set reader (tsah::decodeTreeSetFile)");
   if (version != kTbvhVersion)
     r.fail("unsupported .tbvh version " + std::to_string(version) + " (this reader knows " +
            std::to_string(kTbvhVersion) + ")");
@@ -124,8 +134,8 @@ FlatBvh decodeFlatBvhFile(std::span<const uint8_t> bytes, const std::string& fil
   info.buildSeconds = r.read<double>("build seconds");
   info.timeStart = r.read<double>("time start");
   info.timeEnd = r.read<double>("time end");
-  info.method = readName(r, "method");
-  info.selection = readName(r, "selection");
+  info.method = readTbvhName(r, "method");
+  info.selection = readTbvhName(r, "selection");
   for (std::size_t i = 0; i < kReservedWords; ++i)
     if (r.read<uint32_t>("reserved") != 0) r.fail("reserved header words must be 0");
 
@@ -169,6 +179,7 @@ BvhFile decodeBvhFile(std::span<const uint8_t> bytes, const std::string& file) {
 }
 
 void saveBvhFile(const std::string& path, const Bvh& bvh, const BvhBuildInfo& info) {
+  anim::requireExtension(path, ".tbvh", "tree");
   const std::vector<uint8_t> bytes = encodeBvhFile(bvh, info);
   anim::writeFileAtomically(path, bytes);
 }

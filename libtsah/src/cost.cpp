@@ -8,6 +8,16 @@
 
 namespace tsah {
 
+namespace {
+
+// cT * inner + cI * primitives: the cost of a frame whose root has no area (see cost.hpp), as parts
+// over a unit root area (the same value cost::frameCost gives).
+CostParts degenerateFrameCost(uint64_t innerCount, uint64_t primCount, const CostModel& model) {
+  return {double(model.ct) * double(innerCount), double(model.ci) * double(primCount), 1.0};
+}
+
+}  // namespace
+
 double frameCost(const Bvh& bvh, uint32_t frame, const CostModel& model) {
   if (bvh.nodes.empty()) return 0.0;
   if (frame >= bvh.frameCount) throw std::out_of_range("frameCost: frame index out of range");
@@ -80,8 +90,8 @@ FrameCostEvaluator::FrameCostEvaluator(const Bvh& bvh, CostModel model) : bvh_(&
   std::reverse(postOrder_.begin(), postOrder_.end());
 }
 
-double FrameCostEvaluator::cost(std::span<const Aabb> primBoxes) {
-  if (postOrder_.empty()) return 0.0;
+CostParts FrameCostEvaluator::costParts(std::span<const Aabb> primBoxes) {
+  if (postOrder_.empty()) return {0.0, 0.0, 1.0};
   if (primBoxes.size() != bvh_->primIds.size())
     throw std::invalid_argument("FrameCostEvaluator: expected " +
                                 std::to_string(bvh_->primIds.size()) + " primitive boxes, got " +
@@ -99,7 +109,9 @@ double FrameCostEvaluator::cost(std::span<const Aabb> primBoxes) {
     }
     boxes_[s.node] = box;
   }
-  return cost::frameCost(model_.ct, model_.ci, inner, leaves, boxes_[bvh_->root].area(), innerCount_, primTotal_);
+  const double rootArea = boxes_[bvh_->root].area();
+  if (!(rootArea > 0.0)) return degenerateFrameCost(innerCount_, primTotal_, model_);
+  return {model_.ct * inner, model_.ci * leaves, rootArea};
 }
 
 }  // namespace tsah

@@ -9,6 +9,8 @@
 #include <thread>
 
 #include "anim/error.hpp"
+#include "tsah/cost.hpp"
+#include "refit_plan.hpp"
 
 namespace tsah {
 
@@ -18,7 +20,43 @@ double msSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
+// The best supported kernels with nodes of this width, or null.
+const WideKernels* kernelsFor(CpuLayout layout, std::optional<SimdIsa> isa) {
+  const std::vector<SimdIsa> candidates = isa ? std::vector<SimdIsa>{*isa} : supportedIsas();
+  for (auto it = candidates.rbegin(); it != candidates.rend(); ++it) {
+    if (!isaSupported(*it)) continue;
+    const WideKernels& k = wideKernels(*it);
+    if (layout == CpuLayout::Bvh4 ? k.closest4 != nullptr : k.closest8 != nullptr) return &k;
+  }
+  return nullptr;
+}
+
 }  // namespace
+
+const char* layoutName(CpuLayout layout) {
+  switch (layout) {
+    case CpuLayout::Bvh2: return "bvh2";
+    case CpuLayout::Bvh4: return "bvh4";
+    case CpuLayout::Bvh8: return "bvh8";
+  }
+  return "?";
+}
+
+std::optional<CpuLayout> parseLayout(const std::string& name) {
+  for (CpuLayout l : {CpuLayout::Bvh2, CpuLayout::Bvh4, CpuLayout::Bvh8})
+    if (name == layoutName(l)) return l;
+  return std::nullopt;
+}
+
+bool layoutSupported(CpuLayout layout) {
+  return layout == CpuLayout::Bvh2 || kernelsFor(layout, std::nullopt) != nullptr;
+}
+
+CpuLayout fastestLayout() {
+  for (CpuLayout l : {CpuLayout::Bvh8, CpuLayout::Bvh4})
+    if (layoutSupported(l)) return l;
+  return CpuLayout::Bvh2;
+}
 
 struct CpuRuntime::Threads {
   explicit Threads(uint32_t n) : count(n), arena(static_cast<int>(n)) {}
@@ -38,6 +76,72 @@ CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint3
   if (indices_.size() % 3 != 0) throw anim::Error("runtime: the index array is not a multiple of 3");
   for (uint32_t v : indices_)
     if (v >= vertexCount_) throw anim::Error("runtime: a triangle refers to a vertex out of range");
+  setTree(topologyOf(tree));
+  positions_.assign(std::size_t(vertexCount_) * 3, 0.0f);
+  info_.layout = config.layout;
+  if (config.layout == CpuLayout::Bvh2) {
+    info_.interiorNodes = tree_.interiorCount;
+    info_.leaves = tree_.leafCount;
+    info_.depth = tree_.depth;
+    const std::vector<double> costs = frameCosts(unflattenBvh(tree), config.collapse.cost);
+    info_.binaryCost = info_.layoutCost = temporalCost(costs, config.collapse.k);
+    return;
+  }
+  kernels_ = kernelsFor(config.layout, config.isa);
+  if (!kernels_)
+    throw anim::Error(std::string("runtime: no ") + layoutName(config.layout) + " kernels" +
+                      (config.isa ? std::string(" for ") + isaName(*config.isa) : std::string()) +
+                      " run on this processor (bvh8 needs AVX2)");
+  info_.isa = kernels_->isa;
+  collapse_ = config.collapse;
+  setWideTree(unflattenBvh(tree), true);  // every frame block of the tree
+}
+
+void CpuRuntime::setWideTree(const Bvh& binary, bool reportCosts) {
+  WideCollapser::Config c = collapse_;
+  c.width = static_cast<uint32_t>(info_.layout);
+  c.leafPacket = c.width;  // the kernels test a leaf's triangles c.width at a time
+  const WideBvh w = WideCollapser(c).collapse(binary);
+  info_.binaryCost = reportCosts ? temporalCost(frameCosts(binary, c.cost), c.k) : 0.0;
+  info_.layoutCost = reportCosts ? temporalCost(wideFrameCosts(w, c.cost), c.k) : 0.0;
+  info_.interiorNodes = w.nodeCount();
+  info_.leaves = w.leafCount();
+  info_.depth = w.depth();
+  if (info_.layout == CpuLayout::Bvh4)
+    wide4_ = std::make_shared<WideTree<4>>(w, threads_->count);
+  else
+    wide8_ = std::make_shared<WideTree<8>>(w, threads_->count);
+}
+
+namespace {
+
+const FlatBvh& firstTree(const TreeSet& set) {
+  if (set.trees.empty() || set.ranges.size() != set.trees.size())
+    throw anim::Error("runtime: the tree set holds no trees (or not one time range per tree)");
+  return set.trees.front();
+}
+
+}  // namespace
+
+CpuRuntime::CpuRuntime(const TreeSet& set, std::vector<uint32_t> indices, uint32_t vertexCount, Config config)
+    : CpuRuntime(firstTree(set), std::move(indices), vertexCount, config) {
+  if (set.size() == 1) return;
+  for (const FlatBvh& tree : set.trees) setTrees_.push_back(topologyOf(tree));
+  setRanges_ = set.ranges;
+  if (info_.layout == CpuLayout::Bvh2) return;
+  // Collapse every tree of the set now (from all its frame blocks), so a switch costs no collapse.
+  const LayoutInfo first = info_;
+  for (uint32_t s = 0; s < set.size(); ++s) {
+    if (s > 0) setWideTree(unflattenBvh(set.trees[s]), false);
+    setWide4_.push_back(wide4_);
+    setWide8_.push_back(wide8_);
+  }
+  wide4_ = setWide4_[0];
+  wide8_ = setWide8_[0];
+  info_ = first;
+}
+
+FlatBvh CpuRuntime::topologyOf(const FlatBvh& tree) const {
   if (tree.triangleCount() != triangleCount())
     throw anim::Error("runtime: the tree holds " + std::to_string(tree.triangleCount()) +
                       " triangles, the animation " + std::to_string(triangleCount()));
@@ -54,8 +158,24 @@ CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint3
   one.rootBoxes = {tree.rootBoxes.empty() ? Aabb{} : tree.rootBoxes[0]};
   one.triIndex = tree.triIndex;
   if (auto problem = validateFlatBvh(one)) throw anim::Error("runtime: invalid tree: " + *problem);
-  setTree(std::move(one));
-  positions_.assign(std::size_t(vertexCount_) * 3, 0.0f);
+  if (one.depth > kTraversalStackSize)
+    throw anim::Error("runtime: tree depth " + std::to_string(one.depth) + " exceeds the traversal stack of " +
+                      std::to_string(kTraversalStackSize));
+  return one;
+}
+
+uint32_t CpuRuntime::selectTreeAt(double time) {
+  if (setTrees_.empty()) return 0;
+  const uint32_t index = treeIndexAt(setRanges_, time);
+  if (index != current_) {
+    setTree(setTrees_[index]);
+    if (!setWide4_.empty()) {
+      wide4_ = setWide4_[index];
+      wide8_ = setWide8_[index];
+    }
+    current_ = index;
+  }
+  return index;
 }
 
 CpuRuntime::~CpuRuntime() = default;
@@ -78,27 +198,18 @@ void CpuRuntime::setTree(FlatBvh tree) {
   tree_ = std::move(tree);
   woop_.resize(tree_.triangleCount());
 
-  // Split the tree into about 8 subtrees per thread (each a contiguous index range in canonical
-  // order) so the refit load balances; nodes above them are refitted afterwards.
-  subtreeTasks_.clear();
-  topNodes_.clear();
-  if (tree_.interiorCount == 0) return;
-  const auto ends = subtreeEnds(tree_);
-  const uint32_t grain = std::max<uint32_t>(64, tree_.interiorCount / (8 * threads_->count));
-  std::vector<uint32_t> stack{0};
-  while (!stack.empty()) {
-    const uint32_t i = stack.back();
-    stack.pop_back();
-    if (ends[i] - i <= grain) {
-      subtreeTasks_.push_back({i, ends[i]});
-      continue;
-    }
-    topNodes_.push_back(i);
-    const GpuBvhNode& n = tree_.nodes[i];
-    for (int32_t ref : {n.ref0, n.ref1})
-      if (!isLeafRef(ref)) stack.push_back(static_cast<uint32_t>(ref));
+  if (tree_.interiorCount == 0) {
+    subtreeTasks_.clear();
+    topNodes_.clear();
+    return;
   }
-  std::sort(topNodes_.begin(), topNodes_.end(), std::greater<>());
+  detail::planParallelRefit(
+      subtreeEnds(tree_), threads_->count,
+      [&](uint32_t i, auto push) {
+        for (int32_t ref : {tree_.nodes[i].ref0, tree_.nodes[i].ref1})
+          if (!isLeafRef(ref)) push(static_cast<uint32_t>(ref));
+      },
+      subtreeTasks_, topNodes_);
 }
 
 void CpuRuntime::setPositions(std::span<const float> positions) {
@@ -135,6 +246,19 @@ void CpuRuntime::refitNode(uint32_t i) {
 }
 
 void CpuRuntime::refitAndWoop() {
+  const auto parallel = [this](std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) {
+    parallelFor(n, 1, body);
+  };
+  if (wide4_) {
+    wide4_->refit(positions_.data(), indices_.data(), parallel);
+    view4_ = wide4_->view(indices_.data(), positions_.data());
+    return;
+  }
+  if (wide8_) {
+    wide8_->refit(positions_.data(), indices_.data(), parallel);
+    view8_ = wide8_->view(indices_.data(), positions_.data());
+    return;
+  }
   if (tree_.interiorCount == 0) {
     tree_.rootBoxes[0] = refitLeaf(0, tree_.rootCount);
     return;
@@ -179,6 +303,19 @@ CpuRuntime::RebuildTimings CpuRuntime::rebuild(std::span<const float> positions,
     flat.frameCount = 1;
   }
   setTree(std::move(flat));
+  setTrees_.clear();  // the rebuilt tree replaces the set
+  setWide4_.clear();
+  setWide8_.clear();
+  current_ = 0;
+  if (info_.layout != CpuLayout::Bvh2) {
+    collapse_.k = 0;  // one frame: its weight is 1 whatever k is
+    setWideTree(bvh, false);
+  } else {
+    info_.interiorNodes = tree_.interiorCount;
+    info_.leaves = tree_.leafCount;
+    info_.depth = tree_.depth;
+    info_.binaryCost = info_.layoutCost = 0.0;
+  }
   timings.flattenMs = msSince(start);
   start = std::chrono::steady_clock::now();
   refitAndWoop();
@@ -186,7 +323,29 @@ CpuRuntime::RebuildTimings CpuRuntime::rebuild(std::span<const float> positions,
   return timings;
 }
 
+Hit CpuRuntime::closestHit(const Ray& ray) const {
+  if (wide8_) return kernels_->closest8(view8_, ray);
+  if (wide4_) return kernels_->closest4(view4_, ray);
+  return tsah::closestHit(binaryView(), ray);
+}
+
+bool CpuRuntime::anyHit(const Ray& ray) const {
+  if (wide8_) return kernels_->any8(view8_, ray);
+  if (wide4_) return kernels_->any4(view4_, ray);
+  return tsah::anyHit(binaryView(), ray);
+}
+
+const FlatBvh& CpuRuntime::tree() const {
+  if (info_.layout != CpuLayout::Bvh2) throw anim::Error("runtime: the binary tree is not kept up to date in a wide layout");
+  return tree_;
+}
+
 BvhView CpuRuntime::view() const {
+  if (info_.layout != CpuLayout::Bvh2) throw anim::Error("runtime: the binary view is not kept up to date in a wide layout");
+  return binaryView();
+}
+
+BvhView CpuRuntime::binaryView() const {
   BvhView v;
   v.nodes = tree_.nodes.data();
   v.woop = woop_.data();
@@ -199,6 +358,10 @@ BvhView CpuRuntime::view() const {
   return v;
 }
 
-Aabb CpuRuntime::bounds() const { return tree_.rootBoxes[0]; }
+Aabb CpuRuntime::bounds() const {
+  if (wide4_) return wide4_->bounds();
+  if (wide8_) return wide8_->bounds();
+  return tree_.rootBoxes[0];
+}
 
 }  // namespace tsah

@@ -10,6 +10,7 @@
 #include <utility>
 
 #include "random.hpp"
+#include "stop_rule.hpp"
 #include "tsah/cost_terms.hpp"
 
 namespace tsah {
@@ -552,8 +553,7 @@ InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const Primitive
   const uint32_t nodeCount = session.bvh().nodeCount();
   const auto batchSize = static_cast<uint32_t>(std::max(
       {1.0, double(config_.minBatchSize), std::round(config_.batchFraction * double(nodeCount))}));
-  double best = session.cost();
-  uint32_t withoutImprovement = 0;
+  StallCounter stall(session.cost(), config_.minImprovement, config_.batchesWithoutImprovement);
   bool anyEligible = true;
   for (uint32_t batch = 1; anyEligible; ++batch) {
     if (config_.selection == Selection::BatchSort) {
@@ -576,15 +576,7 @@ InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const Primitive
     }
     session.endBatch();
     record(batch);
-    const double cost = session.cost();
-    if (cost < best * (1.0 - config_.minImprovement)) {
-      best = std::min(best, cost);
-      withoutImprovement = 0;
-    } else {
-      best = std::min(best, cost);
-      ++withoutImprovement;
-    }
-    if (withoutImprovement >= config_.batchesWithoutImprovement) break;
+    if (stall.stalledAfter(session.cost())) break;
     if (config_.maxBatches && batch >= config_.maxBatches) break;
     if (limited && elapsed() >= config_.timeLimitSeconds) {
       result.timeLimitReached = true;

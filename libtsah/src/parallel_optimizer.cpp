@@ -4,6 +4,7 @@
 #include <stdexcept>
 #include <utility>
 
+#include "stop_rule.hpp"
 #include "tsah/parallel_optimizer.hpp"
 
 namespace tsah {
@@ -40,19 +41,15 @@ ParallelReinsertionOptimizer::Result ParallelReinsertionOptimizer::optimize(Bvh 
     if (config_.progress) config_.progress(r);
   };
   record(0);
-  double best = session.cost();
-  uint32_t withoutImprovement = 0;
+  StallCounter stall(session.cost(), config_.minImprovement, config_.batchesWithoutImprovement);
   bool focused = true;
   for (uint32_t round = 1;; ++round) {
     const ReinsertionSession::RoundStats stats = session.round(focused);
     session.endRound();
     record(round);
-    const double cost = session.cost();
-    withoutImprovement = cost < best * (1.0 - config_.minImprovement) ? 0 : withoutImprovement + 1;
-    best = std::min(best, cost);
     // Stalled focused rounds get one full round before the run ends: nodes skipped as quiet may
     // have found new places after changes elsewhere.
-    const bool stalled = stats.candidates == 0 || withoutImprovement >= config_.batchesWithoutImprovement;
+    const bool stalled = stall.stalledAfter(session.cost()) || stats.candidates == 0;
     if (stalled && !focused) break;
     focused = !stalled;
     if (config_.maxBatches && round >= config_.maxBatches) break;

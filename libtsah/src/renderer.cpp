@@ -16,12 +16,13 @@ namespace {
 
 // Area-weighted vertex normals of the current frame, 3 floats per vertex (shading only; rays use
 // face normals).
-std::vector<float> vertexNormals(const BvhView& bvh, uint32_t triangles, uint32_t vertices) {
+std::vector<float> vertexNormals(const uint32_t* indices, const float* positions, uint32_t triangles,
+                                 uint32_t vertices) {
   std::vector<float> n(std::size_t(vertices) * 3, 0.0f);
   for (uint32_t t = 0; t < triangles; ++t) {
-    const Vec3 face = faceNormal(bvh.indices, bvh.positions, t);
+    const Vec3 face = faceNormal(indices, positions, t);
     for (int k = 0; k < 3; ++k) {
-      float* v = n.data() + 3 * std::size_t(bvh.indices[3 * std::size_t(t) + k]);
+      float* v = n.data() + 3 * std::size_t(indices[3 * std::size_t(t) + k]);
       v[0] += face.x;
       v[1] += face.y;
       v[2] += face.z;
@@ -107,7 +108,8 @@ RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const S
   const std::size_t pixels = std::size_t(width) * height;
   if (image.width != width || image.height != height) image = Image(width, height);
 
-  const BvhView bvh = runtime.view();
+  const uint32_t* indices = runtime.indices().data();
+  const float* positions = runtime.positions().data();
   const CameraRays cam = cameraRays(camera, width, height);
   std::vector<Surface> surfaces(pixels);
   std::vector<float> ao(pixels, 1.0f), visibility(pixels, 1.0f);
@@ -121,7 +123,7 @@ RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const S
     for (std::size_t y = y0; y < y1; ++y)
       for (uint32_t x = 0; x < width; ++x) {
         const Ray ray = cam.ray(float(x) + 0.5f, float(y) + 0.5f);
-        surfaces[y * width + x] = primarySurface(ray, closestHit(bvh, ray), bvh.indices, bvh.positions, lighting);
+        surfaces[y * width + x] = primarySurface(ray, runtime.closestHit(ray), indices, positions, lighting);
       }
     rays += (y1 - y0) * width;
   });
@@ -132,7 +134,7 @@ RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const S
     stats.ao = surfacePass(runtime, width, surfaces, base, [&](std::size_t i, const Surface& s, SampleKey key) {
       uint32_t occluded = 0;
       for (uint32_t k = 0; k < settings.aoSamples; ++k)
-        occluded += anyHit(bvh, aoRay(s, key, k, lighting.aoDistance)) ? 1u : 0u;
+        occluded += runtime.anyHit(aoRay(s, key, k, lighting.aoDistance)) ? 1u : 0u;
       ao[i] = aoFactor(occluded, settings.aoSamples);
       return settings.aoSamples;
     });
@@ -145,7 +147,7 @@ RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const S
         Ray ray;
         if (!shadowRay(s, lighting, key, k, ray)) continue;  // the light point is behind the surface
         ++cast;
-        visible += anyHit(bvh, ray) ? 0u : 1u;
+        visible += runtime.anyHit(ray) ? 0u : 1u;
       }
       visibility[i] = lightVisibility(visible, settings.shadowSamples);
       return cast;
@@ -153,13 +155,13 @@ RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const S
 
   // Shading: diffuse sun with soft shadows + sky light scaled by ambient occlusion.
   start = std::chrono::steady_clock::now();
-  const std::vector<float> normals = vertexNormals(bvh, runtime.triangleCount(), runtime.vertexCount());
+  const std::vector<float> normals = vertexNormals(indices, positions, runtime.triangleCount(), runtime.vertexCount());
   runtime.parallelFor(height, 4, [&](std::size_t y0, std::size_t y1) {
     for (std::size_t y = y0; y < y1; ++y)
       for (uint32_t x = 0; x < width; ++x) {
         const std::size_t i = y * width + x;
         const Vec3 color = pixelColor(surfaces[i], cam.ray(float(x) + 0.5f, float(y) + 0.5f), ao[i], visibility[i],
-                                      bvh.indices, normals.data(), lighting);
+                                      indices, normals.data(), lighting);
         storeSrgb8(image.pixel(x, uint32_t(y)), color);
       }
   });

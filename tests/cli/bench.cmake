@@ -77,14 +77,25 @@ if(NOT selections EQUAL 3)
   message(FATAL_ERROR "convergence: ${selections} node selections, expected 3")
 endif()
 string(JSON methods LENGTH "${json}" scenes 0 runtime methods)
-if(NOT methods EQUAL 6)
-  message(FATAL_ERROR "Table 2 has ${methods} methods, expected 6 (SAH0, SAH*, T-SAH, T-SAH x3, two rebuilds)")
+if(NOT methods EQUAL 8)
+  message(FATAL_ERROR "Table 2 has ${methods} methods, expected 8 (SAH0, SAH*, T-SAH, T-SAH x3 equal-time, x3 count mode, budget mode, two rebuilds)")
 endif()
 foreach(key update_ms trace_ms total_ms mrays_per_s rays_per_frame)
   expect_key(scenes 0 runtime methods 2 average ${key})
 endforeach()
 expect_key(scenes 0 runtime methods 2 per_frame total_ms)
 expect_key(scenes 0 segments k_trees average)
+expect_key(scenes 0 segments count_mode split_times)
+expect_key(scenes 0 segments budget_mode trees)
+expect_key(scenes 0 segments budget_mode peak_ratio_to_rebuild)
+string(JSON met GET "${json}" scenes 0 segments budget_mode met)
+if(NOT met)
+  message(FATAL_ERROR "results.json: the budget mode missed its budget")
+endif()
+string(JSON name5 GET "${json}" scenes 0 runtime methods 5 name)
+if(NOT name5 STREQUAL "tsah0-budget")
+  message(FATAL_ERROR "results.json: runtime method 5 is '${name5}', expected tsah0-budget")
+endif()
 expect_key(scenes 0 embree status)
 file(READ ${OUT}/results.md md)
 foreach(text "# tsah bench: results" "## bench_explode" "**Table 1**" "**Table 2**" "**Segments**" "| T-SAH k=0 |"
@@ -134,22 +145,53 @@ add_test(NAME cli.bench.no_gpu
 set_tests_properties(cli.bench.no_gpu PROPERTIES FIXTURES_REQUIRED bench_input
   PASS_REGULAR_EXPRESSION "^tsah: --device cuda: (this tsah was built without the CUDA runtime|no CUDA device is available on this machine)\n$")
 
-# tsah optimize --segments K: K files with their parts' time ranges, the report per part.
+# tsah optimize --segments K|auto: one tree-set file (.tbvh version 2); info, trace and export
+# switch through it; corrupt sets are refused with one line.
 add_test(NAME cli.segments.json
          COMMAND tsah optimize ${W}/bench_explode.tanim -o ${W}/seg.tbvh --segments 3 --eval-frames 12 --json)
 set_tests_properties(cli.segments.json PROPERTIES FIXTURES_REQUIRED bench_input FIXTURES_SETUP bench_segments
-  PASS_REGULAR_EXPRESSION "\"segments\":\\[\\{.*\"index\":0,.*\"output\":\"[^\"]*seg_seg0.tbvh\".*\"time_end\":[0-9.]+,\"time_start\":0\\.0\\},\\{.*\"index\":1,.*seg_seg1.tbvh.*\\{.*\"index\":2,.*seg_seg2.tbvh\".*\"time_end\":5\\.0,")
-add_test(NAME cli.segments.info COMMAND tsah info ${W}/seg_seg2.tbvh)
+  PASS_REGULAR_EXPRESSION "\"parts\":\\[\\{.*\"index\":0,.*\"time_start\":0\\.0\\},\\{.*\"index\":1,.*\\{.*\"index\":2,.*\"time_end\":5\\.0,.*\"segmentation\":\"count\".*\"trees\":3")
+add_test(NAME cli.segments.info COMMAND tsah info ${W}/seg.tbvh)
 set_tests_properties(cli.segments.info PROPERTIES FIXTURES_REQUIRED bench_segments
-  PASS_REGULAR_EXPRESSION "time 3\\.3+ \\.\\. 5\n")
+  PASS_REGULAR_EXPRESSION "v2 tree set.*\nset           3 trees, count segmentation, time 0 \\.\\. 5, overlap 0\n\ntree 0        used for t 0 \\.\\. [0-9.]+ .*\ntree 2        used for t [0-9.]+ \\.\\. 5 ")
 add_test(NAME cli.segments.trace
-         COMMAND tsah trace ${W}/bench_explode.tanim ${W}/seg_seg1.tbvh --frames 2 --width 16 --height 12 --no-images)
-set_tests_properties(cli.segments.trace PROPERTIES FIXTURES_REQUIRED bench_segments)
+         COMMAND tsah trace ${W}/bench_explode.tanim ${W}/seg.tbvh --frames 2 --width 16 --height 12 --no-images --json)
+set_tests_properties(cli.segments.trace PROPERTIES FIXTURES_REQUIRED bench_segments
+  PASS_REGULAR_EXPRESSION "\"time\":0\\.0,\"total_ms\":[-0-9.e]+,\"trace_ms\":[-0-9.e]+,\"trace_ms_by_type\":\\{[^}]*\\},\"tree\":0,.*\"time\":5\\.0,\"total_ms\":[-0-9.e]+,\"trace_ms\":[-0-9.e]+,\"trace_ms_by_type\":\\{[^}]*\\},\"tree\":2,.*\"trees\":3")
+add_test(NAME cli.segments.export COMMAND tsah export ${W}/seg.tbvh ${W}/bench_explode.tanim --time 5 -o ${W}/seg_export)
+set_tests_properties(cli.segments.export PROPERTIES FIXTURES_REQUIRED bench_segments
+  PASS_REGULAR_EXPRESSION "tree 2 of the set's 3: the tree of this time's part \\(t [0-9.]+ \\.\\. 5\\)\n")
+add_test(NAME cli.segments.corrupt
+         COMMAND sh -c "head -c 400 '${W}/seg.tbvh' > '${W}/seg_bad.tbvh' && '$<TARGET_FILE:tsah>' info '${W}/seg_bad.tbvh'")
+set_tests_properties(cli.segments.corrupt PROPERTIES FIXTURES_REQUIRED bench_segments
+  PASS_REGULAR_EXPRESSION "^tsah: [^\n]*seg_bad.tbvh: [^\n]+\n$")
+add_test(NAME cli.segments.corrupt_fails
+         COMMAND sh -c "head -c 400 '${W}/seg.tbvh' > '${W}/seg_bad2.tbvh' && '$<TARGET_FILE:tsah>' trace '${W}/bench_explode.tanim' '${W}/seg_bad2.tbvh' --no-images")
+set_tests_properties(cli.segments.corrupt_fails PROPERTIES FIXTURES_REQUIRED bench_segments WILL_FAIL TRUE)
+add_test(NAME cli.segments.budget
+         COMMAND tsah optimize ${W}/bench_explode.tanim -o ${W}/seg_budget.tbvh --segments auto --budget 1.2
+                 --eval-frames 8 --reference-frames 0 --overlap 0.1)
+set_tests_properties(cli.segments.budget PROPERTIES FIXTURES_REQUIRED bench_input
+  PASS_REGULAR_EXPRESSION "seg_budget.tbvh: a set of [0-9]+ trees \\(budget segmentation, tsah0\\).*\nbudget 1\\.2x the per-frame optimized cost: met on every evaluation frame; peak ratio [01]\\.[0-9]+")
 add_test(NAME cli.segments.text
          COMMAND tsah optimize ${W}/bench_explode.tanim -o ${W}/segtext.tbvh --segments 2 --method sah0)
 set_tests_properties(cli.segments.text PROPERTIES FIXTURES_REQUIRED bench_input
-  PASS_REGULAR_EXPRESSION "segtext.tbvh: 2 trees for 2 equal-time parts, sah0.*\n  .*segtext_seg0.tbvh: t 0 \\.\\. 2\\.5,.*\n  .*segtext_seg1.tbvh: t 2\\.5 \\.\\. 5,.*\ncost over 50 evaluation frames, each with the tree of its part: average [0-9.]+, maximum [0-9.]+\n")
+  PASS_REGULAR_EXPRESSION "segtext.tbvh: a set of 2 trees \\(count segmentation, sah0\\).*\n  tree 0: t 0 \\.\\. [0-9.]+ \\(sah0\\),.*\n  tree 1: t [0-9.]+ \\.\\. 5 \\(sah0\\),.*\ncost over 50 evaluation frames, each with the tree of its part: average [0-9.]+, maximum [0-9.]+\n")
+add_test(NAME cli.segments.bad_count COMMAND tsah optimize ${W}/bench_explode.tanim -o ${W}/x.tbvh --segments three)
+set_tests_properties(cli.segments.bad_count PROPERTIES FIXTURES_REQUIRED bench_input
+  PASS_REGULAR_EXPRESSION "^tsah: --segments expects a number of trees \\(1\\.\\.1000\\) or auto, got 'three'\n$")
+add_test(NAME cli.segments.budget_needs_auto COMMAND tsah optimize ${W}/bench_explode.tanim -o ${W}/x.tbvh --budget 1.1)
+set_tests_properties(cli.segments.budget_needs_auto PROPERTIES FIXTURES_REQUIRED bench_input
+  PASS_REGULAR_EXPRESSION "^tsah: --budget and --budget-cost go with --segments auto\n$")
 file(WRITE ${W}/seg_static.obj "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
 add_test(NAME cli.segments.static COMMAND tsah optimize ${W}/seg_static.obj -o ${W}/seg_static.tbvh --segments 2)
 set_tests_properties(cli.segments.static PROPERTIES
   PASS_REGULAR_EXPRESSION "^tsah: .*seg_static.obj: --segments needs an animation \\(this input has one frame\\)\n$")
+
+# --embree-only: no Table 1, no segments; only the T-SAH tree traced in every layout (and Embree
+# when it was found). A crash here once came from the segment experiment reading Table 1's rows.
+add_test(NAME cli.bench.embree-only
+         COMMAND tsah bench ${W}/bench_explode.tanim --embree-only --quick --width 48 --height 36 --trace-frames 2
+                 --out ${W}/bench_embree_only)
+set_tests_properties(cli.bench.embree-only PROPERTIES FIXTURES_REQUIRED bench_input
+  PASS_REGULAR_EXPRESSION "bench_embree_only/results.json")

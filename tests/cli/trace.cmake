@@ -24,6 +24,17 @@ set_tests_properties(cli.trace.export PROPERTIES FIXTURES_REQUIRED trace_tree FI
 add_test(NAME cli.trace.export.header COMMAND ${CMAKE_COMMAND} -E cat ${W}/trace_export/tsah_scene.h)
 set_tests_properties(cli.trace.export.header PROPERTIES FIXTURES_REQUIRED trace_exported
   PASS_REGULAR_EXPRESSION "TSAH_NODE_COUNT [0-9]+u.*TSAH_ROOT_REF")
+foreach(layout bvh4 bvh8)
+  add_test(NAME cli.trace.export.${layout} COMMAND tsah export ${W}/trace_explode.tbvh ${W}/trace_explode.tanim --frame 2
+                                                   --layout ${layout} -o ${W}/trace_export_${layout})
+  set_tests_properties(cli.trace.export.${layout} PROPERTIES FIXTURES_REQUIRED trace_tree
+                       FIXTURES_SETUP trace_exported_${layout}
+    PASS_REGULAR_EXPRESSION "wrote .*trace_export_${layout}: [0-9]+ nodes, [0-9]+ Woop packets.*${layout} layout")
+  string(SUBSTRING ${layout} 3 1 width)
+  add_test(NAME cli.trace.export.${layout}.header COMMAND ${CMAKE_COMMAND} -E cat ${W}/trace_export_${layout}/tsah_scene.h)
+  set_tests_properties(cli.trace.export.${layout}.header PROPERTIES FIXTURES_REQUIRED trace_exported_${layout}
+    PASS_REGULAR_EXPRESSION "TSAH_WIDTH ${width}u.*TsahBvh${width}Node.*TSAH_PACKET_COUNT [0-9]+u.*TSAH_ROOT_REF")
+endforeach()
 add_test(NAME cli.trace.export.frame COMMAND tsah export ${W}/trace_explode.tbvh ${W}/trace_explode.tanim --frame 6
                                              -o ${W}/trace_export_bad)
 set_tests_properties(cli.trace.export.frame PROPERTIES FIXTURES_REQUIRED trace_tree
@@ -48,6 +59,17 @@ foreach(method binned sweep)
   set_tests_properties(cli.trace.rebuild.${method} PROPERTIES FIXTURES_REQUIRED trace_tree
     PASS_REGULAR_EXPRESSION "\"build_ms\":[0-9.e+-]+.*\"rebuild\":\"${method}\"")
 endforeach()
+foreach(layout bvh2 bvh4)
+  add_test(NAME cli.trace.layout.${layout}
+           COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --frames 1 --width 32 --height 24
+                   --no-images --layout ${layout} --json)
+  set_tests_properties(cli.trace.layout.${layout} PROPERTIES FIXTURES_REQUIRED trace_tree
+    PASS_REGULAR_EXPRESSION "\"layout\":\"${layout}\".*\"tree\":{.*\"tsah_cost\"")
+endforeach()
+add_test(NAME cli.trace.layout.default COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --frames 1
+                                               --width 32 --height 24 --no-images)
+set_tests_properties(cli.trace.layout.default PROPERTIES FIXTURES_REQUIRED trace_tree
+  PASS_REGULAR_EXPRESSION "CPU threads, bvh[248]")
 file(WRITE ${W}/trace_camera.json
   "{\"keys\": [{\"time\": 0, \"eye\": [0, 1, 6], \"look_at\": [0, 0, 0], \"fov\": 50},\n"
   "           {\"time\": 5, \"eye\": [6, 1, 0], \"look_at\": [0, 0, 0], \"up\": [0, 1, 0]}]}\n")

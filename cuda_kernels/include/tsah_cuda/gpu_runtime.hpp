@@ -25,6 +25,7 @@
 #include "tsah/image.hpp"
 #include "tsah/ray.hpp"
 #include "tsah/renderer.hpp"
+#include "tsah/tree_set.hpp"
 #include "tsah/woop.hpp"
 #include "tsah_cuda/device.hpp"
 
@@ -97,14 +98,23 @@ class GpuRuntime {
   // traversal stack allows, and CudaError when the device fails.
   GpuRuntime(const FlatBvh& tree, const anim::Animation& animation, Config config);
   GpuRuntime(const FlatBvh& tree, const anim::Animation& animation);
+  // A tree set: every tree is checked as above and uploaded once; updateAt(t) refits and traces the
+  // tree of t's part (tsah::treeIndexAt: boundaries and overlaps as the CPU runtime), each tree
+  // with its own captured graph.
+  GpuRuntime(const TreeSet& set, const anim::Animation& animation, Config config);
   ~GpuRuntime();
   GpuRuntime(const GpuRuntime&) = delete;
   GpuRuntime& operator=(const GpuRuntime&) = delete;
 
-  // The uploaded tree refitted to the animation at time t (clamped to its range), Woop triangles
-  // recomputed; tracing uses it afterwards.
+  // The uploaded tree of t's part refitted to the animation at time t (clamped to its range), Woop
+  // triangles recomputed; tracing uses it afterwards.
   UpdateTimings updateAt(double time);
-  // The same for positions given by the host (vertexCount * 3 floats), as CpuRuntime::update.
+  // Makes the tree of t's part current for update(positions) (updateAt does it itself); returns it.
+  uint32_t selectTreeAt(double time);
+  uint32_t treeCount() const;
+  uint32_t currentTree() const;
+  // The same for positions given by the host (vertexCount * 3 floats), as CpuRuntime::update: the
+  // current tree (selectTreeAt) is refitted.
   UpdateTimings update(std::span<const float> positions);
   // A new tree for the animation at time t (or for the given positions); tracing uses it until the
   // next update. The uploaded tree is kept.

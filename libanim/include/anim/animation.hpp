@@ -1,10 +1,12 @@
 #pragma once
 // The animation model: constant triangle connectivity plus keyframed vertex positions.
 //
-// Positions are stored once, as float32, one contiguous block of vertexCount*3 floats per keyframe
-// (x0 y0 z0 x1 y1 z1 ...). The topology is stored once for all frames. Positions at any time are the
-// linear interpolation of the two neighbouring keyframes; before the first / after the last keyframe
-// they are clamped.
+// The topology is stored once for all frames. Vertices that never move (a static environment) are
+// stored once, as float32 rest positions; only the moving vertices have one block of
+// movingVertexCount*3 floats per keyframe (x0 y0 z0 x1 y1 z1 ... in ascending vertex order). When
+// every vertex moves there are no rest positions and the moving vertices are 0..vertexCount-1.
+// Positions at any time are the linear interpolation of the two neighbouring keyframes; before the
+// first / after the last keyframe they are clamped.
 #include <array>
 #include <cstddef>
 #include <cstdint>
@@ -50,14 +52,31 @@ struct CameraKey {
   float fovyDegrees = 45.0f;
 };
 
+// Largest coordinate magnitude accepted anywhere: a box of this extent still has a finite surface
+// area in float (3 * (2e18)^2 << 3.4e38), with room for the sums of costs. Larger coordinates (or
+// NaN/Inf) are refused at import, naming the first offending vertex.
+inline constexpr float kMaxCoordinate = 1e18f;
+// Index of the first coordinate that is NaN, infinite or beyond kMaxCoordinate; size() if none.
+std::size_t firstBadCoordinate(std::span<const float> positions);
+// "has a NaN or infinite coordinate" / "has coordinate 3e+38, beyond ..." for that coordinate.
+std::string describeBadCoordinate(float value);
+
 class Animation {
  public:
   Animation() = default;
   // indices: 3 per triangle, each < vertexCount. positions: times.size() blocks of vertexCount*3.
   // times: strictly increasing keyframe times. Throws anim::Error when the sizes disagree, an
-  // index is out of range, times are not increasing, or a coordinate is NaN/Inf.
+  // index is out of range, times are not increasing, or a coordinate is NaN/Inf. Vertices that
+  // are the same in every keyframe are found here and stored once when that saves memory.
   Animation(std::vector<uint32_t> indices, uint32_t vertexCount, std::vector<float> positions,
             std::vector<double> times, std::string name = {});
+  // The split form directly (what a scene bake builds, without ever holding every keyframe whole):
+  // rest: vertexCount*3 positions of every vertex (the moving ones' entries are ignored and set to
+  // their keyframe 0); moving: ascending ids of the vertices that move; motion: times.size()
+  // blocks of moving.size()*3. Same checks as above.
+  static Animation withStaticVertices(std::vector<uint32_t> indices, std::vector<float> rest,
+                                      std::vector<uint32_t> moving, std::vector<float> motion,
+                                      std::vector<double> times, std::string name = {});
 
   const std::string& name() const { return name_; }
   void setName(std::string name) { name_ = std::move(name); }
@@ -70,14 +89,32 @@ class Animation {
 
   std::span<const uint32_t> indices() const { return indices_; }
   std::span<const double> times() const { return times_; }
-  std::span<const float> keyframe(uint32_t k) const;
-  std::span<const float> allPositions() const { return positions_; }
+  // Every vertex of keyframe k (vertexCount*3 floats), assembled from the rest and moving parts.
+  std::vector<float> keyframe(uint32_t k) const;
+  // Every vertex of every keyframe, keyframe-major (keyframeCount*vertexCount*3 floats).
+  std::vector<float> allPositions() const;
+
+  // The static/moving split. movingVertices() is empty when every vertex moves (allMoving()).
+  uint32_t movingVertexCount() const { return movingCount_; }
+  uint32_t staticVertexCount() const { return vertexCount_ - movingCount_; }
+  bool allMoving() const { return movingCount_ == vertexCount_; }
+  std::span<const uint32_t> movingVertices() const { return moving_; }
+  // vertexCount*3 rest positions (moving vertices hold their keyframe 0); empty when allMoving().
+  std::span<const float> restPositions() const { return rest_; }
+  // Keyframe k of the moving vertices only: movingVertexCount*3 floats.
+  std::span<const float> movingKeyframe(uint32_t k) const;
+  // Every keyframe of the moving vertices, keyframe-major (keyframeCount*movingVertexCount*3).
+  std::span<const float> motion() const { return motion_; }
   double startTime() const { return times_.empty() ? 0.0 : times_.front(); }
   double endTime() const { return times_.empty() ? 0.0 : times_.back(); }
 
   // Vertex positions at time t (linear interpolation, clamped to the time range).
   void positionsAt(double t, std::span<float> out) const;
   std::vector<float> positionsAt(double t) const;
+  // Writes only the moving vertices' positions at time t into out (vertexCount*3 floats); the
+  // static entries are left as they are. A per-frame update that filled out once with positionsAt
+  // calls this: its cost is that of the moving vertices only.
+  void movingPositionsAt(double t, std::span<float> out) const;
 
   Bounds keyframeBounds(uint32_t k) const;
   Bounds boundsAt(double t) const;
@@ -99,12 +136,26 @@ class Animation {
 
   // Memory held by the positions and topology, in bytes.
   std::size_t memoryBytes() const;
+  // What memoryBytes() will be for these counts (before building anything that large).
+  static std::size_t memoryBytesFor(uint64_t triangles, uint64_t vertices, uint64_t movingVertices,
+                                    uint64_t keyframes);
 
  private:
+  void validate();
+  void compactStaticVertices();
+  // The moving vertices at time t: contiguous (movingCount*3) when scatter is null, else vertex
+  // scatter[m] of a vertexCount*3 buffer. The one copy of the interpolation arithmetic.
+  void interpolateMoving(double t, float* out, const uint32_t* scatter) const;
+  Bounds staticBounds() const;
+  Animation sampledAt(std::vector<double> times) const;
+
   std::string name_;
   std::vector<uint32_t> indices_;
   uint32_t vertexCount_ = 0;
-  std::vector<float> positions_;
+  uint32_t movingCount_ = 0;
+  std::vector<float> rest_;        // vertexCount*3, or empty when every vertex moves
+  std::vector<uint32_t> moving_;   // ascending moving vertex ids, or empty when every vertex moves
+  std::vector<float> motion_;      // keyframeCount blocks of movingCount*3
   std::vector<double> times_;
   uint32_t degenerate_ = 0;
   std::vector<CameraKey> camera_;

@@ -17,6 +17,8 @@ struct LoadOptions {
   std::function<void(std::size_t done, std::size_t total)> progress;
   // Called with each non-fatal finding of an importer (skipped materials, ...); may be empty.
   std::function<void(const std::string&)> warning;
+  // Resolves a scene object's "data:REL" path (docs/scenes.md); empty: $TSAH_DATA_DIR/REL.
+  std::function<std::string(const std::string& rel)> resolveDataPath;
 };
 
 // Loads INPUT, which may be:
@@ -25,7 +27,10 @@ struct LoadOptions {
 //  - a directory of mesh files (sorted by frame number, so 10 comes after 9),
 //  - a printf pattern such as frames/walk_%04d.obj, or a glob such as 'frames/*.obj',
 //  - a single mesh in a format OpenMesh reads (OBJ, PLY, OFF, STL, OM): a one-frame animation,
-//  - a BART .aff scene or an animated model (MD2, glTF, FBX, Collada) where those importers exist.
+//  - a mesh and a point cache of the same points, mesh.obj+cache.pc2 or +cache.mdd, or a manifest
+//    {"mesh": "mesh.obj", "cache": "cache.pc2"} (see point_cache.hpp),
+//  - a BART .aff scene or an animated model (MD2, glTF, FBX, Collada) where those importers exist,
+//  - a scene file (.json with "objects", docs/scenes.md): objects composed and baked.
 // Throws anim::ImportError naming the file and the problem.
 Animation load(const std::string& input, const LoadOptions& options = {});
 

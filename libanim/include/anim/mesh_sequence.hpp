@@ -3,6 +3,7 @@
 // directory or a JSON manifest into an ordered file list, reading each mesh, and checking that every
 // frame has the topology of the first.
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -21,6 +22,8 @@ struct MeshFrame {
 
 // Reads one mesh file (OBJ, PLY, OFF, STL, OM). Throws ImportError naming the file.
 MeshFrame readMesh(const std::string& path);
+// Parses OBJ text held in memory (`file` names it in messages); readMesh uses it for .obj files.
+MeshFrame decodeObj(std::span<const uint8_t> bytes, const std::string& file);
 
 struct FrameList {
   std::vector<std::string> files;
@@ -37,6 +40,8 @@ FrameList listFrames(const std::string& spec);
 // A JSON manifest: {"frames": ["a.obj", {"file": "b.obj", "time": 0.5}, ...]} or a bare array;
 // paths are relative to the manifest. Times, when given, must be given for every frame.
 FrameList readManifest(const std::string& path);
+// The same for a manifest's bytes already in memory (`path` names it and anchors relative files).
+FrameList decodeManifest(std::span<const uint8_t> bytes, const std::string& path);
 
 // Reads every file, checks topology against the first file and builds the animation (times
 // 0, 1, 2, ... unless the list carries times).

@@ -11,4 +11,8 @@ namespace anim {
 // Each file is written atomically. Returns the number of files written.
 std::size_t saveObjSequence(const Animation& animation, const std::string& pattern);
 
+// One keyframe as one OBJ file (vertices in the animation's order, then the faces), written
+// atomically: the topology file that goes with a point cache.
+void saveObjFrame(const Animation& animation, uint32_t keyframe, const std::string& path);
+
 }  // namespace anim

@@ -10,7 +10,8 @@
 //
 // Every tree is collapsed to adaptive leaves (maxLeafSize; 1 keeps one primitive per leaf) with the
 // cost of the frames it was built for, then evaluated by refitting it to each evaluation frame.
-// libtsah never sees an animation: frames arrive as primitive boxes or triangle positions.
+// The builders never see an animation: frames arrive as primitive boxes or triangle positions
+// (tsah/pipeline.hpp is the glue from an anim::Animation).
 #include <cstdint>
 #include <functional>
 #include <span>

@@ -21,6 +21,23 @@ struct CostModel {
   float ci = 2.0f;  // cost of intersecting one triangle
 };
 
+// Eq. 1 split into its two sums: C_i = (innerTerm + leafTerm) / rootArea. For a frame whose root has
+// no area the terms are cT * inner and cI * primitives and rootArea is 1 (see above).
+struct CostParts {
+  double innerTerm = 0.0;  // cT * sum of interior node areas
+  double leafTerm = 0.0;   // cI * sum over leaves of primitives * area
+  double rootArea = 1.0;
+  double inner() const { return innerTerm / rootArea; }
+  double leaves() const { return leafTerm / rootArea; }
+  double total() const { return (innerTerm + leafTerm) / rootArea; }
+};
+
+// One node's term of the numerator of Eq. 1 (its share of a frame's cost is term / (innerTerm +
+// leafTerm)): cT * area for an interior node, cI * primitives * area for a leaf.
+inline double nodeCostTerm(const CostModel& model, double area, uint32_t leafPrimCount) {
+  return leafPrimCount > 0 ? double(model.ci) * double(leafPrimCount) * area : double(model.ct) * area;
+}
+
 // Eq. 1 for one frame of the boxes stored in the tree (frame < bvh.frameCount).
 double frameCost(const Bvh& bvh, uint32_t frame, const CostModel& model = {});
 // Eq. 1 for every frame stored in the tree.
@@ -41,7 +58,9 @@ class FrameCostEvaluator {
   explicit FrameCostEvaluator(const Bvh& bvh, CostModel model = {});
 
   // primBoxes: one box per primitive (bvh.primCount() of them), indexed by primitive id.
-  double cost(std::span<const Aabb> primBoxes);
+  double cost(std::span<const Aabb> primBoxes) { return costParts(primBoxes).total(); }
+  // The same with its interior and leaf sums apart.
+  CostParts costParts(std::span<const Aabb> primBoxes);
   // The node boxes of the last cost() call, indexed by node.
   std::span<const Aabb> nodeBoxes() const { return boxes_; }
 

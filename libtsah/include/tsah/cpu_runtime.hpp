@@ -2,24 +2,58 @@
 // The CPU runtime: holds one tree in GPU-ready form plus this frame's vertices and Woop triangles.
 // Per frame: update() refits the boxes bottom-up and recomputes the Woop triangles in one parallel
 // pass over disjoint subtrees (then the few nodes above them); rebuild() instead builds a new tree
-// from this frame's triangle boxes (the per-frame rebuild baseline). Traversal reads view().
+// from this frame's triangle boxes (the per-frame rebuild baseline).
+//
+// Layouts: the binary tree as given (bvh2, traversal.hpp), or a 4- or 8-wide tree derived from it
+// once at construction by the multi-frame cost-optimal collapse (wide_bvh.hpp, over the frames the
+// given tree holds) and traced with the SIMD kernels of one instruction set (wide_traversal.hpp).
+// closestHit()/anyHit() trace the current frame in whichever layout was chosen.
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "tsah/bvh.hpp"
 #include "tsah/flat_bvh.hpp"
 #include "tsah/traversal.hpp"
+#include "tsah/tree_set.hpp"
+#include "tsah/wide_bvh.hpp"
+#include "tsah/wide_traversal.hpp"
+#include "tsah/wide_tree.hpp"
 #include "tsah/woop.hpp"
 
 namespace tsah {
 
+enum class CpuLayout : uint8_t { Bvh2 = 2, Bvh4 = 4, Bvh8 = 8 };
+const char* layoutName(CpuLayout layout);  // "bvh2", "bvh4", "bvh8"
+// The layout with the most children the processor's best kernels support (bvh8 with AVX2).
+CpuLayout fastestLayout();
+// False when no kernels of this build that the processor runs have this width.
+bool layoutSupported(CpuLayout layout);
+// "bvh2" / "bvh4" / "bvh8" (nothing for anything else).
+std::optional<CpuLayout> parseLayout(const std::string& name);
+
+// What a runtime traces: the layout, the kernels and the tree's size and multi-frame costs.
+struct LayoutInfo {
+  CpuLayout layout = CpuLayout::Bvh2;
+  SimdIsa isa = SimdIsa::Sse;    // wide layouts: the kernels' instruction set
+  uint32_t interiorNodes = 0, leaves = 0, depth = 0;
+  // T-SAH cost C~^k (Eq. 3, the collapse's cT, cI, k) over the frames of the tree given to the
+  // constructor: of that binary tree, and of the traced layout (equal for bvh2). 0 after rebuild().
+  double binaryCost = 0.0, layoutCost = 0.0;
+};
+
 class CpuRuntime {
  public:
   struct Config {
+    Config(uint32_t workerThreads = 0) : threads(workerThreads) {}  // NOLINT: {threads} converts
     uint32_t threads = 0;  // worker threads; 0 (or more than the hardware has): one per hardware thread
+    CpuLayout layout = CpuLayout::Bvh2;
+    std::optional<SimdIsa> isa;  // wide layouts: the kernels to use (default: the best supported)
+    WideCollapser::Config collapse;  // wide layouts: cost constants, k, leaf size (width, leafPacket: the layout's)
   };
 
   // Builds a tree over one frame of triangle boxes (indexed by triangle id); used by rebuild().
@@ -32,11 +66,16 @@ class CpuRuntime {
     double refitMs = 0.0;    // the refit + Woop pass on the new tree
   };
 
-  // tree: the topology (frame 0's block is used; boxes are recomputed by update()). indices: 3 per
-  // triangle, the animation's topology, each < vertexCount. Throws anim::Error when the tree does
-  // not match the triangle count, is invalid, or is deeper than the traversal stack allows.
+  // tree: the topology (boxes are recomputed by update(); a wide layout is collapsed using every
+  // frame block the tree holds). indices: 3 per triangle, the animation's topology, each <
+  // vertexCount. Throws anim::Error when the tree does not match the triangle count, is invalid, is
+  // deeper than the traversal stack allows, or the layout / instruction set is not supported.
   CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint32_t vertexCount, Config config);
   CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint32_t vertexCount);
+  // A tree set: every tree is checked as above and kept (a wide layout collapses each tree once,
+  // here); selectTreeAt picks the one to refit and trace (tree 0 until then; layoutInfo() describes
+  // tree 0). Throws anim::Error for an empty set.
+  CpuRuntime(const TreeSet& set, std::vector<uint32_t> indices, uint32_t vertexCount, Config config);
   ~CpuRuntime();
   CpuRuntime(const CpuRuntime&) = delete;
   CpuRuntime& operator=(const CpuRuntime&) = delete;
@@ -47,9 +86,25 @@ class CpuRuntime {
   // Takes this frame's positions and replaces the tree by builder(triangle boxes), then refits as
   // update() does (which also computes the Woop triangles).
   RebuildTimings rebuild(std::span<const float> positions, const TreeBuilder& builder);
+  // Makes the tree of the part holding `time` (tsah::treeIndexAt: boundaries and overlaps included)
+  // the current one and returns its index; update() must follow before tracing. A runtime made from
+  // one tree, or after a rebuild, keeps its tree and returns 0.
+  uint32_t selectTreeAt(double time);
+  uint32_t treeCount() const { return setTrees_.empty() ? 1u : static_cast<uint32_t>(setTrees_.size()); }
+  uint32_t currentTree() const { return current_; }
 
+  // Nearest hit / any hit in (ray.tmin, ray.tmax) in the current frame, in the runtime's layout.
+  Hit closestHit(const Ray& ray) const;
+  bool anyHit(const Ray& ray) const;
+
+  const LayoutInfo& layoutInfo() const { return info_; }
+  // The binary tree and its view: bvh2 only (the wide layouts do not refit the binary tree; both
+  // throw anim::Error for them).
   BvhView view() const;
-  const FlatBvh& tree() const { return tree_; }  // one frame of boxes: the current one
+  const FlatBvh& tree() const;
+  // The wide tree of a bvh4 / bvh8 runtime (null otherwise).
+  const WideTree<4>* wide4() const { return wide4_.get(); }
+  const WideTree<8>* wide8() const { return wide8_.get(); }
   std::span<const WoopTriangle> woop() const { return woop_; }
   std::span<const float> positions() const { return positions_; }
   std::span<const uint32_t> indices() const { return indices_; }
@@ -63,6 +118,9 @@ class CpuRuntime {
 
  private:
   void setTree(FlatBvh tree);
+  FlatBvh topologyOf(const FlatBvh& tree) const;  // frame 0's block, validated against this runtime
+  void setWideTree(const Bvh& binary, bool reportCosts);
+  BvhView binaryView() const;
   void setPositions(std::span<const float> positions);
   void refitAndWoop();
   void refitNode(uint32_t node);
@@ -79,6 +137,21 @@ class CpuRuntime {
   // them (descending index, children before parents) on one thread.
   std::vector<std::pair<uint32_t, uint32_t>> subtreeTasks_;
   std::vector<uint32_t> topNodes_;
+  // Wide layouts.
+  LayoutInfo info_;
+  const WideKernels* kernels_ = nullptr;
+  WideCollapser::Config collapse_;
+  std::shared_ptr<WideTree<4>> wide4_;
+  std::shared_ptr<WideTree<8>> wide8_;
+  WideView<4> view4_;
+  WideView<8> view8_;
+  // Tree set: every tree's topology and time range (and, for a wide layout, its wide tree, collapsed
+  // once up front); current_ indexes them (0 for a single tree).
+  std::vector<FlatBvh> setTrees_;
+  std::vector<TimeRange> setRanges_;
+  uint32_t current_ = 0;
+  std::vector<std::shared_ptr<WideTree<4>>> setWide4_;
+  std::vector<std::shared_ptr<WideTree<8>>> setWide8_;
 };
 
 }  // namespace tsah

@@ -1,0 +1,64 @@
+# cmake -DBUILD_DIR=... -DWORK_DIR=... -DCONSUMER_DIR=... -DINPUT=... [-DCXX_COMPILER=...]
+#       [-DCXX_LAUNCHER=...] -P install-consumer.cmake
+# Installs the build tree into WORK_DIR/prefix, builds the consumer example against it (its own
+# CMake project, find_package(tsah) only) and runs it on INPUT; fails unless every step succeeds
+# and the program prints the tree and at least one ray hit.
+foreach(var BUILD_DIR WORK_DIR CONSUMER_DIR INPUT)
+  if(NOT ${var})
+    message(FATAL_ERROR "install-consumer.cmake: ${var} is not set")
+  endif()
+endforeach()
+
+file(REMOVE_RECURSE ${WORK_DIR})
+file(MAKE_DIRECTORY ${WORK_DIR})
+set(prefix ${WORK_DIR}/prefix)
+
+execute_process(COMMAND ${CMAKE_COMMAND} --install ${BUILD_DIR} --prefix ${prefix}
+                OUTPUT_QUIET COMMAND_ERROR_IS_FATAL ANY)
+foreach(installed bin/tsah include/tsah/pipeline.hpp include/anim/animation.hpp lib/cmake/tsah/tsahConfig.cmake
+                  lib/cmake/tsah/tsahConfigVersion.cmake lib/cmake/tsah/tsahTargets.cmake)
+  if(NOT EXISTS ${prefix}/${installed})
+    message(FATAL_ERROR "cmake --install did not install ${installed}")
+  endif()
+endforeach()
+# Private headers (src/) must not be installed.
+file(GLOB_RECURSE private_headers ${prefix}/include/*/random.hpp ${prefix}/include/*/bart_scene.hpp)
+if(private_headers)
+  message(FATAL_ERROR "private headers were installed: ${private_headers}")
+endif()
+
+set(configure_args -S ${CONSUMER_DIR} -B ${WORK_DIR}/build -DCMAKE_PREFIX_PATH=${prefix} -DCMAKE_BUILD_TYPE=Release)
+if(CXX_COMPILER)
+  list(APPEND configure_args -DCMAKE_CXX_COMPILER=${CXX_COMPILER})
+endif()
+if(CXX_LAUNCHER)
+  list(APPEND configure_args -DCMAKE_CXX_COMPILER_LAUNCHER=${CXX_LAUNCHER})
+endif()
+execute_process(COMMAND ${CMAKE_COMMAND} ${configure_args} OUTPUT_QUIET COMMAND_ERROR_IS_FATAL ANY)
+execute_process(COMMAND ${CMAKE_COMMAND} --build ${WORK_DIR}/build OUTPUT_QUIET COMMAND_ERROR_IS_FATAL ANY)
+
+execute_process(COMMAND ${WORK_DIR}/build/tsah_consumer ${INPUT} ${WORK_DIR}/out.tbvh
+                OUTPUT_VARIABLE output COMMAND_ERROR_IS_FATAL ANY)
+message("${output}")
+if(NOT output MATCHES "out.tbvh: [0-9]+ triangles, [0-9]+ nodes, 5 frames, average cost [0-9.]+")
+  message(FATAL_ERROR "the consumer did not describe its tree")
+endif()
+if(NOT output MATCHES "ray [0-9]: triangle [0-9]+ at t = ")
+  message(FATAL_ERROR "the consumer's rays hit nothing")
+endif()
+
+# The installed program reads the tree the library wrote.
+execute_process(COMMAND ${prefix}/bin/tsah info ${WORK_DIR}/out.tbvh OUTPUT_VARIABLE info COMMAND_ERROR_IS_FATAL ANY)
+if(NOT info MATCHES "tsah")
+  message(FATAL_ERROR "installed tsah info did not describe the tree: ${info}")
+endif()
+
+# The installed Python package imports from the prefix (when the module was built).
+file(GLOB python_package ${prefix}/lib/python3*/dist-packages/tsah)
+if(python_package AND EXISTS /usr/bin/python3)
+  get_filename_component(site ${python_package} DIRECTORY)
+  execute_process(COMMAND ${CMAKE_COMMAND} -E env PYTHONPATH=${site} /usr/bin/python3 -c
+                          "import tsah; print('python:', tsah.__version__, tsah.load('${INPUT}'))"
+                  OUTPUT_VARIABLE python_output COMMAND_ERROR_IS_FATAL ANY)
+  message("${python_output}")
+endif()

@@ -1,0 +1,23 @@
+#pragma once
+// How much memory this machine can give a new allocation, and the check that refuses work that
+// would not fit before any of it is allocated (with overcommit a huge vector would "succeed" and
+// the process be killed later while filling it).
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+namespace anim {
+
+// MemAvailable of /proc/meminfo (memory obtainable without swapping), or the physical memory
+// where that is not readable.
+std::size_t availableMemoryBytes();
+
+// Throws anim::Error "WHO: WHAT would need N MiB, more than the M MiB available" when bytes exceed
+// availableMemoryBytes().
+void checkFitsInMemory(std::size_t bytes, const std::string& who, const std::string& what);
+
+// The same check before one allocation, counting free swap too: throws anim::Error
+// "WHO: WHAT needs N MiB, but only M MiB of memory are available".
+void requireMemory(uint64_t bytes, const std::string& who, const std::string& what);
+
+}  // namespace anim

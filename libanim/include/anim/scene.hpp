@@ -1,0 +1,114 @@
+#pragma once
+// Scenes: objects (any input anim::load reads) placed, keyed along paths, time-mapped, instanced
+// and optionally subdivided, baked into one Animation whose static vertices are stored once.
+// The file format (JSON) is documented in docs/scenes.md.
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "anim/animation.hpp"
+#include "anim/load.hpp"
+
+namespace anim {
+
+// An affine 4x4 transform, row-major (m[4 * row + col]); the last row is 0 0 0 1.
+using Matrix4 = std::array<double, 16>;
+Matrix4 identityMatrix();
+Matrix4 multiply(const Matrix4& a, const Matrix4& b);
+// translate * rotate (Z after Y after X, degrees) * scale.
+Matrix4 trsMatrix(const std::array<double, 3>& translate, const std::array<double, 3>& rotateDegrees,
+                  const std::array<double, 3>& scale);
+// Determinant of the linear (upper-left 3x3) part.
+double linearDeterminant(const Matrix4& m);
+// out = m * p for every point of `points` (x y z triples), in place.
+void transformPoints(const Matrix4& m, float* points, std::size_t count);
+
+// One key of a path (root motion): a transform at a scene time; between keys every component is
+// interpolated linearly, outside the keys the first / last key holds.
+struct TransformKey {
+  double time = 0.0;
+  std::array<double, 3> translate{0, 0, 0};
+  std::array<double, 3> rotateDegrees{0, 0, 0};
+  std::array<double, 3> scale{1, 1, 1};
+};
+Matrix4 pathMatrix(const std::vector<TransformKey>& path, double t);  // identity for an empty path
+
+// Scene time t -> the object's own time: start + (t - offset) * speed, then outside the object's
+// [start, end]: hold (clamp) or loop (wrap around).
+enum class OutsideRange { Hold, Loop };
+struct TimeMapping {
+  double offset = 0.0;
+  double speed = 1.0;
+  OutsideRange outside = OutsideRange::Hold;
+  double localTime(double sceneTime, double start, double end) const;
+};
+
+// One placement of an object: world(t) = pathMatrix(path, t) * placement.
+struct SceneInstance {
+  Matrix4 placement = identityMatrix();
+  std::vector<TransformKey> path;
+  TimeMapping time;
+  bool keyed() const { return path.size() > 1; }
+};
+
+struct SceneObject {
+  std::string name;
+  std::string file;         // resolved: relative to the scene file's folder, data: paths resolved
+  double fps = 0.0;         // the object's own sampling rate (LoadOptions::fps); 0: the scene's options
+  std::string clip;         // LoadOptions::clip
+  uint32_t subdivide = 0;   // uniform Loop subdivision levels (static triangle meshes only)
+  std::vector<SceneInstance> instances;
+};
+
+struct SceneDescription {
+  std::string file;         // the scene file
+  std::string name;
+  double fps = 30.0;        // bake rate (LoadOptions::fps overrides it)
+  bool hasTimeRange = false;
+  double start = 0.0, end = 0.0;
+  std::vector<SceneObject> objects;
+};
+
+// True when `path` is a JSON file holding an object with an "objects" member (a scene, not a
+// frame manifest).
+bool isSceneFile(const std::string& path);
+
+// Reads and checks a scene file (transforms finite and invertible, speeds >= 0, keys increasing,
+// files resolved). Throws ImportError naming the scene file and the object.
+SceneDescription parseScene(const std::string& path, const LoadOptions& options = {});
+
+// What each object contributes (all its instances together).
+struct SceneObjectReport {
+  std::string name, file;
+  uint32_t instances = 0;
+  uint32_t sourceTriangles = 0, sourceVertices = 0, sourceKeyframes = 0;  // one instance, after subdivision
+  uint32_t subdivisionLevels = 0;
+  uint64_t triangles = 0, vertices = 0, movingVertices = 0;                 // all instances
+};
+
+// The memory statement, made before anything scene-sized is allocated.
+struct SceneStatement {
+  uint64_t triangles = 0, vertices = 0, movingVertices = 0, keyframes = 0;
+  uint64_t animationBytes = 0;  // the baked Animation (Animation::memoryBytesFor)
+  uint64_t sourceBytes = 0;     // the loaded (and subdivided) objects, each held once
+  uint64_t peakBytes = 0;       // animation + sources + bake scratch: what the bake needs at most
+  uint64_t availableBytes = 0;  // this machine's available memory when the statement was made
+};
+
+struct BakedScene {
+  Animation animation;
+  SceneDescription description;
+  std::vector<SceneObjectReport> objects;
+  SceneStatement statement;
+  uint32_t distinctSources = 0;  // objects loaded (instances and repeated files share one)
+};
+
+// Loads every object once, states the memory, refuses (ImportError naming the scene and the object
+// that crosses the line) a scene that would not fit, then bakes keyframes at the scene's rate (or
+// options.fps) over its time range.
+BakedScene bakeScene(const std::string& path, const LoadOptions& options = {});
+// bakeScene(path, options).animation: what anim::load returns for a scene file.
+Animation loadScene(const std::string& path, const LoadOptions& options = {});
+
+}  // namespace anim

@@ -1,0 +1,238 @@
+// Baking a scene: load each object once, state the memory, bake keyframes with static vertices
+// stored once.
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <tuple>
+
+#include "anim/error.hpp"
+#include "anim/memory.hpp"
+#include "anim/scene.hpp"
+#include "anim/subdivide.hpp"
+
+namespace anim {
+
+namespace {
+
+// The scene files being baked on this thread, outermost first: a scene that reaches itself again
+// through its objects is a cycle.
+thread_local std::vector<std::string> sceneStack;
+
+struct SceneStackEntry {
+  explicit SceneStackEntry(std::string file) { sceneStack.push_back(std::move(file)); }
+  ~SceneStackEntry() { sceneStack.pop_back(); }
+  SceneStackEntry(const SceneStackEntry&) = delete;
+  SceneStackEntry& operator=(const SceneStackEntry&) = delete;
+};
+
+std::string canonical(const std::string& path) {
+  std::error_code ec;
+  const auto c = std::filesystem::weakly_canonical(path, ec);
+  return ec ? path : c.string();
+}
+
+std::string mib(uint64_t bytes) { return std::to_string((bytes + (1u << 19)) >> 20) + " MiB"; }
+
+[[noreturn]] void failObject(const SceneDescription& scene, const SceneObject& object, const std::string& what) {
+  throw ImportError(scene.file, "object '" + object.name + "': " + what);
+}
+
+// Vertices of one instance that move: all of them when its path is keyed, none when its source
+// never moves (or is frozen by speed 0), else the source's moving vertices.
+uint64_t movingOf(const SceneInstance& instance, const Animation& source) {
+  if (instance.keyed()) return source.vertexCount();
+  if (source.keyframeCount() < 2 || instance.time.speed == 0.0) return 0;
+  return source.movingVertexCount();
+}
+
+struct Source {
+  std::shared_ptr<const Animation> animation;
+  std::string key;
+};
+
+// Loads (and subdivides) each object's file once; objects naming the same file with the same
+// options share it.
+std::vector<Source> loadSources(const SceneDescription& scene, const LoadOptions& options, uint64_t& sourceBytes,
+                                uint32_t& distinct) {
+  std::map<std::string, std::shared_ptr<const Animation>> loaded;
+  std::vector<Source> sources;
+  for (const SceneObject& object : scene.objects) {
+    const std::string file = canonical(object.file);
+    for (const std::string& outer : sceneStack)
+      if (outer == file) failObject(scene, object, "scene files include each other (" + object.file + " is being baked already)");
+    const double fps = object.fps > 0.0 ? object.fps : options.fps;
+    const std::string key = file + "\n" + std::to_string(fps) + "\n" + object.clip + "\n" + std::to_string(object.subdivide);
+    auto& slot = loaded[key];
+    if (!slot) {
+      LoadOptions own = options;
+      own.fps = fps;
+      own.clip = object.clip;
+      own.progress = nullptr;
+      Animation a;
+      try {
+        a = load(object.file, own);
+      } catch (const Error& e) {
+        failObject(scene, object, e.what());
+      }
+      if (object.subdivide > 0) {
+        if (a.keyframeCount() != 1)
+          failObject(scene, object, "subdivision needs a static mesh (it has " + std::to_string(a.keyframeCount()) +
+                                        " keyframes)");
+        const MeshCounts after = loopSubdividedCounts(meshCounts(a), object.subdivide);
+        const uint64_t need = sourceBytes + loopSubdivisionBytes(after);
+        if (after.triangles > 0xffffffffull || after.vertices > 0xffffffffull)
+          failObject(scene, object, "subdivision level " + std::to_string(object.subdivide) + " would make " +
+                                        std::to_string(after.triangles) + " triangles, more than 2^32");
+        if (need > availableMemoryBytes())
+          failObject(scene, object, "subdivision level " + std::to_string(object.subdivide) + " (" +
+                                        std::to_string(after.triangles) + " triangles) would need " + mib(need) +
+                                        ", more than the " + mib(availableMemoryBytes()) + " available");
+        try {
+          a = subdivideLoop(a, object.subdivide);
+        } catch (const Error& e) {
+          failObject(scene, object, e.what());
+        }
+      }
+      sourceBytes += a.memoryBytes();
+      slot = std::make_shared<const Animation>(std::move(a));
+      ++distinct;
+    }
+    sources.push_back({slot, key});
+  }
+  return sources;
+}
+
+// The scene's time range: given, or from 0 to where the last object's motion ends (one pass of a
+// looping object, the last key of a path); [0, 0] for a static scene.
+std::pair<double, double> timeRange(const SceneDescription& scene, const std::vector<Source>& sources) {
+  if (scene.hasTimeRange) return {scene.start, scene.end};
+  double end = 0.0;
+  for (std::size_t o = 0; o < scene.objects.size(); ++o) {
+    const Animation& a = *sources[o].animation;
+    for (const SceneInstance& i : scene.objects[o].instances) {
+      if (a.keyframeCount() > 1 && i.time.speed > 0.0)
+        end = std::max(end, i.time.offset + (a.endTime() - a.startTime()) / i.time.speed);
+      if (!i.path.empty()) end = std::max(end, i.path.back().time);
+    }
+  }
+  return {0.0, end};
+}
+
+std::vector<double> bakeTimes(double start, double end, double fps) {
+  std::vector<double> times{start};
+  if (!(end > start)) return times;
+  const double frames = std::ceil((end - start) * fps - 1e-9);
+  for (double i = 1; i < frames; ++i) times.push_back(start + i / fps);
+  times.push_back(end);
+  return times;
+}
+
+}  // namespace
+
+BakedScene bakeScene(const std::string& path, const LoadOptions& options) {
+  BakedScene baked;
+  baked.description = parseScene(path, options);
+  const SceneDescription& scene = baked.description;
+  const SceneStackEntry entry(canonical(path));
+  SceneStatement& st = baked.statement;
+  const std::vector<Source> sources = loadSources(scene, options, st.sourceBytes, baked.distinctSources);
+  const auto [start, end] = timeRange(scene, sources);
+  const double fps = options.fps > 0.0 ? options.fps : scene.fps;
+  const std::vector<double> times = bakeTimes(start, end, fps);
+
+  // The statement, object by object: the first object that takes the scene past the available
+  // memory is the one named in the error.
+  st.keyframes = times.size();
+  st.availableBytes = availableMemoryBytes();
+  uint64_t scratch = 0;
+  for (std::size_t o = 0; o < scene.objects.size(); ++o) {
+    const SceneObject& object = scene.objects[o];
+    const Animation& a = *sources[o].animation;
+    SceneObjectReport r{object.name, object.file, uint32_t(object.instances.size()), a.triangleCount(),
+                        a.vertexCount(), a.keyframeCount(), object.subdivide, 0, 0, 0};
+    for (const SceneInstance& i : object.instances) {
+      r.triangles += a.triangleCount();
+      r.vertices += a.vertexCount();
+      r.movingVertices += movingOf(i, a);
+    }
+    st.triangles += r.triangles;
+    st.vertices += r.vertices;
+    st.movingVertices += r.movingVertices;
+    scratch = std::max<uint64_t>(scratch, uint64_t(a.vertexCount()) * 12);
+    st.animationBytes = Animation::memoryBytesFor(st.triangles, st.vertices, st.movingVertices, st.keyframes);
+    st.peakBytes = st.animationBytes + st.sourceBytes + scratch * sources.size();
+    if (st.triangles > 0xffffffffull || st.vertices > 0xffffffffull)
+      failObject(scene, object, std::to_string(r.instances) + " instances take the scene to " +
+                                    std::to_string(st.triangles) + " triangles and " + std::to_string(st.vertices) +
+                                    " vertices, more than 2^32");
+    if (st.peakBytes > st.availableBytes)
+      failObject(scene, object, std::to_string(r.instances) + " instances take the scene to " +
+                                    std::to_string(st.triangles) + " triangles x " + std::to_string(st.keyframes) +
+                                    " keyframes: the bake would need " + mib(st.peakBytes) + ", more than the " +
+                                    mib(st.availableBytes) + " of memory available");
+    baked.objects.push_back(std::move(r));
+  }
+
+  // The bake: rest positions and triangles of every instance, then the moving vertices keyframe
+  // by keyframe. Each source keeps one scratch frame whose static entries stay at rest.
+  std::vector<uint32_t> indices;
+  std::vector<float> rest;
+  std::vector<uint32_t> moving;
+  std::vector<float> motion;
+  indices.reserve(std::size_t(st.triangles) * 3);
+  rest.resize(std::size_t(st.vertices) * 3);
+  moving.reserve(std::size_t(st.movingVertices));
+  motion.resize(std::size_t(st.movingVertices) * 3 * times.size());
+  std::map<const Animation*, std::vector<float>> scratchFrames;
+  uint32_t base = 0;
+  std::size_t movingBase = 0;
+  const std::size_t movingPerFrame = std::size_t(st.movingVertices) * 3;
+  for (std::size_t o = 0; o < scene.objects.size(); ++o) {
+    const Animation& a = *sources[o].animation;
+    std::vector<float>& frame = scratchFrames[&a];
+    if (frame.empty()) frame = a.positionsAt(a.startTime());
+    for (const SceneInstance& instance : scene.objects[o].instances) {
+      for (uint32_t v : a.indices()) indices.push_back(base + v);
+      auto world = [&](double t) { return multiply(pathMatrix(instance.path, t), instance.placement); };
+      auto local = [&](double t) { return instance.time.localTime(t, a.startTime(), a.endTime()); };
+      a.positionsAt(local(times.front()), frame);
+      std::copy(frame.begin(), frame.end(), rest.begin() + std::ptrdiff_t(base) * 3);
+      transformPoints(world(times.front()), rest.data() + std::size_t(base) * 3, a.vertexCount());
+      const uint64_t movingCount = movingOf(instance, a);
+      if (movingCount > 0) {
+        const bool all = movingCount == a.vertexCount();
+        for (uint32_t m = 0; m < movingCount; ++m) moving.push_back(base + (all ? m : a.movingVertices()[m]));
+        for (std::size_t k = 0; k < times.size(); ++k) {
+          float* out = motion.data() + k * movingPerFrame + movingBase * 3;
+          if (all) {
+            a.positionsAt(local(times[k]), frame);
+            std::copy(frame.begin(), frame.end(), out);
+          } else {
+            a.movingPositionsAt(local(times[k]), frame);
+            for (uint32_t m = 0; m < movingCount; ++m)
+              std::copy_n(frame.data() + 3 * std::size_t(a.movingVertices()[m]), 3, out + 3 * std::size_t(m));
+          }
+          transformPoints(world(times[k]), out, movingCount);
+        }
+        a.positionsAt(a.startTime(), frame);  // static entries back at rest for the next instance
+      }
+      base += a.vertexCount();
+      movingBase += movingCount;
+    }
+  }
+  try {
+    baked.animation = Animation::withStaticVertices(std::move(indices), std::move(rest), std::move(moving),
+                                                    std::move(motion), std::vector<double>(times), scene.name);
+  } catch (const ImportError& e) {
+    throw ImportError(scene.file, std::string("invalid baked scene: ") + e.what());
+  }
+  return baked;
+}
+
+Animation loadScene(const std::string& path, const LoadOptions& options) {
+  return std::move(bakeScene(path, options).animation);
+}
+
+}  // namespace anim

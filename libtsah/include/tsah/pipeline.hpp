@@ -1,0 +1,96 @@
+#pragma once
+// The toolkit's steps on a whole anim::Animation, as `tsah optimize`, `tsah evaluate` and the
+// Python module run them: representative frames, one optimized tree with its .tbvh header, costs
+// over evaluation frames, the paper's Table 1, and batches of rays traced on the CPU runtime.
+//
+// This is the one place where libtsah meets an Animation; the builders themselves (baselines.hpp)
+// still take primitive boxes. Public API: see docs/api.md.
+#include <cstdint>
+#include <functional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "anim/animation.hpp"
+#include "tsah/baselines.hpp"
+#include "tsah/bvh.hpp"
+#include "tsah/bvh_file.hpp"
+#include "tsah/cpu_runtime.hpp"
+#include "tsah/insertion_optimizer.hpp"
+#include "tsah/ray.hpp"
+#include "tsah/segmentation.hpp"
+
+namespace tsah {
+
+// The options of `tsah optimize` / `tsah evaluate`, with the command line's defaults.
+struct TreeOptions {
+  std::string method = "tsah";  // tsah, sah0 or sahstar (evaluate also takes rebuild, tsah<k>)
+  int k = 0;                    // T-SAH exponent of method "tsah"
+  uint32_t frames = 5;          // representative frames, uniform in time
+  std::string optimizer = "sequential";  // sequential (the paper's insertion) or parallel (reinsertion)
+  std::string selection = "mh"; // node selection of the sequential optimizer: mh, random, batch
+  uint64_t seed = 1;
+  float ct = 3.0f, ci = 2.0f;
+  uint32_t maxLeaf = 8;         // largest leaf after collapse
+  double timeLimit = 0.0;       // seconds per optimization, 0: none
+  double minImprovement = InsertionOptimizer::Config{}.minImprovement;
+  unsigned threads = 0;         // 0: all cores
+  std::function<void(const std::string&)> progress;  // optional progress messages
+
+  // "tsah" with k -> tsah<k>; anything else as MethodSpec::parse reads it (throws std::invalid_argument).
+  MethodSpec methodSpec() const;
+  // The builders' settings (cost, leaf size, optimizer selection/seed/limits, threads, progress).
+  // Throws std::invalid_argument for an unknown optimizer or selection.
+  BaselineConfig baselineConfig() const;
+};
+
+// Frames of `animation` at each of `times` as a lazily filled FrameSource (triangle boxes). The
+// animation must outlive the source.
+FrameSource animationFrames(const anim::Animation& animation, std::vector<double> times);
+
+// The animation as the segmentation sees it (triangle boxes at any time); must outlive the result.
+Timeline animationTimeline(const anim::Animation& animation);
+
+// "mh", "random", "batch" -> the optimizer's node selection; throws std::invalid_argument otherwise.
+InsertionOptimizer::Selection parseSelection(const std::string& name);
+
+// `requested` for an animation, 1 for a static input (one keyframe: more frames would repeat it).
+uint32_t framesFor(const anim::Animation& animation, uint32_t requested);
+
+// The triangle boxes of framesFor(animation, frames) representative frames.
+PrimitiveBoxes representativeBoxes(const anim::Animation& animation, uint32_t frames);
+
+// The .tbvh header of a tree built with `options` for `animation` over [timeStart, timeEnd].
+BvhBuildInfo treeBuildInfo(const TreeOptions& options, const anim::Animation& animation, uint32_t frames,
+                           double buildSeconds, double timeStart, double timeEnd);
+
+struct OptimizedTree {
+  Bvh bvh;                                  // boxes for every representative frame
+  BvhBuildInfo info;                        // what saveBvhFile writes into the header
+  InsertionOptimizer::Result optimization;  // T-SAH only: costs and batch history (bvh left empty)
+};
+
+// One tree for the whole animation, exactly as `tsah optimize` builds it (same seed, same tree).
+// Throws anim::Error when the animation has no triangles, std::invalid_argument for a bad method or
+// selection (including "rebuild", which is no single tree).
+OptimizedTree optimizeAnimation(const anim::Animation& animation, const TreeOptions& options);
+
+// Eq. 1 at framesFor(animation, evalFrames) times uniform over the animation, the tree refitted to each.
+std::vector<double> evaluateAnimation(const Bvh& bvh, const anim::Animation& animation, uint32_t evalFrames,
+                                      const CostModel& cost = {}, unsigned threads = 0);
+
+// The paper's Table 1 for one animation, as `tsah evaluate` computes it.
+std::vector<MethodResult> compareOnAnimation(const anim::Animation& animation, std::span<const MethodSpec> methods,
+                                             const TreeOptions& options, uint32_t evalFrames);
+
+// Throws anim::Error with one clear line ("BVH was not built for ANIMATION: ...") when the animation
+// is not the one the tree was built for (triangle count, vertex count or topology hash differ).
+void checkTreeMatchesAnimation(const BvhBuildInfo& info, const std::string& bvhPath, const anim::Animation& animation,
+                               const std::string& animationPath);
+
+// Closest hits (tsah::closestHit) and occlusion (tsah::anyHit) of a batch of rays against the
+// runtime's current frame, on the runtime's threads; results in ray order.
+std::vector<Hit> closestHits(const CpuRuntime& runtime, std::span<const Ray> rays);
+std::vector<uint8_t> anyHits(const CpuRuntime& runtime, std::span<const Ray> rays);
+
+}  // namespace tsah

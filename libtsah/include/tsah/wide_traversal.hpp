@@ -1,0 +1,48 @@
+#pragma once
+// SIMD traversal of the wide layouts (wide_layout.hpp) on the CPU: closest hit and any hit
+// (occlusion: stops at the first hit found), children visited near-first.
+//
+// The kernels are compiled once per instruction set, each in its own file with its own compiler
+// flags (libtsah/src/wide_kernels_<isa>.cpp, all from one template, wide_kernels.inl):
+//   sse:    4-wide nodes with SSE2 (every x86-64 runs it)
+//   avx2:   4-wide with VEX-encoded SSE, 8-wide with AVX2
+//   avx512: the same widths with AVX-512VL (mask registers for the compares; 32 vector registers)
+// and chosen at run time in ONE place (wideKernels(), by __builtin_cpu_supports), so a binary built
+// for plain x86-64 still runs everywhere. Results equal the binary traversal's (traversal.hpp):
+// the box and Woop tests do the same float operations in the same order (no FMA contraction), with
+// the same watertight fallback near edges; only a tie between two triangles at exactly the same
+// distance may resolve to the other triangle.
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "tsah/ray.hpp"
+#include "tsah/wide_layout.hpp"
+
+namespace tsah {
+
+enum class SimdIsa : uint8_t { Sse = 0, Avx2 = 1, Avx512 = 2 };
+
+const char* isaName(SimdIsa isa);  // "sse", "avx2", "avx512"
+std::optional<SimdIsa> parseIsa(const std::string& name);
+// True when the kernels for isa are compiled into this build and the processor runs them.
+bool isaSupported(SimdIsa isa);
+// Every supported instruction set, the best last; and the best one.
+std::vector<SimdIsa> supportedIsas();
+SimdIsa bestIsa();
+
+// The entry points of one instruction set; a width without kernels has null pointers (sse has no
+// 8-wide kernels).
+struct WideKernels {
+  SimdIsa isa = SimdIsa::Sse;
+  Hit (*closest4)(const WideView<4>& bvh, const Ray& ray) = nullptr;
+  bool (*any4)(const WideView<4>& bvh, const Ray& ray) = nullptr;
+  Hit (*closest8)(const WideView<8>& bvh, const Ray& ray) = nullptr;
+  bool (*any8)(const WideView<8>& bvh, const Ray& ray) = nullptr;
+};
+
+// The kernels of isa; throws anim::Error when it is not supported (isaSupported).
+const WideKernels& wideKernels(SimdIsa isa);
+
+}  // namespace tsah

@@ -1,0 +1,158 @@
+#include "tsah/pipeline.hpp"
+
+#include <chrono>
+#include <cstdio>
+#include <stdexcept>
+
+#include "anim/error.hpp"
+#include "tsah/traversal.hpp"
+
+namespace tsah {
+
+MethodSpec TreeOptions::methodSpec() const {
+  return MethodSpec::parse(method == "tsah" ? "tsah" + std::to_string(k) : method);
+}
+
+BaselineConfig TreeOptions::baselineConfig() const {
+  BaselineConfig config;
+  config.cost = {ct, ci};
+  config.maxLeafSize = maxLeaf;
+  config.threads = threads;
+  config.optimizer.selection = parseSelection(selection);
+  config.optimizer.seed = seed;
+  config.optimizer.timeLimitSeconds = timeLimit;
+  config.optimizer.minImprovement = minImprovement;
+  config.optimizerKind = parseOptimizerKind(optimizer);
+  config.parallel.threads = threads;
+  config.progress = progress;
+  return config;
+}
+
+FrameSource animationFrames(const anim::Animation& animation, std::vector<double> times) {
+  FrameSource source;
+  source.frameCount = static_cast<uint32_t>(times.size());
+  source.primCount = animation.triangleCount();
+  source.fill = [&animation, times = std::move(times)](uint32_t frame, std::span<Aabb> out) {
+    const std::vector<float> positions = animation.positionsAt(times[frame]);
+    triangleBoxes(animation.indices(), positions, out);
+  };
+  return source;
+}
+
+Timeline animationTimeline(const anim::Animation& animation) {
+  return Timeline::fromTriangles(animation.indices(), animation.vertexCount(), animation.startTime(),
+                                 animation.endTime(),
+                                 [&animation](double t, std::span<float> out) { animation.positionsAt(t, out); });
+}
+
+InsertionOptimizer::Selection parseSelection(const std::string& name) {
+  using Selection = InsertionOptimizer::Selection;
+  if (name == "mh") return Selection::MetropolisHastings;
+  if (name == "random") return Selection::Uniform;
+  if (name == "batch") return Selection::BatchSort;
+  throw std::invalid_argument("unknown node selection '" + name + "' (expected mh, random or batch)");
+}
+
+uint32_t framesFor(const anim::Animation& animation, uint32_t requested) {
+  return animation.keyframeCount() > 1 ? requested : 1u;
+}
+
+PrimitiveBoxes representativeBoxes(const anim::Animation& animation, uint32_t frames) {
+  const uint32_t n = framesFor(animation, frames);
+  const anim::Animation rep = animation.resample(n);
+  return triangleBoxes(rep.indices(), rep.allPositions(), n);
+}
+
+BvhBuildInfo treeBuildInfo(const TreeOptions& options, const anim::Animation& animation, uint32_t frames,
+                           double buildSeconds, double timeStart, double timeEnd) {
+  const MethodSpec method = options.methodSpec();
+  BvhBuildInfo info;
+  info.method = method.method == Method::TSah ? "tsah" : method.name();
+  // How nodes were chosen for optimization: none (SAH0), parallel (reinsertion) or the selection.
+  info.selection = method.method == Method::Sah0 ? "none" : options.optimizer == "parallel" ? "parallel" : options.selection;
+  info.k = method.k;
+  info.representativeFrames = frames;
+  info.seed = options.seed;
+  info.ct = options.ct;
+  info.ci = options.ci;
+  info.maxLeafSize = options.maxLeaf;
+  info.buildSeconds = buildSeconds;
+  info.timeStart = timeStart;
+  info.timeEnd = timeEnd;
+  info.triangleCount = animation.triangleCount();
+  info.vertexCount = animation.vertexCount();
+  info.topologyHash = topologyHash(animation.indices());
+  return info;
+}
+
+OptimizedTree optimizeAnimation(const anim::Animation& animation, const TreeOptions& options) {
+  if (animation.triangleCount() == 0) throw anim::Error(animation.name() + ": no triangles to build a tree over");
+  const MethodSpec method = options.methodSpec();
+  const BaselineConfig config = options.baselineConfig();
+  const uint32_t frames = framesFor(animation, options.frames);
+  const PrimitiveBoxes rep = representativeBoxes(animation, frames);
+
+  OptimizedTree tree;
+  const auto start = std::chrono::steady_clock::now();
+  tree.bvh = buildMethod(method, rep, config, &tree.optimization);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  tree.info = treeBuildInfo(options, animation, frames, seconds, animation.startTime(), animation.endTime());
+  return tree;
+}
+
+std::vector<double> evaluateAnimation(const Bvh& bvh, const anim::Animation& animation, uint32_t evalFrames,
+                                      const CostModel& cost, unsigned threads) {
+  if (bvh.primCount() != animation.triangleCount())
+    throw anim::Error(animation.name() + ": the tree has " + std::to_string(bvh.primCount()) +
+                      " triangles, the animation " + std::to_string(animation.triangleCount()));
+  return evaluateFrames(bvh, animationFrames(animation, animation.uniformTimes(framesFor(animation, evalFrames))),
+                        cost, threads);
+}
+
+std::vector<MethodResult> compareOnAnimation(const anim::Animation& animation, std::span<const MethodSpec> methods,
+                                             const TreeOptions& options, uint32_t evalFrames) {
+  if (animation.triangleCount() == 0) throw anim::Error(animation.name() + ": no triangles to build a tree over");
+  const PrimitiveBoxes rep = representativeBoxes(animation, options.frames);
+  return compareMethods(methods, rep,
+                        animationFrames(animation, animation.uniformTimes(framesFor(animation, evalFrames))),
+                        options.baselineConfig());
+}
+
+void checkTreeMatchesAnimation(const tsah::BvhBuildInfo& info, const std::string& bvhPath, const anim::Animation& a,
+                               const std::string& animationPath) {
+  auto fail = [&](const std::string& what) {
+    throw anim::Error(bvhPath + " was not built for " + animationPath + ": " + what);
+  };
+  if (info.triangleCount != a.triangleCount())
+    fail("the tree has " + std::to_string(info.triangleCount) + " triangles, the animation " +
+         std::to_string(a.triangleCount()));
+  if (info.vertexCount != a.vertexCount())
+    fail("the tree was built for " + std::to_string(info.vertexCount) + " vertices, the animation has " +
+         std::to_string(a.vertexCount()));
+  const uint32_t hash = topologyHash(a.indices());
+  if (info.topologyHash != hash) {
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "topology hash %08x, the animation's is %08x", info.topologyHash, hash);
+    fail(std::string(buf) + " (same counts, different triangles)");
+  }
+}
+
+std::vector<Hit> closestHits(const CpuRuntime& runtime, std::span<const Ray> rays) {
+  std::vector<Hit> hits(rays.size());
+  const BvhView view = runtime.view();
+  runtime.parallelFor(rays.size(), 1024, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) hits[i] = closestHit(view, rays[i]);
+  });
+  return hits;
+}
+
+std::vector<uint8_t> anyHits(const CpuRuntime& runtime, std::span<const Ray> rays) {
+  std::vector<uint8_t> occluded(rays.size());
+  const BvhView view = runtime.view();
+  runtime.parallelFor(rays.size(), 1024, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) occluded[i] = anyHit(view, rays[i]) ? 1 : 0;
+  });
+  return occluded;
+}
+
+}  // namespace tsah

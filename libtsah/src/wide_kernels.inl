@@ -1,0 +1,229 @@
+// The wide traversal kernels, written once against a small SIMD type V (V::N lanes) and included
+// by each wide_kernels_<isa>.cpp inside its own namespace, after it has defined V4 / V8 for its
+// instruction set. No includes here: everything this needs is included by the including file.
+//
+// V provides: set1, load (aligned), store, + - * /, min, max, abs, comparisons lt/le/gt returning
+// V::Mask, Mask & | and andNot(a, b) = ~a & b, and bits(mask) (one bit per lane).
+//
+// Every entry point is `flatten`, so the shared inline helpers (prepareRay, intersectBox,
+// intersectWatertight) are inlined into it and no copy of them compiled for this instruction set
+// is emitted for the linker to pick for other files.
+//
+// The arithmetic is the scalar code's (traversal.hpp, woop.hpp), operation for operation, so with
+// FMA contraction off (the files' flags) every box and triangle result is bit-identical to it.
+
+#define TSAH_KERNEL [[gnu::flatten]]
+
+// Per-ray values broadcast to all lanes.
+template <class V>
+struct RayLanes {
+  V org[3], dir[3], inv[3];
+  uint32_t nearPlane[3], farPlane[3];  // rows of WideSoaNode::box holding each axis's near/far plane
+};
+
+template <class V>
+inline RayLanes<V> rayLanes(const Ray& ray, const RayPrep& prep) {
+  RayLanes<V> r;
+  for (int a = 0; a < 3; ++a) {
+    r.org[a] = V::set1(ray.org[a]);
+    r.dir[a] = V::set1(ray.dir[a]);
+    r.inv[a] = V::set1(prep.invDir[a]);
+    r.nearPlane[a] = prep.invDir[a] >= 0.0f ? uint32_t(a) : uint32_t(a + 3);
+    r.farPlane[a] = prep.invDir[a] >= 0.0f ? uint32_t(a + 3) : uint32_t(a);
+  }
+  return r;
+}
+
+// dot(p, row r of the packet's triangles) as the scalar code evaluates it: (x*rx + y*ry) + z*rz.
+template <class V, uint32_t N>
+inline V dotRow(const V p[3], const WoopPacket<N>& pk, int r) {
+  return p[0] * V::load(pk.row[4 * r]) + p[1] * V::load(pk.row[4 * r + 1]) + p[2] * V::load(pk.row[4 * r + 2]);
+}
+// ((start + |x*rx|) + |y*ry|) + |z*rz|, the scalar code's order for its error bounds.
+template <class V, uint32_t N>
+inline V absDotRow(V start, const V p[3], const WoopPacket<N>& pk, int r) {
+  return start + V::abs(p[0] * V::load(pk.row[4 * r])) + V::abs(p[1] * V::load(pk.row[4 * r + 1])) +
+         V::abs(p[2] * V::load(pk.row[4 * r + 2]));
+}
+// (|x*rx| + |y*ry|) + |z*rz|.
+template <class V, uint32_t N>
+inline V absDotRow(const V p[3], const WoopPacket<N>& pk, int r) {
+  return V::abs(p[0] * V::load(pk.row[4 * r])) + V::abs(p[1] * V::load(pk.row[4 * r + 1])) +
+         V::abs(p[2] * V::load(pk.row[4 * r + 2]));
+}
+
+// The triangles of one leaf (packets [first, first + packetCount(count))). Returns true when one
+// was hit; for closest hit tmax shrinks to it.
+template <class V, bool AnyHit>
+inline bool intersectLeaf(const WideView<V::N>& bvh, const Ray& ray, const RayPrep& prep, const RayLanes<V>& r,
+                          uint32_t first, uint32_t count, float& tmax, Hit& hit) {
+  constexpr uint32_t N = V::N;
+  bool found = false;
+  const V tmin = V::set1(ray.tmin);
+  for (uint32_t p = 0; p < packetCount<N>(count); ++p) {
+    const WoopPacket<N>& pk = bvh.packets[first + p];
+    const uint32_t lanes = count - p * N < N ? count - p * N : N;
+    const uint32_t used = (1u << lanes) - 1u;
+    const V r0w = V::load(pk.row[3]);
+    const V oz = r0w - dotRow(r.org, pk, 0);
+    const V dz = dotRow(r.dir, pk, 0);
+    const V tt = oz / dz;
+    const auto inRange = V::gt(tt, tmin) & V::lt(tt, V::set1(tmax));
+    const V r0abs = V::abs(V::load(pk.row[0])) + V::abs(V::load(pk.row[1])) + V::abs(V::load(pk.row[2]));
+    const auto grazing = V::andNot(inRange, V::lt(V::abs(dz), V::set1(1e-12f) * r0abs));
+    if (!((V::bits(inRange) | V::bits(grazing)) & used)) continue;  // no lane can hit: skip the rest
+    // Barycentrics and their error bounds (woop.hpp's intersectTriangle).
+    const V du = dotRow(r.dir, pk, 1), dv = dotRow(r.dir, pk, 2);
+    const V b0 = (V::load(pk.row[7]) + dotRow(r.org, pk, 1)) + tt * du;
+    const V b1 = (V::load(pk.row[11]) + dotRow(r.org, pk, 2)) + tt * dv;
+    const V b2 = (V::set1(1.0f) - b0) - b1;
+    const V absT = V::abs(tt);
+    const V errT = absDotRow(V::abs(r0w), r.org, pk, 0) / V::abs(dz);
+    const V e0 = (absDotRow(V::abs(V::load(pk.row[7])), r.org, pk, 1) + absT * absDotRow(r.dir, pk, 1)) +
+                 errT * V::abs(du);
+    const V e1 = (absDotRow(V::abs(V::load(pk.row[11])), r.org, pk, 2) + absT * absDotRow(r.dir, pk, 2)) +
+                 errT * V::abs(dv);
+    const V band0 = V::max(V::set1(kWoopEdgeBand), V::set1(kWoopErrorScale) * e0);
+    const V band1 = V::max(V::set1(kWoopEdgeBand), V::set1(kWoopErrorScale) * e1);
+    const V band2 = band0 + band1;
+    const V zero = V::set1(0.0f);
+    const auto reject = V::lt(b0, zero - band0) | V::lt(b1, zero - band1) | V::lt(b2, zero - band2);
+    const auto accept = V::gt(b0, band0) & V::gt(b1, band1) & V::gt(b2, band2);
+    uint32_t hits = V::bits(inRange & accept) & used;
+    uint32_t fallback = (V::bits(V::andNot(reject | accept, inRange)) | V::bits(grazing)) & used;
+    if (hits) {
+      if (AnyHit) {
+        const uint32_t lane = uint32_t(__builtin_ctz(hits));
+        hit.t = 0.0f;
+        hit.tri = bvh.triIndex[pk.slot[lane]];
+        return true;
+      }
+      alignas(32) float t[N], u[N], v[N];
+      V::store(t, tt);
+      V::store(u, b1);
+      V::store(v, b2);
+      uint32_t best = uint32_t(__builtin_ctz(hits));
+      for (uint32_t m = hits & (hits - 1); m; m &= m - 1) {
+        const uint32_t lane = uint32_t(__builtin_ctz(m));
+        if (t[lane] < t[best]) best = lane;
+      }
+      tmax = t[best];
+      hit = {t[best], u[best], v[best], bvh.triIndex[pk.slot[best]]};
+      found = true;
+    }
+    for (; fallback; fallback &= fallback - 1) {  // near an edge, or grazing: the watertight test decides
+      const uint32_t slot = pk.slot[__builtin_ctz(fallback)];
+      const uint32_t* tri = bvh.indices + 3 * std::size_t(bvh.triIndex[slot]);
+      float t, u, v;
+      if (intersectWatertight(prep, bvh.vertex(tri[0]), bvh.vertex(tri[1]), bvh.vertex(tri[2]), ray.tmin, tmax, t, u,
+                              v)) {
+        tmax = t;
+        hit = {t, u, v, bvh.triIndex[slot]};
+        found = true;
+        if (AnyHit) return true;
+      }
+    }
+  }
+  return found;
+}
+
+template <class V, bool AnyHit>
+inline Hit traverse(const WideView<V::N>& bvh, const Ray& ray) {
+  constexpr uint32_t N = V::N;
+  Hit hit;
+  if (bvh.rootCount == 0 && isLeafRef(bvh.rootRef)) return hit;  // empty tree
+  const RayPrep prep = prepareRay(ray);
+  float tmax = ray.tmax;
+  float tEntry;
+  if (!intersectBox(prep, bvh.rootBox, ray.tmin, tmax, tEntry)) return hit;
+  const RayLanes<V> r = rayLanes<V>(ray, prep);
+  if (isLeafRef(bvh.rootRef)) {
+    intersectLeaf<V, AnyHit>(bvh, ray, prep, r, leafFirstSlot(bvh.rootRef), bvh.rootCount, tmax, hit);
+    return hit;
+  }
+  struct Entry {
+    int32_t ref;
+    uint32_t count;
+    float t;  // entry distance: skipped once the closest hit is nearer
+  };
+  Entry stack[kWideStackSize];
+  uint32_t sp = 0;
+  int32_t ref = bvh.rootRef;
+  uint32_t count = 0;
+  const V vtmin = V::set1(ray.tmin);
+  const V farScale = V::set1(kSlabFarScale);
+  for (;;) {
+    if (!isLeafRef(ref)) {
+      const WideSoaNode<N>& node = bvh.nodes[ref];
+      const V tnx = (V::load(node.box[r.nearPlane[0]]) - r.org[0]) * r.inv[0];
+      const V tny = (V::load(node.box[r.nearPlane[1]]) - r.org[1]) * r.inv[1];
+      const V tnz = (V::load(node.box[r.nearPlane[2]]) - r.org[2]) * r.inv[2];
+      const V tfx = (V::load(node.box[r.farPlane[0]]) - r.org[0]) * r.inv[0];
+      const V tfy = (V::load(node.box[r.farPlane[1]]) - r.org[1]) * r.inv[1];
+      const V tfz = (V::load(node.box[r.farPlane[2]]) - r.org[2]) * r.inv[2];
+      const V tn = V::max(V::max(tnx, tny), V::max(tnz, vtmin));
+      const V tf = V::min(V::min(tfx, tfy), V::min(tfz, V::set1(tmax))) * farScale;
+      uint32_t mask = V::bits(V::le(tn, tf));
+      if (mask) {
+        const uint32_t c0 = uint32_t(__builtin_ctz(mask));
+        mask &= mask - 1;
+        if (!mask) {  // one child: no ordering needed
+          ref = node.ref[c0];
+          count = node.count[c0];
+          continue;
+        }
+        if (AnyHit) {
+          // Occlusion: any hit ends the ray, and most occlusion rays find none, so sorting buys
+          // nothing (Embree does not sort for occlusion either): push the entered children as
+          // they come, continue with the first.
+          ref = node.ref[c0];
+          count = node.count[c0];
+          for (; mask; mask &= mask - 1) {
+            const uint32_t c = uint32_t(__builtin_ctz(mask));
+            stack[sp++] = {node.ref[c], node.count[c], 0.0f};
+          }
+          continue;
+        }
+        alignas(32) float dist[N];
+        V::store(dist, tn);
+        // Push every entered child, keeping the pushed block sorted far to near; take the nearest.
+        const uint32_t base = sp;
+        for (uint32_t c = c0;;) {
+          const Entry e{node.ref[c], node.count[c], dist[c]};
+          uint32_t i = sp++;
+          while (i > base && stack[i - 1].t < e.t) {
+            stack[i] = stack[i - 1];
+            --i;
+          }
+          stack[i] = e;
+          if (!mask) break;
+          c = uint32_t(__builtin_ctz(mask));
+          mask &= mask - 1;
+        }
+        --sp;
+        ref = stack[sp].ref;
+        count = stack[sp].count;
+        continue;
+      }
+    } else if (intersectLeaf<V, AnyHit>(bvh, ray, prep, r, leafFirstSlot(ref), count, tmax, hit) && AnyHit) {
+      return hit;
+    }
+    do {
+      if (sp == 0) return hit;
+      --sp;
+    } while (!AnyHit && stack[sp].t > tmax * kSlabFarScale);  // any hit: tmax never shrinks
+    ref = stack[sp].ref;
+    count = stack[sp].count;
+  }
+}
+
+template <class V>
+TSAH_KERNEL Hit closestKernel(const WideView<V::N>& bvh, const Ray& ray) {
+  return traverse<V, false>(bvh, ray);
+}
+template <class V>
+TSAH_KERNEL bool anyKernel(const WideView<V::N>& bvh, const Ray& ray) {
+  return traverse<V, true>(bvh, ray).valid();
+}
+
+#undef TSAH_KERNEL

@@ -1,0 +1,174 @@
+// The tsah Python module: errors, animations (load, generate, build from numpy arrays, save), and
+// the parts bound in trees.cpp and runtime.cpp.
+#include <pybind11/stl.h>
+
+#include "anim/error.hpp"
+#include "anim/generators.hpp"
+#include "anim/load.hpp"
+#include "anim/tanim.hpp"
+#include "bindings.hpp"
+
+namespace tsah::python {
+
+namespace {
+
+using namespace pybind11::literals;
+
+// A copy of `values` as a float32 array of the given shape.
+py::array_t<float> floatArray(std::span<const float> values, std::vector<py::ssize_t> shape) {
+  py::array_t<float> out(std::move(shape));
+  std::copy(values.begin(), values.end(), out.mutable_data());
+  return out;
+}
+
+anim::Animation makeAnimation(py::handle triangles, py::handle positions, py::handle times, const std::string& name) {
+  const auto tri = checkedArray<uint32_t>(triangles, "triangles", Kind::Integer, {-1, 3});
+  const py::array posArray = py::isinstance<py::array>(positions) ? py::reinterpret_borrow<py::array>(positions) : py::array();
+  // One frame may be given as (V, 3); otherwise (F, V, 3).
+  const bool oneFrame = posArray && posArray.ndim() == 2;
+  const auto pos = oneFrame ? checkedArray<float>(positions, "positions", Kind::Float, {-1, 3})
+                            : checkedArray<float>(positions, "positions", Kind::Float, {-1, -1, 3});
+  const py::ssize_t frames = oneFrame ? 1 : pos.shape(0);
+  const py::ssize_t vertices = oneFrame ? pos.shape(0) : pos.shape(1);
+  std::vector<double> keyTimes;
+  if (times.is_none()) {
+    for (py::ssize_t f = 0; f < frames; ++f) keyTimes.push_back(double(f));
+  } else {
+    const auto t = checkedArray<double>(times, "times", Kind::Number, {-1});
+    if (t.shape(0) != frames)
+      throw py::value_error("times: expected " + std::to_string(frames) + " times (one per frame), got " +
+                            std::to_string(t.shape(0)));
+    keyTimes.assign(t.data(), t.data() + t.size());
+  }
+  if (vertices > py::ssize_t(UINT32_MAX)) throw py::value_error("positions: too many vertices");
+  return anim::Animation(std::vector<uint32_t>(tri.data(), tri.data() + tri.size()), uint32_t(vertices),
+                         std::vector<float>(pos.data(), pos.data() + pos.size()), std::move(keyTimes), name);
+}
+
+anim::Animation loadAnimation(const std::string& path, double fps, const std::string& clip) {
+  anim::LoadOptions options;
+  options.fps = fps;
+  options.clip = clip;
+  std::vector<std::string> warnings;
+  options.warning = [&warnings](const std::string& w) { warnings.push_back(w); };
+  anim::Animation a;
+  {
+    py::gil_scoped_release release;
+    a = anim::load(path, options);
+  }
+  for (const std::string& w : warnings) PyErr_WarnEx(PyExc_UserWarning, w.c_str(), 1);
+  return a;
+}
+
+py::array_t<float> boundsArray(const anim::Bounds& b) {
+  py::array_t<float> out(std::vector<py::ssize_t>{2, 3});
+  for (int a = 0; a < 3; ++a) {
+    out.mutable_at(0, a) = b.min[std::size_t(a)];
+    out.mutable_at(1, a) = b.max[std::size_t(a)];
+  }
+  return out;
+}
+
+}  // namespace
+
+void bindAnimation(py::module_& m) {
+  py::class_<anim::Animation>(m, "Animation", R"doc(
+An animated triangle mesh: one triangle list for all frames, vertex positions per keyframe, and the
+keyframe times. Positions between keyframes are interpolated linearly (clamped at the ends).
+
+Animation(triangles, positions, times=None, name="")
+  triangles  integer array (T, 3): vertex indices of each triangle
+  positions  float array (F, V, 3): positions of the V vertices in each of F keyframes, or (V, 3) for one frame
+  times      numbers (F,): strictly increasing keyframe times (default 0, 1, ..., F-1)
+Raises TypeError for a wrong dtype, ValueError for a wrong shape, tsah.Error for inconsistent data
+(an index out of range, times not increasing, NaN or infinite coordinates).
+)doc")
+      .def(py::init(&makeAnimation), "triangles"_a, "positions"_a, "times"_a = py::none(), "name"_a = "")
+      .def_property_readonly("name", &anim::Animation::name, "Name of the input (file stem) or the given name.")
+      .def_property_readonly("triangle_count", &anim::Animation::triangleCount)
+      .def_property_readonly("vertex_count", &anim::Animation::vertexCount)
+      .def_property_readonly("keyframe_count", &anim::Animation::keyframeCount)
+      .def_property_readonly("start_time", &anim::Animation::startTime)
+      .def_property_readonly("end_time", &anim::Animation::endTime)
+      .def_property_readonly(
+          "triangles",
+          [](const anim::Animation& a) {
+            py::array_t<uint32_t> out(std::vector<py::ssize_t>{py::ssize_t(a.triangleCount()), 3});
+            std::copy(a.indices().begin(), a.indices().end(), out.mutable_data());
+            return out;
+          },
+          "Vertex indices, uint32 array (T, 3) (a copy).")
+      .def_property_readonly(
+          "positions",
+          [](const anim::Animation& a) {
+            return floatArray(a.allPositions(), {a.keyframeCount(), a.vertexCount(), 3});
+          },
+          "Keyframe positions, float32 array (F, V, 3) (a copy).")
+      .def_property_readonly(
+          "times", [](const anim::Animation& a) { return py::array_t<double>(py::ssize_t(a.times().size()), a.times().data()); },
+          "Keyframe times, float64 array (F,).")
+      .def_property_readonly(
+          "bounds", [](const anim::Animation& a) { return boundsArray(a.bounds()); },
+          "Bounds over every keyframe: float32 array (2, 3), minimum then maximum.")
+      .def(
+          "positions_at",
+          [](const anim::Animation& a, double t) {
+            return floatArray(a.positionsAt(t), {a.vertexCount(), 3});
+          },
+          "t"_a, "Vertex positions at time t, float32 array (V, 3) (linear between keyframes, clamped).")
+      .def(
+          "uniform_times",
+          [](const anim::Animation& a, uint32_t n) {
+            const std::vector<double> t = a.uniformTimes(n);
+            return py::array_t<double>(py::ssize_t(t.size()), t.data());
+          },
+          "n"_a, "n times spread uniformly over [start_time, end_time], both ends included.")
+      .def("resample", &anim::Animation::resample, "n"_a,
+           "A new animation with n keyframes at uniform_times(n) (what `tsah resample --frames n` writes).")
+      .def("segment", &anim::Animation::segment, "t0"_a, "t1"_a,
+           "The part between t0 and t1: keyframes at t0, t1 and every original keyframe between them.")
+      .def(
+          "save",
+          [](const anim::Animation& a, const std::string& path) { anim::saveTanim(a, path); }, "path"_a,
+          "Writes the animation as a .tanim file (atomically), as `tsah resample` does.")
+      .def("__repr__", [](const anim::Animation& a) {
+        return "<tsah.Animation '" + a.name() + "': " + std::to_string(a.triangleCount()) + " triangles, " +
+               std::to_string(a.vertexCount()) + " vertices, " + std::to_string(a.keyframeCount()) + " keyframes>";
+      });
+
+  m.def("load", &loadAnimation, "path"_a, "fps"_a = 0.0, "clip"_a = "", R"doc(
+Loads any input the command line reads: a .tanim file, a BART .aff scene, an animated model (MD2,
+glTF/GLB, FBX, Collada; baked at fps), a mesh file (OBJ, PLY, OFF, STL, OM), a directory of mesh
+files, a printf pattern ('frames/walk_%04d.obj'), a glob ('frames/*.obj') or a JSON manifest.
+Importer warnings become Python UserWarnings. Raises tsah.FileError with the command line's one-line
+message ('FILE: problem') when the input cannot be read.
+)doc");
+
+  m.def(
+      "generate",
+      [](const std::string& kind, uint32_t triangles, uint32_t frames, uint64_t seed) {
+        anim::GeneratorOptions options;
+        options.triangles = triangles;
+        options.frames = frames;
+        options.seed = seed;
+        return anim::generate(anim::parseGeneratorKind(kind), options);
+      },
+      "kind"_a, "triangles"_a = 4000, "frames"_a = 30, "seed"_a = 1,
+      "A procedural animation ('explode', 'wave' or 'swap'), as `tsah generate` makes it.");
+}
+
+}  // namespace tsah::python
+
+PYBIND11_MODULE(_tsah, m) {
+  namespace py = pybind11;
+  m.doc() = "T-SAH: one BVH optimized for every frame of an animation (the C++ toolkit's Python layer).";
+  m.attr("__version__") = TSAH_VERSION;
+  // Translators run latest first: FileError (anim::ImportError) before Error (anim::Error).
+  const py::object error = py::register_exception<anim::Error>(m, "Error", PyExc_RuntimeError);
+  error.attr("__doc__") = "An error of the toolkit, with its one-line message ('FILE: problem').";
+  const py::object fileError = py::register_exception<anim::ImportError>(m, "FileError", error);
+  fileError.attr("__doc__") = "An input or tree file that cannot be read (a tsah.Error).";
+  tsah::python::bindAnimation(m);
+  tsah::python::bindTrees(m);
+  tsah::python::bindRuntimes(m);
+}

@@ -1,0 +1,41 @@
+"""T-SAH: one BVH optimized for every frame of an animation.
+
+The Python layer of the tsah C++ toolkit (docs/python.md). Everything here calls the same C++ code
+as the ``tsah`` command line:
+
+>>> import tsah
+>>> animation = tsah.load("samples/explode")            # any input `tsah info` reads
+>>> tree = tsah.optimize(animation, seed=1)              # as `tsah optimize`
+>>> costs = tree.costs(animation, eval_frames=50)        # Eq. 1 per evaluation frame (numpy)
+>>> tree.save("explode.tbvh")                            # the same .tbvh as the command line's
+>>> runtime = tsah.CpuRuntime(tree, animation)
+>>> runtime.refit(animation.end_time)
+>>> hits = runtime.trace(origins, directions)            # numpy (N, 3) arrays -> record array
+
+Errors are tsah.Error (a RuntimeError; tsah.FileError for unreadable files) carrying the command
+line's one-line messages; wrong dtypes raise TypeError, wrong shapes ValueError.
+"""
+from ._tsah import (  # noqa: F401  (the public API)
+    Animation,
+    CpuRuntime,
+    Error,
+    FileError,
+    Tree,
+    __version__,
+    cuda_available,
+    cuda_built,
+    evaluate,
+    generate,
+    load,
+    optimize,
+    read_tree,
+    tree_from_bytes,
+)
+
+if cuda_built:
+    from ._tsah import GpuRuntime  # noqa: F401
+
+__all__ = [
+    "Animation", "CpuRuntime", "Error", "FileError", "Tree", "__version__", "cuda_available", "cuda_built",
+    "evaluate", "generate", "load", "optimize", "read_tree", "tree_from_bytes",
+] + (["GpuRuntime"] if cuda_built else [])

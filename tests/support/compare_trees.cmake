@@ -1,0 +1,18 @@
+# Checks that two .tbvh files A and B are byte-identical except for the build time (bytes 88..95 of
+# the header, docs/tbvh-format.md) and the trailing CRC-32 that covers it.
+file(READ "${A}" a HEX)
+file(READ "${B}" b HEX)
+string(LENGTH "${a}" na)
+string(LENGTH "${b}" nb)
+if(NOT na EQUAL nb OR na LESS 200)
+  message(FATAL_ERROR "sizes differ or files too short: ${na} vs ${nb} hex digits")
+endif()
+math(EXPR body "${na} - 192 - 8")
+foreach(v a b)
+  string(SUBSTRING "${${v}}" 0 176 head)
+  string(SUBSTRING "${${v}}" 192 ${body} rest)
+  set(${v}_masked "${head}${rest}")
+endforeach()
+if(NOT a_masked STREQUAL b_masked)
+  message(FATAL_ERROR "${A} and ${B} differ beyond the build time: the optimization is not deterministic")
+endif()

@@ -1,0 +1,101 @@
+// Inputs and outputs (anim/binary_io.hpp): regular files only, protected inputs, atomic file sets,
+// and removal of temporaries when the process is interrupted.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <string>
+
+#include "anim/binary_io.hpp"
+#include "anim/error.hpp"
+#include "test_support.hpp"
+
+namespace {
+namespace fs = std::filesystem;
+
+std::span<const uint8_t> text(const std::string& s) { return {reinterpret_cast<const uint8_t*>(s.data()), s.size()}; }
+
+std::size_t entries(const fs::path& dir) {
+  return std::size_t(std::distance(fs::directory_iterator(dir), fs::directory_iterator()));
+}
+
+fs::path freshDir(const std::string& name) {
+  const fs::path dir = tsah::test::scratchDir() / name;
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+}  // namespace
+
+TEST(FileIo, RefusesFifoDirectoryAndDevice) {
+  const fs::path dir = freshDir("fileio-kinds");
+  const std::string fifo = (dir / "pipe").string();
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  try {
+    anim::readFile(fifo);  // must not block
+    FAIL() << "a FIFO was read";
+  } catch (const anim::ImportError& e) {
+    EXPECT_NE(std::string(e.what()).find("is a FIFO"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(anim::readFile(dir.string()), anim::ImportError);
+  EXPECT_THROW(anim::checkInputFile("/dev/null"), anim::ImportError);
+}
+
+TEST(FileIo, FileSetAppearsTogetherOrNotAtAll) {
+  const fs::path dir = freshDir("fileio-set");
+  {
+    anim::AtomicFileSet set;
+    set.write((dir / "a.obj").string(), text("a"));
+    set.write((dir / "b.obj").string(), text("b"));
+    EXPECT_FALSE(fs::exists(dir / "a.obj"));  // staged, not yet visible
+    // A third write fails (name too long): the set is abandoned.
+    EXPECT_THROW(set.write((dir / std::string(300, 'x')).string(), text("c")), anim::Error);
+  }
+  EXPECT_EQ(entries(dir), 0u) << "an abandoned set leaves nothing behind";
+  anim::AtomicFileSet set;
+  set.write((dir / "a.obj").string(), text("a"));
+  set.write((dir / "b.obj").string(), text("b"));
+  set.commit();
+  EXPECT_TRUE(fs::exists(dir / "a.obj"));
+  EXPECT_TRUE(fs::exists(dir / "b.obj"));
+  EXPECT_EQ(entries(dir), 2u) << "the staging folder is gone";
+}
+
+TEST(FileIo, ProtectedInputIsNotOverwritten) {
+  const fs::path dir = freshDir("fileio-protect");
+  const std::string in = (dir / "in.bin").string();
+  anim::writeFileAtomically(in, text("input"));
+  anim::protectInputs(true);
+  (void)anim::readFile(in);
+  EXPECT_THROW(anim::writeFileAtomically((dir / "." / "in.bin").string(), text("output")), anim::Error);
+  anim::protectInputs(false);
+  EXPECT_EQ(anim::readFile(in).size(), 5u);
+}
+
+TEST(FileIo, LongLegalNameGetsAShortTemporary) {
+  const fs::path dir = freshDir("fileio-long");
+  const std::string name = std::string(250, 'n');  // legal; NAME.tmp.PID would not be
+  anim::writeFileAtomically((dir / name).string(), text("x"));
+  EXPECT_TRUE(fs::exists(dir / name));
+  EXPECT_EQ(entries(dir), 1u);
+}
+
+TEST(FileIo, InterruptRemovesStagedFiles) {
+  const fs::path dir = freshDir("fileio-signal");
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    anim::installInterruptCleanup();
+    anim::AtomicFileSet set;
+    set.write((dir / "f_0001.obj").string(), text("v 0 0 0\n"));
+    ::kill(::getpid(), SIGTERM);  // delivered to the cleanup thread, which ends the process
+    for (;;) ::pause();
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGTERM) << "status " << status;
+  EXPECT_EQ(entries(dir), 0u) << "the staging folder was removed";
+}
