@@ -35,6 +35,7 @@ struct QueueEntry {
 //   lo.x left child   lo.y right child   lo.z A(N)   hi.x Delta_N   hi.y parent   hi.z leaf flag
 struct InsertionSession::Impl {
   InsertionOptimizer::Config config;
+  const PrimitiveBoxes* prims;  // the leaves' boxes, for releaseCollapsed
   uint32_t frames = 1;
   uint32_t nodeCount = 0;
   std::size_t stride = 2;          // slots per node record: header + frames boxes
@@ -77,16 +78,16 @@ struct InsertionSession::Impl {
   uint32_t chainNode = kInvalidIndex;  // last node accepted by the Metropolis-Hastings chain
   uint64_t steps = 0, accepted = 0;
 
-  Impl(Bvh tree, const PrimitiveBoxes& prims, const InsertionOptimizer::Config& cfg)
-      : config(cfg), shape(std::move(tree)), rng(cfg.seed) {
+  Impl(Bvh tree, const PrimitiveBoxes& primitives, const InsertionOptimizer::Config& cfg)
+      : config(cfg), prims(&primitives), shape(std::move(tree)), rng(cfg.seed) {
     if (config.k < 0) throw std::invalid_argument("InsertionOptimizer: the exponent k must be >= 0");
-    if (prims.frameCount == 0) throw std::invalid_argument("InsertionOptimizer: no frames");
-    if (prims.primCount != shape.primCount())
+    if (primitives.frameCount == 0) throw std::invalid_argument("InsertionOptimizer: no frames");
+    if (primitives.primCount != shape.primCount())
       throw std::invalid_argument("InsertionOptimizer: the tree holds " +
                                   std::to_string(shape.primCount()) + " primitives, the boxes " +
-                                  std::to_string(prims.primCount));
-    refit(shape, prims);
-    frames = prims.frameCount;
+                                  std::to_string(primitives.primCount));
+    refit(shape, primitives);
+    frames = primitives.frameCount;
     nodeCount = shape.nodeCount();
     stride = std::size_t(frames) + 1;
     root = shape.root;
@@ -146,6 +147,26 @@ struct InsertionSession::Impl {
   void prefetch(uint32_t n) const {
     const char* p = reinterpret_cast<const char*>(&header(n));
     for (std::size_t offset = 0; offset < stride * sizeof(Aabb); offset += 64) __builtin_prefetch(p + offset);
+  }
+
+  // The tree as the collapser reads it, straight from the records.
+  CollapseSource collapseSource() const {
+    CollapseSource source;
+    source.frameCount = frames;
+    source.nodeCount = nodeCount;
+    source.root = root;
+    source.primIds = shape.primIds;
+    source.node = [this](uint32_t n) {
+      BvhNode node = shape.nodes[n];  // leaves: the primitive range
+      node.parent = parent(n);
+      if (!isLeaf(n)) {
+        node.left = left(n);
+        node.right = right(n);
+      }
+      return node;
+    };
+    source.boxes = [this](uint32_t n, Aabb* out) { std::copy_n(box(n), frames, out); };
+    return source;
   }
 
   // The tree as a Bvh (topology from the records, primitive ranges and ids from the input).
@@ -516,6 +537,15 @@ Bvh InsertionSession::release() {
   impl_->materialize();
   return std::move(impl_->shape);
 }
+// The collapse reads the node records; they are freed before the collapsed tree's boxes are
+// computed from the primitives, so every node's boxes are never held twice.
+Bvh InsertionSession::releaseCollapsed(const LeafCollapser& collapser) {
+  const PrimitiveBoxes& prims = *impl_->prims;
+  Bvh out = collapser.collapseTopology(impl_->collapseSource());
+  impl_.reset();
+  refit(out, prims);
+  return out;
+}
 uint64_t InsertionSession::steps() const { return impl_->steps; }
 uint64_t InsertionSession::acceptedSteps() const { return impl_->accepted; }
 
@@ -527,7 +557,8 @@ InsertionOptimizer::InsertionOptimizer(Config config) : config_(std::move(config
     throw std::invalid_argument("InsertionOptimizer: batchesWithoutImprovement must be >= 1");
 }
 
-InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const PrimitiveBoxes& prims) const {
+InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const PrimitiveBoxes& prims,
+                                                       const LeafCollapser* collapse) const {
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
   const auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - start).count(); };
@@ -588,8 +619,8 @@ InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const Primitive
   result.finalCost = session.cost();
   result.steps = session.steps();
   result.acceptedSteps = session.acceptedSteps();
-  result.bvh = session.release();
   result.seconds = elapsed();
+  result.bvh = collapse ? session.releaseCollapsed(*collapse) : session.release();
   return result;
 }
 

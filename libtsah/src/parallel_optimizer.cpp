@@ -21,7 +21,8 @@ ParallelReinsertionOptimizer::ParallelReinsertionOptimizer(Config config, Parall
     throw std::invalid_argument("ParallelReinsertionOptimizer: candidateFraction must be in (0, 1]");
 }
 
-ParallelReinsertionOptimizer::Result ParallelReinsertionOptimizer::optimize(Bvh bvh, const PrimitiveBoxes& prims) const {
+ParallelReinsertionOptimizer::Result ParallelReinsertionOptimizer::optimize(Bvh bvh, const PrimitiveBoxes& prims,
+                                                                           const LeafCollapser* collapse) const {
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
   const auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - start).count(); };
@@ -62,8 +63,8 @@ ParallelReinsertionOptimizer::Result ParallelReinsertionOptimizer::optimize(Bvh 
   result.finalCost = session.cost();
   result.steps = session.searches();
   result.acceptedSteps = session.appliedMoves();
-  result.bvh = session.release();
   result.seconds = elapsed();
+  result.bvh = collapse ? session.releaseCollapsed(*collapse) : session.release();
   return result;
 }
 

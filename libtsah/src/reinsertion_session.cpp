@@ -56,6 +56,12 @@ double sampleOf(uint64_t seed, uint64_t round, uint64_t node) {
   return double(z >> 11) * 0x1.0p-53;
 }
 
+// Frees a vector's storage (`v = {}` assigns an empty initializer list and keeps the capacity).
+template <typename T>
+void freeStorage(std::vector<T>& v) {
+  std::vector<T>().swap(v);
+}
+
 inline bool sameBox(const Aabb& a, const Aabb& b) {
   return a.lo.x == b.lo.x && a.lo.y == b.lo.y && a.lo.z == b.lo.z && a.hi.x == b.hi.x && a.hi.y == b.hi.y &&
          a.hi.z == b.hi.z;
@@ -116,6 +122,9 @@ struct ReinsertionSession::Impl {
     adopt(tree);
     primIds = std::move(tree.primIds);
     tree = Bvh{};
+    // Allocated only once the input tree is gone: the two are never held together.
+    area.assign(nodeCount, 0.0f);
+    innerBoxes.assign(std::size_t(innerCount) * frames, Aabb{});
     rootArea.assign(frames, 0.0);
     innerArea.assign(frames, 0.0);
     leafArea.assign(frames, 0.0);
@@ -156,8 +165,6 @@ struct ReinsertionSession::Impl {
       }
     }
     root = id[tree.root];
-    area.assign(nodeCount, 0.0f);
-    innerBoxes.assign(std::size_t(innerCount) * frames, Aabb{});
   }
 
   // ---- boxes ----
@@ -468,7 +475,13 @@ struct ReinsertionSession::Impl {
       });
       for (Scratch& s : scratch) stats.candidates += s.searched;
       std::vector<Move> moves;
-      for (Scratch& s : scratch) moves.insert(moves.end(), s.found.begin(), s.found.end());
+      std::size_t found = 0;
+      for (Scratch& s : scratch) found += s.found.size();
+      moves.reserve(found);
+      for (Scratch& s : scratch) {  // the per-thread lists are freed: early rounds find millions of moves
+        moves.insert(moves.end(), s.found.begin(), s.found.end());
+        freeStorage(s.found);
+      }
       tbb::parallel_sort(moves.begin(), moves.end(), higherPriority);
       stats.improving = moves.size();
 
@@ -483,7 +496,7 @@ struct ReinsertionSession::Impl {
         winners.push_back(m);
       }
       for (const Move& m : winners) forEachTouched(m, [&](uint32_t n) { taken[n] = 0; });
-      moves = {};
+      freeStorage(moves);
       stats.winners = winners.size();
 
       // 4. Exact cost changes (parallel), kept in priority order while they lower C~^k.
@@ -524,6 +537,40 @@ struct ReinsertionSession::Impl {
 
   void endRound() {
     if (config.k > 0) arena.execute([&] { refresh(); });
+  }
+
+  // The tree as the collapser reads it: links, interior boxes, leaf boxes from the primitives.
+  CollapseSource collapseSource() const {
+    CollapseSource source;
+    source.frameCount = frames;
+    source.nodeCount = nodeCount;
+    source.root = root;
+    source.primIds = primIds;
+    source.node = [this](uint32_t n) {
+      BvhNode node;
+      node.parent = links[n].parent;
+      if (isLeaf(n)) {
+        node.primBegin = links[n].left;
+        node.primCount = links[n].right;
+      } else {
+        node.left = links[n].left;
+        node.right = links[n].right;
+      }
+      return node;
+    };
+    source.boxes = [this](uint32_t n, Aabb* out) {
+      if (isLeaf(n)) leafBoxes(n, out);
+      else std::copy_n(innerBox(n), frames, out);
+    };
+    return source;
+  }
+
+  // Frees what only rounds use (A(N), flags, round stamps), before the collapse allocates.
+  void dropRoundState() {
+    freeStorage(area);
+    freeStorage(taken);
+    freeStorage(changedIn);
+    freeStorage(quietSince);
   }
 
   // The topology as a Bvh without boxes (frameCount 0).
@@ -569,6 +616,16 @@ Bvh ReinsertionSession::bvh() const {
 Bvh ReinsertionSession::release() {
   const PrimitiveBoxes& prims = *impl_->prims;
   Bvh out = impl_->topology();
+  impl_.reset();
+  refit(out, prims);
+  return out;
+}
+// The collapse reads the session's own boxes, then the session is freed and the (smaller) collapsed
+// tree's boxes are computed from the primitives: every node's boxes of every frame are never copied.
+Bvh ReinsertionSession::releaseCollapsed(const LeafCollapser& collapser) {
+  const PrimitiveBoxes& prims = *impl_->prims;
+  impl_->dropRoundState();
+  Bvh out = collapser.collapseTopology(impl_->collapseSource());
   impl_.reset();
   refit(out, prims);
   return out;
