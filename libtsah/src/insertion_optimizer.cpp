@@ -86,8 +86,12 @@ struct InsertionSession::Impl {
       throw std::invalid_argument("InsertionOptimizer: the tree holds " +
                                   std::to_string(shape.primCount()) + " primitives, the boxes " +
                                   std::to_string(primitives.primCount));
-    refit(shape, primitives);
+    // The input's boxes are not needed: the records are refitted from the primitives directly
+    // (the same boxes refit() gives), so every node's boxes are never held twice.
+    shape.boxes.clear();
+    shape.boxes.shrink_to_fit();
     frames = primitives.frameCount;
+    shape.frameCount = frames;
     nodeCount = shape.nodeCount();
     stride = std::size_t(frames) + 1;
     root = shape.root;
@@ -98,9 +102,21 @@ struct InsertionSession::Impl {
       setRight(n, node.right);
       setParent(n, node.parent);
       header(n).hi.z = std::bit_cast<float>(uint32_t(node.isLeaf()));
-      std::copy_n(&shape.box(n, 0), frames, box(n));
       if (node.isLeaf()) primTotal += node.primCount;
       else interior.push_back(n);
+    }
+    for (uint32_t n : childrenFirstOrder(shape)) {
+      const BvhNode& node = shape.nodes[n];
+      Aabb* b = box(n);
+      for (uint32_t f = 0; f < frames; ++f) {
+        Aabb fresh;
+        if (node.isLeaf()) {
+          for (uint32_t i = 0; i < node.primCount; ++i) fresh.extend(primitives.at(f, shape.primIds[node.primBegin + i]));
+        } else {
+          fresh = merge(box(node.left)[f], box(node.right)[f]);
+        }
+        b[f] = fresh;
+      }
     }
     innerCount = interior.size();
     proposalIndex.assign(nodeCount, kInvalidIndex);
@@ -108,8 +124,6 @@ struct InsertionSession::Impl {
       proposals.push_back({interior[i], 0.0f});
       proposalIndex[interior[i]] = static_cast<uint32_t>(i);
     }
-    shape.boxes.clear();
-    shape.boxes.shrink_to_fit();
     shapeCurrent = false;
 
     rootArea.assign(frames, 0.0);
