@@ -105,19 +105,7 @@ struct InsertionSession::Impl {
       if (node.isLeaf()) primTotal += node.primCount;
       else interior.push_back(n);
     }
-    for (uint32_t n : childrenFirstOrder(shape)) {
-      const BvhNode& node = shape.nodes[n];
-      Aabb* b = box(n);
-      for (uint32_t f = 0; f < frames; ++f) {
-        Aabb fresh;
-        if (node.isLeaf()) {
-          for (uint32_t i = 0; i < node.primCount; ++i) fresh.extend(primitives.at(f, shape.primIds[node.primBegin + i]));
-        } else {
-          fresh = merge(box(node.left)[f], box(node.right)[f]);
-        }
-        b[f] = fresh;
-      }
-    }
+    refitInto(shape, primitives, [this](uint32_t n) { return box(n); });
     innerCount = interior.size();
     proposalIndex.assign(nodeCount, kInvalidIndex);
     for (std::size_t i = 0; i < interior.size(); ++i) {
@@ -560,6 +548,7 @@ Bvh InsertionSession::releaseCollapsed(const LeafCollapser& collapser) {
   refit(out, prims);
   return out;
 }
+uint32_t InsertionSession::nodeCount() const { return impl_->nodeCount; }
 uint64_t InsertionSession::steps() const { return impl_->steps; }
 uint64_t InsertionSession::acceptedSteps() const { return impl_->accepted; }
 
@@ -595,7 +584,7 @@ InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const Primitive
   };
   record(0);
 
-  const uint32_t nodeCount = session.bvh().nodeCount();
+  const uint32_t nodeCount = session.nodeCount();  // not bvh(): that would copy every node's boxes
   const auto batchSize = static_cast<uint32_t>(std::max(
       {1.0, double(config_.minBatchSize), std::round(config_.batchFraction * double(nodeCount))}));
   StallCounter stall(session.cost(), config_.minImprovement, config_.batchesWithoutImprovement);

@@ -539,6 +539,20 @@ struct ReinsertionSession::Impl {
     if (config.k > 0) arena.execute([&] { refresh(); });
   }
 
+  // Node n as a BvhNode (a leaf's links hold its primitive range).
+  BvhNode nodeOf(uint32_t n) const {
+    BvhNode node;
+    node.parent = links[n].parent;
+    if (isLeaf(n)) {
+      node.primBegin = links[n].left;
+      node.primCount = links[n].right;
+    } else {
+      node.left = links[n].left;
+      node.right = links[n].right;
+    }
+    return node;
+  }
+
   // The tree as the collapser reads it: links, interior boxes, leaf boxes from the primitives.
   CollapseSource collapseSource() const {
     CollapseSource source;
@@ -546,18 +560,7 @@ struct ReinsertionSession::Impl {
     source.nodeCount = nodeCount;
     source.root = root;
     source.primIds = primIds;
-    source.node = [this](uint32_t n) {
-      BvhNode node;
-      node.parent = links[n].parent;
-      if (isLeaf(n)) {
-        node.primBegin = links[n].left;
-        node.primCount = links[n].right;
-      } else {
-        node.left = links[n].left;
-        node.right = links[n].right;
-      }
-      return node;
-    };
+    source.node = [this](uint32_t n) { return nodeOf(n); };
     source.boxes = [this](uint32_t n, Aabb* out) {
       if (isLeaf(n)) leafBoxes(n, out);
       else std::copy_n(innerBox(n), frames, out);
@@ -580,17 +583,7 @@ struct ReinsertionSession::Impl {
     out.root = root;
     out.primIds = primIds;
     out.nodes.resize(nodeCount);
-    for (uint32_t n = 0; n < nodeCount; ++n) {
-      BvhNode& node = out.nodes[n];
-      node.parent = links[n].parent;
-      if (isLeaf(n)) {
-        node.primBegin = links[n].left;
-        node.primCount = links[n].right;
-      } else {
-        node.left = links[n].left;
-        node.right = links[n].right;
-      }
-    }
+    for (uint32_t n = 0; n < nodeCount; ++n) out.nodes[n] = nodeOf(n);
     return out;
   }
 };

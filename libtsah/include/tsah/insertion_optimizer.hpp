@@ -115,7 +115,8 @@ class InsertionSession {
 
   double cost() const;                        // C~^k of the current frame costs
   std::span<const double> frameCosts() const;  // C_i, kept up to date step by step
-  const Bvh& bvh() const;
+  const Bvh& bvh() const;  // materializes the tree with every node's boxes (tests, inspection)
+  uint32_t nodeCount() const;
   Bvh release();  // moves the tree out; the session is unusable afterwards
   // collapser.collapse(release()), with the peak memory of the session alone.
   Bvh releaseCollapsed(const LeafCollapser& collapser);
