@@ -206,7 +206,15 @@ void run(Options opt, CLI::App* sub) {
     }
     scenes.push_back(*it);
   }
-  if (opt.scenes.empty()) {
+  if (opt.scenes.empty() && opt.scaling) {
+    // The scaling mode has its generated inputs: without a data folder it runs on those alone.
+    try {
+      scanData();
+    } catch (const anim::Error& e) {
+      log(std::string("no real scenes: ") + e.what(), false);
+    }
+    scenes = scan.scenes;
+  } else if (opt.scenes.empty()) {
     scanData();
     scenes = scan.scenes;
     if (scenes.empty() && opt.sceneDir.empty() && !opt.scaling) throw UsageError(dataFolder.string() + ": no animations found");
