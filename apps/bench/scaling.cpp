@@ -181,7 +181,7 @@ void makeScalingPlots(json& results, const fs::path& outDir) {
       errors.push_back(error);
   };
   emit("time", "Optimization time", "seconds (optimizer)", "optimize_s", true);
-  emit("memory", "Peak resident memory of tsah optimize", "bytes per triangle", "bytes_per_triangle", false);
+  emit("memory", "Peak resident memory of tsah optimize", "bytes per triangle", "bytes_per_triangle", true);
   emit("cost", "Resulting T-SAH cost (one triangle per leaf)", "T-SAH cost", "final_cost", false);
   results["plot_status"] = errors.empty() ? std::to_string(results["plots"].size()) + " plots" : errors.front();
 }
