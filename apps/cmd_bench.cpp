@@ -20,6 +20,7 @@
 #include "bench/paper.hpp"
 #include "bench/report.hpp"
 #include "bench/runtime_bench.hpp"
+#include "bench/scaling.hpp"
 #include "anim/scene.hpp"
 #include "cli.hpp"
 
@@ -40,6 +41,8 @@ struct Options {
   std::vector<std::string> notes;
   tsah::bench::BenchOptions bench;
   bool list = false, reportOnly = false, noEmbree = false, noConvergence = false;
+  bool scaling = false;  // --scaling: the optimizers' scaling mode (bench/scaling.hpp) instead
+  tsah::bench::ScalingOptions scalingOptions;
 };
 
 // Progress on stderr, one line per message with the elapsed time; frequent detail messages
@@ -123,6 +126,29 @@ void reportOnly(const Options& opt) {
   std::printf("%s\n%s\n", (out / "results.md").c_str(), (out / "results.json").c_str());
 }
 
+// --scaling: every (input, optimizer) pair as one `tsah optimize` child process of this program.
+void runScalingMode(Options& opt, CLI::App* sub, const std::vector<tsah::bench::SceneSource>& scenes, ProgressLog& log) {
+  tsah::bench::ScalingOptions& o = opt.scalingOptions;
+  const tsah::bench::BenchOptions& b = opt.bench;
+  std::error_code ec;
+  o.program = fs::read_symlink("/proc/self/exe", ec).string();
+  if (ec) throw anim::Error("cannot find the tsah program (/proc/self/exe): " + ec.message());
+  o.frames = b.frames;
+  o.evalFrames = sub->get_option("--eval-frames")->count() > 0 ? b.evalFrames : 10;
+  o.seed = b.seed;
+  o.threads = b.threads;
+  const fs::path out = opt.out;
+  json results = tsah::bench::runScaling(scenes, o, out, [&](const std::string& m) { log(m, false); });
+  results["tool"] = "tsah bench --scaling";
+  results["command"] = commandLine();
+  results["machine"] = tsah::bench::machineJson(false);
+  log("plots", false);
+  tsah::bench::makeScalingPlots(results, out);
+  writeText(out / "scaling.json", results.dump(1) + "\n");
+  writeText(out / "scaling.md", tsah::bench::renderScalingMarkdown(results));
+  std::printf("%s\n%s\n", (out / "scaling.md").c_str(), (out / "scaling.json").c_str());
+}
+
 void run(Options opt, CLI::App* sub) {
   using namespace tsah::bench;
   if (opt.reportOnly) return reportOnly(opt);
@@ -181,10 +207,18 @@ void run(Options opt, CLI::App* sub) {
     }
     scenes.push_back(*it);
   }
-  if (opt.scenes.empty()) {
+  if (opt.scenes.empty() && opt.scaling) {
+    // The scaling mode has its generated inputs: without a data folder it runs on those alone.
+    try {
+      scanData();
+    } catch (const anim::Error& e) {
+      log(std::string("no real scenes: ") + e.what(), false);
+    }
+    scenes = scan.scenes;
+  } else if (opt.scenes.empty()) {
     scanData();
     scenes = scan.scenes;
-    if (scenes.empty() && opt.sceneDir.empty()) throw UsageError(dataFolder.string() + ": no animations found");
+    if (scenes.empty() && opt.sceneDir.empty() && !opt.scaling) throw UsageError(dataFolder.string() + ": no animations found");
   }
   if (!opt.sceneDir.empty()) {
     std::vector<std::string> files;
@@ -208,6 +242,7 @@ void run(Options opt, CLI::App* sub) {
   std::error_code ec;
   fs::create_directories(out, ec);
   if (ec || !fs::is_directory(out)) throw anim::Error(out.string() + ": cannot create the output folder");
+  if (opt.scaling) return runScalingMode(opt, sub, scenes, log);
   json results;
   results["tool"] = "tsah bench";
   results["command"] = commandLine();
@@ -330,6 +365,19 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
                   "A note for results.md (repeatable), e.g. what else ran on the machine; with --report-only it is "
                   "added to the finished run");
   sub->add_flag("--list", opt->list, "List the scenes found (and skipped) and exit");
+  sub->add_flag("--scaling", opt->scaling,
+                "Scaling mode: optimization time, peak memory and T-SAH cost against the triangle count, per "
+                "optimizer (generated explode animations and the scenes): OUT/scaling.json, scaling.md, plots");
+  sub->add_option("--scaling-sizes", opt->scalingOptions.sizes, "--scaling: triangle counts of the explode animations")
+      ->check(CLI::Range(100u, 100000000u))
+      ->delimiter(',')
+      ->allow_extra_args(false)
+      ->capture_default_str();
+  sub->add_option("--scaling-optimizers", opt->scalingOptions.optimizers, "--scaling: optimizers to compare")
+      ->check(CLI::IsMember({"sequential", "parallel"}))
+      ->delimiter(',')
+      ->allow_extra_args(false)
+      ->capture_default_str();
   sub->add_flag("--report-only", opt->reportOnly, "Only redo results.md and the plots from OUT/results.json");
   sub->callback([opt, sub] { run(*opt, sub); });
 });

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstring>
 #include <functional>
 #include <random>
 #include <vector>
@@ -136,6 +137,30 @@ TEST(LeafCollapser, CompactPreservesTheTree) {
   ASSERT_EQ(one.nodeCount(), 1u);
   EXPECT_EQ(one.nodes[0].primCount, 150u);
   EXPECT_FALSE(tsah::validate(one, &prims).has_value());
+}
+
+// collapseTopology over a source, then a refit from the primitives: the tree and boxes collapse()
+// gives, for every k (k > 0 may retry with new weights).
+TEST(LeafCollapser, TopologyFromASourceThenRefitEqualsCollapse) {
+  for (int k : {0, 2, 4}) {
+    for (uint32_t maxLeaf : {1u, 3u, 8u}) {
+      const tsah::PrimitiveBoxes prims = randomMovingBoxes(400, 3, 20 + k);
+      const Bvh tree = optimizedTree(prims, k);
+      const LeafCollapser collapser({{}, maxLeaf, k});
+      const Bvh expected = collapser.collapse(tree);
+      Bvh topology = collapser.collapseTopology(tsah::CollapseSource::of(tree));
+      EXPECT_TRUE(topology.boxes.empty());
+      EXPECT_EQ(topology.frameCount, 3u);
+      tsah::refit(topology, prims);
+      ASSERT_EQ(topology.nodeCount(), expected.nodeCount());
+      EXPECT_EQ(topology.primIds, expected.primIds);
+      for (uint32_t n = 0; n < expected.nodeCount(); ++n) {
+        EXPECT_EQ(topology.nodes[n].left, expected.nodes[n].left);
+        EXPECT_EQ(topology.nodes[n].primCount, expected.nodes[n].primCount);
+      }
+      EXPECT_EQ(std::memcmp(topology.boxes.data(), expected.boxes.data(), expected.boxes.size() * sizeof(tsah::Aabb)), 0);
+    }
+  }
 }
 
 TEST(LeafCollapser, EmptyTreeAndBadConfig) {

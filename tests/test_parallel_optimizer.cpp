@@ -4,12 +4,14 @@
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <cstring>
 #include <stdexcept>
 #include <vector>
 
 #include "test_support.hpp"
 #include "tsah/cost.hpp"
 #include "tsah/insertion_optimizer.hpp"
+#include "tsah/leaf_collapser.hpp"
 #include "tsah/parallel_optimizer.hpp"
 #include "tsah/sah_builder.hpp"
 
@@ -42,6 +44,12 @@ bool sameTree(const Bvh& a, const Bvh& b) {
       return false;
   }
   return true;
+}
+
+// sameTree, and every box bit for bit.
+bool identicalTree(const Bvh& a, const Bvh& b) {
+  return sameTree(a, b) && a.frameCount == b.frameCount &&
+         std::memcmp(a.boxes.data(), b.boxes.data(), a.boxes.size() * sizeof(tsah::Aabb)) == 0;
 }
 
 TEST(ReinsertionSession, InvariantsAndExactCostAfterEveryRound) {
@@ -184,6 +192,34 @@ TEST(ParallelReinsertionOptimizer, WithinThreePercentOfTheSequentialOptimizer) {
       EXPECT_LT(parallel.finalCost, 1.03 * sequential.finalCost)
           << "seed " << seed << " k " << k << ": parallel " << parallel.finalCost << ", sequential "
           << sequential.finalCost;
+    }
+  }
+}
+
+// Both optimizers collapse from their own storage (memory): the result must be exactly the tree,
+// boxes included, that collapsing their uncollapsed result gives.
+TEST(ParallelReinsertionOptimizer, CollapseOnReleaseGivesExactlyTheCollapsedResult) {
+  for (uint32_t frames : {1u, 4u}) {
+    for (int k : {0, 2}) {
+      for (uint32_t maxLeaf : {2u, 8u}) {
+        const tsah::PrimitiveBoxes prims = movingBoxes(1200, frames, 70 + frames + k);
+        const tsah::LeafCollapser collapser({{}, maxLeaf, k});
+        ParallelReinsertionOptimizer::Config config;
+        config.k = k;
+        const ParallelReinsertionOptimizer parallel(config, settings(2));
+        const auto plain = parallel.optimize(initialTree(prims), prims);
+        const auto direct = parallel.optimize(initialTree(prims), prims, &collapser);
+        const Bvh expected = collapser.collapse(plain.bvh);
+        EXPECT_LT(expected.nodeCount(), plain.bvh.nodeCount());
+        EXPECT_TRUE(identicalTree(expected, direct.bvh)) << "parallel, frames " << frames << " k " << k;
+        EXPECT_EQ(plain.finalCost, direct.finalCost);
+
+        const tsah::InsertionOptimizer sequential(config);
+        const auto plainSequential = sequential.optimize(initialTree(prims), prims);
+        const auto directSequential = sequential.optimize(initialTree(prims), prims, &collapser);
+        EXPECT_TRUE(identicalTree(collapser.collapse(plainSequential.bvh), directSequential.bvh))
+            << "sequential, frames " << frames << " k " << k;
+      }
     }
   }
 }

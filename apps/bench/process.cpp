@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <spawn.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -51,8 +52,12 @@ ProcessResult runProcess(const std::vector<std::string>& argv, const std::string
   }
   ::close(pipeFds[0]);
   int status = 0;
-  while (::waitpid(pid, &status, 0) < 0)
+  rusage usage{};
+  while (::wait4(pid, &status, 0, &usage) < 0)
     if (errno != EINTR) return result;
+  result.maxRssKb = usage.ru_maxrss;
+  result.cpuSeconds = double(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) +
+                      1e-6 * double(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
   result.status = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
   // posix_spawnp reports a program that could not be executed as exit status 127 on glibc.
   if (result.status == 127 && !programInPath(argv[0]) && argv[0].find('/') == std::string::npos) result.started = false;

@@ -10,6 +10,8 @@ struct ProcessResult {
   bool started = false;  // false: the program could not be run at all (not installed)
   int status = -1;       // exit status (128 + signal when killed by a signal)
   std::string output;    // what it wrote on stderr (and stdout unless redirected), at most 64 KiB
+  long maxRssKb = 0;     // its peak resident memory (getrusage ru_maxrss of the child, KiB)
+  double cpuSeconds = 0; // its user + system CPU time
   bool ok() const { return started && status == 0; }
 };
 

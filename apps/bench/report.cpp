@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "anim/binary_io.hpp"
+#include "bench/plot.hpp"
 #include "bench/process.hpp"
 
 namespace tsah::bench {
@@ -429,75 +430,6 @@ std::string gnuplotVersion() {
 
 namespace {
 
-// A gnuplot single-quoted string: a quote inside is written twice.
-std::string quoted(const std::string& s) {
-  std::string out = "'";
-  for (char c : s) out += c == '\'' ? std::string("''") : std::string(1, c);
-  return out + "'";
-}
-
-struct Series {
-  std::string title;
-  std::vector<double> x, y;
-};
-
-class Plotter {
- public:
-  Plotter(fs::path dir, std::string terminal) : dir_(std::move(dir)), terminal_(std::move(terminal)) {}
-
-  // One PNG of line series (each its own block in the data file); returns the PNG's path relative
-  // to the output folder, or an error message in `error`.
-  bool plot(const std::string& name, const std::string& title, const std::string& xlabel, const std::string& ylabel,
-            const std::vector<Series>& series, bool logY, std::string& error) {
-    std::ostringstream data;
-    for (std::size_t s = 0; s < series.size(); ++s) {
-      data << "# " << series[s].title << "\n";
-      for (std::size_t i = 0; i < series[s].x.size() && i < series[s].y.size(); ++i)
-        data << series[s].x[i] << " " << series[s].y[i] << "\n";
-      data << "\n\n";
-    }
-    const fs::path dat = dir_ / (name + ".dat"), gp = dir_ / (name + ".gp"), png = dir_ / (name + ".png");
-    const fs::path tmp = dir_ / (name + ".png.tmp");
-    std::ostringstream script;
-    script << "set terminal " << terminal_ << "\nset output " << quoted(tmp.string()) << "\nset title "
-           << quoted(title) << "\nset xlabel " << quoted(xlabel) << "\nset ylabel " << quoted(ylabel)
-           << "\nset grid\nset key outside right top\n"
-           << (logY ? "set logscale y\n" : "") << "plot ";
-    bool first = true;
-    for (std::size_t s = 0; s < series.size(); ++s) {
-      if (series[s].x.empty()) continue;
-      script << (first ? "" : ", \\\n     ") << quoted(dat.string()) << " index " << s
-             << " using 1:2 with linespoints pt 7 ps 0.5 lw 2 title " << quoted(series[s].title);
-      first = false;
-    }
-    script << "\nunset output\n";
-    if (first) {
-      error = name + ": nothing to plot";
-      return false;
-    }
-    const std::string d = data.str(), g = script.str();
-    anim::writeFileAtomically(dat.string(), std::span(reinterpret_cast<const uint8_t*>(d.data()), d.size()));
-    anim::writeFileAtomically(gp.string(), std::span(reinterpret_cast<const uint8_t*>(g.data()), g.size()));
-    const ProcessResult r = runProcess({"gnuplot", gp.string()});
-    std::error_code ec;
-    if (!r.ok() || !fs::exists(tmp, ec)) {
-      fs::remove(tmp, ec);
-      error = name + ": gnuplot failed" + (r.output.empty() ? "" : ": " + r.output.substr(0, r.output.find('\n')));
-      return false;
-    }
-    fs::rename(tmp, png, ec);
-    if (ec) {
-      error = png.string() + ": " + ec.message();
-      return false;
-    }
-    return true;
-  }
-
- private:
-  fs::path dir_;
-  std::string terminal_;
-};
-
 std::vector<double> numbers(const json& array) {
   std::vector<double> v;
   if (array.is_array())
@@ -528,9 +460,8 @@ PlotOutcome makePlots(const json& results, const fs::path& outDir) {
     out.status = "skipped: cannot create " + dir.string();
     return out;
   }
-  // pngcairo draws antialiased lines; the plain png terminal is the fallback.
-  const bool cairo = runProcess({"gnuplot", "-e", "set terminal pngcairo"}).ok();
-  Plotter plotter(dir, cairo ? "pngcairo size 960,540 noenhanced font ',10'" : "png size 960,540 noenhanced");
+  const bool cairo = cairoAvailable();
+  Plotter plotter(dir, plotTerminal(cairo));
   std::vector<std::string> errors;
   for (const json& scene : results.value("scenes", json::array())) {
     const std::string name = str(scene, "name");

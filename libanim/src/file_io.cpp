@@ -95,30 +95,40 @@ fs::path temporarySibling(const fs::path& target, const char* kind) {
 
 // Creates `file` and writes all bytes; on failure removes it and throws naming `path` (the output
 // the user asked for) and the reason.
-void writeNewFile(const fs::path& file, const std::string& path, std::span<const uint8_t> bytes) {
+void writeNewFile(const fs::path& file, const std::string& path, std::span<const std::span<const uint8_t>> parts) {
   const int fd = ::open(file.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
   if (fd < 0) {
     const int e = errno;
     if (e == ENAMETOOLONG) throw Error(path + ": file name too long");
     throw Error(path + ": " + createFailure(e, folderOf(fs::path(path))));
   }
-  std::size_t done = 0;
+  std::size_t done = 0, total = 0;
+  for (const auto& bytes : parts) total += bytes.size();
   int error = 0;
-  while (done < bytes.size()) {
-    const ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) {
-      error = n < 0 ? errno : EIO;
-      break;
+  for (const auto& bytes : parts) {
+    std::size_t written = 0;
+    while (error == 0 && written < bytes.size()) {
+      const ssize_t n = ::write(fd, bytes.data() + written, bytes.size() - written);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) {
+        error = n < 0 ? errno : EIO;
+        break;
+      }
+      written += std::size_t(n);
+      done += std::size_t(n);
     }
-    done += std::size_t(n);
   }
   if (::close(fd) != 0 && error == 0) error = errno;
   if (error != 0) {
     ::unlink(file.c_str());
-    throw Error(path + ": write failed after " + std::to_string(done) + " of " + std::to_string(bytes.size()) +
+    throw Error(path + ": write failed after " + std::to_string(done) + " of " + std::to_string(total) +
                 " bytes: " + errnoText(error));
   }
+}
+
+void writeNewFile(const fs::path& file, const std::string& path, std::span<const uint8_t> bytes) {
+  const std::span<const uint8_t> whole[] = {bytes};
+  writeNewFile(file, path, std::span<const std::span<const uint8_t>>(whole));
 }
 
 void removeInFlight() {
@@ -194,12 +204,17 @@ void requireExtension(const std::string& path, const std::string& extension, con
 }
 
 void writeFileAtomically(const std::string& path, std::span<const uint8_t> bytes) {
+  const std::span<const uint8_t> whole[] = {bytes};
+  writeFileAtomically(path, std::span<const std::span<const uint8_t>>(whole));
+}
+
+void writeFileAtomically(const std::string& path, std::span<const std::span<const uint8_t>> parts) {
   refuseOverwritingInput(path);
   const fs::path target(path);
   if (target.filename().string().size() > 255) throw Error(path + ": file name too long");
   const fs::path tmp = temporarySibling(target, "tmp");
   InFlight cleanup(tmp.string());
-  writeNewFile(tmp, path, bytes);
+  writeNewFile(tmp, path, parts);
   if (::rename(tmp.c_str(), target.c_str()) != 0) {
     const int e = errno;
     ::unlink(tmp.c_str());

@@ -99,6 +99,16 @@ Bvh collapseLeaves(const Bvh& bvh, const BaselineConfig& config, int k) {
   return LeafCollapser({config.cost, config.maxLeafSize, k}).collapse(bvh);
 }
 
+// An optimization followed by collapseLeaves, the collapse done by the optimizer from its own
+// storage (the same tree; the optimized tree's boxes of every frame are never copied).
+InsertionOptimizer::Result optimizeAndCollapse(Bvh bvh, const PrimitiveBoxes& prims,
+                                               const InsertionOptimizer::Config& settings,
+                                               const BaselineConfig& config) {
+  if (config.maxLeafSize <= 1) return optimizeTree(std::move(bvh), prims, settings, config);
+  const LeafCollapser collapser({config.cost, config.maxLeafSize, settings.k});
+  return optimizeTree(std::move(bvh), prims, settings, config, &collapser);
+}
+
 InsertionOptimizer::Config optimizerConfig(const BaselineConfig& config, int k, uint64_t seed) {
   InsertionOptimizer::Config c = config.optimizer;
   c.cost = config.cost;
@@ -127,9 +137,10 @@ OptimizerKind parseOptimizerKind(const std::string& name) {
 }
 
 InsertionOptimizer::Result optimizeTree(Bvh bvh, const PrimitiveBoxes& prims, const InsertionOptimizer::Config& settings,
-                                        const BaselineConfig& config) {
-  if (config.optimizerKind == OptimizerKind::Sequential) return InsertionOptimizer(settings).optimize(std::move(bvh), prims);
-  return ParallelReinsertionOptimizer(settings, config.parallel).optimize(std::move(bvh), prims);
+                                        const BaselineConfig& config, const LeafCollapser* collapse) {
+  if (config.optimizerKind == OptimizerKind::Sequential)
+    return InsertionOptimizer(settings).optimize(std::move(bvh), prims, collapse);
+  return ParallelReinsertionOptimizer(settings, config.parallel).optimize(std::move(bvh), prims, collapse);
 }
 
 FrameSource FrameSource::fromBoxes(const PrimitiveBoxes& boxes) {
@@ -193,8 +204,7 @@ Bvh buildSah0(const PrimitiveBoxes& rep, const BaselineConfig& config) {
 Bvh buildOptimizedSah(std::span<const Aabb> frame, const BaselineConfig& config, uint64_t seed) {
   const PrimitiveBoxes boxes = singleFrame(frame);
   Bvh bvh = SweepSahBuilder({config.cost, 1}).build(frame);
-  InsertionOptimizer::Result result = optimizeTree(std::move(bvh), boxes, optimizerConfig(config, 0, seed), config);
-  return collapseLeaves(result.bvh, config, 0);
+  return optimizeAndCollapse(std::move(bvh), boxes, optimizerConfig(config, 0, seed), config).bvh;
 }
 
 namespace {
@@ -240,8 +250,8 @@ Bvh buildTSah(const PrimitiveBoxes& rep, int k, const BaselineConfig& config,
     if (progress.active())
       progress(label + ": batch " + std::to_string(r.batch) + ", cost " + std::to_string(r.cost));
   };
-  InsertionOptimizer::Result result = optimizeTree(std::move(bvh), rep, oc, config);
-  Bvh collapsed = collapseLeaves(result.bvh, config, k);
+  InsertionOptimizer::Result result = optimizeAndCollapse(std::move(bvh), rep, oc, config);
+  Bvh collapsed = std::move(result.bvh);
   if (details) {
     *details = std::move(result);
     details->bvh = Bvh{};

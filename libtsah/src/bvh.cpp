@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <functional>
 
 namespace tsah {
 
@@ -71,23 +72,31 @@ std::vector<uint32_t> childrenFirstOrder(const Bvh& bvh) {
   return order;
 }
 
-void refit(Bvh& bvh, const PrimitiveBoxes& prims) {
+void refitInto(const Bvh& bvh, const PrimitiveBoxes& prims, const std::function<Aabb*(uint32_t node)>& boxesOf) {
   if (bvh.nodes.empty()) return;
-  bvh.frameCount = prims.frameCount;
-  bvh.boxes.assign(bvh.nodes.size() * std::size_t(prims.frameCount), Aabb{});
   for (uint32_t n : childrenFirstOrder(bvh)) {
     const BvhNode& node = bvh.nodes[n];
+    Aabb* out = boxesOf(n);
+    const Aabb* left = node.isLeaf() ? nullptr : boxesOf(node.left);
+    const Aabb* right = node.isLeaf() ? nullptr : boxesOf(node.right);
     for (uint32_t f = 0; f < prims.frameCount; ++f) {
       Aabb b;
       if (node.isLeaf()) {
         for (uint32_t i = 0; i < node.primCount; ++i)
           b.extend(prims.at(f, bvh.primIds[node.primBegin + i]));
       } else {
-        b = merge(bvh.box(node.left, f), bvh.box(node.right, f));
+        b = merge(left[f], right[f]);
       }
-      bvh.box(n, f) = b;
+      out[f] = b;
     }
   }
+}
+
+void refit(Bvh& bvh, const PrimitiveBoxes& prims) {
+  if (bvh.nodes.empty()) return;
+  bvh.frameCount = prims.frameCount;
+  bvh.boxes.assign(bvh.nodes.size() * std::size_t(prims.frameCount), Aabb{});
+  refitInto(bvh, prims, [&bvh](uint32_t n) { return &bvh.box(n, 0); });
 }
 
 std::optional<std::string> validate(const Bvh& bvh, const PrimitiveBoxes* prims) {

@@ -54,15 +54,35 @@ uint32_t topologyHash(std::span<const uint32_t> indices) {
   return anim::crc32(indices.data(), indices.size_bytes());
 }
 
-std::vector<uint8_t> encodeBvhFile(const Bvh& bvh, const BvhBuildInfo& info) {
-  const FlatBvh flat = flattenBvh(bvh);
+namespace {
+
+// A .tbvh file as its parts in file order: header, node blocks, root boxes, triangle indices,
+// checksum. saveBvhFile writes them one after the other, never assembling the whole file in memory.
+struct EncodedBvh {
+  FlatBvh flat;
+  std::vector<uint8_t> header;
+  uint32_t crc = 0;
+
+  template <typename T>
+  static std::span<const uint8_t> bytesOf(const std::vector<T>& v) {
+    return {reinterpret_cast<const uint8_t*>(v.data()), v.size() * sizeof(T)};
+  }
+  std::array<std::span<const uint8_t>, 5> parts() const {
+    return {std::span<const uint8_t>(header), bytesOf(flat.nodes), bytesOf(flat.rootBoxes), bytesOf(flat.triIndex),
+            std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(&crc), sizeof crc)};
+  }
+};
+
+EncodedBvh encodeParts(const Bvh& bvh, const BvhBuildInfo& info) {
+  EncodedBvh out;
+  out.flat = flattenBvh(bvh);
+  const FlatBvh& flat = out.flat;
   if (info.triangleCount != 0 && info.triangleCount != flat.triangleCount())
     throw anim::Error(".tbvh build info says " + std::to_string(info.triangleCount) +
                       " triangles, the tree holds " + std::to_string(flat.triangleCount()));
 
   anim::ByteWriter w;
-  w.buffer().reserve(kTbvhHeaderBytes + flat.nodes.size() * kNodeBytes + flat.rootBoxes.size() * sizeof(Aabb) +
-                     flat.triIndex.size() * 4 + 4);
+  w.buffer().reserve(kTbvhHeaderBytes);
   w.write(kTbvhMagic);
   w.write(kTbvhVersion);
   w.write(kTbvhLayoutAilaLaine64);
@@ -90,12 +110,23 @@ std::vector<uint8_t> encodeBvhFile(const Bvh& bvh, const BvhBuildInfo& info) {
   writeTbvhName(w, info.selection, "selection");
   for (std::size_t i = 0; i < kReservedWords; ++i) w.write(uint32_t{0});
   if (w.buffer().size() != kTbvhHeaderBytes) throw anim::Error("internal: .tbvh header size mismatch");
-  w.writeArray(std::span<const GpuBvhNode>(flat.nodes));
-  w.writeArray(std::span<const Aabb>(flat.rootBoxes));
-  w.writeArray(std::span<const uint32_t>(flat.triIndex));
-  const uint32_t crc = anim::crc32(w.buffer().data(), w.buffer().size());
-  w.write(crc);
-  return std::move(w.buffer());
+  out.header = std::move(w.buffer());
+  const auto parts = out.parts();
+  for (std::size_t i = 0; i + 1 < parts.size(); ++i) out.crc = anim::crc32(parts[i].data(), parts[i].size(), out.crc);
+  return out;
+}
+
+}  // namespace
+
+std::vector<uint8_t> encodeBvhFile(const Bvh& bvh, const BvhBuildInfo& info) {
+  const EncodedBvh encoded = encodeParts(bvh, info);
+  std::vector<uint8_t> bytes;
+  const auto parts = encoded.parts();
+  std::size_t size = 0;
+  for (const auto& part : parts) size += part.size();
+  bytes.reserve(size);
+  for (const auto& part : parts) bytes.insert(bytes.end(), part.begin(), part.end());
+  return bytes;
 }
 
 FlatBvh decodeFlatBvhFile(std::span<const uint8_t> bytes, const std::string& file, BvhBuildInfo* infoOut) {
@@ -180,8 +211,9 @@ BvhFile decodeBvhFile(std::span<const uint8_t> bytes, const std::string& file) {
 
 void saveBvhFile(const std::string& path, const Bvh& bvh, const BvhBuildInfo& info) {
   anim::requireExtension(path, ".tbvh", "tree");
-  const std::vector<uint8_t> bytes = encodeBvhFile(bvh, info);
-  anim::writeFileAtomically(path, bytes);
+  const EncodedBvh encoded = encodeParts(bvh, info);
+  const auto parts = encoded.parts();
+  anim::writeFileAtomically(path, std::span<const std::span<const uint8_t>>(parts));
 }
 
 BvhFile loadBvhFile(const std::string& path) { return decodeBvhFile(anim::readFile(path), path); }

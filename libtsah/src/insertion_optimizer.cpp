@@ -35,6 +35,7 @@ struct QueueEntry {
 //   lo.x left child   lo.y right child   lo.z A(N)   hi.x Delta_N   hi.y parent   hi.z leaf flag
 struct InsertionSession::Impl {
   InsertionOptimizer::Config config;
+  const PrimitiveBoxes* prims;  // the leaves' boxes, for releaseCollapsed
   uint32_t frames = 1;
   uint32_t nodeCount = 0;
   std::size_t stride = 2;          // slots per node record: header + frames boxes
@@ -77,16 +78,20 @@ struct InsertionSession::Impl {
   uint32_t chainNode = kInvalidIndex;  // last node accepted by the Metropolis-Hastings chain
   uint64_t steps = 0, accepted = 0;
 
-  Impl(Bvh tree, const PrimitiveBoxes& prims, const InsertionOptimizer::Config& cfg)
-      : config(cfg), shape(std::move(tree)), rng(cfg.seed) {
+  Impl(Bvh tree, const PrimitiveBoxes& primitives, const InsertionOptimizer::Config& cfg)
+      : config(cfg), prims(&primitives), shape(std::move(tree)), rng(cfg.seed) {
     if (config.k < 0) throw std::invalid_argument("InsertionOptimizer: the exponent k must be >= 0");
-    if (prims.frameCount == 0) throw std::invalid_argument("InsertionOptimizer: no frames");
-    if (prims.primCount != shape.primCount())
+    if (primitives.frameCount == 0) throw std::invalid_argument("InsertionOptimizer: no frames");
+    if (primitives.primCount != shape.primCount())
       throw std::invalid_argument("InsertionOptimizer: the tree holds " +
                                   std::to_string(shape.primCount()) + " primitives, the boxes " +
-                                  std::to_string(prims.primCount));
-    refit(shape, prims);
-    frames = prims.frameCount;
+                                  std::to_string(primitives.primCount));
+    // The input's boxes are not needed: the records are refitted from the primitives directly
+    // (the same boxes refit() gives), so every node's boxes are never held twice.
+    shape.boxes.clear();
+    shape.boxes.shrink_to_fit();
+    frames = primitives.frameCount;
+    shape.frameCount = frames;
     nodeCount = shape.nodeCount();
     stride = std::size_t(frames) + 1;
     root = shape.root;
@@ -97,18 +102,16 @@ struct InsertionSession::Impl {
       setRight(n, node.right);
       setParent(n, node.parent);
       header(n).hi.z = std::bit_cast<float>(uint32_t(node.isLeaf()));
-      std::copy_n(&shape.box(n, 0), frames, box(n));
       if (node.isLeaf()) primTotal += node.primCount;
       else interior.push_back(n);
     }
+    refitInto(shape, primitives, [this](uint32_t n) { return box(n); });
     innerCount = interior.size();
     proposalIndex.assign(nodeCount, kInvalidIndex);
     for (std::size_t i = 0; i < interior.size(); ++i) {
       proposals.push_back({interior[i], 0.0f});
       proposalIndex[interior[i]] = static_cast<uint32_t>(i);
     }
-    shape.boxes.clear();
-    shape.boxes.shrink_to_fit();
     shapeCurrent = false;
 
     rootArea.assign(frames, 0.0);
@@ -146,6 +149,26 @@ struct InsertionSession::Impl {
   void prefetch(uint32_t n) const {
     const char* p = reinterpret_cast<const char*>(&header(n));
     for (std::size_t offset = 0; offset < stride * sizeof(Aabb); offset += 64) __builtin_prefetch(p + offset);
+  }
+
+  // The tree as the collapser reads it, straight from the records.
+  CollapseSource collapseSource() const {
+    CollapseSource source;
+    source.frameCount = frames;
+    source.nodeCount = nodeCount;
+    source.root = root;
+    source.primIds = shape.primIds;
+    source.node = [this](uint32_t n) {
+      BvhNode node = shape.nodes[n];  // leaves: the primitive range
+      node.parent = parent(n);
+      if (!isLeaf(n)) {
+        node.left = left(n);
+        node.right = right(n);
+      }
+      return node;
+    };
+    source.boxes = [this](uint32_t n, Aabb* out) { std::copy_n(box(n), frames, out); };
+    return source;
   }
 
   // The tree as a Bvh (topology from the records, primitive ranges and ids from the input).
@@ -516,6 +539,16 @@ Bvh InsertionSession::release() {
   impl_->materialize();
   return std::move(impl_->shape);
 }
+// The collapse reads the node records; they are freed before the collapsed tree's boxes are
+// computed from the primitives, so every node's boxes are never held twice.
+Bvh InsertionSession::releaseCollapsed(const LeafCollapser& collapser) {
+  const PrimitiveBoxes& prims = *impl_->prims;
+  Bvh out = collapser.collapseTopology(impl_->collapseSource());
+  impl_.reset();
+  refit(out, prims);
+  return out;
+}
+uint32_t InsertionSession::nodeCount() const { return impl_->nodeCount; }
 uint64_t InsertionSession::steps() const { return impl_->steps; }
 uint64_t InsertionSession::acceptedSteps() const { return impl_->accepted; }
 
@@ -527,7 +560,8 @@ InsertionOptimizer::InsertionOptimizer(Config config) : config_(std::move(config
     throw std::invalid_argument("InsertionOptimizer: batchesWithoutImprovement must be >= 1");
 }
 
-InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const PrimitiveBoxes& prims) const {
+InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const PrimitiveBoxes& prims,
+                                                       const LeafCollapser* collapse) const {
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
   const auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - start).count(); };
@@ -550,7 +584,7 @@ InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const Primitive
   };
   record(0);
 
-  const uint32_t nodeCount = session.bvh().nodeCount();
+  const uint32_t nodeCount = session.nodeCount();  // not bvh(): that would copy every node's boxes
   const auto batchSize = static_cast<uint32_t>(std::max(
       {1.0, double(config_.minBatchSize), std::round(config_.batchFraction * double(nodeCount))}));
   StallCounter stall(session.cost(), config_.minImprovement, config_.batchesWithoutImprovement);
@@ -588,8 +622,8 @@ InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const Primitive
   result.finalCost = session.cost();
   result.steps = session.steps();
   result.acceptedSteps = session.acceptedSteps();
-  result.bvh = session.release();
   result.seconds = elapsed();
+  result.bvh = collapse ? session.releaseCollapsed(*collapse) : session.release();
   return result;
 }
 

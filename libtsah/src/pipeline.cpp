@@ -5,6 +5,7 @@
 #include <stdexcept>
 
 #include "anim/error.hpp"
+#include "anim/memory.hpp"
 #include "tsah/traversal.hpp"
 
 namespace tsah {
@@ -59,8 +60,17 @@ uint32_t framesFor(const anim::Animation& animation, uint32_t requested) {
 
 PrimitiveBoxes representativeBoxes(const anim::Animation& animation, uint32_t frames) {
   const uint32_t n = framesFor(animation, frames);
-  const anim::Animation rep = animation.resample(n);
-  return triangleBoxes(rep.indices(), rep.allPositions(), n);
+  PrimitiveBoxes rep;
+  rep.frameCount = n;
+  rep.primCount = animation.triangleCount();
+  anim::checkFitsInMemory(std::size_t(n) * rep.primCount * sizeof(Aabb), animation.name(),
+                          std::to_string(n) + " representative frames");
+  rep.boxes.resize(std::size_t(n) * rep.primCount);
+  // One frame of positions at a time (the resampled animation is never held whole).
+  const FrameSource source = animationFrames(animation, animation.uniformTimes(n));
+  for (uint32_t f = 0; f < n; ++f)
+    source.fill(f, std::span<Aabb>(rep.boxes).subspan(std::size_t(f) * rep.primCount, rep.primCount));
+  return rep;
 }
 
 BvhBuildInfo treeBuildInfo(const TreeOptions& options, const anim::Animation& animation, uint32_t frames,

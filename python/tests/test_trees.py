@@ -33,6 +33,23 @@ def test_optimize_matches_cli_bytes_and_costs(cli, sample, sample_path, tmp_path
         assert tree.optimization is None
 
 
+@pytest.mark.parametrize("threads", [1, 2])
+def test_parallel_optimizer_matches_cli_for_any_thread_count(cli, sample, sample_path, tmp_path, threads):
+    out = tmp_path / "parallel.tbvh"
+    report = cli.json("optimize", sample_path, "-o", out, "--optimizer", "parallel", "--threads", 2, "--seed", 6)
+    tree = tsah.optimize(sample, seed=6, optimizer="parallel", threads=threads)
+    same_tree_bytes(tree.to_bytes(), out.read_bytes())  # the same tree for 1 and 2 threads
+    assert tree.info["selection"] == "parallel" and report["selection"] == "parallel"
+    assert tree.optimization["final_cost"] == report["optimization"]["final_cost"]
+    assert tree.optimization["final_cost"] <= tree.optimization["initial_cost"]
+    assert tree.costs(sample, eval_frames=50).tolist() == report["cost"]["per_frame"]
+    table = tsah.evaluate(sample, "tsah0", eval_frames=50, seed=6, optimizer="parallel", threads=threads)
+    assert table["methods"][0]["per_frame"].tolist() == report["cost"]["per_frame"]
+    sequential = tsah.optimize(sample, seed=6)
+    assert sequential.info["selection"] == "mh"
+    assert tree.to_bytes()[96:] != sequential.to_bytes()[96:]
+
+
 def test_tree_file_round_trip(cli, sample, sample_path, tmp_path):
     out = tmp_path / "cli.tbvh"
     cli.run("optimize", sample_path, "-o", out, "--k", 2, "--max-leaf", 4, "--seed", 5)
@@ -96,6 +113,10 @@ def test_bad_trees_and_options_raise(cli, sample, sample_path, tmp_path):
         tsah.optimize(sample, selection="best")
     with pytest.raises(ValueError, match="rebuild"):
         tsah.optimize(sample, method="rebuild")
+    with pytest.raises(ValueError, match="unknown optimizer"):
+        tsah.optimize(sample, optimizer="gpu")
+    with pytest.raises(ValueError, match="unknown optimizer"):
+        tsah.evaluate(sample, "tsah0", optimizer="fast")
     with pytest.raises(ValueError):
         tsah.evaluate(sample, "sah0,nonsense")
     with pytest.raises(TypeError):

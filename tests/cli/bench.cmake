@@ -195,3 +195,43 @@ add_test(NAME cli.bench.embree-only
                  --out ${W}/bench_embree_only)
 set_tests_properties(cli.bench.embree-only PROPERTIES FIXTURES_REQUIRED bench_input
   PASS_REGULAR_EXPRESSION "bench_embree_only/results.json")
+
+# --scaling: two generated sizes plus the explicit input, both optimizers; every row has its
+# figures, the peak memory is the child's own (VmHWM, positive), the report and plots are listed.
+add_test(NAME cli.bench.scaling
+         COMMAND tsah bench --scaling --scaling-sizes 300,1200 ${W}/bench_explode.tanim --threads 2 --eval-frames 2
+                 --out ${W}/scaling_out)
+set_tests_properties(cli.bench.scaling PROPERTIES FIXTURES_REQUIRED bench_input FIXTURES_SETUP scaling_results
+  PASS_REGULAR_EXPRESSION "scaling_out/scaling.md\n.*scaling_out/scaling.json\n")
+file(WRITE ${W}/scaling_check.cmake [=[
+file(READ ${OUT}/scaling.json json)
+string(JSON rows LENGTH "${json}" rows)
+if(NOT rows EQUAL 6)
+  message(FATAL_ERROR "scaling.json: ${rows} rows, expected 3 inputs x 2 optimizers")
+endif()
+math(EXPR last "${rows} - 1")
+foreach(i RANGE ${last})
+  foreach(key triangles optimize_s command_s cpu_s peak_rss_bytes bytes_per_triangle initial_cost final_cost eval_average)
+    string(JSON value GET "${json}" rows ${i} ${key})
+    if(NOT value GREATER 0)
+      message(FATAL_ERROR "scaling.json: rows ${i} ${key} is ${value}")
+    endif()
+  endforeach()
+  string(JSON initial GET "${json}" rows ${i} initial_cost)
+  string(JSON final GET "${json}" rows ${i} final_cost)
+  if(final GREATER initial)
+    message(FATAL_ERROR "scaling.json: rows ${i} ends above its start (${initial} -> ${final})")
+  endif()
+endforeach()
+string(JSON kind GET "${json}" rows 4 kind)
+string(JSON optimizer GET "${json}" rows 5 optimizer)
+if(NOT kind STREQUAL "scene" OR NOT optimizer STREQUAL "parallel")
+  message(FATAL_ERROR "scaling.json: row order (${kind}, ${optimizer})")
+endif()
+file(READ ${OUT}/scaling.md md)
+if(NOT md MATCHES "\\| bench_explode \\| [0-9]+ \\| parallel \\|")
+  message(FATAL_ERROR "scaling.md has no row of the explicit input")
+endif()
+]=])
+add_test(NAME cli.bench.scaling_check COMMAND ${CMAKE_COMMAND} -DOUT=${W}/scaling_out -P ${W}/scaling_check.cmake)
+set_tests_properties(cli.bench.scaling_check PROPERTIES FIXTURES_REQUIRED scaling_results)

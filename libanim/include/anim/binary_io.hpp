@@ -118,6 +118,9 @@ void requireExtension(const std::string& path, const std::string& extension, con
 // (or SIGINT/SIGTERM once installInterruptCleanup ran) the temporary is removed and anim::Error is
 // thrown naming the path and the reason.
 void writeFileAtomically(const std::string& path, std::span<const uint8_t> bytes);
+// The same for a file given in parts, written one after the other (a large file need not be
+// assembled in memory first).
+void writeFileAtomically(const std::string& path, std::span<const std::span<const uint8_t>> parts);
 
 // A group of output files in one folder that appear together or not at all (an OBJ sequence): each
 // write goes to a hidden staging folder next to them; commit() renames them into place. Destroyed

@@ -93,9 +93,10 @@ Bvh buildMethod(const MethodSpec& method, const PrimitiveBoxes& rep, const Basel
 Bvh buildOptimizedSah(std::span<const Aabb> frame, const BaselineConfig& config, uint64_t seed);
 
 // One optimization with the configured optimizer (config.optimizerKind), with `settings` (a copy
-// of config.optimizer with the method's k and seed).
+// of config.optimizer with the method's k and seed); with `collapse`, the result's tree collapsed
+// by it (see InsertionOptimizer::optimize).
 InsertionOptimizer::Result optimizeTree(Bvh bvh, const PrimitiveBoxes& prims, const InsertionOptimizer::Config& settings,
-                                        const BaselineConfig& config);
+                                        const BaselineConfig& config, const LeafCollapser* collapse = nullptr);
 
 // Eq. 1 per frame of `frames` after refitting the tree's topology to each of them.
 std::vector<double> evaluateFrames(const Bvh& bvh, const FrameSource& frames, const CostModel& cost,

@@ -2,6 +2,7 @@
 // The BVH as plain data: index-based nodes with parent links, leaves holding ranges into a
 // primitive (triangle) index array, and one box per representative frame for every node.
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <span>
 #include <string>
@@ -68,6 +69,9 @@ std::vector<uint32_t> childrenFirstOrder(const Bvh& bvh);
 // Recomputes every node box from the primitive boxes, bottom-up, for all frames of prims
 // (bvh.frameCount becomes prims.frameCount).
 void refit(Bvh& bvh, const PrimitiveBoxes& prims);
+// The same boxes written to other storage: boxesOf(node) is where node's prims.frameCount boxes go
+// (children are written before their parent and read back from there); bvh.boxes is not used.
+void refitInto(const Bvh& bvh, const PrimitiveBoxes& prims, const std::function<Aabb*(uint32_t node)>& boxesOf);
 
 // Checks the tree invariants: the root has no parent, parent/child links agree, every node is
 // reachable from the root exactly once (no cycles, no orphans), every primitive sits in exactly one

@@ -18,6 +18,7 @@
 
 #include "tsah/bvh.hpp"
 #include "tsah/cost.hpp"
+#include "tsah/leaf_collapser.hpp"
 
 namespace tsah {
 
@@ -73,8 +74,10 @@ class InsertionOptimizer {
   const Config& config() const { return config_; }
 
   // Optimizes a valid tree over prims (any leaf sizes; its boxes are recomputed from prims for all
-  // prims.frameCount frames). Deterministic for a given seed.
-  Result optimize(Bvh bvh, const PrimitiveBoxes& prims) const;
+  // prims.frameCount frames). Deterministic for a given seed. With `collapse`, Result::bvh is the
+  // optimized tree collapsed by it: the same tree as collapse->collapse() of the tree returned
+  // without it, made without a second copy of every node's boxes (memory).
+  Result optimize(Bvh bvh, const PrimitiveBoxes& prims, const LeafCollapser* collapse = nullptr) const;
 
  private:
   Config config_;
@@ -86,7 +89,7 @@ class InsertionOptimizer {
 class InsertionSession {
  public:
   // Refits bvh to prims (all frames) and computes the frame costs and weights. Throws
-  // std::invalid_argument when prims does not match the tree.
+  // std::invalid_argument when prims does not match the tree. prims must outlive the session.
   InsertionSession(Bvh bvh, const PrimitiveBoxes& prims, const InsertionOptimizer::Config& config);
   ~InsertionSession();
   InsertionSession(InsertionSession&&) noexcept;
@@ -112,8 +115,11 @@ class InsertionSession {
 
   double cost() const;                        // C~^k of the current frame costs
   std::span<const double> frameCosts() const;  // C_i, kept up to date step by step
-  const Bvh& bvh() const;
+  const Bvh& bvh() const;  // materializes the tree with every node's boxes (tests, inspection)
+  uint32_t nodeCount() const;
   Bvh release();  // moves the tree out; the session is unusable afterwards
+  // collapser.collapse(release()), with the peak memory of the session alone.
+  Bvh releaseCollapsed(const LeafCollapser& collapser);
   uint64_t steps() const;
   uint64_t acceptedSteps() const;
 

@@ -4,12 +4,29 @@
 // T-SAH-weighted multi-frame area A(B) = sum_i (w_i / W) * area(B_i) / S_i over the frames stored in
 // the tree and w_i = C_i^k are the frame weights of the whole tree.
 #include <cstdint>
+#include <functional>
 #include <span>
 
 #include "tsah/bvh.hpp"
 #include "tsah/cost.hpp"
 
 namespace tsah {
+
+// A binary tree with boxes of every frame, as the collapser reads it: a Bvh (CollapseSource::of),
+// or an optimizer's own storage, so that collapsing an optimized tree needs no second copy of every
+// node's boxes. Node ids are [0, nodeCount); nodes not reachable from the root count in the cost of
+// the uncollapsed tree as they do in frameCosts(Bvh).
+struct CollapseSource {
+  uint32_t frameCount = 0;
+  uint32_t nodeCount = 0;
+  uint32_t root = 0;
+  std::span<const uint32_t> primIds;
+  std::function<BvhNode(uint32_t node)> node;            // links and primitive range
+  std::function<void(uint32_t node, Aabb* out)> boxes;  // frameCount boxes of the node
+
+  // A view of bvh (which must outlive it).
+  static CollapseSource of(const Bvh& bvh);
+};
 
 class LeafCollapser {
  public:
@@ -30,12 +47,21 @@ class LeafCollapser {
   // result that would raise it is retried with the new weights and otherwise not collapsed.
   Bvh collapse(const Bvh& bvh) const;
 
+  // The same collapse of a tree given as a source, without boxes (frameCount set, boxes empty):
+  // the caller fills them with refit(result, prims) once the source is gone. That gives exactly the
+  // boxes collapse() copies when the source's boxes are the unions of their primitives' boxes (an
+  // optimizer's tree). Peak memory: the result's topology and one byte per source node.
+  Bvh collapseTopology(const CollapseSource& source) const;
+
   // The tree renumbered as described above; nodes flagged in `asLeaf` (indexed by node, may be
   // empty) become leaves holding every primitive below them.
   static Bvh compact(const Bvh& bvh, std::span<const uint8_t> asLeaf = {});
 
  private:
-  Bvh collapseWithWeights(const Bvh& bvh, std::span<const double> weights) const;
+  // The collapse decisions (one flag per source node) with frame weights `weights`.
+  std::vector<uint8_t> leafFlags(const CollapseSource& source, std::span<const double> weights) const;
+  // The collapsed topology; origin[i] is the source node of output node i.
+  Bvh collapsedTopology(const CollapseSource& source, std::vector<uint32_t>& origin) const;
   Config config_;
 };
 

@@ -31,6 +31,7 @@
 
 #include "tsah/bvh.hpp"
 #include "tsah/insertion_optimizer.hpp"
+#include "tsah/leaf_collapser.hpp"
 
 namespace tsah {
 
@@ -56,8 +57,10 @@ class ParallelReinsertionOptimizer {
   const Config& config() const { return config_; }
 
   // Optimizes a valid tree over prims (any leaf sizes). Result::steps counts searches,
-  // Result::acceptedSteps applied moves, Result::history one record per round.
-  Result optimize(Bvh bvh, const PrimitiveBoxes& prims) const;
+  // Result::acceptedSteps applied moves, Result::history one record per round. With `collapse`,
+  // Result::bvh is the optimized tree collapsed by it: the same tree as collapse->collapse() of the
+  // tree returned without it, made without a second copy of every node's boxes (memory).
+  Result optimize(Bvh bvh, const PrimitiveBoxes& prims, const LeafCollapser* collapse = nullptr) const;
 
  private:
   Config config_;
@@ -93,6 +96,8 @@ class ReinsertionSession {
   std::span<const double> frameCosts() const;  // C_i, updated by every applied move
   Bvh bvh() const;                             // the current tree with boxes for every frame
   Bvh release();                               // the tree; the session is unusable afterwards
+  // collapser.collapse(release()), with the peak memory of the session alone (see the .cpp).
+  Bvh releaseCollapsed(const LeafCollapser& collapser);
   uint64_t searches() const;
   uint64_t appliedMoves() const;
 
