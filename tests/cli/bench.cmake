@@ -140,6 +140,15 @@ set_tests_properties(cli.bench.unknown_scene PROPERTIES
   PASS_REGULAR_EXPRESSION "tsah: no scene 'no-such-scene': not a file or folder, and not a scene of .*bench_empty_data \\(none found\\)")
 add_test(NAME cli.bench.report_only_missing COMMAND tsah bench --report-only --out ${W}/bench_none_here)
 set_tests_properties(cli.bench.report_only_missing PROPERTIES PASS_REGULAR_EXPRESSION "^tsah: .*results.json")
+# --layout names a layout of the chosen device (checked before any scene is read or device sought).
+add_test(NAME cli.bench.layout_cwbvh_on_cpu COMMAND tsah bench --data ${W}/bench_empty_data --layout cwbvh
+                                                   --out ${W}/bench_none)
+set_tests_properties(cli.bench.layout_cwbvh_on_cpu PROPERTIES
+  PASS_REGULAR_EXPRESSION "^tsah: --layout cwbvh is not a layout of --device cpu \\(auto, bvh2, bvh4 or bvh8\\)\n$")
+add_test(NAME cli.bench.layout_bvh8_on_gpu COMMAND tsah bench --data ${W}/bench_empty_data --device cuda
+                                                  --layout bvh8 --out ${W}/bench_none)
+set_tests_properties(cli.bench.layout_bvh8_on_gpu PROPERTIES
+  PASS_REGULAR_EXPRESSION "^tsah: --layout bvh8 is not a layout of --device cuda \\(auto, bvh2 or cwbvh\\)\n$")
 add_test(NAME cli.bench.no_gpu
          COMMAND tsah bench ${W}/bench_explode.tanim --device cuda --quick --out ${W}/bench_gpu_none)
 set_tests_properties(cli.bench.no_gpu PROPERTIES FIXTURES_REQUIRED bench_input
