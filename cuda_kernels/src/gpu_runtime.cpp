@@ -70,9 +70,8 @@ GpuRuntime::Impl::Impl(const TreeSet& set, const anim::Animation& animation, Con
 }
 
 void GpuRuntime::Impl::uploadTree(const FlatBvh& tree) {
-  FlatBvh topologyOfTree = runtimeTopology(tree, triangles, kTraversalStackSize, "GPU runtime");
   DeviceTree& d = trees.emplace_back();
-  d.topology = std::move(topologyOfTree);
+  d.topology = runtimeTopology(tree, triangles, kTraversalStackSize, "GPU runtime");
   const FlatBvh& topology = d.topology;
 
   // Parents of interior nodes and the leaves, for the bottom-up refit.

@@ -253,7 +253,8 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   f.base = {settings.seed, settings.frame, 0};
 
   // Fused wide passes (Config::fuseWidePasses) need no ray or hit buffers.
-  const bool fused = m.scene().cwbvhNodes != nullptr && m.config.fuseWidePasses;
+  const detail::TraceScene scene = m.scene();
+  const bool fused = scene.cwbvhNodes != nullptr && m.config.fuseWidePasses;
   if (!fused) {
     m.rays.reserve(std::max<uint64_t>(padded, aoRays));
     m.hits.reserve(padded);
@@ -265,7 +266,6 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   m.image.reserve(std::size_t(f.width) * f.height * 3);
   uint8_t* shadowTraced = m.shadowOccluded.data() + shadowRays;
 
-  const detail::TraceScene scene = m.scene();
   const detail::TraceLaunch launch = m.traceLaunch();
   const unsigned block = 256;
   cudaStream_t stream = m.stream;
