@@ -19,6 +19,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <map>
 #include <sstream>
@@ -110,7 +111,7 @@ tsah::FlatBvh buildSah0(const anim::Animation& a, const std::string& builder) {
 }
 
 struct Scene {
-  tsah::Camera camera;
+  std::function<tsah::Camera(double)> camera;  // the animation's camera path, else fitted to its bounds
   tsah::SceneLighting lighting;
   tsah::RenderSettings settings;
 };
@@ -166,7 +167,7 @@ json runRefit(const std::string& name, const tsah::FlatBvh& tree, const anim::An
   tsah::RenderSettings settings = scene.settings;
   // Warm-up: module load, allocations, first-touch of the ray buffers.
   rt.updateAt(times.front());
-  if (!opt.noRender) tc::renderFrameGpu(rt, scene.camera, scene.lighting, settings, nullptr);
+  if (!opt.noRender) tc::renderFrameGpu(rt, scene.camera(times.front()), scene.lighting, settings, nullptr);
 
   FrameSeries s;
   for (uint32_t f = 0; f < times.size(); ++f) {
@@ -181,7 +182,7 @@ json runRefit(const std::string& name, const tsah::FlatBvh& tree, const anim::An
     }
     settings.frame = f;
     tc::GpuRenderTimings g;
-    const tsah::RenderStats r = tc::renderFrameGpu(rt, scene.camera, scene.lighting, settings, nullptr, &g);
+    const tsah::RenderStats r = tc::renderFrameGpu(rt, scene.camera(times[f]), scene.lighting, settings, nullptr, &g);
     s.addRender(r, g, u.totalMs());
   }
   json j;
@@ -219,7 +220,7 @@ json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim:
   full.method = method;
   rt.rebuildAt(times.front(), bare);  // warm-up (allocations, CUB, module load)
   rt.rebuildAt(times.front(), full);
-  if (!opt.noRender) tc::renderFrameGpu(rt, scene.camera, scene.lighting, settings, nullptr);
+  if (!opt.noRender) tc::renderFrameGpu(rt, scene.camera(times.front()), scene.lighting, settings, nullptr);
 
   FrameSeries s;
   std::vector<double> morton, sort, hierarchy, top, bottomUp, collapseWoop, clusters, leaves, depth, ratio;
@@ -246,7 +247,7 @@ json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim:
     }
     settings.frame = f;
     tc::GpuRenderTimings g;
-    const tsah::RenderStats r = tc::renderFrameGpu(rt, scene.camera, scene.lighting, settings, nullptr, &g);
+    const tsah::RenderStats r = tc::renderFrameGpu(rt, scene.camera(times[f]), scene.lighting, settings, nullptr, &g);
     s.addRender(r, g, t.totalMs());
   }
   json j;
@@ -283,9 +284,9 @@ json compareWithCpu(const tsah::FlatBvh& tree, const anim::Animation& a, double 
   gpu.updateAt(t);
   tsah::Image cpuImage, gpuImage;
   const auto start = std::chrono::steady_clock::now();
-  const tsah::RenderStats cs = tsah::renderFrame(cpu, scene.camera, scene.lighting, scene.settings, cpuImage);
+  const tsah::RenderStats cs = tsah::renderFrame(cpu, scene.camera(t), scene.lighting, scene.settings, cpuImage);
   const double cpuSeconds = seconds(start);
-  const tsah::RenderStats gs = tc::renderFrameGpu(gpu, scene.camera, scene.lighting, scene.settings, gpuImage);
+  const tsah::RenderStats gs = tc::renderFrameGpu(gpu, scene.camera(t), scene.lighting, scene.settings, gpuImage);
   const tsah::ImageDifference d = tsah::compareImages(cpuImage, gpuImage, 16);
   if (!opt.imageDir.empty()) {
     std::filesystem::create_directories(opt.imageDir);
@@ -335,12 +336,15 @@ void run(const Options& opt) {
   tsah::Aabb bounds;
   bounds.extend(tsah::Vec3{ab.min[0], ab.min[1], ab.min[2]});
   bounds.extend(tsah::Vec3{ab.max[0], ab.max[1], ab.max[2]});
-  scene.camera = tsah::fitCamera(bounds, {0, 1, 0}, 45.0f, float(opt.width) / float(opt.height));
-  scene.lighting = tsah::fitLighting(bounds, scene.camera);
+  const tsah::Camera fitted = tsah::fitCamera(bounds, {0, 1, 0}, 45.0f, float(opt.width) / float(opt.height));
+  std::vector<anim::CameraKey> path(a.cameraPath().begin(), a.cameraPath().end());
+  scene.camera = [path, fitted](double t) { return path.empty() ? fitted : tsah::cameraAt(path, t); };
+  scene.lighting = tsah::fitLighting(bounds, scene.camera(times.front()));
   out["settings"] = {{"frames", frames},       {"width", opt.width},   {"height", opt.height},
                      {"ao_samples", opt.ao},   {"shadow_samples", opt.shadow},
                      {"traversal", opt.traversal}, {"render", !opt.noRender}, {"graphs", !opt.noGraphs},
-                     {"fused_wide_passes", !opt.noFuse}};
+                     {"fused_wide_passes", !opt.noFuse},
+                     {"camera", a.cameraPath().empty() ? "fitted to the animation bounds" : "the animation's camera path"}};
 
   // Trees: files, then SAH0 built here.
   std::vector<std::pair<std::string, tsah::FlatBvh>> trees;

@@ -9,6 +9,8 @@
 #include "cwbvh_kernels.hpp"
 #include "kernels.hpp"
 #include "runtime_impl.hpp"
+
+#include <utility>
 #include "tsah/traversal.hpp"
 
 namespace tsah::cuda {
@@ -41,7 +43,22 @@ GpuRuntime::Impl::Impl(const TreeSet& set, const anim::Animation& animation, Con
   const auto idx = animation.indices();
   for (uint32_t v : idx)
     if (v >= vertices) throw anim::Error("GPU runtime: a triangle refers to a vertex out of range");
+  // Every tree is checked (and its runtime topology made) before the device is touched, so a bad
+  // tree leaves no stream or pinned memory behind (the destructor never runs for a throwing ctor).
+  std::vector<FlatBvh> topologies;
+  topologies.reserve(set.trees.size());
+  for (const FlatBvh& t : set.trees) topologies.push_back(runtimeTopology(t, triangles, kTraversalStackSize, "GPU runtime"));
 
+  try {
+    createOnDevice(set, animation, std::move(topologies));
+  } catch (...) {
+    releaseDevice();
+    throw;
+  }
+}
+
+void GpuRuntime::Impl::createOnDevice(const TreeSet& set, const anim::Animation& animation,
+                                      std::vector<FlatBvh> topologies) {
   CUDA_CHECK(cudaSetDevice(config.device));
   device = describeDevice(config.device);
   CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
@@ -57,21 +74,22 @@ GpuRuntime::Impl::Impl(const TreeSet& set, const anim::Animation& animation, Con
   keyframes = DeviceBuffer<float>(animation.motion(), stream);
   movingIds = DeviceBuffer<uint32_t>(animation.movingVertices(), stream);
   hostRest.assign(animation.restPositions().begin(), animation.restPositions().end());
+  const auto idx = animation.indices();
   indices = DeviceBuffer<uint32_t>(idx, stream);
   hostIndices.assign(idx.begin(), idx.end());
   positions.resize(std::size_t(vertices) * 3);
   if (!hostRest.empty()) positions.upload(std::span<const float>(hostRest), stream);
   trees.reserve(set.trees.size());
-  for (const FlatBvh& t : set.trees) uploadTree(t);
+  for (std::size_t i = 0; i < set.trees.size(); ++i) uploadTree(set.trees[i], std::move(topologies[i]));
   ranges = set.ranges;
   woop.resize(triangles);
   words.resize(8);
   CUDA_CHECK(cudaStreamSynchronize(stream));
 }
 
-void GpuRuntime::Impl::uploadTree(const FlatBvh& tree) {
+void GpuRuntime::Impl::uploadTree(const FlatBvh& tree, FlatBvh topologyOfTree) {
   DeviceTree& d = trees.emplace_back();
-  d.topology = runtimeTopology(tree, triangles, kTraversalStackSize, "GPU runtime");
+  d.topology = std::move(topologyOfTree);
   const FlatBvh& topology = d.topology;
 
   // Parents of interior nodes and the leaves, for the bottom-up refit.
@@ -110,13 +128,16 @@ void GpuRuntime::Impl::uploadTree(const FlatBvh& tree) {
   CUDA_CHECK(cudaStreamSynchronize(stream));
 }
 
-GpuRuntime::Impl::~Impl() {
+GpuRuntime::Impl::~Impl() { releaseDevice(); }
+
+void GpuRuntime::Impl::releaseDevice() noexcept {
   if (stream) cudaStreamSynchronize(stream);
-  for (const DeviceTree& t : trees)
-    if (t.updateGraph) cudaGraphExecDestroy(t.updateGraph);
-  for (const auto& g : rebuildGraphs) cudaGraphExecDestroy(g.exec);
-  if (hostParams) cudaFreeHost(hostParams);
-  if (stream) cudaStreamDestroy(stream);
+  for (DeviceTree& t : trees)
+    if (t.updateGraph) cudaGraphExecDestroy(std::exchange(t.updateGraph, nullptr));
+  for (auto& g : rebuildGraphs)
+    if (g.exec) cudaGraphExecDestroy(std::exchange(g.exec, nullptr));
+  if (hostParams) cudaFreeHost(std::exchange(hostParams, nullptr));
+  if (stream) cudaStreamDestroy(std::exchange(stream, nullptr));
 }
 
 template <typename Enqueue>

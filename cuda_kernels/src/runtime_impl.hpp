@@ -86,7 +86,9 @@ struct GpuRuntime::Impl {
     std::unique_ptr<Cwbvh> cwbvh;           // the compressed layout, when Config::layout == cwbvh
   };
   // Validates one tree against the animation and uploads it (and its compressed layout).
-  void uploadTree(const FlatBvh& tree);
+  void createOnDevice(const TreeSet& set, const anim::Animation& animation, std::vector<FlatBvh> topologies);
+  void uploadTree(const FlatBvh& tree, FlatBvh topologyOfTree);
+  void releaseDevice() noexcept;
   // The 8-wide collapse over all frames of `tree`, its compressed layout and refit data on the device.
   static std::unique_ptr<Cwbvh> uploadCwbvh(const FlatBvh& tree, cudaStream_t stream);
   DeviceTree& tree() { return trees[current]; }

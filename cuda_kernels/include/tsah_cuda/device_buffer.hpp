@@ -92,6 +92,12 @@ class DeviceBuffer {
     void* p = nullptr;
     CUDA_CHECK(cudaMalloc(&p, count * sizeof(T)));
     data_ = static_cast<T*>(p);
+    // Zeroed once: struct padding and slots a kernel leaves unwritten are then defined when they
+    // are copied back (compute-sanitizer initcheck), and no stale data of an earlier buffer shows.
+    // Waited for here: the legacy stream does not order with the runtime's non-blocking streams,
+    // so an unwaited memset could land after an upload that follows on another stream.
+    CUDA_CHECK(cudaMemsetAsync(p, 0, count * sizeof(T), nullptr));
+    CUDA_CHECK(cudaStreamSynchronize(nullptr));
     size_ = count;
   }
   void release() noexcept {

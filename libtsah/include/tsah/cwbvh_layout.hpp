@@ -79,7 +79,14 @@ TSAH_HD float cwbvhStep(uint32_t e) {
 
 // The decoded plane: exactly what the traversal computes (q * step is exact: 8-bit q, power-of-two
 // step; the sum is one rounding), so the quantizer can check its own result.
-TSAH_HD float cwbvhDecode(float p, uint32_t q, float step) { return p + float(q) * step; }
+// q * step is exact (8-bit q times a power of two), so the fused form rounds once, like p + q * step.
+TSAH_HD float cwbvhDecode(float p, float q, float step) {
+#if defined(__CUDA_ARCH__)
+  return __fmaf_rn(q, step, p);
+#else
+  return p + q * step;
+#endif
+}
 
 TSAH_HD Aabb cwbvhChildBox(const CwbvhNode& n, uint32_t slot) {
   const float sx = cwbvhStep(n.ex), sy = cwbvhStep(n.ey), sz = cwbvhStep(n.ez);
@@ -126,16 +133,16 @@ TSAH_HD uint32_t cwbvhGuess(float x, float p, uint32_t e) {
 TSAH_HD uint32_t cwbvhQuantizeLo(float lo, float p, uint32_t e) {
   const float step = cwbvhStep(e);
   uint32_t q = cwbvhGuess(lo, p, e);
-  while (q > 0 && !(cwbvhDecode(p, q, step) <= lo)) --q;
-  while (q < 255 && cwbvhDecode(p, q + 1, step) <= lo) ++q;
+  while (q > 0 && !(cwbvhDecode(p, float(q), step) <= lo)) --q;
+  while (q < 255 && cwbvhDecode(p, float(q + 1), step) <= lo) ++q;
   return q;
 }
 
 TSAH_HD uint32_t cwbvhQuantizeHi(float hi, float p, uint32_t e) {
   const float step = cwbvhStep(e);
   uint32_t q = cwbvhGuess(hi, p, e);
-  while (q < 255 && !(cwbvhDecode(p, q, step) >= hi)) ++q;
-  while (q > 0 && cwbvhDecode(p, q - 1, step) >= hi) --q;
+  while (q < 255 && !(cwbvhDecode(p, float(q), step) >= hi)) ++q;
+  while (q > 0 && cwbvhDecode(p, float(q - 1), step) >= hi) --q;
   return q;
 }
 
@@ -231,12 +238,45 @@ struct CwbvhNodeWords {
 #endif
   }
   TSAH_HD uint32_t meta(uint32_t slot) const { return byteAt(24 + slot); }
+  // meta(slot) for a slot known only at run time: selects between the two words instead of
+  // indexing the node's registers (which would move the node to local memory on the GPU).
+  TSAH_HD uint32_t metaOf(uint32_t slot) const { return ((slot < 4 ? w[6] : w[7]) >> (8u * (slot & 3u))) & 0xffu; }
   TSAH_HD uint32_t qlo(uint32_t axis, uint32_t slot) const { return byteAt(32 + 8 * axis + slot); }
   TSAH_HD uint32_t qhi(uint32_t axis, uint32_t slot) const { return byteAt(56 + 8 * axis + slot); }
 };
 static_assert(offsetof(CwbvhNode, ex) == 12 && offsetof(CwbvhNode, triCount) == 15 &&
               offsetof(CwbvhNode, childBase) == 16 && offsetof(CwbvhNode, triBase) == 20 &&
               offsetof(CwbvhNode, meta) == 24 && offsetof(CwbvhNode, qlo) == 32 && offsetof(CwbvhNode, qhi) == 56);
+
+// One bound per axis of the eight children, as the words of the node that hold it: the near planes
+// of a ray with direction signs `oct` (bit a set: dir[a] < 0, the near plane is hi) or, with
+// oct ^ 7, the far planes.
+struct CwbvhPlaneWords {
+  uint32_t w[6];  // axis a: words 2a, 2a + 1 (slots 0-3, 4-7)
+  // The bound of `slot` along `axis` as a float (0..255, exact). On the GPU one byte permute makes
+  // the float 2^23 + q (bits 0x4B0000qq) and one subtraction removes 2^23: no integer-to-float
+  // conversion and no shift/mask pair, which kept the integer pipe the traversal's bottleneck.
+  TSAH_HD float at(uint32_t axis, uint32_t slot) const {
+    const uint32_t word = w[2 * axis + (slot >> 2)];
+#if defined(__CUDA_ARCH__)
+    return __uint_as_float(__byte_perm(word, 0x4B000000u, 0x7440u | (slot & 3u))) - 8388608.0f;
+#else
+    return float((word >> (8u * (slot & 3u))) & 0xffu);
+#endif
+  }
+};
+
+TSAH_HD CwbvhPlaneWords cwbvhNearPlanes(const CwbvhNodeWords& n, uint32_t oct) {
+  CwbvhPlaneWords planes;
+  TSAH_CWBVH_UNROLL
+  for (uint32_t a = 0; a < 3; ++a) {
+    const uint32_t lo = 8 + 2 * a, hi = 14 + 2 * a;  // words of qlo[a] and qhi[a]
+    const bool negative = (oct >> a) & 1u;
+    planes.w[2 * a] = negative ? n.w[hi] : n.w[lo];
+    planes.w[2 * a + 1] = negative ? n.w[hi + 1] : n.w[lo + 1];
+  }
+  return planes;
+}
 
 // How a traversal loads a node: plain loads on the CPU, read-only cache on the GPU.
 TSAH_HD CwbvhNodeWords cwbvhLoadNode(const CwbvhNode* nodes, uint32_t i) {
@@ -339,28 +379,41 @@ TSAH_HD Hit cwbvhTraverse(const CwbvhView& v, const Ray& ray) {
     const CwbvhNodeWords n = cwbvhLoadNode(v.nodes, nodeIndex);
     const Vec3 p{n.floatAt(0), n.floatAt(1), n.floatAt(2)};
     const float sx = cwbvhStep(n.byteAt(12)), sy = cwbvhStep(n.byteAt(13)), sz = cwbvhStep(n.byteAt(14));
-    uint32_t childHits = 0, childInterior = 0;
-    uint64_t starts = 0, hitLeaves = 0;
+    // Near and far planes per axis by the ray's direction (octant): for dir >= 0 the near plane is
+    // lo, else hi. min/max of the two planes would pick the same value (decode and slab are
+    // monotone in q), so this is intersectBox's result with half the comparisons.
+    const CwbvhPlaneWords near = cwbvhNearPlanes(n, oct), far = cwbvhNearPlanes(n, oct ^ 7u);
+    // Slot masks (bit s: slot s) of the interior and leaf children, and of the hit leaves; hit
+    // interior children by slot ^ oct (the visiting order).
+    uint32_t childHits = 0, childInterior = 0, leafSlots = 0, hitLeafSlots = 0;
     TSAH_CWBVH_UNROLL
     for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
       const uint32_t m = n.meta(s);
       if (m == 0) continue;
       const bool interior = (m & kCwbvhInterior) != 0;
       if (interior) childInterior |= 1u << s;
-      else starts |= 1ull << (m & 0x3fu);
-      Aabb b;
-      b.lo = {cwbvhDecode(p.x, n.qlo(0, s), sx), cwbvhDecode(p.y, n.qlo(1, s), sy), cwbvhDecode(p.z, n.qlo(2, s), sz)};
-      b.hi = {cwbvhDecode(p.x, n.qhi(0, s), sx), cwbvhDecode(p.y, n.qhi(1, s), sy), cwbvhDecode(p.z, n.qhi(2, s), sz)};
-      if (!intersectBox(prep, b, ray.tmin, tmax, tEntry)) continue;
+      else leafSlots |= 1u << s;
+      const float nx = (cwbvhDecode(p.x, near.at(0, s), sx) - prep.org.x) * prep.invDir.x;
+      const float ny = (cwbvhDecode(p.y, near.at(1, s), sy) - prep.org.y) * prep.invDir.y;
+      const float nz = (cwbvhDecode(p.z, near.at(2, s), sz) - prep.org.z) * prep.invDir.z;
+      const float fx = (cwbvhDecode(p.x, far.at(0, s), sx) - prep.org.x) * prep.invDir.x;
+      const float fy = (cwbvhDecode(p.y, far.at(1, s), sy) - prep.org.y) * prep.invDir.y;
+      const float fz = (cwbvhDecode(p.z, far.at(2, s), sz) - prep.org.z) * prep.invDir.z;
+      const float tn = fmaxf_(fmaxf_(nx, ny), fmaxf_(nz, ray.tmin));
+      const float tf = fminf_(fminf_(fx, fy), fminf_(fz, tmax)) * kSlabFarScale;
+      if (!(tn <= tf)) continue;
       if (interior) childHits |= 1u << (s ^ oct);
-      else hitLeaves |= 1ull << (m & 0x3fu);
+      else hitLeafSlots |= 1u << s;
     }
-    // The triangle group: every triangle of the hit leaves.
+    // The triangle group: every triangle of the hit leaves, in slot (= storage) order. A leaf ends
+    // where the node's next leaf begins, or at triCount.
     bool done = false;
-    while (hitLeaves != 0 && !done) {
-      const uint32_t first = cwbvhLowestBit(hitLeaves);
-      hitLeaves &= hitLeaves - 1;
-      const uint32_t end = cwbvhLeafEnd(starts, first, n.byteAt(15));
+    while (hitLeafSlots != 0 && !done) {
+      const uint32_t leafSlot = cwbvhLowestBit(hitLeafSlots);
+      hitLeafSlots &= hitLeafSlots - 1;
+      const uint32_t first = n.metaOf(leafSlot) & 0x3fu;
+      const uint32_t later = leafSlots & ~((2u << leafSlot) - 1u);
+      const uint32_t end = later != 0 ? n.metaOf(cwbvhLowestBit(later)) & 0x3fu : n.byteAt(15);
       for (uint32_t o = first; o < end; ++o) {
         if (cwbvhTriangle(v, ray, prep, n.w[5] + o, tmax, hit) && AnyHit) {
           done = true;
