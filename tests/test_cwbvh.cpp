@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <random>
 
 #include "anim/error.hpp"
@@ -262,6 +263,39 @@ TEST(CwbvhTraversal, SingleLeafTree) {
     const tsah::Ray ray{c + Vec3{0, 0, 10}, 0.0f, Vec3{0, 0, -1}, 1e30f};
     EXPECT_TRUE(tsah::cwbvhClosestHit(v, ray).valid());
     EXPECT_TRUE(tsah::cwbvhAnyHit(v, ray));
+  }
+}
+
+}  // namespace
+
+namespace {
+
+// The traversal's slot masks (interiorSlots, leafSlots from the meta words) and the octant
+// permutation agree with the per-slot definitions for every meta pattern kind and octant.
+TEST(CwbvhTraversal, SlotMasksAndOctantPermutation) {
+  std::mt19937 rng(11);
+  for (int trial = 0; trial < 2000; ++trial) {
+    CwbvhNode n{};
+    for (uint32_t s = 0; s < 8; ++s) {
+      const uint32_t kind = uint32_t(rng() % 3);
+      n.meta[s] = kind == 0 ? 0 : kind == 1 ? tsah::kCwbvhInterior : uint8_t(tsah::kCwbvhLeaf | uint32_t(rng() % 64));
+    }
+    tsah::CwbvhNodeWords w;
+    std::memcpy(w.w, &n, sizeof w.w);
+    uint32_t interior = 0, leaves = 0;
+    for (uint32_t s = 0; s < 8; ++s) {
+      interior |= n.isInterior(s) ? 1u << s : 0u;
+      leaves |= n.isLeaf(s) ? 1u << s : 0u;
+    }
+    ASSERT_EQ(w.interiorSlots(), interior);
+    ASSERT_EQ(w.leafSlots(), leaves);
+    for (uint32_t s = 0; s < 8; ++s) ASSERT_EQ(w.metaOf(s), n.meta[s]);
+    const uint32_t mask = uint32_t(rng() & 0xffu);
+    for (uint32_t oct = 0; oct < 8; ++oct) {
+      uint32_t expected = 0;
+      for (uint32_t s = 0; s < 8; ++s) expected |= ((mask >> s) & 1u) << (s ^ oct);
+      ASSERT_EQ(tsah::cwbvhPermuteSlots(mask, oct), expected);
+    }
   }
 }
 

@@ -238,6 +238,13 @@ struct CwbvhNodeWords {
 #endif
   }
   TSAH_HD uint32_t meta(uint32_t slot) const { return byteAt(24 + slot); }
+  // Slot masks (bit s: slot s) of the interior and of the leaf children, from the meta words.
+  TSAH_HD uint32_t interiorSlots() const { return slotFlags(w[6]) | (slotFlags(w[7]) << 4); }
+  TSAH_HD uint32_t leafSlots() const {  // kCwbvhLeaf set and kCwbvhInterior clear
+    return slotFlags((w[6] << 1) & ~w[6]) | (slotFlags((w[7] << 1) & ~w[7]) << 4);
+  }
+  // Bit 7 of each byte of x, as bits 0-3 (the four products land on distinct bits: no carries).
+  TSAH_HD static uint32_t slotFlags(uint32_t x) { return ((x & 0x80808080u) * 0x00204081u) >> 28; }
   // meta(slot) for a slot known only at run time: selects between the two words instead of
   // indexing the node's registers (which would move the node to local memory on the GPU).
   TSAH_HD uint32_t metaOf(uint32_t slot) const { return ((slot < 4 ? w[6] : w[7]) >> (8u * (slot & 3u))) & 0xffu; }
@@ -315,6 +322,14 @@ TSAH_HD uint32_t cwbvhLoadU32(const uint32_t* p) {
 #endif
 }
 
+// Moves bit s of an 8-bit slot mask to bit s ^ oct.
+TSAH_HD uint32_t cwbvhPermuteSlots(uint32_t m, uint32_t oct) {
+  if (oct & 1u) m = ((m & 0x55u) << 1) | ((m >> 1) & 0x55u);
+  if (oct & 2u) m = ((m & 0x33u) << 2) | ((m >> 2) & 0x33u);
+  if (oct & 4u) m = ((m & 0x0fu) << 4) | ((m >> 4) & 0x0fu);
+  return m;
+}
+
 // A group of interior children still to visit (the paper's node group): the children's base
 // index, their interior-slot mask and the hit children as bits of slot ^ oct.
 struct CwbvhNodeGroup {
@@ -383,16 +398,12 @@ TSAH_HD Hit cwbvhTraverse(const CwbvhView& v, const Ray& ray) {
     // lo, else hi. min/max of the two planes would pick the same value (decode and slab are
     // monotone in q), so this is intersectBox's result with half the comparisons.
     const CwbvhPlaneWords near = cwbvhNearPlanes(n, oct), far = cwbvhNearPlanes(n, oct ^ 7u);
-    // Slot masks (bit s: slot s) of the interior and leaf children, and of the hit leaves; hit
-    // interior children by slot ^ oct (the visiting order).
-    uint32_t childHits = 0, childInterior = 0, leafSlots = 0, hitLeafSlots = 0;
+    // Every slot's box is tested, empty ones too (their planes are garbage, but the hit bit is
+    // masked out below): the slot loop then carries no per-child meta decoding, which kept the
+    // integer pipe busy. The child kinds come from the meta words as masks, once per node.
+    uint32_t boxHits = 0;
     TSAH_CWBVH_UNROLL
     for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
-      const uint32_t m = n.meta(s);
-      if (m == 0) continue;
-      const bool interior = (m & kCwbvhInterior) != 0;
-      if (interior) childInterior |= 1u << s;
-      else leafSlots |= 1u << s;
       const float nx = (cwbvhDecode(p.x, near.at(0, s), sx) - prep.org.x) * prep.invDir.x;
       const float ny = (cwbvhDecode(p.y, near.at(1, s), sy) - prep.org.y) * prep.invDir.y;
       const float nz = (cwbvhDecode(p.z, near.at(2, s), sz) - prep.org.z) * prep.invDir.z;
@@ -401,10 +412,12 @@ TSAH_HD Hit cwbvhTraverse(const CwbvhView& v, const Ray& ray) {
       const float fz = (cwbvhDecode(p.z, far.at(2, s), sz) - prep.org.z) * prep.invDir.z;
       const float tn = fmaxf_(fmaxf_(nx, ny), fmaxf_(nz, ray.tmin));
       const float tf = fminf_(fminf_(fx, fy), fminf_(fz, tmax)) * kSlabFarScale;
-      if (!(tn <= tf)) continue;
-      if (interior) childHits |= 1u << (s ^ oct);
-      else hitLeafSlots |= 1u << s;
+      if (tn <= tf) boxHits |= 1u << s;
     }
+    const uint32_t childInterior = n.interiorSlots(), leafSlots = n.leafSlots();
+    uint32_t hitLeafSlots = boxHits & leafSlots;
+    // Hit interior children by slot ^ oct (the visiting order).
+    const uint32_t childHits = cwbvhPermuteSlots(boxHits & childInterior, oct);
     // The triangle group: every triangle of the hit leaves, in slot (= storage) order. A leaf ends
     // where the node's next leaf begins, or at triCount.
     bool done = false;
