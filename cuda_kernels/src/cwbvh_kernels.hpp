@@ -11,11 +11,12 @@
 namespace tsah::cuda::detail {
 
 // Per frame: exact leaf boxes from the triangles, bottom-up (atomic arrival counter per node, zero
-// on entry; the last child to arrive finishes its node), every node re-quantized with
-// cwbvhQuantize, root->box. exact: nodes * 8 scratch boxes. Results equal tsah::refitCwbvh.
-void launchCwbvhRefit(CwbvhNode* nodes, Aabb* exact, const uint32_t* parentSlot, const CwbvhLeaf* leaves,
-                      uint32_t leafCount, const uint32_t* triIndex, const uint32_t* indices, const float* positions,
-                      uint32_t* counters, RootInfo* root, cudaStream_t stream);
+// on entry; the last child to arrive finishes its node's union), root->box; then every node
+// re-quantized with cwbvhQuantize in parallel. exact: nodeCount * 8 scratch boxes. Results equal
+// tsah::refitCwbvh.
+void launchCwbvhRefit(CwbvhNode* nodes, uint32_t nodeCount, Aabb* exact, const uint32_t* parentSlot,
+                      const CwbvhLeaf* leaves, uint32_t leafCount, const uint32_t* triIndex, const uint32_t* indices,
+                      const float* positions, uint32_t* counters, RootInfo* root, cudaStream_t stream);
 
 // The traversal's view of a scene in the compressed layout (rootBox is read on the device from
 // scene.root).

@@ -250,7 +250,8 @@ void GpuRuntime::Impl::enqueueRefitAndWoop() {
   if (t.cwbvh) {  // refit + re-quantize the compressed layout, Woop triangles per slot of it
     Cwbvh& c = *t.cwbvh;
     c.counters.fillBytes(0, stream);
-    detail::launchCwbvhRefit(c.nodes.data(), c.exact.data(), c.parentSlot.data(), c.leaves.data(),
+    detail::launchCwbvhRefit(c.nodes.data(), uint32_t(c.nodes.size()), c.exact.data(), c.parentSlot.data(),
+                             c.leaves.data(),
                              uint32_t(c.leaves.size()), c.triIndex.data(), indices.data(), positions.data(),
                              c.counters.data(), c.root.data(), stream);
     events.record(2, stream);
