@@ -217,7 +217,7 @@ inline Hit traverse(const WideView<V::N>& bvh, const Ray& ray) {
   }
 }
 
-// --- Refit: the Woop rows of one packet ------------------------------------------------------------
+// --- Refit: the Woop rows and the box of one packet ----------------------------------------------
 // makeWoopTriangle's double-precision arithmetic (woopRowsDouble) on all N lanes at once, as GCC
 // vectors of N doubles (one AVX-512 register for 8 lanes; pairs / quads of registers below that).
 typedef double DoubleLanes4 __attribute__((vector_size(4 * sizeof(double))));
@@ -228,23 +228,51 @@ typedef int32_t IntLanes4 __attribute__((vector_size(4 * sizeof(int32_t))));
 typedef int32_t IntLanes8 __attribute__((vector_size(8 * sizeof(int32_t))));
 
 template <uint32_t N, class D, class F, class I>
-TSAH_KERNEL void woopRowsKernel(const float (*vertices)[N], uint32_t lanes, WoopPacket<N>& pk) {
+TSAH_KERNEL void woopRowsKernel(const float (*vertices)[N], uint32_t lanes, WoopPacket<N>& pk, Aabb& bounds) {
+  F f[9];
   D v[3][3];
-  for (int i = 0; i < 9; ++i) {
-    F f;
-    std::memcpy(&f, vertices[i], sizeof f);
-    v[i / 3][i % 3] = __builtin_convertvector(f, D);
-  }
+#pragma GCC unroll 9
+  for (int k = 0; k < 3; ++k)
+#pragma GCC unroll 3
+    for (int a = 0; a < 3; ++a) {
+      std::memcpy(&f[3 * k + a], vertices[3 * k + a], sizeof(F));
+      v[k][a] = __builtin_convertvector(f[3 * k + a], D);
+    }
   D rows[12], nn;
   woopRowsDouble(v[0], v[1], v[2], rows, nn);
   I keep;  // all ones for the lanes that get their rows, zero for padding and degenerate triangles
   for (uint32_t lane = 0; lane < N; ++lane) keep[lane] = lane < lanes && woopNondegenerate(nn[lane]) ? -1 : 0;
   for (int r = 0; r < 12; ++r) {
-    const F f = __builtin_convertvector(rows[r], F);
+    const F row = __builtin_convertvector(rows[r], F);
     I bits;
-    std::memcpy(&bits, &f, sizeof bits);
+    std::memcpy(&bits, &row, sizeof bits);
     bits &= keep;
     std::memcpy(pk.row[r], &bits, sizeof bits);
+  }
+  // The box of the used lanes' vertices: lane-wise over the three vertices (x < lo ? x : lo from
+  // the empty box, as the scalar refit compared, so a NaN coordinate is skipped), then across the
+  // lanes by halving rotations.
+  I used;
+  for (uint32_t lane = 0; lane < N; ++lane) used[lane] = lane < lanes ? -1 : 0;
+#pragma GCC unroll 3
+  for (int a = 0; a < 3; ++a) {
+    F lo = F{} + 3.402823466e38f, hi = F{} - 3.402823466e38f;
+#pragma GCC unroll 3
+    for (int k = 0; k < 3; ++k) {
+      const F x = f[3 * k + a];
+      lo = ((x < lo) & used) ? x : lo;
+      hi = ((x > hi) & used) ? x : hi;
+    }
+#pragma GCC unroll 3
+    for (uint32_t half = N / 2; half > 0; half /= 2) {
+      I rotate;
+      for (uint32_t lane = 0; lane < N; ++lane) rotate[lane] = int32_t((lane + half) % N);
+      const F l = __builtin_shuffle(lo, rotate), h = __builtin_shuffle(hi, rotate);
+      lo = l < lo ? l : lo;
+      hi = h > hi ? h : hi;
+    }
+    bounds.lo[a] = lo[0];
+    bounds.hi[a] = hi[0];
   }
 }
 

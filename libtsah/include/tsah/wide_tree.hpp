@@ -44,7 +44,7 @@ class WideTree {
   Aabb refitLeaf(uint32_t firstPacket, uint32_t count, const float* positions, const uint32_t* indices);
   void refitNode(uint32_t node, const float* positions, const uint32_t* indices);
 
-  void (*woopRows_)(const float (*vertices)[N], uint32_t lanes, WoopPacket<N>& packet) = nullptr;
+  void (*woopRows_)(const float (*vertices)[N], uint32_t lanes, WoopPacket<N>& packet, Aabb& bounds) = nullptr;
   std::vector<WideSoaNode<N>> nodes_;
   std::vector<WoopPacket<N>> packets_;
   std::vector<uint32_t> triIndex_;
