@@ -5,7 +5,7 @@
 // V provides: set1, load (aligned), store, + - * /, min, max, abs, comparisons lt/le/gt returning
 // V::Mask, Mask & | and andNot(a, b) = ~a & b, and bits(mask) (one bit per lane).
 //
-// Every entry point is `flatten`, so the shared inline helpers (prepareRay, intersectBox,
+// Every entry point is `flatten`, so the shared inline helpers (prepareSlabs, intersectBox,
 // intersectWatertight) are inlined into it and no copy of them compiled for this instruction set
 // is emitted for the linker to pick for other files.
 //
@@ -13,6 +13,17 @@
 // FMA contraction off (the files' flags) every box and triangle result is bit-identical to it.
 
 #define TSAH_KERNEL [[gnu::flatten]]
+
+// The ray's RayPrep: the slab part at once, the watertight shear on the first fallback to the
+// watertight test (most rays never need it, and its axis choice is a data-dependent branch).
+struct LazyPrep {
+  RayPrep prep;
+  bool shear = false;
+  const RayPrep& watertight(const Ray& ray) {
+    if (!shear) prepareShear(ray, prep), shear = true;
+    return prep;
+  }
+};
 
 // Per-ray values broadcast to all lanes.
 template <class V>
@@ -55,7 +66,7 @@ inline V absDotRow(const V p[3], const WoopPacket<N>& pk, int r) {
 // The triangles of one leaf (packets [first, first + packetCount(count))). Returns true when one
 // was hit; for closest hit tmax shrinks to it.
 template <class V, bool AnyHit>
-inline bool intersectLeaf(const WideView<V::N>& bvh, const Ray& ray, const RayPrep& prep, const RayLanes<V>& r,
+inline bool intersectLeaf(const WideView<V::N>& bvh, const Ray& ray, LazyPrep& prep, const RayLanes<V>& r,
                           uint32_t first, uint32_t count, float& tmax, Hit& hit) {
   constexpr uint32_t N = V::N;
   bool found = false;
@@ -115,8 +126,8 @@ inline bool intersectLeaf(const WideView<V::N>& bvh, const Ray& ray, const RayPr
       const uint32_t slot = pk.slot[__builtin_ctz(fallback)];
       const uint32_t* tri = bvh.indices + 3 * std::size_t(bvh.triIndex[slot]);
       float t, u, v;
-      if (intersectWatertight(prep, bvh.vertex(tri[0]), bvh.vertex(tri[1]), bvh.vertex(tri[2]), ray.tmin, tmax, t, u,
-                              v)) {
+      if (intersectWatertight(prep.watertight(ray), bvh.vertex(tri[0]), bvh.vertex(tri[1]), bvh.vertex(tri[2]),
+                              ray.tmin, tmax, t, u, v)) {
         tmax = t;
         hit = {t, u, v, bvh.triIndex[slot]};
         found = true;
@@ -132,15 +143,18 @@ inline Hit traverse(const WideView<V::N>& bvh, const Ray& ray) {
   constexpr uint32_t N = V::N;
   Hit hit;
   if (bvh.rootCount == 0 && isLeafRef(bvh.rootRef)) return hit;  // empty tree
-  const RayPrep prep = prepareRay(ray);
+  LazyPrep prep{prepareSlabs(ray)};
   float tmax = ray.tmax;
-  float tEntry;
-  if (!intersectBox(prep, bvh.rootBox, ray.tmin, tmax, tEntry)) return hit;
-  const RayLanes<V> r = rayLanes<V>(ray, prep);
+  const RayLanes<V> r = rayLanes<V>(ray, prep.prep);
   if (isLeafRef(bvh.rootRef)) {
+    float tEntry;
+    if (!intersectBox(prep.prep, bvh.rootBox, ray.tmin, tmax, tEntry)) return hit;
     intersectLeaf<V, AnyHit>(bvh, ray, prep, r, leafFirstSlot(bvh.rootRef), bvh.rootCount, tmax, hit);
     return hit;
   }
+  // An interior root's box is not tested: it is the union of its children's boxes, and the slab
+  // test is monotone in the planes (rounding included), so a ray missing the root box misses every
+  // child box too; the child tests below decide exactly as if the root test had come first.
   struct Entry {
     int32_t ref;
     uint32_t count;
