@@ -158,7 +158,7 @@ inline Hit traverse(const WideView<V::N>& bvh, const Ray& ray) {
   struct Entry {
     int32_t ref;
     uint32_t count;
-    float t;  // entry distance: skipped once the closest hit is nearer
+    float t;  // sort key; closest hit: the entry distance, skipped once the hit is nearer
   };
   Entry stack[kWideStackSize];
   uint32_t sp = 0;
@@ -186,24 +186,16 @@ inline Hit traverse(const WideView<V::N>& bvh, const Ray& ray) {
           count = node.count[c0];
           continue;
         }
-        if (AnyHit) {
-          // Occlusion: any hit ends the ray, and most occlusion rays find none, so sorting buys
-          // nothing (Embree does not sort for occlusion either): push the entered children as
-          // they come, continue with the first.
-          ref = node.ref[c0];
-          count = node.count[c0];
-          for (; mask; mask &= mask - 1) {
-            const uint32_t c = uint32_t(__builtin_ctz(mask));
-            stack[sp++] = {node.ref[c], node.count[c], 0.0f};
-          }
-          continue;
-        }
-        alignas(32) float dist[N];
-        V::store(dist, tn);
-        // Push every entered child, keeping the pushed block sorted far to near; take the nearest.
+        // Push every entered child, the pushed block sorted by key; continue with the top one.
+        // Closest hit: nearest first (the key is the entry distance). Any hit: farthest first (the
+        // key is its negation). An occlusion ray leaves a surface: its nearest boxes hold that
+        // surface, which it moves away from, while an occluder lies across the gap (a wall, a
+        // ceiling, another object); a ray that finds nothing visits every entered child anyway.
+        alignas(32) float key[N];
+        V::store(key, AnyHit ? V::set1(0.0f) - tn : tn);
         const uint32_t base = sp;
         for (uint32_t c = c0;;) {
-          const Entry e{node.ref[c], node.count[c], dist[c]};
+          const Entry e{node.ref[c], node.count[c], key[c]};
           uint32_t i = sp++;
           while (i > base && stack[i - 1].t < e.t) {
             stack[i] = stack[i - 1];

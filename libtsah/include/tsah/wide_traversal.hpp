@@ -1,6 +1,7 @@
 #pragma once
 // SIMD traversal of the wide layouts (wide_layout.hpp) on the CPU: closest hit and any hit
-// (occlusion: stops at the first hit found), children visited near-first.
+// (occlusion: stops at the first hit found); closest hit visits the entered children near-first,
+// any hit far-first (an occluder lies across the gap from the surface the ray leaves).
 //
 // The kernels are compiled once per instruction set, each in its own file with its own compiler
 // flags (libtsah/src/wide_kernels_<isa>.cpp, all from one template, wide_kernels.inl):
