@@ -48,6 +48,7 @@ WideTree<N>::WideTree(const WideBvh& w, uint32_t threads, SimdIsa isa) {
       std::memset(&pk, 0, sizeof pk);
       for (uint32_t lane = 0; lane < N; ++lane) pk.slot[lane] = p * N + lane < count ? first + p * N + lane : first;
       packets_.push_back(pk);
+      packetSlots_.push_back(first + p * N);
     }
     return makeLeafRef(packet);
   };
@@ -84,8 +85,9 @@ Aabb WideTree<N>::refitLeaf(uint32_t firstPacket, uint32_t count, const float* p
     const uint32_t lanes = count - first < N ? count - first : N;
     alignas(32) float vertices[9][N];  // [3k + a][lane]: axis a of vertex k
     if (lanes < N) std::memset(vertices, 0, sizeof vertices);  // padding lanes: finite values
+    const uint32_t* triangles = triIndex_.data() + packetSlots_[firstPacket + first / N];  // lane by lane
     for (uint32_t lane = 0; lane < lanes; ++lane) {
-      const uint32_t* tri = indices + 3 * std::size_t(triIndex_[pk.slot[lane]]);
+      const uint32_t* tri = indices + 3 * std::size_t(triangles[lane]);
       for (int k = 0; k < 3; ++k) {
         const float* vertex = p + 3 * std::size_t(tri[k]);
         for (int a = 0; a < 3; ++a) vertices[3 * k + a][lane] = vertex[a];

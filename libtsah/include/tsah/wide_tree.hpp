@@ -47,6 +47,9 @@ class WideTree {
   void (*woopRows_)(const float (*vertices)[N], uint32_t lanes, WoopPacket<N>& packet, Aabb& bounds) = nullptr;
   std::vector<WideSoaNode<N>> nodes_;
   std::vector<WoopPacket<N>> packets_;
+  // The slot of each packet's lane 0 (its lanes hold consecutive slots): the refit reads this
+  // instead of the packet's own slot array, whose cache line would be a cold miss per packet.
+  std::vector<uint32_t> packetSlots_;
   std::vector<uint32_t> triIndex_;
   int32_t rootRef_ = makeLeafRef(0);
   uint32_t rootCount_ = 0;
