@@ -42,7 +42,7 @@ std::vector<std::array<Vec3, 3>> testTriangles(uint32_t count, uint32_t seed) {
 template <uint32_t N>
 void checkRowKernel(SimdIsa isa) {
   const tsah::WideKernels& k = tsah::wideKernels(isa);
-  void (*rows)(const float(*)[N], uint32_t, WoopPacket<N>&);
+  void (*rows)(const float(*)[N], uint32_t, WoopPacket<N>&, tsah::Aabb&);
   if constexpr (N == 4)
     rows = k.woopRows4;
   else
@@ -51,13 +51,21 @@ void checkRowKernel(SimdIsa isa) {
   const auto tris = testTriangles(40 * N, 7);
   for (uint32_t first = 0; first + N <= tris.size(); first += N) {
     const uint32_t lanes = 1 + (first / N) % N;  // 1..N used lanes
-    alignas(32) float v[9][N];
+    alignas(32) float v[9][N];  // padding lanes hold other triangles: neither rows nor box may show them
     for (uint32_t lane = 0; lane < N; ++lane)
       for (int c = 0; c < 3; ++c)
         for (int a = 0; a < 3; ++a) v[3 * c + a][lane] = tris[first + lane][c][a];
     WoopPacket<N> pk;
     std::memset(&pk, 0xff, sizeof pk);  // rows must be overwritten, padding included
-    rows(v, lanes, pk);
+    tsah::Aabb box;
+    rows(v, lanes, pk, box);
+    tsah::Aabb expectedBox;  // of the used lanes only
+    for (uint32_t lane = 0; lane < lanes; ++lane)
+      for (const Vec3& p : tris[first + lane]) expectedBox.extend(p);
+    for (int a = 0; a < 3; ++a) {
+      ASSERT_TRUE(sameBits(box.lo[a], expectedBox.lo[a])) << tsah::isaName(isa) << " N=" << N << " packet " << first;
+      ASSERT_TRUE(sameBits(box.hi[a], expectedBox.hi[a])) << tsah::isaName(isa) << " N=" << N << " packet " << first;
+    }
     for (uint32_t lane = 0; lane < N; ++lane) {
       const auto& t = tris[first + lane];
       const tsah::WoopTriangle expected = lane < lanes ? tsah::makeWoopTriangle(t[0], t[1], t[2]) : tsah::WoopTriangle{};

@@ -257,7 +257,10 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const B
     // The toolkit: refit + Woop per layout; the batch is made from the default layout's primary
     // hits (untimed), then every method traces it.
     std::vector<double> updateMs(own.size());
-    for (std::size_t k = 0; k < own.size(); ++k) {
+    for (std::size_t i = 0; i < own.size(); ++i) {
+      // Rotated per frame, as in runCpuMethods: the layout updated first after the interpolation
+      // (and after the previous frame's traces of every other method) is not always the same one.
+      const std::size_t k = (i + f) % own.size();
       startWorkers(*own.front());  // every timed update starts with the workers awake, Embree's too
       start = std::chrono::steady_clock::now();
       own[k]->selectTreeAt(t);  // a tree set: the tree of this frame's part (a single tree: no-op)

@@ -5,7 +5,7 @@
 // V provides: set1, load (aligned), store, + - * /, min, max, abs, comparisons lt/le/gt returning
 // V::Mask, Mask & | and andNot(a, b) = ~a & b, and bits(mask) (one bit per lane).
 //
-// Every entry point is `flatten`, so the shared inline helpers (prepareRay, intersectBox,
+// Every entry point is `flatten`, so the shared inline helpers (prepareSlabs, intersectBox,
 // intersectWatertight) are inlined into it and no copy of them compiled for this instruction set
 // is emitted for the linker to pick for other files.
 //
@@ -13,6 +13,17 @@
 // FMA contraction off (the files' flags) every box and triangle result is bit-identical to it.
 
 #define TSAH_KERNEL [[gnu::flatten]]
+
+// The ray's RayPrep: the slab part at once, the watertight shear on the first fallback to the
+// watertight test (most rays never need it, and its axis choice is a data-dependent branch).
+struct LazyPrep {
+  RayPrep prep;
+  bool shear = false;
+  const RayPrep& watertight(const Ray& ray) {
+    if (!shear) prepareShear(ray, prep), shear = true;
+    return prep;
+  }
+};
 
 // Per-ray values broadcast to all lanes.
 template <class V>
@@ -55,7 +66,7 @@ inline V absDotRow(const V p[3], const WoopPacket<N>& pk, int r) {
 // The triangles of one leaf (packets [first, first + packetCount(count))). Returns true when one
 // was hit; for closest hit tmax shrinks to it.
 template <class V, bool AnyHit>
-inline bool intersectLeaf(const WideView<V::N>& bvh, const Ray& ray, const RayPrep& prep, const RayLanes<V>& r,
+inline bool intersectLeaf(const WideView<V::N>& bvh, const Ray& ray, LazyPrep& prep, const RayLanes<V>& r,
                           uint32_t first, uint32_t count, float& tmax, Hit& hit) {
   constexpr uint32_t N = V::N;
   bool found = false;
@@ -115,8 +126,8 @@ inline bool intersectLeaf(const WideView<V::N>& bvh, const Ray& ray, const RayPr
       const uint32_t slot = pk.slot[__builtin_ctz(fallback)];
       const uint32_t* tri = bvh.indices + 3 * std::size_t(bvh.triIndex[slot]);
       float t, u, v;
-      if (intersectWatertight(prep, bvh.vertex(tri[0]), bvh.vertex(tri[1]), bvh.vertex(tri[2]), ray.tmin, tmax, t, u,
-                              v)) {
+      if (intersectWatertight(prep.watertight(ray), bvh.vertex(tri[0]), bvh.vertex(tri[1]), bvh.vertex(tri[2]),
+                              ray.tmin, tmax, t, u, v)) {
         tmax = t;
         hit = {t, u, v, bvh.triIndex[slot]};
         found = true;
@@ -132,19 +143,22 @@ inline Hit traverse(const WideView<V::N>& bvh, const Ray& ray) {
   constexpr uint32_t N = V::N;
   Hit hit;
   if (bvh.rootCount == 0 && isLeafRef(bvh.rootRef)) return hit;  // empty tree
-  const RayPrep prep = prepareRay(ray);
+  LazyPrep prep{prepareSlabs(ray)};
   float tmax = ray.tmax;
-  float tEntry;
-  if (!intersectBox(prep, bvh.rootBox, ray.tmin, tmax, tEntry)) return hit;
-  const RayLanes<V> r = rayLanes<V>(ray, prep);
+  const RayLanes<V> r = rayLanes<V>(ray, prep.prep);
   if (isLeafRef(bvh.rootRef)) {
+    float tEntry;
+    if (!intersectBox(prep.prep, bvh.rootBox, ray.tmin, tmax, tEntry)) return hit;
     intersectLeaf<V, AnyHit>(bvh, ray, prep, r, leafFirstSlot(bvh.rootRef), bvh.rootCount, tmax, hit);
     return hit;
   }
+  // An interior root's box is not tested: it is the union of its children's boxes, and the slab
+  // test is monotone in the planes (rounding included), so a ray missing the root box misses every
+  // child box too; the child tests below decide exactly as if the root test had come first.
   struct Entry {
     int32_t ref;
     uint32_t count;
-    float t;  // entry distance: skipped once the closest hit is nearer
+    float t;  // sort key; closest hit: the entry distance, skipped once the hit is nearer
   };
   Entry stack[kWideStackSize];
   uint32_t sp = 0;
@@ -172,24 +186,16 @@ inline Hit traverse(const WideView<V::N>& bvh, const Ray& ray) {
           count = node.count[c0];
           continue;
         }
-        if (AnyHit) {
-          // Occlusion: any hit ends the ray, and most occlusion rays find none, so sorting buys
-          // nothing (Embree does not sort for occlusion either): push the entered children as
-          // they come, continue with the first.
-          ref = node.ref[c0];
-          count = node.count[c0];
-          for (; mask; mask &= mask - 1) {
-            const uint32_t c = uint32_t(__builtin_ctz(mask));
-            stack[sp++] = {node.ref[c], node.count[c], 0.0f};
-          }
-          continue;
-        }
-        alignas(32) float dist[N];
-        V::store(dist, tn);
-        // Push every entered child, keeping the pushed block sorted far to near; take the nearest.
+        // Push every entered child, the pushed block sorted by key; continue with the top one.
+        // Closest hit: nearest first (the key is the entry distance). Any hit: farthest first (the
+        // key is its negation). An occlusion ray leaves a surface: its nearest boxes hold that
+        // surface, which it moves away from, while an occluder lies across the gap (a wall, a
+        // ceiling, another object); a ray that finds nothing visits every entered child anyway.
+        alignas(32) float key[N];
+        V::store(key, AnyHit ? V::set1(0.0f) - tn : tn);
         const uint32_t base = sp;
         for (uint32_t c = c0;;) {
-          const Entry e{node.ref[c], node.count[c], dist[c]};
+          const Entry e{node.ref[c], node.count[c], key[c]};
           uint32_t i = sp++;
           while (i > base && stack[i - 1].t < e.t) {
             stack[i] = stack[i - 1];
@@ -217,7 +223,7 @@ inline Hit traverse(const WideView<V::N>& bvh, const Ray& ray) {
   }
 }
 
-// --- Refit: the Woop rows of one packet ------------------------------------------------------------
+// --- Refit: the Woop rows and the box of one packet ----------------------------------------------
 // makeWoopTriangle's double-precision arithmetic (woopRowsDouble) on all N lanes at once, as GCC
 // vectors of N doubles (one AVX-512 register for 8 lanes; pairs / quads of registers below that).
 typedef double DoubleLanes4 __attribute__((vector_size(4 * sizeof(double))));
@@ -228,23 +234,51 @@ typedef int32_t IntLanes4 __attribute__((vector_size(4 * sizeof(int32_t))));
 typedef int32_t IntLanes8 __attribute__((vector_size(8 * sizeof(int32_t))));
 
 template <uint32_t N, class D, class F, class I>
-TSAH_KERNEL void woopRowsKernel(const float (*vertices)[N], uint32_t lanes, WoopPacket<N>& pk) {
+TSAH_KERNEL void woopRowsKernel(const float (*vertices)[N], uint32_t lanes, WoopPacket<N>& pk, Aabb& bounds) {
+  F f[9];
   D v[3][3];
-  for (int i = 0; i < 9; ++i) {
-    F f;
-    std::memcpy(&f, vertices[i], sizeof f);
-    v[i / 3][i % 3] = __builtin_convertvector(f, D);
-  }
+#pragma GCC unroll 9
+  for (int k = 0; k < 3; ++k)
+#pragma GCC unroll 3
+    for (int a = 0; a < 3; ++a) {
+      std::memcpy(&f[3 * k + a], vertices[3 * k + a], sizeof(F));
+      v[k][a] = __builtin_convertvector(f[3 * k + a], D);
+    }
   D rows[12], nn;
   woopRowsDouble(v[0], v[1], v[2], rows, nn);
   I keep;  // all ones for the lanes that get their rows, zero for padding and degenerate triangles
   for (uint32_t lane = 0; lane < N; ++lane) keep[lane] = lane < lanes && woopNondegenerate(nn[lane]) ? -1 : 0;
   for (int r = 0; r < 12; ++r) {
-    const F f = __builtin_convertvector(rows[r], F);
+    const F row = __builtin_convertvector(rows[r], F);
     I bits;
-    std::memcpy(&bits, &f, sizeof bits);
+    std::memcpy(&bits, &row, sizeof bits);
     bits &= keep;
     std::memcpy(pk.row[r], &bits, sizeof bits);
+  }
+  // The box of the used lanes' vertices: lane-wise over the three vertices (x < lo ? x : lo from
+  // the empty box, as the scalar refit compared, so a NaN coordinate is skipped), then across the
+  // lanes by halving rotations.
+  I used;
+  for (uint32_t lane = 0; lane < N; ++lane) used[lane] = lane < lanes ? -1 : 0;
+#pragma GCC unroll 3
+  for (int a = 0; a < 3; ++a) {
+    F lo = F{} + 3.402823466e38f, hi = F{} - 3.402823466e38f;
+#pragma GCC unroll 3
+    for (int k = 0; k < 3; ++k) {
+      const F x = f[3 * k + a];
+      lo = ((x < lo) & used) ? x : lo;
+      hi = ((x > hi) & used) ? x : hi;
+    }
+#pragma GCC unroll 3
+    for (uint32_t half = N / 2; half > 0; half /= 2) {
+      I rotate;
+      for (uint32_t lane = 0; lane < N; ++lane) rotate[lane] = int32_t((lane + half) % N);
+      const F l = __builtin_shuffle(lo, rotate), h = __builtin_shuffle(hi, rotate);
+      lo = l < lo ? l : lo;
+      hi = h > hi ? h : hi;
+    }
+    bounds.lo[a] = lo[0];
+    bounds.hi[a] = hi[0];
   }
 }
 

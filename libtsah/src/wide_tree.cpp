@@ -48,6 +48,7 @@ WideTree<N>::WideTree(const WideBvh& w, uint32_t threads, SimdIsa isa) {
       std::memset(&pk, 0, sizeof pk);
       for (uint32_t lane = 0; lane < N; ++lane) pk.slot[lane] = p * N + lane < count ? first + p * N + lane : first;
       packets_.push_back(pk);
+      packetSlots_.push_back(first + p * N);
     }
     return makeLeafRef(packet);
   };
@@ -78,28 +79,24 @@ WideTree<N>::WideTree(const WideBvh& w, uint32_t threads, SimdIsa isa) {
 
 template <uint32_t N>
 Aabb WideTree<N>::refitLeaf(uint32_t firstPacket, uint32_t count, const float* p, const uint32_t* indices) {
-  float lo[3] = {3.402823466e38f, 3.402823466e38f, 3.402823466e38f};
-  float hi[3] = {-3.402823466e38f, -3.402823466e38f, -3.402823466e38f};
+  Aabb box;
   for (uint32_t first = 0; first < count; first += N) {
     WoopPacket<N>& pk = packets_[firstPacket + first / N];
     const uint32_t lanes = count - first < N ? count - first : N;
-    alignas(32) float vertices[9][N];  // [3k + a][lane]: axis a of vertex k (padding lanes: lane 0's)
-    for (uint32_t lane = 0; lane < N; ++lane) {
-      const uint32_t* tri = indices + 3 * std::size_t(triIndex_[pk.slot[lane < lanes ? lane : 0]]);
+    alignas(32) float vertices[9][N];  // [3k + a][lane]: axis a of vertex k
+    if (lanes < N) std::memset(vertices, 0, sizeof vertices);  // padding lanes: finite values
+    const uint32_t* triangles = triIndex_.data() + packetSlots_[firstPacket + first / N];  // lane by lane
+    for (uint32_t lane = 0; lane < lanes; ++lane) {
+      const uint32_t* tri = indices + 3 * std::size_t(triangles[lane]);
       for (int k = 0; k < 3; ++k) {
         const float* vertex = p + 3 * std::size_t(tri[k]);
-        for (int a = 0; a < 3; ++a) {
-          vertices[3 * k + a][lane] = vertex[a];
-          lo[a] = vertex[a] < lo[a] ? vertex[a] : lo[a];
-          hi[a] = vertex[a] > hi[a] ? vertex[a] : hi[a];
-        }
+        for (int a = 0; a < 3; ++a) vertices[3 * k + a][lane] = vertex[a];
       }
     }
-    woopRows_(vertices, lanes, pk);  // all lanes at once, in the SIMD width of the kernels
+    Aabb packetBox;
+    woopRows_(vertices, lanes, pk, packetBox);  // rows and box of all lanes at once, in SIMD
+    box.extend(packetBox);
   }
-  Aabb box;
-  box.lo = {lo[0], lo[1], lo[2]};
-  box.hi = {hi[0], hi[1], hi[2]};
   return box;
 }
 

@@ -42,7 +42,8 @@ struct RayPrep {
 
 TSAH_HD float absf(float x) { return x < 0.0f ? -x : x; }
 
-TSAH_HD RayPrep prepareRay(const Ray& ray) {
+// The slab part of RayPrep (org, invDir): all the box tests need.
+TSAH_HD RayPrep prepareSlabs(const Ray& ray) {
   RayPrep p;
   p.org = ray.org;
   for (int a = 0; a < 3; ++a) {
@@ -50,6 +51,12 @@ TSAH_HD RayPrep prepareRay(const Ray& ray) {
     if (absf(d) < 1e-30f) d = d < 0.0f ? -1e-30f : 1e-30f;
     p.invDir[a] = 1.0f / d;
   }
+  return p;
+}
+
+// The watertight part of RayPrep (kx, ky, kz, sx, sy, sz): only the watertight triangle test reads
+// it, so a traversal that rarely runs that test may fill it in on first use.
+TSAH_HD void prepareShear(const Ray& ray, RayPrep& p) {
   const float ax = absf(ray.dir.x), ay = absf(ray.dir.y), az = absf(ray.dir.z);
   p.kz = ax > ay ? (ax > az ? 0 : 2) : (ay > az ? 1 : 2);
   p.kx = p.kz == 2 ? 0 : p.kz + 1;
@@ -62,6 +69,11 @@ TSAH_HD RayPrep prepareRay(const Ray& ray) {
   p.sx = ray.dir[p.kx] / ray.dir[p.kz];
   p.sy = ray.dir[p.ky] / ray.dir[p.kz];
   p.sz = 1.0f / ray.dir[p.kz];
+}
+
+TSAH_HD RayPrep prepareRay(const Ray& ray) {
+  RayPrep p = prepareSlabs(ray);
+  prepareShear(ray, p);
   return p;
 }
 

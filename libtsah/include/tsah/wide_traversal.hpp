@@ -1,6 +1,7 @@
 #pragma once
 // SIMD traversal of the wide layouts (wide_layout.hpp) on the CPU: closest hit and any hit
-// (occlusion: stops at the first hit found), children visited near-first.
+// (occlusion: stops at the first hit found); closest hit visits the entered children near-first,
+// any hit far-first (an occluder lies across the gap from the surface the ray leaves).
 //
 // The kernels are compiled once per instruction set, each in its own file with its own compiler
 // flags (libtsah/src/wide_kernels_<isa>.cpp, all from one template, wide_kernels.inl):
@@ -41,10 +42,11 @@ struct WideKernels {
   Hit (*closest8)(const WideView<8>& bvh, const Ray& ray) = nullptr;
   bool (*any8)(const WideView<8>& bvh, const Ray& ray) = nullptr;
   // The refit's inner step (WideTree::refit), in every table: the Woop rows of one packet from its
-  // lanes' vertices (vertices[3k + a][lane]: axis a of vertex k), bit for bit makeWoopTriangle's;
-  // lanes from `lanes` on and degenerate triangles get zero rows.
-  void (*woopRows4)(const float (*vertices)[4], uint32_t lanes, WoopPacket<4>& packet) = nullptr;
-  void (*woopRows8)(const float (*vertices)[8], uint32_t lanes, WoopPacket<8>& packet) = nullptr;
+  // lanes' vertices (vertices[3k + a][lane]: axis a of vertex k), bit for bit makeWoopTriangle's
+  // (lanes from `lanes` on and degenerate triangles get zero rows), and in `bounds` the box of the
+  // first `lanes` lanes' vertices (NaN coordinates skipped). Padding lanes must hold finite values.
+  void (*woopRows4)(const float (*vertices)[4], uint32_t lanes, WoopPacket<4>& packet, Aabb& bounds) = nullptr;
+  void (*woopRows8)(const float (*vertices)[8], uint32_t lanes, WoopPacket<8>& packet, Aabb& bounds) = nullptr;
 };
 
 // The kernels of isa; throws anim::Error when it is not supported (isaSupported).

@@ -44,9 +44,12 @@ class WideTree {
   Aabb refitLeaf(uint32_t firstPacket, uint32_t count, const float* positions, const uint32_t* indices);
   void refitNode(uint32_t node, const float* positions, const uint32_t* indices);
 
-  void (*woopRows_)(const float (*vertices)[N], uint32_t lanes, WoopPacket<N>& packet) = nullptr;
+  void (*woopRows_)(const float (*vertices)[N], uint32_t lanes, WoopPacket<N>& packet, Aabb& bounds) = nullptr;
   std::vector<WideSoaNode<N>> nodes_;
   std::vector<WoopPacket<N>> packets_;
+  // The slot of each packet's lane 0 (its lanes hold consecutive slots): the refit reads this
+  // instead of the packet's own slot array, whose cache line would be a cold miss per packet.
+  std::vector<uint32_t> packetSlots_;
   std::vector<uint32_t> triIndex_;
   int32_t rootRef_ = makeLeafRef(0);
   uint32_t rootCount_ = 0;
