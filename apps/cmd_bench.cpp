@@ -23,6 +23,9 @@
 #include "bench/scaling.hpp"
 #include "anim/scene.hpp"
 #include "cli.hpp"
+#if TSAH_HAVE_CUDA
+#include "tsah_cuda/device.hpp"
+#endif
 
 #ifndef TSAH_SOURCE_DIR
 #define TSAH_SOURCE_DIR ""
@@ -137,6 +140,10 @@ void runScalingMode(Options& opt, CLI::App* sub, const std::vector<tsah::bench::
   o.evalFrames = sub->get_option("--eval-frames")->count() > 0 ? b.evalFrames : 10;
   o.seed = b.seed;
   o.threads = b.threads;
+#if TSAH_HAVE_CUDA
+  if (sub->get_option("--scaling-optimizers")->count() == 0 && tsah::cuda::deviceAvailable())
+    o.optimizers.push_back("cuda");
+#endif
   const fs::path out = opt.out;
   json results = tsah::bench::runScaling(scenes, o, out, [&](const std::string& m) { log(m, false); });
   results["tool"] = "tsah bench --scaling";
@@ -373,8 +380,9 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
       ->delimiter(',')
       ->allow_extra_args(false)
       ->capture_default_str();
-  sub->add_option("--scaling-optimizers", opt->scalingOptions.optimizers, "--scaling: optimizers to compare")
-      ->check(CLI::IsMember({"sequential", "parallel"}))
+  sub->add_option("--scaling-optimizers", opt->scalingOptions.optimizers,
+                  "--scaling: optimizers to compare (cuda: the GPU optimizer, added by default when a device is present)")
+      ->check(CLI::IsMember({"sequential", "parallel", "cuda"}))
       ->delimiter(',')
       ->allow_extra_args(false)
       ->capture_default_str();
