@@ -65,7 +65,7 @@ class CudaBackend {
     allocated += (count - array.size()) * sizeof(T);
     array.resize(count);
   }
-  std::size_t allocated = 0;  // bytes of the optimizer's own buffers
+  std::size_t allocated = 0;  // bytes of the optimizer's buffers (CUB's included)
   template <class T>
   void upload(Array<T>& array, const T* host, std::size_t count) {
     if (count) CUDA_CHECK(cudaMemcpy(array.data(), host, count * sizeof(T), cudaMemcpyHostToDevice));
@@ -92,7 +92,7 @@ class CudaBackend {
     const thrust::counting_iterator<uint32_t> indices(0);
     std::size_t bytes = 0;
     CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, bytes, indices, flags, out, count_.data(), count));
-    temp_.reserve(bytes);
+    reserveTemp(bytes);
     bytes = temp_.size();
     CUDA_CHECK(cub::DeviceSelect::Flagged(temp_.data(), bytes, indices, flags, out, count_.data(), count));
     uint32_t selected = 0;
@@ -103,13 +103,13 @@ class CudaBackend {
   void sortDescending(unsigned long long* keys, uint32_t* values, uint32_t count) {
     if (count < 2) return;
     const auto start = profileStart();
-    keysAlt_.reserve(count);
-    valuesAlt_.reserve(count);
+    reserve(keysAlt_, count);
+    reserve(valuesAlt_, count);
     cub::DoubleBuffer<unsigned long long> k(keys, keysAlt_.data());
     cub::DoubleBuffer<uint32_t> v(values, valuesAlt_.data());
     std::size_t bytes = 0;
     CUDA_CHECK(cub::DeviceRadixSort::SortPairsDescending(nullptr, bytes, k, v, count));
-    temp_.reserve(bytes);
+    reserveTemp(bytes);
     bytes = temp_.size();
     CUDA_CHECK(cub::DeviceRadixSort::SortPairsDescending(temp_.data(), bytes, k, v, count));
     if (k.Current() != keys) {
@@ -120,6 +120,9 @@ class CudaBackend {
   }
 
  private:
+  // CUB's scratch (never empty: a null scratch pointer would make CUB only report its size).
+  void reserveTemp(std::size_t bytes) { reserve(temp_, bytes > 0 ? bytes : 1); }
+
   using Clock = std::chrono::steady_clock;
   Clock::time_point profileStart() {
     if (profile_) CUDA_CHECK(cudaDeviceSynchronize());

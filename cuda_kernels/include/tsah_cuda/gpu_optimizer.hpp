@@ -34,7 +34,8 @@ struct GpuPhaseTime {
   uint64_t launches = 0;
 };
 // optimizeOnGpu (without collapse) with every phase waited for and timed, for finding where the
-// time goes (slower than optimizeOnGpu). deviceBytes: the optimizer's own buffers at their peak.
+// time goes (slower than optimizeOnGpu). deviceBytes: the optimizer's buffers (CUB's included) at
+// their peak.
 InsertionOptimizer::Result profileOnGpu(Bvh bvh, const PrimitiveBoxes& prims,
                                         const ParallelReinsertionOptimizer::Config& config,
                                         const ParallelReinsertionOptimizer::Parallel& parallel,

@@ -42,9 +42,11 @@ inline constexpr uint32_t kMaxDeviceFrames = 16;
 inline constexpr uint32_t kDeviceHeapCapacity = 64;
 // Claim passes per round.
 inline constexpr uint32_t kClaimPasses = 4;
-// Nodes per thread of the frame area sums; winners per thread of the accepted-change sums.
+// Nodes per thread of the frame area sums; winners per thread of the accepted-change sums; rows
+// per thread when partial sums are reduced further (until one thread can add up the rest).
 inline constexpr uint32_t kAreaChunk = 1024;
 inline constexpr uint32_t kDeltaChunk = 256;
+inline constexpr uint32_t kRowsPerThread = 64;
 
 // Move status during the claim passes.
 enum : uint8_t { kUndecided = 0, kWon = 1, kLost = 2 };
@@ -209,6 +211,21 @@ struct LinearAcceptance {
   }
 };
 
+// Thread g: rows [g * kRowsPerThread, ...) of a rows x columns matrix of partial sums, added in
+// order into row g of `out` (one level of a fixed-order reduction).
+struct SumRows {
+  const double* in;
+  uint32_t rows, columns;
+  double* out;
+  TSAH_HD void operator()(uint32_t g) const {
+    double* o = out + std::size_t(g) * columns;
+    for (uint32_t c = 0; c < columns; ++c) o[c] = 0.0;
+    const uint32_t end = (g + 1) * kRowsPerThread < rows ? (g + 1) * kRowsPerThread : rows;
+    for (uint32_t r = g * kRowsPerThread; r < end; ++r)
+      for (uint32_t c = 0; c < columns; ++c) o[c] += in[std::size_t(r) * columns + c];
+  }
+};
+
 // Thread c: the accepted changes of winners [c * kDeltaChunk, ...) summed in order.
 struct SumAccepted {
   const double* delta;
@@ -304,15 +321,15 @@ struct RefitMoves {
   }
 };
 
-// Thread c: the frame area sums of nodes [c * kAreaChunk, ...).
+// Thread c: the frame area sums of nodes [c * kAreaChunk, ...), as row c: frames interior sums,
+// then frames leaf sums.
 struct AreaSums {
   TreeView t;
-  double* inner;  // chunks * frames
-  double* leaf;
+  double* sums;  // chunks * 2 * frames
   TSAH_HD void operator()(uint32_t c) const {
     Aabb buffer[kMaxDeviceFrames];
-    double* in = inner + std::size_t(c) * t.frames;
-    double* le = leaf + std::size_t(c) * t.frames;
+    double* in = sums + std::size_t(c) * 2 * t.frames;
+    double* le = in + t.frames;
     for (uint32_t f = 0; f < t.frames; ++f) in[f] = le[f] = 0.0;
     const uint32_t end = (c + 1) * kAreaChunk < t.nodeCount ? (c + 1) * kAreaChunk : t.nodeCount;
     addAreaSums(t, c * kAreaChunk, end, in, le, buffer);
@@ -323,8 +340,7 @@ struct AreaSums {
 // refresh()).
 struct RefreshCosts {
   TreeView t;  // its areaFactor is written here
-  const double* inner;
-  const double* leaf;
+  const double* sums;  // chunks rows of AreaSums
   uint32_t chunks;
   double* scalars;
   Scalars at;
@@ -334,8 +350,8 @@ struct RefreshCosts {
     for (uint32_t f = 0; f < t.frames; ++f) {
       double in = 0.0, le = 0.0;
       for (uint32_t c = 0; c < chunks; ++c) {
-        in += inner[std::size_t(c) * t.frames + f];
-        le += leaf[std::size_t(c) * t.frames + f];
+        in += sums[std::size_t(c) * 2 * t.frames + f];
+        le += sums[std::size_t(c) * 2 * t.frames + t.frames + f];
       }
       scalars[at.innerArea() + f] = in;
       scalars[at.leafArea() + f] = le;
@@ -449,8 +465,8 @@ class ReinsertionRounds {
     candidates_ = b_.template make<uint32_t>(nodeCount_);
     // The per-move arrays grow to the largest round's needs (reserve), not to the node count.
     const uint32_t chunks = std::max(areaChunks(), (winnerCapacity() + kDeltaChunk - 1) / kDeltaChunk);
-    partialA_ = b_.template make<double>(std::size_t(chunks) * frames_);
-    partialB_ = b_.template make<double>(std::size_t(chunks) * frames_);
+    partialA_ = b_.template make<double>(std::size_t(chunks) * 2 * frames_);
+    partialB_ = b_.template make<double>((std::size_t(chunks) / kRowsPerThread + 1) * 2 * frames_);
     refresh();
   }
 
@@ -500,7 +516,9 @@ class ReinsertionRounds {
     b_.forEach(winners, LinearAcceptance{delta_.data(), scalars_.data(), at_, accept_.data()});
     const uint32_t chunks = (winners + kDeltaChunk - 1) / kDeltaChunk;
     b_.forEach(chunks, SumAccepted{delta_.data(), accept_.data(), winners, frames_, partialA_.data()});
-    b_.forEach(1, CommitAccepted{partialA_.data(), chunks, scalars_.data(), at_, cost_});
+    uint32_t rows = chunks;
+    const double* sums = reduceRows(rows, frames_);
+    b_.forEach(1, CommitAccepted{sums, rows, scalars_.data(), at_, cost_});
     double fallback = 0.0;
     b_.download(scalars_, &fallback, 1, at_.fallback());
     if (fallback != 0.0) {
@@ -549,6 +567,19 @@ class ReinsertionRounds {
 
  private:
   uint32_t areaChunks() const { return (nodeCount_ + kAreaChunk - 1) / kAreaChunk; }
+  // Reduces the rows x columns partial sums in partialA_ (in order, between partialA_ and
+  // partialB_) until at most kRowsPerThread rows are left; returns them, rows updated.
+  const double* reduceRows(uint32_t& rows, uint32_t columns) {
+    double* in = partialA_.data();
+    double* out = partialB_.data();
+    while (rows > kRowsPerThread) {
+      const uint32_t groups = (rows + kRowsPerThread - 1) / kRowsPerThread;
+      b_.forEach(groups, SumRows{in, rows, columns, out});
+      rows = groups;
+      std::swap(in, out);
+    }
+    return in;
+  }
   // Winners touch at least 4 nodes each, all distinct between winners.
   uint32_t winnerCapacity() const { return nodeCount_ / 4 + 1; }
 
@@ -560,8 +591,10 @@ class ReinsertionRounds {
   void refresh() {
     const TreeView t = view();
     const uint32_t chunks = areaChunks();
-    b_.forEach(chunks, AreaSums{t, partialA_.data(), partialB_.data()});
-    b_.forEach(1, RefreshCosts{t, partialA_.data(), partialB_.data(), chunks, scalars_.data(), at_, cost_});
+    b_.forEach(chunks, AreaSums{t, partialA_.data()});
+    uint32_t rows = chunks;
+    const double* sums = reduceRows(rows, 2 * frames_);
+    b_.forEach(1, RefreshCosts{t, sums, rows, scalars_.data(), at_, cost_});
     b_.forEach(nodeCount_, NodeAreas{t});
   }
 
