@@ -177,10 +177,14 @@ void run(Options opt, CLI::App* sub) {
     if (!given("--width")) b.width = 192;
     if (!given("--height")) b.height = 144;
   }
-  if (b.device == "cuda" && !gpuAvailable())
-    throw UsageError(versionsJson()["cuda_runtime_built"].get<bool>()
-                         ? "--device cuda: no CUDA device is available on this machine"
-                         : "--device cuda: this tsah was built without the CUDA runtime");
+  const auto requireGpu = [](const std::string& option) {
+    if (gpuAvailable()) return;
+    throw UsageError(option + (versionsJson()["cuda_runtime_built"].get<bool>()
+                                   ? ": no CUDA device is available on this machine"
+                                   : ": this tsah was built without the CUDA runtime"));
+  };
+  if (b.device == "cuda") requireGpu("--device cuda");
+  if (b.optimizer == "cuda") requireGpu("--optimizer cuda");
   ProgressLog log;
   const fs::path out = opt.out;
   const fs::path cache = opt.cache.empty() ? out / "cache" : fs::path(opt.cache);
@@ -354,8 +358,9 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
       ->capture_default_str();
   sub->add_option("--threads", b.threads, "CPU worker threads (0: all cores)")->capture_default_str();
   sub->add_option("--optimizer", b.optimizer,
-                  "Optimizer of SAH*, SAH-rebuild and T-SAH: sequential (the paper's) or parallel (all cores)")
-      ->check(CLI::IsMember({"sequential", "parallel"}))
+                  "Optimizer of SAH*, SAH-rebuild and T-SAH: sequential (the paper's), parallel (all cores) or "
+                  "cuda (parallel reinsertion on the GPU)")
+      ->check(CLI::IsMember({"sequential", "parallel", "cuda"}))
       ->capture_default_str();
   sub->add_flag("--no-embree", opt->noEmbree, "Skip the Embree peer");
   sub->add_flag("--embree-only", b.embreeOnly,

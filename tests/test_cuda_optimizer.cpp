@@ -133,13 +133,17 @@ TEST(CudaOptimizer, DISABLED_ProfileExplode) {
   EXPECT_LT(gpu.finalCost, gpu.initialCost);
   std::printf("GPU: %.3f s, %zu rounds, cost %.4f -> %.4f, %llu moves\n", gpu.seconds, gpu.history.size() - 1,
               gpu.initialCost, gpu.finalCost, static_cast<unsigned long long>(gpu.acceptedSteps));
-  std::vector<tsah::cuda::GpuPhaseTime> times;
-  std::size_t bytes = 0;
-  const auto profiled = tsah::cuda::profileOnGpu(initialTree(prims), prims, config, {}, times, bytes);
-  EXPECT_EQ(profiled.finalCost, gpu.finalCost);
-  std::printf("profiled: %.3f s; device buffers %.1f B per triangle\n", profiled.seconds, double(bytes) / prims.primCount);
-  for (const auto& t : times)
-    std::printf("  %-22s %8.4f s  %6llu launches\n", t.phase.c_str(), t.seconds, static_cast<unsigned long long>(t.launches));
+  for (const bool specialized : {false, true}) {
+    std::vector<tsah::cuda::GpuPhaseTime> times;
+    std::size_t bytes = 0;
+    const auto profiled = tsah::cuda::profileOnGpu(initialTree(prims), prims, config, {}, times, bytes, specialized);
+    EXPECT_EQ(profiled.finalCost, gpu.finalCost);
+    std::printf("profiled (%s search): %.3f s; device buffers %.1f B per triangle\n",
+                specialized ? "frame-specialized" : "general", profiled.seconds, double(bytes) / prims.primCount);
+    for (const auto& t : times)
+      std::printf("  %-22s %8.4f s  %6llu launches\n", t.phase.c_str(), t.seconds,
+                  static_cast<unsigned long long>(t.launches));
+  }
   if (const char* cpu = std::getenv("TSAH_PROFILE_CPU"); cpu && std::string(cpu) == "1") {
     const auto parallel = ParallelReinsertionOptimizer(config).optimize(initialTree(prims), prims);
     std::printf("CPU parallel: %.3f s, cost %.4f; GPU / CPU = %.4f\n", parallel.seconds, parallel.finalCost,

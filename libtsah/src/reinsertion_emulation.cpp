@@ -31,6 +31,7 @@ struct SerialBackend {
     array = Array<T>(count);
   }
   std::size_t allocated = 0;  // bytes of the optimizer's own buffers, as the GPU allocates them
+  bool specializedSearch = false;  // the same moves either way
   template <class T>
   void upload(Array<T>& array, const T* host, std::size_t count) {
     std::copy_n(host, count, array.data());

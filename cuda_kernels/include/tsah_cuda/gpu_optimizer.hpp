@@ -35,11 +35,13 @@ struct GpuPhaseTime {
 };
 // optimizeOnGpu (without collapse) with every phase waited for and timed, for finding where the
 // time goes (slower than optimizeOnGpu). deviceBytes: the optimizer's buffers (CUB's included) at
-// their peak.
+// their peak. specializedSearch: the search kernel compiled for common frame counts (the same
+// moves; more registers per thread) instead of the general one that optimizeOnGpu runs.
 InsertionOptimizer::Result profileOnGpu(Bvh bvh, const PrimitiveBoxes& prims,
                                         const ParallelReinsertionOptimizer::Config& config,
                                         const ParallelReinsertionOptimizer::Parallel& parallel,
-                                        std::vector<GpuPhaseTime>& times, std::size_t& deviceBytes);
+                                        std::vector<GpuPhaseTime>& times, std::size_t& deviceBytes,
+                                        bool specializedSearch = false);
 
 // optimizeOnGpu with the default Parallel settings as a TreeOptions::gpuOptimizer (tsah/pipeline.hpp).
 TreeOptimizerFunction gpuTreeOptimizer();

@@ -93,6 +93,30 @@ struct MarkCandidates {
   TSAH_HD void operator()(uint32_t n) const { flags[n] = isCandidate(t, rule, n) ? 1 : 0; }
 };
 
+// The search with the frame count as a compile-time constant: its loops unroll and the moving
+// boxes can stay in registers. The same arithmetic in the same order as the general search.
+template <uint32_t Frames, class Heap>
+TSAH_HD Move searchWithFrames(TreeView t, uint32_t l, const Buffers& s, Heap& heap) {
+  t.frames = Frames;
+  return search(t, l, s, heap);
+}
+
+template <class Heap>
+TSAH_HD Move searchSpecialized(const TreeView& t, uint32_t l, const Buffers& s, Heap& heap) {
+  switch (t.frames) {
+    case 1: return searchWithFrames<1>(t, l, s, heap);
+    case 2: return searchWithFrames<2>(t, l, s, heap);
+    case 3: return searchWithFrames<3>(t, l, s, heap);
+    case 4: return searchWithFrames<4>(t, l, s, heap);
+    case 5: return searchWithFrames<5>(t, l, s, heap);
+    case 8: return searchWithFrames<8>(t, l, s, heap);
+    default: return search(t, l, s, heap);
+  }
+}
+
+// Specialized: the search compiled for common frame counts (more registers per thread, fewer
+// threads in flight); which is faster is the device's question (profileOnGpu times both).
+template <bool Specialized>
 struct SearchCandidates {
   TreeView t;
   const uint32_t* candidates;
@@ -104,7 +128,8 @@ struct SearchCandidates {
     Aabb moving[kMaxDeviceFrames], without[kMaxDeviceFrames], other[kMaxDeviceFrames];
     FixedHeap<kDeviceHeapCapacity> heap;
     const uint32_t n = candidates[i];
-    const Move m = search(t, n, Buffers{moving, without, other}, heap);
+    const Buffers buffers{moving, without, other};
+    const Move m = Specialized ? searchSpecialized(t, n, buffers, heap) : search(t, n, buffers, heap);
     moves[i] = m;
     found[i] = m.node != kNone ? 1 : 0;
     quietSince[n] = m.node == kNone ? round : 0;
@@ -415,7 +440,7 @@ void checkReinsertionInput(const Bvh& tree, const PrimitiveBoxes& prims, const P
 //   discarding the contents); upload(array, host pointer, count);
 //   download(array, host pointer, count); zero(pointer, bytes); forEach(count, phase);
 //   selectFlagged(flags, count, out) -> number of i with flags[i] != 0, written to out ascending;
-//   sortDescending(keys, values, count) by key.
+//   sortDescending(keys, values, count) by key; specializedSearch (which search kernel runs).
 template <class Backend>
 class ReinsertionRounds {
  public:
@@ -482,7 +507,12 @@ class ReinsertionRounds {
     b_.reserve(moves_, candidates);
     b_.reserve(improving_, candidates);
     b_.reserve(status_, candidates);
-    b_.forEach(candidates, SearchCandidates{t, candidates_.data(), moves_.data(), flags_.data(), quietSince_.data(), round_});
+    if (b_.specializedSearch)
+      b_.forEach(candidates, SearchCandidates<true>{t, candidates_.data(), moves_.data(), flags_.data(),
+                                                    quietSince_.data(), round_});
+    else
+      b_.forEach(candidates, SearchCandidates<false>{t, candidates_.data(), moves_.data(), flags_.data(),
+                                                     quietSince_.data(), round_});
     const uint32_t improving = b_.selectFlagged(flags_.data(), candidates, improving_.data());
     stats.candidates = candidates;
     stats.improving = improving;
