@@ -179,7 +179,8 @@ InsertionOptimizer::Result profileOnGpu(Bvh bvh, const PrimitiveBoxes& prims,
   if (!deviceAvailable()) throw CudaError(cudaErrorNoDevice, "--device cuda: no CUDA device is available");
   CUDA_CHECK(cudaFree(nullptr));  // the context first, as in optimizeOnGpu
   const auto start = std::chrono::steady_clock::now();
-  reinsertion::BackendSession<CudaBackend> session(CudaBackend(true, specializedSearch), std::move(bvh), prims, config, parallel);
+  reinsertion::BackendSession<CudaBackend> session(CudaBackend(true, specializedSearch), std::move(bvh), prims, config,
+                                                   parallel);
   InsertionOptimizer::Result result = runReinsertionRounds(session, config, nullptr, start);
   times = session.backend().phaseTimes();
   deviceBytes = session.backend().allocated;

@@ -76,7 +76,8 @@ Bvh topologyOf(const std::vector<Links>& links, const std::vector<uint32_t>& pri
   return out;
 }
 
-void checkReinsertionInput(const Bvh& tree, const PrimitiveBoxes& prims, const ParallelReinsertionOptimizer::Config& config,
+void checkReinsertionInput(const Bvh& tree, const PrimitiveBoxes& prims,
+                           const ParallelReinsertionOptimizer::Config& config,
                            const ParallelReinsertionOptimizer::Parallel& parallel) {
   if (config.k < 0) throw std::invalid_argument("ParallelReinsertionOptimizer: the exponent k must be >= 0");
   if (prims.frameCount == 0) throw std::invalid_argument("ParallelReinsertionOptimizer: no frames");
