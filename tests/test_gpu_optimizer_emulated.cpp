@@ -4,13 +4,17 @@
 // the emulation's tree.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cstdio>
 #include <stdexcept>
 
+#include "anim/error.hpp"
+#include "anim/generators.hpp"
 #include "test_support.hpp"
 #include "tsah/cost.hpp"
 #include "tsah/leaf_collapser.hpp"
 #include "tsah/parallel_optimizer.hpp"
+#include "tsah/pipeline.hpp"
 #include "tsah/reinsertion_emulation.hpp"
 #include "tsah/sah_builder.hpp"
 
@@ -132,6 +136,46 @@ TEST(EmulatedGpuOptimizer, CollapseLimitsAndBadInput) {
   EXPECT_THROW(tsah::makeEmulatedDeviceSession(initialTree(many), many, {}, {}), std::invalid_argument);
   const tsah::PrimitiveBoxes other = movingBoxes(5, 2, 62);
   EXPECT_THROW(tsah::makeEmulatedDeviceSession(initialTree(prims), other, {}, {}), std::invalid_argument);
+}
+
+// The pipeline's --device cuda path with the emulation standing in for the GPU: every optimization
+// of T-SAH and SAH* goes through TreeOptions::gpuOptimizer, collapsed as usual; without one,
+// --device cuda is refused with one line.
+TEST(EmulatedGpuOptimizer, PipelineRunsEveryOptimizationThroughTheDeviceHook) {
+  anim::GeneratorOptions g;
+  g.triangles = 1500;
+  g.frames = 6;
+  const anim::Animation a = anim::generate(anim::GeneratorKind::Explode, g);
+  tsah::TreeOptions options;
+  options.device = "cuda";
+  options.k = 2;
+  EXPECT_THROW(tsah::optimizeAnimation(a, options), anim::Error);  // no GPU optimizer given
+  std::atomic<int> calls = 0;  // SAH* optimizes its frames on worker threads
+  options.gpuOptimizer = [&calls](Bvh bvh, const tsah::PrimitiveBoxes& prims,
+                                  const tsah::InsertionOptimizer::Config& settings, const tsah::LeafCollapser* collapse) {
+    ++calls;
+    return tsah::optimizeEmulatedDevice(std::move(bvh), prims, settings, {}, collapse);
+  };
+  const tsah::OptimizedTree tree = tsah::optimizeAnimation(a, options);
+  EXPECT_EQ(calls.load(), 1);
+  EXPECT_EQ(tree.info.selection, "parallel-cuda");
+  const tsah::PrimitiveBoxes rep = tsah::representativeBoxes(a, options.frames);
+  EXPECT_FALSE(tsah::validate(tree.bvh, &rep).has_value());
+  EXPECT_LT(tree.optimization.finalCost, tree.optimization.initialCost);
+  // The same tree as the emulation on its own, collapsed the same way.
+  tsah::InsertionOptimizer::Config config;
+  config.k = 2;
+  const tsah::LeafCollapser collapser({config.cost, options.maxLeaf, 2});
+  const auto direct = tsah::optimizeEmulatedDevice(tsah::SweepSahBuilder({config.cost, 1}).build(rep.frame(0)), rep,
+                                                   config, {}, &collapser);
+  EXPECT_TRUE(tsah::test::sameTopology(direct.bvh, tree.bvh));
+
+  options.method = "sahstar";  // one optimization per representative frame
+  calls = 0;
+  tsah::optimizeAnimation(a, options);
+  EXPECT_EQ(calls.load(), int(options.frames));
+  options.device = "tpu";
+  EXPECT_THROW(tsah::optimizeAnimation(a, options), std::invalid_argument);
 }
 
 }  // namespace
