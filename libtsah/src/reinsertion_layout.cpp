@@ -1,7 +1,9 @@
 // The host side shared by every reinsertion backend (reinsertion_rounds.hpp): the optimizer's node
-// numbering, the first interior boxes, the topology back as a Bvh, the input checks.
+// numbering, the levels of the first refit, the topology back as a Bvh, the input checks.
+#include <algorithm>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include "tsah/reinsertion_rounds.hpp"
 
@@ -36,20 +38,25 @@ NumberedTree numberTree(const Bvh& tree) {
   return out;
 }
 
-std::vector<Aabb> innerBoxesOf(const NumberedTree& tree, const PrimitiveBoxes& prims) {
-  const uint32_t frames = prims.frameCount;
-  std::vector<Aabb> boxes(std::size_t(tree.innerCount) * frames);
-  std::vector<Aabb> buffer(frames);
-  const std::vector<float> noFactors(frames, 0.0f);
-  uint32_t root = tree.root;
-  // Interior nodes are numbered children first, so one ascending pass refits every node after its
-  // children. The view's area array is a dummy: the areas come with the first weights.
-  std::vector<float> area(tree.nodeCount, 0.0f);
-  const TreeView t{const_cast<Links*>(tree.links.data()), boxes.data(), area.data(), prims.boxes.data(),
-                   tree.primIds.data(), noFactors.data(), &root, frames, tree.innerCount, tree.nodeCount,
-                   prims.primCount, false};
-  for (uint32_t n = 0; n < tree.innerCount; ++n) refitNode(t, n, buffer.data());
-  return boxes;
+std::vector<uint32_t> refitLevels(const NumberedTree& tree, std::vector<uint32_t>& order) {
+  // Interior nodes are numbered children first: one ascending pass sees children before parents.
+  std::vector<uint32_t> height(tree.innerCount, 1);
+  uint32_t highest = 0;
+  const auto heightOf = [&](uint32_t n) { return n < tree.innerCount ? height[n] : 0u; };
+  for (uint32_t n = 0; n < tree.innerCount; ++n) {
+    height[n] = 1 + std::max(heightOf(tree.links[n].left), heightOf(tree.links[n].right));
+    highest = std::max(highest, height[n]);
+  }
+  std::vector<uint32_t> offsets(highest + 1, 0);  // counting sort by height
+  for (uint32_t n = 0; n < tree.innerCount; ++n) ++offsets[height[n]];
+  uint32_t sum = 0;
+  for (uint32_t& o : offsets) sum += std::exchange(o, sum);
+  offsets.push_back(sum);  // offsets[h] is where height h starts, h >= 1; offsets[0] (empty) = 0
+  std::vector<uint32_t> next(offsets.begin(), offsets.end() - 1);
+  order.assign(tree.innerCount, 0);
+  for (uint32_t n = 0; n < tree.innerCount; ++n) order[next[height[n]]++] = n;
+  offsets.erase(offsets.begin());  // from height 1
+  return offsets;
 }
 
 BvhNode nodeOf(const Links& links, bool leaf) {

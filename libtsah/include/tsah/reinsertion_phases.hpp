@@ -376,6 +376,17 @@ struct RefreshCosts {
   }
 };
 
+// Thread i: refits interior node nodes[i] from its children (one level of the first bottom-up refit:
+// its children were refitted by earlier launches).
+struct RefitNodes {
+  TreeView t;
+  const uint32_t* nodes;
+  TSAH_HD void operator()(uint32_t i) const {
+    Aabb buffer[kMaxDeviceFrames];
+    refitNode(t, nodes[i], buffer);
+  }
+};
+
 struct NodeAreas {
   TreeView t;
   TSAH_HD void operator()(uint32_t n) const {

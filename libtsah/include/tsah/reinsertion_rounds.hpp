@@ -38,12 +38,10 @@
 namespace tsah::reinsertion {
 
 // ---- host side ----
-// A tree in the optimizer's numbering (interior nodes first, children before parents), with the
-// interior boxes of every frame.
+// A tree in the optimizer's numbering (interior nodes first, children before parents).
 struct NumberedTree {
   std::vector<Links> links;
   std::vector<uint32_t> primIds;
-  std::vector<Aabb> innerBoxes;  // innerCount * frames
   uint32_t innerCount = 0, nodeCount = 0, root = 0;
   uint64_t primTotal = 0;
 };
@@ -51,8 +49,9 @@ struct NumberedTree {
 // The reachable nodes of a valid tree renumbered, without boxes or primIds (the caller moves the
 // tree's primIds: they keep their order). Throws std::invalid_argument for an empty tree.
 NumberedTree numberTree(const Bvh& tree);
-// The interior boxes of every frame, children before parents on one thread.
-std::vector<Aabb> innerBoxesOf(const NumberedTree& tree, const PrimitiveBoxes& prims);
+// The interior nodes by height (leaves 0, a node one more than its higher child) into `order`;
+// returns the offsets of each height in it (heights 1, 2, ...; one more offset at the end).
+std::vector<uint32_t> refitLevels(const NumberedTree& tree, std::vector<uint32_t>& order);
 // Node n as a BvhNode (a leaf's links hold its primitive range).
 BvhNode nodeOf(const Links& links, bool leaf);
 // The topology back as a Bvh without boxes (frameCount 0).
@@ -88,7 +87,8 @@ class ReinsertionRounds {
     numbered.primIds = std::move(tree.primIds);
     tree = Bvh{};
     const uint32_t root = numbered.root;
-    numbered.innerBoxes = innerBoxesOf(numbered, prims);
+    std::vector<uint32_t> levelOrder;
+    const std::vector<uint32_t> levels = refitLevels(numbered, levelOrder);
     innerCount_ = numbered.innerCount;
     nodeCount_ = numbered.nodeCount;
     cost_ = {config.cost.ct, config.cost.ci, config.k, innerCount_, numbered.primTotal};
@@ -97,8 +97,7 @@ class ReinsertionRounds {
     b_.upload(links_, numbered.links.data(), nodeCount_);
     primIds_ = b_.template make<uint32_t>(numbered.primIds.size());
     b_.upload(primIds_, numbered.primIds.data(), numbered.primIds.size());
-    innerBoxes_ = b_.template make<Aabb>(numbered.innerBoxes.size());
-    b_.upload(innerBoxes_, numbered.innerBoxes.data(), numbered.innerBoxes.size());
+    innerBoxes_ = b_.template make<Aabb>(std::size_t(innerCount_) * frames_);  // refitted below
     numbered = NumberedTree{};
     primBoxes_ = b_.template make<Aabb>(prims.boxes.size());
     b_.upload(primBoxes_, prims.boxes.data(), prims.boxes.size());
@@ -106,6 +105,7 @@ class ReinsertionRounds {
     b_.upload(root_, &root, 1);
     area_ = b_.template make<float>(nodeCount_);
     areaFactor_ = b_.template make<float>(frames_);
+    b_.zero(areaFactor_.data(), frames_ * sizeof(float));  // A(N) comes with the first weights
     scalars_ = b_.template make<double>(at_.size());
     b_.zero(scalars_.data(), scalars_.size() * sizeof(double));
     changedIn_ = b_.template make<uint32_t>(nodeCount_);
@@ -120,6 +120,11 @@ class ReinsertionRounds {
     const uint32_t chunks = std::max(areaChunks(), (winnerCapacity() + kDeltaChunk - 1) / kDeltaChunk);
     partialA_ = b_.template make<double>(std::size_t(chunks) * 2 * frames_);
     partialB_ = b_.template make<double>((std::size_t(chunks) / kRowsPerThread + 1) * 2 * frames_);
+    // The interior boxes bottom-up on the device, one launch per level (the candidate list holds
+    // the level order meanwhile).
+    b_.upload(candidates_, levelOrder.data(), levelOrder.size());
+    for (std::size_t level = 0; level + 1 < levels.size(); ++level)
+      b_.forEach(levels[level + 1] - levels[level], RefitNodes{view(), candidates_.data() + levels[level]});
     refresh();
   }
 
