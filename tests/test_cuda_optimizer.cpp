@@ -133,13 +133,18 @@ TEST(CudaOptimizer, DISABLED_ProfileExplode) {
   EXPECT_LT(gpu.finalCost, gpu.initialCost);
   std::printf("GPU: %.3f s, %zu rounds, cost %.4f -> %.4f, %llu moves\n", gpu.seconds, gpu.history.size() - 1,
               gpu.initialCost, gpu.finalCost, static_cast<unsigned long long>(gpu.acceptedSteps));
-  for (const bool specialized : {false, true}) {
+  for (const tsah::cuda::GpuSearchKernel search : {tsah::cuda::GpuSearchKernel{false, false},
+                                                   tsah::cuda::GpuSearchKernel{true, false},
+                                                   tsah::cuda::GpuSearchKernel{false, true},
+                                                   tsah::cuda::GpuSearchKernel{true, true}}) {
     std::vector<tsah::cuda::GpuPhaseTime> times;
     std::size_t bytes = 0;
-    const auto profiled = tsah::cuda::profileOnGpu(initialTree(prims), prims, config, {}, times, bytes, specialized);
+    const auto profiled = tsah::cuda::profileOnGpu(initialTree(prims), prims, config, {}, times, bytes, search);
     EXPECT_EQ(profiled.finalCost, gpu.finalCost);
-    std::printf("profiled (%s search): %.3f s; device buffers %.1f B per triangle\n",
-                specialized ? "frame-specialized" : "general", profiled.seconds, double(bytes) / prims.primCount);
+    std::printf("profiled (%s search, %s): %.3f s; device buffers %.1f B per triangle\n",
+                search.specializedFrames ? "frame-specialized" : "general",
+                search.dynamicFetch ? "persistent threads" : "one thread per candidate", profiled.seconds,
+                double(bytes) / prims.primCount);
     for (const auto& t : times)
       std::printf("  %-22s %8.4f s  %6llu launches\n", t.phase.c_str(), t.seconds,
                   static_cast<unsigned long long>(t.launches));

@@ -5,6 +5,7 @@
 #include <cub/device/device_select.cuh>
 #include <thrust/iterator/counting_iterator.h>
 
+#include <algorithm>
 #include <chrono>
 #include <map>
 #include <string>
@@ -32,6 +33,18 @@ __global__ void forEachKernel(uint32_t count, Phase phase) {
   if (i < count) phase(i);
 }
 
+// Persistent threads: each thread takes the next index as soon as it is done with one, so a warp's
+// lanes do not wait for its slowest search before new work starts (the results do not depend on
+// which thread runs an index).
+template <class Phase>
+__global__ void forEachDynamicKernel(uint32_t count, unsigned* next, Phase phase) {
+  for (;;) {
+    const uint32_t i = atomicAdd(next, 1u);
+    if (i >= count) return;
+    phase(i);
+  }
+}
+
 // A phase's name from its type ("tsah::reinsertion::SearchCandidates<false>" -> without the namespace).
 std::string phaseName(const char* mangled) {
   int status = 0;
@@ -48,8 +61,9 @@ class CudaBackend {
   using Array = DeviceBuffer<T>;
 
   // profile: every phase, compaction and sort waits for the device and is timed (slower).
-  explicit CudaBackend(bool profile = false, bool specialized = false)
-      : specializedSearch(specialized), count_(1), profile_(profile) {}
+  explicit CudaBackend(bool profile = false, GpuSearchKernel search = {})
+      : specializedSearch(search.specializedFrames), count_(1), next_(1), dynamicFetch_(search.dynamicFetch),
+        profile_(profile) {}
   CudaBackend(CudaBackend&&) noexcept = default;
 
   std::vector<GpuPhaseTime> phaseTimes() const {
@@ -90,6 +104,24 @@ class CudaBackend {
     forEachKernel<<<detail::gridFor(count, kBlock), kBlock>>>(count, phase);
     CUDA_CHECK_LAUNCH("reinsertion phase");
     if (profile_) profileEnd(phaseName(typeid(Phase).name()), start);
+  }
+  // The search: forEach, or persistent threads fetching indices (GpuSearchKernel::dynamicFetch).
+  template <class Phase>
+  void forEachBalanced(uint32_t count, const Phase& phase) {
+    if (!dynamicFetch_) return forEach(count, phase);
+    if (count == 0) return;
+    const auto start = profileStart();
+    constexpr unsigned kBlock = 128;
+    int device = 0, multiprocessors = 0, blocksPerSm = 0;
+    CUDA_CHECK(cudaGetDevice(&device));
+    CUDA_CHECK(cudaDeviceGetAttribute(&multiprocessors, cudaDevAttrMultiProcessorCount, device));
+    CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocksPerSm, forEachDynamicKernel<Phase>, kBlock, 0));
+    const std::size_t blocks = std::min<std::size_t>(std::size_t(std::max(1, blocksPerSm)) * multiprocessors,
+                                                     (count + kBlock - 1) / kBlock);
+    next_.fillBytes(0);
+    forEachDynamicKernel<<<unsigned(blocks), kBlock>>>(count, next_.data(), phase);
+    CUDA_CHECK_LAUNCH("reinsertion phase (persistent threads)");
+    if (profile_) profileEnd(phaseName(typeid(Phase).name()) + " (dynamic)", start);
   }
   uint32_t selectFlagged(const uint8_t* flags, uint32_t count, uint32_t* out) {
     if (count == 0) return 0;
@@ -142,6 +174,8 @@ class CudaBackend {
   }
 
   DeviceBuffer<uint32_t> count_;
+  DeviceBuffer<unsigned> next_;  // the persistent threads' next index
+  bool dynamicFetch_ = false;
   bool profile_ = false;
   std::map<std::string, GpuPhaseTime> times_;
   DeviceBuffer<uint8_t> temp_;
@@ -155,8 +189,8 @@ std::unique_ptr<RoundSession> makeGpuReinsertionSession(Bvh bvh, const Primitive
                                                         const ParallelReinsertionOptimizer::Config& config,
                                                         const ParallelReinsertionOptimizer::Parallel& parallel) {
   if (!deviceAvailable()) throw CudaError(cudaErrorNoDevice, "--device cuda: no CUDA device is available");
-  return std::make_unique<reinsertion::BackendSession<CudaBackend>>(CudaBackend{}, std::move(bvh), prims, config,
-                                                                    parallel);
+  return std::make_unique<reinsertion::BackendSession<CudaBackend>>(CudaBackend(false, kDefaultSearchKernel),
+                                                                    std::move(bvh), prims, config, parallel);
 }
 
 InsertionOptimizer::Result optimizeOnGpu(Bvh bvh, const PrimitiveBoxes& prims,
@@ -175,11 +209,11 @@ InsertionOptimizer::Result profileOnGpu(Bvh bvh, const PrimitiveBoxes& prims,
                                         const ParallelReinsertionOptimizer::Config& config,
                                         const ParallelReinsertionOptimizer::Parallel& parallel,
                                         std::vector<GpuPhaseTime>& times, std::size_t& deviceBytes,
-                                        bool specializedSearch) {
+                                        GpuSearchKernel search) {
   if (!deviceAvailable()) throw CudaError(cudaErrorNoDevice, "--device cuda: no CUDA device is available");
   CUDA_CHECK(cudaFree(nullptr));  // the context first, as in optimizeOnGpu
   const auto start = std::chrono::steady_clock::now();
-  reinsertion::BackendSession<CudaBackend> session(CudaBackend(true, specializedSearch), std::move(bvh), prims, config,
+  reinsertion::BackendSession<CudaBackend> session(CudaBackend(true, search), std::move(bvh), prims, config,
                                                    parallel);
   InsertionOptimizer::Result result = runReinsertionRounds(session, config, nullptr, start);
   times = session.backend().phaseTimes();

@@ -45,6 +45,10 @@ struct SerialBackend {
   void forEach(uint32_t count, const Phase& phase) {
     for (uint32_t i = 0; i < count; ++i) phase(i);
   }
+  template <class Phase>
+  void forEachBalanced(uint32_t count, const Phase& phase) {
+    forEach(count, phase);
+  }
   uint32_t selectFlagged(const uint8_t* flags, uint32_t count, uint32_t* out) {
     uint32_t selected = 0;
     for (uint32_t i = 0; i < count; ++i)

@@ -28,6 +28,14 @@ InsertionOptimizer::Result optimizeOnGpu(Bvh bvh, const PrimitiveBoxes& prims,
                                          const ParallelReinsertionOptimizer::Parallel& parallel,
                                          const LeafCollapser* collapse = nullptr);
 
+// How the search phase runs. The moves are the same either way; only the time differs.
+struct GpuSearchKernel {
+  bool specializedFrames = false;  // compiled for 1-5 and 8 frames: more registers, unrolled loops
+  bool dynamicFetch = false;       // persistent threads taking the next candidate when done
+};
+// What optimizeOnGpu and makeGpuReinsertionSession run.
+inline constexpr GpuSearchKernel kDefaultSearchKernel{};
+
 struct GpuPhaseTime {
   std::string phase;     // the phase object's name (tsah/reinsertion_rounds.hpp), or a CUB step
   double seconds = 0.0;  // wall time of all its launches, each waited for
@@ -35,13 +43,12 @@ struct GpuPhaseTime {
 };
 // optimizeOnGpu (without collapse) with every phase waited for and timed, for finding where the
 // time goes (slower than optimizeOnGpu). deviceBytes: the optimizer's buffers (CUB's included) at
-// their peak. specializedSearch: the search kernel compiled for common frame counts (the same
-// moves; more registers per thread) instead of the general one that optimizeOnGpu runs.
+// their peak. search: which search kernel runs.
 InsertionOptimizer::Result profileOnGpu(Bvh bvh, const PrimitiveBoxes& prims,
                                         const ParallelReinsertionOptimizer::Config& config,
                                         const ParallelReinsertionOptimizer::Parallel& parallel,
                                         std::vector<GpuPhaseTime>& times, std::size_t& deviceBytes,
-                                        bool specializedSearch = false);
+                                        GpuSearchKernel search = kDefaultSearchKernel);
 
 // optimizeOnGpu with the default Parallel settings as a TreeOptions::gpuOptimizer (tsah/pipeline.hpp).
 TreeOptimizerFunction gpuTreeOptimizer();

@@ -67,7 +67,8 @@ void checkReinsertionInput(const Bvh& tree, const PrimitiveBoxes& prims,
 //   discarding the contents); upload(array, host pointer, count);
 //   download(array, host pointer, count); zero(pointer, bytes); forEach(count, phase);
 //   selectFlagged(flags, count, out) -> number of i with flags[i] != 0, written to out ascending;
-//   sortDescending(keys, values, count) by key; specializedSearch (which search kernel runs).
+//   sortDescending(keys, values, count) by key; forEachBalanced(count, phase) for the search (the
+//   GPU may run it with persistent threads); specializedSearch (which search kernel runs).
 template <class Backend>
 class ReinsertionRounds {
  public:
@@ -141,10 +142,10 @@ class ReinsertionRounds {
     b_.reserve(improving_, candidates);
     b_.reserve(status_, candidates);
     if (b_.specializedSearch)
-      b_.forEach(candidates, SearchCandidates<true>{t, candidates_.data(), moves_.data(), flags_.data(),
+      b_.forEachBalanced(candidates, SearchCandidates<true>{t, candidates_.data(), moves_.data(), flags_.data(),
                                                     quietSince_.data(), round_});
     else
-      b_.forEach(candidates, SearchCandidates<false>{t, candidates_.data(), moves_.data(), flags_.data(),
+      b_.forEachBalanced(candidates, SearchCandidates<false>{t, candidates_.data(), moves_.data(), flags_.data(),
                                                      quietSince_.data(), round_});
     const uint32_t improving = b_.selectFlagged(flags_.data(), candidates, improving_.data());
     stats.candidates = candidates;
