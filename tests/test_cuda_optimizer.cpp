@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "anim/generators.hpp"
 #include "test_support.hpp"
@@ -36,6 +37,13 @@ tsah::PrimitiveBoxes movingBoxes(uint32_t triangles, uint32_t frames, uint32_t s
 
 Bvh initialTree(const tsah::PrimitiveBoxes& prims) { return tsah::SweepSahBuilder().build(prims.frame(0)); }
 
+// TSAH_CUDA_TESTS=short (scripts/gpu-sanitize.sh sets it): smaller inputs and fewer rounds, so that
+// every compute-sanitizer tool gets through this program in about a minute; the checks are the same.
+bool shortRun() {
+  const char* value = std::getenv("TSAH_CUDA_TESTS");
+  return value && std::string(value) == "short";
+}
+
 TEST(CudaOptimizer, SameTreeAsTheEmulation) {
   REQUIRE_DEVICE();
   struct Case {
@@ -43,12 +51,16 @@ TEST(CudaOptimizer, SameTreeAsTheEmulation) {
     int k;
     double fraction;
   };
-  for (const Case c : {Case{300, 1, 1, 0, 0.5}, Case{2000, 4, 2, 0, 0.25}, Case{2000, 5, 3, 2, 0.25},
-                       Case{20000, 5, 4, 0, 0.25}, Case{20000, 3, 5, 1, 0.5}}) {
+  const std::vector<Case> cases =
+      shortRun() ? std::vector<Case>{{300, 1, 1, 0, 0.5}, {1000, 3, 5, 2, 0.5}}
+                 : std::vector<Case>{{300, 1, 1, 0, 0.5}, {2000, 4, 2, 0, 0.25}, {2000, 5, 3, 2, 0.25},
+                                     {20000, 5, 4, 0, 0.25}, {20000, 3, 5, 1, 0.5}};
+  for (const Case& c : cases) {
     const tsah::PrimitiveBoxes prims = movingBoxes(c.triangles, c.frames, c.seed);
     ParallelReinsertionOptimizer::Config config;
     config.k = c.k;
     config.seed = c.seed;
+    if (shortRun()) config.maxBatches = 12;
     ParallelReinsertionOptimizer::Parallel parallel;
     parallel.candidateFraction = c.fraction;
     const auto gpu = tsah::cuda::optimizeOnGpu(initialTree(prims), prims, config, parallel);
@@ -59,20 +71,43 @@ TEST(CudaOptimizer, SameTreeAsTheEmulation) {
     EXPECT_EQ(gpu.finalCost, emulated.finalCost);
     EXPECT_EQ(gpu.acceptedSteps, emulated.acceptedSteps);
     ASSERT_EQ(gpu.history.size(), emulated.history.size());
-    for (std::size_t i = 0; i < gpu.history.size(); ++i) EXPECT_EQ(gpu.history[i].cost, emulated.history[i].cost) << i;
+    for (std::size_t i = 0; i < gpu.history.size(); ++i)
+      EXPECT_EQ(gpu.history[i].cost, emulated.history[i].cost) << "round " << i;
   }
+}
+
+// Every search variant (general or frame-specialized, one thread per candidate or persistent
+// threads) finds the same moves: the emulation's tree, whichever kernel ran.
+TEST(CudaOptimizer, EverySearchVariantGivesTheSameTree) {
+  REQUIRE_DEVICE();
+  const tsah::PrimitiveBoxes prims = movingBoxes(shortRun() ? 1000 : 5000, 5, 31);
+  ParallelReinsertionOptimizer::Config config;
+  config.maxBatches = shortRun() ? 10 : 40;
+  const auto emulated = tsah::optimizeEmulatedDevice(initialTree(prims), prims, config, {});
+  for (const bool specialized : {false, true})
+    for (const bool dynamic : {false, true}) {
+      std::vector<tsah::cuda::GpuPhaseTime> times;
+      std::size_t bytes = 0;
+      const auto gpu = tsah::cuda::profileOnGpu(initialTree(prims), prims, config, {}, times, bytes,
+                                                tsah::cuda::GpuSearchKernel{specialized, dynamic});
+      EXPECT_TRUE(tsah::test::identicalTree(gpu.bvh, emulated.bvh))
+          << "specialized " << specialized << " dynamic " << dynamic;
+      EXPECT_EQ(gpu.finalCost, emulated.finalCost);
+      EXPECT_FALSE(times.empty());
+      EXPECT_GT(bytes, std::size_t(prims.primCount) * 240);  // at least the interior and primitive boxes
+    }
 }
 
 TEST(CudaOptimizer, InvariantsAndExactCostAfterEveryRound) {
   REQUIRE_DEVICE();
   for (uint32_t frames : {1u, 4u}) {
     for (int k : {0, 2}) {
-      const tsah::PrimitiveBoxes prims = movingBoxes(3000, frames, 20 + frames);
+      const tsah::PrimitiveBoxes prims = movingBoxes(shortRun() ? 600 : 3000, frames, 20 + frames);
       ParallelReinsertionOptimizer::Config config;
       config.k = k;
       const auto session = tsah::cuda::makeGpuReinsertionSession(initialTree(prims), prims, config, {});
       const double start = session->cost();
-      const uint64_t applied = tsah::test::expectValidRounds(*session, prims, k, 15);
+      const uint64_t applied = tsah::test::expectValidRounds(*session, prims, k, shortRun() ? 6 : 15);
       EXPECT_GT(applied, 0u);
       EXPECT_LT(session->cost(), start);
     }
@@ -81,9 +116,11 @@ TEST(CudaOptimizer, InvariantsAndExactCostAfterEveryRound) {
 
 TEST(CudaOptimizer, WithinTwoPercentOfTheCpuParallelOptimizer) {
   REQUIRE_DEVICE();
-  for (uint32_t seed : {11u, 12u, 13u}) {
-    for (int k : {0, 2}) {
-      const tsah::PrimitiveBoxes prims = movingBoxes(20000, 5, seed);
+  const std::vector<uint32_t> seeds = shortRun() ? std::vector<uint32_t>{11} : std::vector<uint32_t>{11, 12, 13};
+  const std::vector<int> exponents = shortRun() ? std::vector<int>{0} : std::vector<int>{0, 2};
+  for (uint32_t seed : seeds) {
+    for (int k : exponents) {
+      const tsah::PrimitiveBoxes prims = movingBoxes(shortRun() ? 600 : 20000, 5, seed);
       ParallelReinsertionOptimizer::Config config;
       config.k = k;
       config.seed = seed;
@@ -102,8 +139,10 @@ TEST(CudaOptimizer, CollapseAndBadInput) {
   REQUIRE_DEVICE();
   const tsah::PrimitiveBoxes prims = movingBoxes(1200, 3, 80);
   const tsah::LeafCollapser collapser({{}, 4, 0});
-  const auto plain = tsah::cuda::optimizeOnGpu(initialTree(prims), prims, {}, {});
-  const auto collapsed = tsah::cuda::optimizeOnGpu(initialTree(prims), prims, {}, {}, &collapser);
+  ParallelReinsertionOptimizer::Config config;
+  if (shortRun()) config.maxBatches = 10;
+  const auto plain = tsah::cuda::optimizeOnGpu(initialTree(prims), prims, config, {});
+  const auto collapsed = tsah::cuda::optimizeOnGpu(initialTree(prims), prims, config, {}, &collapser);
   EXPECT_TRUE(tsah::test::identicalTree(collapser.collapse(plain.bvh), collapsed.bvh));
   for (uint32_t count : {1u, 2u, 3u}) {
     const tsah::PrimitiveBoxes few = movingBoxes(count, 2, 60 + count);
