@@ -23,6 +23,9 @@
 #include "bench/scaling.hpp"
 #include "anim/scene.hpp"
 #include "cli.hpp"
+#if TSAH_HAVE_CUDA
+#include "tsah_cuda/device.hpp"
+#endif
 
 #ifndef TSAH_SOURCE_DIR
 #define TSAH_SOURCE_DIR ""
@@ -137,6 +140,10 @@ void runScalingMode(Options& opt, CLI::App* sub, const std::vector<tsah::bench::
   o.evalFrames = sub->get_option("--eval-frames")->count() > 0 ? b.evalFrames : 10;
   o.seed = b.seed;
   o.threads = b.threads;
+#if TSAH_HAVE_CUDA
+  if (sub->get_option("--scaling-optimizers")->count() == 0 && tsah::cuda::deviceAvailable())
+    o.optimizers.push_back("cuda");
+#endif
   const fs::path out = opt.out;
   json results = tsah::bench::runScaling(scenes, o, out, [&](const std::string& m) { log(m, false); });
   results["tool"] = "tsah bench --scaling";
@@ -170,10 +177,14 @@ void run(Options opt, CLI::App* sub) {
     if (!given("--width")) b.width = 192;
     if (!given("--height")) b.height = 144;
   }
-  if (b.device == "cuda" && !gpuAvailable())
-    throw UsageError(versionsJson()["cuda_runtime_built"].get<bool>()
-                         ? "--device cuda: no CUDA device is available on this machine"
-                         : "--device cuda: this tsah was built without the CUDA runtime");
+  const auto requireGpu = [](const std::string& option) {
+    if (gpuAvailable()) return;
+    throw UsageError(option + (versionsJson()["cuda_runtime_built"].get<bool>()
+                                   ? ": no CUDA device is available on this machine"
+                                   : ": this tsah was built without the CUDA runtime"));
+  };
+  if (b.device == "cuda") requireGpu("--device cuda");
+  if (b.optimizer == "cuda") requireGpu("--optimizer cuda");
   ProgressLog log;
   const fs::path out = opt.out;
   const fs::path cache = opt.cache.empty() ? out / "cache" : fs::path(opt.cache);
@@ -347,8 +358,9 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
       ->capture_default_str();
   sub->add_option("--threads", b.threads, "CPU worker threads (0: all cores)")->capture_default_str();
   sub->add_option("--optimizer", b.optimizer,
-                  "Optimizer of SAH*, SAH-rebuild and T-SAH: sequential (the paper's) or parallel (all cores)")
-      ->check(CLI::IsMember({"sequential", "parallel"}))
+                  "Optimizer of SAH*, SAH-rebuild and T-SAH: sequential (the paper's), parallel (all cores) or "
+                  "cuda (parallel reinsertion on the GPU)")
+      ->check(CLI::IsMember({"sequential", "parallel", "cuda"}))
       ->capture_default_str();
   sub->add_flag("--no-embree", opt->noEmbree, "Skip the Embree peer");
   sub->add_flag("--embree-only", b.embreeOnly,
@@ -373,8 +385,9 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
       ->delimiter(',')
       ->allow_extra_args(false)
       ->capture_default_str();
-  sub->add_option("--scaling-optimizers", opt->scalingOptions.optimizers, "--scaling: optimizers to compare")
-      ->check(CLI::IsMember({"sequential", "parallel"}))
+  sub->add_option("--scaling-optimizers", opt->scalingOptions.optimizers,
+                  "--scaling: optimizers to compare (cuda: the GPU optimizer, added by default when a device is present)")
+      ->check(CLI::IsMember({"sequential", "parallel", "cuda"}))
       ->delimiter(',')
       ->allow_extra_args(false)
       ->capture_default_str();

@@ -45,6 +45,7 @@ std::vector<tsah::MethodSpec> parseMethods(const std::string& list, std::vector<
 void run(const Options& opt) {
   std::vector<std::string> names;  // as written in --methods (e.g. "tsah" stays "tsah")
   const std::vector<tsah::MethodSpec> methods = parseMethods(opt.methods, names);
+  tsah::cli::checkTreeDevice(opt.tree);
   const anim::Animation a = tsah::cli::loadInput(opt.input);
   if (a.triangleCount() == 0) throw tsah::cli::UsageError(opt.input + ": no triangles to build a tree over");
   const uint32_t frames = tsah::framesFor(a, opt.tree.frames);

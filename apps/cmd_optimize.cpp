@@ -198,6 +198,7 @@ void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim:
 void run(const Options& opt) {
   tsah::TreeOptions treeOpt = opt.tree;
   const tsah::MethodSpec method = treeOpt.methodSpec();
+  tsah::cli::checkTreeDevice(treeOpt);
   const anim::Animation a = tsah::cli::loadInput(opt.input);
   if (a.triangleCount() == 0) throw tsah::cli::UsageError(opt.input + ": no triangles to build a tree over");
   // A static input has one frame: resampling it would only repeat that frame.
@@ -240,6 +241,7 @@ void run(const Options& opt) {
   j["method"] = info.method;
   j["k"] = info.k;
   j["optimizer"] = opt.tree.optimizer;
+  j["device"] = opt.tree.device;
   j["selection"] = info.selection;
   j["seed"] = opt.tree.seed;
   j["frames"] = frames;

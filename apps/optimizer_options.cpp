@@ -2,6 +2,13 @@
 
 #include <CLI/CLI.hpp>
 
+#include "cli.hpp"
+
+#if TSAH_HAVE_CUDA
+#include "tsah_cuda/device.hpp"
+#include "tsah_cuda/gpu_optimizer.hpp"
+#endif
+
 namespace tsah::cli {
 
 void addTreeOptions(CLI::App& sub, TreeOptions& tree, uint32_t& evalFrames) {
@@ -33,6 +40,25 @@ void addTreeOptions(CLI::App& sub, TreeOptions& tree, uint32_t& evalFrames) {
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   sub.add_option("--threads", tree.threads, "Worker threads (0: all cores)")->capture_default_str();
+  sub.add_option("--device", tree.device,
+                 "cpu, or cuda: optimize with the parallel reinsertion optimizer on the GPU (--optimizer is then unused)")
+      ->check(CLI::IsMember({"cpu", "cuda"}))
+      ->capture_default_str();
+#if TSAH_HAVE_CUDA
+  tree.gpuOptimizer = cuda::gpuTreeOptimizer();
+#endif
+}
+
+void checkTreeDevice(const TreeOptions& tree) {
+  if (tree.device != "cuda") return;
+#if TSAH_HAVE_CUDA
+  if (!cuda::deviceAvailable())
+    throw UsageError("--device cuda: no CUDA device found (no GPU, no NVIDIA driver, or CUDA_VISIBLE_DEVICES hides "
+                     "them); use --device cpu");
+#else
+  throw UsageError("--device cuda: the GPU optimizer is not built in this version of tsah (configure with a CUDA "
+                   "compiler to build it); use --device cpu");
+#endif
 }
 
 }  // namespace tsah::cli

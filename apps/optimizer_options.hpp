@@ -13,7 +13,12 @@ class App;
 namespace tsah::cli {
 
 // Adds --frames, --eval-frames, --max-leaf, --ct, --ci, --optimizer, --selection, --seed,
-// --time-limit, --min-improvement and --threads to a subcommand.
+// --time-limit, --min-improvement, --threads and --device to a subcommand (with CUDA: the GPU
+// optimizer behind --device cuda).
 void addTreeOptions(CLI::App& command, TreeOptions& tree, uint32_t& evalFrames);
+
+// --device cuda without the GPU optimizer built or without a device: throws UsageError with one
+// line that says which (before any input is read).
+void checkTreeDevice(const TreeOptions& tree);
 
 }  // namespace tsah::cli

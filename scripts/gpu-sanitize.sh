@@ -7,7 +7,8 @@
 #
 # Prepare on the build machine (docs/fuzzing.md, "GPU sanitizers"):
 #   cmake -S . -B build/cuda -DCMAKE_CUDA_ARCHITECTURES=90 -DCMAKE_BUILD_TYPE=RelWithDebInfo
-#   cmake --build build/cuda -j2 --target tsah tsah_gpu_bench test_cuda_runtime test_cuda_tree_set
+#   cmake --build build/cuda -j2 --target tsah tsah_gpu_bench test_cuda_runtime test_cuda_tree_set \
+#     test_cuda_optimizer
 #   ../shared/tools/gpu-bundle build/cuda .gpu
 # Run (device tool, carry [".gpu"]):  bash scripts/gpu-sanitize.sh [TOOLS]   (default: all four)
 set -u
@@ -46,6 +47,8 @@ declare -A runs=(
   [trace-tree-set]="./bin/tsah trace $work/s.tanim $work/set.tbvh --device cuda --frames 3 --width 96 --height 64 --ao 2 --shadow 1 --no-images"
   [gpu-bench]="./bin/tsah_gpu_bench --input $work/s.tanim --tree tsah=$work/s.tbvh --frames 2 --width 128 --height 96 --traversal both --rebuild lbvh,hlbvh-sah"
 )
+# Test programs that know it run their short cases (test_cuda_optimizer: small inputs, few rounds).
+export TSAH_CUDA_TESTS=short
 for t in ./bin/test_cuda_*; do
   [ -x "$t" ] && runs[$(basename "$t")]="$t"
 done

@@ -34,23 +34,9 @@ ParallelReinsertionOptimizer::Parallel settings(unsigned threads, double fractio
   return p;
 }
 
-bool sameTree(const Bvh& a, const Bvh& b) {
-  if (a.root != b.root || a.nodes.size() != b.nodes.size() || a.primIds != b.primIds || a.boxes.size() != b.boxes.size())
-    return false;
-  for (std::size_t n = 0; n < a.nodes.size(); ++n) {
-    const tsah::BvhNode &x = a.nodes[n], &y = b.nodes[n];
-    if (x.parent != y.parent || x.left != y.left || x.right != y.right || x.primBegin != y.primBegin ||
-        x.primCount != y.primCount)
-      return false;
-  }
-  return true;
-}
+using tsah::test::identicalTree;
 
-// sameTree, and every box bit for bit.
-bool identicalTree(const Bvh& a, const Bvh& b) {
-  return sameTree(a, b) && a.frameCount == b.frameCount &&
-         std::memcmp(a.boxes.data(), b.boxes.data(), a.boxes.size() * sizeof(tsah::Aabb)) == 0;
-}
+bool sameTree(const Bvh& a, const Bvh& b) { return tsah::test::sameTopology(a, b) && a.boxes.size() == b.boxes.size(); }
 
 TEST(ReinsertionSession, InvariantsAndExactCostAfterEveryRound) {
   for (uint32_t seed : {1u, 2u, 3u}) {
@@ -62,27 +48,7 @@ TEST(ReinsertionSession, InvariantsAndExactCostAfterEveryRound) {
         config.seed = seed;
         ReinsertionSession session(initialTree(prims), prims, config, settings(2, seed == 3 ? 1.0 : 0.5));
         const double start = session.cost();
-        double previous = start;
-        uint64_t applied = 0;
-        for (int round = 0; round < 12; ++round) {
-          const auto stats = session.round();
-          applied += stats.applied;
-          EXPECT_LE(stats.applied, stats.winners);
-          EXPECT_LE(stats.winners, stats.improving);
-          EXPECT_LE(stats.improving, stats.candidates);
-          const Bvh tree = session.bvh();
-          const auto problem = tsah::validate(tree, &prims);
-          ASSERT_FALSE(problem.has_value()) << "round " << round << ": " << *problem;
-          const std::vector<double> perFrame = tsah::frameCosts(tree);
-          for (uint32_t f = 0; f < frames; ++f)
-            ASSERT_NEAR(session.frameCosts()[f], perFrame[f], 1e-9 * perFrame[f]) << "round " << round;
-          const double expected = tsah::temporalCost(perFrame, k);
-          ASSERT_NEAR(session.cost(), expected, 1e-9 * expected) << "round " << round;
-          EXPECT_LE(session.cost(), previous * (1 + 1e-12)) << "a round raised the cost";
-          session.endRound();
-          EXPECT_NEAR(session.cost(), expected, 1e-9 * expected) << "new weights changed the cost";
-          previous = session.cost();
-        }
+        const uint64_t applied = tsah::test::expectValidRounds(session, prims, k, 12);
         EXPECT_GT(applied, 0u);
         EXPECT_LT(session.cost(), start);
         EXPECT_EQ(session.appliedMoves(), applied);

@@ -15,6 +15,9 @@
 #include "bench/segments.hpp"
 #include "tsah/baselines.hpp"
 #include "tsah/camera.hpp"
+#if TSAH_HAVE_CUDA
+#include "tsah_cuda/gpu_optimizer.hpp"
+#endif
 #include "tsah/image.hpp"
 
 #ifndef TSAH_VERSION
@@ -69,7 +72,15 @@ tsah::BaselineConfig baselineConfig(const BenchOptions& o, const BenchProgress& 
   config.maxLeafSize = o.maxLeaf;
   config.threads = o.threads;
   config.optimizer.seed = o.seed;
-  config.optimizerKind = parseOptimizerKind(o.optimizer);
+  if (o.optimizer == "cuda") {  // the GPU parallel reinsertion optimizer
+#if TSAH_HAVE_CUDA
+    config.deviceOptimizer = cuda::gpuTreeOptimizer();
+#else
+    throw anim::Error("--optimizer cuda: this build of tsah has no CUDA support");
+#endif
+  } else {
+    config.optimizerKind = parseOptimizerKind(o.optimizer);
+  }
   config.parallel.threads = o.threads;
   config.progress = [progress](const std::string& message) { progress(message, true); };
   return config;

@@ -33,7 +33,10 @@ double loadAverage() {
 // One `tsah optimize --json` child: its report, wall time, CPU time and peak memory.
 json optimizeOnce(const Input& input, const std::string& optimizer, const ScalingOptions& o, const fs::path& work) {
   const fs::path tree = work / "scaling-tree.tbvh", report = work / "scaling-report.json";
-  const std::vector<std::string> argv = {o.program, "optimize", input.path, "-o", tree.string(), "--optimizer", optimizer,
+  // "cuda": the GPU parallel reinsertion optimizer (--device cuda); the others are --optimizer names.
+  const bool gpu = optimizer == "cuda";
+  const std::vector<std::string> argv = {o.program, "optimize", input.path, "-o", tree.string(), "--optimizer",
+                                         gpu ? "parallel" : optimizer, "--device", gpu ? "cuda" : "cpu",
                                          "--threads", std::to_string(o.threads), "--frames", std::to_string(o.frames),
                                          "--eval-frames", std::to_string(o.evalFrames), "--seed", std::to_string(o.seed),
                                          "--json"};

@@ -19,8 +19,8 @@ struct ScalingOptions {
   std::string program;                 // the tsah executable that runs each optimization
   std::vector<uint32_t> sizes{10000, 30000, 100000, 300000};  // generated explode triangles
   uint32_t keyframes = 10;             // keyframes of the generated animations
-  // Optimizer names as `tsah optimize --optimizer` takes them. A GPU optimizer joins as one more
-  // name here (e.g. "cuda") once `tsah optimize` has it; nothing else in this mode changes.
+  // Optimizer names as `tsah optimize --optimizer` takes them, and "cuda" for `--device cuda` (the
+  // bench adds it when a device is present and no list was given).
   std::vector<std::string> optimizers{"sequential", "parallel"};
   unsigned threads = 0;                // --threads of every optimization (0: all cores)
   uint32_t frames = 5, evalFrames = 10;

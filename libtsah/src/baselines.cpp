@@ -138,6 +138,7 @@ OptimizerKind parseOptimizerKind(const std::string& name) {
 
 InsertionOptimizer::Result optimizeTree(Bvh bvh, const PrimitiveBoxes& prims, const InsertionOptimizer::Config& settings,
                                         const BaselineConfig& config, const LeafCollapser* collapse) {
+  if (config.deviceOptimizer) return config.deviceOptimizer(std::move(bvh), prims, settings, collapse);
   if (config.optimizerKind == OptimizerKind::Sequential)
     return InsertionOptimizer(settings).optimize(std::move(bvh), prims, collapse);
   return ParallelReinsertionOptimizer(settings, config.parallel).optimize(std::move(bvh), prims, collapse);

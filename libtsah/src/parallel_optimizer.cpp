@@ -23,29 +23,35 @@ ParallelReinsertionOptimizer::ParallelReinsertionOptimizer(Config config, Parall
 
 ParallelReinsertionOptimizer::Result ParallelReinsertionOptimizer::optimize(Bvh bvh, const PrimitiveBoxes& prims,
                                                                            const LeafCollapser* collapse) const {
-  using Clock = std::chrono::steady_clock;
-  const auto start = Clock::now();
-  const auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - start).count(); };
+  const auto start = std::chrono::steady_clock::now();
   ReinsertionSession session(std::move(bvh), prims, config_, parallel_);
-  Result result;
-  result.initialFrameCosts.assign(session.frameCosts().begin(), session.frameCosts().end());
+  return runReinsertionRounds(session, config_, collapse, start);
+}
+
+InsertionOptimizer::Result runReinsertionRounds(RoundSession& session, const InsertionOptimizer::Config& config,
+                                                const LeafCollapser* collapse,
+                                                std::chrono::steady_clock::time_point start) {
+  using Clock = std::chrono::steady_clock;
+  const auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - start).count(); };
+  InsertionOptimizer::Result result;
+  result.initialFrameCosts = session.frameCostList();
   result.initialCost = session.cost();
   const auto record = [&](uint32_t round) {
     InsertionOptimizer::BatchRecord r;
     r.batch = round;
     r.cost = session.cost();
-    r.averageCost = temporalCost(session.frameCosts(), 0);
+    r.averageCost = temporalCost(session.frameCostList(), 0);
     r.elapsedSeconds = elapsed();
     r.steps = session.searches();
     r.acceptedSteps = session.appliedMoves();
     result.history.push_back(r);
-    if (config_.progress) config_.progress(r);
+    if (config.progress) config.progress(r);
   };
   record(0);
-  StallCounter stall(session.cost(), config_.minImprovement, config_.batchesWithoutImprovement);
+  StallCounter stall(session.cost(), config.minImprovement, config.batchesWithoutImprovement);
   bool focused = true;
   for (uint32_t round = 1;; ++round) {
-    const ReinsertionSession::RoundStats stats = session.round(focused);
+    const RoundSession::RoundStats stats = session.round(focused);
     session.endRound();
     record(round);
     // Stalled focused rounds get one full round before the run ends: nodes skipped as quiet may
@@ -53,18 +59,18 @@ ParallelReinsertionOptimizer::Result ParallelReinsertionOptimizer::optimize(Bvh 
     const bool stalled = stall.stalledAfter(session.cost()) || stats.candidates == 0;
     if (stalled && !focused) break;
     focused = !stalled;
-    if (config_.maxBatches && round >= config_.maxBatches) break;
-    if (config_.timeLimitSeconds > 0.0 && elapsed() >= config_.timeLimitSeconds) {
+    if (config.maxBatches && round >= config.maxBatches) break;
+    if (config.timeLimitSeconds > 0.0 && elapsed() >= config.timeLimitSeconds) {
       result.timeLimitReached = true;
       break;
     }
   }
-  result.finalFrameCosts.assign(session.frameCosts().begin(), session.frameCosts().end());
+  result.finalFrameCosts = session.frameCostList();
   result.finalCost = session.cost();
   result.steps = session.searches();
   result.acceptedSteps = session.appliedMoves();
   result.seconds = elapsed();
-  result.bvh = collapse ? session.releaseCollapsed(*collapse) : session.release();
+  result.bvh = session.releaseTree(collapse);
   return result;
 }
 

@@ -26,6 +26,12 @@ BaselineConfig TreeOptions::baselineConfig() const {
   config.optimizerKind = parseOptimizerKind(optimizer);
   config.parallel.threads = threads;
   config.progress = progress;
+  if (device == "cuda") {
+    if (!gpuOptimizer) throw anim::Error("--device cuda: this build of tsah has no CUDA support");
+    config.deviceOptimizer = gpuOptimizer;
+  } else if (device != "cpu") {
+    throw std::invalid_argument("unknown device '" + device + "' (expected cpu or cuda)");
+  }
   return config;
 }
 
@@ -79,7 +85,10 @@ BvhBuildInfo treeBuildInfo(const TreeOptions& options, const anim::Animation& an
   BvhBuildInfo info;
   info.method = method.method == Method::TSah ? "tsah" : method.name();
   // How nodes were chosen for optimization: none (SAH0), parallel (reinsertion) or the selection.
-  info.selection = method.method == Method::Sah0 ? "none" : options.optimizer == "parallel" ? "parallel" : options.selection;
+  info.selection = method.method == Method::Sah0  ? "none"
+                   : options.device == "cuda"     ? "parallel-cuda"
+                   : options.optimizer == "parallel" ? "parallel"
+                                                     : options.selection;
   info.k = method.k;
   info.representativeFrames = frames;
   info.seed = options.seed;

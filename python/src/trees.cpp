@@ -8,6 +8,9 @@
 #include "bindings.hpp"
 #include "tsah/cost.hpp"
 #include "tsah/pipeline.hpp"
+#if TSAH_HAVE_CUDA
+#include "tsah_cuda/gpu_optimizer.hpp"
+#endif
 
 namespace tsah::python {
 
@@ -22,8 +25,9 @@ py::array_t<double> doubleArray(const std::vector<double>& values) {
 // The command line's options, with its defaults, as keyword arguments.
 TreeOptions treeOptions(const std::string& method, int k, uint32_t frames, const std::string& selection, uint64_t seed,
                         float ct, float ci, uint32_t maxLeaf, double timeLimit, double minImprovement,
-                        unsigned threads, const std::string& optimizer) {
+                        unsigned threads, const std::string& optimizer, const std::string& device) {
   parseOptimizerKind(optimizer);  // ValueError for an unknown name, before any work
+  if (device != "cpu" && device != "cuda") throw py::value_error("device: expected 'cpu' or 'cuda'");
   if (frames < 1) throw py::value_error("frames: must be at least 1");
   if (maxLeaf < 1) throw py::value_error("max_leaf: must be at least 1");
   if (!(ct > 0.0f) || !(ci > 0.0f)) throw py::value_error("ct, ci: must be positive");
@@ -41,6 +45,10 @@ TreeOptions treeOptions(const std::string& method, int k, uint32_t frames, const
   o.minImprovement = minImprovement;
   o.threads = threads;
   o.optimizer = optimizer;
+  o.device = device;
+#if TSAH_HAVE_CUDA
+  o.gpuOptimizer = cuda::gpuTreeOptimizer();
+#endif
   return o;
 }
 
@@ -66,9 +74,10 @@ py::object optimizationDict(const Tree& tree) {
 
 Tree optimize(const anim::Animation& animation, const std::string& method, int k, uint32_t frames,
               const std::string& selection, uint64_t seed, float ct, float ci, uint32_t maxLeaf, double timeLimit,
-              double minImprovement, unsigned threads, const std::string& optimizer) {
+              double minImprovement, unsigned threads, const std::string& optimizer, const std::string& device) {
   const TreeOptions options =
-      treeOptions(method, k, frames, selection, seed, ct, ci, maxLeaf, timeLimit, minImprovement, threads, optimizer);
+      treeOptions(method, k, frames, selection, seed, ct, ci, maxLeaf, timeLimit, minImprovement, threads, optimizer,
+                  device);
   if (options.methodSpec().method == Method::SahRebuild)
     throw py::value_error("method: 'rebuild' builds one tree per frame; use tsah.evaluate for it");
   py::gil_scoped_release release;
@@ -100,13 +109,14 @@ std::vector<std::string> methodNames(py::handle methods) {
 
 py::dict evaluate(const anim::Animation& animation, py::handle methodsArg, uint32_t frames, uint32_t evalFrames,
                   uint32_t maxLeaf, float ct, float ci, const std::string& selection, uint64_t seed, double timeLimit,
-                  double minImprovement, unsigned threads, const std::string& optimizer) {
+                  double minImprovement, unsigned threads, const std::string& optimizer, const std::string& device) {
   const std::vector<std::string> names = methodNames(methodsArg);
   std::vector<MethodSpec> methods;
   for (const std::string& name : names) methods.push_back(MethodSpec::parse(name));  // ValueError when unknown
   if (evalFrames < 1) throw py::value_error("eval_frames: must be at least 1");
   const TreeOptions options =
-      treeOptions("tsah", 0, frames, selection, seed, ct, ci, maxLeaf, timeLimit, minImprovement, threads, optimizer);
+      treeOptions("tsah", 0, frames, selection, seed, ct, ci, maxLeaf, timeLimit, minImprovement, threads, optimizer,
+                  device);
   std::vector<MethodResult> results;
   {
     py::gil_scoped_release release;
@@ -202,11 +212,13 @@ static input): float64 array, the per_frame costs of `tsah optimize --json`. ct,
   m.def("optimize", &optimize, "animation"_a, "method"_a = "tsah", "k"_a = 0, "frames"_a = 5, "selection"_a = "mh",
         "seed"_a = 1, "ct"_a = 3.0f, "ci"_a = 2.0f, "max_leaf"_a = 8, "time_limit"_a = 0.0,
         "min_improvement"_a = InsertionOptimizer::Config{}.minImprovement, "threads"_a = 0,
-        "optimizer"_a = "sequential", R"doc(
+        "optimizer"_a = "sequential", "device"_a = "cpu", R"doc(
 One tree for the whole animation, exactly as `tsah optimize` builds it (same options, same defaults;
 the same seed gives the same tree and the same .tbvh bytes apart from the build time field).
   optimizer  'sequential' (the paper's insertion optimizer) or 'parallel' (parallel reinsertion on
              `threads` cores, 0: all; the same tree for any thread count)
+  device     'cpu', or 'cuda': the parallel reinsertion optimizer on the GPU (tsah.Error in a build
+             without CUDA or on a machine without a device)
   method     'tsah' (optimized for all frames), 'sah0' (frame 0, refitted) or 'sahstar' (best over time)
   k          T-SAH exponent (0: average cost; larger: the worst frames weigh more)
   frames     representative frames, uniform in time (1 for a static input)
@@ -218,12 +230,13 @@ Raises ValueError for an unknown method or selection, tsah.Error when the animat
   m.def("evaluate", &evaluate, "animation"_a, "methods"_a = "sah0,sahstar,tsah0,tsah2,tsah4,rebuild", "frames"_a = 5,
         "eval_frames"_a = 50, "max_leaf"_a = 8, "ct"_a = 3.0f, "ci"_a = 2.0f, "selection"_a = "mh", "seed"_a = 1,
         "time_limit"_a = 0.0, "min_improvement"_a = InsertionOptimizer::Config{}.minImprovement, "threads"_a = 0,
-        "optimizer"_a = "sequential", R"doc(
+        "optimizer"_a = "sequential", "device"_a = "cpu", R"doc(
 The paper's Table 1 for one animation, as `tsah evaluate --json` computes it: a dict with input,
 triangles, frames, eval_frames, max_leaf, ct, ci and methods, a list of dicts (name, build_s,
 average, maximum, per_frame: float64 array of the cost at each evaluation frame).
   methods    comma-separated names or a list of them: sah0, sahstar, rebuild, tsah<k>
   optimizer  'sequential' or 'parallel': which optimizer builds the T-SAH, SAH* and rebuild trees
+  device     'cpu', or 'cuda': all of them by the GPU parallel reinsertion optimizer
 )doc");
 }
 

@@ -33,6 +33,21 @@ def test_optimize_matches_cli_bytes_and_costs(cli, sample, sample_path, tmp_path
         assert tree.optimization is None
 
 
+def test_device_cuda_matches_cli_or_says_why_not(cli, sample, sample_path, tmp_path):
+    with pytest.raises(ValueError, match="device"):
+        tsah.optimize(sample, device="tpu")
+    try:
+        tree = tsah.optimize(sample, seed=6, device="cuda")
+    except tsah.Error as caught:  # a build without CUDA, or no device: the command line's reason
+        assert "--device cuda" in str(caught)
+        return
+    out = tmp_path / "cuda.tbvh"
+    report = cli.json("optimize", sample_path, "-o", out, "--device", "cuda", "--seed", 6)
+    same_tree_bytes(tree.to_bytes(), out.read_bytes())  # the GPU optimizer is deterministic too
+    assert tree.info["selection"] == "parallel-cuda" and report["device"] == "cuda"
+    assert tree.optimization["final_cost"] <= tree.optimization["initial_cost"]
+
+
 @pytest.mark.parametrize("threads", [1, 2])
 def test_parallel_optimizer_matches_cli_for_any_thread_count(cli, sample, sample_path, tmp_path, threads):
     out = tmp_path / "parallel.tbvh"

@@ -153,6 +153,12 @@ add_test(NAME cli.bench.no_gpu
          COMMAND tsah bench ${W}/bench_explode.tanim --device cuda --quick --out ${W}/bench_gpu_none)
 set_tests_properties(cli.bench.no_gpu PROPERTIES FIXTURES_REQUIRED bench_input
   PASS_REGULAR_EXPRESSION "^tsah: --device cuda: (this tsah was built without the CUDA runtime|no CUDA device is available on this machine)\n$")
+# The GPU optimizer for the bench's trees: the same one line without CUDA or without a device.
+add_test(NAME cli.bench.optimizer_cuda_no_gpu
+         COMMAND tsah bench ${W}/bench_explode.tanim --optimizer cuda --quick --out ${W}/bench_gpu_optimizer_none)
+set_tests_properties(cli.bench.optimizer_cuda_no_gpu PROPERTIES FIXTURES_REQUIRED bench_input
+  ENVIRONMENT "CUDA_VISIBLE_DEVICES=-1"
+  PASS_REGULAR_EXPRESSION "^tsah: --optimizer cuda: (this tsah was built without the CUDA runtime|no CUDA device is available on this machine)\n$")
 
 # tsah optimize --segments K|auto: one tree-set file (.tbvh version 2); info, trace and export
 # switch through it; corrupt sets are refused with one line.

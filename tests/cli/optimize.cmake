@@ -120,3 +120,40 @@ add_test(NAME cli.evaluate.parallel
          COMMAND tsah evaluate ${W}/opt_swap.tanim --methods sahstar,tsah0,rebuild --optimizer parallel --eval-frames 4 --json)
 set_tests_properties(cli.evaluate.parallel PROPERTIES FIXTURES_REQUIRED opt_input
   PASS_REGULAR_EXPRESSION "\"name\":\"sahstar\".*\"name\":\"tsah0\".*\"name\":\"rebuild\"")
+
+# --device cuda: the GPU optimizer. Without it built, or without a device (CUDA_VISIBLE_DEVICES=-1
+# hides every GPU), one line and a failure status, no output file; with a device, the report says so.
+if(TSAH_HAVE_CUDA)
+  set(opt_cuda_missing "--device cuda: no CUDA device found")
+  set(opt_cuda_env "CUDA_VISIBLE_DEVICES=-1")
+else()
+  set(opt_cuda_missing "--device cuda: the GPU optimizer is not built")
+  set(opt_cuda_env "")
+endif()
+foreach(command optimize evaluate)
+  if(command STREQUAL optimize)
+    set(opt_cuda_args optimize ${W}/opt_swap.tanim -o ${W}/opt_cuda_missing.tbvh --device cuda)
+  else()
+    set(opt_cuda_args evaluate ${W}/opt_swap.tanim --methods tsah0 --device cuda)
+  endif()
+  add_test(NAME cli.${command}.cuda.unavailable COMMAND tsah ${opt_cuda_args})
+  add_test(NAME cli.${command}.cuda.unavailable.status COMMAND tsah ${opt_cuda_args})
+  set_tests_properties(cli.${command}.cuda.unavailable PROPERTIES FIXTURES_REQUIRED opt_input
+    PASS_REGULAR_EXPRESSION "^tsah: ${opt_cuda_missing}[^\n]*\n$")
+  set_tests_properties(cli.${command}.cuda.unavailable.status PROPERTIES FIXTURES_REQUIRED opt_input WILL_FAIL TRUE)
+  if(opt_cuda_env)
+    set_tests_properties(cli.${command}.cuda.unavailable cli.${command}.cuda.unavailable.status
+      PROPERTIES ENVIRONMENT "${opt_cuda_env}")
+  endif()
+endforeach()
+# ... and the refused run left no file behind (cat fails on a missing file).
+add_test(NAME cli.optimize.cuda.no_output COMMAND ${CMAKE_COMMAND} -E cat ${W}/opt_cuda_missing.tbvh)
+set_tests_properties(cli.optimize.cuda.no_output PROPERTIES WILL_FAIL TRUE
+  DEPENDS "cli.optimize.cuda.unavailable;cli.optimize.cuda.unavailable.status")
+if(TSAH_HAVE_CUDA)
+  # Whatever this machine has: a GPU optimizes (the report names the device), no GPU is the one-line error.
+  add_test(NAME cli.optimize.cuda.any
+           COMMAND tsah optimize ${W}/opt_swap.tanim -o ${W}/opt_cuda.tbvh --device cuda --k 2 --json)
+  set_tests_properties(cli.optimize.cuda.any PROPERTIES FIXTURES_REQUIRED opt_input
+    PASS_REGULAR_EXPRESSION "^tsah: --device cuda: no CUDA device found[^\n]*\n$|\"device\":\"cuda\".*\"selection\":\"parallel-cuda\"")
+endif()

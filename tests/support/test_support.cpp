@@ -3,8 +3,11 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
+#include <cstring>
 #include <random>
 #include <unistd.h>
+
+#include "tsah/cost.hpp"
 
 namespace tsah::test {
 
@@ -66,6 +69,49 @@ MovingTriangles randomMovingTriangles(uint32_t triangles, uint32_t frames, uint3
     }
   }
   return s;
+}
+
+bool sameTopology(const Bvh& a, const Bvh& b) {
+  if (a.root != b.root || a.nodes.size() != b.nodes.size() || a.primIds != b.primIds) return false;
+  for (std::size_t n = 0; n < a.nodes.size(); ++n) {
+    const BvhNode &x = a.nodes[n], &y = b.nodes[n];
+    if (x.parent != y.parent || x.left != y.left || x.right != y.right || x.primBegin != y.primBegin ||
+        x.primCount != y.primCount)
+      return false;
+  }
+  return true;
+}
+
+bool identicalTree(const Bvh& a, const Bvh& b) {
+  return sameTopology(a, b) && a.frameCount == b.frameCount && a.boxes.size() == b.boxes.size() &&
+         std::memcmp(a.boxes.data(), b.boxes.data(), a.boxes.size() * sizeof(Aabb)) == 0;
+}
+
+uint64_t expectValidRounds(RoundSession& session, const PrimitiveBoxes& prims, int k, int rounds, double tolerance) {
+  uint64_t applied = 0;
+  double previous = session.cost();
+  for (int round = 0; round < rounds; ++round) {
+    const auto stats = session.round();
+    applied += stats.applied;
+    EXPECT_LE(stats.applied, stats.winners);
+    EXPECT_LE(stats.winners, stats.improving);
+    EXPECT_LE(stats.improving, stats.candidates);
+    const Bvh tree = session.bvh();
+    const auto problem = validate(tree, &prims);
+    EXPECT_FALSE(problem.has_value()) << "round " << round << ": " << *problem;
+    if (problem) return applied;
+    const std::vector<double> perFrame = frameCosts(tree);
+    const std::vector<double> tracked = session.frameCostList();
+    for (uint32_t f = 0; f < prims.frameCount; ++f)
+      EXPECT_NEAR(tracked[f], perFrame[f], tolerance * perFrame[f]) << "round " << round << " frame " << f;
+    const double expected = temporalCost(perFrame, k);
+    EXPECT_NEAR(session.cost(), expected, tolerance * expected) << "round " << round;
+    EXPECT_LE(session.cost(), previous * (1 + 1e-12)) << "round " << round << " raised the cost";
+    session.endRound();
+    EXPECT_NEAR(session.cost(), expected, tolerance * expected) << "new weights changed the cost";
+    previous = session.cost();
+  }
+  return applied;
 }
 
 }  // namespace tsah::test

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "tsah/bvh.hpp"
+#include "tsah/parallel_optimizer.hpp"
 
 namespace tsah::test {
 
@@ -30,5 +31,17 @@ struct MovingTriangles {
   PrimitiveBoxes boxes() const { return triangleBoxes(indices, positions, frames); }
 };
 MovingTriangles randomMovingTriangles(uint32_t triangles, uint32_t frames, uint32_t seed, float maxSpeed);
+
+// Same root, nodes (links, leaf ranges) and primIds.
+bool sameTopology(const Bvh& a, const Bvh& b);
+// sameTopology, the same frame count and every box bit for bit.
+bool identicalTree(const Bvh& a, const Bvh& b);
+
+// Runs `rounds` rounds (each followed by endRound) of a reinsertion session and checks after every
+// one: a valid tree (each primitive in one leaf, parent links, boxes containing their children in
+// every frame), tracked frame costs and C~^k equal to a brute-force recomputation (relative
+// `tolerance`), no round raising the cost, the stats' order. Returns the moves applied.
+uint64_t expectValidRounds(RoundSession& session, const PrimitiveBoxes& prims, int k, int rounds,
+                           double tolerance = 1e-9);
 
 }  // namespace tsah::test

@@ -63,6 +63,11 @@ enum class OptimizerKind {
 std::string optimizerKindName(OptimizerKind kind);
 OptimizerKind parseOptimizerKind(const std::string& name);
 
+// An optimizer run elsewhere (the GPU optimizer, which libtsah cannot call: the tsah program and
+// the Python module set it from tsah_cuda): the same contract as optimizeTree.
+using TreeOptimizerFunction = std::function<InsertionOptimizer::Result(
+    Bvh bvh, const PrimitiveBoxes& prims, const InsertionOptimizer::Config& settings, const LeafCollapser* collapse)>;
+
 struct BaselineConfig {
   CostModel cost;
   uint32_t maxLeafSize = 8;  // leaf collapse after building; 1 keeps one primitive per leaf
@@ -72,6 +77,8 @@ struct BaselineConfig {
   InsertionOptimizer::Config optimizer;
   OptimizerKind optimizerKind = OptimizerKind::Sequential;
   ParallelReinsertionOptimizer::Parallel parallel;  // settings of the parallel optimizer (its threads)
+  // When set, every optimization runs here instead (optimizerKind is then unused).
+  TreeOptimizerFunction deviceOptimizer;
   unsigned threads = 0;  // worker threads for independent trees and frames; 0: all cores
   // Progress messages (which method, which frame, optimizer batches). May be called from worker
   // threads, one call at a time.

@@ -87,6 +87,14 @@ TSAH_HD float unionArea(const Aabb& a, const Aabb& b) {
   return 2.0f * (dx * dy + dy * dz + dz * dx);
 }
 
+// A(a ∪ b) in plain float arithmetic, frame after frame: the same bits on the host and on the GPU
+// (built without fused multiply-adds), so that the GPU optimizer and its host emulation agree.
+TSAH_HD float weightedUnionAreaPortable(const Aabb* a, const Aabb* b, const float* areaFactor, uint32_t frames) {
+  float sum = 0.0f;
+  for (uint32_t f = 0; f < frames; ++f) sum += areaFactor[f] * unionArea(a[f], b[f]);
+  return sum;
+}
+
 // A(a ∪ b) for two nodes' boxes (one per frame each): the innermost operation of every search.
 TSAH_HD float weightedUnionArea(const Aabb* a, const Aabb* b, const float* areaFactor, uint32_t frames) {
 #if defined(TSAH_SSE_COST_TERMS)
@@ -107,9 +115,7 @@ TSAH_HD float weightedUnionArea(const Aabb* a, const Aabb* b, const float* areaF
   _mm_store_ps(lanes, sum);
   return 2.0f * (lanes[0] + lanes[1] + lanes[2]);
 #else
-  float sum = 0.0f;
-  for (uint32_t f = 0; f < frames; ++f) sum += areaFactor[f] * unionArea(a[f], b[f]);
-  return sum;
+  return weightedUnionAreaPortable(a, b, areaFactor, frames);
 #endif
 }
 

@@ -25,9 +25,11 @@
 //
 // Memory: interior nodes hold one box per frame; leaves read the caller's primitive boxes, which
 // must outlive the optimization.
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <span>
+#include <vector>
 
 #include "tsah/bvh.hpp"
 #include "tsah/insertion_optimizer.hpp"
@@ -67,39 +69,64 @@ class ParallelReinsertionOptimizer {
   Parallel parallel_;
 };
 
+struct ReinsertionRoundStats {
+  uint64_t candidates = 0;  // nodes searched
+  uint64_t improving = 0;   // searches that found a better position
+  uint64_t winners = 0;     // moves left after conflict resolution
+  uint64_t applied = 0;     // moves kept and applied
+};
+
+// One tree under parallel reinsertion, round by round: the CPU session below, the GPU session
+// (tsah_cuda/gpu_optimizer.hpp) and its host emulation (tsah/reinsertion_emulation.hpp).
+class RoundSession {
+ public:
+  using RoundStats = ReinsertionRoundStats;
+  virtual ~RoundSession() = default;
+  // One round. Focused (the optimizer's default): a node whose last search found nothing is
+  // searched again only after a move touched it or one of its 4 nearest ancestors; a full round
+  // searches every sampled node.
+  virtual RoundStats round(bool focused = true) = 0;
+  // After a round: new weights for k > 0 from costs recomputed from the boxes (k = 0: nothing).
+  virtual void endRound() = 0;
+  virtual double cost() const = 0;                  // C~^k of the tracked frame costs
+  virtual std::vector<double> frameCostList() const = 0;  // C_i, updated by every applied move
+  virtual Bvh bvh() const = 0;                      // the current tree with boxes for every frame
+  // The tree (collapsed by `collapse` when given); the session is unusable afterwards.
+  virtual Bvh releaseTree(const LeafCollapser* collapse) = 0;
+  virtual uint64_t searches() const = 0;
+  virtual uint64_t appliedMoves() const = 0;
+};
+
+// The optimizer's loop over any session: rounds until the stop rule (see the header comment),
+// history, progress, limits. `seconds` counts from `start` (the session's setup included).
+InsertionOptimizer::Result runReinsertionRounds(RoundSession& session, const InsertionOptimizer::Config& config,
+                                                const LeafCollapser* collapse,
+                                                std::chrono::steady_clock::time_point start);
+
 // The round-level machinery behind ParallelReinsertionOptimizer, public so that tests can check the
 // tree after every round.
-class ReinsertionSession {
+class ReinsertionSession final : public RoundSession {
  public:
-  struct RoundStats {
-    uint64_t candidates = 0;  // nodes searched
-    uint64_t improving = 0;   // searches that found a better position
-    uint64_t winners = 0;     // moves left after conflict resolution
-    uint64_t applied = 0;     // moves kept and applied
-  };
-
   // Throws std::invalid_argument when prims does not match the tree. prims must outlive the session.
   ReinsertionSession(Bvh bvh, const PrimitiveBoxes& prims, const ParallelReinsertionOptimizer::Config& config,
                      const ParallelReinsertionOptimizer::Parallel& parallel);
-  ~ReinsertionSession();
+  ~ReinsertionSession() override;
   ReinsertionSession(ReinsertionSession&&) noexcept;
   ReinsertionSession& operator=(ReinsertionSession&&) noexcept;
 
-  // One round. Focused (the optimizer's default): a node whose last search found nothing is
-  // searched again only after a move touched it or one of its 4 nearest ancestors; a full round searches
-  // every sampled node.
-  RoundStats round(bool focused = true);
-  // After a round: new weights for k > 0 from costs recomputed from the boxes (k = 0: nothing).
-  void endRound();
+  RoundStats round(bool focused = true) override;
+  void endRound() override;
 
-  double cost() const;                         // C~^k of the tracked frame costs
+  double cost() const override;
   std::span<const double> frameCosts() const;  // C_i, updated by every applied move
-  Bvh bvh() const;                             // the current tree with boxes for every frame
+  std::vector<double> frameCostList() const override;
+  Bvh bvh() const override;
   Bvh release();                               // the tree; the session is unusable afterwards
   // collapser.collapse(release()), with the peak memory of the session alone (see the .cpp).
   Bvh releaseCollapsed(const LeafCollapser& collapser);
-  uint64_t searches() const;
-  uint64_t appliedMoves() const;
+  Bvh releaseTree(const LeafCollapser* collapse) override;
+  uint64_t searches() const override;
+  uint64_t appliedMoves() const override;
 
  private:
   struct Impl;

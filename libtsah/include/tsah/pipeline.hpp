@@ -35,12 +35,17 @@ struct TreeOptions {
   double timeLimit = 0.0;       // seconds per optimization, 0: none
   double minImprovement = InsertionOptimizer::Config{}.minImprovement;
   unsigned threads = 0;         // 0: all cores
+  // cpu, or cuda: every optimization by the GPU parallel reinsertion optimizer, which the caller
+  // provides as gpuOptimizer (libtsah has no CUDA code; baselineConfig throws without it).
+  std::string device = "cpu";
+  TreeOptimizerFunction gpuOptimizer;
   std::function<void(const std::string&)> progress;  // optional progress messages
 
   // "tsah" with k -> tsah<k>; anything else as MethodSpec::parse reads it (throws std::invalid_argument).
   MethodSpec methodSpec() const;
   // The builders' settings (cost, leaf size, optimizer selection/seed/limits, threads, progress).
-  // Throws std::invalid_argument for an unknown optimizer or selection.
+  // Throws std::invalid_argument for an unknown optimizer, selection or device, anim::Error for
+  // device "cuda" without a gpuOptimizer (a build without CUDA).
   BaselineConfig baselineConfig() const;
 };
 

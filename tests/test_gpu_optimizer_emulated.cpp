@@ -1,0 +1,181 @@
+// The GPU optimizer's rounds (tsah/reinsertion_rounds.hpp) run by the serial host emulation: tree
+// invariants and exact cost tracking after every round, never above the start, determinism, and
+// quality against the CPU parallel optimizer. test_cuda_optimizer checks that the real kernels give
+// the emulation's tree.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cstdio>
+#include <stdexcept>
+
+#include "anim/error.hpp"
+#include "anim/generators.hpp"
+#include "test_support.hpp"
+#include "tsah/cost.hpp"
+#include "tsah/leaf_collapser.hpp"
+#include "tsah/parallel_optimizer.hpp"
+#include "tsah/pipeline.hpp"
+#include "tsah/reinsertion_emulation.hpp"
+#include "tsah/sah_builder.hpp"
+
+namespace {
+
+using tsah::Bvh;
+using tsah::ParallelReinsertionOptimizer;
+
+tsah::PrimitiveBoxes movingBoxes(uint32_t triangles, uint32_t frames, uint32_t seed) {
+  return tsah::test::randomMovingTriangles(triangles, frames, seed, 4.0f).boxes();
+}
+
+Bvh initialTree(const tsah::PrimitiveBoxes& prims) { return tsah::SweepSahBuilder().build(prims.frame(0)); }
+
+ParallelReinsertionOptimizer::Parallel fraction(double f) {
+  ParallelReinsertionOptimizer::Parallel p;
+  p.candidateFraction = f;
+  return p;
+}
+
+TEST(EmulatedGpuOptimizer, InvariantsAndExactCostAfterEveryRound) {
+  for (uint32_t seed : {1u, 2u, 3u}) {
+    for (uint32_t frames : {1u, 4u}) {
+      for (int k : {0, 2}) {
+        const tsah::PrimitiveBoxes prims = movingBoxes(150 + 100 * seed, frames, seed);
+        ParallelReinsertionOptimizer::Config config;
+        config.k = k;
+        config.seed = seed;
+        const auto session =
+            tsah::makeEmulatedDeviceSession(initialTree(prims), prims, config, fraction(seed == 3 ? 1.0 : 0.5));
+        const double start = session->cost();
+        const uint64_t applied = tsah::test::expectValidRounds(*session, prims, k, 12);
+        EXPECT_GT(applied, 0u) << "seed " << seed << " frames " << frames << " k " << k;
+        EXPECT_LT(session->cost(), start);
+        EXPECT_EQ(session->appliedMoves(), applied);
+      }
+    }
+  }
+}
+
+TEST(EmulatedGpuOptimizer, NeverEndsAboveItsStartAndHistoryIsMonotone) {
+  for (int k : {0, 1, 4}) {
+    const tsah::PrimitiveBoxes prims = movingBoxes(800, 5, 7 + k);
+    ParallelReinsertionOptimizer::Config config;
+    config.k = k;
+    const auto result = tsah::optimizeEmulatedDevice(initialTree(prims), prims, config, {});
+    ASSERT_FALSE(tsah::validate(result.bvh, &prims).has_value());
+    EXPECT_LT(result.finalCost, result.initialCost);
+    ASSERT_GE(result.history.size(), 2u);
+    for (std::size_t i = 1; i < result.history.size(); ++i)
+      EXPECT_LE(result.history[i].cost, result.history[i - 1].cost * (1 + 1e-12));
+    EXPECT_NEAR(result.finalCost, tsah::temporalCost(tsah::frameCosts(result.bvh), k), 1e-9 * result.finalCost);
+  }
+}
+
+TEST(EmulatedGpuOptimizer, SameSeedSameTree) {
+  const tsah::PrimitiveBoxes prims = movingBoxes(1500, 3, 41);
+  ParallelReinsertionOptimizer::Config config;
+  config.seed = 99;
+  config.k = 2;
+  const auto one = tsah::optimizeEmulatedDevice(initialTree(prims), prims, config, {});
+  const auto again = tsah::optimizeEmulatedDevice(initialTree(prims), prims, config, {});
+  EXPECT_TRUE(tsah::test::identicalTree(one.bvh, again.bvh));
+  EXPECT_EQ(one.finalCost, again.finalCost);
+  EXPECT_EQ(one.acceptedSteps, again.acceptedSteps);
+  config.seed = 100;
+  const auto otherSeed = tsah::optimizeEmulatedDevice(initialTree(prims), prims, config, {});
+  EXPECT_FALSE(tsah::test::sameTopology(one.bvh, otherSeed.bvh));
+}
+
+TEST(EmulatedGpuOptimizer, WithinTwoPercentOfTheCpuParallelOptimizer) {
+  for (uint32_t seed : {11u, 12u, 13u}) {
+    for (int k : {0, 2}) {
+      const tsah::PrimitiveBoxes prims = movingBoxes(2000, 5, seed);
+      ParallelReinsertionOptimizer::Config config;
+      config.k = k;
+      config.seed = seed;
+      const auto cpu = ParallelReinsertionOptimizer(config).optimize(initialTree(prims), prims);
+      const auto gpu = tsah::optimizeEmulatedDevice(initialTree(prims), prims, config, {});
+      std::printf("seed %u k %d: emulated GPU / CPU parallel = %.4f\n", seed, k, gpu.finalCost / cpu.finalCost);
+      EXPECT_LT(gpu.finalCost, 1.02 * cpu.finalCost) << "seed " << seed << " k " << k;
+    }
+  }
+}
+
+// The device buffers of a whole run at 5 frames, one triangle per leaf: boxes of the interior nodes
+// and the primitives (240 B per triangle) plus links and round state; per-move arrays grow only to
+// the largest round.
+TEST(EmulatedGpuOptimizer, DeviceMemoryPerTriangle) {
+  const uint32_t triangles = 8000;
+  const tsah::PrimitiveBoxes prims = movingBoxes(triangles, 5, 90);
+  std::size_t bytes = 0;
+  const auto result = tsah::optimizeEmulatedDevice(initialTree(prims), prims, {}, {}, nullptr, &bytes);
+  EXPECT_LT(result.finalCost, result.initialCost);
+  const double perTriangle = double(bytes) / triangles;
+  std::printf("device buffers: %.1f B per triangle (5 frames)\n", perTriangle);
+  EXPECT_GT(perTriangle, 240.0);
+  EXPECT_LT(perTriangle, 400.0);
+}
+
+TEST(EmulatedGpuOptimizer, CollapseLimitsAndBadInput) {
+  const tsah::PrimitiveBoxes prims = movingBoxes(1200, 3, 80);
+  const tsah::LeafCollapser collapser({{}, 4, 0});
+  const auto plain = tsah::optimizeEmulatedDevice(initialTree(prims), prims, {}, {});
+  const auto collapsed = tsah::optimizeEmulatedDevice(initialTree(prims), prims, {}, {}, &collapser);
+  EXPECT_TRUE(tsah::test::identicalTree(collapser.collapse(plain.bvh), collapsed.bvh));
+
+  ParallelReinsertionOptimizer::Config rounds;
+  rounds.maxBatches = 2;
+  EXPECT_EQ(tsah::optimizeEmulatedDevice(initialTree(prims), prims, rounds, {}).history.size(), 3u);
+
+  for (uint32_t count : {1u, 2u, 3u}) {  // no eligible node: the tree comes back unchanged
+    const tsah::PrimitiveBoxes few = movingBoxes(count, 2, 60 + count);
+    const auto result = tsah::optimizeEmulatedDevice(initialTree(few), few, {}, {});
+    EXPECT_FALSE(tsah::validate(result.bvh, &few).has_value());
+    EXPECT_EQ(result.acceptedSteps, 0u);
+  }
+  const tsah::PrimitiveBoxes many = movingBoxes(50, 17, 81);
+  EXPECT_THROW(tsah::makeEmulatedDeviceSession(initialTree(many), many, {}, {}), std::invalid_argument);
+  const tsah::PrimitiveBoxes other = movingBoxes(5, 2, 62);
+  EXPECT_THROW(tsah::makeEmulatedDeviceSession(initialTree(prims), other, {}, {}), std::invalid_argument);
+}
+
+// The pipeline's --device cuda path with the emulation standing in for the GPU: every optimization
+// of T-SAH and SAH* goes through TreeOptions::gpuOptimizer, collapsed as usual; without one,
+// --device cuda is refused with one line.
+TEST(EmulatedGpuOptimizer, PipelineRunsEveryOptimizationThroughTheDeviceHook) {
+  anim::GeneratorOptions g;
+  g.triangles = 1500;
+  g.frames = 6;
+  const anim::Animation a = anim::generate(anim::GeneratorKind::Explode, g);
+  tsah::TreeOptions options;
+  options.device = "cuda";
+  options.k = 2;
+  EXPECT_THROW(tsah::optimizeAnimation(a, options), anim::Error);  // no GPU optimizer given
+  std::atomic<int> calls = 0;  // SAH* optimizes its frames on worker threads
+  options.gpuOptimizer = [&calls](Bvh bvh, const tsah::PrimitiveBoxes& prims,
+                                  const tsah::InsertionOptimizer::Config& settings, const tsah::LeafCollapser* collapse) {
+    ++calls;
+    return tsah::optimizeEmulatedDevice(std::move(bvh), prims, settings, {}, collapse);
+  };
+  const tsah::OptimizedTree tree = tsah::optimizeAnimation(a, options);
+  EXPECT_EQ(calls.load(), 1);
+  EXPECT_EQ(tree.info.selection, "parallel-cuda");
+  const tsah::PrimitiveBoxes rep = tsah::representativeBoxes(a, options.frames);
+  EXPECT_FALSE(tsah::validate(tree.bvh, &rep).has_value());
+  EXPECT_LT(tree.optimization.finalCost, tree.optimization.initialCost);
+  // The same tree as the emulation on its own, collapsed the same way.
+  tsah::InsertionOptimizer::Config config;
+  config.k = 2;
+  const tsah::LeafCollapser collapser({config.cost, options.maxLeaf, 2});
+  const auto direct = tsah::optimizeEmulatedDevice(tsah::SweepSahBuilder({config.cost, 1}).build(rep.frame(0)), rep,
+                                                   config, {}, &collapser);
+  EXPECT_TRUE(tsah::test::sameTopology(direct.bvh, tree.bvh));
+
+  options.method = "sahstar";  // one optimization per representative frame
+  calls = 0;
+  tsah::optimizeAnimation(a, options);
+  EXPECT_EQ(calls.load(), int(options.frames));
+  options.device = "tpu";
+  EXPECT_THROW(tsah::optimizeAnimation(a, options), std::invalid_argument);
+}
+
+}  // namespace
