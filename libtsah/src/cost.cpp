@@ -67,6 +67,26 @@ std::vector<double> temporalWeights(std::span<const double> frameCosts, int k) {
   return weights;
 }
 
+void FrameCostTerms::reset(uint32_t frames) {
+  rootArea.assign(frames, 0.0);
+  innerArea.assign(frames, 0.0);
+  leafArea.assign(frames, 0.0);
+  frameCost.assign(frames, 0.0);
+  areaFactor.assign(frames, 0.0f);
+}
+
+double FrameCostTerms::updateFrameCosts(const CostModel& model, uint64_t innerCount, uint64_t primCount, int k) {
+  for (std::size_t f = 0; f < frameCost.size(); ++f)
+    frameCost[f] = cost::frameCost(model.ct, model.ci, innerArea[f], leafArea[f], rootArea[f], innerCount, primCount);
+  return temporalCost(frameCost, k);
+}
+
+std::vector<double> FrameCostTerms::updateAreaFactors(int k) {
+  std::vector<double> w = temporalWeights(frameCost, k);
+  for (std::size_t f = 0; f < frameCost.size(); ++f) areaFactor[f] = cost::areaFactor(w[f], rootArea[f]);
+  return w;
+}
+
 FrameCostEvaluator::FrameCostEvaluator(const Bvh& bvh, CostModel model) : bvh_(&bvh), model_(model) {
   boxes_.resize(bvh.nodes.size());
   if (bvh.nodes.empty()) return;

@@ -54,11 +54,7 @@ struct InsertionSession::Impl {
   mutable bool shapeCurrent = true;
 
   // Per frame.
-  std::vector<double> rootArea;    // S_i (constant: the root box is the union of all primitives)
-  std::vector<double> innerArea;   // sum of interior node areas
-  std::vector<double> leafArea;    // sum of leaf areas times primitive counts (constant)
-  std::vector<double> frameCost;   // C_i
-  std::vector<float> areaFactor;   // w_i / (W S_i): A(B) = sum_i areaFactor_i * area(B_i)
+  FrameCostTerms terms;  // S_i and the leaf sums stay constant here; the interior sums and C_i change
   std::vector<float> deltaFactor;  // w_i / W: Delta_N = sum_i deltaFactor_i * S_N(i)
   uint64_t innerCount = 0, primTotal = 0;
   double currentCost = 0.0;
@@ -114,11 +110,7 @@ struct InsertionSession::Impl {
     }
     shapeCurrent = false;
 
-    rootArea.assign(frames, 0.0);
-    innerArea.assign(frames, 0.0);
-    leafArea.assign(frames, 0.0);
-    frameCost.assign(frames, 0.0);
-    areaFactor.assign(frames, 0.0f);
+    terms.reset(frames);
     deltaFactor.assign(frames, 0.0f);
     stepAreaChange.assign(frames, 0.0);
     candidateCost.assign(frames, 0.0);
@@ -193,41 +185,30 @@ struct InsertionSession::Impl {
 
   double costOf(std::span<const double> costs) const { return temporalCost(costs, config.k); }
 
-  void computeFrameCost(uint32_t f) {
-    frameCost[f] = cost::frameCost(config.cost.ct, config.cost.ci, innerArea[f], leafArea[f], rootArea[f],
-                                   innerCount, primTotal);
-  }
-
   // A(N) and Delta_N = sum_i (w_i / W) S_N(i): the same weighted area with other factors.
   void updateNodeCaches(uint32_t n) {
-    header(n).lo.z = cost::weightedArea(box(n), areaFactor.data(), frames);
+    header(n).lo.z = cost::weightedArea(box(n), terms.areaFactor.data(), frames);
     setDelta(n, cost::weightedArea(box(n), deltaFactor.data(), frames));
   }
 
   // Recomputes the frame costs from the boxes; with `weights`, also w_i and every node's A and Delta.
   void refresh(bool weights) {
-    std::fill(innerArea.begin(), innerArea.end(), 0.0);
-    std::fill(leafArea.begin(), leafArea.end(), 0.0);
+    std::fill(terms.innerArea.begin(), terms.innerArea.end(), 0.0);
+    std::fill(terms.leafArea.begin(), terms.leafArea.end(), 0.0);
     for (uint32_t n = 0; n < nodeCount; ++n) {
       const Aabb* b = box(n);
       if (isLeaf(n)) {
         const double count = shape.nodes[n].primCount;
-        for (uint32_t f = 0; f < frames; ++f) leafArea[f] += double(b[f].area()) * count;
+        for (uint32_t f = 0; f < frames; ++f) terms.leafArea[f] += double(b[f].area()) * count;
       } else {
-        for (uint32_t f = 0; f < frames; ++f) innerArea[f] += b[f].area();
+        for (uint32_t f = 0; f < frames; ++f) terms.innerArea[f] += b[f].area();
       }
     }
-    for (uint32_t f = 0; f < frames; ++f) {
-      rootArea[f] = box(root)[f].area();
-      computeFrameCost(f);
-    }
-    currentCost = costOf(frameCost);
+    for (uint32_t f = 0; f < frames; ++f) terms.rootArea[f] = box(root)[f].area();
+    currentCost = terms.updateFrameCosts(config.cost, innerCount, primTotal, config.k);
     if (!weights) return;
-    const std::vector<double> w = temporalWeights(frameCost, config.k);
-    for (uint32_t f = 0; f < frames; ++f) {
-      deltaFactor[f] = float(w[f]);
-      areaFactor[f] = cost::areaFactor(w[f], rootArea[f]);
-    }
+    const std::vector<double> w = terms.updateAreaFactors(config.k);
+    for (uint32_t f = 0; f < frames; ++f) deltaFactor[f] = float(w[f]);
     for (uint32_t n = 0; n < nodeCount; ++n) updateNodeCaches(n);
   }
 
@@ -235,7 +216,7 @@ struct InsertionSession::Impl {
   // weights, hence new cached areas).
   void endBatch() {
     if (config.k > 0) refresh(true);
-    else currentCost = costOf(frameCost);
+    else currentCost = costOf(terms.frameCost);
   }
 
   bool eligible(uint32_t n) const {
@@ -292,7 +273,7 @@ struct InsertionSession::Impl {
 
   // Weighted multi-frame area of the union of node x's boxes and the given boxes (from `records`).
   float unionCost(uint32_t x, const Aabb* c) const {
-    return cost::weightedUnionArea(box(x), c, areaFactor.data(), frames);
+    return cost::weightedUnionArea(box(x), c, terms.areaFactor.data(), frames);
   }
 
   void push(QueueEntry e) {
@@ -420,16 +401,16 @@ struct InsertionSession::Impl {
     insert(second, p);
 
     for (uint32_t f = 0; f < frames; ++f)
-      candidateCost[f] = rootArea[f] > 0.0
-                             ? frameCost[f] + config.cost.ct * stepAreaChange[f] / rootArea[f]
-                             : frameCost[f];
+      candidateCost[f] = terms.rootArea[f] > 0.0
+                             ? terms.frameCost[f] + config.cost.ct * stepAreaChange[f] / terms.rootArea[f]
+                             : terms.frameCost[f];
     const double newCost = costOf(candidateCost);
     if (newCost > currentCost) {
       undo();
       return false;
     }
-    frameCost.swap(candidateCost);
-    for (uint32_t f = 0; f < frames; ++f) innerArea[f] += stepAreaChange[f];
+    terms.frameCost.swap(candidateCost);
+    for (uint32_t f = 0; f < frames; ++f) terms.innerArea[f] += stepAreaChange[f];
     currentCost = newCost;
     ++accepted;
     return true;
@@ -533,7 +514,7 @@ std::vector<uint32_t> InsertionSession::batchSortNodes(uint32_t count) const {
 void InsertionSession::refresh() { impl_->refresh(true); }
 void InsertionSession::endBatch() { impl_->endBatch(); }
 double InsertionSession::cost() const { return impl_->currentCost; }
-std::span<const double> InsertionSession::frameCosts() const { return impl_->frameCost; }
+std::span<const double> InsertionSession::frameCosts() const { return impl_->terms.frameCost; }
 const Bvh& InsertionSession::bvh() const { return impl_->materialize(); }
 Bvh InsertionSession::release() {
   impl_->materialize();

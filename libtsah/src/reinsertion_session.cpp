@@ -67,8 +67,7 @@ struct ReinsertionSession::Impl {
   std::vector<float> area;       // A(N) with the current weights
   std::vector<Aabb> innerBoxes;  // innerCount * frames, node-major
   std::vector<uint32_t> primIds;
-  std::vector<double> rootArea, innerArea, leafArea, frameCost;
-  std::vector<float> areaFactor;
+  FrameCostTerms terms;
   double currentCost = 0.0;
   std::vector<uint8_t> taken;  // per node: touched by a winning move of this round
   // Focus: a node whose last search found nothing is searched again only once a move has touched
@@ -98,11 +97,7 @@ struct ReinsertionSession::Impl {
     // Allocated only once the input tree is gone: the two are never held together.
     area.assign(nodeCount, 0.0f);
     innerBoxes.assign(std::size_t(innerCount) * frames, Aabb{});
-    rootArea.assign(frames, 0.0);
-    innerArea.assign(frames, 0.0);
-    leafArea.assign(frames, 0.0);
-    frameCost.assign(frames, 0.0);
-    areaFactor.assign(frames, 0.0f);
+    terms.reset(frames);
     taken.assign(nodeCount, 0);
     changedIn.assign(nodeCount, 0);
     quietSince.assign(nodeCount, 0);
@@ -128,7 +123,7 @@ struct ReinsertionSession::Impl {
   rk::TreeView view() const {
     auto* self = const_cast<Impl*>(this);
     return {self->links.data(), self->innerBoxes.data(), self->area.data(), prims->boxes.data(), primIds.data(),
-            areaFactor.data(),  &self->root,             frames,            innerCount,          nodeCount,
+            terms.areaFactor.data(),  &self->root,             frames,            innerCount,          nodeCount,
             prims->primCount,   true};
   }
   static rk::Buffers buffers(Scratch& s) { return {s.moving.data(), s.without.data(), s.other.data()}; }
@@ -172,23 +167,18 @@ struct ReinsertionSession::Impl {
       rk::addAreaSums(view(), c * kChunk, std::min(nodeCount, (c + 1) * kChunk), &innerPart[std::size_t(c) * frames],
                       &leafPart[std::size_t(c) * frames], s.moving.data());
     });
-    std::fill(innerArea.begin(), innerArea.end(), 0.0);
-    std::fill(leafArea.begin(), leafArea.end(), 0.0);
+    std::fill(terms.innerArea.begin(), terms.innerArea.end(), 0.0);
+    std::fill(terms.leafArea.begin(), terms.leafArea.end(), 0.0);
     for (uint32_t c = 0; c < chunks; ++c)
       for (uint32_t f = 0; f < frames; ++f) {
-        innerArea[f] += innerPart[std::size_t(c) * frames + f];
-        leafArea[f] += leafPart[std::size_t(c) * frames + f];
+        terms.innerArea[f] += innerPart[std::size_t(c) * frames + f];
+        terms.leafArea[f] += leafPart[std::size_t(c) * frames + f];
       }
     Scratch& s = scratch.local();
     const Aabb* rootBoxes = rk::boxesOf(view(), root, s.moving.data());
-    for (uint32_t f = 0; f < frames; ++f) {
-      rootArea[f] = rootBoxes[f].area();
-      frameCost[f] = cost::frameCost(config.cost.ct, config.cost.ci, innerArea[f], leafArea[f], rootArea[f],
-                                     innerCount, primTotal);
-    }
-    currentCost = cost::temporalCost(frameCost.data(), frames, config.k);
-    const std::vector<double> w = temporalWeights(frameCost, config.k);
-    for (uint32_t f = 0; f < frames; ++f) areaFactor[f] = cost::areaFactor(w[f], rootArea[f]);
+    for (uint32_t f = 0; f < frames; ++f) terms.rootArea[f] = rootBoxes[f].area();
+    currentCost = terms.updateFrameCosts(config.cost, innerCount, primTotal, config.k);
+    terms.updateAreaFactors(config.k);
     tbb::parallel_for(tbb::blocked_range<uint32_t>(0, nodeCount, 1024), [&](const auto& range) {
       Scratch& local = scratch.local();
       const rk::TreeView t = view();
@@ -263,8 +253,8 @@ struct ReinsertionSession::Impl {
         const double* d = delta.data() + i * frames;
         const double newCost = rk::costWithChange(sums, d, candidateCost.data());
         if (!(newCost < currentCost)) continue;
-        for (uint32_t f = 0; f < frames; ++f) innerArea[f] += d[f];
-        frameCost.swap(candidateCost);
+        for (uint32_t f = 0; f < frames; ++f) terms.innerArea[f] += d[f];
+        terms.frameCost.swap(candidateCost);
         currentCost = newCost;
         accepted.push_back(winners[i]);
       }
@@ -286,7 +276,7 @@ struct ReinsertionSession::Impl {
   }
 
   rk::FrameSums frameSums() const {
-    return {innerArea.data(), leafArea.data(), rootArea.data(), frames, innerCount, primTotal,
+    return {terms.innerArea.data(), terms.leafArea.data(), terms.rootArea.data(), frames, innerCount, primTotal,
             config.cost.ct,   config.cost.ci,  config.k};
   }
 
@@ -336,8 +326,8 @@ ReinsertionSession& ReinsertionSession::operator=(ReinsertionSession&&) noexcept
 ReinsertionSession::RoundStats ReinsertionSession::round(bool focused) { return impl_->round(focused); }
 void ReinsertionSession::endRound() { impl_->endRound(); }
 double ReinsertionSession::cost() const { return impl_->currentCost; }
-std::span<const double> ReinsertionSession::frameCosts() const { return impl_->frameCost; }
-std::vector<double> ReinsertionSession::frameCostList() const { return impl_->frameCost; }
+std::span<const double> ReinsertionSession::frameCosts() const { return impl_->terms.frameCost; }
+std::vector<double> ReinsertionSession::frameCostList() const { return impl_->terms.frameCost; }
 Bvh ReinsertionSession::releaseTree(const LeafCollapser* collapse) {
   return collapse ? releaseCollapsed(*collapse) : release();
 }

@@ -49,6 +49,21 @@ double temporalCost(std::span<const double> frameCosts, int k);
 // when every cost is 0).
 std::vector<double> temporalWeights(std::span<const double> frameCosts, int k);
 
+// The per-frame terms an optimizer tracks while it changes a tree: S_i (root area), the interior and
+// leaf area sums of Eq. 1, C_i, and the factors of the weighted area A(B) = sum_i areaFactor_i *
+// area(B_i), areaFactor_i = (w_i / W) / S_i. Shared by the sequential and the parallel optimizer.
+struct FrameCostTerms {
+  std::vector<double> rootArea, innerArea, leafArea, frameCost;
+  std::vector<float> areaFactor;
+
+  void reset(uint32_t frames);  // every term 0 for `frames` frames
+  // C_i of every frame from the three area sums; returns C~^k (Eq. 3).
+  double updateFrameCosts(const CostModel& model, uint64_t innerCount, uint64_t primCount, int k);
+  // The weights w_i of the current C_i (temporalWeights) and the area factors made from them;
+  // returns the weights.
+  std::vector<double> updateAreaFactors(int k);
+};
+
 // The cost of one frame of the animation for a fixed tree topology: refits the tree to that frame's
 // primitive boxes (in a buffer owned by the evaluator) and evaluates Eq. 1. Works for any frame,
 // not only the representative ones stored in the tree. Allocates only on construction; one
