@@ -337,8 +337,8 @@ void run(const Options& opt) {
   bounds.extend(tsah::Vec3{ab.min[0], ab.min[1], ab.min[2]});
   bounds.extend(tsah::Vec3{ab.max[0], ab.max[1], ab.max[2]});
   const tsah::Camera fitted = tsah::fitCamera(bounds, {0, 1, 0}, 45.0f, float(opt.width) / float(opt.height));
-  std::vector<anim::CameraKey> path(a.cameraPath().begin(), a.cameraPath().end());
-  scene.camera = [path, fitted](double t) { return path.empty() ? fitted : tsah::cameraAt(path, t); };
+  std::vector<anim::CameraKey> cameraKeys(a.cameraPath().begin(), a.cameraPath().end());
+  scene.camera = [cameraKeys, fitted](double t) { return cameraKeys.empty() ? fitted : tsah::cameraAt(cameraKeys, t); };
   scene.lighting = tsah::fitLighting(bounds, scene.camera(times.front()));
   out["settings"] = {{"frames", frames},       {"width", opt.width},   {"height", opt.height},
                      {"ao_samples", opt.ao},   {"shadow_samples", opt.shadow},
