@@ -237,7 +237,6 @@ struct CwbvhNodeWords {
     return f;
 #endif
   }
-  TSAH_HD uint32_t meta(uint32_t slot) const { return byteAt(24 + slot); }
   // Slot masks (bit s: slot s) of the interior and of the leaf children, from the meta words.
   TSAH_HD uint32_t interiorSlots() const { return slotFlags(w[6]) | (slotFlags(w[7]) << 4); }
   TSAH_HD uint32_t leafSlots() const {  // kCwbvhLeaf set and kCwbvhInterior clear
@@ -245,11 +244,9 @@ struct CwbvhNodeWords {
   }
   // Bit 7 of each byte of x, as bits 0-3 (the four products land on distinct bits: no carries).
   TSAH_HD static uint32_t slotFlags(uint32_t x) { return ((x & 0x80808080u) * 0x00204081u) >> 28; }
-  // meta(slot) for a slot known only at run time: selects between the two words instead of
+  // The meta byte of a slot known only at run time: selects between the two words instead of
   // indexing the node's registers (which would move the node to local memory on the GPU).
   TSAH_HD uint32_t metaOf(uint32_t slot) const { return ((slot < 4 ? w[6] : w[7]) >> (8u * (slot & 3u))) & 0xffu; }
-  TSAH_HD uint32_t qlo(uint32_t axis, uint32_t slot) const { return byteAt(32 + 8 * axis + slot); }
-  TSAH_HD uint32_t qhi(uint32_t axis, uint32_t slot) const { return byteAt(56 + 8 * axis + slot); }
 };
 static_assert(offsetof(CwbvhNode, ex) == 12 && offsetof(CwbvhNode, triCount) == 15 &&
               offsetof(CwbvhNode, childBase) == 16 && offsetof(CwbvhNode, triBase) == 20 &&
