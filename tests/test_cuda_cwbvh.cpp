@@ -23,6 +23,7 @@
 #include "tsah/tree_set.hpp"
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
+#include "test_support.hpp"
 
 namespace {
 
@@ -32,12 +33,7 @@ namespace tc = tsah::cuda;
 #define REQUIRE_GPU() \
   if (!tc::deviceAvailable()) GTEST_SKIP() << "no CUDA device"
 
-anim::Animation makeAnimation(anim::GeneratorKind kind, uint32_t triangles, uint32_t frames) {
-  anim::GeneratorOptions o;
-  o.triangles = triangles;
-  o.frames = frames;
-  return anim::generate(kind, o);
-}
+using tsah::test::generatedAnimation;
 
 // Sweep SAH on the first keyframe, collapsed to leaves of up to 8 triangles, boxes of every keyframe.
 tsah::FlatBvh sahTree(const anim::Animation& a) {
@@ -85,7 +81,7 @@ std::vector<tsah::Ray> randomRays(const tsah::Aabb& b, const anim::Animation& a,
 TEST(CudaCwbvh, NodesEqualHostRefitAtEveryTime) {
   REQUIRE_GPU();
   for (auto kind : {anim::GeneratorKind::Explode, anim::GeneratorKind::Wave}) {
-    const anim::Animation a = makeAnimation(kind, 6000, 6);
+    const anim::Animation a = generatedAnimation(kind, 6000, 6);
     const tsah::FlatBvh tree = sahTree(a);
     tc::GpuRuntime gpu(tree, a, wide());
     tsah::CwbvhTree host = tsah::buildCwbvh(tree);
@@ -105,7 +101,7 @@ TEST(CudaCwbvh, NodesEqualHostRefitAtEveryTime) {
 TEST(CudaCwbvh, HitsEqualCpuReferenceAndBinaryGpu) {
   REQUIRE_GPU();
   for (auto kind : {anim::GeneratorKind::Explode, anim::GeneratorKind::Wave, anim::GeneratorKind::Swap}) {
-    const anim::Animation a = makeAnimation(kind, 8000, 6);
+    const anim::Animation a = generatedAnimation(kind, 8000, 6);
     const tsah::FlatBvh tree = sahTree(a);
     tc::GpuRuntime gpuWide(tree, a, wide());
     tc::GpuRuntime gpuBinary(tree, a);
@@ -152,7 +148,7 @@ TEST(CudaCwbvh, HitsEqualCpuReferenceAndBinaryGpu) {
 // tree of the frame's part, with the hits of the binary runtime over the same set.
 TEST(CudaCwbvh, TreeSetTracesTheTreeOfEachPartLikeTheBinaryLayout) {
   REQUIRE_GPU();
-  const anim::Animation a = makeAnimation(anim::GeneratorKind::Explode, 4000, 6);
+  const anim::Animation a = generatedAnimation(anim::GeneratorKind::Explode, 4000, 6);
   tsah::TreeSet set;
   for (uint32_t k : {0u, 3u}) {
     const tsah::PrimitiveBoxes boxes = tsah::triangleBoxes(a.indices(), a.allPositions(), a.keyframeCount());
@@ -191,7 +187,7 @@ TEST(CudaCwbvh, TreeSetTracesTheTreeOfEachPartLikeTheBinaryLayout) {
 
 TEST(CudaCwbvh, ImagesEqualBinaryAndCpu) {
   REQUIRE_GPU();
-  const anim::Animation a = makeAnimation(anim::GeneratorKind::Explode, 20000, 5);
+  const anim::Animation a = generatedAnimation(anim::GeneratorKind::Explode, 20000, 5);
   const tsah::FlatBvh tree = sahTree(a);
   tsah::CpuRuntime cpu(tree, {a.indices().begin(), a.indices().end()}, a.vertexCount(), {2});
   tc::GpuRuntime gpuWide(tree, a, wide());

@@ -23,6 +23,7 @@
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/device_buffer.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
+#include "test_support.hpp"
 
 namespace {
 
@@ -32,13 +33,7 @@ namespace tc = tsah::cuda;
 #define REQUIRE_GPU() \
   if (!tc::deviceAvailable()) GTEST_SKIP() << "no CUDA device"
 
-anim::Animation makeAnimation(anim::GeneratorKind kind, uint32_t triangles, uint32_t frames, uint64_t seed = 1) {
-  anim::GeneratorOptions o;
-  o.triangles = triangles;
-  o.frames = frames;
-  o.seed = seed;
-  return anim::generate(kind, o);
-}
+using tsah::test::generatedAnimation;
 
 // Sweep SAH on the first keyframe, collapsed to leaves of up to maxLeaf triangles.
 tsah::FlatBvh sahTree(const anim::Animation& a, uint32_t maxLeaf) {
@@ -145,8 +140,8 @@ TEST(CudaCheck, NamesTheCallTheFileAndTheError) {
 }
 
 TEST(CudaRuntime, RejectsATreeOfAnotherAnimationWithoutTouchingTheDevice) {
-  const auto a = makeAnimation(anim::GeneratorKind::Wave, 800, 3);
-  const auto b = makeAnimation(anim::GeneratorKind::Explode, 1500, 3);
+  const auto a = generatedAnimation(anim::GeneratorKind::Wave, 800, 3);
+  const auto b = generatedAnimation(anim::GeneratorKind::Explode, 1500, 3);
   EXPECT_THROW(tc::GpuRuntime(sahTree(b, 8), a), anim::Error);
   EXPECT_THROW(tc::parseRebuildMethod("octree"), anim::Error);
   EXPECT_EQ(tc::parseRebuildMethod("hlbvh-sah"), tc::RebuildMethod::HlbvhSah);
@@ -170,7 +165,7 @@ TEST(CudaBuffer, RoundTripAndMove) {
 
 TEST(CudaRuntime, RefusesToTraceBeforeAnUpdate) {
   REQUIRE_GPU();
-  const auto a = makeAnimation(anim::GeneratorKind::Wave, 800, 3);
+  const auto a = generatedAnimation(anim::GeneratorKind::Wave, 800, 3);
   tc::GpuRuntime gpu(sahTree(a, 4), a);
   const std::vector<tsah::Ray> rays(4, tsah::Ray{{0, 0, 0}, 0, {0, 0, 1}, 1});
   EXPECT_THROW(gpu.closestHits(rays), anim::Error);
@@ -183,7 +178,7 @@ TEST(CudaRuntime, RefusesToTraceBeforeAnUpdate) {
 // on and after the keyframes; for a tree of single-triangle leaves and one of collapsed leaves.
 TEST(CudaRuntime, UpdateEqualsTheCpuRuntimeExactly) {
   REQUIRE_GPU();
-  const auto a = makeAnimation(anim::GeneratorKind::Explode, 6000, 9);
+  const auto a = generatedAnimation(anim::GeneratorKind::Explode, 6000, 9);
   for (uint32_t maxLeaf : {1u, 8u}) {
     SCOPED_TRACE("max leaf " + std::to_string(maxLeaf));
     const tsah::FlatBvh tree = sahTree(a, maxLeaf);
@@ -229,8 +224,8 @@ TEST(CudaRuntime, UpdateEqualsTheCpuRuntimeExactly) {
 // update equals the CPU runtime's bit for bit, also after host positions overwrote the static part.
 TEST(CudaRuntime, UpdateOfAMostlyStaticSceneEqualsTheCpuRuntime) {
   REQUIRE_GPU();
-  const auto still = makeAnimation(anim::GeneratorKind::Wave, 4000, 1, 3);
-  const auto mover = makeAnimation(anim::GeneratorKind::Explode, 1000, 5, 4);
+  const auto still = generatedAnimation(anim::GeneratorKind::Wave, 4000, 1, 3);
+  const auto mover = generatedAnimation(anim::GeneratorKind::Explode, 1000, 5, 4);
   std::vector<uint32_t> idx(still.indices().begin(), still.indices().end());
   for (uint32_t v : mover.indices()) idx.push_back(v + still.vertexCount());
   std::vector<float> pos;
@@ -273,7 +268,7 @@ TEST(CudaRuntime, HitsEqualTheCpuTraversal) {
   REQUIRE_GPU();
   uint32_t seed = 11;
   for (auto kind : {anim::GeneratorKind::Explode, anim::GeneratorKind::Wave, anim::GeneratorKind::Swap}) {
-    const auto a = makeAnimation(kind, 3000, 6, seed);
+    const auto a = generatedAnimation(kind, 3000, 6, seed);
     const tsah::FlatBvh tree = sahTree(a, 8);
     tsah::CpuRuntime cpu = cpuRuntime(tree, a);
     for (bool persistent : {true, false}) {
@@ -290,7 +285,7 @@ TEST(CudaRuntime, HitsEqualTheCpuTraversal) {
 // A tree that is a single leaf (no interior node) refits, traces and renders too.
 TEST(CudaRuntime, SingleLeafTree) {
   REQUIRE_GPU();
-  const auto a = makeAnimation(anim::GeneratorKind::Wave, 6, 4);
+  const auto a = generatedAnimation(anim::GeneratorKind::Wave, 6, 4);
   ASSERT_LE(a.triangleCount(), 16u);
   tsah::Bvh leaf;
   leaf.nodes.resize(1);
@@ -315,7 +310,7 @@ TEST(CudaRuntime, SingleLeafTree) {
 // device's sin/cos/pow/exp.
 TEST(CudaRender, ImageMatchesTheCpuRenderer) {
   REQUIRE_GPU();
-  const auto a = makeAnimation(anim::GeneratorKind::Explode, 4000, 5);
+  const auto a = generatedAnimation(anim::GeneratorKind::Explode, 4000, 5);
   const tsah::FlatBvh tree = sahTree(a, 8);
   tsah::CpuRuntime cpu = cpuRuntime(tree, a);
   tc::GpuRuntime gpu(tree, a);
@@ -443,7 +438,7 @@ TEST(CudaRebuild, LbvhTreesAreValidCollapsedAndTraceLikeTheRefitTree) {
   uint32_t seed = 100;
   for (auto kind : {anim::GeneratorKind::Explode, anim::GeneratorKind::Wave, anim::GeneratorKind::Swap}) {
     seed += 10;
-    checkRebuild(makeAnimation(kind, 5000, 4, seed), tc::RebuildMethod::Lbvh, seed, kind != anim::GeneratorKind::Wave);
+    checkRebuild(generatedAnimation(kind, 5000, 4, seed), tc::RebuildMethod::Lbvh, seed, kind != anim::GeneratorKind::Wave);
   }
 }
 
@@ -452,10 +447,10 @@ TEST(CudaRebuild, HlbvhSahTreesAreValidCollapsedAndTraceLikeTheRefitTree) {
   uint32_t seed = 200;
   for (auto kind : {anim::GeneratorKind::Explode, anim::GeneratorKind::Wave, anim::GeneratorKind::Swap}) {
     seed += 10;
-    checkRebuild(makeAnimation(kind, 5000, 4, seed), tc::RebuildMethod::HlbvhSah, seed, kind != anim::GeneratorKind::Wave);
+    checkRebuild(generatedAnimation(kind, 5000, 4, seed), tc::RebuildMethod::HlbvhSah, seed, kind != anim::GeneratorKind::Wave);
   }
   // Many clusters (the persistent cluster-tree builder gets real work).
-  checkRebuild(makeAnimation(anim::GeneratorKind::Explode, 60000, 2, 7), tc::RebuildMethod::HlbvhSah, 300);
+  checkRebuild(generatedAnimation(anim::GeneratorKind::Explode, 60000, 2, 7), tc::RebuildMethod::HlbvhSah, 300);
 }
 
 // Degenerate inputs: one triangle, two, and many triangles with the same centroid (equal Morton

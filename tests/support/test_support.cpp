@@ -11,6 +11,14 @@
 
 namespace tsah::test {
 
+anim::Animation generatedAnimation(anim::GeneratorKind kind, uint32_t triangles, uint32_t frames, uint64_t seed) {
+  anim::GeneratorOptions o;
+  o.triangles = triangles;
+  o.frames = frames;
+  o.seed = seed;
+  return anim::generate(kind, o);
+}
+
 std::filesystem::path dataDir() {
   if (const char* env = std::getenv("TSAH_DATA_DIR")) return env;
   return TSAH_DATA_DIR;

@@ -5,10 +5,15 @@
 #include <string>
 #include <vector>
 
+#include "anim/animation.hpp"
+#include "anim/generators.hpp"
 #include "tsah/bvh.hpp"
 #include "tsah/parallel_optimizer.hpp"
 
 namespace tsah::test {
+
+// A generated animation (anim::generate) of about `triangles` triangles over `frames` keyframes.
+anim::Animation generatedAnimation(anim::GeneratorKind kind, uint32_t triangles, uint32_t frames, uint64_t seed = 1);
 
 // The real-data folder (../shared/data by default, TSAH_DATA_DIR in the environment overrides).
 std::filesystem::path dataDir();
