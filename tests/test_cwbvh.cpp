@@ -35,6 +35,7 @@ void expectConservative(const std::vector<Aabb>& boxes) {
     ASSERT_TRUE(q.contains(boxes[s])) << "slot " << s << " lo " << boxes[s].lo.x << " " << boxes[s].lo.y << " "
                                       << boxes[s].lo.z << " hi " << boxes[s].hi.x << " " << boxes[s].hi.y << " "
                                       << boxes[s].hi.z << " q.lo.x " << q.lo.x << " q.hi.x " << q.hi.x;
+    ASSERT_TRUE(tsah::cwbvhChildBoxContains(n, s, boxes[s])) << "slot " << s << ": a real plane inside the box";
     ASSERT_TRUE(all.contains(boxes[s]));
   }
 }
@@ -185,6 +186,11 @@ std::vector<tsah::Ray> randomRays(const tsah::BvhView& v, uint32_t triangles, co
     } else {
       ray.org = b.lo + Vec3{u01(rng) * b.extent().x, u01(rng) * b.extent().y, u01(rng) * b.extent().z};
       ray.dir = unit() * (0.1f + 3.0f * u01(rng));
+    }
+    if (i % 7 == 3) {  // axis-aligned: zero direction components (invDir is then +-1e30)
+      ray.dir[int(rng() % 3)] = 0.0f;
+      if (i % 2 == 0) ray.dir[int(rng() % 3)] = 0.0f;
+      if (ray.dir.x == 0.0f && ray.dir.y == 0.0f && ray.dir.z == 0.0f) ray.dir.z = -1.0f;
     }
     ray.tmin = i % 5 == 2 ? 0.01f * u01(rng) : 0.0f;
     ray.tmax = i % 4 == 0 ? u01(rng) * 2.0f : 3.4e38f;

@@ -54,6 +54,8 @@ struct Options {
   std::string traversal = "simple";
   std::string layout = "bvh2,cwbvh";  // layouts of the refitted trees, comma separated
   bool noRender = false, cpuCompare = false, noGraphs = false, noFuse = false;
+  std::vector<float> wideCost = {3.0f, 2.0f};  // cwbvh collapse: cT, cI
+  uint32_t wideLeaf = 8;                       // cwbvh collapse: largest leaf
   std::string imageDir;
   std::string builder = "sweep";
 };
@@ -157,11 +159,18 @@ struct FrameSeries {
   }
 };
 
+tc::GpuRuntime::Config runtimeConfig(const Options& opt, bool persistent, tc::TreeLayout layout) {
+  tc::GpuRuntime::Config c{0, persistent, !opt.noGraphs, layout, !opt.noFuse};
+  c.wideCost = {opt.wideCost[0], opt.wideCost[1]};
+  c.wideMaxLeafSize = opt.wideLeaf;
+  return c;
+}
+
 json runRefit(const std::string& name, const tsah::FlatBvh& tree, const anim::Animation& a,
               const std::vector<double>& times, const Scene& scene, const Options& opt, bool persistent,
               tc::TreeLayout layout) {
   const auto setupStart = std::chrono::steady_clock::now();
-  tc::GpuRuntime rt(tree, a, {0, persistent, !opt.noGraphs, layout, !opt.noFuse});
+  tc::GpuRuntime rt(tree, a, runtimeConfig(opt, persistent, layout));
   const double setupSeconds = seconds(setupStart);
   const double mtris = double(a.triangleCount()) / 1e6;
   tsah::RenderSettings settings = scene.settings;
@@ -191,6 +200,8 @@ json runRefit(const std::string& name, const tsah::FlatBvh& tree, const anim::An
   j["layout"] = tc::treeLayoutName(layout);
   j["setup_seconds"] = setupSeconds;  // upload (and for cwbvh the 8-wide collapse + layout on the host)
   j["traversal"] = persistent ? "persistent" : "simple";
+  if (layout == tc::TreeLayout::Cwbvh)
+    j["wide_collapse"] = {{"ct", opt.wideCost[0]}, {"ci", opt.wideCost[1]}, {"max_leaf", opt.wideLeaf}};
   j["tree"] = {{"interior_nodes", tree.interiorCount}, {"leaves", tree.leafCount}, {"depth", tree.depth}};
   j["update_ms"] = summary(s.update);
   j["update_ms_per_million_triangles"] = summary([&] {
@@ -279,7 +290,7 @@ json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim:
 json compareWithCpu(const tsah::FlatBvh& tree, const anim::Animation& a, double t, const Scene& scene,
                     const Options& opt, tc::TreeLayout layout) {
   tsah::CpuRuntime cpu(tree, {a.indices().begin(), a.indices().end()}, a.vertexCount());
-  tc::GpuRuntime gpu(tree, a, {0, false, true, layout});
+  tc::GpuRuntime gpu(tree, a, runtimeConfig(opt, false, layout));
   cpu.update(a.positionsAt(t));
   gpu.updateAt(t);
   tsah::Image cpuImage, gpuImage;
@@ -381,7 +392,6 @@ void run(const Options& opt) {
   json methods = json::array();
   for (tc::TreeLayout layout : layouts)
     for (bool persistent : modes) {
-      if (layout == tc::TreeLayout::Cwbvh && persistent) continue;  // the wide kernel is one thread per ray
       for (const auto& [name, tree] : trees)
         methods.push_back(runRefit(name, tree, a, times, scene, opt, persistent, layout));
     }
@@ -421,6 +431,10 @@ int main(int argc, char** argv) {
   app.add_option("--traversal", opt.traversal, "simple (one thread per ray, the default), persistent or both");
   app.add_option("--layout", opt.layout, "Layouts of the refitted trees: bvh2, cwbvh or both comma separated (default both)");
   app.add_flag("--no-fuse", opt.noFuse, "cwbvh: separate ray generation and trace kernels (as bvh2) instead of fused passes");
+  app.add_option("--cwbvh-cost", opt.wideCost, "cwbvh: the 8-wide collapse's cost of a node visit and of a triangle (default 3 2)")
+      ->expected(2);
+  app.add_option("--cwbvh-leaf", opt.wideLeaf, "cwbvh: the largest leaf the 8-wide collapse makes (default 8)")
+      ->check(CLI::Range(1u, 64u));
   app.add_flag("--no-graphs", opt.noGraphs, "Launch every kernel instead of replaying CUDA graphs");
   app.add_flag("--no-render", opt.noRender, "Time the updates and rebuilds only");
   app.add_flag("--cpu-compare", opt.cpuCompare, "Render the first frame on the CPU too and compare the images");

@@ -91,19 +91,73 @@ __device__ __forceinline__ Ray loadRayVec(const Ray* rays, uint32_t i) {
 }
 
 template <bool AnyHit>
+__device__ __forceinline__ void storeResult(const CwbvhTraversal<AnyHit>& t, const CwbvhView& view,
+                                            uint32_t i, Hit* __restrict__ hits, uint8_t* __restrict__ occluded) {
+  const Hit h = t.result(view);
+  if constexpr (AnyHit)
+    occluded[i] = h.valid() ? 1 : 0;
+  else
+    reinterpret_cast<float4*>(hits)[i] = make_float4(h.t, h.u, h.v, __uint_as_float(h.tri));
+}
+
+// One thread per ray, or (Persistent) resident threads that each take a new ray, from a global
+// counter, as soon as theirs finishes: lanes of a warp then stay busy while the rays of the warp
+// need different numbers of nodes (the lanes taking rays at the same time share one atomic).
+template <bool AnyHit, bool Persistent>
 __global__ void __launch_bounds__(128) cwbvhTraceKernel(CwbvhView view, const RootInfo* __restrict__ root,
                                                         const Ray* __restrict__ rays, uint32_t count,
-                                                        Hit* __restrict__ hits, uint8_t* __restrict__ occluded) {
-  const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
-  if (i >= count) return;
+                                                        Hit* __restrict__ hits, uint8_t* __restrict__ occluded,
+                                                        uint32_t* __restrict__ rayCounter) {
   view.rootBox = root->box;
-  const Ray ray = loadRayVec(rays, i);
-  if constexpr (AnyHit) {
-    occluded[i] = cwbvhAnyHit(view, ray) ? 1 : 0;
+  CwbvhTraversal<AnyHit> t;
+  CwbvhNodeGroup stack[kCwbvhStackSize];
+  if constexpr (!Persistent) {
+    const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= count) return;
+    if (t.start(view, loadRayVec(rays, i)))
+      while (t.step(view, stack)) {
+      }
+    storeResult(t, view, i, hits, occluded);
   } else {
-    const Hit h = cwbvhClosestHit(view, ray);
-    reinterpret_cast<float4*>(hits)[i] = make_float4(h.t, h.u, h.v, __uint_as_float(h.tri));
+    const uint32_t lane = threadIdx.x & 31u;
+    uint32_t rayIndex = 0;
+    bool live = false;
+    for (;;) {
+      if (!live) {
+        const unsigned mask = __activemask();
+        const int leader = __ffs(mask) - 1;
+        uint32_t base = 0;
+        if (int(lane) == leader) base = atomicAdd(rayCounter, uint32_t(__popc(mask)));
+        base = __shfl_sync(mask, base, leader);
+        rayIndex = base + uint32_t(__popc(mask & ((1u << lane) - 1u)));
+        if (rayIndex >= count) break;
+        live = t.start(view, loadRayVec(rays, rayIndex));
+      } else {
+        live = t.step(view, stack);
+      }
+      if (!live) storeResult(t, view, rayIndex, hits, occluded);
+    }
   }
+}
+
+template <bool AnyHit, bool Persistent>
+void launchWideTyped(const CwbvhView& view, const RootInfo* root, const Ray* rays, uint32_t count, Hit* hits,
+                     uint8_t* occluded, uint32_t* rayCounter, const TraceLaunch& launch, cudaStream_t stream) {
+  const unsigned block = 128;  // fixed by __launch_bounds__
+  unsigned grid = gridFor(count, block);
+  if constexpr (Persistent) {
+    unsigned resident = launch.blocks;
+    if (resident == 0) {
+      int device = 0, sms = 0, perSm = 0;
+      CUDA_CHECK(cudaGetDevice(&device));
+      CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
+      CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&perSm, cwbvhTraceKernel<AnyHit, true>, int(block), 0));
+      resident = unsigned(sms) * unsigned(perSm > 0 ? perSm : 1);
+    }
+    if (resident < grid) grid = resident;
+  }
+  cwbvhTraceKernel<AnyHit, Persistent><<<grid, block, 0, stream>>>(view, root, rays, count, hits, occluded, rayCounter);
+  CUDA_CHECK_LAUNCH(AnyHit ? "cwbvhTraceKernel<any hit>" : "cwbvhTraceKernel<closest hit>");
 }
 
 }  // namespace
@@ -122,17 +176,17 @@ void launchCwbvhRefit(CwbvhNode* nodes, uint32_t nodeCount, Aabb* exact, const u
 }
 
 void launchCwbvhTrace(const TraceScene& scene, const Ray* rays, uint32_t count, Hit* hits, uint8_t* occluded,
-                      cudaStream_t stream) {
+                      uint32_t* rayCounter, const TraceLaunch& launch, cudaStream_t stream) {
   if (count == 0) return;
   const CwbvhView view = cwbvhView(scene);
-  const unsigned block = 128;  // fixed by __launch_bounds__
-  if (hits) {
-    cwbvhTraceKernel<false><<<gridFor(count, block), block, 0, stream>>>(view, scene.root, rays, count, hits, nullptr);
-    CUDA_CHECK_LAUNCH("cwbvhTraceKernel<closest hit>");
-  } else {
-    cwbvhTraceKernel<true><<<gridFor(count, block), block, 0, stream>>>(view, scene.root, rays, count, nullptr, occluded);
-    CUDA_CHECK_LAUNCH("cwbvhTraceKernel<any hit>");
-  }
+  if (hits && launch.persistent)
+    launchWideTyped<false, true>(view, scene.root, rays, count, hits, nullptr, rayCounter, launch, stream);
+  else if (hits)
+    launchWideTyped<false, false>(view, scene.root, rays, count, hits, nullptr, rayCounter, launch, stream);
+  else if (launch.persistent)
+    launchWideTyped<true, true>(view, scene.root, rays, count, nullptr, occluded, rayCounter, launch, stream);
+  else
+    launchWideTyped<true, false>(view, scene.root, rays, count, nullptr, occluded, rayCounter, launch, stream);
 }
 
 }  // namespace tsah::cuda::detail

@@ -32,8 +32,10 @@ inline CwbvhView cwbvhView(const TraceScene& scene) {
   return view;
 }
 
-// One thread per ray: cwbvhClosestHit into hits (hits != nullptr) or cwbvhAnyHit into occluded.
+// cwbvhClosestHit into hits (hits != nullptr) or cwbvhAnyHit into occluded: one thread per ray, or
+// with launch.persistent resident threads taking rays from rayCounter (one device word, zero on
+// entry) as theirs finish.
 void launchCwbvhTrace(const TraceScene& scene, const Ray* rays, uint32_t count, Hit* hits, uint8_t* occluded,
-                      cudaStream_t stream);
+                      uint32_t* rayCounter, const TraceLaunch& launch, cudaStream_t stream);
 
 }  // namespace tsah::cuda::detail

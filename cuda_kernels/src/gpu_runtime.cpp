@@ -123,7 +123,7 @@ void GpuRuntime::Impl::uploadTree(const FlatBvh& tree, FlatBvh topologyOfTree) {
   r.interiorCount = topology.interiorCount;
   r.depth = topology.depth;
   d.root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&r, 1), stream);
-  if (config.layout == TreeLayout::Cwbvh) d.cwbvh = uploadCwbvh(tree, stream);
+  if (config.layout == TreeLayout::Cwbvh) d.cwbvh = uploadCwbvh(tree, config, stream);
   // The host vectors above are freed when this returns: finish their uploads first.
   CUDA_CHECK(cudaStreamSynchronize(stream));
 }
@@ -197,10 +197,11 @@ void GpuRuntime::Impl::buildVertexTriangles() {
 
 // The 8-wide collapse over all frames of the given tree (WideCollapser), its compressed layout,
 // and what the per-frame refit needs on the device.
-std::unique_ptr<GpuRuntime::Impl::Cwbvh> GpuRuntime::Impl::uploadCwbvh(const FlatBvh& tree, cudaStream_t stream) {
+std::unique_ptr<GpuRuntime::Impl::Cwbvh> GpuRuntime::Impl::uploadCwbvh(const FlatBvh& tree, const Config& settings,
+                                                                         cudaStream_t stream) {
   auto cwbvh = std::make_unique<Cwbvh>();
   Cwbvh& c = *cwbvh;
-  c.host = buildCwbvh(tree);
+  c.host = buildCwbvh(tree, settings.wideCost, settings.wideMaxLeafSize);
   c.nodes = DeviceBuffer<CwbvhNode>(std::span<const CwbvhNode>(c.host.nodes), stream);
   c.exact.resize(c.host.exactBoxes.size());
   c.parentSlot = DeviceBuffer<uint32_t>(std::span<const uint32_t>(c.host.parentSlot), stream);

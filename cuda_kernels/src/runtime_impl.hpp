@@ -90,7 +90,7 @@ struct GpuRuntime::Impl {
   void uploadTree(const FlatBvh& tree, FlatBvh topologyOfTree);
   void releaseDevice() noexcept;
   // The 8-wide collapse over all frames of `tree`, its compressed layout and refit data on the device.
-  static std::unique_ptr<Cwbvh> uploadCwbvh(const FlatBvh& tree, cudaStream_t stream);
+  static std::unique_ptr<Cwbvh> uploadCwbvh(const FlatBvh& tree, const Config& settings, cudaStream_t stream);
   DeviceTree& tree() { return trees[current]; }
   const DeviceTree& tree() const { return trees[current]; }
   std::vector<DeviceTree> trees;

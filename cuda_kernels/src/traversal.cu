@@ -235,8 +235,8 @@ int traceBlocksPerMultiprocessor(bool anyHit, uint32_t blockSize) {
 void launchTrace(const TraceScene& scene, const Ray* rays, uint32_t count, Hit* hits, uint8_t* occluded,
                  uint32_t* rayCounter, const TraceLaunch& launch, cudaStream_t stream) {
   if (count == 0) return;
-  if (scene.cwbvhNodes) {  // the compressed wide layout: one thread per ray (cwbvh.cu)
-    launchCwbvhTrace(scene, rays, count, hits, occluded, stream);
+  if (scene.cwbvhNodes) {  // the compressed wide layout (cwbvh.cu)
+    launchCwbvhTrace(scene, rays, count, hits, occluded, rayCounter, launch, stream);
     return;
   }
   const bool anyHit = hits == nullptr;

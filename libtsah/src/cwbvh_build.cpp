@@ -135,9 +135,11 @@ CwbvhTree buildCwbvh(const WideBvh& wide, uint32_t frame) {
   return t;
 }
 
-CwbvhTree buildCwbvh(const FlatBvh& flat) {
+CwbvhTree buildCwbvh(const FlatBvh& flat, CostModel cost, uint32_t maxLeafSize) {
   WideCollapser::Config config;
   config.width = kCwbvhWidth;
+  config.cost = cost;
+  config.maxLeafSize = maxLeafSize;
   return buildCwbvh(WideCollapser(config).collapse(unflattenBvh(flat)));
 }
 
@@ -203,7 +205,7 @@ std::optional<std::string> validateCwbvh(const CwbvhTree& t, bool checkBoxes) {
         }
         if (checkBoxes) {
           const Aabb& exact = t.exactBoxes[std::size_t(i) * kCwbvhWidth + s];
-          if (!cwbvhChildBox(n, s).contains(exact))
+          if (!cwbvhChildBoxContains(n, s, exact))
             return "node " + std::to_string(i) + " slot " + std::to_string(s) +
                    ": the quantized box does not contain the exact box";
         }

@@ -104,6 +104,10 @@ class GpuRuntime {
     // Layout cwbvh: renderFrameGpu makes each ray in the kernel that traces it (three fused passes,
     // no ray buffers); false runs the separate generation and trace kernels of the binary layout.
     bool fuseWidePasses = true;
+    // Layout cwbvh: the 8-wide collapse of the tree (tsah::WideCollapser) — its cost constants
+    // (cT per wide node visit, cI per triangle) and the largest leaf it makes.
+    CostModel wideCost{};
+    uint32_t wideMaxLeafSize = 8;
   };
 
   // tree: the topology to refit (frame 0's block; its boxes are recomputed by updateAt). Throws

@@ -44,9 +44,9 @@ struct CwbvhTree {
 // the tree is wider than 8 or a node's leaf children hold more than 64 triangles.
 CwbvhTree buildCwbvh(const WideBvh& wide, uint32_t frame = 0);
 
-// The 8-wide T-SAH collapse (WideCollapser, width 8, leaves <= 8 triangles, cT = 3, cI = 2, k = 0)
-// of a flat tree over all its frames, then buildCwbvh.
-CwbvhTree buildCwbvh(const FlatBvh& flat);
+// The 8-wide T-SAH collapse (WideCollapser, width 8, k = 0; by default leaves <= 8 triangles and
+// cT = 3, cI = 2) of a flat tree over all its frames, then buildCwbvh.
+CwbvhTree buildCwbvh(const FlatBvh& flat, CostModel cost = {}, uint32_t maxLeafSize = 8);
 
 // Per frame: exact leaf boxes from the triangles, exact boxes bottom-up, every node re-quantized
 // (cwbvhQuantize), rootBox. Exactly the GPU runtime's refit.

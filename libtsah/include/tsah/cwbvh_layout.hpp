@@ -14,8 +14,10 @@
 //                triangle is triBase + offset; it ends where the next leaf of the node begins, or at
 //                triCount: leaves are stored in slot order)
 //   qlo/qhi      8-bit child box bounds per axis: lo = p + qlo * step, hi = p + qhi * step (float)
-// Quantization is conservative: the decoded box (computed exactly as the traversal decodes it)
-// contains the exact float box, so no ray misses a triangle that the binary tree's traversal hits.
+// Quantization is conservative in real arithmetic: every plane p + q * step, as a real number,
+// lies on the outer side of the exact float box (so the rounded decode does too), and the traversal
+// bounds its slab distances with directed rounding (below), so no ray misses a triangle that the
+// binary tree's traversal hits.
 //
 // Children are placed in slots by direction (the paper's octant order): bit a of the slot is 1
 // for a child on the + side of the node along axis a. A ray whose direction has sign bits `oct`
@@ -27,6 +29,7 @@
 #include <type_traits>
 
 #include "tsah/aabb.hpp"
+#include "tsah/directed_rounding.hpp"
 #include "tsah/gpu_layout.hpp"
 #include "tsah/hd.hpp"
 #include "tsah/ray.hpp"
@@ -77,9 +80,9 @@ TSAH_HD float cwbvhStep(uint32_t e) {
 #endif
 }
 
-// The decoded plane: exactly what the traversal computes (q * step is exact: 8-bit q, power-of-two
-// step; the sum is one rounding), so the quantizer can check its own result.
-// q * step is exact (8-bit q times a power of two), so the fused form rounds once, like p + q * step.
+// The decoded plane rounded to nearest (q * step is exact: 8-bit q times a power of two, so the
+// fused form rounds once, like p + q * step). For tests and the host's view of a child box; the
+// quantizer and the traversal work with the real value p + q * step instead (directed rounding).
 TSAH_HD float cwbvhDecode(float p, float q, float step) {
 #if defined(__CUDA_ARCH__)
   return __fmaf_rn(q, step, p);
@@ -117,7 +120,7 @@ TSAH_HD uint32_t cwbvhExponent(float p, float hi) {
   if (!(d > 0.0f)) e = 1;                     // 0, or NaN
   if (e < 1) e = 1;
   if (e > 254) e = 254;
-  while (e < 254 && !(cwbvhDecode(p, 255, cwbvhStep(e)) >= hi)) ++e;
+  while (e < 254 && !(rounding::addDown(p, 255.0f * cwbvhStep(e)) >= hi)) ++e;  // real p + 255 step >= hi
   return e;
 }
 
@@ -130,28 +133,53 @@ TSAH_HD uint32_t cwbvhGuess(float x, float p, uint32_t e) {
   return uint32_t(f);
 }
 
+// Whether the real plane p + q * step lies at or below x / at or above x (decided exactly: the sum
+// rounded up is <= x exactly when the real sum is, x being a float).
+TSAH_HD bool cwbvhPlaneAtMost(float p, uint32_t q, float step, float x) {
+  return rounding::addUp(p, float(q) * step) <= x;
+}
+TSAH_HD bool cwbvhPlaneAtLeast(float p, uint32_t q, float step, float x) {
+  return rounding::addDown(p, float(q) * step) >= x;
+}
+
+// The largest q whose real plane is at or below lo (q = 0 always is: p is the node's lower corner).
 TSAH_HD uint32_t cwbvhQuantizeLo(float lo, float p, uint32_t e) {
   const float step = cwbvhStep(e);
   uint32_t q = cwbvhGuess(lo, p, e);
-  while (q > 0 && !(cwbvhDecode(p, float(q), step) <= lo)) --q;
-  while (q < 255 && cwbvhDecode(p, float(q + 1), step) <= lo) ++q;
+  while (q > 0 && !cwbvhPlaneAtMost(p, q, step, lo)) --q;
+  while (q < 255 && cwbvhPlaneAtMost(p, q + 1, step, lo)) ++q;
   return q;
 }
 
+// The smallest q whose real plane is at or above hi (q = 255 always is, by the exponent's choice).
 TSAH_HD uint32_t cwbvhQuantizeHi(float hi, float p, uint32_t e) {
   const float step = cwbvhStep(e);
   uint32_t q = cwbvhGuess(hi, p, e);
-  while (q < 255 && !(cwbvhDecode(p, float(q), step) >= hi)) ++q;
-  while (q > 0 && cwbvhDecode(p, float(q - 1), step) >= hi) --q;
+  while (q < 255 && !cwbvhPlaneAtLeast(p, q, step, hi)) ++q;
+  while (q > 0 && cwbvhPlaneAtLeast(p, q - 1, step, hi)) --q;
   return q;
 }
 
 }  // namespace detail
 
+// Whether slot's quantized box, with real (unrounded) planes p + q * step, contains box: what the
+// quantizer guarantees and the traversal's box test relies on.
+TSAH_HD bool cwbvhChildBoxContains(const CwbvhNode& n, uint32_t slot, const Aabb& box) {
+  const float p[3] = {n.px, n.py, n.pz};
+  const uint32_t e[3] = {n.ex, n.ey, n.ez};
+  for (int a = 0; a < 3; ++a) {
+    const float step = cwbvhStep(e[a]);
+    if (!detail::cwbvhPlaneAtMost(p[a], n.qlo[a][slot], step, box.lo[a]) ||
+        !detail::cwbvhPlaneAtLeast(p[a], n.qhi[a][slot], step, box.hi[a]))
+      return false;
+  }
+  return true;
+}
+
 // Sets p, e, qlo and qhi of node n from the exact boxes of its occupied slots (boxes[slot], read
 // only where meta[slot] != 0). Returns the union of those boxes (the node's exact box).
-// Conservative: cwbvhChildBox(n, s).contains(boxes[s]) for every occupied slot, for any finite
-// finite boxes (a plane beyond the float range decodes to +-inf, which still contains it).
+// Conservative: cwbvhChildBoxContains(n, s, boxes[s]) for every occupied slot, for any finite
+// boxes (a plane beyond the float range is +-inf, which still contains it).
 TSAH_HD Aabb cwbvhQuantize(CwbvhNode& n, const Aabb* boxes) {
   Aabb all;
   TSAH_CWBVH_UNROLL
@@ -255,17 +283,19 @@ static_assert(offsetof(CwbvhNode, ex) == 12 && offsetof(CwbvhNode, triCount) == 
 // One bound per axis of the eight children, as the words of the node that hold it: the near planes
 // of a ray with direction signs `oct` (bit a set: dir[a] < 0, the near plane is hi) or, with
 // oct ^ 7, the far planes.
+inline constexpr float kCwbvhGridBias = 8388608.0f;  // 2^23
+
 struct CwbvhPlaneWords {
   uint32_t w[6];  // axis a: words 2a, 2a + 1 (slots 0-3, 4-7)
-  // The bound of `slot` along `axis` as a float (0..255, exact). On the GPU one byte permute makes
-  // the float 2^23 + q (bits 0x4B0000qq) and one subtraction removes 2^23: no integer-to-float
-  // conversion and no shift/mask pair, which kept the integer pipe the traversal's bottleneck.
-  TSAH_HD float at(uint32_t axis, uint32_t slot) const {
+  // The bound q of `slot` along `axis` as the float 2^23 + q (exact: bits 0x4B0000qq). On the GPU
+  // that is one byte permute: no integer-to-float conversion and no shift/mask pair, which kept
+  // the integer pipe the traversal's bottleneck. CwbvhSlabLine takes the 2^23 out of its offset.
+  TSAH_HD float biasedAt(uint32_t axis, uint32_t slot) const {
     const uint32_t word = w[2 * axis + (slot >> 2)];
 #if defined(__CUDA_ARCH__)
-    return __uint_as_float(__byte_perm(word, 0x4B000000u, 0x7440u | (slot & 3u))) - 8388608.0f;
+    return __uint_as_float(__byte_perm(word, 0x4B000000u, 0x7440u | (slot & 3u)));
 #else
-    return float((word >> (8u * (slot & 3u))) & 0xffu);
+    return float((word >> (8u * (slot & 3u))) & 0xffu) + kCwbvhGridBias;
 #endif
   }
 };
@@ -327,6 +357,36 @@ TSAH_HD uint32_t cwbvhPermuteSlots(uint32_t m, uint32_t oct) {
   return m;
 }
 
+// The ray's slab distance to a node's planes along one axis, as a function of the 8-bit grid
+// coordinate q: t(q) = q * c + b with c = step * invDir and b = (p - org) * invDir, evaluated as
+// one FMA per plane on the biased coordinate g = 2^23 + q (CwbvhPlaneWords::biasedAt):
+// t = g * c + (b - 2^23 * c). The near form bounds t from below and the far form from above, by
+// directed rounding of c, of both offsets and of the FMA, so the slab interval computed contains
+// the real one for the real planes p + q * step (which contain the exact box). Folding 2^23 into
+// the offset rounds it at the scale of 2^23 * c, which widens each slab by at most about one grid
+// step (conservative; it saves one subtraction per plane). A NaN (0 * inf, inf - inf from extreme
+// coordinates or a direction near zero) drops out of the min/max of the box test, which only
+// widens the interval. Together with kSlabFarScale (the rounding of invDir, as in intersectBox)
+// no ray misses a box that the binary traversal enters.
+struct CwbvhSlabLine {
+  float nearC, nearB, farC, farB;  // near: t >= g * nearC + nearB; far: t <= g * farC + farB
+
+  TSAH_HD float nearAt(float g) const { return rounding::fmaDown(g, nearC, nearB); }
+  TSAH_HD float farAt(float g) const { return rounding::fmaUp(g, farC, farB); }
+};
+
+TSAH_HD CwbvhSlabLine cwbvhSlabLine(float p, float step, float org, float invDir, uint32_t negative) {
+  const float dLo = rounding::subDown(p, org), dHi = rounding::subUp(p, org);  // p - org
+  CwbvhSlabLine l;
+  l.nearC = rounding::mulDown(step, invDir);
+  l.farC = rounding::mulUp(step, invDir);
+  const float nearB = rounding::mulDown(negative ? dHi : dLo, invDir);  // invDir < 0 flips which end is lower
+  const float farB = rounding::mulUp(negative ? dLo : dHi, invDir);
+  l.nearB = rounding::fmaDown(-kCwbvhGridBias, l.nearC, nearB);
+  l.farB = rounding::fmaUp(-kCwbvhGridBias, l.farC, farB);
+  return l;
+}
+
 // A group of interior children still to visit (the paper's node group): the children's base
 // index, their interior-slot mask and the hit children as bits of slot ^ oct.
 struct CwbvhNodeGroup {
@@ -356,31 +416,51 @@ TSAH_HD bool cwbvhTriangle(const CwbvhView& v, const Ray& ray, const RayPrep& pr
   return true;
 }
 
+}  // namespace detail
+
 // The paper's stack-based traversal: a node's hit interior children become one node group
 // (visited in octant order), its hit leaves one triangle group, tested at once. The box test is
-// intersectBox (ray.hpp) on the decoded boxes, the triangle test intersectTriangle (woop.hpp).
-template <bool AnyHit, int StackSize>
-TSAH_HD Hit cwbvhTraverse(const CwbvhView& v, const Ray& ray) {
-  Hit hit;
-  const RayPrep prep = prepareRay(ray);
-  float tmax = ray.tmax;
-  float tEntry;
-  if (isLeafRef(v.rootRef)) {  // a tree that is one leaf (or empty)
-    if (v.rootCount == 0 || !intersectBox(prep, v.rootBox, ray.tmin, tmax, tEntry)) return hit;
-    const uint32_t first = leafFirstSlot(v.rootRef);
-    for (uint32_t s = first; s < first + v.rootCount; ++s)
-      if (cwbvhTriangle(v, ray, prep, s, tmax, hit) && AnyHit) break;
-    if (hit.valid()) hit.tri = cwbvhLoadU32(v.triIndex + hit.tri);
-    return hit;
+// the ray-local one of CwbvhSlabLine (intersectBox for a root that is one leaf), the triangle test
+// intersectTriangle (woop.hpp). Written as a state that advances one node per step(), so that a
+// GPU kernel may interleave rays (a persistent thread takes a new ray when its ray finishes);
+// cwbvhClosestHit / cwbvhAnyHit run it to the end.
+template <bool AnyHit>
+struct CwbvhTraversal {
+  Ray ray;
+  RayPrep prep;
+  Hit hit;           // hit.tri: the triangle slot until result()
+  float tmax;
+  uint32_t oct;      // bit a: dir[a] < 0
+  CwbvhNodeGroup group;
+  int sp;  // entries in the caller's stack (kept apart from this state, which then stays in registers)
+
+  // Sets up the ray; returns whether any node remains to visit (false: result() is final, as for a
+  // tree that is one leaf).
+  TSAH_HD bool start(const CwbvhView& v, const Ray& r) {
+    ray = r;
+    hit = Hit{};
+    prep = prepareRay(r);
+    tmax = r.tmax;
+    sp = 0;
+    group = {0u, 0u};
+    if (isLeafRef(v.rootRef)) {  // a tree that is one leaf (or empty)
+      float tEntry;
+      if (v.rootCount == 0 || !intersectBox(prep, v.rootBox, r.tmin, tmax, tEntry)) return false;
+      const uint32_t first = leafFirstSlot(v.rootRef);
+      for (uint32_t s = first; s < first + v.rootCount; ++s)
+        if (detail::cwbvhTriangle(v, r, prep, s, tmax, hit) && AnyHit) break;
+      return false;
+    }
+    oct = (r.dir.x < 0.0f ? 1u : 0u) | (r.dir.y < 0.0f ? 2u : 0u) | (r.dir.z < 0.0f ? 4u : 0u);
+    group = {0u, (1u << oct) | (1u << 8)};  // the root as a group of one: interior slot 0, key 0 ^ oct
+    return true;
   }
-  const uint32_t oct = (ray.dir.x < 0.0f ? 1u : 0u) | (ray.dir.y < 0.0f ? 2u : 0u) | (ray.dir.z < 0.0f ? 4u : 0u);
-  CwbvhNodeGroup stack[StackSize];
-  int sp = 0;
-  // The root as a group of one: base 0, interior slot 0, hit key 0 ^ oct.
-  CwbvhNodeGroup group{0u, (1u << oct) | (1u << 8)};
-  for (;;) {
+
+  // Visits one node: its children's boxes, the triangles of its hit leaves. Returns whether nodes
+  // remain (false: finished, or an any-hit ray found its hit).
+  TSAH_HD bool step(const CwbvhView& v, CwbvhNodeGroup* stack) {
     if ((group.bits & 0xffu) == 0) {
-      if (sp == 0) break;
+      if (sp == 0) return false;
       group = stack[--sp];
     }
     const uint32_t key = cwbvhLowestBit(group.bits & 0xffu);
@@ -389,26 +469,22 @@ TSAH_HD Hit cwbvhTraverse(const CwbvhView& v, const Ray& ray) {
     const uint32_t imask = group.bits >> 8;
     const uint32_t nodeIndex = group.base + cwbvhPopc(imask & ((1u << slot) - 1u));
     const CwbvhNodeWords n = cwbvhLoadNode(v.nodes, nodeIndex);
-    const Vec3 p{n.floatAt(0), n.floatAt(1), n.floatAt(2)};
-    const float sx = cwbvhStep(n.byteAt(12)), sy = cwbvhStep(n.byteAt(13)), sz = cwbvhStep(n.byteAt(14));
+    const CwbvhSlabLine x = cwbvhSlabLine(n.floatAt(0), cwbvhStep(n.byteAt(12)), prep.org.x, prep.invDir.x, oct & 1u);
+    const CwbvhSlabLine y = cwbvhSlabLine(n.floatAt(1), cwbvhStep(n.byteAt(13)), prep.org.y, prep.invDir.y, oct & 2u);
+    const CwbvhSlabLine z = cwbvhSlabLine(n.floatAt(2), cwbvhStep(n.byteAt(14)), prep.org.z, prep.invDir.z, oct & 4u);
     // Near and far planes per axis by the ray's direction (octant): for dir >= 0 the near plane is
-    // lo, else hi. min/max of the two planes would pick the same value (decode and slab are
-    // monotone in q), so this is intersectBox's result with half the comparisons.
+    // lo, else hi. Every slot's box is tested, empty ones too (their planes are garbage, but the
+    // hit bit is masked out below): the slot loop then carries no per-child meta decoding, which
+    // kept the integer pipe busy. The child kinds come from the meta words as masks, once per node.
     const CwbvhPlaneWords near = cwbvhNearPlanes(n, oct), far = cwbvhNearPlanes(n, oct ^ 7u);
-    // Every slot's box is tested, empty ones too (their planes are garbage, but the hit bit is
-    // masked out below): the slot loop then carries no per-child meta decoding, which kept the
-    // integer pipe busy. The child kinds come from the meta words as masks, once per node.
     uint32_t boxHits = 0;
     TSAH_CWBVH_UNROLL
     for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
-      const float nx = (cwbvhDecode(p.x, near.at(0, s), sx) - prep.org.x) * prep.invDir.x;
-      const float ny = (cwbvhDecode(p.y, near.at(1, s), sy) - prep.org.y) * prep.invDir.y;
-      const float nz = (cwbvhDecode(p.z, near.at(2, s), sz) - prep.org.z) * prep.invDir.z;
-      const float fx = (cwbvhDecode(p.x, far.at(0, s), sx) - prep.org.x) * prep.invDir.x;
-      const float fy = (cwbvhDecode(p.y, far.at(1, s), sy) - prep.org.y) * prep.invDir.y;
-      const float fz = (cwbvhDecode(p.z, far.at(2, s), sz) - prep.org.z) * prep.invDir.z;
-      const float tn = fmaxf_(fmaxf_(nx, ny), fmaxf_(nz, ray.tmin));
-      const float tf = fminf_(fminf_(fx, fy), fminf_(fz, tmax)) * kSlabFarScale;
+      const float tn = rounding::maxNum(rounding::maxNum(x.nearAt(near.biasedAt(0, s)), y.nearAt(near.biasedAt(1, s))),
+                                        rounding::maxNum(z.nearAt(near.biasedAt(2, s)), ray.tmin));
+      const float tf = rounding::minNum(rounding::minNum(x.farAt(far.biasedAt(0, s)), y.farAt(far.biasedAt(1, s))),
+                                        rounding::minNum(z.farAt(far.biasedAt(2, s)), tmax)) *
+                       kSlabFarScale;
       if (tn <= tf) boxHits |= 1u << s;
     }
     const uint32_t childInterior = n.interiorSlots(), leafSlots = n.leafSlots();
@@ -417,41 +493,54 @@ TSAH_HD Hit cwbvhTraverse(const CwbvhView& v, const Ray& ray) {
     const uint32_t childHits = cwbvhPermuteSlots(boxHits & childInterior, oct);
     // The triangle group: every triangle of the hit leaves, in slot (= storage) order. A leaf ends
     // where the node's next leaf begins, or at triCount.
-    bool done = false;
-    while (hitLeafSlots != 0 && !done) {
+    while (hitLeafSlots != 0) {
       const uint32_t leafSlot = cwbvhLowestBit(hitLeafSlots);
       hitLeafSlots &= hitLeafSlots - 1;
       const uint32_t first = n.metaOf(leafSlot) & 0x3fu;
       const uint32_t later = leafSlots & ~((2u << leafSlot) - 1u);
       const uint32_t end = later != 0 ? n.metaOf(cwbvhLowestBit(later)) & 0x3fu : n.byteAt(15);
       for (uint32_t o = first; o < end; ++o) {
-        if (cwbvhTriangle(v, ray, prep, n.w[5] + o, tmax, hit) && AnyHit) {
-          done = true;
-          break;
+        if (detail::cwbvhTriangle(v, ray, prep, n.w[5] + o, tmax, hit) && AnyHit) {
+          group.bits = 0;  // any hit: done
+          sp = 0;
+          return false;
         }
       }
     }
-    if (done) break;
     if (childHits != 0) {
       if ((group.bits & 0xffu) != 0) stack[sp++] = group;
       group = {n.w[4], childHits | (childInterior << 8)};
     }
+    return (group.bits & 0xffu) != 0 || sp != 0;
   }
-  if (hit.valid()) hit.tri = cwbvhLoadU32(v.triIndex + hit.tri);
-  return hit;
-}
 
-}  // namespace detail
+  // The hit with the triangle id (of the animation) in place of the slot.
+  TSAH_HD Hit result(const CwbvhView& v) const {
+    Hit h = hit;
+    if (h.valid()) h.tri = cwbvhLoadU32(v.triIndex + h.tri);
+    return h;
+  }
+};
+
+template <bool AnyHit, int StackSize>
+TSAH_HD Hit cwbvhTraverse(const CwbvhView& v, const Ray& ray) {
+  CwbvhTraversal<AnyHit> t;
+  CwbvhNodeGroup stack[StackSize];
+  if (t.start(v, ray))
+    while (t.step(v, stack)) {
+    }
+  return t.result(v);
+}
 
 // Stack entries: one per wide level at most (a node pushes its remaining group once), so the
 // binary tree's depth limit (kTraversalStackSize = 128) bounds it as well.
 inline constexpr int kCwbvhStackSize = 128;
 
 TSAH_HD Hit cwbvhClosestHit(const CwbvhView& v, const Ray& ray) {
-  return detail::cwbvhTraverse<false, kCwbvhStackSize>(v, ray);
+  return cwbvhTraverse<false, kCwbvhStackSize>(v, ray);
 }
 TSAH_HD bool cwbvhAnyHit(const CwbvhView& v, const Ray& ray) {
-  return detail::cwbvhTraverse<true, kCwbvhStackSize>(v, ray).valid();
+  return cwbvhTraverse<true, kCwbvhStackSize>(v, ray).valid();
 }
 
 }  // namespace tsah
