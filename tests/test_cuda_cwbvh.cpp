@@ -104,11 +104,15 @@ TEST(CudaCwbvh, HitsEqualCpuReferenceAndBinaryGpu) {
     const anim::Animation a = generatedAnimation(kind, 8000, 6);
     const tsah::FlatBvh tree = sahTree(a);
     tc::GpuRuntime gpuWide(tree, a, wide());
+    tc::GpuRuntime::Config persistentConfig = wide();
+    persistentConfig.persistentTraversal = true;
+    tc::GpuRuntime gpuWidePersistent(tree, a, persistentConfig);
     tc::GpuRuntime gpuBinary(tree, a);
     tsah::CwbvhTree host = tsah::buildCwbvh(tree);
     uint32_t hits = 0, ties = 0;
     for (double t : {0.0, 2.3}) {
       gpuWide.updateAt(t);
+      gpuWidePersistent.updateAt(t);
       gpuBinary.updateAt(t);
       const auto pos = a.positionsAt(t);
       tsah::refitCwbvh(host, a.indices(), pos);
@@ -125,6 +129,11 @@ TEST(CudaCwbvh, HitsEqualCpuReferenceAndBinaryGpu) {
       const auto binaryHits = gpuBinary.closestHits(rays);
       const auto wideAny = gpuWide.anyHits(rays);
       const auto binaryAny = gpuBinary.anyHits(rays);
+      // Persistent threads (rays taken from a counter as lanes finish): the same results, ray by ray.
+      const auto persistentHits = gpuWidePersistent.closestHits(rays);
+      const auto persistentAny = gpuWidePersistent.anyHits(rays);
+      ASSERT_EQ(std::memcmp(persistentHits.data(), wideHits.data(), wideHits.size() * sizeof wideHits[0]), 0);
+      ASSERT_EQ(persistentAny, wideAny);
       for (size_t i = 0; i < rays.size(); ++i) {
         // The GPU runs the reference code on the same data: bit-equal.
         const tsah::Hit ref = tsah::cwbvhClosestHit(view, rays[i]);
