@@ -57,15 +57,15 @@ tc::RebuildOptions options(tc::RebuildMethod method, bool collapse) {
 }
 
 // The host emulation on the device's binary arrays.
-tsah::CwbvhTree hostConversion(const tc::GpuRuntime& gpu) {
+tsah::CwbvhTree hostConversion(const tc::GpuRuntime& gpu, uint32_t merge = tsah::kCwbvhDefaultMergeTriangles) {
   const tsah::FlatBvh raw = gpu.downloadRebuiltArrays();
   const tsah::BinaryTreeView view{raw.nodes.data(), raw.interiorCount, raw.triIndex.data(), raw.triangleCount()};
-  return tsah::convertToCwbvh(view, raw.rootRef, raw.rootCount, raw.rootBoxes[0]);
+  return tsah::convertToCwbvh(view, raw.rootRef, raw.rootCount, raw.rootBoxes[0], merge);
 }
 
 void expectEqualToHost(const tc::GpuRuntime& gpu, const tc::RebuildTimings& timings, const anim::Animation& a,
-                       double t) {
-  const tsah::CwbvhTree host = hostConversion(gpu);
+                       double t, uint32_t merge = tsah::kCwbvhDefaultMergeTriangles) {
+  const tsah::CwbvhTree host = hostConversion(gpu, merge);
   ASSERT_EQ(tsah::validateCwbvh(host), std::nullopt);
   const tsah::CwbvhTree device = gpu.downloadRebuiltCwbvh();
   ASSERT_EQ(device.nodes.size(), host.nodes.size()) << "t=" << t;
@@ -94,6 +94,12 @@ TEST(CudaCwbvhRebuild, ConversionEqualsHostEmulation) {
           EXPECT_GE(timings.totalMs(), timings.buildMs() + timings.wideMs);
           expectEqualToHost(gpu, timings, a, t);
         }
+    for (uint32_t merge : {0u, 2u, 8u}) {  // RebuildOptions::wideMergeTriangles
+      tc::RebuildOptions o = options(tc::RebuildMethod::HlbvhSah, false);
+      o.wideMergeTriangles = merge;
+      const tc::RebuildTimings timings = gpu.rebuildAt(1.0, o);
+      expectEqualToHost(gpu, timings, a, 1.0, merge);
+    }
   }
 }
 

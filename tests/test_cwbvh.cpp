@@ -160,22 +160,11 @@ void compareWithBinary(const anim::Animation& a, uint32_t rayCount, uint32_t see
   const tsah::FlatBvh flat = tsah::flattenBvh(bvh);
   tsah::CwbvhTree t = tsah::buildCwbvh(flat);
   tsah::CpuRuntime rt(flat, {a.indices().begin(), a.indices().end()}, a.vertexCount(), {2});
-  std::mt19937 rng(seed);
-  uint32_t hits = 0, ties = 0;
-  for (double time : {a.startTime(), 0.37 * a.endTime(), a.endTime()}) {
-    const auto pos = a.positionsAt(time);
-    rt.update(pos);
+  auto refitted = [&](std::span<const float> pos, const tsah::BvhView&) -> const tsah::CwbvhTree& {
     tsah::refitCwbvh(t, a.indices(), pos);
-    const auto woop = tsah::test::cwbvhWoop(t, a.indices(), pos);
-    const tsah::CwbvhView cv = t.view(woop.data(), a.indices().data(), pos.data());
-    const tsah::BvhView bv = rt.view();
-    const auto rays = tsah::test::randomRays(bv, a.triangleCount(), rt.bounds(), rayCount, rng);
-    const tsah::test::HitAgreement agree = tsah::test::expectSameHits(bv, cv, rays);
-    hits += agree.hits;
-    ties += agree.ties;
-  }
-  EXPECT_GT(hits, rayCount / 4);
-  EXPECT_LE(ties, hits / 100 + 5);
+    return t;
+  };
+  tsah::test::expectWideTraversalMatchesBinary(a, rt, rayCount, seed, refitted);
 }
 
 TEST(CwbvhTraversal, EqualsBinaryTraversal) {

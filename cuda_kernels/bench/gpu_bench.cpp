@@ -37,6 +37,7 @@
 #include "tsah/leaf_collapser.hpp"
 #include "tsah/renderer.hpp"
 #include "tsah/sah_builder.hpp"
+#include "tsah/cwbvh_convert.hpp"
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 
@@ -56,6 +57,7 @@ struct Options {
   bool noRender = false, cpuCompare = false, noGraphs = false, noFuse = false;
   std::string imageDir;
   std::string builder = "sweep";
+  uint32_t wideMerge = tsah::kCwbvhDefaultMergeTriangles;  // RebuildOptions::wideMergeTriangles
 };
 
 json summary(std::vector<double> v) {
@@ -219,8 +221,10 @@ json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim:
   bare.method = method;
   bare.collapse = false;
   bare.woop = false;
+  bare.wideMergeTriangles = opt.wideMerge;
   tc::RebuildOptions full;
   full.method = method;
+  full.wideMergeTriangles = opt.wideMerge;
   rt.rebuildAt(times.front(), bare);  // warm-up (allocations, CUB, module load)
   rt.rebuildAt(times.front(), full);
   if (!opt.noRender) tc::renderFrameGpu(rt, scene.camera(times.front()), scene.lighting, settings, nullptr);
@@ -276,7 +280,10 @@ json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim:
   j["interpolate_ms"] = summary(s.interpolate);
   j["tree"] = {{"leaves", summary(leaves)}, {"depth", summary(depth)}};
   if (method == tc::RebuildMethod::HlbvhSah) j["tree"]["clusters"] = summary(clusters);
-  if (layout == tc::TreeLayout::Cwbvh) j["tree"]["wide_nodes"] = summary(wideNodes);
+  if (layout == tc::TreeLayout::Cwbvh) {
+    j["tree"]["wide_nodes"] = summary(wideNodes);
+    j["wide_merge_triangles"] = opt.wideMerge;
+  }
   if (!opt.noRender) j["trace"] = s.traceJson();
   j["total_ms"] = summary(s.total);
   j["per_frame"] = {{"update_ms", s.update}, {"bare_build_ms", s.bareBuild}, {"total_ms", s.total}};
@@ -432,6 +439,9 @@ int main(int argc, char** argv) {
   app.add_option("--shadow", opt.shadow, "Shadow rays per pixel (default 2)");
   app.add_option("--traversal", opt.traversal, "simple (one thread per ray, the default), persistent or both");
   app.add_option("--layout", opt.layout, "Layouts of the refitted and rebuilt trees: bvh2, cwbvh or both comma separated (default both)");
+  app.add_option("--wide-merge", opt.wideMerge,
+                 "cwbvh rebuilds: binary subtrees of at most this many triangles become one wide leaf (0-8, default 3)")
+      ->check(CLI::Range(0u, tsah::kCwbvhMaxLeafTriangles));
   app.add_flag("--no-fuse", opt.noFuse, "cwbvh: separate ray generation and trace kernels (as bvh2) instead of fused passes");
   app.add_flag("--no-graphs", opt.noGraphs, "Launch every kernel instead of replaying CUDA graphs");
   app.add_flag("--no-render", opt.noRender, "Time the updates and rebuilds only");

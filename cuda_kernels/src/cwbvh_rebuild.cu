@@ -139,13 +139,10 @@ GpuCwbvhConverter::GpuCwbvhConverter(uint32_t triangles) : n_(triangles) {
   starts_.resize(maxNodes);
   triIndex_.resize(n_);
   words_.resize(kConvertWords);
-  int device = 0, sms = 0, perSm = 0;
-  CUDA_CHECK(cudaGetDevice(&device));
-  CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
-  CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&perSm, cwbvhConvertKernel, kConvertBlock, 0));
   // All blocks must be resident (the grid barrier); two per multiprocessor are enough threads for
-  // the widest levels, and fewer blocks make each barrier cheaper.
-  blocks_ = std::max(1, sms * std::clamp(perSm, 1, 2));
+  // the widest levels, and fewer blocks make each barrier cheaper: a small tree gets about one
+  // thread per 8 triangles (a wide node holds ~8 or more; wider levels just take more rounds).
+  blocks_ = std::min(residentBlocks(cwbvhConvertKernel, kConvertBlock, 2), int(gridFor(n_ / 8, kConvertBlock)));
   blockSums_.resize(2 * std::size_t(blocks_));
 }
 

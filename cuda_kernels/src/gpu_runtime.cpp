@@ -352,7 +352,8 @@ namespace {
 
 bool sameOptions(const RebuildOptions& a, const RebuildOptions& b) {
   return a.method == b.method && a.collapse == b.collapse && a.maxLeafSize == b.maxLeafSize &&
-         a.cost.ct == b.cost.ct && a.cost.ci == b.cost.ci && a.woop == b.woop;
+         a.cost.ct == b.cost.ct && a.cost.ci == b.cost.ci && a.woop == b.woop &&
+         a.wideMergeTriangles == b.wideMergeTriangles;
 }
 
 }  // namespace

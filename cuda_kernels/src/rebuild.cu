@@ -704,16 +704,6 @@ __global__ void bottomUpKernel(BottomUpParams p) {
   }
 }
 
-template <typename Kernel>
-int residentBlocks(Kernel kernel, int blockSize) {
-  int device = 0, sms = 0, perSm = 0;
-  CUDA_CHECK(cudaGetDevice(&device));
-  CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
-  CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&perSm, kernel, blockSize, 0));
-  // More than a few blocks per multiprocessor would only add blocks spinning on the queue.
-  return std::max(1, sms * std::min(4, std::max(1, perSm)));
-}
-
 }  // namespace
 
 GpuRebuilder::GpuRebuilder(uint32_t triangles, TreeLayout layout) : n_(triangles), events_(8) {  // see collect
@@ -755,7 +745,8 @@ GpuRebuilder::GpuRebuilder(uint32_t triangles, TreeLayout layout) : n_(triangles
                                              sortedIds_.data(), int64_t(n), 0, kMortonBits));
   CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, scanBytes, headFlags_.data(), clusterOf_.data(), int64_t(n)));
   cubTemp_.resize(std::max<std::size_t>({sortBytes, scanBytes, 1}));
-  topBlocks_ = residentBlocks(clusterTreeKernel, kTopBlock);
+  // More than a few blocks per multiprocessor would only add blocks spinning on the queue.
+  topBlocks_ = residentBlocks(clusterTreeKernel, kTopBlock, 4);
   int device = 0, sms = 0;
   CUDA_CHECK(cudaGetDevice(&device));
   CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
@@ -874,7 +865,7 @@ void GpuRebuilder::enqueue(const uint32_t* indices, const float* positions, cons
   // The wide layout: the binary nodes' array (unreferenced nodes are never read), then the Woop
   // triangles of the wide layout's slots.
   if (wide)
-    wide_->enqueue(nodes_.data(), uint32_t(nodes_.size()), slotTri_.data(), root_.data(), kCwbvhDefaultMergeTriangles,
+    wide_->enqueue(nodes_.data(), uint32_t(nodes_.size()), slotTri_.data(), root_.data(), options.wideMergeTriangles,
                    stream);
   events_.record(6, stream);
   if (options.woop) launchWoop(wide ? wide_->triIndex() : slotTri_.data(), n, indices, positions, woop, stream);

@@ -177,4 +177,23 @@ HitAgreement expectSameHits(const BvhView& binary, const CwbvhView& wide, std::s
   return a;
 }
 
+void expectWideTraversalMatchesBinary(const anim::Animation& a, CpuRuntime& rt, uint32_t rayCount, uint32_t seed,
+                                      const WideTreeAt& wideAt) {
+  std::mt19937 rng(seed);
+  uint32_t hits = 0, ties = 0;
+  for (double time : {a.startTime(), 0.37 * a.endTime(), a.endTime()}) {
+    const auto pos = a.positionsAt(time);
+    rt.update(pos);
+    const BvhView bv = rt.view();
+    const CwbvhTree& t = wideAt(pos, bv);
+    const auto woop = cwbvhWoop(t, a.indices(), pos);
+    const CwbvhView cv = t.view(woop.data(), a.indices().data(), pos.data());
+    const HitAgreement agree = expectSameHits(bv, cv, randomRays(bv, a.triangleCount(), rt.bounds(), rayCount, rng));
+    hits += agree.hits;
+    ties += agree.ties;
+  }
+  EXPECT_GT(hits, rayCount / 4);
+  EXPECT_LE(ties, hits / 100 + 5);
+}
+
 }  // namespace tsah::test

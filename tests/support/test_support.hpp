@@ -7,10 +7,12 @@
 
 #include "anim/animation.hpp"
 #include "anim/generators.hpp"
+#include <functional>
 #include <random>
 #include <span>
 
 #include "tsah/bvh.hpp"
+#include "tsah/cpu_runtime.hpp"
 #include "tsah/cwbvh_build.hpp"
 #include "tsah/parallel_optimizer.hpp"
 #include "tsah/traversal.hpp"
@@ -70,5 +72,12 @@ struct HitAgreement {
   uint32_t hits = 0, ties = 0;
 };
 HitAgreement expectSameHits(const BvhView& binary, const CwbvhView& wide, std::span<const Ray> rays);
+
+// At three times of `a` (start, 0.37 * end, end): updates rt (the binary CPU runtime of a tree for
+// `a`), gets the compressed tree for those positions from wideAt, and runs expectSameHits on
+// rayCount random rays; then expects a quarter of the rays to hit and ties in at most 1% + 5.
+using WideTreeAt = std::function<const CwbvhTree&(std::span<const float> positions, const BvhView& binary)>;
+void expectWideTraversalMatchesBinary(const anim::Animation& a, CpuRuntime& rt, uint32_t rayCount, uint32_t seed,
+                                      const WideTreeAt& wideAt);
 
 }  // namespace tsah::test

@@ -63,6 +63,9 @@ struct RebuildOptions {
   CostModel cost;
   // Woop triangles of the new tree (tracing needs them; false only to time the bare build).
   bool woop = true;
+  // Layout cwbvh: binary subtrees of at most this many triangles (in one slot range) become one
+  // leaf of the compressed tree (0 or 1: only the binary leaves; at most 8). The paper's leaves: 3.
+  uint32_t wideMergeTriangles = 3;
 };
 
 // Device time of one rebuild, in milliseconds (CUDA events), and what was built.
