@@ -369,7 +369,8 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
   sub->add_option("--layout", b.layout,
                   "Tree layout of Table 2: auto (the device's fastest: on the CPU the widest the processor's SIMD "
                   "kernels support, also the default of the Embree comparison), CPU bvh2, bvh4 or bvh8, cuda bvh2 "
-                  "or cwbvh (compressed 8-wide)")
+                  "or cwbvh (compressed 8-wide: the refitted trees and the LBVH / HLBVH-SAH rebuilds, whose "
+                  "conversion on the GPU counts in their update)")
       ->check(CLI::IsMember({"auto", "bvh2", "bvh4", "bvh8", "cwbvh"}))
       ->capture_default_str();
   sub->add_flag("--no-convergence", opt->noConvergence, "Skip the random and batch-sort optimizations of the convergence plot");

@@ -27,6 +27,7 @@
 #include "tsah/sah_builder.hpp"
 #if TSAH_HAVE_CUDA
 #include "tsah_cuda/device.hpp"
+#include "tsah/cwbvh_convert.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 #endif
 
@@ -206,7 +207,7 @@ class GpuFrameRuntime final : public FrameRuntime {
     FrameUpdate u;
     if (rebuild_) {
       const tsah::cuda::RebuildTimings t = runtime_.rebuildAt(time, *rebuild_);
-      u = {t.interpolateMs, t.woopMs, t.buildMs(), t.totalMs()};
+      u = {t.interpolateMs, t.woopMs, t.buildMs() + t.wideMs, t.totalMs()};  // layout cwbvh: with the conversion
     } else {
       const tsah::cuda::UpdateTimings t = runtime_.updateAt(time);
       u = {t.interpolateMs, t.refitMs + t.woopMs, 0.0, t.totalMs()};
@@ -257,6 +258,10 @@ std::unique_ptr<FrameRuntime> makeRuntime(const TraceOptions& opt, const tsah::T
     }
     tsah::cuda::GpuRuntime::Config config;
     if (opt.layout != "auto") config.layout = tsah::cuda::parseTreeLayout(opt.layout);
+    // The compressed layout holds leaves of at most 8 triangles (64 per node), as its refit path's
+    // collapse does.
+    if (rebuild && config.layout == tsah::cuda::TreeLayout::Cwbvh)
+      rebuild->maxLeafSize = std::min(rebuild->maxLeafSize, tsah::kCwbvhMaxLeafTriangles);
     return std::make_unique<GpuFrameRuntime>(trees, a, rebuild, config);
   }
 #endif
@@ -497,7 +502,9 @@ TSAH_REGISTER_COMMAND(70, [](CLI::App& app) {
   sub->add_flag("--no-ground", opt->noGround, "No ground plane: only the animated mesh (as in the paper's runs)");
   sub->add_option("--rebuild", opt->rebuild,
                   "none: refit the given tree (default); otherwise build a new tree every frame (baseline): "
-                  "sweep or binned SAH on the CPU (--device cpu), lbvh or hlbvh-sah on the GPU (--device cuda)")
+                  "sweep or binned SAH on the CPU (--device cpu), lbvh or hlbvh-sah on the GPU (--device cuda; "
+                  "with --layout cwbvh each rebuilt tree is converted to the compressed 8-wide layout on the GPU, "
+                  "and the conversion counts in the update)")
       ->check(CLI::IsMember({"none", "sweep", "binned", "lbvh", "hlbvh-sah"}));
   sub->add_option("--camera", opt->camera, "Camera JSON file: {eye, look_at, up, fov} or {keys: [{time, ...}]}");
   sub->add_option("--eye", opt->eye, "Camera position x,y,z (with --look-at)");
@@ -507,7 +514,8 @@ TSAH_REGISTER_COMMAND(70, [](CLI::App& app) {
   sub->add_option("--threads", opt->threads, "CPU worker threads (0: all cores)");
   sub->add_option("--layout", opt->layout,
                   "Tree layout: CPU bvh2 (the binary tree), bvh4 or bvh8 (wide trees collapsed from it at load "
-                  "time); GPU bvh2 or cwbvh (compressed 8-wide, docs/cwbvh.md); default auto: on the CPU the widest "
+                  "time); GPU bvh2 or cwbvh (compressed 8-wide, docs/cwbvh.md; for the refitted tree and the "
+                  "--rebuild trees); default auto: on the CPU the widest "
                   "the processor's SIMD kernels support, on the GPU the runtime's default")
       ->check(CLI::IsMember({"auto", "bvh2", "bvh4", "bvh8", "cwbvh"}));
   sub->add_option("--isa", opt->isa, "CPU SIMD kernels of a wide layout: sse, avx2 or avx512 (default auto: the best)")

@@ -8,7 +8,7 @@
 # Prepare on the build machine (docs/fuzzing.md, "GPU sanitizers"):
 #   cmake -S . -B build/cuda -DCMAKE_CUDA_ARCHITECTURES=90 -DCMAKE_BUILD_TYPE=RelWithDebInfo
 #   cmake --build build/cuda -j2 --target tsah tsah_gpu_bench test_cuda_runtime test_cuda_tree_set \
-#     test_cuda_optimizer
+#     test_cuda_optimizer test_cuda_cwbvh test_cuda_cwbvh_rebuild
 #   ../shared/tools/gpu-bundle build/cuda .gpu
 # Run (device tool, carry [".gpu"]):  bash scripts/gpu-sanitize.sh [TOOLS]   (default: all four)
 set -u
@@ -44,6 +44,8 @@ declare -A runs=(
   [trace-refit]="${trace[*]}"
   [trace-lbvh]="${trace[*]} --rebuild lbvh"
   [trace-hlbvh-sah]="${trace[*]} --rebuild hlbvh-sah"
+  [trace-lbvh-cwbvh]="${trace[*]} --rebuild lbvh --layout cwbvh"
+  [trace-hlbvh-sah-cwbvh]="${trace[*]} --rebuild hlbvh-sah --layout cwbvh"
   [trace-tree-set]="./bin/tsah trace $work/s.tanim $work/set.tbvh --device cuda --frames 3 --width 96 --height 64 --ao 2 --shadow 1 --no-images"
   [gpu-bench]="./bin/tsah_gpu_bench --input $work/s.tanim --tree tsah=$work/s.tbvh --frames 2 --width 128 --height 96 --traversal both --rebuild lbvh,hlbvh-sah"
 )

@@ -83,18 +83,6 @@ TEST(CwbvhQuantize, GridIsTightForOrdinaryBoxes) {
   EXPECT_EQ(q.lo.x, 0.0f);
 }
 
-// Woop triangles per slot of the compressed layout.
-std::vector<tsah::WoopTriangle> woopOf(const tsah::CwbvhTree& t, std::span<const uint32_t> idx,
-                                       std::span<const float> pos) {
-  std::vector<tsah::WoopTriangle> w(t.triIndex.size());
-  for (size_t s = 0; s < w.size(); ++s) {
-    const uint32_t* tri = idx.data() + 3 * std::size_t(t.triIndex[s]);
-    auto v = [&](uint32_t i) { return Vec3{pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]}; };
-    w[s] = tsah::makeWoopTriangle(v(tri[0]), v(tri[1]), v(tri[2]));
-  }
-  return w;
-}
-
 tsah::Bvh sahTreeOverFrames(std::span<const uint32_t> indices, std::span<const float> positions, uint32_t frames) {
   const tsah::PrimitiveBoxes boxes = tsah::triangleBoxes(indices, positions, frames);
   tsah::SweepSahBuilder::Config c;
@@ -168,70 +156,16 @@ TEST(CwbvhBuild, RefusesTooWideTreesAndOverfullNodes) {
   EXPECT_THROW(tsah::buildCwbvh(two), anim::Error);
 }
 
-// Rays as in test_traversal: from outside at random triangles, from inside in any direction.
-std::vector<tsah::Ray> randomRays(const tsah::BvhView& v, uint32_t triangles, const Aabb& b, uint32_t count,
-                                  std::mt19937& rng) {
-  std::normal_distribution<float> g;
-  auto unit = [&] { return tsah::normalize(Vec3{g(rng), g(rng), g(rng)}); };
-  std::uniform_real_distribution<float> u01(0, 1);
-  const float diag = std::sqrt(tsah::dot(b.extent(), b.extent()));
-  std::vector<tsah::Ray> rays(count);
-  for (uint32_t i = 0; i < count; ++i) {
-    tsah::Ray& ray = rays[i];
-    if (i % 3 == 0) {
-      const uint32_t* tri = v.indices + 3 * (rng() % triangles);
-      const Vec3 target = (v.vertex(tri[0]) + v.vertex(tri[1]) + v.vertex(tri[2])) * (1.0f / 3.0f);
-      ray.org = b.center() + unit() * diag;
-      ray.dir = target - ray.org;
-    } else {
-      ray.org = b.lo + Vec3{u01(rng) * b.extent().x, u01(rng) * b.extent().y, u01(rng) * b.extent().z};
-      ray.dir = unit() * (0.1f + 3.0f * u01(rng));
-    }
-    if (i % 7 == 3) {  // axis-aligned: zero direction components (invDir is then +-1e30)
-      ray.dir[int(rng() % 3)] = 0.0f;
-      if (i % 2 == 0) ray.dir[int(rng() % 3)] = 0.0f;
-      if (ray.dir.x == 0.0f && ray.dir.y == 0.0f && ray.dir.z == 0.0f) ray.dir.z = -1.0f;
-    }
-    ray.tmin = i % 5 == 2 ? 0.01f * u01(rng) : 0.0f;
-    ray.tmax = i % 4 == 0 ? u01(rng) * 2.0f : 3.4e38f;
-  }
-  return rays;
-}
-
 void compareWithBinary(const anim::Animation& a, uint32_t rayCount, uint32_t seed) {
   const tsah::Bvh bvh = sahTreeOverFrames(a.indices(), a.allPositions(), a.keyframeCount());
   const tsah::FlatBvh flat = tsah::flattenBvh(bvh);
   tsah::CwbvhTree t = tsah::buildCwbvh(flat);
   tsah::CpuRuntime rt(flat, {a.indices().begin(), a.indices().end()}, a.vertexCount(), {2});
-  std::mt19937 rng(seed);
-  uint32_t hits = 0, ties = 0;
-  for (double time : {a.startTime(), 0.37 * a.endTime(), a.endTime()}) {
-    const auto pos = a.positionsAt(time);
-    rt.update(pos);
+  auto refitted = [&](std::span<const float> pos, const tsah::BvhView&) -> const tsah::CwbvhTree& {
     tsah::refitCwbvh(t, a.indices(), pos);
-    const auto woop = woopOf(t, a.indices(), pos);
-    const tsah::CwbvhView cv = t.view(woop.data(), a.indices().data(), pos.data());
-    const tsah::BvhView bv = rt.view();
-    for (const tsah::Ray& ray : randomRays(bv, a.triangleCount(), rt.bounds(), rayCount, rng)) {
-      const tsah::Hit expect = tsah::closestHit(bv, ray);
-      const tsah::Hit got = tsah::cwbvhClosestHit(cv, ray);
-      ASSERT_EQ(expect.valid(), got.valid());
-      ASSERT_EQ(tsah::anyHit(bv, ray), tsah::cwbvhAnyHit(cv, ray));
-      if (!expect.valid()) continue;
-      ++hits;
-      // The same triangle test on the same Woop data: equal distances; a different triangle only
-      // where two lie at exactly that distance (shared edges and vertices).
-      ASSERT_EQ(expect.t, got.t);
-      if (expect.tri != got.tri) {
-        ++ties;
-        continue;
-      }
-      ASSERT_EQ(expect.u, got.u);
-      ASSERT_EQ(expect.v, got.v);
-    }
-  }
-  EXPECT_GT(hits, rayCount / 4);
-  EXPECT_LE(ties, hits / 100 + 5);
+    return t;
+  };
+  tsah::test::expectWideTraversalMatchesBinary(a, rt, rayCount, seed, refitted);
 }
 
 TEST(CwbvhTraversal, EqualsBinaryTraversal) {
@@ -258,7 +192,7 @@ TEST(CwbvhTraversal, SingleLeafTree) {
   ASSERT_EQ(tsah::validateCwbvh(t), std::nullopt);
   const std::span<const float> pos(m.positions.data(), 5 * 9);
   tsah::refitCwbvh(t, m.indices, pos);
-  const auto woop = woopOf(t, m.indices, pos);
+  const auto woop = tsah::test::cwbvhWoop(t, m.indices, pos);
   const tsah::CwbvhView v = t.view(woop.data(), m.indices.data(), pos.data());
   for (uint32_t tri = 0; tri < 5; ++tri) {  // a ray through each triangle's centre hits something
     Vec3 c{0, 0, 0};

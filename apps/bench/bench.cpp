@@ -280,7 +280,8 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
       runtime["methods"].push_back(toJson(runGpuRefit(a, r, setup, r.name == "tsah0" ? &picture : nullptr, pictureFrame,
                                                     o.layout == "auto" ? std::string() : o.layout)));
     for (const char* method : {"lbvh", "hlbvh-sah"})
-      runtime["methods"].push_back(toJson(runGpuRebuild(a, tsahTree, method, config.cost, o.maxLeaf, setup)));
+      runtime["methods"].push_back(toJson(runGpuRebuild(a, tsahTree, method, config.cost, o.maxLeaf, setup,
+                                                        o.layout == "auto" ? std::string() : o.layout)));
     runtime["schedule"] = "method by method (device times from CUDA events)";
   } else {
     std::vector<CpuMethodSpec> cpuMethods;

@@ -141,7 +141,9 @@ void table2Section(std::ostringstream& md, const json& scene, const std::string&
      << (rt.contains("layout") ? ", " + str(rt, "layout") + " layout" : std::string()) << ": " << num(rt, "frames")
      << " frames, "
      << num(rt, "width") << "×" << num(rt, "height") << ", " << str(rt, "camera")
-     << "; update = interpolation + refit + Woop, or + rebuild; trace speed over all rays; total = update + trace";
+     << "; update = interpolation + refit + Woop, or + rebuild"
+     << (gpu && rt.contains("layout") && str(rt, "layout") == "cwbvh" ? " + conversion to the wide layout" : "")
+     << "; trace speed over all rays; total = update + trace";
   if (gpu) md << " + the rest of the frame on the device";
   if (paper) md << "; paper: GTX TITAN Black, its Table 2";
   md << ")\n\n| method | update [ms] | trace [MRays/s] | total [ms] | primary / AO / shadow [MRays/s] | rays per frame |";

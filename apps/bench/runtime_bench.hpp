@@ -106,8 +106,11 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& animation,
 RuntimeMethod runGpuRefit(const anim::Animation& animation, const RefitTrees& trees, const RuntimeSetup& setup,
                           Image* image = nullptr, uint32_t imageFrame = 0, const std::string& layout = {});
 // GPU: per frame GpuRuntime::rebuildAt (lbvh or hlbvh-sah, collapse to maxLeaf, Woop) and renderFrameGpu.
+// layout as runGpuRefit: with cwbvh every rebuilt tree is converted to the compressed layout on the
+// device (leaves of at most 8), the conversion counted in the update (extra.wide_conversion_ms).
 RuntimeMethod runGpuRebuild(const anim::Animation& animation, const Bvh& initialTree, const std::string& method,
-                            const CostModel& cost, uint32_t maxLeaf, const RuntimeSetup& setup);
+                            const CostModel& cost, uint32_t maxLeaf, const RuntimeSetup& setup,
+                            const std::string& layout = {});
 // The GPU as JSON (name, memory, compute capability, driver and runtime versions), or null without CUDA.
 nlohmann::json gpuJson();
 bool gpuAvailable();

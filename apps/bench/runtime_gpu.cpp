@@ -1,4 +1,5 @@
 // The GPU side of the runtime benchmark: GpuRuntime + renderFrameGpu per method (built with CUDA).
+#include <algorithm>
 #include <memory>
 
 #include "anim/error.hpp"
@@ -6,6 +7,7 @@
 #include "tsah/flat_bvh.hpp"
 
 #if TSAH_HAVE_CUDA
+#include "tsah/cwbvh_convert.hpp"
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 #endif
@@ -82,14 +84,19 @@ RuntimeMethod runGpuRefit(const anim::Animation& a, const RefitTrees& trees, con
 }
 
 RuntimeMethod runGpuRebuild(const anim::Animation& a, const Bvh& initialTree, const std::string& method,
-                            const CostModel& cost, uint32_t maxLeaf, const RuntimeSetup& setup) {
+                            const CostModel& cost, uint32_t maxLeaf, const RuntimeSetup& setup,
+                            const std::string& layout) {
   requireDevice();
+  cuda::GpuRuntime::Config config;
+  if (!layout.empty()) config.layout = cuda::parseTreeLayout(layout);
+  const bool wide = config.layout == cuda::TreeLayout::Cwbvh;
   cuda::RebuildOptions options;
   options.method = cuda::parseRebuildMethod(method);
   options.collapse = true;
-  options.maxLeafSize = maxLeaf;
+  // The compressed layout holds leaves of at most 8 triangles (64 per node).
+  options.maxLeafSize = wide ? std::min(maxLeaf, kCwbvhMaxLeafTriangles) : maxLeaf;
   options.cost = cost;
-  cuda::GpuRuntime gpu(flattenBvh(initialTree), a);
+  cuda::GpuRuntime gpu(flattenBvh(initialTree), a, config);
   RenderSettings settings = setup.settings;
   gpu.rebuildAt(setup.times.front(), options);  // warm-up: captures the rebuild's graph
   cuda::renderFrameGpu(gpu, setup.camera(setup.times.front()), setup.lighting, settings, nullptr, nullptr);
@@ -97,17 +104,21 @@ RuntimeMethod runGpuRebuild(const anim::Animation& a, const Bvh& initialTree, co
   m.name = method;
   m.label = options.method == cuda::RebuildMethod::Lbvh ? "LBVH rebuild (HLBVH-med)" : "HLBVH-SAH rebuild";
   m.update = "rebuild";
+  double wideMs = 0.0;
   for (std::size_t f = 0; f < setup.times.size(); ++f) {
     report(setup, m.label, f);
     const double t = setup.times[f];
     FrameTiming ft;
     ft.time = t;
     const cuda::RebuildTimings r = gpu.rebuildAt(t, options);
-    ft.updateMs = r.totalMs();
+    ft.updateMs = r.totalMs();  // with the conversion to the compressed layout (cwbvh)
+    wideMs += r.wideMs;
     settings.frame = static_cast<uint32_t>(f);
     renderTimed(gpu, setup, t, settings, ft, nullptr);
     m.frames.push_back(ft);
   }
+  m.extra["layout"] = cuda::treeLayoutName(gpu.config().layout);
+  if (wide) m.extra["wide_conversion_ms"] = setup.times.empty() ? 0.0 : wideMs / double(setup.times.size());
   return m;
 }
 
@@ -121,7 +132,7 @@ RuntimeMethod runGpuRefit(const anim::Animation&, const RefitTrees&, const Runti
   throw anim::Error("--device cuda: this tsah was built without the CUDA runtime");
 }
 RuntimeMethod runGpuRebuild(const anim::Animation&, const Bvh&, const std::string&, const CostModel&, uint32_t,
-                            const RuntimeSetup&) {
+                            const RuntimeSetup&, const std::string&) {
   throw anim::Error("--device cuda: this tsah was built without the CUDA runtime");
 }
 

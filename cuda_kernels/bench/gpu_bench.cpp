@@ -37,6 +37,7 @@
 #include "tsah/leaf_collapser.hpp"
 #include "tsah/renderer.hpp"
 #include "tsah/sah_builder.hpp"
+#include "tsah/cwbvh_convert.hpp"
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 
@@ -58,6 +59,7 @@ struct Options {
   uint32_t wideLeaf = 8;                       // cwbvh collapse: largest leaf
   std::string imageDir;
   std::string builder = "sweep";
+  uint32_t wideMerge = tsah::kCwbvhDefaultMergeTriangles;  // RebuildOptions::wideMergeTriangles
 };
 
 json summary(std::vector<double> v) {
@@ -218,29 +220,34 @@ json runRefit(const std::string& name, const tsah::FlatBvh& tree, const anim::An
   return j;
 }
 
+// Layout cwbvh: every rebuilt tree is converted to the compressed 8-wide layout on the device; the
+// conversion (phases_ms.wide) counts in the build and the update, as the binary Woop pass does.
 json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim::Animation& a,
-                const std::vector<double>& times, const Scene& scene, const Options& opt, bool persistent) {
-  tc::GpuRuntime rt(tree, a, {0, persistent, !opt.noGraphs, tc::TreeLayout::Bvh2});
+                const std::vector<double>& times, const Scene& scene, const Options& opt, bool persistent,
+                tc::TreeLayout layout) {
+  tc::GpuRuntime rt(tree, a, {0, persistent, !opt.noGraphs, layout, !opt.noFuse});
   const double mtris = double(a.triangleCount()) / 1e6;
   tsah::RenderSettings settings = scene.settings;
   tc::RebuildOptions bare;
   bare.method = method;
   bare.collapse = false;
   bare.woop = false;
+  bare.wideMergeTriangles = opt.wideMerge;
   tc::RebuildOptions full;
   full.method = method;
+  full.wideMergeTriangles = opt.wideMerge;
   rt.rebuildAt(times.front(), bare);  // warm-up (allocations, CUB, module load)
   rt.rebuildAt(times.front(), full);
   if (!opt.noRender) tc::renderFrameGpu(rt, scene.camera(times.front()), scene.lighting, settings, nullptr);
 
   FrameSeries s;
-  std::vector<double> morton, sort, hierarchy, top, bottomUp, collapseWoop, clusters, leaves, depth, ratio;
+  std::vector<double> morton, sort, hierarchy, top, bottomUp, wide, clusters, leaves, depth, wideNodes, ratio;
   for (uint32_t f = 0; f < times.size(); ++f) {
     const tc::RebuildTimings b = rt.rebuildAt(times[f], bare);
     s.bareBuild.push_back(b.buildMs());
     const tc::RebuildTimings t = rt.rebuildAt(times[f], full);
-    s.build.push_back(t.buildMs() + t.woopMs);
-    ratio.push_back((t.buildMs() + t.woopMs) / b.buildMs());
+    s.build.push_back(t.buildMs() + t.wideMs + t.woopMs);
+    ratio.push_back((t.buildMs() + t.wideMs + t.woopMs) / b.buildMs());
     s.update.push_back(t.totalMs());
     s.interpolate.push_back(t.interpolateMs);
     morton.push_back(t.mortonMs);
@@ -248,6 +255,8 @@ json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim:
     hierarchy.push_back(t.hierarchyMs);
     top.push_back(t.topMs);
     bottomUp.push_back(t.bottomUpMs);
+    wide.push_back(t.wideMs);
+    wideNodes.push_back(t.wideNodes);
     s.woop.push_back(t.woopMs);
     clusters.push_back(t.clusters);
     leaves.push_back(t.leaves);
@@ -264,6 +273,7 @@ json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim:
   json j;
   j["name"] = tc::rebuildMethodName(method);
   j["kind"] = "rebuild";
+  j["layout"] = tc::treeLayoutName(layout);
   j["traversal"] = persistent ? "persistent" : "simple";
   j["bare_build_ms"] = summary(s.bareBuild);
   j["build_collapse_woop_ms"] = summary(s.build);
@@ -275,11 +285,16 @@ json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim:
   }());
   j["phases_ms"] = {{"morton", summary(morton)},       {"sort", summary(sort)},
                     {"hierarchy", summary(hierarchy)}, {"cluster_tree", summary(top)},
-                    {"bottom_up", summary(bottomUp)},  {"woop", summary(s.woop)}};
+                    {"bottom_up", summary(bottomUp)},  {"wide", summary(wide)},
+                    {"woop", summary(s.woop)}};
   j["update_ms"] = summary(s.update);
   j["interpolate_ms"] = summary(s.interpolate);
   j["tree"] = {{"leaves", summary(leaves)}, {"depth", summary(depth)}};
   if (method == tc::RebuildMethod::HlbvhSah) j["tree"]["clusters"] = summary(clusters);
+  if (layout == tc::TreeLayout::Cwbvh) {
+    j["tree"]["wide_nodes"] = summary(wideNodes);
+    j["wide_merge_triangles"] = opt.wideMerge;
+  }
   if (!opt.noRender) j["trace"] = s.traceJson();
   j["total_ms"] = summary(s.total);
   j["per_frame"] = {{"update_ms", s.update}, {"bare_build_ms", s.bareBuild}, {"total_ms", s.total}};
@@ -399,8 +414,12 @@ void run(const Options& opt) {
     std::stringstream ss(opt.rebuild);
     std::string m;
     while (std::getline(ss, m, ','))
-      for (bool persistent : modes)
-        methods.push_back(runRebuild(tc::parseRebuildMethod(m), trees.front().second, a, times, scene, opt, persistent));
+      for (tc::TreeLayout layout : layouts)
+        for (bool persistent : modes) {
+          if (layout == tc::TreeLayout::Cwbvh && persistent) continue;  // the wide kernel is one thread per ray
+          methods.push_back(
+              runRebuild(tc::parseRebuildMethod(m), trees.front().second, a, times, scene, opt, persistent, layout));
+        }
   }
   out["methods"] = methods;
   if (opt.cpuCompare) {
@@ -429,7 +448,10 @@ int main(int argc, char** argv) {
   app.add_option("--ao", opt.ao, "Ambient-occlusion rays per pixel (default 8)");
   app.add_option("--shadow", opt.shadow, "Shadow rays per pixel (default 2)");
   app.add_option("--traversal", opt.traversal, "simple (one thread per ray, the default), persistent or both");
-  app.add_option("--layout", opt.layout, "Layouts of the refitted trees: bvh2, cwbvh or both comma separated (default both)");
+  app.add_option("--layout", opt.layout, "Layouts of the refitted and rebuilt trees: bvh2, cwbvh or both comma separated (default both)");
+  app.add_option("--wide-merge", opt.wideMerge,
+                 "cwbvh rebuilds: binary subtrees of at most this many triangles become one wide leaf (0-8, default 3)")
+      ->check(CLI::Range(0u, tsah::kCwbvhMaxLeafTriangles));
   app.add_flag("--no-fuse", opt.noFuse, "cwbvh: separate ray generation and trace kernels (as bvh2) instead of fused passes");
   app.add_option("--cwbvh-cost", opt.wideCost, "cwbvh: the 8-wide collapse's cost of a node visit and of a triangle (default 3 2)")
       ->expected(2);

@@ -219,6 +219,16 @@ std::unique_ptr<GpuRuntime::Impl::Cwbvh> GpuRuntime::Impl::uploadCwbvh(const Fla
 }
 
 detail::TraceScene GpuRuntime::Impl::scene() const {
+  if (const detail::GpuCwbvhConverter* wide = tracingRebuilt ? rebuilder->wide() : nullptr) {
+    detail::TraceScene s;  // the rebuilt tree in the compressed layout: always a root node
+    s.woop = woop.data();
+    s.triIndex = wide->triIndex();
+    s.indices = indices.data();
+    s.positions = positions.data();
+    s.root = rebuilder->root();
+    s.cwbvhNodes = wide->nodes();
+    return s;
+  }
   if (const Cwbvh* cwbvh = tree().cwbvh.get(); cwbvh && !tracingRebuilt) {
     detail::TraceScene s;
     s.woop = woop.data();
@@ -343,7 +353,8 @@ namespace {
 
 bool sameOptions(const RebuildOptions& a, const RebuildOptions& b) {
   return a.method == b.method && a.collapse == b.collapse && a.maxLeafSize == b.maxLeafSize &&
-         a.cost.ct == b.cost.ct && a.cost.ci == b.cost.ci && a.woop == b.woop;
+         a.cost.ct == b.cost.ct && a.cost.ci == b.cost.ci && a.woop == b.woop &&
+         a.wideMergeTriangles == b.wideMergeTriangles;
 }
 
 }  // namespace
@@ -351,7 +362,7 @@ bool sameOptions(const RebuildOptions& a, const RebuildOptions& b) {
 RebuildTimings GpuRuntime::rebuildAt(double time, const RebuildOptions& options) {
   Impl& m = *impl_;
   if (options.maxLeafSize == 0) throw anim::Error("GPU rebuild: maxLeafSize must be at least 1");
-  if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles);
+  if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles, m.config.layout);
   m.setFrame(time);
   m.restoreStaticPositions();
   m.woopValid = false;
@@ -386,7 +397,7 @@ RebuildTimings GpuRuntime::rebuild(std::span<const float> positions, const Rebui
   m.positions.upload(positions, m.stream);
   m.restInPlace = false;
   m.events.record(1, m.stream);
-  if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles);
+  if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles, m.config.layout);
   m.woopValid = false;
   m.tracingRebuilt = true;
   RebuildTimings timings = m.rebuilder->build(m.indices.data(), m.positions.data(), options, m.woop.data(), m.stream);
@@ -406,6 +417,7 @@ std::vector<float> GpuRuntime::downloadPositions() const { return impl_->positio
 std::vector<WoopTriangle> GpuRuntime::downloadWoop() const { return impl_->woop.download(impl_->stream); }
 
 std::vector<CwbvhNode> GpuRuntime::downloadCwbvhNodes() const {
+  if (impl_->tracingRebuilt && impl_->rebuilder->wide()) return downloadRebuiltCwbvh().nodes;
   const Impl::Cwbvh* cwbvh = impl_->tree().cwbvh.get();
   if (!cwbvh) throw anim::Error("GPU runtime: the tree is not in the compressed wide layout");
   return cwbvh->nodes.download(impl_->stream);
@@ -426,6 +438,21 @@ Bvh GpuRuntime::downloadRebuiltTree() const {
   const Impl& m = *impl_;
   if (!m.rebuilder || !m.rebuilder->built()) throw anim::Error("GPU runtime: no tree has been rebuilt");
   return m.rebuilder->download(m.stream);
+}
+
+CwbvhTree GpuRuntime::downloadRebuiltCwbvh() const {
+  const Impl& m = *impl_;
+  if (!m.rebuilder || !m.rebuilder->built()) throw anim::Error("GPU runtime: no tree has been rebuilt");
+  if (!m.rebuilder->wide()) throw anim::Error("GPU runtime: rebuilt trees are in the binary layout (layout bvh2)");
+  CwbvhTree t = m.rebuilder->wide()->download(m.stream);
+  t.rootBox = bounds();
+  return t;
+}
+
+FlatBvh GpuRuntime::downloadRebuiltArrays() const {
+  const Impl& m = *impl_;
+  if (!m.rebuilder || !m.rebuilder->built()) throw anim::Error("GPU runtime: no tree has been rebuilt");
+  return m.rebuilder->downloadArrays(m.stream);
 }
 
 Aabb GpuRuntime::bounds() const {

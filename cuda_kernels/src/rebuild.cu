@@ -704,19 +704,9 @@ __global__ void bottomUpKernel(BottomUpParams p) {
   }
 }
 
-template <typename Kernel>
-int residentBlocks(Kernel kernel, int blockSize) {
-  int device = 0, sms = 0, perSm = 0;
-  CUDA_CHECK(cudaGetDevice(&device));
-  CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
-  CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&perSm, kernel, blockSize, 0));
-  // More than a few blocks per multiprocessor would only add blocks spinning on the queue.
-  return std::max(1, sms * std::min(4, std::max(1, perSm)));
-}
-
 }  // namespace
 
-GpuRebuilder::GpuRebuilder(uint32_t triangles) : n_(triangles), events_(8) {
+GpuRebuilder::GpuRebuilder(uint32_t triangles, TreeLayout layout) : n_(triangles), events_(8) {  // see collect
   if (n_ == 0) throw anim::Error("GPU rebuild: no triangles");
   if (n_ > kMaxGpuTriangles) throw anim::Error("GPU rebuild: too many triangles");
   const std::size_t n = n_;
@@ -755,11 +745,13 @@ GpuRebuilder::GpuRebuilder(uint32_t triangles) : n_(triangles), events_(8) {
                                              sortedIds_.data(), int64_t(n), 0, kMortonBits));
   CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, scanBytes, headFlags_.data(), clusterOf_.data(), int64_t(n)));
   cubTemp_.resize(std::max<std::size_t>({sortBytes, scanBytes, 1}));
-  topBlocks_ = residentBlocks(clusterTreeKernel, kTopBlock);
+  // More than a few blocks per multiprocessor would only add blocks spinning on the queue.
+  topBlocks_ = residentBlocks(clusterTreeKernel, kTopBlock, 4);
   int device = 0, sms = 0;
   CUDA_CHECK(cudaGetDevice(&device));
   CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
   boxBlocks_ = 8 * sms;
+  if (layout == TreeLayout::Cwbvh) wide_ = std::make_unique<GpuCwbvhConverter>(n_);
 }
 
 GpuRebuilder::~GpuRebuilder() = default;
@@ -767,6 +759,11 @@ GpuRebuilder::~GpuRebuilder() = default;
 void GpuRebuilder::enqueue(const uint32_t* indices, const float* positions, const RebuildOptions& options,
                            WoopTriangle* woop, cudaStream_t stream) {
   if (options.maxLeafSize == 0) throw anim::Error("GPU rebuild: maxLeafSize must be at least 1");
+  const bool wide = wide_ != nullptr;
+  if (wide && options.collapse && options.maxLeafSize > kCwbvhMaxLeafTriangles)
+    throw anim::Error("GPU rebuild: the cwbvh layout takes leaves of at most " +
+                      std::to_string(kCwbvhMaxLeafTriangles) + " triangles (maxLeafSize is " +
+                      std::to_string(options.maxLeafSize) + ")");
   const bool hlbvh = options.method == RebuildMethod::HlbvhSah;
   const uint32_t n = n_;
   const unsigned block = 256;
@@ -865,21 +862,28 @@ void GpuRebuilder::enqueue(const uint32_t* indices, const float* positions, cons
   CUDA_CHECK_LAUNCH("bottomUpKernel");
   events_.record(5, stream);
 
-  if (options.woop) launchWoop(slotTri_.data(), n, indices, positions, woop, stream);
+  // The wide layout: the binary nodes' array (unreferenced nodes are never read), then the Woop
+  // triangles of the wide layout's slots.
+  if (wide)
+    wide_->enqueue(nodes_.data(), uint32_t(nodes_.size()), slotTri_.data(), root_.data(), options.wideMergeTriangles,
+                   stream);
   events_.record(6, stream);
+  if (options.woop) launchWoop(wide ? wide_->triIndex() : slotTri_.data(), n, indices, positions, woop, stream);
+  events_.record(7, stream);
 }
 
 RebuildTimings GpuRebuilder::collect(const RebuildOptions& options) {
   const bool hlbvh = options.method == RebuildMethod::HlbvhSah;
   RebuildTimings timings;
-  events_.wait(6);
+  events_.wait(7);
 
   timings.mortonMs = events_.ms(0, 1);
   timings.sortMs = events_.ms(1, 2);
   timings.hierarchyMs = events_.ms(2, 3);
   timings.topMs = events_.ms(3, 4);
   timings.bottomUpMs = events_.ms(4, 5);
-  timings.woopMs = events_.ms(5, 6);
+  timings.wideMs = events_.ms(5, 6);
+  timings.woopMs = events_.ms(6, 7);
   RootInfo root;
   CUDA_CHECK(cudaMemcpy(&root, root_.data(), sizeof root, cudaMemcpyDeviceToHost));
   timings.interiorNodes = root.interiorCount;
@@ -893,6 +897,9 @@ RebuildTimings GpuRebuilder::collect(const RebuildOptions& options) {
   if (root.depth > kTraversalStackSize)
     throw anim::Error("GPU rebuild: the tree is " + std::to_string(root.depth) +
                       " levels deep, more than the traversal stack of " + std::to_string(kTraversalStackSize));
+  // The wide tree is no deeper than the binary one (every wide child starts below its parent's
+  // binary node), so the check above bounds the wide traversal's stack too.
+  if (wide_) timings.wideNodes = wide_->collect(nullptr);
   built_ = true;
   return timings;
 }
@@ -901,6 +908,21 @@ RebuildTimings GpuRebuilder::build(const uint32_t* indices, const float* positio
                                    WoopTriangle* woop, cudaStream_t stream) {
   enqueue(indices, positions, options, woop, stream);
   return collect(options);
+}
+
+FlatBvh GpuRebuilder::downloadArrays(cudaStream_t stream) const {
+  if (!built_) throw anim::Error("GPU rebuild: no tree has been built");
+  const RootInfo root = root_.download(stream)[0];
+  FlatBvh raw;
+  raw.nodes = nodes_.download(stream);
+  raw.interiorCount = uint32_t(raw.nodes.size());
+  raw.leafCount = root.interiorCount + 1;
+  raw.depth = root.depth;
+  raw.rootRef = root.ref;
+  raw.rootCount = root.count;
+  raw.rootBoxes = {root.box};
+  raw.triIndex = slotTri_.download(stream);
+  return raw;
 }
 
 Bvh GpuRebuilder::download(cudaStream_t stream) const {

@@ -12,13 +12,18 @@
 //             the same bottom-up pass collapses and writes the nodes.
 // Nodes are indexed by the radix tree (0 .. n-2) and, for HLBVH-SAH, the cluster tree after them;
 // nodes collapsed into leaves or replaced by the cluster tree stay in the array unreferenced.
+// Layout cwbvh: the binary tree is then converted into the compressed 8-wide layout on the device
+// (cwbvh_rebuild.hpp), and the Woop triangles are those of the wide layout's slots.
 #include <cuda_runtime_api.h>
 
 #include <cstdint>
+#include <memory>
 
+#include "cwbvh_rebuild.hpp"
 #include "device_types.hpp"
 #include "event_timer.hpp"
 #include "tsah/bvh.hpp"
+#include "tsah/flat_bvh.hpp"
 #include "tsah_cuda/device_buffer.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 
@@ -26,13 +31,15 @@ namespace tsah::cuda::detail {
 
 class GpuRebuilder {
  public:
-  explicit GpuRebuilder(uint32_t triangles);
+  // layout cwbvh: every build is followed by its conversion into the compressed 8-wide layout.
+  GpuRebuilder(uint32_t triangles, TreeLayout layout);
   ~GpuRebuilder();
   GpuRebuilder(const GpuRebuilder&) = delete;
   GpuRebuilder& operator=(const GpuRebuilder&) = delete;
 
-  // Builds a tree over the triangles (indices: 3 per triangle) at the given device positions.
-  // Writes woop (one per slot) when options.woop. Synchronizes at the end (timings, tree size).
+  // Builds a tree over the triangles (indices: 3 per triangle) at the given device positions,
+  // and with layout cwbvh its compressed 8-wide form. Writes woop (one per slot of the layout)
+  // when options.woop. Synchronizes at the end (timings, tree size).
   RebuildTimings build(const uint32_t* indices, const float* positions, const RebuildOptions& options,
                        WoopTriangle* woop, cudaStream_t stream);
   // build() in two halves: enqueue() only puts work on the stream (no host synchronization, no
@@ -46,13 +53,18 @@ class GpuRebuilder {
   const uint32_t* triIndex() const { return slotTri_.data(); }
   const RootInfo* root() const { return root_.data(); }
   bool built() const { return built_; }
+  // The compressed layout of the last build (null for layout bvh2).
+  const GpuCwbvhConverter* wide() const { return wide_.get(); }
 
   // The last tree as a tsah::Bvh (one frame of boxes: the child boxes stored in the nodes).
   Bvh download(cudaStream_t stream) const;
+  // The last tree's arrays exactly as the device holds them (GpuRuntime::downloadRebuiltArrays).
+  FlatBvh downloadArrays(cudaStream_t stream) const;
 
  private:
   uint32_t n_;
   bool built_ = false;
+  std::unique_ptr<GpuCwbvhConverter> wide_;  // layout cwbvh only
   EventTimer events_;
   // Per triangle (by id) and per slot.
   DeviceBuffer<Aabb> triBox_;

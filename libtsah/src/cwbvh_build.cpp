@@ -2,9 +2,9 @@
 
 #include <algorithm>
 #include <deque>
-#include <limits>
 
 #include "anim/error.hpp"
+#include "tsah/cwbvh_convert.hpp"
 
 namespace tsah {
 
@@ -19,44 +19,20 @@ Aabb triangleBox(std::span<const uint32_t> indices, std::span<const float> posit
   return box;
 }
 
-// Child -> slot assignment: the child whose centre lies farthest in the direction of a slot's
-// octant (bit a set: + side of axis a) gets it, greedily over all pairs as in the paper.
+// Child -> slot assignment (cwbvhAssignSlots) by the children's directions from the node's centre,
+// summed over all frames of the wide tree, so the order suits the whole animation.
 std::vector<uint32_t> assignSlots(const WideBvh& wide, const WideNode& node) {
   const uint32_t n = node.childCount;
-  std::vector<Vec3> offset(n, Vec3{0, 0, 0});
+  Vec3 offset[kCwbvhWidth];
+  Aabb boxes[kCwbvhWidth];
+  for (uint32_t c = 0; c < n; ++c) offset[c] = Vec3{0, 0, 0};
   for (uint32_t f = 0; f < wide.frameCount; ++f) {
-    Aabb all;
-    for (uint32_t c = 0; c < n; ++c) all.extend(wide.childBox(node.firstChild + c, f));
-    const Vec3 centre = all.center();
-    const Vec3 ext = all.extent();
-    for (uint32_t c = 0; c < n; ++c) {
-      const Vec3 d = wide.childBox(node.firstChild + c, f).center() - centre;
-      // Relative to the node's size, so that every frame counts alike.
-      for (int a = 0; a < 3; ++a) offset[c][a] += ext[a] > 0.0f ? d[a] / ext[a] : 0.0f;
-    }
+    for (uint32_t c = 0; c < n; ++c) boxes[c] = wide.childBox(node.firstChild + c, f);
+    cwbvhAddCentreOffsets(boxes, n, offset);
   }
-  std::vector<uint32_t> slotOf(n, kCwbvhWidth);
-  std::vector<bool> slotUsed(kCwbvhWidth, false);
-  for (uint32_t round = 0; round < n; ++round) {
-    float best = -std::numeric_limits<float>::infinity();
-    uint32_t bestC = 0, bestS = 0;
-    for (uint32_t c = 0; c < n; ++c) {
-      if (slotOf[c] != kCwbvhWidth) continue;
-      for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
-        if (slotUsed[s]) continue;
-        const float score = ((s & 1) ? offset[c].x : -offset[c].x) + ((s & 2) ? offset[c].y : -offset[c].y) +
-                            ((s & 4) ? offset[c].z : -offset[c].z);
-        if (score > best) {
-          best = score;
-          bestC = c;
-          bestS = s;
-        }
-      }
-    }
-    slotOf[bestC] = bestS;
-    slotUsed[bestS] = true;
-  }
-  return slotOf;
+  uint32_t slotOf[kCwbvhWidth];
+  cwbvhAssignSlots(offset, n, slotOf);
+  return std::vector<uint32_t>(slotOf, slotOf + n);
 }
 
 }  // namespace

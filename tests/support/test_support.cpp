@@ -2,12 +2,14 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <random>
 #include <unistd.h>
 
 #include "tsah/cost.hpp"
+#include "tsah/sampling.hpp"
 
 namespace tsah::test {
 
@@ -120,6 +122,83 @@ uint64_t expectValidRounds(RoundSession& session, const PrimitiveBoxes& prims, i
     previous = session.cost();
   }
   return applied;
+}
+
+std::vector<WoopTriangle> cwbvhWoop(const CwbvhTree& t, std::span<const uint32_t> idx, std::span<const float> pos) {
+  std::vector<WoopTriangle> w(t.triIndex.size());
+  for (size_t s = 0; s < w.size(); ++s) {
+    const uint32_t* tri = idx.data() + 3 * std::size_t(t.triIndex[s]);
+    auto v = [&](uint32_t i) { return Vec3{pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]}; };
+    w[s] = makeWoopTriangle(v(tri[0]), v(tri[1]), v(tri[2]));
+  }
+  return w;
+}
+
+std::vector<Ray> randomRays(const BvhView& v, uint32_t triangles, const Aabb& b, uint32_t count, std::mt19937& rng) {
+  std::normal_distribution<float> g;
+  auto unit = [&] { return normalize(Vec3{g(rng), g(rng), g(rng)}); };
+  std::uniform_real_distribution<float> u01(0, 1);
+  const float diag = std::sqrt(dot(b.extent(), b.extent()));
+  std::vector<Ray> rays(count);
+  for (uint32_t i = 0; i < count; ++i) {
+    Ray& ray = rays[i];
+    if (i % 3 == 0) {
+      const uint32_t* tri = v.indices + 3 * (rng() % triangles);
+      const Vec3 target = (v.vertex(tri[0]) + v.vertex(tri[1]) + v.vertex(tri[2])) * (1.0f / 3.0f);
+      ray.org = b.center() + unit() * diag;
+      ray.dir = target - ray.org;
+    } else {
+      ray.org = b.lo + Vec3{u01(rng) * b.extent().x, u01(rng) * b.extent().y, u01(rng) * b.extent().z};
+      ray.dir = unit() * (0.1f + 3.0f * u01(rng));
+    }
+    if (i % 7 == 3) {  // axis-aligned: zero direction components (invDir is then +-1e30)
+      ray.dir[int(rng() % 3)] = 0.0f;
+      if (i % 2 == 0) ray.dir[int(rng() % 3)] = 0.0f;
+      if (ray.dir.x == 0.0f && ray.dir.y == 0.0f && ray.dir.z == 0.0f) ray.dir.z = -1.0f;
+    }
+    ray.tmin = i % 5 == 2 ? 0.01f * u01(rng) : 0.0f;
+    ray.tmax = i % 4 == 0 ? u01(rng) * 2.0f : 3.4e38f;
+  }
+  return rays;
+}
+
+HitAgreement expectSameHits(const BvhView& binary, const CwbvhView& wide, std::span<const Ray> rays) {
+  HitAgreement a;
+  for (const Ray& ray : rays) {
+    const Hit expect = closestHit(binary, ray);
+    const Hit got = cwbvhClosestHit(wide, ray);
+    EXPECT_EQ(expect.valid(), got.valid());
+    EXPECT_EQ(anyHit(binary, ray), cwbvhAnyHit(wide, ray));
+    if (!expect.valid() || !got.valid()) continue;
+    ++a.hits;
+    EXPECT_EQ(expect.t, got.t);
+    if (expect.tri != got.tri) {
+      ++a.ties;
+      continue;
+    }
+    EXPECT_EQ(expect.u, got.u);
+    EXPECT_EQ(expect.v, got.v);
+  }
+  return a;
+}
+
+void expectWideTraversalMatchesBinary(const anim::Animation& a, CpuRuntime& rt, uint32_t rayCount, uint32_t seed,
+                                      const WideTreeAt& wideAt) {
+  std::mt19937 rng(seed);
+  uint32_t hits = 0, ties = 0;
+  for (double time : {a.startTime(), 0.37 * a.endTime(), a.endTime()}) {
+    const auto pos = a.positionsAt(time);
+    rt.update(pos);
+    const BvhView bv = rt.view();
+    const CwbvhTree& t = wideAt(pos, bv);
+    const auto woop = cwbvhWoop(t, a.indices(), pos);
+    const CwbvhView cv = t.view(woop.data(), a.indices().data(), pos.data());
+    const HitAgreement agree = expectSameHits(bv, cv, randomRays(bv, a.triangleCount(), rt.bounds(), rayCount, rng));
+    hits += agree.hits;
+    ties += agree.ties;
+  }
+  EXPECT_GT(hits, rayCount / 4);
+  EXPECT_LE(ties, hits / 100 + 5);
 }
 
 }  // namespace tsah::test

@@ -7,8 +7,15 @@
 
 #include "anim/animation.hpp"
 #include "anim/generators.hpp"
+#include <functional>
+#include <random>
+#include <span>
+
 #include "tsah/bvh.hpp"
+#include "tsah/cpu_runtime.hpp"
+#include "tsah/cwbvh_build.hpp"
 #include "tsah/parallel_optimizer.hpp"
+#include "tsah/traversal.hpp"
 
 namespace tsah::test {
 
@@ -48,5 +55,29 @@ bool identicalTree(const Bvh& a, const Bvh& b);
 // `tolerance`), no round raising the cost, the stats' order. Returns the moves applied.
 uint64_t expectValidRounds(RoundSession& session, const PrimitiveBoxes& prims, int k, int rounds,
                            double tolerance = 1e-9);
+
+// Woop triangles per slot of a compressed wide tree, at the given positions.
+std::vector<WoopTriangle> cwbvhWoop(const CwbvhTree& t, std::span<const uint32_t> indices,
+                                    std::span<const float> positions);
+
+// Rays as in test_traversal: a third from outside at random triangles, the others from inside the
+// box in any direction; some with tmin > 0 or a short tmax.
+std::vector<Ray> randomRays(const BvhView& v, uint32_t triangles, const Aabb& box, uint32_t count, std::mt19937& rng);
+
+// Traces every ray with the binary CPU traversal and the compressed wide one and asserts the same
+// validity, any-hit answer and distance (bit for bit: the same triangle test on the same Woop
+// data), and u, v where the triangle is the same. Returns the hits and the ties (a different
+// triangle at exactly the same distance: shared edges and vertices visited in another order).
+struct HitAgreement {
+  uint32_t hits = 0, ties = 0;
+};
+HitAgreement expectSameHits(const BvhView& binary, const CwbvhView& wide, std::span<const Ray> rays);
+
+// At three times of `a` (start, 0.37 * end, end): updates rt (the binary CPU runtime of a tree for
+// `a`), gets the compressed tree for those positions from wideAt, and runs expectSameHits on
+// rayCount random rays; then expects a quarter of the rays to hit and ties in at most 1% + 5.
+using WideTreeAt = std::function<const CwbvhTree&(std::span<const float> positions, const BvhView& binary)>;
+void expectWideTraversalMatchesBinary(const anim::Animation& a, CpuRuntime& rt, uint32_t rayCount, uint32_t seed,
+                                      const WideTreeAt& wideAt);
 
 }  // namespace tsah::test

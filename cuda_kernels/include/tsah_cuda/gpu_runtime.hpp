@@ -7,7 +7,8 @@
 //                 node), Woop triangles;
 //   rebuildAt(t): the per-frame rebuild baselines instead of the refit: LBVH (30-bit Morton codes,
 //                 Karras 2012; the paper's HLBVH-med) or HLBVH-SAH (SAH over the clusters of the top
-//                 15 Morton bits, spatial median below), then leaf collapse (<= 8 triangles) and Woop;
+//                 15 Morton bits, spatial median below), then leaf collapse (<= 8 triangles), with
+//                 layout cwbvh the conversion into the compressed 8-wide layout, and Woop;
 //   renderFrameGpu: primary (closest hit), ambient-occlusion and shadow rays (any hit) with the
 //                 CPU renderer's random numbers and shading.
 // Every phase is timed with CUDA events. Positions, boxes and Woop triangles of updateAt are
@@ -21,6 +22,7 @@
 #include "anim/animation.hpp"
 #include "tsah/bvh.hpp"
 #include "tsah/cost.hpp"
+#include "tsah/cwbvh_build.hpp"
 #include "tsah/cwbvh_layout.hpp"
 #include "tsah/flat_bvh.hpp"
 #include "tsah/image.hpp"
@@ -61,6 +63,9 @@ struct RebuildOptions {
   CostModel cost;
   // Woop triangles of the new tree (tracing needs them; false only to time the bare build).
   bool woop = true;
+  // Layout cwbvh: binary subtrees of at most this many triangles (in one slot range) become one
+  // leaf of the compressed tree (0 or 1: only the binary leaves; at most 8). The paper's leaves: 3.
+  uint32_t wideMergeTriangles = 3;
 };
 
 // Device time of one rebuild, in milliseconds (CUDA events), and what was built.
@@ -71,12 +76,15 @@ struct RebuildTimings {
   double hierarchyMs = 0.0;    // Karras radix tree (HLBVH-SAH: and the 15-bit clusters)
   double topMs = 0.0;          // HLBVH-SAH: SAH tree over the clusters, reordering of the triangles
   double bottomUpMs = 0.0;     // boxes bottom-up (and the collapse), GpuBvhNode output
+  double wideMs = 0.0;         // layout cwbvh: the conversion into the compressed 8-wide layout
   double woopMs = 0.0;
   uint32_t clusters = 0;       // HLBVH-SAH only
-  uint32_t interiorNodes = 0, leaves = 0, depth = 0;
-  // The tree without interpolation and Woop (the "bare build" when collapse is off).
+  uint32_t interiorNodes = 0, leaves = 0, depth = 0;  // of the binary tree
+  uint32_t wideNodes = 0;      // layout cwbvh: nodes of the compressed tree
+  // The binary tree without interpolation and Woop (the "bare build" when collapse is off).
   double buildMs() const { return mortonMs + sortMs + hierarchyMs + topMs + bottomUpMs; }
-  double totalMs() const { return interpolateMs + buildMs() + woopMs; }
+  // Everything until the traced tree is ready: with layout cwbvh the conversion counts too.
+  double totalMs() const { return interpolateMs + buildMs() + wideMs + woopMs; }
 };
 
 // Device time of a rendered frame beyond the ray passes of RenderStats.
@@ -99,7 +107,8 @@ class GpuRuntime {
     // configuration) instead of launching each kernel: the device then runs the frame's kernels
     // back to back instead of waiting for the host between launches of small kernels.
     bool useGraphs = true;
-    // Layout of the refitted tree (rebuilt trees are traced in the binary layout).
+    // Layout of the traced tree: the refitted one, and the rebuilt ones (cwbvh: every rebuild is
+    // converted into the compressed 8-wide layout on the device, RebuildTimings::wideMs).
     TreeLayout layout = TreeLayout::Bvh2;
     // Layout cwbvh: renderFrameGpu makes each ray in the kernel that traces it (three fused passes,
     // no ray buffers); false runs the separate generation and trace kernels of the binary layout.
@@ -153,8 +162,16 @@ class GpuRuntime {
   // The last rebuilt tree as a tsah::Bvh (one frame of boxes), exactly as built on the device.
   Bvh downloadRebuiltTree() const;
   Aabb bounds() const;  // of the traced tree
-  // Layout cwbvh: the compressed nodes of the last update (throws anim::Error for layout bvh2).
+  // Layout cwbvh: the compressed nodes of the last update or rebuild (throws anim::Error for
+  // layout bvh2).
   std::vector<CwbvhNode> downloadCwbvhNodes() const;
+  // Layout cwbvh after a rebuild: the compressed tree the rebuild was converted to (nodes and
+  // triIndex; rootRef 0), as tsah::convertToCwbvh makes it from downloadRebuiltArrays().
+  CwbvhTree downloadRebuiltCwbvh() const;
+  // The last rebuilt binary tree's arrays exactly as the device holds them: every node of the
+  // rebuilder's array (interiorCount of them, in its order, unreferenced ones included: not the
+  // canonical form), the root reference, count and box, and triIndex (binary slot -> triangle).
+  FlatBvh downloadRebuiltArrays() const;
 
   // Traces host rays against the traced tree (closest hit / any hit). stats: ray count and the
   // traversal kernel's device time.

@@ -1,0 +1,296 @@
+#pragma once
+// The compressed 8-wide layout (cwbvh_layout.hpp) of a binary tree in the GpuBvhNode form, made
+// top-down one wide node at a time: the per-node steps, shared (TSAH_HD) by the host emulation
+// (convertToCwbvh below, the tests' reference) and the GPU conversion of the per-frame rebuilds
+// (cuda_kernels/src/cwbvh_rebuild.cu), and the child -> slot assignment shared with buildCwbvh.
+//
+// A wide node starts at one binary node and opens its interior children greedily, the largest
+// surface area first, until it has 8 children (the standard greedy wide collapse). A binary leaf,
+// or a binary subtree of at most `mergeLimit` triangles in one contiguous slot range, becomes one
+// leaf child. Children go into slots by direction (cwbvhAssignSlots, as buildCwbvh does).
+//
+// Level by level (wide level L: the wide nodes [begin, end)), the nodes of a level are numbered in
+// order; node i's interior children get the consecutive indices childBase + rank after the level,
+// its leaf triangles the consecutive new slots triBase + offset, both exclusive prefix sums over
+// the level's nodes of (interior children, leaf triangles). So the result is breadth-first, a
+// node's leaf triangles are contiguous and in slot order, and it does not depend on how many
+// threads do the work: the GPU's bytes equal the host's.
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "tsah/aabb.hpp"
+#include "tsah/cwbvh_build.hpp"
+#include "tsah/cwbvh_layout.hpp"
+#include "tsah/gpu_layout.hpp"
+#include "tsah/hd.hpp"
+
+namespace tsah {
+
+// A leaf child holds at most 8 triangles, so a node's leaves hold at most 64 (the triangle mask).
+inline constexpr uint32_t kCwbvhMaxLeafTriangles = kCwbvhMaxNodeTriangles / kCwbvhWidth;
+// Binary subtrees of at most this many triangles become one leaf child (the paper's leaves: <= 3).
+inline constexpr uint32_t kCwbvhDefaultMergeTriangles = 3;
+
+// Adds one frame's vote for the direction of each child: the offset of its box centre from the
+// centre of the children's union, relative to the union's extent per axis (0 on a flat axis).
+TSAH_HD void cwbvhAddCentreOffsets(const Aabb* boxes, uint32_t n, Vec3* offset) {
+  Aabb all;
+  for (uint32_t c = 0; c < n; ++c) all.extend(boxes[c]);
+  const Vec3 centre = all.center();
+  const Vec3 ext = all.extent();
+  for (uint32_t c = 0; c < n; ++c) {
+    const Vec3 d = boxes[c].center() - centre;
+    for (int a = 0; a < 3; ++a) offset[c][a] += ext[a] > 0.0f ? d[a] / ext[a] : 0.0f;
+  }
+}
+
+// Child -> slot (slotOf[c] for c < n <= 8): greedily over all (child, free slot) pairs, the child
+// whose offset points farthest into a slot's octant (bit a of the slot: + side of axis a) gets it
+// (the paper's assignment). Ties: the lowest child, then the lowest slot.
+TSAH_HD void cwbvhAssignSlots(const Vec3* offset, uint32_t n, uint32_t* slotOf) {
+  uint32_t usedSlots = 0, assigned = 0;
+  for (uint32_t round = 0; round < n; ++round) {
+    bool found = false;
+    float best = 0.0f;
+    uint32_t bestC = 0, bestS = 0;
+    for (uint32_t c = 0; c < n; ++c) {
+      if ((assigned >> c) & 1u) continue;
+      for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
+        if ((usedSlots >> s) & 1u) continue;
+        const float score = ((s & 1u) ? offset[c].x : -offset[c].x) + ((s & 2u) ? offset[c].y : -offset[c].y) +
+                            ((s & 4u) ? offset[c].z : -offset[c].z);
+        if (!found || score > best) {
+          found = true;
+          best = score;
+          bestC = c;
+          bestS = s;
+        }
+      }
+    }
+    slotOf[bestC] = bestS;
+    assigned |= 1u << bestC;
+    usedSlots |= 1u << bestS;
+  }
+}
+
+// The binary tree as the conversion reads it (GpuBvhNode form: a FlatBvh's frame block, or a GPU
+// rebuild's node array, where unreferenced nodes are never read).
+struct BinaryTreeView {
+  const GpuBvhNode* nodes = nullptr;
+  uint32_t nodeCount = 0;             // references must be below it
+  const uint32_t* triIndex = nullptr;  // binary slot -> triangle id
+  uint32_t triangles = 0;
+};
+
+// One child of a wide node: a binary interior node (ref >= 0, count 0) or a leaf (leaf reference
+// to its first binary slot, count triangles).
+struct CwbvhOpenChild {
+  int32_t ref;
+  uint32_t count;
+  Aabb box;
+};
+
+struct CwbvhOpening {
+  uint32_t count = 0;  // children, 1..8
+  CwbvhOpenChild child[kCwbvhWidth];
+  uint32_t slotOf[kCwbvhWidth];
+  uint32_t interior = 0;   // interior children
+  uint32_t triangles = 0;  // triangles of the leaf children (<= 64)
+};
+
+namespace detail {
+
+TSAH_HD GpuBvhNode cwbvhLoadBinaryNode(const GpuBvhNode* nodes, uint32_t i) {
+#if defined(__CUDA_ARCH__)
+  const float4* p = reinterpret_cast<const float4*>(nodes + i);
+  const float4 a = __ldg(p), b = __ldg(p + 1), c = __ldg(p + 2), d = __ldg(p + 3);
+  GpuBvhNode n;
+  n.c0loX = a.x, n.c0hiX = a.y, n.c0loY = a.z, n.c0hiY = a.w;
+  n.c1loX = b.x, n.c1hiX = b.y, n.c1loY = b.z, n.c1hiY = b.w;
+  n.c0loZ = c.x, n.c0hiZ = c.y, n.c1loZ = c.z, n.c1hiZ = c.w;
+  n.ref0 = __float_as_int(d.x), n.ref1 = __float_as_int(d.y);
+  n.count0 = __float_as_uint(d.z), n.count1 = __float_as_uint(d.w);
+  return n;
+#else
+  return nodes[i];
+#endif
+}
+
+TSAH_HD bool cwbvhLeafInRange(const BinaryTreeView& t, int32_t ref, uint32_t count) {
+  const uint32_t first = leafFirstSlot(ref);
+  return count >= 1 && first < t.triangles && count <= t.triangles - first;
+}
+
+// The binary subtree `ref` (an interior node) as one slot range [first, first + count) when it
+// holds at most `limit` (<= kCwbvhMaxLeafTriangles) triangles whose slots are contiguous. Every
+// subtree still on the stack holds at least one triangle, so the walk stops after O(limit) nodes.
+TSAH_HD bool cwbvhSmallSubtree(const BinaryTreeView& t, int32_t ref, uint32_t limit, uint32_t& first,
+                               uint32_t& count) {
+  if (limit > kCwbvhMaxLeafTriangles) limit = kCwbvhMaxLeafTriangles;  // the stack's size
+  int32_t stackRef[kCwbvhMaxLeafTriangles + 1];
+  uint32_t stackCount[kCwbvhMaxLeafTriangles + 1];
+  uint32_t sp = 0, total = 0, lo = 0xffffffffu, hi = 0;
+  stackRef[sp] = ref;
+  stackCount[sp++] = 0;
+  while (sp > 0) {
+    --sp;
+    const int32_t r = stackRef[sp];
+    const uint32_t c = stackCount[sp];
+    if (isLeafRef(r)) {
+      if (!cwbvhLeafInRange(t, r, c)) return false;
+      total += c;
+      lo = leafFirstSlot(r) < lo ? leafFirstSlot(r) : lo;
+      hi = leafFirstSlot(r) + c > hi ? leafFirstSlot(r) + c : hi;
+      if (total > limit) return false;
+      continue;
+    }
+    if (total + sp + 2 > limit || uint32_t(r) >= t.nodeCount) return false;
+    const GpuBvhNode n = cwbvhLoadBinaryNode(t.nodes, uint32_t(r));
+    stackRef[sp] = n.ref1;
+    stackCount[sp++] = n.count1;
+    stackRef[sp] = n.ref0;
+    stackCount[sp++] = n.count0;
+  }
+  if (hi - lo != total) return false;  // not one contiguous range
+  first = lo;
+  count = total;
+  return true;
+}
+
+// Child `side` of binary node n as a wide child: binary leaves and small subtrees become leaves.
+TSAH_HD CwbvhOpenChild cwbvhBinaryChild(const BinaryTreeView& t, const GpuBvhNode& n, int side, uint32_t mergeLimit) {
+  CwbvhOpenChild c{n.childRef(side), isLeafRef(n.childRef(side)) ? n.childCount(side) : 0u, n.childBox(side)};
+  uint32_t first = 0, count = 0;
+  if (!isLeafRef(c.ref) && mergeLimit >= 2 && cwbvhSmallSubtree(t, c.ref, mergeLimit, first, count)) {
+    c.ref = makeLeafRef(first);
+    c.count = count;
+  }
+  return c;
+}
+
+}  // namespace detail
+
+// The children of the wide node that starts at binary reference `ref` (a leaf reference with
+// `count` triangles and box `box` only for a tree that is one leaf) and their slots. mergeLimit
+// must be <= kCwbvhMaxLeafTriangles. Returns false when the input is not a valid binary tree (a
+// reference or leaf out of range, an empty leaf) or the leaf children hold more than 64
+// triangles, which binary leaves of at most kCwbvhMaxLeafTriangles never do.
+TSAH_HD bool cwbvhOpen(const BinaryTreeView& t, int32_t ref, uint32_t count, const Aabb& box, uint32_t mergeLimit,
+                       CwbvhOpening& o) {
+  o.count = 0;
+  if (isLeafRef(ref)) {
+    o.child[0] = {ref, count, box};
+    o.count = 1;
+  } else {
+    if (uint32_t(ref) >= t.nodeCount) return false;
+    const GpuBvhNode n = detail::cwbvhLoadBinaryNode(t.nodes, uint32_t(ref));
+    o.child[0] = detail::cwbvhBinaryChild(t, n, 0, mergeLimit);
+    o.child[1] = detail::cwbvhBinaryChild(t, n, 1, mergeLimit);
+    o.count = 2;
+    while (o.count < kCwbvhWidth) {
+      int widest = -1;
+      float widestArea = 0.0f;
+      for (uint32_t c = 0; c < o.count; ++c) {
+        if (isLeafRef(o.child[c].ref)) continue;
+        const float a = o.child[c].box.area();
+        if (widest < 0 || a > widestArea) {
+          widest = int(c);
+          widestArea = a;
+        }
+      }
+      if (widest < 0) break;
+      if (uint32_t(o.child[widest].ref) >= t.nodeCount) return false;
+      const GpuBvhNode n2 = detail::cwbvhLoadBinaryNode(t.nodes, uint32_t(o.child[widest].ref));
+      o.child[widest] = detail::cwbvhBinaryChild(t, n2, 0, mergeLimit);
+      o.child[o.count++] = detail::cwbvhBinaryChild(t, n2, 1, mergeLimit);
+    }
+  }
+  o.interior = 0;
+  o.triangles = 0;
+  Aabb boxes[kCwbvhWidth];
+  Vec3 offset[kCwbvhWidth];
+  for (uint32_t c = 0; c < o.count; ++c) {
+    const CwbvhOpenChild& ch = o.child[c];
+    if (!isLeafRef(ch.ref)) {
+      if (uint32_t(ch.ref) >= t.nodeCount) return false;
+      ++o.interior;
+    } else {
+      if (!detail::cwbvhLeafInRange(t, ch.ref, ch.count)) return false;
+      o.triangles += ch.count;
+    }
+    boxes[c] = ch.box;
+    offset[c] = Vec3{0.0f, 0.0f, 0.0f};
+  }
+  if (o.triangles > kCwbvhMaxNodeTriangles) return false;
+  cwbvhAddCentreOffsets(boxes, o.count, offset);
+  cwbvhAssignSlots(offset, o.count, o.slotOf);
+  return true;
+}
+
+// Where cwbvhWriteNode puts its results. exactBoxes and parentSlot may be null (the GPU needs
+// neither; the host keeps them for validateCwbvh and refitCwbvh).
+struct CwbvhConvertOutput {
+  CwbvhNode* nodes = nullptr;
+  int32_t* starts = nullptr;      // per wide node: the binary reference it starts at
+  uint32_t* triIndex = nullptr;   // new slot -> triangle id
+  Aabb* exactBoxes = nullptr;     // nodes * 8
+  uint32_t* parentSlot = nullptr;  // per wide node: parent * 8 + slot
+};
+
+// Writes wide node `self` from its opening: interior children become nodes childBase + rank (and
+// their start references), leaf triangles the slots triBase + offset in slot order; the child
+// boxes are quantized with cwbvhQuantize.
+TSAH_HD void cwbvhWriteNode(const BinaryTreeView& t, const CwbvhOpening& o, uint32_t self, uint32_t childBase,
+                            uint32_t triBase, const CwbvhConvertOutput& out) {
+  CwbvhNode n{};
+  n.childBase = childBase;
+  n.triBase = triBase;
+  int childAt[kCwbvhWidth];
+  for (uint32_t s = 0; s < kCwbvhWidth; ++s) childAt[s] = -1;
+  for (uint32_t c = 0; c < o.count; ++c) childAt[o.slotOf[c]] = int(c);
+  Aabb boxes[kCwbvhWidth];
+  uint32_t rank = 0, offset = 0;
+  for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
+    if (childAt[s] < 0) continue;
+    const CwbvhOpenChild& ch = o.child[childAt[s]];
+    boxes[s] = ch.box;
+    if (out.exactBoxes) out.exactBoxes[std::size_t(self) * kCwbvhWidth + s] = ch.box;
+    if (!isLeafRef(ch.ref)) {
+      n.meta[s] = kCwbvhInterior;
+      out.starts[childBase + rank] = ch.ref;
+      if (out.parentSlot) out.parentSlot[childBase + rank] = self * kCwbvhWidth + s;
+      ++rank;
+      continue;
+    }
+    n.meta[s] = uint8_t(kCwbvhLeaf | offset);
+    const uint32_t first = leafFirstSlot(ch.ref);
+    for (uint32_t k = 0; k < ch.count; ++k) out.triIndex[triBase + offset + k] = cwbvhLoadU32(t.triIndex + first + k);
+    offset += ch.count;
+  }
+  n.triCount = uint8_t(offset);
+  cwbvhQuantize(n, boxes);
+#if defined(__CUDA_ARCH__)
+  const uint4* src = reinterpret_cast<const uint4*>(&n);
+  uint4* dst = reinterpret_cast<uint4*>(out.nodes + self);
+#pragma unroll
+  for (int k = 0; k < 5; ++k) dst[k] = src[k];
+#else
+  out.nodes[self] = n;
+#endif
+}
+
+// Host emulation of the GPU conversion (the same steps, serially, level by level): the
+// compressed layout of the binary tree `t` whose root is `rootRef` (a leaf reference with
+// rootCount triangles for a tree that is one leaf) with box rootBox. The result always has a root
+// node (rootRef 0; a one-leaf tree becomes a node with one leaf child), exactBoxes (the binary
+// tree's child boxes), parentSlot, leaves and depth, so validateCwbvh and refitCwbvh apply.
+// Throws anim::Error when t is not a valid binary tree over its triangles or a node's leaves
+// would hold more than 64 triangles. mergeLimit <= kCwbvhMaxLeafTriangles.
+CwbvhTree convertToCwbvh(const BinaryTreeView& t, int32_t rootRef, uint32_t rootCount, const Aabb& rootBox,
+                         uint32_t mergeLimit = kCwbvhDefaultMergeTriangles);
+// The same for frame `frame`'s boxes of a flat tree (canonical or not).
+CwbvhTree convertToCwbvh(const FlatBvh& flat, uint32_t frame = 0, uint32_t mergeLimit = kCwbvhDefaultMergeTriangles);
+
+}  // namespace tsah
