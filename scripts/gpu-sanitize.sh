@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # compute-sanitizer over every GPU code path, for the device machine: memcheck (with leak check),
 # racecheck, initcheck and synccheck over every CUDA test program, and over `tsah trace --device
-# cuda` (refit, both GPU rebuilds, a tree set) and tsah_gpu_bench (both traversals, rebuilds,
-# rendering) on a small generated sample. Writes one summary, $OUT/gpu-sanitize.md, plus one log per
+# cuda` (refit, both GPU rebuilds, a tree set) and tsah_gpu_bench (both traversals of both layouts,
+# rebuilds, rendering) on a small generated sample. Writes one summary, $OUT/gpu-sanitize.md, plus one log per
 # run; exit status 1 when any run reports an error or fails.
 #
 # Prepare on the build machine (docs/fuzzing.md, "GPU sanitizers"):
@@ -48,6 +48,7 @@ declare -A runs=(
   [trace-hlbvh-sah-cwbvh]="${trace[*]} --rebuild hlbvh-sah --layout cwbvh"
   [trace-tree-set]="./bin/tsah trace $work/s.tanim $work/set.tbvh --device cuda --frames 3 --width 96 --height 64 --ao 2 --shadow 1 --no-images"
   [gpu-bench]="./bin/tsah_gpu_bench --input $work/s.tanim --tree tsah=$work/s.tbvh --frames 2 --width 128 --height 96 --traversal both --rebuild lbvh,hlbvh-sah"
+  [gpu-bench-cwbvh-passes]="./bin/tsah_gpu_bench --input $work/s.tanim --tree tsah=$work/s.tbvh --frames 2 --width 128 --height 96 --traversal both --layout cwbvh --no-fuse --rebuild none"
 )
 # Test programs that know it run their short cases (test_cuda_optimizer: small inputs, few rounds).
 export TSAH_CUDA_TESTS=short
