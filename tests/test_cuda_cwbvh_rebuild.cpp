@@ -70,6 +70,7 @@ void expectEqualToHost(const tc::GpuRuntime& gpu, const tc::RebuildTimings& timi
   const tsah::CwbvhTree device = gpu.downloadRebuiltCwbvh();
   ASSERT_EQ(device.nodes.size(), host.nodes.size()) << "t=" << t;
   EXPECT_EQ(timings.wideNodes, host.nodeCount());
+  EXPECT_EQ(timings.wideLevels, host.depth);  // the last level holds only leaves
   EXPECT_EQ(std::memcmp(device.nodes.data(), host.nodes.data(), host.nodes.size() * sizeof(tsah::CwbvhNode)), 0)
       << "t=" << t;
   EXPECT_EQ(device.triIndex, host.triIndex) << "t=" << t;
@@ -94,7 +95,7 @@ TEST(CudaCwbvhRebuild, ConversionEqualsHostEmulation) {
           EXPECT_GE(timings.totalMs(), timings.buildMs() + timings.wideMs);
           expectEqualToHost(gpu, timings, a, t);
         }
-    for (uint32_t merge : {0u, 2u, 8u}) {  // RebuildOptions::wideMergeTriangles
+    for (uint32_t merge : {2u, 3u, 8u}) {  // RebuildOptions::wideMergeTriangles (default 0)
       tc::RebuildOptions o = options(tc::RebuildMethod::HlbvhSah, false);
       o.wideMergeTriangles = merge;
       const tc::RebuildTimings timings = gpu.rebuildAt(1.0, o);

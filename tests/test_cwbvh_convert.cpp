@@ -90,13 +90,14 @@ TEST(ConvertToCwbvh, RandomTreesAreValid) {
 }
 
 // The binary CPU runtime's tree at each time, converted, traced against the binary traversal.
-void compareWithBinary(const anim::Animation& a, uint32_t rayCount, uint32_t seed) {
+void compareWithBinary(const anim::Animation& a, uint32_t rayCount, uint32_t seed,
+                       uint32_t merge = tsah::kCwbvhDefaultMergeTriangles) {
   const tsah::FlatBvh flat = sahTree(a.indices(), a.positionsAt(a.startTime()), 8);
   tsah::CpuRuntime rt(flat, {a.indices().begin(), a.indices().end()}, a.vertexCount(), {2});
   tsah::CwbvhTree t;
   auto convert = [&](std::span<const float> pos, const tsah::BvhView& bv) -> const tsah::CwbvhTree& {
     const tsah::BinaryTreeView binary{bv.nodes, flat.interiorCount, bv.triIndex, a.triangleCount()};
-    t = tsah::convertToCwbvh(binary, bv.rootRef, bv.rootCount, bv.rootBox);
+    t = tsah::convertToCwbvh(binary, bv.rootRef, bv.rootCount, bv.rootBox, merge);
     tsah::FlatBvh now = flat;  // the binary tree at these positions
     now.nodes.assign(bv.nodes, bv.nodes + flat.interiorCount);
     now.rootBoxes = {bv.rootBox};
@@ -110,6 +111,9 @@ TEST(ConvertToCwbvh, SameHitsAsBinaryTraversal) {
   compareWithBinary(tsah::test::generatedAnimation(anim::GeneratorKind::Explode, 3000, 8), 3000, 1);
   compareWithBinary(tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 3000, 8), 3000, 2);
   compareWithBinary(tsah::test::generatedAnimation(anim::GeneratorKind::Swap, 3000, 8), 3000, 3);
+  // Small binary subtrees merged into wide leaves.
+  compareWithBinary(tsah::test::generatedAnimation(anim::GeneratorKind::Explode, 3000, 8), 3000, 5, 3);
+  compareWithBinary(tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 3000, 8), 3000, 6, 8);
 }
 
 TEST(ConvertToCwbvh, RealAnimation) {

@@ -241,7 +241,8 @@ json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim:
   if (!opt.noRender) tc::renderFrameGpu(rt, scene.camera(times.front()), scene.lighting, settings, nullptr);
 
   FrameSeries s;
-  std::vector<double> morton, sort, hierarchy, top, bottomUp, wide, clusters, leaves, depth, wideNodes, ratio;
+  std::vector<double> morton, sort, hierarchy, top, bottomUp, wide, clusters, leaves, depth, wideNodes, wideLevels,
+      ratio;
   for (uint32_t f = 0; f < times.size(); ++f) {
     const tc::RebuildTimings b = rt.rebuildAt(times[f], bare);
     s.bareBuild.push_back(b.buildMs());
@@ -257,6 +258,7 @@ json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim:
     bottomUp.push_back(t.bottomUpMs);
     wide.push_back(t.wideMs);
     wideNodes.push_back(t.wideNodes);
+    wideLevels.push_back(t.wideLevels);
     s.woop.push_back(t.woopMs);
     clusters.push_back(t.clusters);
     leaves.push_back(t.leaves);
@@ -293,6 +295,7 @@ json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim:
   if (method == tc::RebuildMethod::HlbvhSah) j["tree"]["clusters"] = summary(clusters);
   if (layout == tc::TreeLayout::Cwbvh) {
     j["tree"]["wide_nodes"] = summary(wideNodes);
+    j["tree"]["wide_levels"] = summary(wideLevels);
     j["wide_merge_triangles"] = opt.wideMerge;
   }
   if (!opt.noRender) j["trace"] = s.traceJson();
@@ -450,7 +453,7 @@ int main(int argc, char** argv) {
   app.add_option("--traversal", opt.traversal, "simple (one thread per ray, the default), persistent or both");
   app.add_option("--layout", opt.layout, "Layouts of the refitted and rebuilt trees: bvh2, cwbvh or both comma separated (default both)");
   app.add_option("--wide-merge", opt.wideMerge,
-                 "cwbvh rebuilds: binary subtrees of at most this many triangles become one wide leaf (0-8, default 3)")
+                 "cwbvh rebuilds: binary subtrees of at most this many triangles become one wide leaf (0-8, default 0: off)")
       ->check(CLI::Range(0u, tsah::kCwbvhMaxLeafTriangles));
   app.add_flag("--no-fuse", opt.noFuse, "cwbvh: separate ray generation and trace kernels (as bvh2) instead of fused passes");
   app.add_option("--cwbvh-cost", opt.wideCost, "cwbvh: the 8-wide collapse's cost of a node visit and of a triangle (default 3 2)")

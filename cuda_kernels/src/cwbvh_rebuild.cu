@@ -17,7 +17,14 @@ namespace tsah::cuda::detail {
 namespace {
 
 constexpr int kConvertBlock = 128;
-enum ConvertWord : uint32_t { kArrivals = 0, kGeneration = 1, kNodeCountWord = 2, kErrorWord = 3, kConvertWords = 4 };
+enum ConvertWord : uint32_t {
+  kArrivals = 0,
+  kGeneration = 1,
+  kNodeCountWord = 2,
+  kErrorWord = 3,
+  kLevelsWord = 4,
+  kConvertWords = 5
+};
 
 // Every block waits until all blocks have arrived; writes before it are visible after it (read
 // them through L2 with __ldcg: another block's writes never sit in this SM's L1).
@@ -70,9 +77,10 @@ __global__ void __launch_bounds__(kConvertBlock) cwbvhConvertKernel(ConvertParam
   const RootInfo root = *p.root;
   const uint32_t perRound = gridDim.x * kConvertBlock;
   const uint32_t lane = threadIdx.x & 31u;
-  uint32_t begin = 0, end = 1, nodes = 1, tris = 0, parity = 0;
+  uint32_t begin = 0, end = 1, nodes = 1, tris = 0, parity = 0, levels = 0;
   bool failed = false;
   while (begin < end) {
+    ++levels;
     for (uint32_t roundBase = begin; roundBase < end; roundBase += perRound) {
       const uint32_t item = roundBase + blockIdx.x * kConvertBlock + threadIdx.x;
       CwbvhOpening o;
@@ -125,6 +133,7 @@ __global__ void __launch_bounds__(kConvertBlock) cwbvhConvertKernel(ConvertParam
   if (failed) atomicExch(p.words + kErrorWord, 1u);
   if (blockIdx.x == 0 && threadIdx.x == 0) {
     p.words[kNodeCountWord] = nodes;
+    p.words[kLevelsWord] = levels;
     if (tris != p.tree.triangles || nodes > p.maxNodes) atomicExch(p.words + kErrorWord, 1u);
   }
 }
@@ -169,6 +178,7 @@ uint32_t GpuCwbvhConverter::collect(cudaStream_t stream) {
     throw anim::Error("GPU wide conversion: the rebuilt tree is invalid or a wide node's leaves would hold more "
                       "than 64 triangles");
   nodeCount_ = words[kNodeCountWord];
+  levels_ = words[kLevelsWord];
   return nodeCount_;
 }
 

@@ -32,12 +32,13 @@ class GpuCwbvhConverter {
   const CwbvhNode* nodes() const { return nodes_.data(); }
   const uint32_t* triIndex() const { return triIndex_.data(); }
   uint32_t nodeCount() const { return nodeCount_; }
+  uint32_t levels() const { return levels_; }  // of the last conversion (= CwbvhTree::depth)
   // The last conversion's nodes and triIndex (rootRef 0; nothing else of CwbvhTree is filled).
   CwbvhTree download(cudaStream_t stream) const;
 
  private:
   uint32_t n_;
-  uint32_t nodeCount_ = 0;
+  uint32_t nodeCount_ = 0, levels_ = 0;
   int blocks_ = 1;
   DeviceBuffer<CwbvhNode> nodes_;
   DeviceBuffer<int32_t> starts_;   // per wide node: the binary node it starts at

@@ -71,8 +71,8 @@ CwbvhTree convertToCwbvh(const BinaryTreeView& t, int32_t rootRef, uint32_t root
       if (n.isLeaf(s)) leafSlots[k++] = s;
     for (uint32_t j = 0; j < k; ++j) {
       const uint32_t first = n.leafOffset(leafSlots[j]);
-      const uint32_t end = j + 1 < k ? n.leafOffset(leafSlots[j + 1]) : n.triCount;
-      out.leaves.push_back({i * kCwbvhWidth + leafSlots[j], n.triBase + first, end - first});
+      const uint32_t last = j + 1 < k ? n.leafOffset(leafSlots[j + 1]) : n.triCount;  // exclusive
+      out.leaves.push_back({i * kCwbvhWidth + leafSlots[j], n.triBase + first, last - first});
     }
   }
   return out;

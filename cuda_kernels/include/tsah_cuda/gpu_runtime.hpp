@@ -64,8 +64,8 @@ struct RebuildOptions {
   // Woop triangles of the new tree (tracing needs them; false only to time the bare build).
   bool woop = true;
   // Layout cwbvh: binary subtrees of at most this many triangles (in one slot range) become one
-  // leaf of the compressed tree (0 or 1: only the binary leaves; at most 8). The paper's leaves: 3.
-  uint32_t wideMergeTriangles = 3;
+  // leaf of the compressed tree (0 or 1: only the binary leaves, the default; at most 8).
+  uint32_t wideMergeTriangles = 0;
 };
 
 // Device time of one rebuild, in milliseconds (CUDA events), and what was built.
@@ -81,6 +81,7 @@ struct RebuildTimings {
   uint32_t clusters = 0;       // HLBVH-SAH only
   uint32_t interiorNodes = 0, leaves = 0, depth = 0;  // of the binary tree
   uint32_t wideNodes = 0;      // layout cwbvh: nodes of the compressed tree
+  uint32_t wideLevels = 0;     // layout cwbvh: its levels (the conversion's steps; = CwbvhTree::depth)
   // The binary tree without interpolation and Woop (the "bare build" when collapse is off).
   double buildMs() const { return mortonMs + sortMs + hierarchyMs + topMs + bottomUpMs; }
   // Everything until the traced tree is ready: with layout cwbvh the conversion counts too.

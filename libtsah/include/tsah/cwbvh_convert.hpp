@@ -30,18 +30,29 @@ namespace tsah {
 
 // A leaf child holds at most 8 triangles, so a node's leaves hold at most 64 (the triangle mask).
 inline constexpr uint32_t kCwbvhMaxLeafTriangles = kCwbvhMaxNodeTriangles / kCwbvhWidth;
-// Binary subtrees of at most this many triangles become one leaf child (the paper's leaves: <= 3).
-inline constexpr uint32_t kCwbvhDefaultMergeTriangles = 3;
+// Binary subtrees of at most this many triangles can become one leaf child (the paper's leaves:
+// <= 3); off by default: the rebuilds' own SAH collapse already chose the leaves, and on an H100
+// (Kitchen, LBVH) merging up to 3 traced no faster (2,200 vs 2,214 MRays/s) and converted slower.
+inline constexpr uint32_t kCwbvhDefaultMergeTriangles = 0;
+
+// The loops below run over all 8 slots with constant indices (unrolled on the GPU), so a thread's
+// children, scores and slots stay in registers: dynamic indexing would put them in local memory,
+// which made the first version of the GPU conversion latency-bound (~30-60 us per wide level).
 
 // Adds one frame's vote for the direction of each child: the offset of its box centre from the
 // centre of the children's union, relative to the union's extent per axis (0 on a flat axis).
 TSAH_HD void cwbvhAddCentreOffsets(const Aabb* boxes, uint32_t n, Vec3* offset) {
   Aabb all;
-  for (uint32_t c = 0; c < n; ++c) all.extend(boxes[c]);
+  TSAH_CWBVH_UNROLL
+  for (uint32_t c = 0; c < kCwbvhWidth; ++c)
+    if (c < n) all.extend(boxes[c]);
   const Vec3 centre = all.center();
   const Vec3 ext = all.extent();
-  for (uint32_t c = 0; c < n; ++c) {
+  TSAH_CWBVH_UNROLL
+  for (uint32_t c = 0; c < kCwbvhWidth; ++c) {
+    if (c >= n) continue;
     const Vec3 d = boxes[c].center() - centre;
+    TSAH_CWBVH_UNROLL
     for (int a = 0; a < 3; ++a) offset[c][a] += ext[a] > 0.0f ? d[a] / ext[a] : 0.0f;
   }
 }
@@ -50,26 +61,35 @@ TSAH_HD void cwbvhAddCentreOffsets(const Aabb* boxes, uint32_t n, Vec3* offset) 
 // whose offset points farthest into a slot's octant (bit a of the slot: + side of axis a) gets it
 // (the paper's assignment). Ties: the lowest child, then the lowest slot.
 TSAH_HD void cwbvhAssignSlots(const Vec3* offset, uint32_t n, uint32_t* slotOf) {
+  float score[kCwbvhWidth][kCwbvhWidth];
+  TSAH_CWBVH_UNROLL
+  for (uint32_t c = 0; c < kCwbvhWidth; ++c) {
+    const Vec3 o = c < n ? offset[c] : Vec3{0.0f, 0.0f, 0.0f};
+    TSAH_CWBVH_UNROLL
+    for (uint32_t s = 0; s < kCwbvhWidth; ++s)
+      score[c][s] = ((s & 1u) ? o.x : -o.x) + ((s & 2u) ? o.y : -o.y) + ((s & 4u) ? o.z : -o.z);
+  }
   uint32_t usedSlots = 0, assigned = 0;
   for (uint32_t round = 0; round < n; ++round) {
     bool found = false;
     float best = 0.0f;
     uint32_t bestC = 0, bestS = 0;
-    for (uint32_t c = 0; c < n; ++c) {
-      if ((assigned >> c) & 1u) continue;
+    TSAH_CWBVH_UNROLL
+    for (uint32_t c = 0; c < kCwbvhWidth; ++c) {
+      TSAH_CWBVH_UNROLL
       for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
-        if ((usedSlots >> s) & 1u) continue;
-        const float score = ((s & 1u) ? offset[c].x : -offset[c].x) + ((s & 2u) ? offset[c].y : -offset[c].y) +
-                            ((s & 4u) ? offset[c].z : -offset[c].z);
-        if (!found || score > best) {
+        const bool free = c < n && !((assigned >> c) & 1u) && !((usedSlots >> s) & 1u);
+        if (free && (!found || score[c][s] > best)) {
           found = true;
-          best = score;
+          best = score[c][s];
           bestC = c;
           bestS = s;
         }
       }
     }
-    slotOf[bestC] = bestS;
+    TSAH_CWBVH_UNROLL
+    for (uint32_t c = 0; c < kCwbvhWidth; ++c)
+      if (c == bestC) slotOf[c] = bestS;
     assigned |= 1u << bestC;
     usedSlots |= 1u << bestS;
   }
@@ -92,10 +112,10 @@ struct CwbvhOpenChild {
   Aabb box;
 };
 
+// The children of one wide node by slot (occupied: bit s set when slot s has a child).
 struct CwbvhOpening {
-  uint32_t count = 0;  // children, 1..8
-  CwbvhOpenChild child[kCwbvhWidth];
-  uint32_t slotOf[kCwbvhWidth];
+  uint32_t occupied = 0;
+  CwbvhOpenChild slot[kCwbvhWidth];
   uint32_t interior = 0;   // interior children
   uint32_t triangles = 0;  // triangles of the leaf children (<= 64)
 };
@@ -167,6 +187,12 @@ TSAH_HD CwbvhOpenChild cwbvhBinaryChild(const BinaryTreeView& t, const GpuBvhNod
     c.ref = makeLeafRef(first);
     c.count = count;
   }
+#if defined(__CUDA_ARCH__)
+  // An interior child may be opened next: start moving its node into L1 now, so that the
+  // opening's chain of dependent node loads waits on L1 rather than L2.
+  if (!isLeafRef(c.ref) && uint32_t(c.ref) < t.nodeCount)
+    asm volatile("prefetch.global.L1 [%0];" ::"l"(t.nodes + c.ref));
+#endif
   return c;
 }
 
@@ -179,53 +205,88 @@ TSAH_HD CwbvhOpenChild cwbvhBinaryChild(const BinaryTreeView& t, const GpuBvhNod
 // triangles, which binary leaves of at most kCwbvhMaxLeafTriangles never do.
 TSAH_HD bool cwbvhOpen(const BinaryTreeView& t, int32_t ref, uint32_t count, const Aabb& box, uint32_t mergeLimit,
                        CwbvhOpening& o) {
-  o.count = 0;
+  CwbvhOpenChild child[kCwbvhWidth];  // in opening order
+  float area[kCwbvhWidth];            // of the children (compared only for interior ones)
+  TSAH_CWBVH_UNROLL
+  for (uint32_t c = 0; c < kCwbvhWidth; ++c) area[c] = 0.0f;
+  uint32_t n = 0;
   if (isLeafRef(ref)) {
-    o.child[0] = {ref, count, box};
-    o.count = 1;
+    child[0] = {ref, count, box};
+    n = 1;
   } else {
     if (uint32_t(ref) >= t.nodeCount) return false;
-    const GpuBvhNode n = detail::cwbvhLoadBinaryNode(t.nodes, uint32_t(ref));
-    o.child[0] = detail::cwbvhBinaryChild(t, n, 0, mergeLimit);
-    o.child[1] = detail::cwbvhBinaryChild(t, n, 1, mergeLimit);
-    o.count = 2;
-    while (o.count < kCwbvhWidth) {
+    const GpuBvhNode root = detail::cwbvhLoadBinaryNode(t.nodes, uint32_t(ref));
+    child[0] = detail::cwbvhBinaryChild(t, root, 0, mergeLimit);
+    child[1] = detail::cwbvhBinaryChild(t, root, 1, mergeLimit);
+    area[0] = child[0].box.area();
+    area[1] = child[1].box.area();
+    n = 2;
+    while (n < kCwbvhWidth) {
       int widest = -1;
       float widestArea = 0.0f;
-      for (uint32_t c = 0; c < o.count; ++c) {
-        if (isLeafRef(o.child[c].ref)) continue;
-        const float a = o.child[c].box.area();
-        if (widest < 0 || a > widestArea) {
+      int32_t widestRef = 0;
+      TSAH_CWBVH_UNROLL
+      for (uint32_t c = 0; c < kCwbvhWidth; ++c) {
+        if (c >= n || isLeafRef(child[c].ref)) continue;
+        if (widest < 0 || area[c] > widestArea) {
           widest = int(c);
-          widestArea = a;
+          widestArea = area[c];
+          widestRef = child[c].ref;
         }
       }
       if (widest < 0) break;
-      if (uint32_t(o.child[widest].ref) >= t.nodeCount) return false;
-      const GpuBvhNode n2 = detail::cwbvhLoadBinaryNode(t.nodes, uint32_t(o.child[widest].ref));
-      o.child[widest] = detail::cwbvhBinaryChild(t, n2, 0, mergeLimit);
-      o.child[o.count++] = detail::cwbvhBinaryChild(t, n2, 1, mergeLimit);
+      if (uint32_t(widestRef) >= t.nodeCount) return false;
+      const GpuBvhNode node = detail::cwbvhLoadBinaryNode(t.nodes, uint32_t(widestRef));
+      const CwbvhOpenChild first = detail::cwbvhBinaryChild(t, node, 0, mergeLimit);
+      const CwbvhOpenChild second = detail::cwbvhBinaryChild(t, node, 1, mergeLimit);
+      const float firstArea = first.box.area(), secondArea = second.box.area();
+      TSAH_CWBVH_UNROLL
+      for (uint32_t c = 0; c < kCwbvhWidth; ++c) {
+        if (c == uint32_t(widest)) {
+          child[c] = first;
+          area[c] = firstArea;
+        }
+        if (c == n) {
+          child[c] = second;
+          area[c] = secondArea;
+        }
+      }
+      ++n;
     }
   }
   o.interior = 0;
   o.triangles = 0;
   Aabb boxes[kCwbvhWidth];
   Vec3 offset[kCwbvhWidth];
-  for (uint32_t c = 0; c < o.count; ++c) {
-    const CwbvhOpenChild& ch = o.child[c];
+  bool valid = true;
+  TSAH_CWBVH_UNROLL
+  for (uint32_t c = 0; c < kCwbvhWidth; ++c) {
+    offset[c] = Vec3{0.0f, 0.0f, 0.0f};
+    if (c >= n) continue;
+    const CwbvhOpenChild& ch = child[c];
     if (!isLeafRef(ch.ref)) {
-      if (uint32_t(ch.ref) >= t.nodeCount) return false;
+      valid = valid && uint32_t(ch.ref) < t.nodeCount;
       ++o.interior;
     } else {
-      if (!detail::cwbvhLeafInRange(t, ch.ref, ch.count)) return false;
+      valid = valid && detail::cwbvhLeafInRange(t, ch.ref, ch.count);
       o.triangles += ch.count;
     }
     boxes[c] = ch.box;
-    offset[c] = Vec3{0.0f, 0.0f, 0.0f};
   }
-  if (o.triangles > kCwbvhMaxNodeTriangles) return false;
-  cwbvhAddCentreOffsets(boxes, o.count, offset);
-  cwbvhAssignSlots(offset, o.count, o.slotOf);
+  if (!valid || o.triangles > kCwbvhMaxNodeTriangles) return false;
+  cwbvhAddCentreOffsets(boxes, n, offset);
+  uint32_t slotOf[kCwbvhWidth];
+  cwbvhAssignSlots(offset, n, slotOf);
+  // By slot.
+  o.occupied = 0;
+  TSAH_CWBVH_UNROLL
+  for (uint32_t c = 0; c < kCwbvhWidth; ++c) {
+    if (c >= n) continue;
+    TSAH_CWBVH_UNROLL
+    for (uint32_t s = 0; s < kCwbvhWidth; ++s)
+      if (slotOf[c] == s) o.slot[s] = child[c];
+    o.occupied |= 1u << slotOf[c];
+  }
   return true;
 }
 
@@ -247,14 +308,12 @@ TSAH_HD void cwbvhWriteNode(const BinaryTreeView& t, const CwbvhOpening& o, uint
   CwbvhNode n{};
   n.childBase = childBase;
   n.triBase = triBase;
-  int childAt[kCwbvhWidth];
-  for (uint32_t s = 0; s < kCwbvhWidth; ++s) childAt[s] = -1;
-  for (uint32_t c = 0; c < o.count; ++c) childAt[o.slotOf[c]] = int(c);
   Aabb boxes[kCwbvhWidth];
   uint32_t rank = 0, offset = 0;
+  TSAH_CWBVH_UNROLL
   for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
-    if (childAt[s] < 0) continue;
-    const CwbvhOpenChild& ch = o.child[childAt[s]];
+    if (!((o.occupied >> s) & 1u)) continue;
+    const CwbvhOpenChild& ch = o.slot[s];
     boxes[s] = ch.box;
     if (out.exactBoxes) out.exactBoxes[std::size_t(self) * kCwbvhWidth + s] = ch.box;
     if (!isLeafRef(ch.ref)) {
