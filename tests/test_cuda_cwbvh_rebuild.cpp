@@ -19,6 +19,7 @@
 #include "tsah/sah_builder.hpp"
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
+#include "cuda_test_support.hpp"
 #include "test_support.hpp"
 
 namespace {
@@ -26,16 +27,7 @@ namespace {
 using tsah::Vec3;
 namespace tc = tsah::cuda;
 
-#define REQUIRE_GPU() \
-  if (!tc::deviceAvailable()) GTEST_SKIP() << "no CUDA device"
-
 using tsah::test::generatedAnimation;
-
-// TSAH_CUDA_TESTS=short (scripts/gpu-sanitize.sh sets it): smaller inputs, the same checks.
-bool shortRun() {
-  const char* value = std::getenv("TSAH_CUDA_TESTS");
-  return value && std::string(value) == "short";
-}
 
 tsah::FlatBvh frameZeroTree(const anim::Animation& a) {
   const tsah::PrimitiveBoxes boxes = tsah::triangleBoxes(a.indices(), a.positionsAt(a.startTime()), 1);
@@ -83,7 +75,7 @@ void expectEqualToHost(const tc::GpuRuntime& gpu, const tc::RebuildTimings& timi
 TEST(CudaCwbvhRebuild, ConversionEqualsHostEmulation) {
   REQUIRE_GPU();
   for (auto kind : {anim::GeneratorKind::Explode, anim::GeneratorKind::Wave}) {
-    const anim::Animation a = generatedAnimation(kind, shortRun() ? 3000 : 30000, 6);
+    const anim::Animation a = generatedAnimation(kind, tsah::test::shortCudaRun() ? 3000 : 30000, 6);
     const tsah::FlatBvh tree = frameZeroTree(a);
     tc::GpuRuntime gpu(tree, a, config(tc::TreeLayout::Cwbvh));
     for (auto method : {tc::RebuildMethod::Lbvh, tc::RebuildMethod::HlbvhSah})
@@ -109,7 +101,7 @@ TEST(CudaCwbvhRebuild, ConversionEqualsHostEmulation) {
 // and replayed: the same input gives the same bytes, with and without a CUDA graph.
 TEST(CudaCwbvhRebuild, LargeTreeDeterministicWithAndWithoutGraphs) {
   REQUIRE_GPU();
-  const anim::Animation a = generatedAnimation(anim::GeneratorKind::Explode, shortRun() ? 20000 : 1000000, 3);
+  const anim::Animation a = generatedAnimation(anim::GeneratorKind::Explode, tsah::test::shortCudaRun() ? 20000 : 1000000, 3);
   const tsah::FlatBvh tree = frameZeroTree(a);
   tc::GpuRuntime graphs(tree, a, config(tc::TreeLayout::Cwbvh, true));
   tc::GpuRuntime direct(tree, a, config(tc::TreeLayout::Cwbvh, false));

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "anim/generators.hpp"
+#include "cuda_test_support.hpp"
 #include "test_support.hpp"
 #include "tsah/cost.hpp"
 #include "tsah/leaf_collapser.hpp"
@@ -28,31 +29,21 @@ namespace {
 using tsah::Bvh;
 using tsah::ParallelReinsertionOptimizer;
 
-#define REQUIRE_DEVICE() \
-  if (!tsah::cuda::deviceAvailable()) GTEST_SKIP() << "no CUDA device"
-
 tsah::PrimitiveBoxes movingBoxes(uint32_t triangles, uint32_t frames, uint32_t seed) {
   return tsah::test::randomMovingTriangles(triangles, frames, seed, 4.0f).boxes();
 }
 
 Bvh initialTree(const tsah::PrimitiveBoxes& prims) { return tsah::SweepSahBuilder().build(prims.frame(0)); }
 
-// TSAH_CUDA_TESTS=short (scripts/gpu-sanitize.sh sets it): smaller inputs and fewer rounds, so that
-// every compute-sanitizer tool gets through this program in about a minute; the checks are the same.
-bool shortRun() {
-  const char* value = std::getenv("TSAH_CUDA_TESTS");
-  return value && std::string(value) == "short";
-}
-
 TEST(CudaOptimizer, SameTreeAsTheEmulation) {
-  REQUIRE_DEVICE();
+  REQUIRE_GPU();
   struct Case {
     uint32_t triangles, frames, seed;
     int k;
     double fraction;
   };
   const std::vector<Case> cases =
-      shortRun() ? std::vector<Case>{{300, 1, 1, 0, 0.5}, {1000, 3, 5, 2, 0.5}}
+      tsah::test::shortCudaRun() ? std::vector<Case>{{300, 1, 1, 0, 0.5}, {1000, 3, 5, 2, 0.5}}
                  : std::vector<Case>{{300, 1, 1, 0, 0.5}, {2000, 4, 2, 0, 0.25}, {2000, 5, 3, 2, 0.25},
                                      {20000, 5, 4, 0, 0.25}, {20000, 3, 5, 1, 0.5}};
   for (const Case& c : cases) {
@@ -60,7 +51,7 @@ TEST(CudaOptimizer, SameTreeAsTheEmulation) {
     ParallelReinsertionOptimizer::Config config;
     config.k = c.k;
     config.seed = c.seed;
-    if (shortRun()) config.maxBatches = 12;
+    if (tsah::test::shortCudaRun()) config.maxBatches = 12;
     ParallelReinsertionOptimizer::Parallel parallel;
     parallel.candidateFraction = c.fraction;
     const auto gpu = tsah::cuda::optimizeOnGpu(initialTree(prims), prims, config, parallel);
@@ -79,10 +70,10 @@ TEST(CudaOptimizer, SameTreeAsTheEmulation) {
 // Every search variant (general or frame-specialized, one thread per candidate or persistent
 // threads) finds the same moves: the emulation's tree, whichever kernel ran.
 TEST(CudaOptimizer, EverySearchVariantGivesTheSameTree) {
-  REQUIRE_DEVICE();
-  const tsah::PrimitiveBoxes prims = movingBoxes(shortRun() ? 1000 : 5000, 5, 31);
+  REQUIRE_GPU();
+  const tsah::PrimitiveBoxes prims = movingBoxes(tsah::test::shortCudaRun() ? 1000 : 5000, 5, 31);
   ParallelReinsertionOptimizer::Config config;
-  config.maxBatches = shortRun() ? 10 : 40;
+  config.maxBatches = tsah::test::shortCudaRun() ? 10 : 40;
   const auto emulated = tsah::optimizeEmulatedDevice(initialTree(prims), prims, config, {});
   for (const bool specialized : {false, true})
     for (const bool dynamic : {false, true}) {
@@ -99,15 +90,15 @@ TEST(CudaOptimizer, EverySearchVariantGivesTheSameTree) {
 }
 
 TEST(CudaOptimizer, InvariantsAndExactCostAfterEveryRound) {
-  REQUIRE_DEVICE();
+  REQUIRE_GPU();
   for (uint32_t frames : {1u, 4u}) {
     for (int k : {0, 2}) {
-      const tsah::PrimitiveBoxes prims = movingBoxes(shortRun() ? 600 : 3000, frames, 20 + frames);
+      const tsah::PrimitiveBoxes prims = movingBoxes(tsah::test::shortCudaRun() ? 600 : 3000, frames, 20 + frames);
       ParallelReinsertionOptimizer::Config config;
       config.k = k;
       const auto session = tsah::cuda::makeGpuReinsertionSession(initialTree(prims), prims, config, {});
       const double start = session->cost();
-      const uint64_t applied = tsah::test::expectValidRounds(*session, prims, k, shortRun() ? 6 : 15);
+      const uint64_t applied = tsah::test::expectValidRounds(*session, prims, k, tsah::test::shortCudaRun() ? 6 : 15);
       EXPECT_GT(applied, 0u);
       EXPECT_LT(session->cost(), start);
     }
@@ -115,12 +106,12 @@ TEST(CudaOptimizer, InvariantsAndExactCostAfterEveryRound) {
 }
 
 TEST(CudaOptimizer, WithinTwoPercentOfTheCpuParallelOptimizer) {
-  REQUIRE_DEVICE();
-  const std::vector<uint32_t> seeds = shortRun() ? std::vector<uint32_t>{11} : std::vector<uint32_t>{11, 12, 13};
-  const std::vector<int> exponents = shortRun() ? std::vector<int>{0} : std::vector<int>{0, 2};
+  REQUIRE_GPU();
+  const std::vector<uint32_t> seeds = tsah::test::shortCudaRun() ? std::vector<uint32_t>{11} : std::vector<uint32_t>{11, 12, 13};
+  const std::vector<int> exponents = tsah::test::shortCudaRun() ? std::vector<int>{0} : std::vector<int>{0, 2};
   for (uint32_t seed : seeds) {
     for (int k : exponents) {
-      const tsah::PrimitiveBoxes prims = movingBoxes(shortRun() ? 600 : 20000, 5, seed);
+      const tsah::PrimitiveBoxes prims = movingBoxes(tsah::test::shortCudaRun() ? 600 : 20000, 5, seed);
       ParallelReinsertionOptimizer::Config config;
       config.k = k;
       config.seed = seed;
@@ -136,11 +127,11 @@ TEST(CudaOptimizer, WithinTwoPercentOfTheCpuParallelOptimizer) {
 }
 
 TEST(CudaOptimizer, CollapseAndBadInput) {
-  REQUIRE_DEVICE();
+  REQUIRE_GPU();
   const tsah::PrimitiveBoxes prims = movingBoxes(1200, 3, 80);
   const tsah::LeafCollapser collapser({{}, 4, 0});
   ParallelReinsertionOptimizer::Config config;
-  if (shortRun()) config.maxBatches = 10;
+  if (tsah::test::shortCudaRun()) config.maxBatches = 10;
   const auto plain = tsah::cuda::optimizeOnGpu(initialTree(prims), prims, config, {});
   const auto collapsed = tsah::cuda::optimizeOnGpu(initialTree(prims), prims, config, {}, &collapser);
   EXPECT_TRUE(tsah::test::identicalTree(collapser.collapse(plain.bvh), collapsed.bvh));
@@ -158,7 +149,7 @@ TEST(CudaOptimizer, CollapseAndBadInput) {
 // the size, TSAH_PROFILE_CPU=1 adds the CPU parallel optimizer for the cost ratio. Disabled by
 // default (a benchmark): --gtest_also_run_disabled_tests --gtest_filter='*Profile*'.
 TEST(CudaOptimizer, DISABLED_ProfileExplode) {
-  REQUIRE_DEVICE();
+  REQUIRE_GPU();
   const char* size = std::getenv("TSAH_PROFILE_TRIANGLES");
   anim::GeneratorOptions g;
   g.triangles = size ? uint32_t(std::stoul(size)) : 200000u;

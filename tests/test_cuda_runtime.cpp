@@ -23,15 +23,13 @@
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/device_buffer.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
+#include "cuda_test_support.hpp"
 #include "test_support.hpp"
 
 namespace {
 
 using tsah::Vec3;
 namespace tc = tsah::cuda;
-
-#define REQUIRE_GPU() \
-  if (!tc::deviceAvailable()) GTEST_SKIP() << "no CUDA device"
 
 using tsah::test::generatedAnimation;
 

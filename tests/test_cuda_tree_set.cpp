@@ -15,6 +15,7 @@
 #include "tsah/tree_set.hpp"
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
+#include "cuda_test_support.hpp"
 
 namespace {
 
@@ -36,7 +37,7 @@ tsah::TreeSet makeSet(const anim::Animation& a) {
 }
 
 TEST(CudaTreeSet, UpdateAtRefitsTheTreeOfEachFramesPartLikeTheCpuRuntime) {
-  if (!tc::deviceAvailable()) GTEST_SKIP() << "no CUDA device";
+  REQUIRE_GPU();
   anim::GeneratorOptions o;
   o.triangles = 2000;
   o.frames = 8;
@@ -71,7 +72,7 @@ TEST(CudaTreeSet, UpdateAtRefitsTheTreeOfEachFramesPartLikeTheCpuRuntime) {
 }
 
 TEST(CudaTreeSet, RefusesAnEmptySetOrATreeOfOtherTriangles) {
-  if (!tc::deviceAvailable()) GTEST_SKIP() << "no CUDA device";
+  REQUIRE_GPU();
   anim::GeneratorOptions o;
   o.triangles = 500;
   o.frames = 8;

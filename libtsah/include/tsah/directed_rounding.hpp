@@ -13,23 +13,23 @@
 
 namespace tsah::rounding {
 
+enum class Round { Down, Up };  // toward -inf, toward +inf
+
 namespace detail {
 
-// x rounded toward -inf / +inf to float, where x = hi + lo exactly (lo: the rounding error of the
+// x rounded in direction R to float, where x = hi + lo exactly (lo: the rounding error of the
 // double hi, |lo| <= half an ulp of hi). No float lies strictly between x and hi unless hi is a
 // float itself, so only then does lo decide.
-inline float downFromDouble(double hi, double lo) {
+template <Round R>
+inline float fromDouble(double hi, double lo) {
+  constexpr bool up = R == Round::Up;
   float f = static_cast<float>(hi);
-  if (static_cast<double>(f) > hi || (static_cast<double>(f) == hi && lo < 0.0))
-    f = std::nextafter(f, -std::numeric_limits<float>::infinity());
+  const double back = static_cast<double>(f);
+  if (up ? (back < hi || (back == hi && lo > 0.0)) : (back > hi || (back == hi && lo < 0.0)))
+    f = std::nextafter(f, (up ? 1.0f : -1.0f) * std::numeric_limits<float>::infinity());
   return f;
 }
-inline float upFromDouble(double hi, double lo) {
-  float f = static_cast<float>(hi);
-  if (static_cast<double>(f) < hi || (static_cast<double>(f) == hi && lo > 0.0))
-    f = std::nextafter(f, std::numeric_limits<float>::infinity());
-  return f;
-}
+
 // Knuth's TwoSum: s + e == a + b exactly (round-to-nearest double, no overflow).
 inline void twoSum(double a, double b, double& s, double& e) {
   s = a + b;
@@ -39,63 +39,48 @@ inline void twoSum(double a, double b, double& s, double& e) {
 
 }  // namespace detail
 
-TSAH_HD float subDown(float a, float b) {
+template <Round R>
+TSAH_HD float sub(float a, float b) {
 #if defined(__CUDA_ARCH__)
-  return __fsub_rd(a, b);
+  if constexpr (R == Round::Down) return __fsub_rd(a, b);
+  else return __fsub_ru(a, b);
 #else
   double s, e;
   detail::twoSum(a, -static_cast<double>(b), s, e);
-  return detail::downFromDouble(s, e);
+  return detail::fromDouble<R>(s, e);
 #endif
 }
 
-TSAH_HD float subUp(float a, float b) {
+template <Round R>
+TSAH_HD float mul(float a, float b) {
 #if defined(__CUDA_ARCH__)
-  return __fsub_ru(a, b);
+  if constexpr (R == Round::Down) return __fmul_rd(a, b);
+  else return __fmul_ru(a, b);
 #else
-  double s, e;
-  detail::twoSum(a, -static_cast<double>(b), s, e);
-  return detail::upFromDouble(s, e);
+  return detail::fromDouble<R>(static_cast<double>(a) * b, 0.0);  // 48-bit product: exact
 #endif
 }
 
-TSAH_HD float mulDown(float a, float b) {
+// a * b + c with one rounding, for |a| < 2^25 with at most 24 significant bits (a * b is then exact
+// in double; the cwbvh box test passes 2^23 + an 8-bit grid coordinate, or -2^23).
+template <Round R>
+TSAH_HD float fma(float a, float b, float c) {
 #if defined(__CUDA_ARCH__)
-  return __fmul_rd(a, b);
-#else
-  return detail::downFromDouble(static_cast<double>(a) * b, 0.0);  // 48-bit product: exact
-#endif
-}
-
-TSAH_HD float mulUp(float a, float b) {
-#if defined(__CUDA_ARCH__)
-  return __fmul_ru(a, b);
-#else
-  return detail::upFromDouble(static_cast<double>(a) * b, 0.0);
-#endif
-}
-
-// a * b + c with one rounding, for |a| < 2^24 with at most 24 significant bits (a * b is then exact
-// in double; the cwbvh box test passes 8-bit grid coordinates).
-TSAH_HD float fmaDown(float a, float b, float c) {
-#if defined(__CUDA_ARCH__)
-  return __fmaf_rd(a, b, c);
+  if constexpr (R == Round::Down) return __fmaf_rd(a, b, c);
+  else return __fmaf_ru(a, b, c);
 #else
   double s, e;
   detail::twoSum(static_cast<double>(a) * b, c, s, e);
-  return detail::downFromDouble(s, e);
+  return detail::fromDouble<R>(s, e);
 #endif
 }
 
-TSAH_HD float fmaUp(float a, float b, float c) {
-#if defined(__CUDA_ARCH__)
-  return __fmaf_ru(a, b, c);
-#else
-  double s, e;
-  detail::twoSum(static_cast<double>(a) * b, c, s, e);
-  return detail::upFromDouble(s, e);
-#endif
-}
+TSAH_HD float subDown(float a, float b) { return sub<Round::Down>(a, b); }
+TSAH_HD float subUp(float a, float b) { return sub<Round::Up>(a, b); }
+TSAH_HD float mulDown(float a, float b) { return mul<Round::Down>(a, b); }
+TSAH_HD float mulUp(float a, float b) { return mul<Round::Up>(a, b); }
+TSAH_HD float fmaDown(float a, float b, float c) { return fma<Round::Down>(a, b, c); }
+TSAH_HD float fmaUp(float a, float b, float c) { return fma<Round::Up>(a, b, c); }
 
 // a + b rounded up, for the quantizer's exact plane checks: addUp(a, b) <= x exactly when the real
 // a + b <= x (x a float).
