@@ -125,19 +125,13 @@ __global__ void __launch_bounds__(128) cwbvhTraceKernel(CwbvhView view, const Ro
       }
     storeResult(t, view, i, hits, occluded);
   } else {
-    const uint32_t lane = threadIdx.x & 31u;
     uint32_t rayIndex = 0;
     bool live = false;
     for (;;) {
       const unsigned looping = __activemask();
       const unsigned idle = __ballot_sync(looping, !live);
       if (!live && (__popc(idle) >= kRefillIdleLanes || idle == looping)) {
-        const unsigned mask = __activemask();
-        const int leader = __ffs(mask) - 1;
-        uint32_t base = 0;
-        if (int(lane) == leader) base = atomicAdd(rayCounter, uint32_t(__popc(mask)));
-        base = __shfl_sync(mask, base, leader);
-        rayIndex = base + uint32_t(__popc(mask & ((1u << lane) - 1u)));
+        rayIndex = takeRayIndices(rayCounter);
         if (rayIndex >= count) break;
         live = t.start(view, loadRayVec(rays, rayIndex));
         if (!live) storeResult(t, view, rayIndex, hits, occluded);
@@ -156,14 +150,8 @@ void launchWideTyped(const CwbvhView& view, const RootInfo* root, const Ray* ray
   const unsigned block = 128;  // fixed by __launch_bounds__
   unsigned grid = gridFor(count, block);
   if constexpr (Persistent) {
-    unsigned resident = launch.blocks;
-    if (resident == 0) {
-      int device = 0, sms = 0, perSm = 0;
-      CUDA_CHECK(cudaGetDevice(&device));
-      CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
-      CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&perSm, cwbvhTraceKernel<AnyHit, true>, int(block), 0));
-      resident = unsigned(sms) * unsigned(perSm > 0 ? perSm : 1);
-    }
+    const unsigned resident =
+        launch.blocks != 0 ? launch.blocks : unsigned(residentBlocks(cwbvhTraceKernel<AnyHit, true>, int(block), 64));
     if (resident < grid) grid = resident;
   }
   cwbvhTraceKernel<AnyHit, Persistent><<<grid, block, 0, stream>>>(view, root, rays, count, hits, occluded, rayCounter);

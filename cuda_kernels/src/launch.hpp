@@ -28,4 +28,19 @@ int residentBlocks(Kernel kernel, int blockSize, int maxPerSm) {
   return std::max(1, sms * std::clamp(perSm, 1, maxPerSm));
 }
 
+#if defined(__CUDACC__)
+// Persistent traversal: the lanes of a warp that call this together take consecutive ray indices
+// from *counter with one atomic per warp (Aila and Laine's ray fetch; the callers are the active
+// lanes, named with __activemask(), so no code assumes lock-step execution).
+__device__ __forceinline__ uint32_t takeRayIndices(uint32_t* counter) {
+  const unsigned mask = __activemask();
+  const uint32_t lane = threadIdx.x & 31u;
+  const int leader = __ffs(mask) - 1;
+  uint32_t base = 0;
+  if (int(lane) == leader) base = atomicAdd(counter, uint32_t(__popc(mask)));
+  base = __shfl_sync(mask, base, leader);
+  return base + uint32_t(__popc(mask & ((1u << lane) - 1u)));
+}
+#endif
+
 }  // namespace tsah::cuda::detail

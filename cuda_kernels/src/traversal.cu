@@ -58,7 +58,6 @@ __global__ void __launch_bounds__(128) traceKernel(TraceScene scene, const Ray* 
   stack[0] = make_int2(kSentinel, 0);
 
   const RootInfo rootInfo = *scene.root;
-  const uint32_t lane = threadIdx.x & 31u;
 
   Ray ray;
   RayPrep prep;
@@ -73,13 +72,7 @@ __global__ void __launch_bounds__(128) traceKernel(TraceScene scene, const Ray* 
   for (;;) {
     if (needRay) {
       if constexpr (Persistent) {
-        // The lanes that need a ray right now take consecutive indices with one atomic per warp.
-        const unsigned mask = __activemask();
-        const int leader = __ffs(mask) - 1;
-        uint32_t base = 0;
-        if (int(lane) == leader) base = atomicAdd(rayCounter, uint32_t(__popc(mask)));
-        base = __shfl_sync(mask, base, leader);
-        rayIndex = base + uint32_t(__popc(mask & ((1u << lane) - 1u)));
+        rayIndex = takeRayIndices(rayCounter);  // the lanes that need a ray right now
       } else {
         if (fetchedOnce) break;
         fetchedOnce = true;
