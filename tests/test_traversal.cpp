@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <algorithm>
 #include <random>
 
@@ -335,6 +336,33 @@ TEST(Traversal, ChildBoxTestEqualsScalarBoxTest) {
       ASSERT_EQ(0, std::memcmp(&s1, &v1, 4)) << i;
     }
   }
+}
+
+// The slab set-up replaces a zero or tiny direction component by +-1e-30 (keeping its sign; -0 and
+// +0 become +1e-30) and leaves everything else, NaN included, to 1 / d.
+TEST(Traversal, SlabSetupClampsTinyDirectionComponents) {
+  struct Case {
+    float d, inv;
+  };
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const Case cases[] = {{0.0f, 1e30f},      {-0.0f, 1e30f},    {1e-31f, 1e30f},   {-1e-31f, -1e30f},
+                        {1e-30f, 1.0f / 1e-30f}, {-1e-30f, -1.0f / 1e-30f}, {0.5f, 2.0f}, {-4.0f, -0.25f},
+                        {std::numeric_limits<float>::denorm_min(), 1e30f}};
+  for (const Case& c : cases) {
+    tsah::Ray ray;
+    ray.org = {0, 0, 0};
+    ray.dir = {c.d, -c.d, c.d};
+    const tsah::RayPrep p = tsah::prepareSlabs(ray);
+    const float expectY = c.d == 0.0f ? c.inv : -c.inv;  // both zeros become +1e-30
+    EXPECT_EQ(p.invDir.x, c.inv) << c.d;
+    EXPECT_EQ(p.invDir.y, expectY) << c.d;
+  }
+  tsah::Ray ray;
+  ray.org = {0, 0, 0};
+  ray.dir = {nan, -nan, 1.0f};
+  const tsah::RayPrep p = tsah::prepareSlabs(ray);
+  EXPECT_TRUE(std::isnan(p.invDir.x) && std::isnan(p.invDir.y));
+  EXPECT_EQ(p.invDir.z, 1.0f);
 }
 
 TEST(Traversal, DegenerateTrianglesAreNeverHit) {
