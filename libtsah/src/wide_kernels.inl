@@ -196,7 +196,7 @@ inline Hit traverse(const WideView<V::N>& bvh, const Ray& ray) {
           count = node.count[c0];
           continue;
         }
-        if constexpr (Q == Query::AnyTreeOrder) {  // push every entered child in slot order; continue with the last
+        if constexpr (Q == Query::AnyTreeOrder) {  // every entered child in slot order; the last one next
           for (uint32_t c = c0;;) {
             stack[sp++] = Entry{node.ref[c], node.count[c], 0.0f};
             if (!mask) break;
@@ -216,6 +216,15 @@ inline Hit traverse(const WideView<V::N>& bvh, const Ray& ray) {
         // With tied keys the block keeps slot order, the last slot on top (TreeOrder's order).
         alignas(32) float key[N];
         V::store(key, AnyHit ? V::set1(0.0f) - tn : tn);
+        if (!(mask & (mask - 1))) {  // two children: the insertion's order with one compare
+          const uint32_t c1 = uint32_t(__builtin_ctz(mask));
+          const bool swap = key[c0] < key[c1];
+          const uint32_t below = swap ? c1 : c0, first = swap ? c0 : c1;
+          stack[sp++] = Entry{node.ref[below], node.count[below], key[below]};
+          ref = node.ref[first];
+          count = node.count[first];
+          continue;
+        }
         const uint32_t base = sp;
         for (uint32_t c = c0;;) {
           const Entry e{node.ref[c], node.count[c], key[c]};
