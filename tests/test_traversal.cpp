@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <algorithm>
 #include <random>
 
@@ -335,6 +336,35 @@ TEST(Traversal, ChildBoxTestEqualsScalarBoxTest) {
       ASSERT_EQ(0, std::memcmp(&s1, &v1, 4)) << i;
     }
   }
+}
+
+// The slab set-up replaces a zero or tiny direction component (|d| < 1e-30) by +-1e-30, negative
+// only for a negative d (-0 and +0 both become +1e-30), and leaves everything else, NaN included,
+// to 1 / d.
+TEST(Traversal, SlabSetupClampsTinyDirectionComponents) {
+  const float clamped = 1.0f / 1e-30f;
+  struct Case {
+    float d, inv;
+  };
+  const Case cases[] = {
+      {0.0f, clamped},         {-0.0f, clamped},        {1e-31f, clamped},
+      {-1e-31f, -clamped},     {std::numeric_limits<float>::denorm_min(), clamped},
+      {-std::numeric_limits<float>::denorm_min(), -clamped},
+      {2e-30f, 1.0f / 2e-30f}, {-2e-30f, 1.0f / -2e-30f}, {0.5f, 2.0f}, {-4.0f, -0.25f},
+  };
+  for (const Case& c : cases) {
+    tsah::Ray ray;
+    ray.org = {0, 0, 0};
+    ray.dir = {c.d, 1.0f, 1.0f};
+    EXPECT_EQ(tsah::prepareSlabs(ray).invDir.x, c.inv) << c.d;
+  }
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  tsah::Ray ray;
+  ray.org = {0, 0, 0};
+  ray.dir = {nan, -nan, 1.0f};
+  const tsah::RayPrep p = tsah::prepareSlabs(ray);
+  EXPECT_TRUE(std::isnan(p.invDir.x) && std::isnan(p.invDir.y));
+  EXPECT_EQ(p.invDir.z, 1.0f);
 }
 
 TEST(Traversal, DegenerateTrianglesAreNeverHit) {

@@ -1,7 +1,8 @@
 // The wide layouts (bvh4, bvh8) against the binary traversal, for every instruction set this machine
 // runs, each dispatch target tested explicitly: closest hit (same triangle, or a triangle at the same
 // distance when two tie; distances equal to within 1e-6 relative, in fact bit-identical) and any hit
-// (the same answer) on random and real scenes, plus the refit's boxes in every frame.
+// (the same answer, in both child orders) on random and real scenes, plus the refit's boxes in every
+// frame.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -126,6 +127,7 @@ void checkSameHits(const anim::Animation& a, const tsah::FlatBvh& tree, std::spa
         ASSERT_EQ(expect.valid(), got.valid()) << where;
         ASSERT_EQ(binary.anyHit(rays[i]), wide.anyHit(rays[i])) << where;
         ASSERT_EQ(wide.anyHit(rays[i]), got.valid()) << where;
+        ASSERT_EQ(wide.anyHit(rays[i], tsah::AnyHitOrder::TreeOrder), got.valid()) << where;
         if (!expect.valid()) continue;
         ++hits;
         ASSERT_NEAR(expect.t, got.t, 1e-6f * std::max(1.0f, expect.t)) << where;
@@ -182,6 +184,7 @@ TEST(WideTraversal, SingleLeafTreesAndEmptyRays) {
     tsah::Ray away{rt.bounds().hi + Vec3{1, 1, 1}, 0.0f, {1, 1, 1}, 3.4e38f};
     EXPECT_FALSE(rt.closestHit(away).valid());
     EXPECT_FALSE(rt.anyHit(away));
+    EXPECT_FALSE(rt.anyHit(away, tsah::AnyHitOrder::TreeOrder));
   }
 }
 
@@ -211,6 +214,7 @@ TEST(WideTraversal, SameAnswersThroughEdgesAndVertices) {
           const tsah::Hit expect = binary.closestHit(ray), got = rt.closestHit(ray);
           ASSERT_EQ(expect.valid(), got.valid()) << tsah::isaName(isa) << " triangle " << t << " edge " << e;
           ASSERT_EQ(binary.anyHit(ray), rt.anyHit(ray));
+          ASSERT_EQ(binary.anyHit(ray), rt.anyHit(ray, tsah::AnyHitOrder::TreeOrder));
           if (expect.valid()) {
             ASSERT_NEAR(expect.t, got.t, 1e-6f * expect.t);  // a tie may pick a neighbour through the vertex
           }
@@ -284,6 +288,7 @@ TEST(WideTraversal, RebuildKeepsTheLayout) {
   for (const tsah::Ray& ray : randomRays(binary, 500, 9)) {
     ASSERT_EQ(binary.closestHit(ray).valid(), wide.closestHit(ray).valid());
     ASSERT_EQ(binary.anyHit(ray), wide.anyHit(ray));
+    ASSERT_EQ(binary.anyHit(ray), wide.anyHit(ray, tsah::AnyHitOrder::TreeOrder));
   }
 }
 

@@ -127,7 +127,9 @@ BatchTracer EmbreePeer::tracer() const {
       hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID ? 1u : 0u;
     }
   };
-  tracer.occluded = [scene](const std::vector<Ray>& rays, std::size_t first, std::size_t count, uint64_t& occluded) {
+  // Embree has no choice of order for occlusion rays (it never sorts them): the order is ignored.
+  tracer.occluded = [scene](const std::vector<Ray>& rays, std::size_t first, std::size_t count, AnyHitOrder,
+                            uint64_t& occluded) {
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);
     for (std::size_t i = first; i < first + count; ++i) {

@@ -78,8 +78,15 @@ RayPassStats timedPass(const CpuRuntime& runtime, const std::vector<Ray>& rays, 
 BatchTrace traceBatch(const CpuRuntime& runtime, const RayBatch& batch, const BatchTracer& tracer) {
   BatchTrace t;
   t.primary = timedPass(runtime, batch.primary, t.primaryHits, tracer.closest);
-  t.ao = timedPass(runtime, batch.ao, t.aoOccluded, tracer.occluded);
-  t.shadow = timedPass(runtime, batch.shadow, t.shadowOccluded, tracer.occluded);
+  // The renderer's any-hit orders (renderer.cpp): tree order for the short AO rays, farthest
+  // first for the shadow rays.
+  auto occluded = [&tracer](AnyHitOrder order) {
+    return [&tracer, order](const std::vector<Ray>& rays, std::size_t first, std::size_t count, uint64_t& n) {
+      tracer.occluded(rays, first, count, order, n);
+    };
+  };
+  t.ao = timedPass(runtime, batch.ao, t.aoOccluded, occluded(AnyHitOrder::TreeOrder));
+  t.shadow = timedPass(runtime, batch.shadow, t.shadowOccluded, occluded(AnyHitOrder::FarthestFirst));
   return t;
 }
 
@@ -88,8 +95,9 @@ BatchTracer toolkitTracer(const CpuRuntime& runtime) {
   tracer.closest = [&runtime](const std::vector<Ray>& rays, std::size_t first, std::size_t count, uint64_t& hits) {
     for (std::size_t i = first; i < first + count; ++i) hits += runtime.closestHit(rays[i]).valid() ? 1u : 0u;
   };
-  tracer.occluded = [&runtime](const std::vector<Ray>& rays, std::size_t first, std::size_t count, uint64_t& occluded) {
-    for (std::size_t i = first; i < first + count; ++i) occluded += runtime.anyHit(rays[i]) ? 1u : 0u;
+  tracer.occluded = [&runtime](const std::vector<Ray>& rays, std::size_t first, std::size_t count, AnyHitOrder order,
+                               uint64_t& occluded) {
+    for (std::size_t i = first; i < first + count; ++i) occluded += runtime.anyHit(rays[i], order) ? 1u : 0u;
   };
   return tracer;
 }

@@ -37,10 +37,14 @@ struct BatchTrace {
 };
 
 // A ray tracer over chunks of a batch: closest(rays, first, count, hitCount) and
-// occluded(rays, first, count, occludedCount) trace rays [first, first + count).
+// occluded(rays, first, count, order, occludedCount) trace rays [first, first + count). `order` is
+// the renderer's any-hit order of the pass (TreeOrder for the AO rays, FarthestFirst for the
+// shadow rays); a tracer without that choice (Embree) ignores it.
 struct BatchTracer {
   std::function<void(const std::vector<Ray>& rays, std::size_t first, std::size_t count, uint64_t& hits)> closest;
-  std::function<void(const std::vector<Ray>& rays, std::size_t first, std::size_t count, uint64_t& occluded)> occluded;
+  std::function<void(const std::vector<Ray>& rays, std::size_t first, std::size_t count, AnyHitOrder order,
+                     uint64_t& occluded)>
+      occluded;
 };
 
 // Traces every pass of the batch with `tracer`, spread over the runtime's threads, each pass timed

@@ -310,9 +310,9 @@ Hit CpuRuntime::closestHit(const Ray& ray) const {
   return tsah::closestHit(binaryView(), ray);
 }
 
-bool CpuRuntime::anyHit(const Ray& ray) const {
-  if (wide8_) return kernels_->any8(view8_, ray);
-  if (wide4_) return kernels_->any4(view4_, ray);
+bool CpuRuntime::anyHit(const Ray& ray, AnyHitOrder order) const {
+  if (wide8_) return kernels_->any8(view8_, ray, order);
+  if (wide4_) return kernels_->any4(view4_, ray, order);
   return tsah::anyHit(binaryView(), ray);
 }
 

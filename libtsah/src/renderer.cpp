@@ -134,7 +134,7 @@ RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const S
     stats.ao = surfacePass(runtime, width, surfaces, base, [&](std::size_t i, const Surface& s, SampleKey key) {
       uint32_t occluded = 0;
       for (uint32_t k = 0; k < settings.aoSamples; ++k)
-        occluded += runtime.anyHit(aoRay(s, key, k, lighting.aoDistance)) ? 1u : 0u;
+        occluded += runtime.anyHit(aoRay(s, key, k, lighting.aoDistance), AnyHitOrder::TreeOrder) ? 1u : 0u;
       ao[i] = aoFactor(occluded, settings.aoSamples);
       return settings.aoSamples;
     });

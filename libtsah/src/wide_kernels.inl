@@ -19,6 +19,12 @@
 struct LazyPrep {
   RayPrep prep;
   bool shear = false;
+  // The shear fields start at zero only so that no path reads an indeterminate value as far as the
+  // compiler can tell (watertight() always fills them before they are used).
+  explicit LazyPrep(const Ray& ray) : prep(prepareSlabs(ray)) {
+    prep.kx = prep.ky = prep.kz = 0;
+    prep.sx = prep.sy = prep.sz = 0.0f;
+  }
   const RayPrep& watertight(const Ray& ray) {
     if (!shear) prepareShear(ray, prep), shear = true;
     return prep;
@@ -138,12 +144,16 @@ inline bool intersectLeaf(const WideView<V::N>& bvh, const Ray& ray, LazyPrep& p
   return found;
 }
 
-template <class V, bool AnyHit>
+// What a traversal looks for, and for any hit in which order it visits the entered children.
+enum class Query { Closest, AnyFarthestFirst, AnyTreeOrder };
+
+template <class V, Query Q>
 inline Hit traverse(const WideView<V::N>& bvh, const Ray& ray) {
   constexpr uint32_t N = V::N;
+  constexpr bool AnyHit = Q != Query::Closest;
   Hit hit;
   if (bvh.rootCount == 0 && isLeafRef(bvh.rootRef)) return hit;  // empty tree
-  LazyPrep prep{prepareSlabs(ray)};
+  LazyPrep prep(ray);
   float tmax = ray.tmax;
   const RayLanes<V> r = rayLanes<V>(ray, prep.prep);
   if (isLeafRef(bvh.rootRef)) {
@@ -186,13 +196,35 @@ inline Hit traverse(const WideView<V::N>& bvh, const Ray& ray) {
           count = node.count[c0];
           continue;
         }
+        if constexpr (Q == Query::AnyTreeOrder) {  // every entered child in slot order; the last one next
+          for (uint32_t c = c0;;) {
+            stack[sp++] = Entry{node.ref[c], node.count[c], 0.0f};
+            if (!mask) break;
+            c = uint32_t(__builtin_ctz(mask));
+            mask &= mask - 1;
+          }
+          --sp;
+          ref = stack[sp].ref;
+          count = stack[sp].count;
+          continue;
+        }
         // Push every entered child, the pushed block sorted by key; continue with the top one.
         // Closest hit: nearest first (the key is the entry distance). Any hit: farthest first (the
         // key is its negation). An occlusion ray leaves a surface: its nearest boxes hold that
         // surface, which it moves away from, while an occluder lies across the gap (a wall, a
         // ceiling, another object); a ray that finds nothing visits every entered child anyway.
+        // With tied keys the block keeps slot order, the last slot on top (TreeOrder's order).
         alignas(32) float key[N];
         V::store(key, AnyHit ? V::set1(0.0f) - tn : tn);
+        if (!(mask & (mask - 1))) {  // two children: the insertion's order with one compare
+          const uint32_t c1 = uint32_t(__builtin_ctz(mask));
+          const bool swap = key[c0] < key[c1];
+          const uint32_t below = swap ? c1 : c0, first = swap ? c0 : c1;
+          stack[sp++] = Entry{node.ref[below], node.count[below], key[below]};
+          ref = node.ref[first];
+          count = node.count[first];
+          continue;
+        }
         const uint32_t base = sp;
         for (uint32_t c = c0;;) {
           const Entry e{node.ref[c], node.count[c], key[c]};
@@ -284,11 +316,12 @@ TSAH_KERNEL void woopRowsKernel(const float (*vertices)[N], uint32_t lanes, Woop
 
 template <class V>
 TSAH_KERNEL Hit closestKernel(const WideView<V::N>& bvh, const Ray& ray) {
-  return traverse<V, false>(bvh, ray);
+  return traverse<V, Query::Closest>(bvh, ray);
 }
 template <class V>
-TSAH_KERNEL bool anyKernel(const WideView<V::N>& bvh, const Ray& ray) {
-  return traverse<V, true>(bvh, ray).valid();
+TSAH_KERNEL bool anyKernel(const WideView<V::N>& bvh, const Ray& ray, AnyHitOrder order) {
+  return order == AnyHitOrder::TreeOrder ? traverse<V, Query::AnyTreeOrder>(bvh, ray).valid()
+                                         : traverse<V, Query::AnyFarthestFirst>(bvh, ray).valid();
 }
 
 #undef TSAH_KERNEL

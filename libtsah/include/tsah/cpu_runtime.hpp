@@ -94,8 +94,11 @@ class CpuRuntime {
   uint32_t currentTree() const { return current_; }
 
   // Nearest hit / any hit in (ray.tmin, ray.tmax) in the current frame, in the runtime's layout.
+  // `order` picks the wide layouts' any-hit child order (the answer is the same; bvh2 ignores it):
+  // the default for long rays such as shadow rays, AnyHitOrder::TreeOrder for short ones (ambient
+  // occlusion).
   Hit closestHit(const Ray& ray) const;
-  bool anyHit(const Ray& ray) const;
+  bool anyHit(const Ray& ray, AnyHitOrder order = AnyHitOrder::FarthestFirst) const;
 
   const LayoutInfo& layoutInfo() const { return info_; }
   // The binary tree and its view: bvh2 only (the wide layouts do not refit the binary tree; both

@@ -1,7 +1,7 @@
 #pragma once
 // SIMD traversal of the wide layouts (wide_layout.hpp) on the CPU: closest hit and any hit
 // (occlusion: stops at the first hit found); closest hit visits the entered children near-first,
-// any hit far-first (an occluder lies across the gap from the surface the ray leaves).
+// any hit in the order the caller picks (AnyHitOrder: farthest first, or the tree's order).
 //
 // The kernels are compiled once per instruction set, each in its own file with its own compiler
 // flags (libtsah/src/wide_kernels_<isa>.cpp, all from one template, wide_kernels.inl):
@@ -25,6 +25,18 @@ namespace tsah {
 
 enum class SimdIsa : uint8_t { Sse = 0, Avx2 = 1, Avx512 = 2 };
 
+// The order in which an any-hit (occlusion) traversal visits the children a ray enters. The answer
+// is the same either way; only how soon the first hit is found, and the cost of ordering, differ.
+enum class AnyHitOrder : uint8_t {
+  // Sorted by entry distance, farthest first: rays leaving a surface whose occluder lies across a
+  // gap (shadow rays toward a light: the wall or ceiling between the surface and the light).
+  FarthestFirst = 0,
+  // No sort: the node's child order (the binary tree's), last child first. For short rays (ambient
+  // occlusion): the children they enter mostly contain the origin, so the entry distances tie and
+  // sorting them is wasted work.
+  TreeOrder = 1,
+};
+
 const char* isaName(SimdIsa isa);  // "sse", "avx2", "avx512"
 std::optional<SimdIsa> parseIsa(const std::string& name);
 // True when the kernels for isa are compiled into this build and the processor runs them.
@@ -38,9 +50,9 @@ SimdIsa bestIsa();
 struct WideKernels {
   SimdIsa isa = SimdIsa::Sse;
   Hit (*closest4)(const WideView<4>& bvh, const Ray& ray) = nullptr;
-  bool (*any4)(const WideView<4>& bvh, const Ray& ray) = nullptr;
+  bool (*any4)(const WideView<4>& bvh, const Ray& ray, AnyHitOrder order) = nullptr;
   Hit (*closest8)(const WideView<8>& bvh, const Ray& ray) = nullptr;
-  bool (*any8)(const WideView<8>& bvh, const Ray& ray) = nullptr;
+  bool (*any8)(const WideView<8>& bvh, const Ray& ray, AnyHitOrder order) = nullptr;
   // The refit's inner step (WideTree::refit), in every table: the Woop rows of one packet from its
   // lanes' vertices (vertices[3k + a][lane]: axis a of vertex k), bit for bit makeWoopTriangle's
   // (lanes from `lanes` on and degenerate triangles get zero rows), and in `bounds` the box of the
