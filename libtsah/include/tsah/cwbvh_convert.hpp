@@ -57,36 +57,48 @@ TSAH_HD void cwbvhAddCentreOffsets(const Aabb* boxes, uint32_t n, Vec3* offset) 
   }
 }
 
+// A float's order as an unsigned integer (-0 taken as +0, which compares equal to it).
+TSAH_HD uint32_t cwbvhOrderedBits(float f) {
+  if (f == 0.0f) f = 0.0f;
+  const uint32_t u = detail::floatBits(f);
+  return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
+}
+
+TSAH_HD uint64_t cwbvhMax64(uint64_t a, uint64_t b) { return a > b ? a : b; }
+
 // Child -> slot (slotOf[c] for c < n <= 8): greedily over all (child, free slot) pairs, the child
 // whose offset points farthest into a slot's octant (bit a of the slot: + side of axis a) gets it
-// (the paper's assignment). Ties: the lowest child, then the lowest slot.
+// (the paper's assignment). Ties: the lowest child, then the lowest slot. Each round takes the
+// largest key (score's order, then 63 - (8 * child + slot)) of the free pairs as a tree of maxima
+// instead of a chain of 64 dependent comparisons (a GPU thread's latency per wide node).
 TSAH_HD void cwbvhAssignSlots(const Vec3* offset, uint32_t n, uint32_t* slotOf) {
-  float score[kCwbvhWidth][kCwbvhWidth];
+  uint32_t order[kCwbvhWidth][kCwbvhWidth];
   TSAH_CWBVH_UNROLL
   for (uint32_t c = 0; c < kCwbvhWidth; ++c) {
     const Vec3 o = c < n ? offset[c] : Vec3{0.0f, 0.0f, 0.0f};
     TSAH_CWBVH_UNROLL
     for (uint32_t s = 0; s < kCwbvhWidth; ++s)
-      score[c][s] = ((s & 1u) ? o.x : -o.x) + ((s & 2u) ? o.y : -o.y) + ((s & 4u) ? o.z : -o.z);
+      order[c][s] = cwbvhOrderedBits(((s & 1u) ? o.x : -o.x) + ((s & 2u) ? o.y : -o.y) + ((s & 4u) ? o.z : -o.z));
   }
   uint32_t usedSlots = 0, assigned = 0;
   for (uint32_t round = 0; round < n; ++round) {
-    bool found = false;
-    float best = 0.0f;
-    uint32_t bestC = 0, bestS = 0;
+    uint64_t rowBest[kCwbvhWidth];
     TSAH_CWBVH_UNROLL
     for (uint32_t c = 0; c < kCwbvhWidth; ++c) {
+      uint64_t key[kCwbvhWidth];  // 0 for a pair that is not free (a free pair's key is larger)
       TSAH_CWBVH_UNROLL
       for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
         const bool free = c < n && !((assigned >> c) & 1u) && !((usedSlots >> s) & 1u);
-        if (free && (!found || score[c][s] > best)) {
-          found = true;
-          best = score[c][s];
-          bestC = c;
-          bestS = s;
-        }
+        key[s] = free ? (uint64_t(order[c][s]) << 32) | (63u - (8u * c + s)) : 0u;
       }
+      rowBest[c] = cwbvhMax64(cwbvhMax64(cwbvhMax64(key[0], key[1]), cwbvhMax64(key[2], key[3])),
+                              cwbvhMax64(cwbvhMax64(key[4], key[5]), cwbvhMax64(key[6], key[7])));
     }
+    const uint64_t best =
+        cwbvhMax64(cwbvhMax64(cwbvhMax64(rowBest[0], rowBest[1]), cwbvhMax64(rowBest[2], rowBest[3])),
+                   cwbvhMax64(cwbvhMax64(rowBest[4], rowBest[5]), cwbvhMax64(rowBest[6], rowBest[7])));
+    const uint32_t pair = 63u - uint32_t(best & 63u);
+    const uint32_t bestC = pair >> 3, bestS = pair & 7u;
     TSAH_CWBVH_UNROLL
     for (uint32_t c = 0; c < kCwbvhWidth; ++c)
       if (c == bestC) slotOf[c] = bestS;
@@ -325,7 +337,19 @@ TSAH_HD void cwbvhWriteNode(const BinaryTreeView& t, const CwbvhOpening& o, uint
     }
     n.meta[s] = uint8_t(kCwbvhLeaf | offset);
     const uint32_t first = leafFirstSlot(ch.ref);
-    for (uint32_t k = 0; k < ch.count; ++k) out.triIndex[triBase + offset + k] = cwbvhLoadU32(t.triIndex + first + k);
+    if (ch.count <= kCwbvhMaxLeafTriangles) {
+      // All loads of the leaf first, then the stores: one memory latency per leaf instead of one
+      // per triangle (a load-store loop waits on each load; on the GPU that was most of a level).
+      uint32_t ids[kCwbvhMaxLeafTriangles];
+      TSAH_CWBVH_UNROLL
+      for (uint32_t k = 0; k < kCwbvhMaxLeafTriangles; ++k)
+        ids[k] = k < ch.count ? cwbvhLoadU32(t.triIndex + first + k) : 0u;
+      TSAH_CWBVH_UNROLL
+      for (uint32_t k = 0; k < kCwbvhMaxLeafTriangles; ++k)
+        if (k < ch.count) out.triIndex[triBase + offset + k] = ids[k];
+    } else {  // a one-leaf tree's root (up to 64 triangles)
+      for (uint32_t k = 0; k < ch.count; ++k) out.triIndex[triBase + offset + k] = cwbvhLoadU32(t.triIndex + first + k);
+    }
     offset += ch.count;
   }
   n.triCount = uint8_t(offset);
