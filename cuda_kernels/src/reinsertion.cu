@@ -55,7 +55,8 @@ std::string phaseName(const char* mangled) {
   return name.rfind(prefix, 0) == 0 ? name.substr(prefix.size()) : name;
 }
 
-class CudaBackend {
+// allocated (CountedArrays): bytes of the optimizer's buffers (CUB's included).
+class CudaBackend : public reinsertion::CountedArrays<DeviceBuffer> {
  public:
   template <class T>
   using Array = DeviceBuffer<T>;
@@ -72,18 +73,6 @@ class CudaBackend {
     return out;
   }
 
-  template <class T>
-  Array<T> make(std::size_t count) {
-    allocated += count * sizeof(T);
-    return Array<T>(count);
-  }
-  template <class T>
-  void reserve(Array<T>& array, std::size_t count) {
-    if (count <= array.size()) return;
-    allocated += (count - array.size()) * sizeof(T);
-    array.resize(count);
-  }
-  std::size_t allocated = 0;  // bytes of the optimizer's buffers (CUB's included)
   bool specializedSearch = false;
   template <class T>
   void upload(Array<T>& array, const T* host, std::size_t count) {

@@ -15,22 +15,14 @@ namespace tsah {
 namespace {
 
 // Arrays are host vectors; every phase is a loop over its thread indices, in order.
-struct SerialBackend {
-  template <class T>
-  using Array = std::vector<T>;
+template <class T>
+using HostArray = std::vector<T>;
 
+// allocated: bytes of the optimizer's own buffers, as the GPU allocates them.
+struct SerialBackend : reinsertion::CountedArrays<HostArray> {
   template <class T>
-  Array<T> make(std::size_t count) {
-    allocated += count * sizeof(T);
-    return Array<T>(count);
-  }
-  template <class T>
-  void reserve(Array<T>& array, std::size_t count) {
-    if (count <= array.size()) return;
-    allocated += (count - array.size()) * sizeof(T);
-    array = Array<T>(count);
-  }
-  std::size_t allocated = 0;  // bytes of the optimizer's own buffers, as the GPU allocates them
+  using Array = HostArray<T>;
+
   bool specializedSearch = false;  // the same moves either way
   template <class T>
   void upload(Array<T>& array, const T* host, std::size_t count) {

@@ -62,9 +62,29 @@ void checkReinsertionInput(const Bvh& tree, const PrimitiveBoxes& prims,
                            const ParallelReinsertionOptimizer::Config& config,
                            const ParallelReinsertionOptimizer::Parallel& parallel);
 
+// A backend's make / reserve over its array type, counting the bytes they allocate (allocated):
+// the GPU backend reports its buffers, the host emulation the same allocations made on the host.
+template <template <class> class ArrayOf>
+struct CountedArrays {
+  std::size_t allocated = 0;
+
+  template <class T>
+  ArrayOf<T> make(std::size_t count) {
+    allocated += count * sizeof(T);
+    return ArrayOf<T>(count);
+  }
+  // Grows (discarding the contents) when fewer than `count` elements are held.
+  template <class T>
+  void reserve(ArrayOf<T>& array, std::size_t count) {
+    if (count <= array.size()) return;
+    allocated += (count - array.size()) * sizeof(T);
+    array = ArrayOf<T>(count);
+  }
+};
+
 // Backend: arrays and data-parallel loops (see reinsertion_emulation.cpp for the simplest one).
 //   template <class T> Array<T> (data(), size()); make<T>(count); reserve(array, count) (grows,
-//   discarding the contents); upload(array, host pointer, count);
+//   discarding the contents: CountedArrays<Array> provides both); upload(array, host pointer, count);
 //   download(array, host pointer, count); zero(pointer, bytes); forEach(count, phase);
 //   selectFlagged(flags, count, out) -> number of i with flags[i] != 0, written to out ascending;
 //   sortDescending(keys, values, count) by key; forEachBalanced(count, phase) for the search (the
