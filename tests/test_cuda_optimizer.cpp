@@ -29,11 +29,8 @@ namespace {
 using tsah::Bvh;
 using tsah::ParallelReinsertionOptimizer;
 
-tsah::PrimitiveBoxes movingBoxes(uint32_t triangles, uint32_t frames, uint32_t seed) {
-  return tsah::test::randomMovingTriangles(triangles, frames, seed, 4.0f).boxes();
-}
-
-Bvh initialTree(const tsah::PrimitiveBoxes& prims) { return tsah::SweepSahBuilder().build(prims.frame(0)); }
+using tsah::test::frameZeroSahTree;
+using tsah::test::movingTriangleBoxes;
 
 TEST(CudaOptimizer, SameTreeAsTheEmulation) {
   REQUIRE_GPU();
@@ -47,15 +44,15 @@ TEST(CudaOptimizer, SameTreeAsTheEmulation) {
                  : std::vector<Case>{{300, 1, 1, 0, 0.5}, {2000, 4, 2, 0, 0.25}, {2000, 5, 3, 2, 0.25},
                                      {20000, 5, 4, 0, 0.25}, {20000, 3, 5, 1, 0.5}};
   for (const Case& c : cases) {
-    const tsah::PrimitiveBoxes prims = movingBoxes(c.triangles, c.frames, c.seed);
+    const tsah::PrimitiveBoxes prims = movingTriangleBoxes(c.triangles, c.frames, c.seed);
     ParallelReinsertionOptimizer::Config config;
     config.k = c.k;
     config.seed = c.seed;
     if (tsah::test::shortCudaRun()) config.maxBatches = 12;
     ParallelReinsertionOptimizer::Parallel parallel;
     parallel.candidateFraction = c.fraction;
-    const auto gpu = tsah::cuda::optimizeOnGpu(initialTree(prims), prims, config, parallel);
-    const auto emulated = tsah::optimizeEmulatedDevice(initialTree(prims), prims, config, parallel);
+    const auto gpu = tsah::cuda::optimizeOnGpu(frameZeroSahTree(prims), prims, config, parallel);
+    const auto emulated = tsah::optimizeEmulatedDevice(frameZeroSahTree(prims), prims, config, parallel);
     std::printf("%u triangles x %u frames, k %d: GPU %.6f emulated %.6f, %zu rounds, %.3f s on the GPU\n",
                 c.triangles, c.frames, c.k, gpu.finalCost, emulated.finalCost, gpu.history.size() - 1, gpu.seconds);
     EXPECT_TRUE(tsah::test::identicalTree(gpu.bvh, emulated.bvh)) << c.triangles << " triangles, seed " << c.seed;
@@ -71,15 +68,15 @@ TEST(CudaOptimizer, SameTreeAsTheEmulation) {
 // threads) finds the same moves: the emulation's tree, whichever kernel ran.
 TEST(CudaOptimizer, EverySearchVariantGivesTheSameTree) {
   REQUIRE_GPU();
-  const tsah::PrimitiveBoxes prims = movingBoxes(tsah::test::shortCudaRun() ? 1000 : 5000, 5, 31);
+  const tsah::PrimitiveBoxes prims = movingTriangleBoxes(tsah::test::shortCudaRun() ? 1000 : 5000, 5, 31);
   ParallelReinsertionOptimizer::Config config;
   config.maxBatches = tsah::test::shortCudaRun() ? 10 : 40;
-  const auto emulated = tsah::optimizeEmulatedDevice(initialTree(prims), prims, config, {});
+  const auto emulated = tsah::optimizeEmulatedDevice(frameZeroSahTree(prims), prims, config, {});
   for (const bool specialized : {false, true})
     for (const bool dynamic : {false, true}) {
       std::vector<tsah::cuda::GpuPhaseTime> times;
       std::size_t bytes = 0;
-      const auto gpu = tsah::cuda::profileOnGpu(initialTree(prims), prims, config, {}, times, bytes,
+      const auto gpu = tsah::cuda::profileOnGpu(frameZeroSahTree(prims), prims, config, {}, times, bytes,
                                                 tsah::cuda::GpuSearchKernel{specialized, dynamic});
       EXPECT_TRUE(tsah::test::identicalTree(gpu.bvh, emulated.bvh))
           << "specialized " << specialized << " dynamic " << dynamic;
@@ -93,10 +90,10 @@ TEST(CudaOptimizer, InvariantsAndExactCostAfterEveryRound) {
   REQUIRE_GPU();
   for (uint32_t frames : {1u, 4u}) {
     for (int k : {0, 2}) {
-      const tsah::PrimitiveBoxes prims = movingBoxes(tsah::test::shortCudaRun() ? 600 : 3000, frames, 20 + frames);
+      const tsah::PrimitiveBoxes prims = movingTriangleBoxes(tsah::test::shortCudaRun() ? 600 : 3000, frames, 20 + frames);
       ParallelReinsertionOptimizer::Config config;
       config.k = k;
-      const auto session = tsah::cuda::makeGpuReinsertionSession(initialTree(prims), prims, config, {});
+      const auto session = tsah::cuda::makeGpuReinsertionSession(frameZeroSahTree(prims), prims, config, {});
       const double start = session->cost();
       const uint64_t applied = tsah::test::expectValidRounds(*session, prims, k, tsah::test::shortCudaRun() ? 6 : 15);
       EXPECT_GT(applied, 0u);
@@ -111,12 +108,12 @@ TEST(CudaOptimizer, WithinTwoPercentOfTheCpuParallelOptimizer) {
   const std::vector<int> exponents = tsah::test::shortCudaRun() ? std::vector<int>{0} : std::vector<int>{0, 2};
   for (uint32_t seed : seeds) {
     for (int k : exponents) {
-      const tsah::PrimitiveBoxes prims = movingBoxes(tsah::test::shortCudaRun() ? 600 : 20000, 5, seed);
+      const tsah::PrimitiveBoxes prims = movingTriangleBoxes(tsah::test::shortCudaRun() ? 600 : 20000, 5, seed);
       ParallelReinsertionOptimizer::Config config;
       config.k = k;
       config.seed = seed;
-      const auto cpu = ParallelReinsertionOptimizer(config).optimize(initialTree(prims), prims);
-      const auto gpu = tsah::cuda::optimizeOnGpu(initialTree(prims), prims, config, {});
+      const auto cpu = ParallelReinsertionOptimizer(config).optimize(frameZeroSahTree(prims), prims);
+      const auto gpu = tsah::cuda::optimizeOnGpu(frameZeroSahTree(prims), prims, config, {});
       ASSERT_FALSE(tsah::validate(gpu.bvh, &prims).has_value());
       EXPECT_LT(gpu.finalCost, gpu.initialCost);
       std::printf("seed %u k %d: GPU / CPU parallel = %.4f (GPU %.3f s, CPU %.3f s)\n", seed, k,
@@ -128,20 +125,20 @@ TEST(CudaOptimizer, WithinTwoPercentOfTheCpuParallelOptimizer) {
 
 TEST(CudaOptimizer, CollapseAndBadInput) {
   REQUIRE_GPU();
-  const tsah::PrimitiveBoxes prims = movingBoxes(1200, 3, 80);
+  const tsah::PrimitiveBoxes prims = movingTriangleBoxes(1200, 3, 80);
   const tsah::LeafCollapser collapser({{}, 4, 0});
   ParallelReinsertionOptimizer::Config config;
   if (tsah::test::shortCudaRun()) config.maxBatches = 10;
-  const auto plain = tsah::cuda::optimizeOnGpu(initialTree(prims), prims, config, {});
-  const auto collapsed = tsah::cuda::optimizeOnGpu(initialTree(prims), prims, config, {}, &collapser);
+  const auto plain = tsah::cuda::optimizeOnGpu(frameZeroSahTree(prims), prims, config, {});
+  const auto collapsed = tsah::cuda::optimizeOnGpu(frameZeroSahTree(prims), prims, config, {}, &collapser);
   EXPECT_TRUE(tsah::test::identicalTree(collapser.collapse(plain.bvh), collapsed.bvh));
   for (uint32_t count : {1u, 2u, 3u}) {
-    const tsah::PrimitiveBoxes few = movingBoxes(count, 2, 60 + count);
-    const auto result = tsah::cuda::optimizeOnGpu(initialTree(few), few, {}, {});
+    const tsah::PrimitiveBoxes few = movingTriangleBoxes(count, 2, 60 + count);
+    const auto result = tsah::cuda::optimizeOnGpu(frameZeroSahTree(few), few, {}, {});
     EXPECT_FALSE(tsah::validate(result.bvh, &few).has_value());
   }
-  const tsah::PrimitiveBoxes many = movingBoxes(50, 17, 81);
-  EXPECT_THROW(tsah::cuda::makeGpuReinsertionSession(initialTree(many), many, {}, {}), std::invalid_argument);
+  const tsah::PrimitiveBoxes many = movingTriangleBoxes(50, 17, 81);
+  EXPECT_THROW(tsah::cuda::makeGpuReinsertionSession(frameZeroSahTree(many), many, {}, {}), std::invalid_argument);
 }
 
 // Where the time goes on a generated explode animation (10 keyframes, 5 representative frames):
@@ -158,7 +155,7 @@ TEST(CudaOptimizer, DISABLED_ProfileExplode) {
   const tsah::PrimitiveBoxes prims = tsah::representativeBoxes(a, 5);
   std::printf("explode: %u triangles x %u frames\n", prims.primCount, prims.frameCount);
   ParallelReinsertionOptimizer::Config config;
-  const auto gpu = tsah::cuda::optimizeOnGpu(initialTree(prims), prims, config, {});
+  const auto gpu = tsah::cuda::optimizeOnGpu(frameZeroSahTree(prims), prims, config, {});
   ASSERT_FALSE(tsah::validate(gpu.bvh, &prims).has_value());
   EXPECT_LT(gpu.finalCost, gpu.initialCost);
   std::printf("GPU: %.3f s, %zu rounds, cost %.4f -> %.4f, %llu moves\n", gpu.seconds, gpu.history.size() - 1,
@@ -169,7 +166,7 @@ TEST(CudaOptimizer, DISABLED_ProfileExplode) {
                                                    tsah::cuda::GpuSearchKernel{true, true}}) {
     std::vector<tsah::cuda::GpuPhaseTime> times;
     std::size_t bytes = 0;
-    const auto profiled = tsah::cuda::profileOnGpu(initialTree(prims), prims, config, {}, times, bytes, search);
+    const auto profiled = tsah::cuda::profileOnGpu(frameZeroSahTree(prims), prims, config, {}, times, bytes, search);
     EXPECT_EQ(profiled.finalCost, gpu.finalCost);
     std::printf("profiled (%s search, %s): %.3f s; device buffers %.1f B per triangle\n",
                 search.specializedFrames ? "frame-specialized" : "general",
@@ -180,7 +177,7 @@ TEST(CudaOptimizer, DISABLED_ProfileExplode) {
                   static_cast<unsigned long long>(t.launches));
   }
   if (const char* cpu = std::getenv("TSAH_PROFILE_CPU"); cpu && std::string(cpu) == "1") {
-    const auto parallel = ParallelReinsertionOptimizer(config).optimize(initialTree(prims), prims);
+    const auto parallel = ParallelReinsertionOptimizer(config).optimize(frameZeroSahTree(prims), prims);
     std::printf("CPU parallel: %.3f s, cost %.4f; GPU / CPU = %.4f\n", parallel.seconds, parallel.finalCost,
                 gpu.finalCost / parallel.finalCost);
     EXPECT_LT(gpu.finalCost, 1.02 * parallel.finalCost);

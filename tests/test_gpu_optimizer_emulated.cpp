@@ -23,11 +23,8 @@ namespace {
 using tsah::Bvh;
 using tsah::ParallelReinsertionOptimizer;
 
-tsah::PrimitiveBoxes movingBoxes(uint32_t triangles, uint32_t frames, uint32_t seed) {
-  return tsah::test::randomMovingTriangles(triangles, frames, seed, 4.0f).boxes();
-}
-
-Bvh initialTree(const tsah::PrimitiveBoxes& prims) { return tsah::SweepSahBuilder().build(prims.frame(0)); }
+using tsah::test::frameZeroSahTree;
+using tsah::test::movingTriangleBoxes;
 
 ParallelReinsertionOptimizer::Parallel fraction(double f) {
   ParallelReinsertionOptimizer::Parallel p;
@@ -39,12 +36,12 @@ TEST(EmulatedGpuOptimizer, InvariantsAndExactCostAfterEveryRound) {
   for (uint32_t seed : {1u, 2u, 3u}) {
     for (uint32_t frames : {1u, 4u}) {
       for (int k : {0, 2}) {
-        const tsah::PrimitiveBoxes prims = movingBoxes(150 + 100 * seed, frames, seed);
+        const tsah::PrimitiveBoxes prims = movingTriangleBoxes(150 + 100 * seed, frames, seed);
         ParallelReinsertionOptimizer::Config config;
         config.k = k;
         config.seed = seed;
         const auto session =
-            tsah::makeEmulatedDeviceSession(initialTree(prims), prims, config, fraction(seed == 3 ? 1.0 : 0.5));
+            tsah::makeEmulatedDeviceSession(frameZeroSahTree(prims), prims, config, fraction(seed == 3 ? 1.0 : 0.5));
         const double start = session->cost();
         const uint64_t applied = tsah::test::expectValidRounds(*session, prims, k, 12);
         EXPECT_GT(applied, 0u) << "seed " << seed << " frames " << frames << " k " << k;
@@ -57,10 +54,10 @@ TEST(EmulatedGpuOptimizer, InvariantsAndExactCostAfterEveryRound) {
 
 TEST(EmulatedGpuOptimizer, NeverEndsAboveItsStartAndHistoryIsMonotone) {
   for (int k : {0, 1, 4}) {
-    const tsah::PrimitiveBoxes prims = movingBoxes(800, 5, 7 + k);
+    const tsah::PrimitiveBoxes prims = movingTriangleBoxes(800, 5, 7 + k);
     ParallelReinsertionOptimizer::Config config;
     config.k = k;
-    const auto result = tsah::optimizeEmulatedDevice(initialTree(prims), prims, config, {});
+    const auto result = tsah::optimizeEmulatedDevice(frameZeroSahTree(prims), prims, config, {});
     ASSERT_FALSE(tsah::validate(result.bvh, &prims).has_value());
     EXPECT_LT(result.finalCost, result.initialCost);
     ASSERT_GE(result.history.size(), 2u);
@@ -71,29 +68,29 @@ TEST(EmulatedGpuOptimizer, NeverEndsAboveItsStartAndHistoryIsMonotone) {
 }
 
 TEST(EmulatedGpuOptimizer, SameSeedSameTree) {
-  const tsah::PrimitiveBoxes prims = movingBoxes(1500, 3, 41);
+  const tsah::PrimitiveBoxes prims = movingTriangleBoxes(1500, 3, 41);
   ParallelReinsertionOptimizer::Config config;
   config.seed = 99;
   config.k = 2;
-  const auto one = tsah::optimizeEmulatedDevice(initialTree(prims), prims, config, {});
-  const auto again = tsah::optimizeEmulatedDevice(initialTree(prims), prims, config, {});
+  const auto one = tsah::optimizeEmulatedDevice(frameZeroSahTree(prims), prims, config, {});
+  const auto again = tsah::optimizeEmulatedDevice(frameZeroSahTree(prims), prims, config, {});
   EXPECT_TRUE(tsah::test::identicalTree(one.bvh, again.bvh));
   EXPECT_EQ(one.finalCost, again.finalCost);
   EXPECT_EQ(one.acceptedSteps, again.acceptedSteps);
   config.seed = 100;
-  const auto otherSeed = tsah::optimizeEmulatedDevice(initialTree(prims), prims, config, {});
+  const auto otherSeed = tsah::optimizeEmulatedDevice(frameZeroSahTree(prims), prims, config, {});
   EXPECT_FALSE(tsah::test::sameTopology(one.bvh, otherSeed.bvh));
 }
 
 TEST(EmulatedGpuOptimizer, WithinTwoPercentOfTheCpuParallelOptimizer) {
   for (uint32_t seed : {11u, 12u, 13u}) {
     for (int k : {0, 2}) {
-      const tsah::PrimitiveBoxes prims = movingBoxes(2000, 5, seed);
+      const tsah::PrimitiveBoxes prims = movingTriangleBoxes(2000, 5, seed);
       ParallelReinsertionOptimizer::Config config;
       config.k = k;
       config.seed = seed;
-      const auto cpu = ParallelReinsertionOptimizer(config).optimize(initialTree(prims), prims);
-      const auto gpu = tsah::optimizeEmulatedDevice(initialTree(prims), prims, config, {});
+      const auto cpu = ParallelReinsertionOptimizer(config).optimize(frameZeroSahTree(prims), prims);
+      const auto gpu = tsah::optimizeEmulatedDevice(frameZeroSahTree(prims), prims, config, {});
       std::printf("seed %u k %d: emulated GPU / CPU parallel = %.4f\n", seed, k, gpu.finalCost / cpu.finalCost);
       EXPECT_LT(gpu.finalCost, 1.02 * cpu.finalCost) << "seed " << seed << " k " << k;
     }
@@ -105,9 +102,9 @@ TEST(EmulatedGpuOptimizer, WithinTwoPercentOfTheCpuParallelOptimizer) {
 // the largest round.
 TEST(EmulatedGpuOptimizer, DeviceMemoryPerTriangle) {
   const uint32_t triangles = 8000;
-  const tsah::PrimitiveBoxes prims = movingBoxes(triangles, 5, 90);
+  const tsah::PrimitiveBoxes prims = movingTriangleBoxes(triangles, 5, 90);
   std::size_t bytes = 0;
-  const auto result = tsah::optimizeEmulatedDevice(initialTree(prims), prims, {}, {}, nullptr, &bytes);
+  const auto result = tsah::optimizeEmulatedDevice(frameZeroSahTree(prims), prims, {}, {}, nullptr, &bytes);
   EXPECT_LT(result.finalCost, result.initialCost);
   const double perTriangle = double(bytes) / triangles;
   std::printf("device buffers: %.1f B per triangle (5 frames)\n", perTriangle);
@@ -116,26 +113,26 @@ TEST(EmulatedGpuOptimizer, DeviceMemoryPerTriangle) {
 }
 
 TEST(EmulatedGpuOptimizer, CollapseLimitsAndBadInput) {
-  const tsah::PrimitiveBoxes prims = movingBoxes(1200, 3, 80);
+  const tsah::PrimitiveBoxes prims = movingTriangleBoxes(1200, 3, 80);
   const tsah::LeafCollapser collapser({{}, 4, 0});
-  const auto plain = tsah::optimizeEmulatedDevice(initialTree(prims), prims, {}, {});
-  const auto collapsed = tsah::optimizeEmulatedDevice(initialTree(prims), prims, {}, {}, &collapser);
+  const auto plain = tsah::optimizeEmulatedDevice(frameZeroSahTree(prims), prims, {}, {});
+  const auto collapsed = tsah::optimizeEmulatedDevice(frameZeroSahTree(prims), prims, {}, {}, &collapser);
   EXPECT_TRUE(tsah::test::identicalTree(collapser.collapse(plain.bvh), collapsed.bvh));
 
   ParallelReinsertionOptimizer::Config rounds;
   rounds.maxBatches = 2;
-  EXPECT_EQ(tsah::optimizeEmulatedDevice(initialTree(prims), prims, rounds, {}).history.size(), 3u);
+  EXPECT_EQ(tsah::optimizeEmulatedDevice(frameZeroSahTree(prims), prims, rounds, {}).history.size(), 3u);
 
   for (uint32_t count : {1u, 2u, 3u}) {  // no eligible node: the tree comes back unchanged
-    const tsah::PrimitiveBoxes few = movingBoxes(count, 2, 60 + count);
-    const auto result = tsah::optimizeEmulatedDevice(initialTree(few), few, {}, {});
+    const tsah::PrimitiveBoxes few = movingTriangleBoxes(count, 2, 60 + count);
+    const auto result = tsah::optimizeEmulatedDevice(frameZeroSahTree(few), few, {}, {});
     EXPECT_FALSE(tsah::validate(result.bvh, &few).has_value());
     EXPECT_EQ(result.acceptedSteps, 0u);
   }
-  const tsah::PrimitiveBoxes many = movingBoxes(50, 17, 81);
-  EXPECT_THROW(tsah::makeEmulatedDeviceSession(initialTree(many), many, {}, {}), std::invalid_argument);
-  const tsah::PrimitiveBoxes other = movingBoxes(5, 2, 62);
-  EXPECT_THROW(tsah::makeEmulatedDeviceSession(initialTree(prims), other, {}, {}), std::invalid_argument);
+  const tsah::PrimitiveBoxes many = movingTriangleBoxes(50, 17, 81);
+  EXPECT_THROW(tsah::makeEmulatedDeviceSession(frameZeroSahTree(many), many, {}, {}), std::invalid_argument);
+  const tsah::PrimitiveBoxes other = movingTriangleBoxes(5, 2, 62);
+  EXPECT_THROW(tsah::makeEmulatedDeviceSession(frameZeroSahTree(prims), other, {}, {}), std::invalid_argument);
 }
 
 // The pipeline's --device cuda path with the emulation standing in for the GPU: every optimization

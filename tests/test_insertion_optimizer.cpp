@@ -20,9 +20,7 @@ using tsah::InsertionSession;
 using Selection = InsertionOptimizer::Selection;
 
 // Random triangles moving with random velocities: the frame-0 grouping degrades over time.
-tsah::PrimitiveBoxes randomMovingBoxes(uint32_t triangles, uint32_t frames, uint32_t seed) {
-  return tsah::test::randomMovingTriangles(triangles, frames, seed, 4.0f).boxes();
-}
+using tsah::test::movingTriangleBoxes;
 
 Bvh initialTree(const tsah::PrimitiveBoxes& prims) {
   Bvh bvh = tsah::SweepSahBuilder().build(prims.frame(0));
@@ -83,7 +81,7 @@ TEST(InsertionSession, InvariantsAndExactCostAfterEveryStep) {
   for (uint32_t seed : {1u, 2u, 3u}) {
     for (uint32_t frames : {1u, 3u}) {
       for (int k : {0, 2}) {
-        const tsah::PrimitiveBoxes prims = randomMovingBoxes(40 + 30 * seed, frames, seed);
+        const tsah::PrimitiveBoxes prims = movingTriangleBoxes(40 + 30 * seed, frames, seed);
         InsertionOptimizer::Config config;
         config.k = k;
         config.seed = seed;
@@ -119,7 +117,7 @@ TEST(InsertionSession, InvariantsAndExactCostAfterEveryStep) {
 
 TEST(InsertionSession, StepsOnEveryNodeKeepTheTreeValid) {
   // Exhaustively step every eligible node of a small tree, several rounds.
-  const tsah::PrimitiveBoxes prims = randomMovingBoxes(24, 2, 7);
+  const tsah::PrimitiveBoxes prims = movingTriangleBoxes(24, 2, 7);
   InsertionSession session(initialTree(prims), prims, {});
   for (int round = 0; round < 3; ++round)
     for (uint32_t n = 0; n < session.bvh().nodeCount(); ++n) {
@@ -132,7 +130,7 @@ TEST(InsertionSession, StepsOnEveryNodeKeepTheTreeValid) {
 }
 
 TEST(InsertionSession, MetropolisHastingsNeverRepeatsTheLastNode) {
-  const tsah::PrimitiveBoxes prims = randomMovingBoxes(200, 2, 5);
+  const tsah::PrimitiveBoxes prims = movingTriangleBoxes(200, 2, 5);
   InsertionSession session(initialTree(prims), prims, {});
   uint32_t last = tsah::kInvalidIndex;
   for (int i = 0; i < 200; ++i) {
@@ -144,7 +142,7 @@ TEST(InsertionSession, MetropolisHastingsNeverRepeatsTheLastNode) {
 }
 
 TEST(InsertionSession, BatchSortTakesTheMostInefficientNodes) {
-  const tsah::PrimitiveBoxes prims = randomMovingBoxes(150, 3, 8);
+  const tsah::PrimitiveBoxes prims = movingTriangleBoxes(150, 3, 8);
   InsertionSession session(initialTree(prims), prims, {});
   const std::vector<uint32_t> batch = session.batchSortNodes(20);
   ASSERT_EQ(batch.size(), 20u);
@@ -161,7 +159,7 @@ TEST(InsertionSession, BatchSortTakesTheMostInefficientNodes) {
 TEST(InsertionOptimizer, NeverEndsAboveItsStartAndHistoryIsMonotone) {
   for (Selection selection : {Selection::MetropolisHastings, Selection::Uniform, Selection::BatchSort}) {
     for (int k : {0, 2, 4}) {
-      const tsah::PrimitiveBoxes prims = randomMovingBoxes(300, 4, 11 + uint32_t(k));
+      const tsah::PrimitiveBoxes prims = movingTriangleBoxes(300, 4, 11 + uint32_t(k));
       InsertionOptimizer::Config config;
       config.k = k;
       config.selection = selection;
@@ -191,7 +189,7 @@ TEST(InsertionOptimizer, NeverEndsAboveItsStartAndHistoryIsMonotone) {
 }
 
 TEST(InsertionOptimizer, KZeroOptimizesTheMeanFrameCost) {
-  const tsah::PrimitiveBoxes prims = randomMovingBoxes(250, 5, 21);
+  const tsah::PrimitiveBoxes prims = movingTriangleBoxes(250, 5, 21);
   const InsertionOptimizer::Result result = InsertionOptimizer().optimize(initialTree(prims), prims);
   const std::vector<double> perFrame = tsah::frameCosts(result.bvh);
   double mean = 0;
@@ -204,7 +202,7 @@ TEST(InsertionOptimizer, KZeroOptimizesTheMeanFrameCost) {
 
 TEST(InsertionOptimizer, OneFrameTsahEqualsSahOptimization) {
   // With one frame every weight is 1: T-SAH of any k is SAH optimization, step for step.
-  const tsah::PrimitiveBoxes prims = randomMovingBoxes(400, 1, 31);
+  const tsah::PrimitiveBoxes prims = movingTriangleBoxes(400, 1, 31);
   InsertionOptimizer::Config sah;
   sah.seed = 5;
   InsertionOptimizer::Config tsah4 = sah;
@@ -245,7 +243,7 @@ TEST(InsertionOptimizer, TsahFindsTheTemporalGroupingSah0DoesNot) {
 }
 
 TEST(InsertionOptimizer, SameSeedSameTree) {
-  const tsah::PrimitiveBoxes prims = randomMovingBoxes(500, 3, 41);
+  const tsah::PrimitiveBoxes prims = movingTriangleBoxes(500, 3, 41);
   for (Selection selection : {Selection::MetropolisHastings, Selection::Uniform, Selection::BatchSort}) {
     InsertionOptimizer::Config config;
     config.seed = 99;
@@ -260,7 +258,7 @@ TEST(InsertionOptimizer, SameSeedSameTree) {
 }
 
 TEST(InsertionOptimizer, TimeLimitAndBatchLimitStopEarly) {
-  const tsah::PrimitiveBoxes prims = randomMovingBoxes(2000, 2, 51);
+  const tsah::PrimitiveBoxes prims = movingTriangleBoxes(2000, 2, 51);
   InsertionOptimizer::Config config;
   config.timeLimitSeconds = 1e-9;
   const auto limited = InsertionOptimizer(config).optimize(initialTree(prims), prims);
@@ -278,13 +276,13 @@ TEST(InsertionOptimizer, TimeLimitAndBatchLimitStopEarly) {
 
 TEST(InsertionOptimizer, TinyTreesAndBadInput) {
   // Three primitives: no node is eligible; the tree comes back unchanged.
-  const tsah::PrimitiveBoxes prims = randomMovingBoxes(3, 2, 61);
+  const tsah::PrimitiveBoxes prims = movingTriangleBoxes(3, 2, 61);
   const Bvh start = initialTree(prims);
   const auto result = InsertionOptimizer().optimize(start, prims);
   EXPECT_TRUE(sameTree(start, result.bvh));
   EXPECT_EQ(result.steps, 0u);
 
-  const tsah::PrimitiveBoxes other = randomMovingBoxes(5, 2, 62);
+  const tsah::PrimitiveBoxes other = movingTriangleBoxes(5, 2, 62);
   EXPECT_THROW(InsertionOptimizer().optimize(start, other), std::invalid_argument);
   InsertionOptimizer::Config negative;
   negative.k = -1;

@@ -21,11 +21,8 @@ using tsah::Bvh;
 using tsah::ParallelReinsertionOptimizer;
 using tsah::ReinsertionSession;
 
-tsah::PrimitiveBoxes movingBoxes(uint32_t triangles, uint32_t frames, uint32_t seed) {
-  return tsah::test::randomMovingTriangles(triangles, frames, seed, 4.0f).boxes();
-}
-
-Bvh initialTree(const tsah::PrimitiveBoxes& prims) { return tsah::SweepSahBuilder().build(prims.frame(0)); }
+using tsah::test::frameZeroSahTree;
+using tsah::test::movingTriangleBoxes;
 
 ParallelReinsertionOptimizer::Parallel settings(unsigned threads, double fraction = 0.5) {
   ParallelReinsertionOptimizer::Parallel p;
@@ -42,11 +39,11 @@ TEST(ReinsertionSession, InvariantsAndExactCostAfterEveryRound) {
   for (uint32_t seed : {1u, 2u, 3u}) {
     for (uint32_t frames : {1u, 4u}) {
       for (int k : {0, 2}) {
-        const tsah::PrimitiveBoxes prims = movingBoxes(150 + 100 * seed, frames, seed);
+        const tsah::PrimitiveBoxes prims = movingTriangleBoxes(150 + 100 * seed, frames, seed);
         ParallelReinsertionOptimizer::Config config;
         config.k = k;
         config.seed = seed;
-        ReinsertionSession session(initialTree(prims), prims, config, settings(2, seed == 3 ? 1.0 : 0.5));
+        ReinsertionSession session(frameZeroSahTree(prims), prims, config, settings(2, seed == 3 ? 1.0 : 0.5));
         const double start = session.cost();
         const uint64_t applied = tsah::test::expectValidRounds(session, prims, k, 12);
         EXPECT_GT(applied, 0u);
@@ -89,8 +86,8 @@ bool inSubtree(const Bvh& bvh, uint32_t node, uint32_t top) {
 // force) lowers the cost: the branch-and-bound search misses no position.
 TEST(ReinsertionSession, ConvergedTreeHasNoImprovingSingleMove) {
   for (uint32_t seed : {5u, 6u}) {
-    const tsah::PrimitiveBoxes prims = movingBoxes(40, 3, seed);
-    ReinsertionSession session(initialTree(prims), prims, {}, settings(2, 1.0));
+    const tsah::PrimitiveBoxes prims = movingTriangleBoxes(40, 3, seed);
+    ReinsertionSession session(frameZeroSahTree(prims), prims, {}, settings(2, 1.0));
     int rounds = 0;
     while (session.round().improving > 0 && ++rounds < 500) {
     }
@@ -112,10 +109,10 @@ TEST(ReinsertionSession, ConvergedTreeHasNoImprovingSingleMove) {
 
 TEST(ParallelReinsertionOptimizer, NeverEndsAboveItsStartAndHistoryIsMonotone) {
   for (int k : {0, 1, 4}) {
-    const tsah::PrimitiveBoxes prims = movingBoxes(800, 5, 7 + k);
+    const tsah::PrimitiveBoxes prims = movingTriangleBoxes(800, 5, 7 + k);
     ParallelReinsertionOptimizer::Config config;
     config.k = k;
-    const auto result = ParallelReinsertionOptimizer(config, settings(2)).optimize(initialTree(prims), prims);
+    const auto result = ParallelReinsertionOptimizer(config, settings(2)).optimize(frameZeroSahTree(prims), prims);
     ASSERT_FALSE(tsah::validate(result.bvh, &prims).has_value());
     EXPECT_LT(result.finalCost, result.initialCost);
     ASSERT_GE(result.history.size(), 2u);
@@ -127,33 +124,33 @@ TEST(ParallelReinsertionOptimizer, NeverEndsAboveItsStartAndHistoryIsMonotone) {
 }
 
 TEST(ParallelReinsertionOptimizer, SameSeedSameTreeForAnyThreadCount) {
-  const tsah::PrimitiveBoxes prims = movingBoxes(1500, 3, 41);
+  const tsah::PrimitiveBoxes prims = movingTriangleBoxes(1500, 3, 41);
   ParallelReinsertionOptimizer::Config config;
   config.seed = 99;
   config.k = 2;
-  const auto one = ParallelReinsertionOptimizer(config, settings(1)).optimize(initialTree(prims), prims);
-  const auto again = ParallelReinsertionOptimizer(config, settings(1)).optimize(initialTree(prims), prims);
-  const auto two = ParallelReinsertionOptimizer(config, settings(2)).optimize(initialTree(prims), prims);
-  const auto four = ParallelReinsertionOptimizer(config, settings(4)).optimize(initialTree(prims), prims);
+  const auto one = ParallelReinsertionOptimizer(config, settings(1)).optimize(frameZeroSahTree(prims), prims);
+  const auto again = ParallelReinsertionOptimizer(config, settings(1)).optimize(frameZeroSahTree(prims), prims);
+  const auto two = ParallelReinsertionOptimizer(config, settings(2)).optimize(frameZeroSahTree(prims), prims);
+  const auto four = ParallelReinsertionOptimizer(config, settings(4)).optimize(frameZeroSahTree(prims), prims);
   for (const auto* other : {&again, &two, &four}) {
     EXPECT_TRUE(sameTree(one.bvh, other->bvh));
     EXPECT_EQ(one.finalCost, other->finalCost);
     EXPECT_EQ(one.acceptedSteps, other->acceptedSteps);
   }
   config.seed = 100;
-  const auto otherSeed = ParallelReinsertionOptimizer(config, settings(2)).optimize(initialTree(prims), prims);
+  const auto otherSeed = ParallelReinsertionOptimizer(config, settings(2)).optimize(frameZeroSahTree(prims), prims);
   EXPECT_FALSE(sameTree(one.bvh, otherSeed.bvh));
 }
 
 TEST(ParallelReinsertionOptimizer, WithinThreePercentOfTheSequentialOptimizer) {
   for (uint32_t seed : {11u, 12u, 13u}) {
     for (int k : {0, 2}) {
-      const tsah::PrimitiveBoxes prims = movingBoxes(2000, 5, seed);
+      const tsah::PrimitiveBoxes prims = movingTriangleBoxes(2000, 5, seed);
       tsah::InsertionOptimizer::Config config;
       config.k = k;
       config.seed = seed;
-      const auto sequential = tsah::InsertionOptimizer(config).optimize(initialTree(prims), prims);
-      const auto parallel = ParallelReinsertionOptimizer(config, settings(2)).optimize(initialTree(prims), prims);
+      const auto sequential = tsah::InsertionOptimizer(config).optimize(frameZeroSahTree(prims), prims);
+      const auto parallel = ParallelReinsertionOptimizer(config, settings(2)).optimize(frameZeroSahTree(prims), prims);
       std::printf("seed %u k %d: parallel / sequential = %.4f\n", seed, k, parallel.finalCost / sequential.finalCost);
       EXPECT_LT(parallel.finalCost, 1.03 * sequential.finalCost)
           << "seed " << seed << " k " << k << ": parallel " << parallel.finalCost << ", sequential "
@@ -168,21 +165,21 @@ TEST(ParallelReinsertionOptimizer, CollapseOnReleaseGivesExactlyTheCollapsedResu
   for (uint32_t frames : {1u, 4u}) {
     for (int k : {0, 2}) {
       for (uint32_t maxLeaf : {2u, 8u}) {
-        const tsah::PrimitiveBoxes prims = movingBoxes(1200, frames, 70 + frames + k);
+        const tsah::PrimitiveBoxes prims = movingTriangleBoxes(1200, frames, 70 + frames + k);
         const tsah::LeafCollapser collapser({{}, maxLeaf, k});
         ParallelReinsertionOptimizer::Config config;
         config.k = k;
         const ParallelReinsertionOptimizer parallel(config, settings(2));
-        const auto plain = parallel.optimize(initialTree(prims), prims);
-        const auto direct = parallel.optimize(initialTree(prims), prims, &collapser);
+        const auto plain = parallel.optimize(frameZeroSahTree(prims), prims);
+        const auto direct = parallel.optimize(frameZeroSahTree(prims), prims, &collapser);
         const Bvh expected = collapser.collapse(plain.bvh);
         EXPECT_LT(expected.nodeCount(), plain.bvh.nodeCount());
         EXPECT_TRUE(identicalTree(expected, direct.bvh)) << "parallel, frames " << frames << " k " << k;
         EXPECT_EQ(plain.finalCost, direct.finalCost);
 
         const tsah::InsertionOptimizer sequential(config);
-        const auto plainSequential = sequential.optimize(initialTree(prims), prims);
-        const auto directSequential = sequential.optimize(initialTree(prims), prims, &collapser);
+        const auto plainSequential = sequential.optimize(frameZeroSahTree(prims), prims);
+        const auto directSequential = sequential.optimize(frameZeroSahTree(prims), prims, &collapser);
         EXPECT_TRUE(identicalTree(collapser.collapse(plainSequential.bvh), directSequential.bvh))
             << "sequential, frames " << frames << " k " << k;
       }
@@ -191,26 +188,26 @@ TEST(ParallelReinsertionOptimizer, CollapseOnReleaseGivesExactlyTheCollapsedResu
 }
 
 TEST(ParallelReinsertionOptimizer, LimitsTinyTreesAndBadInput) {
-  const tsah::PrimitiveBoxes prims = movingBoxes(2000, 2, 51);
+  const tsah::PrimitiveBoxes prims = movingTriangleBoxes(2000, 2, 51);
   ParallelReinsertionOptimizer::Config rounds;
   rounds.maxBatches = 2;
-  const auto two = ParallelReinsertionOptimizer(rounds).optimize(initialTree(prims), prims);
+  const auto two = ParallelReinsertionOptimizer(rounds).optimize(frameZeroSahTree(prims), prims);
   EXPECT_EQ(two.history.size(), 3u);
   ParallelReinsertionOptimizer::Config limited;
   limited.timeLimitSeconds = 1e-9;
-  const auto once = ParallelReinsertionOptimizer(limited).optimize(initialTree(prims), prims);
+  const auto once = ParallelReinsertionOptimizer(limited).optimize(frameZeroSahTree(prims), prims);
   EXPECT_TRUE(once.timeLimitReached);
   EXPECT_EQ(once.history.size(), 2u);
 
   for (uint32_t count : {1u, 2u, 3u}) {  // no eligible node: the tree comes back unchanged
-    const tsah::PrimitiveBoxes few = movingBoxes(count, 2, 60 + count);
-    const auto result = ParallelReinsertionOptimizer().optimize(initialTree(few), few);
+    const tsah::PrimitiveBoxes few = movingTriangleBoxes(count, 2, 60 + count);
+    const auto result = ParallelReinsertionOptimizer().optimize(frameZeroSahTree(few), few);
     EXPECT_FALSE(tsah::validate(result.bvh, &few).has_value());
     EXPECT_EQ(result.acceptedSteps, 0u);
   }
 
-  const tsah::PrimitiveBoxes other = movingBoxes(5, 2, 62);
-  EXPECT_THROW(ParallelReinsertionOptimizer().optimize(initialTree(prims), other), std::invalid_argument);
+  const tsah::PrimitiveBoxes other = movingTriangleBoxes(5, 2, 62);
+  EXPECT_THROW(ParallelReinsertionOptimizer().optimize(frameZeroSahTree(prims), other), std::invalid_argument);
   ParallelReinsertionOptimizer::Config negative;
   negative.k = -1;
   EXPECT_THROW(ParallelReinsertionOptimizer{negative}, std::invalid_argument);

@@ -1,5 +1,7 @@
 #include "test_support.hpp"
 
+#include "tsah/sah_builder.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -80,6 +82,12 @@ MovingTriangles randomMovingTriangles(uint32_t triangles, uint32_t frames, uint3
   }
   return s;
 }
+
+PrimitiveBoxes movingTriangleBoxes(uint32_t triangles, uint32_t frames, uint32_t seed) {
+  return randomMovingTriangles(triangles, frames, seed, 4.0f).boxes();
+}
+
+Bvh frameZeroSahTree(const PrimitiveBoxes& prims) { return SweepSahBuilder().build(prims.frame(0)); }
 
 bool sameTopology(const Bvh& a, const Bvh& b) {
   if (a.root != b.root || a.nodes.size() != b.nodes.size() || a.primIds != b.primIds) return false;

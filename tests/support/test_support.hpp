@@ -43,6 +43,10 @@ struct MovingTriangles {
   PrimitiveBoxes boxes() const { return triangleBoxes(indices, positions, frames); }
 };
 MovingTriangles randomMovingTriangles(uint32_t triangles, uint32_t frames, uint32_t seed, float maxSpeed);
+// The optimizer tests' input: randomMovingTriangles(triangles, frames, seed, 4).boxes().
+PrimitiveBoxes movingTriangleBoxes(uint32_t triangles, uint32_t frames, uint32_t seed);
+// The optimizers' starting tree: the sweep-SAH tree of frame 0 (frame 0's boxes only).
+Bvh frameZeroSahTree(const PrimitiveBoxes& prims);
 
 // Same root, nodes (links, leaf ranges) and primIds.
 bool sameTopology(const Bvh& a, const Bvh& b);
