@@ -225,7 +225,7 @@ json runRefit(const std::string& name, const tsah::FlatBvh& tree, const anim::An
 json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim::Animation& a,
                 const std::vector<double>& times, const Scene& scene, const Options& opt, bool persistent,
                 tc::TreeLayout layout) {
-  tc::GpuRuntime rt(tree, a, {0, persistent, !opt.noGraphs, layout, !opt.noFuse});
+  tc::GpuRuntime rt(tree, a, runtimeConfig(opt, persistent, layout));
   const double mtris = double(a.triangleCount()) / 1e6;
   tsah::RenderSettings settings = scene.settings;
   tc::RebuildOptions bare;
