@@ -4,6 +4,7 @@
 // compressed layout returns the binary CPU traversal's hits (the GPU kernels run the same code).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <random>
@@ -134,6 +135,32 @@ TEST(CwbvhBuild, RealAnimationAcrossFrames) {
   const tsah::Bvh bvh = sahTreeOverFrames(a.indices(), pos, frames);
   tsah::CwbvhTree t = tsah::buildCwbvh(tsah::flattenBvh(bvh));
   checkAcrossFrames(t, a.indices(), pos, a.vertexCount(), frames);
+}
+
+// buildCwbvh(flat, cost, maxLeafSize) passes the collapse constants on (the GPU runtime's
+// Config::wideCost / wideMaxLeafSize): over a tree of one-triangle leaves, cheap triangles merge
+// leaves up to the limit, and a limit of 1 keeps every leaf single.
+TEST(CwbvhBuild, CollapseConstantsAndLeafLimitReachTheCollapse) {
+  const auto m = tsah::test::randomMovingTriangles(400, 2, 5, 0.1f);
+  const tsah::PrimitiveBoxes boxes = m.boxes();
+  tsah::SweepSahBuilder::Config c;
+  c.maxLeafSize = 1;
+  tsah::Bvh bvh = tsah::SweepSahBuilder(c).build(boxes.frame(0));
+  tsah::refit(bvh, boxes);
+  const tsah::FlatBvh flat = tsah::flattenBvh(bvh);
+  auto largestLeaf = [](const tsah::CwbvhTree& t) {
+    uint32_t largest = 0;
+    for (const tsah::CwbvhLeaf& l : t.leaves) largest = std::max(largest, l.count);
+    return largest;
+  };
+  const tsah::CwbvhTree merged = tsah::buildCwbvh(flat, tsah::CostModel{3.0f, 0.1f}, 4);
+  const tsah::CwbvhTree single = tsah::buildCwbvh(flat, tsah::CostModel{3.0f, 0.1f}, 1);
+  ASSERT_EQ(tsah::validateCwbvh(merged), std::nullopt);
+  ASSERT_EQ(tsah::validateCwbvh(single), std::nullopt);
+  EXPECT_GT(largestLeaf(merged), 1u);
+  EXPECT_LE(largestLeaf(merged), 4u);
+  EXPECT_EQ(largestLeaf(single), 1u);
+  EXPECT_LT(merged.leaves.size(), single.leaves.size());
 }
 
 TEST(CwbvhBuild, RefusesTooWideTreesAndOverfullNodes) {
