@@ -4,7 +4,7 @@
 //                  [--tree NAME=FILE.tbvh]... [--sah0] [--rebuild lbvh,hlbvh-sah|none]
 //                  [--frames 50] [--width 1024] [--height 768] [--ao 8] [--shadow 2]
 //                  [--traversal simple|persistent|both] [--layout bvh2,cwbvh] [--no-graphs] [--no-render] [--cpu-compare]
-//                  [--image-dir DIR] [--builder sweep|binned]
+//                  [--image-dir DIR] [--builder sweep|binned] [--leaf-boxes exact|quantized|both] [--ground]
 //
 // For every tree (from .tbvh files, or SAH0 built here: sweep SAH on the first frame, collapsed to
 // at most 8 triangles per leaf) and every GPU rebuild method, over `frames` times spread uniformly
@@ -55,11 +55,14 @@ struct Options {
   std::string traversal = "simple";
   std::string layout = "bvh2,cwbvh";  // layouts of the refitted trees, comma separated
   bool noRender = false, cpuCompare = false, noGraphs = false, noFuse = false;
+  bool ground = false;  // the analytic ground plane (off: the meshes alone, as tsah bench and the paper)
   std::vector<float> wideCost = {3.0f, 2.0f};  // cwbvh collapse: cT, cI
   uint32_t wideLeaf = 8;                       // cwbvh collapse: largest leaf
   std::string imageDir;
   std::string builder = "sweep";
   uint32_t wideMerge = tsah::kCwbvhDefaultMergeTriangles;  // RebuildOptions::wideMergeTriangles
+  std::string leafBoxes = "exact";                          // cwbvh: exact, quantized or both
+  bool exactLeafBoxes = true;                               // the mode of the row being run
 };
 
 json summary(std::vector<double> v) {
@@ -165,6 +168,7 @@ tc::GpuRuntime::Config runtimeConfig(const Options& opt, bool persistent, tc::Tr
   tc::GpuRuntime::Config c{0, persistent, !opt.noGraphs, layout, !opt.noFuse};
   c.wideCost = {opt.wideCost[0], opt.wideCost[1]};
   c.wideMaxLeafSize = opt.wideLeaf;
+  c.exactLeafBoxes = opt.exactLeafBoxes;
   return c;
 }
 
@@ -200,6 +204,7 @@ json runRefit(const std::string& name, const tsah::FlatBvh& tree, const anim::An
   j["name"] = name;
   j["kind"] = "refit";
   j["layout"] = tc::treeLayoutName(layout);
+  if (layout == tc::TreeLayout::Cwbvh) j["leaf_boxes"] = opt.exactLeafBoxes ? "exact" : "quantized";
   j["setup_seconds"] = setupSeconds;  // upload (and for cwbvh the 8-wide collapse + layout on the host)
   j["traversal"] = persistent ? "persistent" : "simple";
   if (layout == tc::TreeLayout::Cwbvh)
@@ -276,6 +281,7 @@ json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim:
   j["name"] = tc::rebuildMethodName(method);
   j["kind"] = "rebuild";
   j["layout"] = tc::treeLayoutName(layout);
+  if (layout == tc::TreeLayout::Cwbvh) j["leaf_boxes"] = opt.exactLeafBoxes ? "exact" : "quantized";
   j["traversal"] = persistent ? "persistent" : "simple";
   j["bare_build_ms"] = summary(s.bareBuild);
   j["build_collapse_woop_ms"] = summary(s.build);
@@ -368,11 +374,11 @@ void run(const Options& opt) {
   const tsah::Camera fitted = tsah::fitCamera(bounds, {0, 1, 0}, 45.0f, float(opt.width) / float(opt.height));
   std::vector<anim::CameraKey> cameraKeys(a.cameraPath().begin(), a.cameraPath().end());
   scene.camera = [cameraKeys, fitted](double t) { return cameraKeys.empty() ? fitted : tsah::cameraAt(cameraKeys, t); };
-  scene.lighting = tsah::fitLighting(bounds, scene.camera(times.front()));
+  scene.lighting = tsah::fitLighting(bounds, scene.camera(times.front()), {0, 1, 0}, 0.1f, opt.ground);
   out["settings"] = {{"frames", frames},       {"width", opt.width},   {"height", opt.height},
                      {"ao_samples", opt.ao},   {"shadow_samples", opt.shadow},
                      {"traversal", opt.traversal}, {"render", !opt.noRender}, {"graphs", !opt.noGraphs},
-                     {"fused_wide_passes", !opt.noFuse},
+                     {"fused_wide_passes", !opt.noFuse}, {"ground", opt.ground},
                      {"camera", a.cameraPath().empty() ? "fitted to the animation bounds" : "the animation's camera path"}};
 
   // Trees: files, then SAH0 built here.
@@ -407,22 +413,37 @@ void run(const Options& opt) {
   }
   if (layouts.empty()) throw anim::Error("--layout needs bvh2, cwbvh or both");
 
+  std::vector<bool> leafModes;  // CwbvhView::leafBoxes set (exact) or not (quantized)
+  if (opt.leafBoxes == "exact" || opt.leafBoxes == "both") leafModes.push_back(true);
+  if (opt.leafBoxes == "quantized" || opt.leafBoxes == "both") leafModes.push_back(false);
+  if (leafModes.empty()) throw anim::Error("--leaf-boxes must be exact, quantized or both");
+  // The options of one row: the layout's leaf box modes (bvh2 has none).
+  auto rowOptions = [&](tc::TreeLayout layout) {
+    std::vector<Options> rows;
+    for (bool exact : layout == tc::TreeLayout::Cwbvh ? leafModes : std::vector<bool>{true}) {
+      rows.push_back(opt);
+      rows.back().exactLeafBoxes = exact;
+    }
+    return rows;
+  };
+
   json methods = json::array();
   for (tc::TreeLayout layout : layouts)
-    for (bool persistent : modes) {
-      for (const auto& [name, tree] : trees)
-        methods.push_back(runRefit(name, tree, a, times, scene, opt, persistent, layout));
-    }
+    for (const Options& row : rowOptions(layout))
+      for (bool persistent : modes)
+        for (const auto& [name, tree] : trees)
+          methods.push_back(runRefit(name, tree, a, times, scene, row, persistent, layout));
   if (opt.rebuild != "none") {
     std::stringstream ss(opt.rebuild);
     std::string m;
     while (std::getline(ss, m, ','))
       for (tc::TreeLayout layout : layouts)
-        for (bool persistent : modes) {
-          if (layout == tc::TreeLayout::Cwbvh && persistent) continue;  // the wide kernel is one thread per ray
-          methods.push_back(
-              runRebuild(tc::parseRebuildMethod(m), trees.front().second, a, times, scene, opt, persistent, layout));
-        }
+        for (const Options& row : rowOptions(layout))
+          for (bool persistent : modes) {
+            if (layout == tc::TreeLayout::Cwbvh && persistent) continue;  // the wide kernel is one thread per ray
+            methods.push_back(
+                runRebuild(tc::parseRebuildMethod(m), trees.front().second, a, times, scene, row, persistent, layout));
+          }
   }
   out["methods"] = methods;
   if (opt.cpuCompare) {
@@ -460,6 +481,10 @@ int main(int argc, char** argv) {
       ->expected(2);
   app.add_option("--cwbvh-leaf", opt.wideLeaf, "cwbvh: the largest leaf the 8-wide collapse makes (default 8)")
       ->check(CLI::Range(1u, 64u));
+  app.add_option("--leaf-boxes", opt.leafBoxes,
+                 "cwbvh: test a hit leaf's exact float box before its triangles (exact, the default), only its 8-bit "
+                 "box (quantized), or both rows");
+  app.add_flag("--ground", opt.ground, "Add the analytic ground plane (default: the meshes alone, as tsah bench)");
   app.add_flag("--no-graphs", opt.noGraphs, "Launch every kernel instead of replaying CUDA graphs");
   app.add_flag("--no-render", opt.noRender, "Time the updates and rebuilds only");
   app.add_flag("--cpu-compare", opt.cpuCompare, "Render the first frame on the CPU too and compare the images");

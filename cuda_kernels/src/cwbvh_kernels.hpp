@@ -29,6 +29,7 @@ inline CwbvhView cwbvhView(const TraceScene& scene) {
   view.positions = scene.positions;
   view.rootRef = scene.cwbvhRootRef;
   view.rootCount = scene.cwbvhRootCount;
+  view.leafBoxes = scene.cwbvhLeafBoxes;
   return view;
 }
 

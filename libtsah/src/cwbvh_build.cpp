@@ -37,7 +37,8 @@ std::vector<uint32_t> assignSlots(const WideBvh& wide, const WideNode& node) {
 
 }  // namespace
 
-CwbvhView CwbvhTree::view(const WoopTriangle* woop, const uint32_t* indices, const float* positions) const {
+CwbvhView CwbvhTree::view(const WoopTriangle* woop, const uint32_t* indices, const float* positions,
+                          bool exactLeafBoxes) const {
   CwbvhView v;
   v.nodes = nodes.data();
   v.woop = woop;
@@ -47,6 +48,7 @@ CwbvhView CwbvhTree::view(const WoopTriangle* woop, const uint32_t* indices, con
   v.rootRef = rootRef;
   v.rootCount = rootCount;
   v.rootBox = rootBox;
+  if (exactLeafBoxes && !exactBoxes.empty()) v.leafBoxes = exactBoxes.data();
   return v;
 }
 
