@@ -105,16 +105,12 @@ TEST(CudaCwbvh, HitsEqualCpuReferenceAndBinaryGpu) {
     tc::GpuRuntime::Config persistentConfig = wide();
     persistentConfig.persistentTraversal = true;
     tc::GpuRuntime gpuWidePersistent(tree, a, persistentConfig);
-    tc::GpuRuntime::Config quantizedConfig = wide();
-    quantizedConfig.exactLeafBoxes = false;
-    tc::GpuRuntime gpuWideQuantized(tree, a, quantizedConfig);
     tc::GpuRuntime gpuBinary(tree, a);
     tsah::CwbvhTree host = tsah::buildCwbvh(tree);
     uint32_t hits = 0, ties = 0;
     for (double t : {0.0, 2.3}) {
       gpuWide.updateAt(t);
       gpuWidePersistent.updateAt(t);
-      gpuWideQuantized.updateAt(t);
       gpuBinary.updateAt(t);
       const auto pos = a.positionsAt(t);
       tsah::refitCwbvh(host, a.indices(), pos);
@@ -126,7 +122,6 @@ TEST(CudaCwbvh, HitsEqualCpuReferenceAndBinaryGpu) {
       }
       EXPECT_EQ(std::memcmp(woop.data(), gpuWide.downloadWoop().data(), woop.size() * sizeof woop[0]), 0);
       const tsah::CwbvhView view = host.view(woop.data(), a.indices().data(), pos.data());
-      const tsah::CwbvhView quantizedView = host.view(woop.data(), a.indices().data(), pos.data(), false);
       const auto rays = randomRays(gpuBinary.bounds(), a, pos, 20000, 11);
       const auto wideHits = gpuWide.closestHits(rays);
       const auto binaryHits = gpuBinary.closestHits(rays);
@@ -137,17 +132,11 @@ TEST(CudaCwbvh, HitsEqualCpuReferenceAndBinaryGpu) {
       const auto persistentAny = gpuWidePersistent.anyHits(rays);
       ASSERT_EQ(std::memcmp(persistentHits.data(), wideHits.data(), wideHits.size() * sizeof wideHits[0]), 0);
       ASSERT_EQ(persistentAny, wideAny);
-      // Without the exact leaf box test (Config::exactLeafBoxes false): the host reference of that mode.
-      const auto quantizedHits = gpuWideQuantized.closestHits(rays);
-      const auto quantizedAny = gpuWideQuantized.anyHits(rays);
       for (size_t i = 0; i < rays.size(); ++i) {
         // The GPU runs the reference code on the same data: bit-equal.
         const tsah::Hit ref = tsah::cwbvhClosestHit(view, rays[i]);
         ASSERT_EQ(std::memcmp(&ref, &wideHits[i], sizeof ref), 0) << "ray " << i;
         ASSERT_EQ(wideAny[i] != 0, tsah::cwbvhAnyHit(view, rays[i])) << "ray " << i;
-        const tsah::Hit quantizedRef = tsah::cwbvhClosestHit(quantizedView, rays[i]);
-        ASSERT_EQ(std::memcmp(&quantizedRef, &quantizedHits[i], sizeof quantizedRef), 0) << "ray " << i;
-        ASSERT_EQ(quantizedAny[i] != 0, tsah::cwbvhAnyHit(quantizedView, rays[i])) << "ray " << i;
         // Against the binary tree: the same hit or none; another triangle only at the same distance.
         ASSERT_EQ(wideAny[i], binaryAny[i]) << "ray " << i;
         ASSERT_EQ(wideHits[i].valid(), binaryHits[i].valid()) << "ray " << i;

@@ -204,35 +204,6 @@ TEST(CwbvhTraversal, EqualsBinaryTraversal) {
   compareWithBinary(anim::generate(anim::GeneratorKind::Swap, o), 3000, 3);
 }
 
-// The exact leaf box test gates a leaf's triangles: with every leaf child's exact box replaced by
-// a point far outside the scene no ray hits anything, while the quantized boxes alone still find the hits.
-TEST(CwbvhTraversal, ExactLeafBoxesGateTheTriangles) {
-  anim::GeneratorOptions o;
-  o.triangles = 2000;
-  o.frames = 4;
-  const anim::Animation a = anim::generate(anim::GeneratorKind::Wave, o);
-  const tsah::FlatBvh flat = tsah::flattenBvh(sahTreeOverFrames(a.indices(), a.allPositions(), a.keyframeCount()));
-  tsah::CwbvhTree t = tsah::buildCwbvh(flat);
-  const auto pos = a.positionsAt(a.startTime());
-  tsah::refitCwbvh(t, a.indices(), pos);
-  const auto woop = tsah::test::cwbvhWoop(t, a.indices(), pos);
-  tsah::CpuRuntime rt(flat, {a.indices().begin(), a.indices().end()}, a.vertexCount(), {1});
-  rt.update(pos);
-  std::mt19937 rng(4);
-  const auto rays = tsah::test::randomRays(rt.view(), a.triangleCount(), rt.bounds(), 2000, rng);
-  const Vec3 far{1e30f, 1e30f, 1e30f};  // (not the empty box: the slab test reads lo > hi as the box from hi to lo)
-  for (const tsah::CwbvhLeaf& leaf : t.leaves) t.exactBoxes[leaf.nodeSlot] = Aabb{far, far};
-  const tsah::CwbvhView gated = t.view(woop.data(), a.indices().data(), pos.data(), true);
-  const tsah::CwbvhView quantized = t.view(woop.data(), a.indices().data(), pos.data(), false);
-  uint32_t hits = 0;
-  for (const tsah::Ray& ray : rays) {
-    EXPECT_FALSE(tsah::cwbvhClosestHit(gated, ray).valid());
-    EXPECT_FALSE(tsah::cwbvhAnyHit(gated, ray));
-    hits += tsah::cwbvhClosestHit(quantized, ray).valid() ? 1 : 0;
-  }
-  EXPECT_GT(hits, rays.size() / 4);
-}
-
 TEST(CwbvhTraversal, SingleLeafTree) {
   const auto m = tsah::test::randomMovingTriangles(5, 2, 9, 0.1f);
   const tsah::PrimitiveBoxes boxes = m.boxes();

@@ -4,7 +4,7 @@
 //                  [--tree NAME=FILE.tbvh]... [--sah0] [--rebuild lbvh,hlbvh-sah|none]
 //                  [--frames 50] [--width 1024] [--height 768] [--ao 8] [--shadow 2]
 //                  [--traversal simple|persistent|both] [--layout bvh2,cwbvh] [--no-graphs] [--no-render] [--cpu-compare]
-//                  [--image-dir DIR] [--builder sweep|binned] [--leaf-boxes exact|quantized|both] [--ground]
+//                  [--image-dir DIR] [--builder sweep|binned] [--ground]
 //
 // For every tree (from .tbvh files, or SAH0 built here: sweep SAH on the first frame, collapsed to
 // at most 8 triangles per leaf) and every GPU rebuild method, over `frames` times spread uniformly
@@ -61,8 +61,6 @@ struct Options {
   std::string imageDir;
   std::string builder = "sweep";
   uint32_t wideMerge = tsah::kCwbvhDefaultMergeTriangles;  // RebuildOptions::wideMergeTriangles
-  std::string leafBoxes = "exact";                          // cwbvh: exact, quantized or both
-  bool exactLeafBoxes = true;                               // the mode of the row being run
 };
 
 json summary(std::vector<double> v) {
@@ -168,7 +166,6 @@ tc::GpuRuntime::Config runtimeConfig(const Options& opt, bool persistent, tc::Tr
   tc::GpuRuntime::Config c{0, persistent, !opt.noGraphs, layout, !opt.noFuse};
   c.wideCost = {opt.wideCost[0], opt.wideCost[1]};
   c.wideMaxLeafSize = opt.wideLeaf;
-  c.exactLeafBoxes = opt.exactLeafBoxes;
   return c;
 }
 
@@ -204,7 +201,6 @@ json runRefit(const std::string& name, const tsah::FlatBvh& tree, const anim::An
   j["name"] = name;
   j["kind"] = "refit";
   j["layout"] = tc::treeLayoutName(layout);
-  if (layout == tc::TreeLayout::Cwbvh) j["leaf_boxes"] = opt.exactLeafBoxes ? "exact" : "quantized";
   j["setup_seconds"] = setupSeconds;  // upload (and for cwbvh the 8-wide collapse + layout on the host)
   j["traversal"] = persistent ? "persistent" : "simple";
   if (layout == tc::TreeLayout::Cwbvh)
@@ -281,7 +277,6 @@ json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim:
   j["name"] = tc::rebuildMethodName(method);
   j["kind"] = "rebuild";
   j["layout"] = tc::treeLayoutName(layout);
-  if (layout == tc::TreeLayout::Cwbvh) j["leaf_boxes"] = opt.exactLeafBoxes ? "exact" : "quantized";
   j["traversal"] = persistent ? "persistent" : "simple";
   j["bare_build_ms"] = summary(s.bareBuild);
   j["build_collapse_woop_ms"] = summary(s.build);
@@ -413,37 +408,22 @@ void run(const Options& opt) {
   }
   if (layouts.empty()) throw anim::Error("--layout needs bvh2, cwbvh or both");
 
-  std::vector<bool> leafModes;  // CwbvhView::leafBoxes set (exact) or not (quantized)
-  if (opt.leafBoxes == "exact" || opt.leafBoxes == "both") leafModes.push_back(true);
-  if (opt.leafBoxes == "quantized" || opt.leafBoxes == "both") leafModes.push_back(false);
-  if (leafModes.empty()) throw anim::Error("--leaf-boxes must be exact, quantized or both");
-  // The options of one row: the layout's leaf box modes (bvh2 has none).
-  auto rowOptions = [&](tc::TreeLayout layout) {
-    std::vector<Options> rows;
-    for (bool exact : layout == tc::TreeLayout::Cwbvh ? leafModes : std::vector<bool>{true}) {
-      rows.push_back(opt);
-      rows.back().exactLeafBoxes = exact;
-    }
-    return rows;
-  };
-
   json methods = json::array();
   for (tc::TreeLayout layout : layouts)
-    for (const Options& row : rowOptions(layout))
-      for (bool persistent : modes)
-        for (const auto& [name, tree] : trees)
-          methods.push_back(runRefit(name, tree, a, times, scene, row, persistent, layout));
+    for (bool persistent : modes) {
+      for (const auto& [name, tree] : trees)
+        methods.push_back(runRefit(name, tree, a, times, scene, opt, persistent, layout));
+    }
   if (opt.rebuild != "none") {
     std::stringstream ss(opt.rebuild);
     std::string m;
     while (std::getline(ss, m, ','))
       for (tc::TreeLayout layout : layouts)
-        for (const Options& row : rowOptions(layout))
-          for (bool persistent : modes) {
-            if (layout == tc::TreeLayout::Cwbvh && persistent) continue;  // the wide kernel is one thread per ray
-            methods.push_back(
-                runRebuild(tc::parseRebuildMethod(m), trees.front().second, a, times, scene, row, persistent, layout));
-          }
+        for (bool persistent : modes) {
+          if (layout == tc::TreeLayout::Cwbvh && persistent) continue;  // the wide kernel is one thread per ray
+          methods.push_back(
+              runRebuild(tc::parseRebuildMethod(m), trees.front().second, a, times, scene, opt, persistent, layout));
+        }
   }
   out["methods"] = methods;
   if (opt.cpuCompare) {
@@ -481,9 +461,6 @@ int main(int argc, char** argv) {
       ->expected(2);
   app.add_option("--cwbvh-leaf", opt.wideLeaf, "cwbvh: the largest leaf the 8-wide collapse makes (default 8)")
       ->check(CLI::Range(1u, 64u));
-  app.add_option("--leaf-boxes", opt.leafBoxes,
-                 "cwbvh: test a hit leaf's exact float box before its triangles (exact, the default), only its 8-bit "
-                 "box (quantized), or both rows");
   app.add_flag("--ground", opt.ground, "Add the analytic ground plane (default: the meshes alone, as tsah bench)");
   app.add_flag("--no-graphs", opt.noGraphs, "Launch every kernel instead of replaying CUDA graphs");
   app.add_flag("--no-render", opt.noRender, "Time the updates and rebuilds only");

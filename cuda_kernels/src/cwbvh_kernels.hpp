@@ -29,7 +29,6 @@ inline CwbvhView cwbvhView(const TraceScene& scene) {
   view.positions = scene.positions;
   view.rootRef = scene.cwbvhRootRef;
   view.rootCount = scene.cwbvhRootCount;
-  view.leafBoxes = scene.cwbvhLeafBoxes;
   return view;
 }
 

@@ -58,7 +58,7 @@ __device__ __forceinline__ uint32_t warpSum(uint32_t v) {
 struct ConvertParams {
   BinaryTreeView tree;
   const RootInfo* root;
-  CwbvhConvertOutput out;  // nodes, starts, triIndex, exactBoxes (optional)
+  CwbvhConvertOutput out;  // nodes, starts, triIndex
   uint2* blockSums;        // 2 * gridDim.x
   uint32_t* words;
   uint32_t mergeLimit;
@@ -140,14 +140,13 @@ __global__ void __launch_bounds__(kConvertBlock) cwbvhConvertKernel(ConvertParam
 
 }  // namespace
 
-GpuCwbvhConverter::GpuCwbvhConverter(uint32_t triangles, bool exactBoxes) : n_(triangles) {
+GpuCwbvhConverter::GpuCwbvhConverter(uint32_t triangles) : n_(triangles) {
   if (n_ == 0) throw anim::Error("GPU wide conversion: no triangles");
   // Every wide node but a one-leaf root starts at its own binary interior node (<= n - 1).
   const std::size_t maxNodes = std::max<std::size_t>(1, std::size_t(n_) - 1);
   nodes_.resize(maxNodes);
   starts_.resize(maxNodes);
   triIndex_.resize(n_);
-  if (exactBoxes) exactBoxes_.resize(maxNodes * kCwbvhWidth);
   words_.resize(kConvertWords);
   // All blocks must be resident (the grid barrier); two per multiprocessor are enough threads for
   // the widest levels, and fewer blocks make each barrier cheaper: a small tree gets about one
@@ -164,7 +163,7 @@ void GpuCwbvhConverter::enqueue(const GpuBvhNode* nodes, uint32_t nodeCount, con
   words_.fillBytes(0, stream);
   ConvertParams p{{nodes, nodeCount, slotTri, n_},
                   root,
-                  {nodes_.data(), starts_.data(), triIndex_.data(), exactBoxes_.size() ? exactBoxes_.data() : nullptr, nullptr},
+                  {nodes_.data(), starts_.data(), triIndex_.data(), nullptr, nullptr},
                   blockSums_.data(),
                   words_.data(),
                   mergeLimit,
@@ -187,7 +186,6 @@ CwbvhTree GpuCwbvhConverter::download(cudaStream_t stream) const {
   CwbvhTree t;
   t.nodes = nodes_.download(stream, nodeCount_);
   t.triIndex = triIndex_.download(stream);
-  if (exactBoxes_.size()) t.exactBoxes = exactBoxes_.download(stream, std::size_t(nodeCount_) * kCwbvhWidth);
   t.rootRef = 0;
   t.rootCount = 0;
   return t;

@@ -16,9 +16,7 @@ namespace tsah::cuda::detail {
 
 class GpuCwbvhConverter {
  public:
-  // exactBoxes: also write every child's exact (binary) box, node * 8 + slot (exactBoxes()), for
-  // the traversal's exact leaf test (CwbvhView::leafBoxes); 192 bytes per triangle of capacity.
-  GpuCwbvhConverter(uint32_t triangles, bool exactBoxes);
+  explicit GpuCwbvhConverter(uint32_t triangles);
 
   // Puts the conversion of the binary tree on the stream: nodeCount nodes (only those reachable
   // from root->ref are read), slotTri: binary slot -> triangle id, root: on the device. Writes
@@ -33,11 +31,9 @@ class GpuCwbvhConverter {
 
   const CwbvhNode* nodes() const { return nodes_.data(); }
   const uint32_t* triIndex() const { return triIndex_.data(); }
-  const Aabb* exactBoxes() const { return exactBoxes_.size() ? exactBoxes_.data() : nullptr; }
   uint32_t nodeCount() const { return nodeCount_; }
   uint32_t levels() const { return levels_; }  // of the last conversion (= CwbvhTree::depth)
-  // The last conversion's nodes, triIndex and (when kept) exactBoxes (rootRef 0; nothing else of
-  // CwbvhTree is filled).
+  // The last conversion's nodes and triIndex (rootRef 0; nothing else of CwbvhTree is filled).
   CwbvhTree download(cudaStream_t stream) const;
 
  private:
@@ -47,7 +43,6 @@ class GpuCwbvhConverter {
   DeviceBuffer<CwbvhNode> nodes_;
   DeviceBuffer<int32_t> starts_;   // per wide node: the binary node it starts at
   DeviceBuffer<uint32_t> triIndex_;
-  DeviceBuffer<Aabb> exactBoxes_;  // nodes * 8, or empty
   DeviceBuffer<uint2> blockSums_;  // per block, two rounds: (interior children, leaf triangles)
   DeviceBuffer<uint32_t> words_;   // grid barrier, node count, error
 };

@@ -38,7 +38,6 @@ struct TraceScene {
   const CwbvhNode* cwbvhNodes = nullptr;
   int32_t cwbvhRootRef = 0;
   uint32_t cwbvhRootCount = 0;
-  const Aabb* cwbvhLeafBoxes = nullptr;  // exact child boxes (node * 8 + slot), or null: CwbvhView::leafBoxes
 };
 
 // A leaf of an uploaded tree as the refit sees it: where its box goes (interior node * 2 + side,

@@ -227,7 +227,6 @@ detail::TraceScene GpuRuntime::Impl::scene() const {
     s.positions = positions.data();
     s.root = rebuilder->root();
     s.cwbvhNodes = wide->nodes();
-    if (config.exactLeafBoxes) s.cwbvhLeafBoxes = wide->exactBoxes();
     return s;
   }
   if (const Cwbvh* cwbvh = tree().cwbvh.get(); cwbvh && !tracingRebuilt) {
@@ -240,7 +239,6 @@ detail::TraceScene GpuRuntime::Impl::scene() const {
     s.cwbvhNodes = cwbvh->nodes.data();
     s.cwbvhRootRef = cwbvh->host.rootRef;
     s.cwbvhRootCount = cwbvh->host.rootCount;
-    if (config.exactLeafBoxes) s.cwbvhLeafBoxes = cwbvh->exact.data();
     return s;
   }
   detail::TraceScene s;
@@ -364,7 +362,7 @@ bool sameOptions(const RebuildOptions& a, const RebuildOptions& b) {
 RebuildTimings GpuRuntime::rebuildAt(double time, const RebuildOptions& options) {
   Impl& m = *impl_;
   if (options.maxLeafSize == 0) throw anim::Error("GPU rebuild: maxLeafSize must be at least 1");
-  if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles, m.config.layout, m.config.exactLeafBoxes);
+  if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles, m.config.layout);
   m.setFrame(time);
   m.restoreStaticPositions();
   m.woopValid = false;
@@ -399,7 +397,7 @@ RebuildTimings GpuRuntime::rebuild(std::span<const float> positions, const Rebui
   m.positions.upload(positions, m.stream);
   m.restInPlace = false;
   m.events.record(1, m.stream);
-  if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles, m.config.layout, m.config.exactLeafBoxes);
+  if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles, m.config.layout);
   m.woopValid = false;
   m.tracingRebuilt = true;
   RebuildTimings timings = m.rebuilder->build(m.indices.data(), m.positions.data(), options, m.woop.data(), m.stream);

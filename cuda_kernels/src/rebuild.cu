@@ -706,7 +706,7 @@ __global__ void bottomUpKernel(BottomUpParams p) {
 
 }  // namespace
 
-GpuRebuilder::GpuRebuilder(uint32_t triangles, TreeLayout layout, bool exactBoxes) : n_(triangles), events_(8) {  // see collect
+GpuRebuilder::GpuRebuilder(uint32_t triangles, TreeLayout layout) : n_(triangles), events_(8) {  // see collect
   if (n_ == 0) throw anim::Error("GPU rebuild: no triangles");
   if (n_ > kMaxGpuTriangles) throw anim::Error("GPU rebuild: too many triangles");
   const std::size_t n = n_;
@@ -751,7 +751,7 @@ GpuRebuilder::GpuRebuilder(uint32_t triangles, TreeLayout layout, bool exactBoxe
   CUDA_CHECK(cudaGetDevice(&device));
   CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
   boxBlocks_ = 8 * sms;
-  if (layout == TreeLayout::Cwbvh) wide_ = std::make_unique<GpuCwbvhConverter>(n_, exactBoxes);
+  if (layout == TreeLayout::Cwbvh) wide_ = std::make_unique<GpuCwbvhConverter>(n_);
 }
 
 GpuRebuilder::~GpuRebuilder() = default;

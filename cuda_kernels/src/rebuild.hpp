@@ -31,9 +31,8 @@ namespace tsah::cuda::detail {
 
 class GpuRebuilder {
  public:
-  // layout cwbvh: every build is followed by its conversion into the compressed 8-wide layout
-  // (exactBoxes: the conversion also keeps the exact child boxes, GpuCwbvhConverter).
-  GpuRebuilder(uint32_t triangles, TreeLayout layout, bool exactBoxes = false);
+  // layout cwbvh: every build is followed by its conversion into the compressed 8-wide layout.
+  GpuRebuilder(uint32_t triangles, TreeLayout layout);
   ~GpuRebuilder();
   GpuRebuilder(const GpuRebuilder&) = delete;
   GpuRebuilder& operator=(const GpuRebuilder&) = delete;

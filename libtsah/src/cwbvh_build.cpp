@@ -37,8 +37,7 @@ std::vector<uint32_t> assignSlots(const WideBvh& wide, const WideNode& node) {
 
 }  // namespace
 
-CwbvhView CwbvhTree::view(const WoopTriangle* woop, const uint32_t* indices, const float* positions,
-                          bool exactLeafBoxes) const {
+CwbvhView CwbvhTree::view(const WoopTriangle* woop, const uint32_t* indices, const float* positions) const {
   CwbvhView v;
   v.nodes = nodes.data();
   v.woop = woop;
@@ -48,7 +47,6 @@ CwbvhView CwbvhTree::view(const WoopTriangle* woop, const uint32_t* indices, con
   v.rootRef = rootRef;
   v.rootCount = rootCount;
   v.rootBox = rootBox;
-  if (exactLeafBoxes && !exactBoxes.empty()) v.leafBoxes = exactBoxes.data();
   return v;
 }
 

@@ -200,17 +200,13 @@ void expectWideTraversalMatchesBinary(const anim::Animation& a, CpuRuntime& rt, 
     const BvhView bv = rt.view();
     const CwbvhTree& t = wideAt(pos, bv);
     const auto woop = cwbvhWoop(t, a.indices(), pos);
-    const auto rays = randomRays(bv, a.triangleCount(), rt.bounds(), rayCount, rng);
-    for (bool exactLeafBoxes : {true, false}) {  // with and without the exact leaf box test
-      const CwbvhView cv = t.view(woop.data(), a.indices().data(), pos.data(), exactLeafBoxes);
-      EXPECT_EQ(cv.leafBoxes != nullptr, exactLeafBoxes && t.nodeCount() > 0);
-      const HitAgreement agree = expectSameHits(bv, cv, rays);
-      hits += agree.hits;
-      ties += agree.ties;
-    }
+    const CwbvhView cv = t.view(woop.data(), a.indices().data(), pos.data());
+    const HitAgreement agree = expectSameHits(bv, cv, randomRays(bv, a.triangleCount(), rt.bounds(), rayCount, rng));
+    hits += agree.hits;
+    ties += agree.ties;
   }
-  EXPECT_GT(hits, rayCount / 2);
-  EXPECT_LE(ties, hits / 100 + 10);
+  EXPECT_GT(hits, rayCount / 4);
+  EXPECT_LE(ties, hits / 100 + 5);
 }
 
 }  // namespace tsah::test

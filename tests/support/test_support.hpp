@@ -79,8 +79,7 @@ HitAgreement expectSameHits(const BvhView& binary, const CwbvhView& wide, std::s
 
 // At three times of `a` (start, 0.37 * end, end): updates rt (the binary CPU runtime of a tree for
 // `a`), gets the compressed tree for those positions from wideAt, and runs expectSameHits on
-// rayCount random rays, with and without the exact leaf box test (CwbvhView::leafBoxes); then
-// expects a quarter of the rays to hit and ties in at most 1% + 5 (over both modes).
+// rayCount random rays; then expects a quarter of the rays to hit and ties in at most 1% + 5.
 using WideTreeAt = std::function<const CwbvhTree&(std::span<const float> positions, const BvhView& binary)>;
 void expectWideTraversalMatchesBinary(const anim::Animation& a, CpuRuntime& rt, uint32_t rayCount, uint32_t seed,
                                       const WideTreeAt& wideAt);

@@ -118,9 +118,6 @@ class GpuRuntime {
     // (cT per wide node visit, cI per triangle) and the largest leaf it makes.
     CostModel wideCost{};
     uint32_t wideMaxLeafSize = 8;
-    // Layout cwbvh: a leaf's triangles are tested only when the ray also hits its exact float box
-    // (the refit's, or the rebuild's binary box; CwbvhView::leafBoxes), not only its 8-bit one.
-    bool exactLeafBoxes = true;
   };
 
   // tree: the topology to refit (frame 0's block; its boxes are recomputed by updateAt). Throws

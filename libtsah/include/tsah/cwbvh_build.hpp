@@ -34,10 +34,8 @@ struct CwbvhTree {
   uint32_t depth = 0;                  // wide depth of the deepest leaf
 
   uint32_t nodeCount() const { return static_cast<uint32_t>(nodes.size()); }
-  // A view for the traversal with the given per-slot Woop triangles, indices and positions;
-  // exactLeafBoxes: leaves are tested against exactBoxes too (CwbvhView::leafBoxes).
-  CwbvhView view(const WoopTriangle* woop, const uint32_t* indices, const float* positions,
-                 bool exactLeafBoxes = true) const;
+  // A view for the traversal with the given per-slot Woop triangles, indices and positions.
+  CwbvhView view(const WoopTriangle* woop, const uint32_t* indices, const float* positions) const;
 };
 
 // The compressed layout of `wide` (width <= 8), quantized with its boxes of frame `frame`.

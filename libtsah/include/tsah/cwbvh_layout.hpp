@@ -248,11 +248,6 @@ struct CwbvhView {
   int32_t rootRef = 0;                  // node 0, or a leaf reference when the tree is one leaf
   uint32_t rootCount = 0;
   Aabb rootBox;
-  // Optional: the exact float boxes of the children (node * 8 + slot), as the refit last computed
-  // them. When set, a leaf whose quantized box the ray hits has its triangles tested only if its
-  // exact box is hit as well: the 8-bit grid's slack (up to a grid step on each side) otherwise
-  // lets rays that start on a surface (AO, shadow) enter their neighbours' leaves.
-  const Aabb* leafBoxes = nullptr;
 };
 
 // The node as the traversal reads it: 20 words, with every field taken out by a constant byte
@@ -343,19 +338,6 @@ TSAH_HD WoopTriangle cwbvhLoadWoop(const WoopTriangle* woop, uint32_t s) {
   return {{a.x, a.y, a.z, a.w}, {b.x, b.y, b.z, b.w}, {c.x, c.y, c.z, c.w}};
 #else
   return woop[s];
-#endif
-}
-
-TSAH_HD Aabb cwbvhLoadBox(const Aabb* boxes, std::size_t i) {
-#if defined(__CUDA_ARCH__)
-  const float2* p = reinterpret_cast<const float2*>(boxes + i);  // 24-byte boxes: 8-byte aligned
-  const float2 a = __ldg(p), b = __ldg(p + 1), c = __ldg(p + 2);
-  Aabb box;
-  box.lo = {a.x, a.y, b.x};
-  box.hi = {b.y, c.x, c.y};
-  return box;
-#else
-  return boxes[i];
 #endif
 }
 
@@ -514,12 +496,6 @@ struct CwbvhTraversal {
     while (hitLeafSlots != 0) {
       const uint32_t leafSlot = cwbvhLowestBit(hitLeafSlots);
       hitLeafSlots &= hitLeafSlots - 1;
-      if (v.leafBoxes != nullptr) {  // the exact box (intersectBox, as the binary traversal tests it)
-        float tEntry;
-        if (!intersectBox(prep, cwbvhLoadBox(v.leafBoxes, std::size_t(nodeIndex) * kCwbvhWidth + leafSlot), ray.tmin,
-                          tmax, tEntry))
-          continue;
-      }
       const uint32_t first = n.metaOf(leafSlot) & 0x3fu;
       const uint32_t later = leafSlots & ~((2u << leafSlot) - 1u);
       const uint32_t end = later != 0 ? n.metaOf(cwbvhLowestBit(later)) & 0x3fu : n.byteAt(15);
