@@ -23,7 +23,15 @@ using detail::RootInfo;
 
 // Pixels are processed in tiles of 8 x 4 (one warp), so a warp's primary rays are coherent.
 constexpr uint32_t kTileW = 8, kTileH = 4;
-enum Word : uint32_t { kAoRays = 0, kShadowRays = 1, kPrimaryCounter = 2, kAoCounter = 3, kShadowCounter = 4 };
+enum Word : uint32_t {
+  kAoRays = 0,
+  kShadowRays = 1,
+  kPrimaryCounter = 2,
+  kAoCounter = 3,
+  kShadowCounter = 4,
+  kActivePixels = 5,  // fused wide passes: entries of activePixels
+  kWords = 6          // GpuRuntime::Impl::words holds at least this many
+};
 
 struct Frame {
   uint32_t width, height, tilesX, padded;  // padded: tilesX * tilesY * 32 entries
@@ -67,17 +75,22 @@ __device__ __forceinline__ void countRays(uint32_t* word, bool valid) {
   if (valid && lane == uint32_t(__ffs(mask) - 1)) atomicAdd(word, uint32_t(__popc(mask)));
 }
 
-// A Surface as three float4 per padded pixel (coalesced 16-byte accesses).
+// A Surface as three float4 per padded pixel (coalesced 16-byte accesses). A pixel without a
+// surface stores (and its readers load) only the first, which holds the kind: on a small mesh in a
+// wide frame that is most pixels.
 __device__ __forceinline__ void storeSurface(float4* surfaces, uint32_t j, const Surface& s) {
   float4* out = surfaces + 3 * std::size_t(j);
   out[0] = make_float4(s.position.x, s.position.y, s.position.z, __uint_as_float(uint32_t(s.kind)));
+  if (s.kind == SurfaceKind::None) return;
   out[1] = make_float4(s.normal.x, s.normal.y, s.normal.z, __uint_as_float(s.tri));
   out[2] = make_float4(s.u, s.v, 0.0f, 0.0f);
 }
 
 __device__ __forceinline__ Surface loadSurface(const float4* surfaces, uint32_t j) {
   const float4* p = surfaces + 3 * std::size_t(j);
-  const float4 a = p[0], b = p[1], c = p[2];
+  const float4 a = p[0];
+  if (SurfaceKind(__float_as_uint(a.w)) == SurfaceKind::None) return Surface{};
+  const float4 b = p[1], c = p[2];
   return {{a.x, a.y, a.z}, {b.x, b.y, b.z}, SurfaceKind(__float_as_uint(a.w)), __float_as_uint(b.w), c.x, c.y};
 }
 
@@ -145,15 +158,35 @@ __global__ void shadowRaysKernel(Frame f, const float4* __restrict__ surfaces, R
 // (cwbvhClosestHit / cwbvhAnyHit, the TSAH_HD traversal), so no ray or hit buffer is written and
 // read back (at 1024 x 768 with 8 AO rays that is about 0.4 GB of traffic per frame). Same rays,
 // same results as the separate kernels above.
+//
+// The primary pass lists the pixels that found a surface (activePixels), and the AO and shadow
+// passes run over that list only: warps take 32 (pixel, sample) entries at a time from a counter
+// until the list is done. A small character in a wide frame covers a few percent of the pixels,
+// and one thread per padded pixel and sample spent most of those passes on pixels without rays.
 __device__ __forceinline__ CwbvhView wideView(CwbvhView v, const RootInfo* root) {
   v.rootBox = root->box;
   return v;
 }
 
+// Appends pixel j to the list when `active` (one atomic per warp; the order within the list does
+// not matter: every ray's random numbers depend on its pixel and sample only).
+__device__ __forceinline__ void appendActive(uint32_t* list, uint32_t* count, uint32_t j, bool active) {
+  const unsigned mask = __ballot_sync(__activemask(), active);
+  if (!active) return;
+  const uint32_t lane = threadIdx.x & 31u;
+  const int leader = __ffs(mask) - 1;
+  uint32_t base = 0;
+  if (int(lane) == leader) base = atomicAdd(count, uint32_t(__popc(mask)));
+  base = __shfl_sync(mask, base, leader);
+  list[base + uint32_t(__popc(mask & ((1u << lane) - 1u)))] = j;
+}
+
 __global__ void __launch_bounds__(128) widePrimaryKernel(Frame f, CwbvhView view, const RootInfo* __restrict__ root,
                                                           const uint32_t* __restrict__ indices,
                                                           const float* __restrict__ positions,
-                                                          float4* __restrict__ surfaces) {
+                                                          float4* __restrict__ surfaces,
+                                                          uint32_t* __restrict__ activePixels,
+                                                          uint32_t* __restrict__ words) {
   const uint32_t j = blockIdx.x * blockDim.x + threadIdx.x;
   if (j >= f.padded) return;
   uint32_t x, y;
@@ -163,31 +196,61 @@ __global__ void __launch_bounds__(128) widePrimaryKernel(Frame f, CwbvhView view
     s = primarySurface(ray, cwbvhClosestHit(wideView(view, root), ray), indices, positions, f.light);
   }
   storeSurface(surfaces, j, s);
+  appendActive(activePixels, words + kActivePixels, j, s.kind != SurfaceKind::None);
+}
+
+// Calls body(pixel, sample) for every sample of every listed pixel: each warp takes 32 entries at
+// a time from *counter. Every lane of the warp must call it (the grid has no partial warps).
+template <class Body>
+__device__ __forceinline__ void forEachListedSample(const uint32_t* __restrict__ activePixels, const uint32_t* words,
+                                                    uint32_t* counter, uint32_t samples, Body body) {
+  const uint32_t total = words[kActivePixels] * samples;  // < 2^32: at most padded * samples entries
+  const uint32_t lane = threadIdx.x & 31u;
+  for (;;) {
+    uint32_t base = 0;
+    if (lane == 0) base = atomicAdd(counter, 32u);
+    base = __shfl_sync(0xffffffffu, base, 0);
+    if (base >= total) return;
+    const uint32_t r = base + lane;
+    if (r < total) body(__ldg(activePixels + r / samples), r % samples);
+  }
+}
+
+__device__ __forceinline__ SampleKey pixelKey(const Frame& f, uint32_t j) {
+  uint32_t x, y;
+  pixelOf(f, j, x, y);
+  SampleKey key = f.base;
+  key.pixel = pixelIndex(f, x, y);
+  return key;
 }
 
 __global__ void __launch_bounds__(128) wideAoKernel(Frame f, CwbvhView view, const RootInfo* __restrict__ root,
                                                      const float4* __restrict__ surfaces,
+                                                     const uint32_t* __restrict__ activePixels,
                                                      uint8_t* __restrict__ occluded, uint32_t* __restrict__ words) {
-  const uint64_t r = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (r >= uint64_t(f.padded) * f.aoSamples) return;
-  const SecondarySample p = secondarySample(f, surfaces, r, f.aoSamples);
-  countRays(words + kAoRays, p.valid);
-  occluded[r] = p.valid && cwbvhAnyHit(wideView(view, root), aoRay(p.surface, p.key, p.sample, f.light.aoDistance))
-                    ? 1 : 0;
+  forEachListedSample(activePixels, words, words + kAoCounter, f.aoSamples, [&](uint32_t j, uint32_t sample) {
+    const Surface s = loadSurface(surfaces, j);
+    countRays(words + kAoRays, true);
+    occluded[std::size_t(j) * f.aoSamples + sample] =
+        cwbvhAnyHit(wideView(view, root), aoRay(s, pixelKey(f, j), sample, f.light.aoDistance)) ? 1 : 0;
+  });
 }
 
 __global__ void __launch_bounds__(128) wideShadowKernel(Frame f, CwbvhView view, const RootInfo* __restrict__ root,
                                                          const float4* __restrict__ surfaces,
+                                                         const uint32_t* __restrict__ activePixels,
                                                          uint8_t* __restrict__ occluded, uint8_t* __restrict__ traced,
                                                          uint32_t* __restrict__ words) {
-  const uint64_t r = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (r >= uint64_t(f.padded) * f.shadowSamples) return;
-  const SecondarySample p = secondarySample(f, surfaces, r, f.shadowSamples);
-  Ray ray;
-  const bool valid = p.valid && shadowRay(p.surface, f.light, p.key, p.sample, ray);
-  countRays(words + kShadowRays, valid);
-  traced[r] = valid ? 1 : 0;
-  occluded[r] = valid && cwbvhAnyHit(wideView(view, root), ray) ? 1 : 0;
+  forEachListedSample(activePixels, words, words + kShadowCounter, f.shadowSamples, [&](uint32_t j, uint32_t sample) {
+    const Surface s = loadSurface(surfaces, j);
+    Ray ray;
+    // A light point behind the surface: no ray, not lit.
+    const bool valid = shadowRay(s, f.light, pixelKey(f, j), sample, ray);
+    countRays(words + kShadowRays, valid);
+    const std::size_t r = std::size_t(j) * f.shadowSamples + sample;
+    traced[r] = valid ? 1 : 0;
+    occluded[r] = valid && cwbvhAnyHit(wideView(view, root), ray) ? 1 : 0;
+  });
 }
 
 // Vertex normals for shading: each vertex sums the face normals of its triangles in increasing
@@ -260,6 +323,7 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
     m.hits.reserve(padded);
   }
   m.surfaces.reserve(3 * padded);
+  if (fused) m.activePixels.reserve(padded);
   m.occluded.reserve(std::max<uint64_t>(aoRays, 1));
   if (!fused) m.shadowRays.reserve(std::max<uint64_t>(shadowRays, 1));
   m.shadowOccluded.reserve(std::max<uint64_t>(2 * shadowRays, 2));  // results, then "traced" flags
@@ -271,6 +335,7 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   cudaStream_t stream = m.stream;
   auto& ev = m.events;
 
+  m.words.reserve(kWords);
   m.words.fillBytes(0, stream);
   ev.record(0, stream);
   if (fused) {
@@ -280,20 +345,28 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
     const unsigned wideBlock = 128;  // fixed by __launch_bounds__
     ev.record(1, stream);
     widePrimaryKernel<<<detail::gridFor(padded, wideBlock), wideBlock, 0, stream>>>(
-        f, view, scene.root, m.indices.data(), m.positions.data(), m.surfaces.data());
+        f, view, scene.root, m.indices.data(), m.positions.data(), m.surfaces.data(), m.activePixels.data(),
+        m.words.data());
     CUDA_CHECK_LAUNCH("widePrimaryKernel");
     ev.record(2, stream);
     ev.record(3, stream);
+    // The secondary passes loop over the listed pixels (their number is known on the device only):
+    // as many blocks as are resident at once, or fewer when the frame cannot have that many rays.
+    auto listGrid = [&](auto kernel, uint64_t rays) {
+      const int resident = detail::residentBlocks(kernel, int(wideBlock), 16);
+      return std::min<unsigned>(unsigned(resident), detail::gridFor(rays, wideBlock));
+    };
     if (aoRays > 0) {
-      wideAoKernel<<<detail::gridFor(aoRays, wideBlock), wideBlock, 0, stream>>>(f, view, scene.root, m.surfaces.data(),
-                                                                                  m.occluded.data(), m.words.data());
+      wideAoKernel<<<listGrid(wideAoKernel, aoRays), wideBlock, 0, stream>>>(
+          f, view, scene.root, m.surfaces.data(), m.activePixels.data(), m.occluded.data(), m.words.data());
       CUDA_CHECK_LAUNCH("wideAoKernel");
     }
     ev.record(4, stream);
     ev.record(5, stream);
     if (shadowRays > 0) {
-      wideShadowKernel<<<detail::gridFor(shadowRays, wideBlock), wideBlock, 0, stream>>>(
-          f, view, scene.root, m.surfaces.data(), m.shadowOccluded.data(), shadowTraced, m.words.data());
+      wideShadowKernel<<<listGrid(wideShadowKernel, shadowRays), wideBlock, 0, stream>>>(
+          f, view, scene.root, m.surfaces.data(), m.activePixels.data(), m.shadowOccluded.data(), shadowTraced,
+          m.words.data());
       CUDA_CHECK_LAUNCH("wideShadowKernel");
     }
     ev.record(6, stream);

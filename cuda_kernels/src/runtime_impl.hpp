@@ -110,6 +110,7 @@ struct GpuRuntime::Impl {
   DeviceBuffer<uint8_t> occluded, shadowOccluded;
   DeviceBuffer<Ray> shadowRays;
   DeviceBuffer<float4> surfaces;         // 3 per pixel: position + kind, normal + triangle, u v
+  DeviceBuffer<uint32_t> activePixels;   // fused wide passes: the pixels whose primary ray found a surface
   DeviceBuffer<uint32_t> vertexTriOffsets, vertexTris;  // triangles of each vertex (CSR), for normals
   DeviceBuffer<float> normals;           // smooth shading normals of the current frame
   DeviceBuffer<uint8_t> image;

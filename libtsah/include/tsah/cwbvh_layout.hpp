@@ -451,6 +451,11 @@ struct CwbvhTraversal {
         if (detail::cwbvhTriangle(v, r, prep, s, tmax, hit) && AnyHit) break;
       return false;
     }
+    // A ray that misses the whole tree (most camera rays of a small character in a wide frame)
+    // ends here, before the root node is fetched. rootBox contains every child box, and the box
+    // test is monotone, so no ray that could hit a triangle is dropped.
+    float tEntry;
+    if (!intersectBox(prep, v.rootBox, r.tmin, tmax, tEntry)) return false;
     oct = (r.dir.x < 0.0f ? 1u : 0u) | (r.dir.y < 0.0f ? 2u : 0u) | (r.dir.z < 0.0f ? 4u : 0u);
     group = {0u, (1u << oct) | (1u << 8)};  // the root as a group of one: interior slot 0, key 0 ^ oct
     return true;
