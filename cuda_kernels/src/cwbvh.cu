@@ -63,26 +63,55 @@ __global__ void cwbvhExactRefitKernel(const CwbvhNode* __restrict__ nodes, Aabb*
   root->box = box;
 }
 
-// Pass 2: every node re-quantized from its children's exact boxes (one thread per node). Words
-// 0 (p, e; triCount kept) and 2-4 (qlo, qhi) are rewritten; word 1 (bases, meta) never changes.
-__global__ void cwbvhQuantizeKernel(CwbvhNode* __restrict__ nodes, const Aabb* __restrict__ exact,
-                                    uint32_t nodeCount) {
-  const uint32_t node = blockIdx.x * blockDim.x + threadIdx.x;
-  if (node >= nodeCount) return;
-  uint4* raw = reinterpret_cast<uint4*>(nodes + node);
-  CwbvhNode n;
-  uint4* local = reinterpret_cast<uint4*>(&n);
-  local[0] = raw[0];
-  local[1] = raw[1];
-  Aabb boxes[kCwbvhWidth];
+// Pass 2: every node re-quantized from its children's exact boxes, 8 lanes per node (lane s: slot
+// s), because one thread quantizing all 48 planes of a node was a long serial chain (14 us on a
+// tree of 30 nodes). Every lane forms the node's union from all 8 boxes (shuffled, in slot order:
+// the same extends as cwbvhQuantize, so the same bits) and the exponents; each lane then
+// quantizes its own slot (cwbvhSlotPlanes). Words 0 (p, e; triCount kept) and 2-4 (qlo, qhi) are
+// rewritten; word 1 (bases, meta) never changes.
+constexpr uint32_t kQuantizeBlock = 128;  // whole warps: every lane takes part in the shuffles
+__global__ void __launch_bounds__(kQuantizeBlock) cwbvhQuantizeKernel(CwbvhNode* __restrict__ nodes,
+                                                                      const Aabb* __restrict__ exact,
+                                                                      uint32_t nodeCount) {
+  const uint32_t thread = blockIdx.x * blockDim.x + threadIdx.x;
+  const uint32_t node = thread / kCwbvhWidth, slot = thread % kCwbvhWidth;
+  const bool valid = node < nodeCount;
+  uint2 metaWords = make_uint2(0u, 0u);  // bytes 24-31: meta[8]
+  if (valid) metaWords = __ldg(reinterpret_cast<const uint2*>(nodes + node) + 3);
+  const uint32_t metaWord = slot < 4 ? metaWords.x : metaWords.y;
+  const bool empty = ((metaWord >> (8u * (slot & 3u))) & 0xffu) == 0;
+  Aabb mine;
+  if (valid && !empty) mine = exact[std::size_t(node) * kCwbvhWidth + slot];
+  Aabb all;
+  const uint32_t group = (threadIdx.x & 31u) & ~(kCwbvhWidth - 1u);  // first lane of this node's 8
 #pragma unroll
-  for (uint32_t s = 0; s < kCwbvhWidth; ++s)
-    if (n.meta[s] != 0) boxes[s] = exact[std::size_t(node) * kCwbvhWidth + s];
-  cwbvhQuantize(n, boxes);
-  raw[0] = local[0];
-  raw[2] = local[2];
-  raw[3] = local[3];
-  raw[4] = local[4];
+  for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
+    Aabb b;
+    b.lo = {__shfl_sync(0xffffffffu, mine.lo.x, group + s), __shfl_sync(0xffffffffu, mine.lo.y, group + s),
+            __shfl_sync(0xffffffffu, mine.lo.z, group + s)};
+    b.hi = {__shfl_sync(0xffffffffu, mine.hi.x, group + s), __shfl_sync(0xffffffffu, mine.hi.y, group + s),
+            __shfl_sync(0xffffffffu, mine.hi.z, group + s)};
+    const uint32_t m = ((s < 4 ? metaWords.x : metaWords.y) >> (8u * (s & 3u))) & 0xffu;
+    if (m != 0) all.extend(b);
+  }
+  if (!valid) return;
+  uint32_t e[3];
+  cwbvhGridExponents(all, e);
+  const CwbvhSlotPlanes q = cwbvhSlotPlanes(empty, empty ? all : mine, all, e);
+  CwbvhNode* n = nodes + node;
+#pragma unroll
+  for (int a = 0; a < 3; ++a) {
+    n->qlo[a][slot] = q.lo[a];
+    n->qhi[a][slot] = q.hi[a];
+  }
+  if (slot == 0) {  // the grid: p and the exponents (byte 15, triCount, is kept)
+    n->px = all.lo.x;
+    n->py = all.lo.y;
+    n->pz = all.lo.z;
+    n->ex = uint8_t(e[0]);
+    n->ey = uint8_t(e[1]);
+    n->ez = uint8_t(e[2]);
+  }
 }
 
 __device__ __forceinline__ Ray loadRayVec(const Ray* rays, uint32_t i) {
@@ -169,7 +198,8 @@ void launchCwbvhRefit(CwbvhNode* nodes, uint32_t nodeCount, Aabb* exact, const u
                                                                          triIndex, indices, positions, counters, root);
   CUDA_CHECK_LAUNCH("cwbvhExactRefitKernel");
   if (nodeCount == 0) return;  // the tree is one leaf
-  cwbvhQuantizeKernel<<<gridFor(nodeCount, block), block, 0, stream>>>(nodes, exact, nodeCount);
+  cwbvhQuantizeKernel<<<gridFor(std::size_t(nodeCount) * kCwbvhWidth, kQuantizeBlock), kQuantizeBlock, 0, stream>>>(
+      nodes, exact, nodeCount);
   CUDA_CHECK_LAUNCH("cwbvhQuantizeKernel");
 }
 

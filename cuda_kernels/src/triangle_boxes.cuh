@@ -22,11 +22,33 @@ __device__ __forceinline__ void extendByTriangle(Aabb& box, const uint32_t* __re
   box.extend(loadVertex(positions, __ldg(v + 2)));
 }
 
-// The box of the leaf holding slots [first, first + count) of `triIndex`.
+// The box of the leaf holding slots [first, first + count) of `triIndex`, in slot and vertex order.
+// Four triangles at a time: their ids, then their vertex ids, then their vertices are loaded
+// together, so a leaf waits for three memory round trips per four triangles instead of per one.
 __device__ __forceinline__ Aabb leafBox(uint32_t first, uint32_t count, const uint32_t* __restrict__ triIndex,
                                         const uint32_t* __restrict__ indices, const float* __restrict__ positions) {
+  constexpr uint32_t kBatch = 4;
   Aabb box;
-  for (uint32_t s = first; s < first + count; ++s) extendByTriangle(box, indices, positions, __ldg(triIndex + s));
+  for (uint32_t s = first; s < first + count; s += kBatch) {
+    const uint32_t n = first + count - s < kBatch ? first + count - s : kBatch;
+    uint32_t tri[kBatch], v[kBatch][3];
+    Vec3 p[kBatch][3];
+#pragma unroll
+    for (uint32_t k = 0; k < kBatch; ++k) tri[k] = k < n ? __ldg(triIndex + s + k) : 0u;
+#pragma unroll
+    for (uint32_t k = 0; k < kBatch; ++k)
+#pragma unroll
+      for (int c = 0; c < 3; ++c) v[k][c] = k < n ? __ldg(indices + 3 * std::size_t(tri[k]) + c) : 0u;
+#pragma unroll
+    for (uint32_t k = 0; k < kBatch; ++k)
+#pragma unroll
+      for (int c = 0; c < 3; ++c) p[k][c] = k < n ? loadVertex(positions, v[k][c]) : Vec3{0.0f, 0.0f, 0.0f};
+#pragma unroll
+    for (uint32_t k = 0; k < kBatch; ++k)
+#pragma unroll
+      for (int c = 0; c < 3; ++c)
+        if (k < n) box.extend(p[k][c]);
+  }
   return box;
 }
 

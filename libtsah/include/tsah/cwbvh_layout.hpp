@@ -180,6 +180,29 @@ TSAH_HD bool cwbvhChildBoxContains(const CwbvhNode& n, uint32_t slot, const Aabb
 // only where meta[slot] != 0). Returns the union of those boxes (the node's exact box).
 // Conservative: cwbvhChildBoxContains(n, s, boxes[s]) for every occupied slot, for any finite
 // boxes (a plane beyond the float range is +-inf, which still contains it).
+// The two steps of cwbvhQuantize, shared with the GPU refit (which runs the second one in a lane
+// per slot): the node's grid exponents from the union of its children, and one slot's planes.
+TSAH_HD void cwbvhGridExponents(const Aabb& all, uint32_t e[3]) {
+  e[0] = detail::cwbvhExponent(all.lo.x, all.hi.x);
+  e[1] = detail::cwbvhExponent(all.lo.y, all.hi.y);
+  e[2] = detail::cwbvhExponent(all.lo.z, all.hi.z);
+}
+
+struct CwbvhSlotPlanes {
+  uint8_t lo[3], hi[3];  // qlo, qhi per axis
+};
+// box: the exact box of an occupied slot; an empty slot gets the empty planes 255 / 0 (never read:
+// meta says empty).
+TSAH_HD CwbvhSlotPlanes cwbvhSlotPlanes(bool empty, const Aabb& box, const Aabb& all, const uint32_t e[3]) {
+  CwbvhSlotPlanes q;
+  TSAH_CWBVH_UNROLL
+  for (int a = 0; a < 3; ++a) {
+    q.lo[a] = empty ? uint8_t(255) : uint8_t(detail::cwbvhQuantizeLo(box.lo[a], all.lo[a], e[a]));
+    q.hi[a] = empty ? uint8_t(0) : uint8_t(detail::cwbvhQuantizeHi(box.hi[a], all.lo[a], e[a]));
+  }
+  return q;
+}
+
 TSAH_HD Aabb cwbvhQuantize(CwbvhNode& n, const Aabb* boxes) {
   Aabb all;
   TSAH_CWBVH_UNROLL
@@ -188,23 +211,17 @@ TSAH_HD Aabb cwbvhQuantize(CwbvhNode& n, const Aabb* boxes) {
   n.px = all.lo.x;
   n.py = all.lo.y;
   n.pz = all.lo.z;
-  const uint32_t ex = detail::cwbvhExponent(all.lo.x, all.hi.x);
-  const uint32_t ey = detail::cwbvhExponent(all.lo.y, all.hi.y);
-  const uint32_t ez = detail::cwbvhExponent(all.lo.z, all.hi.z);
-  n.ex = uint8_t(ex);
-  n.ey = uint8_t(ey);
-  n.ez = uint8_t(ez);
-  const uint32_t e[3] = {ex, ey, ez};
+  uint32_t e[3];
+  cwbvhGridExponents(all, e);
+  n.ex = uint8_t(e[0]);
+  n.ey = uint8_t(e[1]);
+  n.ez = uint8_t(e[2]);
   TSAH_CWBVH_UNROLL
   for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
+    const CwbvhSlotPlanes q = cwbvhSlotPlanes(n.isEmpty(s), n.isEmpty(s) ? all : boxes[s], all, e);
     for (int a = 0; a < 3; ++a) {
-      if (n.isEmpty(s)) {
-        n.qlo[a][s] = 255;  // an empty box; never read (meta says empty)
-        n.qhi[a][s] = 0;
-      } else {
-        n.qlo[a][s] = uint8_t(detail::cwbvhQuantizeLo(boxes[s].lo[a], all.lo[a], e[a]));
-        n.qhi[a][s] = uint8_t(detail::cwbvhQuantizeHi(boxes[s].hi[a], all.lo[a], e[a]));
-      }
+      n.qlo[a][s] = q.lo[a];
+      n.qhi[a][s] = q.hi[a];
     }
   }
   return all;
