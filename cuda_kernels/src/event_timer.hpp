@@ -36,6 +36,8 @@ class EventTimer {
       CUDA_CHECK(cudaEventRecord(events_.at(i), stream));
   }
   void wait(std::size_t i) { CUDA_CHECK(cudaEventSynchronize(events_.at(i))); }
+  // Makes `stream` wait for event i (recorded on another stream): a fork or join between streams.
+  void streamWait(std::size_t i, cudaStream_t stream) { CUDA_CHECK(cudaStreamWaitEvent(stream, events_.at(i), 0)); }
   // Device milliseconds from event a to event b; both must have completed (wait on the later one).
   double ms(std::size_t a, std::size_t b) const {
     float v = 0.0f;

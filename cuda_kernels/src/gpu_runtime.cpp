@@ -62,6 +62,7 @@ void GpuRuntime::Impl::createOnDevice(const TreeSet& set, const anim::Animation&
   CUDA_CHECK(cudaSetDevice(config.device));
   device = describeDevice(config.device);
   CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
+  CUDA_CHECK(cudaStreamCreateWithFlags(&sideStream, cudaStreamNonBlocking));
   events.create(16);
   void* pinned = nullptr;
   CUDA_CHECK(cudaHostAlloc(&pinned, sizeof(detail::FrameParams), cudaHostAllocDefault));
@@ -137,7 +138,9 @@ void GpuRuntime::Impl::releaseDevice() noexcept {
   for (auto& g : rebuildGraphs)
     if (g.exec) cudaGraphExecDestroy(std::exchange(g.exec, nullptr));
   if (hostParams) cudaFreeHost(std::exchange(hostParams, nullptr));
+  if (sideStream) cudaStreamSynchronize(sideStream);
   if (stream) cudaStreamDestroy(std::exchange(stream, nullptr));
+  if (sideStream) cudaStreamDestroy(std::exchange(sideStream, nullptr));
 }
 
 template <typename Enqueue>

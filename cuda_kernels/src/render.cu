@@ -334,6 +334,13 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   const unsigned block = 256;
   cudaStream_t stream = m.stream;
   auto& ev = m.events;
+  auto enqueueVertexNormals = [&](cudaStream_t s) {
+    if (m.vertexTris.empty()) m.buildVertexTriangles();
+    vertexNormalsKernel<<<detail::gridFor(m.vertices, block), block, 0, s>>>(
+        m.vertices, m.vertexTriOffsets.data(), m.vertexTris.data(), m.indices.data(), m.positions.data(),
+        m.normals.data());
+    CUDA_CHECK_LAUNCH("vertexNormalsKernel");
+  };
 
   m.words.reserve(kWords);
   m.words.fillBytes(0, stream);
@@ -356,20 +363,29 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
       const int resident = detail::residentBlocks(kernel, int(wideBlock), 16);
       return std::min<unsigned>(unsigned(resident), detail::gridFor(rays, wideBlock));
     };
+    // The shadow pass (then the vertex normals) runs on the side stream beside the AO pass: both
+    // only read the surfaces, and each alone leaves most of the GPU idle on small frames (a few
+    // thousand warps of long any-hit rays). Event 10 joins them before shading.
+    cudaStream_t side = m.sideStream;
+    ev.streamWait(2, side);
     if (aoRays > 0) {
       wideAoKernel<<<listGrid(wideAoKernel, aoRays), wideBlock, 0, stream>>>(
           f, view, scene.root, m.surfaces.data(), m.activePixels.data(), m.occluded.data(), m.words.data());
       CUDA_CHECK_LAUNCH("wideAoKernel");
     }
     ev.record(4, stream);
-    ev.record(5, stream);
+    ev.record(5, side);
     if (shadowRays > 0) {
-      wideShadowKernel<<<listGrid(wideShadowKernel, shadowRays), wideBlock, 0, stream>>>(
+      wideShadowKernel<<<listGrid(wideShadowKernel, shadowRays), wideBlock, 0, side>>>(
           f, view, scene.root, m.surfaces.data(), m.activePixels.data(), m.shadowOccluded.data(), shadowTraced,
           m.words.data());
       CUDA_CHECK_LAUNCH("wideShadowKernel");
     }
-    ev.record(6, stream);
+    ev.record(6, side);
+    enqueueVertexNormals(side);
+    ev.record(10, side);
+    ev.streamWait(10, stream);
+    ev.record(11, stream);
   } else {
     primaryRaysKernel<<<detail::gridFor(padded, block), block, 0, stream>>>(f, m.rays.data());
     CUDA_CHECK_LAUNCH("primaryRaysKernel");
@@ -400,11 +416,10 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
                         m.words.data() + kShadowCounter, launch, stream);
     ev.record(6, stream);
   }
-  if (m.vertexTris.empty()) m.buildVertexTriangles();
-  vertexNormalsKernel<<<detail::gridFor(m.vertices, block), block, 0, stream>>>(
-      m.vertices, m.vertexTriOffsets.data(), m.vertexTris.data(), m.indices.data(), m.positions.data(),
-      m.normals.data());
-  CUDA_CHECK_LAUNCH("vertexNormalsKernel");
+  if (!fused) {
+    ev.record(11, stream);
+    enqueueVertexNormals(stream);
+  }
   shadeKernel<<<detail::gridFor(padded, block), block, 0, stream>>>(f, m.surfaces.data(), m.occluded.data(),
                                                                     m.shadowOccluded.data(), shadowTraced,
                                                                     m.indices.data(), m.normals.data(),
@@ -424,9 +439,9 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   stats.primary = {uint64_t(f.width) * f.height, ev.ms(1, 2)};
   stats.ao = {counts[kAoRays], ev.ms(3, 4)};
   stats.shadow = {counts[kShadowRays], ev.ms(5, 6)};
-  stats.shadeMs = ev.ms(6, 7);
-  if (timings) {
-    timings->generateMs = ev.ms(0, 1) + ev.ms(2, 3) + ev.ms(4, 5);
+  stats.shadeMs = ev.ms(11, 7);
+  if (timings) {  // fused: the rays are made inside the trace passes (and 4 -> 5 spans two streams)
+    timings->generateMs = ev.ms(0, 1) + ev.ms(2, 3) + (fused ? 0.0 : ev.ms(4, 5));
     timings->shadeMs = stats.shadeMs;
     timings->downloadMs = ev.ms(7, 8);
     timings->totalMs = ev.ms(0, 8);

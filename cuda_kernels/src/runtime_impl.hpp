@@ -44,6 +44,7 @@ struct GpuRuntime::Impl {
   Config config;
   DeviceInfo device;
   cudaStream_t stream = nullptr;
+  cudaStream_t sideStream = nullptr;  // the renderer's shadow pass, beside the AO pass on `stream`
   detail::EventTimer events;  // created once the device is chosen
 
   uint32_t triangles = 0, vertices = 0;
