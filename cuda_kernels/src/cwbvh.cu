@@ -160,7 +160,7 @@ __global__ void __launch_bounds__(128) cwbvhTraceKernel(CwbvhView view, const Ro
       const unsigned looping = __activemask();
       const unsigned idle = __ballot_sync(looping, !live);
       if (!live && (__popc(idle) >= kRefillIdleLanes || idle == looping)) {
-        rayIndex = takeRayIndices(rayCounter);
+        rayIndex = takeIndices(rayCounter);
         if (rayIndex >= count) break;
         live = t.start(view, loadRayVec(rays, rayIndex));
         if (!live) storeResult(t, view, rayIndex, hits, occluded);

@@ -29,10 +29,11 @@ int residentBlocks(Kernel kernel, int blockSize, int maxPerSm) {
 }
 
 #if defined(__CUDACC__)
-// Persistent traversal: the lanes of a warp that call this together take consecutive ray indices
-// from *counter with one atomic per warp (Aila and Laine's ray fetch; the callers are the active
-// lanes, named with __activemask(), so no code assumes lock-step execution).
-__device__ __forceinline__ uint32_t takeRayIndices(uint32_t* counter) {
+// The lanes of a warp that call this together take consecutive indices from *counter with one
+// atomic per warp: the persistent traversals' ray fetch (Aila and Laine) and the renderer's list
+// of pixels with a surface. The callers are the active lanes, named with __activemask(), so no
+// code assumes lock-step execution.
+__device__ __forceinline__ uint32_t takeIndices(uint32_t* counter) {
   const unsigned mask = __activemask();
   const uint32_t lane = threadIdx.x & 31u;
   const int leader = __ffs(mask) - 1;

@@ -168,19 +168,6 @@ __device__ __forceinline__ CwbvhView wideView(CwbvhView v, const RootInfo* root)
   return v;
 }
 
-// Appends pixel j to the list when `active` (one atomic per warp; the order within the list does
-// not matter: every ray's random numbers depend on its pixel and sample only).
-__device__ __forceinline__ void appendActive(uint32_t* list, uint32_t* count, uint32_t j, bool active) {
-  const unsigned mask = __ballot_sync(__activemask(), active);
-  if (!active) return;
-  const uint32_t lane = threadIdx.x & 31u;
-  const int leader = __ffs(mask) - 1;
-  uint32_t base = 0;
-  if (int(lane) == leader) base = atomicAdd(count, uint32_t(__popc(mask)));
-  base = __shfl_sync(mask, base, leader);
-  list[base + uint32_t(__popc(mask & ((1u << lane) - 1u)))] = j;
-}
-
 __global__ void __launch_bounds__(128) widePrimaryKernel(Frame f, CwbvhView view, const RootInfo* __restrict__ root,
                                                           const uint32_t* __restrict__ indices,
                                                           const float* __restrict__ positions,
@@ -196,7 +183,9 @@ __global__ void __launch_bounds__(128) widePrimaryKernel(Frame f, CwbvhView view
     s = primarySurface(ray, cwbvhClosestHit(wideView(view, root), ray), indices, positions, f.light);
   }
   storeSurface(surfaces, j, s);
-  appendActive(activePixels, words + kActivePixels, j, s.kind != SurfaceKind::None);
+  // Listed with one atomic per warp; the order within the list does not matter (every ray's random
+  // numbers depend on its pixel and sample only).
+  if (s.kind != SurfaceKind::None) activePixels[detail::takeIndices(words + kActivePixels)] = j;
 }
 
 // Calls body(pixel, sample) for every sample of every listed pixel: each warp takes 32 entries at

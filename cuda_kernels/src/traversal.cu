@@ -72,7 +72,7 @@ __global__ void __launch_bounds__(128) traceKernel(TraceScene scene, const Ray* 
   for (;;) {
     if (needRay) {
       if constexpr (Persistent) {
-        rayIndex = takeRayIndices(rayCounter);  // the lanes that need a ray right now
+        rayIndex = takeIndices(rayCounter);  // the lanes that need a ray right now
       } else {
         if (fetchedOnce) break;
         fetchedOnce = true;
