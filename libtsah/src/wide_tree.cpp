@@ -83,18 +83,9 @@ Aabb WideTree<N>::refitLeaf(uint32_t firstPacket, uint32_t count, const float* p
   for (uint32_t first = 0; first < count; first += N) {
     WoopPacket<N>& pk = packets_[firstPacket + first / N];
     const uint32_t lanes = count - first < N ? count - first : N;
-    alignas(32) float vertices[9][N];  // [3k + a][lane]: axis a of vertex k
-    if (lanes < N) std::memset(vertices, 0, sizeof vertices);  // padding lanes: finite values
-    const uint32_t* triangles = triIndex_.data() + packetSlots_[firstPacket + first / N];  // lane by lane
-    for (uint32_t lane = 0; lane < lanes; ++lane) {
-      const uint32_t* tri = indices + 3 * std::size_t(triangles[lane]);
-      for (int k = 0; k < 3; ++k) {
-        const float* vertex = p + 3 * std::size_t(tri[k]);
-        for (int a = 0; a < 3; ++a) vertices[3 * k + a][lane] = vertex[a];
-      }
-    }
     Aabb packetBox;
-    woopRows_(vertices, lanes, pk, packetBox);  // rows and box of all lanes at once, in SIMD
+    // rows and box of all lanes at once, in SIMD
+    woopRows_(p, indices, triIndex_.data() + packetSlots_[firstPacket + first / N], lanes, pk, packetBox);
     box.extend(packetBox);
   }
   return box;
@@ -124,13 +115,17 @@ Aabb nodeBounds(const WideSoaNode<N>& node) {
 }  // namespace
 
 template <uint32_t N>
-void WideTree<N>::refitNode(uint32_t i, const float* positions, const uint32_t* indices) {
+void WideTree<N>::refitLeaves(uint32_t i, const float* positions, const uint32_t* indices) {
   WideSoaNode<N>& node = nodes_[i];
-  for (uint32_t c = 0; c < N && usedSlot(node, c); ++c) {
-    const int32_t ref = node.ref[c];
-    node.setChildBox(c, isLeafRef(ref) ? refitLeaf(leafFirstSlot(ref), node.count[c], positions, indices)
-                                       : nodeBounds(nodes_[static_cast<uint32_t>(ref)]));
-  }
+  for (uint32_t c = 0; c < N && usedSlot(node, c); ++c)
+    if (isLeafRef(node.ref[c])) node.setChildBox(c, refitLeaf(leafFirstSlot(node.ref[c]), node.count[c], positions, indices));
+}
+
+template <uint32_t N>
+void WideTree<N>::refitInterior(uint32_t i) {
+  WideSoaNode<N>& node = nodes_[i];
+  for (uint32_t c = 0; c < N && usedSlot(node, c); ++c)
+    if (!isLeafRef(node.ref[c])) node.setChildBox(c, nodeBounds(nodes_[static_cast<uint32_t>(node.ref[c])]));
 }
 
 template <uint32_t N>
@@ -142,10 +137,11 @@ void WideTree<N>::refit(const float* positions, const uint32_t* indices, const P
   parallelFor(subtreeTasks_.size(), [&](std::size_t begin, std::size_t end) {
     for (std::size_t t = begin; t < end; ++t) {
       const auto [root, stop] = subtreeTasks_[t];
-      for (uint32_t i = stop; i-- > root;) refitNode(i, positions, indices);  // children (larger indices) first
+      for (uint32_t i = root; i < stop; ++i) refitLeaves(i, positions, indices);  // packets in memory order
+      for (uint32_t i = stop; i-- > root;) refitInterior(i);  // children (larger indices) first
     }
   });
-  for (uint32_t i : topNodes_) refitNode(i, positions, indices);
+  for (uint32_t i : topNodes_) refitLeaves(i, positions, indices), refitInterior(i);
   rootBox_ = nodeBounds(nodes_[0]);
 }
 

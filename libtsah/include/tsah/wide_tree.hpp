@@ -42,9 +42,11 @@ class WideTree {
 
  private:
   Aabb refitLeaf(uint32_t firstPacket, uint32_t count, const float* positions, const uint32_t* indices);
-  void refitNode(uint32_t node, const float* positions, const uint32_t* indices);
+  void refitLeaves(uint32_t node, const float* positions, const uint32_t* indices);
+  void refitInterior(uint32_t node);
 
-  void (*woopRows_)(const float (*vertices)[N], uint32_t lanes, WoopPacket<N>& packet, Aabb& bounds) = nullptr;
+  void (*woopRows_)(const float* positions, const uint32_t* indices, const uint32_t* triangles, uint32_t lanes,
+                    WoopPacket<N>& packet, Aabb& bounds) = nullptr;
   std::vector<WideSoaNode<N>> nodes_;
   std::vector<WoopPacket<N>> packets_;
   // The slot of each packet's lane 0 (its lanes hold consecutive slots): the refit reads this
