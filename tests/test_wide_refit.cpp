@@ -9,6 +9,7 @@
 #include <random>
 #include <vector>
 
+#include "anim/error.hpp"
 #include "anim/generators.hpp"
 #include "tsah/sah_builder.hpp"
 #include "tsah/wide_bvh.hpp"
@@ -54,7 +55,7 @@ std::vector<std::array<Vec3, 3>> testTriangles(uint32_t count, uint32_t seed) {
 template <uint32_t N>
 void checkRowKernel(SimdIsa isa) {
   const tsah::WideKernels& k = tsah::wideKernels(isa);
-  void (*rows)(const float*, const uint32_t*, const uint32_t*, uint32_t, WoopPacket<N>&, tsah::Aabb&);
+  void (*rows)(const float*, const uint32_t*, uint32_t, WoopPacket<N>&, tsah::Aabb&);
   if constexpr (N == 4)
     rows = k.woopRows4;
   else
@@ -74,14 +75,17 @@ void checkRowKernel(SimdIsa isa) {
     }
   for (uint32_t first = 0; first + N <= count; first += N) {
     const uint32_t lanes = 1 + (first / N) % N;  // 1..N used lanes
-    // The packet's triangle ids, scrambled; the ids past `lanes` name other triangles, which
+    // The packet's triangle ids, scrambled; the lanes past `lanes` hold other triangles, which
     // neither the rows nor the box may show.
-    uint32_t ids[N];
-    for (uint32_t lane = 0; lane < N; ++lane) ids[lane] = (first + lane * 7 + (lane < lanes ? 0 : 5 * N)) % count;
+    uint32_t ids[N], vertices[3 * N];
+    for (uint32_t lane = 0; lane < N; ++lane) {
+      ids[lane] = (first + lane * 7 + (lane < lanes ? 0 : 5 * N)) % count;
+      for (int c = 0; c < 3; ++c) vertices[3 * lane + c] = indices[3 * ids[lane] + c];
+    }
     WoopPacket<N> pk;
     std::memset(&pk, 0xff, sizeof pk);  // rows must be overwritten, padding included
     tsah::Aabb box;
-    rows(positions.data(), indices.data(), ids, lanes, pk, box);
+    rows(positions.data(), vertices, lanes, pk, box);
     tsah::Aabb expectedBox;  // of the used lanes only
     for (uint32_t lane = 0; lane < lanes; ++lane)
       for (const Vec3& p : tris[ids[lane]]) extendSkippingNaN(expectedBox, p);
@@ -169,12 +173,11 @@ void refitWithEveryThreadCountAndIsa(const anim::Animation& a, const tsah::WideB
   middle[3 * indices[3 * 20 + 2] + 1] = std::numeric_limits<float>::quiet_NaN();  // y of a vertex of triangle 20
   for (SimdIsa isa : tsah::supportedIsas())
     for (uint32_t threads : {1u, 3u, 16u}) {
-      tsah::WideTree<N> tree(w, threads, isa);
+      tsah::WideTree<N> tree(w, indices, threads, isa);
       for (std::size_t f = 0; f < frames.size(); ++f) {
-        tree.refit(frames[f].data(), indices.data(),
-                   [](std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) {
-                     for (std::size_t i = n; i-- > 0;) body(i, i + 1);  // tasks one by one, last first
-                   });
+        tree.refit(frames[f].data(), [](std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) {
+          for (std::size_t i = n; i-- > 0;) body(i, i + 1);  // tasks one by one, last first
+        });
         SCOPED_TRACE(std::string(tsah::isaName(isa)) + " threads " + std::to_string(threads) + " frame " +
                      std::to_string(f));
         checkRefit(tree, frames[f].data(), indices.data());
@@ -200,6 +203,21 @@ TEST(WideRefit, RefitHoldsExactRowsAndBoxesForEveryPlanAndInstructionSet) {
     else
       refitWithEveryThreadCountAndIsa<8>(a, w);
   }
+}
+
+TEST(WideRefit, RejectsAnIndexArrayShorterThanTheTree) {
+  anim::GeneratorOptions o;
+  o.triangles = 200;
+  o.frames = 1;
+  const anim::Animation a = anim::generate(anim::GeneratorKind::Wave, o);
+  const tsah::PrimitiveBoxes boxes = tsah::triangleBoxes(a.indices(), a.positionsAt(a.startTime()), 1);
+  tsah::WideCollapser::Config c;
+  c.width = 8;
+  const tsah::WideBvh w = tsah::WideCollapser(c).collapse(tsah::SweepSahBuilder().build(boxes.frame(0)));
+  const std::vector<uint32_t> indices(a.indices().begin(), a.indices().end());
+  EXPECT_NO_THROW(tsah::WideTree<8>(w, indices, 1));
+  const std::vector<uint32_t> shorter(indices.begin(), indices.end() - 3);  // the last triangle is missing
+  EXPECT_THROW(tsah::WideTree<8>(w, shorter, 1), anim::Error);
 }
 
 }  // namespace

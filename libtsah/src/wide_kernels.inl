@@ -276,13 +276,11 @@ inline void coordinateLanes(F& out, const float* positions, const uint32_t (*ver
 }
 
 template <uint32_t N, class D, class F, class I>
-TSAH_KERNEL void woopRowsKernel(const float* positions, const uint32_t* indices, const uint32_t* triangles,
-                                uint32_t lanes, WoopPacket<N>& pk, Aabb& bounds) {
+TSAH_KERNEL void woopRowsKernel(const float* positions, const uint32_t* vertices, uint32_t lanes, WoopPacket<N>& pk,
+                                Aabb& bounds) {
   uint32_t vertex[N][3];  // padding lanes repeat lane 0's triangle: finite values, masked out below
-  for (uint32_t lane = 0; lane < N; ++lane) {
-    const uint32_t* tri = indices + 3 * std::size_t(triangles[lane < lanes ? lane : 0]);
-    for (int k = 0; k < 3; ++k) vertex[lane][k] = tri[k];
-  }
+  for (uint32_t lane = 0; lane < N; ++lane)
+    for (int k = 0; k < 3; ++k) vertex[lane][k] = vertices[3 * (lane < lanes ? lane : 0) + k];
   F f[9];
   D v[3][3];
 #pragma GCC unroll 9
