@@ -108,9 +108,9 @@ void CpuRuntime::setWideTree(const Bvh& binary, bool reportCosts) {
   info_.leaves = w.leafCount();
   info_.depth = w.depth();
   if (info_.layout == CpuLayout::Bvh4)
-    wide4_ = std::make_shared<WideTree<4>>(w, threads_->count, info_.isa);
+    wide4_ = std::make_shared<WideTree<4>>(w, indices_, threads_->count, info_.isa);
   else
-    wide8_ = std::make_shared<WideTree<8>>(w, threads_->count, info_.isa);
+    wide8_ = std::make_shared<WideTree<8>>(w, indices_, threads_->count, info_.isa);
 }
 
 namespace {
@@ -231,12 +231,12 @@ void CpuRuntime::refitAndWoop() {
     parallelFor(n, 1, body);
   };
   if (wide4_) {
-    wide4_->refit(positions_.data(), indices_.data(), parallel);
+    wide4_->refit(positions_.data(), parallel);
     view4_ = wide4_->view(indices_.data(), positions_.data());
     return;
   }
   if (wide8_) {
-    wide8_->refit(positions_.data(), indices_.data(), parallel);
+    wide8_->refit(positions_.data(), parallel);
     view8_ = wide8_->view(indices_.data(), positions_.data());
     return;
   }

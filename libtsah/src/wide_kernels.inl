@@ -265,15 +265,29 @@ typedef float FloatLanes8 __attribute__((vector_size(8 * sizeof(float))));
 typedef int32_t IntLanes4 __attribute__((vector_size(4 * sizeof(int32_t))));
 typedef int32_t IntLanes8 __attribute__((vector_size(8 * sizeof(int32_t))));
 
+// Coordinate `axis` of vertex k of every lane's triangle, built in registers from scalar loads.
+// (Not through a stack array written lane by lane and read as one vector: that load cannot take
+// its data from the pending narrow stores and waits until they reach the cache, which is behind
+// the previous packet's stores, usually cache misses: the refit then runs one packet at a time.)
+template <class F, std::size_t... Lane>
+inline void coordinateLanes(F& out, const float* positions, const uint32_t (*vertex)[3], int k, int axis,
+                            std::index_sequence<Lane...>) {
+  out = F{positions[3 * std::size_t(vertex[Lane][k]) + axis]...};
+}
+
 template <uint32_t N, class D, class F, class I>
-TSAH_KERNEL void woopRowsKernel(const float (*vertices)[N], uint32_t lanes, WoopPacket<N>& pk, Aabb& bounds) {
+TSAH_KERNEL void woopRowsKernel(const float* positions, const uint32_t* vertices, uint32_t lanes, WoopPacket<N>& pk,
+                                Aabb& bounds) {
+  uint32_t vertex[N][3];  // padding lanes repeat lane 0's triangle: finite values, masked out below
+  for (uint32_t lane = 0; lane < N; ++lane)
+    for (int k = 0; k < 3; ++k) vertex[lane][k] = vertices[3 * (lane < lanes ? lane : 0) + k];
   F f[9];
   D v[3][3];
 #pragma GCC unroll 9
   for (int k = 0; k < 3; ++k)
 #pragma GCC unroll 3
     for (int a = 0; a < 3; ++a) {
-      std::memcpy(&f[3 * k + a], vertices[3 * k + a], sizeof(F));
+      coordinateLanes(f[3 * k + a], positions, vertex, k, a, std::make_index_sequence<N>{});
       v[k][a] = __builtin_convertvector(f[3 * k + a], D);
     }
   D rows[12], nn;
@@ -287,19 +301,17 @@ TSAH_KERNEL void woopRowsKernel(const float (*vertices)[N], uint32_t lanes, Woop
     bits &= keep;
     std::memcpy(pk.row[r], &bits, sizeof bits);
   }
-  // The box of the used lanes' vertices: lane-wise over the three vertices (x < lo ? x : lo from
-  // the empty box, as the scalar refit compared, so a NaN coordinate is skipped), then across the
-  // lanes by halving rotations.
-  I used;
-  for (uint32_t lane = 0; lane < N; ++lane) used[lane] = lane < lanes ? -1 : 0;
+  // The box of the used lanes' vertices (padding lanes repeat lane 0): lane-wise over the three
+  // vertices (x < lo ? x : lo from the empty box, as the scalar refit compared, so a NaN
+  // coordinate is skipped), then across the lanes by halving rotations.
 #pragma GCC unroll 3
   for (int a = 0; a < 3; ++a) {
     F lo = F{} + 3.402823466e38f, hi = F{} - 3.402823466e38f;
 #pragma GCC unroll 3
     for (int k = 0; k < 3; ++k) {
       const F x = f[3 * k + a];
-      lo = ((x < lo) & used) ? x : lo;
-      hi = ((x > hi) & used) ? x : hi;
+      lo = x < lo ? x : lo;
+      hi = x > hi ? x : hi;
     }
 #pragma GCC unroll 3
     for (uint32_t half = N / 2; half > 0; half /= 2) {

@@ -27,7 +27,7 @@ bool usedSlot(const WideSoaNode<N>& node, uint32_t c) {
 }  // namespace
 
 template <uint32_t N>
-WideTree<N>::WideTree(const WideBvh& w, uint32_t threads, SimdIsa isa) {
+WideTree<N>::WideTree(const WideBvh& w, std::span<const uint32_t> indices, uint32_t threads, SimdIsa isa) {
   if constexpr (N == 4)
     woopRows_ = wideKernels(isa).woopRows4;
   else
@@ -40,6 +40,13 @@ WideTree<N>::WideTree(const WideBvh& w, uint32_t threads, SimdIsa isa) {
   if (wideStackNeed<N>(depth_) > kWideStackSize)
     throw anim::Error("wide tree: depth " + std::to_string(depth_) + " exceeds the traversal stack");
   triIndex_ = w.primIds;
+  slotVertices_.resize(3 * triIndex_.size());
+  for (std::size_t s = 0; s < triIndex_.size(); ++s) {
+    if (triIndex_[s] >= indices.size() / 3)
+      throw anim::Error("wide tree: triangle " + std::to_string(triIndex_[s]) + " is past the " +
+                        std::to_string(indices.size() / 3) + " triangles of the index array");
+    for (int k = 0; k < 3; ++k) slotVertices_[3 * s + k] = indices[3 * std::size_t(triIndex_[s]) + k];
+  }
   // Packets of a leaf over slots [first, first + count): lane l of packet p holds slot first + p*N + l.
   auto addLeaf = [&](uint32_t first, uint32_t count) {
     const auto packet = static_cast<uint32_t>(packets_.size());
@@ -78,23 +85,14 @@ WideTree<N>::WideTree(const WideBvh& w, uint32_t threads, SimdIsa isa) {
 }
 
 template <uint32_t N>
-Aabb WideTree<N>::refitLeaf(uint32_t firstPacket, uint32_t count, const float* p, const uint32_t* indices) {
+Aabb WideTree<N>::refitLeaf(uint32_t firstPacket, uint32_t count, const float* positions) {
   Aabb box;
   for (uint32_t first = 0; first < count; first += N) {
-    WoopPacket<N>& pk = packets_[firstPacket + first / N];
+    const uint32_t packet = firstPacket + first / N;
     const uint32_t lanes = count - first < N ? count - first : N;
-    alignas(32) float vertices[9][N];  // [3k + a][lane]: axis a of vertex k
-    if (lanes < N) std::memset(vertices, 0, sizeof vertices);  // padding lanes: finite values
-    const uint32_t* triangles = triIndex_.data() + packetSlots_[firstPacket + first / N];  // lane by lane
-    for (uint32_t lane = 0; lane < lanes; ++lane) {
-      const uint32_t* tri = indices + 3 * std::size_t(triangles[lane]);
-      for (int k = 0; k < 3; ++k) {
-        const float* vertex = p + 3 * std::size_t(tri[k]);
-        for (int a = 0; a < 3; ++a) vertices[3 * k + a][lane] = vertex[a];
-      }
-    }
-    Aabb packetBox;
-    woopRows_(vertices, lanes, pk, packetBox);  // rows and box of all lanes at once, in SIMD
+    Aabb packetBox;  // rows and box of all lanes at once, in SIMD
+    woopRows_(positions, slotVertices_.data() + 3 * std::size_t(packetSlots_[packet]), lanes, packets_[packet],
+              packetBox);
     box.extend(packetBox);
   }
   return box;
@@ -124,28 +122,33 @@ Aabb nodeBounds(const WideSoaNode<N>& node) {
 }  // namespace
 
 template <uint32_t N>
-void WideTree<N>::refitNode(uint32_t i, const float* positions, const uint32_t* indices) {
+void WideTree<N>::refitLeaves(uint32_t i, const float* positions) {
   WideSoaNode<N>& node = nodes_[i];
-  for (uint32_t c = 0; c < N && usedSlot(node, c); ++c) {
-    const int32_t ref = node.ref[c];
-    node.setChildBox(c, isLeafRef(ref) ? refitLeaf(leafFirstSlot(ref), node.count[c], positions, indices)
-                                       : nodeBounds(nodes_[static_cast<uint32_t>(ref)]));
-  }
+  for (uint32_t c = 0; c < N && usedSlot(node, c); ++c)
+    if (isLeafRef(node.ref[c])) node.setChildBox(c, refitLeaf(leafFirstSlot(node.ref[c]), node.count[c], positions));
 }
 
 template <uint32_t N>
-void WideTree<N>::refit(const float* positions, const uint32_t* indices, const ParallelFor& parallelFor) {
+void WideTree<N>::refitInterior(uint32_t i) {
+  WideSoaNode<N>& node = nodes_[i];
+  for (uint32_t c = 0; c < N && usedSlot(node, c); ++c)
+    if (!isLeafRef(node.ref[c])) node.setChildBox(c, nodeBounds(nodes_[static_cast<uint32_t>(node.ref[c])]));
+}
+
+template <uint32_t N>
+void WideTree<N>::refit(const float* positions, const ParallelFor& parallelFor) {
   if (isLeafRef(rootRef_)) {
-    rootBox_ = refitLeaf(leafFirstSlot(rootRef_), rootCount_, positions, indices);
+    rootBox_ = refitLeaf(leafFirstSlot(rootRef_), rootCount_, positions);
     return;
   }
   parallelFor(subtreeTasks_.size(), [&](std::size_t begin, std::size_t end) {
     for (std::size_t t = begin; t < end; ++t) {
       const auto [root, stop] = subtreeTasks_[t];
-      for (uint32_t i = stop; i-- > root;) refitNode(i, positions, indices);  // children (larger indices) first
+      for (uint32_t i = root; i < stop; ++i) refitLeaves(i, positions);  // packets in memory order
+      for (uint32_t i = stop; i-- > root;) refitInterior(i);  // children (larger indices) first
     }
   });
-  for (uint32_t i : topNodes_) refitNode(i, positions, indices);
+  for (uint32_t i : topNodes_) refitLeaves(i, positions), refitInterior(i);
   rootBox_ = nodeBounds(nodes_[0]);
 }
 

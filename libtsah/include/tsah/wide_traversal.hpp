@@ -53,12 +53,15 @@ struct WideKernels {
   bool (*any4)(const WideView<4>& bvh, const Ray& ray, AnyHitOrder order) = nullptr;
   Hit (*closest8)(const WideView<8>& bvh, const Ray& ray) = nullptr;
   bool (*any8)(const WideView<8>& bvh, const Ray& ray, AnyHitOrder order) = nullptr;
-  // The refit's inner step (WideTree::refit), in every table: the Woop rows of one packet from its
-  // lanes' vertices (vertices[3k + a][lane]: axis a of vertex k), bit for bit makeWoopTriangle's
-  // (lanes from `lanes` on and degenerate triangles get zero rows), and in `bounds` the box of the
-  // first `lanes` lanes' vertices (NaN coordinates skipped). Padding lanes must hold finite values.
-  void (*woopRows4)(const float (*vertices)[4], uint32_t lanes, WoopPacket<4>& packet, Aabb& bounds) = nullptr;
-  void (*woopRows8)(const float (*vertices)[8], uint32_t lanes, WoopPacket<8>& packet, Aabb& bounds) = nullptr;
+  // The refit's inner step (WideTree::refit), in every table: the Woop rows of one packet whose
+  // lane l < lanes holds the triangle of vertex indices vertices[3l], [3l + 1], [3l + 2] (xyz per
+  // vertex in `positions`), bit for bit makeWoopTriangle's (lanes from `lanes` on and degenerate
+  // triangles get zero rows), and in `bounds` the box of those triangles' vertices (NaN
+  // coordinates skipped). 1 <= lanes <= N; vertices past lane lanes - 1 are not read.
+  void (*woopRows4)(const float* positions, const uint32_t* vertices, uint32_t lanes, WoopPacket<4>& packet,
+                    Aabb& bounds) = nullptr;
+  void (*woopRows8)(const float* positions, const uint32_t* vertices, uint32_t lanes, WoopPacket<8>& packet,
+                    Aabb& bounds) = nullptr;
 };
 
 // The kernels of isa; throws anim::Error when it is not supported (isaSupported).

@@ -22,14 +22,16 @@ class WideTree {
   using ParallelFor =
       std::function<void(std::size_t n, const std::function<void(std::size_t begin, std::size_t end)>& body)>;
 
-  // topology.width must be at most N (a narrower topology leaves slots unused). Boxes and
-  // triangles are zero until the first refit(). threads: how many workers refit() will run on (it
-  // plans about 8 subtrees per thread). isa: whose SIMD code computes the Woop rows (the results
-  // are the same for every one); throws anim::Error when it is not supported.
-  WideTree(const WideBvh& topology, uint32_t threads, SimdIsa isa = bestIsa());
+  // topology.width must be at most N (a narrower topology leaves slots unused). indices: the
+  // triangles (3 vertex indices per triangle id), the same for every frame; the tree keeps its own
+  // copy in slot order. Boxes and triangles are zero until the first refit(). threads: how many
+  // workers refit() will run on (it plans about 8 subtrees per thread). isa: whose SIMD code
+  // computes the Woop rows (the results are the same for every one). Throws anim::Error when the
+  // isa is not supported or a triangle id is past the index array.
+  WideTree(const WideBvh& topology, std::span<const uint32_t> indices, uint32_t threads, SimdIsa isa = bestIsa());
 
-  // This frame's vertices (xyz per vertex) and the triangles (3 vertex indices per triangle id).
-  void refit(const float* positions, const uint32_t* indices, const ParallelFor& parallelFor);
+  // This frame's vertices (xyz per vertex; every vertex index of the triangles must be in range).
+  void refit(const float* positions, const ParallelFor& parallelFor);
 
   WideView<N> view(const uint32_t* indices, const float* positions) const;
   Aabb bounds() const { return rootBox_; }
@@ -41,16 +43,23 @@ class WideTree {
   uint32_t rootCount() const { return rootCount_; }
 
  private:
-  Aabb refitLeaf(uint32_t firstPacket, uint32_t count, const float* positions, const uint32_t* indices);
-  void refitNode(uint32_t node, const float* positions, const uint32_t* indices);
+  Aabb refitLeaf(uint32_t firstPacket, uint32_t count, const float* positions);
+  // A refit task computes its nodes' leaf children first, in increasing packet order (so the
+  // packet stores stream forward through memory), then their interior children, bottom-up.
+  void refitLeaves(uint32_t node, const float* positions);
+  void refitInterior(uint32_t node);
 
-  void (*woopRows_)(const float (*vertices)[N], uint32_t lanes, WoopPacket<N>& packet, Aabb& bounds) = nullptr;
+  void (*woopRows_)(const float* positions, const uint32_t* vertices, uint32_t lanes, WoopPacket<N>& packet,
+                    Aabb& bounds) = nullptr;
   std::vector<WideSoaNode<N>> nodes_;
   std::vector<WoopPacket<N>> packets_;
   // The slot of each packet's lane 0 (its lanes hold consecutive slots): the refit reads this
   // instead of the packet's own slot array, whose cache line would be a cold miss per packet.
   std::vector<uint32_t> packetSlots_;
   std::vector<uint32_t> triIndex_;
+  // The vertex indices of each slot's triangle (3 per slot): the refit reads them in slot order, a
+  // stream, where indices[3 * triIndex[slot]] would be a cache miss per triangle.
+  std::vector<uint32_t> slotVertices_;
   int32_t rootRef_ = makeLeafRef(0);
   uint32_t rootCount_ = 0;
   uint32_t depth_ = 0;
