@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstring>
 #include <random>
+#include <limits>
 
 #include "anim/error.hpp"
 #include "anim/generators.hpp"
@@ -71,6 +72,56 @@ TEST(CwbvhQuantize, ContainsRandomDegenerateHugeAndTinyBoxes) {
   expectConservative({Aabb{{-1e-38f, 0, 0}, {1e-38f, 1e-45f, 0}}, Aabb{{1e7f, 1e7f, 1e7f}, {1.0000001e7f, 1e7f, 1e7f}}});
 }
 
+// The quantizer settles each plane from its guess with the two neighbouring tests and searches only
+// when the guess may be further off: every exponent and plane must equal the plain searches from
+// the estimate and the guess (the quantizer before this shortcut), over random and extreme
+// coordinates, NaN and infinities. Where the tests are monotone in q (finite planes) that is also
+// the unique answer; where they are not (a plane of inf - inf), only the search's start defines it.
+TEST(CwbvhQuantize, SteppedPlanesEqualTheSearch) {
+  using namespace tsah::detail;
+  auto referenceExponent = [](float p, float hi) {
+    const float d = (hi - p) * (1.0f / 255.0f);
+    uint32_t e = (floatBits(d) >> 23) & 0xffu;
+    if (!(d > 0.0f)) e = 1;
+    e = std::clamp<uint32_t>(e, 1, 254);
+    while (e < 254 && !(tsah::rounding::addDown(p, 255.0f * tsah::cwbvhStep(e)) >= hi)) ++e;
+    return e;
+  };
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
+  const float specials[] = {0.0f, -0.0f, 1e-45f, -1e-45f, 1e-38f, 3.4e38f, -3.4e38f, inf, -inf, nan, 1.0f, -1.0f};
+  uint32_t checked = 0;
+  for (int round = 0; round < 200000; ++round) {
+    float v[3];
+    for (float& x : v) {
+      if (rng() % 16 == 0) {
+        x = specials[rng() % std::size(specials)];
+      } else {
+        const float mag = std::ldexp(u(rng), int(rng() % 200) - 100);
+        x = (rng() % 2 ? mag : -mag) + (rng() % 4 == 0 ? std::ldexp(u(rng), int(rng() % 40)) : 0.0f);
+      }
+    }
+    for (int k : {0, 1, 0})  // p <= x <= hi, NaN anywhere
+      if (v[k + 1] < v[k]) std::swap(v[k], v[k + 1]);
+    const float p = v[0], x = v[1], hi = v[2];
+    const uint32_t e = cwbvhExponent(p, hi);
+    ASSERT_EQ(e, referenceExponent(p, hi)) << p << " " << hi;
+    const float step = tsah::cwbvhStep(e);
+    ASSERT_EQ(cwbvhQuantizeLo(x, p, e), cwbvhSearchLo(x, p, step, cwbvhGuess(x, p, e))) << p << " " << x << " e " << e;
+    ASSERT_EQ(cwbvhQuantizeHi(x, p, e), cwbvhSearchHi(x, p, step, cwbvhGuess(x, p, e))) << p << " " << x << " e " << e;
+    ASSERT_EQ(cwbvhQuantizeLo(hi, p, e), cwbvhSearchLo(hi, p, step, cwbvhGuess(hi, p, e))) << p << " " << hi << " e " << e;
+    ASSERT_EQ(cwbvhQuantizeHi(hi, p, e), cwbvhSearchHi(hi, p, step, cwbvhGuess(hi, p, e))) << p << " " << hi << " e " << e;
+    // Finite planes: the unique answer, whatever the search starts from.
+    if (e < 254 && std::isfinite(p) && std::isfinite(x) && x - p <= 3.4e38f) {
+      ASSERT_EQ(cwbvhQuantizeLo(x, p, e), cwbvhSearchLo(x, p, step, 0)) << p << " " << x << " e " << e;
+      ASSERT_EQ(cwbvhQuantizeHi(x, p, e), cwbvhSearchHi(x, p, step, 255)) << p << " " << x << " e " << e;
+      ++checked;
+    }
+  }
+  EXPECT_GT(checked, 150000u);
+}
+
 TEST(CwbvhQuantize, GridIsTightForOrdinaryBoxes) {
   // Quantization must not be conservative by giving up: a child a quarter of its node is at most
   // a quarter plus two grid steps.
@@ -123,6 +174,53 @@ TEST(CwbvhBuild, RandomTreesAcrossFramesStayConservative) {
     ASSERT_EQ(t.nodeCount(), wide.nodeCount());
     checkAcrossFrames(t, m.indices, m.positions, uint32_t(m.indices.size()), m.frames);
   }
+}
+
+// cwbvhLevels: every node in exactly one group, in ascending order within it; a node with only leaf
+// children in group 0, any other one group above its highest interior child (so a refit group by
+// group reads finished children only).
+void checkLevels(const tsah::CwbvhTree& t) {
+  const tsah::CwbvhLevels levels = tsah::cwbvhLevels(t);
+  ASSERT_FALSE(levels.starts.empty());
+  ASSERT_EQ(levels.starts.front(), 0u);
+  ASSERT_EQ(levels.starts.back(), t.nodeCount());
+  ASSERT_EQ(levels.nodes.size(), t.nodeCount());
+  std::vector<uint32_t> groupOf(t.nodeCount(), ~0u);
+  for (uint32_t h = 0; h + 1 < levels.starts.size(); ++h) {
+    ASSERT_LT(levels.starts[h], levels.starts[h + 1]) << "empty group " << h;
+    for (uint32_t i = levels.starts[h]; i < levels.starts[h + 1]; ++i) {
+      ASSERT_LT(levels.nodes[i], t.nodeCount());
+      ASSERT_EQ(groupOf[levels.nodes[i]], ~0u) << "node " << levels.nodes[i] << " twice";
+      groupOf[levels.nodes[i]] = h;
+      if (i > levels.starts[h]) {
+        EXPECT_LT(levels.nodes[i - 1], levels.nodes[i]);
+      }
+    }
+  }
+  for (uint32_t i = 0; i < t.nodeCount(); ++i) {
+    const tsah::CwbvhNode& n = t.nodes[i];
+    uint32_t expected = 0, rank = 0;
+    for (uint32_t s = 0; s < tsah::kCwbvhWidth; ++s)
+      if (n.isInterior(s)) expected = std::max(expected, groupOf[n.childBase + rank++] + 1);
+    EXPECT_EQ(groupOf[i], expected) << "node " << i;
+  }
+}
+
+TEST(CwbvhBuild, LevelsGroupNodesByHeight) {
+  for (uint32_t seed = 1; seed <= 3; ++seed) {
+    const auto m = tsah::test::randomMovingTriangles(500 * seed, 2, seed, 0.5f);
+    tsah::CwbvhTree t = tsah::buildCwbvh(tsah::flattenBvh(sahTreeOverFrames(m.indices, m.positions, m.frames)));
+    ASSERT_GT(t.depth, 1u);
+    checkLevels(t);
+  }
+  // A one-leaf binary tree: a root with one leaf child, alone in group 0.
+  const auto one = tsah::test::randomMovingTriangles(3, 1, 9, 0.5f);
+  const tsah::CwbvhTree root = tsah::buildCwbvh(tsah::flattenBvh(sahTreeOverFrames(one.indices, one.positions, 1)));
+  ASSERT_EQ(root.nodeCount(), 1u);
+  checkLevels(root);
+  EXPECT_EQ(tsah::cwbvhLevels(root).starts, (std::vector<uint32_t>{0u, 1u}));
+  // A tree without nodes (the root a leaf reference) has no groups.
+  EXPECT_EQ(tsah::cwbvhLevels(tsah::CwbvhTree{}).starts, std::vector<uint32_t>{0u});
 }
 
 TEST(CwbvhBuild, RealAnimationAcrossFrames) {

@@ -2,8 +2,6 @@
 // Both run libtsah's TSAH_HD code (cwbvh_layout.hpp: cwbvhQuantize, cwbvhClosestHit/AnyHit, the
 // box test of ray.hpp and the triangle test of woop.hpp), compiled with -fmad=false like the rest
 // of the per-frame path, so nodes equal tsah::refitCwbvh's and hits the CPU reference traversal's.
-#include <cuda/atomic>
-
 #include "cwbvh_kernels.hpp"
 #include "launch.hpp"
 #include "triangle_boxes.cuh"
@@ -13,13 +11,9 @@ namespace tsah::cuda::detail {
 
 namespace {
 
-__device__ __forceinline__ void storeBox(Aabb* b, const Aabb& box) {
-  float* f = reinterpret_cast<float*>(b);
-  f[0] = box.lo.x, f[1] = box.lo.y, f[2] = box.lo.z, f[3] = box.hi.x, f[4] = box.hi.y, f[5] = box.hi.z;
-}
-
 __device__ __forceinline__ Aabb loadBoxL2(const Aabb* b) {
-  // Written by other threads of this launch: read through L2, never a stale L1 line.
+  // Written earlier in this launch by another warp of the block (the top levels): read through L2,
+  // never a stale L1 line.
   const float* f = reinterpret_cast<const float*>(b);
   Aabb box;
   box.lo = {__ldcg(f), __ldcg(f + 1), __ldcg(f + 2)};
@@ -27,61 +21,36 @@ __device__ __forceinline__ Aabb loadBoxL2(const Aabb* b) {
   return box;
 }
 
-// Pass 1: exact boxes bottom-up. One thread per leaf writes its box into the parent's slot; the
-// last child to arrive at a node (atomic counter) writes the union of the node's slots into the
-// node's own slot in its parent, and so on up to the root. Only boxes move here (a union per
-// node, as cheap as the binary refit); the quantization is pass 2, in parallel over all nodes,
-// instead of one thread quantizing every node on its path (the old chain was 3x the binary
-// refit's time on Kitchen).
-__global__ void cwbvhExactRefitKernel(const CwbvhNode* __restrict__ nodes, Aabb* __restrict__ exact,
-                                      const uint32_t* __restrict__ parentSlot, const CwbvhLeaf* __restrict__ leaves,
-                                      uint32_t leafCount, const uint32_t* __restrict__ triIndex,
-                                      const uint32_t* __restrict__ indices, const float* __restrict__ positions,
-                                      uint32_t* __restrict__ counters, RootInfo* __restrict__ root) {
-  const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
-  if (i >= leafCount) return;
-  const CwbvhLeaf leaf = leaves[i];
-  Aabb box = leafBox(leaf.first, leaf.count, triIndex, indices, positions);
-  uint32_t slot = leaf.nodeSlot;
-  while (slot != kCwbvhNoParent) {
-    const uint32_t node = slot / kCwbvhWidth;
-    storeBox(exact + slot, box);
-    CwbvhNode n;
-    reinterpret_cast<uint4*>(&n)[1] = __ldg(reinterpret_cast<const uint4*>(nodes + node) + 1);  // bases and meta
-    uint32_t occupied = 0;
-#pragma unroll
-    for (uint32_t s = 0; s < kCwbvhWidth; ++s) occupied += n.meta[s] != 0 ? 1u : 0u;
-    ::cuda::atomic_ref<uint32_t, ::cuda::thread_scope_device> arrivals(counters[node]);
-    if (arrivals.fetch_add(1, ::cuda::memory_order_acq_rel) + 1 != occupied) return;  // a later child finishes it
-    Aabb all;  // the union in slot order, exactly as cwbvhQuantize forms it
-#pragma unroll
-    for (uint32_t s = 0; s < kCwbvhWidth; ++s)
-      if (n.meta[s] != 0) all.extend(loadBoxL2(exact + std::size_t(node) * kCwbvhWidth + s));
-    box = all;
-    slot = parentSlot[node];
+// The refit and re-quantization of one node by 8 aligned lanes of a warp (lane s: slot s), every
+// lane of the warp taking part (the shuffles); `valid` false for lanes without a node. Each lane
+// forms its slot's exact box: an interior child's union (nodeBoxes, written by the child's own
+// group earlier), a leaf child's box from its triangles (leafBox), nothing for an empty slot.
+// Every lane then forms the node's union from all 8 boxes (shuffled, in slot order: the same
+// extends as cwbvhQuantize, so the same bits as tsah::refitCwbvh) and the exponents, and quantizes
+// its own slot (cwbvhSlotPlanes). Words 0 (p, e; triCount kept) and 2-4 (qlo, qhi) are rewritten;
+// word 1 (bases, meta) never changes. Slot 0 stores the union as the node's box (and the root's).
+__device__ __forceinline__ void refitNodeLanes(CwbvhNode* __restrict__ nodes, Aabb* __restrict__ nodeBoxes,
+                                               uint32_t node, bool valid, const uint32_t* __restrict__ slotVertices,
+                                               const float* __restrict__ positions, RootInfo* __restrict__ root) {
+  const uint32_t slot = threadIdx.x % kCwbvhWidth;
+  CwbvhNodeWords n{};  // words 3-7: exponents and triCount, childBase, triBase, meta[8]
+  if (valid) {
+    n.w[3] = __ldg(reinterpret_cast<const uint32_t*>(nodes + node) + 3);
+    const uint4 v = __ldg(reinterpret_cast<const uint4*>(nodes + node) + 1);
+    n.w[4] = v.x, n.w[5] = v.y, n.w[6] = v.z, n.w[7] = v.w;
   }
-  root->box = box;
-}
-
-// Pass 2: every node re-quantized from its children's exact boxes, 8 lanes per node (lane s: slot
-// s), because one thread quantizing all 48 planes of a node was a long serial chain (14 us on a
-// tree of 30 nodes). Every lane forms the node's union from all 8 boxes (shuffled, in slot order:
-// the same extends as cwbvhQuantize, so the same bits) and the exponents; each lane then
-// quantizes its own slot (cwbvhSlotPlanes). Words 0 (p, e; triCount kept) and 2-4 (qlo, qhi) are
-// rewritten; word 1 (bases, meta) never changes.
-constexpr uint32_t kQuantizeBlock = 128;  // whole warps: every lane takes part in the shuffles
-__global__ void __launch_bounds__(kQuantizeBlock) cwbvhQuantizeKernel(CwbvhNode* __restrict__ nodes,
-                                                                      const Aabb* __restrict__ exact,
-                                                                      uint32_t nodeCount) {
-  const uint32_t thread = blockIdx.x * blockDim.x + threadIdx.x;
-  const uint32_t node = thread / kCwbvhWidth, slot = thread % kCwbvhWidth;
-  const bool valid = node < nodeCount;
-  uint2 metaWords = make_uint2(0u, 0u);  // bytes 24-31: meta[8]
-  if (valid) metaWords = __ldg(reinterpret_cast<const uint2*>(nodes + node) + 3);
-  const uint32_t metaWord = slot < 4 ? metaWords.x : metaWords.y;
-  const bool empty = ((metaWord >> (8u * (slot & 3u))) & 0xffu) == 0;
+  const uint32_t meta = n.metaOf(slot);
+  const bool empty = meta == 0;
   Aabb mine;
-  if (valid && !empty) mine = exact[std::size_t(node) * kCwbvhWidth + slot];
+  if (meta & kCwbvhInterior) {
+    const uint32_t rank = cwbvhPopc(n.interiorSlots() & ((1u << slot) - 1u));
+    mine = loadBoxL2(nodeBoxes + n.w[4] + rank);
+  } else if (!empty) {  // a leaf: it ends where the node's next leaf begins, or at triCount
+    const uint32_t leafSlots = n.leafSlots(), first = meta & 0x3fu;
+    const uint32_t later = leafSlots & ~((2u << slot) - 1u);
+    const uint32_t end = later != 0 ? n.metaOf(cwbvhLowestBit(later)) & 0x3fu : n.byteAt(15);
+    mine = leafBox(n.w[5] + first, end - first, slotVertices, positions);
+  }
   Aabb all;
   const uint32_t group = (threadIdx.x & 31u) & ~(kCwbvhWidth - 1u);  // first lane of this node's 8
 #pragma unroll
@@ -91,27 +60,68 @@ __global__ void __launch_bounds__(kQuantizeBlock) cwbvhQuantizeKernel(CwbvhNode*
             __shfl_sync(0xffffffffu, mine.lo.z, group + s)};
     b.hi = {__shfl_sync(0xffffffffu, mine.hi.x, group + s), __shfl_sync(0xffffffffu, mine.hi.y, group + s),
             __shfl_sync(0xffffffffu, mine.hi.z, group + s)};
-    const uint32_t m = ((s < 4 ? metaWords.x : metaWords.y) >> (8u * (s & 3u))) & 0xffu;
-    if (m != 0) all.extend(b);
+    if (n.metaOf(s) != 0) all.extend(b);
   }
   if (!valid) return;
   uint32_t e[3];
   cwbvhGridExponents(all, e);
   const CwbvhSlotPlanes q = cwbvhSlotPlanes(empty, empty ? all : mine, all, e);
-  CwbvhNode* n = nodes + node;
+  CwbvhNode* out = nodes + node;
 #pragma unroll
   for (int a = 0; a < 3; ++a) {
-    n->qlo[a][slot] = q.lo[a];
-    n->qhi[a][slot] = q.hi[a];
+    out->qlo[a][slot] = q.lo[a];
+    out->qhi[a][slot] = q.hi[a];
   }
   if (slot == 0) {  // the grid: p and the exponents (byte 15, triCount, is kept)
-    n->px = all.lo.x;
-    n->py = all.lo.y;
-    n->pz = all.lo.z;
-    n->ex = uint8_t(e[0]);
-    n->ey = uint8_t(e[1]);
-    n->ez = uint8_t(e[2]);
+    out->px = all.lo.x;
+    out->py = all.lo.y;
+    out->pz = all.lo.z;
+    out->ex = uint8_t(e[0]);
+    out->ey = uint8_t(e[1]);
+    out->ez = uint8_t(e[2]);
+    float* f = reinterpret_cast<float*>(nodeBoxes + node);
+    f[0] = all.lo.x, f[1] = all.lo.y, f[2] = all.lo.z, f[3] = all.hi.x, f[4] = all.hi.y, f[5] = all.hi.z;
+    if (node == 0) root->box = all;
   }
+}
+
+// One group of nodes of equal height (cwbvhLevels), 8 lanes per node. Each group is one launch:
+// no atomics, and a node's interior children were finished by an earlier launch. (The previous
+// refit climbed from every leaf with an arrival counter per node and re-quantized in a second
+// kernel; on 1M triangles that was 84 + 26 us, latency-bound, against one launch per height here.)
+constexpr uint32_t kLevelBlock = 128;  // whole warps: every lane takes part in the shuffles
+__global__ void __launch_bounds__(kLevelBlock)
+    cwbvhLevelKernel(CwbvhNode* __restrict__ nodes, Aabb* __restrict__ nodeBoxes, const uint32_t* __restrict__ group,
+                     uint32_t count, const uint32_t* __restrict__ slotVertices, const float* __restrict__ positions,
+                     RootInfo* __restrict__ root) {
+  const uint32_t item = (blockIdx.x * blockDim.x + threadIdx.x) / kCwbvhWidth;
+  const bool valid = item < count;
+  refitNodeLanes(nodes, nodeBoxes, valid ? __ldg(group + item) : 0u, valid, slotVertices, positions, root);
+}
+
+// The small groups at the top of the tree (a few nodes each) in one block, a barrier between
+// groups, instead of a launch each: groups [firstGroup, groupCount) of `starts` (on the device).
+constexpr uint32_t kTopBlock = 256;
+__global__ void __launch_bounds__(kTopBlock)
+    cwbvhTopLevelsKernel(CwbvhNode* __restrict__ nodes, Aabb* __restrict__ nodeBoxes,
+                         const uint32_t* __restrict__ levelNodes, const uint32_t* __restrict__ starts,
+                         uint32_t firstGroup, uint32_t groupCount, const uint32_t* __restrict__ slotVertices,
+                         const float* __restrict__ positions, RootInfo* __restrict__ root) {
+  for (uint32_t h = firstGroup; h < groupCount; ++h) {
+    const uint32_t begin = __ldg(starts + h), end = __ldg(starts + h + 1);
+    for (uint32_t base = begin; base < end; base += kTopBlock / kCwbvhWidth) {
+      const uint32_t item = base + threadIdx.x / kCwbvhWidth;
+      const bool valid = item < end;
+      refitNodeLanes(nodes, nodeBoxes, valid ? __ldg(levelNodes + item) : 0u, valid, slotVertices, positions, root);
+    }
+    __syncthreads();  // the group's boxes are visible to the block before its parents read them
+  }
+}
+
+// A tree that is one leaf: its box is the root box.
+__global__ void cwbvhRootLeafKernel(uint32_t first, uint32_t count, const uint32_t* __restrict__ slotVertices,
+                                    const float* __restrict__ positions, RootInfo* __restrict__ root) {
+  root->box = leafBox(first, count, slotVertices, positions);
 }
 
 __device__ __forceinline__ Ray loadRayVec(const Ray* rays, uint32_t i) {
@@ -189,18 +199,34 @@ void launchWideTyped(const CwbvhView& view, const RootInfo* root, const Ray* ray
 
 }  // namespace
 
-void launchCwbvhRefit(CwbvhNode* nodes, uint32_t nodeCount, Aabb* exact, const uint32_t* parentSlot,
-                      const CwbvhLeaf* leaves, uint32_t leafCount, const uint32_t* triIndex, const uint32_t* indices,
-                      const float* positions, uint32_t* counters, RootInfo* root, cudaStream_t stream) {
-  if (leafCount == 0) return;
-  const uint32_t block = 128;
-  cwbvhExactRefitKernel<<<gridFor(leafCount, block), block, 0, stream>>>(nodes, exact, parentSlot, leaves, leafCount,
-                                                                         triIndex, indices, positions, counters, root);
-  CUDA_CHECK_LAUNCH("cwbvhExactRefitKernel");
-  if (nodeCount == 0) return;  // the tree is one leaf
-  cwbvhQuantizeKernel<<<gridFor(std::size_t(nodeCount) * kCwbvhWidth, kQuantizeBlock), kQuantizeBlock, 0, stream>>>(
-      nodes, exact, nodeCount);
-  CUDA_CHECK_LAUNCH("cwbvhQuantizeKernel");
+uint32_t cwbvhFirstTopGroup(const std::vector<uint32_t>& starts) {
+  // A group of up to 64 nodes takes two passes of the block (32 nodes each): cheaper than a launch.
+  constexpr uint32_t kTopGroupNodes = 2 * kTopBlock / kCwbvhWidth;
+  uint32_t top = uint32_t(starts.size()) - 1;
+  while (top > 0 && starts[top] - starts[top - 1] <= kTopGroupNodes) --top;
+  return top;
+}
+
+void launchCwbvhRefit(const CwbvhRefitPlan& plan, CwbvhNode* nodes, Aabb* nodeBoxes, const uint32_t* slotVertices,
+                      const float* positions, RootInfo* root, cudaStream_t stream) {
+  if (plan.rootLeafCount > 0) {  // one leaf, no nodes
+    cwbvhRootLeafKernel<<<1, 1, 0, stream>>>(plan.rootLeafFirst, plan.rootLeafCount, slotVertices, positions, root);
+    CUDA_CHECK_LAUNCH("cwbvhRootLeafKernel");
+    return;
+  }
+  const uint32_t groups = uint32_t(plan.starts.size()) - 1;
+  uint32_t h = 0;
+  for (; h < groups && h < plan.firstTopGroup; ++h) {
+    const uint32_t count = plan.starts[h + 1] - plan.starts[h];
+    cwbvhLevelKernel<<<gridFor(std::size_t(count) * kCwbvhWidth, kLevelBlock), kLevelBlock, 0, stream>>>(
+        nodes, nodeBoxes, plan.levelNodes + plan.starts[h], count, slotVertices, positions, root);
+    CUDA_CHECK_LAUNCH("cwbvhLevelKernel");
+  }
+  if (h < groups) {
+    cwbvhTopLevelsKernel<<<1, kTopBlock, 0, stream>>>(nodes, nodeBoxes, plan.levelNodes, plan.deviceStarts, h, groups,
+                                                      slotVertices, positions, root);
+    CUDA_CHECK_LAUNCH("cwbvhTopLevelsKernel");
+  }
 }
 
 void launchCwbvhTrace(const TraceScene& scene, const Ray* rays, uint32_t count, Hit* hits, uint8_t* occluded,

@@ -4,19 +4,34 @@
 #include <cuda_runtime_api.h>
 
 #include <cstdint>
+#include <vector>
 
 #include "device_types.hpp"
 #include "tsah/cwbvh_build.hpp"
 
 namespace tsah::cuda::detail {
 
-// Per frame: exact leaf boxes from the triangles, bottom-up (atomic arrival counter per node, zero
-// on entry; the last child to arrive finishes its node's union), root->box; then every node
-// re-quantized with cwbvhQuantize in parallel. exact: nodeCount * 8 scratch boxes. Results equal
-// tsah::refitCwbvh.
-void launchCwbvhRefit(CwbvhNode* nodes, uint32_t nodeCount, Aabb* exact, const uint32_t* parentSlot,
-                      const CwbvhLeaf* leaves, uint32_t leafCount, const uint32_t* triIndex, const uint32_t* indices,
-                      const float* positions, uint32_t* counters, RootInfo* root, cudaStream_t stream);
+// What the per-frame refit of a compressed tree launches, set up once at upload: the node groups of
+// tsah::cwbvhLevels (device arrays, and the group starts on the host to size the launches), or the
+// root leaf of a tree without nodes.
+struct CwbvhRefitPlan {
+  const uint32_t* levelNodes = nullptr;    // device: CwbvhLevels::nodes
+  const uint32_t* deviceStarts = nullptr;  // device: CwbvhLevels::starts
+  std::vector<uint32_t> starts;            // host copy of CwbvhLevels::starts
+  uint32_t firstTopGroup = 0;              // groups from here on run in one block (cwbvhFirstTopGroup)
+  uint32_t rootLeafFirst = 0, rootLeafCount = 0;  // a one-leaf tree: its slots
+};
+
+// The first group of `starts` from which every group is small enough to share one block (launched
+// once for all of them, with a barrier between groups, instead of a launch each).
+uint32_t cwbvhFirstTopGroup(const std::vector<uint32_t>& starts);
+
+// Per frame: every node's exact child boxes (leaf boxes from the triangles, interior children's
+// unions from nodeBoxes) and its re-quantization, group by group bottom-up, 8 lanes per node; the
+// node's union into nodeBoxes (nodeCount boxes of scratch) and the root's into root->box. Results
+// equal tsah::refitCwbvh. slotVertices: 3 vertex ids per slot (tsah::slotVertexIndices).
+void launchCwbvhRefit(const CwbvhRefitPlan& plan, CwbvhNode* nodes, Aabb* nodeBoxes, const uint32_t* slotVertices,
+                      const float* positions, RootInfo* root, cudaStream_t stream);
 
 // The traversal's view of a scene in the compressed layout (rootBox is read on the device from
 // scene.root).

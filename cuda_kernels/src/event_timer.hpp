@@ -35,6 +35,9 @@ class EventTimer {
     else
       CUDA_CHECK(cudaEventRecord(events_.at(i), stream));
   }
+  // Records event i for a fork or join between streams only (never timed): a plain record, which
+  // inside a capture becomes a dependency of the graph.
+  void mark(std::size_t i, cudaStream_t stream) { CUDA_CHECK(cudaEventRecord(events_.at(i), stream)); }
   void wait(std::size_t i) { CUDA_CHECK(cudaEventSynchronize(events_.at(i))); }
   // Makes `stream` wait for event i (recorded on another stream): a fork or join between streams.
   void streamWait(std::size_t i, cudaStream_t stream) { CUDA_CHECK(cudaStreamWaitEvent(stream, events_.at(i), 0)); }

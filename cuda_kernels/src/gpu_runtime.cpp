@@ -116,6 +116,13 @@ void GpuRuntime::Impl::uploadTree(const FlatBvh& tree, FlatBvh topologyOfTree) {
   d.nodeParent = DeviceBuffer<uint32_t>(std::span<const uint32_t>(parent), stream);
   d.counters.resize(topology.interiorCount);
   d.triIndex = DeviceBuffer<uint32_t>(std::span<const uint32_t>(topology.triIndex), stream);
+  // The refit and Woop pass of the binary layout stream the slots' vertex ids (the compressed
+  // layout keeps its own, in its slot order).
+  std::vector<uint32_t> slotVertices;
+  if (config.layout == TreeLayout::Bvh2) {
+    slotVertices = slotVertexIndices(topology.triIndex, hostIndices, "GPU runtime");
+    d.slotVertices = DeviceBuffer<uint32_t>(std::span<const uint32_t>(slotVertices), stream);
+  }
   d.leaves = DeviceBuffer<detail::LeafRecord>(std::span<const detail::LeafRecord>(leafRecords), stream);
   detail::RootInfo r;
   r.box = topology.rootBoxes[0];
@@ -124,7 +131,7 @@ void GpuRuntime::Impl::uploadTree(const FlatBvh& tree, FlatBvh topologyOfTree) {
   r.interiorCount = topology.interiorCount;
   r.depth = topology.depth;
   d.root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&r, 1), stream);
-  if (config.layout == TreeLayout::Cwbvh) d.cwbvh = uploadCwbvh(tree, config, stream);
+  if (config.layout == TreeLayout::Cwbvh) d.cwbvh = uploadCwbvh(tree, hostIndices, config, stream);
   // The host vectors above are freed when this returns: finish their uploads first.
   CUDA_CHECK(cudaStreamSynchronize(stream));
 }
@@ -200,17 +207,28 @@ void GpuRuntime::Impl::buildVertexTriangles() {
 
 // The 8-wide collapse over all frames of the given tree (WideCollapser), its compressed layout,
 // and what the per-frame refit needs on the device.
-std::unique_ptr<GpuRuntime::Impl::Cwbvh> GpuRuntime::Impl::uploadCwbvh(const FlatBvh& tree, const Config& settings,
-                                                                         cudaStream_t stream) {
+std::unique_ptr<GpuRuntime::Impl::Cwbvh> GpuRuntime::Impl::uploadCwbvh(const FlatBvh& tree,
+                                                                         std::span<const uint32_t> indices,
+                                                                         const Config& settings, cudaStream_t stream) {
   auto cwbvh = std::make_unique<Cwbvh>();
   Cwbvh& c = *cwbvh;
   c.host = buildCwbvh(tree, settings.wideCost, settings.wideMaxLeafSize);
   c.nodes = DeviceBuffer<CwbvhNode>(std::span<const CwbvhNode>(c.host.nodes), stream);
-  c.exact.resize(c.host.exactBoxes.size());
-  c.parentSlot = DeviceBuffer<uint32_t>(std::span<const uint32_t>(c.host.parentSlot), stream);
-  c.counters.resize(c.host.nodes.size());
+  c.nodeBoxes.resize(c.host.nodes.size());
   c.triIndex = DeviceBuffer<uint32_t>(std::span<const uint32_t>(c.host.triIndex), stream);
-  c.leaves = DeviceBuffer<CwbvhLeaf>(std::span<const CwbvhLeaf>(c.host.leaves), stream);
+  const std::vector<uint32_t> slotVertices = slotVertexIndices(c.host.triIndex, indices, "GPU runtime");
+  c.slotVertices = DeviceBuffer<uint32_t>(std::span<const uint32_t>(slotVertices), stream);
+  const CwbvhLevels levels = cwbvhLevels(c.host);
+  c.levelNodes = DeviceBuffer<uint32_t>(std::span<const uint32_t>(levels.nodes), stream);
+  c.levelStarts = DeviceBuffer<uint32_t>(std::span<const uint32_t>(levels.starts), stream);
+  c.refit.levelNodes = c.levelNodes.data();
+  c.refit.deviceStarts = c.levelStarts.data();
+  c.refit.starts = levels.starts;
+  c.refit.firstTopGroup = detail::cwbvhFirstTopGroup(levels.starts);
+  if (isLeafRef(c.host.rootRef)) {
+    c.refit.rootLeafFirst = leafFirstSlot(c.host.rootRef);
+    c.refit.rootLeafCount = c.host.rootCount;
+  }
   detail::RootInfo r;
   r.box = c.host.rootBox;
   r.ref = c.host.rootRef;
@@ -218,6 +236,7 @@ std::unique_ptr<GpuRuntime::Impl::Cwbvh> GpuRuntime::Impl::uploadCwbvh(const Fla
   r.interiorCount = c.host.nodeCount();
   r.depth = c.host.depth;
   c.root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&r, 1), stream);
+  CUDA_CHECK(cudaStreamSynchronize(stream));  // before slotVertices, levels and r go
   return cwbvh;
 }
 
@@ -260,24 +279,26 @@ void GpuRuntime::Impl::requireTraceable() const {
 }
 
 void GpuRuntime::Impl::enqueueRefitAndWoop() {
+  // The Woop pass (bandwidth-bound) runs on the side stream beside the refit (latency-bound: a
+  // chain of small launches or atomics up the tree); both only read the positions. Events 12 and
+  // 13 fork and join the side stream; 2 follows the refit, 3 both.
   DeviceTree& t = tree();
-  if (t.cwbvh) {  // refit + re-quantize the compressed layout, Woop triangles per slot of it
-    Cwbvh& c = *t.cwbvh;
-    c.counters.fillBytes(0, stream);
-    detail::launchCwbvhRefit(c.nodes.data(), uint32_t(c.nodes.size()), c.exact.data(), c.parentSlot.data(),
-                             c.leaves.data(),
-                             uint32_t(c.leaves.size()), c.triIndex.data(), indices.data(), positions.data(),
-                             c.counters.data(), c.root.data(), stream);
-    events.record(2, stream);
-    detail::launchWoop(c.triIndex.data(), triangles, indices.data(), positions.data(), woop.data(), stream);
-    events.record(3, stream);
-    return;
+  Cwbvh* c = t.cwbvh.get();
+  events.mark(12, stream);
+  events.streamWait(12, sideStream);
+  detail::launchSlotWoop(c ? c->slotVertices.data() : t.slotVertices.data(), triangles, positions.data(), woop.data(),
+                         sideStream);
+  events.mark(13, sideStream);
+  if (c) {  // refit + re-quantize the compressed layout
+    detail::launchCwbvhRefit(c->refit, c->nodes.data(), c->nodeBoxes.data(), c->slotVertices.data(), positions.data(),
+                             c->root.data(), stream);
+  } else {
+    t.counters.fillBytes(0, stream);
+    detail::launchRefit(t.nodes.data(), t.nodeParent.data(), t.leaves.data(), uint32_t(t.leaves.size()),
+                        t.slotVertices.data(), positions.data(), t.counters.data(), t.root.data(), stream);
   }
-  t.counters.fillBytes(0, stream);
-  detail::launchRefit(t.nodes.data(), t.nodeParent.data(), t.leaves.data(), uint32_t(t.leaves.size()),
-                      t.triIndex.data(), indices.data(), positions.data(), t.counters.data(), t.root.data(), stream);
   events.record(2, stream);
-  detail::launchWoop(t.triIndex.data(), triangles, indices.data(), positions.data(), woop.data(), stream);
+  events.streamWait(13, stream);
   events.record(3, stream);
 }
 

@@ -18,14 +18,18 @@ void launchInterpolateFrame(const float* keyframes, const uint32_t* movingIds, c
                             uint32_t movingCount, cudaStream_t stream);
 
 // Bottom-up refit of an uploaded tree: one thread per leaf record, atomic counters per interior node
-// (must be zero on entry); writes every child box, and root->box.
+// (must be zero on entry); writes every child box, and root->box. slotVertices: 3 vertex ids per
+// slot (tsah::slotVertexIndices).
 void launchRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
-                 const uint32_t* triIndex, const uint32_t* indices, const float* positions, uint32_t* counters,
-                 RootInfo* root, cudaStream_t stream);
+                 const uint32_t* slotVertices, const float* positions, uint32_t* counters, RootInfo* root,
+                 cudaStream_t stream);
 
-// Woop triangle of every slot.
+// Woop triangle of every slot, the vertex ids found through the slot's triangle id (the rebuilds)
+// or in slot order (launchSlotWoop: the refits' slotVertices).
 void launchWoop(const uint32_t* triIndex, uint32_t slots, const uint32_t* indices, const float* positions,
                 WoopTriangle* woop, cudaStream_t stream);
+void launchSlotWoop(const uint32_t* slotVertices, uint32_t slots, const float* positions, WoopTriangle* woop,
+                    cudaStream_t stream);
 
 // Traversal of `count` rays: closest hit into hits (when hits != nullptr) or any hit into
 // occluded (1 = something hit). rayCounter: one device word, zero on entry (persistent launch).

@@ -24,8 +24,8 @@ struct GpuRuntime::Impl {
   detail::TraceLaunch traceLaunch() const { return {config.persistentTraversal, 128, 0}; }
   // Throws unless there is a traceable frame (an update or a rebuild with Woop triangles).
   void requireTraceable() const;
-  // Refit and Woop on the stream (events 2 and 3 after them); finishUpdate waits and reads the
-  // timings (events 0..3).
+  // The refit on the stream and the Woop pass beside it (events 2 and 3, 12 and 13); finishUpdate
+  // waits and reads the timings (events 0..3).
   void enqueueRefitAndWoop();
   UpdateTimings finishUpdate();
   // The triangles of every vertex in increasing order (once, at the first render).
@@ -70,9 +70,11 @@ struct GpuRuntime::Impl {
   struct Cwbvh {
     CwbvhTree host;                      // topology (and frame-0 quantization) as built on the host
     DeviceBuffer<CwbvhNode> nodes;
-    DeviceBuffer<Aabb> exact;            // nodes * 8 exact child boxes of the current frame
-    DeviceBuffer<uint32_t> parentSlot, counters, triIndex;
-    DeviceBuffer<CwbvhLeaf> leaves;
+    DeviceBuffer<Aabb> nodeBoxes;         // per node: the exact union of its children, this frame
+    DeviceBuffer<uint32_t> triIndex;
+    DeviceBuffer<uint32_t> slotVertices;  // 3 vertex ids per slot, for the refit and the Woop pass
+    DeviceBuffer<uint32_t> levelNodes, levelStarts;  // tsah::cwbvhLevels, for the refit
+    detail::CwbvhRefitPlan refit;
     DeviceBuffer<detail::RootInfo> root;
   };
   // The uploaded trees (canonical order, one block of nodes each): one, or a tree set's K, all
@@ -81,6 +83,7 @@ struct GpuRuntime::Impl {
     FlatBvh topology;                    // host copy of its structure
     DeviceBuffer<GpuBvhNode> nodes;
     DeviceBuffer<uint32_t> nodeParent, counters, triIndex;
+    DeviceBuffer<uint32_t> slotVertices;  // 3 vertex ids per slot, for the refit and the Woop pass
     DeviceBuffer<detail::LeafRecord> leaves;
     DeviceBuffer<detail::RootInfo> root;
     cudaGraphExec_t updateGraph = nullptr;  // updateAt's graph for this tree (captured at first use)
@@ -91,7 +94,8 @@ struct GpuRuntime::Impl {
   void uploadTree(const FlatBvh& tree, FlatBvh topologyOfTree);
   void releaseDevice() noexcept;
   // The 8-wide collapse over all frames of `tree`, its compressed layout and refit data on the device.
-  static std::unique_ptr<Cwbvh> uploadCwbvh(const FlatBvh& tree, const Config& settings, cudaStream_t stream);
+  static std::unique_ptr<Cwbvh> uploadCwbvh(const FlatBvh& tree, std::span<const uint32_t> indices,
+                                            const Config& settings, cudaStream_t stream);
   DeviceTree& tree() { return trees[current]; }
   const DeviceTree& tree() const { return trees[current]; }
   std::vector<DeviceTree> trees;

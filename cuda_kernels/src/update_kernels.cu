@@ -52,13 +52,13 @@ __device__ __forceinline__ Aabb readChildBox(const GpuBvhNode* node, int side) {
 
 __global__ void refitKernel(GpuBvhNode* __restrict__ nodes, const uint32_t* __restrict__ nodeParent,
                             const LeafRecord* __restrict__ leaves, uint32_t leafCount,
-                            const uint32_t* __restrict__ triIndex, const uint32_t* __restrict__ indices,
+                            const uint32_t* __restrict__ slotVertices,
                             const float* __restrict__ positions, uint32_t* __restrict__ counters,
                             RootInfo* __restrict__ root) {
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= leafCount) return;
   const LeafRecord leaf = leaves[i];
-  Aabb box = leafBox(leaf.first, leaf.count, triIndex, indices, positions);
+  Aabb box = leafBox(leaf.first, leaf.count, slotVertices, positions);
   uint32_t slot = leaf.parentSlot;
   // Walk up: the second thread to arrive at a node has both child boxes and carries on.
   while (slot != kNoParent) {
@@ -73,17 +73,38 @@ __global__ void refitKernel(GpuBvhNode* __restrict__ nodes, const uint32_t* __re
   root->box = box;
 }
 
-__global__ void woopKernel(const uint32_t* __restrict__ triIndex, uint32_t slots, const uint32_t* __restrict__ indices,
-                           const float* __restrict__ positions, WoopTriangle* __restrict__ woop) {
+// Where the Woop pass finds the vertex ids of slot s: in slot order (the refits' slotVertices,
+// streamed) or through the slot's triangle id (the rebuilds, whose slot order changes every frame).
+struct SlotOrderedIds {
+  const uint32_t* ids;
+  __device__ const uint32_t* operator()(uint32_t s) const { return ids + 3 * std::size_t(s); }
+};
+struct GatheredIds {
+  const uint32_t* triIndex;
+  const uint32_t* indices;
+  __device__ const uint32_t* operator()(uint32_t s) const { return indices + 3 * std::size_t(__ldg(triIndex + s)); }
+};
+
+template <class VertexIds>
+__global__ void woopKernel(VertexIds ids, uint32_t slots, const float* __restrict__ positions,
+                           WoopTriangle* __restrict__ woop) {
   const uint32_t s = blockIdx.x * blockDim.x + threadIdx.x;
   if (s >= slots) return;
-  const uint32_t* tri = indices + 3 * std::size_t(__ldg(triIndex + s));
+  const uint32_t* tri = ids(s);
   const WoopTriangle w = makeWoopTriangle(loadVertex(positions, __ldg(tri)), loadVertex(positions, __ldg(tri + 1)),
                                           loadVertex(positions, __ldg(tri + 2)));
   float4* out = reinterpret_cast<float4*>(woop + s);
   out[0] = make_float4(w.r0.x, w.r0.y, w.r0.z, w.r0.w);
   out[1] = make_float4(w.r1.x, w.r1.y, w.r1.z, w.r1.w);
   out[2] = make_float4(w.r2.x, w.r2.y, w.r2.z, w.r2.w);
+}
+
+template <class VertexIds>
+void launchWoopKernel(VertexIds ids, uint32_t slots, const float* positions, WoopTriangle* woop, cudaStream_t stream) {
+  if (slots == 0) return;
+  const uint32_t block = 128;
+  woopKernel<<<gridFor(slots, block), block, 0, stream>>>(ids, slots, positions, woop);
+  CUDA_CHECK_LAUNCH("woopKernel");
 }
 
 }  // namespace
@@ -98,21 +119,23 @@ void launchInterpolateFrame(const float* keyframes, const uint32_t* movingIds, c
 }
 
 void launchRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
-                 const uint32_t* triIndex, const uint32_t* indices, const float* positions, uint32_t* counters,
-                 RootInfo* root, cudaStream_t stream) {
+                 const uint32_t* slotVertices, const float* positions, uint32_t* counters, RootInfo* root,
+                 cudaStream_t stream) {
   if (leafCount == 0) return;
   const uint32_t block = 128;
-  refitKernel<<<gridFor(leafCount, block), block, 0, stream>>>(nodes, nodeParent, leaves, leafCount, triIndex,
-                                                               indices, positions, counters, root);
+  refitKernel<<<gridFor(leafCount, block), block, 0, stream>>>(nodes, nodeParent, leaves, leafCount,
+                                                               slotVertices, positions, counters, root);
   CUDA_CHECK_LAUNCH("refitKernel");
 }
 
 void launchWoop(const uint32_t* triIndex, uint32_t slots, const uint32_t* indices, const float* positions,
                 WoopTriangle* woop, cudaStream_t stream) {
-  if (slots == 0) return;
-  const uint32_t block = 128;
-  woopKernel<<<gridFor(slots, block), block, 0, stream>>>(triIndex, slots, indices, positions, woop);
-  CUDA_CHECK_LAUNCH("woopKernel");
+  launchWoopKernel(GatheredIds{triIndex, indices}, slots, positions, woop, stream);
+}
+
+void launchSlotWoop(const uint32_t* slotVertices, uint32_t slots, const float* positions, WoopTriangle* woop,
+                    cudaStream_t stream) {
+  launchWoopKernel(SlotOrderedIds{slotVertices}, slots, positions, woop, stream);
 }
 
 }  // namespace tsah::cuda::detail

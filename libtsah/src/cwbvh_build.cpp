@@ -139,6 +139,26 @@ void refitCwbvh(CwbvhTree& t, std::span<const uint32_t> indices, std::span<const
   }
 }
 
+CwbvhLevels cwbvhLevels(const CwbvhTree& t) {
+  std::vector<uint32_t> height(t.nodeCount(), 0);
+  uint32_t maxHeight = 0;
+  // Children have larger indices than their parent: reverse order sees every child first.
+  for (uint32_t i = t.nodeCount(); i-- > 0;) {
+    maxHeight = std::max(maxHeight, height[i]);
+    if (t.parentSlot[i] == kCwbvhNoParent) continue;
+    uint32_t& parent = height[t.parentSlot[i] / kCwbvhWidth];
+    parent = std::max(parent, height[i] + 1);
+  }
+  CwbvhLevels levels;
+  levels.starts.assign(t.nodes.empty() ? 1 : maxHeight + 2, 0);
+  for (uint32_t h : height) ++levels.starts[h + 1];
+  for (std::size_t h = 1; h < levels.starts.size(); ++h) levels.starts[h] += levels.starts[h - 1];
+  levels.nodes.resize(t.nodeCount());
+  std::vector<uint32_t> fill(levels.starts.begin(), levels.starts.end() - 1);
+  for (uint32_t i = 0; i < t.nodeCount(); ++i) levels.nodes[fill[height[i]]++] = i;
+  return levels;
+}
+
 std::optional<std::string> validateCwbvh(const CwbvhTree& t, bool checkBoxes) {
   const uint32_t slots = uint32_t(t.triIndex.size());
   std::vector<uint8_t> covered(slots, 0);

@@ -259,4 +259,16 @@ FlatBvh runtimeTopology(const FlatBvh& tree, uint32_t triangles, uint32_t maxDep
   return one;
 }
 
+std::vector<uint32_t> slotVertexIndices(std::span<const uint32_t> triIndex, std::span<const uint32_t> indices,
+                                        const std::string& who) {
+  std::vector<uint32_t> out(3 * triIndex.size());
+  for (std::size_t s = 0; s < triIndex.size(); ++s) {
+    if (triIndex[s] >= indices.size() / 3)
+      throw anim::Error(who + ": triangle " + std::to_string(triIndex[s]) + " is past the " +
+                        std::to_string(indices.size() / 3) + " triangles of the index array");
+    for (int k = 0; k < 3; ++k) out[3 * s + k] = indices[3 * std::size_t(triIndex[s]) + k];
+  }
+  return out;
+}
+
 }  // namespace tsah

@@ -3,6 +3,7 @@
 #include <cstring>
 
 #include "anim/error.hpp"
+#include "tsah/flat_bvh.hpp"
 #include "refit_plan.hpp"
 
 namespace tsah {
@@ -40,13 +41,7 @@ WideTree<N>::WideTree(const WideBvh& w, std::span<const uint32_t> indices, uint3
   if (wideStackNeed<N>(depth_) > kWideStackSize)
     throw anim::Error("wide tree: depth " + std::to_string(depth_) + " exceeds the traversal stack");
   triIndex_ = w.primIds;
-  slotVertices_.resize(3 * triIndex_.size());
-  for (std::size_t s = 0; s < triIndex_.size(); ++s) {
-    if (triIndex_[s] >= indices.size() / 3)
-      throw anim::Error("wide tree: triangle " + std::to_string(triIndex_[s]) + " is past the " +
-                        std::to_string(indices.size() / 3) + " triangles of the index array");
-    for (int k = 0; k < 3; ++k) slotVertices_[3 * s + k] = indices[3 * std::size_t(triIndex_[s]) + k];
-  }
+  slotVertices_ = slotVertexIndices(triIndex_, indices, "wide tree");
   // Packets of a leaf over slots [first, first + count): lane l of packet p holds slot first + p*N + l.
   auto addLeaf = [&](uint32_t first, uint32_t count) {
     const auto packet = static_cast<uint32_t>(packets_.size());

@@ -37,8 +37,8 @@ namespace tsah::cuda {
 // Device time of one refit update, in milliseconds (CUDA events).
 struct UpdateTimings {
   double interpolateMs = 0.0;  // update(positions): the upload instead
-  double refitMs = 0.0;
-  double woopMs = 0.0;
+  double refitMs = 0.0;  // the refit (and re-quantization)
+  double woopMs = 0.0;   // the Woop pass, which runs beside the refit: only the part after the refit ends
   double totalMs() const { return interpolateMs + refitMs + woopMs; }
 };
 

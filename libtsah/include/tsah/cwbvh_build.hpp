@@ -52,6 +52,16 @@ CwbvhTree buildCwbvh(const FlatBvh& flat, CostModel cost = {}, uint32_t maxLeafS
 // (cwbvhQuantize), rootBox. Exactly the GPU runtime's refit.
 void refitCwbvh(CwbvhTree& tree, std::span<const uint32_t> indices, std::span<const float> positions);
 
+// The nodes grouped by height (0: every child a leaf; otherwise one more than the highest interior
+// child), lowest first, ascending indices within a group: a refit that finishes each group before
+// the next reads only finished children (the GPU runtime's refit runs a launch per group). Group h
+// is nodes[starts[h], starts[h + 1]); a one-leaf tree has no groups (starts = {0}).
+struct CwbvhLevels {
+  std::vector<uint32_t> nodes;
+  std::vector<uint32_t> starts;
+};
+CwbvhLevels cwbvhLevels(const CwbvhTree& tree);
+
 // Structure (references in range, every slot reached once, leaf ranges covering triIndex once,
 // triangle offsets < 64) and, when boxes are given (exactBoxes current), that every decoded child
 // box contains its exact box. Returns the first violation.

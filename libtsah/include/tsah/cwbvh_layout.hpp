@@ -113,14 +113,27 @@ TSAH_HD uint32_t floatBits(float f) {
 #endif
 }
 
-// The smallest exponent (from an estimate, then upwards) whose 255 steps from p reach hi in float.
+// Whether 255 steps of exponent e from p reach hi in float (the real p + 255 step >= hi); always
+// true for the largest exponent, 254.
+TSAH_HD bool cwbvhExponentReaches(float p, float hi, uint32_t e) {
+  return e >= 254 || rounding::addDown(p, 255.0f * cwbvhStep(e)) >= hi;
+}
+
+// The smallest exponent from an estimate upwards whose 255 steps from p reach hi. The estimate
+// (the exponent of (hi - p) / 255) is one below the answer unless that quotient is a power of two,
+// so the first two candidates are tested side by side (independent instruction chains, no loop);
+// only when both fail does the search go on.
 TSAH_HD uint32_t cwbvhExponent(float p, float hi) {
   const float d = (hi - p) * (1.0f / 255.0f);
   uint32_t e = (floatBits(d) >> 23) & 0xffu;  // d >= 0: 2^(e-127) <= d < 2^(e-126)
   if (!(d > 0.0f)) e = 1;                     // 0, or NaN
   if (e < 1) e = 1;
   if (e > 254) e = 254;
-  while (e < 254 && !(rounding::addDown(p, 255.0f * cwbvhStep(e)) >= hi)) ++e;  // real p + 255 step >= hi
+  const bool first = cwbvhExponentReaches(p, hi, e), second = cwbvhExponentReaches(p, hi, e + 1);
+  if (first) return e;
+  if (second) return e + 1;
+  e += 2;
+  while (!cwbvhExponentReaches(p, hi, e)) ++e;
   return e;
 }
 
@@ -133,6 +146,15 @@ TSAH_HD uint32_t cwbvhGuess(float x, float p, uint32_t e) {
   return uint32_t(f);
 }
 
+// Whether the guess of x is within one of the answer: (x - p) rounded to nearest is within half an
+// ulp of the real difference, so (x - p) / step is off by less than 256 * 2^-24, far below one,
+// unless the difference is not finite (an overflow, an infinite or NaN coordinate) or 1 / step is
+// not a normal float (e = 254).
+TSAH_HD bool cwbvhGuessWithinOne(float x, float p, uint32_t e) {
+  const float d = x - p;
+  return e < 254 && d >= -3.402823466e38f && d <= 3.402823466e38f;
+}
+
 // Whether the real plane p + q * step lies at or below x / at or above x (decided exactly: the sum
 // rounded up is <= x exactly when the real sum is, x being a float).
 TSAH_HD bool cwbvhPlaneAtMost(float p, uint32_t q, float step, float x) {
@@ -142,22 +164,38 @@ TSAH_HD bool cwbvhPlaneAtLeast(float p, uint32_t q, float step, float x) {
   return rounding::addDown(p, float(q) * step) >= x;
 }
 
-// The largest q whose real plane is at or below lo (q = 0 always is: p is the node's lower corner).
-TSAH_HD uint32_t cwbvhQuantizeLo(float lo, float p, uint32_t e) {
-  const float step = cwbvhStep(e);
-  uint32_t q = cwbvhGuess(lo, p, e);
+// The searches by single steps (the reference, and the fallback when the guess may be further off).
+TSAH_HD uint32_t cwbvhSearchLo(float lo, float p, float step, uint32_t q) {
   while (q > 0 && !cwbvhPlaneAtMost(p, q, step, lo)) --q;
   while (q < 255 && cwbvhPlaneAtMost(p, q + 1, step, lo)) ++q;
   return q;
+}
+TSAH_HD uint32_t cwbvhSearchHi(float hi, float p, float step, uint32_t q) {
+  while (q < 255 && !cwbvhPlaneAtLeast(p, q, step, hi)) ++q;
+  while (q > 0 && cwbvhPlaneAtLeast(p, q - 1, step, hi)) --q;
+  return q;
+}
+
+// The largest q whose real plane is at or below lo (q = 0 always is: p is the node's lower corner).
+// The planes are monotone in q, so the answer is unique: from a guess within one of it, the two
+// neighbouring tests (side by side, no loop) settle it; otherwise the search does.
+TSAH_HD uint32_t cwbvhQuantizeLo(float lo, float p, uint32_t e) {
+  const float step = cwbvhStep(e);
+  const uint32_t q = cwbvhGuess(lo, p, e);
+  if (!cwbvhGuessWithinOne(lo, p, e)) return cwbvhSearchLo(lo, p, step, q);
+  const bool atQ = q == 0 || cwbvhPlaneAtMost(p, q, step, lo);
+  const bool atNext = q < 255 && cwbvhPlaneAtMost(p, q + 1, step, lo);
+  return !atQ ? q - 1 : atNext ? q + 1 : q;
 }
 
 // The smallest q whose real plane is at or above hi (q = 255 always is, by the exponent's choice).
 TSAH_HD uint32_t cwbvhQuantizeHi(float hi, float p, uint32_t e) {
   const float step = cwbvhStep(e);
-  uint32_t q = cwbvhGuess(hi, p, e);
-  while (q < 255 && !cwbvhPlaneAtLeast(p, q, step, hi)) ++q;
-  while (q > 0 && cwbvhPlaneAtLeast(p, q - 1, step, hi)) --q;
-  return q;
+  const uint32_t q = cwbvhGuess(hi, p, e);
+  if (!cwbvhGuessWithinOne(hi, p, e)) return cwbvhSearchHi(hi, p, step, q);
+  const bool atQ = q == 255 || cwbvhPlaneAtLeast(p, q, step, hi);
+  const bool atPrevious = q > 0 && cwbvhPlaneAtLeast(p, q - 1, step, hi);
+  return !atQ ? q + 1 : atPrevious ? q - 1 : q;
 }
 
 }  // namespace detail

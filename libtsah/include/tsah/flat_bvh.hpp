@@ -61,4 +61,10 @@ FlatBvh runtimeTopology(const FlatBvh& tree, uint32_t triangles, uint32_t maxDep
 // For each interior node i, one past the last interior node of its subtree (canonical order).
 std::vector<uint32_t> subtreeEnds(const FlatBvh& flat);
 
+// The vertex indices of each slot's triangle, 3 per slot (indices[3 * triIndex[s] + k]), so that a
+// refit streams them in slot order instead of gathering indices[3 * triIndex[s]] (a cache miss per
+// triangle). Throws anim::Error, the message starting with `who`, for a triangle id past `indices`.
+std::vector<uint32_t> slotVertexIndices(std::span<const uint32_t> triIndex, std::span<const uint32_t> indices,
+                                        const std::string& who);
+
 }  // namespace tsah
