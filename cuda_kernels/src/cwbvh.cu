@@ -21,35 +21,51 @@ __device__ __forceinline__ Aabb loadBoxL2(const Aabb* b) {
   return box;
 }
 
-// The refit and re-quantization of one node by 8 aligned lanes of a warp (lane s: slot s), every
-// lane of the warp taking part (the shuffles); `valid` false for lanes without a node. Each lane
-// forms its slot's exact box: an interior child's union (nodeBoxes, written by the child's own
-// group earlier), a leaf child's box from its triangles (leafBox), nothing for an empty slot.
-// Every lane then forms the node's union from all 8 boxes (shuffled, in slot order: the same
-// extends as cwbvhQuantize, so the same bits as tsah::refitCwbvh) and the exponents, and quantizes
-// its own slot (cwbvhSlotPlanes). Words 0 (p, e; triCount kept) and 2-4 (qlo, qhi) are rewritten;
-// word 1 (bases, meta) never changes. Slot 0 stores the union as the node's box (and the root's).
-__device__ __forceinline__ void refitNodeLanes(CwbvhNode* __restrict__ nodes, Aabb* __restrict__ nodeBoxes,
-                                               uint32_t node, bool valid, const uint32_t* __restrict__ slotVertices,
-                                               const float* __restrict__ positions, RootInfo* __restrict__ root) {
-  const uint32_t slot = threadIdx.x % kCwbvhWidth;
-  CwbvhNodeWords n{};  // words 3-7: exponents and triCount, childBase, triBase, meta[8]
+// Words 3-7 of a node (exponents and triCount, childBase, triBase, meta[8]): what the refit reads.
+__device__ __forceinline__ CwbvhNodeWords loadRefitWords(const CwbvhNode* __restrict__ nodes, uint32_t node, bool valid) {
+  CwbvhNodeWords n{};
   if (valid) {
     n.w[3] = __ldg(reinterpret_cast<const uint32_t*>(nodes + node) + 3);
     const uint4 v = __ldg(reinterpret_cast<const uint4*>(nodes + node) + 1);
     n.w[4] = v.x, n.w[5] = v.y, n.w[6] = v.z, n.w[7] = v.w;
   }
+  return n;
+}
+
+// The box of the leaf in `slot` (its meta byte `meta`): it ends where the node's next leaf
+// begins, or at triCount.
+__device__ __forceinline__ Aabb slotLeafBox(const CwbvhNodeWords& n, uint32_t slot, uint32_t meta,
+                                            const uint32_t* __restrict__ slotVertices,
+                                            const float* __restrict__ positions) {
+  const uint32_t first = meta & 0x3fu;
+  const uint32_t later = n.leafSlots() & ~((2u << slot) - 1u);
+  const uint32_t end = later != 0 ? n.metaOf(cwbvhLowestBit(later)) & 0x3fu : n.byteAt(15);
+  return leafBox(n.w[5] + first, end - first, slotVertices, positions);
+}
+
+// The refit and re-quantization of one node by 8 aligned lanes of a warp (lane s: slot s), every
+// lane of the warp taking part (the shuffles); `valid` false for lanes without a node. Each lane
+// forms its slot's exact box: an interior child's union (nodeBoxes, written by the child's own
+// group earlier), a leaf child's box (leafBoxOf(meta): from its triangles, or computed earlier),
+// nothing for an empty slot. Every lane then forms the node's union from all 8 boxes (shuffled, in
+// slot order: the same extends as cwbvhQuantize, so the same bits as tsah::refitCwbvh) and the
+// exponents, and quantizes its own slot (cwbvhSlotPlanes). Words 0 (p, e; triCount kept) and 2-4
+// (qlo, qhi) are rewritten; word 1 (bases, meta) never changes. Slot 0 stores the union as the
+// node's box (and the root's).
+template <class LeafBoxOf>
+__device__ __forceinline__ void refitNodeLanes(CwbvhNode* __restrict__ nodes, Aabb* __restrict__ nodeBoxes,
+                                               uint32_t node, bool valid, LeafBoxOf leafBoxOf,
+                                               RootInfo* __restrict__ root) {
+  const uint32_t slot = threadIdx.x % kCwbvhWidth;
+  const CwbvhNodeWords n = loadRefitWords(nodes, node, valid);
   const uint32_t meta = n.metaOf(slot);
   const bool empty = meta == 0;
   Aabb mine;
   if (meta & kCwbvhInterior) {
     const uint32_t rank = cwbvhPopc(n.interiorSlots() & ((1u << slot) - 1u));
     mine = loadBoxL2(nodeBoxes + n.w[4] + rank);
-  } else if (!empty) {  // a leaf: it ends where the node's next leaf begins, or at triCount
-    const uint32_t leafSlots = n.leafSlots(), first = meta & 0x3fu;
-    const uint32_t later = leafSlots & ~((2u << slot) - 1u);
-    const uint32_t end = later != 0 ? n.metaOf(cwbvhLowestBit(later)) & 0x3fu : n.byteAt(15);
-    mine = leafBox(n.w[5] + first, end - first, slotVertices, positions);
+  } else if (!empty) {
+    mine = leafBoxOf(n, meta);
   }
   Aabb all;
   const uint32_t group = (threadIdx.x & 31u) & ~(kCwbvhWidth - 1u);  // first lane of this node's 8
@@ -96,23 +112,49 @@ __global__ void __launch_bounds__(kLevelBlock)
                      RootInfo* __restrict__ root) {
   const uint32_t item = (blockIdx.x * blockDim.x + threadIdx.x) / kCwbvhWidth;
   const bool valid = item < count;
-  refitNodeLanes(nodes, nodeBoxes, valid ? __ldg(group + item) : 0u, valid, slotVertices, positions, root);
+  const uint32_t slot = threadIdx.x % kCwbvhWidth;
+  auto leafBoxOf = [&](const CwbvhNodeWords& n, uint32_t meta) {
+    return slotLeafBox(n, slot, meta, slotVertices, positions);
+  };
+  refitNodeLanes(nodes, nodeBoxes, valid ? __ldg(group + item) : 0u, valid, leafBoxOf, root);
 }
 
 // The small groups at the top of the tree (a few nodes each) in one block, a barrier between
 // groups, instead of a launch each: groups [firstGroup, groupCount) of `starts` (on the device).
+// The leaf boxes of all those nodes come first, all at once (they depend on no group), into
+// leafBoxes (8 per node of these groups): each group then waits only for its children's unions,
+// not for its leaves' vertex loads.
 constexpr uint32_t kTopBlock = 256;
 __global__ void __launch_bounds__(kTopBlock)
     cwbvhTopLevelsKernel(CwbvhNode* __restrict__ nodes, Aabb* __restrict__ nodeBoxes,
                          const uint32_t* __restrict__ levelNodes, const uint32_t* __restrict__ starts,
-                         uint32_t firstGroup, uint32_t groupCount, const uint32_t* __restrict__ slotVertices,
-                         const float* __restrict__ positions, RootInfo* __restrict__ root) {
+                         uint32_t firstGroup, uint32_t groupCount, Aabb* __restrict__ leafBoxes,
+                         const uint32_t* __restrict__ slotVertices, const float* __restrict__ positions,
+                         RootInfo* __restrict__ root) {
+  constexpr uint32_t kNodesPerPass = kTopBlock / kCwbvhWidth;
+  const uint32_t slot = threadIdx.x % kCwbvhWidth;
+  const uint32_t topBegin = __ldg(starts + firstGroup), topEnd = __ldg(starts + groupCount);
+  for (uint32_t base = topBegin; base < topEnd; base += kNodesPerPass) {
+    const uint32_t item = base + threadIdx.x / kCwbvhWidth;
+    if (item >= topEnd) continue;
+    const CwbvhNodeWords n = loadRefitWords(nodes, __ldg(levelNodes + item), true);
+    const uint32_t meta = n.metaOf(slot);
+    if ((meta & 0xc0u) == kCwbvhLeaf) {
+      const Aabb b = slotLeafBox(n, slot, meta, slotVertices, positions);
+      float* f = reinterpret_cast<float*>(leafBoxes + std::size_t(item - topBegin) * kCwbvhWidth + slot);
+      f[0] = b.lo.x, f[1] = b.lo.y, f[2] = b.lo.z, f[3] = b.hi.x, f[4] = b.hi.y, f[5] = b.hi.z;
+    }
+  }
+  __syncthreads();
   for (uint32_t h = firstGroup; h < groupCount; ++h) {
     const uint32_t begin = __ldg(starts + h), end = __ldg(starts + h + 1);
-    for (uint32_t base = begin; base < end; base += kTopBlock / kCwbvhWidth) {
+    for (uint32_t base = begin; base < end; base += kNodesPerPass) {
       const uint32_t item = base + threadIdx.x / kCwbvhWidth;
       const bool valid = item < end;
-      refitNodeLanes(nodes, nodeBoxes, valid ? __ldg(levelNodes + item) : 0u, valid, slotVertices, positions, root);
+      auto leafBoxOf = [&](const CwbvhNodeWords&, uint32_t) {
+        return loadBoxL2(leafBoxes + std::size_t(item - topBegin) * kCwbvhWidth + slot);
+      };
+      refitNodeLanes(nodes, nodeBoxes, valid ? __ldg(levelNodes + item) : 0u, valid, leafBoxOf, root);
     }
     __syncthreads();  // the group's boxes are visible to the block before its parents read them
   }
@@ -224,7 +266,7 @@ void launchCwbvhRefit(const CwbvhRefitPlan& plan, CwbvhNode* nodes, Aabb* nodeBo
   }
   if (h < groups) {
     cwbvhTopLevelsKernel<<<1, kTopBlock, 0, stream>>>(nodes, nodeBoxes, plan.levelNodes, plan.deviceStarts, h, groups,
-                                                      slotVertices, positions, root);
+                                                      plan.topLeafBoxes, slotVertices, positions, root);
     CUDA_CHECK_LAUNCH("cwbvhTopLevelsKernel");
   }
 }

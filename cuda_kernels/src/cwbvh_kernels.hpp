@@ -19,6 +19,7 @@ struct CwbvhRefitPlan {
   const uint32_t* deviceStarts = nullptr;  // device: CwbvhLevels::starts
   std::vector<uint32_t> starts;            // host copy of CwbvhLevels::starts
   uint32_t firstTopGroup = 0;              // groups from here on run in one block (cwbvhFirstTopGroup)
+  Aabb* topLeafBoxes = nullptr;            // device scratch: 8 boxes per node of those groups
   uint32_t rootLeafFirst = 0, rootLeafCount = 0;  // a one-leaf tree: its slots
 };
 

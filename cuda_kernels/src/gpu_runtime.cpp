@@ -225,6 +225,8 @@ std::unique_ptr<GpuRuntime::Impl::Cwbvh> GpuRuntime::Impl::uploadCwbvh(const Fla
   c.refit.deviceStarts = c.levelStarts.data();
   c.refit.starts = levels.starts;
   c.refit.firstTopGroup = detail::cwbvhFirstTopGroup(levels.starts);
+  c.topLeafBoxes.resize(std::size_t(levels.starts.back() - levels.starts[c.refit.firstTopGroup]) * kCwbvhWidth);
+  c.refit.topLeafBoxes = c.topLeafBoxes.data();
   if (isLeafRef(c.host.rootRef)) {
     c.refit.rootLeafFirst = leafFirstSlot(c.host.rootRef);
     c.refit.rootLeafCount = c.host.rootCount;
