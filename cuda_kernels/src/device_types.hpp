@@ -48,8 +48,9 @@ struct LeafRecord {
   uint32_t count;
 };
 
-// Which keyframes the interpolation blends, read by the kernel from device memory so that one
-// captured CUDA graph serves every frame. Offsets are in floats.
+// Which keyframes the interpolation blends: a kernel argument, which the runtime sets in its
+// captured graphs before each launch (setInterpolationParams), so one graph serves every frame.
+// Offsets are in floats.
 struct alignas(16) FrameParams {
   uint64_t a = 0, b = 0;
   float alpha = 0.0f;

@@ -64,10 +64,6 @@ void GpuRuntime::Impl::createOnDevice(const TreeSet& set, const anim::Animation&
   CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
   CUDA_CHECK(cudaStreamCreateWithFlags(&sideStream, cudaStreamNonBlocking));
   events.create(16);
-  void* pinned = nullptr;
-  CUDA_CHECK(cudaHostAlloc(&pinned, sizeof(detail::FrameParams), cudaHostAllocDefault));
-  hostParams = new (pinned) detail::FrameParams{};
-  frameParams.resize(1);
   times.assign(animation.times().begin(), animation.times().end());
   // Only the moving vertices are keyed on the device; the static ones are uploaded once into
   // `positions` and never written by the per-frame interpolation.
@@ -140,18 +136,15 @@ GpuRuntime::Impl::~Impl() { releaseDevice(); }
 
 void GpuRuntime::Impl::releaseDevice() noexcept {
   if (stream) cudaStreamSynchronize(stream);
-  for (DeviceTree& t : trees)
-    if (t.updateGraph) cudaGraphExecDestroy(std::exchange(t.updateGraph, nullptr));
-  for (auto& g : rebuildGraphs)
-    if (g.exec) cudaGraphExecDestroy(std::exchange(g.exec, nullptr));
-  if (hostParams) cudaFreeHost(std::exchange(hostParams, nullptr));
+  for (DeviceTree& t : trees) destroy(t.updateGraph);
+  for (auto& g : rebuildGraphs) destroy(g.graph);
   if (sideStream) cudaStreamSynchronize(sideStream);
   if (stream) cudaStreamDestroy(std::exchange(stream, nullptr));
   if (sideStream) cudaStreamDestroy(std::exchange(sideStream, nullptr));
 }
 
 template <typename Enqueue>
-cudaGraphExec_t GpuRuntime::Impl::capture(Enqueue&& enqueue) {
+GpuRuntime::Impl::CapturedGraph GpuRuntime::Impl::capture(Enqueue&& enqueue) {
   CUDA_CHECK(cudaStreamBeginCapture(stream, cudaStreamCaptureModeThreadLocal));
   try {
     enqueue();
@@ -161,28 +154,41 @@ cudaGraphExec_t GpuRuntime::Impl::capture(Enqueue&& enqueue) {
     if (broken) cudaGraphDestroy(broken);
     throw;
   }
-  cudaGraph_t graph = nullptr;
-  CUDA_CHECK(cudaStreamEndCapture(stream, &graph));
-  cudaGraphExec_t exec = nullptr;
-  const cudaError_t status = cudaGraphInstantiate(&exec, graph, 0);
-  cudaGraphDestroy(graph);
-  CUDA_CHECK(status);
-  return exec;
+  CapturedGraph g;
+  CUDA_CHECK(cudaStreamEndCapture(stream, &g.graph));
+  // The graph stays alive with its executable: the interpolation node is updated through it.
+  try {
+    g.interpolation = detail::findInterpolationNode(g.graph);
+    CUDA_CHECK(cudaGraphInstantiate(&g.exec, g.graph, 0));
+  } catch (...) {
+    destroy(g);
+    throw;
+  }
+  return g;
+}
+
+void GpuRuntime::Impl::launch(const CapturedGraph& g) {
+  if (g.interpolation) detail::setInterpolationParams(g.exec, g.interpolation, frame);
+  CUDA_CHECK(cudaGraphLaunch(g.exec, stream));
+}
+
+void GpuRuntime::Impl::destroy(CapturedGraph& g) noexcept {
+  if (g.exec) cudaGraphExecDestroy(std::exchange(g.exec, nullptr));
+  if (g.graph) cudaGraphDestroy(std::exchange(g.graph, nullptr));
+  g.interpolation = nullptr;
 }
 
 void GpuRuntime::Impl::setFrame(double time) {
   const auto [k, alpha] = anim::keyframeBlend(times, time);
   const uint64_t perFrame = uint64_t(movingVertices) * 3;
-  hostParams->a = k * perFrame;
-  hostParams->b = (alpha == 0.0f ? k : k + 1) * perFrame;
-  hostParams->alpha = alpha;
+  frame.a = k * perFrame;
+  frame.b = (alpha == 0.0f ? k : k + 1) * perFrame;
+  frame.alpha = alpha;
 }
 
 void GpuRuntime::Impl::enqueueInterpolation() {
   events.record(0, stream);
-  CUDA_CHECK(cudaMemcpyAsync(frameParams.data(), hostParams, sizeof(detail::FrameParams), cudaMemcpyHostToDevice,
-                             stream));
-  detail::launchInterpolateFrame(keyframes.data(), movingIds.size() ? movingIds.data() : nullptr, frameParams.data(),
+  detail::launchInterpolateFrame(keyframes.data(), movingIds.size() ? movingIds.data() : nullptr, frame,
                                  positions.data(), movingVertices, stream);
   events.record(1, stream);
 }
@@ -353,9 +359,9 @@ UpdateTimings GpuRuntime::updateAt(double time) {
     m.enqueueRefitAndWoop();
   };
   if (m.config.useGraphs) {
-    cudaGraphExec_t& graph = m.tree().updateGraph;
-    if (!graph) graph = m.capture(enqueue);
-    CUDA_CHECK(cudaGraphLaunch(graph, m.stream));
+    Impl::CapturedGraph& graph = m.tree().updateGraph;
+    if (!graph.exec) graph = m.capture(enqueue);
+    m.launch(graph);
   } else {
     enqueue();
   }
@@ -404,7 +410,7 @@ RebuildTimings GpuRuntime::rebuildAt(double time, const RebuildOptions& options)
       m.rebuildGraphs.push_back({options, m.capture(enqueue)});
       it = m.rebuildGraphs.end() - 1;
     }
-    CUDA_CHECK(cudaGraphLaunch(it->exec, m.stream));
+    m.launch(it->graph);
   } else {
     enqueue();
   }

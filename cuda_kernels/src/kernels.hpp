@@ -11,11 +11,17 @@
 namespace tsah::cuda::detail {
 
 // The moving vertices of the frame: for m < movingCount and c < 3, with i = 3m + c,
-// out[3 * v + c] = (1 - alpha) * a[i] + alpha * b[i], a = keyframes + params->a, b = keyframes + params->b,
+// out[3 * v + c] = (1 - alpha) * a[i] + alpha * b[i], a = keyframes + params.a, b = keyframes + params.b,
 // v = movingIds[m] (or m when movingIds is null: every vertex moves); rounded exactly as
 // anim::Animation::positionsAt does (alpha == 0 copies a). Static vertices are not touched.
-void launchInterpolateFrame(const float* keyframes, const uint32_t* movingIds, const FrameParams* params, float* out,
+void launchInterpolateFrame(const float* keyframes, const uint32_t* movingIds, const FrameParams& params, float* out,
                             uint32_t movingCount, cudaStream_t stream);
+
+// The interpolation's kernel node in a graph captured around launchInterpolateFrame (null when
+// there is none: no moving vertex), and the update of its frame before a launch of the graph.
+// (Copying the parameters from pinned host memory inside the graph cost a transfer per frame.)
+cudaGraphNode_t findInterpolationNode(cudaGraph_t graph);
+void setInterpolationParams(cudaGraphExec_t exec, cudaGraphNode_t node, const FrameParams& params);
 
 // Bottom-up refit of an uploaded tree: one thread per leaf record, atomic counters per interior node
 // (must be zero on entry); writes every child box, and root->box. slotVertices: 3 vertex ids per

@@ -30,16 +30,26 @@ struct GpuRuntime::Impl {
   UpdateTimings finishUpdate();
   // The triangles of every vertex in increasing order (once, at the first render).
   void buildVertexTriangles();
-  // Puts the interpolation of time t on the stream (events 0 and 1 around it): keyframe choice in
-  // hostParams, copied to frameParams by the stream, so the same work can be captured once.
+  // Puts the interpolation of time t on the stream (events 0 and 1 around it): setFrame chooses the
+  // keyframes (frame), enqueueInterpolation launches with them; a captured graph gets them from
+  // launch(), so the same work is captured once.
   void setFrame(double time);
   void enqueueInterpolation();
   // Puts the static vertices' rest positions back into `positions` when an update from host
   // positions overwrote them (the interpolation writes only the moving vertices).
   void restoreStaticPositions();
+  // A captured graph, kept with its interpolation node (whose frame launch() sets).
+  struct CapturedGraph {
+    cudaGraph_t graph = nullptr;
+    cudaGraphExec_t exec = nullptr;
+    cudaGraphNode_t interpolation = nullptr;  // null: the graph interpolates nothing
+  };
   // Captures what `enqueue` puts on the stream into an executable graph.
   template <typename Enqueue>
-  cudaGraphExec_t capture(Enqueue&& enqueue);
+  CapturedGraph capture(Enqueue&& enqueue);
+  // Launches a captured graph for the current frame.
+  void launch(const CapturedGraph& g);
+  static void destroy(CapturedGraph& g) noexcept;
 
   Config config;
   DeviceInfo device;
@@ -57,11 +67,10 @@ struct GpuRuntime::Impl {
   bool restInPlace = true;               // `positions` holds the rest positions of the static vertices
   DeviceBuffer<uint32_t> indices;        // 3 per triangle
   DeviceBuffer<float> positions;         // the current frame
-  detail::FrameParams* hostParams = nullptr;  // pinned
-  DeviceBuffer<detail::FrameParams> frameParams;
+  detail::FrameParams frame;             // the keyframes of the current frame (setFrame)
   struct RebuildGraph {
     RebuildOptions options;
-    cudaGraphExec_t exec;
+    CapturedGraph graph;
   };
   std::vector<RebuildGraph> rebuildGraphs;
 
@@ -87,7 +96,7 @@ struct GpuRuntime::Impl {
     DeviceBuffer<uint32_t> slotVertices;  // 3 vertex ids per slot, for the refit and the Woop pass
     DeviceBuffer<detail::LeafRecord> leaves;
     DeviceBuffer<detail::RootInfo> root;
-    cudaGraphExec_t updateGraph = nullptr;  // updateAt's graph for this tree (captured at first use)
+    CapturedGraph updateGraph;              // updateAt's graph for this tree (captured at first use)
     std::unique_ptr<Cwbvh> cwbvh;           // the compressed layout, when Config::layout == cwbvh
   };
   // Validates one tree against the animation and uploads it (and its compressed layout).

@@ -2,6 +2,8 @@
 // Compiled with -fmad=false (see CMakeLists.txt) so every result is bit-identical to the CPU path.
 #include <cuda/atomic>
 
+#include <vector>
+
 #include "kernels.hpp"
 #include "launch.hpp"
 #include "triangle_boxes.cuh"
@@ -11,9 +13,7 @@ namespace tsah::cuda::detail {
 namespace {
 
 __global__ void interpolateFrameKernel(const float* __restrict__ keyframes, const uint32_t* __restrict__ movingIds,
-                                       const FrameParams* __restrict__ params, float* __restrict__ out,
-                                       std::size_t count) {
-  const FrameParams p = *params;
+                                       FrameParams p, float* __restrict__ out, std::size_t count) {
   const float* a = keyframes + p.a;
   const float* b = keyframes + p.b;
   // Same operations and rounding as anim::Animation::positionsAt: beta * a + alpha * b. Scalar
@@ -118,13 +118,40 @@ void launchWoopKernel(VertexIds ids, uint32_t slots, const float* positions, Woo
 
 }  // namespace
 
-void launchInterpolateFrame(const float* keyframes, const uint32_t* movingIds, const FrameParams* params, float* out,
+void launchInterpolateFrame(const float* keyframes, const uint32_t* movingIds, const FrameParams& params, float* out,
                             uint32_t movingCount, cudaStream_t stream) {
   const std::size_t count = std::size_t(movingCount) * 3;
   if (count == 0) return;
   const uint32_t block = 256;
   interpolateFrameKernel<<<gridFor(count, block), block, 0, stream>>>(keyframes, movingIds, params, out, count);
   CUDA_CHECK_LAUNCH("interpolateFrameKernel");
+}
+
+cudaGraphNode_t findInterpolationNode(cudaGraph_t graph) {
+  std::size_t count = 0;
+  CUDA_CHECK(cudaGraphGetNodes(graph, nullptr, &count));
+  std::vector<cudaGraphNode_t> nodes(count);
+  CUDA_CHECK(cudaGraphGetNodes(graph, nodes.data(), &count));
+  for (cudaGraphNode_t node : nodes) {
+    cudaGraphNodeType type;
+    CUDA_CHECK(cudaGraphNodeGetType(node, &type));
+    if (type != cudaGraphNodeTypeKernel) continue;
+    cudaKernelNodeParams p{};
+    CUDA_CHECK(cudaGraphKernelNodeGetParams(node, &p));
+    if (p.func == reinterpret_cast<void*>(&interpolateFrameKernel)) return node;
+  }
+  return nullptr;
+}
+
+void setInterpolationParams(cudaGraphExec_t exec, cudaGraphNode_t node, const FrameParams& params) {
+  cudaKernelNodeParams p{};
+  CUDA_CHECK(cudaGraphKernelNodeGetParams(node, &p));
+  // The captured arguments (keyframes, movingIds, out, count) stay; only the frame changes.
+  void* args[5] = {p.kernelParams[0], p.kernelParams[1], const_cast<FrameParams*>(&params), p.kernelParams[3],
+                   p.kernelParams[4]};
+  p.kernelParams = args;
+  p.extra = nullptr;
+  CUDA_CHECK(cudaGraphExecKernelNodeSetParams(exec, node, &p));
 }
 
 void launchRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
