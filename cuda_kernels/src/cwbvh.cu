@@ -47,9 +47,9 @@ __device__ __forceinline__ Aabb slotLeafBox(const CwbvhNodeWords& n, uint32_t sl
 // lane of the warp taking part (the shuffles); `valid` false for lanes without a node. Each lane
 // forms its slot's exact box: an interior child's union (nodeBoxes, written by the child's own
 // group earlier), a leaf child's box (leafBoxOf(meta): from its triangles, or computed earlier),
-// nothing for an empty slot. Every lane then forms the node's union from all 8 boxes (shuffled, in
-// slot order: the same extends as cwbvhQuantize, so the same bits as tsah::refitCwbvh) and the
-// exponents, and quantizes its own slot (cwbvhSlotPlanes). Words 0 (p, e; triCount kept) and 2-4
+// nothing for an empty slot. The lanes then form the node's union (in cwbvhChildUnion's order, so
+// the same bits as tsah::refitCwbvh) and the exponents, and each quantizes its own slot
+// (cwbvhSlotPlanes). Words 0 (p, e; triCount kept) and 2-4
 // (qlo, qhi) are rewritten; word 1 (bases, meta) never changes. Slot 0 stores the union as the
 // node's box (and the root's).
 template <class LeafBoxOf>
@@ -60,27 +60,43 @@ __device__ __forceinline__ void refitNodeLanes(CwbvhNode* __restrict__ nodes, Aa
   const CwbvhNodeWords n = loadRefitWords(nodes, node, valid);
   const uint32_t meta = n.metaOf(slot);
   const bool empty = meta == 0;
-  Aabb mine;
-  if (meta & kCwbvhInterior) {
-    const uint32_t rank = cwbvhPopc(n.interiorSlots() & ((1u << slot) - 1u));
-    mine = loadBoxL2(nodeBoxes + n.w[4] + rank);
-  } else if (!empty) {
-    mine = leafBoxOf(n, meta);
-  }
-  Aabb all;
-  const uint32_t group = (threadIdx.x & 31u) & ~(kCwbvhWidth - 1u);  // first lane of this node's 8
+  const uint32_t rank = cwbvhPopc(n.interiorSlots() & ((1u << slot) - 1u));
+  const Aabb mine = (meta & kCwbvhInterior) ? loadBoxL2(nodeBoxes + n.w[4] + rank)
+                    : !empty                ? leafBoxOf(n, meta)
+                                            : Aabb{};
+  // The union, as cwbvhChildUnion forms it: three exchanges, each joining the lower and the upper
+  // half of an aligned block of slots (which of them holds an occupied slot is in the meta words).
+  const uint32_t occupied = n.interiorSlots() | n.leafSlots();
+  Aabb partBox = mine;  // (a CwbvhPartialUnion here put `mine` in local memory)
+  bool partAny = !empty;
 #pragma unroll
-  for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
-    Aabb b;
-    b.lo = {__shfl_sync(0xffffffffu, mine.lo.x, group + s), __shfl_sync(0xffffffffu, mine.lo.y, group + s),
-            __shfl_sync(0xffffffffu, mine.lo.z, group + s)};
-    b.hi = {__shfl_sync(0xffffffffu, mine.hi.x, group + s), __shfl_sync(0xffffffffu, mine.hi.y, group + s),
-            __shfl_sync(0xffffffffu, mine.hi.z, group + s)};
-    if (n.metaOf(s) != 0) all.extend(b);
+  for (uint32_t width = 1; width < kCwbvhWidth; width *= 2) {
+    Aabb other;
+    other.lo = {__shfl_xor_sync(0xffffffffu, partBox.lo.x, width), __shfl_xor_sync(0xffffffffu, partBox.lo.y, width),
+                __shfl_xor_sync(0xffffffffu, partBox.lo.z, width)};
+    other.hi = {__shfl_xor_sync(0xffffffffu, partBox.hi.x, width), __shfl_xor_sync(0xffffffffu, partBox.hi.y, width),
+                __shfl_xor_sync(0xffffffffu, partBox.hi.z, width)};
+    const uint32_t otherFirst = (slot ^ width) & ~(width - 1u);
+    const bool otherAny = ((occupied >> otherFirst) & ((1u << width) - 1u)) != 0;
+    // cwbvhJoin(lower half, upper half), written as selects.
+    const bool upperHalf = (slot & width) != 0;  // the other half is the lower one
+    const Aabb lower = upperHalf ? other : partBox, upper = upperHalf ? partBox : other;
+    const bool lowerAny = upperHalf ? otherAny : partAny, upperAny = upperHalf ? partAny : otherAny;
+    Aabb joined = lower;
+    joined.extend(upper);
+    partBox = lowerAny && upperAny ? joined : lowerAny ? lower : upper;
+    partAny = lowerAny || upperAny;
   }
+  const Aabb all = partBox;
+  // The grid exponents (cwbvhGridExponents): lanes 0-2 of the node form one axis each, the others
+  // take them from there.
+  const uint32_t group = (threadIdx.x & 31u) & ~(kCwbvhWidth - 1u);  // first lane of this node's 8
+  const float lo = slot == 1 ? all.lo.y : slot == 2 ? all.lo.z : all.lo.x;
+  const float hi = slot == 1 ? all.hi.y : slot == 2 ? all.hi.z : all.hi.x;
+  const uint32_t own = tsah::detail::cwbvhExponent(lo, hi);
+  const uint32_t e[3] = {__shfl_sync(0xffffffffu, own, group), __shfl_sync(0xffffffffu, own, group + 1),
+                         __shfl_sync(0xffffffffu, own, group + 2)};
   if (!valid) return;
-  uint32_t e[3];
-  cwbvhGridExponents(all, e);
   const CwbvhSlotPlanes q = cwbvhSlotPlanes(empty, empty ? all : mine, all, e);
   CwbvhNode* out = nodes + node;
 #pragma unroll

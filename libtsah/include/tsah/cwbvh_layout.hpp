@@ -241,11 +241,39 @@ TSAH_HD CwbvhSlotPlanes cwbvhSlotPlanes(bool empty, const Aabb& box, const Aabb&
   return q;
 }
 
-TSAH_HD Aabb cwbvhQuantize(CwbvhNode& n, const Aabb* boxes) {
-  Aabb all;
+// The union of a node's occupied child boxes (occupied: bit s for slot s), formed in a fixed order
+// of pairs: ((0 1) (2 3)) ((4 5) (6 7)), the lower half first, an empty half adding nothing. That
+// is the order in which 8 lanes of a warp form it with three exchanges (the GPU refit), and the
+// order fixes the bits where boxes tie at -0 / +0 or hold a NaN.
+struct CwbvhPartialUnion {
+  Aabb box;
+  bool any = false;  // some occupied slot is in it
+};
+TSAH_HD CwbvhPartialUnion cwbvhJoin(const CwbvhPartialUnion& lower, const CwbvhPartialUnion& upper) {
+  if (!lower.any) return upper;
+  if (!upper.any) return lower;
+  CwbvhPartialUnion u = lower;
+  u.box.extend(upper.box);
+  return u;
+}
+TSAH_HD Aabb cwbvhChildUnion(const Aabb* boxes, uint32_t occupied) {
+  CwbvhPartialUnion part[kCwbvhWidth];
   TSAH_CWBVH_UNROLL
-  for (uint32_t s = 0; s < kCwbvhWidth; ++s)
-    if (!n.isEmpty(s)) all.extend(boxes[s]);
+  for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
+    part[s].any = (occupied >> s) & 1u;
+    if (part[s].any) part[s].box = boxes[s];
+  }
+  TSAH_CWBVH_UNROLL
+  for (uint32_t width = 1; width < kCwbvhWidth; width *= 2)
+    TSAH_CWBVH_UNROLL
+    for (uint32_t s = 0; s < kCwbvhWidth; s += 2 * width) part[s] = cwbvhJoin(part[s], part[s + width]);
+  return part[0].box;
+}
+
+TSAH_HD Aabb cwbvhQuantize(CwbvhNode& n, const Aabb* boxes) {
+  uint32_t occupied = 0;
+  for (uint32_t s = 0; s < kCwbvhWidth; ++s) occupied |= n.isEmpty(s) ? 0u : 1u << s;
+  const Aabb all = cwbvhChildUnion(boxes, occupied);
   n.px = all.lo.x;
   n.py = all.lo.y;
   n.pz = all.lo.z;
