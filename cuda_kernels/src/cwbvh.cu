@@ -21,6 +21,14 @@ __device__ __forceinline__ Aabb loadBoxL2(const Aabb* b) {
   return box;
 }
 
+// c ? a : b, component by component (a select of whole boxes went through local memory).
+__device__ __forceinline__ Aabb pickBox(bool c, const Aabb& a, const Aabb& b) {
+  Aabb r;
+  r.lo = {c ? a.lo.x : b.lo.x, c ? a.lo.y : b.lo.y, c ? a.lo.z : b.lo.z};
+  r.hi = {c ? a.hi.x : b.hi.x, c ? a.hi.y : b.hi.y, c ? a.hi.z : b.hi.z};
+  return r;
+}
+
 // Words 3-7 of a node (exponents and triCount, childBase, triBase, meta[8]): what the refit reads.
 __device__ __forceinline__ CwbvhNodeWords loadRefitWords(const CwbvhNode* __restrict__ nodes, uint32_t node, bool valid) {
   CwbvhNodeWords n{};
@@ -80,11 +88,11 @@ __device__ __forceinline__ void refitNodeLanes(CwbvhNode* __restrict__ nodes, Aa
     const bool otherAny = ((occupied >> otherFirst) & ((1u << width) - 1u)) != 0;
     // cwbvhJoin(lower half, upper half), written as selects.
     const bool upperHalf = (slot & width) != 0;  // the other half is the lower one
-    const Aabb lower = upperHalf ? other : partBox, upper = upperHalf ? partBox : other;
+    const Aabb lower = pickBox(upperHalf, other, partBox), upper = pickBox(upperHalf, partBox, other);
     const bool lowerAny = upperHalf ? otherAny : partAny, upperAny = upperHalf ? partAny : otherAny;
     Aabb joined = lower;
     joined.extend(upper);
-    partBox = lowerAny && upperAny ? joined : lowerAny ? lower : upper;
+    partBox = pickBox(lowerAny && upperAny, joined, pickBox(lowerAny, lower, upper));
     partAny = lowerAny || upperAny;
   }
   const Aabb all = partBox;
@@ -97,7 +105,8 @@ __device__ __forceinline__ void refitNodeLanes(CwbvhNode* __restrict__ nodes, Aa
   const uint32_t e[3] = {__shfl_sync(0xffffffffu, own, group), __shfl_sync(0xffffffffu, own, group + 1),
                          __shfl_sync(0xffffffffu, own, group + 2)};
   if (!valid) return;
-  const CwbvhSlotPlanes q = cwbvhSlotPlanes(empty, empty ? all : mine, all, e);
+  const Aabb slotBox = pickBox(empty, all, mine);  // (a select of references put both boxes in local memory)
+  const CwbvhSlotPlanes q = cwbvhSlotPlanes(empty, slotBox, all, e);
   CwbvhNode* out = nodes + node;
 #pragma unroll
   for (int a = 0; a < 3; ++a) {
