@@ -470,6 +470,29 @@ TSAH_HD CwbvhSlabLine cwbvhSlabLine(float p, float step, float org, float invDir
   return l;
 }
 
+// A slot's entry and exit distance from its three slab distances per side: max(a, b, c, tmin) and
+// min(a, b, c, tmax), NaN dropping out. On the GPU (sm_90 and later) the three slabs go through one
+// three-way integer max / min of their bits (VIMNMX3), where the float form needs two float
+// min/max: the traversal's box test is bound by that pipe. Bits of floats of one sign order like
+// the floats (reversed for negative ones), so the integer form differs from the float one only
+// where signs mix or a NaN takes part, and there it returns a value at or below the float max
+// (entry) or at or above the float min (exit): the slab interval only widens, as it does where a
+// NaN drops out, and no ray misses a box it enters in the float form.
+TSAH_HD float cwbvhSlabEntry(float a, float b, float c, float tmin) {
+#if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 900
+  return rounding::maxNum(__int_as_float(__vimax3_s32(__float_as_int(a), __float_as_int(b), __float_as_int(c))), tmin);
+#else
+  return rounding::maxNum(rounding::maxNum(a, b), rounding::maxNum(c, tmin));
+#endif
+}
+TSAH_HD float cwbvhSlabExit(float a, float b, float c, float tmax) {
+#if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 900
+  return rounding::minNum(__int_as_float(__vimin3_s32(__float_as_int(a), __float_as_int(b), __float_as_int(c))), tmax);
+#else
+  return rounding::minNum(rounding::minNum(a, b), rounding::minNum(c, tmax));
+#endif
+}
+
 // A group of interior children still to visit (the paper's node group): the children's base
 // index, their interior-slot mask and the hit children as bits of slot ^ oct.
 struct CwbvhNodeGroup {
@@ -568,10 +591,10 @@ struct CwbvhTraversal {
     uint32_t boxHits = 0;
     TSAH_CWBVH_UNROLL
     for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
-      const float tn = rounding::maxNum(rounding::maxNum(x.nearAt(near.biasedAt(0, s)), y.nearAt(near.biasedAt(1, s))),
-                                        rounding::maxNum(z.nearAt(near.biasedAt(2, s)), ray.tmin));
-      const float tf = rounding::minNum(rounding::minNum(x.farAt(far.biasedAt(0, s)), y.farAt(far.biasedAt(1, s))),
-                                        rounding::minNum(z.farAt(far.biasedAt(2, s)), tmax)) *
+      const float tn = cwbvhSlabEntry(x.nearAt(near.biasedAt(0, s)), y.nearAt(near.biasedAt(1, s)),
+                                      z.nearAt(near.biasedAt(2, s)), ray.tmin);
+      const float tf = cwbvhSlabExit(x.farAt(far.biasedAt(0, s)), y.farAt(far.biasedAt(1, s)),
+                                     z.farAt(far.biasedAt(2, s)), tmax) *
                        kSlabFarScale;
       if (tn <= tf) boxHits |= 1u << s;
     }
