@@ -1,7 +1,8 @@
 // The compressed 8-wide BVH on the device: the per-frame refit + re-quantization and the traversal.
-// Both run libtsah's TSAH_HD code (cwbvh_layout.hpp: cwbvhQuantize, cwbvhClosestHit/AnyHit, the
-// box test of ray.hpp and the triangle test of woop.hpp), compiled with -fmad=false like the rest
-// of the per-frame path, so nodes equal tsah::refitCwbvh's and hits the CPU reference traversal's.
+// Both run libtsah's TSAH_HD code (cwbvh_quantize.hpp: the planes and the union; cwbvh_layout.hpp:
+// cwbvhClosestHit/AnyHit, the box test of ray.hpp and the triangle test of woop.hpp), compiled
+// with -fmad=false like the rest of the per-frame path, so nodes equal tsah::refitCwbvh's and hits
+// the CPU reference traversal's.
 #include "cwbvh_kernels.hpp"
 #include "launch.hpp"
 #include "triangle_boxes.cuh"
