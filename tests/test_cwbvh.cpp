@@ -337,6 +337,54 @@ namespace {
 
 // The traversal's slot masks (interiorSlots, leafSlots from the meta words) and the octant
 // permutation agree with the per-slot definitions for every meta pattern kind and octant.
+// The box test takes each slot's entry / exit through a three-way max / min of the slab distances'
+// bits (cwbvhSlabEntry / cwbvhSlabExit). Against the float form: never a shorter interval (entry at
+// or below, exit at or above), so every box the float form enters is entered; the float max / min
+// where the three distances are non-negative, the float min / max where all are negative. Over
+// random, signed-zero, infinite and NaN distances, and ray intervals whose bounds are not NaN.
+TEST(CwbvhTraversal, SlabBitsWidenTheFloatInterval) {
+  using tsah::rounding::maxNum;
+  using tsah::rounding::minNum;
+  std::mt19937 rng(23);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
+  const float specials[] = {0.0f, -0.0f, inf, -inf, nan, -nan, 1e-45f, -1e-45f, 3.4e38f, -3.4e38f};
+  auto pick = [&]() {
+    if (rng() % 6 == 0) return specials[rng() % std::size(specials)];
+    return u(rng) * std::ldexp(1.0f, int(rng() % 60) - 30);
+  };
+  uint32_t entered = 0, sameSign = 0;
+  for (int round = 0; round < 300000; ++round) {
+    const float a = pick(), b = pick(), c = pick(), d = pick(), e = pick(), f = pick();
+    const float tmin = rng() % 4 == 0 ? 0.0f : std::fabs(u(rng)) * 1e-3f;
+    float tmax = rng() % 4 == 0 ? inf : std::fabs(pick());
+    if (std::isnan(tmax)) tmax = 1.0f;  // a NaN bound: the triangle test never reports a hit anyway
+    const float entryFloat = maxNum(maxNum(a, b), maxNum(c, tmin));
+    const float exitFloat = minNum(minNum(d, e), minNum(f, tmax));
+    const float entryBits = tsah::cwbvhSlabEntry(a, b, c, tmin), exitBits = tsah::cwbvhSlabExit(d, e, f, tmax);
+    ASSERT_FALSE(entryBits > entryFloat) << a << " " << b << " " << c << " " << tmin;
+    ASSERT_FALSE(exitBits < exitFloat) << d << " " << e << " " << f << " " << tmax;
+    if (entryFloat <= exitFloat) {
+      ASSERT_TRUE(entryBits <= exitBits) << a << " " << b << " " << c << " | " << d << " " << e << " " << f << " " << tmax;
+      ++entered;
+    }
+    // Bits of non-negative floats order like the floats, of negative ones the other way round.
+    const bool noNan = !std::isnan(a) && !std::isnan(b) && !std::isnan(c);
+    const auto below = [](float x, float y) { return x < y || (x == y && std::signbit(x) && !std::signbit(y)); };
+    if (noNan && !std::signbit(a) && !std::signbit(b) && !std::signbit(c)) {
+      ASSERT_EQ(tsah::cwbvhBitsMax3(a, b, c), std::max({a, b, c}, below));
+      ASSERT_EQ(tsah::cwbvhBitsMin3(a, b, c), std::min({a, b, c}, below));
+      ++sameSign;
+    } else if (noNan && std::signbit(a) && std::signbit(b) && std::signbit(c)) {
+      ASSERT_EQ(tsah::cwbvhBitsMax3(a, b, c), std::min({a, b, c}, below));
+      ASSERT_EQ(tsah::cwbvhBitsMin3(a, b, c), std::max({a, b, c}, below));
+      ++sameSign;
+    }
+  }
+  EXPECT_GT(entered, 3000u);  // 5,808 with this seed
+  EXPECT_GT(sameSign, 50000u);
+}
+
 TEST(CwbvhTraversal, SlotMasksAndOctantPermutation) {
   std::mt19937 rng(11);
   for (int trial = 0; trial < 2000; ++trial) {

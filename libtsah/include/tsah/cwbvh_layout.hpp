@@ -3,6 +3,7 @@
 // quantization, both included here), shared by the CPU reference traversal and the CUDA kernels
 // (TSAH_HD): the paper's stack-based traversal with node and triangle groups, the ray-local box
 // test with directed rounding and the triangle test of woop.hpp.
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -196,26 +197,39 @@ TSAH_HD CwbvhSlabLine cwbvhSlabLine(float p, float step, float org, float invDir
 }
 
 // A slot's entry and exit distance from its three slab distances per side: max(a, b, c, tmin) and
-// min(a, b, c, tmax), NaN dropping out. On the GPU (sm_90 and later) the three slabs go through one
-// three-way integer max / min of their bits (VIMNMX3), where the float form needs two float
-// min/max: the traversal's box test is bound by that pipe. Bits of floats of one sign order like
-// the floats (reversed for negative ones), so the integer form differs from the float one only
-// where signs mix or a NaN takes part, and there it returns a value at or below the float max
-// (entry) or at or above the float min (exit): the slab interval only widens, as it does where a
-// NaN drops out, and no ray misses a box it enters in the float form.
-TSAH_HD float cwbvhSlabEntry(float a, float b, float c, float tmin) {
+// min(a, b, c, tmax), NaN dropping out. The three slabs go through one three-way max / min of their
+// bits as signed integers (on sm_90 one instruction, VIMNMX3, where the float form needs two float
+// min/max: the GPU box test is bound by that pipe); the CPU reference takes the same path, so both
+// visit the same nodes. Bits of non-negative floats order like the floats and those of negative
+// ones the other way round, so the integer form equals the float one where the three distances are
+// non-negative (and no NaN), and elsewhere returns a value at or below the float max (entry) or at
+// or above the float min (exit): the slab interval only widens, as it does where a NaN drops out,
+// and no ray misses a box that the float form enters (CwbvhTraversal.SlabBitsWidenTheFloatInterval;
+// for a ray whose tmin or tmax is NaN that does not hold, but the triangle test never reports a
+// hit for such a ray either).
+TSAH_HD float cwbvhBitsMax3(float a, float b, float c) {
 #if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 900
-  return rounding::maxNum(__int_as_float(__vimax3_s32(__float_as_int(a), __float_as_int(b), __float_as_int(c))), tmin);
+  return __int_as_float(__vimax3_s32(__float_as_int(a), __float_as_int(b), __float_as_int(c)));
 #else
-  return rounding::maxNum(rounding::maxNum(a, b), rounding::maxNum(c, tmin));
+  const int32_t m = std::max(std::max(int32_t(detail::floatBits(a)), int32_t(detail::floatBits(b))),
+                             int32_t(detail::floatBits(c)));
+  return detail::bitsFloat(uint32_t(m));
 #endif
 }
-TSAH_HD float cwbvhSlabExit(float a, float b, float c, float tmax) {
+TSAH_HD float cwbvhBitsMin3(float a, float b, float c) {
 #if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 900
-  return rounding::minNum(__int_as_float(__vimin3_s32(__float_as_int(a), __float_as_int(b), __float_as_int(c))), tmax);
+  return __int_as_float(__vimin3_s32(__float_as_int(a), __float_as_int(b), __float_as_int(c)));
 #else
-  return rounding::minNum(rounding::minNum(a, b), rounding::minNum(c, tmax));
+  const int32_t m = std::min(std::min(int32_t(detail::floatBits(a)), int32_t(detail::floatBits(b))),
+                             int32_t(detail::floatBits(c)));
+  return detail::bitsFloat(uint32_t(m));
 #endif
+}
+TSAH_HD float cwbvhSlabEntry(float a, float b, float c, float tmin) {
+  return rounding::maxNum(cwbvhBitsMax3(a, b, c), tmin);
+}
+TSAH_HD float cwbvhSlabExit(float a, float b, float c, float tmax) {
+  return rounding::minNum(cwbvhBitsMin3(a, b, c), tmax);
 }
 
 // A group of interior children still to visit (the paper's node group): the children's base

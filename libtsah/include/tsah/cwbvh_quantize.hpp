@@ -3,6 +3,7 @@
 // grid exponents, each slot's 8-bit planes and the union of the children, shared by the host
 // (buildCwbvh, refitCwbvh, convertToCwbvh) and the GPU refit (TSAH_HD).
 #include <cstdint>
+#include <cstring>
 
 #include "tsah/aabb.hpp"
 #include "tsah/cwbvh_node.hpp"
@@ -20,6 +21,16 @@ TSAH_HD uint32_t floatBits(float f) {
   uint32_t u;
   std::memcpy(&u, &f, sizeof u);
   return u;
+#endif
+}
+
+TSAH_HD float bitsFloat(uint32_t u) {
+#if defined(__CUDA_ARCH__)
+  return __uint_as_float(u);
+#else
+  float f;
+  std::memcpy(&f, &u, sizeof f);
+  return f;
 #endif
 }
 
