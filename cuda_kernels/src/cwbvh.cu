@@ -58,9 +58,8 @@ __device__ __forceinline__ Aabb slotLeafBox(const CwbvhNodeWords& n, uint32_t sl
 // group earlier), a leaf child's box (leafBoxOf(meta): from its triangles, or computed earlier),
 // nothing for an empty slot. The lanes then form the node's union (in cwbvhChildUnion's order, so
 // the same bits as tsah::refitCwbvh) and the exponents, and each quantizes its own slot
-// (cwbvhSlotPlanes). Words 0 (p, e; triCount kept) and 2-4
-// (qlo, qhi) are rewritten; word 1 (bases, meta) never changes. Slot 0 stores the union as the
-// node's box (and the root's).
+// (cwbvhSlotPlanes). Words 0 (p, e; triCount kept) and 2-4 (qlo, qhi) are rewritten; word 1
+// (bases, meta) never changes. Slot 0 stores the union as the node's box (and the root's).
 template <class LeafBoxOf>
 __device__ __forceinline__ void refitNodeLanes(CwbvhNode* __restrict__ nodes, Aabb* __restrict__ nodeBoxes,
                                                uint32_t node, bool valid, LeafBoxOf leafBoxOf,
