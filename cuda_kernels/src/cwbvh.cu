@@ -22,12 +22,9 @@ __device__ __forceinline__ Aabb loadBoxL2(const Aabb* b) {
   return box;
 }
 
-// c ? a : b, component by component (a select of whole boxes went through local memory).
-__device__ __forceinline__ Aabb pickBox(bool c, const Aabb& a, const Aabb& b) {
-  Aabb r;
-  r.lo = {c ? a.lo.x : b.lo.x, c ? a.lo.y : b.lo.y, c ? a.lo.z : b.lo.z};
-  r.hi = {c ? a.hi.x : b.hi.x, c ? a.hi.y : b.hi.y, c ? a.hi.z : b.hi.z};
-  return r;
+__device__ __forceinline__ void storeBox(Aabb* b, const Aabb& box) {
+  float* f = reinterpret_cast<float*>(b);
+  f[0] = box.lo.x, f[1] = box.lo.y, f[2] = box.lo.z, f[3] = box.hi.x, f[4] = box.hi.y, f[5] = box.hi.z;
 }
 
 // Words 3-7 of a node (exponents and triCount, childBase, triBase, meta[8]): what the refit reads.
@@ -47,9 +44,7 @@ __device__ __forceinline__ Aabb slotLeafBox(const CwbvhNodeWords& n, uint32_t sl
                                             const uint32_t* __restrict__ slotVertices,
                                             const float* __restrict__ positions) {
   const uint32_t first = meta & 0x3fu;
-  const uint32_t later = n.leafSlots() & ~((2u << slot) - 1u);
-  const uint32_t end = later != 0 ? n.metaOf(cwbvhLowestBit(later)) & 0x3fu : n.byteAt(15);
-  return leafBox(n.w[5] + first, end - first, slotVertices, positions);
+  return leafBox(n.w[5] + first, n.leafEnd(slot, n.leafSlots()) - first, slotVertices, positions);
 }
 
 // The refit and re-quantization of one node by 8 aligned lanes of a warp (lane s: slot s), every
@@ -75,27 +70,23 @@ __device__ __forceinline__ void refitNodeLanes(CwbvhNode* __restrict__ nodes, Aa
   // The union, as cwbvhChildUnion forms it: three exchanges, each joining the lower and the upper
   // half of an aligned block of slots (which of them holds an occupied slot is in the meta words).
   const uint32_t occupied = n.interiorSlots() | n.leafSlots();
-  Aabb partBox = mine;  // (a CwbvhPartialUnion here put `mine` in local memory)
-  bool partAny = !empty;
+  CwbvhPartialUnion part{mine, !empty};
 #pragma unroll
   for (uint32_t width = 1; width < kCwbvhWidth; width *= 2) {
-    Aabb other;
-    other.lo = {__shfl_xor_sync(0xffffffffu, partBox.lo.x, width), __shfl_xor_sync(0xffffffffu, partBox.lo.y, width),
-                __shfl_xor_sync(0xffffffffu, partBox.lo.z, width)};
-    other.hi = {__shfl_xor_sync(0xffffffffu, partBox.hi.x, width), __shfl_xor_sync(0xffffffffu, partBox.hi.y, width),
-                __shfl_xor_sync(0xffffffffu, partBox.hi.z, width)};
+    CwbvhPartialUnion other;
+    other.box.lo = {__shfl_xor_sync(0xffffffffu, part.box.lo.x, width),
+                    __shfl_xor_sync(0xffffffffu, part.box.lo.y, width),
+                    __shfl_xor_sync(0xffffffffu, part.box.lo.z, width)};
+    other.box.hi = {__shfl_xor_sync(0xffffffffu, part.box.hi.x, width),
+                    __shfl_xor_sync(0xffffffffu, part.box.hi.y, width),
+                    __shfl_xor_sync(0xffffffffu, part.box.hi.z, width)};
     const uint32_t otherFirst = (slot ^ width) & ~(width - 1u);
-    const bool otherAny = ((occupied >> otherFirst) & ((1u << width) - 1u)) != 0;
-    // cwbvhJoin(lower half, upper half), written as selects.
+    other.any = ((occupied >> otherFirst) & ((1u << width) - 1u)) != 0;
     const bool upperHalf = (slot & width) != 0;  // the other half is the lower one
-    const Aabb lower = pickBox(upperHalf, other, partBox), upper = pickBox(upperHalf, partBox, other);
-    const bool lowerAny = upperHalf ? otherAny : partAny, upperAny = upperHalf ? partAny : otherAny;
-    Aabb joined = lower;
-    joined.extend(upper);
-    partBox = pickBox(lowerAny && upperAny, joined, pickBox(lowerAny, lower, upper));
-    partAny = lowerAny || upperAny;
+    part = cwbvhJoin({cwbvhSelectBox(upperHalf, other.box, part.box), upperHalf ? other.any : part.any},
+                     {cwbvhSelectBox(upperHalf, part.box, other.box), upperHalf ? part.any : other.any});
   }
-  const Aabb all = partBox;
+  const Aabb all = part.box;
   // The grid exponents (cwbvhGridExponents): lanes 0-2 of the node form one axis each, the others
   // take them from there.
   const uint32_t group = (threadIdx.x & 31u) & ~(kCwbvhWidth - 1u);  // first lane of this node's 8
@@ -105,7 +96,7 @@ __device__ __forceinline__ void refitNodeLanes(CwbvhNode* __restrict__ nodes, Aa
   const uint32_t e[3] = {__shfl_sync(0xffffffffu, own, group), __shfl_sync(0xffffffffu, own, group + 1),
                          __shfl_sync(0xffffffffu, own, group + 2)};
   if (!valid) return;
-  const Aabb slotBox = pickBox(empty, all, mine);  // (a select of references put both boxes in local memory)
+  const Aabb slotBox = cwbvhSelectBox(empty, all, mine);  // (a select of references put both boxes in local memory)
   const CwbvhSlotPlanes q = cwbvhSlotPlanes(empty, slotBox, all, e);
   CwbvhNode* out = nodes + node;
 #pragma unroll
@@ -120,8 +111,7 @@ __device__ __forceinline__ void refitNodeLanes(CwbvhNode* __restrict__ nodes, Aa
     out->ex = uint8_t(e[0]);
     out->ey = uint8_t(e[1]);
     out->ez = uint8_t(e[2]);
-    float* f = reinterpret_cast<float*>(nodeBoxes + node);
-    f[0] = all.lo.x, f[1] = all.lo.y, f[2] = all.lo.z, f[3] = all.hi.x, f[4] = all.hi.y, f[5] = all.hi.z;
+    storeBox(nodeBoxes + node, all);
     if (node == 0) root->box = all;
   }
 }
@@ -165,9 +155,8 @@ __global__ void __launch_bounds__(kTopBlock)
     const CwbvhNodeWords n = loadRefitWords(nodes, __ldg(levelNodes + item), true);
     const uint32_t meta = n.metaOf(slot);
     if ((meta & 0xc0u) == kCwbvhLeaf) {
-      const Aabb b = slotLeafBox(n, slot, meta, slotVertices, positions);
-      float* f = reinterpret_cast<float*>(leafBoxes + std::size_t(item - topBegin) * kCwbvhWidth + slot);
-      f[0] = b.lo.x, f[1] = b.lo.y, f[2] = b.lo.z, f[3] = b.hi.x, f[4] = b.hi.y, f[5] = b.hi.z;
+      storeBox(leafBoxes + std::size_t(item - topBegin) * kCwbvhWidth + slot,
+               slotLeafBox(n, slot, meta, slotVertices, positions));
     }
   }
   __syncthreads();
@@ -266,15 +255,28 @@ void launchWideTyped(const CwbvhView& view, const RootInfo* root, const Ray* ray
 
 }  // namespace
 
-uint32_t cwbvhFirstTopGroup(const std::vector<uint32_t>& starts) {
-  // A group of up to 64 nodes takes two passes of the block (32 nodes each): cheaper than a launch.
+CwbvhRefitPlan makeCwbvhRefitPlan(const CwbvhTree& tree, cudaStream_t stream) {
+  CwbvhRefitPlan plan;
+  if (isLeafRef(tree.rootRef)) {
+    plan.rootLeafFirst = leafFirstSlot(tree.rootRef);
+    plan.rootLeafCount = tree.rootCount;
+  }
+  const CwbvhLevels levels = cwbvhLevels(tree);
+  plan.levelNodes = DeviceBuffer<uint32_t>(std::span<const uint32_t>(levels.nodes), stream);
+  plan.levelStarts = DeviceBuffer<uint32_t>(std::span<const uint32_t>(levels.starts), stream);
+  plan.starts = levels.starts;
+  // From the top down, the groups that take at most two passes of the block (32 nodes each) share
+  // it: cheaper than a launch each.
   constexpr uint32_t kTopGroupNodes = 2 * kTopBlock / kCwbvhWidth;
-  uint32_t top = uint32_t(starts.size()) - 1;
-  while (top > 0 && starts[top] - starts[top - 1] <= kTopGroupNodes) --top;
-  return top;
+  uint32_t top = uint32_t(plan.starts.size()) - 1;
+  while (top > 0 && plan.starts[top] - plan.starts[top - 1] <= kTopGroupNodes) --top;
+  plan.firstTopGroup = top;
+  plan.topLeafBoxes.resize(std::size_t(plan.starts.back() - plan.starts[top]) * kCwbvhWidth);
+  CUDA_CHECK(cudaStreamSynchronize(stream));  // before `levels` goes
+  return plan;
 }
 
-void launchCwbvhRefit(const CwbvhRefitPlan& plan, CwbvhNode* nodes, Aabb* nodeBoxes, const uint32_t* slotVertices,
+void launchCwbvhRefit(CwbvhRefitPlan& plan, CwbvhNode* nodes, Aabb* nodeBoxes, const uint32_t* slotVertices,
                       const float* positions, RootInfo* root, cudaStream_t stream) {
   if (plan.rootLeafCount > 0) {  // one leaf, no nodes
     cwbvhRootLeafKernel<<<1, 1, 0, stream>>>(plan.rootLeafFirst, plan.rootLeafCount, slotVertices, positions, root);
@@ -286,12 +288,13 @@ void launchCwbvhRefit(const CwbvhRefitPlan& plan, CwbvhNode* nodes, Aabb* nodeBo
   for (; h < groups && h < plan.firstTopGroup; ++h) {
     const uint32_t count = plan.starts[h + 1] - plan.starts[h];
     cwbvhLevelKernel<<<gridFor(std::size_t(count) * kCwbvhWidth, kLevelBlock), kLevelBlock, 0, stream>>>(
-        nodes, nodeBoxes, plan.levelNodes + plan.starts[h], count, slotVertices, positions, root);
+        nodes, nodeBoxes, plan.levelNodes.data() + plan.starts[h], count, slotVertices, positions, root);
     CUDA_CHECK_LAUNCH("cwbvhLevelKernel");
   }
   if (h < groups) {
-    cwbvhTopLevelsKernel<<<1, kTopBlock, 0, stream>>>(nodes, nodeBoxes, plan.levelNodes, plan.deviceStarts, h, groups,
-                                                      plan.topLeafBoxes, slotVertices, positions, root);
+    cwbvhTopLevelsKernel<<<1, kTopBlock, 0, stream>>>(nodes, nodeBoxes, plan.levelNodes.data(),
+                                                      plan.levelStarts.data(), h, groups, plan.topLeafBoxes.data(),
+                                                      slotVertices, positions, root);
     CUDA_CHECK_LAUNCH("cwbvhTopLevelsKernel");
   }
 }

@@ -8,30 +8,30 @@
 
 #include "device_types.hpp"
 #include "tsah/cwbvh_build.hpp"
+#include "tsah_cuda/device_buffer.hpp"
 
 namespace tsah::cuda::detail {
 
-// What the per-frame refit of a compressed tree launches, set up once at upload: the node groups of
-// tsah::cwbvhLevels (device arrays, and the group starts on the host to size the launches), or the
-// root leaf of a tree without nodes.
+// What the per-frame refit of a compressed tree launches: the node groups of tsah::cwbvhLevels (on
+// the device, and their starts on the host to size the launches), or the one leaf of a tree
+// without nodes. Made once at upload by makeCwbvhRefitPlan.
 struct CwbvhRefitPlan {
-  const uint32_t* levelNodes = nullptr;    // device: CwbvhLevels::nodes
-  const uint32_t* deviceStarts = nullptr;  // device: CwbvhLevels::starts
-  std::vector<uint32_t> starts;            // host copy of CwbvhLevels::starts
-  uint32_t firstTopGroup = 0;              // groups from here on run in one block (cwbvhFirstTopGroup)
-  Aabb* topLeafBoxes = nullptr;            // device scratch: 8 boxes per node of those groups
-  uint32_t rootLeafFirst = 0, rootLeafCount = 0;  // a one-leaf tree: its slots
+  DeviceBuffer<uint32_t> levelNodes, levelStarts;  // CwbvhLevels::nodes, ::starts
+  std::vector<uint32_t> starts;                    // host copy of CwbvhLevels::starts
+  uint32_t firstTopGroup = 0;                      // the groups from here on run in one block
+  DeviceBuffer<Aabb> topLeafBoxes;                 // scratch: 8 boxes per node of those groups
+  uint32_t rootLeafFirst = 0, rootLeafCount = 0;   // a tree without nodes: its leaf's slots
 };
 
-// The first group of `starts` from which every group is small enough to share one block (launched
-// once for all of them, with a barrier between groups, instead of a launch each).
-uint32_t cwbvhFirstTopGroup(const std::vector<uint32_t>& starts);
+// The plan of `tree` (uploads on `stream` and waits for them).
+CwbvhRefitPlan makeCwbvhRefitPlan(const CwbvhTree& tree, cudaStream_t stream);
 
 // Per frame: every node's exact child boxes (leaf boxes from the triangles, interior children's
 // unions from nodeBoxes) and its re-quantization, group by group bottom-up, 8 lanes per node; the
 // node's union into nodeBoxes (nodeCount boxes of scratch) and the root's into root->box. Results
-// equal tsah::refitCwbvh. slotVertices: 3 vertex ids per slot (tsah::slotVertexIndices).
-void launchCwbvhRefit(const CwbvhRefitPlan& plan, CwbvhNode* nodes, Aabb* nodeBoxes, const uint32_t* slotVertices,
+// equal tsah::refitCwbvh. slotVertices: 3 vertex ids per slot (tsah::slotVertexIndices); plan:
+// non-const for its scratch boxes.
+void launchCwbvhRefit(CwbvhRefitPlan& plan, CwbvhNode* nodes, Aabb* nodeBoxes, const uint32_t* slotVertices,
                       const float* positions, RootInfo* root, cudaStream_t stream);
 
 // The traversal's view of a scene in the compressed layout (rootBox is read on the device from

@@ -224,19 +224,7 @@ std::unique_ptr<GpuRuntime::Impl::Cwbvh> GpuRuntime::Impl::uploadCwbvh(const Fla
   c.triIndex = DeviceBuffer<uint32_t>(std::span<const uint32_t>(c.host.triIndex), stream);
   const std::vector<uint32_t> slotVertices = slotVertexIndices(c.host.triIndex, indices, "GPU runtime");
   c.slotVertices = DeviceBuffer<uint32_t>(std::span<const uint32_t>(slotVertices), stream);
-  const CwbvhLevels levels = cwbvhLevels(c.host);
-  c.levelNodes = DeviceBuffer<uint32_t>(std::span<const uint32_t>(levels.nodes), stream);
-  c.levelStarts = DeviceBuffer<uint32_t>(std::span<const uint32_t>(levels.starts), stream);
-  c.refit.levelNodes = c.levelNodes.data();
-  c.refit.deviceStarts = c.levelStarts.data();
-  c.refit.starts = levels.starts;
-  c.refit.firstTopGroup = detail::cwbvhFirstTopGroup(levels.starts);
-  c.topLeafBoxes.resize(std::size_t(levels.starts.back() - levels.starts[c.refit.firstTopGroup]) * kCwbvhWidth);
-  c.refit.topLeafBoxes = c.topLeafBoxes.data();
-  if (isLeafRef(c.host.rootRef)) {
-    c.refit.rootLeafFirst = leafFirstSlot(c.host.rootRef);
-    c.refit.rootLeafCount = c.host.rootCount;
-  }
+  c.refit = detail::makeCwbvhRefitPlan(c.host, stream);
   detail::RootInfo r;
   r.box = c.host.rootBox;
   r.ref = c.host.rootRef;
@@ -244,7 +232,7 @@ std::unique_ptr<GpuRuntime::Impl::Cwbvh> GpuRuntime::Impl::uploadCwbvh(const Fla
   r.interiorCount = c.host.nodeCount();
   r.depth = c.host.depth;
   c.root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&r, 1), stream);
-  CUDA_CHECK(cudaStreamSynchronize(stream));  // before slotVertices, levels and r go
+  CUDA_CHECK(cudaStreamSynchronize(stream));  // before slotVertices and r go
   return cwbvh;
 }
 

@@ -80,10 +80,8 @@ struct GpuRuntime::Impl {
     CwbvhTree host;                      // topology (and frame-0 quantization) as built on the host
     DeviceBuffer<CwbvhNode> nodes;
     DeviceBuffer<Aabb> nodeBoxes;         // per node: the exact union of its children, this frame
-    DeviceBuffer<Aabb> topLeafBoxes;      // the refit's scratch for the leaves of its top groups
     DeviceBuffer<uint32_t> triIndex;
     DeviceBuffer<uint32_t> slotVertices;  // 3 vertex ids per slot, for the refit and the Woop pass
-    DeviceBuffer<uint32_t> levelNodes, levelStarts;  // tsah::cwbvhLevels, for the refit
     detail::CwbvhRefitPlan refit;
     DeviceBuffer<detail::RootInfo> root;
   };

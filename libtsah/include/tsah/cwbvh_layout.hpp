@@ -84,6 +84,12 @@ struct CwbvhNodeWords {
   // The meta byte of a slot known only at run time: selects between the two words instead of
   // indexing the node's registers (which would move the node to local memory on the GPU).
   TSAH_HD uint32_t metaOf(uint32_t slot) const { return ((slot < 4 ? w[6] : w[7]) >> (8u * (slot & 3u))) & 0xffu; }
+  // The end (offset from triBase, exclusive) of the leaf in `slot`, leafSlots being this node's
+  // leafSlots(): where the node's next leaf begins (leaves are stored in slot order), or triCount.
+  TSAH_HD uint32_t leafEnd(uint32_t slot, uint32_t leafSlots) const {
+    const uint32_t later = leafSlots & ~((2u << slot) - 1u);
+    return later != 0 ? metaOf(cwbvhLowestBit(later)) & 0x3fu : byteAt(15);
+  }
 };
 static_assert(offsetof(CwbvhNode, ex) == 12 && offsetof(CwbvhNode, triCount) == 15 &&
               offsetof(CwbvhNode, childBase) == 16 && offsetof(CwbvhNode, triBase) == 20 &&
@@ -346,9 +352,7 @@ struct CwbvhTraversal {
     while (hitLeafSlots != 0) {
       const uint32_t leafSlot = cwbvhLowestBit(hitLeafSlots);
       hitLeafSlots &= hitLeafSlots - 1;
-      const uint32_t first = n.metaOf(leafSlot) & 0x3fu;
-      const uint32_t later = leafSlots & ~((2u << leafSlot) - 1u);
-      const uint32_t end = later != 0 ? n.metaOf(cwbvhLowestBit(later)) & 0x3fu : n.byteAt(15);
+      const uint32_t first = n.metaOf(leafSlot) & 0x3fu, end = n.leafEnd(leafSlot, leafSlots);
       for (uint32_t o = first; o < end; ++o) {
         if (detail::cwbvhTriangle(v, ray, prep, n.w[5] + o, tmax, hit) && AnyHit) {
           group.bits = 0;  // any hit: done

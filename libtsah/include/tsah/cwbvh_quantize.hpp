@@ -170,12 +170,20 @@ struct CwbvhPartialUnion {
   Aabb box;
   bool any = false;  // some occupied slot is in it
 };
+// c ? a : b, component by component (on the GPU a select of whole boxes, or early returns of
+// them, went through local memory).
+TSAH_HD Aabb cwbvhSelectBox(bool c, const Aabb& a, const Aabb& b) {
+  Aabb r;
+  r.lo = {c ? a.lo.x : b.lo.x, c ? a.lo.y : b.lo.y, c ? a.lo.z : b.lo.z};
+  r.hi = {c ? a.hi.x : b.hi.x, c ? a.hi.y : b.hi.y, c ? a.hi.z : b.hi.z};
+  return r;
+}
+// lower extended by upper; an empty half adds nothing.
 TSAH_HD CwbvhPartialUnion cwbvhJoin(const CwbvhPartialUnion& lower, const CwbvhPartialUnion& upper) {
-  if (!lower.any) return upper;
-  if (!upper.any) return lower;
-  CwbvhPartialUnion u = lower;
-  u.box.extend(upper.box);
-  return u;
+  Aabb joined = lower.box;
+  joined.extend(upper.box);
+  return {cwbvhSelectBox(lower.any && upper.any, joined, cwbvhSelectBox(lower.any, lower.box, upper.box)),
+          lower.any || upper.any};
 }
 TSAH_HD Aabb cwbvhChildUnion(const Aabb* boxes, uint32_t occupied) {
   CwbvhPartialUnion part[kCwbvhWidth];
