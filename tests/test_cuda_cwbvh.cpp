@@ -10,6 +10,8 @@
 #include <cmath>
 #include <cstring>
 #include <random>
+#include <span>
+#include <vector>
 
 #include "anim/error.hpp"
 #include "anim/generators.hpp"
@@ -76,6 +78,18 @@ std::vector<tsah::Ray> randomRays(const tsah::Aabb& b, const anim::Animation& a,
   return rays;
 }
 
+// The Woop triangles of the layout's slots, made on the host.
+std::vector<tsah::WoopTriangle> hostWoop(const tsah::CwbvhTree& host, const anim::Animation& a,
+                                         std::span<const float> pos) {
+  std::vector<tsah::WoopTriangle> woop(host.triIndex.size());
+  for (size_t s = 0; s < woop.size(); ++s) {
+    const uint32_t* tri = a.indices().data() + 3 * std::size_t(host.triIndex[s]);
+    auto v = [&](uint32_t i) { return Vec3{pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]}; };
+    woop[s] = tsah::makeWoopTriangle(v(tri[0]), v(tri[1]), v(tri[2]));
+  }
+  return woop;
+}
+
 TEST(CudaCwbvh, NodesEqualHostRefitAtEveryTime) {
   REQUIRE_GPU();
   for (auto kind : {anim::GeneratorKind::Explode, anim::GeneratorKind::Wave}) {
@@ -93,6 +107,39 @@ TEST(CudaCwbvh, NodesEqualHostRefitAtEveryTime) {
       const tsah::Aabb b = gpu.bounds();
       EXPECT_TRUE(b.contains(host.rootBox) && host.rootBox.contains(b));
     }
+  }
+}
+
+// A tree without nodes (its root is one leaf of a few triangles): the refit forms the root box as
+// tsah::refitCwbvh does, and the hits are the CPU reference traversal's.
+TEST(CudaCwbvh, TreeThatIsOneLeaf) {
+  REQUIRE_GPU();
+  const anim::Animation a = generatedAnimation(anim::GeneratorKind::Wave, 6, 4);
+  ASSERT_LE(a.triangleCount(), 8u);  // one leaf of the collapse (leaves of up to 8)
+  const tsah::FlatBvh tree = tsah::test::singleLeafTree(a);
+  tsah::CwbvhTree host = tsah::buildCwbvh(tree);
+  ASSERT_TRUE(tsah::isLeafRef(host.rootRef));
+  ASSERT_EQ(host.nodeCount(), 0u);
+  tc::GpuRuntime gpu(tree, a, wide());
+  for (double t : {a.startTime(), 0.4 * a.endTime(), a.endTime()}) {
+    gpu.updateAt(t);
+    const auto pos = a.positionsAt(t);
+    tsah::refitCwbvh(host, a.indices(), pos);
+    const tsah::Aabb b = gpu.bounds();
+    ASSERT_TRUE(b.contains(host.rootBox) && host.rootBox.contains(b)) << "t=" << t;
+    const std::vector<tsah::WoopTriangle> woop = hostWoop(host, a, pos);
+    const tsah::CwbvhView view = host.view(woop.data(), a.indices().data(), pos.data());
+    const auto rays = randomRays(b, a, pos, 3000, 7);
+    const auto hits = gpu.closestHits(rays);
+    const auto any = gpu.anyHits(rays);
+    uint32_t valid = 0;
+    for (size_t i = 0; i < rays.size(); ++i) {
+      const tsah::Hit ref = tsah::cwbvhClosestHit(view, rays[i]);
+      ASSERT_EQ(std::memcmp(&ref, &hits[i], sizeof ref), 0) << "ray " << i << " t=" << t;
+      ASSERT_EQ(any[i] != 0, tsah::cwbvhAnyHit(view, rays[i])) << "ray " << i << " t=" << t;
+      valid += ref.valid() ? 1 : 0;
+    }
+    EXPECT_GT(valid, 300u) << "t=" << t;
   }
 }
 
@@ -114,12 +161,7 @@ TEST(CudaCwbvh, HitsEqualCpuReferenceAndBinaryGpu) {
       gpuBinary.updateAt(t);
       const auto pos = a.positionsAt(t);
       tsah::refitCwbvh(host, a.indices(), pos);
-      std::vector<tsah::WoopTriangle> woop(host.triIndex.size());
-      for (size_t s = 0; s < woop.size(); ++s) {
-        const uint32_t* tri = a.indices().data() + 3 * std::size_t(host.triIndex[s]);
-        auto v = [&](uint32_t i) { return Vec3{pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]}; };
-        woop[s] = tsah::makeWoopTriangle(v(tri[0]), v(tri[1]), v(tri[2]));
-      }
+      const std::vector<tsah::WoopTriangle> woop = hostWoop(host, a, pos);
       EXPECT_EQ(std::memcmp(woop.data(), gpuWide.downloadWoop().data(), woop.size() * sizeof woop[0]), 0);
       const tsah::CwbvhView view = host.view(woop.data(), a.indices().data(), pos.data());
       const auto rays = randomRays(gpuBinary.bounds(), a, pos, 20000, 11);

@@ -285,15 +285,7 @@ TEST(CudaRuntime, SingleLeafTree) {
   REQUIRE_GPU();
   const auto a = generatedAnimation(anim::GeneratorKind::Wave, 6, 4);
   ASSERT_LE(a.triangleCount(), 16u);
-  tsah::Bvh leaf;
-  leaf.nodes.resize(1);
-  leaf.nodes[0].primCount = a.triangleCount();
-  for (uint32_t i = 0; i < a.triangleCount(); ++i) leaf.primIds.push_back(i);
-  leaf.boxes.resize(1);
-  std::vector<tsah::Aabb> boxes(a.triangleCount());
-  tsah::triangleBoxes(a.indices(), a.keyframe(0), boxes);
-  for (const tsah::Aabb& b : boxes) leaf.boxes[0].extend(b);
-  const tsah::FlatBvh tree = tsah::flattenBvh(leaf);
+  const tsah::FlatBvh tree = tsah::test::singleLeafTree(a);
   ASSERT_EQ(tree.interiorCount, 0u);
   tsah::CpuRuntime cpu = cpuRuntime(tree, a);
   tc::GpuRuntime gpu(tree, a);

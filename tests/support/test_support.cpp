@@ -89,6 +89,18 @@ PrimitiveBoxes movingTriangleBoxes(uint32_t triangles, uint32_t frames, uint32_t
 
 Bvh frameZeroSahTree(const PrimitiveBoxes& prims) { return SweepSahBuilder().build(prims.frame(0)); }
 
+FlatBvh singleLeafTree(const anim::Animation& a) {
+  Bvh leaf;
+  leaf.nodes.resize(1);
+  leaf.nodes[0].primCount = a.triangleCount();
+  for (uint32_t i = 0; i < a.triangleCount(); ++i) leaf.primIds.push_back(i);
+  leaf.boxes.resize(1);
+  std::vector<Aabb> boxes(a.triangleCount());
+  triangleBoxes(a.indices(), a.keyframe(0), boxes);
+  for (const Aabb& b : boxes) leaf.boxes[0].extend(b);
+  return flattenBvh(leaf);
+}
+
 bool sameTopology(const Bvh& a, const Bvh& b) {
   if (a.root != b.root || a.nodes.size() != b.nodes.size() || a.primIds != b.primIds) return false;
   for (std::size_t n = 0; n < a.nodes.size(); ++n) {

@@ -14,6 +14,7 @@
 #include "tsah/bvh.hpp"
 #include "tsah/cpu_runtime.hpp"
 #include "tsah/cwbvh_build.hpp"
+#include "tsah/flat_bvh.hpp"
 #include "tsah/parallel_optimizer.hpp"
 #include "tsah/traversal.hpp"
 
@@ -47,6 +48,8 @@ MovingTriangles randomMovingTriangles(uint32_t triangles, uint32_t frames, uint3
 PrimitiveBoxes movingTriangleBoxes(uint32_t triangles, uint32_t frames, uint32_t seed);
 // The optimizers' starting tree: the sweep-SAH tree of frame 0 (frame 0's boxes only).
 Bvh frameZeroSahTree(const PrimitiveBoxes& prims);
+// The animation's triangles in one leaf (the root), boxed on keyframe 0, in flat form.
+FlatBvh singleLeafTree(const anim::Animation& a);
 
 // Same root, nodes (links, leaf ranges) and primIds.
 bool sameTopology(const Bvh& a, const Bvh& b);
