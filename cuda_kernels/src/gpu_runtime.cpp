@@ -168,14 +168,14 @@ GpuRuntime::Impl::CapturedGraph GpuRuntime::Impl::capture(Enqueue&& enqueue) {
 }
 
 void GpuRuntime::Impl::launch(const CapturedGraph& g) {
-  if (g.interpolation) detail::setInterpolationParams(g.exec, g.interpolation, frame);
+  if (g.interpolation.node) detail::setInterpolationParams(g.exec, g.interpolation, frame);
   CUDA_CHECK(cudaGraphLaunch(g.exec, stream));
 }
 
 void GpuRuntime::Impl::destroy(CapturedGraph& g) noexcept {
   if (g.exec) cudaGraphExecDestroy(std::exchange(g.exec, nullptr));
   if (g.graph) cudaGraphDestroy(std::exchange(g.graph, nullptr));
-  g.interpolation = nullptr;
+  g.interpolation = {};
 }
 
 void GpuRuntime::Impl::setFrame(double time) {

@@ -17,11 +17,16 @@ namespace tsah::cuda::detail {
 void launchInterpolateFrame(const float* keyframes, const uint32_t* movingIds, const FrameParams& params, float* out,
                             uint32_t movingCount, cudaStream_t stream);
 
-// The interpolation's kernel node in a graph captured around launchInterpolateFrame (null when
-// there is none: no moving vertex), and the update of its frame before a launch of the graph.
-// (Copying the parameters from pinned host memory inside the graph cost a transfer per frame.)
-cudaGraphNode_t findInterpolationNode(cudaGraph_t graph);
-void setInterpolationParams(cudaGraphExec_t exec, cudaGraphNode_t node, const FrameParams& params);
+// The interpolation's kernel node in a graph captured around launchInterpolateFrame (node null
+// when there is none: no moving vertex) with its captured launch, and the update of its frame
+// before a launch of the graph. (Copying the parameters from pinned host memory inside the graph
+// cost a transfer per frame.) The launch's argument pointers live as long as the graph.
+struct InterpolationNode {
+  cudaGraphNode_t node = nullptr;
+  cudaKernelNodeParams launch{};
+};
+InterpolationNode findInterpolationNode(cudaGraph_t graph);
+void setInterpolationParams(cudaGraphExec_t exec, const InterpolationNode& node, const FrameParams& params);
 
 // Bottom-up refit of an uploaded tree: one thread per leaf record, atomic counters per interior node
 // (must be zero on entry); writes every child box, and root->box. slotVertices: 3 vertex ids per

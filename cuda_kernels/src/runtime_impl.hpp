@@ -7,6 +7,7 @@
 
 #include "device_types.hpp"
 #include "event_timer.hpp"
+#include "kernels.hpp"
 #include "rebuild.hpp"
 #include "tsah/cwbvh_build.hpp"
 #include "tsah_cuda/device_buffer.hpp"
@@ -42,7 +43,7 @@ struct GpuRuntime::Impl {
   struct CapturedGraph {
     cudaGraph_t graph = nullptr;
     cudaGraphExec_t exec = nullptr;
-    cudaGraphNode_t interpolation = nullptr;  // null: the graph interpolates nothing
+    detail::InterpolationNode interpolation;  // node null: the graph interpolates nothing
   };
   // Captures what `enqueue` puts on the stream into an executable graph.
   template <typename Enqueue>

@@ -127,7 +127,7 @@ void launchInterpolateFrame(const float* keyframes, const uint32_t* movingIds, c
   CUDA_CHECK_LAUNCH("interpolateFrameKernel");
 }
 
-cudaGraphNode_t findInterpolationNode(cudaGraph_t graph) {
+InterpolationNode findInterpolationNode(cudaGraph_t graph) {
   std::size_t count = 0;
   CUDA_CHECK(cudaGraphGetNodes(graph, nullptr, &count));
   std::vector<cudaGraphNode_t> nodes(count);
@@ -136,22 +136,21 @@ cudaGraphNode_t findInterpolationNode(cudaGraph_t graph) {
     cudaGraphNodeType type;
     CUDA_CHECK(cudaGraphNodeGetType(node, &type));
     if (type != cudaGraphNodeTypeKernel) continue;
-    cudaKernelNodeParams p{};
-    CUDA_CHECK(cudaGraphKernelNodeGetParams(node, &p));
-    if (p.func == reinterpret_cast<void*>(&interpolateFrameKernel)) return node;
+    InterpolationNode found{node, {}};
+    CUDA_CHECK(cudaGraphKernelNodeGetParams(node, &found.launch));
+    if (found.launch.func == reinterpret_cast<void*>(&interpolateFrameKernel)) return found;
   }
-  return nullptr;
+  return {};
 }
 
-void setInterpolationParams(cudaGraphExec_t exec, cudaGraphNode_t node, const FrameParams& params) {
-  cudaKernelNodeParams p{};
-  CUDA_CHECK(cudaGraphKernelNodeGetParams(node, &p));
+void setInterpolationParams(cudaGraphExec_t exec, const InterpolationNode& node, const FrameParams& params) {
+  cudaKernelNodeParams p = node.launch;
   // The captured arguments (keyframes, movingIds, out, count) stay; only the frame changes.
   void* args[5] = {p.kernelParams[0], p.kernelParams[1], const_cast<FrameParams*>(&params), p.kernelParams[3],
                    p.kernelParams[4]};
   p.kernelParams = args;
   p.extra = nullptr;
-  CUDA_CHECK(cudaGraphExecKernelNodeSetParams(exec, node, &p));
+  CUDA_CHECK(cudaGraphExecKernelNodeSetParams(exec, node.node, &p));
 }
 
 void launchRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
