@@ -4,6 +4,7 @@
 // with -fmad=false like the rest of the per-frame path, so nodes equal tsah::refitCwbvh's and hits
 // the CPU reference traversal's.
 #include "cwbvh_kernels.hpp"
+#include "cwbvh_lanes.cuh"
 #include "launch.hpp"
 #include "triangle_boxes.cuh"
 
@@ -51,10 +52,10 @@ __device__ __forceinline__ Aabb slotLeafBox(const CwbvhNodeWords& n, uint32_t sl
 // lane of the warp taking part (the shuffles); `valid` false for lanes without a node. Each lane
 // forms its slot's exact box: an interior child's union (nodeBoxes, written by the child's own
 // group earlier), a leaf child's box (leafBoxOf(meta): from its triangles, or computed earlier),
-// nothing for an empty slot. The lanes then form the node's union (in cwbvhChildUnion's order, so
-// the same bits as tsah::refitCwbvh) and the exponents, and each quantizes its own slot
-// (cwbvhSlotPlanes). Words 0 (p, e; triCount kept) and 2-4 (qlo, qhi) are rewritten; word 1
-// (bases, meta) never changes. Slot 0 stores the union as the node's box (and the root's).
+// nothing for an empty slot. The lanes then form the node's grid (cwbvhGridLanes: the same bits as
+// tsah::refitCwbvh) and each quantizes its own slot. Words 0 (p, e; triCount kept) and 2-4 (qlo,
+// qhi) are rewritten; word 1 (bases, meta) never changes. Slot 0 stores the union as the node's
+// box (and the root's).
 template <class LeafBoxOf>
 __device__ __forceinline__ void refitNodeLanes(CwbvhNode* __restrict__ nodes, Aabb* __restrict__ nodeBoxes,
                                                uint32_t node, bool valid, LeafBoxOf leafBoxOf,
@@ -67,52 +68,13 @@ __device__ __forceinline__ void refitNodeLanes(CwbvhNode* __restrict__ nodes, Aa
   const Aabb mine = (meta & kCwbvhInterior) ? loadBoxL2(nodeBoxes + n.w[4] + rank)
                     : !empty                ? leafBoxOf(n, meta)
                                             : Aabb{};
-  // The union, as cwbvhChildUnion forms it: three exchanges, each joining the lower and the upper
-  // half of an aligned block of slots (which of them holds an occupied slot is in the meta words).
   const uint32_t occupied = n.interiorSlots() | n.leafSlots();
-  CwbvhPartialUnion part{mine, !empty};
-#pragma unroll
-  for (uint32_t width = 1; width < kCwbvhWidth; width *= 2) {
-    CwbvhPartialUnion other;
-    other.box.lo = {__shfl_xor_sync(0xffffffffu, part.box.lo.x, width),
-                    __shfl_xor_sync(0xffffffffu, part.box.lo.y, width),
-                    __shfl_xor_sync(0xffffffffu, part.box.lo.z, width)};
-    other.box.hi = {__shfl_xor_sync(0xffffffffu, part.box.hi.x, width),
-                    __shfl_xor_sync(0xffffffffu, part.box.hi.y, width),
-                    __shfl_xor_sync(0xffffffffu, part.box.hi.z, width)};
-    const uint32_t otherFirst = (slot ^ width) & ~(width - 1u);
-    other.any = ((occupied >> otherFirst) & ((1u << width) - 1u)) != 0;
-    const bool upperHalf = (slot & width) != 0;  // the other half is the lower one
-    part = cwbvhJoin({cwbvhSelectBox(upperHalf, other.box, part.box), upperHalf ? other.any : part.any},
-                     {cwbvhSelectBox(upperHalf, part.box, other.box), upperHalf ? part.any : other.any});
-  }
-  const Aabb all = part.box;
-  // The grid exponents (cwbvhGridExponents): lanes 0-2 of the node form one axis each, the others
-  // take them from there.
-  const uint32_t group = (threadIdx.x & 31u) & ~(kCwbvhWidth - 1u);  // first lane of this node's 8
-  const float lo = slot == 1 ? all.lo.y : slot == 2 ? all.lo.z : all.lo.x;
-  const float hi = slot == 1 ? all.hi.y : slot == 2 ? all.hi.z : all.hi.x;
-  const uint32_t own = tsah::detail::cwbvhExponent(lo, hi);
-  const uint32_t e[3] = {__shfl_sync(0xffffffffu, own, group), __shfl_sync(0xffffffffu, own, group + 1),
-                         __shfl_sync(0xffffffffu, own, group + 2)};
+  const CwbvhLaneGrid g = cwbvhGridLanes(slot, mine, occupied);
   if (!valid) return;
-  const Aabb slotBox = cwbvhSelectBox(empty, all, mine);  // (a select of references put both boxes in local memory)
-  const CwbvhSlotPlanes q = cwbvhSlotPlanes(empty, slotBox, all, e);
-  CwbvhNode* out = nodes + node;
-#pragma unroll
-  for (int a = 0; a < 3; ++a) {
-    out->qlo[a][slot] = q.lo[a];
-    out->qhi[a][slot] = q.hi[a];
-  }
-  if (slot == 0) {  // the grid: p and the exponents (byte 15, triCount, is kept)
-    out->px = all.lo.x;
-    out->py = all.lo.y;
-    out->pz = all.lo.z;
-    out->ex = uint8_t(e[0]);
-    out->ey = uint8_t(e[1]);
-    out->ez = uint8_t(e[2]);
-    storeBox(nodeBoxes + node, all);
-    if (node == 0) root->box = all;
+  cwbvhStoreGridLanes(nodes + node, slot, empty, mine, g);
+  if (slot == 0) {  // the node's box (byte 15, triCount, and word 1 are kept)
+    storeBox(nodeBoxes + node, g.all);
+    if (node == 0) root->box = g.all;
   }
 }
 

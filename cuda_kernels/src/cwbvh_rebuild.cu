@@ -9,6 +9,7 @@
 #include <string>
 
 #include "anim/error.hpp"
+#include "cwbvh_lanes.cuh"
 #include "cwbvh_rebuild.hpp"
 #include "launch.hpp"
 
@@ -17,6 +18,10 @@ namespace tsah::cuda::detail {
 namespace {
 
 constexpr int kConvertBlock = 128;
+// Resident blocks per multiprocessor (all blocks must be resident: the grid barrier). A round
+// opens 16 nodes per block, so the widest levels of large trees want several blocks per SM; more
+// blocks make each barrier dearer.
+constexpr int kConvertBlocksPerSm = 4;
 enum ConvertWord : uint32_t {
   kArrivals = 0,
   kGeneration = 1,
@@ -65,37 +70,241 @@ struct ConvertParams {
   uint32_t maxNodes;       // capacity of out.nodes and out.starts
 };
 
-// Level by level: round after round of gridDim.x * kConvertBlock wide nodes, each thread opens
-// one node (cwbvhOpen) and the level's running prefix sums of (interior children, leaf
-// triangles) in node order give its childBase and triBase. The sums are a block scan plus the
-// sums of the lower blocks, which every block reads from blockSums after the barrier, so every
-// block also knows the round's totals without another barrier.
+// One wide node, opened by the 8 lanes of a group: the steps of cwbvhOpen and cwbvhWriteNode
+// (tsah/cwbvh_convert.hpp) with a lane per child, so a level waits for a few dependent loads and a
+// few hundred instructions per lane instead of one thread's ~10k. The bits are the serial code's
+// (the GPU tests compare the nodes with tsah::convertToCwbvh byte for byte).
+constexpr uint32_t kGroupLanes = kCwbvhWidth;
+constexpr uint32_t kGroupsPerBlock = kConvertBlock / kGroupLanes;
+
+// Lane c's value of the group (c: 0-7, a constant when unrolled).
+template <class T>
+__device__ __forceinline__ T fromLane(uint32_t groupMask, T v, uint32_t c) {
+  return __shfl_sync(groupMask, v, int(c), int(kGroupLanes));
+}
+
+__device__ __forceinline__ uint64_t maxOverGroup(uint32_t groupMask, uint64_t v) {
+#pragma unroll
+  for (uint32_t w = kGroupLanes / 2; w >= 1; w /= 2) {
+    const uint64_t other = __shfl_xor_sync(groupMask, v, int(w), int(kGroupLanes));
+    v = other > v ? other : v;
+  }
+  return v;
+}
+
+__device__ __forceinline__ uint32_t sumOverGroup(uint32_t groupMask, uint32_t v) {
+#pragma unroll
+  for (uint32_t w = kGroupLanes / 2; w >= 1; w /= 2) v += __shfl_xor_sync(groupMask, v, int(w), int(kGroupLanes));
+  return v;
+}
+
+// The children of the wide node starting at `start` (cwbvhOpen's opening): lane c gets child c in
+// opening order (`mine`), all lanes the count n. The widest interior child (the first of the
+// largest area, as the serial fold over c = 0..n-1 picks it) is opened until there are 8.
+// Returns false, in every lane of the group, for an invalid reference.
+__device__ bool openLanes(const BinaryTreeView& t, int32_t start, uint32_t count, const Aabb& box, uint32_t mergeLimit,
+                          uint32_t lane, uint32_t groupMask, CwbvhOpenChild& mine, uint32_t& n) {
+  mine = {0, 0, Aabb{}};
+  if (isLeafRef(start)) {  // a tree that is one leaf
+    if (lane == 0) mine = {start, count, box};
+    n = 1;
+    return true;
+  }
+  if (uint32_t(start) >= t.nodeCount) return false;
+  float area = 0.0f;
+  const GpuBvhNode root = tsah::detail::cwbvhLoadBinaryNode(t.nodes, uint32_t(start));
+  if (lane < 2) {
+    mine = tsah::detail::cwbvhBinaryChild(t, root, int(lane), mergeLimit);
+    area = mine.box.area();
+  }
+  n = 2;
+  while (n < kCwbvhWidth) {
+    const int candidate = lane < n && !isLeafRef(mine.ref) ? 1 : 0;
+    int widest = -1;
+    float widestArea = 0.0f;
+#pragma unroll
+    for (uint32_t c = 0; c < kGroupLanes; ++c) {
+      const int isCandidate = fromLane(groupMask, candidate, c);
+      const float a = fromLane(groupMask, area, c);
+      if (isCandidate && (widest < 0 || a > widestArea)) {
+        widest = int(c);
+        widestArea = a;
+      }
+    }
+    if (widest < 0) break;
+    const int32_t widestRef = __shfl_sync(groupMask, mine.ref, widest, int(kGroupLanes));
+    if (uint32_t(widestRef) >= t.nodeCount) return false;
+    const GpuBvhNode node = tsah::detail::cwbvhLoadBinaryNode(t.nodes, uint32_t(widestRef));
+    if (lane == uint32_t(widest) || lane == n) {
+      mine = tsah::detail::cwbvhBinaryChild(t, node, lane == n ? 1 : 0, mergeLimit);
+      area = mine.box.area();
+    }
+    ++n;
+  }
+  return true;
+}
+
+// cwbvhAssignSlots with a lane per child (row): each round every lane offers the best key of its
+// row among the free slots and the group takes the largest (max is associative: the serial tree
+// of maxima picks the same pair). Returns this lane's child's slot.
+__device__ uint32_t assignSlotLanes(const Vec3& offset, uint32_t n, uint32_t lane, uint32_t groupMask) {
+  uint32_t order[kCwbvhWidth];
+#pragma unroll
+  for (uint32_t s = 0; s < kCwbvhWidth; ++s)
+    order[s] = cwbvhOrderedBits(((s & 1u) ? offset.x : -offset.x) + ((s & 2u) ? offset.y : -offset.y) +
+                                ((s & 4u) ? offset.z : -offset.z));
+  uint32_t usedSlots = 0, assigned = 0, mySlot = 0;
+  for (uint32_t round = 0; round < n; ++round) {
+    const bool freeRow = lane < n && !((assigned >> lane) & 1u);
+    uint64_t rowBest = 0;
+#pragma unroll
+    for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
+      const uint64_t key = freeRow && !((usedSlots >> s) & 1u) ? (uint64_t(order[s]) << 32) | (63u - (8u * lane + s)) : 0u;
+      rowBest = key > rowBest ? key : rowBest;
+    }
+    const uint32_t pair = 63u - uint32_t(maxOverGroup(groupMask, rowBest) & 63u);
+    if (lane == pair >> 3) mySlot = pair & 7u;
+    assigned |= 1u << (pair >> 3);
+    usedSlots |= 1u << (pair & 7u);
+  }
+  return mySlot;
+}
+
+// A wide node's children by slot, in the lanes of its group (lane s: slot s).
+struct SlotChild {
+  CwbvhOpenChild child{0, 0u, Aabb{}};
+  bool occupied = false;
+};
+
+// Opens the node and puts its children into their slots (cwbvhOpen). interior / triangles: the
+// node's interior children and leaf triangles. Returns false (every lane) when the tree is invalid.
+__device__ bool openNodeLanes(const BinaryTreeView& t, int32_t start, uint32_t count, const Aabb& box,
+                              uint32_t mergeLimit, uint32_t lane, uint32_t groupMask, SlotChild& out,
+                              uint32_t& interior, uint32_t& triangles) {
+  CwbvhOpenChild mine;
+  uint32_t n = 0;
+  if (!openLanes(t, start, count, box, mergeLimit, lane, groupMask, mine, n)) return false;
+  const bool has = lane < n, isInterior = has && !isLeafRef(mine.ref);
+  const bool valid = !has || (isInterior ? uint32_t(mine.ref) < t.nodeCount
+                                         : tsah::detail::cwbvhLeafInRange(t, mine.ref, mine.count));
+  interior = uint32_t(__popc(__ballot_sync(groupMask, isInterior)));
+  triangles = sumOverGroup(groupMask, has && !isInterior ? mine.count : 0u);
+  if (__ballot_sync(groupMask, !valid) != 0 || triangles > kCwbvhMaxNodeTriangles) return false;
+  // cwbvhAddCentreOffsets: this child's offset from the centre of the children's union (min and
+  // max in any order give the same union; a zero's sign cannot change a slot key).
+  Aabb all = has ? mine.box : Aabb{};
+#pragma unroll
+  for (uint32_t w = kGroupLanes / 2; w >= 1; w /= 2) {
+    Aabb other;
+    other.lo = {__shfl_xor_sync(groupMask, all.lo.x, int(w), int(kGroupLanes)),
+                __shfl_xor_sync(groupMask, all.lo.y, int(w), int(kGroupLanes)),
+                __shfl_xor_sync(groupMask, all.lo.z, int(w), int(kGroupLanes))};
+    other.hi = {__shfl_xor_sync(groupMask, all.hi.x, int(w), int(kGroupLanes)),
+                __shfl_xor_sync(groupMask, all.hi.y, int(w), int(kGroupLanes)),
+                __shfl_xor_sync(groupMask, all.hi.z, int(w), int(kGroupLanes))};
+    all.extend(other);
+  }
+  Vec3 offset{0.0f, 0.0f, 0.0f};
+  if (has) {
+    const Vec3 centre = all.center(), ext = all.extent(), d = mine.box.center() - centre;
+#pragma unroll
+    for (int a = 0; a < 3; ++a) offset[a] += ext[a] > 0.0f ? d[a] / ext[a] : 0.0f;  // 0 + x, as the host
+  }
+  const uint32_t mySlot = assignSlotLanes(offset, n, lane, groupMask);
+  // By slot: lane s takes the child whose slot is s.
+  uint32_t source = kGroupLanes;
+#pragma unroll
+  for (uint32_t c = 0; c < kGroupLanes; ++c)
+    if (c < n && fromLane(groupMask, mySlot, c) == lane) source = c;
+  const uint32_t from = source & (kGroupLanes - 1u);
+  out.occupied = source < kGroupLanes;
+  out.child.ref = fromLane(groupMask, mine.ref, from);
+  out.child.count = fromLane(groupMask, mine.count, from);
+  out.child.box.lo = {fromLane(groupMask, mine.box.lo.x, from), fromLane(groupMask, mine.box.lo.y, from),
+                      fromLane(groupMask, mine.box.lo.z, from)};
+  out.child.box.hi = {fromLane(groupMask, mine.box.hi.x, from), fromLane(groupMask, mine.box.hi.y, from),
+                      fromLane(groupMask, mine.box.hi.z, from)};
+  return true;
+}
+
+// cwbvhWriteNode by the lanes of the group: lane s writes slot s's meta byte, its start reference
+// (interior) or its triangle ids (leaf), and its planes; lane 0 the bases and the triangle count.
+// The grid exponents take the whole warp (cwbvhGridLanes): every lane must call it, `valid` false
+// for lanes of groups without a node.
+__device__ void writeNodeLanes(const BinaryTreeView& t, const SlotChild& mine, bool valid, uint32_t self,
+                               uint32_t childBase, uint32_t triBase, uint32_t lane, const CwbvhConvertOutput& out) {
+  const bool isInterior = valid && mine.occupied && !isLeafRef(mine.child.ref);
+  const bool isLeaf = valid && mine.occupied && isLeafRef(mine.child.ref);
+  const uint32_t occupied = (__ballot_sync(0xffffffffu, valid && mine.occupied) >> cwbvhGroupFirstLane()) & 0xffu;
+  const uint32_t interiorSlots = (__ballot_sync(0xffffffffu, isInterior) >> cwbvhGroupFirstLane()) & 0xffu;
+  // Leaf triangles of the lower slots: an inclusive scan over the group, minus this lane's own.
+  const uint32_t count = isLeaf ? mine.child.count : 0u;
+  uint32_t below = count;
+#pragma unroll
+  for (uint32_t w = 1; w < kGroupLanes; w *= 2) {
+    const uint32_t other = __shfl_up_sync(0xffffffffu, below, w, int(kGroupLanes));
+    if (lane >= w) below += other;
+  }
+  const uint32_t total = __shfl_sync(0xffffffffu, below, int(kGroupLanes - 1u), int(kGroupLanes));
+  below -= count;
+  const CwbvhLaneGrid g = cwbvhGridLanes(lane, mine.child.box, occupied);
+  if (!valid) return;
+  CwbvhNode* node = out.nodes + self;
+  cwbvhStoreGridLanes(node, lane, !mine.occupied, mine.child.box, g);
+  uint8_t meta = 0;
+  if (isInterior) {
+    meta = kCwbvhInterior;
+    out.starts[childBase + uint32_t(__popc(interiorSlots & ((1u << lane) - 1u)))] = mine.child.ref;
+  } else if (isLeaf) {
+    meta = uint8_t(kCwbvhLeaf | below);
+    const uint32_t first = leafFirstSlot(mine.child.ref);
+    for (uint32_t k = 0; k < mine.child.count; ++k)
+      out.triIndex[triBase + below + k] = cwbvhLoadU32(t.triIndex + first + k);
+  }
+  node->meta[lane] = meta;
+  if (lane == 0) {
+    node->triCount = uint8_t(total);
+    node->childBase = childBase;
+    node->triBase = triBase;
+  }
+}
+
+// Level by level: round after round of gridDim.x * kGroupsPerBlock wide nodes, each opened by a
+// group of 8 lanes, and the level's running prefix sums of (interior children, leaf triangles) in
+// node order give its childBase and triBase. The sums are a block scan plus the sums of the lower
+// blocks, which every block reads from blockSums after the barrier, so every block also knows the
+// round's totals without another barrier.
 __global__ void __launch_bounds__(kConvertBlock) cwbvhConvertKernel(ConvertParams p) {
   using BlockScan = cub::BlockScan<uint32_t, kConvertBlock>;
   __shared__ typename BlockScan::TempStorage scanStorage;
   __shared__ uint32_t sums[4];  // lower blocks' nodes and triangles, the round's nodes and triangles
   const RootInfo root = *p.root;
-  const uint32_t perRound = gridDim.x * kConvertBlock;
-  const uint32_t lane = threadIdx.x & 31u;
+  const uint32_t perRound = gridDim.x * kGroupsPerBlock;
+  const uint32_t lane = threadIdx.x & 31u, slot = threadIdx.x % kGroupLanes;
+  const uint32_t groupMask = 0xffu << cwbvhGroupFirstLane();
   uint32_t begin = 0, end = 1, nodes = 1, tris = 0, parity = 0, levels = 0;
   bool failed = false;
   while (begin < end) {
     ++levels;
     for (uint32_t roundBase = begin; roundBase < end; roundBase += perRound) {
-      const uint32_t item = roundBase + blockIdx.x * kConvertBlock + threadIdx.x;
-      CwbvhOpening o;
+      const uint32_t item = roundBase + blockIdx.x * kGroupsPerBlock + threadIdx.x / kGroupLanes;
+      SlotChild mine;
+      uint32_t interior = 0, triangles = 0;
       bool valid = item < end;
       if (valid) {
         const int32_t start = item == 0 ? root.ref : __ldcg(p.out.starts + item);
-        if (!cwbvhOpen(p.tree, start, item == 0 ? root.count : 0u, root.box, p.mergeLimit, o)) {
+        if (!openNodeLanes(p.tree, start, item == 0 ? root.count : 0u, root.box, p.mergeLimit, slot, groupMask, mine,
+                           interior, triangles)) {
           failed = true;
           valid = false;
         }
       }
-      // interior <= 8 and triangles <= 64 per node: a block's sums fit 16 bits each.
-      const uint32_t packed = valid ? (o.interior << 16) | o.triangles : 0u;
+      // One entry per node (its lane 0); interior <= 8 and triangles <= 64 per node: a block's
+      // sums fit 16 bits each.
+      const uint32_t packed = valid && slot == 0 ? (interior << 16) | triangles : 0u;
       uint32_t prefix = 0, blockTotal = 0;
       BlockScan(scanStorage).ExclusiveSum(packed, prefix, blockTotal);
+      prefix = __shfl_sync(0xffffffffu, prefix, int(cwbvhGroupFirstLane()));
       if (threadIdx.x == 0) p.blockSums[parity * gridDim.x + blockIdx.x] = make_uint2(blockTotal >> 16, blockTotal & 0xffffu);
       if (threadIdx.x < 4) sums[threadIdx.x] = 0;
       gridBarrier(p.words);
@@ -112,14 +321,13 @@ __global__ void __launch_bounds__(kConvertBlock) cwbvhConvertKernel(ConvertParam
         if (lane == 0 && v[k] != 0) atomicAdd(&sums[k], v[k]);
       }
       __syncthreads();
-      if (valid) {
-        const uint32_t childBase = nodes + sums[0] + (prefix >> 16);
-        const uint32_t triBase = tris + sums[1] + (prefix & 0xffffu);
-        if (uint64_t(childBase) + o.interior > p.maxNodes || uint64_t(triBase) + o.triangles > p.tree.triangles)
-          failed = true;  // the references form no tree over the triangles
-        else
-          cwbvhWriteNode(p.tree, o, item, childBase, triBase, p.out);
+      const uint32_t childBase = nodes + sums[0] + (prefix >> 16);
+      const uint32_t triBase = tris + sums[1] + (prefix & 0xffffu);
+      if (valid && (uint64_t(childBase) + interior > p.maxNodes || uint64_t(triBase) + triangles > p.tree.triangles)) {
+        failed = true;  // the references form no tree over the triangles (the same in every lane of the group)
+        valid = false;
       }
+      writeNodeLanes(p.tree, mine, valid, item, childBase, triBase, slot, p.out);
       nodes += sums[2];
       tris += sums[3];
       parity ^= 1u;
@@ -148,10 +356,11 @@ GpuCwbvhConverter::GpuCwbvhConverter(uint32_t triangles) : n_(triangles) {
   starts_.resize(maxNodes);
   triIndex_.resize(n_);
   words_.resize(kConvertWords);
-  // All blocks must be resident (the grid barrier); two per multiprocessor are enough threads for
-  // the widest levels, and fewer blocks make each barrier cheaper: a small tree gets about one
-  // thread per 8 triangles (a wide node holds ~8 or more; wider levels just take more rounds).
-  blocks_ = std::min(residentBlocks(cwbvhConvertKernel, kConvertBlock, 2), int(gridFor(n_ / 8, kConvertBlock)));
+  // All blocks must be resident (the grid barrier), and fewer blocks make each barrier cheaper: a
+  // small tree gets about one group of 8 lanes per 8 triangles (a wide node holds ~8 or more; wider
+  // levels just take more rounds).
+  blocks_ = std::min(residentBlocks(cwbvhConvertKernel, kConvertBlock, kConvertBlocksPerSm),
+                     int(gridFor(std::size_t(n_ / 8) * kGroupLanes, kConvertBlock)));
   blockSums_.resize(2 * std::size_t(blocks_));
 }
 
