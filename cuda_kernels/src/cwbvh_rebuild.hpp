@@ -2,8 +2,8 @@
 // The per-frame conversion of a rebuilt binary tree (GpuRebuilder) into the compressed 8-wide
 // layout on the device: one persistent kernel walks the tree level by level with the per-node
 // steps of tsah/cwbvh_convert.hpp (greedy opening by surface area, octant slots, cwbvhQuantize),
-// numbering each level's nodes and triangles with a grid-wide prefix sum, so the result is
-// byte-identical to the host emulation tsah::convertToCwbvh.
+// each node done by 8 lanes (a lane per child), numbering each level's nodes and triangles with a
+// grid-wide prefix sum, so the result is byte-identical to the host emulation tsah::convertToCwbvh.
 #include <cuda_runtime_api.h>
 
 #include <cstdint>

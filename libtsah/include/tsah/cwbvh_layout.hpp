@@ -106,7 +106,7 @@ struct CwbvhPlaneWords {
   // that is one byte permute: no integer-to-float conversion and no shift/mask pair, which kept
   // the integer pipe the traversal's bottleneck. CwbvhSlabLine takes the 2^23 out of its offset.
   TSAH_HD float biasedAt(uint32_t axis, uint32_t slot) const {
-    const uint32_t word = w[2 * axis + (slot >> 2)];
+    const uint32_t word = (slot & 4u) != 0 ? w[2 * axis + 1] : w[2 * axis];
 #if defined(__CUDA_ARCH__)
     return __uint_as_float(__byte_perm(word, 0x4B000000u, 0x7440u | (slot & 3u)));
 #else
@@ -238,6 +238,33 @@ TSAH_HD float cwbvhSlabExit(float a, float b, float c, float tmax) {
   return rounding::minNum(cwbvhBitsMin3(a, b, c), tmax);
 }
 
+// The box test of one node for one ray: the three slab lines and the near and far plane words of
+// the ray's octant, made once per node; hits(slot) tests one child slot.
+struct CwbvhBoxTest {
+  CwbvhSlabLine x, y, z;
+  CwbvhPlaneWords near, far;
+
+  TSAH_HD CwbvhBoxTest(const CwbvhNodeWords& n, const RayPrep& prep, uint32_t oct)
+      : x(cwbvhSlabLine(n.floatAt(0), cwbvhStep(n.byteAt(12)), prep.org.x, prep.invDir.x, oct & 1u)),
+        y(cwbvhSlabLine(n.floatAt(1), cwbvhStep(n.byteAt(13)), prep.org.y, prep.invDir.y, oct & 2u)),
+        z(cwbvhSlabLine(n.floatAt(2), cwbvhStep(n.byteAt(14)), prep.org.z, prep.invDir.z, oct & 4u)),
+        // Near and far planes per axis by the ray's direction (octant): for dir >= 0 the near plane
+        // is lo, else hi.
+        near(cwbvhNearPlanes(n, oct)),
+        far(cwbvhNearPlanes(n, oct ^ 7u)) {}
+
+  // Whether the ray's interval [tmin, tmax] meets the quantized box of `slot` (an empty slot's
+  // planes are garbage: the caller masks its bit out).
+  TSAH_HD bool hits(uint32_t slot, float tmin, float tmax) const {
+    const float tn = cwbvhSlabEntry(x.nearAt(near.biasedAt(0, slot)), y.nearAt(near.biasedAt(1, slot)),
+                                    z.nearAt(near.biasedAt(2, slot)), tmin);
+    const float tf = cwbvhSlabExit(x.farAt(far.biasedAt(0, slot)), y.farAt(far.biasedAt(1, slot)),
+                                   z.farAt(far.biasedAt(2, slot)), tmax) *
+                     kSlabFarScale;
+    return tn <= tf;
+  }
+};
+
 // A group of interior children still to visit (the paper's node group): the children's base
 // index, their interior-slot mask and the hit children as bits of slot ^ oct.
 struct CwbvhNodeGroup {
@@ -325,24 +352,14 @@ struct CwbvhTraversal {
     const uint32_t imask = group.bits >> 8;
     const uint32_t nodeIndex = group.base + cwbvhPopc(imask & ((1u << slot) - 1u));
     const CwbvhNodeWords n = cwbvhLoadNode(v.nodes, nodeIndex);
-    const CwbvhSlabLine x = cwbvhSlabLine(n.floatAt(0), cwbvhStep(n.byteAt(12)), prep.org.x, prep.invDir.x, oct & 1u);
-    const CwbvhSlabLine y = cwbvhSlabLine(n.floatAt(1), cwbvhStep(n.byteAt(13)), prep.org.y, prep.invDir.y, oct & 2u);
-    const CwbvhSlabLine z = cwbvhSlabLine(n.floatAt(2), cwbvhStep(n.byteAt(14)), prep.org.z, prep.invDir.z, oct & 4u);
-    // Near and far planes per axis by the ray's direction (octant): for dir >= 0 the near plane is
-    // lo, else hi. Every slot's box is tested, empty ones too (their planes are garbage, but the
-    // hit bit is masked out below): the slot loop then carries no per-child meta decoding, which
-    // kept the integer pipe busy. The child kinds come from the meta words as masks, once per node.
-    const CwbvhPlaneWords near = cwbvhNearPlanes(n, oct), far = cwbvhNearPlanes(n, oct ^ 7u);
+    // Every slot's box is tested, empty ones too (their hit bit is masked out below): the slot loop
+    // then carries no per-child meta decoding, which kept the integer pipe busy. The child kinds
+    // come from the meta words as masks, once per node.
+    const CwbvhBoxTest test(n, prep, oct);
     uint32_t boxHits = 0;
     TSAH_CWBVH_UNROLL
-    for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
-      const float tn = cwbvhSlabEntry(x.nearAt(near.biasedAt(0, s)), y.nearAt(near.biasedAt(1, s)),
-                                      z.nearAt(near.biasedAt(2, s)), ray.tmin);
-      const float tf = cwbvhSlabExit(x.farAt(far.biasedAt(0, s)), y.farAt(far.biasedAt(1, s)),
-                                     z.farAt(far.biasedAt(2, s)), tmax) *
-                       kSlabFarScale;
-      if (tn <= tf) boxHits |= 1u << s;
-    }
+    for (uint32_t s = 0; s < kCwbvhWidth; ++s)
+      if (test.hits(s, ray.tmin, tmax)) boxHits |= 1u << s;
     const uint32_t childInterior = n.interiorSlots(), leafSlots = n.leafSlots();
     uint32_t hitLeafSlots = boxHits & leafSlots;
     // Hit interior children by slot ^ oct (the visiting order).
