@@ -8,7 +8,7 @@
 # Prepare on the build machine (docs/fuzzing.md, "GPU sanitizers"):
 #   cmake -S . -B build/cuda -DCMAKE_CUDA_ARCHITECTURES=90 -DCMAKE_BUILD_TYPE=RelWithDebInfo
 #   cmake --build build/cuda -j2 --target tsah tsah_gpu_bench test_cuda_runtime test_cuda_tree_set \
-#     test_cuda_optimizer test_cuda_cwbvh test_cuda_cwbvh_rebuild
+#     test_cuda_optimizer test_cuda_cwbvh test_cuda_cwbvh_rebuild test_cuda_cwbvh_convert
 #   ../shared/tools/gpu-bundle build/cuda .gpu
 # Run (device tool, carry [".gpu"]):  bash scripts/gpu-sanitize.sh [TOOLS]   (default: all four)
 set -u

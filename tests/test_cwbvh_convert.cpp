@@ -122,32 +122,6 @@ TEST(ConvertToCwbvh, RealAnimation) {
   compareWithBinary(anim::load(path.string()), 3000, 4);
 }
 
-// A binary tree of a few triangles in one or two leaves.
-tsah::FlatBvh tinyTree(const tsah::test::MovingTriangles& m, std::vector<uint32_t> leafSizes) {
-  const uint32_t n = uint32_t(m.indices.size() / 3);
-  tsah::Bvh bvh;
-  bvh.frameCount = 1;
-  bvh.primIds.resize(n);
-  std::iota(bvh.primIds.begin(), bvh.primIds.end(), 0u);
-  bvh.nodes.resize(leafSizes.size() == 1 ? 1 : 3);
-  if (leafSizes.size() == 1) {
-    bvh.nodes[0].primCount = n;
-  } else {
-    bvh.nodes[0].left = 1;
-    bvh.nodes[0].right = 2;
-    bvh.nodes[1] = {};
-    bvh.nodes[1].parent = 0;
-    bvh.nodes[1].primCount = leafSizes[0];
-    bvh.nodes[2] = {};
-    bvh.nodes[2].parent = 0;
-    bvh.nodes[2].primBegin = leafSizes[0];
-    bvh.nodes[2].primCount = leafSizes[1];
-  }
-  bvh.boxes.resize(bvh.nodes.size());
-  tsah::refit(bvh, m.boxes());
-  return tsah::flattenBvh(bvh);
-}
-
 void expectEveryTriangleHit(const tsah::CwbvhTree& t, const tsah::test::MovingTriangles& m) {
   const auto woop = tsah::test::cwbvhWoop(t, m.indices, m.positions);
   const tsah::CwbvhView v = t.view(woop.data(), m.indices.data(), m.positions.data());
@@ -168,7 +142,7 @@ TEST(ConvertToCwbvh, OneTriangleOneLeafAndTwoLeaves) {
   const auto five = tsah::test::randomMovingTriangles(5, 1, 6, 0.0f);
   for (const auto& [m, sizes] : {std::pair{one, std::vector<uint32_t>{1}}, std::pair{five, std::vector<uint32_t>{5}},
                                  std::pair{five, std::vector<uint32_t>{2, 3}}}) {
-    const tsah::FlatBvh flat = tinyTree(m, sizes);
+    const tsah::FlatBvh flat = tsah::test::tinyTree(m, sizes);
     const tsah::CwbvhTree t = tsah::convertToCwbvh(flat);
     // Always a root node (the GPU's trace reads no leaf root): one child per binary leaf.
     ASSERT_EQ(t.nodeCount(), 1u);
@@ -181,7 +155,7 @@ TEST(ConvertToCwbvh, OneTriangleOneLeafAndTwoLeaves) {
 TEST(ConvertToCwbvh, RefusesInvalidTrees) {
   const auto m = tsah::test::randomMovingTriangles(100, 1, 3, 0.0f);
   // Two leaves of 50 triangles: 100 under one wide node (binary leaves of <= 8 never do this).
-  EXPECT_THROW(tsah::convertToCwbvh(tinyTree(m, {50, 50})), anim::Error);
+  EXPECT_THROW(tsah::convertToCwbvh(tsah::test::tinyTree(m, {50, 50})), anim::Error);
   const tsah::FlatBvh good = sahTree(m.indices, m.positions, 8);
   EXPECT_NO_THROW(tsah::convertToCwbvh(good));
   EXPECT_THROW(tsah::convertToCwbvh(good, 0, tsah::kCwbvhMaxLeafTriangles + 1), anim::Error);

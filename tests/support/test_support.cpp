@@ -101,6 +101,31 @@ FlatBvh singleLeafTree(const anim::Animation& a) {
   return flattenBvh(leaf);
 }
 
+FlatBvh tinyTree(const MovingTriangles& m, const std::vector<uint32_t>& leafSizes) {
+  const uint32_t n = uint32_t(m.indices.size() / 3);
+  Bvh bvh;
+  bvh.frameCount = 1;
+  bvh.primIds.resize(n);
+  for (uint32_t i = 0; i < n; ++i) bvh.primIds[i] = i;
+  bvh.nodes.resize(leafSizes.size() == 1 ? 1 : 3);
+  if (leafSizes.size() == 1) {
+    bvh.nodes[0].primCount = n;
+  } else {
+    bvh.nodes[0].left = 1;
+    bvh.nodes[0].right = 2;
+    bvh.nodes[1] = {};
+    bvh.nodes[1].parent = 0;
+    bvh.nodes[1].primCount = leafSizes[0];
+    bvh.nodes[2] = {};
+    bvh.nodes[2].parent = 0;
+    bvh.nodes[2].primBegin = leafSizes[0];
+    bvh.nodes[2].primCount = leafSizes[1];
+  }
+  bvh.boxes.resize(bvh.nodes.size());
+  refit(bvh, m.boxes());
+  return flattenBvh(bvh);
+}
+
 bool sameTopology(const Bvh& a, const Bvh& b) {
   if (a.root != b.root || a.nodes.size() != b.nodes.size() || a.primIds != b.primIds) return false;
   for (std::size_t n = 0; n < a.nodes.size(); ++n) {

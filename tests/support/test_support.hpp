@@ -50,6 +50,9 @@ PrimitiveBoxes movingTriangleBoxes(uint32_t triangles, uint32_t frames, uint32_t
 Bvh frameZeroSahTree(const PrimitiveBoxes& prims);
 // The animation's triangles in one leaf (the root), boxed on keyframe 0, in flat form.
 FlatBvh singleLeafTree(const anim::Animation& a);
+// m's triangles (one frame) in one leaf (leafSizes {n}) or two leaves under a root (sizes {a, b},
+// a + b = n), in flat form.
+FlatBvh tinyTree(const MovingTriangles& m, const std::vector<uint32_t>& leafSizes);
 
 // Same root, nodes (links, leaf ranges) and primIds.
 bool sameTopology(const Bvh& a, const Bvh& b);
