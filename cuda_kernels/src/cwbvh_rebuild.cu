@@ -261,9 +261,18 @@ __device__ void writeNodeLanes(const BinaryTreeView& t, const SlotChild& mine, b
     out.starts[childBase + uint32_t(__popc(interiorSlots & ((1u << lane) - 1u)))] = mine.child.ref;
   } else if (isLeaf) {
     meta = uint8_t(kCwbvhLeaf | below);
-    const uint32_t first = leafFirstSlot(mine.child.ref);
-    for (uint32_t k = 0; k < mine.child.count; ++k)
-      out.triIndex[triBase + below + k] = cwbvhLoadU32(t.triIndex + first + k);
+    const uint32_t first = leafFirstSlot(mine.child.ref);  // count: this leaf's triangles
+    if (count <= kCwbvhMaxLeafTriangles) {
+      // All loads first, then the stores: one memory latency per leaf, not one per triangle.
+      uint32_t ids[kCwbvhMaxLeafTriangles];
+#pragma unroll
+      for (uint32_t k = 0; k < kCwbvhMaxLeafTriangles; ++k) ids[k] = k < count ? cwbvhLoadU32(t.triIndex + first + k) : 0u;
+#pragma unroll
+      for (uint32_t k = 0; k < kCwbvhMaxLeafTriangles; ++k)
+        if (k < count) out.triIndex[triBase + below + k] = ids[k];
+    } else {  // a one-leaf tree's root (up to 64 triangles)
+      for (uint32_t k = 0; k < count; ++k) out.triIndex[triBase + below + k] = cwbvhLoadU32(t.triIndex + first + k);
+    }
   }
   node->meta[lane] = meta;
   if (lane == 0) {
