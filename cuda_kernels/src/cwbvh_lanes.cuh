@@ -11,6 +11,23 @@ namespace tsah::cuda::detail {
 // The first lane of the calling lane's group of 8 (within its warp).
 __device__ __forceinline__ uint32_t cwbvhGroupFirstLane() { return (threadIdx.x & 31u) & ~(kCwbvhWidth - 1u); }
 
+// A box from another lane of the same group of 8 (the lanes named in mask all call it): from
+// member `source`, or from the member whose index differs from this one's by xor `laneXor`.
+__device__ __forceinline__ Aabb cwbvhShflBox(uint32_t mask, const Aabb& b, uint32_t source) {
+  auto get = [&](float v) { return __shfl_sync(mask, v, int(source), int(kCwbvhWidth)); };
+  Aabb r;
+  r.lo = {get(b.lo.x), get(b.lo.y), get(b.lo.z)};
+  r.hi = {get(b.hi.x), get(b.hi.y), get(b.hi.z)};
+  return r;
+}
+__device__ __forceinline__ Aabb cwbvhShflXorBox(uint32_t mask, const Aabb& b, uint32_t laneXor) {
+  auto get = [&](float v) { return __shfl_xor_sync(mask, v, int(laneXor), int(kCwbvhWidth)); };
+  Aabb r;
+  r.lo = {get(b.lo.x), get(b.lo.y), get(b.lo.z)};
+  r.hi = {get(b.hi.x), get(b.hi.y), get(b.hi.z)};
+  return r;
+}
+
 // The node's grid: the union of the occupied slots' exact boxes and its exponents.
 struct CwbvhLaneGrid {
   Aabb all;
@@ -27,12 +44,7 @@ __device__ __forceinline__ CwbvhLaneGrid cwbvhGridLanes(uint32_t slot, const Aab
 #pragma unroll
   for (uint32_t width = 1; width < kCwbvhWidth; width *= 2) {
     CwbvhPartialUnion other;
-    other.box.lo = {__shfl_xor_sync(0xffffffffu, part.box.lo.x, width),
-                    __shfl_xor_sync(0xffffffffu, part.box.lo.y, width),
-                    __shfl_xor_sync(0xffffffffu, part.box.lo.z, width)};
-    other.box.hi = {__shfl_xor_sync(0xffffffffu, part.box.hi.x, width),
-                    __shfl_xor_sync(0xffffffffu, part.box.hi.y, width),
-                    __shfl_xor_sync(0xffffffffu, part.box.hi.z, width)};
+    other.box = cwbvhShflXorBox(0xffffffffu, part.box, width);
     const uint32_t otherFirst = (slot ^ width) & ~(width - 1u);
     other.any = ((occupied >> otherFirst) & ((1u << width) - 1u)) != 0;
     const bool upperHalf = (slot & width) != 0;  // the other half is the lower one

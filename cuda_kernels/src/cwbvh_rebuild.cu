@@ -102,28 +102,30 @@ __device__ __forceinline__ uint32_t sumOverGroup(uint32_t groupMask, uint32_t v)
   return v;
 }
 
-// The children of the wide node starting at `start` (cwbvhOpen's opening): lane c gets child c in
-// opening order (`mine`), all lanes the count n. The widest interior child (the first of the
+// In the functions below, `member` is the calling lane's index in its group of 8 (0-7).
+
+// The children of the wide node starting at `start` (cwbvhOpen's opening): member c gets child c
+// in opening order (`mine`), every member the count n. The widest interior child (the first of the
 // largest area, as the serial fold over c = 0..n-1 picks it) is opened until there are 8.
 // Returns false, in every lane of the group, for an invalid reference.
 __device__ bool openLanes(const BinaryTreeView& t, int32_t start, uint32_t count, const Aabb& box, uint32_t mergeLimit,
-                          uint32_t lane, uint32_t groupMask, CwbvhOpenChild& mine, uint32_t& n) {
+                          uint32_t member, uint32_t groupMask, CwbvhOpenChild& mine, uint32_t& n) {
   mine = {0, 0, Aabb{}};
   if (isLeafRef(start)) {  // a tree that is one leaf
-    if (lane == 0) mine = {start, count, box};
+    if (member == 0) mine = {start, count, box};
     n = 1;
     return true;
   }
   if (uint32_t(start) >= t.nodeCount) return false;
   float area = 0.0f;
   const GpuBvhNode root = tsah::detail::cwbvhLoadBinaryNode(t.nodes, uint32_t(start));
-  if (lane < 2) {
-    mine = tsah::detail::cwbvhBinaryChild(t, root, int(lane), mergeLimit);
+  if (member < 2) {
+    mine = tsah::detail::cwbvhBinaryChild(t, root, int(member), mergeLimit);
     area = mine.box.area();
   }
   n = 2;
   while (n < kCwbvhWidth) {
-    const int candidate = lane < n && !isLeafRef(mine.ref) ? 1 : 0;
+    const int candidate = member < n && !isLeafRef(mine.ref) ? 1 : 0;
     int widest = -1;
     float widestArea = 0.0f;
 #pragma unroll
@@ -139,8 +141,8 @@ __device__ bool openLanes(const BinaryTreeView& t, int32_t start, uint32_t count
     const int32_t widestRef = __shfl_sync(groupMask, mine.ref, widest, int(kGroupLanes));
     if (uint32_t(widestRef) >= t.nodeCount) return false;
     const GpuBvhNode node = tsah::detail::cwbvhLoadBinaryNode(t.nodes, uint32_t(widestRef));
-    if (lane == uint32_t(widest) || lane == n) {
-      mine = tsah::detail::cwbvhBinaryChild(t, node, lane == n ? 1 : 0, mergeLimit);
+    if (member == uint32_t(widest) || member == n) {
+      mine = tsah::detail::cwbvhBinaryChild(t, node, member == n ? 1 : 0, mergeLimit);
       area = mine.box.area();
     }
     ++n;
@@ -148,33 +150,29 @@ __device__ bool openLanes(const BinaryTreeView& t, int32_t start, uint32_t count
   return true;
 }
 
-// cwbvhAssignSlots with a lane per child (row): each round every lane offers the best key of its
-// row among the free slots and the group takes the largest (max is associative: the serial tree
-// of maxima picks the same pair). Returns this lane's child's slot.
-__device__ uint32_t assignSlotLanes(const Vec3& offset, uint32_t n, uint32_t lane, uint32_t groupMask) {
-  uint32_t order[kCwbvhWidth];
+// cwbvhAssignSlots with a member per child (row): each round every member offers the best key of
+// its row among the free slots and the group takes the largest (max is associative: the serial tree
+// of maxima picks the same pair). Returns this member's child's slot.
+__device__ uint32_t assignSlotLanes(const Vec3& offset, uint32_t n, uint32_t member, uint32_t groupMask) {
+  uint32_t score[kCwbvhWidth];
 #pragma unroll
-  for (uint32_t s = 0; s < kCwbvhWidth; ++s)
-    order[s] = cwbvhOrderedBits(((s & 1u) ? offset.x : -offset.x) + ((s & 2u) ? offset.y : -offset.y) +
-                                ((s & 4u) ? offset.z : -offset.z));
+  for (uint32_t s = 0; s < kCwbvhWidth; ++s) score[s] = cwbvhSlotScore(offset, s);
   uint32_t usedSlots = 0, assigned = 0, mySlot = 0;
   for (uint32_t round = 0; round < n; ++round) {
-    const bool freeRow = lane < n && !((assigned >> lane) & 1u);
+    const bool freeRow = member < n && !((assigned >> member) & 1u);
     uint64_t rowBest = 0;
 #pragma unroll
-    for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
-      const uint64_t key = freeRow && !((usedSlots >> s) & 1u) ? (uint64_t(order[s]) << 32) | (63u - (8u * lane + s)) : 0u;
-      rowBest = key > rowBest ? key : rowBest;
-    }
-    const uint32_t pair = 63u - uint32_t(maxOverGroup(groupMask, rowBest) & 63u);
-    if (lane == pair >> 3) mySlot = pair & 7u;
+    for (uint32_t s = 0; s < kCwbvhWidth; ++s)
+      if (freeRow && !((usedSlots >> s) & 1u)) rowBest = cwbvhMax64(rowBest, cwbvhSlotKey(score[s], member, s));
+    const uint32_t pair = cwbvhKeyPair(maxOverGroup(groupMask, rowBest));
+    if (member == pair >> 3) mySlot = pair & 7u;
     assigned |= 1u << (pair >> 3);
     usedSlots |= 1u << (pair & 7u);
   }
   return mySlot;
 }
 
-// A wide node's children by slot, in the lanes of its group (lane s: slot s).
+// A wide node's children by slot, in the members of its group (member s: slot s).
 struct SlotChild {
   CwbvhOpenChild child{0, 0u, Aabb{}};
   bool occupied = false;
@@ -183,12 +181,12 @@ struct SlotChild {
 // Opens the node and puts its children into their slots (cwbvhOpen). interior / triangles: the
 // node's interior children and leaf triangles. Returns false (every lane) when the tree is invalid.
 __device__ bool openNodeLanes(const BinaryTreeView& t, int32_t start, uint32_t count, const Aabb& box,
-                              uint32_t mergeLimit, uint32_t lane, uint32_t groupMask, SlotChild& out,
+                              uint32_t mergeLimit, uint32_t member, uint32_t groupMask, SlotChild& out,
                               uint32_t& interior, uint32_t& triangles) {
   CwbvhOpenChild mine;
   uint32_t n = 0;
-  if (!openLanes(t, start, count, box, mergeLimit, lane, groupMask, mine, n)) return false;
-  const bool has = lane < n, isInterior = has && !isLeafRef(mine.ref);
+  if (!openLanes(t, start, count, box, mergeLimit, member, groupMask, mine, n)) return false;
+  const bool has = member < n, isInterior = has && !isLeafRef(mine.ref);
   const bool valid = !has || (isInterior ? uint32_t(mine.ref) < t.nodeCount
                                          : tsah::detail::cwbvhLeafInRange(t, mine.ref, mine.count));
   interior = uint32_t(__popc(__ballot_sync(groupMask, isInterior)));
@@ -198,45 +196,30 @@ __device__ bool openNodeLanes(const BinaryTreeView& t, int32_t start, uint32_t c
   // max in any order give the same union; a zero's sign cannot change a slot key).
   Aabb all = has ? mine.box : Aabb{};
 #pragma unroll
-  for (uint32_t w = kGroupLanes / 2; w >= 1; w /= 2) {
-    Aabb other;
-    other.lo = {__shfl_xor_sync(groupMask, all.lo.x, int(w), int(kGroupLanes)),
-                __shfl_xor_sync(groupMask, all.lo.y, int(w), int(kGroupLanes)),
-                __shfl_xor_sync(groupMask, all.lo.z, int(w), int(kGroupLanes))};
-    other.hi = {__shfl_xor_sync(groupMask, all.hi.x, int(w), int(kGroupLanes)),
-                __shfl_xor_sync(groupMask, all.hi.y, int(w), int(kGroupLanes)),
-                __shfl_xor_sync(groupMask, all.hi.z, int(w), int(kGroupLanes))};
-    all.extend(other);
-  }
+  for (uint32_t w = kGroupLanes / 2; w >= 1; w /= 2) all.extend(cwbvhShflXorBox(groupMask, all, w));
   Vec3 offset{0.0f, 0.0f, 0.0f};
-  if (has) {
-    const Vec3 centre = all.center(), ext = all.extent(), d = mine.box.center() - centre;
-#pragma unroll
-    for (int a = 0; a < 3; ++a) offset[a] += ext[a] > 0.0f ? d[a] / ext[a] : 0.0f;  // 0 + x, as the host
-  }
-  const uint32_t mySlot = assignSlotLanes(offset, n, lane, groupMask);
-  // By slot: lane s takes the child whose slot is s.
+  if (has) cwbvhAddCentreOffset(mine.box, all.center(), all.extent(), offset);
+  const uint32_t mySlot = assignSlotLanes(offset, n, member, groupMask);
+  // By slot: member s takes the child whose slot is s.
   uint32_t source = kGroupLanes;
 #pragma unroll
   for (uint32_t c = 0; c < kGroupLanes; ++c)
-    if (c < n && fromLane(groupMask, mySlot, c) == lane) source = c;
+    if (c < n && fromLane(groupMask, mySlot, c) == member) source = c;
   const uint32_t from = source & (kGroupLanes - 1u);
   out.occupied = source < kGroupLanes;
   out.child.ref = fromLane(groupMask, mine.ref, from);
   out.child.count = fromLane(groupMask, mine.count, from);
-  out.child.box.lo = {fromLane(groupMask, mine.box.lo.x, from), fromLane(groupMask, mine.box.lo.y, from),
-                      fromLane(groupMask, mine.box.lo.z, from)};
-  out.child.box.hi = {fromLane(groupMask, mine.box.hi.x, from), fromLane(groupMask, mine.box.hi.y, from),
-                      fromLane(groupMask, mine.box.hi.z, from)};
+  out.child.box = cwbvhShflBox(groupMask, mine.box, from);
   return true;
 }
 
-// cwbvhWriteNode by the lanes of the group: lane s writes slot s's meta byte, its start reference
-// (interior) or its triangle ids (leaf), and its planes; lane 0 the bases and the triangle count.
+// cwbvhWriteNode by the members of the group: member s writes slot s's meta byte, its start
+// reference (interior) or its triangle ids (leaf), and its planes; member 0 the bases and the
+// triangle count.
 // The grid exponents take the whole warp (cwbvhGridLanes): every lane must call it, `valid` false
 // for lanes of groups without a node.
 __device__ void writeNodeLanes(const BinaryTreeView& t, const SlotChild& mine, bool valid, uint32_t self,
-                               uint32_t childBase, uint32_t triBase, uint32_t lane, const CwbvhConvertOutput& out) {
+                               uint32_t childBase, uint32_t triBase, uint32_t member, const CwbvhConvertOutput& out) {
   const bool isInterior = valid && mine.occupied && !isLeafRef(mine.child.ref);
   const bool isLeaf = valid && mine.occupied && isLeafRef(mine.child.ref);
   const uint32_t occupied = (__ballot_sync(0xffffffffu, valid && mine.occupied) >> cwbvhGroupFirstLane()) & 0xffu;
@@ -247,35 +230,24 @@ __device__ void writeNodeLanes(const BinaryTreeView& t, const SlotChild& mine, b
 #pragma unroll
   for (uint32_t w = 1; w < kGroupLanes; w *= 2) {
     const uint32_t other = __shfl_up_sync(0xffffffffu, below, w, int(kGroupLanes));
-    if (lane >= w) below += other;
+    if (member >= w) below += other;
   }
   const uint32_t total = __shfl_sync(0xffffffffu, below, int(kGroupLanes - 1u), int(kGroupLanes));
   below -= count;
-  const CwbvhLaneGrid g = cwbvhGridLanes(lane, mine.child.box, occupied);
+  const CwbvhLaneGrid g = cwbvhGridLanes(member, mine.child.box, occupied);
   if (!valid) return;
   CwbvhNode* node = out.nodes + self;
-  cwbvhStoreGridLanes(node, lane, !mine.occupied, mine.child.box, g);
+  cwbvhStoreGridLanes(node, member, !mine.occupied, mine.child.box, g);
   uint8_t meta = 0;
   if (isInterior) {
     meta = kCwbvhInterior;
-    out.starts[childBase + uint32_t(__popc(interiorSlots & ((1u << lane) - 1u)))] = mine.child.ref;
+    out.starts[childBase + uint32_t(__popc(interiorSlots & ((1u << member) - 1u)))] = mine.child.ref;
   } else if (isLeaf) {
     meta = uint8_t(kCwbvhLeaf | below);
-    const uint32_t first = leafFirstSlot(mine.child.ref);  // count: this leaf's triangles
-    if (count <= kCwbvhMaxLeafTriangles) {
-      // All loads first, then the stores: one memory latency per leaf, not one per triangle.
-      uint32_t ids[kCwbvhMaxLeafTriangles];
-#pragma unroll
-      for (uint32_t k = 0; k < kCwbvhMaxLeafTriangles; ++k) ids[k] = k < count ? cwbvhLoadU32(t.triIndex + first + k) : 0u;
-#pragma unroll
-      for (uint32_t k = 0; k < kCwbvhMaxLeafTriangles; ++k)
-        if (k < count) out.triIndex[triBase + below + k] = ids[k];
-    } else {  // a one-leaf tree's root (up to 64 triangles)
-      for (uint32_t k = 0; k < count; ++k) out.triIndex[triBase + below + k] = cwbvhLoadU32(t.triIndex + first + k);
-    }
+    cwbvhCopyLeafTriangles(t, mine.child.ref, count, out.triIndex + triBase + below);
   }
-  node->meta[lane] = meta;
-  if (lane == 0) {
+  node->meta[member] = meta;
+  if (member == 0) {
     node->triCount = uint8_t(total);
     node->childBase = childBase;
     node->triBase = triBase;
@@ -293,7 +265,7 @@ __global__ void __launch_bounds__(kConvertBlock) cwbvhConvertKernel(ConvertParam
   __shared__ uint32_t sums[4];  // lower blocks' nodes and triangles, the round's nodes and triangles
   const RootInfo root = *p.root;
   const uint32_t perRound = gridDim.x * kGroupsPerBlock;
-  const uint32_t lane = threadIdx.x & 31u, slot = threadIdx.x % kGroupLanes;
+  const uint32_t lane = threadIdx.x & 31u, member = threadIdx.x % kGroupLanes;
   const uint32_t groupMask = 0xffu << cwbvhGroupFirstLane();
   uint32_t begin = 0, end = 1, nodes = 1, tris = 0, parity = 0, levels = 0;
   bool failed = false;
@@ -306,7 +278,7 @@ __global__ void __launch_bounds__(kConvertBlock) cwbvhConvertKernel(ConvertParam
       bool valid = item < end;
       if (valid) {
         const int32_t start = item == 0 ? root.ref : __ldcg(p.out.starts + item);
-        if (!openNodeLanes(p.tree, start, item == 0 ? root.count : 0u, root.box, p.mergeLimit, slot, groupMask, mine,
+        if (!openNodeLanes(p.tree, start, item == 0 ? root.count : 0u, root.box, p.mergeLimit, member, groupMask, mine,
                            interior, triangles)) {
           failed = true;
           valid = false;
@@ -314,7 +286,7 @@ __global__ void __launch_bounds__(kConvertBlock) cwbvhConvertKernel(ConvertParam
       }
       // One entry per node (its lane 0); interior <= 8 and triangles <= 64 per node: a block's
       // sums fit 16 bits each.
-      const uint32_t packed = valid && slot == 0 ? (interior << 16) | triangles : 0u;
+      const uint32_t packed = valid && member == 0 ? (interior << 16) | triangles : 0u;
       uint32_t prefix = 0, blockTotal = 0;
       BlockScan(scanStorage).ExclusiveSum(packed, prefix, blockTotal);
       prefix = __shfl_sync(0xffffffffu, prefix, int(cwbvhGroupFirstLane()));
@@ -340,7 +312,7 @@ __global__ void __launch_bounds__(kConvertBlock) cwbvhConvertKernel(ConvertParam
         failed = true;  // the references form no tree over the triangles (the same in every lane of the group)
         valid = false;
       }
-      writeNodeLanes(p.tree, mine, valid, item, childBase, triBase, slot, p.out);
+      writeNodeLanes(p.tree, mine, valid, item, childBase, triBase, member, p.out);
       nodes += sums[2];
       tris += sums[3];
       parity ^= 1u;

@@ -41,6 +41,13 @@ inline constexpr uint32_t kCwbvhDefaultMergeTriangles = 0;
 
 // Adds one frame's vote for the direction of each child: the offset of its box centre from the
 // centre of the children's union, relative to the union's extent per axis (0 on a flat axis).
+// One child's vote, added to `offset`: box's centre relative to the union's centre and extent.
+TSAH_HD void cwbvhAddCentreOffset(const Aabb& box, const Vec3& centre, const Vec3& ext, Vec3& offset) {
+  const Vec3 d = box.center() - centre;
+  TSAH_CWBVH_UNROLL
+  for (int a = 0; a < 3; ++a) offset[a] += ext[a] > 0.0f ? d[a] / ext[a] : 0.0f;
+}
+
 TSAH_HD void cwbvhAddCentreOffsets(const Aabb* boxes, uint32_t n, Vec3* offset) {
   Aabb all;
   TSAH_CWBVH_UNROLL
@@ -49,12 +56,8 @@ TSAH_HD void cwbvhAddCentreOffsets(const Aabb* boxes, uint32_t n, Vec3* offset) 
   const Vec3 centre = all.center();
   const Vec3 ext = all.extent();
   TSAH_CWBVH_UNROLL
-  for (uint32_t c = 0; c < kCwbvhWidth; ++c) {
-    if (c >= n) continue;
-    const Vec3 d = boxes[c].center() - centre;
-    TSAH_CWBVH_UNROLL
-    for (int a = 0; a < 3; ++a) offset[c][a] += ext[a] > 0.0f ? d[a] / ext[a] : 0.0f;
-  }
+  for (uint32_t c = 0; c < kCwbvhWidth; ++c)
+    if (c < n) cwbvhAddCentreOffset(boxes[c], centre, ext, offset[c]);
 }
 
 // A float's order as an unsigned integer (-0 taken as +0, which compares equal to it).
@@ -65,6 +68,18 @@ TSAH_HD uint32_t cwbvhOrderedBits(float f) {
 }
 
 TSAH_HD uint64_t cwbvhMax64(uint64_t a, uint64_t b) { return a > b ? a : b; }
+
+// How far a child whose offset is o points into slot s's octant (bit a of s: + side of axis a),
+// as an ordered integer.
+TSAH_HD uint32_t cwbvhSlotScore(const Vec3& o, uint32_t s) {
+  return cwbvhOrderedBits(((s & 1u) ? o.x : -o.x) + ((s & 2u) ? o.y : -o.y) + ((s & 4u) ? o.z : -o.z));
+}
+// The key of the pair (child c, slot s) with that score: larger wins; ties go to the lowest child,
+// then the lowest slot. cwbvhKeyPair gives back 8 * c + s.
+TSAH_HD uint64_t cwbvhSlotKey(uint32_t score, uint32_t c, uint32_t s) {
+  return (uint64_t(score) << 32) | (63u - (8u * c + s));
+}
+TSAH_HD uint32_t cwbvhKeyPair(uint64_t key) { return 63u - uint32_t(key & 63u); }
 
 // Child -> slot (slotOf[c] for c < n <= 8): greedily over all (child, free slot) pairs, the child
 // whose offset points farthest into a slot's octant (bit a of the slot: + side of axis a) gets it
@@ -77,8 +92,7 @@ TSAH_HD void cwbvhAssignSlots(const Vec3* offset, uint32_t n, uint32_t* slotOf) 
   for (uint32_t c = 0; c < kCwbvhWidth; ++c) {
     const Vec3 o = c < n ? offset[c] : Vec3{0.0f, 0.0f, 0.0f};
     TSAH_CWBVH_UNROLL
-    for (uint32_t s = 0; s < kCwbvhWidth; ++s)
-      order[c][s] = cwbvhOrderedBits(((s & 1u) ? o.x : -o.x) + ((s & 2u) ? o.y : -o.y) + ((s & 4u) ? o.z : -o.z));
+    for (uint32_t s = 0; s < kCwbvhWidth; ++s) order[c][s] = cwbvhSlotScore(o, s);
   }
   uint32_t usedSlots = 0, assigned = 0;
   for (uint32_t round = 0; round < n; ++round) {
@@ -89,7 +103,7 @@ TSAH_HD void cwbvhAssignSlots(const Vec3* offset, uint32_t n, uint32_t* slotOf) 
       TSAH_CWBVH_UNROLL
       for (uint32_t s = 0; s < kCwbvhWidth; ++s) {
         const bool free = c < n && !((assigned >> c) & 1u) && !((usedSlots >> s) & 1u);
-        key[s] = free ? (uint64_t(order[c][s]) << 32) | (63u - (8u * c + s)) : 0u;
+        key[s] = free ? cwbvhSlotKey(order[c][s], c, s) : 0u;
       }
       rowBest[c] = cwbvhMax64(cwbvhMax64(cwbvhMax64(key[0], key[1]), cwbvhMax64(key[2], key[3])),
                               cwbvhMax64(cwbvhMax64(key[4], key[5]), cwbvhMax64(key[6], key[7])));
@@ -97,7 +111,7 @@ TSAH_HD void cwbvhAssignSlots(const Vec3* offset, uint32_t n, uint32_t* slotOf) 
     const uint64_t best =
         cwbvhMax64(cwbvhMax64(cwbvhMax64(rowBest[0], rowBest[1]), cwbvhMax64(rowBest[2], rowBest[3])),
                    cwbvhMax64(cwbvhMax64(rowBest[4], rowBest[5]), cwbvhMax64(rowBest[6], rowBest[7])));
-    const uint32_t pair = 63u - uint32_t(best & 63u);
+    const uint32_t pair = cwbvhKeyPair(best);
     const uint32_t bestC = pair >> 3, bestS = pair & 7u;
     TSAH_CWBVH_UNROLL
     for (uint32_t c = 0; c < kCwbvhWidth; ++c)
@@ -312,6 +326,23 @@ struct CwbvhConvertOutput {
   uint32_t* parentSlot = nullptr;  // per wide node: parent * 8 + slot
 };
 
+// The triangle ids of the binary leaf (ref, count) into dst[0, count).
+TSAH_HD void cwbvhCopyLeafTriangles(const BinaryTreeView& t, int32_t ref, uint32_t count, uint32_t* dst) {
+  const uint32_t first = leafFirstSlot(ref);
+  if (count <= kCwbvhMaxLeafTriangles) {
+    // All loads of the leaf first, then the stores: one memory latency per leaf instead of one per
+    // triangle (a load-store loop waits on each load; on the GPU that was most of a level).
+    uint32_t ids[kCwbvhMaxLeafTriangles];
+    TSAH_CWBVH_UNROLL
+    for (uint32_t k = 0; k < kCwbvhMaxLeafTriangles; ++k) ids[k] = k < count ? cwbvhLoadU32(t.triIndex + first + k) : 0u;
+    TSAH_CWBVH_UNROLL
+    for (uint32_t k = 0; k < kCwbvhMaxLeafTriangles; ++k)
+      if (k < count) dst[k] = ids[k];
+  } else {  // a one-leaf tree's root (up to 64 triangles)
+    for (uint32_t k = 0; k < count; ++k) dst[k] = cwbvhLoadU32(t.triIndex + first + k);
+  }
+}
+
 // Writes wide node `self` from its opening: interior children become nodes childBase + rank (and
 // their start references), leaf triangles the slots triBase + offset in slot order; the child
 // boxes are quantized with cwbvhQuantize.
@@ -336,20 +367,7 @@ TSAH_HD void cwbvhWriteNode(const BinaryTreeView& t, const CwbvhOpening& o, uint
       continue;
     }
     n.meta[s] = uint8_t(kCwbvhLeaf | offset);
-    const uint32_t first = leafFirstSlot(ch.ref);
-    if (ch.count <= kCwbvhMaxLeafTriangles) {
-      // All loads of the leaf first, then the stores: one memory latency per leaf instead of one
-      // per triangle (a load-store loop waits on each load; on the GPU that was most of a level).
-      uint32_t ids[kCwbvhMaxLeafTriangles];
-      TSAH_CWBVH_UNROLL
-      for (uint32_t k = 0; k < kCwbvhMaxLeafTriangles; ++k)
-        ids[k] = k < ch.count ? cwbvhLoadU32(t.triIndex + first + k) : 0u;
-      TSAH_CWBVH_UNROLL
-      for (uint32_t k = 0; k < kCwbvhMaxLeafTriangles; ++k)
-        if (k < ch.count) out.triIndex[triBase + offset + k] = ids[k];
-    } else {  // a one-leaf tree's root (up to 64 triangles)
-      for (uint32_t k = 0; k < ch.count; ++k) out.triIndex[triBase + offset + k] = cwbvhLoadU32(t.triIndex + first + k);
-    }
+    cwbvhCopyLeafTriangles(t, ch.ref, ch.count, out.triIndex + triBase + offset);
     offset += ch.count;
   }
   n.triCount = uint8_t(offset);
