@@ -13,19 +13,18 @@ __device__ __forceinline__ uint32_t cwbvhGroupFirstLane() { return (threadIdx.x 
 
 // A box from another lane of the same group of 8 (the lanes named in mask all call it): from
 // member `source`, or from the member whose index differs from this one's by xor `laneXor`.
-__device__ __forceinline__ Aabb cwbvhShflBox(uint32_t mask, const Aabb& b, uint32_t source) {
-  auto get = [&](float v) { return __shfl_sync(mask, v, int(source), int(kCwbvhWidth)); };
+template <class Get>
+__device__ __forceinline__ Aabb cwbvhBoxFrom(const Aabb& b, Get get) {
   Aabb r;
   r.lo = {get(b.lo.x), get(b.lo.y), get(b.lo.z)};
   r.hi = {get(b.hi.x), get(b.hi.y), get(b.hi.z)};
   return r;
 }
+__device__ __forceinline__ Aabb cwbvhShflBox(uint32_t mask, const Aabb& b, uint32_t source) {
+  return cwbvhBoxFrom(b, [&](float v) { return __shfl_sync(mask, v, int(source), int(kCwbvhWidth)); });
+}
 __device__ __forceinline__ Aabb cwbvhShflXorBox(uint32_t mask, const Aabb& b, uint32_t laneXor) {
-  auto get = [&](float v) { return __shfl_xor_sync(mask, v, int(laneXor), int(kCwbvhWidth)); };
-  Aabb r;
-  r.lo = {get(b.lo.x), get(b.lo.y), get(b.lo.z)};
-  r.hi = {get(b.hi.x), get(b.hi.y), get(b.hi.z)};
-  return r;
+  return cwbvhBoxFrom(b, [&](float v) { return __shfl_xor_sync(mask, v, int(laneXor), int(kCwbvhWidth)); });
 }
 
 // The node's grid: the union of the occupied slots' exact boxes and its exponents.

@@ -106,7 +106,7 @@ struct CwbvhPlaneWords {
   // that is one byte permute: no integer-to-float conversion and no shift/mask pair, which kept
   // the integer pipe the traversal's bottleneck. CwbvhSlabLine takes the 2^23 out of its offset.
   TSAH_HD float biasedAt(uint32_t axis, uint32_t slot) const {
-    const uint32_t word = (slot & 4u) != 0 ? w[2 * axis + 1] : w[2 * axis];
+    const uint32_t word = w[2 * axis + (slot >> 2)];
 #if defined(__CUDA_ARCH__)
     return __uint_as_float(__byte_perm(word, 0x4B000000u, 0x7440u | (slot & 3u)));
 #else
