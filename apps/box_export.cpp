@@ -4,12 +4,12 @@
 #include <cstdio>
 #include <filesystem>
 
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/files.hpp"
+#include "tsah/base/error.hpp"
 #include "animation_frames.hpp"
 #include "cli.hpp"
-#include "tsah/box_view.hpp"
-#include "tsah/tree_quality.hpp"
+#include "tsah/inspect/box_view.hpp"
+#include "tsah/inspect/tree_quality.hpp"
 
 namespace tsah::cli {
 
@@ -45,7 +45,7 @@ void exportBoxes(const BoxExportOptions& o, const tsah::FlatBvh& flat, const tsa
   if (o.minDepth > o.maxDepth) throw UsageError("--min-depth is larger than --max-depth");
 
   const tsah::Bvh bvh = tsah::unflattenBvh(flat);
-  const tsah::CostModel model{info.ct, info.ci};
+  const tsah::CostModel model = info.objective.cost;
   std::vector<tsah::Aabb> prims(a.triangleCount());
   tsah::triangleBoxes(a.indices(), positions, prims);
   const tsah::FrameBoxes frame = tsah::frameBoxes(bvh, prims, model);
@@ -69,12 +69,12 @@ void exportBoxes(const BoxExportOptions& o, const tsah::FlatBvh& flat, const tsa
   const fs::path parent = fs::path(out).parent_path();
   if (!parent.empty()) fs::create_directories(parent, ec);
   if (ext == ".ply") {
-    anim::writeFileAtomically(out, tsah::encodeBoxViewPly(mesh));
+    tsah::writeFileAtomically(out, tsah::encodeBoxViewPly(mesh));
   } else {
     const fs::path mtl = fs::path(out).replace_extension(".mtl");
     const std::string mtlText = tsah::encodeBoxViewMtl(), objText = tsah::encodeBoxViewObj(mesh, mtl.filename().string());
-    anim::writeFileAtomically(mtl.string(), {reinterpret_cast<const uint8_t*>(mtlText.data()), mtlText.size()});
-    anim::writeFileAtomically(out, {reinterpret_cast<const uint8_t*>(objText.data()), objText.size()});
+    tsah::writeFileAtomically(mtl.string(), {reinterpret_cast<const uint8_t*>(mtlText.data()), mtlText.size()});
+    tsah::writeFileAtomically(out, {reinterpret_cast<const uint8_t*>(objText.data()), objText.size()});
   }
   std::printf("wrote %s: %u boxes (depth %u..%u), coloured by %s, frame cost %.2f (time %g)\n", out.c_str(),
               mesh.boxCount, mesh.minDepth, mesh.maxDepth, o.colour.c_str(), frame.cost.total(), time);

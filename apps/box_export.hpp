@@ -7,8 +7,8 @@
 #include <string>
 
 #include "anim/animation.hpp"
-#include "tsah/bvh_file.hpp"
-#include "tsah/flat_bvh.hpp"
+#include "tsah/io/bvh_file.hpp"
+#include "tsah/layout/flat_bvh.hpp"
 
 namespace tsah::cli {
 

@@ -5,18 +5,18 @@
 #include <filesystem>
 #include <unistd.h>
 
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/files.hpp"
+#include "tsah/base/error.hpp"
 #include "animation_frames.hpp"
 #include "cli.hpp"
-#include "tsah/tree_quality.hpp"
+#include "tsah/inspect/tree_quality.hpp"
 
 namespace tsah::cli {
 
 bool looksLikeBvhFile(const std::string& path) {
   std::error_code ec;
   if (!std::filesystem::exists(path, ec) || std::filesystem::is_directory(path, ec)) return false;  // sequences
-  const anim::InputFile in(path);  // a FIFO or device is refused here instead of blocking
+  const tsah::InputFile in(path);  // a FIFO or device is refused here instead of blocking
   char magic[8] = {};
   return ::pread(in.fd(), magic, sizeof magic, 0) == ssize_t(sizeof magic) && std::string(magic, 7) == "TSAHBVH" &&
          magic[7] == '\0';
@@ -35,12 +35,12 @@ nlohmann::json describeBvh(const tsah::FlatBvh& flat, const tsah::BvhBuildInfo& 
   j["layout"] = "aila-laine-64";
   j["method"] = info.method;
   j["selection"] = info.selection;
-  j["k"] = info.k;
+  j["k"] = info.objective.k;
   j["representative_frames"] = info.representativeFrames;
   j["seed"] = info.seed;
-  j["ct"] = info.ct;
-  j["ci"] = info.ci;
-  j["max_leaf_size"] = info.maxLeafSize;
+  j["ct"] = info.objective.cost.ct;
+  j["ci"] = info.objective.cost.ci;
+  j["max_leaf_size"] = info.objective.maxLeafSize;
   j["build_s"] = info.buildSeconds;
   j["time"] = {info.timeStart, info.timeEnd};
   j["triangles"] = info.triangleCount;
@@ -64,9 +64,9 @@ void printTree(const nlohmann::json& j, const tsah::BvhBuildInfo& info, const Fl
   std::snprintf(hash, sizeof hash, "%08x", info.topologyHash);
   const auto& lo = j["bounds_frame0"][0];
   const auto& hi = j["bounds_frame0"][1];
-  std::printf("method        %s (selection %s, k=%d, seed %llu)\n", info.method.c_str(), info.selection.c_str(), info.k,
+  std::printf("method        %s (selection %s, k=%d, seed %llu)\n", info.method.c_str(), info.selection.c_str(), info.objective.k,
               static_cast<unsigned long long>(info.seed));
-  std::printf("cost          cT=%g cI=%g, max leaf size %u\n", double(info.ct), double(info.ci), info.maxLeafSize);
+  std::printf("cost          cT=%g cI=%g, max leaf size %u\n", double(info.objective.cost.ct), double(info.objective.cost.ci), info.objective.maxLeafSize);
   std::printf("frames        %u representative, %u box sets, time %g .. %g\n", info.representativeFrames,
               flat.frameCount, info.timeStart, info.timeEnd);
   std::printf("triangles     %u (vertices %u, topology hash %s)\n", info.triangleCount, info.vertexCount, hash);
@@ -80,7 +80,7 @@ void printTree(const nlohmann::json& j, const tsah::BvhBuildInfo& info, const Fl
 }  // namespace
 
 void describeBvhFile(const std::string& path, bool json) {
-  const std::vector<uint8_t> bytes = anim::readFile(path);
+  const std::vector<uint8_t> bytes = tsah::readFile(path);
   const TreeSet set = decodeTreeSetFile(bytes, path);
   if (set.version == kTbvhVersion) {
     nlohmann::json j = describeBvh(set.trees[0], set.builds[0]);
@@ -169,25 +169,25 @@ nlohmann::json treeQualityJson(const TreeShape& shape, const TreeQuality& qualit
 void describeTreeOverAnimation(const std::string& bvhPath, const std::string& animationPath, uint32_t frames,
                                bool json) {
   BvhBuildInfo info;
-  const FlatBvh flat = decodeFlatBvhFile(anim::readFile(bvhPath), bvhPath, &info);
+  const FlatBvh flat = decodeFlatBvhFile(tsah::readFile(bvhPath), bvhPath, &info);
   const anim::Animation a = loadInput(animationPath);
   checkTreeMatchesAnimation(info, bvhPath, a, animationPath);
   const Bvh bvh = unflattenBvh(flat);
   std::vector<double> times = frames ? a.uniformTimes(frames) : std::vector<double>(a.times().begin(), a.times().end());
   const TreeShape shape = treeShape(bvh);
-  const TreeQuality quality = evaluateTreeQuality(bvh, animationFrames(a, times), {info.ct, info.ci});
+  const TreeQuality quality = evaluateTreeQuality(bvh, animationFrames(a, times), info.objective.cost);
   nlohmann::json j = treeQualityJson(shape, quality, times);
   j["tree"] = bvhPath;
   j["animation"] = animationPath;
   j["method"] = info.method;
-  j["ct"] = info.ct;
-  j["ci"] = info.ci;
+  j["ct"] = info.objective.cost.ct;
+  j["ci"] = info.objective.cost.ci;
   if (json) {
     std::printf("%s\n", j.dump().c_str());
     return;
   }
   std::printf("tree        %s (%s, k=%d, %u representative frames, cT=%g cI=%g)\n", bvhPath.c_str(), info.method.c_str(),
-              info.k, info.representativeFrames, double(info.ct), double(info.ci));
+              info.objective.k, info.representativeFrames, double(info.objective.cost.ct), double(info.objective.cost.ci));
   std::printf("animation   %s (%zu frames evaluated, time %g .. %g)\n", animationPath.c_str(), times.size(),
               times.front(), times.back());
   std::printf("shape       %u interior, %u leaves, depth %u, leaves of %u..%u triangles (mean %.2f)\n", shape.innerCount,

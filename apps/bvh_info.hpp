@@ -5,9 +5,9 @@
 #include <nlohmann/json.hpp>
 
 #include "anim/animation.hpp"
-#include "tsah/bvh_file.hpp"
+#include "tsah/io/bvh_file.hpp"
 #include "tsah/pipeline.hpp"
-#include "tsah/tree_set.hpp"
+#include "tsah/io/tree_set.hpp"
 
 namespace tsah::cli {
 
@@ -17,7 +17,7 @@ bool looksLikeBvhFile(const std::string& path);
 // The header of a decoded file as JSON (the fields of docs/tbvh-format.md, plus leaf statistics).
 nlohmann::json describeBvh(const tsah::FlatBvh& flat, const tsah::BvhBuildInfo& info);
 
-// Loads and validates `path` (throws anim::ImportError naming the file) and prints its header on
+// Loads and validates `path` (throws tsah::FileError naming the file) and prints its header on
 // stdout: aligned text, or one JSON object when json is true. A tree set (version 2) prints the
 // set's header and then each tree with the time range it is used for.
 void describeBvhFile(const std::string& path, bool json);

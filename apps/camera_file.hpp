@@ -10,7 +10,7 @@
 
 namespace tsah::cli {
 
-// Reads and checks a camera file; throws anim::ImportError naming the file and the problem.
+// Reads and checks a camera file; throws tsah::FileError naming the file and the problem.
 std::vector<anim::CameraKey> loadCameraFile(const std::string& path);
 // The same for the file's bytes already in memory (`path` names it in messages).
 std::vector<anim::CameraKey> decodeCameraFile(std::span<const uint8_t> bytes, const std::string& path);

@@ -12,8 +12,8 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/files.hpp"
+#include "tsah/base/error.hpp"
 #include "bench/bench.hpp"
 #include "bench/data_scan.hpp"
 #include "bench/embree_peer.hpp"
@@ -94,7 +94,7 @@ std::string commandLine() {
 }
 
 void writeText(const fs::path& path, const std::string& text) {
-  anim::writeFileAtomically(path.string(), std::span(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
+  tsah::writeFileAtomically(path.string(), std::span(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
 }
 
 void writeReport(const fs::path& out, const json& results) {
@@ -113,14 +113,14 @@ void reportOnly(const Options& opt) {
   ProgressLog log;
   const fs::path out = opt.out;
   const std::string file = (out / "results.json").string();
-  const std::vector<uint8_t> bytes = anim::readFileForUpdate(file, std::size_t(1) << 30);  // rewritten below
+  const std::vector<uint8_t> bytes = tsah::readFileForUpdate(file, std::size_t(1) << 30);  // rewritten below
   json results;
   try {
     results = json::parse(bytes.begin(), bytes.end());
   } catch (const json::exception& e) {
-    throw anim::ImportError(file, std::string("not valid JSON: ") + e.what());
+    throw tsah::FileError(file, std::string("not valid JSON: ") + e.what());
   }
-  if (!results.is_object() || !results.contains("scenes")) throw anim::ImportError(file, "not a tsah bench results file");
+  if (!results.is_object() || !results.contains("scenes")) throw tsah::FileError(file, "not a tsah bench results file");
   // Notes given now annotate the finished run (what was learned after it, e.g. about the machine).
   if (!results.contains("notes") || !results["notes"].is_array()) results["notes"] = json::array();
   for (const std::string& n : opt.notes) results["notes"].push_back("(added after the run with --report-only) " + n);
@@ -135,7 +135,7 @@ void runScalingMode(Options& opt, CLI::App* sub, const std::vector<tsah::bench::
   const tsah::bench::BenchOptions& b = opt.bench;
   std::error_code ec;
   o.program = fs::read_symlink("/proc/self/exe", ec).string();
-  if (ec) throw anim::Error("cannot find the tsah program (/proc/self/exe): " + ec.message());
+  if (ec) throw tsah::Error("cannot find the tsah program (/proc/self/exe): " + ec.message());
   o.frames = b.frames;
   o.evalFrames = sub->get_option("--eval-frames")->count() > 0 ? b.evalFrames : 10;
   o.seed = b.seed;
@@ -222,7 +222,7 @@ void run(Options opt, CLI::App* sub) {
     // The scaling mode has its generated inputs: without a data folder it runs on those alone.
     try {
       scanData();
-    } catch (const anim::Error& e) {
+    } catch (const tsah::Error& e) {
       log(std::string("no real scenes: ") + e.what(), false);
     }
     scenes = scan.scenes;
@@ -252,7 +252,7 @@ void run(Options opt, CLI::App* sub) {
 
   std::error_code ec;
   fs::create_directories(out, ec);
-  if (ec || !fs::is_directory(out)) throw anim::Error(out.string() + ": cannot create the output folder");
+  if (ec || !fs::is_directory(out)) throw tsah::Error(out.string() + ": cannot create the output folder");
   if (opt.scaling) return runScalingMode(opt, sub, scenes, log);
   json results;
   results["tool"] = "tsah bench";
@@ -304,7 +304,7 @@ void run(Options opt, CLI::App* sub) {
   results["finished"] = nowText();
   makePlotsInto(results, out, log);
   writeReport(out, results);
-  if (results["scenes"].empty()) throw anim::Error("no scene could be benchmarked (see " + (out / "results.md").string() + ")");
+  if (results["scenes"].empty()) throw tsah::Error("no scene could be benchmarked (see " + (out / "results.md").string() + ")");
   std::printf("%s\n%s\n", (out / "results.md").c_str(), (out / "results.json").c_str());
 }
 

@@ -10,7 +10,7 @@
 
 #include "cli.hpp"
 #include "optimizer_options.hpp"
-#include "tsah/baselines.hpp"
+#include "tsah/optimize/baselines.hpp"
 #include "tsah/pipeline.hpp"
 
 namespace {

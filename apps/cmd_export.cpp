@@ -16,12 +16,12 @@
 #include <filesystem>
 #include <string>
 
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/files.hpp"
+#include "tsah/base/error.hpp"
 #include "box_export.hpp"
 #include "bvh_info.hpp"
 #include "cli.hpp"
-#include "tsah/cpu_runtime.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
 
 namespace {
 
@@ -125,7 +125,6 @@ std::string cHeaderWide(const tsah::CpuRuntime& rt, const tsah::WideTree<N>& w, 
  */
 #ifndef TSAH_SCENE_H
 #define TSAH_SCENE_H
-#include <stdint.h>
 
 )";
   h += "#define TSAH_WIDTH " + n + "u\n";
@@ -194,7 +193,7 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
   sub->callback([opt, boxes] {
     namespace fs = std::filesystem;
     // A tree set exports the tree of the frame's part (tsah::treeIndexAt), as the runtimes use it.
-    const tsah::TreeSet set = tsah::decodeTreeSetFile(anim::readFile(opt->bvh), opt->bvh);
+    const tsah::TreeSet set = tsah::decodeTreeSetFile(tsah::readFile(opt->bvh), opt->bvh);
     const anim::Animation a = tsah::cli::loadInput(opt->input);
     tsah::cli::checkTreeMatchesAnimation(set.builds.front(), opt->bvh, a, opt->input);
 
@@ -226,7 +225,7 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
     config.layout = *tsah::parseLayout(opt->layout);
     config.isa = tsah::SimdIsa::Sse;  // the layout does not depend on the kernels; sse runs everywhere...
     if (config.layout == tsah::CpuLayout::Bvh8) config.isa.reset();  // ...but has no 8-wide kernels
-    config.collapse = tsah::wideCollapseConfig(info);
+    config.collapse = tsah::wideCollapseConfig(info.objective);
     // Only the part's tree: a runtime over the whole set would collapse every tree of it.
     tsah::CpuRuntime rt(set.trees[part], {a.indices().begin(), a.indices().end()}, a.vertexCount(), config);
     rt.update(positions);
@@ -235,10 +234,10 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
     if (fs::exists(opt->out, ec) && !fs::is_directory(opt->out, ec))
       throw tsah::cli::UsageError(opt->out + " exists and is not a folder");
     fs::create_directories(opt->out, ec);
-    if (ec) throw anim::Error(opt->out + ": cannot create the folder: " + ec.message());
+    if (ec) throw tsah::Error(opt->out + ": cannot create the folder: " + ec.message());
     const fs::path out(opt->out);
     auto write = [&](const char* name, std::span<const uint8_t> data) {
-      anim::writeFileAtomically((out / name).string(), data);
+      tsah::writeFileAtomically((out / name).string(), data);
     };
     std::string header;
     std::size_t nodes = 0, woop = 0;

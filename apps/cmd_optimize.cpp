@@ -14,11 +14,11 @@
 #include "animation_frames.hpp"
 #include "cli.hpp"
 #include "optimizer_options.hpp"
-#include "tsah/baselines.hpp"
-#include "tsah/bvh_file.hpp"
+#include "tsah/optimize/baselines.hpp"
+#include "tsah/io/bvh_file.hpp"
 #include "tsah/pipeline.hpp"
-#include "tsah/segmentation.hpp"
-#include "tsah/tree_set.hpp"
+#include "tsah/optimize/segmentation.hpp"
+#include "tsah/io/tree_set.hpp"
 
 namespace {
 
@@ -110,7 +110,7 @@ void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim:
         tsah::treeBuildInfo(opt.tree, a, frames, r.buildSeconds[s], r.buildRanges[s].start, r.buildRanges[s].end);
     if (r.methods[s] == "sah-frame") {
       info.method = "sah-frame";
-      info.k = 0;
+      info.objective.k = 0;
       info.representativeFrames = 1;
     }
     builds.push_back(info);
@@ -239,7 +239,7 @@ void run(const Options& opt) {
   j["input"] = opt.input;
   j["output"] = opt.output;
   j["method"] = info.method;
-  j["k"] = info.k;
+  j["k"] = info.objective.k;
   j["optimizer"] = opt.tree.optimizer;
   j["device"] = opt.tree.device;
   j["selection"] = info.selection;

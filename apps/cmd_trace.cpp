@@ -13,21 +13,22 @@
 #include <string>
 #include <vector>
 
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/files.hpp"
+#include "tsah/base/error.hpp"
 #include "bvh_info.hpp"
 #include "camera_file.hpp"
-#include "tsah/tree_set.hpp"
+#include "tsah/io/tree_set.hpp"
 #include "cli.hpp"
-#include "tsah/binned_sah_builder.hpp"
-#include "tsah/camera.hpp"
-#include "tsah/cpu_runtime.hpp"
-#include "tsah/leaf_collapser.hpp"
-#include "tsah/renderer.hpp"
-#include "tsah/sah_builder.hpp"
+#include "tsah/build/binned_sah_builder.hpp"
+#include "tsah/render/camera.hpp"
+#include "tsah/render/camera_path.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
+#include "tsah/optimize/leaf_collapser.hpp"
+#include "tsah/render/renderer.hpp"
+#include "tsah/build/sah_builder.hpp"
 #if TSAH_HAVE_CUDA
 #include "tsah_cuda/device.hpp"
-#include "tsah/cwbvh_convert.hpp"
+#include "tsah/layout/cwbvh_convert.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 #endif
 
@@ -245,8 +246,8 @@ class GpuFrameRuntime final : public FrameRuntime {
 
 std::unique_ptr<FrameRuntime> makeRuntime(const TraceOptions& opt, const tsah::TreeSet& trees,
                                           const tsah::BvhBuildInfo& info, const anim::Animation& a) {
-  const tsah::CostModel cost{info.ct, info.ci};
-  const uint32_t maxLeaf = std::max(1u, info.maxLeafSize);
+  const tsah::CostModel cost = info.objective.cost;
+  const uint32_t maxLeaf = std::max(1u, info.objective.maxLeafSize);
 #if TSAH_HAVE_CUDA
   if (opt.device == "cuda") {
     std::optional<tsah::cuda::RebuildOptions> rebuild;
@@ -268,7 +269,7 @@ std::unique_ptr<FrameRuntime> makeRuntime(const TraceOptions& opt, const tsah::T
   tsah::CpuRuntime::Config config(opt.threads);
   config.layout = opt.layout == "auto" ? tsah::fastestLayout() : *tsah::parseLayout(opt.layout);
   if (opt.isa != "auto") config.isa = tsah::parseIsa(opt.isa);
-  config.collapse = tsah::wideCollapseConfig(info);
+  config.collapse = tsah::wideCollapseConfig(info.objective);
   return std::make_unique<CpuFrameRuntime>(trees, a, config, cpuRebuilder(opt.rebuild, cost, maxLeaf));
 }
 
@@ -308,7 +309,7 @@ void runTrace(const TraceOptions& opt) {
 
   // Inputs: the tree (or tree set: each frame refits the tree of its part) is validated completely
   // by the reader; then it must match the animation.
-  const tsah::TreeSet trees = tsah::decodeTreeSetFile(anim::readFile(opt.bvh), opt.bvh);
+  const tsah::TreeSet trees = tsah::decodeTreeSetFile(tsah::readFile(opt.bvh), opt.bvh);
   const tsah::BvhBuildInfo& info = trees.builds.front();
   const anim::Animation a = tsah::cli::loadInput(opt.input);
   tsah::cli::checkTreeMatchesAnimation(info, opt.bvh, a, opt.input);
@@ -348,7 +349,7 @@ void runTrace(const TraceOptions& opt) {
   if (!opt.noImages) {
     std::error_code ec;
     fs::create_directories(opt.out, ec);
-    if (ec || !fs::is_directory(opt.out)) throw anim::Error(opt.out + ": cannot create the output folder");
+    if (ec || !fs::is_directory(opt.out)) throw tsah::Error(opt.out + ": cannot create the output folder");
   }
 
   tsah::RenderSettings settings;

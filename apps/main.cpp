@@ -3,13 +3,13 @@
 #include <exception>
 #include <new>
 
-#include "anim/binary_io.hpp"
+#include "tsah/base/files.hpp"
 #include "cli.hpp"
 
 int main(int argc, char** argv) {
   // Before any thread exists: SIGINT/SIGTERM remove the temporaries in flight (no partial files).
-  anim::installInterruptCleanup();
-  anim::protectInputs(true);  // an output may never replace one of the command's inputs
+  tsah::installInterruptCleanup();
+  tsah::protectInputs(true);  // an output may never replace one of the command's inputs
   CLI::App app{"tsah: build one BVH optimized for every frame of an animation (T-SAH), "
                "export it and trace every frame with only a refit."};
   app.set_version_flag("--version", std::string("tsah ") + TSAH_VERSION);

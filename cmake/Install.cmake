@@ -1,5 +1,5 @@
 # `cmake --install`: the public headers, the static libraries, the `tsah` program and a CMake package
-# (tsahConfig.cmake, tsahConfigVersion.cmake) exporting tsah::anim, tsah::tsah and, when the CUDA
+# (tsahConfig.cmake, tsahConfigVersion.cmake) exporting tsah::base, tsah::anim, tsah::tsah and, when the CUDA
 # runtime was built, tsah::cuda. The public API is listed in docs/api.md. Included at the end of the
 # top-level CMakeLists.txt, after every target exists.
 include(GNUInstallDirs)
@@ -10,14 +10,16 @@ set(TSAH_INSTALL_CMAKEDIR ${CMAKE_INSTALL_LIBDIR}/cmake/tsah CACHE STRING "Where
 # Installed names (namespace tsah::) and in-tree aliases with the same names, so code written against
 # the package also builds inside this tree. The older in-tree names (anim::anim, tsah::core) stay.
 # Position-independent code: the static libraries can be linked into shared libraries (the Python module).
+set_target_properties(tsah_base PROPERTIES EXPORT_NAME base POSITION_INDEPENDENT_CODE ON)
 set_target_properties(anim PROPERTIES EXPORT_NAME anim POSITION_INDEPENDENT_CODE ON)
 set_target_properties(tsah_core PROPERTIES EXPORT_NAME tsah POSITION_INDEPENDENT_CODE ON)
 # The public headers use C++20 (std::span): consumers compile with at least that.
+target_compile_features(tsah_base PUBLIC cxx_std_20)
 target_compile_features(anim PUBLIC cxx_std_20)
 target_compile_features(tsah_core PUBLIC cxx_std_20)
 add_library(tsah::anim ALIAS anim)
 add_library(tsah::tsah ALIAS tsah_core)
-set(TSAH_EXPORTED_TARGETS anim tsah_core)
+set(TSAH_EXPORTED_TARGETS tsah_base anim tsah_core)
 set(TSAH_PUBLIC_INCLUDE_DIRS ${PROJECT_SOURCE_DIR}/libanim/include/ ${PROJECT_SOURCE_DIR}/libtsah/include/)
 if(TSAH_HAVE_CUDA)
   set_target_properties(tsah_cuda PROPERTIES EXPORT_NAME cuda)

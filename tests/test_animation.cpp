@@ -4,7 +4,7 @@
 #include <limits>
 
 #include "anim/animation.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 
 namespace {
 
@@ -71,9 +71,9 @@ TEST(Animation, UniformResampling) {
   }
   EXPECT_EQ(a.resample(50).keyframeCount(), 50u);
   EXPECT_EQ(a.uniformTimes(1).size(), 1u);
-  EXPECT_THROW(a.resample(0), anim::Error);
+  EXPECT_THROW(a.resample(0), tsah::Error);
   // 4e9 frames x 4 vertices would need ~190 GB: refused up front with a clear error, not OOM-killed.
-  EXPECT_THROW(a.resample(4'000'000'000u), anim::Error);
+  EXPECT_THROW(a.resample(4'000'000'000u), tsah::Error);
 }
 
 TEST(Animation, SegmentKeepsInteriorKeyframes) {
@@ -88,11 +88,11 @@ TEST(Animation, SegmentKeepsInteriorKeyframes) {
 TEST(Animation, RejectsNanAndBadIndices) {
   std::vector<float> pos(9, 0.0f);
   pos[4] = std::numeric_limits<float>::quiet_NaN();
-  EXPECT_THROW(anim::Animation({0, 1, 2}, 3, pos, {0.0}), anim::ImportError);
-  EXPECT_THROW(anim::Animation({0, 1, 3}, 3, std::vector<float>(9, 0.0f), {0.0}), anim::ImportError);
+  EXPECT_THROW(anim::Animation({0, 1, 2}, 3, pos, {0.0}), tsah::FileError);
+  EXPECT_THROW(anim::Animation({0, 1, 3}, 3, std::vector<float>(9, 0.0f), {0.0}), tsah::FileError);
   EXPECT_THROW(anim::Animation({0, 1, 2}, 3, std::vector<float>(18, 0.0f), {1.0, 0.5}),
-               anim::ImportError);
-  EXPECT_THROW(anim::Animation({0, 1, 2}, 3, std::vector<float>(8, 0.0f), {0.0}), anim::ImportError);
+               tsah::FileError);
+  EXPECT_THROW(anim::Animation({0, 1, 2}, 3, std::vector<float>(8, 0.0f), {0.0}), tsah::FileError);
 }
 
 TEST(Animation, CountsDegenerateTriangles) {

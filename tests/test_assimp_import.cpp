@@ -11,8 +11,8 @@
 #include <vector>
 
 #include "anim/assimp_import.hpp"
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/binary_io.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/load.hpp"
 #include "test_support.hpp"
 
@@ -69,7 +69,7 @@ TEST(Md2Data, ClipsGroupFramesByName) {
   try {
     anim::load(faerie.string(), options);
     FAIL() << "unknown clip accepted";
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     EXPECT_NE(std::string(e.what()).find("clips: stand, "), std::string::npos) << e.what();
   }
 }
@@ -78,7 +78,7 @@ TEST(Md2Data, ClipsGroupFramesByName) {
 std::vector<uint8_t> makeMd2() {
   const int32_t numVerts = 4, numTris = 2, numFrames = 3, frameSize = 40 + 4 * numVerts;
   const int32_t offTris = 68, offFrames = offTris + 12 * numTris, offEnd = offFrames + numFrames * frameSize;
-  anim::ByteWriter w;
+  tsah::ByteWriter w;
   w.append("IDP2", 4);
   for (int32_t v : {8, 64, 64, frameSize, 0, numVerts, 0, numTris, 0, numFrames, 68, 68, offTris, offFrames, offEnd, offEnd})
     w.write(v);
@@ -137,18 +137,18 @@ TEST(Md2, CorruptHeadersAndIndicesAreRefused) {
     try {
       anim::decodeMd2(bytes, "bad.md2");
       ADD_FAILURE() << "accepted a corrupt header (offset " << c.offset << ")";
-    } catch (const anim::ImportError& e) {
+    } catch (const tsah::FileError& e) {
       EXPECT_NE(std::string(e.what()).find(c.expected), std::string::npos) << e.what();
       EXPECT_EQ(std::string(e.what()).rfind("bad.md2", 0), 0u) << e.what();
     }
   }
   auto badIndex = makeMd2();
   badIndex[68 + 2] = 9;  // triangle 0, second vertex index 9 of 4
-  EXPECT_THROW(anim::decodeMd2(badIndex, "bad.md2"), anim::ImportError);
+  EXPECT_THROW(anim::decodeMd2(badIndex, "bad.md2"), tsah::FileError);
   auto truncated = makeMd2();
   truncated.resize(truncated.size() - 1);
-  EXPECT_THROW(anim::decodeMd2(truncated, "bad.md2"), anim::ImportError);
-  EXPECT_THROW(anim::decodeMd2(std::vector<uint8_t>(10, 0), "bad.md2"), anim::ImportError);
+  EXPECT_THROW(anim::decodeMd2(truncated, "bad.md2"), tsah::FileError);
+  EXPECT_THROW(anim::decodeMd2(std::vector<uint8_t>(10, 0), "bad.md2"), tsah::FileError);
 }
 
 TEST(Md2, RandomByteMutationsGiveErrorsOrValidAnimations) {
@@ -162,7 +162,7 @@ TEST(Md2, RandomByteMutationsGiveErrorsOrValidAnimations) {
       const auto a = anim::decodeMd2(bytes, "m.md2");
       EXPECT_GT(a.triangleCount(), 0u);
       ++loaded;
-    } catch (const anim::ImportError&) {
+    } catch (const tsah::FileError&) {
     }
   }
   EXPECT_GT(loaded, 100);
@@ -358,7 +358,7 @@ TEST(Gltf, ClipsAreChosenByNameOrIndex) {
   try {
     anim::load(file.string(), options);
     FAIL() << "unknown clip accepted";
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     EXPECT_NE(std::string(e.what()).find("no clip 'wave' (clips: morph, lift)"), std::string::npos) << e.what();
   }
 }
@@ -369,11 +369,11 @@ TEST(Gltf, BrokenFilesGiveImportErrorsNamingThem) {
   try {
     anim::load(garbage.string());
     FAIL() << "garbage accepted";
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     EXPECT_NE(std::string(e.what()).find("garbage.gltf"), std::string::npos) << e.what();
   }
   const fs::path empty = writeFile(dir / "empty.gltf", "{\"asset\":{\"version\":\"2.0\"},\"scene\":0,\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"name\":\"n\"}]}");
-  EXPECT_THROW(anim::load(empty.string()), anim::ImportError);
+  EXPECT_THROW(anim::load(empty.string()), tsah::FileError);
 }
 
 // ---- assimp-testmodels ----------------------------------------------------------------------------

@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "anim/bart.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/load.hpp"
 #include "test_support.hpp"
 
@@ -42,7 +42,7 @@ Loaded loadText(const std::string& text, anim::BartOptions options = {}, const s
 std::string errorOf(const std::string& text, const std::string& name = "scene.aff") {
   try {
     loadText(text, {}, name);
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     return e.what();
   }
   return {};
@@ -187,7 +187,7 @@ TEST(Bart, PositionSplineMatchesHandComputedKochanekBartelsValues) {
   EXPECT_EQ(s.at(2.5)[0], 1.0);            // and to key n-2 after it
   EXPECT_EQ(s.startTime(), 0.0);
   EXPECT_EQ(s.endTime(), 1.0);
-  EXPECT_THROW(anim::bart::PositionSpline(std::vector<anim::bart::SplineKey>(3)), anim::Error);
+  EXPECT_THROW(anim::bart::PositionSpline(std::vector<anim::bart::SplineKey>(3)), tsah::Error);
 }
 
 double angleAboutZ(const anim::bart::Quaternion& q) {
@@ -375,12 +375,12 @@ TEST(Bart, IncludeCyclesAreErrorsNamingTheChain) {
   try {
     anim::importBart((dir / "a.aff").string());
     FAIL() << "cycle accepted";
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     const std::string m = e.what();
     EXPECT_NE(m.find("b.aff: line 2: include cycle: a.aff -> b.aff -> a.aff"), std::string::npos) << m;
   }
   writeText(dir / "self.aff", "i 0 ./self.aff\n");
-  EXPECT_THROW(anim::importBart((dir / "self.aff").string()), anim::ImportError);
+  EXPECT_THROW(anim::importBart((dir / "self.aff").string()), tsah::FileError);
 }
 
 TEST(Bart, IncludeDepthIsBounded) {
@@ -390,7 +390,7 @@ TEST(Bart, IncludeDepthIsBounded) {
   try {
     anim::importBart((dir / "f0.aff").string());
     FAIL() << "deep include chain accepted";
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     EXPECT_NE(std::string(e.what()).find("nested deeper than 32"), std::string::npos) << e.what();
   }
   anim::BartOptions deep;
@@ -415,7 +415,7 @@ TEST(Bart, ExponentialIncludeFanOutIsRefusedBeforeExpanding) {
   try {
     anim::importBart((dir / "l12.aff").string());  // 10^12 triangles if expanded
     FAIL() << "include bomb accepted";
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     EXPECT_NE(std::string(e.what()).find("expands to more than"), std::string::npos) << e.what();
   }
 }
@@ -462,7 +462,7 @@ TEST(Bart, HugeFrameCountsAreRefusedBeforeAllocating) {
   try {
     loadText(std::string("a 0 1 1000\n") + kTriangle, small);
     FAIL() << "limit ignored";
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     EXPECT_NE(std::string(e.what()).find("more than the limit"), std::string::npos) << e.what();
   }
 }
@@ -482,7 +482,7 @@ TEST(Bart, LoadDispatchesAffAndPassesFpsAndWarnings) {
 
 // ---- randomized mutations -------------------------------------------------------------------------
 
-// Thousands of mutated scenes: each must load or throw anim::Error, never crash or hang.
+// Thousands of mutated scenes: each must load or throw tsah::Error, never crash or hang.
 TEST(Bart, RandomMutationsGiveErrorsOrValidAnimations) {
   const fs::path dir = tsah::test::scratchDir();
   writeText(dir / "inc.aff", kTriangle);
@@ -547,7 +547,7 @@ TEST(Bart, RandomMutationsGiveErrorsOrValidAnimations) {
       ASSERT_GT(a.triangleCount(), 0u);
       ASSERT_GT(a.keyframeCount(), 0u);
       ++loaded;
-    } catch (const anim::Error& e) {
+    } catch (const tsah::Error& e) {
       ASSERT_EQ(std::string(e.what()).find('\n'), std::string::npos) << e.what();
       ++rejected;
     }

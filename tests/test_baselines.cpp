@@ -6,9 +6,9 @@
 #include <random>
 #include <vector>
 
-#include "tsah/baselines.hpp"
-#include "tsah/cost.hpp"
-#include "tsah/sah_builder.hpp"
+#include "tsah/optimize/baselines.hpp"
+#include "tsah/core/cost.hpp"
+#include "tsah/build/sah_builder.hpp"
 
 namespace {
 

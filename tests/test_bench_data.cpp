@@ -8,7 +8,7 @@
 #include <set>
 #include <unistd.h>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/generators.hpp"
 #include "anim/load.hpp"
 #include "anim/obj_writer.hpp"
@@ -160,12 +160,12 @@ TEST(BenchData, UnpacksOnceAndAgainWhenTheArchiveChanges) {
 TEST(BenchData, BrokenArchivesAndMissingFoldersAreErrors) {
   const fs::path root = tsah::test::scratchDir();
   writeFile(root / "data" / "bad.tar.xz", "this is not an xz stream");
-  EXPECT_THROW(tsah::bench::unpackArchive(root / "data" / "bad.tar.xz", root / "cache"), anim::Error);
-  EXPECT_THROW(tsah::bench::scanDataFolder(root / "data", {root / "cache", {}}), anim::Error);
+  EXPECT_THROW(tsah::bench::unpackArchive(root / "data" / "bad.tar.xz", root / "cache"), tsah::Error);
+  EXPECT_THROW(tsah::bench::scanDataFolder(root / "data", {root / "cache", {}}), tsah::Error);
   // Nothing half-unpacked is left in the cache.
   for (const auto& e : fs::directory_iterator(root / "cache")) ADD_FAILURE() << "left behind: " << e.path();
-  EXPECT_THROW(tsah::bench::scanDataFolder(root / "no-such-folder", {root / "cache", {}}), anim::Error);
-  EXPECT_THROW(tsah::bench::explicitScene(root / "no-such-file.tanim"), anim::Error);
+  EXPECT_THROW(tsah::bench::scanDataFolder(root / "no-such-folder", {root / "cache", {}}), tsah::Error);
+  EXPECT_THROW(tsah::bench::explicitScene(root / "no-such-file.tanim"), tsah::Error);
 }
 
 TEST(BenchData, ExplicitScenesAndTheDefaultDataFolder) {

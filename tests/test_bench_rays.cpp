@@ -5,13 +5,13 @@
 
 #include <cstring>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/generators.hpp"
 #include "bench/embree_peer.hpp"
 #include "bench/ray_batch.hpp"
-#include "tsah/baselines.hpp"
-#include "tsah/flat_bvh.hpp"
-#include "tsah/traversal.hpp"
+#include "tsah/optimize/baselines.hpp"
+#include "tsah/layout/flat_bvh.hpp"
+#include "tsah/layout/traversal.hpp"
 
 namespace {
 
@@ -138,7 +138,7 @@ TEST(BenchRays, EmbreeFindsWhatTheToolkitFindsAfterRebuildsAndRefits) {
       peer.tracer().closest(aimed, 0, aimed.size(), hits);
       EXPECT_EQ(hits, aimed.size()) << name << " frame " << frame;
     }
-    EXPECT_THROW(peer.update(std::vector<float>(3)), anim::Error);
+    EXPECT_THROW(peer.update(std::vector<float>(3)), tsah::Error);
   }
 }
 #else

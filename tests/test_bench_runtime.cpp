@@ -8,8 +8,8 @@
 #include "animation_frames.hpp"
 #include "bench/embree_peer.hpp"
 #include "bench/runtime_bench.hpp"
-#include "tsah/baselines.hpp"
-#include "tsah/flat_bvh.hpp"
+#include "tsah/optimize/baselines.hpp"
+#include "tsah/layout/flat_bvh.hpp"
 
 namespace {
 

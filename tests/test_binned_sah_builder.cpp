@@ -11,9 +11,9 @@
 #include <stdexcept>
 
 #include "anim/generators.hpp"
-#include "tsah/binned_sah_builder.hpp"
-#include "tsah/cost.hpp"
-#include "tsah/sah_builder.hpp"
+#include "tsah/build/binned_sah_builder.hpp"
+#include "tsah/core/cost.hpp"
+#include "tsah/build/sah_builder.hpp"
 
 namespace {
 

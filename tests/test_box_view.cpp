@@ -6,9 +6,9 @@
 #include <sstream>
 #include <string>
 
-#include "tsah/box_view.hpp"
-#include "tsah/sah_builder.hpp"
-#include "tsah/tree_quality.hpp"
+#include "tsah/inspect/box_view.hpp"
+#include "tsah/build/sah_builder.hpp"
+#include "tsah/inspect/tree_quality.hpp"
 
 namespace {
 

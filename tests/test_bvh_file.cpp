@@ -6,10 +6,10 @@
 #include <numeric>
 #include <random>
 
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/binary_io.hpp"
+#include "tsah/base/error.hpp"
 #include "test_support.hpp"
-#include "tsah/bvh_file.hpp"
+#include "tsah/io/bvh_file.hpp"
 
 namespace {
 
@@ -86,12 +86,12 @@ tsah::BvhBuildInfo sampleInfo(uint32_t prims) {
   tsah::BvhBuildInfo info;
   info.method = "tsah";
   info.selection = "mh";
-  info.k = 1;
+  info.objective.k = 1;
   info.representativeFrames = 5;
   info.seed = 0x123456789abcdefull;
-  info.ct = 3.0f;
-  info.ci = 2.0f;
-  info.maxLeafSize = 8;
+  info.objective.cost.ct = 3.0f;
+  info.objective.cost.ci = 2.0f;
+  info.objective.maxLeafSize = 8;
   info.buildSeconds = 1.25;
   info.timeStart = 0.5;
   info.timeEnd = 47.0;
@@ -140,12 +140,12 @@ TEST(BvhFile, RoundTripIsBitExactAndKeepsTheTree) {
       expectSameTree(bvh, file.bvh);
       EXPECT_EQ(file.info.method, info.method);
       EXPECT_EQ(file.info.selection, info.selection);
-      EXPECT_EQ(file.info.k, info.k);
+      EXPECT_EQ(file.info.objective.k, info.objective.k);
       EXPECT_EQ(file.info.representativeFrames, info.representativeFrames);
       EXPECT_EQ(file.info.seed, info.seed);
-      EXPECT_EQ(file.info.ct, info.ct);
-      EXPECT_EQ(file.info.ci, info.ci);
-      EXPECT_EQ(file.info.maxLeafSize, info.maxLeafSize);
+      EXPECT_EQ(file.info.objective.cost.ct, info.objective.cost.ct);
+      EXPECT_EQ(file.info.objective.cost.ci, info.objective.cost.ci);
+      EXPECT_EQ(file.info.objective.maxLeafSize, info.objective.maxLeafSize);
       EXPECT_EQ(file.info.buildSeconds, info.buildSeconds);
       EXPECT_EQ(file.info.timeStart, info.timeStart);
       EXPECT_EQ(file.info.timeEnd, info.timeEnd);
@@ -208,7 +208,7 @@ TEST(BvhFile, SaveAndLoadThroughAFile) {
   tsah::saveBvhFile(path, bvh, sampleInfo(64));
   const auto file = tsah::loadBvhFile(path);
   expectSameTree(bvh, file.bvh);
-  EXPECT_THROW(tsah::loadBvhFile(path + ".missing"), anim::ImportError);
+  EXPECT_THROW(tsah::loadBvhFile(path + ".missing"), tsah::FileError);
 }
 
 TEST(BvhFile, EncoderRejectsBadInput) {
@@ -216,18 +216,18 @@ TEST(BvhFile, EncoderRejectsBadInput) {
   const Bvh bvh = randomTree(10, 1, 8, rng);
   auto info = sampleInfo(10);
   info.method = "a-name-that-is-far-too-long";
-  EXPECT_THROW(tsah::encodeBvhFile(bvh, info), anim::Error);
+  EXPECT_THROW(tsah::encodeBvhFile(bvh, info), tsah::Error);
   info = sampleInfo(11);
-  EXPECT_THROW(tsah::encodeBvhFile(bvh, info), anim::Error);  // count disagrees with the tree
-  EXPECT_THROW(tsah::encodeBvhFile(Bvh{}, sampleInfo(0)), anim::Error);
+  EXPECT_THROW(tsah::encodeBvhFile(bvh, info), tsah::Error);  // count disagrees with the tree
+  EXPECT_THROW(tsah::encodeBvhFile(Bvh{}, sampleInfo(0)), tsah::Error);
   Bvh broken = bvh;
   broken.nodes[broken.root].parent = 0;
-  EXPECT_THROW(tsah::encodeBvhFile(broken, sampleInfo(10)), anim::Error);
+  EXPECT_THROW(tsah::encodeBvhFile(broken, sampleInfo(10)), tsah::Error);
 }
 
 TEST(BvhFile, TopologyHashIsCrcOfIndices) {
   const std::vector<uint32_t> indices{0, 1, 2, 2, 1, 3};
-  EXPECT_EQ(tsah::topologyHash(indices), anim::crc32(indices.data(), indices.size() * 4));
+  EXPECT_EQ(tsah::topologyHash(indices), tsah::crc32(indices.data(), indices.size() * 4));
   std::vector<uint32_t> other = indices;
   std::swap(other[0], other[1]);
   EXPECT_NE(tsah::topologyHash(indices), tsah::topologyHash(other));
@@ -237,7 +237,7 @@ TEST(BvhFile, TopologyHashIsCrcOfIndices) {
 
 void fixCrc(std::vector<uint8_t>& bytes) {
   if (bytes.size() < 4) return;
-  const uint32_t crc = anim::crc32(bytes.data(), bytes.size() - 4);
+  const uint32_t crc = tsah::crc32(bytes.data(), bytes.size() - 4);
   std::memcpy(bytes.data() + bytes.size() - 4, &crc, 4);
 }
 
@@ -255,7 +255,7 @@ TEST(BvhFile, RejectsTargetedCorruption) {
     try {
       tsah::decodeBvhFile(bytes, "bad.tbvh");
       ADD_FAILURE() << "accepted a file that should fail with '" << fragment << "'";
-    } catch (const anim::ImportError& e) {
+    } catch (const tsah::FileError& e) {
       EXPECT_NE(std::string(e.what()).find(fragment), std::string::npos) << e.what();
     }
   };
@@ -385,7 +385,7 @@ TEST(BvhFile, RandomMutationsNeverCrash) {
       ++accepted;
       const auto problem = tsah::validate(file.bvh);
       ASSERT_FALSE(problem) << "case " << c << ": " << *problem;
-    } catch (const anim::ImportError& e) {
+    } catch (const tsah::FileError& e) {
       ASSERT_NE(std::string(e.what()).find("mutant.tbvh"), std::string::npos);
     }
   }

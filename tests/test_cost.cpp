@@ -6,8 +6,8 @@
 #include <random>
 #include <vector>
 
-#include "tsah/cost.hpp"
-#include "tsah/sah_builder.hpp"
+#include "tsah/core/cost.hpp"
+#include "tsah/build/sah_builder.hpp"
 #include "test_support.hpp"
 
 namespace {

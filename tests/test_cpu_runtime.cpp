@@ -5,13 +5,14 @@
 #include <cstdlib>
 #include <filesystem>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/generators.hpp"
 #include "test_support.hpp"
-#include "tsah/binned_sah_builder.hpp"
-#include "tsah/bvh_file.hpp"
-#include "tsah/camera.hpp"
-#include "tsah/renderer.hpp"
+#include "tsah/build/binned_sah_builder.hpp"
+#include "tsah/io/bvh_file.hpp"
+#include "tsah/render/camera.hpp"
+#include "tsah/render/camera_path.hpp"
+#include "tsah/render/renderer.hpp"
 
 namespace {
 
@@ -153,7 +154,7 @@ TEST(CpuRuntime, RejectsTreesDeeperThanTheStack) {
   bvh.nodes[2 * n - 2].primCount = 1;
   tsah::refit(bvh, tsah::triangleBoxes(idx, pos, 1));
   ASSERT_FALSE(tsah::validate(bvh));
-  EXPECT_THROW(tsah::CpuRuntime(tsah::flattenBvh(bvh), idx, 3 * n), anim::Error);
+  EXPECT_THROW(tsah::CpuRuntime(tsah::flattenBvh(bvh), idx, 3 * n), tsah::Error);
 }
 
 TEST(CpuRuntime, FittedCameraSeesTheWholeScene) {
@@ -196,10 +197,10 @@ TEST(CpuRuntime, CameraPathInterpolation) {
   EXPECT_FLOAT_EQ(mid.fovYDegrees, 50.0f);
   EXPECT_FLOAT_EQ(tsah::cameraAt(keys, -1.0).eye.z, 10.0f);  // clamped
   EXPECT_FLOAT_EQ(tsah::cameraAt(keys, 5.0).eye.x, 10.0f);
-  EXPECT_THROW(tsah::cameraAt({}, 0.0), anim::Error);
+  EXPECT_THROW(tsah::cameraAt({}, 0.0), tsah::Error);
   tsah::Camera bad;
   bad.lookAt = bad.eye;
-  EXPECT_THROW(tsah::validateCamera(bad), anim::Error);
+  EXPECT_THROW(tsah::validateCamera(bad), tsah::Error);
 }
 
 TEST(CpuRuntime, PngRoundTrip) {
@@ -210,7 +211,7 @@ TEST(CpuRuntime, PngRoundTrip) {
   EXPECT_EQ(back.width, 7u);
   EXPECT_EQ(back.height, 5u);
   EXPECT_EQ(back.rgb, image.rgb);
-  EXPECT_THROW(tsah::decodePng(std::vector<uint8_t>(bytes.begin(), bytes.begin() + 20), "cut.png"), anim::ImportError);
+  EXPECT_THROW(tsah::decodePng(std::vector<uint8_t>(bytes.begin(), bytes.begin() + 20), "cut.png"), tsah::FileError);
 }
 
 }  // namespace

@@ -13,16 +13,16 @@
 #include <span>
 #include <vector>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/generators.hpp"
-#include "tsah/cpu_runtime.hpp"
-#include "tsah/cwbvh_build.hpp"
-#include "tsah/leaf_collapser.hpp"
-#include "tsah/renderer.hpp"
-#include "tsah/sah_builder.hpp"
-#include "tsah/sampling.hpp"
-#include "tsah/traversal.hpp"
-#include "tsah/tree_set.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
+#include "tsah/layout/cwbvh_build.hpp"
+#include "tsah/optimize/leaf_collapser.hpp"
+#include "tsah/render/renderer.hpp"
+#include "tsah/build/sah_builder.hpp"
+#include "tsah/render/sampling.hpp"
+#include "tsah/layout/traversal.hpp"
+#include "tsah/io/tree_set.hpp"
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 #include "cuda_test_support.hpp"
@@ -301,7 +301,7 @@ TEST(CudaCwbvh, LayoutNames) {
   EXPECT_EQ(tc::parseTreeLayout("cwbvh"), tc::TreeLayout::Cwbvh);
   EXPECT_EQ(tc::parseTreeLayout("bvh2"), tc::TreeLayout::Bvh2);
   EXPECT_STREQ(tc::treeLayoutName(tc::TreeLayout::Cwbvh), "cwbvh");
-  EXPECT_THROW(tc::parseTreeLayout("bvh8"), anim::Error);
+  EXPECT_THROW(tc::parseTreeLayout("bvh8"), tsah::Error);
 }
 
 }  // namespace

@@ -2,7 +2,7 @@
 // cuda_kernels/src/cwbvh_rebuild.hpp: a node per group of 8 lanes), driven directly with trees the
 // GPU rebuilders never make: random SAH trees with leaves of 1, 4 and 8 triangles and every merge
 // limit, tiny trees and invalid ones. Valid trees give tsah::convertToCwbvh's bytes; invalid ones
-// are refused with anim::Error (no hang, no out-of-range write: the GPU sanitizers run this
+// are refused with tsah::Error (no hang, no out-of-range write: the GPU sanitizers run this
 // program), and the converter works again afterwards. Skipped without a device.
 #include <gtest/gtest.h>
 
@@ -13,10 +13,10 @@
 #include <string>
 #include <vector>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "cwbvh_rebuild.hpp"
-#include "tsah/cwbvh_convert.hpp"
-#include "tsah/sah_builder.hpp"
+#include "tsah/layout/cwbvh_convert.hpp"
+#include "tsah/build/sah_builder.hpp"
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/device_buffer.hpp"
 #include "cuda_test_support.hpp"
@@ -121,11 +121,11 @@ TEST(CudaCwbvhConvert, RefusesInvalidTrees) {
   }
   for (const auto& [what, tree] : bad) {
     SCOPED_TRACE(what);
-    EXPECT_THROW(tsah::convertToCwbvh(tree, 0, 0), anim::Error);
-    EXPECT_THROW(deviceConversion(converter, tree, 0), anim::Error);
+    EXPECT_THROW(tsah::convertToCwbvh(tree, 0, 0), tsah::Error);
+    EXPECT_THROW(deviceConversion(converter, tree, 0), tsah::Error);
   }
   expectHostBytes(converter, good, 0);
-  EXPECT_THROW(deviceConversion(converter, good, tsah::kCwbvhMaxLeafTriangles + 1), anim::Error);
+  EXPECT_THROW(deviceConversion(converter, good, tsah::kCwbvhMaxLeafTriangles + 1), tsah::Error);
 }
 
 }  // namespace

@@ -13,10 +13,10 @@
 #include <string>
 #include <random>
 
-#include "anim/error.hpp"
-#include "tsah/cwbvh_convert.hpp"
-#include "tsah/renderer.hpp"
-#include "tsah/sah_builder.hpp"
+#include "tsah/base/error.hpp"
+#include "tsah/layout/cwbvh_convert.hpp"
+#include "tsah/render/renderer.hpp"
+#include "tsah/build/sah_builder.hpp"
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 #include "cuda_test_support.hpp"
@@ -214,7 +214,7 @@ TEST(CudaCwbvhRebuild, TinySceneLargeLeavesAndBackToRefit) {
   tc::GpuRuntime gpu(frameZeroTree(a), a, config(tc::TreeLayout::Cwbvh));
   tc::RebuildOptions large = options(tc::RebuildMethod::HlbvhSah, true);
   large.maxLeafSize = 16;  // 8 leaves of 16 would overflow a node's 64 triangles
-  EXPECT_THROW(gpu.rebuildAt(0.0, large), anim::Error);
+  EXPECT_THROW(gpu.rebuildAt(0.0, large), tsah::Error);
   gpu.rebuildAt(0.0, options(tc::RebuildMethod::HlbvhSah, true));
   EXPECT_TRUE(gpu.tracingRebuiltTree());
   gpu.updateAt(0.0);
@@ -225,7 +225,7 @@ TEST(CudaCwbvhRebuild, TinySceneLargeLeavesAndBackToRefit) {
   const tc::RebuildTimings b = binary.rebuildAt(0.0, large);
   EXPECT_EQ(b.wideMs, 0.0);
   EXPECT_EQ(b.wideNodes, 0u);
-  EXPECT_THROW(binary.downloadRebuiltCwbvh(), anim::Error);
+  EXPECT_THROW(binary.downloadRebuiltCwbvh(), tsah::Error);
 }
 
 }  // namespace

@@ -11,14 +11,14 @@
 #include <cstring>
 #include <random>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/generators.hpp"
-#include "tsah/cost.hpp"
-#include "tsah/cpu_runtime.hpp"
-#include "tsah/leaf_collapser.hpp"
-#include "tsah/renderer.hpp"
-#include "tsah/sah_builder.hpp"
-#include "tsah/traversal.hpp"
+#include "tsah/core/cost.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
+#include "tsah/optimize/leaf_collapser.hpp"
+#include "tsah/render/renderer.hpp"
+#include "tsah/build/sah_builder.hpp"
+#include "tsah/layout/traversal.hpp"
 #include "tsah_cuda/cuda_check.hpp"
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/device_buffer.hpp"
@@ -140,8 +140,8 @@ TEST(CudaCheck, NamesTheCallTheFileAndTheError) {
 TEST(CudaRuntime, RejectsATreeOfAnotherAnimationWithoutTouchingTheDevice) {
   const auto a = generatedAnimation(anim::GeneratorKind::Wave, 800, 3);
   const auto b = generatedAnimation(anim::GeneratorKind::Explode, 1500, 3);
-  EXPECT_THROW(tc::GpuRuntime(sahTree(b, 8), a), anim::Error);
-  EXPECT_THROW(tc::parseRebuildMethod("octree"), anim::Error);
+  EXPECT_THROW(tc::GpuRuntime(sahTree(b, 8), a), tsah::Error);
+  EXPECT_THROW(tc::parseRebuildMethod("octree"), tsah::Error);
   EXPECT_EQ(tc::parseRebuildMethod("hlbvh-sah"), tc::RebuildMethod::HlbvhSah);
   EXPECT_STREQ(tc::rebuildMethodName(tc::RebuildMethod::Lbvh), "lbvh");
 }
@@ -156,7 +156,7 @@ TEST(CudaBuffer, RoundTripAndMove) {
   EXPECT_EQ(a.size(), 0u);
   EXPECT_EQ(a.data(), nullptr);
   EXPECT_EQ(b.download(), host);
-  EXPECT_THROW(b.upload(std::vector<uint32_t>(1001)), anim::Error);
+  EXPECT_THROW(b.upload(std::vector<uint32_t>(1001)), tsah::Error);
   b.resize(10);
   EXPECT_EQ(b.size(), 10u);
 }
@@ -166,10 +166,10 @@ TEST(CudaRuntime, RefusesToTraceBeforeAnUpdate) {
   const auto a = generatedAnimation(anim::GeneratorKind::Wave, 800, 3);
   tc::GpuRuntime gpu(sahTree(a, 4), a);
   const std::vector<tsah::Ray> rays(4, tsah::Ray{{0, 0, 0}, 0, {0, 0, 1}, 1});
-  EXPECT_THROW(gpu.closestHits(rays), anim::Error);
+  EXPECT_THROW(gpu.closestHits(rays), tsah::Error);
   gpu.updateAt(a.startTime());
   EXPECT_NO_THROW(gpu.closestHits(rays));
-  EXPECT_THROW(gpu.downloadRebuiltTree(), anim::Error);
+  EXPECT_THROW(gpu.downloadRebuiltTree(), tsah::Error);
 }
 
 // Interpolation, refit and Woop equal the CPU runtime's, bit for bit, at times before, between,
@@ -213,7 +213,7 @@ TEST(CudaRuntime, UpdateEqualsTheCpuRuntimeExactly) {
     cpu.update(pos);
     gpu.update(pos);
     ASSERT_EQ(0, std::memcmp(&gpu.downloadTree().rootBoxes[0], &cpu.tree().rootBoxes[0], sizeof(tsah::Aabb)));
-    EXPECT_THROW(gpu.update(std::vector<float>(pos.size() - 3)), anim::Error);
+    EXPECT_THROW(gpu.update(std::vector<float>(pos.size() - 3)), tsah::Error);
   }
 }
 
@@ -341,7 +341,7 @@ TEST(CudaRender, ImageMatchesTheCpuRenderer) {
   EXPECT_EQ(none.primary.rays, uint64_t(settings.width) * settings.height);
   settings.width = 0;
   tsah::Image image;
-  EXPECT_THROW(tc::renderFrameGpu(gpu, camera, lighting, settings, image), anim::Error);
+  EXPECT_THROW(tc::renderFrameGpu(gpu, camera, lighting, settings, image), tsah::Error);
 }
 
 // --- Rebuilds ---------------------------------------------------------------------------------

@@ -7,12 +7,12 @@
 
 #include <cstring>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/generators.hpp"
-#include "tsah/cpu_runtime.hpp"
-#include "tsah/leaf_collapser.hpp"
-#include "tsah/sah_builder.hpp"
-#include "tsah/tree_set.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
+#include "tsah/optimize/leaf_collapser.hpp"
+#include "tsah/build/sah_builder.hpp"
+#include "tsah/io/tree_set.hpp"
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 #include "cuda_test_support.hpp"
@@ -77,10 +77,10 @@ TEST(CudaTreeSet, RefusesAnEmptySetOrATreeOfOtherTriangles) {
   o.triangles = 500;
   o.frames = 8;
   const anim::Animation a = anim::generate(anim::GeneratorKind::Wave, o);
-  EXPECT_THROW(tc::GpuRuntime(tsah::TreeSet{}, a, tc::GpuRuntime::Config{}), anim::Error);
+  EXPECT_THROW(tc::GpuRuntime(tsah::TreeSet{}, a, tc::GpuRuntime::Config{}), tsah::Error);
   tsah::TreeSet set = makeSet(a);
   set.trees[2].triIndex.pop_back();
-  EXPECT_THROW(tc::GpuRuntime(set, a, tc::GpuRuntime::Config{}), anim::Error);
+  EXPECT_THROW(tc::GpuRuntime(set, a, tc::GpuRuntime::Config{}), tsah::Error);
 }
 
 }  // namespace

@@ -10,14 +10,14 @@
 #include <random>
 #include <limits>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/generators.hpp"
 #include "anim/load.hpp"
-#include "tsah/cpu_runtime.hpp"
-#include "tsah/cwbvh_build.hpp"
-#include "tsah/sah_builder.hpp"
-#include "tsah/sampling.hpp"
-#include "tsah/traversal.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
+#include "tsah/layout/cwbvh_build.hpp"
+#include "tsah/build/sah_builder.hpp"
+#include "tsah/render/sampling.hpp"
+#include "tsah/layout/traversal.hpp"
 #include "test_support.hpp"
 
 namespace {
@@ -268,7 +268,7 @@ TEST(CwbvhBuild, RefusesTooWideTreesAndOverfullNodes) {
   c.width = 8;
   tsah::WideBvh wide = tsah::WideCollapser(c).collapse(bvh);
   wide.width = 9;
-  EXPECT_THROW(tsah::buildCwbvh(wide), anim::Error);
+  EXPECT_THROW(tsah::buildCwbvh(wide), tsah::Error);
   // Two leaf children of 50 triangles each: 100 triangles in one node.
   tsah::WideBvh two;
   two.rootRef = 0;
@@ -278,7 +278,7 @@ TEST(CwbvhBuild, RefusesTooWideTreesAndOverfullNodes) {
   for (uint32_t i = 0; i < 100; ++i) two.primIds[i] = i;
   two.childBoxes = {Aabb{{0, 0, 0}, {1, 1, 1}}, Aabb{{1, 1, 1}, {2, 2, 2}}};
   two.rootBoxes = {Aabb{{0, 0, 0}, {2, 2, 2}}};
-  EXPECT_THROW(tsah::buildCwbvh(two), anim::Error);
+  EXPECT_THROW(tsah::buildCwbvh(two), tsah::Error);
 }
 
 void compareWithBinary(const anim::Animation& a, uint32_t rayCount, uint32_t seed) {

@@ -11,8 +11,8 @@
 #include <random>
 #include <vector>
 
-#include "tsah/cwbvh_layout.hpp"
-#include "tsah/directed_rounding.hpp"
+#include "tsah/layout/cwbvh_layout.hpp"
+#include "tsah/core/directed_rounding.hpp"
 
 namespace {
 

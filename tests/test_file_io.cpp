@@ -9,8 +9,8 @@
 #include <filesystem>
 #include <string>
 
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/files.hpp"
+#include "tsah/base/error.hpp"
 #include "test_support.hpp"
 
 namespace {
@@ -35,27 +35,27 @@ TEST(FileIo, RefusesFifoDirectoryAndDevice) {
   const std::string fifo = (dir / "pipe").string();
   ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
   try {
-    anim::readFile(fifo);  // must not block
+    tsah::readFile(fifo);  // must not block
     FAIL() << "a FIFO was read";
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     EXPECT_NE(std::string(e.what()).find("is a FIFO"), std::string::npos) << e.what();
   }
-  EXPECT_THROW(anim::readFile(dir.string()), anim::ImportError);
-  EXPECT_THROW(anim::checkInputFile("/dev/null"), anim::ImportError);
+  EXPECT_THROW(tsah::readFile(dir.string()), tsah::FileError);
+  EXPECT_THROW(tsah::checkInputFile("/dev/null"), tsah::FileError);
 }
 
 TEST(FileIo, FileSetAppearsTogetherOrNotAtAll) {
   const fs::path dir = freshDir("fileio-set");
   {
-    anim::AtomicFileSet set;
+    tsah::AtomicFileSet set;
     set.write((dir / "a.obj").string(), text("a"));
     set.write((dir / "b.obj").string(), text("b"));
     EXPECT_FALSE(fs::exists(dir / "a.obj"));  // staged, not yet visible
     // A third write fails (name too long): the set is abandoned.
-    EXPECT_THROW(set.write((dir / std::string(300, 'x')).string(), text("c")), anim::Error);
+    EXPECT_THROW(set.write((dir / std::string(300, 'x')).string(), text("c")), tsah::Error);
   }
   EXPECT_EQ(entries(dir), 0u) << "an abandoned set leaves nothing behind";
-  anim::AtomicFileSet set;
+  tsah::AtomicFileSet set;
   set.write((dir / "a.obj").string(), text("a"));
   set.write((dir / "b.obj").string(), text("b"));
   set.commit();
@@ -67,18 +67,18 @@ TEST(FileIo, FileSetAppearsTogetherOrNotAtAll) {
 TEST(FileIo, ProtectedInputIsNotOverwritten) {
   const fs::path dir = freshDir("fileio-protect");
   const std::string in = (dir / "in.bin").string();
-  anim::writeFileAtomically(in, text("input"));
-  anim::protectInputs(true);
-  (void)anim::readFile(in);
-  EXPECT_THROW(anim::writeFileAtomically((dir / "." / "in.bin").string(), text("output")), anim::Error);
-  anim::protectInputs(false);
-  EXPECT_EQ(anim::readFile(in).size(), 5u);
+  tsah::writeFileAtomically(in, text("input"));
+  tsah::protectInputs(true);
+  (void)tsah::readFile(in);
+  EXPECT_THROW(tsah::writeFileAtomically((dir / "." / "in.bin").string(), text("output")), tsah::Error);
+  tsah::protectInputs(false);
+  EXPECT_EQ(tsah::readFile(in).size(), 5u);
 }
 
 TEST(FileIo, LongLegalNameGetsAShortTemporary) {
   const fs::path dir = freshDir("fileio-long");
   const std::string name = std::string(250, 'n');  // legal; NAME.tmp.PID would not be
-  anim::writeFileAtomically((dir / name).string(), text("x"));
+  tsah::writeFileAtomically((dir / name).string(), text("x"));
   EXPECT_TRUE(fs::exists(dir / name));
   EXPECT_EQ(entries(dir), 1u);
 }
@@ -88,8 +88,8 @@ TEST(FileIo, InterruptRemovesStagedFiles) {
   const pid_t child = ::fork();
   ASSERT_GE(child, 0);
   if (child == 0) {
-    anim::installInterruptCleanup();
-    anim::AtomicFileSet set;
+    tsah::installInterruptCleanup();
+    tsah::AtomicFileSet set;
     set.write((dir / "f_0001.obj").string(), text("v 0 0 0\n"));
     ::kill(::getpid(), SIGTERM);  // delivered to the cleanup thread, which ends the process
     for (;;) ::pause();

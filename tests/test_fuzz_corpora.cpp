@@ -1,7 +1,7 @@
 // Replays the committed fuzz corpora (tests/fuzz/corpus/<entry>/) through the same entry points as
 // the libFuzzer targets (tests/fuzz/entries.hpp), with every truncation of every file, so a
 // regression on any of them, or on an input a fuzzer once found, fails CI without clang. An entry
-// returns normally when the parser accepts the input or refuses it with a one-line anim::Error.
+// returns normally when the parser accepts the input or refuses it with a one-line tsah::Error.
 #include <gtest/gtest.h>
 
 #include <filesystem>

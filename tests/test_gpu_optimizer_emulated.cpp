@@ -8,15 +8,15 @@
 #include <cstdio>
 #include <stdexcept>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/generators.hpp"
 #include "test_support.hpp"
-#include "tsah/cost.hpp"
-#include "tsah/leaf_collapser.hpp"
-#include "tsah/parallel_optimizer.hpp"
+#include "tsah/core/cost.hpp"
+#include "tsah/optimize/leaf_collapser.hpp"
+#include "tsah/optimize/parallel_optimizer.hpp"
 #include "tsah/pipeline.hpp"
-#include "tsah/reinsertion_emulation.hpp"
-#include "tsah/sah_builder.hpp"
+#include "tsah/optimize/detail/reinsertion_emulation.hpp"
+#include "tsah/build/sah_builder.hpp"
 
 namespace {
 
@@ -146,7 +146,7 @@ TEST(EmulatedGpuOptimizer, PipelineRunsEveryOptimizationThroughTheDeviceHook) {
   tsah::TreeOptions options;
   options.device = "cuda";
   options.k = 2;
-  EXPECT_THROW(tsah::optimizeAnimation(a, options), anim::Error);  // no GPU optimizer given
+  EXPECT_THROW(tsah::optimizeAnimation(a, options), tsah::Error);  // no GPU optimizer given
   std::atomic<int> calls = 0;  // SAH* optimizes its frames on worker threads
   options.gpuOptimizer = [&calls](Bvh bvh, const tsah::PrimitiveBoxes& prims,
                                   const tsah::InsertionOptimizer::Config& settings, const tsah::LeafCollapser* collapse) {

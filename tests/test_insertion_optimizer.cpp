@@ -7,9 +7,9 @@
 #include <random>
 #include <vector>
 
-#include "tsah/cost.hpp"
-#include "tsah/insertion_optimizer.hpp"
-#include "tsah/sah_builder.hpp"
+#include "tsah/core/cost.hpp"
+#include "tsah/optimize/insertion_optimizer.hpp"
+#include "tsah/build/sah_builder.hpp"
 #include "test_support.hpp"
 
 namespace {

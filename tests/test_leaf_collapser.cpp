@@ -8,10 +8,10 @@
 #include <random>
 #include <vector>
 
-#include "tsah/cost.hpp"
-#include "tsah/insertion_optimizer.hpp"
-#include "tsah/leaf_collapser.hpp"
-#include "tsah/sah_builder.hpp"
+#include "tsah/core/cost.hpp"
+#include "tsah/optimize/insertion_optimizer.hpp"
+#include "tsah/optimize/leaf_collapser.hpp"
+#include "tsah/build/sah_builder.hpp"
 #include "test_support.hpp"
 
 namespace {

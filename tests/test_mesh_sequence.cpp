@@ -2,7 +2,7 @@
 
 #include <fstream>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/load.hpp"
 #include "anim/mesh_sequence.hpp"
 #include "test_support.hpp"
@@ -52,12 +52,12 @@ TEST(ObjReader, ErrorsNameFileAndLine) {
   try {
     anim::readMesh((dir / "bad.obj").string());
     FAIL() << "expected an error";
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     EXPECT_NE(std::string(e.what()).find("bad.obj: line 4"), std::string::npos) << e.what();
   }
   writeText(dir / "nan.obj", "v 0 0 x\n");
-  EXPECT_THROW(anim::readMesh((dir / "nan.obj").string()), anim::ImportError);
-  EXPECT_THROW(anim::readMesh((dir / "missing.obj").string()), anim::ImportError);
+  EXPECT_THROW(anim::readMesh((dir / "nan.obj").string()), tsah::FileError);
+  EXPECT_THROW(anim::readMesh((dir / "missing.obj").string()), tsah::FileError);
 }
 
 TEST(OtherFormats, OffThroughOpenMesh) {
@@ -76,7 +76,7 @@ TEST(OtherFormats, NonManifoldFacesAreAnErrorNotSilentlyDropped) {
   try {
     anim::load((dir / "nm.off").string());
     FAIL() << "expected an error";
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     EXPECT_NE(std::string(e.what()).find("non-manifold"), std::string::npos) << e.what();
   }
 }
@@ -111,8 +111,8 @@ TEST_F(Sequence, PrintfPatternAndGlob) {
   const auto b = anim::load((dir / "walk_*.obj").string());
   EXPECT_EQ(b.keyframeCount(), 5u);
   EXPECT_FLOAT_EQ(b.keyframe(3)[0], 9.0f);
-  EXPECT_THROW(anim::load((dir / "run_%d.obj").string()), anim::ImportError);
-  EXPECT_THROW(anim::load((dir / "walk_%s.obj").string()), anim::ImportError);
+  EXPECT_THROW(anim::load((dir / "run_%d.obj").string()), tsah::FileError);
+  EXPECT_THROW(anim::load((dir / "walk_%s.obj").string()), tsah::FileError);
 }
 
 TEST_F(Sequence, ZeroPaddedPattern) {
@@ -137,11 +137,11 @@ TEST_F(Sequence, ManifestWithTimes) {
   writeText(dir / "bare.json", R"(["walk_0.obj", "walk_1.obj", "walk_2.obj"])");
   EXPECT_EQ(anim::load((dir / "bare.json").string()).keyframeCount(), 3u);
   writeText(dir / "partial.json", R"([{"file": "walk_0.obj", "time": 1}, "walk_1.obj"])");
-  EXPECT_THROW(anim::load((dir / "partial.json").string()), anim::ImportError);
+  EXPECT_THROW(anim::load((dir / "partial.json").string()), tsah::FileError);
   writeText(dir / "backwards.json", R"([{"file": "walk_0.obj", "time": 2}, {"file": "walk_1.obj", "time": 1}])");
-  EXPECT_THROW(anim::load((dir / "backwards.json").string()), anim::ImportError);
+  EXPECT_THROW(anim::load((dir / "backwards.json").string()), tsah::FileError);
   writeText(dir / "broken.json", "{\"frames\": [");
-  EXPECT_THROW(anim::load((dir / "broken.json").string()), anim::ImportError);
+  EXPECT_THROW(anim::load((dir / "broken.json").string()), tsah::FileError);
 }
 
 TEST_F(Sequence, TopologyMismatchNamesTheFirstDifferingFile) {
@@ -149,7 +149,7 @@ TEST_F(Sequence, TopologyMismatchNamesTheFirstDifferingFile) {
   try {
     anim::load(dir.string());
     FAIL() << "expected a topology error";
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     EXPECT_NE(std::string(e.what()).find("walk_5.obj"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("triangles"), std::string::npos) << e.what();
   }
@@ -157,7 +157,7 @@ TEST_F(Sequence, TopologyMismatchNamesTheFirstDifferingFile) {
   try {
     anim::load(dir.string());
     FAIL() << "expected a vertex count error";
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     EXPECT_NE(std::string(e.what()).find("walk_5.obj: has 5 vertices"), std::string::npos) << e.what();
   }
 }
@@ -169,7 +169,7 @@ TEST_F(Sequence, SameCountsDifferentFacesIsAnError) {
   std::string swapped = quadObj(3.0f, false);
   swapped.replace(swapped.find("f 1 3 4"), 7, "f 1 4 3");
   writeText(dir / "walk_3.obj", swapped);
-  EXPECT_THROW(anim::load(dir.string()), anim::ImportError);
+  EXPECT_THROW(anim::load(dir.string()), tsah::FileError);
 }
 
 TEST_F(Sequence, NanCoordinateIsAnError) {
@@ -177,7 +177,7 @@ TEST_F(Sequence, NanCoordinateIsAnError) {
   try {
     anim::load(dir.string());
     FAIL() << "expected a NaN error";
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     EXPECT_NE(std::string(e.what()).find("walk_4.obj"), std::string::npos) << e.what();
   }
 }

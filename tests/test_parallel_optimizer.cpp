@@ -9,11 +9,11 @@
 #include <vector>
 
 #include "test_support.hpp"
-#include "tsah/cost.hpp"
-#include "tsah/insertion_optimizer.hpp"
-#include "tsah/leaf_collapser.hpp"
-#include "tsah/parallel_optimizer.hpp"
-#include "tsah/sah_builder.hpp"
+#include "tsah/core/cost.hpp"
+#include "tsah/optimize/insertion_optimizer.hpp"
+#include "tsah/optimize/leaf_collapser.hpp"
+#include "tsah/optimize/parallel_optimizer.hpp"
+#include "tsah/build/sah_builder.hpp"
 
 namespace {
 

@@ -10,8 +10,7 @@
 #include <fstream>
 #include <limits>
 
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/generators.hpp"
 #include "anim/load.hpp"
 #include "anim/mesh_sequence.hpp"
@@ -67,7 +66,7 @@ std::vector<uint8_t> withFrames(Bytes b, int frames, int points) { return addFra
 std::string errorOf(std::span<const uint8_t> bytes, PointCacheFormat format) {
   try {
     anim::decodePointCache(bytes, "cache.bin", format);
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     return e.what();
   }
   return "";
@@ -152,7 +151,7 @@ TEST(PointCache, Pc2RefusesTimesOffAUniformGrid) {
   try {
     anim::encodePc2(a);
     FAIL() << "accepted uneven times";
-  } catch (const anim::Error& e) {
+  } catch (const tsah::Error& e) {
     EXPECT_NE(std::string(e.what()).find("--frames"), std::string::npos) << e.what();
   }
   // MDD keeps every time.
@@ -191,7 +190,7 @@ TEST(PointCache, InputFormsAndTheirErrors) {
   auto loadError = [](const std::string& input) -> std::string {
     try {
       anim::load(input);
-    } catch (const anim::ImportError& e) {
+    } catch (const tsah::FileError& e) {
       return e.what();
     }
     return "";

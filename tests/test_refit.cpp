@@ -4,11 +4,11 @@
 
 #include <cstring>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/generators.hpp"
-#include "tsah/binned_sah_builder.hpp"
-#include "tsah/cpu_runtime.hpp"
-#include "tsah/sah_builder.hpp"
+#include "tsah/build/binned_sah_builder.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
+#include "tsah/build/sah_builder.hpp"
 
 namespace {
 
@@ -107,13 +107,13 @@ TEST(Refit, RejectsMismatchedInput) {
   const tsah::FlatBvh flat = tsah::flattenBvh(tsah::SweepSahBuilder().build(boxes));
   std::vector<uint32_t> idx(a.indices().begin(), a.indices().end());
   std::vector<uint32_t> fewer(idx.begin(), idx.end() - 3);
-  EXPECT_THROW(tsah::CpuRuntime(flat, fewer, a.vertexCount()), anim::Error);
+  EXPECT_THROW(tsah::CpuRuntime(flat, fewer, a.vertexCount()), tsah::Error);
   std::vector<uint32_t> outOfRange = idx;
   outOfRange[5] = a.vertexCount();
-  EXPECT_THROW(tsah::CpuRuntime(flat, outOfRange, a.vertexCount()), anim::Error);
+  EXPECT_THROW(tsah::CpuRuntime(flat, outOfRange, a.vertexCount()), tsah::Error);
   tsah::CpuRuntime rt(flat, idx, a.vertexCount());
   std::vector<float> shortPositions(3 * a.vertexCount() - 3);
-  EXPECT_THROW(rt.update(shortPositions), anim::Error);
+  EXPECT_THROW(rt.update(shortPositions), tsah::Error);
 }
 
 }  // namespace

@@ -8,8 +8,8 @@
 #include <random>
 #include <vector>
 
-#include "tsah/cost.hpp"
-#include "tsah/sah_builder.hpp"
+#include "tsah/core/cost.hpp"
+#include "tsah/build/sah_builder.hpp"
 
 namespace {
 

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <fstream>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/load.hpp"
 #include "anim/scene.hpp"
 #include "anim/subdivide.hpp"
@@ -41,7 +41,7 @@ std::string sceneWith(const std::string& objects, const std::string& extra = "\"
 std::string loadError(const fs::path& scene) {
   try {
     anim::load(scene.string());
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     return e.what();
   }
   return "";
@@ -189,7 +189,7 @@ TEST(Scene, LoopSubdivisionCountsAndStaysCloseToTheSurface) {
     }
   }
   EXPECT_THROW(anim::subdivideLoop(anim::Animation({0, 1, 2}, 3, std::vector<float>(18, 0.0f), {0.0, 1.0}), 1),
-               anim::Error);
+               tsah::Error);
 }
 
 TEST(Scene, SubdivideInASceneFile) {

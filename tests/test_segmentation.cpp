@@ -9,8 +9,8 @@
 #include "anim/animation.hpp"
 #include "anim/load.hpp"
 #include "test_support.hpp"
-#include "tsah/cost.hpp"
-#include "tsah/segmentation.hpp"
+#include "tsah/core/cost.hpp"
+#include "tsah/optimize/segmentation.hpp"
 
 namespace {
 

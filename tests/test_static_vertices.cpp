@@ -4,8 +4,8 @@
 #include <cstring>
 
 #include "anim/animation.hpp"
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/binary_io.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/tanim.hpp"
 
 namespace {
@@ -90,10 +90,10 @@ TEST(StaticVertices, AllMovingKeepsTheDenseForm) {
 TEST(StaticVertices, WithStaticVerticesChecksItsInput) {
   EXPECT_THROW(anim::Animation::withStaticVertices({0, 1, 2}, std::vector<float>(9, 0.0f), {2, 1},
                                                    std::vector<float>(6, 0.0f), {0.0}),
-               anim::ImportError);  // ids not ascending
+               tsah::FileError);  // ids not ascending
   EXPECT_THROW(anim::Animation::withStaticVertices({0, 1, 2}, std::vector<float>(9, 0.0f), {1},
                                                    std::vector<float>(5, 0.0f), {0.0}),
-               anim::ImportError);  // motion size
+               tsah::FileError);  // motion size
   const auto a = anim::Animation::withStaticVertices({0, 1, 2}, {0, 0, 0, 1, 0, 0, 0, 1, 0}, {1},
                                                      {1, 0, 0, 3, 0, 0}, {0.0, 2.0});
   EXPECT_EQ(a.positionsAt(1.0), (std::vector<float>{0, 0, 0, 2, 0, 0, 0, 1, 0}));
@@ -117,7 +117,7 @@ TEST(TanimVersion2, RoundTripKeepsTheSplitAndIsSmaller) {
 TEST(TanimVersion2, ReadsVersion1) {
   const auto a = mostlyStatic();
   const std::vector<float> all = a.allPositions();
-  anim::ByteWriter payload;
+  tsah::ByteWriter payload;
   payload.append("strip\0\0\0", 8);
   payload.writeArray(a.times());
   payload.writeArray(a.indices());
@@ -136,9 +136,9 @@ TEST(TanimVersion2, ReadsVersion1) {
   h.keyframeCount = 4;
   h.nameBytes = 5;
   h.payloadBytes = payload.buffer().size();
-  h.payloadCrc = anim::crc32(payload.buffer().data(), payload.buffer().size());
-  h.headerCrc = anim::crc32(&h, 60);
-  anim::ByteWriter file;
+  h.payloadCrc = tsah::crc32(payload.buffer().data(), payload.buffer().size());
+  h.headerCrc = tsah::crc32(&h, 60);
+  tsah::ByteWriter file;
   file.write(h);
   file.append(payload.buffer().data(), payload.buffer().size());
   const auto b = anim::decodeTanim(file.buffer(), "v1.tanim");
@@ -151,9 +151,9 @@ TEST(TanimVersion2, RejectsMoreMovingThanVertices) {
   auto bytes = anim::encodeTanim(mostlyStatic());
   const uint32_t absurd = 1000;
   std::memcpy(bytes.data() + 36, &absurd, 4);
-  const uint32_t crc = anim::crc32(bytes.data(), 60);
+  const uint32_t crc = tsah::crc32(bytes.data(), 60);
   std::memcpy(bytes.data() + 60, &crc, 4);
-  EXPECT_THROW(anim::decodeTanim(bytes, "bad.tanim"), anim::ImportError);
+  EXPECT_THROW(anim::decodeTanim(bytes, "bad.tanim"), tsah::FileError);
 }
 
 }  // namespace

@@ -2,8 +2,8 @@
 
 #include <cstring>
 
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/binary_io.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/generators.hpp"
 #include "anim/tanim.hpp"
 #include "test_support.hpp"
@@ -41,9 +41,9 @@ void expectSame(const anim::Animation& a, const anim::Animation& b) {
 }
 
 TEST(Crc32, KnownValue) {
-  EXPECT_EQ(anim::crc32("123456789", 9), 0xCBF43926u);
+  EXPECT_EQ(tsah::crc32("123456789", 9), 0xCBF43926u);
   // Continuing a CRC over two pieces equals the CRC of the whole.
-  EXPECT_EQ(anim::crc32("6789", 4, anim::crc32("12345", 5)), 0xCBF43926u);
+  EXPECT_EQ(tsah::crc32("6789", 4, tsah::crc32("12345", 5)), 0xCBF43926u);
 }
 
 TEST(Tanim, RoundTripInMemoryAndOnDisk) {
@@ -63,7 +63,7 @@ TEST(Tanim, EveryTruncationIsRejected) {
   const auto bytes = anim::encodeTanim(sample());
   for (std::size_t n = 0; n < bytes.size(); n += 1 + n / 16) {
     std::vector<uint8_t> cut(bytes.begin(), bytes.begin() + std::ptrdiff_t(n));
-    EXPECT_THROW(anim::decodeTanim(cut, "cut.tanim"), anim::ImportError) << "length " << n;
+    EXPECT_THROW(anim::decodeTanim(cut, "cut.tanim"), tsah::FileError) << "length " << n;
   }
 }
 
@@ -75,7 +75,7 @@ TEST(Tanim, CorruptionIsDetected) {
     state = state * 6364136223846793005ull + 1442695040888963407ull;
     const std::size_t at = (state >> 33) % copy.size();
     copy[at] ^= uint8_t(1u << ((state >> 20) % 8));
-    EXPECT_THROW(anim::decodeTanim(copy, "flip.tanim"), anim::ImportError) << "byte " << at;
+    EXPECT_THROW(anim::decodeTanim(copy, "flip.tanim"), tsah::FileError) << "byte " << at;
   }
 }
 
@@ -84,20 +84,20 @@ TEST(Tanim, HostileCountsWithValidChecksumsAreRejectedWithoutHugeAllocation) {
   // Patch the vertex count to an absurd value and recompute the header CRC, as an attacker would.
   uint32_t absurd = 0xfffffff0u;
   std::memcpy(bytes.data() + 16, &absurd, 4);
-  const uint32_t crc = anim::crc32(bytes.data(), 60);
+  const uint32_t crc = tsah::crc32(bytes.data(), 60);
   std::memcpy(bytes.data() + 60, &crc, 4);
   try {
     anim::decodeTanim(bytes, "hostile.tanim");
     FAIL();
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     EXPECT_NE(std::string(e.what()).find("hostile.tanim"), std::string::npos);
   }
 }
 
 TEST(Tanim, MissingFileAndWrongMagic) {
-  EXPECT_THROW(anim::loadTanim("/nonexistent/x.tanim"), anim::ImportError);
+  EXPECT_THROW(anim::loadTanim("/nonexistent/x.tanim"), tsah::FileError);
   std::vector<uint8_t> junk(200, 'x');
-  EXPECT_THROW(anim::decodeTanim(junk, "junk.tanim"), anim::ImportError);
+  EXPECT_THROW(anim::decodeTanim(junk, "junk.tanim"), tsah::FileError);
 }
 
 }  // namespace
@@ -110,14 +110,14 @@ TEST(Tanim, NameWithControlCharactersIsRefusedAndNeverWritten) {
   std::vector<uint8_t> bytes = anim::encodeTanim(a);
   EXPECT_EQ(anim::decodeTanim(bytes, "w.tanim").name(), "two_lines");
   bytes[64 + 3] = '\n';  // the name starts the payload; repair both checksums as a hostile file would
-  const uint32_t payloadCrc = anim::crc32(bytes.data() + 64, bytes.size() - 64);
+  const uint32_t payloadCrc = tsah::crc32(bytes.data() + 64, bytes.size() - 64);
   std::memcpy(bytes.data() + 48, &payloadCrc, 4);
-  const uint32_t headerCrc = anim::crc32(bytes.data(), 60);
+  const uint32_t headerCrc = tsah::crc32(bytes.data(), 60);
   std::memcpy(bytes.data() + 60, &headerCrc, 4);
   try {
     anim::decodeTanim(bytes, "n.tanim");
     FAIL() << "accepted a name with a line break";
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     EXPECT_STREQ(e.what(), "n.tanim: the animation name holds a control character (byte 10 at 3)");
   }
 }

@@ -9,11 +9,11 @@
 #include <random>
 
 #include "anim/generators.hpp"
-#include "tsah/binned_sah_builder.hpp"
-#include "tsah/cpu_runtime.hpp"
-#include "tsah/sah_builder.hpp"
-#include "tsah/sampling.hpp"
-#include "tsah/traversal.hpp"
+#include "tsah/build/binned_sah_builder.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
+#include "tsah/build/sah_builder.hpp"
+#include "tsah/render/sampling.hpp"
+#include "tsah/layout/traversal.hpp"
 
 namespace {
 

@@ -4,11 +4,11 @@
 
 #include <cmath>
 
-#include "tsah/baselines.hpp"
-#include "tsah/cost.hpp"
-#include "tsah/leaf_collapser.hpp"
-#include "tsah/sah_builder.hpp"
-#include "tsah/tree_quality.hpp"
+#include "tsah/optimize/baselines.hpp"
+#include "tsah/core/cost.hpp"
+#include "tsah/optimize/leaf_collapser.hpp"
+#include "tsah/build/sah_builder.hpp"
+#include "tsah/inspect/tree_quality.hpp"
 #include "test_support.hpp"
 
 namespace {

@@ -6,13 +6,14 @@
 #include <cstring>
 #include <random>
 
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/binary_io.hpp"
+#include "tsah/base/files.hpp"
+#include "tsah/base/error.hpp"
 #include "test_support.hpp"
-#include "tsah/cpu_runtime.hpp"
-#include "tsah/leaf_collapser.hpp"
-#include "tsah/sah_builder.hpp"
-#include "tsah/tree_set.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
+#include "tsah/optimize/leaf_collapser.hpp"
+#include "tsah/build/sah_builder.hpp"
+#include "tsah/io/tree_set.hpp"
 
 namespace {
 
@@ -41,7 +42,7 @@ struct Fixture {
 };
 
 std::vector<uint8_t> withCrc(std::vector<uint8_t> bytes) {
-  const uint32_t crc = anim::crc32(bytes.data(), bytes.size() - 4);
+  const uint32_t crc = tsah::crc32(bytes.data(), bytes.size() - 4);
   std::memcpy(bytes.data() + bytes.size() - 4, &crc, 4);
   return bytes;
 }
@@ -57,7 +58,7 @@ void expectRefused(const std::vector<uint8_t>& bytes, const std::string& what) {
   try {
     tsah::decodeTreeSetFile(bytes, "set.tbvh");
     ADD_FAILURE() << "accepted: " << what;
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     const std::string message = e.what();
     EXPECT_EQ(message.rfind("set.tbvh", 0), 0u) << message;
     EXPECT_EQ(message.find('\n'), std::string::npos) << message;
@@ -118,7 +119,7 @@ TEST(TreeSet, VersionOneFileIsASetOfOneTreeAndTheSingleTreeReaderRefusesSets) {
   try {
     tsah::decodeFlatBvhFile(v2, "set.tbvh");
     ADD_FAILURE() << "the single-tree reader accepted a set";
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     EXPECT_NE(std::string(e.what()).find("tree set"), std::string::npos) << e.what();
   }
 }
@@ -126,14 +127,14 @@ TEST(TreeSet, VersionOneFileIsASetOfOneTreeAndTheSingleTreeReaderRefusesSets) {
 TEST(TreeSet, WriterRefusesInconsistentSets) {
   Fixture fx(2);
   const std::vector<TimeRange> good = {{0, 1}, {1, 2}};
-  EXPECT_THROW(tsah::encodeTreeSetFile(fx.trees, fx.builds, std::vector<TimeRange>{{0, 1}, {1.5, 2}}, {}), anim::Error);
-  EXPECT_THROW(tsah::encodeTreeSetFile(fx.trees, fx.builds, std::vector<TimeRange>{{0, 1}}, {}), anim::Error);
+  EXPECT_THROW(tsah::encodeTreeSetFile(fx.trees, fx.builds, std::vector<TimeRange>{{0, 1}, {1.5, 2}}, {}), tsah::Error);
+  EXPECT_THROW(tsah::encodeTreeSetFile(fx.trees, fx.builds, std::vector<TimeRange>{{0, 1}}, {}), tsah::Error);
   auto builds = fx.builds;
   builds[1].topologyHash ^= 1;
-  EXPECT_THROW(tsah::encodeTreeSetFile(fx.trees, builds, good, {}), anim::Error);
+  EXPECT_THROW(tsah::encodeTreeSetFile(fx.trees, builds, good, {}), tsah::Error);
   tsah::TreeSetInfo info;
   info.segmentation = "a-name-far-too-long";
-  EXPECT_THROW(tsah::encodeTreeSetFile(fx.trees, fx.builds, good, info), anim::Error);
+  EXPECT_THROW(tsah::encodeTreeSetFile(fx.trees, fx.builds, good, info), tsah::Error);
 }
 
 TEST(TreeSet, CorruptOrInconsistentSetsAreRefusedWithOneLine) {
@@ -158,7 +159,7 @@ TEST(TreeSet, CorruptOrInconsistentSetsAreRefusedWithOneLine) {
       const tsah::TreeSet set = tsah::decodeTreeSetFile(b, "set.tbvh");
       EXPECT_FALSE(tsah::validateTimeRanges(set.ranges).has_value()) << "byte " << at;
       for (const tsah::FlatBvh& t : set.trees) EXPECT_FALSE(tsah::validateFlatBvh(t).has_value()) << "byte " << at;
-    } catch (const anim::ImportError& e) {
+    } catch (const tsah::FileError& e) {
       EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos);
     }
   }
@@ -209,13 +210,13 @@ TEST(TreeSet, FileHelpersRoundTripAndNameTheFileOnError) {
   const std::string path = (dir / "set.tbvh").string();
   tsah::saveTreeSetFile(path, fx.trees, fx.builds, std::vector<TimeRange>{{0, 1}, {1, 2}}, {});
   EXPECT_EQ(tsah::loadTreeSetFile(path).size(), 2u);
-  std::vector<uint8_t> bytes = anim::readFile(path);
+  std::vector<uint8_t> bytes = tsah::readFile(path);
   bytes[bytes.size() / 2] ^= 0x40;
-  anim::writeFileAtomically(path, bytes);
+  tsah::writeFileAtomically(path, bytes);
   try {
     tsah::loadTreeSetFile(path);
     ADD_FAILURE() << "corrupt set accepted";
-  } catch (const anim::ImportError& e) {
+  } catch (const tsah::FileError& e) {
     EXPECT_EQ(std::string(e.what()).rfind(path, 0), 0u) << e.what();
   }
 }

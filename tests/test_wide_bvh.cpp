@@ -8,11 +8,11 @@
 #include <random>
 #include <vector>
 
-#include "anim/error.hpp"
-#include "tsah/cost.hpp"
-#include "tsah/leaf_collapser.hpp"
-#include "tsah/sah_builder.hpp"
-#include "tsah/wide_bvh.hpp"
+#include "tsah/base/error.hpp"
+#include "tsah/core/cost.hpp"
+#include "tsah/optimize/leaf_collapser.hpp"
+#include "tsah/build/sah_builder.hpp"
+#include "tsah/layout/wide_bvh.hpp"
 #include "test_support.hpp"
 
 namespace {
@@ -197,16 +197,16 @@ TEST(WideBvh, WholeTreeAsOneLeaf) {
 TEST(WideBvh, RejectsBadInputAndValidationCatchesCorruption) {
   WideCollapser::Config bad;
   bad.width = 9;
-  EXPECT_THROW(WideCollapser{bad}, anim::Error);
+  EXPECT_THROW(WideCollapser{bad}, tsah::Error);
   bad.width = 4;
   bad.maxLeafSize = 0;
-  EXPECT_THROW(WideCollapser{bad}, anim::Error);
-  EXPECT_THROW(WideCollapser().collapse(Bvh{}), anim::Error);
+  EXPECT_THROW(WideCollapser{bad}, tsah::Error);
+  EXPECT_THROW(WideCollapser().collapse(Bvh{}), tsah::Error);
 
   const auto boxes = tsah::test::randomMovingTriangles(200, 2, 9, 1.0f).boxes();
   const Bvh bvh = sahTree(boxes, 2);
   const std::vector<double> wrongCount(3, 1.0);
-  EXPECT_THROW(WideCollapser().collapse(bvh, wrongCount), anim::Error);
+  EXPECT_THROW(WideCollapser().collapse(bvh, wrongCount), tsah::Error);
   const WideBvh good = WideCollapser().collapse(bvh);
   ASSERT_EQ(tsah::validateWide(good, &boxes), std::nullopt);
   WideBvh dup = good;

@@ -9,12 +9,12 @@
 #include <random>
 #include <vector>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/generators.hpp"
-#include "tsah/sah_builder.hpp"
-#include "tsah/wide_bvh.hpp"
-#include "tsah/wide_tree.hpp"
-#include "tsah/woop.hpp"
+#include "tsah/build/sah_builder.hpp"
+#include "tsah/layout/wide_bvh.hpp"
+#include "tsah/layout/wide_tree.hpp"
+#include "tsah/layout/woop.hpp"
 
 namespace {
 
@@ -217,7 +217,7 @@ TEST(WideRefit, RejectsAnIndexArrayShorterThanTheTree) {
   const std::vector<uint32_t> indices(a.indices().begin(), a.indices().end());
   EXPECT_NO_THROW(tsah::WideTree<8>(w, indices, 1));
   const std::vector<uint32_t> shorter(indices.begin(), indices.end() - 3);  // the last triangle is missing
-  EXPECT_THROW(tsah::WideTree<8>(w, shorter, 1), anim::Error);
+  EXPECT_THROW(tsah::WideTree<8>(w, shorter, 1), tsah::Error);
 }
 
 }  // namespace

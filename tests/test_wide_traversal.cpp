@@ -8,16 +8,16 @@
 #include <cmath>
 #include <random>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/generators.hpp"
 #include "anim/load.hpp"
 #include "test_support.hpp"
-#include "tsah/binned_sah_builder.hpp"
-#include "tsah/cpu_runtime.hpp"
-#include "tsah/insertion_optimizer.hpp"
-#include "tsah/leaf_collapser.hpp"
-#include "tsah/sah_builder.hpp"
-#include "tsah/sampling.hpp"
+#include "tsah/build/binned_sah_builder.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
+#include "tsah/optimize/insertion_optimizer.hpp"
+#include "tsah/optimize/leaf_collapser.hpp"
+#include "tsah/build/sah_builder.hpp"
+#include "tsah/render/sampling.hpp"
 
 namespace {
 
@@ -262,7 +262,7 @@ TEST(WideTraversal, RefitBoxesContainChildrenInEveryFrameAndCostsAreReported) {
     tsah::CpuRuntime rt = runtime(a, tree, layout);
     EXPECT_GT(rt.layoutInfo().binaryCost, 0.0);
     EXPECT_LE(rt.layoutInfo().layoutCost, rt.layoutInfo().binaryCost);
-    EXPECT_THROW(rt.view(), anim::Error);  // the binary tree is not refitted in a wide layout
+    EXPECT_THROW(rt.view(), tsah::Error);  // the binary tree is not refitted in a wide layout
     for (uint32_t f = 0; f < 10; ++f) {
       rt.update(a.positionsAt(a.startTime() + (a.endTime() - a.startTime()) * f / 9.0));
       if (layout == CpuLayout::Bvh4)
@@ -297,7 +297,7 @@ TEST(WideTraversal, RejectsUnsupportedKernels) {
   o.triangles = 100;
   o.frames = 2;
   const auto a = anim::generate(anim::GeneratorKind::Swap, o);
-  EXPECT_THROW(runtime(a, multiFrameTree(a, 4, 1), CpuLayout::Bvh8, SimdIsa::Sse), anim::Error);  // sse: 4-wide only
+  EXPECT_THROW(runtime(a, multiFrameTree(a, 4, 1), CpuLayout::Bvh8, SimdIsa::Sse), tsah::Error);  // sse: 4-wide only
 }
 
 TEST(WideTraversal, SameHitsAsBinaryOnRealScenes) {

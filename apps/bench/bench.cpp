@@ -7,18 +7,19 @@
 #include <sstream>
 #include <thread>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/load.hpp"
 #include "bench/embree_peer.hpp"
 #include "bench/runtime_bench.hpp"
 #include "animation_frames.hpp"
 #include "bench/segments.hpp"
-#include "tsah/baselines.hpp"
-#include "tsah/camera.hpp"
+#include "tsah/optimize/baselines.hpp"
+#include "tsah/render/camera.hpp"
+#include "tsah/render/camera_path.hpp"
 #if TSAH_HAVE_CUDA
 #include "tsah_cuda/gpu_optimizer.hpp"
 #endif
-#include "tsah/image.hpp"
+#include "tsah/render/image.hpp"
 
 #ifndef TSAH_VERSION
 #define TSAH_VERSION "unknown"
@@ -76,7 +77,7 @@ tsah::BaselineConfig baselineConfig(const BenchOptions& o, const BenchProgress& 
 #if TSAH_HAVE_CUDA
     config.deviceOptimizer = cuda::gpuTreeOptimizer();
 #else
-    throw anim::Error("--optimizer cuda: this build of tsah has no CUDA support");
+    throw tsah::Error("--optimizer cuda: this build of tsah has no CUDA support");
 #endif
   } else {
     config.optimizerKind = parseOptimizerKind(o.optimizer);
@@ -126,7 +127,7 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   j["load_s"] = secondsSince(start);
   j["warnings"] = warnings;
   if (a.keyframeCount() < 2) throw NotAnAnimation(scene.input + ": one keyframe (a static scene, not an animation)");
-  if (a.triangleCount() == 0) throw anim::Error(scene.input + ": no triangles");
+  if (a.triangleCount() == 0) throw tsah::Error(scene.input + ": no triangles");
   j["triangles"] = a.triangleCount();
   j["vertices"] = a.vertexCount();
   j["keyframes"] = a.keyframeCount();

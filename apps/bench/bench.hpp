@@ -60,7 +60,7 @@ class NotAnAnimation : public std::runtime_error {
 };
 
 // Runs the benchmark on one scene. The traced picture of the T-SAH refit (middle frame, half size
-// when large) goes to outDir/images/<scene>.png. Throws anim::Error for unreadable inputs.
+// when large) goes to outDir/images/<scene>.png. Throws tsah::Error for unreadable inputs.
 nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& options, const std::filesystem::path& outDir,
                           const BenchProgress& progress);
 

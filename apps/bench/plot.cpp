@@ -3,7 +3,7 @@
 #include <sstream>
 #include <span>
 
-#include "anim/binary_io.hpp"
+#include "tsah/base/files.hpp"
 #include "bench/process.hpp"
 
 namespace tsah::bench {
@@ -52,8 +52,8 @@ bool Plotter::plot(const std::string& name, const std::string& title, const std:
     return false;
   }
   const std::string d = data.str(), g = script.str();
-  anim::writeFileAtomically(dat.string(), std::span(reinterpret_cast<const uint8_t*>(d.data()), d.size()));
-  anim::writeFileAtomically(gp.string(), std::span(reinterpret_cast<const uint8_t*>(g.data()), g.size()));
+  tsah::writeFileAtomically(dat.string(), std::span(reinterpret_cast<const uint8_t*>(d.data()), d.size()));
+  tsah::writeFileAtomically(gp.string(), std::span(reinterpret_cast<const uint8_t*>(g.data()), g.size()));
   const ProcessResult r = runProcess({"gnuplot", gp.string()});
   std::error_code ec;
   if (!r.ok() || !fs::exists(tmp, ec)) {

@@ -3,9 +3,9 @@
 #include <atomic>
 #include <chrono>
 
-#include "tsah/sampling.hpp"
-#include "tsah/shading.hpp"
-#include "tsah/traversal.hpp"
+#include "tsah/render/sampling.hpp"
+#include "tsah/render/shading.hpp"
+#include "tsah/layout/traversal.hpp"
 
 namespace tsah::bench {
 

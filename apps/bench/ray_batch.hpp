@@ -6,10 +6,10 @@
 #include <functional>
 #include <vector>
 
-#include "tsah/camera.hpp"
-#include "tsah/cpu_runtime.hpp"
-#include "tsah/ray.hpp"
-#include "tsah/renderer.hpp"
+#include "tsah/render/camera.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
+#include "tsah/core/ray.hpp"
+#include "tsah/render/renderer.hpp"
 
 namespace tsah::bench {
 

@@ -8,7 +8,7 @@
 #include <map>
 #include <sstream>
 
-#include "anim/binary_io.hpp"
+#include "tsah/base/error.hpp"
 #include "bench/plot.hpp"
 #include "bench/process.hpp"
 

@@ -13,13 +13,13 @@
 #include <nlohmann/json.hpp>
 
 #include "anim/animation.hpp"
-#include "tsah/binned_sah_builder.hpp"
-#include "tsah/bvh.hpp"
-#include "tsah/camera.hpp"
-#include "tsah/cpu_runtime.hpp"
-#include "tsah/image.hpp"
-#include "tsah/renderer.hpp"
-#include "tsah/tree_set.hpp"
+#include "tsah/build/binned_sah_builder.hpp"
+#include "tsah/core/bvh.hpp"
+#include "tsah/render/camera.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
+#include "tsah/render/image.hpp"
+#include "tsah/render/renderer.hpp"
+#include "tsah/io/tree_set.hpp"
 
 namespace tsah::bench {
 
@@ -101,7 +101,7 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& animation,
                                                const RuntimeSetup& setup, const RefitTrees* set = nullptr);
 
 // GPU (built with CUDA): per frame GpuRuntime::updateAt (interpolation, refit, Woop on the device)
-// and renderFrameGpu. Throws anim::Error when the bench was built without CUDA or no device exists.
+// and renderFrameGpu. Throws tsah::Error when the bench was built without CUDA or no device exists.
 // layout: "bvh2" or "cwbvh" (GpuRuntime::Config::layout), empty for the runtime's default.
 RuntimeMethod runGpuRefit(const anim::Animation& animation, const RefitTrees& trees, const RuntimeSetup& setup,
                           Image* image = nullptr, uint32_t imageFrame = 0, const std::string& layout = {});

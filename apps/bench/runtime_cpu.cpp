@@ -5,10 +5,10 @@
 
 #include "bench/embree_peer.hpp"
 #include "bench/runtime_bench.hpp"
-#include "tsah/cpu_runtime.hpp"
-#include "tsah/flat_bvh.hpp"
-#include "tsah/leaf_collapser.hpp"
-#include "tsah/sah_builder.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
+#include "tsah/layout/flat_bvh.hpp"
+#include "tsah/optimize/leaf_collapser.hpp"
+#include "tsah/build/sah_builder.hpp"
 
 namespace tsah::bench {
 

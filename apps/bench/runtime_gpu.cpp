@@ -2,12 +2,12 @@
 #include <algorithm>
 #include <memory>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "bench/runtime_bench.hpp"
-#include "tsah/flat_bvh.hpp"
+#include "tsah/layout/flat_bvh.hpp"
 
 #if TSAH_HAVE_CUDA
-#include "tsah/cwbvh_convert.hpp"
+#include "tsah/layout/cwbvh_convert.hpp"
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 #endif
@@ -24,7 +24,7 @@ void report(const RuntimeSetup& setup, const std::string& label, std::size_t fra
 }
 
 void requireDevice() {
-  if (!cuda::deviceAvailable()) throw anim::Error("--device cuda: no CUDA device is available on this machine");
+  if (!cuda::deviceAvailable()) throw tsah::Error("--device cuda: no CUDA device is available on this machine");
 }
 
 // Renders the current frame: the ray passes (device time of the traversal kernels) and the whole
@@ -129,11 +129,11 @@ nlohmann::json gpuJson() { return nullptr; }
 
 RuntimeMethod runGpuRefit(const anim::Animation&, const RefitTrees&, const RuntimeSetup&, Image*, uint32_t,
                           const std::string&) {
-  throw anim::Error("--device cuda: this tsah was built without the CUDA runtime");
+  throw tsah::Error("--device cuda: this tsah was built without the CUDA runtime");
 }
 RuntimeMethod runGpuRebuild(const anim::Animation&, const Bvh&, const std::string&, const CostModel&, uint32_t,
                             const RuntimeSetup&, const std::string&) {
-  throw anim::Error("--device cuda: this tsah was built without the CUDA runtime");
+  throw tsah::Error("--device cuda: this tsah was built without the CUDA runtime");
 }
 
 #endif

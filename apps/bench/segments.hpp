@@ -13,8 +13,8 @@
 #include <nlohmann/json.hpp>
 
 #include "anim/animation.hpp"
-#include "tsah/baselines.hpp"
-#include "tsah/segmentation.hpp"
+#include "tsah/optimize/baselines.hpp"
+#include "tsah/optimize/segmentation.hpp"
 
 namespace tsah::bench {
 

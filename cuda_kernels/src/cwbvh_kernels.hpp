@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "device_types.hpp"
-#include "tsah/cwbvh_build.hpp"
+#include "tsah/layout/cwbvh_build.hpp"
 #include "tsah_cuda/device_buffer.hpp"
 
 namespace tsah::cuda::detail {

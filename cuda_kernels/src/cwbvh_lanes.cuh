@@ -4,7 +4,7 @@
 // trees (cwbvh_rebuild.cu). Each gives the bits of libtsah's serial code (cwbvh_quantize.hpp).
 #include <cstdint>
 
-#include "tsah/cwbvh_quantize.hpp"
+#include "tsah/layout/cwbvh_quantize.hpp"
 
 namespace tsah::cuda::detail {
 

@@ -4,11 +4,11 @@
 #include <cstdint>
 #include <type_traits>
 
-#include "tsah/aabb.hpp"
-#include "tsah/cwbvh_layout.hpp"
-#include "tsah/gpu_layout.hpp"
-#include "tsah/ray.hpp"
-#include "tsah/woop.hpp"
+#include "tsah/core/aabb.hpp"
+#include "tsah/layout/cwbvh_layout.hpp"
+#include "tsah/layout/gpu_layout.hpp"
+#include "tsah/core/ray.hpp"
+#include "tsah/layout/woop.hpp"
 
 namespace tsah::cuda::detail {
 

@@ -22,10 +22,10 @@
 #include "cwbvh_rebuild.hpp"
 #include "device_types.hpp"
 #include "event_timer.hpp"
-#include "tsah/bvh.hpp"
-#include "tsah/flat_bvh.hpp"
+#include "tsah/core/bvh.hpp"
+#include "tsah/layout/flat_bvh.hpp"
 #include "tsah_cuda/device_buffer.hpp"
-#include "tsah_cuda/gpu_runtime.hpp"
+#include "tsah_cuda/rebuild_types.hpp"
 
 namespace tsah::cuda::detail {
 

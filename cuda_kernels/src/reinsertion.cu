@@ -18,7 +18,7 @@
 #include <cstdlib>
 
 #include "launch.hpp"
-#include "tsah/reinsertion_rounds.hpp"
+#include "tsah/optimize/detail/reinsertion_rounds.hpp"
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/device_buffer.hpp"
 #include "tsah_cuda/gpu_optimizer.hpp"

@@ -7,13 +7,13 @@
 // last bit.
 #include <cuda/atomic>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "cwbvh_kernels.hpp"
 #include "kernels.hpp"
 #include "launch.hpp"
 #include "runtime_impl.hpp"
-#include "tsah/camera.hpp"
-#include "tsah/shading.hpp"
+#include "tsah/render/camera.hpp"
+#include "tsah/render/shading.hpp"
 
 namespace tsah::cuda {
 
@@ -283,7 +283,7 @@ __global__ void shadeKernel(Frame f, const float4* __restrict__ surfaces, const 
 
 RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const SceneLighting& lighting,
                            const RenderSettings& settings, Image* image, GpuRenderTimings* timings) {
-  if (settings.width == 0 || settings.height == 0) throw anim::Error("render: the image size must be positive");
+  if (settings.width == 0 || settings.height == 0) throw tsah::Error("render: the image size must be positive");
   validateCamera(camera);
   GpuRuntime::Impl& m = *runtime.impl_;
   m.requireTraceable();
@@ -296,7 +296,7 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   const uint64_t padded = uint64_t(f.tilesX) * tilesY * 32;
   const uint64_t aoRays = padded * settings.aoSamples, shadowRays = padded * settings.shadowSamples;
   if (padded > 0xffffffffu || aoRays > 0xffffffffu || shadowRays > 0xffffffffu)
-    throw anim::Error("render: too many rays for one frame");
+    throw tsah::Error("render: too many rays for one frame");
   f.padded = uint32_t(padded);
   f.cam = cameraRays(camera, f.width, f.height);
   f.light = lighting;

@@ -9,7 +9,7 @@
 #include "event_timer.hpp"
 #include "kernels.hpp"
 #include "rebuild.hpp"
-#include "tsah/cwbvh_build.hpp"
+#include "tsah/layout/cwbvh_build.hpp"
 #include "tsah_cuda/device_buffer.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 

@@ -8,7 +8,7 @@
 #include "cwbvh_kernels.hpp"
 #include "kernels.hpp"
 #include "launch.hpp"
-#include "tsah/traversal.hpp"
+#include "tsah/layout/traversal.hpp"
 
 namespace tsah::cuda::detail {
 

@@ -4,7 +4,7 @@
 #include <cstddef>
 #include <cstdint>
 
-#include "tsah/aabb.hpp"
+#include "tsah/core/aabb.hpp"
 
 namespace tsah::cuda::detail {
 

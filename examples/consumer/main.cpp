@@ -7,8 +7,8 @@
 #include <vector>
 
 #include <anim/load.hpp>
-#include <tsah/bvh_file.hpp>
-#include <tsah/cpu_runtime.hpp>
+#include <tsah/io/bvh_file.hpp>
+#include <tsah/runtime/cpu_runtime.hpp>
 #include <tsah/pipeline.hpp>
 #if defined(CONSUMER_WITH_CUDA)
 #include <tsah_cuda/device.hpp>

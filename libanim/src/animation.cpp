@@ -8,9 +8,8 @@
 
 #include <cstring>
 
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
-#include "anim/memory.hpp"
+#include "tsah/base/error.hpp"
+#include "tsah/base/memory.hpp"
 
 namespace anim {
 
@@ -59,11 +58,11 @@ Animation Animation::withStaticVertices(std::vector<uint32_t> indices, std::vect
   a.name_ = std::move(name);
   const std::string who = a.name_.empty() ? std::string("animation") : a.name_;
   if (rest.size() % 3 != 0 || rest.size() / 3 > 0xffffffffu)
-    throw ImportError(who, "rest position array holds " + std::to_string(rest.size()) + " floats, not 3 per vertex");
+    throw tsah::FileError(who, "rest position array holds " + std::to_string(rest.size()) + " floats, not 3 per vertex");
   a.vertexCount_ = static_cast<uint32_t>(rest.size() / 3);
   for (std::size_t i = 0; i < moving.size(); ++i)
     if (moving[i] >= a.vertexCount_ || (i > 0 && moving[i] <= moving[i - 1]))
-      throw ImportError(who, "moving vertex ids are not ascending ids below the vertex count");
+      throw tsah::FileError(who, "moving vertex ids are not ascending ids below the vertex count");
   a.movingCount_ = static_cast<uint32_t>(moving.size());
   a.indices_ = std::move(indices);
   a.motion_ = std::move(motion);
@@ -82,29 +81,29 @@ Animation Animation::withStaticVertices(std::vector<uint32_t> indices, std::vect
 void Animation::validate() {
   const std::string who = name_.empty() ? std::string("animation") : name_;
   if (indices_.size() % 3 != 0)
-    throw ImportError(who, "index count " + std::to_string(indices_.size()) + " is not a multiple of 3");
-  if (times_.empty()) throw ImportError(who, "no keyframes");
+    throw tsah::FileError(who, "index count " + std::to_string(indices_.size()) + " is not a multiple of 3");
+  if (times_.empty()) throw tsah::FileError(who, "no keyframes");
   if (motion_.size() != times_.size() * std::size_t(movingCount_) * 3)
-    throw ImportError(who, "position array holds " + std::to_string(motion_.size()) +
+    throw tsah::FileError(who, "position array holds " + std::to_string(motion_.size()) +
                                " floats, expected " + std::to_string(times_.size()) + " keyframes x " +
                                std::to_string(movingCount_) + " vertices x 3");
   for (std::size_t i = 0; i < indices_.size(); ++i)
     if (indices_[i] >= vertexCount_)
-      throw ImportError(who, "triangle " + std::to_string(i / 3) + " references vertex " +
+      throw tsah::FileError(who, "triangle " + std::to_string(i / 3) + " references vertex " +
                                  std::to_string(indices_[i]) + " but there are only " +
                                  std::to_string(vertexCount_) + " vertices");
   for (std::size_t i = 0; i < times_.size(); ++i) {
     if (!std::isfinite(times_[i]))
-      throw ImportError(who, "keyframe " + std::to_string(i) + " has a non-finite time");
+      throw tsah::FileError(who, "keyframe " + std::to_string(i) + " has a non-finite time");
     if (i > 0 && !(times_[i] > times_[i - 1]))
-      throw ImportError(who, "keyframe times are not strictly increasing at keyframe " + std::to_string(i));
+      throw tsah::FileError(who, "keyframe times are not strictly increasing at keyframe " + std::to_string(i));
   }
   if (const std::size_t bad = firstBadCoordinate(rest_); bad < rest_.size())
-    throw ImportError(who, "static vertex " + std::to_string(bad / 3) + " " + describeBadCoordinate(rest_[bad]));
+    throw tsah::FileError(who, "static vertex " + std::to_string(bad / 3) + " " + describeBadCoordinate(rest_[bad]));
   if (const std::size_t bad = firstBadCoordinate(motion_); bad < motion_.size()) {
     const std::size_t perFrame = std::size_t(movingCount_) * 3;
     const std::size_t m = (bad % perFrame) / 3;
-    throw ImportError(who, "keyframe " + std::to_string(bad / perFrame) + " vertex " +
+    throw tsah::FileError(who, "keyframe " + std::to_string(bad / perFrame) + " vertex " +
                                std::to_string(allMoving() ? m : moving_[m]) + " " + describeBadCoordinate(motion_[bad]));
   }
   degenerate_ = 0;
@@ -145,7 +144,7 @@ std::span<const float> Animation::movingKeyframe(uint32_t k) const {
 }
 
 std::vector<float> Animation::keyframe(uint32_t k) const {
-  if (k >= keyframeCount()) throw Error(name_ + ": keyframe " + std::to_string(k) + " out of range");
+  if (k >= keyframeCount()) throw tsah::Error(name_ + ": keyframe " + std::to_string(k) + " out of range");
   std::vector<float> out = allMoving() ? std::vector<float>() : rest_;
   out.resize(std::size_t(vertexCount_) * 3);
   movingPositionsAt(times_[k], out);
@@ -196,7 +195,7 @@ void Animation::interpolateMoving(double t, float* out, const uint32_t* scatter)
 
 void Animation::movingPositionsAt(double t, std::span<float> out) const {
   if (out.size() != std::size_t(vertexCount_) * 3)
-    throw Error(name_ + ": position buffer holds " + std::to_string(out.size()) + " floats, expected " +
+    throw tsah::Error(name_ + ": position buffer holds " + std::to_string(out.size()) + " floats, expected " +
                 std::to_string(std::size_t(vertexCount_) * 3));
   interpolateMoving(t, out.data(), allMoving() ? nullptr : moving_.data());
 }
@@ -272,8 +271,8 @@ Animation Animation::sampledAt(std::vector<double> t) const {
 }
 
 Animation Animation::resample(uint32_t n) const {
-  if (n == 0) throw Error(name_ + ": cannot resample to 0 frames");
-  checkFitsInMemory(memoryBytesFor(triangleCount(), vertexCount_, movingCount_, n), name_, std::to_string(n) + " frames");
+  if (n == 0) throw tsah::Error(name_ + ": cannot resample to 0 frames");
+  tsah::checkFitsInMemory(memoryBytesFor(triangleCount(), vertexCount_, movingCount_, n), name_, std::to_string(n) + " frames");
   std::vector<double> t = uniformTimes(n);
   if (n > 1 && !(endTime() > startTime())) {
     // A one-keyframe animation sampled n times: frames at 0,1,...; the geometry stays the same.

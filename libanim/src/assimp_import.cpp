@@ -20,8 +20,8 @@
 #include <unordered_map>
 
 #include "anim/assimp_import.hpp"
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/files.hpp"
+#include "tsah/base/error.hpp"
 
 namespace anim {
 
@@ -156,7 +156,7 @@ std::string clipLabel(const aiAnimation* a, unsigned i) {
 
 const aiAnimation* chooseClip(const aiScene* scene, const std::string& clip, const std::string& file) {
   if (scene->mNumAnimations == 0) {
-    if (!clip.empty()) throw ImportError(file, "has no animation clips, so clip '" + clip + "' cannot be chosen");
+    if (!clip.empty()) throw tsah::FileError(file, "has no animation clips, so clip '" + clip + "' cannot be chosen");
     return nullptr;
   }
   if (clip.empty()) return scene->mAnimations[0];
@@ -168,7 +168,7 @@ const aiAnimation* chooseClip(const aiScene* scene, const std::string& clip, con
   }
   std::string list;
   for (unsigned i = 0; i < scene->mNumAnimations; ++i) list += (i ? ", " : "") + clipLabel(scene->mAnimations[i], i);
-  throw ImportError(file, "no clip '" + clip + "' (clips: " + list + ")");
+  throw tsah::FileError(file, "no clip '" + clip + "' (clips: " + list + ")");
 }
 
 // Keyframe times in seconds: every 1/fps over the clip, or (fps 0) every distinct key time of it.
@@ -177,7 +177,7 @@ std::vector<double> frameTimes(const aiAnimation* clip, double fps, double ticks
   std::vector<double> ticks;
   auto addKeys = [&](const auto* keys, unsigned n) {
     for (unsigned k = 0; k < n; ++k) {
-      if (!std::isfinite(keys[k].mTime)) throw ImportError(file, "clip has a non-finite key time");
+      if (!std::isfinite(keys[k].mTime)) throw tsah::FileError(file, "clip has a non-finite key time");
       ticks.push_back(keys[k].mTime);
     }
   };
@@ -193,7 +193,7 @@ std::vector<double> frameTimes(const aiAnimation* clip, double fps, double ticks
     double end = std::isfinite(clip->mDuration) ? clip->mDuration : 0.0;
     if (!ticks.empty()) end = std::max(end, ticks.back());
     const double count = std::floor(end / ticksPerSecond * fps + 1e-9) + 1.0;
-    if (!(count <= double(kMaxFrames))) throw ImportError(file, "the clip is too long to sample at " + std::to_string(fps) + " fps");
+    if (!(count <= double(kMaxFrames))) throw tsah::FileError(file, "the clip is too long to sample at " + std::to_string(fps) + " fps");
     std::vector<double> times(static_cast<std::size_t>(std::max(1.0, count)));
     for (std::size_t i = 0; i < times.size(); ++i) times[i] = double(i) / fps;
     return times;
@@ -203,7 +203,7 @@ std::vector<double> frameTimes(const aiAnimation* clip, double fps, double ticks
     const double s = t / ticksPerSecond;
     if (times.empty() || s > times.back() + 1e-9 * std::max(1.0, std::fabs(s))) times.push_back(s);
   }
-  if (times.size() > kMaxFrames) throw ImportError(file, "the clip has more than " + std::to_string(kMaxFrames) + " key times");
+  if (times.size() > kMaxFrames) throw tsah::FileError(file, "the clip has more than " + std::to_string(kMaxFrames) + " key times");
   if (times.empty()) times.push_back(0.0);
   return times;
 }
@@ -265,8 +265,8 @@ void weldVertices(std::vector<uint32_t>& indices, std::vector<float>& positions,
 
 Animation bake(const aiScene* scene, const std::string& file, const LoadOptions& options) {
   if (!(options.fps >= 0.0) || !std::isfinite(options.fps))
-    throw ImportError(file, "frame rate must be a finite number >= 0");
-  if (!scene->mRootNode) throw ImportError(file, "the scene has no node hierarchy");
+    throw tsah::FileError(file, "frame rate must be a finite number >= 0");
+  if (!scene->mRootNode) throw tsah::FileError(file, "the scene has no node hierarchy");
   const aiAnimation* clip = chooseClip(scene, options.clip, file);
   const double tps = clip && clip->mTicksPerSecond > 0.0 && std::isfinite(clip->mTicksPerSecond) ? clip->mTicksPerSecond
                                                                                                   : kDefaultTicksPerSecond;
@@ -280,7 +280,7 @@ Animation bake(const aiScene* scene, const std::string& file, const LoadOptions&
     while (!stack.empty()) {
       auto [n, parent] = stack.back();
       stack.pop_back();
-      if (nodes.size() > (std::size_t(1) << 24)) throw ImportError(file, "the node hierarchy is too large");
+      if (nodes.size() > (std::size_t(1) << 24)) throw tsah::FileError(file, "the node hierarchy is too large");
       SceneNode sn;
       sn.node = n;
       sn.parent = parent;
@@ -309,7 +309,7 @@ Animation bake(const aiScene* scene, const std::string& file, const LoadOptions&
   for (int i = 0; i < int(nodes.size()); ++i) {
     const aiNode* n = nodes[i].node;
     for (unsigned k = 0; k < n->mNumMeshes; ++k) {
-      if (n->mMeshes[k] >= scene->mNumMeshes) throw ImportError(file, "a node references a missing mesh");
+      if (n->mMeshes[k] >= scene->mNumMeshes) throw tsah::FileError(file, "a node references a missing mesh");
       const aiMesh* mesh = scene->mMeshes[n->mMeshes[k]];
       MeshInstance inst{i, mesh, uint32_t(vertexCount), nullptr, {}};
       uint64_t triangles = 0;
@@ -320,7 +320,7 @@ Animation bake(const aiScene* scene, const std::string& file, const LoadOptions&
           continue;
         }
         for (int c = 0; c < 3; ++c) {
-          if (face.mIndices[c] >= mesh->mNumVertices) throw ImportError(file, "a face references a missing vertex");
+          if (face.mIndices[c] >= mesh->mNumVertices) throw tsah::FileError(file, "a face references a missing vertex");
           indices.push_back(uint32_t(vertexCount + face.mIndices[c]));
         }
         ++triangles;
@@ -329,9 +329,9 @@ Animation bake(const aiScene* scene, const std::string& file, const LoadOptions&
       for (unsigned b = 0; b < mesh->mNumBones; ++b) {
         const aiBone* bone = mesh->mBones[b];
         const auto it = byName.find(bone->mName.C_Str());
-        if (it == byName.end()) throw ImportError(file, "bone '" + std::string(bone->mName.C_Str()) + "' has no node");
+        if (it == byName.end()) throw tsah::FileError(file, "bone '" + std::string(bone->mName.C_Str()) + "' has no node");
         for (unsigned w = 0; w < bone->mNumWeights; ++w)
-          if (bone->mWeights[w].mVertexId >= mesh->mNumVertices) throw ImportError(file, "a bone weight references a missing vertex");
+          if (bone->mWeights[w].mVertexId >= mesh->mNumVertices) throw tsah::FileError(file, "a bone weight references a missing vertex");
         inst.boneNodes.push_back(it->second);
       }
       if (clip)
@@ -341,13 +341,13 @@ Animation bake(const aiScene* scene, const std::string& file, const LoadOptions&
         }
       for (unsigned a = 0; a < mesh->mNumAnimMeshes; ++a)
         if (!mesh->mAnimMeshes[a]->mVertices || mesh->mAnimMeshes[a]->mNumVertices != mesh->mNumVertices)
-          throw ImportError(file, "a morph target of mesh '" + std::string(mesh->mName.C_Str()) + "' has no or too few positions");
+          throw tsah::FileError(file, "a morph target of mesh '" + std::string(mesh->mName.C_Str()) + "' has no or too few positions");
       instances.push_back(std::move(inst));
       vertexCount += mesh->mNumVertices;
-      if (vertexCount > kMaxVertices) throw ImportError(file, "the scene has more than " + std::to_string(kMaxVertices) + " vertices");
+      if (vertexCount > kMaxVertices) throw tsah::FileError(file, "the scene has more than " + std::to_string(kMaxVertices) + " vertices");
     }
   }
-  if (indices.empty()) throw ImportError(file, "the scene holds no triangles");
+  if (indices.empty()) throw tsah::FileError(file, "the scene holds no triangles");
   if (skippedFaces) warnings.push_back(file + ": skipped " + std::to_string(skippedFaces) + " point and line primitives");
   if (scene->mNumAnimations > 1) {
     unsigned chosen = 0;
@@ -359,7 +359,7 @@ Animation bake(const aiScene* scene, const std::string& file, const LoadOptions&
   const std::vector<double> times = frameTimes(clip, options.fps, tps, file);
   const std::size_t perFrame = std::size_t(vertexCount) * 3;
   if ((long double)perFrame * sizeof(float) * times.size() > (long double)kMaxPositionBytes)
-    throw ImportError(file, std::to_string(times.size()) + " frames x " + std::to_string(vertexCount) +
+    throw tsah::FileError(file, std::to_string(times.size()) + " frames x " + std::to_string(vertexCount) +
                                 " vertices need more than " + std::to_string(kMaxPositionBytes >> 30) +
                                 " GiB of keyframe positions; sample fewer frames");
   std::vector<float> positions(perFrame * times.size());
@@ -457,10 +457,10 @@ Animation bake(const aiScene* scene, const std::string& file, const LoadOptions&
 }
 
 const aiScene* readScene(Assimp::Importer& importer, const std::string& path) {
-  checkInputFile(path);  // a FIFO or device would block or never end inside Assimp
+  tsah::checkInputFile(path);  // a FIFO or device would block or never end inside Assimp
   const aiScene* scene = importer.ReadFile(path, aiProcess_Triangulate | aiProcess_ValidateDataStructure);
-  if (!scene) throw ImportError(path, std::string("cannot import: ") + importer.GetErrorString());
-  if (scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE) throw ImportError(path, "the file holds an incomplete scene");
+  if (!scene) throw tsah::FileError(path, std::string("cannot import: ") + importer.GetErrorString());
+  if (scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE) throw tsah::FileError(path, "the file holds an incomplete scene");
   return scene;
 }
 
@@ -473,7 +473,7 @@ bool isModelFile(const std::string& path) {
 
 Animation importModel(const std::string& path, const LoadOptions& options) {
   if (lowerExtension(path) == ".md2") {
-    const std::vector<uint8_t> bytes = readFile(path, std::size_t(1) << 30);
+    const std::vector<uint8_t> bytes = tsah::readFile(path, std::size_t(1) << 30);
     return decodeMd2(bytes, path, options);
   }
   Assimp::Importer importer;
@@ -482,7 +482,7 @@ Animation importModel(const std::string& path, const LoadOptions& options) {
 
 std::vector<std::string> modelClips(const std::string& path) {
   if (lowerExtension(path) == ".md2") {
-    const std::vector<uint8_t> bytes = readFile(path, std::size_t(1) << 30);
+    const std::vector<uint8_t> bytes = tsah::readFile(path, std::size_t(1) << 30);
     return md2Clips(bytes, path);
   }
   Assimp::Importer importer;

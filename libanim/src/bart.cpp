@@ -13,8 +13,8 @@
 #include <mutex>
 #include <thread>
 
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/files.hpp"
+#include "tsah/base/error.hpp"
 #include "bart_scene.hpp"
 
 namespace anim {
@@ -166,7 +166,7 @@ class Flattener {
 std::vector<double> frameTimes(const ParsedScene& scene, const FlatScene& flat, const BartOptions& options,
                                const std::string& path, std::vector<std::string>& warnings) {
   const double fps = options.fps;
-  if (!(fps >= 0.0) || !std::isfinite(fps)) throw ImportError(path, "frame rate must be a finite number >= 0");
+  if (!(fps >= 0.0) || !std::isfinite(fps)) throw tsah::FileError(path, "frame rate must be a finite number >= 0");
   double t0 = 0.0, t1 = 0.0;
   uint64_t frames = 1;
   if (scene.range) {
@@ -189,7 +189,7 @@ std::vector<double> frameTimes(const ParsedScene& scene, const FlatScene& flat, 
     for (const auto& t : flat.triangles) cover(t.triangle->times.front(), t.triangle->times.back());
     if (t1 > t0 && fps == 0.0) {
       const double count = std::floor((t1 - t0) * kFallbackFps + 1e-9) + 1.0;
-      if (count > double(kMaxFrames)) throw ImportError(path, "the animation is too long to sample");
+      if (count > double(kMaxFrames)) throw tsah::FileError(path, "the animation is too long to sample");
       frames = static_cast<uint64_t>(count);
       warnings.push_back(path + ": no 'a' line; sampling the animated time span [" + std::to_string(t0) + ", " +
                          std::to_string(t1) + "] at " + std::to_string(int(kFallbackFps)) + " frames per time unit");
@@ -198,14 +198,14 @@ std::vector<double> frameTimes(const ParsedScene& scene, const FlatScene& flat, 
   if (fps > 0.0 && t1 > t0) {
     const double count = std::floor((t1 - t0) * fps + 1e-9) + 1.0;
     if (!(count <= double(kMaxFrames)))
-      throw ImportError(path, "sampling [" + std::to_string(t0) + ", " + std::to_string(t1) + "] at " +
+      throw tsah::FileError(path, "sampling [" + std::to_string(t0) + ", " + std::to_string(t1) + "] at " +
                                   std::to_string(fps) + " fps gives more than " + std::to_string(kMaxFrames) + " frames");
     std::vector<double> times(static_cast<std::size_t>(count));
     for (std::size_t i = 0; i < times.size(); ++i) times[i] = t0 + double(i) / fps;
     return times;
   }
   if (frames > kMaxFrames)
-    throw ImportError(scene.range->file, "line " + std::to_string(scene.range->line) + ": frame count " +
+    throw tsah::FileError(scene.range->file, "line " + std::to_string(scene.range->line) + ": frame count " +
                                              std::to_string(frames) + " exceeds the limit of " + std::to_string(kMaxFrames));
   if (frames <= 1 || !(t1 > t0)) return {t0};
   std::vector<double> times(frames);
@@ -214,7 +214,7 @@ std::vector<double> frameTimes(const ParsedScene& scene, const FlatScene& flat, 
   // Times so close that they round together would break the strictly increasing keyframe times.
   for (std::size_t i = 1; i < times.size(); ++i)
     if (!(times[i] > times[i - 1]))
-      throw ImportError(scene.range->file, "line " + std::to_string(scene.range->line) +
+      throw tsah::FileError(scene.range->file, "line " + std::to_string(scene.range->line) +
                                                ": the frame times are too close together to tell apart");
   return times;
 }
@@ -287,13 +287,13 @@ std::string skippedSummary(const ParsedScene& s) {
 Animation sample(const ParsedScene& scene, const std::string& path, const BartOptions& options) {
   std::vector<std::string> warnings = scene.warnings;
   const FlatScene flat = Flattener(scene, warnings).run();
-  if (flat.indices.empty()) throw ImportError(path, "the scene holds no triangles");
+  if (flat.indices.empty()) throw tsah::FileError(path, "the scene holds no triangles");
   const std::vector<double> times = frameTimes(scene, flat, options, path, warnings);
 
   const std::size_t perFrame = std::size_t(flat.vertexCount) * 3;
   const long double bytes = (long double)perFrame * sizeof(float) * (long double)times.size();
   if (bytes > (long double)options.maxPositionBytes)
-    throw ImportError(path, std::to_string(times.size()) + " frames x " + std::to_string(flat.vertexCount) +
+    throw tsah::FileError(path, std::to_string(times.size()) + " frames x " + std::to_string(flat.vertexCount) +
                                 " vertices need " + byteSize(bytes) + " of keyframe positions, more than the limit of " +
                                 byteSize((long double)options.maxPositionBytes) + "; sample fewer frames");
 
@@ -391,7 +391,7 @@ Animation importBartText(std::string_view text, const std::string& path, const B
 }
 
 Animation importBart(const std::string& path, const BartOptions& options) {
-  const std::vector<uint8_t> bytes = readFile(path, std::size_t(1) << 30);
+  const std::vector<uint8_t> bytes = tsah::readFile(path, std::size_t(1) << 30);
   return importBartText(std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()), path, options);
 }
 

@@ -1,4 +1,4 @@
-// The AFF parser: text -> bart_detail::ParsedScene. Every problem throws ImportError naming the file
+// The AFF parser: text -> bart_detail::ParsedScene. Every problem throws tsah::FileError naming the file
 // and the line; sizes read from the text are checked against the input left before anything is
 // reserved, includes are bounded in depth and cycles are refused.
 #include <algorithm>
@@ -11,8 +11,8 @@
 #include <system_error>
 #include <unordered_map>
 
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/files.hpp"
+#include "tsah/base/error.hpp"
 #include "bart_scene.hpp"
 
 namespace anim::bart_detail {
@@ -57,7 +57,7 @@ class Tokens {
   bool atEnd() { return peek().empty(); }
 
   [[noreturn]] void fail(const std::string& what) const {
-    throw ImportError(file_, "line " + std::to_string(tokenLine_) + ": " + what);
+    throw tsah::FileError(file_, "line " + std::to_string(tokenLine_) + ": " + what);
   }
 
   std::string_view word(const char* what) {
@@ -254,7 +254,7 @@ class Parser {
     fileScene->root.line = 1;
     while (!tokens.atEnd()) command(tokens, stack);
     if (stack.size() > 1)
-      throw ImportError(path, "line " + std::to_string(stack.back()->line) + ": '{' is never closed");
+      throw tsah::FileError(path, "line " + std::to_string(stack.back()->line) + ": '{' is never closed");
     closeBlock(fileScene->root, tokens);
     return fileScene;
   }
@@ -568,10 +568,10 @@ class Parser {
       auto spline = [&](auto make) {
         try {
           return make();
-        } catch (const ImportError&) {
+        } catch (const tsah::FileError&) {
           throw;
-        } catch (const Error& e) {
-          throw ImportError(tk.file(), "line " + std::to_string(motionLine) + ": " + e.what());
+        } catch (const tsah::Error& e) {
+          throw tsah::FileError(tk.file(), "line " + std::to_string(motionLine) + ": " + e.what());
         }
       };
       if (motion == "transl" || motion == "scale") {
@@ -645,7 +645,7 @@ class Parser {
       return;
     }
     const int64_t detailBefore = detail_;
-    const std::vector<uint8_t> bytes = readFile(target.string(), kMaxFileBytes);
+    const std::vector<uint8_t> bytes = tsah::readFile(target.string(), kMaxFileBytes);
     includeStack_.push_back(key);
     auto sub = parseFile(std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()), target.string());
     includeStack_.pop_back();

@@ -89,7 +89,7 @@ struct ParsedScene {
   std::vector<std::string> warnings;
 };
 
-// Parses `text` as the file `path` and every file it includes. Throws ImportError naming file:line.
+// Parses `text` as the file `path` and every file it includes. Throws tsah::FileError naming file:line.
 ParsedScene parseScene(std::string_view text, const std::string& path, const BartOptions& options);
 
 }  // namespace anim::bart_detail

@@ -6,7 +6,7 @@
 
 #include "anim/assimp_import.hpp"
 #include "anim/bart.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/mesh_sequence.hpp"
 #include "anim/point_cache.hpp"
 #include "anim/scene.hpp"
@@ -33,12 +33,12 @@ std::string stemName(const std::string& input) {
 Animation load(const std::string& input, const LoadOptions& options) {
   namespace fs = std::filesystem;
   std::error_code ec;
-  if (input.empty()) throw ImportError("<input>", "empty input path");
+  if (input.empty()) throw tsah::FileError("<input>", "empty input path");
   if (input.find('%') != std::string::npos || input.find_first_of("*?[") != std::string::npos)
     return importSequence(listFrames(input), options, stemName(fs::path(input).parent_path().string()));
   if (fs::is_directory(input, ec)) return importSequence(listFrames(input), options, stemName(input));
   if (const auto pair = splitPointCacheInput(input)) return importPointCache(*pair, options);  // mesh.obj+cache.pc2
-  if (!fs::exists(input, ec)) throw ImportError(input, "no such file or directory");
+  if (!fs::exists(input, ec)) throw tsah::FileError(input, "no such file or directory");
   const std::string ext = lowerExtension(input);
   if (ext == ".tanim") return loadTanim(input);
   if (ext == ".aff") {
@@ -50,7 +50,7 @@ Animation load(const std::string& input, const LoadOptions& options) {
   }
   if (isModelFile(input)) return importModel(input, options);
   if (pointCacheFormat(input))
-    throw ImportError(input, "a point cache holds positions only: name a mesh of the same points with it, as "
+    throw tsah::FileError(input, "a point cache holds positions only: name a mesh of the same points with it, as "
                              "mesh.obj+" + fs::path(input).filename().string());
   if (ext == ".json" && isSceneFile(input)) return loadScene(input, options);
   if (ext == ".json") {
@@ -58,7 +58,7 @@ Animation load(const std::string& input, const LoadOptions& options) {
     return importSequence(readManifest(input), options, stemName(input));
   }
   if (isMeshFile(input)) return importSequence(FrameList{{input}, {}}, options, stemName(input));
-  throw ImportError(input, "unknown input format '" + ext +
+  throw tsah::FileError(input, "unknown input format '" + ext +
                                "' (expected .tanim, .json manifest, a mesh file, a directory, a "
                                "printf pattern or a glob)");
 }

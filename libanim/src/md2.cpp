@@ -12,8 +12,8 @@
 #include <string>
 
 #include "anim/assimp_import.hpp"
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/binary_io.hpp"
+#include "tsah/base/error.hpp"
 
 namespace anim {
 
@@ -36,7 +36,7 @@ struct Md2 {
   std::span<const uint8_t> block(int64_t offset, int64_t count, int64_t size, const char* what) const {
     if (offset < 0 || count < 0 || size <= 0 || offset > int64_t(bytes.size()) ||
         count > (int64_t(bytes.size()) - offset) / size)
-      throw ImportError(file, std::string(what) + " (" + std::to_string(count) + " x " + std::to_string(size) +
+      throw tsah::FileError(file, std::string(what) + " (" + std::to_string(count) + " x " + std::to_string(size) +
                                   " bytes at offset " + std::to_string(offset) + ") lies outside the " +
                                   std::to_string(bytes.size()) + "-byte file");
     return bytes.subspan(std::size_t(offset), std::size_t(count * size));
@@ -50,7 +50,7 @@ struct Md2 {
 };
 
 Md2 parse(std::span<const uint8_t> bytes, const std::string& file) {
-  ByteReader in(bytes, file);
+  tsah::ByteReader in(bytes, file);
   char magic[4];
   std::memcpy(magic, in.bytes(4, "magic").data(), 4);
   if (std::memcmp(magic, "IDP2", 4) != 0) in.fail("not an MD2 file (magic is not IDP2)");
@@ -59,13 +59,13 @@ Md2 parse(std::span<const uint8_t> bytes, const std::string& file) {
   for (int32_t& field : f) field = in.read<int32_t>("header");
   m.h = {f[0], f[1], f[2], f[3], f[4], f[5], f[6], f[7], f[8], f[9], f[10], f[11], f[12], f[13], f[14], f[15]};
   const Md2Header& h = m.h;
-  if (h.version != 8) throw ImportError(file, "unsupported MD2 version " + std::to_string(h.version) + " (expected 8)");
+  if (h.version != 8) throw tsah::FileError(file, "unsupported MD2 version " + std::to_string(h.version) + " (expected 8)");
   if (h.numVertices < 1 || h.numVertices > 65535)
-    throw ImportError(file, "vertex count " + std::to_string(h.numVertices) + " is out of range [1, 65535]");
-  if (h.numTriangles < 1) throw ImportError(file, "the model has no triangles");
-  if (h.numFrames < 1) throw ImportError(file, "the model has no frames");
+    throw tsah::FileError(file, "vertex count " + std::to_string(h.numVertices) + " is out of range [1, 65535]");
+  if (h.numTriangles < 1) throw tsah::FileError(file, "the model has no triangles");
+  if (h.numFrames < 1) throw tsah::FileError(file, "the model has no frames");
   if (h.frameSize < 40 + 4 * int64_t(h.numVertices))
-    throw ImportError(file, "frame size " + std::to_string(h.frameSize) + " is too small for " +
+    throw tsah::FileError(file, "frame size " + std::to_string(h.frameSize) + " is too small for " +
                                 std::to_string(h.numVertices) + " vertices");
   m.block(h.offsetTriangles, h.numTriangles, 12, "triangle block");
   m.block(h.offsetFrames, h.numFrames, h.frameSize, "frame block");
@@ -97,7 +97,7 @@ Animation decodeMd2(std::span<const uint8_t> bytes, const std::string& file, con
   const Md2 m = parse(bytes, file);
   const Md2Header& h = m.h;
   if (!(options.fps >= 0.0) || !std::isfinite(options.fps))
-    throw ImportError(file, "frame rate must be a finite number >= 0");
+    throw tsah::FileError(file, "frame rate must be a finite number >= 0");
   const double fps = options.fps > 0.0 ? options.fps : kMd2Fps;
 
   // The frames to keep: all of them, or one clip chosen by name or index.
@@ -115,7 +115,7 @@ Animation decodeMd2(std::span<const uint8_t> bytes, const std::string& file, con
     } else {
       std::string list;
       for (const auto& c : clips) list += (list.empty() ? "" : ", ") + c;
-      throw ImportError(file, "no clip '" + options.clip + "' (clips: " + list + ")");
+      throw tsah::FileError(file, "no clip '" + options.clip + "' (clips: " + list + ")");
     }
     for (int32_t f = 0; f < h.numFrames; ++f)
       if (groupOf(m.frameName(f)) == chosen) frames.push_back(f);
@@ -128,7 +128,7 @@ Animation decodeMd2(std::span<const uint8_t> bytes, const std::string& file, con
       uint16_t v;
       std::memcpy(&v, tris.data() + 12 * std::size_t(t) + 2 * c, 2);
       if (v >= h.numVertices)
-        throw ImportError(file, "triangle " + std::to_string(t) + " uses vertex " + std::to_string(v) +
+        throw tsah::FileError(file, "triangle " + std::to_string(t) + " uses vertex " + std::to_string(v) +
                                     " but the model has " + std::to_string(h.numVertices) + " vertices");
       indices[3 * std::size_t(t) + c] = v;
     }
@@ -143,7 +143,7 @@ Animation decodeMd2(std::span<const uint8_t> bytes, const std::string& file, con
     std::memcpy(translate, rec.data() + 12, 12);
     for (int a = 0; a < 3; ++a)
       if (!std::isfinite(scale[a]) || !std::isfinite(translate[a]))
-        throw ImportError(file, "frame " + std::to_string(frames[k]) + " has a non-finite scale or translation");
+        throw tsah::FileError(file, "frame " + std::to_string(frames[k]) + " has a non-finite scale or translation");
     const uint8_t* v = rec.data() + 40;
     float* out = positions.data() + k * perFrame;
     for (int32_t i = 0; i < h.numVertices; ++i)

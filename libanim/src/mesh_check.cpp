@@ -11,9 +11,8 @@
 #include <vector>
 
 #include "anim/animation.hpp"
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
-#include "anim/memory.hpp"
+#include "tsah/base/error.hpp"
+#include "tsah/base/memory.hpp"
 
 namespace anim {
 
@@ -76,29 +75,29 @@ void checkCounts(const std::string& path, uint64_t vertices, uint64_t faces, uin
   const bool overflow = __builtin_mul_overflow(vertices, vertexBytes, &a) ||
                         __builtin_mul_overflow(faces, faceBytes, &b) || __builtin_add_overflow(a, b, &need);
   if (overflow || need > available)
-    throw ImportError(path, "header declares " + std::to_string(vertices) + " vertices and " +
+    throw tsah::FileError(path, "header declares " + std::to_string(vertices) + " vertices and " +
                                 std::to_string(faces) + " faces (at least " +
                                 (overflow ? std::string("2^64") : std::to_string(need)) +
                                 " bytes), but only " + std::to_string(available) + " bytes follow it");
   // OpenMesh's half-edge mesh: about 48 bytes per vertex and 80 per face (with their half-edges).
-  requireMemory(vertices * 48 + faces * 80, path,
+  tsah::requireMemory(vertices * 48 + faces * 80, path,
                 "reading " + std::to_string(vertices) + " vertices and " + std::to_string(faces) + " faces");
 }
 
 void checkCoordinate(const std::string& path, uint64_t vertex, double value) {
   if (!(std::fabs(value) <= double(kMaxCoordinate)))
-    throw ImportError(path, "vertex " + std::to_string(vertex) + " " + describeBadCoordinate(float(value)));
+    throw tsah::FileError(path, "vertex " + std::to_string(vertex) + " " + describeBadCoordinate(float(value)));
 }
 
 void checkFaceIndex(const std::string& path, uint64_t face, int64_t index, uint64_t vertices) {
   if (index < 0 || uint64_t(index) >= vertices)
-    throw ImportError(path, "face " + std::to_string(face) + " references vertex " + std::to_string(index) +
+    throw tsah::FileError(path, "face " + std::to_string(face) + " references vertex " + std::to_string(index) +
                                 " but the file has " + std::to_string(vertices) + " vertices (0.." +
                                 std::to_string(vertices == 0 ? 0 : vertices - 1) + ")");
 }
 
 void checkFaceSize(const std::string& path, uint64_t face, uint64_t size) {
-  if (size < 3) throw ImportError(path, "face " + std::to_string(face) + " has " + std::to_string(size) +
+  if (size < 3) throw tsah::FileError(path, "face " + std::to_string(face) + " has " + std::to_string(size) +
                                             " vertices (at least 3 needed)");
 }
 
@@ -108,24 +107,24 @@ DeclaredMesh checkOff(const std::string& path, std::span<const uint8_t> bytes) {
   Tokens in(bytes, 0);
   const std::string_view magic = in.next(true);
   if (magic.size() < 3 || magic.substr(magic.size() - 3) != "OFF")
-    throw ImportError(path, "not an OFF file (the first word is not OFF)");
+    throw tsah::FileError(path, "not an OFF file (the first word is not OFF)");
   if (magic.find('4') != std::string_view::npos || magic.find('n') != std::string_view::npos)
-    throw ImportError(path, "4D and n-dimensional OFF files are not supported");
+    throw tsah::FileError(path, "4D and n-dimensional OFF files are not supported");
   // OpenMesh reads the keyword line whole and the counts from the lines after it: anything else on
   // the keyword line would make the two readers disagree about the counts.
   std::string_view word = in.nextOnLine();
   const bool binary = word == "BINARY";
   if (binary) word = in.nextOnLine();
   if (!word.empty())
-    throw ImportError(path, "the " + std::string(magic) + " line holds '" + std::string(word) +
+    throw tsah::FileError(path, "the " + std::string(magic) + " line holds '" + std::string(word) +
                                 "' after the keyword (the counts go on the next line)");
   uint64_t counts[3] = {};
   for (int i = 0; i < 3; ++i) {
     word = in.next(true);
     if (!parseCount(word, counts[i]))
-      throw ImportError(path, "header needs the vertex, face and edge counts, got '" + std::string(word) + "'");
+      throw tsah::FileError(path, "header needs the vertex, face and edge counts, got '" + std::string(word) + "'");
   }
-  if (counts[2] > 0xffffffffu) throw ImportError(path, "edge count " + std::to_string(counts[2]) + " is absurd");
+  if (counts[2] > 0xffffffffu) throw tsah::FileError(path, "edge count " + std::to_string(counts[2]) + " is absurd");
   const DeclaredMesh declared{true, counts[0], counts[1]};
   if (binary) {  // binary OFF: 3 floats per vertex, at least 4 ints per face
     checkCounts(path, declared.vertices, declared.faces, 12, 16, bytes.size());
@@ -137,7 +136,7 @@ DeclaredMesh checkOff(const std::string& path, std::span<const uint8_t> bytes) {
       const std::string_view token = in.next(true);
       double value = 0;
       if (!parseNumber(token, value))
-        throw ImportError(path, "vertex " + std::to_string(v) + ": coordinate " + std::string(1, char('x' + a)) +
+        throw tsah::FileError(path, "vertex " + std::to_string(v) + ": coordinate " + std::string(1, char('x' + a)) +
                                     (token.empty() ? " is missing (the file ends early)"
                                                    : " is not a number: '" + std::string(token) + "'"));
       checkCoordinate(path, v, value);
@@ -148,7 +147,7 @@ DeclaredMesh checkOff(const std::string& path, std::span<const uint8_t> bytes) {
     const std::string_view token = in.next(true);
     uint64_t n = 0;
     if (!parseCount(token, n))
-      throw ImportError(path, "face " + std::to_string(f) + (token.empty() ? " is missing (the file ends early)"
+      throw tsah::FileError(path, "face " + std::to_string(f) + (token.empty() ? " is missing (the file ends early)"
                                                                         : ": bad vertex count '" + std::string(token) + "'"));
     checkFaceSize(path, f, n);
     for (uint64_t k = 0; k < n; ++k) {
@@ -156,7 +155,7 @@ DeclaredMesh checkOff(const std::string& path, std::span<const uint8_t> bytes) {
       int64_t index = -1;
       auto [next, ec] = std::from_chars(t.data(), t.data() + t.size(), index);
       if (t.empty() || ec != std::errc() || next != t.data() + t.size())
-        throw ImportError(path, "face " + std::to_string(f) + ": vertex index " + std::to_string(k) +
+        throw tsah::FileError(path, "face " + std::to_string(f) + ": vertex index " + std::to_string(k) +
                                     (t.empty() ? " is missing" : " is not an integer: '" + std::string(t) + "'"));
       checkFaceIndex(path, f, index, declared.vertices);
     }
@@ -233,7 +232,7 @@ DeclaredMesh checkPly(const std::string& path, std::span<const uint8_t> bytes) {
   }
   if (text.substr(0, 3) != "ply" || text.size() < 4 || (text[3] != '\n' && text[3] != '\r') ||
       headerEnd == std::string_view::npos)
-    throw ImportError(path, "not a PLY file (no 'ply' line ... 'end_header' line)");
+    throw tsah::FileError(path, "not a PLY file (no 'ply' line ... 'end_header' line)");
   std::size_t bodyStart = text.find('\n', headerEnd);
   bodyStart = bodyStart == std::string_view::npos ? bytes.size() : bodyStart + 1;
 
@@ -250,35 +249,35 @@ DeclaredMesh checkPly(const std::string& path, std::span<const uint8_t> bytes) {
     if (word == "format") {
       const std::string_view f = header.nextOnLine();
       format = f == "ascii" ? Format::Ascii : f == "binary_little_endian" ? Format::Little
-             : f == "binary_big_endian" ? Format::Big : throw ImportError(path, "unknown PLY format '" + std::string(f) + "'");
+             : f == "binary_big_endian" ? Format::Big : throw tsah::FileError(path, "unknown PLY format '" + std::string(f) + "'");
       const std::string_view version = header.nextOnLine();
       double v = 0;
       if (!parseNumber(version, v) || v != 1.0)
-        throw ImportError(path, "unsupported PLY version '" + std::string(version) + "' (1.0 expected)");
+        throw tsah::FileError(path, "unsupported PLY version '" + std::string(version) + "' (1.0 expected)");
     } else if (word == "element") {
       PlyElement e;
       e.name = std::string(header.nextOnLine());
-      if (!parseCount(header.nextOnLine(), e.count)) throw ImportError(path, "element " + e.name + " has no valid count");
+      if (!parseCount(header.nextOnLine(), e.count)) throw tsah::FileError(path, "element " + e.name + " has no valid count");
       elements.push_back(std::move(e));
     } else if (word == "property") {
-      if (elements.empty()) throw ImportError(path, "property before any element");
+      if (elements.empty()) throw tsah::FileError(path, "property before any element");
       PlyProperty p;
       std::string_view t = header.nextOnLine();
       if (t == "list") {
         bool f;
         if (!plyType(header.nextOnLine(), p.countSize, f, p.countSigned) || f)
-          throw ImportError(path, "bad list count type in the header");
+          throw tsah::FileError(path, "bad list count type in the header");
         t = header.nextOnLine();
       }
-      if (!plyType(t, p.size, p.isFloat, p.isSigned)) throw ImportError(path, "unknown property type '" + std::string(t) + "'");
+      if (!plyType(t, p.size, p.isFloat, p.isSigned)) throw tsah::FileError(path, "unknown property type '" + std::string(t) + "'");
       p.name = std::string(header.nextOnLine());
-      if (p.name.empty()) throw ImportError(path, "a property of element " + elements.back().name + " has no name");
+      if (p.name.empty()) throw tsah::FileError(path, "a property of element " + elements.back().name + " has no name");
       elements.back().properties.push_back(std::move(p));
     } else {
-      throw ImportError(path, "unexpected header word '" + std::string(word) + "'");
+      throw tsah::FileError(path, "unexpected header word '" + std::string(word) + "'");
     }
     if (const std::string_view extra = header.nextOnLine(); !extra.empty())
-      throw ImportError(path, "unexpected header word '" + std::string(extra) + "' after the " + std::string(word) + " statement");
+      throw tsah::FileError(path, "unexpected header word '" + std::string(extra) + "' after the " + std::string(word) + " statement");
   }
   DeclaredMesh declared{true, 0, 0};
   uint64_t minBytes[2] = {0, 0};  // per vertex, per face
@@ -302,12 +301,12 @@ DeclaredMesh checkPly(const std::string& path, std::span<const uint8_t> bytes) {
       const std::string_view token = ascii.next();
       double v = 0;
       if (!parseNumber(token, v))
-        throw ImportError(path, where + (token.empty() ? " is missing (the file ends early)"
+        throw tsah::FileError(path, where + (token.empty() ? " is missing (the file ends early)"
                                                        : " is not a number: '" + std::string(token) + "'"));
       return v;
     }
     if (bytes.size() - offset < std::size_t(size))
-      throw ImportError(path, where + " is missing (the file ends at byte " + std::to_string(bytes.size()) + ")");
+      throw tsah::FileError(path, where + " is missing (the file ends at byte " + std::to_string(bytes.size()) + ")");
     const double v = readBinary(bytes.data() + offset, size, isFloat, isSigned, bigEndian);
     offset += std::size_t(size);
     return v;
@@ -327,13 +326,13 @@ DeclaredMesh checkPly(const std::string& path, std::span<const uint8_t> bytes) {
         if (!(n >= 0) || n != std::floor(n) || n > 4294967295.0) {
           char number[32];
           std::snprintf(number, sizeof number, "%g", n);
-          throw ImportError(path, e.name + " " + std::to_string(r) + ": bad list length " + number);
+          throw tsah::FileError(path, e.name + " " + std::to_string(r) + ": bad list length " + number);
         }
         if (indices) checkFaceSize(path, r, uint64_t(n));
         if (format != Format::Ascii && !indices) {  // skip the list without reading each value
           uint64_t skip = 0;
           if (__builtin_mul_overflow(uint64_t(n), uint64_t(p.size), &skip) || skip > bytes.size() - offset)
-            throw ImportError(path, e.name + " " + std::to_string(r) + ": list " + p.name + " runs past the end of the file");
+            throw tsah::FileError(path, e.name + " " + std::to_string(r) + ": list " + p.name + " runs past the end of the file");
           offset += std::size_t(skip);
           continue;
         }

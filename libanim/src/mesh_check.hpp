@@ -14,7 +14,7 @@ struct DeclaredMesh {
 
 // Reads the header of a PLY or OFF file (by its extension) and walks its vertices and faces:
 // counts that cannot fit in the file, a non-numeric, non-finite or too large coordinate, a face
-// with fewer than 3 vertices or one referencing a vertex that does not exist throw ImportError
+// with fewer than 3 vertices or one referencing a vertex that does not exist throw tsah::FileError
 // naming the file and the vertex or face. Other extensions return {known = false}.
 DeclaredMesh checkMeshFile(const std::string& path, std::span<const uint8_t> bytes);
 

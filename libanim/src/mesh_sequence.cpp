@@ -18,9 +18,9 @@
 #include <sstream>
 #include <thread>
 
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
-#include "anim/memory.hpp"
+#include "tsah/base/files.hpp"
+#include "tsah/base/error.hpp"
+#include "tsah/base/memory.hpp"
 #include "mesh_check.hpp"
 
 namespace anim {
@@ -54,7 +54,7 @@ MeshFrame decodeObj(std::span<const uint8_t> bytes, const std::string& path) {
   std::vector<uint32_t> polygon;
   std::size_t line = 1;
   auto fail = [&](const std::string& what) -> void {
-    throw ImportError(path, "line " + std::to_string(line) + ": " + what);
+    throw tsah::FileError(path, "line " + std::to_string(line) + ": " + what);
   };
   auto skipSpaces = [&] {
     while (p < end && (*p == ' ' || *p == '\t' || *p == '\r')) ++p;
@@ -106,7 +106,7 @@ MeshFrame decodeObj(std::span<const uint8_t> bytes, const std::string& path) {
     if (p < end) ++p;
     ++line;
   }
-  if (mesh.positions.empty()) throw ImportError(path, "no vertices");
+  if (mesh.positions.empty()) throw tsah::FileError(path, "no vertices");
   return mesh;
 }
 
@@ -117,7 +117,7 @@ namespace {
 // Our own pass over the file first (mesh_check.hpp): OpenMesh drops faces that reference missing
 // vertices and allocates whatever a header claims; afterwards its counts must match the header's.
 MeshFrame readWithOpenMesh(const std::string& path) {
-  const DeclaredMesh declared = checkMeshFile(path, readFile(path));
+  const DeclaredMesh declared = checkMeshFile(path, tsah::readFile(path));
   using Mesh = OpenMesh::PolyMesh_ArrayKernelT<>;
   Mesh mesh;
   // omerr/omlog are process-wide: connect them once to one captured stream (OpenMesh never frees a
@@ -141,11 +141,11 @@ MeshFrame readWithOpenMesh(const std::string& path) {
     ok = OpenMesh::IO::read_mesh(mesh, path, options);
     complaints = messages.str();
   }
-  if (!ok) throw ImportError(path, "OpenMesh cannot read this file");
+  if (!ok) throw tsah::FileError(path, "OpenMesh cannot read this file");
   if (complaints.find("complex") != std::string::npos)
-    throw ImportError(path, "has non-manifold faces that the mesh reader drops; convert it to OBJ");
+    throw tsah::FileError(path, "has non-manifold faces that the mesh reader drops; convert it to OBJ");
   if (declared.known && (mesh.n_vertices() != declared.vertices || mesh.n_faces() != declared.faces))
-    throw ImportError(path, "the mesh reader kept " + std::to_string(mesh.n_vertices()) + " of " +
+    throw tsah::FileError(path, "the mesh reader kept " + std::to_string(mesh.n_vertices()) + " of " +
                                 std::to_string(declared.vertices) + " vertices and " + std::to_string(mesh.n_faces()) +
                                 " of " + std::to_string(declared.faces) +
                                 " faces (it drops degenerate and non-manifold faces); convert it to OBJ");
@@ -163,7 +163,7 @@ MeshFrame readWithOpenMesh(const std::string& path) {
     if (polygon.size() > 3) ++out.polygonsTriangulated;
     fanTriangulate(polygon, out.indices);
   }
-  if (out.positions.empty()) throw ImportError(path, "no vertices");
+  if (out.positions.empty()) throw tsah::FileError(path, "no vertices");
   return out;
 }
 
@@ -191,7 +191,7 @@ std::regex patternToRegex(const std::string& filePattern, const std::string& spe
       while (j < filePattern.size() && std::isdigit(static_cast<unsigned char>(filePattern[j])))
         width = width * 10 + (filePattern[j++] - '0');
       if (j >= filePattern.size() || filePattern[j] != 'd' || sawNumber)
-        throw ImportError(spec, "frame pattern must contain exactly one %d-style number (e.g. %04d)");
+        throw tsah::FileError(spec, "frame pattern must contain exactly one %d-style number (e.g. %04d)");
       re += zeroPad && width > 0 ? "(\\d{" + std::to_string(width) + ",})" : "(\\d+)";
       sawNumber = true;
       i = j;
@@ -202,7 +202,7 @@ std::regex patternToRegex(const std::string& filePattern, const std::string& spe
       re += c;
     }
   }
-  if (!sawNumber) throw ImportError(spec, "frame pattern has no %d");
+  if (!sawNumber) throw tsah::FileError(spec, "frame pattern has no %d");
   return std::regex(re);
 }
 
@@ -214,7 +214,7 @@ bool isMeshFile(const std::string& path) {
 }
 
 MeshFrame readMesh(const std::string& path) {
-  if (lower(fs::path(path).extension().string()) == ".obj") return decodeObj(readFile(path), path);
+  if (lower(fs::path(path).extension().string()) == ".obj") return decodeObj(tsah::readFile(path), path);
   return readWithOpenMesh(path);
 }
 
@@ -251,7 +251,7 @@ FrameList listFrames(const std::string& spec) {
   if (spec.find('%') != std::string::npos) {
     const fs::path p(spec);
     const fs::path dir = p.has_parent_path() ? p.parent_path() : fs::path(".");
-    if (!fs::is_directory(dir, ec)) throw ImportError(spec, "folder " + dir.string() + " does not exist");
+    if (!fs::is_directory(dir, ec)) throw tsah::FileError(spec, "folder " + dir.string() + " does not exist");
     const std::regex re = patternToRegex(p.filename().string(), spec);
     std::vector<std::pair<unsigned long long, std::string>> numbered;
     for (const auto& entry : fs::directory_iterator(dir, ec)) {
@@ -277,13 +277,13 @@ FrameList listFrames(const std::string& spec) {
         list.files.push_back(entry.path().string());
     std::sort(list.files.begin(), list.files.end(), naturalLess);
   } else {
-    throw ImportError(spec, "not a frame pattern, glob or directory");
+    throw tsah::FileError(spec, "not a frame pattern, glob or directory");
   }
-  if (list.files.empty()) throw ImportError(spec, "matches no mesh files");
+  if (list.files.empty()) throw tsah::FileError(spec, "matches no mesh files");
   return list;
 }
 
-FrameList readManifest(const std::string& path) { return decodeManifest(readFile(path, std::size_t(1) << 28), path); }
+FrameList readManifest(const std::string& path) { return decodeManifest(tsah::readFile(path, std::size_t(1) << 28), path); }
 
 FrameList decodeManifest(std::span<const uint8_t> bytes, const std::string& path) {
   nlohmann::json doc;
@@ -293,15 +293,15 @@ FrameList decodeManifest(std::span<const uint8_t> bytes, const std::string& path
     std::string what = e.what();
     if (const auto end = what.find("] "); what.rfind("[json.exception", 0) == 0 && end != std::string::npos)
       what.erase(0, end + 2);  // the library's "[json.exception.parse_error.101] " tag
-    throw ImportError(path, "invalid JSON: " + what);
+    throw tsah::FileError(path, "invalid JSON: " + what);
   }
   const nlohmann::json* frames = &doc;
   if (doc.is_object()) {
-    if (!doc.contains("frames")) throw ImportError(path, "manifest object has no \"frames\" array");
+    if (!doc.contains("frames")) throw tsah::FileError(path, "manifest object has no \"frames\" array");
     frames = &doc["frames"];
   }
   if (!frames->is_array() || frames->empty())
-    throw ImportError(path, "manifest \"frames\" must be a non-empty array");
+    throw tsah::FileError(path, "manifest \"frames\" must be a non-empty array");
   const fs::path base = fs::path(path).parent_path();
   FrameList list;
   std::size_t withTime = 0;
@@ -313,30 +313,30 @@ FrameList decodeManifest(std::span<const uint8_t> bytes, const std::string& path
     } else if (f.is_object() && f.contains("file") && f["file"].is_string()) {
       file = f["file"].get<std::string>();
       if (f.contains("time")) {
-        if (!f["time"].is_number()) throw ImportError(path, "frame " + std::to_string(i) + ": \"time\" is not a number");
+        if (!f["time"].is_number()) throw tsah::FileError(path, "frame " + std::to_string(i) + ": \"time\" is not a number");
         list.times.push_back(f["time"].get<double>());
         ++withTime;
       }
     } else {
-      throw ImportError(path, "frame " + std::to_string(i) + " is neither a file name nor {\"file\": ...}");
+      throw tsah::FileError(path, "frame " + std::to_string(i) + " is neither a file name nor {\"file\": ...}");
     }
     const fs::path fp(file);
     list.files.push_back(fp.is_absolute() ? fp.string() : (base / fp).string());
   }
   if (withTime != 0 && withTime != list.files.size())
-    throw ImportError(path, "times given for " + std::to_string(withTime) + " of " +
+    throw tsah::FileError(path, "times given for " + std::to_string(withTime) + " of " +
                                 std::to_string(list.files.size()) + " frames: give all or none");
   return list;
 }
 
 Animation importSequence(const FrameList& frames, const LoadOptions& options, std::string name) {
   const std::size_t n = frames.files.size();
-  if (n == 0) throw Error(name + ": no frames");
-  if (!frames.times.empty() && frames.times.size() != n) throw Error(name + ": times do not match frames");
+  if (n == 0) throw tsah::Error(name + ": no frames");
+  if (!frames.times.empty() && frames.times.size() != n) throw tsah::Error(name + ": times do not match frames");
 
   const MeshFrame first = readMesh(frames.files[0]);
   const std::size_t perFrame = first.positions.size();
-  requireMemory(uint64_t(perFrame) * n * sizeof(float), name,
+  tsah::requireMemory(uint64_t(perFrame) * n * sizeof(float), name,
                 std::to_string(n) + " frames of " + std::to_string(perFrame / 3) + " vertices");
   std::vector<float> positions(perFrame * n);
   std::copy(first.positions.begin(), first.positions.end(), positions.begin());
@@ -351,16 +351,16 @@ Animation importSequence(const FrameList& frames, const LoadOptions& options, st
       try {
         MeshFrame m = readMesh(frames.files[i]);
         if (m.positions.size() != perFrame)
-          throw ImportError(frames.files[i], "has " + std::to_string(m.positions.size() / 3) +
+          throw tsah::FileError(frames.files[i], "has " + std::to_string(m.positions.size() / 3) +
                                                  " vertices but the first frame (" + frames.files[0] +
                                                  ") has " + std::to_string(perFrame / 3));
         if (m.indices != first.indices) {
           if (m.indices.size() != first.indices.size())
-            throw ImportError(frames.files[i], "has " + std::to_string(m.indices.size() / 3) +
+            throw tsah::FileError(frames.files[i], "has " + std::to_string(m.indices.size() / 3) +
                                                    " triangles but the first frame (" + frames.files[0] +
                                                    ") has " + std::to_string(first.indices.size() / 3));
           const auto mismatch = std::mismatch(m.indices.begin(), m.indices.end(), first.indices.begin());
-          throw ImportError(frames.files[i],
+          throw tsah::FileError(frames.files[i],
                             "triangle " + std::to_string((mismatch.first - m.indices.begin()) / 3) +
                                 " differs from the first frame (" + frames.files[0] + ")");
         }
@@ -391,13 +391,13 @@ Animation importSequence(const FrameList& frames, const LoadOptions& options, st
     for (std::size_t i = 0; i < n; ++i) times.push_back(double(i));
   for (std::size_t i = 1; i < times.size(); ++i)
     if (!(times[i] > times[i - 1]))
-      throw ImportError(frames.files[i], "frame time " + std::to_string(times[i]) +
+      throw tsah::FileError(frames.files[i], "frame time " + std::to_string(times[i]) +
                                              " is not after the previous frame's");
   // The Animation constructor checks the coordinates too; name the frame file in that message.
   if (const std::size_t bad = firstBadCoordinate(positions); bad < positions.size())
-    throw ImportError(frames.files[bad / perFrame],
+    throw tsah::FileError(frames.files[bad / perFrame],
                       "vertex " + std::to_string((bad % perFrame) / 3) + " " + describeBadCoordinate(positions[bad]));
-  if (first.indices.empty()) throw ImportError(frames.files[0], "has no faces");
+  if (first.indices.empty()) throw tsah::FileError(frames.files[0], "has no faces");
   return Animation(first.indices, uint32_t(perFrame / 3), std::move(positions), std::move(times),
                    std::move(name));
 }

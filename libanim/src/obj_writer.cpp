@@ -5,8 +5,8 @@
 #include <regex>
 #include <string>
 
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/files.hpp"
+#include "tsah/base/error.hpp"
 
 namespace anim {
 
@@ -36,7 +36,7 @@ std::string objText(const Animation& a, uint32_t k, const std::string& faces) {
 }
 
 void writeText(const std::string& path, const std::string& text) {
-  writeFileAtomically(path, std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
+  tsah::writeFileAtomically(path, std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
 }
 
 }  // namespace
@@ -46,12 +46,12 @@ std::size_t saveObjSequence(const Animation& a, const std::string& pattern) {
   // format, so anything else (%s, %n) would be undefined behaviour.
   static const std::regex valid("[^%]*%0?[0-9]{0,3}d[^%]*");
   if (!std::regex_match(pattern, valid))
-    throw Error(pattern + ": output pattern needs exactly one %d-style number, e.g. frames/f_%04d.obj");
-  requireExtension(pattern, ".obj", "OBJ sequence");
+    throw tsah::Error(pattern + ": output pattern needs exactly one %d-style number, e.g. frames/f_%04d.obj");
+  tsah::requireExtension(pattern, ".obj", "OBJ sequence");
   const std::string faces = faceLines(a);
   // All frames appear together or none: a failure half-way (a full disk) must not leave a shorter
   // sequence behind that reads as a valid animation.
-  AtomicFileSet files;
+  tsah::AtomicFileSet files;
   for (uint32_t k = 0; k < a.keyframeCount(); ++k) {
     char name[4096];
     std::snprintf(name, sizeof name, pattern.c_str(), int(k + 1));
@@ -69,7 +69,7 @@ std::size_t saveObjSequence(const Animation& a, const std::string& pattern) {
 
 void saveObjFrame(const Animation& a, uint32_t keyframe, const std::string& path) {
   if (keyframe >= a.keyframeCount())
-    throw Error(path + ": keyframe " + std::to_string(keyframe) + " is out of range (" +
+    throw tsah::Error(path + ": keyframe " + std::to_string(keyframe) + " is out of range (" +
                 std::to_string(a.keyframeCount()) + " keyframes)");
   writeText(path, objText(a, keyframe, faceLines(a)));
 }

@@ -10,8 +10,9 @@
 #include <cstring>
 #include <filesystem>
 
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/binary_io.hpp"
+#include "tsah/base/files.hpp"
+#include "tsah/base/error.hpp"
 
 namespace anim {
 
@@ -27,19 +28,19 @@ constexpr double kUniformTolerance = 1e-4;
 
 uint32_t swapBytes(uint32_t v) { return __builtin_bswap32(v); }
 
-int32_t readBigInt32(ByteReader& in, const char* what) {
+int32_t readBigInt32(tsah::ByteReader& in, const char* what) {
   return std::bit_cast<int32_t>(swapBytes(in.read<uint32_t>(what)));
 }
 
 // Fails unless `count` (a header field) lies in [1, 2^31).
 uint32_t checkedCount(int32_t count, const std::string& file, const char* what) {
-  if (count < 1) throw ImportError(file, std::string(what) + " " + std::to_string(count) + " is absurd (must be at least 1)");
+  if (count < 1) throw tsah::FileError(file, std::string(what) + " " + std::to_string(count) + " is absurd (must be at least 1)");
   return uint32_t(count);
 }
 
 // The position floats of a cache: `frames` blocks of `points` xyz triples, no more and no fewer
 // bytes than that left in the reader (checked before allocating). Big-endian floats are swapped.
-std::vector<float> readPositions(ByteReader& in, uint32_t frames, uint32_t points, bool bigEndian) {
+std::vector<float> readPositions(tsah::ByteReader& in, uint32_t frames, uint32_t points, bool bigEndian) {
   const uint64_t blockBytes = uint64_t(points) * kPointBytes;
   const uint64_t left = in.remaining();
   const std::string promised = std::to_string(frames) + " frames of " + std::to_string(points) + " points (" +
@@ -62,15 +63,15 @@ void checkCoordinates(const PointCache& cache, const std::string& file) {
   const std::size_t perFrame = std::size_t(cache.pointCount) * 3;
   const std::size_t i = firstBadCoordinate(cache.positions);
   if (i < cache.positions.size())
-    throw ImportError(file, "frame " + std::to_string(i / perFrame) + ", point " + std::to_string((i % perFrame) / 3) +
+    throw tsah::FileError(file, "frame " + std::to_string(i / perFrame) + ", point " + std::to_string((i % perFrame) / 3) +
                                 " " + describeBadCoordinate(cache.positions[i]));
 }
 
 void checkTimes(const std::vector<double>& times, const std::string& file) {
   for (std::size_t i = 0; i < times.size(); ++i) {
-    if (!std::isfinite(times[i])) throw ImportError(file, "frame " + std::to_string(i) + " has a non-finite time");
+    if (!std::isfinite(times[i])) throw tsah::FileError(file, "frame " + std::to_string(i) + " has a non-finite time");
     if (i > 0 && !(times[i] > times[i - 1]))
-      throw ImportError(file, "frame " + std::to_string(i) + " time " + std::to_string(times[i]) +
+      throw tsah::FileError(file, "frame " + std::to_string(i) + " time " + std::to_string(times[i]) +
                                   " is not after the previous frame's (" + std::to_string(times[i - 1]) + ")");
   }
 }
@@ -79,12 +80,12 @@ std::span<const uint8_t> asBytes(const std::vector<uint8_t>& v) { return v; }
 
 void checkEncodable(const Animation& a, const char* format) {
   if (a.keyframeCount() == 0 || a.vertexCount() == 0)
-    throw Error(a.name() + ": nothing to write as " + format + " (no keyframes or no vertices)");
+    throw tsah::Error(a.name() + ": nothing to write as " + format + " (no keyframes or no vertices)");
   if (a.keyframeCount() > uint32_t(INT32_MAX) || a.vertexCount() > uint32_t(INT32_MAX))
-    throw Error(a.name() + ": too many keyframes or vertices for " + format);
+    throw tsah::Error(a.name() + ": too many keyframes or vertices for " + format);
 }
 
-void writeBigEndian(ByteWriter& out, uint32_t bits) { out.write(swapBytes(bits)); }
+void writeBigEndian(tsah::ByteWriter& out, uint32_t bits) { out.write(swapBytes(bits)); }
 
 }  // namespace
 
@@ -97,20 +98,20 @@ std::optional<PointCacheFormat> pointCacheFormat(const std::string& path) {
 }
 
 PointCache decodePc2(std::span<const uint8_t> bytes, const std::string& file) {
-  ByteReader in(bytes, file);
+  tsah::ByteReader in(bytes, file);
   std::array<char, 12> signature;
   std::memcpy(signature.data(), in.bytes(signature.size(), "PC2 signature").data(), signature.size());
-  if (signature != kPc2Signature) throw ImportError(file, "not a PC2 file (the signature is not POINTCACHE2)");
+  if (signature != kPc2Signature) throw tsah::FileError(file, "not a PC2 file (the signature is not POINTCACHE2)");
   const int32_t version = in.read<int32_t>("PC2 version");
   if (version != kPc2Version)
-    throw ImportError(file, "unsupported PC2 version " + std::to_string(version) + " (expected 1)");
+    throw tsah::FileError(file, "unsupported PC2 version " + std::to_string(version) + " (expected 1)");
   PointCache cache;
   cache.pointCount = checkedCount(in.read<int32_t>("point count"), file, "point count");
   const float start = in.read<float>("start frame");
   const float rate = in.read<float>("sample rate");
   const uint32_t samples = checkedCount(in.read<int32_t>("sample count"), file, "sample count");
   if (!std::isfinite(start) || !std::isfinite(rate) || (samples > 1 && !(rate > 0.0f)))
-    throw ImportError(file, "start frame " + std::to_string(start) + " and sample rate " + std::to_string(rate) +
+    throw tsah::FileError(file, "start frame " + std::to_string(start) + " and sample rate " + std::to_string(rate) +
                                 " do not give increasing sample times (the rate must be a finite number > 0)");
   cache.positions = readPositions(in, samples, cache.pointCount, false);
   cache.times.resize(samples);
@@ -121,7 +122,7 @@ PointCache decodePc2(std::span<const uint8_t> bytes, const std::string& file) {
 }
 
 PointCache decodeMdd(std::span<const uint8_t> bytes, const std::string& file) {
-  ByteReader in(bytes, file);
+  tsah::ByteReader in(bytes, file);
   const uint32_t frames = checkedCount(readBigInt32(in, "frame count"), file, "frame count");
   PointCache cache;
   cache.pointCount = checkedCount(readBigInt32(in, "point count"), file, "point count");
@@ -154,11 +155,11 @@ std::vector<uint8_t> encodePc2(const Animation& a) {
   for (std::size_t i = 0; i < n; ++i) {
     const double expected = double(start) + double(i) * double(rate);
     if (std::fabs(times[i] - expected) > kUniformTolerance * std::max(double(rate), std::fabs(expected)))
-      throw Error(a.name() + ": keyframe " + std::to_string(i) + " at time " + std::to_string(times[i]) +
+      throw tsah::Error(a.name() + ": keyframe " + std::to_string(i) + " at time " + std::to_string(times[i]) +
                   " is off the uniform grid a PC2 file stores (start " + std::to_string(start) + ", step " +
                   std::to_string(rate) + "); resample with --frames N, or write .mdd, which keeps every time");
   }
-  ByteWriter out;
+  tsah::ByteWriter out;
   out.append(kPc2Signature.data(), kPc2Signature.size());
   out.write(kPc2Version);
   out.write(int32_t(a.vertexCount()));
@@ -172,14 +173,14 @@ std::vector<uint8_t> encodePc2(const Animation& a) {
 
 std::vector<uint8_t> encodeMdd(const Animation& a) {
   checkEncodable(a, "MDD");
-  ByteWriter out;
+  tsah::ByteWriter out;
   writeBigEndian(out, a.keyframeCount());
   writeBigEndian(out, a.vertexCount());
   float previous = -INFINITY;
   for (uint32_t k = 0; k < a.keyframeCount(); ++k) {
     const float t = float(a.times()[k]);
     if (!(t > previous))
-      throw Error(a.name() + ": keyframe times " + std::to_string(a.times()[k - 1]) + " and " +
+      throw tsah::Error(a.name() + ": keyframe times " + std::to_string(a.times()[k - 1]) + " and " +
                   std::to_string(a.times()[k]) + " are equal in the float32 time table of an MDD file");
     previous = t;
     writeBigEndian(out, std::bit_cast<uint32_t>(t));
@@ -190,8 +191,8 @@ std::vector<uint8_t> encodeMdd(const Animation& a) {
 
 void savePointCache(const Animation& animation, const std::string& path) {
   const auto format = pointCacheFormat(path);
-  if (!format) throw Error(path + ": a point cache file must end in .pc2 or .mdd");
-  writeFileAtomically(path, asBytes(*format == PointCacheFormat::Pc2 ? encodePc2(animation) : encodeMdd(animation)));
+  if (!format) throw tsah::Error(path + ": a point cache file must end in .pc2 or .mdd");
+  tsah::writeFileAtomically(path, asBytes(*format == PointCacheFormat::Pc2 ? encodePc2(animation) : encodeMdd(animation)));
 }
 
 }  // namespace anim

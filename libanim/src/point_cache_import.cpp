@@ -3,8 +3,8 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/files.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/mesh_sequence.hpp"
 #include "anim/point_cache.hpp"
 
@@ -21,11 +21,11 @@ std::optional<PointCacheInput> splitPointCacheInput(const std::string& input) {
 }
 
 std::optional<PointCacheInput> readPointCacheManifest(const std::string& path) {
-  const std::vector<uint8_t> bytes = readFile(path, std::size_t(1) << 28);
+  const std::vector<uint8_t> bytes = tsah::readFile(path, std::size_t(1) << 28);
   const nlohmann::json doc = nlohmann::json::parse(bytes.begin(), bytes.end(), nullptr, false);
   if (!doc.is_object() || !doc.contains("cache")) return std::nullopt;  // another kind of manifest
   if (!doc["cache"].is_string() || !doc.contains("mesh") || !doc["mesh"].is_string())
-    throw ImportError(path, "a point-cache manifest needs \"mesh\" and \"cache\" file names: "
+    throw tsah::FileError(path, "a point-cache manifest needs \"mesh\" and \"cache\" file names: "
                             "{\"mesh\": \"horse.obj\", \"cache\": \"horse.mdd\"}");
   const fs::path base = fs::path(path).parent_path();
   auto resolve = [&](const std::string& name) {
@@ -33,19 +33,19 @@ std::optional<PointCacheInput> readPointCacheManifest(const std::string& path) {
     return p.is_absolute() ? p.string() : (base / p).string();
   };
   PointCacheInput pair{resolve(doc["mesh"].get<std::string>()), resolve(doc["cache"].get<std::string>())};
-  if (!pointCacheFormat(pair.cache)) throw ImportError(path, "\"cache\" must name a .pc2 or .mdd file");
+  if (!pointCacheFormat(pair.cache)) throw tsah::FileError(path, "\"cache\" must name a .pc2 or .mdd file");
   return pair;
 }
 
 Animation importPointCache(const PointCacheInput& input, const LoadOptions& options) {
   const auto format = pointCacheFormat(input.cache);
-  if (!format) throw ImportError(input.cache, "not a point cache (expected .pc2 or .mdd)");
+  if (!format) throw tsah::FileError(input.cache, "not a point cache (expected .pc2 or .mdd)");
   MeshFrame mesh = readMesh(input.mesh);
-  if (mesh.indices.empty()) throw ImportError(input.mesh, "has no faces");
-  PointCache cache = decodePointCache(readFile(input.cache), input.cache, *format);
+  if (mesh.indices.empty()) throw tsah::FileError(input.mesh, "has no faces");
+  PointCache cache = decodePointCache(tsah::readFile(input.cache), input.cache, *format);
   const uint32_t meshPoints = uint32_t(mesh.positions.size() / 3);
   if (cache.pointCount != meshPoints)
-    throw ImportError(input.cache, "holds " + std::to_string(cache.pointCount) + " points but the mesh " + input.mesh +
+    throw tsah::FileError(input.cache, "holds " + std::to_string(cache.pointCount) + " points but the mesh " + input.mesh +
                                        " has " + std::to_string(meshPoints) +
                                        " vertices (the cache needs a mesh with the same points in the same order)");
   if (cache.skippedRestFrame && options.warning)

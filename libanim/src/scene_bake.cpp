@@ -8,8 +8,9 @@
 #include <memory>
 #include <tuple>
 
-#include "anim/error.hpp"
-#include "anim/memory.hpp"
+#include "tsah/base/error.hpp"
+#include "tsah/base/memory.hpp"
+#include "anim/load.hpp"
 #include "anim/scene.hpp"
 #include "anim/subdivide.hpp"
 
@@ -37,7 +38,7 @@ std::string canonical(const std::string& path) {
 std::string mib(uint64_t bytes) { return std::to_string((bytes + (1u << 19)) >> 20) + " MiB"; }
 
 [[noreturn]] void failObject(const SceneDescription& scene, const SceneObject& object, const std::string& what) {
-  throw ImportError(scene.file, "object '" + object.name + "': " + what);
+  throw tsah::FileError(scene.file, "object '" + object.name + "': " + what);
 }
 
 // Vertices of one instance that move: all of them when its path is keyed, none when its source
@@ -74,7 +75,7 @@ std::vector<Source> loadSources(const SceneDescription& scene, const LoadOptions
       Animation a;
       try {
         a = load(object.file, own);
-      } catch (const Error& e) {
+      } catch (const tsah::Error& e) {
         failObject(scene, object, e.what());
       }
       if (object.subdivide > 0) {
@@ -86,13 +87,13 @@ std::vector<Source> loadSources(const SceneDescription& scene, const LoadOptions
         if (after.triangles > 0xffffffffull || after.vertices > 0xffffffffull)
           failObject(scene, object, "subdivision level " + std::to_string(object.subdivide) + " would make " +
                                         std::to_string(after.triangles) + " triangles, more than 2^32");
-        if (need > availableMemoryBytes())
+        if (need > tsah::availableMemoryBytes())
           failObject(scene, object, "subdivision level " + std::to_string(object.subdivide) + " (" +
                                         std::to_string(after.triangles) + " triangles) would need " + mib(need) +
-                                        ", more than the " + mib(availableMemoryBytes()) + " available");
+                                        ", more than the " + mib(tsah::availableMemoryBytes()) + " available");
         try {
           a = subdivideLoop(a, object.subdivide);
-        } catch (const Error& e) {
+        } catch (const tsah::Error& e) {
           failObject(scene, object, e.what());
         }
       }
@@ -154,13 +155,13 @@ BakedScene bakeScene(const std::string& path, const LoadOptions& options) {
     char text[160];
     std::snprintf(text, sizeof text, "the time range [%g, %g] at %g keyframes per second needs more than 2^32 keyframes",
                   start, end, fps);
-    throw ImportError(path, text);
+    throw tsah::FileError(path, text);
   }
 
   // The statement, object by object: the first object that takes the scene past the available
   // memory is the one named in the error.
   st.keyframes = uint64_t(keyframes);
-  st.availableBytes = availableMemoryBytes();
+  st.availableBytes = tsah::availableMemoryBytes();
   uint64_t scratch = 0;
   for (std::size_t o = 0; o < scene.objects.size(); ++o) {
     const SceneObject& object = scene.objects[o];
@@ -242,8 +243,8 @@ BakedScene bakeScene(const std::string& path, const LoadOptions& options) {
   try {
     baked.animation = Animation::withStaticVertices(std::move(indices), std::move(rest), std::move(moving),
                                                     std::move(motion), std::vector<double>(times), scene.name);
-  } catch (const ImportError& e) {
-    throw ImportError(scene.file, std::string("invalid baked scene: ") + e.what());
+  } catch (const tsah::FileError& e) {
+    throw tsah::FileError(scene.file, std::string("invalid baked scene: ") + e.what());
   }
   return baked;
 }

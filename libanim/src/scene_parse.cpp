@@ -5,8 +5,8 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/files.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/scene.hpp"
 
 namespace anim {
@@ -81,12 +81,12 @@ using nlohmann::json;
 
 constexpr std::size_t kMaxSceneFileBytes = std::size_t(64) << 20;
 
-// Every error of a scene file names the file (ImportError) and, where one is at fault, the object.
+// Every error of a scene file names the file (tsah::FileError) and, where one is at fault, the object.
 struct Context {
   std::string file;
   std::string object;  // empty at scene level
   [[noreturn]] void fail(const std::string& what) const {
-    throw ImportError(file, object.empty() ? what : "object '" + object + "': " + what);
+    throw tsah::FileError(file, object.empty() ? what : "object '" + object + "': " + what);
   }
 };
 
@@ -255,11 +255,11 @@ SceneObject objectOf(const json& j, std::size_t index, const std::filesystem::pa
 }
 
 json readJson(const std::string& path) {
-  const std::vector<uint8_t> bytes = readFile(path, kMaxSceneFileBytes);
+  const std::vector<uint8_t> bytes = tsah::readFile(path, kMaxSceneFileBytes);
   try {
     return json::parse(bytes.begin(), bytes.end());
   } catch (const json::exception& e) {
-    throw ImportError(path, std::string("not valid JSON (") + e.what() + ")");
+    throw tsah::FileError(path, std::string("not valid JSON (") + e.what() + ")");
   }
 }
 
@@ -268,8 +268,8 @@ json readJson(const std::string& path) {
 bool isSceneFile(const std::string& path) {
   std::vector<uint8_t> bytes;
   try {
-    bytes = readFile(path, kMaxSceneFileBytes);
-  } catch (const Error&) {
+    bytes = tsah::readFile(path, kMaxSceneFileBytes);
+  } catch (const tsah::Error&) {
     return false;  // the manifest reader reports what is wrong with it
   }
   const json j = json::parse(bytes.begin(), bytes.end(), nullptr, false);

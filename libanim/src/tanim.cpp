@@ -5,8 +5,9 @@
 #include <cmath>
 #include <cstring>
 
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/binary_io.hpp"
+#include "tsah/base/files.hpp"
+#include "tsah/base/error.hpp"
 
 namespace anim {
 
@@ -78,7 +79,7 @@ std::vector<uint8_t> encodeTanim(const Animation& a) {
   h.nameBytes = static_cast<uint32_t>(name.size());
   h.payloadBytes = payloadSize(h);
 
-  ByteWriter payload;
+  tsah::ByteWriter payload;
   payload.append(name.data(), name.size());
   const uint64_t zero = 0;
   payload.append(&zero, padTo8(name.size()) - name.size());
@@ -99,48 +100,48 @@ std::vector<uint8_t> encodeTanim(const Animation& a) {
     r.fovyDegrees = k.fovyDegrees;
     payload.write(r);
   }
-  h.payloadCrc = crc32(payload.buffer().data(), payload.buffer().size());
-  h.headerCrc = crc32(&h, offsetof(Header, headerCrc));
+  h.payloadCrc = tsah::crc32(payload.buffer().data(), payload.buffer().size());
+  h.headerCrc = tsah::crc32(&h, offsetof(Header, headerCrc));
 
-  ByteWriter out;
+  tsah::ByteWriter out;
   out.write(h);
   out.append(payload.buffer().data(), payload.buffer().size());
   return std::move(out.buffer());
 }
 
 Animation decodeTanim(std::span<const uint8_t> bytes, const std::string& file) {
-  ByteReader in(bytes, file);
+  tsah::ByteReader in(bytes, file);
   const Header h = in.read<Header>("header");
-  if (h.magic != kMagic) throw ImportError(file, "not a .tanim file (bad magic)");
-  if (crc32(&h, offsetof(Header, headerCrc)) != h.headerCrc)
-    throw ImportError(file, "header checksum mismatch (corrupt file)");
+  if (h.magic != kMagic) throw tsah::FileError(file, "not a .tanim file (bad magic)");
+  if (tsah::crc32(&h, offsetof(Header, headerCrc)) != h.headerCrc)
+    throw tsah::FileError(file, "header checksum mismatch (corrupt file)");
   if (h.version != 1 && h.version != kVersion)
-    throw ImportError(file, "unsupported .tanim version " + std::to_string(h.version) +
+    throw tsah::FileError(file, "unsupported .tanim version " + std::to_string(h.version) +
                                 " (this build reads versions 1 and " + std::to_string(kVersion) + ")");
   if (h.version >= 2 && h.movingVertexCount > h.vertexCount)
-    throw ImportError(file, "moving vertex count " + std::to_string(h.movingVertexCount) + " exceeds the vertex count " +
+    throw tsah::FileError(file, "moving vertex count " + std::to_string(h.movingVertexCount) + " exceeds the vertex count " +
                                 std::to_string(h.vertexCount));
-  if (h.keyframeCount == 0) throw ImportError(file, "no keyframes");
-  if (h.nameBytes > kMaxName) throw ImportError(file, "name length " + std::to_string(h.nameBytes) + " is absurd");
+  if (h.keyframeCount == 0) throw tsah::FileError(file, "no keyframes");
+  if (h.nameBytes > kMaxName) throw tsah::FileError(file, "name length " + std::to_string(h.nameBytes) + " is absurd");
   if (h.cameraKeyCount > kMaxCameraKeys)
-    throw ImportError(file, "camera key count " + std::to_string(h.cameraKeyCount) + " is absurd");
+    throw tsah::FileError(file, "camera key count " + std::to_string(h.cameraKeyCount) + " is absurd");
   const uint64_t expected = payloadSize(h);
   if (expected == 0 || expected != h.payloadBytes)
-    throw ImportError(file, "header counts (" + std::to_string(h.vertexCount) + " vertices, " +
+    throw tsah::FileError(file, "header counts (" + std::to_string(h.vertexCount) + " vertices, " +
                                 std::to_string(h.triangleCount) + " triangles, " +
                                 std::to_string(h.keyframeCount) + " keyframes) do not match the payload size");
   if (h.payloadBytes != in.remaining())
-    throw ImportError(file, "file holds " + std::to_string(in.remaining()) + " payload bytes, header says " +
+    throw tsah::FileError(file, "file holds " + std::to_string(in.remaining()) + " payload bytes, header says " +
                                 std::to_string(h.payloadBytes) + (h.payloadBytes > in.remaining() ? " (truncated)" : ""));
   const auto payload = bytes.subspan(in.offset());
-  if (crc32(payload.data(), payload.size()) != h.payloadCrc)
-    throw ImportError(file, "payload checksum mismatch (corrupt file)");
+  if (tsah::crc32(payload.data(), payload.size()) != h.payloadCrc)
+    throw tsah::FileError(file, "payload checksum mismatch (corrupt file)");
 
   const auto nameBytes = in.bytes(padTo8(h.nameBytes), "name");
   std::string name(reinterpret_cast<const char*>(nameBytes.data()), h.nameBytes);
   // Names end up in messages and reports, which are one line each.
   if (const auto bad = std::find_if(name.begin(), name.end(), isControl); bad != name.end())
-    throw ImportError(file, "the animation name holds a control character (byte " +
+    throw tsah::FileError(file, "the animation name holds a control character (byte " +
                                 std::to_string(static_cast<unsigned char>(*bad)) + " at " +
                                 std::to_string(bad - name.begin()) + ")");
   std::vector<double> times;
@@ -164,7 +165,7 @@ Animation decodeTanim(std::span<const uint8_t> bytes, const std::string& file) {
     std::memcpy(k.up.data(), r.up, sizeof r.up);
     k.fovyDegrees = r.fovyDegrees;
     if (!std::isfinite(k.time) || !std::isfinite(k.fovyDegrees))
-      throw ImportError(file, "camera key has a non-finite value");
+      throw tsah::FileError(file, "camera key has a non-finite value");
   }
   // The consistency checks (index range, times, NaN) name the file, never the stored name: that is
   // free text, and a name holding a line break would break the one-line error.
@@ -177,10 +178,10 @@ Animation decodeTanim(std::span<const uint8_t> bytes, const std::string& file) {
 }
 
 void saveTanim(const Animation& animation, const std::string& path) {
-  requireExtension(path, ".tanim", "animation");
-  writeFileAtomically(path, encodeTanim(animation));
+  tsah::requireExtension(path, ".tanim", "animation");
+  tsah::writeFileAtomically(path, encodeTanim(animation));
 }
 
-Animation loadTanim(const std::string& path) { return decodeTanim(readFile(path), path); }
+Animation loadTanim(const std::string& path) { return decodeTanim(tsah::readFile(path), path); }
 
 }  // namespace anim

@@ -4,9 +4,9 @@
 #include <cstdio>
 #include <stdexcept>
 
-#include "anim/error.hpp"
-#include "anim/memory.hpp"
-#include "tsah/traversal.hpp"
+#include "tsah/base/error.hpp"
+#include "tsah/base/memory.hpp"
+#include "tsah/layout/traversal.hpp"
 
 namespace tsah {
 
@@ -27,7 +27,7 @@ BaselineConfig TreeOptions::baselineConfig() const {
   config.parallel.threads = threads;
   config.progress = progress;
   if (device == "cuda") {
-    if (!gpuOptimizer) throw anim::Error("--device cuda: this build of tsah has no CUDA support");
+    if (!gpuOptimizer) throw tsah::Error("--device cuda: this build of tsah has no CUDA support");
     config.deviceOptimizer = gpuOptimizer;
   } else if (device != "cpu") {
     throw std::invalid_argument("unknown device '" + device + "' (expected cpu or cuda)");
@@ -69,7 +69,7 @@ PrimitiveBoxes representativeBoxes(const anim::Animation& animation, uint32_t fr
   PrimitiveBoxes rep;
   rep.frameCount = n;
   rep.primCount = animation.triangleCount();
-  anim::checkFitsInMemory(std::size_t(n) * rep.primCount * sizeof(Aabb), animation.name(),
+  tsah::checkFitsInMemory(std::size_t(n) * rep.primCount * sizeof(Aabb), animation.name(),
                           std::to_string(n) + " representative frames");
   rep.boxes.resize(std::size_t(n) * rep.primCount);
   // One frame of positions at a time (the resampled animation is never held whole).
@@ -89,12 +89,12 @@ BvhBuildInfo treeBuildInfo(const TreeOptions& options, const anim::Animation& an
                    : options.device == "cuda"     ? "parallel-cuda"
                    : options.optimizer == "parallel" ? "parallel"
                                                      : options.selection;
-  info.k = method.k;
+  info.objective.k = method.k;
   info.representativeFrames = frames;
   info.seed = options.seed;
-  info.ct = options.ct;
-  info.ci = options.ci;
-  info.maxLeafSize = options.maxLeaf;
+  info.objective.cost.ct = options.ct;
+  info.objective.cost.ci = options.ci;
+  info.objective.maxLeafSize = options.maxLeaf;
   info.buildSeconds = buildSeconds;
   info.timeStart = timeStart;
   info.timeEnd = timeEnd;
@@ -105,7 +105,7 @@ BvhBuildInfo treeBuildInfo(const TreeOptions& options, const anim::Animation& an
 }
 
 OptimizedTree optimizeAnimation(const anim::Animation& animation, const TreeOptions& options) {
-  if (animation.triangleCount() == 0) throw anim::Error(animation.name() + ": no triangles to build a tree over");
+  if (animation.triangleCount() == 0) throw tsah::Error(animation.name() + ": no triangles to build a tree over");
   const MethodSpec method = options.methodSpec();
   const BaselineConfig config = options.baselineConfig();
   const uint32_t frames = framesFor(animation, options.frames);
@@ -122,7 +122,7 @@ OptimizedTree optimizeAnimation(const anim::Animation& animation, const TreeOpti
 std::vector<double> evaluateAnimation(const Bvh& bvh, const anim::Animation& animation, uint32_t evalFrames,
                                       const CostModel& cost, unsigned threads) {
   if (bvh.primCount() != animation.triangleCount())
-    throw anim::Error(animation.name() + ": the tree has " + std::to_string(bvh.primCount()) +
+    throw tsah::Error(animation.name() + ": the tree has " + std::to_string(bvh.primCount()) +
                       " triangles, the animation " + std::to_string(animation.triangleCount()));
   return evaluateFrames(bvh, animationFrames(animation, animation.uniformTimes(framesFor(animation, evalFrames))),
                         cost, threads);
@@ -130,7 +130,7 @@ std::vector<double> evaluateAnimation(const Bvh& bvh, const anim::Animation& ani
 
 std::vector<MethodResult> compareOnAnimation(const anim::Animation& animation, std::span<const MethodSpec> methods,
                                              const TreeOptions& options, uint32_t evalFrames) {
-  if (animation.triangleCount() == 0) throw anim::Error(animation.name() + ": no triangles to build a tree over");
+  if (animation.triangleCount() == 0) throw tsah::Error(animation.name() + ": no triangles to build a tree over");
   const PrimitiveBoxes rep = representativeBoxes(animation, options.frames);
   return compareMethods(methods, rep,
                         animationFrames(animation, animation.uniformTimes(framesFor(animation, evalFrames))),
@@ -140,7 +140,7 @@ std::vector<MethodResult> compareOnAnimation(const anim::Animation& animation, s
 void checkTreeMatchesAnimation(const tsah::BvhBuildInfo& info, const std::string& bvhPath, const anim::Animation& a,
                                const std::string& animationPath) {
   auto fail = [&](const std::string& what) {
-    throw anim::Error(bvhPath + " was not built for " + animationPath + ": " + what);
+    throw tsah::Error(bvhPath + " was not built for " + animationPath + ": " + what);
   };
   if (info.triangleCount != a.triangleCount())
     fail("the tree has " + std::to_string(info.triangleCount) + " triangles, the animation " +

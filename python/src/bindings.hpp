@@ -9,9 +9,9 @@
 #include <string>
 #include <vector>
 
-#include "tsah/bvh.hpp"
-#include "tsah/bvh_file.hpp"
-#include "tsah/insertion_optimizer.hpp"
+#include "tsah/core/bvh.hpp"
+#include "tsah/io/bvh_file.hpp"
+#include "tsah/optimize/insertion_optimizer.hpp"
 
 namespace tsah::python {
 

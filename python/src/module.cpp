@@ -2,7 +2,7 @@
 // the parts bound in trees.cpp and runtime.cpp.
 #include <pybind11/stl.h>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/generators.hpp"
 #include "anim/load.hpp"
 #include "anim/tanim.hpp"
@@ -163,10 +163,10 @@ PYBIND11_MODULE(_tsah, m) {
   namespace py = pybind11;
   m.doc() = "T-SAH: one BVH optimized for every frame of an animation (the C++ toolkit's Python layer).";
   m.attr("__version__") = TSAH_VERSION;
-  // Translators run latest first: FileError (anim::ImportError) before Error (anim::Error).
-  const py::object error = py::register_exception<anim::Error>(m, "Error", PyExc_RuntimeError);
+  // Translators run latest first: FileError (tsah::FileError) before Error (tsah::Error).
+  const py::object error = py::register_exception<tsah::Error>(m, "Error", PyExc_RuntimeError);
   error.attr("__doc__") = "An error of the toolkit, with its one-line message ('FILE: problem').";
-  const py::object fileError = py::register_exception<anim::ImportError>(m, "FileError", error);
+  const py::object fileError = py::register_exception<tsah::FileError>(m, "FileError", error);
   fileError.attr("__doc__") = "An input or tree file that cannot be read (a tsah.Error).";
   tsah::python::bindAnimation(m);
   tsah::python::bindTrees(m);

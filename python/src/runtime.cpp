@@ -9,10 +9,10 @@
 
 #include "anim/animation.hpp"
 #include "bindings.hpp"
-#include "tsah/cpu_runtime.hpp"
-#include "tsah/flat_bvh.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
+#include "tsah/layout/flat_bvh.hpp"
 #include "tsah/pipeline.hpp"
-#include "tsah/ray.hpp"
+#include "tsah/core/ray.hpp"
 #if defined(TSAH_HAVE_CUDA)
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"

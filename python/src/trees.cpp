@@ -6,7 +6,7 @@
 
 #include "anim/animation.hpp"
 #include "bindings.hpp"
-#include "tsah/cost.hpp"
+#include "tsah/core/cost.hpp"
 #include "tsah/pipeline.hpp"
 #if TSAH_HAVE_CUDA
 #include "tsah_cuda/gpu_optimizer.hpp"
@@ -53,9 +53,9 @@ TreeOptions treeOptions(const std::string& method, int k, uint32_t frames, const
 }
 
 py::dict infoDict(const BvhBuildInfo& info) {
-  return py::dict("method"_a = info.method, "selection"_a = info.selection, "k"_a = info.k,
-                  "representative_frames"_a = info.representativeFrames, "seed"_a = info.seed, "ct"_a = info.ct,
-                  "ci"_a = info.ci, "max_leaf_size"_a = info.maxLeafSize, "build_s"_a = info.buildSeconds,
+  return py::dict("method"_a = info.method, "selection"_a = info.selection, "k"_a = info.objective.k,
+                  "representative_frames"_a = info.representativeFrames, "seed"_a = info.seed, "ct"_a = info.objective.cost.ct,
+                  "ci"_a = info.objective.cost.ci, "max_leaf_size"_a = info.objective.maxLeafSize, "build_s"_a = info.buildSeconds,
                   "time"_a = py::make_tuple(info.timeStart, info.timeEnd), "triangles"_a = info.triangleCount,
                   "vertices"_a = info.vertexCount, "topology_hash"_a = info.topologyHash);
 }
@@ -171,8 +171,8 @@ header of its .tbvh file (how it was built). Made by tsah.optimize or tsah.read_
           [](const Tree& t, const anim::Animation& animation, uint32_t evalFrames, py::object ct, py::object ci,
              unsigned threads) {
             if (evalFrames < 1) throw py::value_error("eval_frames: must be at least 1");
-            const CostModel cost{ct.is_none() ? t.file.info.ct : ct.cast<float>(),
-                                 ci.is_none() ? t.file.info.ci : ci.cast<float>()};
+            const CostModel cost{ct.is_none() ? t.file.info.objective.cost.ct : ct.cast<float>(),
+                                 ci.is_none() ? t.file.info.objective.cost.ci : ci.cast<float>()};
             std::vector<double> costs;
             {
               py::gil_scoped_release release;

@@ -1,6 +1,6 @@
 #pragma once
 // One entry per parser a user can hand the tool. Each parses the bytes as that format and returns
-// normally when the input is accepted or refused with anim::Error (a one-line message); anything
+// normally when the input is accepted or refused with tsah::Error (a one-line message); anything
 // else (a crash, a sanitizer report, another exception type, a multi-line message, an accepted
 // result that breaks an invariant) is a finding. The libFuzzer targets (fuzz_main.cpp, one per
 // entry, named fuzz_<entry>) call them, and tests/test_fuzz_corpora.cpp replays the committed
@@ -12,7 +12,7 @@
 #include <string>
 #include <string_view>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 
 namespace tsah::fuzz {
 
@@ -34,15 +34,15 @@ void treeset(std::span<const uint8_t> data);   // .tbvh read as a tree set, vers
 void aff(std::span<const uint8_t> data);       // BART .aff with includes
 void scene(std::span<const uint8_t> data);     // a .json through anim::load: scene, point-cache or frame manifest
 
-// Throws std::logic_error when an anim::Error message is not one line (the CLI prints one line).
+// Throws std::logic_error when an tsah::Error message is not one line (the CLI prints one line).
 void requireOneLine(const char* what);
 
-// Runs `parse`; anim::Error is a clean refusal (checked to be one line), other exceptions escape.
+// Runs `parse`; tsah::Error is a clean refusal (checked to be one line), other exceptions escape.
 template <typename F>
 void refuseCleanly(F&& parse) {
   try {
     parse();
-  } catch (const anim::Error& e) {
+  } catch (const tsah::Error& e) {
     requireOneLine(e.what());
   }
 }

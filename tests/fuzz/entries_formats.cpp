@@ -9,8 +9,8 @@
 #include <vector>
 
 #include "anim/assimp_import.hpp"
-#include "anim/binary_io.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/binary_io.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/mesh_sequence.hpp"
 #include "anim/tanim.hpp"
 #include "camera_file.hpp"
@@ -68,9 +68,9 @@ void tanim(std::span<const uint8_t> data) {
   if ((data[0] & 1) && bytes.size() >= 64) {  // repair the checksums so the fuzzer gets past them
     const uint64_t payloadBytes = bytes.size() - 64;
     std::memcpy(bytes.data() + 40, &payloadBytes, 8);
-    const uint32_t payloadCrc = anim::crc32(bytes.data() + 64, bytes.size() - 64);
+    const uint32_t payloadCrc = tsah::crc32(bytes.data() + 64, bytes.size() - 64);
     std::memcpy(bytes.data() + 48, &payloadCrc, 4);
-    const uint32_t headerCrc = anim::crc32(bytes.data(), 60);
+    const uint32_t headerCrc = tsah::crc32(bytes.data(), 60);
     std::memcpy(bytes.data() + 60, &headerCrc, 4);
   }
   refuseCleanly([&] {

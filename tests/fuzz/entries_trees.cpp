@@ -5,10 +5,10 @@
 #include <stdexcept>
 #include <vector>
 
-#include "anim/binary_io.hpp"
+#include "tsah/base/binary_io.hpp"
 #include "entries.hpp"
-#include "tsah/bvh_file.hpp"
-#include "tsah/tree_set.hpp"
+#include "tsah/io/bvh_file.hpp"
+#include "tsah/io/tree_set.hpp"
 
 namespace tsah::fuzz {
 
@@ -29,7 +29,7 @@ uint32_t readU32(const std::vector<uint8_t>& b, std::size_t at) {
 // Sets the last 4 bytes of bytes[begin, begin + size) to the CRC-32 of the bytes before them.
 void repairCrc(std::vector<uint8_t>& bytes, uint64_t begin, uint64_t size) {
   if (size < 4 || begin > bytes.size() || size > bytes.size() - begin) return;
-  const uint32_t crc = anim::crc32(bytes.data() + begin, size - 4);
+  const uint32_t crc = tsah::crc32(bytes.data() + begin, size - 4);
   std::memcpy(bytes.data() + begin + size - 4, &crc, 4);
 }
 

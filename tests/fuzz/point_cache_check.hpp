@@ -2,7 +2,7 @@
 // The property every point-cache input must have, shared by the libFuzzer targets (fuzz_pc2,
 // fuzz_mdd) and by test_point_cache, which replays the seed corpora as ordinary tests.
 //
-// Decoding either throws anim::ImportError with a one-line message, or gives a cache whose counts
+// Decoding either throws tsah::FileError with a one-line message, or gives a cache whose counts
 // agree, whose times increase and whose coordinates are finite, and which survives a round trip
 // through the encoder (MDD: byte for byte, unless a rest-pose block was skipped; PC2: the same
 // positions and times within the float precision of the header's start and rate).
@@ -14,7 +14,7 @@
 #include <string_view>
 
 #include "anim/animation.hpp"
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 #include "anim/point_cache.hpp"
 
 namespace anim::fuzz {
@@ -24,7 +24,7 @@ inline std::optional<std::string> pointCacheFinding(std::span<const uint8_t> byt
   PointCache cache;
   try {
     cache = decodePointCache(bytes, "fuzz", format);
-  } catch (const ImportError& e) {
+  } catch (const tsah::FileError& e) {
     if (std::string_view(e.what()).find('\n') != std::string_view::npos) return "error message is not one line";
     return std::nullopt;  // rejected with a clear error: fine
   }
@@ -45,7 +45,7 @@ inline std::optional<std::string> pointCacheFinding(std::span<const uint8_t> byt
   std::vector<uint8_t> again;
   try {
     again = encodePc2(a);
-  } catch (const Error&) {
+  } catch (const tsah::Error&) {
     return "PC2 sample times read from a file do not encode again";
   }
   const PointCache back = decodePc2(again, "fuzz-again");

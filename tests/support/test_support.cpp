@@ -1,6 +1,6 @@
 #include "test_support.hpp"
 
-#include "tsah/sah_builder.hpp"
+#include "tsah/build/sah_builder.hpp"
 
 #include <gtest/gtest.h>
 
@@ -10,8 +10,8 @@
 #include <random>
 #include <unistd.h>
 
-#include "tsah/cost.hpp"
-#include "tsah/sampling.hpp"
+#include "tsah/core/cost.hpp"
+#include "tsah/render/sampling.hpp"
 
 namespace tsah::test {
 

@@ -11,12 +11,12 @@
 #include <random>
 #include <span>
 
-#include "tsah/bvh.hpp"
-#include "tsah/cpu_runtime.hpp"
-#include "tsah/cwbvh_build.hpp"
-#include "tsah/flat_bvh.hpp"
-#include "tsah/parallel_optimizer.hpp"
-#include "tsah/traversal.hpp"
+#include "tsah/core/bvh.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
+#include "tsah/layout/cwbvh_build.hpp"
+#include "tsah/layout/flat_bvh.hpp"
+#include "tsah/optimize/parallel_optimizer.hpp"
+#include "tsah/layout/traversal.hpp"
 
 namespace tsah::test {
 

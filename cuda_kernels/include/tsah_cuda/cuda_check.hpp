@@ -5,13 +5,13 @@
 
 #include <string>
 
-#include "anim/error.hpp"
+#include "tsah/base/error.hpp"
 
 namespace tsah::cuda {
 
-class CudaError : public anim::Error {
+class CudaError : public tsah::Error {
  public:
-  CudaError(cudaError_t code, const std::string& what) : anim::Error(what), code_(code) {}
+  CudaError(cudaError_t code, const std::string& what) : tsah::Error(what), code_(code) {}
   cudaError_t code() const { return code_; }
 
  private:

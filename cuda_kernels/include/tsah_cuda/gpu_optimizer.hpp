@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "tsah/baselines.hpp"
-#include "tsah/parallel_optimizer.hpp"
+#include "tsah/optimize/baselines.hpp"
+#include "tsah/optimize/parallel_optimizer.hpp"
 
 namespace tsah::cuda {
 

@@ -20,17 +20,18 @@
 #include <vector>
 
 #include "anim/animation.hpp"
-#include "tsah/bvh.hpp"
-#include "tsah/cost.hpp"
-#include "tsah/cwbvh_build.hpp"
-#include "tsah/cwbvh_layout.hpp"
-#include "tsah/flat_bvh.hpp"
-#include "tsah/image.hpp"
-#include "tsah/ray.hpp"
-#include "tsah/renderer.hpp"
-#include "tsah/tree_set.hpp"
-#include "tsah/woop.hpp"
+#include "tsah/core/bvh.hpp"
+#include "tsah/core/cost.hpp"
+#include "tsah/layout/cwbvh_build.hpp"
+#include "tsah/layout/cwbvh_layout.hpp"
+#include "tsah/layout/flat_bvh.hpp"
+#include "tsah/render/image.hpp"
+#include "tsah/core/ray.hpp"
+#include "tsah/render/renderer.hpp"
+#include "tsah/io/tree_set.hpp"
+#include "tsah/layout/woop.hpp"
 #include "tsah_cuda/device.hpp"
+#include "tsah_cuda/rebuild_types.hpp"
 
 namespace tsah::cuda {
 
@@ -40,52 +41,6 @@ struct UpdateTimings {
   double refitMs = 0.0;  // the refit (and re-quantization)
   double woopMs = 0.0;   // the Woop pass, which runs beside the refit: only the part after the refit ends
   double totalMs() const { return interpolateMs + refitMs + woopMs; }
-};
-
-// The node layout the refitted tree is traced in: the binary Aila-Laine node (gpu_layout.hpp) or
-// the compressed 8-wide node (cwbvh_layout.hpp; the 8-wide T-SAH collapse of the uploaded tree,
-// re-quantized every frame).
-enum class TreeLayout { Bvh2, Cwbvh };
-const char* treeLayoutName(TreeLayout layout);       // "bvh2", "cwbvh"
-TreeLayout parseTreeLayout(std::string_view name);   // throws anim::Error for anything else
-
-enum class RebuildMethod { Lbvh, HlbvhSah };
-const char* rebuildMethodName(RebuildMethod method);  // "lbvh", "hlbvh-sah"
-RebuildMethod parseRebuildMethod(std::string_view name);  // throws anim::Error for anything else
-
-struct RebuildOptions {
-  RebuildMethod method = RebuildMethod::Lbvh;
-  // Leaf collapse with LeafCollapser's rule for one frame (k = 0): bottom-up, a subtree of at most
-  // maxLeafSize triangles becomes one leaf when cI * n * area <= its cost as it is. false: one
-  // triangle per leaf (the "bare" build).
-  bool collapse = true;
-  uint32_t maxLeafSize = 8;
-  CostModel cost;
-  // Woop triangles of the new tree (tracing needs them; false only to time the bare build).
-  bool woop = true;
-  // Layout cwbvh: binary subtrees of at most this many triangles (in one slot range) become one
-  // leaf of the compressed tree (0 or 1: only the binary leaves, the default; at most 8).
-  uint32_t wideMergeTriangles = 0;
-};
-
-// Device time of one rebuild, in milliseconds (CUDA events), and what was built.
-struct RebuildTimings {
-  double interpolateMs = 0.0;  // rebuildAt: positions of the frame (rebuild(positions): upload)
-  double mortonMs = 0.0;       // triangle boxes, centroid bounds, Morton codes
-  double sortMs = 0.0;         // CUB radix sort of the 30-bit codes
-  double hierarchyMs = 0.0;    // Karras radix tree (HLBVH-SAH: and the 15-bit clusters)
-  double topMs = 0.0;          // HLBVH-SAH: SAH tree over the clusters, reordering of the triangles
-  double bottomUpMs = 0.0;     // boxes bottom-up (and the collapse), GpuBvhNode output
-  double wideMs = 0.0;         // layout cwbvh: the conversion into the compressed 8-wide layout
-  double woopMs = 0.0;
-  uint32_t clusters = 0;       // HLBVH-SAH only
-  uint32_t interiorNodes = 0, leaves = 0, depth = 0;  // of the binary tree
-  uint32_t wideNodes = 0;      // layout cwbvh: nodes of the compressed tree
-  uint32_t wideLevels = 0;     // layout cwbvh: its levels (the conversion's steps; = CwbvhTree::depth)
-  // The binary tree without interpolation and Woop (the "bare build" when collapse is off).
-  double buildMs() const { return mortonMs + sortMs + hierarchyMs + topMs + bottomUpMs; }
-  // Everything until the traced tree is ready: with layout cwbvh the conversion counts too.
-  double totalMs() const { return interpolateMs + buildMs() + wideMs + woopMs; }
 };
 
 // Device time of a rendered frame beyond the ray passes of RenderStats.
@@ -121,7 +76,7 @@ class GpuRuntime {
   };
 
   // tree: the topology to refit (frame 0's block; its boxes are recomputed by updateAt). Throws
-  // anim::Error when the tree does not match the animation, is invalid, or is deeper than the
+  // tsah::Error when the tree does not match the animation, is invalid, or is deeper than the
   // traversal stack allows, and CudaError when the device fails.
   GpuRuntime(const FlatBvh& tree, const anim::Animation& animation, Config config);
   GpuRuntime(const FlatBvh& tree, const anim::Animation& animation);
@@ -163,7 +118,7 @@ class GpuRuntime {
   // The last rebuilt tree as a tsah::Bvh (one frame of boxes), exactly as built on the device.
   Bvh downloadRebuiltTree() const;
   Aabb bounds() const;  // of the traced tree
-  // Layout cwbvh: the compressed nodes of the last update or rebuild (throws anim::Error for
+  // Layout cwbvh: the compressed nodes of the last update or rebuild (throws tsah::Error for
   // layout bvh2).
   std::vector<CwbvhNode> downloadCwbvhNodes() const;
   // Layout cwbvh after a rebuild: the compressed tree the rebuild was converted to (nodes and
@@ -188,7 +143,7 @@ class GpuRuntime {
 };
 
 // tsah::renderFrame on the GPU for the runtime's current frame: the same passes, random numbers and
-// shading. image == nullptr skips the download (benchmarks). Throws anim::Error for an empty image
+// shading. image == nullptr skips the download (benchmarks). Throws tsah::Error for an empty image
 // size or an invalid camera, as the CPU renderer does.
 RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const SceneLighting& lighting,
                            const RenderSettings& settings, Image* image, GpuRenderTimings* timings = nullptr);

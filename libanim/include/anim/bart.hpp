@@ -38,7 +38,7 @@ struct BartOptions {
   std::function<void(std::size_t done, std::size_t total)> progress;
 };
 
-// Loads the AFF scene at `path` with everything it includes. Throws anim::ImportError whose message
+// Loads the AFF scene at `path` with everything it includes. Throws tsah::FileError whose message
 // names the file and line of the problem.
 Animation importBart(const std::string& path, const BartOptions& options = {});
 
@@ -62,7 +62,7 @@ struct SplineKey {
 class PositionSpline {
  public:
   PositionSpline() = default;
-  // Throws anim::Error for fewer than 4 keys or a non-finite time.
+  // Throws tsah::Error for fewer than 4 keys or a non-finite time.
   explicit PositionSpline(const std::vector<SplineKey>& keys);
   std::array<double, 3> at(double t) const;
   double startTime() const;
@@ -93,7 +93,7 @@ struct RotationKey {
 class RotationSpline {
  public:
   RotationSpline() = default;
-  // Throws anim::Error for fewer than 4 keys or a non-finite time.
+  // Throws tsah::Error for fewer than 4 keys or a non-finite time.
   explicit RotationSpline(const std::vector<RotationKey>& keys);
   // The unit quaternion at time t.
   Quaternion at(double t) const;

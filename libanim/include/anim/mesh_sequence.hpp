@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "anim/animation.hpp"
-#include "anim/load.hpp"
+#include "anim/load_options.hpp"
 
 namespace anim {
 
@@ -20,7 +20,7 @@ struct MeshFrame {
   uint32_t polygonsTriangulated = 0;
 };
 
-// Reads one mesh file (OBJ, PLY, OFF, STL, OM). Throws ImportError naming the file.
+// Reads one mesh file (OBJ, PLY, OFF, STL, OM). Throws tsah::FileError naming the file.
 MeshFrame readMesh(const std::string& path);
 // Parses OBJ text held in memory (`file` names it in messages); readMesh uses it for .obj files.
 MeshFrame decodeObj(std::span<const uint8_t> bytes, const std::string& file);

@@ -16,7 +16,7 @@
 #include <vector>
 
 #include "anim/animation.hpp"
-#include "anim/load.hpp"
+#include "anim/load_options.hpp"
 
 namespace anim {
 
@@ -35,13 +35,13 @@ struct PointCache {
 
 // Decoders: every count is checked against the byte size before anything is allocated; a wrong
 // signature, a truncated or oversized file, an absurd count, a non-finite or non-increasing time or
-// a NaN/Inf coordinate throws ImportError naming `file`.
+// a NaN/Inf coordinate throws tsah::FileError naming `file`.
 PointCache decodePc2(std::span<const uint8_t> bytes, const std::string& file);
 PointCache decodeMdd(std::span<const uint8_t> bytes, const std::string& file);
 PointCache decodePointCache(std::span<const uint8_t> bytes, const std::string& file, PointCacheFormat format);
 
 // Encoders of an animation's keyframes. PC2 can only express uniformly spaced samples: keyframe
-// times that are not (within 1e-4 of a step) throw anim::Error suggesting `--frames N`. MDD stores
+// times that are not (within 1e-4 of a step) throw tsah::Error suggesting `--frames N`. MDD stores
 // the times as they are (as float32).
 std::vector<uint8_t> encodePc2(const Animation& animation);
 std::vector<uint8_t> encodeMdd(const Animation& animation);
@@ -61,12 +61,12 @@ std::optional<PointCacheInput> splitPointCacheInput(const std::string& input);
 
 // A JSON manifest object {"mesh": "horse.obj", "cache": "horse.mdd"} (paths relative to the
 // manifest): the pair; nothing when the manifest is not of this form (e.g. a frame list). Throws
-// ImportError when it names a cache but is malformed.
+// tsah::FileError when it names a cache but is malformed.
 std::optional<PointCacheInput> readPointCacheManifest(const std::string& path);
 
 // Reads the mesh (only its faces and point count are used; its positions are ignored) and the cache,
 // checks that the point counts agree, and builds the animation with the cache's times. Warnings
-// (a skipped MDD rest frame) go to options.warning. Throws ImportError naming the file at fault.
+// (a skipped MDD rest frame) go to options.warning. Throws tsah::FileError naming the file at fault.
 Animation importPointCache(const PointCacheInput& input, const LoadOptions& options = {});
 
 }  // namespace anim

@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "anim/animation.hpp"
-#include "anim/load.hpp"
+#include "anim/load_options.hpp"
 
 namespace anim {
 
@@ -75,7 +75,7 @@ struct SceneDescription {
 bool isSceneFile(const std::string& path);
 
 // Reads and checks a scene file (transforms finite and invertible, speeds >= 0, keys increasing,
-// files resolved). Throws ImportError naming the scene file and the object.
+// files resolved). Throws tsah::FileError naming the scene file and the object.
 SceneDescription parseScene(const std::string& path, const LoadOptions& options = {});
 
 // What each object contributes (all its instances together).
@@ -104,7 +104,7 @@ struct BakedScene {
   uint32_t distinctSources = 0;  // objects loaded (instances and repeated files share one)
 };
 
-// Loads every object once, states the memory, refuses (ImportError naming the scene and the object
+// Loads every object once, states the memory, refuses (tsah::FileError naming the scene and the object
 // that crosses the line) a scene that would not fit, then bakes keyframes at the scene's rate (or
 // options.fps) over its time range.
 BakedScene bakeScene(const std::string& path, const LoadOptions& options = {});

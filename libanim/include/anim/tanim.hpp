@@ -11,7 +11,7 @@ namespace anim {
 
 std::vector<uint8_t> encodeTanim(const Animation& animation);
 // Validates everything (magic, version, counts against the byte size, checksum, indices, times,
-// finite coordinates) before building the animation; throws ImportError naming `file`.
+// finite coordinates) before building the animation; throws tsah::FileError naming `file`.
 Animation decodeTanim(std::span<const uint8_t> bytes, const std::string& file);
 
 // Atomic write (temporary file + rename).

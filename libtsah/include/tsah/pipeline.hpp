@@ -12,13 +12,13 @@
 #include <vector>
 
 #include "anim/animation.hpp"
-#include "tsah/baselines.hpp"
-#include "tsah/bvh.hpp"
-#include "tsah/bvh_file.hpp"
-#include "tsah/cpu_runtime.hpp"
-#include "tsah/insertion_optimizer.hpp"
-#include "tsah/ray.hpp"
-#include "tsah/segmentation.hpp"
+#include "tsah/optimize/baselines.hpp"
+#include "tsah/core/bvh.hpp"
+#include "tsah/io/bvh_file.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
+#include "tsah/optimize/insertion_optimizer.hpp"
+#include "tsah/core/ray.hpp"
+#include "tsah/optimize/segmentation.hpp"
 
 namespace tsah {
 
@@ -44,7 +44,7 @@ struct TreeOptions {
   // "tsah" with k -> tsah<k>; anything else as MethodSpec::parse reads it (throws std::invalid_argument).
   MethodSpec methodSpec() const;
   // The builders' settings (cost, leaf size, optimizer selection/seed/limits, threads, progress).
-  // Throws std::invalid_argument for an unknown optimizer, selection or device, anim::Error for
+  // Throws std::invalid_argument for an unknown optimizer, selection or device, tsah::Error for
   // device "cuda" without a gpuOptimizer (a build without CUDA).
   BaselineConfig baselineConfig() const;
 };
@@ -76,7 +76,7 @@ struct OptimizedTree {
 };
 
 // One tree for the whole animation, exactly as `tsah optimize` builds it (same seed, same tree).
-// Throws anim::Error when the animation has no triangles, std::invalid_argument for a bad method or
+// Throws tsah::Error when the animation has no triangles, std::invalid_argument for a bad method or
 // selection (including "rebuild", which is no single tree).
 OptimizedTree optimizeAnimation(const anim::Animation& animation, const TreeOptions& options);
 
@@ -88,7 +88,7 @@ std::vector<double> evaluateAnimation(const Bvh& bvh, const anim::Animation& ani
 std::vector<MethodResult> compareOnAnimation(const anim::Animation& animation, std::span<const MethodSpec> methods,
                                              const TreeOptions& options, uint32_t evalFrames);
 
-// Throws anim::Error with one clear line ("BVH was not built for ANIMATION: ...") when the animation
+// Throws tsah::Error with one clear line ("BVH was not built for ANIMATION: ...") when the animation
 // is not the one the tree was built for (triangle count, vertex count or topology hash differ).
 void checkTreeMatchesAnimation(const BvhBuildInfo& info, const std::string& bvhPath, const anim::Animation& animation,
                                const std::string& animationPath);

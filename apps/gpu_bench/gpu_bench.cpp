@@ -1,0 +1,482 @@
+// tsah_gpu_bench: the paper's Table 2 on the GPU, as one JSON object on stdout.
+//
+//   tsah_gpu_bench (--input FILE | --generate KIND:TRIANGLES:FRAMES)
+//                  [--tree NAME=FILE.tbvh]... [--sah0] [--rebuild lbvh,hlbvh-sah|none]
+//                  [--frames 50] [--width 1024] [--height 768] [--ao 8] [--shadow 2]
+//                  [--traversal simple|persistent|both] [--layout bvh2,cwbvh] [--no-graphs] [--no-render] [--cpu-compare]
+//                  [--image-dir DIR] [--builder sweep|binned] [--ground]
+//
+// For every tree (from .tbvh files, or SAH0 built here: sweep SAH on the first frame, collapsed to
+// at most 8 triangles per leaf) and every GPU rebuild method, over `frames` times spread uniformly
+// over the animation: per-frame update ms (interpolation + refit + Woop; for rebuilds interpolation
+// + build + collapse + Woop, and the bare build without collapse and Woop), trace MRays/s of the
+// primary, ambient-occlusion and shadow passes, and the total ms of the frame. Timings are CUDA
+// events (device time); summaries give mean, median, min and max.
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <functional>
+#include <iostream>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "tsah/base/files.hpp"
+#include "tsah/base/error.hpp"
+#include "anim/generators.hpp"
+#include "anim/load.hpp"
+#include "tsah/build/binned_sah_builder.hpp"
+#include "tsah/io/bvh_file.hpp"
+#include "tsah/render/camera.hpp"
+#include "tsah/render/camera_path.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
+#include "tsah/optimize/leaf_collapser.hpp"
+#include "tsah/render/renderer.hpp"
+#include "tsah/build/sah_builder.hpp"
+#include "tsah/layout/cwbvh_convert.hpp"
+#include "tsah_cuda/device.hpp"
+#include "tsah_cuda/gpu_runtime.hpp"
+
+namespace {
+
+using nlohmann::json;
+namespace tc = tsah::cuda;
+
+struct Options {
+  std::string input, generate;
+  std::vector<std::string> trees;
+  bool sah0 = false;
+  std::string rebuild = "lbvh,hlbvh-sah";
+  uint32_t frames = 50, width = 1024, height = 768, ao = 8, shadow = 2;
+  std::string traversal = "simple";
+  std::string layout = "bvh2,cwbvh";  // layouts of the refitted trees, comma separated
+  bool noRender = false, cpuCompare = false, noGraphs = false, noFuse = false;
+  bool ground = false;  // the analytic ground plane (off: the meshes alone, as tsah bench and the paper)
+  std::vector<float> wideCost = {3.0f, 2.0f};  // cwbvh collapse: cT, cI
+  uint32_t wideLeaf = 8;                       // cwbvh collapse: largest leaf
+  std::string imageDir;
+  std::string builder = "sweep";
+  uint32_t wideMerge = tsah::kCwbvhDefaultMergeTriangles;  // RebuildOptions::wideMergeTriangles
+};
+
+json summary(std::vector<double> v) {
+  if (v.empty()) return json::object();
+  std::sort(v.begin(), v.end());
+  double sum = 0.0;
+  for (double x : v) sum += x;
+  const std::size_t n = v.size();
+  const double median = n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+  return {{"mean", sum / double(n)}, {"median", median}, {"min", v.front()}, {"max", v.back()}};
+}
+
+double seconds(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+anim::Animation loadAnimation(const Options& opt, json& info) {
+  if (!opt.generate.empty()) {
+    // KIND:TRIANGLES:FRAMES
+    std::stringstream ss(opt.generate);
+    std::string kind, tris, frames;
+    std::getline(ss, kind, ':');
+    std::getline(ss, tris, ':');
+    std::getline(ss, frames, ':');
+    anim::GeneratorOptions g;
+    try {
+      g.triangles = uint32_t(std::stoul(tris));
+      g.frames = uint32_t(std::stoul(frames));
+    } catch (const std::exception&) {
+      throw tsah::Error("--generate expects KIND:TRIANGLES:FRAMES, got '" + opt.generate + "'");
+    }
+    info["generated"] = opt.generate;
+    return anim::generate(anim::parseGeneratorKind(kind), g);
+  }
+  info["file"] = opt.input;
+  return anim::load(opt.input);
+}
+
+tsah::FlatBvh buildSah0(const anim::Animation& a, const std::string& builder) {
+  std::vector<tsah::Aabb> boxes(a.triangleCount());
+  tsah::triangleBoxes(a.indices(), a.keyframe(0), boxes);
+  tsah::Bvh bvh;
+  if (builder == "binned") {
+    tsah::BinnedSahBuilder::Config c;
+    c.maxLeafSize = 8;
+    bvh = tsah::BinnedSahBuilder(c).build(boxes);
+  } else {
+    tsah::LeafCollapser::Config c;
+    c.maxLeafSize = 8;
+    bvh = tsah::LeafCollapser(c).collapse(tsah::SweepSahBuilder().build(boxes));
+  }
+  return tsah::flattenBvh(bvh);
+}
+
+struct Scene {
+  std::function<tsah::Camera(double)> camera;  // the animation's camera path, else fitted to its bounds
+  tsah::SceneLighting lighting;
+  tsah::RenderSettings settings;
+};
+
+// Accumulates one method's per-frame figures.
+struct FrameSeries {
+  std::vector<double> update, interpolate, refit, woop, build, bareBuild, total;
+  std::vector<double> primary, ao, shadow, all;  // MRays/s per frame
+  uint64_t rays[3] = {0, 0, 0};
+  double traceMs[3] = {0, 0, 0};
+
+  void addRender(const tsah::RenderStats& s, const tc::GpuRenderTimings& g, double updateMs) {
+    primary.push_back(s.primary.mraysPerSecond());
+    ao.push_back(s.ao.mraysPerSecond());
+    shadow.push_back(s.shadow.mraysPerSecond());
+    all.push_back(s.total().mraysPerSecond());
+    const tsah::RayPassStats passes[3] = {s.primary, s.ao, s.shadow};
+    for (int i = 0; i < 3; ++i) {
+      rays[i] += passes[i].rays;
+      traceMs[i] += passes[i].ms;
+    }
+    total.push_back(updateMs + g.totalMs);
+  }
+
+  json traceJson() const {
+    json j;
+    const char* names[3] = {"primary", "ao", "shadow"};
+    uint64_t allRays = 0;
+    double allMs = 0.0;
+    for (int i = 0; i < 3; ++i) {
+      j[names[i]] = {{"rays_per_frame", rays[i] / std::max<std::size_t>(1, primary.size())},
+                     {"mrays_per_s", traceMs[i] > 0 ? double(rays[i]) / (traceMs[i] * 1e3) : 0.0},
+                     {"ms_per_frame", traceMs[i] / double(std::max<std::size_t>(1, primary.size()))}};
+      allRays += rays[i];
+      allMs += traceMs[i];
+    }
+    j["primary"]["per_frame_mrays_per_s"] = summary(primary);
+    j["ao"]["per_frame_mrays_per_s"] = summary(ao);
+    j["shadow"]["per_frame_mrays_per_s"] = summary(shadow);
+    j["all"] = {{"mrays_per_s", allMs > 0 ? double(allRays) / (allMs * 1e3) : 0.0},
+                {"ms_per_frame", allMs / double(std::max<std::size_t>(1, primary.size()))}};
+    return j;
+  }
+};
+
+tc::GpuRuntime::Config runtimeConfig(const Options& opt, bool persistent, tc::TreeLayout layout) {
+  tc::GpuRuntime::Config c{0, persistent, !opt.noGraphs, layout, !opt.noFuse};
+  c.wideCost = {opt.wideCost[0], opt.wideCost[1]};
+  c.wideMaxLeafSize = opt.wideLeaf;
+  return c;
+}
+
+json runRefit(const std::string& name, const tsah::FlatBvh& tree, const anim::Animation& a,
+              const std::vector<double>& times, const Scene& scene, const Options& opt, bool persistent,
+              tc::TreeLayout layout) {
+  const auto setupStart = std::chrono::steady_clock::now();
+  tc::GpuRuntime rt(tree, a, runtimeConfig(opt, persistent, layout));
+  const double setupSeconds = seconds(setupStart);
+  const double mtris = double(a.triangleCount()) / 1e6;
+  tsah::RenderSettings settings = scene.settings;
+  // Warm-up: module load, allocations, first-touch of the ray buffers.
+  rt.updateAt(times.front());
+  if (!opt.noRender) tc::renderFrameGpu(rt, scene.camera(times.front()), scene.lighting, settings, nullptr);
+
+  FrameSeries s;
+  for (uint32_t f = 0; f < times.size(); ++f) {
+    const tc::UpdateTimings u = rt.updateAt(times[f]);
+    s.update.push_back(u.totalMs());
+    s.interpolate.push_back(u.interpolateMs);
+    s.refit.push_back(u.refitMs);
+    s.woop.push_back(u.woopMs);
+    if (opt.noRender) {
+      s.total.push_back(u.totalMs());
+      continue;
+    }
+    settings.frame = f;
+    tc::GpuRenderTimings g;
+    const tsah::RenderStats r = tc::renderFrameGpu(rt, scene.camera(times[f]), scene.lighting, settings, nullptr, &g);
+    s.addRender(r, g, u.totalMs());
+  }
+  json j;
+  j["name"] = name;
+  j["kind"] = "refit";
+  j["layout"] = tc::treeLayoutName(layout);
+  j["setup_seconds"] = setupSeconds;  // upload (and for cwbvh the 8-wide collapse + layout on the host)
+  j["traversal"] = persistent ? "persistent" : "simple";
+  if (layout == tc::TreeLayout::Cwbvh)
+    j["wide_collapse"] = {{"ct", opt.wideCost[0]}, {"ci", opt.wideCost[1]}, {"max_leaf", opt.wideLeaf}};
+  j["tree"] = {{"interior_nodes", tree.interiorCount}, {"leaves", tree.leafCount}, {"depth", tree.depth}};
+  j["update_ms"] = summary(s.update);
+  j["update_ms_per_million_triangles"] = summary([&] {
+    std::vector<double> v;
+    for (double x : s.update) v.push_back(x / mtris);
+    return v;
+  }());
+  j["interpolate_ms"] = summary(s.interpolate);
+  j["refit_ms"] = summary(s.refit);
+  j["woop_ms"] = summary(s.woop);
+  if (!opt.noRender) j["trace"] = s.traceJson();
+  j["total_ms"] = summary(s.total);
+  j["per_frame"] = {{"update_ms", s.update}, {"total_ms", s.total}, {"ao_mrays_per_s", s.ao}};
+  return j;
+}
+
+// Layout cwbvh: every rebuilt tree is converted to the compressed 8-wide layout on the device; the
+// conversion (phases_ms.wide) counts in the build and the update, as the binary Woop pass does.
+json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim::Animation& a,
+                const std::vector<double>& times, const Scene& scene, const Options& opt, bool persistent,
+                tc::TreeLayout layout) {
+  tc::GpuRuntime rt(tree, a, runtimeConfig(opt, persistent, layout));
+  const double mtris = double(a.triangleCount()) / 1e6;
+  tsah::RenderSettings settings = scene.settings;
+  tc::RebuildOptions bare;
+  bare.method = method;
+  bare.collapse = false;
+  bare.woop = false;
+  bare.wideMergeTriangles = opt.wideMerge;
+  tc::RebuildOptions full;
+  full.method = method;
+  full.wideMergeTriangles = opt.wideMerge;
+  rt.rebuildAt(times.front(), bare);  // warm-up (allocations, CUB, module load)
+  rt.rebuildAt(times.front(), full);
+  if (!opt.noRender) tc::renderFrameGpu(rt, scene.camera(times.front()), scene.lighting, settings, nullptr);
+
+  FrameSeries s;
+  std::vector<double> morton, sort, hierarchy, top, bottomUp, wide, clusters, leaves, depth, wideNodes, wideLevels,
+      ratio;
+  for (uint32_t f = 0; f < times.size(); ++f) {
+    const tc::RebuildTimings b = rt.rebuildAt(times[f], bare);
+    s.bareBuild.push_back(b.buildMs());
+    const tc::RebuildTimings t = rt.rebuildAt(times[f], full);
+    s.build.push_back(t.buildMs() + t.wideMs + t.woopMs);
+    ratio.push_back((t.buildMs() + t.wideMs + t.woopMs) / b.buildMs());
+    s.update.push_back(t.totalMs());
+    s.interpolate.push_back(t.interpolateMs);
+    morton.push_back(t.mortonMs);
+    sort.push_back(t.sortMs);
+    hierarchy.push_back(t.hierarchyMs);
+    top.push_back(t.topMs);
+    bottomUp.push_back(t.bottomUpMs);
+    wide.push_back(t.wideMs);
+    wideNodes.push_back(t.wideNodes);
+    wideLevels.push_back(t.wideLevels);
+    s.woop.push_back(t.woopMs);
+    clusters.push_back(t.clusters);
+    leaves.push_back(t.leaves);
+    depth.push_back(t.depth);
+    if (opt.noRender) {
+      s.total.push_back(t.totalMs());
+      continue;
+    }
+    settings.frame = f;
+    tc::GpuRenderTimings g;
+    const tsah::RenderStats r = tc::renderFrameGpu(rt, scene.camera(times[f]), scene.lighting, settings, nullptr, &g);
+    s.addRender(r, g, t.totalMs());
+  }
+  json j;
+  j["name"] = tc::rebuildMethodName(method);
+  j["kind"] = "rebuild";
+  j["layout"] = tc::treeLayoutName(layout);
+  j["traversal"] = persistent ? "persistent" : "simple";
+  j["bare_build_ms"] = summary(s.bareBuild);
+  j["build_collapse_woop_ms"] = summary(s.build);
+  j["collapse_woop_over_bare"] = summary(ratio);
+  j["bare_build_ms_per_million_triangles"] = summary([&] {
+    std::vector<double> v;
+    for (double x : s.bareBuild) v.push_back(x / mtris);
+    return v;
+  }());
+  j["phases_ms"] = {{"morton", summary(morton)},       {"sort", summary(sort)},
+                    {"hierarchy", summary(hierarchy)}, {"cluster_tree", summary(top)},
+                    {"bottom_up", summary(bottomUp)},  {"wide", summary(wide)},
+                    {"woop", summary(s.woop)}};
+  j["update_ms"] = summary(s.update);
+  j["interpolate_ms"] = summary(s.interpolate);
+  j["tree"] = {{"leaves", summary(leaves)}, {"depth", summary(depth)}};
+  if (method == tc::RebuildMethod::HlbvhSah) j["tree"]["clusters"] = summary(clusters);
+  if (layout == tc::TreeLayout::Cwbvh) {
+    j["tree"]["wide_nodes"] = summary(wideNodes);
+    j["tree"]["wide_levels"] = summary(wideLevels);
+    j["wide_merge_triangles"] = opt.wideMerge;
+  }
+  if (!opt.noRender) j["trace"] = s.traceJson();
+  j["total_ms"] = summary(s.total);
+  j["per_frame"] = {{"update_ms", s.update}, {"bare_build_ms", s.bareBuild}, {"total_ms", s.total}};
+  return j;
+}
+
+// One frame on the CPU renderer and on the GPU: how far apart the images are.
+json compareWithCpu(const tsah::FlatBvh& tree, const anim::Animation& a, double t, const Scene& scene,
+                    const Options& opt, tc::TreeLayout layout) {
+  tsah::CpuRuntime cpu(tree, {a.indices().begin(), a.indices().end()}, a.vertexCount());
+  tc::GpuRuntime gpu(tree, a, runtimeConfig(opt, false, layout));
+  cpu.update(a.positionsAt(t));
+  gpu.updateAt(t);
+  tsah::Image cpuImage, gpuImage;
+  const auto start = std::chrono::steady_clock::now();
+  const tsah::RenderStats cs = tsah::renderFrame(cpu, scene.camera(t), scene.lighting, scene.settings, cpuImage);
+  const double cpuSeconds = seconds(start);
+  const tsah::RenderStats gs = tc::renderFrameGpu(gpu, scene.camera(t), scene.lighting, scene.settings, gpuImage);
+  const tsah::ImageDifference d = tsah::compareImages(cpuImage, gpuImage, 16);
+  if (!opt.imageDir.empty()) {
+    std::filesystem::create_directories(opt.imageDir);
+    tsah::savePng(opt.imageDir + "/cpu.png", cpuImage);  // the same for every layout
+    tsah::savePng(opt.imageDir + "/gpu-" + tc::treeLayoutName(layout) + ".png", gpuImage);
+  }
+  return {{"layout", tc::treeLayoutName(layout)},
+          {"mean_abs", d.meanAbs},
+          {"max_abs", d.maxAbs},
+          {"fraction_above_16", d.fractionAbove},
+          {"cpu_threads", cpu.threadCount()},
+          {"cpu_seconds", cpuSeconds},
+          {"cpu_mrays_per_s", cs.total().mraysPerSecond()},
+          {"rays_cpu", {cs.primary.rays, cs.ao.rays, cs.shadow.rays}},
+          {"rays_gpu", {gs.primary.rays, gs.ao.rays, gs.shadow.rays}}};
+}
+
+void run(const Options& opt) {
+  if (opt.input.empty() == opt.generate.empty()) throw tsah::Error("give exactly one of --input and --generate");
+  if (!tc::deviceAvailable()) throw tsah::Error("no CUDA device");
+  const tc::DeviceInfo dev = tc::describeDevice(0);
+  json out;
+  out["device"] = {{"name", dev.name},
+                   {"compute_capability", std::to_string(dev.computeMajor) + "." + std::to_string(dev.computeMinor)},
+                   {"multiprocessors", dev.multiprocessors},
+                   {"memory_gib", double(dev.globalMemoryBytes) / double(1ull << 30)},
+                   {"cuda_runtime", dev.runtimeVersion},
+                   {"cuda_driver", dev.driverVersion}};
+
+  json input;
+  auto start = std::chrono::steady_clock::now();
+  const anim::Animation a = loadAnimation(opt, input);
+  input["load_seconds"] = seconds(start);
+  input["triangles"] = a.triangleCount();
+  input["vertices"] = a.vertexCount();
+  input["keyframes"] = a.keyframeCount();
+  out["input"] = input;
+
+  const uint32_t frames = std::max<uint32_t>(1, opt.frames);
+  const std::vector<double> times = a.uniformTimes(frames);
+  Scene scene;
+  scene.settings.width = opt.width;
+  scene.settings.height = opt.height;
+  scene.settings.aoSamples = opt.ao;
+  scene.settings.shadowSamples = opt.shadow;
+  const anim::Bounds ab = a.bounds();
+  tsah::Aabb bounds;
+  bounds.extend(tsah::Vec3{ab.min[0], ab.min[1], ab.min[2]});
+  bounds.extend(tsah::Vec3{ab.max[0], ab.max[1], ab.max[2]});
+  const tsah::Camera fitted = tsah::fitCamera(bounds, {0, 1, 0}, 45.0f, float(opt.width) / float(opt.height));
+  std::vector<anim::CameraKey> cameraKeys(a.cameraPath().begin(), a.cameraPath().end());
+  scene.camera = [cameraKeys, fitted](double t) { return cameraKeys.empty() ? fitted : tsah::cameraAt(cameraKeys, t); };
+  scene.lighting = tsah::fitLighting(bounds, scene.camera(times.front()), {0, 1, 0}, 0.1f, opt.ground);
+  out["settings"] = {{"frames", frames},       {"width", opt.width},   {"height", opt.height},
+                     {"ao_samples", opt.ao},   {"shadow_samples", opt.shadow},
+                     {"traversal", opt.traversal}, {"render", !opt.noRender}, {"graphs", !opt.noGraphs},
+                     {"fused_wide_passes", !opt.noFuse}, {"ground", opt.ground},
+                     {"camera", a.cameraPath().empty() ? "fitted to the animation bounds" : "the animation's camera path"}};
+
+  // Trees: files, then SAH0 built here.
+  std::vector<std::pair<std::string, tsah::FlatBvh>> trees;
+  for (const std::string& spec : opt.trees) {
+    const auto eq = spec.find('=');
+    const std::string name = eq == std::string::npos ? spec : spec.substr(0, eq);
+    const std::string path = eq == std::string::npos ? spec : spec.substr(eq + 1);
+    tsah::BvhBuildInfo info;
+    trees.emplace_back(name, tsah::decodeFlatBvhFile(tsah::readFile(path), path, &info));
+    if (info.topologyHash != 0 && info.topologyHash != tsah::topologyHash(a.indices()))
+      throw tsah::Error(path + ": the tree was built for another animation (topology hash differs)");
+  }
+  json builds = json::object();
+  if (opt.sah0 || trees.empty()) {
+    start = std::chrono::steady_clock::now();
+    trees.emplace_back("sah0", buildSah0(a, opt.builder));
+    builds["sah0"] = {{"builder", opt.builder + " + collapse(8)"}, {"seconds", seconds(start)}};
+  }
+  out["cpu_builds"] = builds;
+
+  std::vector<bool> modes;
+  if (opt.traversal == "persistent" || opt.traversal == "both") modes.push_back(true);
+  if (opt.traversal == "simple" || opt.traversal == "both") modes.push_back(false);
+  if (modes.empty()) throw tsah::Error("--traversal must be persistent, simple or both");
+
+  std::vector<tc::TreeLayout> layouts;
+  {
+    std::stringstream ss(opt.layout);
+    std::string l;
+    while (std::getline(ss, l, ',')) layouts.push_back(tc::parseTreeLayout(l));
+  }
+  if (layouts.empty()) throw tsah::Error("--layout needs bvh2, cwbvh or both");
+
+  json methods = json::array();
+  for (tc::TreeLayout layout : layouts)
+    for (bool persistent : modes) {
+      for (const auto& [name, tree] : trees)
+        methods.push_back(runRefit(name, tree, a, times, scene, opt, persistent, layout));
+    }
+  if (opt.rebuild != "none") {
+    std::stringstream ss(opt.rebuild);
+    std::string m;
+    while (std::getline(ss, m, ','))
+      for (tc::TreeLayout layout : layouts)
+        for (bool persistent : modes) {
+          if (layout == tc::TreeLayout::Cwbvh && persistent) continue;  // the wide kernel is one thread per ray
+          methods.push_back(
+              runRebuild(tc::parseRebuildMethod(m), trees.front().second, a, times, scene, opt, persistent, layout));
+        }
+  }
+  out["methods"] = methods;
+  if (opt.cpuCompare) {
+    out["cpu_compare"] = json::array();
+    for (tc::TreeLayout layout : layouts)
+      out["cpu_compare"].push_back(compareWithCpu(trees.front().second, a, times.front(), scene, opt, layout));
+  }
+  std::cout << out.dump(1) << std::endl;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"tsah_gpu_bench: GPU update, rebuild and trace figures as one JSON object"};
+  Options opt;
+  app.add_option("--input", opt.input, "Animation file (.tanim or anything tsah reads)");
+  app.add_option("--generate", opt.generate, "Generated animation KIND:TRIANGLES:FRAMES (explode, wave, swap)");
+  app.add_option("--tree", opt.trees, "NAME=FILE.tbvh, a tree to refit (repeatable)");
+  app.add_flag("--sah0", opt.sah0, "Also build SAH0 here (the default when no --tree is given)");
+  app.add_option("--builder", opt.builder, "SAH0 builder: sweep (+ leaf collapse) or binned")
+      ->check(CLI::IsMember({"sweep", "binned"}));
+  app.add_option("--rebuild", opt.rebuild, "GPU rebuild methods, comma separated, or none");
+  app.add_option("--frames", opt.frames, "Frames timed, uniform over the animation (default 50)");
+  app.add_option("--width", opt.width, "Image width (default 1024)");
+  app.add_option("--height", opt.height, "Image height (default 768)");
+  app.add_option("--ao", opt.ao, "Ambient-occlusion rays per pixel (default 8)");
+  app.add_option("--shadow", opt.shadow, "Shadow rays per pixel (default 2)");
+  app.add_option("--traversal", opt.traversal, "simple (one thread per ray, the default), persistent or both");
+  app.add_option("--layout", opt.layout, "Layouts of the refitted and rebuilt trees: bvh2, cwbvh or both comma separated (default both)");
+  app.add_option("--wide-merge", opt.wideMerge,
+                 "cwbvh rebuilds: binary subtrees of at most this many triangles become one wide leaf (0-8, default 0: off)")
+      ->check(CLI::Range(0u, tsah::kCwbvhMaxLeafTriangles));
+  app.add_flag("--no-fuse", opt.noFuse, "cwbvh: separate ray generation and trace kernels (as bvh2) instead of fused passes");
+  app.add_option("--cwbvh-cost", opt.wideCost, "cwbvh: the 8-wide collapse's cost of a node visit and of a triangle (default 3 2)")
+      ->expected(2);
+  app.add_option("--cwbvh-leaf", opt.wideLeaf, "cwbvh: the largest leaf the 8-wide collapse makes (default 8)")
+      ->check(CLI::Range(1u, 64u));
+  app.add_flag("--ground", opt.ground, "Add the analytic ground plane (default: the meshes alone, as tsah bench)");
+  app.add_flag("--no-graphs", opt.noGraphs, "Launch every kernel instead of replaying CUDA graphs");
+  app.add_flag("--no-render", opt.noRender, "Time the updates and rebuilds only");
+  app.add_flag("--cpu-compare", opt.cpuCompare, "Render the first frame on the CPU too and compare the images");
+  app.add_option("--image-dir", opt.imageDir, "Where --cpu-compare writes cpu.png and gpu.png");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  try {
+    run(opt);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "tsah_gpu_bench: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,56 @@
+#pragma once
+// The .tbvh file: an optimized BVH in a GPU-ready layout plus how it was built.
+// Specified in docs/tbvh-format.md (byte layout, validation rules, checksum).
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "tsah/core/bvh.hpp"
+#include "tsah/core/objective.hpp"
+#include "tsah/layout/flat_bvh.hpp"
+
+namespace tsah {
+
+inline constexpr uint32_t kTbvhVersion = 1;
+inline constexpr uint32_t kTbvhLayoutAilaLaine64 = 1;  // GpuBvhNode, 64 bytes, see gpu_layout.hpp
+inline constexpr uint32_t kTbvhHeaderBytes = 160;
+inline constexpr std::size_t kTbvhNameBytes = 16;     // method and selection: NUL-padded ASCII
+
+// How a tree was built; stored in the file header and printed by `tsah info`.
+struct BvhBuildInfo {
+  std::string method = "tsah";      // tsah, sah0, sahstar, ... (at most 15 printable ASCII chars)
+  std::string selection = "mh";     // node selection of the optimizer: mh, random, batch, none
+  uint32_t representativeFrames = 1;
+  uint64_t seed = 0;
+  Objective objective;              // k, cT, cI and the maximum leaf size the tree was built for
+  double buildSeconds = 0.0;
+  double timeStart = 0.0, timeEnd = 0.0;  // time range of the animation the tree was built for
+  uint32_t triangleCount = 0;       // 0 when encoding: taken from the tree
+  uint32_t vertexCount = 0;
+  uint32_t topologyHash = 0;        // topologyHash(indices): catches a mismatched input
+};
+
+struct BvhFile {
+  BvhBuildInfo info;
+  Bvh bvh;  // topology, primIds and the boxes stored in the file (frameCount boxes per node)
+};
+
+// CRC-32 of the triangle index array (3 x uint32 per triangle, little-endian): the topology hash
+// stored in .tbvh files and checked by `tsah trace` / `tsah export` against the animation.
+uint32_t topologyHash(std::span<const uint32_t> indices);
+
+// Writes the tree in canonical order (see flat_bvh.hpp). Throws tsah::Error when the tree is
+// empty or invalid, a name does not fit, or info.triangleCount disagrees with the tree.
+std::vector<uint8_t> encodeBvhFile(const Bvh& bvh, const BvhBuildInfo& info);
+// Validates everything before use (magic, version, layout, sizes vs byte count, checksum, indices in
+// range, each triangle referenced exactly once, the node graph a tree); throws tsah::FileError
+// naming `file`. Allocates only after the counts have been checked against the byte count.
+BvhFile decodeBvhFile(std::span<const uint8_t> bytes, const std::string& file);
+// The same, returning the flat (GPU-ready) form without converting it back to a Bvh.
+FlatBvh decodeFlatBvhFile(std::span<const uint8_t> bytes, const std::string& file, BvhBuildInfo* info = nullptr);
+
+void saveBvhFile(const std::string& path, const Bvh& bvh, const BvhBuildInfo& info);  // atomic
+BvhFile loadBvhFile(const std::string& path);
+
+}  // namespace tsah

@@ -1,0 +1,182 @@
+#pragma once
+// Stack-based traversal of the GPU-ready binary BVH (gpu_layout.hpp): closest hit for primary rays,
+// any hit for occlusion (ambient occlusion, shadows). Written against a trivially copyable view so
+// that the same code runs on the CPU and, compiled by nvcc, on the GPU.
+#include <cstdint>
+
+#if !defined(__CUDACC__) && (defined(__SSE2__) || defined(_M_X64))
+#include <emmintrin.h>
+#define TSAH_TRAVERSAL_SSE 1
+#endif
+
+#include "tsah/layout/gpu_layout.hpp"
+#include "tsah/core/hd.hpp"
+#include "tsah/core/ray.hpp"
+#include "tsah/layout/woop.hpp"
+
+namespace tsah {
+
+// Traversal needs one stack entry per tree level; trees deeper than this are refused up front by
+// the runtimes (CpuRuntime checks FlatBvh::depth).
+inline constexpr uint32_t kTraversalStackSize = 128;
+
+// Everything a traversal reads for one frame. Raw pointers and counts only: pass by value.
+struct BvhView {
+  const GpuBvhNode* nodes = nullptr;    // interior nodes, canonical order
+  const WoopTriangle* woop = nullptr;   // per slot
+  const uint32_t* triIndex = nullptr;   // slot -> triangle id
+  const uint32_t* indices = nullptr;    // 3 vertex indices per triangle id
+  const float* positions = nullptr;     // xyz per vertex, this frame
+  int32_t rootRef = makeLeafRef(0);
+  uint32_t rootCount = 0;
+  Aabb rootBox;
+
+  TSAH_HD Vec3 vertex(uint32_t i) const { return {positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]}; }
+};
+
+// Slab tests of both children of a node: bit 0 / bit 1 set when child 0 / 1 is entered within
+// [tmin, tmax], with the entry distances in t0 and t1. Exactly intersectBox() on each child
+// (the SSE path performs the same operations in the same order, so results are bit-identical).
+struct NodeRayPrep {
+#if defined(TSAH_TRAVERSAL_SSE)
+  __m128 oxy, ixy, oz, iz;
+#endif
+  RayPrep ray;
+};
+
+TSAH_HD NodeRayPrep prepareNodeRay(const RayPrep& r) {
+  NodeRayPrep p;
+  p.ray = r;
+#if defined(TSAH_TRAVERSAL_SSE)
+  p.oxy = _mm_setr_ps(r.org.x, r.org.x, r.org.y, r.org.y);
+  p.ixy = _mm_setr_ps(r.invDir.x, r.invDir.x, r.invDir.y, r.invDir.y);
+  p.oz = _mm_set1_ps(r.org.z);
+  p.iz = _mm_set1_ps(r.invDir.z);
+#endif
+  return p;
+}
+
+TSAH_HD int intersectChildren(const NodeRayPrep& p, const GpuBvhNode& node, float tmin, float tmax, float& t0,
+                              float& t1) {
+#if defined(TSAH_TRAVERSAL_SSE)
+  const __m128 a = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(&node.c0loX), p.oxy), p.ixy);  // x0l x0h y0l y0h
+  const __m128 b = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(&node.c1loX), p.oxy), p.ixy);  // x1l x1h y1l y1h
+  const __m128 c = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(&node.c0loZ), p.oz), p.iz);    // z0l z0h z1l z1h
+  const __m128 lo = _mm_shuffle_ps(a, b, _MM_SHUFFLE(2, 0, 2, 0));  // x0l y0l x1l y1l
+  const __m128 hi = _mm_shuffle_ps(a, b, _MM_SHUFFLE(3, 1, 3, 1));  // x0h y0h x1h y1h
+  const __m128 mn = _mm_min_ps(lo, hi), mx = _mm_max_ps(lo, hi);
+  const __m128 zlo = _mm_shuffle_ps(c, c, _MM_SHUFFLE(2, 0, 2, 0));  // z0l z1l . .
+  const __m128 zhi = _mm_shuffle_ps(c, c, _MM_SHUFFLE(3, 1, 3, 1));  // z0h z1h . .
+  // Lanes 0 and 1 hold child 0 and child 1.
+  const __m128 nearXY = _mm_max_ps(_mm_shuffle_ps(mn, mn, _MM_SHUFFLE(2, 0, 2, 0)),
+                                   _mm_shuffle_ps(mn, mn, _MM_SHUFFLE(3, 1, 3, 1)));
+  const __m128 farXY = _mm_min_ps(_mm_shuffle_ps(mx, mx, _MM_SHUFFLE(2, 0, 2, 0)),
+                                  _mm_shuffle_ps(mx, mx, _MM_SHUFFLE(3, 1, 3, 1)));
+  const __m128 nearZ = _mm_max_ps(_mm_min_ps(zlo, zhi), _mm_set1_ps(tmin));
+  const __m128 farZ = _mm_min_ps(_mm_max_ps(zlo, zhi), _mm_set1_ps(tmax));
+  const __m128 tn = _mm_max_ps(nearXY, nearZ);
+  const __m128 tf = _mm_mul_ps(_mm_min_ps(farXY, farZ), _mm_set1_ps(kSlabFarScale));
+  alignas(16) float entry[4];
+  _mm_store_ps(entry, tn);
+  t0 = entry[0];
+  t1 = entry[1];
+  return _mm_movemask_ps(_mm_cmple_ps(tn, tf)) & 3;
+#else
+  const bool hit0 = intersectBox(p.ray, node.childBox(0), tmin, tmax, t0);
+  const bool hit1 = intersectBox(p.ray, node.childBox(1), tmin, tmax, t1);
+  return (hit0 ? 1 : 0) | (hit1 ? 2 : 0);
+#endif
+}
+
+namespace detail {
+
+// Tests the triangles of one leaf; returns true when one was hit (and, for closest hit, shortened tmax).
+template <bool AnyHit>
+TSAH_HD bool intersectLeaf(const BvhView& bvh, const Ray& ray, const RayPrep& prep, uint32_t first, uint32_t count,
+                           float& tmax, Hit& hit) {
+  bool found = false;
+  for (uint32_t s = first; s < first + count; ++s) {
+    float t, u, v;
+    auto fetch = [&](Vec3& v0, Vec3& v1, Vec3& v2) {
+      const uint32_t* tri = bvh.indices + 3 * std::size_t(bvh.triIndex[s]);
+      v0 = bvh.vertex(tri[0]);
+      v1 = bvh.vertex(tri[1]);
+      v2 = bvh.vertex(tri[2]);
+    };
+    if (intersectTriangle(ray, prep, bvh.woop[s], tmax, fetch, t, u, v)) {
+      found = true;
+      tmax = t;
+      hit.t = t;
+      hit.u = u;
+      hit.v = v;
+      hit.tri = bvh.triIndex[s];
+      if (AnyHit) return true;
+    }
+  }
+  return found;
+}
+
+template <bool AnyHit>
+TSAH_HD Hit traverse(const BvhView& bvh, const Ray& ray) {
+  Hit hit;
+  const RayPrep prep = prepareRay(ray);
+  const NodeRayPrep nodePrep = prepareNodeRay(prep);
+  float tmax = ray.tmax;
+  float tEntry;
+  if (bvh.rootCount == 0 && isLeafRef(bvh.rootRef)) return hit;  // empty tree
+  if (!intersectBox(prep, bvh.rootBox, ray.tmin, tmax, tEntry)) return hit;
+  if (isLeafRef(bvh.rootRef)) {
+    intersectLeaf<AnyHit>(bvh, ray, prep, leafFirstSlot(bvh.rootRef), bvh.rootCount, tmax, hit);
+    return hit;
+  }
+  // Stack of (reference, leaf count); the near child is visited first, the far one pushed.
+  int32_t stackRef[kTraversalStackSize];
+  uint32_t stackCount[kTraversalStackSize];
+  float stackEntry[kTraversalStackSize];  // entry distance of the pushed box: skip it once tmax is nearer
+  uint32_t sp = 0;
+  int32_t ref = bvh.rootRef;
+  uint32_t count = 0;
+  for (;;) {
+    if (isLeafRef(ref)) {
+      if (intersectLeaf<AnyHit>(bvh, ray, prep, leafFirstSlot(ref), count, tmax, hit) && AnyHit) return hit;
+    } else {
+      const GpuBvhNode& node = bvh.nodes[ref];
+      float t0, t1;
+      const int mask = intersectChildren(nodePrep, node, ray.tmin, tmax, t0, t1);
+      const bool hit0 = (mask & 1) != 0, hit1 = (mask & 2) != 0;
+      if (hit0 && hit1) {
+        const bool swap = t1 < t0;
+        const int nearC = swap ? 1 : 0, farC = swap ? 0 : 1;
+        stackRef[sp] = node.childRef(farC);
+        stackCount[sp] = node.childCount(farC);
+        stackEntry[sp] = swap ? t0 : t1;
+        ++sp;
+        ref = node.childRef(nearC);
+        count = node.childCount(nearC);
+        continue;
+      }
+      if (hit0 || hit1) {
+        const int c = hit0 ? 0 : 1;
+        ref = node.childRef(c);
+        count = node.childCount(c);
+        continue;
+      }
+    }
+    do {
+      if (sp == 0) return hit;
+      --sp;
+    } while (stackEntry[sp] > tmax * kSlabFarScale);
+    ref = stackRef[sp];
+    count = stackCount[sp];
+  }
+}
+
+}  // namespace detail
+
+// Nearest hit in (ray.tmin, ray.tmax); hit.tri == kNoHit when there is none.
+TSAH_HD Hit closestHit(const BvhView& bvh, const Ray& ray) { return detail::traverse<false>(bvh, ray); }
+
+// True when anything is hit in (ray.tmin, ray.tmax) (occlusion).
+TSAH_HD bool anyHit(const BvhView& bvh, const Ray& ray) { return detail::traverse<true>(bvh, ray).valid(); }
+
+}  // namespace tsah

@@ -1,0 +1,74 @@
+#pragma once
+// A wide tree in the CPU SIMD layout (wide_layout.hpp) with its per-frame refit: the nodes and
+// Woop packets of one frame, built from a WideBvh topology (wide_bvh.hpp). refit() recomputes
+// every child box and Woop packet from this frame's vertices in one parallel pass over disjoint
+// subtrees (then the few nodes above them), as CpuRuntime does for the binary tree.
+#include <cstdint>
+#include <functional>
+#include <span>
+#include <utility>
+#include <vector>
+
+#include "tsah/layout/wide_bvh.hpp"
+#include "tsah/layout/wide_layout.hpp"
+#include "tsah/layout/wide_traversal.hpp"
+
+namespace tsah {
+
+template <uint32_t N>
+class WideTree {
+ public:
+  // Runs body(begin, end) over chunks of [0, n), possibly in parallel.
+  using ParallelFor =
+      std::function<void(std::size_t n, const std::function<void(std::size_t begin, std::size_t end)>& body)>;
+
+  // topology.width must be at most N (a narrower topology leaves slots unused). indices: the
+  // triangles (3 vertex indices per triangle id), the same for every frame; the tree keeps its own
+  // copy in slot order. Boxes and triangles are zero until the first refit(). threads: how many
+  // workers refit() will run on (it plans about 8 subtrees per thread). isa: whose SIMD code
+  // computes the Woop rows (the results are the same for every one). Throws tsah::Error when the
+  // isa is not supported or a triangle id is past the index array.
+  WideTree(const WideBvh& topology, std::span<const uint32_t> indices, uint32_t threads, SimdIsa isa = bestIsa());
+
+  // This frame's vertices (xyz per vertex; every vertex index of the triangles must be in range).
+  void refit(const float* positions, const ParallelFor& parallelFor);
+
+  WideView<N> view(const uint32_t* indices, const float* positions) const;
+  Aabb bounds() const { return rootBox_; }
+  uint32_t depth() const { return depth_; }
+  std::span<const WideSoaNode<N>> nodes() const { return nodes_; }
+  std::span<const WoopPacket<N>> packets() const { return packets_; }
+  std::span<const uint32_t> triIndex() const { return triIndex_; }
+  int32_t rootRef() const { return rootRef_; }
+  uint32_t rootCount() const { return rootCount_; }
+
+ private:
+  Aabb refitLeaf(uint32_t firstPacket, uint32_t count, const float* positions);
+  // A refit task computes its nodes' leaf children first, in increasing packet order (so the
+  // packet stores stream forward through memory), then their interior children, bottom-up.
+  void refitLeaves(uint32_t node, const float* positions);
+  void refitInterior(uint32_t node);
+
+  void (*woopRows_)(const float* positions, const uint32_t* vertices, uint32_t lanes, WoopPacket<N>& packet,
+                    Aabb& bounds) = nullptr;
+  std::vector<WideSoaNode<N>> nodes_;
+  std::vector<WoopPacket<N>> packets_;
+  // The slot of each packet's lane 0 (its lanes hold consecutive slots): the refit reads this
+  // instead of the packet's own slot array, whose cache line would be a cold miss per packet.
+  std::vector<uint32_t> packetSlots_;
+  std::vector<uint32_t> triIndex_;
+  // The vertex indices of each slot's triangle (3 per slot): the refit reads them in slot order, a
+  // stream, where indices[3 * triIndex[slot]] would be a cache miss per triangle.
+  std::vector<uint32_t> slotVertices_;
+  int32_t rootRef_ = makeLeafRef(0);
+  uint32_t rootCount_ = 0;
+  uint32_t depth_ = 0;
+  Aabb rootBox_;
+  std::vector<std::pair<uint32_t, uint32_t>> subtreeTasks_;
+  std::vector<uint32_t> topNodes_;
+};
+
+extern template class WideTree<4>;
+extern template class WideTree<8>;
+
+}  // namespace tsah

@@ -1,0 +1,160 @@
+#pragma once
+// The CPU runtime: holds one tree in GPU-ready form plus this frame's vertices and Woop triangles.
+// Per frame: update() refits the boxes bottom-up and recomputes the Woop triangles in one parallel
+// pass over disjoint subtrees (then the few nodes above them); rebuild() instead builds a new tree
+// from this frame's triangle boxes (the per-frame rebuild baseline).
+//
+// Layouts: the binary tree as given (bvh2, traversal.hpp), or a 4- or 8-wide tree derived from it
+// once at construction by the multi-frame cost-optimal collapse (wide_bvh.hpp, over the frames the
+// given tree holds) and traced with the SIMD kernels of one instruction set (wide_traversal.hpp).
+// closestHit()/anyHit() trace the current frame in whichever layout was chosen.
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "tsah/core/bvh.hpp"
+#include "tsah/layout/flat_bvh.hpp"
+#include "tsah/layout/traversal.hpp"
+#include "tsah/io/tree_set.hpp"
+#include "tsah/layout/wide_bvh.hpp"
+#include "tsah/layout/wide_traversal.hpp"
+#include "tsah/layout/wide_tree.hpp"
+#include "tsah/layout/woop.hpp"
+
+namespace tsah {
+
+enum class CpuLayout : uint8_t { Bvh2 = 2, Bvh4 = 4, Bvh8 = 8 };
+const char* layoutName(CpuLayout layout);  // "bvh2", "bvh4", "bvh8"
+// The layout with the most children the processor's best kernels support (bvh8 with AVX2).
+CpuLayout fastestLayout();
+// False when no kernels of this build that the processor runs have this width.
+bool layoutSupported(CpuLayout layout);
+// "bvh2" / "bvh4" / "bvh8" (nothing for anything else).
+std::optional<CpuLayout> parseLayout(const std::string& name);
+
+// What a runtime traces: the layout, the kernels and the tree's size and multi-frame costs.
+struct LayoutInfo {
+  CpuLayout layout = CpuLayout::Bvh2;
+  SimdIsa isa = SimdIsa::Sse;    // wide layouts: the kernels' instruction set
+  uint32_t interiorNodes = 0, leaves = 0, depth = 0;
+  // T-SAH cost C~^k (Eq. 3, the collapse's cT, cI, k) over the frames of the tree given to the
+  // constructor: of that binary tree, and of the traced layout (equal for bvh2). 0 after rebuild().
+  double binaryCost = 0.0, layoutCost = 0.0;
+};
+
+class CpuRuntime {
+ public:
+  struct Config {
+    Config(uint32_t workerThreads = 0) : threads(workerThreads) {}  // NOLINT: {threads} converts
+    uint32_t threads = 0;  // worker threads; 0 (or more than the hardware has): one per hardware thread
+    CpuLayout layout = CpuLayout::Bvh2;
+    std::optional<SimdIsa> isa;  // wide layouts: the kernels to use (default: the best supported)
+    WideCollapser::Config collapse;  // wide layouts: cost constants, k, leaf size (width, leafPacket: the layout's)
+  };
+
+  // Builds a tree over one frame of triangle boxes (indexed by triangle id); used by rebuild().
+  using TreeBuilder = std::function<Bvh(std::span<const Aabb> triangleBoxes)>;
+
+  struct RebuildTimings {
+    double boxesMs = 0.0;    // triangle boxes of the frame
+    double buildMs = 0.0;    // the builder itself (plus leaf collapse if it does one)
+    double flattenMs = 0.0;  // conversion to the GPU layout
+    double refitMs = 0.0;    // the refit + Woop pass on the new tree
+  };
+
+  // tree: the topology (boxes are recomputed by update(); a wide layout is collapsed using every
+  // frame block the tree holds). indices: 3 per triangle, the animation's topology, each <
+  // vertexCount. Throws tsah::Error when the tree does not match the triangle count, is invalid, is
+  // deeper than the traversal stack allows, or the layout / instruction set is not supported.
+  CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint32_t vertexCount, Config config);
+  CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint32_t vertexCount);
+  // A tree set: every tree is checked as above and kept (a wide layout collapses each tree once,
+  // here); selectTreeAt picks the one to refit and trace (tree 0 until then; layoutInfo() describes
+  // tree 0). Throws tsah::Error for an empty set.
+  CpuRuntime(const TreeSet& set, std::vector<uint32_t> indices, uint32_t vertexCount, Config config);
+  ~CpuRuntime();
+  CpuRuntime(const CpuRuntime&) = delete;
+  CpuRuntime& operator=(const CpuRuntime&) = delete;
+
+  // Takes this frame's vertex positions (vertexCount * 3 floats), refits every box and recomputes
+  // the Woop triangles.
+  void update(std::span<const float> positions);
+  // Takes this frame's positions and replaces the tree by builder(triangle boxes), then refits as
+  // update() does (which also computes the Woop triangles).
+  RebuildTimings rebuild(std::span<const float> positions, const TreeBuilder& builder);
+  // Makes the tree of the part holding `time` (tsah::treeIndexAt: boundaries and overlaps included)
+  // the current one and returns its index; update() must follow before tracing. A runtime made from
+  // one tree, or after a rebuild, keeps its tree and returns 0.
+  uint32_t selectTreeAt(double time);
+  uint32_t treeCount() const { return setTrees_.empty() ? 1u : static_cast<uint32_t>(setTrees_.size()); }
+  uint32_t currentTree() const { return current_; }
+
+  // Nearest hit / any hit in (ray.tmin, ray.tmax) in the current frame, in the runtime's layout.
+  // `order` picks the wide layouts' any-hit child order (the answer is the same; bvh2 ignores it):
+  // the default for long rays such as shadow rays, AnyHitOrder::TreeOrder for short ones (ambient
+  // occlusion).
+  Hit closestHit(const Ray& ray) const;
+  bool anyHit(const Ray& ray, AnyHitOrder order = AnyHitOrder::FarthestFirst) const;
+
+  const LayoutInfo& layoutInfo() const { return info_; }
+  // The binary tree and its view: bvh2 only (the wide layouts do not refit the binary tree; both
+  // throw tsah::Error for them).
+  BvhView view() const;
+  const FlatBvh& tree() const;
+  // The wide tree of a bvh4 / bvh8 runtime (null otherwise).
+  const WideTree<4>* wide4() const { return wide4_.get(); }
+  const WideTree<8>* wide8() const { return wide8_.get(); }
+  std::span<const WoopTriangle> woop() const { return woop_; }
+  std::span<const float> positions() const { return positions_; }
+  std::span<const uint32_t> indices() const { return indices_; }
+  uint32_t triangleCount() const { return static_cast<uint32_t>(indices_.size() / 3); }
+  uint32_t vertexCount() const { return vertexCount_; }
+  Aabb bounds() const;  // of the current frame
+  uint32_t threadCount() const;
+
+  // Runs body(begin, end) over chunks of [0, n) on the runtime's threads (chunks of about `grain`).
+  void parallelFor(std::size_t n, std::size_t grain, const std::function<void(std::size_t, std::size_t)>& body) const;
+
+ private:
+  void setTree(FlatBvh tree);
+  FlatBvh topologyOf(const FlatBvh& tree) const;  // frame 0's block, validated against this runtime
+  void setWideTree(const Bvh& binary, bool reportCosts);
+  BvhView binaryView() const;
+  void setPositions(std::span<const float> positions);
+  void refitAndWoop();
+  void refitNode(uint32_t node);
+  Aabb refitLeaf(uint32_t firstSlot, uint32_t count);
+
+  struct Threads;
+  std::unique_ptr<Threads> threads_;
+  FlatBvh tree_;
+  std::vector<uint32_t> indices_;
+  uint32_t vertexCount_ = 0;
+  std::vector<float> positions_;
+  std::vector<WoopTriangle> woop_;
+  // Parallel refit plan: disjoint subtrees [root, end) refitted in parallel, then the nodes above
+  // them (descending index, children before parents) on one thread.
+  std::vector<std::pair<uint32_t, uint32_t>> subtreeTasks_;
+  std::vector<uint32_t> topNodes_;
+  // Wide layouts.
+  LayoutInfo info_;
+  const WideKernels* kernels_ = nullptr;
+  WideCollapser::Config collapse_;
+  std::shared_ptr<WideTree<4>> wide4_;
+  std::shared_ptr<WideTree<8>> wide8_;
+  WideView<4> view4_;
+  WideView<8> view8_;
+  // Tree set: every tree's topology and time range (and, for a wide layout, its wide tree, collapsed
+  // once up front); current_ indexes them (0 for a single tree).
+  std::vector<FlatBvh> setTrees_;
+  std::vector<TimeRange> setRanges_;
+  uint32_t current_ = 0;
+  std::vector<std::shared_ptr<WideTree<4>>> setWide4_;
+  std::vector<std::shared_ptr<WideTree<8>>> setWide8_;
+};
+
+}  // namespace tsah

@@ -1,0 +1,78 @@
+// The one dispatch point of the wide SIMD kernels: which instruction sets this build has and the
+// processor runs (__builtin_cpu_supports), and their kernel tables.
+#include "tsah/layout/wide_traversal.hpp"
+
+#include "tsah/base/error.hpp"
+#include "layout/wide_kernels.hpp"
+
+namespace tsah {
+
+namespace {
+
+struct KernelTables {
+  bool supported[3] = {false, false, false};
+  WideKernels table[3];
+
+  KernelTables() {
+#if TSAH_HAVE_SSE_KERNELS
+    table[0] = detail::sseKernels();
+    supported[0] = true;  // SSE2 is part of x86-64
+#endif
+#if TSAH_HAVE_AVX2_KERNELS
+    table[1] = detail::avx2Kernels();
+    __builtin_cpu_init();
+    supported[1] = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+#endif
+#if TSAH_HAVE_AVX512_KERNELS
+    table[2] = detail::avx512Kernels();
+    supported[2] = __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+                   __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512bw") && supported[1];
+#endif
+  }
+};
+
+const KernelTables& tables() {
+  static const KernelTables t;
+  return t;
+}
+
+}  // namespace
+
+const char* isaName(SimdIsa isa) {
+  switch (isa) {
+    case SimdIsa::Sse: return "sse";
+    case SimdIsa::Avx2: return "avx2";
+    case SimdIsa::Avx512: return "avx512";
+  }
+  return "?";
+}
+
+std::optional<SimdIsa> parseIsa(const std::string& name) {
+  for (SimdIsa isa : {SimdIsa::Sse, SimdIsa::Avx2, SimdIsa::Avx512})
+    if (name == isaName(isa)) return isa;
+  return std::nullopt;
+}
+
+bool isaSupported(SimdIsa isa) { return tables().supported[static_cast<int>(isa)]; }
+
+std::vector<SimdIsa> supportedIsas() {
+  std::vector<SimdIsa> out;
+  for (SimdIsa isa : {SimdIsa::Sse, SimdIsa::Avx2, SimdIsa::Avx512})
+    if (isaSupported(isa)) out.push_back(isa);
+  return out;
+}
+
+SimdIsa bestIsa() {
+  const auto all = supportedIsas();
+  if (all.empty()) throw tsah::Error("wide traversal: this build has no SIMD kernels for this processor");
+  return all.back();
+}
+
+const WideKernels& wideKernels(SimdIsa isa) {
+  if (!isaSupported(isa))
+    throw tsah::Error(std::string("wide traversal: the ") + isaName(isa) +
+                      " kernels are not in this build or this processor does not run them");
+  return tables().table[static_cast<int>(isa)];
+}
+
+}  // namespace tsah

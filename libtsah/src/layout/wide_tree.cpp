@@ -1,0 +1,167 @@
+#include "tsah/layout/wide_tree.hpp"
+
+#include <cstring>
+
+#include "tsah/base/error.hpp"
+#include "tsah/layout/flat_bvh.hpp"
+#include "layout/refit_plan.hpp"
+
+namespace tsah {
+
+namespace {
+
+template <uint32_t N>
+void clearNode(WideSoaNode<N>& node) {
+  for (uint32_t c = 0; c < N; ++c) {
+    node.setChildBox(c, Aabb{});  // the empty box: never entered (wide_layout.hpp)
+    node.ref[c] = 0;
+    node.count[c] = 0;
+  }
+}
+
+// An unused slot: ref 0 (the root, never anyone's child) with no triangles.
+template <uint32_t N>
+bool usedSlot(const WideSoaNode<N>& node, uint32_t c) {
+  return node.ref[c] != 0 || node.count[c] != 0;
+}
+
+}  // namespace
+
+template <uint32_t N>
+WideTree<N>::WideTree(const WideBvh& w, std::span<const uint32_t> indices, uint32_t threads, SimdIsa isa) {
+  if constexpr (N == 4)
+    woopRows_ = wideKernels(isa).woopRows4;
+  else
+    woopRows_ = wideKernels(isa).woopRows8;
+  if (w.width > N)
+    throw tsah::Error("wide tree: a " + std::to_string(w.width) + "-wide topology does not fit " + std::to_string(N) +
+                      "-wide nodes");
+  if (auto problem = validateWide(w)) throw tsah::Error("wide tree: invalid topology: " + *problem);
+  depth_ = w.depth();
+  if (wideStackNeed<N>(depth_) > kWideStackSize)
+    throw tsah::Error("wide tree: depth " + std::to_string(depth_) + " exceeds the traversal stack");
+  triIndex_ = w.primIds;
+  slotVertices_ = slotVertexIndices(triIndex_, indices, "wide tree");
+  // Packets of a leaf over slots [first, first + count): lane l of packet p holds slot first + p*N + l.
+  auto addLeaf = [&](uint32_t first, uint32_t count) {
+    const auto packet = static_cast<uint32_t>(packets_.size());
+    for (uint32_t p = 0; p < packetCount<N>(count); ++p) {
+      WoopPacket<N> pk;
+      std::memset(&pk, 0, sizeof pk);
+      for (uint32_t lane = 0; lane < N; ++lane) pk.slot[lane] = p * N + lane < count ? first + p * N + lane : first;
+      packets_.push_back(pk);
+      packetSlots_.push_back(first + p * N);
+    }
+    return makeLeafRef(packet);
+  };
+  if (isLeafRef(w.rootRef)) {
+    rootRef_ = addLeaf(0, w.rootCount);
+    rootCount_ = w.rootCount;
+    return;
+  }
+  rootRef_ = 0;
+  nodes_.resize(w.nodeCount());
+  for (uint32_t n = 0; n < w.nodeCount(); ++n) {
+    WideSoaNode<N>& node = nodes_[n];
+    clearNode(node);
+    for (uint32_t c = 0; c < w.nodes[n].childCount; ++c) {
+      const WideChild& child = w.children[w.nodes[n].firstChild + c];
+      node.ref[c] = child.isLeaf() ? addLeaf(child.firstPrim(), child.count) : child.ref;
+      node.count[c] = child.isLeaf() ? child.count : 0;
+    }
+  }
+  detail::planParallelRefit(
+      wideSubtreeEnds(w), threads,
+      [&](uint32_t i, auto push) {
+        for (uint32_t c = 0; c < N; ++c)
+          if (usedSlot(nodes_[i], c) && !isLeafRef(nodes_[i].ref[c])) push(static_cast<uint32_t>(nodes_[i].ref[c]));
+      },
+      subtreeTasks_, topNodes_, 64 / N);  // a wide node: about N / 2 binary nodes' triangles and boxes
+}
+
+template <uint32_t N>
+Aabb WideTree<N>::refitLeaf(uint32_t firstPacket, uint32_t count, const float* positions) {
+  Aabb box;
+  for (uint32_t first = 0; first < count; first += N) {
+    const uint32_t packet = firstPacket + first / N;
+    const uint32_t lanes = count - first < N ? count - first : N;
+    Aabb packetBox;  // rows and box of all lanes at once, in SIMD
+    woopRows_(positions, slotVertices_.data() + 3 * std::size_t(packetSlots_[packet]), lanes, packets_[packet],
+              packetBox);
+    box.extend(packetBox);
+  }
+  return box;
+}
+
+namespace {
+
+// The union of a node's children (unused slots hold the empty box), lane by lane.
+template <uint32_t N>
+Aabb nodeBounds(const WideSoaNode<N>& node) {
+  float b[6];
+  for (int r = 0; r < 3; ++r) {
+    float lo = node.box[r][0], hi = node.box[r + 3][0];
+    for (uint32_t c = 1; c < N; ++c) {
+      lo = node.box[r][c] < lo ? node.box[r][c] : lo;
+      hi = node.box[r + 3][c] > hi ? node.box[r + 3][c] : hi;
+    }
+    b[r] = lo;
+    b[r + 3] = hi;
+  }
+  Aabb box;
+  box.lo = {b[0], b[1], b[2]};
+  box.hi = {b[3], b[4], b[5]};
+  return box;
+}
+
+}  // namespace
+
+template <uint32_t N>
+void WideTree<N>::refitLeaves(uint32_t i, const float* positions) {
+  WideSoaNode<N>& node = nodes_[i];
+  for (uint32_t c = 0; c < N && usedSlot(node, c); ++c)
+    if (isLeafRef(node.ref[c])) node.setChildBox(c, refitLeaf(leafFirstSlot(node.ref[c]), node.count[c], positions));
+}
+
+template <uint32_t N>
+void WideTree<N>::refitInterior(uint32_t i) {
+  WideSoaNode<N>& node = nodes_[i];
+  for (uint32_t c = 0; c < N && usedSlot(node, c); ++c)
+    if (!isLeafRef(node.ref[c])) node.setChildBox(c, nodeBounds(nodes_[static_cast<uint32_t>(node.ref[c])]));
+}
+
+template <uint32_t N>
+void WideTree<N>::refit(const float* positions, const ParallelFor& parallelFor) {
+  if (isLeafRef(rootRef_)) {
+    rootBox_ = refitLeaf(leafFirstSlot(rootRef_), rootCount_, positions);
+    return;
+  }
+  parallelFor(subtreeTasks_.size(), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t t = begin; t < end; ++t) {
+      const auto [root, stop] = subtreeTasks_[t];
+      for (uint32_t i = root; i < stop; ++i) refitLeaves(i, positions);  // packets in memory order
+      for (uint32_t i = stop; i-- > root;) refitInterior(i);  // children (larger indices) first
+    }
+  });
+  for (uint32_t i : topNodes_) refitLeaves(i, positions), refitInterior(i);
+  rootBox_ = nodeBounds(nodes_[0]);
+}
+
+template <uint32_t N>
+WideView<N> WideTree<N>::view(const uint32_t* indices, const float* positions) const {
+  WideView<N> v;
+  v.nodes = nodes_.data();
+  v.packets = packets_.data();
+  v.triIndex = triIndex_.data();
+  v.indices = indices;
+  v.positions = positions;
+  v.rootRef = rootRef_;
+  v.rootCount = rootCount_;
+  v.rootBox = rootBox_;
+  return v;
+}
+
+template class WideTree<4>;
+template class WideTree<8>;
+
+}  // namespace tsah

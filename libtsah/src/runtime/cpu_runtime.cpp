@@ -1,0 +1,348 @@
+#include "tsah/runtime/cpu_runtime.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <chrono>
+#include <thread>
+
+#include "tsah/base/error.hpp"
+#include "tsah/core/cost.hpp"
+#include "layout/refit_plan.hpp"
+
+namespace tsah {
+
+namespace {
+
+double msSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+// The best supported kernels with nodes of this width, or null.
+const WideKernels* kernelsFor(CpuLayout layout, std::optional<SimdIsa> isa) {
+  const std::vector<SimdIsa> candidates = isa ? std::vector<SimdIsa>{*isa} : supportedIsas();
+  for (auto it = candidates.rbegin(); it != candidates.rend(); ++it) {
+    if (!isaSupported(*it)) continue;
+    const WideKernels& k = wideKernels(*it);
+    if (layout == CpuLayout::Bvh4 ? k.closest4 != nullptr : k.closest8 != nullptr) return &k;
+  }
+  return nullptr;
+}
+
+}  // namespace
+
+const char* layoutName(CpuLayout layout) {
+  switch (layout) {
+    case CpuLayout::Bvh2: return "bvh2";
+    case CpuLayout::Bvh4: return "bvh4";
+    case CpuLayout::Bvh8: return "bvh8";
+  }
+  return "?";
+}
+
+std::optional<CpuLayout> parseLayout(const std::string& name) {
+  for (CpuLayout l : {CpuLayout::Bvh2, CpuLayout::Bvh4, CpuLayout::Bvh8})
+    if (name == layoutName(l)) return l;
+  return std::nullopt;
+}
+
+bool layoutSupported(CpuLayout layout) {
+  return layout == CpuLayout::Bvh2 || kernelsFor(layout, std::nullopt) != nullptr;
+}
+
+CpuLayout fastestLayout() {
+  for (CpuLayout l : {CpuLayout::Bvh8, CpuLayout::Bvh4})
+    if (layoutSupported(l)) return l;
+  return CpuLayout::Bvh2;
+}
+
+struct CpuRuntime::Threads {
+  explicit Threads(uint32_t n) : count(n), arena(static_cast<int>(n)) {}
+  uint32_t count;
+  tbb::task_arena arena;
+};
+
+CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint32_t vertexCount)
+    : CpuRuntime(tree, std::move(indices), vertexCount, Config{}) {}
+
+CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint32_t vertexCount, Config config)
+    : indices_(std::move(indices)), vertexCount_(vertexCount) {
+  // More workers than hardware threads only oversubscribe (and make TBB warn): cap the count.
+  const uint32_t hardware = std::max(1u, std::thread::hardware_concurrency());
+  const uint32_t threads = config.threads == 0 ? hardware : std::min(config.threads, hardware);
+  threads_ = std::make_unique<Threads>(threads);
+  if (indices_.size() % 3 != 0) throw tsah::Error("runtime: the index array is not a multiple of 3");
+  for (uint32_t v : indices_)
+    if (v >= vertexCount_) throw tsah::Error("runtime: a triangle refers to a vertex out of range");
+  setTree(topologyOf(tree));
+  positions_.assign(std::size_t(vertexCount_) * 3, 0.0f);
+  info_.layout = config.layout;
+  if (config.layout == CpuLayout::Bvh2) {
+    info_.interiorNodes = tree_.interiorCount;
+    info_.leaves = tree_.leafCount;
+    info_.depth = tree_.depth;
+    const std::vector<double> costs = frameCosts(unflattenBvh(tree), config.collapse.cost);
+    info_.binaryCost = info_.layoutCost = temporalCost(costs, config.collapse.k);
+    return;
+  }
+  kernels_ = kernelsFor(config.layout, config.isa);
+  if (!kernels_)
+    throw tsah::Error(std::string("runtime: no ") + layoutName(config.layout) + " kernels" +
+                      (config.isa ? std::string(" for ") + isaName(*config.isa) : std::string()) +
+                      " run on this processor (bvh8 needs AVX2)");
+  info_.isa = kernels_->isa;
+  collapse_ = config.collapse;
+  setWideTree(unflattenBvh(tree), true);  // every frame block of the tree
+}
+
+void CpuRuntime::setWideTree(const Bvh& binary, bool reportCosts) {
+  WideCollapser::Config c = collapse_;
+  c.width = static_cast<uint32_t>(info_.layout);
+  c.leafPacket = c.width;  // the kernels test a leaf's triangles c.width at a time
+  const WideBvh w = WideCollapser(c).collapse(binary);
+  info_.binaryCost = reportCosts ? temporalCost(frameCosts(binary, c.cost), c.k) : 0.0;
+  info_.layoutCost = reportCosts ? temporalCost(wideFrameCosts(w, c.cost), c.k) : 0.0;
+  info_.interiorNodes = w.nodeCount();
+  info_.leaves = w.leafCount();
+  info_.depth = w.depth();
+  if (info_.layout == CpuLayout::Bvh4)
+    wide4_ = std::make_shared<WideTree<4>>(w, indices_, threads_->count, info_.isa);
+  else
+    wide8_ = std::make_shared<WideTree<8>>(w, indices_, threads_->count, info_.isa);
+}
+
+namespace {
+
+const FlatBvh& firstTree(const TreeSet& set) {
+  if (set.trees.empty() || set.ranges.size() != set.trees.size())
+    throw tsah::Error("runtime: the tree set holds no trees (or not one time range per tree)");
+  return set.trees.front();
+}
+
+}  // namespace
+
+CpuRuntime::CpuRuntime(const TreeSet& set, std::vector<uint32_t> indices, uint32_t vertexCount, Config config)
+    : CpuRuntime(firstTree(set), std::move(indices), vertexCount, config) {
+  if (set.size() == 1) return;
+  for (const FlatBvh& tree : set.trees) setTrees_.push_back(topologyOf(tree));
+  setRanges_ = set.ranges;
+  if (info_.layout == CpuLayout::Bvh2) return;
+  // Collapse every tree of the set now (from all its frame blocks), so a switch costs no collapse.
+  const LayoutInfo first = info_;
+  for (uint32_t s = 0; s < set.size(); ++s) {
+    if (s > 0) setWideTree(unflattenBvh(set.trees[s]), false);
+    setWide4_.push_back(wide4_);
+    setWide8_.push_back(wide8_);
+  }
+  wide4_ = setWide4_[0];
+  wide8_ = setWide8_[0];
+  info_ = first;
+}
+
+FlatBvh CpuRuntime::topologyOf(const FlatBvh& tree) const {
+  return runtimeTopology(tree, triangleCount(), kTraversalStackSize, "runtime");
+}
+
+uint32_t CpuRuntime::selectTreeAt(double time) {
+  if (setTrees_.empty()) return 0;
+  const uint32_t index = treeIndexAt(setRanges_, time);
+  if (index != current_) {
+    setTree(setTrees_[index]);
+    if (!setWide4_.empty()) {
+      wide4_ = setWide4_[index];
+      wide8_ = setWide8_[index];
+    }
+    current_ = index;
+  }
+  return index;
+}
+
+CpuRuntime::~CpuRuntime() = default;
+
+uint32_t CpuRuntime::threadCount() const { return threads_->count; }
+
+void CpuRuntime::parallelFor(std::size_t n, std::size_t grain,
+                             const std::function<void(std::size_t, std::size_t)>& body) const {
+  if (n == 0) return;
+  threads_->arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, std::max<std::size_t>(1, grain)),
+                      [&](const tbb::blocked_range<std::size_t>& r) { body(r.begin(), r.end()); });
+  });
+}
+
+void CpuRuntime::setTree(FlatBvh tree) {
+  if (tree.depth > kTraversalStackSize)
+    throw tsah::Error("runtime: tree depth " + std::to_string(tree.depth) + " exceeds the traversal stack of " +
+                      std::to_string(kTraversalStackSize));
+  tree_ = std::move(tree);
+  woop_.resize(tree_.triangleCount());
+
+  if (tree_.interiorCount == 0) {
+    subtreeTasks_.clear();
+    topNodes_.clear();
+    return;
+  }
+  detail::planParallelRefit(
+      subtreeEnds(tree_), threads_->count,
+      [&](uint32_t i, auto push) {
+        for (int32_t ref : {tree_.nodes[i].ref0, tree_.nodes[i].ref1})
+          if (!isLeafRef(ref)) push(static_cast<uint32_t>(ref));
+      },
+      subtreeTasks_, topNodes_);
+}
+
+void CpuRuntime::setPositions(std::span<const float> positions) {
+  if (positions.size() != std::size_t(vertexCount_) * 3)
+    throw tsah::Error("runtime: got " + std::to_string(positions.size()) + " coordinates, expected " +
+                      std::to_string(std::size_t(vertexCount_) * 3));
+  positions_.assign(positions.begin(), positions.end());
+}
+
+Aabb CpuRuntime::refitLeaf(uint32_t firstSlot, uint32_t count) {
+  Aabb box;
+  const float* p = positions_.data();
+  for (uint32_t s = firstSlot; s < firstSlot + count; ++s) {
+    const uint32_t* tri = indices_.data() + 3 * std::size_t(tree_.triIndex[s]);
+    const Vec3 v0{p[3 * tri[0]], p[3 * tri[0] + 1], p[3 * tri[0] + 2]};
+    const Vec3 v1{p[3 * tri[1]], p[3 * tri[1] + 1], p[3 * tri[1] + 2]};
+    const Vec3 v2{p[3 * tri[2]], p[3 * tri[2] + 1], p[3 * tri[2] + 2]};
+    woop_[s] = makeWoopTriangle(v0, v1, v2);
+    box.extend(v0);
+    box.extend(v1);
+    box.extend(v2);
+  }
+  return box;
+}
+
+void CpuRuntime::refitNode(uint32_t i) {
+  GpuBvhNode& node = tree_.nodes[i];
+  for (int c = 0; c < 2; ++c) {
+    const int32_t ref = node.childRef(c);
+    const Aabb box = isLeafRef(ref) ? refitLeaf(leafFirstSlot(ref), node.childCount(c))
+                                    : tree_.nodes[static_cast<uint32_t>(ref)].bounds();
+    node.setChildBox(c, box);
+  }
+}
+
+void CpuRuntime::refitAndWoop() {
+  const auto parallel = [this](std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) {
+    parallelFor(n, 1, body);
+  };
+  if (wide4_) {
+    wide4_->refit(positions_.data(), parallel);
+    view4_ = wide4_->view(indices_.data(), positions_.data());
+    return;
+  }
+  if (wide8_) {
+    wide8_->refit(positions_.data(), parallel);
+    view8_ = wide8_->view(indices_.data(), positions_.data());
+    return;
+  }
+  if (tree_.interiorCount == 0) {
+    tree_.rootBoxes[0] = refitLeaf(0, tree_.rootCount);
+    return;
+  }
+  parallelFor(subtreeTasks_.size(), 1, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t t = begin; t < end; ++t) {
+      const auto [root, stop] = subtreeTasks_[t];
+      for (uint32_t i = stop; i-- > root;) refitNode(i);  // children (larger indices) first
+    }
+  });
+  for (uint32_t i : topNodes_) refitNode(i);
+  tree_.rootBoxes[0] = tree_.nodes[0].bounds();
+}
+
+void CpuRuntime::update(std::span<const float> positions) {
+  setPositions(positions);
+  refitAndWoop();
+}
+
+CpuRuntime::RebuildTimings CpuRuntime::rebuild(std::span<const float> positions, const TreeBuilder& builder) {
+  RebuildTimings timings;
+  setPositions(positions);
+  auto start = std::chrono::steady_clock::now();
+  std::vector<Aabb> boxes(triangleCount());
+  parallelFor(boxes.size(), 4096, [&](std::size_t begin, std::size_t end) {
+    triangleBoxes(std::span<const uint32_t>(indices_).subspan(3 * begin, 3 * (end - begin)), positions_,
+                  std::span<Aabb>(boxes).subspan(begin, end - begin));
+  });
+  timings.boxesMs = msSince(start);
+  start = std::chrono::steady_clock::now();
+  Bvh bvh;
+  threads_->arena.execute([&] { bvh = builder(boxes); });  // a parallel builder uses our threads
+  timings.buildMs = msSince(start);
+  start = std::chrono::steady_clock::now();
+  if (bvh.primCount() != triangleCount())
+    throw tsah::Error("runtime: the rebuilt tree holds " + std::to_string(bvh.primCount()) + " triangles, expected " +
+                      std::to_string(triangleCount()));
+  FlatBvh flat = flattenBvh(bvh);
+  if (flat.frameCount != 1) {  // keep frame 0 only
+    flat.nodes.resize(flat.interiorCount);
+    flat.rootBoxes.resize(1);
+    flat.frameCount = 1;
+  }
+  setTree(std::move(flat));
+  setTrees_.clear();  // the rebuilt tree replaces the set
+  setWide4_.clear();
+  setWide8_.clear();
+  current_ = 0;
+  if (info_.layout != CpuLayout::Bvh2) {
+    collapse_.k = 0;  // one frame: its weight is 1 whatever k is
+    setWideTree(bvh, false);
+  } else {
+    info_.interiorNodes = tree_.interiorCount;
+    info_.leaves = tree_.leafCount;
+    info_.depth = tree_.depth;
+    info_.binaryCost = info_.layoutCost = 0.0;
+  }
+  timings.flattenMs = msSince(start);
+  start = std::chrono::steady_clock::now();
+  refitAndWoop();
+  timings.refitMs = msSince(start);
+  return timings;
+}
+
+Hit CpuRuntime::closestHit(const Ray& ray) const {
+  if (wide8_) return kernels_->closest8(view8_, ray);
+  if (wide4_) return kernels_->closest4(view4_, ray);
+  return tsah::closestHit(binaryView(), ray);
+}
+
+bool CpuRuntime::anyHit(const Ray& ray, AnyHitOrder order) const {
+  if (wide8_) return kernels_->any8(view8_, ray, order);
+  if (wide4_) return kernels_->any4(view4_, ray, order);
+  return tsah::anyHit(binaryView(), ray);
+}
+
+const FlatBvh& CpuRuntime::tree() const {
+  if (info_.layout != CpuLayout::Bvh2) throw tsah::Error("runtime: the binary tree is not kept up to date in a wide layout");
+  return tree_;
+}
+
+BvhView CpuRuntime::view() const {
+  if (info_.layout != CpuLayout::Bvh2) throw tsah::Error("runtime: the binary view is not kept up to date in a wide layout");
+  return binaryView();
+}
+
+BvhView CpuRuntime::binaryView() const {
+  BvhView v;
+  v.nodes = tree_.nodes.data();
+  v.woop = woop_.data();
+  v.triIndex = tree_.triIndex.data();
+  v.indices = indices_.data();
+  v.positions = positions_.data();
+  v.rootRef = tree_.rootRef;
+  v.rootCount = tree_.rootCount;
+  v.rootBox = tree_.rootBoxes[0];
+  return v;
+}
+
+Aabb CpuRuntime::bounds() const {
+  if (wide4_) return wide4_->bounds();
+  if (wide8_) return wide8_->bounds();
+  return tree_.rootBoxes[0];
+}
+
+}  // namespace tsah
