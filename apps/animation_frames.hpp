@@ -6,7 +6,6 @@
 namespace tsah::cli {
 
 using tsah::animationFrames;
-using tsah::parseSelection;
 using tsah::animationTimeline;
 
 }  // namespace tsah::cli

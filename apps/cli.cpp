@@ -99,12 +99,12 @@ void setupAllCommands(CLI::App& app) {
   hardenNumericOptions(app);
 }
 
-void checkLayoutForDevice(const std::string& layout, const std::string& device) {
-  const bool gpu = device == "cuda";
-  const bool ok = layout == "auto" || layout == "bvh2" ||
-                  (gpu ? layout == "cwbvh" : layout == "bvh4" || layout == "bvh8");
+void checkLayoutForDevice(Layout layout, Device device) {
+  const bool gpu = device == Device::Cuda;
+  const bool ok = layout == Layout::Auto || layout == Layout::Bvh2 ||
+                  (gpu ? layout == Layout::Cwbvh : layout == Layout::Bvh4 || layout == Layout::Bvh8);
   if (!ok)
-    throw UsageError("--layout " + layout + " is not a layout of --device " + device + " (" +
+    throw UsageError(std::string("--layout ") + name(layout) + " is not a layout of --device " + name(device) + " (" +
                      (gpu ? "auto, bvh2 or cwbvh" : "auto, bvh2, bvh4 or bvh8") + ")");
 }
 

@@ -4,11 +4,15 @@
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <functional>
+#include <initializer_list>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "anim/animation.hpp"
 #include "anim/load.hpp"
+#include "tsah/base/error.hpp"
+#include "tsah/core/kinds.hpp"
 
 namespace tsah::cli {
 
@@ -17,10 +21,11 @@ namespace tsah::cli {
 inline constexpr int kExitFailure = 1;
 inline constexpr int kExitUsage = 2;
 
-// A usage error: main prints "tsah: <message>" and exits with kExitUsage.
-class UsageError : public std::runtime_error {
+// A usage error found by the command line's own checks: main prints "tsah: <message>" and exits
+// with kExitUsage.
+class UsageError : public ConfigError {
  public:
-  using std::runtime_error::runtime_error;
+  using ConfigError::ConfigError;
 };
 
 using CommandSetup = std::function<void(CLI::App& app)>;
@@ -34,9 +39,24 @@ void hardenNumericOptions(CLI::App& app);
 // A CLI11 message as one line with compact numbers ("0 to 1", not "0.000000 to 1.000000").
 std::string compactNumbers(const std::string& text);
 
-// --layout of trace and bench for --device (cpu or cuda): auto, or a layout that device traces
-// (cpu: bvh2, bvh4, bvh8; cuda: bvh2, cwbvh). Throws UsageError naming the device's layouts otherwise.
-void checkLayoutForDevice(const std::string& layout, const std::string& device);
+// An option naming a value of E (tsah/core/kinds.hpp), one of `allowed`: CLI11 refuses any other
+// name ("--flag: x not in {a,b}", exit 2) and the value is parsed once, into `target`, by
+// tsah::parse. The help shows `target`'s name as the default.
+template <typename E>
+CLI::Option* addChoice(CLI::App& sub, const std::string& flag, E& target, const std::string& help,
+                       std::initializer_list<E> allowed) {
+  std::vector<std::string> names;
+  for (E value : allowed) names.emplace_back(tsah::name(value));
+  return sub
+      .add_option_function<std::string>(
+          flag, [&target](const std::string& text) { target = tsah::parse<E>(text); }, help)
+      ->check(CLI::IsMember(names))
+      ->default_str(tsah::name(target));
+}
+
+// --layout of trace and bench for --device: auto, or a layout that device traces (cpu: bvh2,
+// bvh4, bvh8; cuda: bvh2, cwbvh). Throws UsageError naming the device's layouts otherwise.
+void checkLayoutForDevice(Layout layout, Device device);
 
 // True when stderr is a terminal: progress output is shown only then.
 bool progressEnabled();

@@ -23,6 +23,7 @@
 #include "bench/scaling.hpp"
 #include "anim/scene.hpp"
 #include "cli.hpp"
+#include "frame_runtime.hpp"
 #if TSAH_HAVE_CUDA
 #include "tsah_cuda/device.hpp"
 #endif
@@ -161,7 +162,7 @@ void run(Options opt, CLI::App* sub) {
   if (opt.reportOnly) return reportOnly(opt);
   BenchOptions& b = opt.bench;
   b.embree = !opt.noEmbree;
-  if (b.embreeOnly && (opt.noEmbree || b.device != "cpu"))
+  if (b.embreeOnly && (opt.noEmbree || b.device != tsah::Device::Cpu))
     throw UsageError("--embree-only runs the CPU comparison with Embree: not with --no-embree or --device cuda");
   if (b.embreeOnly && !embreeAvailable()) throw UsageError("--embree-only: " + embreeStatus());
   tsah::cli::checkLayoutForDevice(b.layout, b.device);
@@ -178,12 +179,12 @@ void run(Options opt, CLI::App* sub) {
     if (!given("--height")) b.height = 144;
   }
   const auto requireGpu = [](const std::string& option) {
-    if (gpuAvailable()) return;
+    if (tsah::cli::gpuAvailable()) return;
     throw UsageError(option + (versionsJson()["cuda_runtime_built"].get<bool>()
                                    ? ": no CUDA device is available on this machine"
                                    : ": this tsah was built without the CUDA runtime"));
   };
-  if (b.device == "cuda") requireGpu("--device cuda");
+  if (b.device == tsah::Device::Cuda) requireGpu("--device cuda");
   if (b.optimizer == "cuda") requireGpu("--optimizer cuda");
   ProgressLog log;
   const fs::path out = opt.out;
@@ -258,7 +259,7 @@ void run(Options opt, CLI::App* sub) {
   results["tool"] = "tsah bench";
   results["command"] = commandLine();
   results["started"] = nowText();
-  results["machine"] = machineJson(b.device == "cuda");
+  results["machine"] = machineJson(b.device == tsah::Device::Cuda);
   json versions = versionsJson();
   versions["gnuplot"] = gnuplotVersion();
   results["versions"] = versions;
@@ -280,7 +281,7 @@ void run(Options opt, CLI::App* sub) {
   for (const SkippedEntry& s : scan.skipped) results["skipped"].push_back({{"path", s.path}, {"reason", s.reason}});
 
   const auto started = std::chrono::steady_clock::now();
-  log("benchmarking " + std::to_string(scenes.size()) + " scene(s) on the " + b.device + " into " + out.string(), false);
+  log("benchmarking " + std::to_string(scenes.size()) + " scene(s) on the " + std::string(tsah::name(b.device)) + " into " + out.string(), false);
   for (const SceneSource& scene : scenes) {
     const auto start = std::chrono::steady_clock::now();
     try {
@@ -320,9 +321,8 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
                   "animation in the data folder");
   sub->add_option("--data", opt->data,
                   "Data folder (default: $TSAH_DATA_DIR, else ../shared/data next to the source checkout)");
-  sub->add_option("--device", b.device, "Where the runtime part runs: cpu, or cuda (the GPU runtime)")
-      ->check(CLI::IsMember({"cpu", "cuda"}))
-      ->capture_default_str();
+  tsah::cli::addChoice(*sub, "--device", b.device, "Where the runtime part runs: cpu, or cuda (the GPU runtime)",
+                       {tsah::Device::Cpu, tsah::Device::Cuda});
   sub->add_option("--out", opt->out, "Output folder: results.json, results.md, plots/, images/")->capture_default_str();
   sub->add_option("--scene-dir", opt->sceneDir,
                   "Also bench every scene file (*.json, docs/scenes.md) of this folder, e.g. samples/scenes/bench; "
@@ -344,9 +344,9 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
   sub->add_option("--ao", b.aoRays, "Ambient-occlusion rays per pixel")->check(CLI::Range(0u, 1024u))->capture_default_str();
   sub->add_option("--shadow", b.shadowRays, "Shadow rays per pixel")->check(CLI::Range(0u, 1024u))->capture_default_str();
   sub->add_flag("--ground", b.ground, "Add the analytic ground plane (the paper traces the meshes alone)");
-  sub->add_option("--max-leaf", b.maxLeaf, "Largest leaf of every tree")->check(CLI::Range(1u, 256u))->capture_default_str();
-  sub->add_option("--ct", b.ct, "Cost of traversing a node")->check(CLI::PositiveNumber)->capture_default_str();
-  sub->add_option("--ci", b.ci, "Cost of intersecting a triangle")->check(CLI::PositiveNumber)->capture_default_str();
+  sub->add_option("--max-leaf", b.objective.maxLeafSize, "Largest leaf of every tree")->check(CLI::Range(1u, 256u))->capture_default_str();
+  sub->add_option("--ct", b.objective.cost.ct, "Cost of traversing a node")->check(CLI::PositiveNumber)->capture_default_str();
+  sub->add_option("--ci", b.objective.cost.ci, "Cost of intersecting a triangle")->check(CLI::PositiveNumber)->capture_default_str();
   sub->add_option("--segments", b.segments,
                   "K of the segmented T-SAH: K equal-time parts and the count mode with K trees (1: skip)")
       ->check(CLI::Range(1u, 64u))
@@ -366,13 +366,12 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
   sub->add_flag("--embree-only", b.embreeOnly,
                 "Only the T-SAH tree and the toolkit (bvh2/bvh4/bvh8) vs Embree comparison: no Tables 1 and 2, "
                 "no convergence runs, no segments");
-  sub->add_option("--layout", b.layout,
-                  "Tree layout of Table 2: auto (the device's fastest: on the CPU the widest the processor's SIMD "
+  tsah::cli::addChoice(*sub, "--layout", b.layout,
+                       "Tree layout of Table 2: auto (the device's fastest: on the CPU the widest the processor's SIMD "
                   "kernels support, also the default of the Embree comparison), CPU bvh2, bvh4 or bvh8, cuda bvh2 "
                   "or cwbvh (compressed 8-wide: the refitted trees and the LBVH / HLBVH-SAH rebuilds, whose "
-                  "conversion on the GPU counts in their update)")
-      ->check(CLI::IsMember({"auto", "bvh2", "bvh4", "bvh8", "cwbvh"}))
-      ->capture_default_str();
+                  "conversion on the GPU counts in their update)",
+                       {tsah::Layout::Auto, tsah::Layout::Bvh2, tsah::Layout::Bvh4, tsah::Layout::Bvh8, tsah::Layout::Cwbvh});
   sub->add_flag("--no-convergence", opt->noConvergence, "Skip the random and batch-sort optimizations of the convergence plot");
   sub->add_option("--note", opt->notes,
                   "A note for results.md (repeatable), e.g. what else ran on the machine; with --report-only it is "

@@ -32,7 +32,7 @@ std::vector<tsah::MethodSpec> parseMethods(const std::string& list, std::vector<
     if (name.empty()) continue;
     try {
       methods.push_back(tsah::MethodSpec::parse(name));
-    } catch (const std::invalid_argument& e) {
+    } catch (const tsah::ConfigError& e) {
       throw tsah::cli::UsageError(std::string("--methods: ") + e.what());
     }
     names.push_back(name);
@@ -61,9 +61,9 @@ void run(const Options& opt) {
   j["triangles"] = a.triangleCount();
   j["frames"] = frames;
   j["eval_frames"] = evalFrames;
-  j["max_leaf"] = opt.tree.maxLeaf;
-  j["ct"] = opt.tree.ct;
-  j["ci"] = opt.tree.ci;
+  j["max_leaf"] = opt.tree.objective.maxLeafSize;
+  j["ct"] = opt.tree.objective.cost.ct;
+  j["ci"] = opt.tree.objective.cost.ci;
   j["methods"] = nlohmann::json::array();
   for (std::size_t m = 0; m < results.size(); ++m)
     j["methods"].push_back({{"name", names[m]},
@@ -77,7 +77,7 @@ void run(const Options& opt) {
     return;
   }
   std::printf("%s: %u triangles, %u representative frames, %u evaluation frames, cT=%g cI=%g, max leaf %u\n",
-              opt.input.c_str(), a.triangleCount(), frames, evalFrames, double(opt.tree.ct), double(opt.tree.ci), opt.tree.maxLeaf);
+              opt.input.c_str(), a.triangleCount(), frames, evalFrames, double(opt.tree.objective.cost.ct), double(opt.tree.objective.cost.ci), opt.tree.objective.maxLeafSize);
   std::printf("%-10s %10s %10s %10s\n", "method", "build [s]", "cost", "max cost");
   for (std::size_t m = 0; m < results.size(); ++m)
     std::printf("%-10s %10.2f %10.2f %10.2f\n", names[m].c_str(), results[m].buildSeconds, results[m].average,

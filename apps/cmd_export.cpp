@@ -222,9 +222,9 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
     const uint32_t part = tsah::treeIndexAt(set.ranges, time);
     const tsah::BvhBuildInfo& info = set.builds[part];
     tsah::CpuRuntime::Config config(opt->threads);
-    config.layout = *tsah::parseLayout(opt->layout);
+    config.layout = tsah::parse<tsah::Layout>(opt->layout);
     config.isa = tsah::SimdIsa::Sse;  // the layout does not depend on the kernels; sse runs everywhere...
-    if (config.layout == tsah::CpuLayout::Bvh8) config.isa.reset();  // ...but has no 8-wide kernels
+    if (config.layout == tsah::Layout::Bvh8) config.isa.reset();  // ...but has no 8-wide kernels
     config.collapse = tsah::wideCollapseConfig(info.objective);
     // Only the part's tree: a runtime over the whole set would collapse every tree of it.
     tsah::CpuRuntime rt(set.trees[part], {a.indices().begin(), a.indices().end()}, a.vertexCount(), config);

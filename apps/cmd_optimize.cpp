@@ -231,7 +231,7 @@ void run(const Options& opt) {
   const double buildSeconds = info.buildSeconds;
 
   progress.message("evaluating " + std::to_string(evalFrames) + " frames");
-  const std::vector<double> perFrame = tsah::evaluateAnimation(bvh, a, evalFrames, {opt.tree.ct, opt.tree.ci}, opt.tree.threads);
+  const std::vector<double> perFrame = tsah::evaluateAnimation(bvh, a, evalFrames, opt.tree.objective.cost, opt.tree.threads);
   const auto [average, maximum] = averageAndMaximum(perFrame);
   tsah::saveBvhFile(opt.output, bvh, info);
 
@@ -240,8 +240,8 @@ void run(const Options& opt) {
   j["output"] = opt.output;
   j["method"] = info.method;
   j["k"] = info.objective.k;
-  j["optimizer"] = opt.tree.optimizer;
-  j["device"] = opt.tree.device;
+  j["optimizer"] = tsah::name(opt.tree.optimizer);
+  j["device"] = tsah::name(opt.tree.device);
   j["selection"] = info.selection;
   j["seed"] = opt.tree.seed;
   j["frames"] = frames;
@@ -250,7 +250,7 @@ void run(const Options& opt) {
   j["nodes"] = bvh.nodeCount();
   j["leaves"] = bvh.leafCount();
   j["depth"] = bvh.depth();
-  j["max_leaf"] = opt.tree.maxLeaf;
+  j["max_leaf"] = opt.tree.objective.maxLeafSize;
   j["build_s"] = buildSeconds;
   j["cost"] = {{"average", average}, {"maximum", maximum}, {"per_frame", perFrame}};
   if (method.method == tsah::Method::TSah) {
@@ -279,10 +279,10 @@ TSAH_REGISTER_COMMAND(40, [](CLI::App& app) {
   auto opt = std::make_shared<Options>();
   sub->add_option("INPUT", opt->input, "Animation or static mesh (any input `tsah info` reads)")->required();
   sub->add_option("-o,--output", opt->output, "Output .tbvh file")->required();
-  sub->add_option("--method", opt->tree.method, "tsah (one tree optimized for all frames), sah0 (frame 0, refit) or sahstar (best over time)")
-      ->check(CLI::IsMember({"tsah", "sah0", "sahstar"}))
-      ->capture_default_str();
-  sub->add_option("--k", opt->tree.k, "T-SAH exponent: 0 optimizes the average cost, larger values the worst frames")
+  tsah::cli::addChoice(*sub, "--method", opt->tree.method,
+                       "tsah (one tree optimized for all frames), sah0 (frame 0, refit) or sahstar (best over time)",
+                       {tsah::Method::TSah, tsah::Method::Sah0, tsah::Method::SahStar});
+  sub->add_option("--k", opt->tree.objective.k, "T-SAH exponent: 0 optimizes the average cost, larger values the worst frames")
       ->check(CLI::Range(0, 16))
       ->capture_default_str();
   tsah::cli::addTreeOptions(*sub, opt->tree, opt->evalFrames);

@@ -19,17 +19,13 @@
 #include "camera_file.hpp"
 #include "tsah/io/tree_set.hpp"
 #include "cli.hpp"
-#include "tsah/build/binned_sah_builder.hpp"
+#include "frame_runtime.hpp"
 #include "tsah/render/camera.hpp"
 #include "tsah/render/camera_path.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
-#include "tsah/optimize/leaf_collapser.hpp"
 #include "tsah/render/renderer.hpp"
-#include "tsah/build/sah_builder.hpp"
 #if TSAH_HAVE_CUDA
 #include "tsah_cuda/device.hpp"
-#include "tsah/layout/cwbvh_convert.hpp"
-#include "tsah_cuda/gpu_runtime.hpp"
 #endif
 
 namespace {
@@ -53,26 +49,18 @@ tsah::Vec3 parseVec3(const std::string& text, const std::string& option) {
 }
 
 struct TraceOptions {
-  std::string input, bvh, device = "cpu", out = "trace", camera, eye, lookAt, up = "0,1,0", rebuild = "none";
-  std::string layout = "auto", isa = "auto";  // tree layout (CPU or GPU) and the CPU's SIMD kernels
+  std::string input, bvh, out = "trace", camera, eye, lookAt, up = "0,1,0", rebuild = "none";
+  tsah::Device device = tsah::Device::Cpu;
+  tsah::Layout layout = tsah::Layout::Auto;  // tree layout (CPU or GPU)
+  std::string isa = "auto";                  // the CPU's SIMD kernels
   uint32_t frames = 0, width = 1024, height = 768, ao = 8, shadow = 2, threads = 0, seed = 1;
   float fov = 45.0f, aoDistance = 0.0f, aoFraction = 0.1f;
   bool json = false, noImages = false, noGround = false;
 };
 
-// Per-frame rebuild baselines: sweep and binned SAH run on the CPU, LBVH and HLBVH-SAH on the GPU.
-bool isCpuRebuild(const std::string& r) { return r == "sweep" || r == "binned"; }
-bool isGpuRebuild(const std::string& r) { return r == "lbvh" || r == "hlbvh-sah"; }
-
-void checkDeviceAndRebuild(const TraceOptions& opt) {
-  if (opt.device == "cpu" && isGpuRebuild(opt.rebuild))
-    throw UsageError("--rebuild " + opt.rebuild + " is a GPU rebuild: use it with --device cuda "
-                     "(the CPU rebuilds are sweep and binned)");
-  if (opt.device == "cuda" && isCpuRebuild(opt.rebuild))
-    throw UsageError("--rebuild " + opt.rebuild + " is a CPU rebuild: use it with --device cpu "
-                     "(the GPU rebuilds are lbvh and hlbvh-sah)");
+void checkDeviceAndLayout(const TraceOptions& opt) {
   tsah::cli::checkLayoutForDevice(opt.layout, opt.device);
-  if (opt.device != "cuda") return;
+  if (opt.device != tsah::Device::Cuda) return;
 #if TSAH_HAVE_CUDA
   if (!tsah::cuda::deviceAvailable())
     throw UsageError("no CUDA device found (no GPU, no NVIDIA driver, or CUDA_VISIBLE_DEVICES hides them); "
@@ -83,201 +71,11 @@ void checkDeviceAndRebuild(const TraceOptions& opt) {
 #endif
 }
 
-// What one frame's update cost: interpolation, refit (with the Woop triangles) or rebuild.
-struct FrameUpdate {
-  double interpolateMs = 0.0, refitMs = 0.0, buildMs = 0.0, updateMs = 0.0;
-};
-
-// The runtime the per-frame loop drives: bring the traced tree to time t (refit or rebuild), then
-// render the frame. The CPU times with the host's clock, the GPU with CUDA events (device time).
-class FrameRuntime {
- public:
-  virtual ~FrameRuntime() = default;
-  // Starts what the first timed frame must not pay for (worker threads; allocations, CUDA graph
-  // capture and module loading on the GPU).
-  virtual void warmUp(double time, const tsah::Camera& camera, const tsah::SceneLighting& lighting,
-                      const tsah::RenderSettings& settings) = 0;
-  virtual FrameUpdate update(double time) = 0;
-  // image == nullptr: the picture is not needed (--no-images).
-  virtual tsah::RenderStats render(const tsah::Camera& camera, const tsah::SceneLighting& lighting,
-                                   const tsah::RenderSettings& settings, tsah::Image* image) = 0;
-  virtual uint32_t currentTree() const = 0;           // of a tree set: the one the last update refitted
-  virtual std::string summary() const = 0;            // for the text output's first line
-  virtual void describe(nlohmann::json& out) const = 0;  // "device" and what else identifies it
-};
-
-class CpuFrameRuntime final : public FrameRuntime {
- public:
-  CpuFrameRuntime(const tsah::TreeSet& trees, const anim::Animation& animation, const tsah::CpuRuntime::Config& config,
-                  tsah::CpuRuntime::TreeBuilder builder)
-      : animation_(animation),
-        runtime_(trees, {animation.indices().begin(), animation.indices().end()}, animation.vertexCount(), config),
-        builder_(std::move(builder)),
-        positions_(animation.positionsAt(animation.startTime())) {}
-
-  void warmUp(double, const tsah::Camera&, const tsah::SceneLighting&, const tsah::RenderSettings&) override {
-    runtime_.parallelFor(runtime_.threadCount() * 4, 1, [](std::size_t, std::size_t) {});
-  }
-
-  FrameUpdate update(double time) override {
-    FrameUpdate u;
-    const auto start = std::chrono::steady_clock::now();
-    animation_.movingPositionsAt(time, positions_);  // the static vertices are in place since construction
-    u.interpolateMs = msSince(start);
-    if (builder_) {
-      const auto t = runtime_.rebuild(positions_, builder_);
-      u.buildMs = t.boxesMs + t.buildMs + t.flattenMs;
-      u.refitMs = t.refitMs;
-    } else {
-      const auto s = std::chrono::steady_clock::now();
-      runtime_.selectTreeAt(time);
-      runtime_.update(positions_);
-      u.refitMs = msSince(s);
-    }
-    u.updateMs = msSince(start);
-    return u;
-  }
-
-  tsah::RenderStats render(const tsah::Camera& camera, const tsah::SceneLighting& lighting,
-                           const tsah::RenderSettings& settings, tsah::Image* image) override {
-    return tsah::renderFrame(runtime_, camera, lighting, settings, image ? *image : scratch_);
-  }
-
-  uint32_t currentTree() const override { return runtime_.currentTree(); }
-  std::string summary() const override {
-    const tsah::LayoutInfo& l = runtime_.layoutInfo();
-    std::string s = std::to_string(runtime_.threadCount()) + " CPU threads, " + tsah::layoutName(l.layout);
-    if (l.layout != tsah::CpuLayout::Bvh2) s += std::string(" (") + tsah::isaName(l.isa) + ")";
-    char cost[96];
-    std::snprintf(cost, sizeof cost, ", T-SAH cost %.2f (binary %.2f)", l.layoutCost, l.binaryCost);
-    return s + cost;
-  }
-  void describe(nlohmann::json& out) const override {
-    const tsah::LayoutInfo& l = runtime_.layoutInfo();
-    out["device"] = "cpu";
-    out["threads"] = runtime_.threadCount();
-    out["timer"] = "host steady clock";
-    out["layout"] = tsah::layoutName(l.layout);
-    if (l.layout != tsah::CpuLayout::Bvh2) out["isa"] = tsah::isaName(l.isa);
-    out["tree"] = {{"interior_nodes", l.interiorNodes}, {"leaves", l.leaves}, {"depth", l.depth},
-                   {"tsah_cost", l.layoutCost}, {"binary_tsah_cost", l.binaryCost}};
-  }
-
- private:
-  const anim::Animation& animation_;
-  tsah::CpuRuntime runtime_;
-  tsah::CpuRuntime::TreeBuilder builder_;
-  std::vector<float> positions_;
-  tsah::Image scratch_;
-};
-
-tsah::CpuRuntime::TreeBuilder cpuRebuilder(const std::string& rebuild, const tsah::CostModel& cost, uint32_t maxLeaf) {
-  if (rebuild == "binned") {
-    tsah::BinnedSahBuilder::Config c;
-    c.cost = cost;
-    c.maxLeafSize = maxLeaf;
-    return [c](std::span<const tsah::Aabb> boxes) { return tsah::BinnedSahBuilder(c).build(boxes); };
-  }
-  if (rebuild == "sweep") {
-    tsah::SweepSahBuilder::Config s;
-    s.cost = cost;
-    tsah::LeafCollapser::Config l;
-    l.cost = cost;
-    l.maxLeafSize = maxLeaf;
-    return [s, l](std::span<const tsah::Aabb> boxes) {
-      return tsah::LeafCollapser(l).collapse(tsah::SweepSahBuilder(s).build(boxes));
-    };
-  }
-  return {};
-}
-
-#if TSAH_HAVE_CUDA
-class GpuFrameRuntime final : public FrameRuntime {
- public:
-  GpuFrameRuntime(const tsah::TreeSet& trees, const anim::Animation& animation,
-                  std::optional<tsah::cuda::RebuildOptions> rebuild, tsah::cuda::GpuRuntime::Config config)
-      : runtime_(trees, animation, config), rebuild_(rebuild) {}
-
-  void warmUp(double time, const tsah::Camera& camera, const tsah::SceneLighting& lighting,
-              const tsah::RenderSettings& settings) override {
-    update(time);
-    tsah::cuda::renderFrameGpu(runtime_, camera, lighting, settings, nullptr);
-  }
-
-  FrameUpdate update(double time) override {
-    FrameUpdate u;
-    if (rebuild_) {
-      const tsah::cuda::RebuildTimings t = runtime_.rebuildAt(time, *rebuild_);
-      u = {t.interpolateMs, t.woopMs, t.buildMs() + t.wideMs, t.totalMs()};  // layout cwbvh: with the conversion
-    } else {
-      const tsah::cuda::UpdateTimings t = runtime_.updateAt(time);
-      u = {t.interpolateMs, t.refitMs + t.woopMs, 0.0, t.totalMs()};
-    }
-    return u;
-  }
-
-  tsah::RenderStats render(const tsah::Camera& camera, const tsah::SceneLighting& lighting,
-                           const tsah::RenderSettings& settings, tsah::Image* image) override {
-    return tsah::cuda::renderFrameGpu(runtime_, camera, lighting, settings, image);
-  }
-
-  uint32_t currentTree() const override { return runtime_.currentTree(); }
-  std::string summary() const override {
-    return "GPU " + runtime_.device().name + ", " + tsah::cuda::treeLayoutName(runtime_.config().layout) + " layout";
-  }
-  void describe(nlohmann::json& out) const override {
-    const tsah::cuda::DeviceInfo& d = runtime_.device();
-    out["device"] = d.name;
-    out["gpu"] = {{"name", d.name},
-                  {"compute_capability", std::to_string(d.computeMajor) + "." + std::to_string(d.computeMinor)},
-                  {"multiprocessors", d.multiprocessors},
-                  {"memory_mib", d.globalMemoryBytes >> 20},
-                  {"cuda_runtime", d.runtimeVersion},
-                  {"cuda_driver", d.driverVersion}};
-    out["timer"] = "CUDA events (device time)";
-    out["layout"] = tsah::cuda::treeLayoutName(runtime_.config().layout);
-  }
-
- private:
-  tsah::cuda::GpuRuntime runtime_;
-  std::optional<tsah::cuda::RebuildOptions> rebuild_;
-};
-#endif
-
-std::unique_ptr<FrameRuntime> makeRuntime(const TraceOptions& opt, const tsah::TreeSet& trees,
-                                          const tsah::BvhBuildInfo& info, const anim::Animation& a) {
-  const tsah::CostModel cost = info.objective.cost;
-  const uint32_t maxLeaf = std::max(1u, info.objective.maxLeafSize);
-#if TSAH_HAVE_CUDA
-  if (opt.device == "cuda") {
-    std::optional<tsah::cuda::RebuildOptions> rebuild;
-    if (isGpuRebuild(opt.rebuild)) {
-      rebuild.emplace();
-      rebuild->method = tsah::cuda::parseRebuildMethod(opt.rebuild);
-      rebuild->maxLeafSize = maxLeaf;
-      rebuild->cost = cost;
-    }
-    tsah::cuda::GpuRuntime::Config config;
-    if (opt.layout != "auto") config.layout = tsah::cuda::parseTreeLayout(opt.layout);
-    // The compressed layout holds leaves of at most 8 triangles (64 per node), as its refit path's
-    // collapse does.
-    if (rebuild && config.layout == tsah::cuda::TreeLayout::Cwbvh)
-      rebuild->maxLeafSize = std::min(rebuild->maxLeafSize, tsah::kCwbvhMaxLeafTriangles);
-    return std::make_unique<GpuFrameRuntime>(trees, a, rebuild, config);
-  }
-#endif
-  tsah::CpuRuntime::Config config(opt.threads);
-  config.layout = opt.layout == "auto" ? tsah::fastestLayout() : *tsah::parseLayout(opt.layout);
-  if (opt.isa != "auto") config.isa = tsah::parseIsa(opt.isa);
-  config.collapse = tsah::wideCollapseConfig(info.objective);
-  return std::make_unique<CpuFrameRuntime>(trees, a, config, cpuRebuilder(opt.rebuild, cost, maxLeaf));
-}
-
 struct FrameResult {
   uint32_t frame = 0;
   double time = 0.0;
   uint32_t tree = 0;  // of a tree set: the tree of the frame's part
-  FrameUpdate update;
+  tsah::cli::FrameUpdate update;
   tsah::RenderStats render;
   double pngMs = 0.0;
   std::string image;
@@ -298,7 +96,14 @@ nlohmann::json traceMsJson(const tsah::RenderStats& s) {
 
 void runTrace(const TraceOptions& opt) {
   namespace fs = std::filesystem;
-  checkDeviceAndRebuild(opt);
+  tsah::cli::FrameRuntimeOptions runtimeOptions;
+  runtimeOptions.device = opt.device;
+  runtimeOptions.layout = opt.layout;
+  if (opt.isa != "auto") runtimeOptions.isa = tsah::parseIsa(opt.isa);
+  runtimeOptions.threads = opt.threads;
+  runtimeOptions.rebuild = tsah::cli::parseRebuild(opt.rebuild);
+  tsah::cli::checkRebuildForDevice(runtimeOptions.rebuild, opt.device);
+  checkDeviceAndLayout(opt);
   if (opt.eye.empty() != opt.lookAt.empty()) throw UsageError("--eye and --look-at go together");
   if (!opt.camera.empty() && !opt.eye.empty()) throw UsageError("give either --camera or --eye/--look-at");
   if (!(opt.fov > 0.0f && opt.fov < 180.0f)) throw UsageError("--fov must be between 0 and 180 degrees");
@@ -313,7 +118,8 @@ void runTrace(const TraceOptions& opt) {
   const tsah::BvhBuildInfo& info = trees.builds.front();
   const anim::Animation a = tsah::cli::loadInput(opt.input);
   tsah::cli::checkTreeMatchesAnimation(info, opt.bvh, a, opt.input);
-  const std::unique_ptr<FrameRuntime> rt = makeRuntime(opt, trees, info, a);
+  runtimeOptions.objective = info.objective;
+  const std::unique_ptr<tsah::cli::FrameRuntime> rt = tsah::cli::makeFrameRuntime(trees, a, runtimeOptions);
 
   const uint32_t frameCount = opt.frames ? opt.frames : std::min<uint32_t>(a.keyframeCount(), 50);
   const std::vector<double> times = a.uniformTimes(frameCount);
@@ -358,11 +164,11 @@ void runTrace(const TraceOptions& opt) {
   settings.aoSamples = opt.ao;
   settings.shadowSamples = opt.shadow;
   settings.seed = opt.seed;
-  rt->warmUp(times.front(), cameraAt(times.front()), lighting, settings);
+  rt->warmUp(times.front(), cameraAt, lighting, settings);
 
   const bool rebuilds = opt.rebuild != "none";
   const std::string mode =
-      rebuilds ? "rebuild " + opt.rebuild + (isGpuRebuild(opt.rebuild) ? " (GPU)" : " (CPU)")
+      rebuilds ? "rebuild " + opt.rebuild + (tsah::cli::isGpuRebuild(runtimeOptions.rebuild) ? " (GPU)" : " (CPU)")
                : trees.size() > 1 ? "refit of the tree of each frame's part (" + std::to_string(trees.size()) + " trees)"
                                   : "refit";
   if (!opt.json)
@@ -379,7 +185,7 @@ void runTrace(const TraceOptions& opt) {
     r.update = rt->update(r.time);
     r.tree = rt->currentTree();
     settings.frame = f;
-    r.render = rt->render(cameraAt(r.time), lighting, settings, opt.noImages ? nullptr : &image);
+    r.render = rt->render(cameraAt(r.time), lighting, settings, opt.noImages ? nullptr : &image).rays;
     if (!opt.noImages) {
       const auto s = std::chrono::steady_clock::now();
       char name[32];
@@ -488,8 +294,9 @@ TSAH_REGISTER_COMMAND(70, [](CLI::App& app) {
   auto opt = std::make_shared<TraceOptions>();
   sub->add_option("ANIMATION", opt->input, "The animation (any input `tsah info` reads)")->required();
   sub->add_option("BVH", opt->bvh, "Tree from `tsah optimize` (.tbvh) built for this animation")->required();
-  sub->add_option("--device", opt->device, "cpu (default) or cuda (the GPU runtime, when built and a GPU is present)")
-      ->check(CLI::IsMember({"cpu", "cuda"}));
+  tsah::cli::addChoice(*sub, "--device", opt->device,
+                       "cpu (default) or cuda (the GPU runtime, when built and a GPU is present)",
+                       {tsah::Device::Cpu, tsah::Device::Cuda});
   sub->add_option("--frames", opt->frames,
                   "Frames to trace, uniform over the animation's time range (default: one per keyframe, at most 50)");
   sub->add_option("--width", opt->width, "Image width (default 1024)")->check(CLI::Range(1u, 16384u));
@@ -513,12 +320,12 @@ TSAH_REGISTER_COMMAND(70, [](CLI::App& app) {
   sub->add_option("--up", opt->up, "Scene up direction x,y,z (default 0,1,0)");
   sub->add_option("--fov", opt->fov, "Vertical field of view in degrees (default 45)");
   sub->add_option("--threads", opt->threads, "CPU worker threads (0: all cores)");
-  sub->add_option("--layout", opt->layout,
-                  "Tree layout: CPU bvh2 (the binary tree), bvh4 or bvh8 (wide trees collapsed from it at load "
+  tsah::cli::addChoice(*sub, "--layout", opt->layout,
+                       "Tree layout: CPU bvh2 (the binary tree), bvh4 or bvh8 (wide trees collapsed from it at load "
                   "time); GPU bvh2 or cwbvh (compressed 8-wide, docs/cwbvh.md; for the refitted tree and the "
                   "--rebuild trees); default auto: on the CPU the widest "
-                  "the processor's SIMD kernels support, on the GPU the runtime's default")
-      ->check(CLI::IsMember({"auto", "bvh2", "bvh4", "bvh8", "cwbvh"}));
+                  "the processor's SIMD kernels support, on the GPU the runtime's default",
+                       {tsah::Layout::Auto, tsah::Layout::Bvh2, tsah::Layout::Bvh4, tsah::Layout::Bvh8, tsah::Layout::Cwbvh});
   sub->add_option("--isa", opt->isa, "CPU SIMD kernels of a wide layout: sse, avx2 or avx512 (default auto: the best)")
       ->check(CLI::IsMember({"auto", "sse", "avx2", "avx512"}));
   sub->add_option("--seed", opt->seed, "Seed of the per-pixel random numbers (default 1)");

@@ -18,19 +18,17 @@ void addTreeOptions(CLI::App& sub, TreeOptions& tree, uint32_t& evalFrames) {
   sub.add_option("--eval-frames", evalFrames, "Evaluation frames for the reported cost, uniform in time")
       ->check(CLI::Range(1u, 100000u))
       ->capture_default_str();
-  sub.add_option("--max-leaf", tree.maxLeaf, "Largest leaf after collapse (1: one triangle per leaf)")
+  sub.add_option("--max-leaf", tree.objective.maxLeafSize, "Largest leaf after collapse (1: one triangle per leaf)")
       ->check(CLI::Range(1u, 256u))
       ->capture_default_str();
-  sub.add_option("--ct", tree.ct, "Cost of traversing a node")->check(CLI::PositiveNumber)->capture_default_str();
-  sub.add_option("--ci", tree.ci, "Cost of intersecting a triangle")->check(CLI::PositiveNumber)->capture_default_str();
-  sub.add_option("--optimizer", tree.optimizer,
-                 "parallel (reinsertion on all cores) or sequential (the paper's Metropolis-Hastings insertion, one core)")
-      ->check(CLI::IsMember({"sequential", "parallel"}))
-      ->capture_default_str();
-  sub.add_option("--selection", tree.selection,
-                 "Node selection of the sequential optimizer: mh (Metropolis-Hastings), random, batch (batch sorting)")
-      ->check(CLI::IsMember({"mh", "random", "batch"}))
-      ->capture_default_str();
+  sub.add_option("--ct", tree.objective.cost.ct, "Cost of traversing a node")->check(CLI::PositiveNumber)->capture_default_str();
+  sub.add_option("--ci", tree.objective.cost.ci, "Cost of intersecting a triangle")->check(CLI::PositiveNumber)->capture_default_str();
+  addChoice(sub, "--optimizer", tree.optimizer,
+            "parallel (reinsertion on all cores) or sequential (the paper's Metropolis-Hastings insertion, one core)",
+            {OptimizerKind::Sequential, OptimizerKind::Parallel});
+  addChoice(sub, "--selection", tree.selection,
+            "Node selection of the sequential optimizer: mh (Metropolis-Hastings), random, batch (batch sorting)",
+            {Selection::MetropolisHastings, Selection::Uniform, Selection::BatchSort});
   sub.add_option("--seed", tree.seed, "Random seed (same seed and thread count, same tree)")->capture_default_str();
   sub.add_option("--time-limit", tree.timeLimit, "Stop each optimization after this many seconds (0: none)")
       ->check(CLI::NonNegativeNumber)
@@ -40,17 +38,16 @@ void addTreeOptions(CLI::App& sub, TreeOptions& tree, uint32_t& evalFrames) {
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   sub.add_option("--threads", tree.threads, "Worker threads (0: all cores)")->capture_default_str();
-  sub.add_option("--device", tree.device,
-                 "cpu, or cuda: optimize with the parallel reinsertion optimizer on the GPU (--optimizer is then unused)")
-      ->check(CLI::IsMember({"cpu", "cuda"}))
-      ->capture_default_str();
+  addChoice(sub, "--device", tree.device,
+            "cpu, or cuda: optimize with the parallel reinsertion optimizer on the GPU (--optimizer is then unused)",
+            {Device::Cpu, Device::Cuda});
 #if TSAH_HAVE_CUDA
   tree.gpuOptimizer = cuda::gpuTreeOptimizer();
 #endif
 }
 
 void checkTreeDevice(const TreeOptions& tree) {
-  if (tree.device != "cuda") return;
+  if (tree.device != Device::Cuda) return;
 #if TSAH_HAVE_CUDA
   if (!cuda::deviceAvailable())
     throw UsageError("--device cuda: no CUDA device found (no GPU, no NVIDIA driver, or CUDA_VISIBLE_DEVICES hides "

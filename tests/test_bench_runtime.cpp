@@ -66,7 +66,7 @@ TEST(BenchRuntime, EveryMethodTracesEveryFrameWithTheSameRays) {
       {{"rebuild-binned", "binned", {&tsah0}, {}}, CpuRebuild::Binned},
   };
   tsah::Image picture;
-  const auto methods = tsah::bench::runCpuMethods(a, specs, config.cost, 8, setup, &picture, 1, 2);
+  const auto methods = tsah::bench::runCpuMethods(a, specs, config.objective.cost, 8, setup, &picture, 1, 2);
   ASSERT_EQ(methods.size(), specs.size());
   EXPECT_FALSE(progress.empty());
   for (std::size_t m = 0; m < methods.size(); ++m) {
@@ -118,7 +118,7 @@ TEST(BenchRuntime, EmbreeComparisonTracesEveryLayoutWithTheSameResults) {
   std::vector<std::string> names;
   for (const auto& m : methods) names.push_back(m.name);
   ASSERT_FALSE(names.empty());
-  EXPECT_EQ(names[0], std::string("tsah0-") + tsah::layoutName(setup.layout));  // the default layout first
+  EXPECT_EQ(names[0], std::string("tsah0-") + tsah::name(setup.layout));  // the default layout first
   for (const char* n : {"tsah0-bvh2", "embree-medium", "embree-high", "embree-refit"})
     EXPECT_NE(std::find(names.begin(), names.end(), n), names.end()) << n;
   for (const auto& m : methods) {
@@ -160,7 +160,7 @@ TEST(BenchRuntime, EmbreeComparisonTracesTheTreeSetSwitchingTreesWithTheSameResu
   const auto it = std::find_if(methods.begin(), methods.end(),
                                [](const auto& m) { return m.name.rfind("tsah0-count2-", 0) == 0; });
   ASSERT_NE(it, methods.end());
-  EXPECT_EQ(it->name, std::string("tsah0-count2-") + tsah::layoutName(setup.layout));
+  EXPECT_EQ(it->name, std::string("tsah0-count2-") + tsah::name(setup.layout));
   EXPECT_EQ(it->extra["trees"], 2);
   ASSERT_EQ(it->frames.size(), 2u);
   EXPECT_EQ(it->frames[1].rays.ao.rays, methods[0].frames[1].rays.ao.rays);  // the same batch

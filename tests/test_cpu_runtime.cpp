@@ -39,7 +39,7 @@ Scene makeScene(anim::GeneratorKind kind, uint32_t triangles) {
 
 tsah::Image render(const Scene& s, double time, uint32_t threads, tsah::RenderSettings settings,
                    tsah::RenderStats* stats = nullptr, bool ground = true,
-                   tsah::CpuLayout layout = tsah::CpuLayout::Bvh2) {
+                   tsah::Layout layout = tsah::Layout::Bvh2) {
   tsah::CpuRuntime::Config config(threads);
   config.layout = layout;
   tsah::CpuRuntime rt(s.tree, {s.animation.indices().begin(), s.animation.indices().end()}, s.animation.vertexCount(),
@@ -114,15 +114,15 @@ TEST(CpuRuntime, MatchesReferenceImage) {
   ASSERT_TRUE(std::filesystem::exists(ref)) << ref << " is missing";
   const tsah::Image expected = tsah::loadPng(ref.string());
   // Every layout this processor traces renders the reference picture.
-  for (tsah::CpuLayout layout : {tsah::CpuLayout::Bvh2, tsah::CpuLayout::Bvh4, tsah::CpuLayout::Bvh8}) {
+  for (tsah::Layout layout : {tsah::Layout::Bvh2, tsah::Layout::Bvh4, tsah::Layout::Bvh8}) {
     if (!tsah::layoutSupported(layout)) continue;
     const tsah::Image image = render(s, 2.5, 2, small(96, 72), nullptr, true, layout);
     const tsah::ImageDifference d = tsah::compareImages(expected, image, 24);
     // Tolerance for floating-point differences between compilers and libm versions.
-    EXPECT_LT(d.meanAbs, 1.5) << tsah::layoutName(layout);
-    EXPECT_LT(d.fractionAbove, 0.01) << tsah::layoutName(layout);
+    EXPECT_LT(d.meanAbs, 1.5) << tsah::name(layout);
+    EXPECT_LT(d.fractionAbove, 0.01) << tsah::name(layout);
     if (d.meanAbs >= 1.5 || d.fractionAbove >= 0.01)
-      tsah::savePng((tsah::test::scratchDir() / (std::string("actual-") + tsah::layoutName(layout) + ".png")).string(),
+      tsah::savePng((tsah::test::scratchDir() / (std::string("actual-") + tsah::name(layout) + ".png")).string(),
                     image);
   }
 }

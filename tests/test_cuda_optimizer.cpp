@@ -126,7 +126,7 @@ TEST(CudaOptimizer, WithinTwoPercentOfTheCpuParallelOptimizer) {
 TEST(CudaOptimizer, CollapseAndBadInput) {
   REQUIRE_GPU();
   const tsah::PrimitiveBoxes prims = movingTriangleBoxes(1200, 3, 80);
-  const tsah::LeafCollapser collapser({{}, 4, 0});
+  const tsah::LeafCollapser collapser({0, {}, 4});
   ParallelReinsertionOptimizer::Config config;
   if (tsah::test::shortCudaRun()) config.maxBatches = 10;
   const auto plain = tsah::cuda::optimizeOnGpu(frameZeroSahTree(prims), prims, config, {});

@@ -114,7 +114,7 @@ TEST(EmulatedGpuOptimizer, DeviceMemoryPerTriangle) {
 
 TEST(EmulatedGpuOptimizer, CollapseLimitsAndBadInput) {
   const tsah::PrimitiveBoxes prims = movingTriangleBoxes(1200, 3, 80);
-  const tsah::LeafCollapser collapser({{}, 4, 0});
+  const tsah::LeafCollapser collapser({0, {}, 4});
   const auto plain = tsah::optimizeEmulatedDevice(frameZeroSahTree(prims), prims, {}, {});
   const auto collapsed = tsah::optimizeEmulatedDevice(frameZeroSahTree(prims), prims, {}, {}, &collapser);
   EXPECT_TRUE(tsah::test::identicalTree(collapser.collapse(plain.bvh), collapsed.bvh));
@@ -144,8 +144,8 @@ TEST(EmulatedGpuOptimizer, PipelineRunsEveryOptimizationThroughTheDeviceHook) {
   g.frames = 6;
   const anim::Animation a = anim::generate(anim::GeneratorKind::Explode, g);
   tsah::TreeOptions options;
-  options.device = "cuda";
-  options.k = 2;
+  options.device = tsah::Device::Cuda;
+  options.objective.k = 2;
   EXPECT_THROW(tsah::optimizeAnimation(a, options), tsah::Error);  // no GPU optimizer given
   std::atomic<int> calls = 0;  // SAH* optimizes its frames on worker threads
   options.gpuOptimizer = [&calls](Bvh bvh, const tsah::PrimitiveBoxes& prims,
@@ -162,17 +162,16 @@ TEST(EmulatedGpuOptimizer, PipelineRunsEveryOptimizationThroughTheDeviceHook) {
   // The same tree as the emulation on its own, collapsed the same way.
   tsah::InsertionOptimizer::Config config;
   config.k = 2;
-  const tsah::LeafCollapser collapser({config.cost, options.maxLeaf, 2});
+  const tsah::LeafCollapser collapser({2, config.cost, options.objective.maxLeafSize});
   const auto direct = tsah::optimizeEmulatedDevice(tsah::SweepSahBuilder({config.cost, 1}).build(rep.frame(0)), rep,
                                                    config, {}, &collapser);
   EXPECT_TRUE(tsah::test::sameTopology(direct.bvh, tree.bvh));
 
-  options.method = "sahstar";  // one optimization per representative frame
+  options.method = tsah::Method::SahStar;  // one optimization per representative frame
   calls = 0;
   tsah::optimizeAnimation(a, options);
   EXPECT_EQ(calls.load(), int(options.frames));
-  options.device = "tpu";
-  EXPECT_THROW(tsah::optimizeAnimation(a, options), std::invalid_argument);
+  EXPECT_THROW(tsah::parse<tsah::Device>("tpu"), tsah::ConfigError);  // names are refused where they are parsed
 }
 
 }  // namespace

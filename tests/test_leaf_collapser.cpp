@@ -77,7 +77,7 @@ TEST(LeafCollapser, NeverRaisesTheCostAndKeepsTheTreeValid) {
         const tsah::PrimitiveBoxes prims = randomMovingBoxes(300, 3, seed);
         const Bvh tree = optimizedTree(prims, k);
         const double before = tsah::temporalCost(tsah::frameCosts(tree), k);
-        const Bvh collapsed = LeafCollapser({{}, maxLeaf, k}).collapse(tree);
+        const Bvh collapsed = LeafCollapser({k, {}, maxLeaf}).collapse(tree);
         const auto problem = tsah::validate(collapsed, &prims);
         ASSERT_FALSE(problem.has_value()) << *problem;
         const double after = tsah::temporalCost(tsah::frameCosts(collapsed), k);
@@ -99,7 +99,7 @@ TEST(LeafCollapser, KZeroFindsTheOptimalCollapse) {
   for (const tsah::CostModel model : {tsah::CostModel{}, tsah::CostModel{1.0f, 1.0f}, tsah::CostModel{10.0f, 1.0f}}) {
     const tsah::PrimitiveBoxes prims = randomMovingBoxes(200, 2, 9);
     const Bvh tree = optimizedTree(prims, 0);
-    const Bvh collapsed = LeafCollapser({model, 6, 0}).collapse(tree);
+    const Bvh collapsed = LeafCollapser({0, model, 6}).collapse(tree);
     const double after = tsah::temporalCost(tsah::frameCosts(collapsed, model), 0);
     const double optimum = optimalMeanCost(tree, 6, model.ct, model.ci);
     EXPECT_NEAR(after, optimum, 1e-9 * optimum);
@@ -110,12 +110,12 @@ TEST(LeafCollapser, CostConstantsDecideTheLeafSize) {
   const tsah::PrimitiveBoxes prims = randomMovingBoxes(400, 1, 4);
   const Bvh tree = optimizedTree(prims, 0);
   // Expensive traversal: many primitives per leaf. Expensive intersection: hardly any collapse.
-  const Bvh coarse = LeafCollapser({{30.0f, 1.0f}, 8, 0}).collapse(tree);
-  const Bvh fine = LeafCollapser({{1.0f, 30.0f}, 8, 0}).collapse(tree);
+  const Bvh coarse = LeafCollapser({0, {30.0f, 1.0f}, 8}).collapse(tree);
+  const Bvh fine = LeafCollapser({0, {1.0f, 30.0f}, 8}).collapse(tree);
   EXPECT_LT(coarse.leafCount(), 400u / 4);
   EXPECT_EQ(fine.leafCount(), 400u);
   // Leaf size 1 changes nothing but the numbering.
-  const Bvh same = LeafCollapser({{}, 1, 0}).collapse(tree);
+  const Bvh same = LeafCollapser({0, {}, 1}).collapse(tree);
   EXPECT_EQ(same.nodeCount(), tree.nodeCount());
   EXPECT_NEAR(tsah::frameCost(same, 0), tsah::frameCost(tree, 0), 1e-9 * tsah::frameCost(tree, 0));
 }
@@ -146,7 +146,7 @@ TEST(LeafCollapser, TopologyFromASourceThenRefitEqualsCollapse) {
     for (uint32_t maxLeaf : {1u, 3u, 8u}) {
       const tsah::PrimitiveBoxes prims = randomMovingBoxes(400, 3, 20 + k);
       const Bvh tree = optimizedTree(prims, k);
-      const LeafCollapser collapser({{}, maxLeaf, k});
+      const LeafCollapser collapser({k, {}, maxLeaf});
       const Bvh expected = collapser.collapse(tree);
       Bvh topology = collapser.collapseTopology(tsah::CollapseSource::of(tree));
       EXPECT_TRUE(topology.boxes.empty());
@@ -165,8 +165,8 @@ TEST(LeafCollapser, TopologyFromASourceThenRefitEqualsCollapse) {
 
 TEST(LeafCollapser, EmptyTreeAndBadConfig) {
   EXPECT_TRUE(LeafCollapser().collapse(Bvh{}).nodes.empty());
-  EXPECT_THROW(LeafCollapser({{}, 0, 0}), std::invalid_argument);
-  EXPECT_THROW(LeafCollapser({{}, 8, -2}), std::invalid_argument);
+  EXPECT_THROW(LeafCollapser({0, {}, 0}), std::invalid_argument);
+  EXPECT_THROW(LeafCollapser({-2, {}, 8}), std::invalid_argument);
 }
 
 }  // namespace

@@ -166,7 +166,7 @@ TEST(ParallelReinsertionOptimizer, CollapseOnReleaseGivesExactlyTheCollapsedResu
     for (int k : {0, 2}) {
       for (uint32_t maxLeaf : {2u, 8u}) {
         const tsah::PrimitiveBoxes prims = movingTriangleBoxes(1200, frames, 70 + frames + k);
-        const tsah::LeafCollapser collapser({{}, maxLeaf, k});
+        const tsah::LeafCollapser collapser({k, {}, maxLeaf});
         ParallelReinsertionOptimizer::Config config;
         config.k = k;
         const ParallelReinsertionOptimizer parallel(config, settings(2));

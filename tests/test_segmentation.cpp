@@ -112,7 +112,7 @@ TEST(Segmentation, OneTreeInCountModeIsTheSingleTree) {
   EXPECT_EQ(r.trees[0].primIds, whole.primIds);
   EXPECT_EQ(r.trees[0].boxes.size(), whole.boxes.size());
   const std::vector<double> direct =
-      tsah::evaluateFrames(whole, timelineOf(a).frames(a.uniformTimes(c.evaluationFrames)), c.baseline.cost, 1);
+      tsah::evaluateFrames(whole, timelineOf(a).frames(a.uniformTimes(c.evaluationFrames)), c.baseline.objective.cost, 1);
   ASSERT_EQ(r.costs.size(), direct.size());
   for (std::size_t i = 0; i < direct.size(); ++i) EXPECT_NEAR(r.costs[i], direct[i], 1e-9 * direct[i]);
 }

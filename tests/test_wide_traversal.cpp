@@ -21,7 +21,7 @@
 
 namespace {
 
-using tsah::CpuLayout;
+using tsah::Layout;
 using tsah::SimdIsa;
 using tsah::Vec3;
 
@@ -42,7 +42,7 @@ tsah::FlatBvh multiFrameTree(const anim::Animation& a, uint32_t maxLeaf, uint32_
   return tsah::flattenBvh(bvh);
 }
 
-tsah::CpuRuntime runtime(const anim::Animation& a, const tsah::FlatBvh& tree, CpuLayout layout,
+tsah::CpuRuntime runtime(const anim::Animation& a, const tsah::FlatBvh& tree, Layout layout,
                          std::optional<SimdIsa> isa = std::nullopt) {
   tsah::CpuRuntime::Config c;
   c.threads = 2;
@@ -94,12 +94,12 @@ std::vector<tsah::Ray> randomRays(const tsah::CpuRuntime& rt, uint32_t count, ui
 }
 
 // Every wide (layout, instruction set) this machine runs.
-std::vector<std::pair<CpuLayout, SimdIsa>> wideTargets() {
-  std::vector<std::pair<CpuLayout, SimdIsa>> out;
+std::vector<std::pair<Layout, SimdIsa>> wideTargets() {
+  std::vector<std::pair<Layout, SimdIsa>> out;
   for (SimdIsa isa : tsah::supportedIsas()) {
     const tsah::WideKernels& k = tsah::wideKernels(isa);
-    if (k.closest4) out.push_back({CpuLayout::Bvh4, isa});
-    if (k.closest8) out.push_back({CpuLayout::Bvh8, isa});
+    if (k.closest4) out.push_back({Layout::Bvh4, isa});
+    if (k.closest8) out.push_back({Layout::Bvh8, isa});
   }
   return out;
 }
@@ -107,7 +107,7 @@ std::vector<std::pair<CpuLayout, SimdIsa>> wideTargets() {
 // Traces the rays with the binary runtime and every wide target at times ts; counts the hits.
 void checkSameHits(const anim::Animation& a, const tsah::FlatBvh& tree, std::span<const double> ts,
                    uint32_t rayCount, uint32_t seed, uint64_t& hits) {
-  tsah::CpuRuntime binary = runtime(a, tree, CpuLayout::Bvh2);
+  tsah::CpuRuntime binary = runtime(a, tree, Layout::Bvh2);
   hits = 0;
   for (const auto& [layout, isa] : wideTargets()) {
     tsah::CpuRuntime wide = runtime(a, tree, layout, isa);
@@ -122,7 +122,7 @@ void checkSameHits(const anim::Animation& a, const tsah::FlatBvh& tree, std::spa
       for (std::size_t i = 0; i < rays.size(); ++i) {
         const tsah::Hit expect = binary.closestHit(rays[i]);
         const tsah::Hit got = wide.closestHit(rays[i]);
-        const std::string where = std::string(tsah::layoutName(layout)) + "/" + tsah::isaName(isa) + " ray " +
+        const std::string where = std::string(tsah::name(layout)) + "/" + tsah::isaName(isa) + " ray " +
                                   std::to_string(i) + " t=" + std::to_string(t);
         ASSERT_EQ(expect.valid(), got.valid()) << where;
         ASSERT_EQ(binary.anyHit(rays[i]), wide.anyHit(rays[i])) << where;
@@ -196,7 +196,7 @@ TEST(WideTraversal, SameAnswersThroughEdgesAndVertices) {
   o.frames = 2;
   const auto a = anim::generate(anim::GeneratorKind::Wave, o);
   const tsah::FlatBvh tree = multiFrameTree(a, 4, 2);
-  tsah::CpuRuntime binary = runtime(a, tree, CpuLayout::Bvh2);
+  tsah::CpuRuntime binary = runtime(a, tree, Layout::Bvh2);
   binary.update(a.positionsAt(a.startTime()));
   for (const auto& [layout, isa] : wideTargets()) {
     tsah::CpuRuntime rt = runtime(a, tree, layout, isa);
@@ -257,7 +257,7 @@ TEST(WideTraversal, RefitBoxesContainChildrenInEveryFrameAndCostsAreReported) {
   o.frames = 10;
   const auto a = anim::generate(anim::GeneratorKind::Explode, o);
   const tsah::FlatBvh tree = multiFrameTree(a, 4, 4);
-  for (CpuLayout layout : {CpuLayout::Bvh4, CpuLayout::Bvh8}) {
+  for (Layout layout : {Layout::Bvh4, Layout::Bvh8}) {
     if (!tsah::layoutSupported(layout)) continue;
     tsah::CpuRuntime rt = runtime(a, tree, layout);
     EXPECT_GT(rt.layoutInfo().binaryCost, 0.0);
@@ -265,7 +265,7 @@ TEST(WideTraversal, RefitBoxesContainChildrenInEveryFrameAndCostsAreReported) {
     EXPECT_THROW(rt.view(), tsah::Error);  // the binary tree is not refitted in a wide layout
     for (uint32_t f = 0; f < 10; ++f) {
       rt.update(a.positionsAt(a.startTime() + (a.endTime() - a.startTime()) * f / 9.0));
-      if (layout == CpuLayout::Bvh4)
+      if (layout == Layout::Bvh4)
         expectBoxesContainChildren(*rt.wide4(), rt);
       else
         expectBoxesContainChildren(*rt.wide8(), rt);
@@ -279,7 +279,7 @@ TEST(WideTraversal, RebuildKeepsTheLayout) {
   o.frames = 4;
   const auto a = anim::generate(anim::GeneratorKind::Swap, o);
   const tsah::FlatBvh tree = multiFrameTree(a, 4, 2);
-  tsah::CpuRuntime binary = runtime(a, tree, CpuLayout::Bvh2);
+  tsah::CpuRuntime binary = runtime(a, tree, Layout::Bvh2);
   tsah::CpuRuntime wide = runtime(a, tree, tsah::fastestLayout());
   const auto positions = a.positionsAt(a.endTime());
   const auto builder = [](std::span<const tsah::Aabb> boxes) { return tsah::BinnedSahBuilder().build(boxes); };
@@ -297,7 +297,7 @@ TEST(WideTraversal, RejectsUnsupportedKernels) {
   o.triangles = 100;
   o.frames = 2;
   const auto a = anim::generate(anim::GeneratorKind::Swap, o);
-  EXPECT_THROW(runtime(a, multiFrameTree(a, 4, 1), CpuLayout::Bvh8, SimdIsa::Sse), tsah::Error);  // sse: 4-wide only
+  EXPECT_THROW(runtime(a, multiFrameTree(a, 4, 1), Layout::Bvh8, SimdIsa::Sse), tsah::Error);  // sse: 4-wide only
 }
 
 TEST(WideTraversal, SameHitsAsBinaryOnRealScenes) {

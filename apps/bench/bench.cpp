@@ -11,6 +11,7 @@
 #include "anim/load.hpp"
 #include "bench/embree_peer.hpp"
 #include "bench/runtime_bench.hpp"
+#include "frame_runtime.hpp"
 #include "animation_frames.hpp"
 #include "bench/segments.hpp"
 #include "tsah/optimize/baselines.hpp"
@@ -69,8 +70,7 @@ const std::vector<std::string> kTable1Methods = {"rebuild", "sahstar", "sah0", "
 
 tsah::BaselineConfig baselineConfig(const BenchOptions& o, const BenchProgress& progress) {
   tsah::BaselineConfig config;
-  config.cost = {o.ct, o.ci};
-  config.maxLeafSize = o.maxLeaf;
+  config.objective = o.objective;
   config.threads = o.threads;
   config.optimizer.seed = o.seed;
   if (o.optimizer == "cuda") {  // the GPU parallel reinsertion optimizer
@@ -80,7 +80,7 @@ tsah::BaselineConfig baselineConfig(const BenchOptions& o, const BenchProgress& 
     throw tsah::Error("--optimizer cuda: this build of tsah has no CUDA support");
 #endif
   } else {
-    config.optimizerKind = parseOptimizerKind(o.optimizer);
+    config.optimizerKind = parse<OptimizerKind>(o.optimizer);
   }
   config.parallel.threads = o.threads;
   config.progress = [progress](const std::string& message) { progress(message, true); };
@@ -232,12 +232,12 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   setup.settings.shadowSamples = o.shadowRays;
   setup.settings.seed = static_cast<uint32_t>(o.seed);
   setup.threads = o.threads;
-  setup.layout = o.layout == "auto" ? fastestLayout() : parseLayout(o.layout).value_or(CpuLayout::Bvh2);
-  setup.collapse.cost = config.cost;
-  setup.collapse.maxLeafSize = o.maxLeaf;
+  setup.layout = o.layout == Layout::Auto || o.device == Device::Cuda ? fastestLayout() : o.layout;
+  setup.collapse.cost = config.objective.cost;
+  setup.collapse.maxLeafSize = config.objective.maxLeafSize;
   setup.progress = [&](const std::string& m) { progress(scene.name + ": " + m, true); };
 
-  const bool gpu = o.device == "cuda";
+  const bool gpu = o.device == Device::Cuda;
   RefitTrees sah0{"sah0", "SAH0 refit", {&sah0Tree}, {}};
   RefitTrees sahStar{"sahstar", "SAH* refit", {&sahStarTree}, {}};
   RefitTrees tsah{"tsah0", "T-SAH k=0 refit", {&tsahTree}, {}};
@@ -253,7 +253,7 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
       std::to_string(o.shadowRays) + " shadow rays per pixel");
   nlohmann::json runtime;
   runtime["device"] = gpu ? "cuda" : "cpu";
-  runtime["layout"] = gpu ? (o.layout == "auto" ? "default" : o.layout) : layoutName(setup.layout);
+  runtime["layout"] = gpu ? (o.layout == Layout::Auto ? "default" : name(o.layout)) : name(setup.layout);
   runtime["frames"] = setup.times.size();
   runtime["width"] = o.width;
   runtime["height"] = o.height;
@@ -277,12 +277,13 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   if (o.embreeOnly) {
     runtime["skipped"] = "--embree-only";
   } else if (gpu) {
+    const std::string gpuLayoutName = o.layout == Layout::Auto ? std::string() : name(o.layout);
     for (const RefitTrees& r : refits)
       runtime["methods"].push_back(toJson(runGpuRefit(a, r, setup, r.name == "tsah0" ? &picture : nullptr, pictureFrame,
-                                                    o.layout == "auto" ? std::string() : o.layout)));
+                                                    gpuLayoutName)));
     for (const char* method : {"lbvh", "hlbvh-sah"})
-      runtime["methods"].push_back(toJson(runGpuRebuild(a, tsahTree, method, config.cost, o.maxLeaf, setup,
-                                                        o.layout == "auto" ? std::string() : o.layout)));
+      runtime["methods"].push_back(toJson(runGpuRebuild(a, tsahTree, method, config.objective.cost,
+                                                        config.objective.maxLeafSize, setup, gpuLayoutName)));
     runtime["schedule"] = "method by method (device times from CUDA events)";
   } else {
     std::vector<CpuMethodSpec> cpuMethods;
@@ -291,7 +292,7 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
     cpuMethods.push_back({{"rebuild-binned", "binned SAH rebuild", {&tsahTree}, {}}, CpuRebuild::Binned});
     runtime["schedule"] = "frame by frame: every method on a frame before the next, in an order rotated every frame";
     const std::size_t tsahIndex = 2;  // cpuMethods: sah0, sahstar, tsah0, ...
-    for (const RuntimeMethod& m : runCpuMethods(a, cpuMethods, config.cost, o.maxLeaf, setup, &picture, tsahIndex, pictureFrame))
+    for (const RuntimeMethod& m : runCpuMethods(a, cpuMethods, config.objective.cost, config.objective.maxLeafSize, setup, &picture, tsahIndex, pictureFrame))
       runtime["methods"].push_back(toJson(m));
   }
   runtime["wall_s"] = secondsSince(start);
@@ -346,7 +347,7 @@ nlohmann::json machineJson(bool withGpu) {
   m["os"] = fileValue("/etc/os-release", "PRETTY_NAME", '=');
   struct utsname u;
   if (::uname(&u) == 0) m["kernel"] = std::string(u.sysname) + " " + u.release + " " + u.machine;
-  if (withGpu) m["gpu"] = gpuJson();
+  if (withGpu) m["gpu"] = cli::deviceJson();
   return m;
 }
 
@@ -375,14 +376,14 @@ nlohmann::json versionsJson() {
 }
 
 nlohmann::json optionsJson(const BenchOptions& o) {
-  return {{"device", o.device},     {"quick", o.quick},          {"seed", o.seed},
+  return {{"device", name(o.device)},     {"quick", o.quick},          {"seed", o.seed},
           {"frames", o.frames},     {"eval_frames", o.evalFrames}, {"trace_frames", o.traceFrames},
           {"width", o.width},       {"height", o.height},        {"ao_rays", o.aoRays},
-          {"shadow_rays", o.shadowRays}, {"ground", o.ground},   {"max_leaf", o.maxLeaf},
-          {"ct", o.ct},             {"ci", o.ci},                {"segments", o.segments},   {"budget", o.budget},
+          {"shadow_rays", o.shadowRays}, {"ground", o.ground},   {"max_leaf", o.objective.maxLeafSize},
+          {"ct", o.objective.cost.ct}, {"ci", o.objective.cost.ci},                {"segments", o.segments},   {"budget", o.budget},
           {"threads", o.threads},   {"embree", o.embree},        {"convergence", o.convergence},
           {"optimizer", o.optimizer},
-          {"layout", o.layout},     {"embree_only", o.embreeOnly}};
+          {"layout", name(o.layout)},     {"embree_only", o.embreeOnly}};
 }
 
 }  // namespace tsah::bench

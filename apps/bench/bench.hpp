@@ -21,11 +21,13 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/data_scan.hpp"
+#include "tsah/core/kinds.hpp"
+#include "tsah/core/objective.hpp"
 
 namespace tsah::bench {
 
 struct BenchOptions {
-  std::string device = "cpu";   // cpu or cuda (the runtime part)
+  Device device = Device::Cpu;  // where the runtime part runs
   bool quick = false;           // smoke run: the caller sets the smaller sizes below
   uint64_t seed = 1;            // optimizer seed (and per-pixel random numbers)
   uint32_t frames = 5;          // representative frames
@@ -34,16 +36,15 @@ struct BenchOptions {
   uint32_t width = 1024, height = 768;
   uint32_t aoRays = 8, shadowRays = 2;
   bool ground = false;          // the analytic ground plane (the paper traces the mesh only)
-  uint32_t maxLeaf = 8;
-  float ct = 3.0f, ci = 2.0f;
+  Objective objective;          // cT, cI and the largest leaf of every tree (k: each method's own)
   uint32_t segments = 3;        // K of the equal-time parts and of the count mode (1: skip)
   double budget = 1.05;         // budget mode: factor of SAH-rebuild's cost per evaluation frame (0: skip)
   unsigned threads = 0;         // CPU threads (0: all cores)
   std::string optimizer = "sequential";  // optimizer of SAH*, SAH-rebuild and T-SAH: sequential | parallel | cuda
   bool embree = true;           // run the Embree peer when built with it (CPU device only)
   bool embreeOnly = false;      // only the T-SAH tree and the toolkit-vs-Embree comparison (no Tables 1/2)
-  std::string layout = "auto";  // tree layout of the runtime part: auto (the device's fastest); CPU bvh2, bvh4,
-                                // bvh8; cuda bvh2 or cwbvh
+  Layout layout = Layout::Auto;  // tree layout of the runtime part: Auto (the device's fastest); CPU bvh2,
+                                 // bvh4, bvh8; cuda bvh2 or cwbvh
   bool convergence = true;      // run the three node selections for the convergence plot
   double fps = 0.0;             // import: sampling rate of continuous animations (0: the file's own)
   std::string clip;             // import: the animation clip of a multi-clip model (empty: the first)

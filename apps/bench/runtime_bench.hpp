@@ -21,6 +21,10 @@
 #include "tsah/render/renderer.hpp"
 #include "tsah/io/tree_set.hpp"
 
+namespace tsah::cli {
+class FrameRuntime;
+}
+
 namespace tsah::bench {
 
 // What every runtime method traces: the frames, the view and the ray workload.
@@ -30,7 +34,7 @@ struct RuntimeSetup {
   SceneLighting lighting;
   RenderSettings settings;                       // image size, AO/shadow rays, seed (frame is set per frame)
   unsigned threads = 0;                          // CPU worker threads (0: all cores)
-  CpuLayout layout = fastestLayout();            // CPU: the layout every refit and rebuild traces
+  Layout layout = fastestLayout();            // CPU: the layout every refit and rebuild traces
   WideCollapser::Config collapse;                // CPU wide layouts: cost constants, k, leaf size
   std::function<void(const std::string&)> progress;
 };
@@ -101,7 +105,7 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& animation,
                                                const RuntimeSetup& setup, const RefitTrees* set = nullptr);
 
 // GPU (built with CUDA): per frame GpuRuntime::updateAt (interpolation, refit, Woop on the device)
-// and renderFrameGpu. Throws tsah::Error when the bench was built without CUDA or no device exists.
+// and renderFrameGpu. Throws tsah::ConfigError when the bench was built without CUDA or no device exists.
 // layout: "bvh2" or "cwbvh" (GpuRuntime::Config::layout), empty for the runtime's default.
 RuntimeMethod runGpuRefit(const anim::Animation& animation, const RefitTrees& trees, const RuntimeSetup& setup,
                           Image* image = nullptr, uint32_t imageFrame = 0, const std::string& layout = {});
@@ -111,8 +115,12 @@ RuntimeMethod runGpuRefit(const anim::Animation& animation, const RefitTrees& tr
 RuntimeMethod runGpuRebuild(const anim::Animation& animation, const Bvh& initialTree, const std::string& method,
                             const CostModel& cost, uint32_t maxLeaf, const RuntimeSetup& setup,
                             const std::string& layout = {});
-// The GPU as JSON (name, memory, compute capability, driver and runtime versions), or null without CUDA.
-nlohmann::json gpuJson();
-bool gpuAvailable();
+// One frame of a method after its update (updateMs): the ray passes timed (rays, traceMs) and the
+// whole frame (totalMs = updateMs + the driver's frame time); with `image`, the frame is rendered
+// once more, untimed, into it (the GPU downloads the picture only then).
+FrameTiming timeFrame(cli::FrameRuntime& runtime, const RuntimeSetup& setup, double time, double updateMs,
+                      const RenderSettings& settings, Image* image);
+// Progress on the first, every tenth and the last frame: "LABEL: frame F/N".
+void reportFrame(const RuntimeSetup& setup, const std::string& label, std::size_t frame);
 
 }  // namespace tsah::bench

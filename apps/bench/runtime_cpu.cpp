@@ -5,10 +5,9 @@
 
 #include "bench/embree_peer.hpp"
 #include "bench/runtime_bench.hpp"
+#include "frame_runtime.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
 #include "tsah/layout/flat_bvh.hpp"
-#include "tsah/optimize/leaf_collapser.hpp"
-#include "tsah/build/sah_builder.hpp"
 
 namespace tsah::bench {
 
@@ -18,25 +17,11 @@ double msSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
-nlohmann::json ratesJson(const RenderStats& s) {
-  return {{"primary", s.primary.mraysPerSecond()},
-          {"ao", s.ao.mraysPerSecond()},
-          {"shadow", s.shadow.mraysPerSecond()},
-          {"total", s.total().mraysPerSecond()}};
-}
-
 void startWorkers(const CpuRuntime& rt) {
   rt.parallelFor(rt.threadCount() * 4, 1, [](std::size_t, std::size_t) {});  // before anything is timed
 }
 
-#if TSAH_HAVE_EMBREE
-void report(const RuntimeSetup& setup, const std::string& label, std::size_t frame) {
-  if (setup.progress && (frame == 0 || (frame + 1) % 10 == 0 || frame + 1 == setup.times.size()))
-    setup.progress(label + ": frame " + std::to_string(frame + 1) + "/" + std::to_string(setup.times.size()));
-}
-#endif
-
-CpuRuntime::Config runtimeConfig(const RuntimeSetup& setup, CpuLayout layout) {
+CpuRuntime::Config runtimeConfig(const RuntimeSetup& setup, Layout layout) {
   CpuRuntime::Config c(setup.threads);
   c.layout = layout;
   c.collapse = setup.collapse;
@@ -44,7 +29,7 @@ CpuRuntime::Config runtimeConfig(const RuntimeSetup& setup, CpuLayout layout) {
 }
 
 std::unique_ptr<CpuRuntime> makeRuntime(const anim::Animation& a, const Bvh& tree, const RuntimeSetup& setup,
-                                        CpuLayout layout) {
+                                        Layout layout) {
   return std::make_unique<CpuRuntime>(flattenBvh(tree), std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
                                       a.vertexCount(), runtimeConfig(setup, layout));
 }
@@ -58,104 +43,27 @@ std::unique_ptr<CpuRuntime> makeSetRuntime(const anim::Animation& a, const Refit
 // "LABEL, bvh8, avx512": the layout and, for a wide one, its kernels.
 std::string layoutLabel(const std::string& label, const CpuRuntime& rt) {
   const LayoutInfo& l = rt.layoutInfo();
-  return label + ", " + layoutName(l.layout) + (l.layout == CpuLayout::Bvh2 ? "" : std::string(", ") + isaName(l.isa));
+  return label + ", " + tsah::name(l.layout) + (l.layout == Layout::Bvh2 ? "" : std::string(", ") + isaName(l.isa));
 }
 
 // The toolkit's layouts for the Embree comparison: the default (fastest) one first.
-std::vector<CpuLayout> comparedLayouts(CpuLayout first) {
-  std::vector<CpuLayout> out{first};
-  for (CpuLayout l : {CpuLayout::Bvh8, CpuLayout::Bvh4, CpuLayout::Bvh2})
+std::vector<Layout> comparedLayouts(Layout first) {
+  std::vector<Layout> out{first};
+  for (Layout l : {Layout::Bvh8, Layout::Bvh4, Layout::Bvh2})
     if (l != first && layoutSupported(l)) out.push_back(l);
   return out;
 }
 
 nlohmann::json layoutJson(const CpuRuntime& rt) {
   const LayoutInfo& l = rt.layoutInfo();
-  nlohmann::json j = {{"layout", layoutName(l.layout)},
+  nlohmann::json j = {{"layout", tsah::name(l.layout)},
                       {"interior_nodes", l.interiorNodes},
                       {"leaves", l.leaves},
                       {"depth", l.depth},
                       {"tsah_cost", l.layoutCost},
                       {"binary_tsah_cost", l.binaryCost}};
-  if (l.layout != CpuLayout::Bvh2) j["isa"] = isaName(l.isa);
+  if (l.layout != Layout::Bvh2) j["isa"] = isaName(l.isa);
   return j;
-}
-
-}  // namespace
-
-TreeSet treeSetOf(const RefitTrees& trees, const anim::Animation& a) {
-  TreeSet set;
-  for (const Bvh* tree : trees.trees) set.trees.push_back(flattenBvh(*tree));
-  set.ranges = trees.ranges;
-  if (set.ranges.empty()) set.ranges = {{a.startTime(), a.endTime()}};
-  return set;
-}
-
-nlohmann::json toJson(const RuntimeMethod& m) {
-  nlohmann::json j;
-  j["name"] = m.name;
-  j["label"] = m.label;
-  j["update"] = m.update;
-  RenderStats sum;
-  double update = 0.0, trace = 0.0, total = 0.0;
-  nlohmann::json times = nlohmann::json::array(), updates = nlohmann::json::array(), traces = nlohmann::json::array(),
-                 totals = nlohmann::json::array(), rates = nlohmann::json::array();
-  for (const FrameTiming& f : m.frames) {
-    update += f.updateMs;
-    trace += f.traceMs;
-    total += f.totalMs;
-    for (auto [s, p] : {std::pair{&sum.primary, &f.rays.primary}, std::pair{&sum.ao, &f.rays.ao},
-                        std::pair{&sum.shadow, &f.rays.shadow}}) {
-      s->rays += p->rays;
-      s->ms += p->ms;
-    }
-    times.push_back(f.time);
-    updates.push_back(f.updateMs);
-    traces.push_back(f.traceMs);
-    totals.push_back(f.totalMs);
-    rates.push_back(f.rays.total().mraysPerSecond());
-  }
-  const double n = m.frames.empty() ? 1.0 : double(m.frames.size());
-  j["frames"] = m.frames.size();
-  j["average"] = {{"update_ms", update / n},
-                  {"trace_ms", trace / n},
-                  {"total_ms", total / n},
-                  {"mrays_per_s", ratesJson(sum)},
-                  {"rays_per_frame",
-                   {{"primary", double(sum.primary.rays) / n},
-                    {"ao", double(sum.ao.rays) / n},
-                    {"shadow", double(sum.shadow.rays) / n},
-                    {"total", double(sum.total().rays) / n}}}};
-  j["per_frame"] = {{"time", times}, {"update_ms", updates}, {"trace_ms", traces}, {"total_ms", totals},
-                    {"mrays_per_s", rates}};
-  if (!m.extra.empty()) j["extra"] = m.extra;
-  return j;
-}
-
-namespace {
-
-// One method's state during the frame-by-frame run.
-struct CpuRunner {
-  RuntimeMethod result;
-  std::unique_ptr<CpuRuntime> runtime;                // refit: the tree or tree set; rebuild: the initial tree
-  CpuRuntime::TreeBuilder builder;                    // set for rebuilds
-  std::vector<float> positions;
-  Image scratch;
-};
-
-CpuRuntime::TreeBuilder rebuildBuilder(CpuRebuild kind, const CostModel& cost, uint32_t maxLeaf) {
-  if (kind == CpuRebuild::Binned) {
-    BinnedSahBuilder::Config c;
-    c.cost = cost;
-    c.maxLeafSize = maxLeaf;
-    return [c](std::span<const Aabb> boxes) { return BinnedSahBuilder(c).build(boxes); };
-  }
-  SweepSahBuilder::Config s;
-  s.cost = cost;
-  LeafCollapser::Config l;
-  l.cost = cost;
-  l.maxLeafSize = maxLeaf;
-  return [s, l](std::span<const Aabb> boxes) { return LeafCollapser(l).collapse(SweepSahBuilder(s).build(boxes)); };
 }
 
 }  // namespace
@@ -163,51 +71,42 @@ CpuRuntime::TreeBuilder rebuildBuilder(CpuRebuild kind, const CostModel& cost, u
 std::vector<RuntimeMethod> runCpuMethods(const anim::Animation& a, const std::vector<CpuMethodSpec>& specs,
                                          const CostModel& cost, uint32_t maxLeaf, const RuntimeSetup& setup, Image* image,
                                          std::size_t imageMethod, uint32_t imageFrame) {
-  std::vector<CpuRunner> runners(specs.size());
-  for (std::size_t m = 0; m < specs.size(); ++m) {
-    const CpuMethodSpec& spec = specs[m];
-    CpuRunner& r = runners[m];
-    r.result = {spec.trees.name, spec.trees.label, spec.rebuild ? "rebuild" : "refit", {}, nlohmann::json::object()};
+  std::vector<RuntimeMethod> results;
+  std::vector<std::unique_ptr<cli::FrameRuntime>> runtimes;
+  for (const CpuMethodSpec& spec : specs) {
+    results.push_back({spec.trees.name, spec.trees.label, spec.rebuild ? "rebuild" : "refit", {}, nlohmann::json::object()});
+    cli::FrameRuntimeOptions options;
+    options.layout = setup.layout;
+    options.threads = setup.threads;
+    options.objective = setup.collapse;  // the wide layouts' collapse
     if (spec.rebuild) {
-      r.runtime = makeRuntime(a, *spec.trees.trees.front(), setup, setup.layout);  // a rebuild replaces it anyway
+      // A rebuild replaces the first tree every frame: the sweep SAH collapsed like the T-SAH tree,
+      // or the binned SAH with its own leaf rule.
+      options.rebuild = *spec.rebuild == CpuRebuild::Binned ? cli::Rebuild::Binned : cli::Rebuild::Sweep;
+      options.objective.cost = cost;
+      options.objective.maxLeafSize = maxLeaf;
+      RefitTrees first = spec.trees;
+      first.trees.resize(1);
+      first.ranges.clear();
+      runtimes.push_back(cli::makeFrameRuntime(treeSetOf(first, a), a, options));
     } else {
-      r.runtime = makeSetRuntime(a, spec.trees, setup);
+      runtimes.push_back(cli::makeFrameRuntime(treeSetOf(spec.trees, a), a, options));
     }
-    if (spec.rebuild) r.builder = rebuildBuilder(*spec.rebuild, cost, maxLeaf);
-    r.positions = a.positionsAt(a.startTime());  // static vertices once; each frame writes the moving ones
-    startWorkers(*r.runtime);
+    runtimes.back()->warmUp(setup.times.front(), setup.camera, setup.lighting, setup.settings);
   }
   RenderSettings settings = setup.settings;
   for (std::size_t f = 0; f < setup.times.size(); ++f) {
-    if (setup.progress && (f == 0 || (f + 1) % 10 == 0 || f + 1 == setup.times.size()))
-      setup.progress("all methods: frame " + std::to_string(f + 1) + "/" + std::to_string(setup.times.size()));
+    reportFrame(setup, "all methods", f);
     const double t = setup.times[f];
     settings.frame = static_cast<uint32_t>(f);
-    for (std::size_t k = 0; k < runners.size(); ++k) {
-      const std::size_t m = (k + f) % runners.size();  // rotated: no method is always first or last
-      CpuRunner& r = runners[m];
-      CpuRuntime& rt = *r.runtime;
-      FrameTiming ft;
-      ft.time = t;
-      const auto start = std::chrono::steady_clock::now();
-      a.movingPositionsAt(t, r.positions);
-      if (r.builder) {
-        rt.rebuild(r.positions, r.builder);
-      } else {
-        rt.selectTreeAt(t);  // a tree set: the tree of this frame's part
-        rt.update(r.positions);
-      }
-      ft.updateMs = msSince(start);
-      Image& target = image && m == imageMethod && f == imageFrame ? *image : r.scratch;
-      ft.rays = renderFrame(rt, setup.camera(t), setup.lighting, settings, target);
-      ft.traceMs = ft.rays.total().ms;
-      ft.totalMs = ft.updateMs + ft.traceMs;
-      r.result.frames.push_back(ft);
+    for (std::size_t k = 0; k < runtimes.size(); ++k) {
+      const std::size_t m = (k + f) % runtimes.size();  // rotated: no method is always first or last
+      const cli::FrameUpdate u = runtimes[m]->update(t);
+      results[m].frames.push_back(
+          timeFrame(*runtimes[m], setup, t, u.updateMs, settings, image && m == imageMethod && f == imageFrame ? image : nullptr));
     }
   }
-  std::vector<RuntimeMethod> out;
-  for (CpuRunner& r : runners) out.push_back(std::move(r.result));
-  return out;
+  return results;
 }
 
 std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const Bvh& tree, const std::string& name,
@@ -218,14 +117,14 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const B
   // One toolkit runtime per layout (the default first: the rays are made with it and every other
   // method's results are compared with its), then one Embree peer per mode.
   std::vector<std::unique_ptr<CpuRuntime>> own;
-  for (CpuLayout layout : comparedLayouts(setup.layout)) {
+  for (Layout layout : comparedLayouts(setup.layout)) {
     own.push_back(makeRuntime(a, tree, setup, layout));
-    methods.push_back({name + "-" + layoutName(layout), layoutLabel(label, *own.back()), "refit", {},
+    methods.push_back({name + "-" + tsah::name(layout), layoutLabel(label, *own.back()), "refit", {},
                        {{"layout", layoutJson(*own.back())}, {"default_layout", layout == setup.layout}}});
   }
   if (set && set->trees.size() > 1) {  // the tree set: switches to each frame's tree
     own.push_back(makeSetRuntime(a, *set, setup));
-    methods.push_back({set->name + "-" + layoutName(setup.layout), layoutLabel(set->label, *own.back()), "refit", {},
+    methods.push_back({set->name + "-" + tsah::name(setup.layout), layoutLabel(set->label, *own.back()), "refit", {},
                        {{"layout", layoutJson(*own.back())}, {"trees", set->trees.size()}}});
   }
   startWorkers(*own.front());
@@ -246,7 +145,7 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& a, const B
   std::vector<float> positions = a.positionsAt(a.startTime());  // static vertices once
   RenderSettings settings = setup.settings;
   for (std::size_t f = 0; f < setup.times.size(); ++f) {
-    report(setup, "toolkit vs Embree", f);
+    reportFrame(setup, "toolkit vs Embree", f);
     const double t = setup.times[f];
     settings.frame = static_cast<uint32_t>(f);
     // Every method's update includes the same interpolation of the frame's vertices.

@@ -10,27 +10,23 @@
 
 namespace tsah {
 
-MethodSpec TreeOptions::methodSpec() const {
-  return MethodSpec::parse(method == "tsah" ? "tsah" + std::to_string(k) : method);
-}
+MethodSpec TreeOptions::methodSpec() const { return {method, method == Method::TSah ? objective.k : 0}; }
 
 BaselineConfig TreeOptions::baselineConfig() const {
+  objective.validate("tree options");
   BaselineConfig config;
-  config.cost = {ct, ci};
-  config.maxLeafSize = maxLeaf;
+  config.objective = objective;
   config.threads = threads;
-  config.optimizer.selection = parseSelection(selection);
+  config.optimizer.selection = selection;
   config.optimizer.seed = seed;
   config.optimizer.timeLimitSeconds = timeLimit;
   config.optimizer.minImprovement = minImprovement;
-  config.optimizerKind = parseOptimizerKind(optimizer);
+  config.optimizerKind = optimizer;
   config.parallel.threads = threads;
   config.progress = progress;
-  if (device == "cuda") {
-    if (!gpuOptimizer) throw tsah::Error("--device cuda: this build of tsah has no CUDA support");
+  if (device == Device::Cuda) {
+    if (!gpuOptimizer) throw ConfigError("--device cuda: this build of tsah has no CUDA support");
     config.deviceOptimizer = gpuOptimizer;
-  } else if (device != "cpu") {
-    throw std::invalid_argument("unknown device '" + device + "' (expected cpu or cuda)");
   }
   return config;
 }
@@ -50,14 +46,6 @@ Timeline animationTimeline(const anim::Animation& animation) {
   return Timeline::fromTriangles(animation.indices(), animation.vertexCount(), animation.startTime(),
                                  animation.endTime(),
                                  [&animation](double t, std::span<float> out) { animation.positionsAt(t, out); });
-}
-
-InsertionOptimizer::Selection parseSelection(const std::string& name) {
-  using Selection = InsertionOptimizer::Selection;
-  if (name == "mh") return Selection::MetropolisHastings;
-  if (name == "random") return Selection::Uniform;
-  if (name == "batch") return Selection::BatchSort;
-  throw std::invalid_argument("unknown node selection '" + name + "' (expected mh, random or batch)");
 }
 
 uint32_t framesFor(const anim::Animation& animation, uint32_t requested) {
@@ -83,18 +71,16 @@ BvhBuildInfo treeBuildInfo(const TreeOptions& options, const anim::Animation& an
                            double buildSeconds, double timeStart, double timeEnd) {
   const MethodSpec method = options.methodSpec();
   BvhBuildInfo info;
-  info.method = method.method == Method::TSah ? "tsah" : method.name();
+  info.method = name(method.method);
   // How nodes were chosen for optimization: none (SAH0), parallel (reinsertion) or the selection.
-  info.selection = method.method == Method::Sah0  ? "none"
-                   : options.device == "cuda"     ? "parallel-cuda"
-                   : options.optimizer == "parallel" ? "parallel"
-                                                     : options.selection;
+  info.selection = method.method == Method::Sah0                 ? "none"
+                   : options.device == Device::Cuda               ? "parallel-cuda"
+                   : options.optimizer == OptimizerKind::Parallel ? "parallel"
+                                                                  : name(options.selection);
+  info.objective = options.objective;
   info.objective.k = method.k;
   info.representativeFrames = frames;
   info.seed = options.seed;
-  info.objective.cost.ct = options.ct;
-  info.objective.cost.ci = options.ci;
-  info.objective.maxLeafSize = options.maxLeaf;
   info.buildSeconds = buildSeconds;
   info.timeStart = timeStart;
   info.timeEnd = timeEnd;

@@ -26,26 +26,23 @@ py::array_t<double> doubleArray(const std::vector<double>& values) {
 TreeOptions treeOptions(const std::string& method, int k, uint32_t frames, const std::string& selection, uint64_t seed,
                         float ct, float ci, uint32_t maxLeaf, double timeLimit, double minImprovement,
                         unsigned threads, const std::string& optimizer, const std::string& device) {
-  parseOptimizerKind(optimizer);  // ValueError for an unknown name, before any work
   if (device != "cpu" && device != "cuda") throw py::value_error("device: expected 'cpu' or 'cuda'");
   if (frames < 1) throw py::value_error("frames: must be at least 1");
   if (maxLeaf < 1) throw py::value_error("max_leaf: must be at least 1");
   if (!(ct > 0.0f) || !(ci > 0.0f)) throw py::value_error("ct, ci: must be positive");
   if (k < 0) throw py::value_error("k: must be 0 or more");
   TreeOptions o;
-  o.method = method;
-  o.k = k;
+  const MethodSpec spec = MethodSpec::parse(method);  // "tsah<k>" names its own k
+  o.method = spec.method;
+  o.objective = {method == "tsah" ? k : spec.k, {ct, ci}, maxLeaf};
   o.frames = frames;
-  o.selection = selection;
+  o.selection = parse<Selection>(selection);
   o.seed = seed;
-  o.ct = ct;
-  o.ci = ci;
-  o.maxLeaf = maxLeaf;
   o.timeLimit = timeLimit;
   o.minImprovement = minImprovement;
   o.threads = threads;
-  o.optimizer = optimizer;
-  o.device = device;
+  o.optimizer = parse<OptimizerKind>(optimizer);
+  o.device = parse<Device>(device);
 #if TSAH_HAVE_CUDA
   o.gpuOptimizer = cuda::gpuTreeOptimizer();
 #endif

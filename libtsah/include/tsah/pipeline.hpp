@@ -12,6 +12,8 @@
 #include <vector>
 
 #include "anim/animation.hpp"
+#include "tsah/core/kinds.hpp"
+#include "tsah/core/objective.hpp"
 #include "tsah/optimize/baselines.hpp"
 #include "tsah/core/bvh.hpp"
 #include "tsah/io/bvh_file.hpp"
@@ -24,28 +26,26 @@ namespace tsah {
 
 // The options of `tsah optimize` / `tsah evaluate`, with the command line's defaults.
 struct TreeOptions {
-  std::string method = "tsah";  // tsah, sah0 or sahstar (evaluate also takes rebuild, tsah<k>)
-  int k = 0;                    // T-SAH exponent of method "tsah"
-  uint32_t frames = 5;          // representative frames, uniform in time
-  std::string optimizer = "sequential";  // sequential (the paper's insertion) or parallel (reinsertion)
-  std::string selection = "mh"; // node selection of the sequential optimizer: mh, random, batch
+  Method method = Method::TSah;  // tsah, sah0 or sahstar (rebuild is no single tree)
+  Objective objective;           // k (of method tsah), cT, cI, largest leaf after collapse
+  uint32_t frames = 5;           // representative frames, uniform in time
+  OptimizerKind optimizer = OptimizerKind::Sequential;  // the paper's insertion, or parallel reinsertion
+  Selection selection = Selection::MetropolisHastings;  // node selection of the sequential optimizer
   uint64_t seed = 1;
-  float ct = 3.0f, ci = 2.0f;
-  uint32_t maxLeaf = 8;         // largest leaf after collapse
-  double timeLimit = 0.0;       // seconds per optimization, 0: none
+  double timeLimit = 0.0;        // seconds per optimization, 0: none
   double minImprovement = InsertionOptimizer::Config{}.minImprovement;
-  unsigned threads = 0;         // 0: all cores
-  // cpu, or cuda: every optimization by the GPU parallel reinsertion optimizer, which the caller
+  unsigned threads = 0;          // 0: all cores
+  // Cpu, or Cuda: every optimization by the GPU parallel reinsertion optimizer, which the caller
   // provides as gpuOptimizer (libtsah has no CUDA code; baselineConfig throws without it).
-  std::string device = "cpu";
+  Device device = Device::Cpu;
   TreeOptimizerFunction gpuOptimizer;
   std::function<void(const std::string&)> progress;  // optional progress messages
 
-  // "tsah" with k -> tsah<k>; anything else as MethodSpec::parse reads it (throws std::invalid_argument).
+  // The method with the objective's k (T-SAH) or 0 (the others).
   MethodSpec methodSpec() const;
-  // The builders' settings (cost, leaf size, optimizer selection/seed/limits, threads, progress).
-  // Throws std::invalid_argument for an unknown optimizer, selection or device, tsah::Error for
-  // device "cuda" without a gpuOptimizer (a build without CUDA).
+  // The builders' settings (objective, optimizer selection/seed/limits, threads, progress). Throws
+  // tsah::ConfigError for an invalid objective, or device Cuda without a gpuOptimizer (a build
+  // without CUDA).
   BaselineConfig baselineConfig() const;
 };
 
@@ -55,9 +55,6 @@ FrameSource animationFrames(const anim::Animation& animation, std::vector<double
 
 // The animation as the segmentation sees it (triangle boxes at any time); must outlive the result.
 Timeline animationTimeline(const anim::Animation& animation);
-
-// "mh", "random", "batch" -> the optimizer's node selection; throws std::invalid_argument otherwise.
-InsertionOptimizer::Selection parseSelection(const std::string& name);
 
 // `requested` for an animation, 1 for a static input (one keyframe: more frames would repeat it).
 uint32_t framesFor(const anim::Animation& animation, uint32_t requested);
@@ -76,8 +73,8 @@ struct OptimizedTree {
 };
 
 // One tree for the whole animation, exactly as `tsah optimize` builds it (same seed, same tree).
-// Throws tsah::Error when the animation has no triangles, std::invalid_argument for a bad method or
-// selection (including "rebuild", which is no single tree).
+// Throws tsah::DataError when the animation has no triangles, tsah::ConfigError for method
+// SahRebuild (no single tree) or an invalid objective.
 OptimizedTree optimizeAnimation(const anim::Animation& animation, const TreeOptions& options);
 
 // Eq. 1 at framesFor(animation, evalFrames) times uniform over the animation, the tree refitted to each.

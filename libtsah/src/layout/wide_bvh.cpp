@@ -260,8 +260,8 @@ WideBvh WideCollapser::collapse(const Bvh& bvh) const {
 
 WideCollapser::Config wideCollapseConfig(const Objective& objective, uint32_t width) {
   WideCollapser::Config c;
+  static_cast<Objective&>(c) = objective;
   c.width = width;
-  c.cost = objective.cost;
   c.k = std::max(0, objective.k);
   c.maxLeafSize = std::max(1u, objective.maxLeafSize);
   return c;

@@ -11,6 +11,7 @@
 #include <tuple>
 #include <utility>
 
+#include "tsah/base/error.hpp"
 #include "tsah/optimize/leaf_collapser.hpp"
 #include "tsah/build/sah_builder.hpp"
 
@@ -95,8 +96,8 @@ PrimitiveBoxes singleFrame(std::span<const Aabb> frame) {
 }
 
 Bvh collapseLeaves(const Bvh& bvh, const BaselineConfig& config, int k) {
-  if (config.maxLeafSize <= 1) return bvh;
-  return LeafCollapser({config.cost, config.maxLeafSize, k}).collapse(bvh);
+  if (config.objective.maxLeafSize <= 1) return bvh;
+  return LeafCollapser(Objective{k, config.objective.cost, config.objective.maxLeafSize}).collapse(bvh);
 }
 
 // An optimization followed by collapseLeaves, the collapse done by the optimizer from its own
@@ -104,14 +105,14 @@ Bvh collapseLeaves(const Bvh& bvh, const BaselineConfig& config, int k) {
 InsertionOptimizer::Result optimizeAndCollapse(Bvh bvh, const PrimitiveBoxes& prims,
                                                const InsertionOptimizer::Config& settings,
                                                const BaselineConfig& config) {
-  if (config.maxLeafSize <= 1) return optimizeTree(std::move(bvh), prims, settings, config);
-  const LeafCollapser collapser({config.cost, config.maxLeafSize, settings.k});
+  if (config.objective.maxLeafSize <= 1) return optimizeTree(std::move(bvh), prims, settings, config);
+  const LeafCollapser collapser(Objective{settings.k, config.objective.cost, config.objective.maxLeafSize});
   return optimizeTree(std::move(bvh), prims, settings, config, &collapser);
 }
 
 InsertionOptimizer::Config optimizerConfig(const BaselineConfig& config, int k, uint64_t seed) {
   InsertionOptimizer::Config c = config.optimizer;
-  c.cost = config.cost;
+  c.cost = config.objective.cost;
   c.k = k;
   c.seed = seed;
   c.progress = nullptr;
@@ -125,16 +126,6 @@ void checkFrames(const PrimitiveBoxes& rep) {
 }
 
 }  // namespace
-
-std::string optimizerKindName(OptimizerKind kind) {
-  return kind == OptimizerKind::Sequential ? "sequential" : "parallel";
-}
-
-OptimizerKind parseOptimizerKind(const std::string& name) {
-  if (name == "sequential") return OptimizerKind::Sequential;
-  if (name == "parallel") return OptimizerKind::Parallel;
-  throw std::invalid_argument("unknown optimizer '" + name + "' (expected sequential or parallel)");
-}
 
 InsertionOptimizer::Result optimizeTree(Bvh bvh, const PrimitiveBoxes& prims, const InsertionOptimizer::Config& settings,
                                         const BaselineConfig& config, const LeafCollapser* collapse) {
@@ -169,34 +160,23 @@ FrameSource FrameSource::fromTriangles(std::span<const uint32_t> indices, std::s
 }
 
 std::string MethodSpec::name() const {
-  switch (method) {
-    case Method::Sah0:
-      return "sah0";
-    case Method::SahStar:
-      return "sahstar";
-    case Method::SahRebuild:
-      return "rebuild";
-    case Method::TSah:
-      return "tsah" + std::to_string(k);
-  }
-  return "?";
+  return method == Method::TSah ? "tsah" + std::to_string(k) : tsah::name(method);
 }
 
 MethodSpec MethodSpec::parse(const std::string& name) {
-  if (name == "sah0") return {Method::Sah0, 0};
-  if (name == "sahstar") return {Method::SahStar, 0};
-  if (name == "rebuild") return {Method::SahRebuild, 0};
-  if (name == "tsah") return {Method::TSah, 0};
-  if (name.rfind("tsah", 0) == 0 && name.size() <= 6 &&
+  if (name.rfind("tsah", 0) == 0 && name.size() > 4 && name.size() <= 6 &&
       std::all_of(name.begin() + 4, name.end(), [](char c) { return c >= '0' && c <= '9'; }))
     return {Method::TSah, std::stoi(name.substr(4))};
-  throw std::invalid_argument("unknown method '" + name +
-                              "' (expected sah0, sahstar, rebuild or tsah<k> such as tsah0, tsah2)");
+  try {
+    return {tsah::parse<Method>(name), 0};
+  } catch (const ConfigError&) {
+    throw ConfigError("unknown method '" + name + "' (expected sah0, sahstar, rebuild or tsah<k> such as tsah0, tsah2)");
+  }
 }
 
 Bvh buildSah0(const PrimitiveBoxes& rep, const BaselineConfig& config) {
   checkFrames(rep);
-  Bvh bvh = SweepSahBuilder({config.cost, 1}).build(rep.frame(0));
+  Bvh bvh = SweepSahBuilder({config.objective.cost, 1}).build(rep.frame(0));
   bvh = collapseLeaves(bvh, config, 0);  // with the cost of frame 0, the only frame SAH0 knows
   refit(bvh, rep);
   return bvh;
@@ -204,7 +184,7 @@ Bvh buildSah0(const PrimitiveBoxes& rep, const BaselineConfig& config) {
 
 Bvh buildOptimizedSah(std::span<const Aabb> frame, const BaselineConfig& config, uint64_t seed) {
   const PrimitiveBoxes boxes = singleFrame(frame);
-  Bvh bvh = SweepSahBuilder({config.cost, 1}).build(frame);
+  Bvh bvh = SweepSahBuilder({config.objective.cost, 1}).build(frame);
   return optimizeAndCollapse(std::move(bvh), boxes, optimizerConfig(config, 0, seed), config).bvh;
 }
 
@@ -215,7 +195,7 @@ namespace {
 std::pair<Bvh, double> sahStarCandidate(const PrimitiveBoxes& rep, uint32_t f, const BaselineConfig& config) {
   Bvh tree = buildOptimizedSah(rep.frame(f), config, derivedSeed(config.optimizer.seed, 1, f));
   refit(tree, rep);
-  const double average = temporalCost(frameCosts(tree, config.cost), 0);
+  const double average = temporalCost(frameCosts(tree, config.objective.cost), 0);
   return {std::move(tree), average};
 }
 
@@ -243,7 +223,7 @@ Bvh buildTSah(const PrimitiveBoxes& rep, int k, const BaselineConfig& config,
               InsertionOptimizer::Result* details) {
   checkFrames(rep);
   ProgressSink progress(config);
-  Bvh bvh = SweepSahBuilder({config.cost, 1}).build(rep.frame(0));
+  Bvh bvh = SweepSahBuilder({config.objective.cost, 1}).build(rep.frame(0));
   InsertionOptimizer::Config oc = optimizerConfig(config, k, config.optimizer.seed);
   const std::string label = "tsah" + std::to_string(k);
   oc.progress = [&](const InsertionOptimizer::BatchRecord& r) {
@@ -360,7 +340,7 @@ std::vector<MethodResult> compareMethods(std::span<const MethodSpec> methods, co
         evaluation.fill(task.index, frameBoxes[w]);
         const Bvh tree =
             buildOptimizedSah(frameBoxes[w], inner, derivedSeed(config.optimizer.seed, 2, task.index));
-        results[task.method].perFrame[task.index] = frameCost(tree, 0, config.cost);
+        results[task.method].perFrame[task.index] = frameCost(tree, 0, config.objective.cost);
         break;
       }
     }
@@ -384,7 +364,7 @@ std::vector<MethodResult> compareMethods(std::span<const MethodSpec> methods, co
     const unsigned evalWorkers = workerCount(config.threads, evaluation.frameCount);
     std::vector<std::vector<FrameCostEvaluator>> evaluators(evalWorkers);
     for (auto& perWorker : evaluators)
-      for (std::size_t m : single) perWorker.emplace_back(trees[m], config.cost);
+      for (std::size_t m : single) perWorker.emplace_back(trees[m], config.objective.cost);
     frameBoxes.resize(std::max<std::size_t>(frameBoxes.size(), evalWorkers), std::vector<Aabb>(evaluation.primCount));
     progress("evaluating " + std::to_string(evaluation.frameCount) + " frames");
     parallelFor(evaluation.frameCount, evalWorkers, [&](std::size_t f, unsigned w) {

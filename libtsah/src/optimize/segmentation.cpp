@@ -84,7 +84,7 @@ class Search {
         inside.push_back(times_[f]);
       }
     if (!inside.empty())
-      c.costs = evaluateFrames(c.tree, timeline_.frames(std::move(inside)), config_.baseline.cost,
+      c.costs = evaluateFrames(c.tree, timeline_.frames(std::move(inside)), config_.baseline.objective.cost,
                                config_.baseline.threads);
     return cache_.emplace(key, std::move(c)).first->second;
   }
@@ -211,7 +211,7 @@ std::vector<double> referenceCosts(const Timeline& tl, const SegmentationConfig&
           tl.boxesAt(times[sample[q]], boxes);
           const Bvh tree = buildOptimizedSah(boxes, single, frameSeed(c, sample[q]));
           PrimitiveBoxes one{1, tl.primCount, std::move(boxes)};
-          sampled[q] = evaluateFrames(tree, FrameSource::fromBoxes(one), c.baseline.cost, 1).front();
+          sampled[q] = evaluateFrames(tree, FrameSource::fromBoxes(one), c.baseline.objective.cost, 1).front();
         }
       } catch (...) {
         errors[w] = std::current_exception();

@@ -21,41 +21,26 @@ double msSince(std::chrono::steady_clock::time_point start) {
 }
 
 // The best supported kernels with nodes of this width, or null.
-const WideKernels* kernelsFor(CpuLayout layout, std::optional<SimdIsa> isa) {
+const WideKernels* kernelsFor(Layout layout, std::optional<SimdIsa> isa) {
   const std::vector<SimdIsa> candidates = isa ? std::vector<SimdIsa>{*isa} : supportedIsas();
   for (auto it = candidates.rbegin(); it != candidates.rend(); ++it) {
     if (!isaSupported(*it)) continue;
     const WideKernels& k = wideKernels(*it);
-    if (layout == CpuLayout::Bvh4 ? k.closest4 != nullptr : k.closest8 != nullptr) return &k;
+    if (layout == Layout::Bvh4 ? k.closest4 != nullptr : k.closest8 != nullptr) return &k;
   }
   return nullptr;
 }
 
 }  // namespace
 
-const char* layoutName(CpuLayout layout) {
-  switch (layout) {
-    case CpuLayout::Bvh2: return "bvh2";
-    case CpuLayout::Bvh4: return "bvh4";
-    case CpuLayout::Bvh8: return "bvh8";
-  }
-  return "?";
+bool layoutSupported(Layout layout) {
+  return layout == Layout::Bvh2 || kernelsFor(layout, std::nullopt) != nullptr;
 }
 
-std::optional<CpuLayout> parseLayout(const std::string& name) {
-  for (CpuLayout l : {CpuLayout::Bvh2, CpuLayout::Bvh4, CpuLayout::Bvh8})
-    if (name == layoutName(l)) return l;
-  return std::nullopt;
-}
-
-bool layoutSupported(CpuLayout layout) {
-  return layout == CpuLayout::Bvh2 || kernelsFor(layout, std::nullopt) != nullptr;
-}
-
-CpuLayout fastestLayout() {
-  for (CpuLayout l : {CpuLayout::Bvh8, CpuLayout::Bvh4})
+Layout fastestLayout() {
+  for (Layout l : {Layout::Bvh8, Layout::Bvh4})
     if (layoutSupported(l)) return l;
-  return CpuLayout::Bvh2;
+  return Layout::Bvh2;
 }
 
 struct CpuRuntime::Threads {
@@ -79,7 +64,7 @@ CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint3
   setTree(topologyOf(tree));
   positions_.assign(std::size_t(vertexCount_) * 3, 0.0f);
   info_.layout = config.layout;
-  if (config.layout == CpuLayout::Bvh2) {
+  if (config.layout == Layout::Bvh2) {
     info_.interiorNodes = tree_.interiorCount;
     info_.leaves = tree_.leafCount;
     info_.depth = tree_.depth;
@@ -89,7 +74,7 @@ CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint3
   }
   kernels_ = kernelsFor(config.layout, config.isa);
   if (!kernels_)
-    throw tsah::Error(std::string("runtime: no ") + layoutName(config.layout) + " kernels" +
+    throw tsah::Error(std::string("runtime: no ") + name(config.layout) + " kernels" +
                       (config.isa ? std::string(" for ") + isaName(*config.isa) : std::string()) +
                       " run on this processor (bvh8 needs AVX2)");
   info_.isa = kernels_->isa;
@@ -107,7 +92,7 @@ void CpuRuntime::setWideTree(const Bvh& binary, bool reportCosts) {
   info_.interiorNodes = w.nodeCount();
   info_.leaves = w.leafCount();
   info_.depth = w.depth();
-  if (info_.layout == CpuLayout::Bvh4)
+  if (info_.layout == Layout::Bvh4)
     wide4_ = std::make_shared<WideTree<4>>(w, indices_, threads_->count, info_.isa);
   else
     wide8_ = std::make_shared<WideTree<8>>(w, indices_, threads_->count, info_.isa);
@@ -128,7 +113,7 @@ CpuRuntime::CpuRuntime(const TreeSet& set, std::vector<uint32_t> indices, uint32
   if (set.size() == 1) return;
   for (const FlatBvh& tree : set.trees) setTrees_.push_back(topologyOf(tree));
   setRanges_ = set.ranges;
-  if (info_.layout == CpuLayout::Bvh2) return;
+  if (info_.layout == Layout::Bvh2) return;
   // Collapse every tree of the set now (from all its frame blocks), so a switch costs no collapse.
   const LayoutInfo first = info_;
   for (uint32_t s = 0; s < set.size(); ++s) {
@@ -288,7 +273,7 @@ CpuRuntime::RebuildTimings CpuRuntime::rebuild(std::span<const float> positions,
   setWide4_.clear();
   setWide8_.clear();
   current_ = 0;
-  if (info_.layout != CpuLayout::Bvh2) {
+  if (info_.layout != Layout::Bvh2) {
     collapse_.k = 0;  // one frame: its weight is 1 whatever k is
     setWideTree(bvh, false);
   } else {
@@ -317,12 +302,12 @@ bool CpuRuntime::anyHit(const Ray& ray, AnyHitOrder order) const {
 }
 
 const FlatBvh& CpuRuntime::tree() const {
-  if (info_.layout != CpuLayout::Bvh2) throw tsah::Error("runtime: the binary tree is not kept up to date in a wide layout");
+  if (info_.layout != Layout::Bvh2) throw tsah::Error("runtime: the binary tree is not kept up to date in a wide layout");
   return tree_;
 }
 
 BvhView CpuRuntime::view() const {
-  if (info_.layout != CpuLayout::Bvh2) throw tsah::Error("runtime: the binary view is not kept up to date in a wide layout");
+  if (info_.layout != Layout::Bvh2) throw tsah::Error("runtime: the binary view is not kept up to date in a wide layout");
   return binaryView();
 }
 

@@ -13,6 +13,11 @@ struct CostModel {
 };
 
 struct Objective {
+  // Written out in the order k, cost, leaf size: a constructor rather than an aggregate, so that a
+  // brace list in another order ({cost, leaf, k}) is refused instead of spread over the fields.
+  Objective() = default;
+  Objective(int k_, CostModel cost_, uint32_t maxLeafSize_) : k(k_), cost(cost_), maxLeafSize(maxLeafSize_) {}
+
   int k = 0;                  // T-SAH exponent: frame weights w_i = C_i^k (0: the plain average)
   CostModel cost;             // cT, cI (the paper's 3 and 2)
   uint32_t maxLeafSize = 8;   // largest leaf the collapse makes (a leaf of the optimizer is kept whole)

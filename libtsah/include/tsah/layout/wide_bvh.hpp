@@ -89,13 +89,11 @@ struct WideBvh {
 
 class WideCollapser {
  public:
-  struct Config {
+  // The objective (Objective: cT per wide interior node visit, cI per triangle test, the T-SAH
+  // exponent of the frame weights w_i = C_i^k of the binary tree, and the largest leaf the collapse
+  // makes; a leaf of the binary tree is kept whole even when larger) plus the node shape.
+  struct Config : Objective {
     uint32_t width = 8;        // children per wide node (the CPU layouts use 4 and 8; 2..8 allowed)
-    uint32_t maxLeafSize = 8;  // leaves made by the collapse hold at most this many triangles
-                               // (a leaf of the binary tree is kept whole even when larger)
-    CostModel cost;            // cT per wide interior node visit, cI per triangle test (defaults 3, 2:
-                               // the paper's constants, so the wide and binary costs compare)
-    int k = 0;                 // T-SAH exponent of the frame weights w_i = C_i^k of the binary tree
     uint32_t leafPacket = 1;   // triangles tested at once: a leaf of j costs cI * ceil(j / leafPacket)
                                // (1: Eq. 1; the SIMD layouts use their width, since testing one
                                // packet of N triangles costs about as much as testing one)

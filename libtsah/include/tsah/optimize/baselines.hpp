@@ -20,6 +20,7 @@
 
 #include "tsah/core/bvh.hpp"
 #include "tsah/core/cost.hpp"
+#include "tsah/core/kinds.hpp"
 #include "tsah/optimize/insertion_optimizer.hpp"
 #include "tsah/optimize/parallel_optimizer.hpp"
 
@@ -41,27 +42,15 @@ struct FrameSource {
                                    uint32_t frameCount);
 };
 
-enum class Method { Sah0, SahStar, SahRebuild, TSah };
-
 struct MethodSpec {
   Method method = Method::TSah;
   int k = 0;  // T-SAH exponent
 
   // "sah0", "sahstar", "rebuild", "tsah<k>".
   std::string name() const;
-  // Parses a name as above ("tsah" alone means tsah0); throws std::invalid_argument otherwise.
+  // Parses a name as above ("tsah" alone means tsah0); throws tsah::ConfigError otherwise.
   static MethodSpec parse(const std::string& name);
 };
-
-// Which optimizer improves the trees of SAH*, SAH-rebuild and T-SAH.
-enum class OptimizerKind {
-  Sequential,  // InsertionOptimizer: the paper's Metropolis-Hastings insertion optimizer, one thread
-  Parallel,    // ParallelReinsertionOptimizer: parallel reinsertion on all cores
-};
-
-// "sequential" or "parallel"; parseOptimizerKind throws std::invalid_argument for anything else.
-std::string optimizerKindName(OptimizerKind kind);
-OptimizerKind parseOptimizerKind(const std::string& name);
 
 // An optimizer run elsewhere (the GPU optimizer, which libtsah cannot call: the tsah program and
 // the Python module set it from tsah_cuda): the same contract as optimizeTree.
@@ -69,13 +58,14 @@ using TreeOptimizerFunction = std::function<InsertionOptimizer::Result(
     Bvh bvh, const PrimitiveBoxes& prims, const InsertionOptimizer::Config& settings, const LeafCollapser* collapse)>;
 
 struct BaselineConfig {
-  CostModel cost;
-  uint32_t maxLeafSize = 8;  // leaf collapse after building; 1 keeps one primitive per leaf
+  // cT, cI and the largest leaf of the collapse after building (1 keeps one primitive per leaf).
+  // Its k is each method's own (MethodSpec::k; 0 for SAH0, SAH*, SAH-rebuild).
+  Objective objective;
   // Settings of every optimization (SAH*, SAH-rebuild, T-SAH), whichever optimizer runs it. Its
-  // cost model and k are replaced by `cost` and the method's k; single-frame optimizations get
-  // derived seeds.
+  // cost model and k are replaced by the objective's cost and the method's k; single-frame
+  // optimizations get derived seeds.
   InsertionOptimizer::Config optimizer;
-  OptimizerKind optimizerKind = OptimizerKind::Sequential;
+  OptimizerKind optimizerKind = OptimizerKind::Sequential;  // core/kinds.hpp
   ParallelReinsertionOptimizer::Parallel parallel;  // settings of the parallel optimizer (its threads)
   // When set, every optimization runs here instead (optimizerKind is then unused).
   TreeOptimizerFunction deviceOptimizer;

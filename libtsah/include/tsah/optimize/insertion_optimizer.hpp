@@ -18,17 +18,14 @@
 
 #include "tsah/core/bvh.hpp"
 #include "tsah/core/cost.hpp"
+#include "tsah/core/kinds.hpp"
 #include "tsah/optimize/leaf_collapser.hpp"
 
 namespace tsah {
 
 class InsertionOptimizer {
  public:
-  enum class Selection {
-    MetropolisHastings,  // independent chain on Delta_N = sum_i C_i^k S_N(i) (the paper's choice)
-    Uniform,             // uniformly random eligible nodes
-    BatchSort,           // Bittner 2013: the batch of nodes with the highest inefficiency measure
-  };
+  using Selection = tsah::Selection;  // core/kinds.hpp
 
   // The state after one batch (batch 0: the starting tree), for progress and convergence plots.
   struct BatchRecord {

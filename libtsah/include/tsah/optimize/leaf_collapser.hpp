@@ -30,11 +30,8 @@ struct CollapseSource {
 
 class LeafCollapser {
  public:
-  struct Config {
-    CostModel cost;
-    uint32_t maxLeafSize = 8;  // a collapsed leaf holds at most this many primitives
-    int k = 0;                 // T-SAH exponent of the frame weights
-  };
+  // The objective: cT, cI, the T-SAH exponent of the frame weights and the largest leaf.
+  using Config = Objective;
 
   LeafCollapser() = default;
   explicit LeafCollapser(Config config);

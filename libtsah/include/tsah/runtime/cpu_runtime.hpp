@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "tsah/core/bvh.hpp"
+#include "tsah/core/kinds.hpp"
 #include "tsah/layout/flat_bvh.hpp"
 #include "tsah/layout/traversal.hpp"
 #include "tsah/io/tree_set.hpp"
@@ -27,18 +28,15 @@
 
 namespace tsah {
 
-enum class CpuLayout : uint8_t { Bvh2 = 2, Bvh4 = 4, Bvh8 = 8 };
-const char* layoutName(CpuLayout layout);  // "bvh2", "bvh4", "bvh8"
+// The CPU runtime traces Layout::Bvh2, Bvh4 and Bvh8 (core/kinds.hpp).
 // The layout with the most children the processor's best kernels support (bvh8 with AVX2).
-CpuLayout fastestLayout();
+Layout fastestLayout();
 // False when no kernels of this build that the processor runs have this width.
-bool layoutSupported(CpuLayout layout);
-// "bvh2" / "bvh4" / "bvh8" (nothing for anything else).
-std::optional<CpuLayout> parseLayout(const std::string& name);
+bool layoutSupported(Layout layout);
 
 // What a runtime traces: the layout, the kernels and the tree's size and multi-frame costs.
 struct LayoutInfo {
-  CpuLayout layout = CpuLayout::Bvh2;
+  Layout layout = Layout::Bvh2;
   SimdIsa isa = SimdIsa::Sse;    // wide layouts: the kernels' instruction set
   uint32_t interiorNodes = 0, leaves = 0, depth = 0;
   // T-SAH cost C~^k (Eq. 3, the collapse's cT, cI, k) over the frames of the tree given to the
@@ -51,7 +49,7 @@ class CpuRuntime {
   struct Config {
     Config(uint32_t workerThreads = 0) : threads(workerThreads) {}  // NOLINT: {threads} converts
     uint32_t threads = 0;  // worker threads; 0 (or more than the hardware has): one per hardware thread
-    CpuLayout layout = CpuLayout::Bvh2;
+    Layout layout = Layout::Bvh2;
     std::optional<SimdIsa> isa;  // wide layouts: the kernels to use (default: the best supported)
     WideCollapser::Config collapse;  // wide layouts: cost constants, k, leaf size (width, leafPacket: the layout's)
   };
