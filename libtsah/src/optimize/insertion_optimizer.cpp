@@ -10,7 +10,7 @@
 #include <utility>
 
 #include "optimize/random.hpp"
-#include "optimize/stop_rule.hpp"
+#include "optimize/optimizer_run.hpp"
 #include "tsah/core/cost_terms.hpp"
 
 namespace tsah {
@@ -543,32 +543,18 @@ InsertionOptimizer::InsertionOptimizer(Config config) : config_(std::move(config
 
 InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const PrimitiveBoxes& prims,
                                                        const LeafCollapser* collapse) const {
-  using Clock = std::chrono::steady_clock;
-  const auto start = Clock::now();
-  const auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - start).count(); };
-  const bool limited = config_.timeLimitSeconds > 0.0;
-
+  const auto start = OptimizerRun::Clock::now();
   InsertionSession session(std::move(bvh), prims, config_);
-  Result result;
-  result.initialFrameCosts.assign(session.frameCosts().begin(), session.frameCosts().end());
-  result.initialCost = session.cost();
-  const auto record = [&](uint32_t batch) {
-    BatchRecord r;
-    r.batch = batch;
-    r.cost = session.cost();
-    r.averageCost = temporalCost(session.frameCosts(), 0);
-    r.elapsedSeconds = elapsed();
-    r.steps = session.steps();
-    r.acceptedSteps = session.acceptedSteps();
-    result.history.push_back(r);
-    if (config_.progress) config_.progress(r);
+  const auto state = [&session] {
+    return RunState{session.cost(), session.frameCosts(), session.steps(), session.acceptedSteps()};
   };
-  record(0);
+  OptimizerRun run(config_, start, state());
 
   const uint32_t nodeCount = session.nodeCount();  // not bvh(): that would copy every node's boxes
   const auto batchSize = static_cast<uint32_t>(std::max(
       {1.0, double(config_.minBatchSize), std::round(config_.batchFraction * double(nodeCount))}));
-  StallCounter stall(session.cost(), config_.minImprovement, config_.batchesWithoutImprovement);
+  // Within a batch the time limit is looked at every 32 steps.
+  const auto outOfTime = [&run](std::size_t i) { return run.timeLimited() && (i & 31) == 31 && run.pastTimeLimit(); };
   bool anyEligible = true;
   for (uint32_t batch = 1; anyEligible; ++batch) {
     if (config_.selection == Selection::BatchSort) {
@@ -576,7 +562,7 @@ InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const Primitive
       anyEligible = !nodes.empty();
       for (std::size_t i = 0; i < nodes.size(); ++i) {
         if (session.eligible(nodes[i])) session.step(nodes[i]);
-        if (limited && (i & 31) == 31 && elapsed() >= config_.timeLimitSeconds) break;
+        if (outOfTime(i)) break;
       }
     } else {
       for (uint32_t i = 0; i < batchSize; ++i) {
@@ -586,26 +572,14 @@ InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const Primitive
           break;
         }
         session.step(node);
-        if (limited && (i & 31) == 31 && elapsed() >= config_.timeLimitSeconds) break;
+        if (outOfTime(i)) break;
       }
     }
     session.endBatch();
-    record(batch);
-    if (stall.stalledAfter(session.cost())) break;
-    if (config_.maxBatches && batch >= config_.maxBatches) break;
-    if (limited && elapsed() >= config_.timeLimitSeconds) {
-      result.timeLimitReached = true;
-      break;
-    }
+    if (run.endBatch(batch, state()) || run.limitReached(batch)) break;
   }
-
-  result.finalFrameCosts.assign(session.frameCosts().begin(), session.frameCosts().end());
-  result.finalCost = session.cost();
-  result.steps = session.steps();
-  result.acceptedSteps = session.acceptedSteps();
-  result.seconds = elapsed();
-  result.bvh = collapse ? session.releaseCollapsed(*collapse) : session.release();
-  return result;
+  run.finalState(state());
+  return run.finish(collapse ? session.releaseCollapsed(*collapse) : session.release());
 }
 
 }  // namespace tsah

@@ -4,7 +4,7 @@
 #include <stdexcept>
 #include <utility>
 
-#include "optimize/stop_rule.hpp"
+#include "optimize/optimizer_run.hpp"
 #include "tsah/optimize/parallel_optimizer.hpp"
 
 namespace tsah {
@@ -31,47 +31,25 @@ ParallelReinsertionOptimizer::Result ParallelReinsertionOptimizer::optimize(Bvh 
 InsertionOptimizer::Result runReinsertionRounds(RoundSession& session, const InsertionOptimizer::Config& config,
                                                 const LeafCollapser* collapse,
                                                 std::chrono::steady_clock::time_point start) {
-  using Clock = std::chrono::steady_clock;
-  const auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - start).count(); };
-  InsertionOptimizer::Result result;
-  result.initialFrameCosts = session.frameCostList();
-  result.initialCost = session.cost();
-  const auto record = [&](uint32_t round) {
-    InsertionOptimizer::BatchRecord r;
-    r.batch = round;
-    r.cost = session.cost();
-    r.averageCost = temporalCost(session.frameCostList(), 0);
-    r.elapsedSeconds = elapsed();
-    r.steps = session.searches();
-    r.acceptedSteps = session.appliedMoves();
-    result.history.push_back(r);
-    if (config.progress) config.progress(r);
+  std::vector<double> frameCosts;  // RoundSession gives them by value: kept alive for the RunState
+  const auto state = [&session, &frameCosts] {
+    frameCosts = session.frameCostList();
+    return RunState{session.cost(), frameCosts, session.searches(), session.appliedMoves()};
   };
-  record(0);
-  StallCounter stall(session.cost(), config.minImprovement, config.batchesWithoutImprovement);
+  OptimizerRun run(config, start, state());
   bool focused = true;
   for (uint32_t round = 1;; ++round) {
     const RoundSession::RoundStats stats = session.round(focused);
     session.endRound();
-    record(round);
     // Stalled focused rounds get one full round before the run ends: nodes skipped as quiet may
     // have found new places after changes elsewhere.
-    const bool stalled = stall.stalledAfter(session.cost()) || stats.candidates == 0;
+    const bool stalled = run.endBatch(round, state()) || stats.candidates == 0;
     if (stalled && !focused) break;
     focused = !stalled;
-    if (config.maxBatches && round >= config.maxBatches) break;
-    if (config.timeLimitSeconds > 0.0 && elapsed() >= config.timeLimitSeconds) {
-      result.timeLimitReached = true;
-      break;
-    }
+    if (run.limitReached(round)) break;
   }
-  result.finalFrameCosts = session.frameCostList();
-  result.finalCost = session.cost();
-  result.steps = session.searches();
-  result.acceptedSteps = session.appliedMoves();
-  result.seconds = elapsed();
-  result.bvh = session.releaseTree(collapse);
-  return result;
+  run.finalState(state());
+  return run.finish(session.releaseTree(collapse));
 }
 
 }  // namespace tsah
