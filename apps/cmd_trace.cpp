@@ -99,7 +99,7 @@ void runTrace(const TraceOptions& opt) {
   tsah::cli::FrameRuntimeOptions runtimeOptions;
   runtimeOptions.device = opt.device;
   runtimeOptions.layout = opt.layout;
-  if (opt.isa != "auto") runtimeOptions.isa = tsah::parseIsa(opt.isa);
+  if (opt.isa != "auto") runtimeOptions.isa = tsah::parse<tsah::SimdIsa>(opt.isa);
   runtimeOptions.threads = opt.threads;
   runtimeOptions.rebuild = tsah::cli::parseRebuild(opt.rebuild);
   tsah::cli::checkRebuildForDevice(runtimeOptions.rebuild, opt.device);

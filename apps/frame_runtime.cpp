@@ -93,7 +93,7 @@ class CpuFrameRuntime final : public FrameRuntime {
   std::string summary() const override {
     const LayoutInfo& l = runtime_.layoutInfo();
     std::string s = std::to_string(runtime_.threadCount()) + " CPU threads, " + name(l.layout);
-    if (l.layout != Layout::Bvh2) s += std::string(" (") + isaName(l.isa) + ")";
+    if (l.layout != Layout::Bvh2) s += std::string(" (") + name(l.isa) + ")";
     char cost[96];
     std::snprintf(cost, sizeof cost, ", T-SAH cost %.2f (binary %.2f)", l.layoutCost, l.binaryCost);
     return s + cost;
@@ -105,7 +105,7 @@ class CpuFrameRuntime final : public FrameRuntime {
     out["threads"] = runtime_.threadCount();
     out["timer"] = "host steady clock";
     out["layout"] = name(l.layout);
-    if (l.layout != Layout::Bvh2) out["isa"] = isaName(l.isa);
+    if (l.layout != Layout::Bvh2) out["isa"] = name(l.isa);
     out["tree"] = {{"interior_nodes", l.interiorNodes}, {"leaves", l.leaves}, {"depth", l.depth},
                    {"tsah_cost", l.layoutCost}, {"binary_tsah_cost", l.binaryCost}};
   }

@@ -60,7 +60,7 @@ void checkRowKernel(SimdIsa isa) {
     rows = k.woopRows4;
   else
     rows = k.woopRows8;
-  ASSERT_NE(rows, nullptr) << tsah::isaName(isa);
+  ASSERT_NE(rows, nullptr) << tsah::name(isa);
   const auto tris = testTriangles(40 * N, 7);
   // Every triangle with its own three vertices, stored in reverse order so that ids, vertex
   // indices and slots all differ.
@@ -90,8 +90,8 @@ void checkRowKernel(SimdIsa isa) {
     for (uint32_t lane = 0; lane < lanes; ++lane)
       for (const Vec3& p : tris[ids[lane]]) extendSkippingNaN(expectedBox, p);
     for (int a = 0; a < 3; ++a) {
-      ASSERT_TRUE(sameBits(box.lo[a], expectedBox.lo[a])) << tsah::isaName(isa) << " N=" << N << " packet " << first;
-      ASSERT_TRUE(sameBits(box.hi[a], expectedBox.hi[a])) << tsah::isaName(isa) << " N=" << N << " packet " << first;
+      ASSERT_TRUE(sameBits(box.lo[a], expectedBox.lo[a])) << tsah::name(isa) << " N=" << N << " packet " << first;
+      ASSERT_TRUE(sameBits(box.hi[a], expectedBox.hi[a])) << tsah::name(isa) << " N=" << N << " packet " << first;
     }
     for (uint32_t lane = 0; lane < N; ++lane) {
       const tsah::WoopTriangle expected =
@@ -101,7 +101,7 @@ void checkRowKernel(SimdIsa isa) {
       const float* e = &expected.r0.x;
       const float* g = &got.r0.x;
       for (int r = 0; r < 12; ++r)
-        ASSERT_TRUE(sameBits(e[r], g[r])) << tsah::isaName(isa) << " N=" << N << " triangle " << ids[lane]
+        ASSERT_TRUE(sameBits(e[r], g[r])) << tsah::name(isa) << " N=" << N << " triangle " << ids[lane]
                                           << " lane " << lane << " row value " << r << ": " << g[r] << " vs " << e[r];
     }
   }
@@ -178,7 +178,7 @@ void refitWithEveryThreadCountAndIsa(const anim::Animation& a, const tsah::WideB
         tree.refit(frames[f].data(), [](std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) {
           for (std::size_t i = n; i-- > 0;) body(i, i + 1);  // tasks one by one, last first
         });
-        SCOPED_TRACE(std::string(tsah::isaName(isa)) + " threads " + std::to_string(threads) + " frame " +
+        SCOPED_TRACE(std::string(tsah::name(isa)) + " threads " + std::to_string(threads) + " frame " +
                      std::to_string(f));
         checkRefit(tree, frames[f].data(), indices.data());
       }

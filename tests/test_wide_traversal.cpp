@@ -122,7 +122,7 @@ void checkSameHits(const anim::Animation& a, const tsah::FlatBvh& tree, std::spa
       for (std::size_t i = 0; i < rays.size(); ++i) {
         const tsah::Hit expect = binary.closestHit(rays[i]);
         const tsah::Hit got = wide.closestHit(rays[i]);
-        const std::string where = std::string(tsah::name(layout)) + "/" + tsah::isaName(isa) + " ray " +
+        const std::string where = std::string(tsah::name(layout)) + "/" + tsah::name(isa) + " ray " +
                                   std::to_string(i) + " t=" + std::to_string(t);
         ASSERT_EQ(expect.valid(), got.valid()) << where;
         ASSERT_EQ(binary.anyHit(rays[i]), wide.anyHit(rays[i])) << where;
@@ -153,7 +153,7 @@ TEST(WideTraversal, EveryDispatchTargetIsTested) {
   EXPECT_TRUE(tsah::isaSupported(SimdIsa::Sse));  // every x86-64
   EXPECT_EQ(tsah::bestIsa(), tsah::supportedIsas().back());
   EXPECT_TRUE(tsah::layoutSupported(tsah::fastestLayout()));
-  for (SimdIsa isa : tsah::supportedIsas()) std::printf("dispatch target: %s\n", tsah::isaName(isa));
+  for (SimdIsa isa : tsah::supportedIsas()) std::printf("dispatch target: %s\n", tsah::name(isa));
 }
 
 TEST(WideTraversal, SameHitsAsBinaryOnGeneratedAnimations) {
@@ -212,7 +212,7 @@ TEST(WideTraversal, SameAnswersThroughEdgesAndVertices) {
           const Vec3 target = vertex(tri[e]) * (1 - s) + vertex(tri[(e + 1) % 3]) * s;
           const tsah::Ray ray{eye, 0.0f, target - eye, 1.5f};
           const tsah::Hit expect = binary.closestHit(ray), got = rt.closestHit(ray);
-          ASSERT_EQ(expect.valid(), got.valid()) << tsah::isaName(isa) << " triangle " << t << " edge " << e;
+          ASSERT_EQ(expect.valid(), got.valid()) << tsah::name(isa) << " triangle " << t << " edge " << e;
           ASSERT_EQ(binary.anyHit(ray), rt.anyHit(ray));
           ASSERT_EQ(binary.anyHit(ray), rt.anyHit(ray, tsah::AnyHitOrder::TreeOrder));
           if (expect.valid()) {

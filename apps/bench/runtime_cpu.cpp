@@ -43,7 +43,7 @@ std::unique_ptr<CpuRuntime> makeSetRuntime(const anim::Animation& a, const Refit
 // "LABEL, bvh8, avx512": the layout and, for a wide one, its kernels.
 std::string layoutLabel(const std::string& label, const CpuRuntime& rt) {
   const LayoutInfo& l = rt.layoutInfo();
-  return label + ", " + tsah::name(l.layout) + (l.layout == Layout::Bvh2 ? "" : std::string(", ") + isaName(l.isa));
+  return label + ", " + tsah::name(l.layout) + (l.layout == Layout::Bvh2 ? "" : std::string(", ") + name(l.isa));
 }
 
 // The toolkit's layouts for the Embree comparison: the default (fastest) one first.
@@ -62,7 +62,7 @@ nlohmann::json layoutJson(const CpuRuntime& rt) {
                       {"depth", l.depth},
                       {"tsah_cost", l.layoutCost},
                       {"binary_tsah_cost", l.binaryCost}};
-  if (l.layout != Layout::Bvh2) j["isa"] = isaName(l.isa);
+  if (l.layout != Layout::Bvh2) j["isa"] = name(l.isa);
   return j;
 }
 

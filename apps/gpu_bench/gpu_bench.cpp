@@ -40,6 +40,7 @@
 #include "tsah/build/sah_builder.hpp"
 #include "tsah/layout/cwbvh_convert.hpp"
 #include "tsah_cuda/device.hpp"
+#include "frame_runtime.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 
 namespace {
@@ -129,6 +130,19 @@ struct FrameSeries {
   uint64_t rays[3] = {0, 0, 0};
   double traceMs[3] = {0, 0, 0};
 
+  // After a frame's update: renders it (unless noRender) and records the rays and the frame's total.
+  template <class Scene>
+  void finishFrame(tc::GpuRuntime& rt, const Scene& scene, tsah::RenderSettings& settings, uint32_t frame, double time,
+                   double updateMs, bool noRender) {
+    if (noRender) {
+      total.push_back(updateMs);
+      return;
+    }
+    settings.frame = frame;
+    tc::GpuRenderTimings g;
+    addRender(tc::renderFrameGpu(rt, scene.camera(time), scene.lighting, settings, nullptr, &g), g, updateMs);
+  }
+
   void addRender(const tsah::RenderStats& s, const tc::GpuRenderTimings& g, double updateMs) {
     primary.push_back(s.primary.mraysPerSecond());
     ao.push_back(s.ao.mraysPerSecond());
@@ -189,14 +203,7 @@ json runRefit(const std::string& name, const tsah::FlatBvh& tree, const anim::An
     s.interpolate.push_back(u.interpolateMs);
     s.refit.push_back(u.refitMs);
     s.woop.push_back(u.woopMs);
-    if (opt.noRender) {
-      s.total.push_back(u.totalMs());
-      continue;
-    }
-    settings.frame = f;
-    tc::GpuRenderTimings g;
-    const tsah::RenderStats r = tc::renderFrameGpu(rt, scene.camera(times[f]), scene.lighting, settings, nullptr, &g);
-    s.addRender(r, g, u.totalMs());
+    s.finishFrame(rt, scene, settings, f, times[f], u.totalMs(), opt.noRender);
   }
   json j;
   j["name"] = name;
@@ -265,14 +272,7 @@ json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim:
     clusters.push_back(t.clusters);
     leaves.push_back(t.leaves);
     depth.push_back(t.depth);
-    if (opt.noRender) {
-      s.total.push_back(t.totalMs());
-      continue;
-    }
-    settings.frame = f;
-    tc::GpuRenderTimings g;
-    const tsah::RenderStats r = tc::renderFrameGpu(rt, scene.camera(times[f]), scene.lighting, settings, nullptr, &g);
-    s.addRender(r, g, t.totalMs());
+    s.finishFrame(rt, scene, settings, f, times[f], t.totalMs(), opt.noRender);
   }
   json j;
   j["name"] = tc::rebuildMethodName(method);
@@ -338,14 +338,8 @@ json compareWithCpu(const tsah::FlatBvh& tree, const anim::Animation& a, double 
 void run(const Options& opt) {
   if (opt.input.empty() == opt.generate.empty()) throw tsah::Error("give exactly one of --input and --generate");
   if (!tc::deviceAvailable()) throw tsah::Error("no CUDA device");
-  const tc::DeviceInfo dev = tc::describeDevice(0);
   json out;
-  out["device"] = {{"name", dev.name},
-                   {"compute_capability", std::to_string(dev.computeMajor) + "." + std::to_string(dev.computeMinor)},
-                   {"multiprocessors", dev.multiprocessors},
-                   {"memory_gib", double(dev.globalMemoryBytes) / double(1ull << 30)},
-                   {"cuda_runtime", dev.runtimeVersion},
-                   {"cuda_driver", dev.driverVersion}};
+  out["device"] = tsah::cli::deviceJson();
 
   json input;
   auto start = std::chrono::steady_clock::now();

@@ -24,6 +24,7 @@ constexpr Named<OptimizerKind> kOptimizers[] = {{OptimizerKind::Sequential, "seq
 constexpr Named<Selection> kSelections[] = {
     {Selection::MetropolisHastings, "mh"}, {Selection::Uniform, "random"}, {Selection::BatchSort, "batch"}};
 constexpr Named<Device> kDevices[] = {{Device::Cpu, "cpu"}, {Device::Cuda, "cuda"}};
+constexpr Named<SimdIsa> kIsas[] = {{SimdIsa::Sse, "sse"}, {SimdIsa::Avx2, "avx2"}, {SimdIsa::Avx512, "avx512"}};
 
 // The table of E and the word for E in messages.
 template <typename E>
@@ -32,7 +33,8 @@ constexpr std::span<const Named<E>> rowsOf() {
   else if constexpr (std::is_same_v<E, Method>) return kMethods;
   else if constexpr (std::is_same_v<E, OptimizerKind>) return kOptimizers;
   else if constexpr (std::is_same_v<E, Selection>) return kSelections;
-  else return kDevices;
+  else if constexpr (std::is_same_v<E, Device>) return kDevices;
+  else return kIsas;
 }
 
 template <typename E>
@@ -41,7 +43,8 @@ constexpr const char* kindOf() {
   else if constexpr (std::is_same_v<E, Method>) return "method";
   else if constexpr (std::is_same_v<E, OptimizerKind>) return "optimizer";
   else if constexpr (std::is_same_v<E, Selection>) return "node selection";
-  else return "device";
+  else if constexpr (std::is_same_v<E, Device>) return "device";
+  else return "instruction set";
 }
 
 template <typename E>
@@ -58,6 +61,7 @@ const char* name(Method value) { return nameOf(value); }
 const char* name(OptimizerKind value) { return nameOf(value); }
 const char* name(Selection value) { return nameOf(value); }
 const char* name(Device value) { return nameOf(value); }
+const char* name(SimdIsa value) { return nameOf(value); }
 
 template <typename E>
 std::string choices() {
@@ -83,10 +87,12 @@ template Method parse<Method>(std::string_view);
 template OptimizerKind parse<OptimizerKind>(std::string_view);
 template Selection parse<Selection>(std::string_view);
 template Device parse<Device>(std::string_view);
+template SimdIsa parse<SimdIsa>(std::string_view);
 template std::string choices<Layout>();
 template std::string choices<Method>();
 template std::string choices<OptimizerKind>();
 template std::string choices<Selection>();
 template std::string choices<Device>();
+template std::string choices<SimdIsa>();
 
 }  // namespace tsah

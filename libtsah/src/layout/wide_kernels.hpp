@@ -2,6 +2,8 @@
 // Private to libtsah: what the per-instruction-set kernel files (wide_kernels_<isa>.cpp) include
 // before the SIMD types and wide_kernels.inl, and the factory each of them defines. Only
 // wide_traversal.cpp (the one dispatch point) calls the factories.
+#include <type_traits>
+
 #include "tsah/core/ray.hpp"
 #include "tsah/layout/wide_layout.hpp"
 #include "tsah/layout/wide_traversal.hpp"

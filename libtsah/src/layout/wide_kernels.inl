@@ -336,4 +336,21 @@ TSAH_KERNEL bool anyKernel(const WideView<V::N>& bvh, const Ray& ray, AnyHitOrde
                                          : traverse<V, Query::AnyFarthestFirst>(bvh, ray).valid();
 }
 
+// This instruction set's kernels as the dispatch table: four-lane nodes always, eight-lane nodes
+// when the set has an eight-lane type V8 (not void).
+template <class V4, class V8>
+WideKernels kernelTable(SimdIsa isa) {
+  WideKernels k;
+  k.isa = isa;
+  k.closest4 = &closestKernel<V4>;
+  k.any4 = &anyKernel<V4>;
+  if constexpr (!std::is_void_v<V8>) {
+    k.closest8 = &closestKernel<V8>;
+    k.any8 = &anyKernel<V8>;
+  }
+  k.woopRows4 = &woopRowsKernel<4, DoubleLanes4, FloatLanes4, IntLanes4>;
+  k.woopRows8 = &woopRowsKernel<8, DoubleLanes8, FloatLanes8, IntLanes8>;
+  return k;
+}
+
 #undef TSAH_KERNEL

@@ -17,16 +17,6 @@ namespace tsah::isa_avx2 {
 
 namespace tsah::detail {
 
-WideKernels avx2Kernels() {
-  WideKernels k;
-  k.isa = SimdIsa::Avx2;
-  k.closest4 = &isa_avx2::closestKernel<isa_avx2::V4>;
-  k.any4 = &isa_avx2::anyKernel<isa_avx2::V4>;
-  k.closest8 = &isa_avx2::closestKernel<isa_avx2::V8>;
-  k.any8 = &isa_avx2::anyKernel<isa_avx2::V8>;
-  k.woopRows4 = &isa_avx2::woopRowsKernel<4, isa_avx2::DoubleLanes4, isa_avx2::FloatLanes4, isa_avx2::IntLanes4>;
-  k.woopRows8 = &isa_avx2::woopRowsKernel<8, isa_avx2::DoubleLanes8, isa_avx2::FloatLanes8, isa_avx2::IntLanes8>;
-  return k;
-}
+WideKernels avx2Kernels() { return isa_avx2::kernelTable<isa_avx2::V4, isa_avx2::V8>(SimdIsa::Avx2); }
 
 }  // namespace tsah::detail

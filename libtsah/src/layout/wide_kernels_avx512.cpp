@@ -18,16 +18,6 @@ namespace tsah::isa_avx512 {
 
 namespace tsah::detail {
 
-WideKernels avx512Kernels() {
-  WideKernels k;
-  k.isa = SimdIsa::Avx512;
-  k.closest4 = &isa_avx512::closestKernel<isa_avx512::V4>;
-  k.any4 = &isa_avx512::anyKernel<isa_avx512::V4>;
-  k.closest8 = &isa_avx512::closestKernel<isa_avx512::V8>;
-  k.any8 = &isa_avx512::anyKernel<isa_avx512::V8>;
-  k.woopRows4 = &isa_avx512::woopRowsKernel<4, isa_avx512::DoubleLanes4, isa_avx512::FloatLanes4, isa_avx512::IntLanes4>;
-  k.woopRows8 = &isa_avx512::woopRowsKernel<8, isa_avx512::DoubleLanes8, isa_avx512::FloatLanes8, isa_avx512::IntLanes8>;
-  return k;
-}
+WideKernels avx512Kernels() { return isa_avx512::kernelTable<isa_avx512::V4, isa_avx512::V8>(SimdIsa::Avx512); }
 
 }  // namespace tsah::detail

@@ -15,14 +15,6 @@ namespace tsah::isa_sse {
 
 namespace tsah::detail {
 
-WideKernels sseKernels() {
-  WideKernels k;
-  k.isa = SimdIsa::Sse;
-  k.closest4 = &isa_sse::closestKernel<isa_sse::V4>;
-  k.any4 = &isa_sse::anyKernel<isa_sse::V4>;
-  k.woopRows4 = &isa_sse::woopRowsKernel<4, isa_sse::DoubleLanes4, isa_sse::FloatLanes4, isa_sse::IntLanes4>;
-  k.woopRows8 = &isa_sse::woopRowsKernel<8, isa_sse::DoubleLanes8, isa_sse::FloatLanes8, isa_sse::IntLanes8>;
-  return k;
-}
+WideKernels sseKernels() { return isa_sse::kernelTable<isa_sse::V4, void>(SimdIsa::Sse); }
 
 }  // namespace tsah::detail

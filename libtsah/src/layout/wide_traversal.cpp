@@ -38,21 +38,6 @@ const KernelTables& tables() {
 
 }  // namespace
 
-const char* isaName(SimdIsa isa) {
-  switch (isa) {
-    case SimdIsa::Sse: return "sse";
-    case SimdIsa::Avx2: return "avx2";
-    case SimdIsa::Avx512: return "avx512";
-  }
-  return "?";
-}
-
-std::optional<SimdIsa> parseIsa(const std::string& name) {
-  for (SimdIsa isa : {SimdIsa::Sse, SimdIsa::Avx2, SimdIsa::Avx512})
-    if (name == isaName(isa)) return isa;
-  return std::nullopt;
-}
-
 bool isaSupported(SimdIsa isa) { return tables().supported[static_cast<int>(isa)]; }
 
 std::vector<SimdIsa> supportedIsas() {
@@ -70,7 +55,7 @@ SimdIsa bestIsa() {
 
 const WideKernels& wideKernels(SimdIsa isa) {
   if (!isaSupported(isa))
-    throw tsah::Error(std::string("wide traversal: the ") + isaName(isa) +
+    throw tsah::Error(std::string("wide traversal: the ") + name(isa) +
                       " kernels are not in this build or this processor does not run them");
   return tables().table[static_cast<int>(isa)];
 }

@@ -522,13 +522,7 @@ Bvh InsertionSession::release() {
 }
 // The collapse reads the node records; they are freed before the collapsed tree's boxes are
 // computed from the primitives, so every node's boxes are never held twice.
-Bvh InsertionSession::releaseCollapsed(const LeafCollapser& collapser) {
-  const PrimitiveBoxes& prims = *impl_->prims;
-  Bvh out = collapser.collapseTopology(impl_->collapseSource());
-  impl_.reset();
-  refit(out, prims);
-  return out;
-}
+Bvh InsertionSession::releaseCollapsed(const LeafCollapser& collapser) { return releaseCollapsedTree(impl_, collapser); }
 uint32_t InsertionSession::nodeCount() const { return impl_->nodeCount; }
 uint64_t InsertionSession::steps() const { return impl_->steps; }
 uint64_t InsertionSession::acceptedSteps() const { return impl_->accepted; }

@@ -5,10 +5,12 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdint>
+#include <memory>
 #include <span>
 
 #include "tsah/core/cost.hpp"
 #include "tsah/optimize/insertion_optimizer.hpp"
+#include "tsah/optimize/leaf_collapser.hpp"
 
 namespace tsah {
 
@@ -32,6 +34,18 @@ class StallCounter {
   uint32_t patience_;
   uint32_t without_ = 0;
 };
+
+// An optimizer session's tree collapsed from its node records, which are freed (with the rest of
+// the session) before the collapsed tree's boxes are computed from the primitives: every node's
+// boxes are never held twice.
+template <class SessionImpl>
+Bvh releaseCollapsedTree(std::unique_ptr<SessionImpl>& session, const LeafCollapser& collapser) {
+  const PrimitiveBoxes& prims = *session->prims;
+  Bvh out = collapser.collapseTopology(session->collapseSource());
+  session.reset();
+  refit(out, prims);
+  return out;
+}
 
 // An optimizer's state as the run records it.
 struct RunState {

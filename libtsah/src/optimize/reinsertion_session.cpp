@@ -1,4 +1,5 @@
 // ReinsertionSession: one round of parallel reinsertion (see parallel_optimizer.hpp).
+#include "optimize/optimizer_run.hpp"
 #include "tsah/optimize/parallel_optimizer.hpp"
 
 #include <tbb/enumerable_thread_specific.h>
@@ -347,12 +348,8 @@ Bvh ReinsertionSession::release() {
 // The collapse reads the session's own boxes, then the session is freed and the (smaller) collapsed
 // tree's boxes are computed from the primitives: every node's boxes of every frame are never copied.
 Bvh ReinsertionSession::releaseCollapsed(const LeafCollapser& collapser) {
-  const PrimitiveBoxes& prims = *impl_->prims;
   impl_->dropRoundState();
-  Bvh out = collapser.collapseTopology(impl_->collapseSource());
-  impl_.reset();
-  refit(out, prims);
-  return out;
+  return releaseCollapsedTree(impl_, collapser);
 }
 uint64_t ReinsertionSession::searches() const { return impl_->searches; }
 uint64_t ReinsertionSession::appliedMoves() const { return impl_->applied; }

@@ -75,7 +75,7 @@ CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint3
   kernels_ = kernelsFor(config.layout, config.isa);
   if (!kernels_)
     throw tsah::Error(std::string("runtime: no ") + name(config.layout) + " kernels" +
-                      (config.isa ? std::string(" for ") + isaName(*config.isa) : std::string()) +
+                      (config.isa ? std::string(" for ") + name(*config.isa) : std::string()) +
                       " run on this processor (bvh8 needs AVX2)");
   info_.isa = kernels_->isa;
   collapse_ = config.collapse;

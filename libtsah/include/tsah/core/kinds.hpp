@@ -32,16 +32,21 @@ enum class Selection : uint8_t {
 // Where work runs.
 enum class Device : uint8_t { Cpu, Cuda };
 
+// The CPU instruction set of the wide layouts' SIMD kernels (the value indexes their tables).
+enum class SimdIsa : uint8_t { Sse = 0, Avx2 = 1, Avx512 = 2 };
+
 // Names: "auto", "bvh2", "bvh4", "bvh8", "cwbvh"; "sah0", "sahstar", "rebuild", "tsah";
-// "sequential", "parallel"; "mh", "random", "batch"; "cpu", "cuda".
+// "sequential", "parallel"; "mh", "random", "batch"; "cpu", "cuda"; "sse", "avx2", "avx512".
 const char* name(Layout value);
 const char* name(Method value);
 const char* name(OptimizerKind value);
 const char* name(Selection value);
 const char* name(Device value);
+const char* name(SimdIsa value);
 
 // The value named `text`; anything else throws tsah::ConfigError "unknown KIND 'text' (expected
-// a, b or c)", KIND being "layout", "method", "optimizer", "node selection" or "device".
+// a, b or c)", KIND being "layout", "method", "optimizer", "node selection", "device" or
+// "instruction set".
 template <typename E>
 E parse(std::string_view text);
 

@@ -18,12 +18,12 @@
 #include <string>
 #include <vector>
 
+#include "tsah/core/kinds.hpp"
 #include "tsah/core/ray.hpp"
 #include "tsah/layout/wide_layout.hpp"
 
 namespace tsah {
 
-enum class SimdIsa : uint8_t { Sse = 0, Avx2 = 1, Avx512 = 2 };
 
 // The order in which an any-hit (occlusion) traversal visits the children a ray enters. The answer
 // is the same either way; only how soon the first hit is found, and the cost of ordering, differ.
@@ -37,8 +37,7 @@ enum class AnyHitOrder : uint8_t {
   TreeOrder = 1,
 };
 
-const char* isaName(SimdIsa isa);  // "sse", "avx2", "avx512"
-std::optional<SimdIsa> parseIsa(const std::string& name);
+// SimdIsa and its names ("sse", "avx2", "avx512"): core/kinds.hpp.
 // True when the kernels for isa are compiled into this build and the processor runs them.
 bool isaSupported(SimdIsa isa);
 // Every supported instruction set, the best last; and the best one.
