@@ -181,6 +181,8 @@ std::unique_ptr<FrameRuntime> makeGpuFrameRuntime(const TreeSet& trees, const an
                       "use --device cpu");
   cuda::GpuRuntime::Config config;
   if (options.layout != Layout::Auto) config.layout = cuda::parseTreeLayout(name(options.layout));
+  // The cwbvh collapse of trees without build infos (a set read from a file brings each tree's own).
+  config.wideObjective = options.objective;
   std::optional<cuda::RebuildOptions> rebuild;
   if (options.rebuild != Rebuild::None) {
     rebuild.emplace();

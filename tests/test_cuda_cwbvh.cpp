@@ -110,6 +110,91 @@ TEST(CudaCwbvh, NodesEqualHostRefitAtEveryTime) {
   }
 }
 
+// Config::wideObjective reaches the 8-wide collapse of the uploaded tree: the compressed nodes are
+// the ones the host's collapse makes for that objective (WideCollapser(wideCollapseConfig(objective,
+// 8)), as the CPU wide layouts), refitted at every time, with the Woop triangles in its slot order.
+// The input is wideObjectiveCase (k = 2, cT = 4, cI = 1, leaves of at most 6), whose tree differs
+// from the default objective's (asserted here; CwbvhBuild.EveryPartOfTheObjectiveShapesTheTree in
+// test_cwbvh shows that k, the constants and the leaf limit each matter), so a runtime that dropped
+// the objective would fail; a runtime with the default objective holds the default tree.
+TEST(CudaCwbvh, CollapseFollowsTheObjective) {
+  REQUIRE_GPU();
+  using tsah::test::hostCwbvh;
+  const tsah::test::WideObjectiveCase c = tsah::test::wideObjectiveCase();
+  const anim::Animation& a = c.animation;
+  tsah::CwbvhTree host = hostCwbvh(c.tree, c.objective);
+  tsah::CwbvhTree hostDefault = hostCwbvh(c.tree, tsah::Objective{});
+  ASSERT_FALSE(tsah::test::sameCwbvh(host, hostDefault));
+  tc::GpuRuntime::Config config = wide();
+  config.wideObjective = c.objective;
+  tc::GpuRuntime gpu(c.tree, a, config);
+  tc::GpuRuntime gpuDefault(c.tree, a, wide());
+  EXPECT_EQ(gpu.config().wideObjective.k, c.objective.k);
+  for (double t : {a.startTime(), 0.5 * (a.startTime() + a.endTime()), a.endTime()}) {
+    const auto pos = a.positionsAt(t);
+    for (auto [runtime, tree] : {std::pair{&gpu, &host}, std::pair{&gpuDefault, &hostDefault}}) {
+      const bool isDefault = runtime == &gpuDefault;
+      runtime->updateAt(t);
+      tsah::refitCwbvh(*tree, a.indices(), pos);
+      ASSERT_EQ(tsah::validateCwbvh(*tree), std::nullopt);
+      const std::vector<tsah::CwbvhNode> nodes = runtime->downloadCwbvhNodes();
+      ASSERT_EQ(nodes.size(), tree->nodes.size()) << "t=" << t << " default " << isDefault;
+      EXPECT_EQ(std::memcmp(nodes.data(), tree->nodes.data(), nodes.size() * sizeof(tsah::CwbvhNode)), 0)
+          << "t=" << t << " default " << isDefault;
+      const std::vector<tsah::WoopTriangle> woop = hostWoop(*tree, a, pos);
+      const std::vector<tsah::WoopTriangle> deviceWoop = runtime->downloadWoop();
+      ASSERT_EQ(deviceWoop.size(), woop.size());
+      EXPECT_EQ(std::memcmp(deviceWoop.data(), woop.data(), woop.size() * sizeof woop[0]), 0)
+          << "t=" << t << " default " << isDefault;
+      const tsah::Aabb b = runtime->bounds();
+      EXPECT_TRUE(b.contains(tree->rootBox) && tree->rootBox.contains(b)) << "t=" << t << " default " << isDefault;
+    }
+  }
+}
+
+// A tree set with build infos (one per tree, as a .tbvh file gives) collapses each tree with its
+// own objective, whatever Config::wideObjective says; without build infos every tree follows
+// Config::wideObjective. Build infos for only some trees are refused.
+TEST(CudaCwbvh, TreeSetCollapsesEachTreeWithItsOwnObjective) {
+  REQUIRE_GPU();
+  using tsah::test::hostCwbvh;
+  const tsah::test::WideObjectiveCase c = tsah::test::wideObjectiveCase();
+  const anim::Animation& a = c.animation;
+  tsah::TreeSet set;
+  set.trees = {c.tree, c.tree};
+  const double mid = 0.5 * (a.startTime() + a.endTime());
+  set.ranges = {{a.startTime(), mid}, {mid, a.endTime()}};
+  set.builds.resize(2);
+  set.builds[0].objective = c.objective;  // tree 1 keeps the default objective
+  tc::GpuRuntime::Config config = wide();
+  config.wideObjective = tsah::Objective{1, {2.0f, 1.0f}, 3};
+  const tsah::Objective ownObjectives[2] = {c.objective, tsah::Objective{}};
+  for (const tsah::Objective& own : ownObjectives)
+    ASSERT_FALSE(tsah::test::sameCwbvh(hostCwbvh(c.tree, own), hostCwbvh(c.tree, config.wideObjective)));
+  tsah::TreeSet bare = set;
+  bare.builds.clear();
+  tc::GpuRuntime withBuilds(set, a, config);
+  tc::GpuRuntime withoutBuilds(bare, a, config);
+  for (double t : {a.startTime(), a.endTime()}) {
+    const uint32_t s = set.treeAt(t);
+    const auto pos = a.positionsAt(t);
+    for (tc::GpuRuntime* runtime : {&withBuilds, &withoutBuilds}) {
+      const bool builds = runtime == &withBuilds;
+      runtime->updateAt(t);
+      ASSERT_EQ(runtime->currentTree(), s);
+      tsah::CwbvhTree host = hostCwbvh(set.trees[s], builds ? ownObjectives[s] : config.wideObjective);
+      tsah::refitCwbvh(host, a.indices(), pos);
+      const std::vector<tsah::CwbvhNode> nodes = runtime->downloadCwbvhNodes();
+      ASSERT_EQ(nodes.size(), host.nodes.size()) << "t=" << t << " builds " << builds;
+      EXPECT_EQ(std::memcmp(nodes.data(), host.nodes.data(), nodes.size() * sizeof(tsah::CwbvhNode)), 0)
+          << "t=" << t << " builds " << builds;
+    }
+  }
+  tsah::TreeSet partial = set;
+  partial.builds.resize(1);
+  EXPECT_THROW(tc::GpuRuntime(partial, a, config), tsah::Error);
+}
+
 // A tree without nodes (its root is one leaf of a few triangles): the refit forms the root box as
 // tsah::refitCwbvh does, and the hits are the CPU reference traversal's.
 TEST(CudaCwbvh, TreeThatIsOneLeaf) {

@@ -235,9 +235,9 @@ TEST(CwbvhBuild, RealAnimationAcrossFrames) {
   checkAcrossFrames(t, a.indices(), pos, a.vertexCount(), frames);
 }
 
-// buildCwbvh(flat, cost, maxLeafSize) passes the collapse constants on (the GPU runtime's
-// Config::wideCost / wideMaxLeafSize): over a tree of one-triangle leaves, cheap triangles merge
-// leaves up to the limit, and a limit of 1 keeps every leaf single.
+// buildCwbvh(flat, objective) passes the collapse constants on (the GPU runtime's
+// Config::wideObjective): over a tree of one-triangle leaves, cheap triangles merge leaves up to the
+// limit, and a limit of 1 keeps every leaf single.
 TEST(CwbvhBuild, CollapseConstantsAndLeafLimitReachTheCollapse) {
   const auto m = tsah::test::randomMovingTriangles(400, 2, 5, 0.1f);
   const tsah::PrimitiveBoxes boxes = m.boxes();
@@ -251,14 +251,49 @@ TEST(CwbvhBuild, CollapseConstantsAndLeafLimitReachTheCollapse) {
     for (const tsah::CwbvhLeaf& l : t.leaves) largest = std::max(largest, l.count);
     return largest;
   };
-  const tsah::CwbvhTree merged = tsah::buildCwbvh(flat, tsah::CostModel{3.0f, 0.1f}, 4);
-  const tsah::CwbvhTree single = tsah::buildCwbvh(flat, tsah::CostModel{3.0f, 0.1f}, 1);
+  const tsah::CwbvhTree merged = tsah::buildCwbvh(flat, tsah::Objective{0, {3.0f, 0.1f}, 4});
+  const tsah::CwbvhTree single = tsah::buildCwbvh(flat, tsah::Objective{0, {3.0f, 0.1f}, 1});
   ASSERT_EQ(tsah::validateCwbvh(merged), std::nullopt);
   ASSERT_EQ(tsah::validateCwbvh(single), std::nullopt);
   EXPECT_GT(largestLeaf(merged), 1u);
   EXPECT_LE(largestLeaf(merged), 4u);
   EXPECT_EQ(largestLeaf(single), 1u);
   EXPECT_LT(merged.leaves.size(), single.leaves.size());
+}
+
+// buildCwbvh(flat, objective) is the CPU wide layouts' collapse (WideCollapser(wideCollapseConfig(
+// objective, 8))), and on the input of the objective tests (wideObjectiveCase, which the GPU's
+// CudaCwbvh.CollapseFollowsTheObjective uses too) each part of the objective changes the tree: a
+// collapse that dropped k, the cost constants or the leaf limit would make another one. A limit
+// above 8 collapses as 8 (a compressed node holds at most 64 triangles).
+TEST(CwbvhBuild, EveryPartOfTheObjectiveShapesTheTree) {
+  using tsah::test::hostCwbvh;
+  using tsah::test::sameCwbvh;
+  const tsah::test::WideObjectiveCase c = tsah::test::wideObjectiveCase();
+  const tsah::Objective& objective = c.objective;
+  const tsah::CwbvhTree tree = hostCwbvh(c.tree, objective);
+  ASSERT_EQ(tsah::validateCwbvh(tree), std::nullopt);
+  EXPECT_TRUE(sameCwbvh(tsah::buildCwbvh(c.tree, objective), tree));
+  uint32_t largest = 0;
+  for (const tsah::CwbvhLeaf& l : tree.leaves) largest = std::max(largest, l.count);
+  EXPECT_GT(largest, 1u);
+  EXPECT_LE(largest, objective.maxLeafSize);
+
+  EXPECT_FALSE(sameCwbvh(tsah::buildCwbvh(c.tree), tree)) << "the default objective";
+  EXPECT_FALSE(sameCwbvh(tsah::buildCwbvh(c.tree, tsah::Objective{}), tree)) << "the default objective";
+  tsah::Objective other = objective;
+  other.k = 0;
+  EXPECT_FALSE(sameCwbvh(hostCwbvh(c.tree, other), tree)) << "k = 0";
+  other = objective;
+  other.cost = tsah::CostModel{};
+  EXPECT_FALSE(sameCwbvh(hostCwbvh(c.tree, other), tree)) << "cT = 3, cI = 2";
+  other = objective;
+  other.maxLeafSize = 8;
+  EXPECT_FALSE(sameCwbvh(hostCwbvh(c.tree, other), tree)) << "leaves of up to 8";
+
+  tsah::Objective large = objective;
+  large.maxLeafSize = 16;
+  EXPECT_TRUE(sameCwbvh(tsah::buildCwbvh(c.tree, large), hostCwbvh(c.tree, other)));
 }
 
 TEST(CwbvhBuild, RefusesTooWideTreesAndOverfullNodes) {

@@ -35,7 +35,7 @@ struct RuntimeSetup {
   RenderSettings settings;                       // image size, AO/shadow rays, seed (frame is set per frame)
   unsigned threads = 0;                          // CPU worker threads (0: all cores)
   Layout layout = fastestLayout();            // CPU: the layout every refit and rebuild traces
-  WideCollapser::Config collapse;                // CPU wide layouts: cost constants, k, leaf size
+  WideCollapser::Config collapse;                // wide layouts (CPU, GPU cwbvh): cost constants, k, leaf size
   std::function<void(const std::string&)> progress;
 };
 

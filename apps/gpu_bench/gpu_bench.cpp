@@ -58,8 +58,8 @@ struct Options {
   std::string layout = "bvh2,cwbvh";  // layouts of the refitted trees, comma separated
   bool noRender = false, cpuCompare = false, noGraphs = false, noFuse = false;
   bool ground = false;  // the analytic ground plane (off: the meshes alone, as tsah bench and the paper)
-  std::vector<float> wideCost = {3.0f, 2.0f};  // cwbvh collapse: cT, cI
-  uint32_t wideLeaf = 8;                       // cwbvh collapse: largest leaf
+  std::vector<float> wideCost;  // cwbvh collapse: cT, cI instead of the tree's objective's (empty: the tree's)
+  uint32_t wideLeaf = 0;        // cwbvh collapse: largest leaf instead of the tree's objective's (0: the tree's)
   std::string imageDir;
   std::string builder = "sweep";
   uint32_t wideMerge = tsah::kCwbvhDefaultMergeTriangles;  // RebuildOptions::wideMergeTriangles
@@ -116,6 +116,13 @@ tsah::FlatBvh buildSah0(const anim::Animation& a, const std::string& builder) {
   }
   return tsah::flattenBvh(bvh);
 }
+
+// A tree to refit, and the objective of its 8-wide collapse (a file's own; SAH0: the default one).
+struct Tree {
+  std::string name;
+  tsah::FlatBvh flat;
+  tsah::Objective objective;
+};
 
 struct Scene {
   std::function<tsah::Camera(double)> camera;  // the animation's camera path, else fitted to its bounds
@@ -177,18 +184,21 @@ struct FrameSeries {
   }
 };
 
-tc::GpuRuntime::Config runtimeConfig(const Options& opt, bool persistent, tc::TreeLayout layout) {
+// The cwbvh collapse follows the tree's objective, with the costs and leaf size of the command line.
+tc::GpuRuntime::Config runtimeConfig(const Options& opt, bool persistent, tc::TreeLayout layout,
+                                     tsah::Objective objective) {
   tc::GpuRuntime::Config c{0, persistent, !opt.noGraphs, layout, !opt.noFuse};
-  c.wideCost = {opt.wideCost[0], opt.wideCost[1]};
-  c.wideMaxLeafSize = opt.wideLeaf;
+  if (!opt.wideCost.empty()) objective.cost = {opt.wideCost[0], opt.wideCost[1]};
+  if (opt.wideLeaf != 0) objective.maxLeafSize = opt.wideLeaf;
+  c.wideObjective = objective;
   return c;
 }
 
-json runRefit(const std::string& name, const tsah::FlatBvh& tree, const anim::Animation& a,
-              const std::vector<double>& times, const Scene& scene, const Options& opt, bool persistent,
-              tc::TreeLayout layout) {
+json runRefit(const Tree& t, const anim::Animation& a, const std::vector<double>& times, const Scene& scene,
+              const Options& opt, bool persistent, tc::TreeLayout layout) {
+  const tsah::FlatBvh& tree = t.flat;
   const auto setupStart = std::chrono::steady_clock::now();
-  tc::GpuRuntime rt(tree, a, runtimeConfig(opt, persistent, layout));
+  tc::GpuRuntime rt(tree, a, runtimeConfig(opt, persistent, layout, t.objective));
   const double setupSeconds = seconds(setupStart);
   const double mtris = double(a.triangleCount()) / 1e6;
   tsah::RenderSettings settings = scene.settings;
@@ -206,13 +216,18 @@ json runRefit(const std::string& name, const tsah::FlatBvh& tree, const anim::An
     s.finishFrame(rt, scene, settings, f, times[f], u.totalMs(), opt.noRender);
   }
   json j;
-  j["name"] = name;
+  j["name"] = t.name;
   j["kind"] = "refit";
   j["layout"] = tc::treeLayoutName(layout);
   j["setup_seconds"] = setupSeconds;  // upload (and for cwbvh the 8-wide collapse + layout on the host)
   j["traversal"] = persistent ? "persistent" : "simple";
-  if (layout == tc::TreeLayout::Cwbvh)
-    j["wide_collapse"] = {{"ct", opt.wideCost[0]}, {"ci", opt.wideCost[1]}, {"max_leaf", opt.wideLeaf}};
+  if (layout == tc::TreeLayout::Cwbvh) {
+    const tsah::Objective& o = rt.config().wideObjective;
+    j["wide_collapse"] = {{"k", o.k},
+                          {"ct", o.cost.ct},
+                          {"ci", o.cost.ci},
+                          {"max_leaf", std::min(o.maxLeafSize, tsah::kCwbvhMaxLeafTriangles)}};
+  }
   j["tree"] = {{"interior_nodes", tree.interiorCount}, {"leaves", tree.leafCount}, {"depth", tree.depth}};
   j["update_ms"] = summary(s.update);
   j["update_ms_per_million_triangles"] = summary([&] {
@@ -231,10 +246,10 @@ json runRefit(const std::string& name, const tsah::FlatBvh& tree, const anim::An
 
 // Layout cwbvh: every rebuilt tree is converted to the compressed 8-wide layout on the device; the
 // conversion (phases_ms.wide) counts in the build and the update, as the binary Woop pass does.
-json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim::Animation& a,
+json runRebuild(tc::RebuildMethod method, const Tree& tree, const anim::Animation& a,
                 const std::vector<double>& times, const Scene& scene, const Options& opt, bool persistent,
                 tc::TreeLayout layout) {
-  tc::GpuRuntime rt(tree, a, runtimeConfig(opt, persistent, layout));
+  tc::GpuRuntime rt(tree.flat, a, runtimeConfig(opt, persistent, layout, tree.objective));
   const double mtris = double(a.triangleCount()) / 1e6;
   tsah::RenderSettings settings = scene.settings;
   tc::RebuildOptions bare;
@@ -307,10 +322,10 @@ json runRebuild(tc::RebuildMethod method, const tsah::FlatBvh& tree, const anim:
 }
 
 // One frame on the CPU renderer and on the GPU: how far apart the images are.
-json compareWithCpu(const tsah::FlatBvh& tree, const anim::Animation& a, double t, const Scene& scene,
-                    const Options& opt, tc::TreeLayout layout) {
-  tsah::CpuRuntime cpu(tree, {a.indices().begin(), a.indices().end()}, a.vertexCount());
-  tc::GpuRuntime gpu(tree, a, runtimeConfig(opt, false, layout));
+json compareWithCpu(const Tree& tree, const anim::Animation& a, double t, const Scene& scene, const Options& opt,
+                    tc::TreeLayout layout) {
+  tsah::CpuRuntime cpu(tree.flat, {a.indices().begin(), a.indices().end()}, a.vertexCount());
+  tc::GpuRuntime gpu(tree.flat, a, runtimeConfig(opt, false, layout, tree.objective));
   cpu.update(a.positionsAt(t));
   gpu.updateAt(t);
   tsah::Image cpuImage, gpuImage;
@@ -372,20 +387,21 @@ void run(const Options& opt) {
                      {"camera", a.cameraPath().empty() ? "fitted to the animation bounds" : "the animation's camera path"}};
 
   // Trees: files, then SAH0 built here.
-  std::vector<std::pair<std::string, tsah::FlatBvh>> trees;
+  std::vector<Tree> trees;
   for (const std::string& spec : opt.trees) {
     const auto eq = spec.find('=');
     const std::string name = eq == std::string::npos ? spec : spec.substr(0, eq);
     const std::string path = eq == std::string::npos ? spec : spec.substr(eq + 1);
     tsah::BvhBuildInfo info;
-    trees.emplace_back(name, tsah::decodeFlatBvhFile(tsah::readFile(path), path, &info));
+    tsah::FlatBvh flat = tsah::decodeFlatBvhFile(tsah::readFile(path), path, &info);
+    trees.push_back({name, std::move(flat), info.objective});
     if (info.topologyHash != 0 && info.topologyHash != tsah::topologyHash(a.indices()))
       throw tsah::Error(path + ": the tree was built for another animation (topology hash differs)");
   }
   json builds = json::object();
   if (opt.sah0 || trees.empty()) {
     start = std::chrono::steady_clock::now();
-    trees.emplace_back("sah0", buildSah0(a, opt.builder));
+    trees.push_back({"sah0", buildSah0(a, opt.builder), tsah::Objective{}});
     builds["sah0"] = {{"builder", opt.builder + " + collapse(8)"}, {"seconds", seconds(start)}};
   }
   out["cpu_builds"] = builds;
@@ -406,8 +422,7 @@ void run(const Options& opt) {
   json methods = json::array();
   for (tc::TreeLayout layout : layouts)
     for (bool persistent : modes) {
-      for (const auto& [name, tree] : trees)
-        methods.push_back(runRefit(name, tree, a, times, scene, opt, persistent, layout));
+      for (const Tree& tree : trees) methods.push_back(runRefit(tree, a, times, scene, opt, persistent, layout));
     }
   if (opt.rebuild != "none") {
     std::stringstream ss(opt.rebuild);
@@ -417,14 +432,14 @@ void run(const Options& opt) {
         for (bool persistent : modes) {
           if (layout == tc::TreeLayout::Cwbvh && persistent) continue;  // the wide kernel is one thread per ray
           methods.push_back(
-              runRebuild(tc::parseRebuildMethod(m), trees.front().second, a, times, scene, opt, persistent, layout));
+              runRebuild(tc::parseRebuildMethod(m), trees.front(), a, times, scene, opt, persistent, layout));
         }
   }
   out["methods"] = methods;
   if (opt.cpuCompare) {
     out["cpu_compare"] = json::array();
     for (tc::TreeLayout layout : layouts)
-      out["cpu_compare"].push_back(compareWithCpu(trees.front().second, a, times.front(), scene, opt, layout));
+      out["cpu_compare"].push_back(compareWithCpu(trees.front(), a, times.front(), scene, opt, layout));
   }
   std::cout << out.dump(1) << std::endl;
 }
@@ -452,10 +467,14 @@ int main(int argc, char** argv) {
                  "cwbvh rebuilds: binary subtrees of at most this many triangles become one wide leaf (0-8, default 0: off)")
       ->check(CLI::Range(0u, tsah::kCwbvhMaxLeafTriangles));
   app.add_flag("--no-fuse", opt.noFuse, "cwbvh: separate ray generation and trace kernels (as bvh2) instead of fused passes");
-  app.add_option("--cwbvh-cost", opt.wideCost, "cwbvh: the 8-wide collapse's cost of a node visit and of a triangle (default 3 2)")
+  app.add_option("--cwbvh-cost", opt.wideCost,
+                 "cwbvh: the 8-wide collapse's cost of a node visit and of a triangle instead of the tree's objective's "
+                 "(a file's own; SAH0: 3 2)")
       ->expected(2);
-  app.add_option("--cwbvh-leaf", opt.wideLeaf, "cwbvh: the largest leaf the 8-wide collapse makes (default 8)")
-      ->check(CLI::Range(1u, 64u));
+  app.add_option("--cwbvh-leaf", opt.wideLeaf,
+                 "cwbvh: the largest leaf the 8-wide collapse makes instead of the tree's objective's (a file's own; "
+                 "SAH0: 8; at most 8)")
+      ->check(CLI::Range(1u, tsah::kCwbvhMaxLeafTriangles));
   app.add_flag("--ground", opt.ground, "Add the analytic ground plane (default: the meshes alone, as tsah bench)");
   app.add_flag("--no-graphs", opt.noGraphs, "Launch every kernel instead of replaying CUDA graphs");
   app.add_flag("--no-render", opt.noRender, "Time the updates and rebuilds only");

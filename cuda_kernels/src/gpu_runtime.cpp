@@ -40,6 +40,8 @@ GpuRuntime::Impl::Impl(const TreeSet& set, const anim::Animation& animation, Con
   if (animation.keyframeCount() == 0) throw tsah::Error("GPU runtime: the animation has no keyframes");
   if (set.trees.empty() || set.ranges.size() != set.trees.size())
     throw tsah::Error("GPU runtime: the tree set holds no trees (or not one time range per tree)");
+  if (!set.builds.empty() && set.builds.size() != set.trees.size())
+    throw tsah::Error("GPU runtime: the tree set holds build infos, but not one per tree");
   const auto idx = animation.indices();
   for (uint32_t v : idx)
     if (v >= vertices) throw tsah::Error("GPU runtime: a triangle refers to a vertex out of range");
@@ -77,14 +79,17 @@ void GpuRuntime::Impl::createOnDevice(const TreeSet& set, const anim::Animation&
   positions.resize(std::size_t(vertices) * 3);
   if (!hostRest.empty()) positions.upload(std::span<const float>(hostRest), stream);
   trees.reserve(set.trees.size());
-  for (std::size_t i = 0; i < set.trees.size(); ++i) uploadTree(set.trees[i], std::move(topologies[i]));
+  for (std::size_t i = 0; i < set.trees.size(); ++i) {
+    const Objective& wideObjective = set.builds.empty() ? config.wideObjective : set.builds[i].objective;
+    uploadTree(set.trees[i], std::move(topologies[i]), wideObjective);
+  }
   ranges = set.ranges;
   woop.resize(triangles);
   words.resize(8);
   CUDA_CHECK(cudaStreamSynchronize(stream));
 }
 
-void GpuRuntime::Impl::uploadTree(const FlatBvh& tree, FlatBvh topologyOfTree) {
+void GpuRuntime::Impl::uploadTree(const FlatBvh& tree, FlatBvh topologyOfTree, const Objective& wideObjective) {
   DeviceTree& d = trees.emplace_back();
   d.topology = std::move(topologyOfTree);
   const FlatBvh& topology = d.topology;
@@ -127,7 +132,7 @@ void GpuRuntime::Impl::uploadTree(const FlatBvh& tree, FlatBvh topologyOfTree) {
   r.interiorCount = topology.interiorCount;
   r.depth = topology.depth;
   d.root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&r, 1), stream);
-  if (config.layout == TreeLayout::Cwbvh) d.cwbvh = uploadCwbvh(tree, hostIndices, config, stream);
+  if (config.layout == TreeLayout::Cwbvh) d.cwbvh = uploadCwbvh(tree, hostIndices, wideObjective, stream);
   // The host vectors above are freed when this returns: finish their uploads first.
   CUDA_CHECK(cudaStreamSynchronize(stream));
 }
@@ -211,14 +216,15 @@ void GpuRuntime::Impl::buildVertexTriangles() {
   normals.resize(std::size_t(vertices) * 3);
 }
 
-// The 8-wide collapse over all frames of the given tree (WideCollapser), its compressed layout,
-// and what the per-frame refit needs on the device.
+// The 8-wide collapse over all frames of the given tree for the objective (WideCollapser), its
+// compressed layout, and what the per-frame refit needs on the device.
 std::unique_ptr<GpuRuntime::Impl::Cwbvh> GpuRuntime::Impl::uploadCwbvh(const FlatBvh& tree,
                                                                          std::span<const uint32_t> indices,
-                                                                         const Config& settings, cudaStream_t stream) {
+                                                                         const Objective& objective,
+                                                                         cudaStream_t stream) {
   auto cwbvh = std::make_unique<Cwbvh>();
   Cwbvh& c = *cwbvh;
-  c.host = buildCwbvh(tree, settings.wideCost, settings.wideMaxLeafSize);
+  c.host = buildCwbvh(tree, objective);
   c.nodes = DeviceBuffer<CwbvhNode>(std::span<const CwbvhNode>(c.host.nodes), stream);
   c.nodeBoxes.resize(c.host.nodes.size());
   c.triIndex = DeviceBuffer<uint32_t>(std::span<const uint32_t>(c.host.triIndex), stream);

@@ -1,5 +1,5 @@
 #pragma once
-// The per-frame GPU rebuild baselines (host side; kernels in rebuild.cu).
+// The per-frame GPU rebuild baselines (host side; the steps in rebuild_*.cu, rebuild_steps.cuh).
 //
 //  LBVH:      triangle boxes and centroid bounds -> 30-bit Morton codes -> CUB radix sort ->
 //             Karras (2012) radix tree -> bottom-up boxes with atomic counters, where the leaf
@@ -73,7 +73,7 @@ class GpuRebuilder {
   // Per interior node (radix tree, then cluster tree).
   DeviceBuffer<int2> children_;
   DeviceBuffer<uint32_t> nodeParent_, counters_;
-  DeviceBuffer<uint4> nodeInfo_;  // 3 x uint4 per node, see rebuild.cu
+  DeviceBuffer<uint4> nodeInfo_;  // 3 x uint4 per node, see rebuild_bottom_up.cu
   DeviceBuffer<GpuBvhNode> nodes_;
   DeviceBuffer<RootInfo> root_;
   // HLBVH-SAH.

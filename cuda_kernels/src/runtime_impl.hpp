@@ -100,11 +100,12 @@ struct GpuRuntime::Impl {
   };
   // Validates one tree against the animation and uploads it (and its compressed layout).
   void createOnDevice(const TreeSet& set, const anim::Animation& animation, std::vector<FlatBvh> topologies);
-  void uploadTree(const FlatBvh& tree, FlatBvh topologyOfTree);
+  void uploadTree(const FlatBvh& tree, FlatBvh topologyOfTree, const Objective& wideObjective);
   void releaseDevice() noexcept;
-  // The 8-wide collapse over all frames of `tree`, its compressed layout and refit data on the device.
+  // The 8-wide collapse over all frames of `tree` for `objective`, its compressed layout and refit
+  // data on the device.
   static std::unique_ptr<Cwbvh> uploadCwbvh(const FlatBvh& tree, std::span<const uint32_t> indices,
-                                            const Config& settings, cudaStream_t stream);
+                                            const Objective& objective, cudaStream_t stream);
   DeviceTree& tree() { return trees[current]; }
   const DeviceTree& tree() const { return trees[current]; }
   std::vector<DeviceTree> trees;

@@ -130,6 +130,7 @@ class GpuTracer {
     checkTreeMatchesAnimation(tree.file.info, "the tree", animation, "'" + animation.name() + "'");
     cuda::GpuRuntime::Config config;
     config.device = device;
+    config.wideObjective = tree.file.info.objective;
     runtime_ = std::make_unique<cuda::GpuRuntime>(flattenBvh(tree.file.bvh), animation, config);
     refit(animation.startTime());
   }

@@ -101,6 +101,29 @@ FlatBvh singleLeafTree(const anim::Animation& a) {
   return flattenBvh(leaf);
 }
 
+WideObjectiveCase wideObjectiveCase() {
+  anim::Animation a = generatedAnimation(anim::GeneratorKind::Explode, 3000, 6);
+  const PrimitiveBoxes boxes = triangleBoxes(a.indices(), a.allPositions(), a.keyframeCount());
+  Bvh bvh = SweepSahBuilder().build(boxes.frame(0));
+  refit(bvh, boxes);
+  Objective objective;
+  objective.k = 2;
+  objective.cost = {4.0f, 1.0f};
+  objective.maxLeafSize = 6;
+  FlatBvh tree = flattenBvh(bvh);
+  return {std::move(a), std::move(tree), objective};
+}
+
+CwbvhTree hostCwbvh(const FlatBvh& tree, const Objective& objective) {
+  return buildCwbvh(WideCollapser(wideCollapseConfig(objective, kCwbvhWidth)).collapse(unflattenBvh(tree)));
+}
+
+bool sameCwbvh(const CwbvhTree& a, const CwbvhTree& b) {
+  return a.nodes.size() == b.nodes.size() &&
+         std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(CwbvhNode)) == 0 &&
+         a.triIndex == b.triIndex;
+}
+
 FlatBvh tinyTree(const MovingTriangles& m, const std::vector<uint32_t>& leafSizes) {
   const uint32_t n = uint32_t(m.indices.size() / 3);
   Bvh bvh;

@@ -54,6 +54,23 @@ FlatBvh singleLeafTree(const anim::Animation& a);
 // a + b = n), in flat form.
 FlatBvh tinyTree(const MovingTriangles& m, const std::vector<uint32_t>& leafSizes);
 
+// The input of the tests that the compressed 8-wide collapse follows a tree's objective
+// (test_cwbvh on the host, test_cuda_cwbvh on the GPU): an exploding animation, its sweep-SAH tree
+// of keyframe 0 (one triangle per leaf) with the boxes of every keyframe, and an objective (k = 2,
+// cT and cI other than 3 and 2, leaves of at most 6) whose collapse of that tree differs from the
+// default objective's and from the one with k = 0 (test_cwbvh checks both).
+struct WideObjectiveCase {
+  anim::Animation animation;
+  FlatBvh tree;
+  Objective objective;
+};
+WideObjectiveCase wideObjectiveCase();
+// The host's compressed 8-wide tree of `tree` for `objective`, made as the CPU wide layouts make
+// theirs: WideCollapser(wideCollapseConfig(objective, 8)) over every frame, then buildCwbvh.
+CwbvhTree hostCwbvh(const FlatBvh& tree, const Objective& objective);
+// The same nodes (bytes) and triangle order.
+bool sameCwbvh(const CwbvhTree& a, const CwbvhTree& b);
+
 // Same root, nodes (links, leaf ranges) and primIds.
 bool sameTopology(const Bvh& a, const Bvh& b);
 // sameTopology, the same frame count and every box bit for bit.

@@ -22,6 +22,7 @@
 #include "anim/animation.hpp"
 #include "tsah/core/bvh.hpp"
 #include "tsah/core/cost.hpp"
+#include "tsah/core/objective.hpp"
 #include "tsah/layout/cwbvh_build.hpp"
 #include "tsah/layout/cwbvh_layout.hpp"
 #include "tsah/layout/flat_bvh.hpp"
@@ -69,10 +70,12 @@ class GpuRuntime {
     // Layout cwbvh: renderFrameGpu makes each ray in the kernel that traces it (three fused passes,
     // no ray buffers); false runs the separate generation and trace kernels of the binary layout.
     bool fuseWidePasses = true;
-    // Layout cwbvh: the 8-wide collapse of the tree (tsah::WideCollapser) — its cost constants
-    // (cT per wide node visit, cI per triangle) and the largest leaf it makes.
-    CostModel wideCost{};
-    uint32_t wideMaxLeafSize = 8;
+    // Layout cwbvh: the objective of the 8-wide collapse of an uploaded tree over all its frames
+    // (tsah::buildCwbvh(tree, objective): k, cT, cI and the largest leaf, as the CPU wide layouts'
+    // tsah::wideCollapseConfig; leaves of at most 8) for a tree that brings none: the FlatBvh
+    // constructors' tree and every tree of a set without build infos. A set with one BvhBuildInfo
+    // per tree (as a .tbvh file gives) collapses each tree with its own objective.
+    Objective wideObjective{};
   };
 
   // tree: the topology to refit (frame 0's block; its boxes are recomputed by updateAt). Throws
@@ -82,7 +85,8 @@ class GpuRuntime {
   GpuRuntime(const FlatBvh& tree, const anim::Animation& animation);
   // A tree set: every tree is checked as above and uploaded once; updateAt(t) refits and traces the
   // tree of t's part (tsah::treeIndexAt: boundaries and overlaps as the CPU runtime), each tree
-  // with its own captured graph.
+  // with its own captured graph. set.builds: empty, or one per tree (their objectives: see
+  // Config::wideObjective).
   GpuRuntime(const TreeSet& set, const anim::Animation& animation, Config config);
   ~GpuRuntime();
   GpuRuntime(const GpuRuntime&) = delete;

@@ -111,11 +111,9 @@ CwbvhTree buildCwbvh(const WideBvh& wide, uint32_t frame) {
   return t;
 }
 
-CwbvhTree buildCwbvh(const FlatBvh& flat, CostModel cost, uint32_t maxLeafSize) {
-  WideCollapser::Config config;
-  config.width = kCwbvhWidth;
-  config.cost = cost;
-  config.maxLeafSize = maxLeafSize;
+CwbvhTree buildCwbvh(const FlatBvh& flat, const Objective& objective) {
+  WideCollapser::Config config = wideCollapseConfig(objective, kCwbvhWidth);
+  config.maxLeafSize = std::min(config.maxLeafSize, kCwbvhMaxLeafTriangles);
   return buildCwbvh(WideCollapser(config).collapse(unflattenBvh(flat)));
 }
 

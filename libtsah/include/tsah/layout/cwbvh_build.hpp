@@ -44,9 +44,12 @@ struct CwbvhTree {
 // the tree is wider than 8 or a node's leaf children hold more than 64 triangles.
 CwbvhTree buildCwbvh(const WideBvh& wide, uint32_t frame = 0);
 
-// The 8-wide T-SAH collapse (WideCollapser, width 8, k = 0; by default leaves <= 8 triangles and
-// cT = 3, cI = 2) of a flat tree over all its frames, then buildCwbvh.
-CwbvhTree buildCwbvh(const FlatBvh& flat, CostModel cost = {}, uint32_t maxLeafSize = 8);
+// The 8-wide T-SAH collapse of a flat tree over all its frames for an objective (the tree file's
+// BvhBuildInfo::objective), then buildCwbvh: WideCollapser(wideCollapseConfig(objective, 8)), so
+// its k, cT, cI and largest leaf as in the CPU wide layouts, the largest leaf capped at
+// kCwbvhMaxLeafTriangles (a node's leaves hold at most 64 triangles). The default objective:
+// k = 0, cT = 3, cI = 2, leaves of at most 8.
+CwbvhTree buildCwbvh(const FlatBvh& flat, const Objective& objective = {});
 
 // Per frame: exact leaf boxes from the triangles, exact boxes bottom-up, every node re-quantized
 // (cwbvhQuantize), rootBox. Exactly the GPU runtime's refit.
