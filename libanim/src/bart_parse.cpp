@@ -1,6 +1,8 @@
 // The AFF parser: text -> bart_detail::ParsedScene. Every problem throws tsah::FileError naming the file
 // and the line; sizes read from the text are checked against the input left before anything is
 // reserved, includes are bounded in depth and cycles are refused.
+// Longer than the project's ~600 lines on purpose: it is the whole grammar of one format (every
+// AFF directive with its checks) over one tokenizer; split, each half would need the other's state.
 #include <algorithm>
 #include <charconv>
 #include <cmath>
