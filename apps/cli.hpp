@@ -4,11 +4,11 @@
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <functional>
-#include <stdexcept>
 #include <string>
 
 #include "anim/animation.hpp"
 #include "anim/load.hpp"
+#include "tsah/base/error.hpp"
 
 namespace tsah::cli {
 
@@ -17,10 +17,12 @@ namespace tsah::cli {
 inline constexpr int kExitFailure = 1;
 inline constexpr int kExitUsage = 2;
 
-// A usage error: main prints "tsah: <message>" and exits with kExitUsage.
-class UsageError : public std::runtime_error {
+// A usage error found by the command line's own option checks (a tsah::ConfigError): main prints
+// "tsah: <message>" and exits with kExitUsage. ConfigErrors the library throws exit with
+// kExitFailure, as every other error does.
+class UsageError : public tsah::ConfigError {
  public:
-  using std::runtime_error::runtime_error;
+  using tsah::ConfigError::ConfigError;
 };
 
 using CommandSetup = std::function<void(CLI::App& app)>;

@@ -32,7 +32,7 @@ std::vector<tsah::MethodSpec> parseMethods(const std::string& list, std::vector<
     if (name.empty()) continue;
     try {
       methods.push_back(tsah::MethodSpec::parse(name));
-    } catch (const std::invalid_argument& e) {
+    } catch (const tsah::ConfigError& e) {
       throw tsah::cli::UsageError(std::string("--methods: ") + e.what());
     }
     names.push_back(name);

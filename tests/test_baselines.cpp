@@ -6,6 +6,7 @@
 #include <random>
 #include <vector>
 
+#include "tsah/base/error.hpp"
 #include "tsah/optimize/baselines.hpp"
 #include "tsah/core/cost.hpp"
 #include "tsah/build/sah_builder.hpp"
@@ -61,7 +62,7 @@ TEST(Baselines, MethodNamesRoundTrip) {
   EXPECT_EQ(MethodSpec::parse("tsah2").k, 2);
   EXPECT_EQ(MethodSpec::parse("rebuild").method, Method::SahRebuild);
   for (const char* bad : {"", "sah", "tsahx", "tsah-1", "SAH0", "tsah123"})
-    EXPECT_THROW(MethodSpec::parse(bad), std::invalid_argument) << bad;
+    EXPECT_THROW(MethodSpec::parse(bad), tsah::ConfigError) << bad;
 }
 
 TEST(Baselines, FrameSourcesProduceTriangleBoxes) {
@@ -98,7 +99,7 @@ TEST(Baselines, EvaluateFramesIsRefitPlusFrameCost) {
 
   const Triangles other = swapAnimation(11, 2, 3);
   EXPECT_THROW(tsah::evaluateFrames(bvh, tsah::FrameSource::fromTriangles(other.indices, other.positions, 2), {}),
-               std::invalid_argument);
+               tsah::DataError);
 }
 
 TEST(Baselines, SingleTreeMethodsGiveValidTreesOverTheRepresentativeFrames) {
@@ -119,7 +120,7 @@ TEST(Baselines, SingleTreeMethodsGiveValidTreesOverTheRepresentativeFrames) {
       }
     }
   }
-  EXPECT_THROW(tsah::buildMethod(MethodSpec::parse("rebuild"), rep, {}), std::invalid_argument);
+  EXPECT_THROW(tsah::buildMethod(MethodSpec::parse("rebuild"), rep, {}), tsah::ConfigError);
 }
 
 TEST(Baselines, SahStarKeepsTheBestTreeOverTime) {

@@ -24,7 +24,7 @@ void report(const RuntimeSetup& setup, const std::string& label, std::size_t fra
 }
 
 void requireDevice() {
-  if (!cuda::deviceAvailable()) throw tsah::Error("--device cuda: no CUDA device is available on this machine");
+  if (!cuda::deviceAvailable()) throw tsah::Failure("--device cuda: no CUDA device is available on this machine");
 }
 
 // Renders the current frame: the ray passes (device time of the traversal kernels) and the whole
@@ -129,11 +129,11 @@ nlohmann::json gpuJson() { return nullptr; }
 
 RuntimeMethod runGpuRefit(const anim::Animation&, const RefitTrees&, const RuntimeSetup&, Image*, uint32_t,
                           const std::string&) {
-  throw tsah::Error("--device cuda: this tsah was built without the CUDA runtime");
+  throw tsah::ConfigError("--device cuda: this tsah was built without the CUDA runtime");
 }
 RuntimeMethod runGpuRebuild(const anim::Animation&, const Bvh&, const std::string&, const CostModel&, uint32_t,
                             const RuntimeSetup&, const std::string&) {
-  throw tsah::Error("--device cuda: this tsah was built without the CUDA runtime");
+  throw tsah::ConfigError("--device cuda: this tsah was built without the CUDA runtime");
 }
 
 #endif

@@ -91,7 +91,7 @@ anim::Animation loadAnimation(const Options& opt, json& info) {
       g.triangles = uint32_t(std::stoul(tris));
       g.frames = uint32_t(std::stoul(frames));
     } catch (const std::exception&) {
-      throw tsah::Error("--generate expects KIND:TRIANGLES:FRAMES, got '" + opt.generate + "'");
+      throw tsah::ConfigError("--generate expects KIND:TRIANGLES:FRAMES, got '" + opt.generate + "'");
     }
     info["generated"] = opt.generate;
     return anim::generate(anim::parseGeneratorKind(kind), g);
@@ -336,8 +336,8 @@ json compareWithCpu(const tsah::FlatBvh& tree, const anim::Animation& a, double 
 }
 
 void run(const Options& opt) {
-  if (opt.input.empty() == opt.generate.empty()) throw tsah::Error("give exactly one of --input and --generate");
-  if (!tc::deviceAvailable()) throw tsah::Error("no CUDA device");
+  if (opt.input.empty() == opt.generate.empty()) throw tsah::ConfigError("give exactly one of --input and --generate");
+  if (!tc::deviceAvailable()) throw tsah::Failure("no CUDA device");
   const tc::DeviceInfo dev = tc::describeDevice(0);
   json out;
   out["device"] = {{"name", dev.name},
@@ -386,7 +386,7 @@ void run(const Options& opt) {
     tsah::BvhBuildInfo info;
     trees.emplace_back(name, tsah::decodeFlatBvhFile(tsah::readFile(path), path, &info));
     if (info.topologyHash != 0 && info.topologyHash != tsah::topologyHash(a.indices()))
-      throw tsah::Error(path + ": the tree was built for another animation (topology hash differs)");
+      throw tsah::DataError(path + ": the tree was built for another animation (topology hash differs)");
   }
   json builds = json::object();
   if (opt.sah0 || trees.empty()) {
@@ -399,7 +399,7 @@ void run(const Options& opt) {
   std::vector<bool> modes;
   if (opt.traversal == "persistent" || opt.traversal == "both") modes.push_back(true);
   if (opt.traversal == "simple" || opt.traversal == "both") modes.push_back(false);
-  if (modes.empty()) throw tsah::Error("--traversal must be persistent, simple or both");
+  if (modes.empty()) throw tsah::ConfigError("--traversal must be persistent, simple or both");
 
   std::vector<tc::TreeLayout> layouts;
   {
@@ -407,7 +407,7 @@ void run(const Options& opt) {
     std::string l;
     while (std::getline(ss, l, ',')) layouts.push_back(tc::parseTreeLayout(l));
   }
-  if (layouts.empty()) throw tsah::Error("--layout needs bvh2, cwbvh or both");
+  if (layouts.empty()) throw tsah::ConfigError("--layout needs bvh2, cwbvh or both");
 
   json methods = json::array();
   for (tc::TreeLayout layout : layouts)

@@ -41,11 +41,11 @@ struct TreeOptions {
   TreeOptimizerFunction gpuOptimizer;
   std::function<void(const std::string&)> progress;  // optional progress messages
 
-  // "tsah" with k -> tsah<k>; anything else as MethodSpec::parse reads it (throws std::invalid_argument).
+  // "tsah" with k -> tsah<k>; anything else as MethodSpec::parse reads it (throws tsah::ConfigError).
   MethodSpec methodSpec() const;
   // The builders' settings (cost, leaf size, optimizer selection/seed/limits, threads, progress).
-  // Throws std::invalid_argument for an unknown optimizer, selection or device, tsah::Error for
-  // device "cuda" without a gpuOptimizer (a build without CUDA).
+  // Throws tsah::ConfigError for an unknown optimizer, selection or device, and for device "cuda"
+  // without a gpuOptimizer (a build without CUDA).
   BaselineConfig baselineConfig() const;
 };
 
@@ -56,7 +56,7 @@ FrameSource animationFrames(const anim::Animation& animation, std::vector<double
 // The animation as the segmentation sees it (triangle boxes at any time); must outlive the result.
 Timeline animationTimeline(const anim::Animation& animation);
 
-// "mh", "random", "batch" -> the optimizer's node selection; throws std::invalid_argument otherwise.
+// "mh", "random", "batch" -> the optimizer's node selection; throws tsah::ConfigError otherwise.
 InsertionOptimizer::Selection parseSelection(const std::string& name);
 
 // `requested` for an animation, 1 for a static input (one keyframe: more frames would repeat it).
@@ -76,7 +76,7 @@ struct OptimizedTree {
 };
 
 // One tree for the whole animation, exactly as `tsah optimize` builds it (same seed, same tree).
-// Throws tsah::Error when the animation has no triangles, std::invalid_argument for a bad method or
+// Throws tsah::DataError when the animation has no triangles, tsah::ConfigError for a bad method or
 // selection (including "rebuild", which is no single tree).
 OptimizedTree optimizeAnimation(const anim::Animation& animation, const TreeOptions& options);
 
@@ -88,7 +88,7 @@ std::vector<double> evaluateAnimation(const Bvh& bvh, const anim::Animation& ani
 std::vector<MethodResult> compareOnAnimation(const anim::Animation& animation, std::span<const MethodSpec> methods,
                                              const TreeOptions& options, uint32_t evalFrames);
 
-// Throws tsah::Error with one clear line ("BVH was not built for ANIMATION: ...") when the animation
+// Throws tsah::DataError with one clear line ("BVH was not built for ANIMATION: ...") when the animation
 // is not the one the tree was built for (triangle count, vertex count or topology hash differ).
 void checkTreeMatchesAnimation(const BvhBuildInfo& info, const std::string& bvhPath, const anim::Animation& animation,
                                const std::string& animationPath);

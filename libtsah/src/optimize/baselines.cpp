@@ -6,11 +6,11 @@
 #include <exception>
 #include <limits>
 #include <mutex>
-#include <stdexcept>
 #include <thread>
 #include <tuple>
 #include <utility>
 
+#include "tsah/base/error.hpp"
 #include "tsah/optimize/leaf_collapser.hpp"
 #include "tsah/build/sah_builder.hpp"
 
@@ -119,9 +119,9 @@ InsertionOptimizer::Config optimizerConfig(const BaselineConfig& config, int k, 
 }
 
 void checkFrames(const PrimitiveBoxes& rep) {
-  if (rep.frameCount == 0) throw std::invalid_argument("no representative frames");
+  if (rep.frameCount == 0) throw tsah::DataError("no representative frames");
   if (rep.boxes.size() != std::size_t(rep.frameCount) * rep.primCount)
-    throw std::invalid_argument("representative frame boxes do not match frames x primitives");
+    throw tsah::DataError("representative frame boxes do not match frames x primitives");
 }
 
 }  // namespace
@@ -133,7 +133,7 @@ std::string optimizerKindName(OptimizerKind kind) {
 OptimizerKind parseOptimizerKind(const std::string& name) {
   if (name == "sequential") return OptimizerKind::Sequential;
   if (name == "parallel") return OptimizerKind::Parallel;
-  throw std::invalid_argument("unknown optimizer '" + name + "' (expected sequential or parallel)");
+  throw tsah::ConfigError("unknown optimizer '" + name + "' (expected sequential or parallel)");
 }
 
 InsertionOptimizer::Result optimizeTree(Bvh bvh, const PrimitiveBoxes& prims, const InsertionOptimizer::Config& settings,
@@ -190,8 +190,8 @@ MethodSpec MethodSpec::parse(const std::string& name) {
   if (name.rfind("tsah", 0) == 0 && name.size() <= 6 &&
       std::all_of(name.begin() + 4, name.end(), [](char c) { return c >= '0' && c <= '9'; }))
     return {Method::TSah, std::stoi(name.substr(4))};
-  throw std::invalid_argument("unknown method '" + name +
-                              "' (expected sah0, sahstar, rebuild or tsah<k> such as tsah0, tsah2)");
+  throw tsah::ConfigError("unknown method '" + name +
+                          "' (expected sah0, sahstar, rebuild or tsah<k> such as tsah0, tsah2)");
 }
 
 Bvh buildSah0(const PrimitiveBoxes& rep, const BaselineConfig& config) {
@@ -272,14 +272,14 @@ Bvh buildMethod(const MethodSpec& method, const PrimitiveBoxes& rep, const Basel
     case Method::SahRebuild:
       break;
   }
-  throw std::invalid_argument("method " + method.name() + " builds one tree per frame, not one tree");
+  throw tsah::ConfigError("method " + method.name() + " builds one tree per frame, not one tree");
 }
 
 std::vector<double> evaluateFrames(const Bvh& bvh, const FrameSource& frames, const CostModel& cost,
                                    unsigned threads) {
   if (frames.primCount != bvh.primCount())
-    throw std::invalid_argument("evaluation frames hold " + std::to_string(frames.primCount) +
-                                " primitives, the tree " + std::to_string(bvh.primCount()));
+    throw tsah::DataError("evaluation frames hold " + std::to_string(frames.primCount) + " primitives, the tree " +
+                          std::to_string(bvh.primCount()));
   std::vector<double> costs(frames.frameCount, 0.0);
   const unsigned workers = workerCount(threads, frames.frameCount);
   std::vector<FrameCostEvaluator> evaluators(workers, FrameCostEvaluator(bvh, cost));
@@ -295,7 +295,7 @@ std::vector<MethodResult> compareMethods(std::span<const MethodSpec> methods, co
                                          const FrameSource& evaluation, const BaselineConfig& config) {
   checkFrames(rep);
   if (evaluation.primCount != rep.primCount)
-    throw std::invalid_argument("evaluation frames and representative frames differ in primitive count");
+    throw tsah::DataError("evaluation frames and representative frames differ in primitive count");
   ProgressSink progress(config);
   // Workers report through the one sink above (one message at a time); per-batch optimizer
   // callbacks would come from several threads at once, so they are not forwarded here.

@@ -1,9 +1,9 @@
 #include "tsah/optimize/leaf_collapser.hpp"
 
 #include <algorithm>
-#include <stdexcept>
 #include <vector>
 
+#include "tsah/base/error.hpp"
 #include "tsah/core/cost_terms.hpp"
 
 namespace tsah {
@@ -123,8 +123,8 @@ CollapseSource CollapseSource::of(const Bvh& bvh) {
 }
 
 LeafCollapser::LeafCollapser(Config config) : config_(config) {
-  if (config_.maxLeafSize == 0) throw std::invalid_argument("LeafCollapser: maxLeafSize must be >= 1");
-  if (config_.k < 0) throw std::invalid_argument("LeafCollapser: the exponent k must be >= 0");
+  if (config_.maxLeafSize == 0) throw tsah::ConfigError("LeafCollapser: maxLeafSize must be >= 1");
+  if (config_.k < 0) throw tsah::ConfigError("LeafCollapser: the exponent k must be >= 0");
 }
 
 Bvh LeafCollapser::compact(const Bvh& bvh, std::span<const uint8_t> asLeaf) {

@@ -1,10 +1,10 @@
 // The optimizer's driver: rounds of ReinsertionSession (reinsertion_session.cpp) until the stop rule.
 #include <algorithm>
 #include <chrono>
-#include <stdexcept>
 #include <utility>
 
 #include "optimize/stop_rule.hpp"
+#include "tsah/base/error.hpp"
 #include "tsah/optimize/parallel_optimizer.hpp"
 
 namespace tsah {
@@ -14,11 +14,11 @@ ParallelReinsertionOptimizer::ParallelReinsertionOptimizer(Config config)
 
 ParallelReinsertionOptimizer::ParallelReinsertionOptimizer(Config config, Parallel parallel)
     : config_(std::move(config)), parallel_(parallel) {
-  if (config_.k < 0) throw std::invalid_argument("ParallelReinsertionOptimizer: the exponent k must be >= 0");
+  if (config_.k < 0) throw tsah::ConfigError("ParallelReinsertionOptimizer: the exponent k must be >= 0");
   if (config_.batchesWithoutImprovement == 0)
-    throw std::invalid_argument("ParallelReinsertionOptimizer: batchesWithoutImprovement must be >= 1");
+    throw tsah::ConfigError("ParallelReinsertionOptimizer: batchesWithoutImprovement must be >= 1");
   if (!(parallel_.candidateFraction > 0.0) || parallel_.candidateFraction > 1.0)
-    throw std::invalid_argument("ParallelReinsertionOptimizer: candidateFraction must be in (0, 1]");
+    throw tsah::ConfigError("ParallelReinsertionOptimizer: candidateFraction must be in (0, 1]");
 }
 
 ParallelReinsertionOptimizer::Result ParallelReinsertionOptimizer::optimize(Bvh bvh, const PrimitiveBoxes& prims,

@@ -49,7 +49,7 @@ struct MethodSpec {
 
   // "sah0", "sahstar", "rebuild", "tsah<k>".
   std::string name() const;
-  // Parses a name as above ("tsah" alone means tsah0); throws std::invalid_argument otherwise.
+  // Parses a name as above ("tsah" alone means tsah0); throws tsah::ConfigError otherwise.
   static MethodSpec parse(const std::string& name);
 };
 
@@ -59,7 +59,7 @@ enum class OptimizerKind {
   Parallel,    // ParallelReinsertionOptimizer: parallel reinsertion on all cores
 };
 
-// "sequential" or "parallel"; parseOptimizerKind throws std::invalid_argument for anything else.
+// "sequential" or "parallel"; parseOptimizerKind throws tsah::ConfigError for anything else.
 std::string optimizerKindName(OptimizerKind kind);
 OptimizerKind parseOptimizerKind(const std::string& name);
 
@@ -92,7 +92,7 @@ Bvh buildSah0(const PrimitiveBoxes& rep, const BaselineConfig& config);
 Bvh buildSahStar(const PrimitiveBoxes& rep, const BaselineConfig& config);
 Bvh buildTSah(const PrimitiveBoxes& rep, int k, const BaselineConfig& config,
               InsertionOptimizer::Result* details = nullptr);
-// Any single-tree method (throws std::invalid_argument for SahRebuild, which builds many trees).
+// Any single-tree method (throws tsah::ConfigError for SahRebuild, which builds many trees).
 Bvh buildMethod(const MethodSpec& method, const PrimitiveBoxes& rep, const BaselineConfig& config,
                 InsertionOptimizer::Result* details = nullptr);
 // An optimized SAH tree for one frame (sweep SAH, insertion optimization, collapse), as SAH* and

@@ -107,7 +107,7 @@ InsertionOptimizer::Result runReinsertionRounds(RoundSession& session, const Ins
 // tree after every round.
 class ReinsertionSession final : public RoundSession {
  public:
-  // Throws std::invalid_argument when prims does not match the tree. prims must outlive the session.
+  // Throws tsah::DataError when prims does not match the tree. prims must outlive the session.
   ReinsertionSession(Bvh bvh, const PrimitiveBoxes& prims, const ParallelReinsertionOptimizer::Config& config,
                      const ParallelReinsertionOptimizer::Parallel& parallel);
   ~ReinsertionSession() override;
