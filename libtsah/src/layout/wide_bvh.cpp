@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <limits>
 
+#include "tsah/base/assert.hpp"
 #include "tsah/base/error.hpp"
 
 namespace tsah {
@@ -232,7 +233,9 @@ WideBvh WideCollapser::collapse(const Bvh& bvh, std::span<const double> weights,
   const std::vector<double> w = normalizedWeights(weights, bvh.frameCount);
   const CollapsePlan plan(bvh, config_, areaWeights(bvh, w), false);
   if (weightedCost) *weightedCost = plan.cost(bvh.root);
-  return buildWide(bvh, plan, config_.width);
+  WideBvh wide = buildWide(bvh, plan, config_.width);
+  TSAH_ASSERT_VALID(validateWide(wide), "wide collapse: the wide tree");
+  return wide;
 }
 
 WideBvh WideCollapser::collapse(const Bvh& bvh) const {

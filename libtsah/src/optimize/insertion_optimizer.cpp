@@ -10,6 +10,7 @@
 
 #include "optimize/random.hpp"
 #include "optimize/stop_rule.hpp"
+#include "tsah/base/assert.hpp"
 #include "tsah/base/error.hpp"
 #include "tsah/core/cost_terms.hpp"
 
@@ -589,6 +590,10 @@ InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const Primitive
       }
     }
     session.endBatch();
+    // Debug builds: the tree is still a tree over every primitive, each box holding its children's
+    // and primitives' boxes in every frame (bvh() materializes the boxes; release builds skip both).
+    TSAH_ASSERT_VALID(validate(session.bvh(), &prims),
+                      "insertion optimizer: the tree after batch " + std::to_string(batch));
     record(batch);
     if (stall.stalledAfter(session.cost())) break;
     if (config_.maxBatches && batch >= config_.maxBatches) break;

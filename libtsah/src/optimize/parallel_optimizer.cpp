@@ -1,9 +1,11 @@
 // The optimizer's driver: rounds of ReinsertionSession (reinsertion_session.cpp) until the stop rule.
 #include <algorithm>
 #include <chrono>
+#include <string>
 #include <utility>
 
 #include "optimize/stop_rule.hpp"
+#include "tsah/base/assert.hpp"
 #include "tsah/base/error.hpp"
 #include "tsah/optimize/parallel_optimizer.hpp"
 
@@ -53,6 +55,10 @@ InsertionOptimizer::Result runReinsertionRounds(RoundSession& session, const Ins
   for (uint32_t round = 1;; ++round) {
     const RoundSession::RoundStats stats = session.round(focused);
     session.endRound();
+    // Debug builds: the round's moves left a tree over every primitive (topology() gathers it, from
+    // the device for the GPU session; release builds skip both).
+    TSAH_ASSERT_VALID(validate(session.topology()),
+                      "parallel reinsertion: the tree after round " + std::to_string(round));
     record(round);
     // Stalled focused rounds get one full round before the run ends: nodes skipped as quiet may
     // have found new places after changes elsewhere.

@@ -323,6 +323,7 @@ class BackendSession final : public RoundSession {
     refit(out, *prims_);
     return out;
   }
+  Bvh topology() const override { return rounds_->topology(); }
   // The device state is freed before the host computes the boxes: the two are never held together.
   Bvh releaseTree(const LeafCollapser* collapse) override {
     Bvh out = rounds_->topology();
