@@ -21,11 +21,12 @@ namespace tsah::cli {
 inline constexpr int kExitFailure = 1;
 inline constexpr int kExitUsage = 2;
 
-// A usage error found by the command line's own checks: main prints "tsah: <message>" and exits
-// with kExitUsage.
-class UsageError : public ConfigError {
+// A usage error found by the command line's own option checks (a tsah::ConfigError): main prints
+// "tsah: <message>" and exits with kExitUsage. ConfigErrors the library throws exit with
+// kExitFailure, as every other error does.
+class UsageError : public tsah::ConfigError {
  public:
-  using ConfigError::ConfigError;
+  using tsah::ConfigError::ConfigError;
 };
 
 using CommandSetup = std::function<void(CLI::App& app)>;

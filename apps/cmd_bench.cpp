@@ -136,7 +136,7 @@ void runScalingMode(Options& opt, CLI::App* sub, const std::vector<tsah::bench::
   const tsah::bench::BenchOptions& b = opt.bench;
   std::error_code ec;
   o.program = fs::read_symlink("/proc/self/exe", ec).string();
-  if (ec) throw tsah::Error("cannot find the tsah program (/proc/self/exe): " + ec.message());
+  if (ec) throw tsah::Failure("cannot find the tsah program (/proc/self/exe): " + ec.message());
   o.frames = b.frames;
   o.evalFrames = sub->get_option("--eval-frames")->count() > 0 ? b.evalFrames : 10;
   o.seed = b.seed;
@@ -253,7 +253,7 @@ void run(Options opt, CLI::App* sub) {
 
   std::error_code ec;
   fs::create_directories(out, ec);
-  if (ec || !fs::is_directory(out)) throw tsah::Error(out.string() + ": cannot create the output folder");
+  if (ec || !fs::is_directory(out)) throw tsah::Failure(out.string() + ": cannot create the output folder");
   if (opt.scaling) return runScalingMode(opt, sub, scenes, log);
   json results;
   results["tool"] = "tsah bench";
@@ -305,7 +305,8 @@ void run(Options opt, CLI::App* sub) {
   results["finished"] = nowText();
   makePlotsInto(results, out, log);
   writeReport(out, results);
-  if (results["scenes"].empty()) throw tsah::Error("no scene could be benchmarked (see " + (out / "results.md").string() + ")");
+  if (results["scenes"].empty())
+    throw tsah::Failure("no scene could be benchmarked (see " + (out / "results.md").string() + ")");
   std::printf("%s\n%s\n", (out / "results.md").c_str(), (out / "results.json").c_str());
 }
 

@@ -234,7 +234,7 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
     if (fs::exists(opt->out, ec) && !fs::is_directory(opt->out, ec))
       throw tsah::cli::UsageError(opt->out + " exists and is not a folder");
     fs::create_directories(opt->out, ec);
-    if (ec) throw tsah::Error(opt->out + ": cannot create the folder: " + ec.message());
+    if (ec) throw tsah::Failure(opt->out + ": cannot create the folder: " + ec.message());
     const fs::path out(opt->out);
     auto write = [&](const char* name, std::span<const uint8_t> data) {
       tsah::writeFileAtomically((out / name).string(), data);

@@ -155,7 +155,7 @@ void runTrace(const TraceOptions& opt) {
   if (!opt.noImages) {
     std::error_code ec;
     fs::create_directories(opt.out, ec);
-    if (ec || !fs::is_directory(opt.out)) throw tsah::Error(opt.out + ": cannot create the output folder");
+    if (ec || !fs::is_directory(opt.out)) throw tsah::Failure(opt.out + ": cannot create the output folder");
   }
 
   tsah::RenderSettings settings;

@@ -177,8 +177,8 @@ class GpuFrameRuntime final : public FrameRuntime {
 std::unique_ptr<FrameRuntime> makeGpuFrameRuntime(const TreeSet& trees, const anim::Animation& animation,
                                                   const FrameRuntimeOptions& options) {
   if (!cuda::deviceAvailable())
-    throw ConfigError("no CUDA device found (no GPU, no NVIDIA driver, or CUDA_VISIBLE_DEVICES hides them); "
-                      "use --device cpu");
+    throw Failure("no CUDA device found (no GPU, no NVIDIA driver, or CUDA_VISIBLE_DEVICES hides them); "
+                  "use --device cpu");
   cuda::GpuRuntime::Config config;
   if (options.layout != Layout::Auto) config.layout = cuda::parseTreeLayout(name(options.layout));
   // The cwbvh collapse of trees without build infos (a set read from a file brings each tree's own).

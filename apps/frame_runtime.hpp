@@ -79,7 +79,8 @@ struct FrameRuntimeOptions {
 
 // The runtime of `trees` (each refitted in its part of the animation, or trees.trees[0] the first
 // tree of a rebuild every frame) for `animation`. Throws tsah::ConfigError for a GPU request in a
-// build without CUDA or on a machine without a GPU, UsageError for a rebuild of the other device.
+// build without CUDA, tsah::Failure on a machine without a GPU, UsageError for a rebuild of the
+// other device.
 std::unique_ptr<FrameRuntime> makeFrameRuntime(const TreeSet& trees, const anim::Animation& animation,
                                                const FrameRuntimeOptions& options);
 

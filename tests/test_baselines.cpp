@@ -99,7 +99,7 @@ TEST(Baselines, EvaluateFramesIsRefitPlusFrameCost) {
 
   const Triangles other = swapAnimation(11, 2, 3);
   EXPECT_THROW(tsah::evaluateFrames(bvh, tsah::FrameSource::fromTriangles(other.indices, other.positions, 2), {}),
-               std::invalid_argument);
+               tsah::DataError);
 }
 
 TEST(Baselines, SingleTreeMethodsGiveValidTreesOverTheRepresentativeFrames) {
@@ -120,7 +120,7 @@ TEST(Baselines, SingleTreeMethodsGiveValidTreesOverTheRepresentativeFrames) {
       }
     }
   }
-  EXPECT_THROW(tsah::buildMethod(MethodSpec::parse("rebuild"), rep, {}), std::invalid_argument);
+  EXPECT_THROW(tsah::buildMethod(MethodSpec::parse("rebuild"), rep, {}), tsah::ConfigError);
 }
 
 TEST(Baselines, SahStarKeepsTheBestTreeOverTime) {

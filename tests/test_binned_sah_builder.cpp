@@ -8,9 +8,9 @@
 #include <cstring>
 #include <limits>
 #include <random>
-#include <stdexcept>
 
 #include "anim/generators.hpp"
+#include "tsah/base/error.hpp"
 #include "tsah/build/binned_sah_builder.hpp"
 #include "tsah/core/cost.hpp"
 #include "tsah/build/sah_builder.hpp"
@@ -134,16 +134,16 @@ TEST(BinnedSahBuilder, RejectsBadInput) {
   tsah::Aabb bad;
   bad.extend(tsah::Vec3{0, 0, 0});
   bad.hi.x = std::numeric_limits<float>::quiet_NaN();
-  EXPECT_THROW(tsah::BinnedSahBuilder().build(std::vector<tsah::Aabb>{bad}), std::invalid_argument);
-  EXPECT_THROW(tsah::BinnedSahBuilder().build(std::vector<tsah::Aabb>{tsah::Aabb{}}), std::invalid_argument);
+  EXPECT_THROW(tsah::BinnedSahBuilder().build(std::vector<tsah::Aabb>{bad}), tsah::DataError);
+  EXPECT_THROW(tsah::BinnedSahBuilder().build(std::vector<tsah::Aabb>{tsah::Aabb{}}), tsah::DataError);
   tsah::BinnedSahBuilder::Config c;
   c.binCount = 1;
   tsah::Aabb ok;
   ok.extend(tsah::Vec3{0, 0, 0});
-  EXPECT_THROW(tsah::BinnedSahBuilder(c).build(std::vector<tsah::Aabb>{ok}), std::invalid_argument);
+  EXPECT_THROW(tsah::BinnedSahBuilder(c).build(std::vector<tsah::Aabb>{ok}), tsah::ConfigError);
   c = {};
   c.maxLeafSize = 0;
-  EXPECT_THROW(tsah::BinnedSahBuilder(c).build(std::vector<tsah::Aabb>{ok}), std::invalid_argument);
+  EXPECT_THROW(tsah::BinnedSahBuilder(c).build(std::vector<tsah::Aabb>{ok}), tsah::ConfigError);
 }
 
 }  // namespace

@@ -6,6 +6,7 @@
 #include <sstream>
 #include <string>
 
+#include "tsah/base/error.hpp"
 #include "tsah/inspect/box_view.hpp"
 #include "tsah/build/sah_builder.hpp"
 #include "tsah/inspect/tree_quality.hpp"
@@ -91,7 +92,7 @@ TEST(BoxView, GrowthBandsAreLog2) {
   o.minGrowth = 3.0;
   growth[r.bvh.nodes[r.bvh.root].left] = 3.0;
   EXPECT_EQ(tsah::buildBoxView(r.bvh, r.frame, growth, o).boxCount, 2u);
-  EXPECT_THROW(tsah::buildBoxView(r.bvh, r.frame, {}, o), std::invalid_argument);
+  EXPECT_THROW(tsah::buildBoxView(r.bvh, r.frame, {}, o), tsah::ConfigError);
 }
 
 TEST(BoxView, PlyAndObjFilesParseBack) {

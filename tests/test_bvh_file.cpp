@@ -216,13 +216,13 @@ TEST(BvhFile, EncoderRejectsBadInput) {
   const Bvh bvh = randomTree(10, 1, 8, rng);
   auto info = sampleInfo(10);
   info.method = "a-name-that-is-far-too-long";
-  EXPECT_THROW(tsah::encodeBvhFile(bvh, info), tsah::Error);
+  EXPECT_THROW(tsah::encodeBvhFile(bvh, info), tsah::ConfigError);
   info = sampleInfo(11);
-  EXPECT_THROW(tsah::encodeBvhFile(bvh, info), tsah::Error);  // count disagrees with the tree
-  EXPECT_THROW(tsah::encodeBvhFile(Bvh{}, sampleInfo(0)), tsah::Error);
+  EXPECT_THROW(tsah::encodeBvhFile(bvh, info), tsah::DataError);  // count disagrees with the tree
+  EXPECT_THROW(tsah::encodeBvhFile(Bvh{}, sampleInfo(0)), tsah::DataError);
   Bvh broken = bvh;
   broken.nodes[broken.root].parent = 0;
-  EXPECT_THROW(tsah::encodeBvhFile(broken, sampleInfo(10)), tsah::Error);
+  EXPECT_THROW(tsah::encodeBvhFile(broken, sampleInfo(10)), tsah::DataError);
 }
 
 TEST(BvhFile, TopologyHashIsCrcOfIndices) {

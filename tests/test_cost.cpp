@@ -6,6 +6,7 @@
 #include <random>
 #include <vector>
 
+#include "tsah/base/error.hpp"
 #include "tsah/core/cost.hpp"
 #include "tsah/build/sah_builder.hpp"
 #include "test_support.hpp"
@@ -69,7 +70,7 @@ TEST(Cost, SingleLeafAndSmallTrees) {
   const std::vector<Aabb> boxes = {Aabb{{0, 0, 0}, {1, 1, 1}}, Aabb{{1, 0, 0}, {2, 1, 1}}};
   const Bvh two = tsah::SweepSahBuilder().build(boxes);
   EXPECT_NEAR(tsah::frameCost(two, 0), (3.0 * 10 + 2.0 * 12) / 10.0, 1e-12);
-  EXPECT_THROW(tsah::frameCost(two, 1), std::out_of_range);
+  EXPECT_THROW(tsah::frameCost(two, 1), tsah::ConfigError);
 }
 
 TEST(Cost, DegenerateFrameCostIsEveryNode) {
@@ -101,7 +102,7 @@ TEST(Cost, TemporalCostDefinition) {
   const std::vector<double> big = {1e200, 2e200};
   EXPECT_TRUE(std::isfinite(tsah::temporalCost(big, 8)));
   EXPECT_EQ(tsah::temporalCost(std::vector<double>{}, 2), 0.0);
-  EXPECT_THROW(tsah::temporalCost(c, -1), std::invalid_argument);
+  EXPECT_THROW(tsah::temporalCost(c, -1), tsah::ConfigError);
 }
 
 TEST(Cost, TemporalWeightsAreNormalizedPowers) {
@@ -162,7 +163,7 @@ TEST(Cost, EvaluatorMatchesRefitOnAnyFrame) {
     EXPECT_EQ(evaluator.nodeBoxes()[copy.root].hi.x, copy.box(copy.root, 0).hi.x);
   }
   const std::vector<Aabb> tooFew(10);
-  EXPECT_THROW(evaluator.cost(tooFew), std::invalid_argument);
+  EXPECT_THROW(evaluator.cost(tooFew), tsah::DataError);
 }
 
 }  // namespace

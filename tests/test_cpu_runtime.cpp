@@ -197,10 +197,10 @@ TEST(CpuRuntime, CameraPathInterpolation) {
   EXPECT_FLOAT_EQ(mid.fovYDegrees, 50.0f);
   EXPECT_FLOAT_EQ(tsah::cameraAt(keys, -1.0).eye.z, 10.0f);  // clamped
   EXPECT_FLOAT_EQ(tsah::cameraAt(keys, 5.0).eye.x, 10.0f);
-  EXPECT_THROW(tsah::cameraAt({}, 0.0), tsah::Error);
+  EXPECT_THROW(tsah::cameraAt({}, 0.0), tsah::ConfigError);
   tsah::Camera bad;
   bad.lookAt = bad.eye;
-  EXPECT_THROW(tsah::validateCamera(bad), tsah::Error);
+  EXPECT_THROW(tsah::validateCamera(bad), tsah::ConfigError);
 }
 
 TEST(CpuRuntime, PngRoundTrip) {

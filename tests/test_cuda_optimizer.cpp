@@ -7,13 +7,13 @@
 
 #include <cstdio>
 #include <cstdlib>
-#include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "anim/generators.hpp"
 #include "cuda_test_support.hpp"
 #include "test_support.hpp"
+#include "tsah/base/error.hpp"
 #include "tsah/core/cost.hpp"
 #include "tsah/optimize/leaf_collapser.hpp"
 #include "tsah/optimize/parallel_optimizer.hpp"
@@ -138,7 +138,7 @@ TEST(CudaOptimizer, CollapseAndBadInput) {
     EXPECT_FALSE(tsah::validate(result.bvh, &few).has_value());
   }
   const tsah::PrimitiveBoxes many = movingTriangleBoxes(50, 17, 81);
-  EXPECT_THROW(tsah::cuda::makeGpuReinsertionSession(frameZeroSahTree(many), many, {}, {}), std::invalid_argument);
+  EXPECT_THROW(tsah::cuda::makeGpuReinsertionSession(frameZeroSahTree(many), many, {}, {}), tsah::ConfigError);
 }
 
 // Where the time goes on a generated explode animation (10 keyframes, 5 representative frames):

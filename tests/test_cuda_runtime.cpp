@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstring>
 #include <random>
+#include <type_traits>
 
 #include "tsah/base/error.hpp"
 #include "anim/generators.hpp"
@@ -135,13 +136,16 @@ TEST(CudaCheck, NamesTheCallTheFileAndTheError) {
     EXPECT_NE(what.find("invalid argument"), std::string::npos) << what;
   }
   EXPECT_NO_THROW(CUDA_CHECK(cudaSuccess));
+  // A device error is a failure of the work, not a mistake of the caller.
+  static_assert(std::is_base_of_v<tsah::Failure, tc::CudaError>);
+  EXPECT_THROW(CUDA_CHECK(cudaErrorInvalidValue), tsah::Failure);
 }
 
 TEST(CudaRuntime, RejectsATreeOfAnotherAnimationWithoutTouchingTheDevice) {
   const auto a = generatedAnimation(anim::GeneratorKind::Wave, 800, 3);
   const auto b = generatedAnimation(anim::GeneratorKind::Explode, 1500, 3);
-  EXPECT_THROW(tc::GpuRuntime(sahTree(b, 8), a), tsah::Error);
-  EXPECT_THROW(tc::parseRebuildMethod("octree"), tsah::Error);
+  EXPECT_THROW(tc::GpuRuntime(sahTree(b, 8), a), tsah::DataError);
+  EXPECT_THROW(tc::parseRebuildMethod("octree"), tsah::ConfigError);
   EXPECT_EQ(tc::parseRebuildMethod("hlbvh-sah"), tc::RebuildMethod::HlbvhSah);
   EXPECT_STREQ(tc::rebuildMethodName(tc::RebuildMethod::Lbvh), "lbvh");
 }

@@ -155,16 +155,16 @@ TEST(ConvertToCwbvh, OneTriangleOneLeafAndTwoLeaves) {
 TEST(ConvertToCwbvh, RefusesInvalidTrees) {
   const auto m = tsah::test::randomMovingTriangles(100, 1, 3, 0.0f);
   // Two leaves of 50 triangles: 100 under one wide node (binary leaves of <= 8 never do this).
-  EXPECT_THROW(tsah::convertToCwbvh(tsah::test::tinyTree(m, {50, 50})), tsah::Error);
+  EXPECT_THROW(tsah::convertToCwbvh(tsah::test::tinyTree(m, {50, 50})), tsah::DataError);
   const tsah::FlatBvh good = sahTree(m.indices, m.positions, 8);
   EXPECT_NO_THROW(tsah::convertToCwbvh(good));
-  EXPECT_THROW(tsah::convertToCwbvh(good, 0, tsah::kCwbvhMaxLeafTriangles + 1), tsah::Error);
-  EXPECT_THROW(tsah::convertToCwbvh(good, 1), tsah::Error);  // no such frame
+  EXPECT_THROW(tsah::convertToCwbvh(good, 0, tsah::kCwbvhMaxLeafTriangles + 1), tsah::ConfigError);
+  EXPECT_THROW(tsah::convertToCwbvh(good, 1), tsah::ConfigError);  // no such frame
   {
     tsah::FlatBvh bad = good;  // a reference past the nodes
     bad.nodes[0].ref1 = int32_t(bad.interiorCount);
     bad.nodes[0].count1 = 0;
-    EXPECT_THROW(tsah::convertToCwbvh(bad, 0, 0), tsah::Error);
+    EXPECT_THROW(tsah::convertToCwbvh(bad, 0, 0), tsah::DataError);
   }
   {
     tsah::FlatBvh bad = good;  // a cycle: a child refers back to the root
@@ -172,7 +172,7 @@ TEST(ConvertToCwbvh, RefusesInvalidTrees) {
     const uint32_t child = uint32_t(bad.nodes[0].childRef(side));
     (side == 0 ? bad.nodes[child].ref0 : bad.nodes[child].ref1) = 0;
     (side == 0 ? bad.nodes[child].count0 : bad.nodes[child].count1) = 0;
-    EXPECT_THROW(tsah::convertToCwbvh(bad, 0, 0), tsah::Error);
+    EXPECT_THROW(tsah::convertToCwbvh(bad, 0, 0), tsah::DataError);
   }
   {
     tsah::FlatBvh bad = good;  // a leaf past the triangles
@@ -182,7 +182,7 @@ TEST(ConvertToCwbvh, RefusesInvalidTrees) {
         n.count0 = 2;
         break;
       }
-    EXPECT_THROW(tsah::convertToCwbvh(bad, 0, 0), tsah::Error);
+    EXPECT_THROW(tsah::convertToCwbvh(bad, 0, 0), tsah::DataError);
   }
 }
 

@@ -64,11 +64,11 @@ TEST(GeneratorsBehaviour, SwapGroupsExchangeSides) {
 TEST(GeneratorsBehaviour, RejectsAbsurdSizesAndUnknownKinds) {
   anim::GeneratorOptions o;
   o.triangles = 0;
-  EXPECT_THROW(anim::generate(GeneratorKind::Wave, o), tsah::Error);
+  EXPECT_THROW(anim::generate(GeneratorKind::Wave, o), tsah::ConfigError);
   o.triangles = 40'000'000;
   o.frames = 1000;
-  EXPECT_THROW(anim::generate(GeneratorKind::Wave, o), tsah::Error);
-  EXPECT_THROW(anim::parseGeneratorKind("implode"), tsah::Error);
+  EXPECT_THROW(anim::generate(GeneratorKind::Wave, o), tsah::ConfigError);
+  EXPECT_THROW(anim::parseGeneratorKind("implode"), tsah::ConfigError);
   EXPECT_EQ(anim::parseGeneratorKind("swap"), GeneratorKind::Swap);
 }
 

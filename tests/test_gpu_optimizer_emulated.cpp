@@ -130,9 +130,9 @@ TEST(EmulatedGpuOptimizer, CollapseLimitsAndBadInput) {
     EXPECT_EQ(result.acceptedSteps, 0u);
   }
   const tsah::PrimitiveBoxes many = movingTriangleBoxes(50, 17, 81);
-  EXPECT_THROW(tsah::makeEmulatedDeviceSession(frameZeroSahTree(many), many, {}, {}), std::invalid_argument);
+  EXPECT_THROW(tsah::makeEmulatedDeviceSession(frameZeroSahTree(many), many, {}, {}), tsah::ConfigError);
   const tsah::PrimitiveBoxes other = movingTriangleBoxes(5, 2, 62);
-  EXPECT_THROW(tsah::makeEmulatedDeviceSession(frameZeroSahTree(prims), other, {}, {}), std::invalid_argument);
+  EXPECT_THROW(tsah::makeEmulatedDeviceSession(frameZeroSahTree(prims), other, {}, {}), tsah::DataError);
 }
 
 // The pipeline's --device cuda path with the emulation standing in for the GPU: every optimization

@@ -7,6 +7,7 @@
 #include <random>
 #include <vector>
 
+#include "tsah/base/error.hpp"
 #include "tsah/core/cost.hpp"
 #include "tsah/optimize/insertion_optimizer.hpp"
 #include "tsah/build/sah_builder.hpp"
@@ -126,7 +127,7 @@ TEST(InsertionSession, StepsOnEveryNodeKeepTheTreeValid) {
       const auto problem = tsah::validate(session.bvh(), &prims);
       ASSERT_FALSE(problem.has_value()) << *problem;
     }
-  EXPECT_THROW(session.step(session.bvh().root), std::invalid_argument);
+  EXPECT_THROW(session.step(session.bvh().root), tsah::ConfigError);
 }
 
 TEST(InsertionSession, MetropolisHastingsNeverRepeatsTheLastNode) {
@@ -283,13 +284,13 @@ TEST(InsertionOptimizer, TinyTreesAndBadInput) {
   EXPECT_EQ(result.steps, 0u);
 
   const tsah::PrimitiveBoxes other = movingTriangleBoxes(5, 2, 62);
-  EXPECT_THROW(InsertionOptimizer().optimize(start, other), std::invalid_argument);
+  EXPECT_THROW(InsertionOptimizer().optimize(start, other), tsah::DataError);
   InsertionOptimizer::Config negative;
   negative.k = -1;
-  EXPECT_THROW(InsertionOptimizer{negative}, std::invalid_argument);
+  EXPECT_THROW(InsertionOptimizer{negative}, tsah::ConfigError);
   InsertionOptimizer::Config fraction;
   fraction.batchFraction = 0.0;
-  EXPECT_THROW(InsertionOptimizer{fraction}, std::invalid_argument);
+  EXPECT_THROW(InsertionOptimizer{fraction}, tsah::ConfigError);
 }
 
 }  // namespace

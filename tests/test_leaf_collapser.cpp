@@ -8,6 +8,7 @@
 #include <random>
 #include <vector>
 
+#include "tsah/base/error.hpp"
 #include "tsah/core/cost.hpp"
 #include "tsah/optimize/insertion_optimizer.hpp"
 #include "tsah/optimize/leaf_collapser.hpp"
@@ -165,8 +166,8 @@ TEST(LeafCollapser, TopologyFromASourceThenRefitEqualsCollapse) {
 
 TEST(LeafCollapser, EmptyTreeAndBadConfig) {
   EXPECT_TRUE(LeafCollapser().collapse(Bvh{}).nodes.empty());
-  EXPECT_THROW(LeafCollapser({0, {}, 0}), std::invalid_argument);
-  EXPECT_THROW(LeafCollapser({-2, {}, 8}), std::invalid_argument);
+  EXPECT_THROW(LeafCollapser({0, {}, 0}), tsah::ConfigError);
+  EXPECT_THROW(LeafCollapser({-2, {}, 8}), tsah::ConfigError);
 }
 
 }  // namespace

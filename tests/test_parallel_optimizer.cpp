@@ -5,10 +5,10 @@
 
 #include <cstdio>
 #include <cstring>
-#include <stdexcept>
 #include <vector>
 
 #include "test_support.hpp"
+#include "tsah/base/error.hpp"
 #include "tsah/core/cost.hpp"
 #include "tsah/optimize/insertion_optimizer.hpp"
 #include "tsah/optimize/leaf_collapser.hpp"
@@ -207,12 +207,12 @@ TEST(ParallelReinsertionOptimizer, LimitsTinyTreesAndBadInput) {
   }
 
   const tsah::PrimitiveBoxes other = movingTriangleBoxes(5, 2, 62);
-  EXPECT_THROW(ParallelReinsertionOptimizer().optimize(frameZeroSahTree(prims), other), std::invalid_argument);
+  EXPECT_THROW(ParallelReinsertionOptimizer().optimize(frameZeroSahTree(prims), other), tsah::DataError);
   ParallelReinsertionOptimizer::Config negative;
   negative.k = -1;
-  EXPECT_THROW(ParallelReinsertionOptimizer{negative}, std::invalid_argument);
-  EXPECT_THROW(ParallelReinsertionOptimizer({}, settings(1, 0.0)), std::invalid_argument);
-  EXPECT_THROW(ParallelReinsertionOptimizer({}, settings(1, 1.5)), std::invalid_argument);
+  EXPECT_THROW(ParallelReinsertionOptimizer{negative}, tsah::ConfigError);
+  EXPECT_THROW(ParallelReinsertionOptimizer({}, settings(1, 0.0)), tsah::ConfigError);
+  EXPECT_THROW(ParallelReinsertionOptimizer({}, settings(1, 1.5)), tsah::ConfigError);
 }
 
 }  // namespace

@@ -107,13 +107,13 @@ TEST(Refit, RejectsMismatchedInput) {
   const tsah::FlatBvh flat = tsah::flattenBvh(tsah::SweepSahBuilder().build(boxes));
   std::vector<uint32_t> idx(a.indices().begin(), a.indices().end());
   std::vector<uint32_t> fewer(idx.begin(), idx.end() - 3);
-  EXPECT_THROW(tsah::CpuRuntime(flat, fewer, a.vertexCount()), tsah::Error);
+  EXPECT_THROW(tsah::CpuRuntime(flat, fewer, a.vertexCount()), tsah::DataError);
   std::vector<uint32_t> outOfRange = idx;
   outOfRange[5] = a.vertexCount();
-  EXPECT_THROW(tsah::CpuRuntime(flat, outOfRange, a.vertexCount()), tsah::Error);
+  EXPECT_THROW(tsah::CpuRuntime(flat, outOfRange, a.vertexCount()), tsah::DataError);
   tsah::CpuRuntime rt(flat, idx, a.vertexCount());
   std::vector<float> shortPositions(3 * a.vertexCount() - 3);
-  EXPECT_THROW(rt.update(shortPositions), tsah::Error);
+  EXPECT_THROW(rt.update(shortPositions), tsah::DataError);
 }
 
 }  // namespace

@@ -8,6 +8,7 @@
 #include <random>
 #include <vector>
 
+#include "tsah/base/error.hpp"
 #include "tsah/core/cost.hpp"
 #include "tsah/build/sah_builder.hpp"
 
@@ -164,9 +165,9 @@ TEST(SweepSahBuilder, LargerLeavesWhenAllowed) {
 TEST(SweepSahBuilder, RejectsNonFiniteBoxes) {
   auto boxes = randomBoxes(10, 5);
   boxes[7].hi.y = std::numeric_limits<float>::quiet_NaN();
-  EXPECT_THROW(tsah::SweepSahBuilder().build(boxes), std::invalid_argument);
+  EXPECT_THROW(tsah::SweepSahBuilder().build(boxes), tsah::DataError);
   boxes[7].hi.y = std::numeric_limits<float>::infinity();
-  EXPECT_THROW(tsah::SweepSahBuilder().build(boxes), std::invalid_argument);
+  EXPECT_THROW(tsah::SweepSahBuilder().build(boxes), tsah::DataError);
 }
 
 TEST(SweepSahBuilder, Deterministic) {

@@ -9,6 +9,7 @@
 #include "anim/animation.hpp"
 #include "anim/load.hpp"
 #include "test_support.hpp"
+#include "tsah/base/error.hpp"
 #include "tsah/core/cost.hpp"
 #include "tsah/optimize/segmentation.hpp"
 
@@ -64,8 +65,8 @@ TEST(Segmentation, EqualTimeRangesCoverTheRangeWithoutGaps) {
     }
     EXPECT_FALSE(tsah::validateTimeRanges(s).has_value());
   }
-  EXPECT_THROW(tsah::equalTimeRanges(0.0, 1.0, 0), std::invalid_argument);
-  EXPECT_THROW(tsah::equalTimeRanges(1.0, 0.0, 2), std::invalid_argument);
+  EXPECT_THROW(tsah::equalTimeRanges(0.0, 1.0, 0), tsah::ConfigError);
+  EXPECT_THROW(tsah::equalTimeRanges(1.0, 0.0, 2), tsah::ConfigError);
 }
 
 TEST(Segmentation, TreeOfATimeFollowsTheRangesBoundariesIncluded) {
@@ -219,22 +220,22 @@ TEST(Segmentation, OverlapWidensEachTreesBuildRangeAndKeepsTheSwitchAtTheBoundar
   EXPECT_EQ(r.buildRanges.front().start, a.startTime());
   EXPECT_EQ(r.buildRanges.back().end, a.endTime());
   c.overlap = 5.0;  // longer than an equal-time part
-  EXPECT_THROW(tsah::segmentTimeline(timelineOf(a), c), std::invalid_argument);
+  EXPECT_THROW(tsah::segmentTimeline(timelineOf(a), c), tsah::ConfigError);
 }
 
 TEST(Segmentation, RefusesBadConfigurations) {
   const anim::Animation a = movingAnimation(40, 4, 1);
   SegmentationConfig c = smallConfig(5);
   c.method = tsah::MethodSpec::parse("rebuild");
-  EXPECT_THROW(tsah::segmentTimeline(timelineOf(a), c), std::invalid_argument);
+  EXPECT_THROW(tsah::segmentTimeline(timelineOf(a), c), tsah::ConfigError);
   c = smallConfig(1);
-  EXPECT_THROW(tsah::segmentTimeline(timelineOf(a), c), std::invalid_argument);
+  EXPECT_THROW(tsah::segmentTimeline(timelineOf(a), c), tsah::ConfigError);
   c = smallConfig(5);
   c.mode = SegmentationConfig::Mode::Count;
   c.count = 0;
-  EXPECT_THROW(tsah::segmentTimeline(timelineOf(a), c), std::invalid_argument);
+  EXPECT_THROW(tsah::segmentTimeline(timelineOf(a), c), tsah::ConfigError);
   const anim::Animation still = a.resample(1);
-  EXPECT_THROW(tsah::segmentTimeline(timelineOf(still), smallConfig(5)), std::invalid_argument);
+  EXPECT_THROW(tsah::segmentTimeline(timelineOf(still), smallConfig(5)), tsah::DataError);
 }
 
 // Real data (skips without the data folder): an MD2 character at a 1.05x budget on a few frames.

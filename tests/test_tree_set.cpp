@@ -127,14 +127,15 @@ TEST(TreeSet, VersionOneFileIsASetOfOneTreeAndTheSingleTreeReaderRefusesSets) {
 TEST(TreeSet, WriterRefusesInconsistentSets) {
   Fixture fx(2);
   const std::vector<TimeRange> good = {{0, 1}, {1, 2}};
-  EXPECT_THROW(tsah::encodeTreeSetFile(fx.trees, fx.builds, std::vector<TimeRange>{{0, 1}, {1.5, 2}}, {}), tsah::Error);
-  EXPECT_THROW(tsah::encodeTreeSetFile(fx.trees, fx.builds, std::vector<TimeRange>{{0, 1}}, {}), tsah::Error);
+  EXPECT_THROW(tsah::encodeTreeSetFile(fx.trees, fx.builds, std::vector<TimeRange>{{0, 1}, {1.5, 2}}, {}),
+               tsah::DataError);
+  EXPECT_THROW(tsah::encodeTreeSetFile(fx.trees, fx.builds, std::vector<TimeRange>{{0, 1}}, {}), tsah::DataError);
   auto builds = fx.builds;
   builds[1].topologyHash ^= 1;
-  EXPECT_THROW(tsah::encodeTreeSetFile(fx.trees, builds, good, {}), tsah::Error);
+  EXPECT_THROW(tsah::encodeTreeSetFile(fx.trees, builds, good, {}), tsah::DataError);
   tsah::TreeSetInfo info;
   info.segmentation = "a-name-far-too-long";
-  EXPECT_THROW(tsah::encodeTreeSetFile(fx.trees, fx.builds, good, info), tsah::Error);
+  EXPECT_THROW(tsah::encodeTreeSetFile(fx.trees, fx.builds, good, info), tsah::ConfigError);
 }
 
 TEST(TreeSet, CorruptOrInconsistentSetsAreRefusedWithOneLine) {

@@ -197,16 +197,16 @@ TEST(WideBvh, WholeTreeAsOneLeaf) {
 TEST(WideBvh, RejectsBadInputAndValidationCatchesCorruption) {
   WideCollapser::Config bad;
   bad.width = 9;
-  EXPECT_THROW(WideCollapser{bad}, tsah::Error);
+  EXPECT_THROW(WideCollapser{bad}, tsah::ConfigError);
   bad.width = 4;
   bad.maxLeafSize = 0;
-  EXPECT_THROW(WideCollapser{bad}, tsah::Error);
-  EXPECT_THROW(WideCollapser().collapse(Bvh{}), tsah::Error);
+  EXPECT_THROW(WideCollapser{bad}, tsah::ConfigError);
+  EXPECT_THROW(WideCollapser().collapse(Bvh{}), tsah::DataError);
 
   const auto boxes = tsah::test::randomMovingTriangles(200, 2, 9, 1.0f).boxes();
   const Bvh bvh = sahTree(boxes, 2);
   const std::vector<double> wrongCount(3, 1.0);
-  EXPECT_THROW(WideCollapser().collapse(bvh, wrongCount), tsah::Error);
+  EXPECT_THROW(WideCollapser().collapse(bvh, wrongCount), tsah::ConfigError);
   const WideBvh good = WideCollapser().collapse(bvh);
   ASSERT_EQ(tsah::validateWide(good, &boxes), std::nullopt);
   WideBvh dup = good;

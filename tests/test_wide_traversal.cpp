@@ -262,7 +262,7 @@ TEST(WideTraversal, RefitBoxesContainChildrenInEveryFrameAndCostsAreReported) {
     tsah::CpuRuntime rt = runtime(a, tree, layout);
     EXPECT_GT(rt.layoutInfo().binaryCost, 0.0);
     EXPECT_LE(rt.layoutInfo().layoutCost, rt.layoutInfo().binaryCost);
-    EXPECT_THROW(rt.view(), tsah::Error);  // the binary tree is not refitted in a wide layout
+    EXPECT_THROW(rt.view(), tsah::ConfigError);  // the binary tree is not refitted in a wide layout
     for (uint32_t f = 0; f < 10; ++f) {
       rt.update(a.positionsAt(a.startTime() + (a.endTime() - a.startTime()) * f / 9.0));
       if (layout == Layout::Bvh4)
@@ -297,7 +297,7 @@ TEST(WideTraversal, RejectsUnsupportedKernels) {
   o.triangles = 100;
   o.frames = 2;
   const auto a = anim::generate(anim::GeneratorKind::Swap, o);
-  EXPECT_THROW(runtime(a, multiFrameTree(a, 4, 1), Layout::Bvh8, SimdIsa::Sse), tsah::Error);  // sse: 4-wide only
+  EXPECT_THROW(runtime(a, multiFrameTree(a, 4, 1), Layout::Bvh8, SimdIsa::Sse), tsah::ConfigError);  // sse: 4-wide only
 }
 
 TEST(WideTraversal, SameHitsAsBinaryOnRealScenes) {

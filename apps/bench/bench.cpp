@@ -77,7 +77,7 @@ tsah::BaselineConfig baselineConfig(const BenchOptions& o, const BenchProgress& 
 #if TSAH_HAVE_CUDA
     config.deviceOptimizer = cuda::gpuTreeOptimizer();
 #else
-    throw tsah::Error("--optimizer cuda: this build of tsah has no CUDA support");
+    throw tsah::ConfigError("--optimizer cuda: this build of tsah has no CUDA support");
 #endif
   } else {
     config.optimizerKind = parse<OptimizerKind>(o.optimizer);
@@ -127,7 +127,7 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   j["load_s"] = secondsSince(start);
   j["warnings"] = warnings;
   if (a.keyframeCount() < 2) throw NotAnAnimation(scene.input + ": one keyframe (a static scene, not an animation)");
-  if (a.triangleCount() == 0) throw tsah::Error(scene.input + ": no triangles");
+  if (a.triangleCount() == 0) throw tsah::DataError(scene.input + ": no triangles");
   j["triangles"] = a.triangleCount();
   j["vertices"] = a.vertexCount();
   j["keyframes"] = a.keyframeCount();

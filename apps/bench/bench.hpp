@@ -23,6 +23,7 @@
 #include "bench/data_scan.hpp"
 #include "tsah/core/kinds.hpp"
 #include "tsah/core/objective.hpp"
+#include "tsah/base/error.hpp"
 
 namespace tsah::bench {
 
@@ -55,13 +56,14 @@ struct BenchOptions {
 using BenchProgress = std::function<void(const std::string& message, bool detail)>;
 
 // Thrown by benchScene for an input that is not an animation (one keyframe): the scene is skipped.
-class NotAnAnimation : public std::runtime_error {
+class NotAnAnimation : public tsah::DataError {
  public:
-  using std::runtime_error::runtime_error;
+  using tsah::DataError::DataError;
 };
 
 // Runs the benchmark on one scene. The traced picture of the T-SAH refit (middle frame, half size
-// when large) goes to outDir/images/<scene>.png. Throws tsah::Error for unreadable inputs.
+// when large) goes to outDir/images/<scene>.png. Throws tsah::FileError for unreadable inputs,
+// NotAnAnimation (a tsah::DataError) for a static one.
 nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& options, const std::filesystem::path& outDir,
                           const BenchProgress& progress);
 

@@ -49,7 +49,7 @@ std::vector<fs::directory_entry> sortedEntries(const fs::path& dir) {
   std::vector<fs::directory_entry> entries;
   std::error_code ec;
   for (const auto& e : fs::directory_iterator(dir, ec)) entries.push_back(e);
-  if (ec) throw tsah::Error(dir.string() + ": cannot list the folder (" + ec.message() + ")");
+  if (ec) throw tsah::FileError(dir.string(), "cannot list the folder (" + ec.message() + ")");
   std::sort(entries.begin(), entries.end(),
             [](const fs::directory_entry& a, const fs::directory_entry& b) { return a.path() < b.path(); });
   return entries;
@@ -226,7 +226,7 @@ std::vector<std::string> bartSceneFiles(const fs::path& folder, std::vector<Skip
 fs::path unpackArchive(const fs::path& archive, const fs::path& cache, const std::function<void()>& onUnpack) {
   std::error_code ec;
   const auto size = fs::file_size(archive, ec);
-  if (ec) throw tsah::Error(archive.string() + ": cannot be read (" + ec.message() + ")");
+  if (ec) throw tsah::FileError(archive.string(), "cannot be read (" + ec.message() + ")");
   const auto mtime = fs::last_write_time(archive, ec).time_since_epoch().count();
   std::string base = archive.filename().string();
   const std::string name = lower(base);
@@ -242,11 +242,11 @@ fs::path unpackArchive(const fs::path& archive, const fs::path& cache, const std
 
   if (onUnpack) onUnpack();
   fs::create_directories(cache, ec);
-  if (ec) throw tsah::Error(cache.string() + ": cannot create the cache folder (" + ec.message() + ")");
+  if (ec) throw tsah::Failure(cache.string() + ": cannot create the cache folder (" + ec.message() + ")");
   const fs::path staging = cache / (".staging-" + base + "-" + std::to_string(::getpid()));
   fs::remove_all(staging, ec);
   fs::create_directories(staging, ec);
-  if (ec) throw tsah::Error(staging.string() + ": cannot be created (" + ec.message() + ")");
+  if (ec) throw tsah::Failure(staging.string() + ": cannot be created (" + ec.message() + ")");
   ProcessResult r;
   if (tar) {
     r = runProcess({"tar", endsWith(name, ".tar") ? "-xf" : "-xJf", fs::absolute(archive).string(), "-C", staging.string()});
@@ -257,18 +257,18 @@ fs::path unpackArchive(const fs::path& archive, const fs::path& cache, const std
     fs::remove_all(staging, ec);
     std::string why = r.started ? "exit status " + std::to_string(r.status) : "the program is not installed";
     if (!r.output.empty()) why += ": " + r.output.substr(0, r.output.find('\n'));
-    throw tsah::Error(archive.string() + ": cannot unpack (" + std::string(tar ? "tar" : "xz") + ", " + why + ")");
+    throw tsah::Failure(archive.string() + ": cannot unpack (" + std::string(tar ? "tar" : "xz") + ", " + why + ")");
   }
   if (std::FILE* marker = std::fopen((staging / ".complete").c_str(), "w")) std::fclose(marker);
   fs::rename(staging, target, ec);  // another run that won the race leaves its own complete copy
   if (ec) fs::remove_all(staging, ec);
-  if (!fs::exists(target / ".complete", ec)) throw tsah::Error(target.string() + ": unpacking did not complete");
+  if (!fs::exists(target / ".complete", ec)) throw tsah::Failure(target.string() + ": unpacking did not complete");
   return result;
 }
 
 DataScan scanDataFolder(const fs::path& folder, const ScanOptions& options) {
   std::error_code ec;
-  if (!fs::is_directory(folder, ec)) throw tsah::Error(folder.string() + ": the data folder does not exist");
+  if (!fs::is_directory(folder, ec)) throw tsah::ConfigError(folder.string() + ": the data folder does not exist");
   Scanner scanner{options, fs::weakly_canonical(folder), {}};
   scanner.scanFolder(folder, {}, 0);
   DataScan out = std::move(scanner.out);
@@ -283,7 +283,7 @@ DataScan scanDataFolder(const fs::path& folder, const ScanOptions& options) {
 
 SceneSource explicitScene(const fs::path& input) {
   std::error_code ec;
-  if (!fs::exists(input, ec)) throw tsah::Error(input.string() + ": no such file or folder");
+  if (!fs::exists(input, ec)) throw tsah::FileError(input.string(), "no such file or folder");
   SceneSource s;
   s.input = input.string();
   s.origin = input.string();

@@ -41,8 +41,8 @@ struct ScanOptions {
   std::function<void(const std::string&)> progress;  // "unpacking X" when an archive is unpacked; may be empty
 };
 
-// Scans a data folder as described above. Throws tsah::Error when the folder does not exist or an
-// archive cannot be unpacked.
+// Scans a data folder as described above. Throws tsah::ConfigError when the folder does not exist,
+// tsah::Failure when an archive cannot be unpacked.
 DataScan scanDataFolder(const std::filesystem::path& folder, const ScanOptions& options);
 
 // The BART scene files of a folder of .aff files (file names, sorted); files that look like scenes
@@ -57,7 +57,7 @@ bool isFrameSequenceFolder(const std::filesystem::path& folder);
 // unpacked again and an unchanged one only once. Unpacks into a staging folder first and renames
 // it, so an interrupted run never leaves a half-unpacked cache behind. Returns the folder (for a
 // single .xz file: the decompressed file). onUnpack is called just before real work starts (not
-// when the cached copy is used). Throws tsah::Error when tar/xz fail.
+// when the cached copy is used). Throws tsah::Failure when tar/xz fail.
 std::filesystem::path unpackArchive(const std::filesystem::path& archive, const std::filesystem::path& cache,
                                     const std::function<void()>& onUnpack = {});
 

@@ -25,7 +25,7 @@ struct EmbreePeer::Impl {
     const RTCError code = rtcGetDeviceError(device);
     if (code == RTC_ERROR_NONE) return;
     std::lock_guard<std::mutex> lock(errorMutex);
-    throw tsah::Error(std::string("Embree: ") + what + " failed" + (error.empty() ? "" : ": " + error));
+    throw tsah::Failure(std::string("Embree: ") + what + " failed" + (error.empty() ? "" : ": " + error));
   }
 };
 
@@ -44,7 +44,7 @@ EmbreePeer::EmbreePeer(std::span<const uint32_t> indices, uint32_t vertexCount, 
   m.vertexCount = vertexCount;
   const std::string config = threads > 0 ? "threads=" + std::to_string(threads) : std::string();
   m.device = rtcNewDevice(config.empty() ? nullptr : config.c_str());
-  if (!m.device) throw tsah::Error("Embree: cannot create a device (rtcNewDevice)");
+  if (!m.device) throw tsah::Failure("Embree: cannot create a device (rtcNewDevice)");
   rtcSetDeviceErrorFunction(
       m.device,
       [](void* user, RTCError, const char* message) {
@@ -71,7 +71,7 @@ EmbreePeer::EmbreePeer(std::span<const uint32_t> indices, uint32_t vertexCount, 
   auto* tris = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(m.geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
                                                               3 * sizeof(uint32_t), indices.size() / 3));
   m.check("creating the triangle geometry");
-  if (!m.vertices || !tris) throw tsah::Error("Embree: cannot allocate the geometry buffers");
+  if (!m.vertices || !tris) throw tsah::Failure("Embree: cannot allocate the geometry buffers");
   std::memcpy(tris, indices.data(), indices.size_bytes());
   std::memset(m.vertices, 0, std::size_t(vertexCount) * 3 * sizeof(float));
   rtcCommitGeometry(m.geometry);
@@ -88,8 +88,8 @@ EmbreePeer::~EmbreePeer() {
 double EmbreePeer::update(std::span<const float> positions) {
   Impl& m = *impl_;
   if (positions.size() != std::size_t(m.vertexCount) * 3)
-    throw tsah::Error("Embree peer: expected " + std::to_string(std::size_t(m.vertexCount) * 3) + " coordinates, got " +
-                      std::to_string(positions.size()));
+    throw tsah::DataError("Embree peer: expected " + std::to_string(std::size_t(m.vertexCount) * 3) +
+                          " coordinates, got " + std::to_string(positions.size()));
   const auto start = std::chrono::steady_clock::now();
   std::memcpy(m.vertices, positions.data(), positions.size_bytes());
   rtcUpdateGeometryBuffer(m.geometry, RTC_BUFFER_TYPE_VERTEX, 0);

@@ -26,7 +26,7 @@ class EmbreePeer {
   static const char* modeName(Mode mode);  // embree-medium, embree-high, embree-refit
 
   // indices: 3 per triangle, each < vertexCount. threads: Embree's build threads (0: all cores).
-  // Throws tsah::Error when Embree cannot create its device or geometry.
+  // Throws tsah::Failure when Embree cannot create its device or geometry.
   EmbreePeer(std::span<const uint32_t> indices, uint32_t vertexCount, Mode mode, unsigned threads);
   ~EmbreePeer();
   EmbreePeer(const EmbreePeer&) = delete;

@@ -105,7 +105,8 @@ std::vector<RuntimeMethod> runEmbreeComparison(const anim::Animation& animation,
                                                const RuntimeSetup& setup, const RefitTrees* set = nullptr);
 
 // GPU (built with CUDA): per frame GpuRuntime::updateAt (interpolation, refit, Woop on the device)
-// and renderFrameGpu. Throws tsah::ConfigError when the bench was built without CUDA or no device exists.
+// and renderFrameGpu. Throws tsah::ConfigError when the bench was built without CUDA,
+// tsah::Failure when no device exists.
 // layout: "bvh2" or "cwbvh" (GpuRuntime::Config::layout), empty for the runtime's default.
 RuntimeMethod runGpuRefit(const anim::Animation& animation, const RefitTrees& trees, const RuntimeSetup& setup,
                           Image* image = nullptr, uint32_t imageFrame = 0, const std::string& layout = {});

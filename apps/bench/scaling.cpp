@@ -47,12 +47,13 @@ json optimizeOnce(const Input& input, const std::string& optimizer, const Scalin
   std::error_code ec;
   fs::remove(tree, ec);
   if (!r.ok())
-    throw tsah::Error(input.path + ": tsah optimize --optimizer " + optimizer + " failed" +
-                      (r.output.empty() ? "" : ": " + r.output.substr(0, r.output.find('\n'))));
+    throw tsah::Failure(input.path + ": tsah optimize --optimizer " + optimizer + " failed" +
+                        (r.output.empty() ? "" : ": " + r.output.substr(0, r.output.find('\n'))));
   std::ifstream in(report);
   const json j = json::parse(in, nullptr, false);
   fs::remove(report, ec);
-  if (j.is_discarded() || !j.contains("optimization")) throw tsah::Error(input.path + ": unreadable tsah optimize report");
+  if (j.is_discarded() || !j.contains("optimization"))
+    throw tsah::Failure(input.path + ": unreadable tsah optimize report");
   const double triangles = j["triangles"].get<double>();
   // The child's own high-water mark: wait4's ru_maxrss also counts this process, whose memory the
   // child shared until it started the program.
@@ -83,7 +84,7 @@ json runScaling(const std::vector<SceneSource>& scenes, const ScalingOptions& o,
   const fs::path work = outDir / "scaling";
   std::error_code ec;
   fs::create_directories(work, ec);
-  if (ec) throw tsah::Error(work.string() + ": cannot create the folder");
+  if (ec) throw tsah::Failure(work.string() + ": cannot create the folder");
   std::vector<Input> inputs;
   for (uint32_t n : o.sizes) {
     const std::string name = "explode-" + std::to_string(n);

@@ -31,7 +31,7 @@ struct ScalingOptions {
 // returns {"rows": [...], "machine"...}: per row input, kind (generated or scene), triangles,
 // optimizer, threads, optimize_s (the optimizer's own time), command_s and cpu_s of the whole
 // process, peak_rss_bytes, bytes_per_triangle, initial_cost, final_cost (C~^k with one triangle
-// per leaf), eval_average (Eq. 1 of the collapsed tree over evalFrames frames). Throws tsah::Error
+// per leaf), eval_average (Eq. 1 of the collapsed tree over evalFrames frames). Throws tsah::Failure
 // when a child fails.
 nlohmann::json runScaling(const std::vector<SceneSource>& scenes, const ScalingOptions& options,
                           const std::filesystem::path& outDir, const std::function<void(const std::string&)>& progress);

@@ -92,7 +92,7 @@ anim::Animation loadAnimation(const Options& opt, json& info) {
       g.triangles = uint32_t(std::stoul(tris));
       g.frames = uint32_t(std::stoul(frames));
     } catch (const std::exception&) {
-      throw tsah::Error("--generate expects KIND:TRIANGLES:FRAMES, got '" + opt.generate + "'");
+      throw tsah::ConfigError("--generate expects KIND:TRIANGLES:FRAMES, got '" + opt.generate + "'");
     }
     info["generated"] = opt.generate;
     return anim::generate(anim::parseGeneratorKind(kind), g);
@@ -351,8 +351,8 @@ json compareWithCpu(const Tree& tree, const anim::Animation& a, double t, const 
 }
 
 void run(const Options& opt) {
-  if (opt.input.empty() == opt.generate.empty()) throw tsah::Error("give exactly one of --input and --generate");
-  if (!tc::deviceAvailable()) throw tsah::Error("no CUDA device");
+  if (opt.input.empty() == opt.generate.empty()) throw tsah::ConfigError("give exactly one of --input and --generate");
+  if (!tc::deviceAvailable()) throw tsah::Failure("no CUDA device");
   json out;
   out["device"] = tsah::cli::deviceJson();
 
@@ -396,7 +396,7 @@ void run(const Options& opt) {
     tsah::FlatBvh flat = tsah::decodeFlatBvhFile(tsah::readFile(path), path, &info);
     trees.push_back({name, std::move(flat), info.objective});
     if (info.topologyHash != 0 && info.topologyHash != tsah::topologyHash(a.indices()))
-      throw tsah::Error(path + ": the tree was built for another animation (topology hash differs)");
+      throw tsah::DataError(path + ": the tree was built for another animation (topology hash differs)");
   }
   json builds = json::object();
   if (opt.sah0 || trees.empty()) {
@@ -409,7 +409,7 @@ void run(const Options& opt) {
   std::vector<bool> modes;
   if (opt.traversal == "persistent" || opt.traversal == "both") modes.push_back(true);
   if (opt.traversal == "simple" || opt.traversal == "both") modes.push_back(false);
-  if (modes.empty()) throw tsah::Error("--traversal must be persistent, simple or both");
+  if (modes.empty()) throw tsah::ConfigError("--traversal must be persistent, simple or both");
 
   std::vector<tc::TreeLayout> layouts;
   {
@@ -417,7 +417,7 @@ void run(const Options& opt) {
     std::string l;
     while (std::getline(ss, l, ',')) layouts.push_back(tc::parseTreeLayout(l));
   }
-  if (layouts.empty()) throw tsah::Error("--layout needs bvh2, cwbvh or both");
+  if (layouts.empty()) throw tsah::ConfigError("--layout needs bvh2, cwbvh or both");
 
   json methods = json::array();
   for (tc::TreeLayout layout : layouts)

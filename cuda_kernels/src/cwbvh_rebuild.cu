@@ -334,7 +334,7 @@ __global__ void __launch_bounds__(kConvertBlock) cwbvhConvertKernel(ConvertParam
 }  // namespace
 
 GpuCwbvhConverter::GpuCwbvhConverter(uint32_t triangles) : n_(triangles) {
-  if (n_ == 0) throw tsah::Error("GPU wide conversion: no triangles");
+  if (n_ == 0) throw tsah::DataError("GPU wide conversion: no triangles");
   // Every wide node but a one-leaf root starts at its own binary interior node (<= n - 1).
   const std::size_t maxNodes = std::max<std::size_t>(1, std::size_t(n_) - 1);
   nodes_.resize(maxNodes);
@@ -352,8 +352,8 @@ GpuCwbvhConverter::GpuCwbvhConverter(uint32_t triangles) : n_(triangles) {
 void GpuCwbvhConverter::enqueue(const GpuBvhNode* nodes, uint32_t nodeCount, const uint32_t* slotTri,
                                 const RootInfo* root, uint32_t mergeLimit, cudaStream_t stream) {
   if (mergeLimit > kCwbvhMaxLeafTriangles)
-    throw tsah::Error("GPU wide conversion: leaves merge at most " + std::to_string(kCwbvhMaxLeafTriangles) +
-                      " triangles");
+    throw tsah::ConfigError("GPU wide conversion: leaves merge at most " + std::to_string(kCwbvhMaxLeafTriangles) +
+                            " triangles");
   words_.fillBytes(0, stream);
   ConvertParams p{{nodes, nodeCount, slotTri, n_},
                   root,
@@ -369,8 +369,9 @@ void GpuCwbvhConverter::enqueue(const GpuBvhNode* nodes, uint32_t nodeCount, con
 uint32_t GpuCwbvhConverter::collect(cudaStream_t stream) {
   const std::vector<uint32_t> words = words_.download(stream);
   if (words[kErrorWord] != 0)
-    throw tsah::Error("GPU wide conversion: the rebuilt tree is invalid or a wide node's leaves would hold more "
-                      "than 64 triangles");
+    throw tsah::Failure(
+        "GPU wide conversion: the rebuilt tree is invalid or a wide node's leaves would hold more "
+        "than 64 triangles");
   nodeCount_ = words[kNodeCountWord];
   levels_ = words[kLevelsWord];
   return nodeCount_;

@@ -24,7 +24,7 @@ class GpuCwbvhConverter {
   // copy: capturable into a CUDA graph. mergeLimit <= kCwbvhMaxLeafTriangles.
   void enqueue(const GpuBvhNode* nodes, uint32_t nodeCount, const uint32_t* slotTri, const RootInfo* root,
                uint32_t mergeLimit, cudaStream_t stream);
-  // After the stream has run the conversion: its node count. Throws tsah::Error when the kernel
+  // After the stream has run the conversion: its node count. Throws tsah::Failure when the kernel
   // found the binary tree invalid (a reference out of range, leaves of more than 64 triangles
   // under one wide node, triangles in no leaf).
   uint32_t collect(cudaStream_t stream);

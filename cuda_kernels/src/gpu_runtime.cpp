@@ -24,27 +24,27 @@ const char* treeLayoutName(TreeLayout layout) { return layout == TreeLayout::Bvh
 TreeLayout parseTreeLayout(std::string_view name) {
   if (name == "bvh2") return TreeLayout::Bvh2;
   if (name == "cwbvh") return TreeLayout::Cwbvh;
-  throw tsah::Error("unknown tree layout '" + std::string(name) + "' (expected bvh2 or cwbvh)");
+  throw tsah::ConfigError("unknown tree layout '" + std::string(name) + "' (expected bvh2 or cwbvh)");
 }
 
 RebuildMethod parseRebuildMethod(std::string_view name) {
   if (name == "lbvh") return RebuildMethod::Lbvh;
   if (name == "hlbvh-sah" || name == "hlbvh") return RebuildMethod::HlbvhSah;
-  throw tsah::Error("unknown GPU rebuild method '" + std::string(name) + "' (expected lbvh or hlbvh-sah)");
+  throw tsah::ConfigError("unknown GPU rebuild method '" + std::string(name) + "' (expected lbvh or hlbvh-sah)");
 }
 
 GpuRuntime::Impl::Impl(const TreeSet& set, const anim::Animation& animation, Config cfg) : config(cfg) {
   triangles = animation.triangleCount();
   vertices = animation.vertexCount();
-  if (triangles == 0) throw tsah::Error("GPU runtime: the animation has no triangles");
-  if (animation.keyframeCount() == 0) throw tsah::Error("GPU runtime: the animation has no keyframes");
+  if (triangles == 0) throw tsah::DataError("GPU runtime: the animation has no triangles");
+  if (animation.keyframeCount() == 0) throw tsah::DataError("GPU runtime: the animation has no keyframes");
   if (set.trees.empty() || set.ranges.size() != set.trees.size())
-    throw tsah::Error("GPU runtime: the tree set holds no trees (or not one time range per tree)");
+    throw tsah::DataError("GPU runtime: the tree set holds no trees (or not one time range per tree)");
   if (!set.builds.empty() && set.builds.size() != set.trees.size())
-    throw tsah::Error("GPU runtime: the tree set holds build infos, but not one per tree");
+    throw tsah::DataError("GPU runtime: the tree set holds build infos, but not one per tree");
   const auto idx = animation.indices();
   for (uint32_t v : idx)
-    if (v >= vertices) throw tsah::Error("GPU runtime: a triangle refers to a vertex out of range");
+    if (v >= vertices) throw tsah::DataError("GPU runtime: a triangle refers to a vertex out of range");
   // Every tree is checked (and its runtime topology made) before the device is touched, so a bad
   // tree leaves no stream or pinned memory behind (the destructor never runs for a throwing ctor).
   std::vector<FlatBvh> topologies;
@@ -277,7 +277,7 @@ detail::TraceScene GpuRuntime::Impl::scene() const {
 
 void GpuRuntime::Impl::requireTraceable() const {
   if (!woopValid)
-    throw tsah::Error("GPU runtime: nothing to trace yet (call update/updateAt, or rebuild with Woop triangles)");
+    throw tsah::ConfigError("GPU runtime: nothing to trace yet (call update/updateAt, or rebuild with Woop triangles)");
 }
 
 void GpuRuntime::Impl::enqueueRefitAndWoop() {
@@ -365,8 +365,8 @@ UpdateTimings GpuRuntime::updateAt(double time) {
 UpdateTimings GpuRuntime::update(std::span<const float> positions) {
   Impl& m = *impl_;
   if (positions.size() != std::size_t(m.vertices) * 3)
-    throw tsah::Error("GPU runtime: got " + std::to_string(positions.size()) + " coordinates, expected " +
-                      std::to_string(std::size_t(m.vertices) * 3));
+    throw tsah::DataError("GPU runtime: got " + std::to_string(positions.size()) + " coordinates, expected " +
+                          std::to_string(std::size_t(m.vertices) * 3));
   m.events.record(0, m.stream);
   m.positions.upload(positions, m.stream);
   m.restInPlace = false;
@@ -387,7 +387,7 @@ bool sameOptions(const RebuildOptions& a, const RebuildOptions& b) {
 
 RebuildTimings GpuRuntime::rebuildAt(double time, const RebuildOptions& options) {
   Impl& m = *impl_;
-  if (options.maxLeafSize == 0) throw tsah::Error("GPU rebuild: maxLeafSize must be at least 1");
+  if (options.maxLeafSize == 0) throw tsah::ConfigError("GPU rebuild: maxLeafSize must be at least 1");
   if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles, m.config.layout);
   m.setFrame(time);
   m.restoreStaticPositions();
@@ -417,8 +417,8 @@ RebuildTimings GpuRuntime::rebuildAt(double time, const RebuildOptions& options)
 RebuildTimings GpuRuntime::rebuild(std::span<const float> positions, const RebuildOptions& options) {
   Impl& m = *impl_;
   if (positions.size() != std::size_t(m.vertices) * 3)
-    throw tsah::Error("GPU runtime: got " + std::to_string(positions.size()) + " coordinates, expected " +
-                      std::to_string(std::size_t(m.vertices) * 3));
+    throw tsah::DataError("GPU runtime: got " + std::to_string(positions.size()) + " coordinates, expected " +
+                          std::to_string(std::size_t(m.vertices) * 3));
   m.events.record(0, m.stream);
   m.positions.upload(positions, m.stream);
   m.restInPlace = false;
@@ -445,14 +445,15 @@ std::vector<WoopTriangle> GpuRuntime::downloadWoop() const { return impl_->woop.
 std::vector<CwbvhNode> GpuRuntime::downloadCwbvhNodes() const {
   if (impl_->tracingRebuilt && impl_->rebuilder->wide()) return downloadRebuiltCwbvh().nodes;
   const Impl::Cwbvh* cwbvh = impl_->tree().cwbvh.get();
-  if (!cwbvh) throw tsah::Error("GPU runtime: the tree is not in the compressed wide layout");
+  if (!cwbvh) throw tsah::ConfigError("GPU runtime: the tree is not in the compressed wide layout");
   return cwbvh->nodes.download(impl_->stream);
 }
 
 FlatBvh GpuRuntime::downloadTree() const {
   const Impl& m = *impl_;
   if (m.tree().cwbvh && !m.tracingRebuilt)
-    throw tsah::Error("GPU runtime: downloadTree gives the binary layout; this runtime traces the compressed one");
+    throw tsah::ConfigError(
+        "GPU runtime: downloadTree gives the binary layout; this runtime traces the compressed one");
   if (m.tracingRebuilt) return flattenBvh(downloadRebuiltTree());
   FlatBvh flat = m.tree().topology;
   flat.nodes = m.tree().nodes.download(m.stream);
@@ -462,14 +463,15 @@ FlatBvh GpuRuntime::downloadTree() const {
 
 Bvh GpuRuntime::downloadRebuiltTree() const {
   const Impl& m = *impl_;
-  if (!m.rebuilder || !m.rebuilder->built()) throw tsah::Error("GPU runtime: no tree has been rebuilt");
+  if (!m.rebuilder || !m.rebuilder->built()) throw tsah::ConfigError("GPU runtime: no tree has been rebuilt");
   return m.rebuilder->download(m.stream);
 }
 
 CwbvhTree GpuRuntime::downloadRebuiltCwbvh() const {
   const Impl& m = *impl_;
-  if (!m.rebuilder || !m.rebuilder->built()) throw tsah::Error("GPU runtime: no tree has been rebuilt");
-  if (!m.rebuilder->wide()) throw tsah::Error("GPU runtime: rebuilt trees are in the binary layout (layout bvh2)");
+  if (!m.rebuilder || !m.rebuilder->built()) throw tsah::ConfigError("GPU runtime: no tree has been rebuilt");
+  if (!m.rebuilder->wide())
+    throw tsah::ConfigError("GPU runtime: rebuilt trees are in the binary layout (layout bvh2)");
   CwbvhTree t = m.rebuilder->wide()->download(m.stream);
   t.rootBox = bounds();
   return t;
@@ -477,7 +479,7 @@ CwbvhTree GpuRuntime::downloadRebuiltCwbvh() const {
 
 FlatBvh GpuRuntime::downloadRebuiltArrays() const {
   const Impl& m = *impl_;
-  if (!m.rebuilder || !m.rebuilder->built()) throw tsah::Error("GPU runtime: no tree has been rebuilt");
+  if (!m.rebuilder || !m.rebuilder->built()) throw tsah::ConfigError("GPU runtime: no tree has been rebuilt");
   return m.rebuilder->downloadArrays(m.stream);
 }
 
@@ -499,7 +501,7 @@ std::vector<Result> traceHostRays(GpuRuntime::Impl& m, std::span<const Ray> rays
     if (stats) *stats = {};
     return out;
   }
-  if (rays.size() > 0xffffffffu) throw tsah::Error("GPU runtime: too many rays in one call");
+  if (rays.size() > 0xffffffffu) throw tsah::ConfigError("GPU runtime: too many rays in one call");
   const auto count = static_cast<uint32_t>(rays.size());
   m.rays.reserve(count);
   m.rays.upload(rays, m.stream);

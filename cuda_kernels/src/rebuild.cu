@@ -12,8 +12,8 @@
 namespace tsah::cuda::detail {
 
 GpuRebuilder::GpuRebuilder(uint32_t triangles, TreeLayout layout) : n_(triangles), events_(8) {  // see collect
-  if (n_ == 0) throw tsah::Error("GPU rebuild: no triangles");
-  if (n_ > kMaxGpuTriangles) throw tsah::Error("GPU rebuild: too many triangles");
+  if (n_ == 0) throw tsah::DataError("GPU rebuild: no triangles");
+  if (n_ > kMaxGpuTriangles) throw tsah::DataError("GPU rebuild: too many triangles");
   const std::size_t n = n_;
   const std::size_t clusterCap = std::min<std::size_t>(n, kMaxClusters);
   const std::size_t nodeCap = std::max<std::size_t>(1, (n - 1) + (clusterCap - 1));
@@ -62,12 +62,12 @@ GpuRebuilder::~GpuRebuilder() = default;
 
 void GpuRebuilder::enqueue(const uint32_t* indices, const float* positions, const RebuildOptions& options,
                            WoopTriangle* woop, cudaStream_t stream) {
-  if (options.maxLeafSize == 0) throw tsah::Error("GPU rebuild: maxLeafSize must be at least 1");
+  if (options.maxLeafSize == 0) throw tsah::ConfigError("GPU rebuild: maxLeafSize must be at least 1");
   const bool wide = wide_ != nullptr;
   if (wide && options.collapse && options.maxLeafSize > kCwbvhMaxLeafTriangles)
-    throw tsah::Error("GPU rebuild: the cwbvh layout takes leaves of at most " +
-                      std::to_string(kCwbvhMaxLeafTriangles) + " triangles (maxLeafSize is " +
-                      std::to_string(options.maxLeafSize) + ")");
+    throw tsah::ConfigError("GPU rebuild: the cwbvh layout takes leaves of at most " +
+                            std::to_string(kCwbvhMaxLeafTriangles) + " triangles (maxLeafSize is " +
+                            std::to_string(options.maxLeafSize) + ")");
   const bool hlbvh = options.method == RebuildMethod::HlbvhSah;
   const uint32_t n = n_;
   built_ = false;
@@ -176,8 +176,8 @@ RebuildTimings GpuRebuilder::collect(const RebuildOptions& options) {
     timings.clusters = clusters;
   }
   if (root.depth > kTraversalStackSize)
-    throw tsah::Error("GPU rebuild: the tree is " + std::to_string(root.depth) +
-                      " levels deep, more than the traversal stack of " + std::to_string(kTraversalStackSize));
+    throw tsah::Failure("GPU rebuild: the tree is " + std::to_string(root.depth) +
+                        " levels deep, more than the traversal stack of " + std::to_string(kTraversalStackSize));
   // The wide tree is no deeper than the binary one (every wide child starts below its parent's
   // binary node), so the check above bounds the wide traversal's stack too.
   if (wide_) {
@@ -195,7 +195,7 @@ RebuildTimings GpuRebuilder::build(const uint32_t* indices, const float* positio
 }
 
 FlatBvh GpuRebuilder::downloadArrays(cudaStream_t stream) const {
-  if (!built_) throw tsah::Error("GPU rebuild: no tree has been built");
+  if (!built_) throw tsah::ConfigError("GPU rebuild: no tree has been built");
   const RootInfo root = root_.download(stream)[0];
   FlatBvh raw;
   raw.nodes = nodes_.download(stream);
@@ -210,7 +210,7 @@ FlatBvh GpuRebuilder::downloadArrays(cudaStream_t stream) const {
 }
 
 Bvh GpuRebuilder::download(cudaStream_t stream) const {
-  if (!built_) throw tsah::Error("GPU rebuild: no tree has been built");
+  if (!built_) throw tsah::ConfigError("GPU rebuild: no tree has been built");
   const std::vector<GpuBvhNode> nodes = nodes_.download(stream);
   const std::vector<RootInfo> root = root_.download(stream);
   Bvh bvh;
@@ -237,13 +237,13 @@ Bvh GpuRebuilder::download(cudaStream_t stream) const {
     if (isLeafRef(item.ref)) {
       const uint32_t first = leafFirstSlot(item.ref);
       if (item.count == 0 || std::size_t(first) + item.count > n_)
-        throw tsah::Error("GPU rebuild: a leaf's slot range is out of bounds");
+        throw tsah::Failure("GPU rebuild: a leaf's slot range is out of bounds");
       bvh.nodes[item.index].primBegin = first;
       bvh.nodes[item.index].primCount = item.count;
       continue;
     }
     if (uint32_t(item.ref) >= nodes.size() || ++interiorSeen > limit)
-      throw tsah::Error("GPU rebuild: a node reference is out of range or the nodes form a cycle");
+      throw tsah::Failure("GPU rebuild: a node reference is out of range or the nodes form a cycle");
     const GpuBvhNode& node = nodes[uint32_t(item.ref)];
     const uint32_t left = addNode(item.index, node.childBox(0));
     const uint32_t right = addNode(item.index, node.childBox(1));

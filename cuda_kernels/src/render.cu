@@ -283,7 +283,7 @@ __global__ void shadeKernel(Frame f, const float4* __restrict__ surfaces, const 
 
 RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const SceneLighting& lighting,
                            const RenderSettings& settings, Image* image, GpuRenderTimings* timings) {
-  if (settings.width == 0 || settings.height == 0) throw tsah::Error("render: the image size must be positive");
+  if (settings.width == 0 || settings.height == 0) throw tsah::ConfigError("render: the image size must be positive");
   validateCamera(camera);
   GpuRuntime::Impl& m = *runtime.impl_;
   m.requireTraceable();
@@ -296,7 +296,7 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   const uint64_t padded = uint64_t(f.tilesX) * tilesY * 32;
   const uint64_t aoRays = padded * settings.aoSamples, shadowRays = padded * settings.shadowSamples;
   if (padded > 0xffffffffu || aoRays > 0xffffffffu || shadowRays > 0xffffffffu)
-    throw tsah::Error("render: too many rays for one frame");
+    throw tsah::ConfigError("render: too many rays for one frame");
   f.padded = uint32_t(padded);
   f.cam = cameraRays(camera, f.width, f.height);
   f.light = lighting;

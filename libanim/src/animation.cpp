@@ -144,7 +144,7 @@ std::span<const float> Animation::movingKeyframe(uint32_t k) const {
 }
 
 std::vector<float> Animation::keyframe(uint32_t k) const {
-  if (k >= keyframeCount()) throw tsah::Error(name_ + ": keyframe " + std::to_string(k) + " out of range");
+  if (k >= keyframeCount()) throw tsah::ConfigError(name_ + ": keyframe " + std::to_string(k) + " out of range");
   std::vector<float> out = allMoving() ? std::vector<float>() : rest_;
   out.resize(std::size_t(vertexCount_) * 3);
   movingPositionsAt(times_[k], out);
@@ -195,8 +195,8 @@ void Animation::interpolateMoving(double t, float* out, const uint32_t* scatter)
 
 void Animation::movingPositionsAt(double t, std::span<float> out) const {
   if (out.size() != std::size_t(vertexCount_) * 3)
-    throw tsah::Error(name_ + ": position buffer holds " + std::to_string(out.size()) + " floats, expected " +
-                std::to_string(std::size_t(vertexCount_) * 3));
+    throw tsah::ConfigError(name_ + ": position buffer holds " + std::to_string(out.size()) + " floats, expected " +
+                            std::to_string(std::size_t(vertexCount_) * 3));
   interpolateMoving(t, out.data(), allMoving() ? nullptr : moving_.data());
 }
 
@@ -271,7 +271,7 @@ Animation Animation::sampledAt(std::vector<double> t) const {
 }
 
 Animation Animation::resample(uint32_t n) const {
-  if (n == 0) throw tsah::Error(name_ + ": cannot resample to 0 frames");
+  if (n == 0) throw tsah::ConfigError(name_ + ": cannot resample to 0 frames");
   tsah::checkFitsInMemory(memoryBytesFor(triangleCount(), vertexCount_, movingCount_, n), name_, std::to_string(n) + " frames");
   std::vector<double> t = uniformTimes(n);
   if (n > 1 && !(endTime() > startTime())) {

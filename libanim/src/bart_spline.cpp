@@ -94,11 +94,13 @@ Q slerp(double t, const Q& p, const Q& q) {
 template <typename Key>
 void checkKeys(const std::vector<Key>& keys, const char* what) {
   if (keys.size() < 4)
-    throw tsah::Error(std::string(what) + " spline needs at least 4 keys (the first and last only shape the "
-                                    "end tangents), got " +
-                std::to_string(keys.size()));
+    throw tsah::DataError(std::string(what) +
+                          " spline needs at least 4 keys (the first and last only shape the "
+                          "end tangents), got " +
+                          std::to_string(keys.size()));
   for (std::size_t i = 0; i < keys.size(); ++i)
-    if (!std::isfinite(keys[i].time)) throw tsah::Error(std::string(what) + " key " + std::to_string(i) + " has a non-finite time");
+    if (!std::isfinite(keys[i].time))
+      throw tsah::DataError(std::string(what) + " key " + std::to_string(i) + " has a non-finite time");
 }
 
 // 2 (t2 - t1) / (tb - ta): the factor that adapts a tangent to uneven key spacing; 1 when the keys

@@ -259,24 +259,24 @@ Animation swap(const GeneratorOptions& o) {
 
 Animation generate(GeneratorKind kind, const GeneratorOptions& options) {
   if (options.triangles == 0 || options.triangles > 50'000'000u)
-    throw tsah::Error("generate: --triangles must be between 1 and 50,000,000");
+    throw tsah::ConfigError("generate: --triangles must be between 1 and 50,000,000");
   if (options.frames == 0 || options.frames > 100'000u)
-    throw tsah::Error("generate: --frames must be between 1 and 100,000");
+    throw tsah::ConfigError("generate: --frames must be between 1 and 100,000");
   if (double(options.triangles) * options.frames > 5e8)
-    throw tsah::Error("generate: triangles x frames is too large (positions would not fit in memory)");
+    throw tsah::ConfigError("generate: triangles x frames is too large (positions would not fit in memory)");
   switch (kind) {
     case GeneratorKind::Explode: return explode(options);
     case GeneratorKind::Wave: return wave(options);
     case GeneratorKind::Swap: return swap(options);
   }
-  throw tsah::Error("generate: unknown kind");
+  throw tsah::ConfigError("generate: unknown kind");
 }
 
 GeneratorKind parseGeneratorKind(std::string_view name) {
   if (name == "explode") return GeneratorKind::Explode;
   if (name == "wave") return GeneratorKind::Wave;
   if (name == "swap") return GeneratorKind::Swap;
-  throw tsah::Error("unknown generator '" + std::string(name) + "' (expected explode, wave or swap)");
+  throw tsah::ConfigError("unknown generator '" + std::string(name) + "' (expected explode, wave or swap)");
 }
 
 const char* generatorName(GeneratorKind kind) {

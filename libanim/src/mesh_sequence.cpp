@@ -331,8 +331,8 @@ FrameList decodeManifest(std::span<const uint8_t> bytes, const std::string& path
 
 Animation importSequence(const FrameList& frames, const LoadOptions& options, std::string name) {
   const std::size_t n = frames.files.size();
-  if (n == 0) throw tsah::Error(name + ": no frames");
-  if (!frames.times.empty() && frames.times.size() != n) throw tsah::Error(name + ": times do not match frames");
+  if (n == 0) throw tsah::DataError(name + ": no frames");
+  if (!frames.times.empty() && frames.times.size() != n) throw tsah::DataError(name + ": times do not match frames");
 
   const MeshFrame first = readMesh(frames.files[0]);
   const std::size_t perFrame = first.positions.size();

@@ -46,7 +46,7 @@ std::size_t saveObjSequence(const Animation& a, const std::string& pattern) {
   // format, so anything else (%s, %n) would be undefined behaviour.
   static const std::regex valid("[^%]*%0?[0-9]{0,3}d[^%]*");
   if (!std::regex_match(pattern, valid))
-    throw tsah::Error(pattern + ": output pattern needs exactly one %d-style number, e.g. frames/f_%04d.obj");
+    throw tsah::ConfigError(pattern + ": output pattern needs exactly one %d-style number, e.g. frames/f_%04d.obj");
   tsah::requireExtension(pattern, ".obj", "OBJ sequence");
   const std::string faces = faceLines(a);
   // All frames appear together or none: a failure half-way (a full disk) must not leave a shorter
@@ -69,8 +69,8 @@ std::size_t saveObjSequence(const Animation& a, const std::string& pattern) {
 
 void saveObjFrame(const Animation& a, uint32_t keyframe, const std::string& path) {
   if (keyframe >= a.keyframeCount())
-    throw tsah::Error(path + ": keyframe " + std::to_string(keyframe) + " is out of range (" +
-                std::to_string(a.keyframeCount()) + " keyframes)");
+    throw tsah::ConfigError(path + ": keyframe " + std::to_string(keyframe) + " is out of range (" +
+                            std::to_string(a.keyframeCount()) + " keyframes)");
   writeText(path, objText(a, keyframe, faceLines(a)));
 }
 

@@ -80,9 +80,9 @@ std::span<const uint8_t> asBytes(const std::vector<uint8_t>& v) { return v; }
 
 void checkEncodable(const Animation& a, const char* format) {
   if (a.keyframeCount() == 0 || a.vertexCount() == 0)
-    throw tsah::Error(a.name() + ": nothing to write as " + format + " (no keyframes or no vertices)");
+    throw tsah::DataError(a.name() + ": nothing to write as " + format + " (no keyframes or no vertices)");
   if (a.keyframeCount() > uint32_t(INT32_MAX) || a.vertexCount() > uint32_t(INT32_MAX))
-    throw tsah::Error(a.name() + ": too many keyframes or vertices for " + format);
+    throw tsah::DataError(a.name() + ": too many keyframes or vertices for " + format);
 }
 
 void writeBigEndian(tsah::ByteWriter& out, uint32_t bits) { out.write(swapBytes(bits)); }
@@ -155,9 +155,10 @@ std::vector<uint8_t> encodePc2(const Animation& a) {
   for (std::size_t i = 0; i < n; ++i) {
     const double expected = double(start) + double(i) * double(rate);
     if (std::fabs(times[i] - expected) > kUniformTolerance * std::max(double(rate), std::fabs(expected)))
-      throw tsah::Error(a.name() + ": keyframe " + std::to_string(i) + " at time " + std::to_string(times[i]) +
-                  " is off the uniform grid a PC2 file stores (start " + std::to_string(start) + ", step " +
-                  std::to_string(rate) + "); resample with --frames N, or write .mdd, which keeps every time");
+      throw tsah::DataError(a.name() + ": keyframe " + std::to_string(i) + " at time " + std::to_string(times[i]) +
+                            " is off the uniform grid a PC2 file stores (start " + std::to_string(start) + ", step " +
+                            std::to_string(rate) +
+                            "); resample with --frames N, or write .mdd, which keeps every time");
   }
   tsah::ByteWriter out;
   out.append(kPc2Signature.data(), kPc2Signature.size());
@@ -180,8 +181,8 @@ std::vector<uint8_t> encodeMdd(const Animation& a) {
   for (uint32_t k = 0; k < a.keyframeCount(); ++k) {
     const float t = float(a.times()[k]);
     if (!(t > previous))
-      throw tsah::Error(a.name() + ": keyframe times " + std::to_string(a.times()[k - 1]) + " and " +
-                  std::to_string(a.times()[k]) + " are equal in the float32 time table of an MDD file");
+      throw tsah::DataError(a.name() + ": keyframe times " + std::to_string(a.times()[k - 1]) + " and " +
+                            std::to_string(a.times()[k]) + " are equal in the float32 time table of an MDD file");
     previous = t;
     writeBigEndian(out, std::bit_cast<uint32_t>(t));
   }
@@ -191,7 +192,7 @@ std::vector<uint8_t> encodeMdd(const Animation& a) {
 
 void savePointCache(const Animation& animation, const std::string& path) {
   const auto format = pointCacheFormat(path);
-  if (!format) throw tsah::Error(path + ": a point cache file must end in .pc2 or .mdd");
+  if (!format) throw tsah::ConfigError(path + ": a point cache file must end in .pc2 or .mdd");
   tsah::writeFileAtomically(path, asBytes(*format == PointCacheFormat::Pc2 ? encodePc2(animation) : encodeMdd(animation)));
 }
 

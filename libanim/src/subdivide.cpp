@@ -46,8 +46,8 @@ uint64_t loopSubdivisionBytes(const MeshCounts& c) {
 Animation subdivideLoop(const Animation& source, uint32_t levels) {
   const std::string who = source.name().empty() ? std::string("mesh") : source.name();
   if (source.keyframeCount() != 1)
-    throw tsah::Error(who + ": subdivision needs a static mesh (this one has " + std::to_string(source.keyframeCount()) +
-                " keyframes)");
+    throw tsah::DataError(who + ": subdivision needs a static mesh (this one has " +
+                          std::to_string(source.keyframeCount()) + " keyframes)");
   if (levels == 0) return source;
   Mesh mesh;
   const std::vector<float> p = source.keyframe(0);
@@ -67,10 +67,10 @@ Animation subdivideLoop(const Animation& source, uint32_t levels) {
   }
   omerr().enable();
   if (rejected > 0)
-    throw tsah::Error(who + ": cannot subdivide: " + std::to_string(rejected) +
-                " triangles repeat a vertex (OpenMesh cannot represent them)");
+    throw tsah::DataError(who + ": cannot subdivide: " + std::to_string(rejected) +
+                          " triangles repeat a vertex (OpenMesh cannot represent them)");
   OpenMesh::Subdivider::Uniform::LoopT<Mesh> loop;
-  if (!loop.attach(mesh) || !loop(levels)) throw tsah::Error(who + ": Loop subdivision failed");
+  if (!loop.attach(mesh) || !loop(levels)) throw tsah::Failure(who + ": Loop subdivision failed");
   loop.detach();
   std::vector<float> positions(mesh.n_vertices() * 3);
   for (const auto v : mesh.vertices()) {

@@ -2,7 +2,6 @@
 
 #include <chrono>
 #include <cstdio>
-#include <stdexcept>
 
 #include "tsah/base/error.hpp"
 #include "tsah/base/memory.hpp"
@@ -91,7 +90,7 @@ BvhBuildInfo treeBuildInfo(const TreeOptions& options, const anim::Animation& an
 }
 
 OptimizedTree optimizeAnimation(const anim::Animation& animation, const TreeOptions& options) {
-  if (animation.triangleCount() == 0) throw tsah::Error(animation.name() + ": no triangles to build a tree over");
+  if (animation.triangleCount() == 0) throw tsah::DataError(animation.name() + ": no triangles to build a tree over");
   const MethodSpec method = options.methodSpec();
   const BaselineConfig config = options.baselineConfig();
   const uint32_t frames = framesFor(animation, options.frames);
@@ -108,15 +107,15 @@ OptimizedTree optimizeAnimation(const anim::Animation& animation, const TreeOpti
 std::vector<double> evaluateAnimation(const Bvh& bvh, const anim::Animation& animation, uint32_t evalFrames,
                                       const CostModel& cost, unsigned threads) {
   if (bvh.primCount() != animation.triangleCount())
-    throw tsah::Error(animation.name() + ": the tree has " + std::to_string(bvh.primCount()) +
-                      " triangles, the animation " + std::to_string(animation.triangleCount()));
+    throw tsah::DataError(animation.name() + ": the tree has " + std::to_string(bvh.primCount()) +
+                          " triangles, the animation " + std::to_string(animation.triangleCount()));
   return evaluateFrames(bvh, animationFrames(animation, animation.uniformTimes(framesFor(animation, evalFrames))),
                         cost, threads);
 }
 
 std::vector<MethodResult> compareOnAnimation(const anim::Animation& animation, std::span<const MethodSpec> methods,
                                              const TreeOptions& options, uint32_t evalFrames) {
-  if (animation.triangleCount() == 0) throw tsah::Error(animation.name() + ": no triangles to build a tree over");
+  if (animation.triangleCount() == 0) throw tsah::DataError(animation.name() + ": no triangles to build a tree over");
   const PrimitiveBoxes rep = representativeBoxes(animation, options.frames);
   return compareMethods(methods, rep,
                         animationFrames(animation, animation.uniformTimes(framesFor(animation, evalFrames))),
@@ -126,7 +125,7 @@ std::vector<MethodResult> compareOnAnimation(const anim::Animation& animation, s
 void checkTreeMatchesAnimation(const tsah::BvhBuildInfo& info, const std::string& bvhPath, const anim::Animation& a,
                                const std::string& animationPath) {
   auto fail = [&](const std::string& what) {
-    throw tsah::Error(bvhPath + " was not built for " + animationPath + ": " + what);
+    throw tsah::DataError(bvhPath + " was not built for " + animationPath + ": " + what);
   };
   if (info.triangleCount != a.triangleCount())
     fail("the tree has " + std::to_string(info.triangleCount) + " triangles, the animation " +

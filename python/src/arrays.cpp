@@ -1,8 +1,10 @@
-// numpy argument checks of the Python module: wrong types raise TypeError, wrong shapes or values
-// ValueError, always with the argument's name, before any data reaches the C++ API.
+// numpy argument checks of the Python module: wrong types raise tsah.ArgumentTypeError (a TypeError),
+// wrong shapes or values tsah.ConfigError (a ValueError), always with the argument's name, before any
+// data reaches the C++ API.
 #include <limits>
 
 #include "bindings.hpp"
+#include "tsah/base/error.hpp"
 
 namespace tsah::python {
 
@@ -47,18 +49,19 @@ template <class T>
 Array<T> checkedArray(py::handle obj, const std::string& name, Kind kind,
                                                 std::initializer_list<py::ssize_t> shape) {
   if (!py::isinstance<py::array>(obj))
-    throw py::type_error(name + ": expected a numpy array, got " + std::string(py::str(obj.get_type().attr("__name__"))));
+    throw ArgumentTypeError(name + ": expected a numpy array, got " +
+                            std::string(py::str(obj.get_type().attr("__name__"))));
   const py::array a = py::reinterpret_borrow<py::array>(obj);
   if (!kindAccepts(kind, a.dtype().kind()))
-    throw py::type_error(name + ": expected " + kindName(kind) + " array, got dtype " + std::string(py::str(a.dtype())));
+    throw ArgumentTypeError(name + ": expected " + kindName(kind) + " array, got dtype " +
+                            std::string(py::str(a.dtype())));
   bool shapeOk = a.ndim() == py::ssize_t(shape.size());
   std::size_t d = 0;
   for (py::ssize_t want : shape) {
     if (shapeOk && want >= 0 && a.shape(py::ssize_t(d)) != want) shapeOk = false;
     ++d;
   }
-  if (!shapeOk)
-    throw py::value_error(name + ": expected shape " + expectedShape(shape) + ", got " + shapeText(a));
+  if (!shapeOk) throw tsah::ConfigError(name + ": expected shape " + expectedShape(shape) + ", got " + shapeText(a));
 
   if constexpr (std::is_integral_v<T>) {
     // Check the range in 64 bits before narrowing, so -1 or 2**40 is an error, never a wrapped index.
@@ -67,17 +70,17 @@ Array<T> checkedArray(py::handle obj, const std::string& name, Kind kind,
       const uint64_t* p = wide.data();
       for (py::ssize_t i = 0; i < wide.size(); ++i)
         if (p[i] > uint64_t(std::numeric_limits<T>::max()))
-          throw py::value_error(name + ": value " + std::to_string(p[i]) + " is out of range");
+          throw tsah::ConfigError(name + ": value " + std::to_string(p[i]) + " is out of range");
     } else {
       const auto wide = py::array_t<int64_t, py::array::c_style | py::array::forcecast>::ensure(a);
       const int64_t* p = wide.data();
       for (py::ssize_t i = 0; i < wide.size(); ++i)
         if (p[i] < int64_t(std::numeric_limits<T>::min()) || uint64_t(p[i]) > uint64_t(std::numeric_limits<T>::max()))
-          throw py::value_error(name + ": value " + std::to_string(p[i]) + " is out of range");
+          throw tsah::ConfigError(name + ": value " + std::to_string(p[i]) + " is out of range");
     }
   }
   auto result = Array<T>::ensure(a);
-  if (!result) throw py::type_error(name + ": cannot convert dtype " + std::string(py::str(a.dtype())));
+  if (!result) throw ArgumentTypeError(name + ": cannot convert dtype " + std::string(py::str(a.dtype())));
   return result;
 }
 

@@ -36,11 +36,11 @@ anim::Animation makeAnimation(py::handle triangles, py::handle positions, py::ha
   } else {
     const auto t = checkedArray<double>(times, "times", Kind::Number, {-1});
     if (t.shape(0) != frames)
-      throw py::value_error("times: expected " + std::to_string(frames) + " times (one per frame), got " +
-                            std::to_string(t.shape(0)));
+      throw tsah::ConfigError("times: expected " + std::to_string(frames) + " times (one per frame), got " +
+                              std::to_string(t.shape(0)));
     keyTimes.assign(t.data(), t.data() + t.size());
   }
-  if (vertices > py::ssize_t(UINT32_MAX)) throw py::value_error("positions: too many vertices");
+  if (vertices > py::ssize_t(UINT32_MAX)) throw tsah::DataError("positions: too many vertices");
   return anim::Animation(std::vector<uint32_t>(tri.data(), tri.data() + tri.size()), uint32_t(vertices),
                          std::vector<float>(pos.data(), pos.data() + pos.size()), std::move(keyTimes), name);
 }
@@ -69,7 +69,78 @@ py::array_t<float> boundsArray(const anim::Bounds& b) {
   return out;
 }
 
+// The Python classes of the C++ exceptions (tsah/base/error.hpp), created once at import and kept
+// for the life of the process (the translator below needs them after the module object is gone).
+struct ErrorClasses {
+  PyObject* error = nullptr;
+  PyObject* config = nullptr;
+  PyObject* data = nullptr;
+  PyObject* file = nullptr;
+  PyObject* failure = nullptr;
+  PyObject* argumentType = nullptr;
+};
+ErrorClasses errorClasses;
+
+// A new exception class tsah.<name> with the given bases, added to `m`.
+PyObject* newErrorClass(py::module_& m, const char* name, const char* doc, std::initializer_list<PyObject*> bases) {
+  py::tuple baseTuple(bases.size());
+  std::size_t i = 0;
+  for (PyObject* base : bases) baseTuple[i++] = py::handle(base);
+  const std::string fullName = std::string("tsah.") + name;
+  PyObject* cls = PyErr_NewExceptionWithDoc(fullName.c_str(), doc, baseTuple.ptr(), nullptr);
+  if (!cls) throw py::error_already_set();
+  m.add_object(name, py::handle(cls));  // the module takes its own reference; ours is never released
+  return cls;
+}
+
 }  // namespace
+
+void bindErrors(py::module_& m) {
+  ErrorClasses& c = errorClasses;
+  c.error = newErrorClass(m, "Error",
+                          "An error of the toolkit, with its one-line message ('FILE: problem'). The base of\n"
+                          "ConfigError, DataError (FileError) and Failure; a RuntimeError.",
+                          {PyExc_RuntimeError});
+  c.config = newErrorClass(m, "ConfigError",
+                           "An invalid request: an option or argument out of range, an unknown name, settings that\n"
+                           "contradict each other, a call the object cannot serve (a tsah.Error and a ValueError).",
+                           {c.error, PyExc_ValueError});
+  c.data = newErrorClass(m, "DataError",
+                         "Unusable data: NaN coordinates, a tree that is not a tree, a tree built for another\n"
+                         "animation (a tsah.Error and a ValueError).",
+                         {c.error, PyExc_ValueError});
+  c.file = newErrorClass(m, "FileError",
+                         "An input or tree file that cannot be read; the message starts with the file name (a\n"
+                         "tsah.DataError).",
+                         {c.data});
+  c.failure = newErrorClass(m, "Failure",
+                            "The request and the data were fine but the work failed: a write error, a full disk,\n"
+                            "not enough memory, a GPU error (a tsah.Error, so a RuntimeError).",
+                            {c.error});
+  c.argumentType = newErrorClass(m, "ArgumentTypeError",
+                                 "An argument of the wrong type or dtype (a tsah.ConfigError and a TypeError).",
+                                 {c.config, PyExc_TypeError});
+  // One translator, the most specific class first (pybind11 tries translators latest-registered
+  // first; anything that is not a tsah::Error falls through to pybind11's own).
+  py::register_exception_translator([](std::exception_ptr p) {
+    const ErrorClasses& classes = errorClasses;
+    try {
+      if (p) std::rethrow_exception(p);
+    } catch (const ArgumentTypeError& e) {
+      PyErr_SetString(classes.argumentType, e.what());
+    } catch (const tsah::FileError& e) {
+      PyErr_SetString(classes.file, e.what());
+    } catch (const tsah::DataError& e) {
+      PyErr_SetString(classes.data, e.what());
+    } catch (const tsah::ConfigError& e) {
+      PyErr_SetString(classes.config, e.what());
+    } catch (const tsah::Failure& e) {
+      PyErr_SetString(classes.failure, e.what());
+    } catch (const tsah::Error& e) {
+      PyErr_SetString(classes.error, e.what());
+    }
+  });
+}
 
 void bindAnimation(py::module_& m) {
   py::class_<anim::Animation>(m, "Animation", R"doc(
@@ -80,8 +151,9 @@ Animation(triangles, positions, times=None, name="")
   triangles  integer array (T, 3): vertex indices of each triangle
   positions  float array (F, V, 3): positions of the V vertices in each of F keyframes, or (V, 3) for one frame
   times      numbers (F,): strictly increasing keyframe times (default 0, 1, ..., F-1)
-Raises TypeError for a wrong dtype, ValueError for a wrong shape, tsah.Error for inconsistent data
-(an index out of range, times not increasing, NaN or infinite coordinates).
+Raises tsah.ArgumentTypeError (a TypeError) for a wrong dtype, tsah.ConfigError (a ValueError) for a
+wrong shape, tsah.DataError (its subclass tsah.FileError, naming the animation) for inconsistent
+data (an index out of range, times not increasing, NaN or infinite coordinates).
 )doc")
       .def(py::init(&makeAnimation), "triangles"_a, "positions"_a, "times"_a = py::none(), "name"_a = "")
       .def_property_readonly("name", &anim::Animation::name, "Name of the input (file stem) or the given name.")
@@ -163,11 +235,7 @@ PYBIND11_MODULE(_tsah, m) {
   namespace py = pybind11;
   m.doc() = "T-SAH: one BVH optimized for every frame of an animation (the C++ toolkit's Python layer).";
   m.attr("__version__") = TSAH_VERSION;
-  // Translators run latest first: FileError (tsah::FileError) before Error (tsah::Error).
-  const py::object error = py::register_exception<tsah::Error>(m, "Error", PyExc_RuntimeError);
-  error.attr("__doc__") = "An error of the toolkit, with its one-line message ('FILE: problem').";
-  const py::object fileError = py::register_exception<tsah::FileError>(m, "FileError", error);
-  fileError.attr("__doc__") = "An input or tree file that cannot be read (a tsah.Error).";
+  tsah::python::bindErrors(m);
   tsah::python::bindAnimation(m);
   tsah::python::bindTrees(m);
   tsah::python::bindRuntimes(m);

@@ -196,7 +196,7 @@ for (checked: triangle count, vertex count, topology), traced on the CPU. Starts
   m.def("cuda_available", &cuda::deviceAvailable, "True when the CUDA runtime was built and a GPU is present.");
   py::class_<GpuTracer>(m, "GpuRuntime", R"doc(
 GpuRuntime(tree, animation, device=0): the same as CpuRuntime on a CUDA device (all keyframes are
-uploaded once; refit and traversal run on the GPU). Raises tsah.Error when no device is usable.
+uploaded once; refit and traversal run on the GPU). Raises tsah.Failure when no device is usable.
 )doc")
       .def(py::init<const Tree&, const anim::Animation&, int>(), "tree"_a, "animation"_a, "device"_a = 0)
       .def("refit", &GpuTracer::refit, "time"_a, "Refits on the device to the animation at this time.")

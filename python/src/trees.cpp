@@ -9,6 +9,7 @@
 #include "tsah/core/cost.hpp"
 #include "tsah/pipeline.hpp"
 #if TSAH_HAVE_CUDA
+#include "tsah/base/error.hpp"
 #include "tsah_cuda/gpu_optimizer.hpp"
 #endif
 
@@ -26,11 +27,11 @@ py::array_t<double> doubleArray(const std::vector<double>& values) {
 TreeOptions treeOptions(const std::string& method, int k, uint32_t frames, const std::string& selection, uint64_t seed,
                         float ct, float ci, uint32_t maxLeaf, double timeLimit, double minImprovement,
                         unsigned threads, const std::string& optimizer, const std::string& device) {
-  if (device != "cpu" && device != "cuda") throw py::value_error("device: expected 'cpu' or 'cuda'");
-  if (frames < 1) throw py::value_error("frames: must be at least 1");
-  if (maxLeaf < 1) throw py::value_error("max_leaf: must be at least 1");
-  if (!(ct > 0.0f) || !(ci > 0.0f)) throw py::value_error("ct, ci: must be positive");
-  if (k < 0) throw py::value_error("k: must be 0 or more");
+  if (device != "cpu" && device != "cuda") throw tsah::ConfigError("device: expected 'cpu' or 'cuda'");
+  if (frames < 1) throw tsah::ConfigError("frames: must be at least 1");
+  if (maxLeaf < 1) throw tsah::ConfigError("max_leaf: must be at least 1");
+  if (!(ct > 0.0f) || !(ci > 0.0f)) throw tsah::ConfigError("ct, ci: must be positive");
+  if (k < 0) throw tsah::ConfigError("k: must be 0 or more");
   TreeOptions o;
   const MethodSpec spec = MethodSpec::parse(method);  // "tsah<k>" names its own k
   o.method = spec.method;
@@ -76,7 +77,7 @@ Tree optimize(const anim::Animation& animation, const std::string& method, int k
       treeOptions(method, k, frames, selection, seed, ct, ci, maxLeaf, timeLimit, minImprovement, threads, optimizer,
                   device);
   if (options.methodSpec().method == Method::SahRebuild)
-    throw py::value_error("method: 'rebuild' builds one tree per frame; use tsah.evaluate for it");
+    throw tsah::ConfigError("method: 'rebuild' builds one tree per frame; use tsah.evaluate for it");
   py::gil_scoped_release release;
   OptimizedTree built = optimizeAnimation(animation, options);
   Tree tree;
@@ -96,11 +97,11 @@ std::vector<std::string> methodNames(py::handle methods) {
       if (!name.empty()) names.push_back(name);
   } else {
     for (py::handle m : methods) {
-      if (!py::isinstance<py::str>(m)) throw py::type_error("methods: expected names (str)");
+      if (!py::isinstance<py::str>(m)) throw ArgumentTypeError("methods: expected names (str)");
       names.push_back(m.cast<std::string>());
     }
   }
-  if (names.empty()) throw py::value_error("methods: no method given");
+  if (names.empty()) throw tsah::ConfigError("methods: no method given");
   return names;
 }
 
@@ -109,8 +110,8 @@ py::dict evaluate(const anim::Animation& animation, py::handle methodsArg, uint3
                   double minImprovement, unsigned threads, const std::string& optimizer, const std::string& device) {
   const std::vector<std::string> names = methodNames(methodsArg);
   std::vector<MethodSpec> methods;
-  for (const std::string& name : names) methods.push_back(MethodSpec::parse(name));  // ValueError when unknown
-  if (evalFrames < 1) throw py::value_error("eval_frames: must be at least 1");
+  for (const std::string& name : names) methods.push_back(MethodSpec::parse(name));  // ConfigError when unknown
+  if (evalFrames < 1) throw tsah::ConfigError("eval_frames: must be at least 1");
   const TreeOptions options =
       treeOptions("tsah", 0, frames, selection, seed, ct, ci, maxLeaf, timeLimit, minImprovement, threads, optimizer,
                   device);
@@ -145,10 +146,12 @@ header of its .tbvh file (how it was built). Made by tsah.optimize or tsah.read_
       .def_property_readonly("leaf_count", [](const Tree& t) { return t.file.bvh.leafCount(); })
       .def_property_readonly("depth", [](const Tree& t) { return t.file.bvh.depth(); })
       .def_property_readonly("triangle_count", [](const Tree& t) { return t.file.bvh.primCount(); })
-      .def_property_readonly("frame_count", [](const Tree& t) { return t.file.bvh.frameCount; },
-                             "Box sets stored per node (the representative frames).")
-      .def_property_readonly("info", [](const Tree& t) { return infoDict(t.file.info); },
-                             "The .tbvh header as a dict (the keys of `tsah info --json`).")
+      .def_property_readonly(
+          "frame_count", [](const Tree& t) { return t.file.bvh.frameCount; },
+          "Box sets stored per node (the representative frames).")
+      .def_property_readonly(
+          "info", [](const Tree& t) { return infoDict(t.file.info); },
+          "The .tbvh header as a dict (the keys of `tsah info --json`).")
       .def_property_readonly("optimization", &optimizationDict,
                              "For a T-SAH tree built in this process: the optimizer's costs and batch history "
                              "(as in `tsah optimize --json`); None otherwise.")
@@ -161,13 +164,15 @@ header of its .tbvh file (how it was built). Made by tsah.optimize or tsah.read_
           "Triangle id of each slot of the .tbvh triangle array (leaves own consecutive slots).")
       .def(
           "frame_costs",
-          [](const Tree& t, float ct, float ci) { return doubleArray(frameCosts(t.file.bvh, {ct, ci})); },
+          [](const Tree& t, float ct, float ci) {
+            return doubleArray(frameCosts(t.file.bvh, {ct, ci}));
+          },
           "ct"_a = 3.0f, "ci"_a = 2.0f, "Eq. 1 cost at each stored (representative) frame, float64 array.")
       .def(
           "costs",
           [](const Tree& t, const anim::Animation& animation, uint32_t evalFrames, py::object ct, py::object ci,
              unsigned threads) {
-            if (evalFrames < 1) throw py::value_error("eval_frames: must be at least 1");
+            if (evalFrames < 1) throw tsah::ConfigError("eval_frames: must be at least 1");
             const CostModel cost{ct.is_none() ? t.file.info.objective.cost.ct : ct.cast<float>(),
                                  ci.is_none() ? t.file.info.objective.cost.ci : ci.cast<float>()};
             std::vector<double> costs;
@@ -214,14 +219,15 @@ One tree for the whole animation, exactly as `tsah optimize` builds it (same opt
 the same seed gives the same tree and the same .tbvh bytes apart from the build time field).
   optimizer  'sequential' (the paper's insertion optimizer) or 'parallel' (parallel reinsertion on
              `threads` cores, 0: all; the same tree for any thread count)
-  device     'cpu', or 'cuda': the parallel reinsertion optimizer on the GPU (tsah.Error in a build
+  device     'cpu', or 'cuda': the parallel reinsertion optimizer on the GPU (tsah.ConfigError in a build
              without CUDA or on a machine without a device)
   method     'tsah' (optimized for all frames), 'sah0' (frame 0, refitted) or 'sahstar' (best over time)
   k          T-SAH exponent (0: average cost; larger: the worst frames weigh more)
   frames     representative frames, uniform in time (1 for a static input)
   selection  'mh' (Metropolis-Hastings), 'random' or 'batch'
   max_leaf   largest leaf after the adaptive collapse
-Raises ValueError for an unknown method or selection, tsah.Error when the animation has no triangles.
+Raises tsah.ConfigError (a ValueError) for an unknown method or selection, tsah.DataError when the
+animation has no triangles.
 )doc");
 
   m.def("evaluate", &evaluate, "animation"_a, "methods"_a = "sah0,sahstar,tsah0,tsah2,tsah4,rebuild", "frames"_a = 5,

@@ -12,13 +12,20 @@ as the ``tsah`` command line:
 >>> runtime.refit(animation.end_time)
 >>> hits = runtime.trace(origins, directions)            # numpy (N, 3) arrays -> record array
 
-Errors are tsah.Error (a RuntimeError; tsah.FileError for unreadable files) carrying the command
-line's one-line messages; wrong dtypes raise TypeError, wrong shapes ValueError.
+Errors carry the command line's one-line messages. All are tsah.Error (a RuntimeError):
+tsah.ConfigError (also a ValueError) for a bad option or argument, tsah.DataError (also a
+ValueError) for unusable data, its subclass tsah.FileError for an unreadable file, tsah.Failure when
+the work itself failed (a write error, no memory, a GPU error). Wrong types and dtypes raise
+tsah.ArgumentTypeError, a tsah.ConfigError that is also a TypeError.
 """
 from ._tsah import (  # noqa: F401  (the public API)
     Animation,
     CpuRuntime,
+    ArgumentTypeError,
+    ConfigError,
+    DataError,
     Error,
+    Failure,
     FileError,
     Tree,
     __version__,
@@ -36,6 +43,7 @@ if cuda_built:
     from ._tsah import GpuRuntime  # noqa: F401
 
 __all__ = [
-    "Animation", "CpuRuntime", "Error", "FileError", "Tree", "__version__", "cuda_available", "cuda_built",
+    "Animation", "ArgumentTypeError", "ConfigError", "CpuRuntime", "DataError", "Error", "Failure", "FileError",
+    "Tree", "__version__", "cuda_available", "cuda_built",
     "evaluate", "generate", "load", "optimize", "read_tree", "tree_from_bytes",
 ] + (["GpuRuntime"] if cuda_built else [])

@@ -9,9 +9,10 @@
 
 namespace tsah::cuda {
 
-class CudaError : public tsah::Error {
+// A failure of the device or the driver (a tsah::Failure): the request and the data were fine.
+class CudaError : public tsah::Failure {
  public:
-  CudaError(cudaError_t code, const std::string& what) : tsah::Error(what), code_(code) {}
+  CudaError(cudaError_t code, const std::string& what) : tsah::Failure(what), code_(code) {}
   cudaError_t code() const { return code_; }
 
  private:

@@ -9,6 +9,7 @@
 #include <utility>
 #include <vector>
 
+#include "tsah/base/error.hpp"
 #include "tsah_cuda/cuda_check.hpp"
 
 namespace tsah::cuda {
@@ -67,15 +68,16 @@ class DeviceBuffer {
   // Copies host data into the first host.size() elements (asynchronous on `stream` for pinned
   // memory; pageable host memory makes it synchronous with respect to the host).
   void upload(std::span<const T> host, cudaStream_t stream = nullptr) {
-    if (host.size() > size_) throw tsah::Error("DeviceBuffer: upload of " + std::to_string(host.size()) +
-                                               " elements into a buffer of " + std::to_string(size_));
+    if (host.size() > size_)
+      throw tsah::ConfigError("DeviceBuffer: upload of " + std::to_string(host.size()) + " elements into a buffer of " +
+                              std::to_string(size_));
     if (host.empty()) return;
     CUDA_CHECK(cudaMemcpyAsync(data_, host.data(), host.size() * sizeof(T), cudaMemcpyHostToDevice, stream));
   }
   // Copies the first `count` elements (all when count is npos) to the host; waits for `stream`.
   std::vector<T> download(cudaStream_t stream = nullptr, std::size_t count = std::size_t(-1)) const {
     if (count == std::size_t(-1)) count = size_;
-    if (count > size_) throw tsah::Error("DeviceBuffer: download past the end of the buffer");
+    if (count > size_) throw tsah::ConfigError("DeviceBuffer: download past the end of the buffer");
     std::vector<T> host(count);
     if (count == 0) return host;
     CUDA_CHECK(cudaMemcpyAsync(host.data(), data_, count * sizeof(T), cudaMemcpyDeviceToHost, stream));

@@ -16,8 +16,8 @@
 
 namespace tsah::cuda {
 
-// Throws CudaError when there is no usable device, std::invalid_argument for bad input or more than
-// 16 representative frames. prims must outlive the session.
+// Throws CudaError (a tsah::Failure) when there is no usable device, tsah::DataError for bad input,
+// tsah::ConfigError for more than 16 representative frames. prims must outlive the session.
 std::unique_ptr<RoundSession> makeGpuReinsertionSession(Bvh bvh, const PrimitiveBoxes& prims,
                                                         const ParallelReinsertionOptimizer::Config& config,
                                                         const ParallelReinsertionOptimizer::Parallel& parallel);

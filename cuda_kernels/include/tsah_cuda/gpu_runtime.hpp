@@ -79,8 +79,8 @@ class GpuRuntime {
   };
 
   // tree: the topology to refit (frame 0's block; its boxes are recomputed by updateAt). Throws
-  // tsah::Error when the tree does not match the animation, is invalid, or is deeper than the
-  // traversal stack allows, and CudaError when the device fails.
+  // tsah::DataError when the tree does not match the animation, is invalid, or is deeper than the
+  // traversal stack allows, and CudaError (a tsah::Failure) when the device fails.
   GpuRuntime(const FlatBvh& tree, const anim::Animation& animation, Config config);
   GpuRuntime(const FlatBvh& tree, const anim::Animation& animation);
   // A tree set: every tree is checked as above and uploaded once; updateAt(t) refits and traces the
@@ -122,8 +122,8 @@ class GpuRuntime {
   // The last rebuilt tree as a tsah::Bvh (one frame of boxes), exactly as built on the device.
   Bvh downloadRebuiltTree() const;
   Aabb bounds() const;  // of the traced tree
-  // Layout cwbvh: the compressed nodes of the last update or rebuild (throws tsah::Error for
-  // layout bvh2).
+  // Layout cwbvh: the compressed nodes of the last update or rebuild (throws tsah::ConfigError
+  // for layout bvh2).
   std::vector<CwbvhNode> downloadCwbvhNodes() const;
   // Layout cwbvh after a rebuild: the compressed tree the rebuild was converted to (nodes and
   // triIndex; rootRef 0), as tsah::convertToCwbvh makes it from downloadRebuiltArrays().
@@ -147,8 +147,8 @@ class GpuRuntime {
 };
 
 // tsah::renderFrame on the GPU for the runtime's current frame: the same passes, random numbers and
-// shading. image == nullptr skips the download (benchmarks). Throws tsah::Error for an empty image
-// size or an invalid camera, as the CPU renderer does.
+// shading. image == nullptr skips the download (benchmarks). Throws tsah::ConfigError for an
+// empty image size or an invalid camera, as the CPU renderer does.
 RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const SceneLighting& lighting,
                            const RenderSettings& settings, Image* image, GpuRenderTimings* timings = nullptr);
 inline RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const SceneLighting& lighting,

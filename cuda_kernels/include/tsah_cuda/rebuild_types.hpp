@@ -13,11 +13,11 @@ namespace tsah::cuda {
 // re-quantized every frame).
 enum class TreeLayout { Bvh2, Cwbvh };
 const char* treeLayoutName(TreeLayout layout);       // "bvh2", "cwbvh"
-TreeLayout parseTreeLayout(std::string_view name);   // throws tsah::Error for anything else
+TreeLayout parseTreeLayout(std::string_view name);   // throws tsah::ConfigError for anything else
 
 enum class RebuildMethod { Lbvh, HlbvhSah };
 const char* rebuildMethodName(RebuildMethod method);  // "lbvh", "hlbvh-sah"
-RebuildMethod parseRebuildMethod(std::string_view name);  // throws tsah::Error for anything else
+RebuildMethod parseRebuildMethod(std::string_view name);  // throws tsah::ConfigError for anything else
 
 struct RebuildOptions {
   RebuildMethod method = RebuildMethod::Lbvh;

@@ -65,9 +65,10 @@ class Animation {
  public:
   Animation() = default;
   // indices: 3 per triangle, each < vertexCount. positions: times.size() blocks of vertexCount*3.
-  // times: strictly increasing keyframe times. Throws tsah::Error when the sizes disagree, an
-  // index is out of range, times are not increasing, or a coordinate is NaN/Inf. Vertices that
-  // are the same in every keyframe are found here and stored once when that saves memory.
+  // times: strictly increasing keyframe times. Throws tsah::FileError (a tsah::DataError) naming
+  // the animation when the sizes disagree, an index is out of range, times are not increasing, or a
+  // coordinate is NaN/Inf. Vertices that are the same in every keyframe are found here and stored
+  // once when that saves memory.
   Animation(std::vector<uint32_t> indices, uint32_t vertexCount, std::vector<float> positions,
             std::vector<double> times, std::string name = {});
   // The split form directly (what a scene bake builds, without ever holding every keyframe whole):

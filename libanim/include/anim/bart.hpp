@@ -62,7 +62,7 @@ struct SplineKey {
 class PositionSpline {
  public:
   PositionSpline() = default;
-  // Throws tsah::Error for fewer than 4 keys or a non-finite time.
+  // Throws tsah::DataError for fewer than 4 keys or a non-finite time.
   explicit PositionSpline(const std::vector<SplineKey>& keys);
   std::array<double, 3> at(double t) const;
   double startTime() const;
@@ -93,7 +93,7 @@ struct RotationKey {
 class RotationSpline {
  public:
   RotationSpline() = default;
-  // Throws tsah::Error for fewer than 4 keys or a non-finite time.
+  // Throws tsah::DataError for fewer than 4 keys or a non-finite time.
   explicit RotationSpline(const std::vector<RotationKey>& keys);
   // The unit quaternion at time t.
   Quaternion at(double t) const;

@@ -21,7 +21,7 @@ struct GeneratorOptions {
 };
 
 Animation generate(GeneratorKind kind, const GeneratorOptions& options);
-// "explode", "wave", "swap"; throws tsah::Error for anything else.
+// "explode", "wave", "swap"; throws tsah::ConfigError for anything else.
 GeneratorKind parseGeneratorKind(std::string_view name);
 const char* generatorName(GeneratorKind kind);
 

@@ -41,7 +41,7 @@ PointCache decodeMdd(std::span<const uint8_t> bytes, const std::string& file);
 PointCache decodePointCache(std::span<const uint8_t> bytes, const std::string& file, PointCacheFormat format);
 
 // Encoders of an animation's keyframes. PC2 can only express uniformly spaced samples: keyframe
-// times that are not (within 1e-4 of a step) throw tsah::Error suggesting `--frames N`. MDD stores
+// times that are not (within 1e-4 of a step) throw tsah::DataError suggesting `--frames N`. MDD stores
 // the times as they are (as float32).
 std::vector<uint8_t> encodePc2(const Animation& animation);
 std::vector<uint8_t> encodeMdd(const Animation& animation);

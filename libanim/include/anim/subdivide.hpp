@@ -23,8 +23,8 @@ uint64_t loopSubdivisionBytes(const MeshCounts& counts);
 
 // `levels` Loop levels of a one-keyframe animation. Triangles OpenMesh cannot link in (at a
 // non-manifold edge or vertex) get their own copies of their vertices and subdivide on their own,
-// so each level gives exactly 4x the triangles. Throws Error when the mesh has several keyframes
-// or a triangle repeats a vertex.
+// so each level gives exactly 4x the triangles. Throws tsah::DataError when the mesh has several
+// keyframes or a triangle repeats a vertex, tsah::Failure when OpenMesh fails to subdivide.
 Animation subdivideLoop(const Animation& mesh, uint32_t levels);
 
 }  // namespace anim

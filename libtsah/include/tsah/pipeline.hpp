@@ -85,7 +85,7 @@ std::vector<double> evaluateAnimation(const Bvh& bvh, const anim::Animation& ani
 std::vector<MethodResult> compareOnAnimation(const anim::Animation& animation, std::span<const MethodSpec> methods,
                                              const TreeOptions& options, uint32_t evalFrames);
 
-// Throws tsah::Error with one clear line ("BVH was not built for ANIMATION: ...") when the animation
+// Throws tsah::DataError with one clear line ("BVH was not built for ANIMATION: ...") when the animation
 // is not the one the tree was built for (triangle count, vertex count or topology hash differ).
 void checkTreeMatchesAnimation(const BvhBuildInfo& info, const std::string& bvhPath, const anim::Animation& animation,
                                const std::string& animationPath);

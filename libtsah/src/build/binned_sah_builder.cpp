@@ -5,8 +5,9 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <stdexcept>
 #include <vector>
+
+#include "tsah/base/error.hpp"
 
 namespace tsah {
 
@@ -285,15 +286,15 @@ class Build {
 
 Bvh BinnedSahBuilder::build(std::span<const Aabb> primBoxes) const {
   if (config_.binCount < 2 || config_.binCount > kMaxBins)
-    throw std::invalid_argument("binned SAH: bin count must be 2.." + std::to_string(kMaxBins));
-  if (config_.maxLeafSize == 0) throw std::invalid_argument("binned SAH: max leaf size must be at least 1");
-  if (config_.parallelThreshold == 0) throw std::invalid_argument("binned SAH: parallel threshold must be positive");
+    throw tsah::ConfigError("binned SAH: bin count must be 2.." + std::to_string(kMaxBins));
+  if (config_.maxLeafSize == 0) throw tsah::ConfigError("binned SAH: max leaf size must be at least 1");
+  if (config_.parallelThreshold == 0) throw tsah::ConfigError("binned SAH: parallel threshold must be positive");
   if (primBoxes.size() >= std::size_t(kInvalidIndex) / 2)
-    throw std::invalid_argument("binned SAH: too many primitives for 32-bit node indices");
+    throw tsah::DataError("binned SAH: too many primitives for 32-bit node indices");
   for (const Aabb& b : primBoxes)
     if (!std::isfinite(b.lo.x) || !std::isfinite(b.lo.y) || !std::isfinite(b.lo.z) || !std::isfinite(b.hi.x) ||
         !std::isfinite(b.hi.y) || !std::isfinite(b.hi.z) || b.empty())
-      throw std::invalid_argument("binned SAH: a primitive box is empty or not finite");
+      throw tsah::DataError("binned SAH: a primitive box is empty or not finite");
   Build build(config_, primBoxes);
   return build.run();
 }

@@ -5,9 +5,10 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
-#include <stdexcept>
 #include <string>
 #include <vector>
+
+#include "tsah/base/error.hpp"
 
 namespace tsah {
 
@@ -35,14 +36,13 @@ Bvh SweepSahBuilder::build(std::span<const Aabb> boxes) const {
   const std::size_t count = boxes.size();
   if (count == 0) return bvh;
   if (count >= std::size_t(std::numeric_limits<uint32_t>::max() / 2))
-    throw std::invalid_argument("SweepSahBuilder: too many primitives (" + std::to_string(count) + ")");
+    throw tsah::DataError("SweepSahBuilder: too many primitives (" + std::to_string(count) + ")");
   const uint32_t n = static_cast<uint32_t>(count);
 
   std::vector<Vec3> centroid(n);
   for (uint32_t i = 0; i < n; ++i) {
     if (!finite(boxes[i]))
-      throw std::invalid_argument("SweepSahBuilder: primitive " + std::to_string(i) +
-                                  " has a non-finite box");
+      throw tsah::DataError("SweepSahBuilder: primitive " + std::to_string(i) + " has a non-finite box");
     centroid[i] = boxes[i].center();
   }
   // One order per axis, sorted once; ties broken by id so the result never depends on the sort.

@@ -2,8 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <stdexcept>
 
+#include "tsah/base/error.hpp"
 #include "tsah/core/cost_terms.hpp"
 
 namespace tsah {
@@ -20,7 +20,7 @@ CostParts degenerateFrameCost(uint64_t innerCount, uint64_t primCount, const Cos
 
 double frameCost(const Bvh& bvh, uint32_t frame, const CostModel& model) {
   if (bvh.nodes.empty()) return 0.0;
-  if (frame >= bvh.frameCount) throw std::out_of_range("frameCost: frame index out of range");
+  if (frame >= bvh.frameCount) throw tsah::ConfigError("frameCost: frame index out of range");
   double inner = 0.0, leaves = 0.0;
   uint64_t innerCount = 0, primCount = 0;
   for (uint32_t n = 0; n < bvh.nodeCount(); ++n) {
@@ -44,12 +44,12 @@ std::vector<double> frameCosts(const Bvh& bvh, const CostModel& model) {
 }
 
 double temporalCost(std::span<const double> frameCosts, int k) {
-  if (k < 0) throw std::invalid_argument("temporalCost: the exponent k must be >= 0");
+  if (k < 0) throw tsah::ConfigError("temporalCost: the exponent k must be >= 0");
   return cost::temporalCost(frameCosts.data(), static_cast<uint32_t>(frameCosts.size()), k);
 }
 
 std::vector<double> temporalWeights(std::span<const double> frameCosts, int k) {
-  if (k < 0) throw std::invalid_argument("temporalWeights: the exponent k must be >= 0");
+  if (k < 0) throw tsah::ConfigError("temporalWeights: the exponent k must be >= 0");
   std::vector<double> weights(frameCosts.size(), 0.0);
   if (frameCosts.empty()) return weights;
   double largest = 0.0;
@@ -113,9 +113,8 @@ FrameCostEvaluator::FrameCostEvaluator(const Bvh& bvh, CostModel model) : bvh_(&
 CostParts FrameCostEvaluator::costParts(std::span<const Aabb> primBoxes) {
   if (postOrder_.empty()) return {0.0, 0.0, 1.0};
   if (primBoxes.size() != bvh_->primIds.size())
-    throw std::invalid_argument("FrameCostEvaluator: expected " +
-                                std::to_string(bvh_->primIds.size()) + " primitive boxes, got " +
-                                std::to_string(primBoxes.size()));
+    throw tsah::DataError("FrameCostEvaluator: expected " + std::to_string(bvh_->primIds.size()) +
+                          " primitive boxes, got " + std::to_string(primBoxes.size()));
   const uint32_t* primIds = bvh_->primIds.data();
   double inner = 0.0, leaves = 0.0;
   for (const Step& s : postOrder_) {

@@ -4,7 +4,8 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <stdexcept>
+
+#include "tsah/base/error.hpp"
 
 namespace tsah {
 
@@ -83,7 +84,7 @@ BoxMesh buildBoxView(const Bvh& bvh, const FrameBoxes& frame, std::span<const do
   BoxMesh m;
   if (bvh.nodes.empty()) return m;
   if ((o.colour == BoxViewOptions::Colour::Growth || o.minGrowth > 0.0) && nodeGrowth.size() != bvh.nodes.size())
-    throw std::invalid_argument("buildBoxView: growth colours or filters need one growth value per node");
+    throw tsah::ConfigError("buildBoxView: growth colours or filters need one growth value per node");
   const std::vector<uint32_t> depth = nodeDepths(bvh);
   std::vector<uint32_t> chosen;
   for (uint32_t i = 0; i < bvh.nodeCount(); ++i)

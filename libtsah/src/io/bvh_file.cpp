@@ -4,7 +4,9 @@
 #include <cmath>
 #include <cstring>
 
+#include "tsah/base/assert.hpp"
 #include "tsah/base/binary_io.hpp"
+#include "tsah/base/error.hpp"
 #include "tsah/base/files.hpp"
 #include "io/tbvh_io.hpp"
 
@@ -23,11 +25,10 @@ namespace detail {
 
 void writeTbvhName(tsah::ByteWriter& w, const std::string& name, const char* what) {
   if (name.size() >= kTbvhNameBytes)
-    throw tsah::Error(std::string(".tbvh ") + what + " name '" + name + "' is longer than " +
-                      std::to_string(kTbvhNameBytes - 1) + " characters");
+    throw tsah::ConfigError(std::string(".tbvh ") + what + " name '" + name + "' is longer than " +
+                            std::to_string(kTbvhNameBytes - 1) + " characters");
   for (char c : name)
-    if (c < 0x20 || c > 0x7e)
-      throw tsah::Error(std::string(".tbvh ") + what + " name must be printable ASCII");
+    if (c < 0x20 || c > 0x7e) throw tsah::ConfigError(std::string(".tbvh ") + what + " name must be printable ASCII");
   std::array<char, kTbvhNameBytes> field{};
   std::memcpy(field.data(), name.data(), name.size());
   w.write(field);
@@ -79,8 +80,8 @@ EncodedBvh encodeParts(const Bvh& bvh, const BvhBuildInfo& info) {
   out.flat = flattenBvh(bvh);
   const FlatBvh& flat = out.flat;
   if (info.triangleCount != 0 && info.triangleCount != flat.triangleCount())
-    throw tsah::Error(".tbvh build info says " + std::to_string(info.triangleCount) +
-                      " triangles, the tree holds " + std::to_string(flat.triangleCount()));
+    throw tsah::DataError(".tbvh build info says " + std::to_string(info.triangleCount) +
+                          " triangles, the tree holds " + std::to_string(flat.triangleCount()));
 
   tsah::ByteWriter w;
   w.buffer().reserve(kTbvhHeaderBytes);
@@ -110,7 +111,7 @@ EncodedBvh encodeParts(const Bvh& bvh, const BvhBuildInfo& info) {
   writeTbvhName(w, info.method, "method");
   writeTbvhName(w, info.selection, "selection");
   for (std::size_t i = 0; i < kReservedWords; ++i) w.write(uint32_t{0});
-  if (w.buffer().size() != kTbvhHeaderBytes) throw tsah::Error("internal: .tbvh header size mismatch");
+  TSAH_ASSERT(w.buffer().size() == kTbvhHeaderBytes, ".tbvh header size mismatch");
   out.header = std::move(w.buffer());
   const auto parts = out.parts();
   for (std::size_t i = 0; i + 1 < parts.size(); ++i) out.crc = tsah::crc32(parts[i].data(), parts[i].size(), out.crc);

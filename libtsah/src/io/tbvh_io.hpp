@@ -11,7 +11,7 @@ namespace tsah::detail {
 inline constexpr std::array<char, 8> kTbvhMagic = {'T', 'S', 'A', 'H', 'B', 'V', 'H', '\0'};
 
 // A NUL-padded name field of kTbvhNameBytes: 0-15 printable ASCII characters. writeTbvhName throws
-// tsah::Error when the name does not fit; readTbvhName fails the reader on a malformed field.
+// tsah::ConfigError when the name does not fit; readTbvhName fails the reader on a malformed field.
 void writeTbvhName(tsah::ByteWriter& w, const std::string& name, const char* what);
 std::string readTbvhName(tsah::ByteReader& r, const char* what);
 

@@ -3,9 +3,10 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <stdexcept>
 
+#include "tsah/base/assert.hpp"
 #include "tsah/base/binary_io.hpp"
+#include "tsah/base/error.hpp"
 #include "tsah/base/files.hpp"
 #include "io/tbvh_io.hpp"
 
@@ -29,8 +30,8 @@ std::string describeRange(const TimeRange& r) {
 }  // namespace
 
 std::vector<TimeRange> equalTimeRanges(double start, double end, uint32_t count) {
-  if (count == 0) throw std::invalid_argument("the number of parts must be at least 1");
-  if (!(end >= start)) throw std::invalid_argument("parts: the time range ends before it starts");
+  if (count == 0) throw tsah::ConfigError("the number of parts must be at least 1");
+  if (!(end >= start)) throw tsah::ConfigError("parts: the time range ends before it starts");
   std::vector<TimeRange> parts(count);
   const double length = (end - start) / double(count);
   for (uint32_t i = 0; i < count; ++i) {
@@ -70,20 +71,21 @@ std::optional<std::string> validateTimeRanges(std::span<const TimeRange> ranges)
 std::vector<uint8_t> encodeTreeSetFile(std::span<const Bvh> trees, std::span<const BvhBuildInfo> builds,
                                        std::span<const TimeRange> ranges, const TreeSetInfo& info) {
   if (trees.size() != builds.size() || trees.size() != ranges.size())
-    throw tsah::Error(".tbvh set: " + std::to_string(trees.size()) + " trees, " + std::to_string(builds.size()) +
-                      " build records and " + std::to_string(ranges.size()) + " time ranges");
+    throw tsah::DataError(".tbvh set: " + std::to_string(trees.size()) + " trees, " + std::to_string(builds.size()) +
+                          " build records and " + std::to_string(ranges.size()) + " time ranges");
   if (trees.size() > kTbvhMaxTrees)
-    throw tsah::Error(".tbvh set: more than " + std::to_string(kTbvhMaxTrees) + " trees");
-  if (auto problem = validateTimeRanges(ranges)) throw tsah::Error(".tbvh set: " + *problem);
+    throw tsah::DataError(".tbvh set: more than " + std::to_string(kTbvhMaxTrees) + " trees");
+  if (auto problem = validateTimeRanges(ranges)) throw tsah::DataError(".tbvh set: " + *problem);
   if (!std::isfinite(info.overlap) || info.overlap < 0 || !std::isfinite(info.budget) || info.budget < 0)
-    throw tsah::Error(".tbvh set: overlap and budget must be finite and >= 0");
+    throw tsah::ConfigError(".tbvh set: overlap and budget must be finite and >= 0");
 
   const uint32_t triangleCount = trees[0].primCount();
   std::vector<std::vector<uint8_t>> images;
   for (std::size_t s = 0; s < trees.size(); ++s) {
     if (trees[s].primCount() != triangleCount || builds[s].vertexCount != builds[0].vertexCount ||
         builds[s].topologyHash != builds[0].topologyHash)
-      throw tsah::Error(".tbvh set: tree " + std::to_string(s) + " was built for a different animation than tree 0");
+      throw tsah::DataError(".tbvh set: tree " + std::to_string(s) +
+                            " was built for a different animation than tree 0");
     BvhBuildInfo b = builds[s];
     b.timeStart = ranges[s].start;
     b.timeEnd = ranges[s].end;
@@ -106,7 +108,7 @@ std::vector<uint8_t> encodeTreeSetFile(std::span<const Bvh> trees, std::span<con
   w.write(info.budget);
   detail::writeTbvhName(w, info.segmentation, "segmentation");
   for (std::size_t i = 0; i < kReservedWords; ++i) w.write(uint32_t{0});
-  if (w.buffer().size() != kTbvhSetHeaderBytes) throw tsah::Error("internal: .tbvh set header size mismatch");
+  TSAH_ASSERT(w.buffer().size() == kTbvhSetHeaderBytes, ".tbvh set header size mismatch");
   uint64_t offset = align16(kTbvhSetHeaderBytes + uint64_t(kTbvhSetEntryBytes) * trees.size());
   for (std::size_t s = 0; s < trees.size(); ++s) {
     w.write(ranges[s].start);

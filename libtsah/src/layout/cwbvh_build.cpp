@@ -52,8 +52,9 @@ CwbvhView CwbvhTree::view(const WoopTriangle* woop, const uint32_t* indices, con
 
 CwbvhTree buildCwbvh(const WideBvh& wide, uint32_t frame) {
   if (wide.width > kCwbvhWidth)
-    throw tsah::Error("compressed wide BVH: the wide tree has width " + std::to_string(wide.width) + " (at most 8)");
-  if (frame >= wide.frameCount) throw tsah::Error("compressed wide BVH: no frame " + std::to_string(frame));
+    throw tsah::DataError("compressed wide BVH: the wide tree has width " + std::to_string(wide.width) +
+                          " (at most 8)");
+  if (frame >= wide.frameCount) throw tsah::ConfigError("compressed wide BVH: no frame " + std::to_string(frame));
   CwbvhTree t;
   t.rootBox = wide.rootBoxes[frame];
   if (isLeafRef(wide.rootRef)) {
@@ -74,7 +75,7 @@ CwbvhTree buildCwbvh(const WideBvh& wide, uint32_t frame) {
   uint32_t next = 1, index = 0;
   for (; !queue.empty(); queue.pop_front(), ++index) {
     const WideNode& w = wide.nodes[queue.front()];
-    if (w.childCount > kCwbvhWidth) throw tsah::Error("compressed wide BVH: a node has more than 8 children");
+    if (w.childCount > kCwbvhWidth) throw tsah::DataError("compressed wide BVH: a node has more than 8 children");
     const std::vector<uint32_t> slotOf = assignSlots(wide, w);
     std::vector<int> childAt(kCwbvhWidth, -1);
     for (uint32_t c = 0; c < w.childCount; ++c) childAt[slotOf[c]] = int(c);
@@ -98,7 +99,7 @@ CwbvhTree buildCwbvh(const WideBvh& wide, uint32_t frame) {
       }
       const uint32_t offset = uint32_t(t.triIndex.size()) - n.triBase;
       if (offset + child.count > kCwbvhMaxNodeTriangles)
-        throw tsah::Error("compressed wide BVH: a node's leaves hold more than 64 triangles");
+        throw tsah::DataError("compressed wide BVH: a node's leaves hold more than 64 triangles");
       n.meta[s] = uint8_t(kCwbvhLeaf | offset);
       t.leaves.push_back({index * kCwbvhWidth + s, uint32_t(t.triIndex.size()), child.count});
       t.triIndex.insert(t.triIndex.end(), wide.primIds.begin() + child.firstPrim(),

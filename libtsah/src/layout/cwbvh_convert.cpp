@@ -12,10 +12,10 @@ namespace tsah {
 
 CwbvhTree convertToCwbvh(const BinaryTreeView& t, int32_t rootRef, uint32_t rootCount, const Aabb& rootBox,
                          uint32_t mergeLimit) {
-  if (t.triangles == 0) throw tsah::Error("compressed wide BVH: the binary tree has no triangles");
+  if (t.triangles == 0) throw tsah::DataError("compressed wide BVH: the binary tree has no triangles");
   if (mergeLimit > kCwbvhMaxLeafTriangles)
-    throw tsah::Error("compressed wide BVH: leaves merge at most " + std::to_string(kCwbvhMaxLeafTriangles) +
-                      " triangles");
+    throw tsah::ConfigError("compressed wide BVH: leaves merge at most " + std::to_string(kCwbvhMaxLeafTriangles) +
+                            " triangles");
   // Every wide node but a one-leaf root starts at its own binary interior node, and a binary tree
   // over n triangles has at most n - 1 of them: more means the references form no tree.
   const uint32_t maxNodes = std::max(1u, t.triangles - 1);
@@ -35,14 +35,15 @@ CwbvhTree convertToCwbvh(const BinaryTreeView& t, int32_t rootRef, uint32_t root
     for (uint32_t i = begin; i < end; ++i) {
       CwbvhOpening& o = level[i - begin];
       if (!cwbvhOpen(t, starts[i], i == 0 ? rootCount : 0u, rootBox, mergeLimit, o))
-        throw tsah::Error("compressed wide BVH: the binary tree is invalid (a reference out of range, an empty "
-                          "leaf, or more than 64 triangles under one wide node)");
+        throw tsah::DataError(
+            "compressed wide BVH: the binary tree is invalid (a reference out of range, an empty "
+            "leaf, or more than 64 triangles under one wide node)");
       interior += o.interior;
       leafTris += o.triangles;
       if (o.triangles > 0) out.depth = depth + 1;
     }
     if (nodes + interior > maxNodes || tris + leafTris > t.triangles)
-      throw tsah::Error("compressed wide BVH: the binary references do not form a tree over the triangles");
+      throw tsah::DataError("compressed wide BVH: the binary references do not form a tree over the triangles");
     out.nodes.resize(std::size_t(nodes + interior));
     out.parentSlot.resize(out.nodes.size(), kCwbvhNoParent);
     out.exactBoxes.resize(out.nodes.size() * kCwbvhWidth);
@@ -61,8 +62,8 @@ CwbvhTree convertToCwbvh(const BinaryTreeView& t, int32_t rootRef, uint32_t root
     tris += leafTris;
   }
   if (tris != t.triangles)
-    throw tsah::Error("compressed wide BVH: the binary tree's leaves hold " + std::to_string(tris) + " of " +
-                      std::to_string(t.triangles) + " triangles");
+    throw tsah::DataError("compressed wide BVH: the binary tree's leaves hold " + std::to_string(tris) + " of " +
+                          std::to_string(t.triangles) + " triangles");
   // The refit's leaf list: a node's leaves in slot order, each ending where the next begins.
   for (uint32_t i = 0; i < out.nodeCount(); ++i) {
     const CwbvhNode& n = out.nodes[i];
@@ -81,7 +82,7 @@ CwbvhTree convertToCwbvh(const BinaryTreeView& t, int32_t rootRef, uint32_t root
 CwbvhTree convertToCwbvh(const FlatBvh& flat, uint32_t frame, uint32_t mergeLimit) {
   if (frame >= flat.frameCount || flat.rootBoxes.size() <= frame ||
       flat.nodes.size() < std::size_t(flat.frameCount) * flat.interiorCount)
-    throw tsah::Error("compressed wide BVH: the flat tree has no frame " + std::to_string(frame));
+    throw tsah::ConfigError("compressed wide BVH: the flat tree has no frame " + std::to_string(frame));
   const std::span<const GpuBvhNode> block = flat.frameNodes(frame);
   const BinaryTreeView view{block.data(), flat.interiorCount, flat.triIndex.data(), flat.triangleCount()};
   return convertToCwbvh(view, flat.rootRef, flat.rootCount, flat.rootBoxes[frame], mergeLimit);

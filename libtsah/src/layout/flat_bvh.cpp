@@ -20,9 +20,9 @@ std::string str(uint64_t v) { return std::to_string(v); }
 }  // namespace
 
 FlatBvh flattenBvh(const Bvh& bvh) {
-  if (bvh.nodes.empty() || bvh.primIds.empty()) throw tsah::Error("cannot flatten an empty BVH");
-  if (auto problem = validate(bvh)) throw tsah::Error("cannot flatten an invalid BVH: " + *problem);
-  if (bvh.primIds.size() > kMaxGpuTriangles) throw tsah::Error("BVH has too many primitives");
+  if (bvh.nodes.empty() || bvh.primIds.empty()) throw tsah::DataError("cannot flatten an empty BVH");
+  if (auto problem = validate(bvh)) throw tsah::DataError("cannot flatten an invalid BVH: " + *problem);
+  if (bvh.primIds.size() > kMaxGpuTriangles) throw tsah::DataError("BVH has too many primitives");
 
   FlatBvh flat;
   flat.frameCount = bvh.frameCount;
@@ -239,8 +239,8 @@ std::vector<uint32_t> subtreeEnds(const FlatBvh& flat) {
 
 FlatBvh runtimeTopology(const FlatBvh& tree, uint32_t triangles, uint32_t maxDepth, const std::string& who) {
   if (tree.triangleCount() != triangles)
-    throw tsah::Error(who + ": the tree holds " + std::to_string(tree.triangleCount()) + " triangles, the animation " +
-                      std::to_string(triangles));
+    throw tsah::DataError(who + ": the tree holds " + std::to_string(tree.triangleCount()) +
+                          " triangles, the animation " + std::to_string(triangles));
   FlatBvh one;
   one.frameCount = 1;
   one.interiorCount = tree.interiorCount;
@@ -252,10 +252,10 @@ FlatBvh runtimeTopology(const FlatBvh& tree, uint32_t triangles, uint32_t maxDep
   one.nodes.assign(block.begin(), block.end());
   one.rootBoxes = {tree.rootBoxes.empty() ? Aabb{} : tree.rootBoxes[0]};
   one.triIndex = tree.triIndex;
-  if (auto problem = validateFlatBvh(one)) throw tsah::Error(who + ": invalid tree: " + *problem);
+  if (auto problem = validateFlatBvh(one)) throw tsah::DataError(who + ": invalid tree: " + *problem);
   if (one.depth > maxDepth)
-    throw tsah::Error(who + ": tree depth " + std::to_string(one.depth) + " exceeds the traversal stack of " +
-                      std::to_string(maxDepth));
+    throw tsah::DataError(who + ": tree depth " + std::to_string(one.depth) + " exceeds the traversal stack of " +
+                          std::to_string(maxDepth));
   return one;
 }
 
@@ -264,8 +264,8 @@ std::vector<uint32_t> slotVertexIndices(std::span<const uint32_t> triIndex, std:
   std::vector<uint32_t> out(3 * triIndex.size());
   for (std::size_t s = 0; s < triIndex.size(); ++s) {
     if (triIndex[s] >= indices.size() / 3)
-      throw tsah::Error(who + ": triangle " + std::to_string(triIndex[s]) + " is past the " +
-                        std::to_string(indices.size() / 3) + " triangles of the index array");
+      throw tsah::DataError(who + ": triangle " + std::to_string(triIndex[s]) + " is past the " +
+                            std::to_string(indices.size() / 3) + " triangles of the index array");
     for (int k = 0; k < 3; ++k) out[3 * s + k] = indices[3 * std::size_t(triIndex[s]) + k];
   }
   return out;

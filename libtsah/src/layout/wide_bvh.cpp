@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <limits>
 
+#include "tsah/base/assert.hpp"
 #include "tsah/base/error.hpp"
 
 namespace tsah {
@@ -179,14 +180,15 @@ WideBvh buildWide(const Bvh& bvh, const CollapsePlan& plan, uint32_t width) {
 
 std::vector<double> normalizedWeights(std::span<const double> weights, uint32_t frames) {
   if (weights.size() != frames)
-    throw tsah::Error("wide collapse: " + std::to_string(weights.size()) + " frame weights for " +
-                      std::to_string(frames) + " frames");
+    throw tsah::ConfigError("wide collapse: " + std::to_string(weights.size()) + " frame weights for " +
+                            std::to_string(frames) + " frames");
   double total = 0.0;
   for (double w : weights) {
-    if (!(w >= 0.0) || !(w < kInfinity)) throw tsah::Error("wide collapse: frame weights must be finite and >= 0");
+    if (!(w >= 0.0) || !(w < kInfinity))
+      throw tsah::ConfigError("wide collapse: frame weights must be finite and >= 0");
     total += w;
   }
-  if (!(total > 0.0)) throw tsah::Error("wide collapse: the frame weights are all zero");
+  if (!(total > 0.0)) throw tsah::ConfigError("wide collapse: the frame weights are all zero");
   std::vector<double> out(weights.begin(), weights.end());
   for (double& w : out) w /= total;
   return out;
@@ -217,21 +219,23 @@ uint32_t WideBvh::depth() const {
 
 WideCollapser::WideCollapser(Config config) : config_(config) {
   if (config_.width < 2 || config_.width > kMaxWideWidth)
-    throw tsah::Error("wide collapse: the width must be 2 to " + std::to_string(kMaxWideWidth));
-  if (config_.maxLeafSize < 1) throw tsah::Error("wide collapse: the maximum leaf size must be at least 1");
-  if (config_.leafPacket < 1) throw tsah::Error("wide collapse: the leaf packet must hold at least 1 triangle");
-  if (config_.k < 0) throw tsah::Error("wide collapse: the exponent k must be >= 0");
+    throw tsah::ConfigError("wide collapse: the width must be 2 to " + std::to_string(kMaxWideWidth));
+  if (config_.maxLeafSize < 1) throw tsah::ConfigError("wide collapse: the maximum leaf size must be at least 1");
+  if (config_.leafPacket < 1) throw tsah::ConfigError("wide collapse: the leaf packet must hold at least 1 triangle");
+  if (config_.k < 0) throw tsah::ConfigError("wide collapse: the exponent k must be >= 0");
   if (!(config_.cost.ct >= 0.0f) || !(config_.cost.ci >= 0.0f))
-    throw tsah::Error("wide collapse: the cost constants must be >= 0");
+    throw tsah::ConfigError("wide collapse: the cost constants must be >= 0");
 }
 
 WideBvh WideCollapser::collapse(const Bvh& bvh, std::span<const double> weights, double* weightedCost) const {
-  if (bvh.primCount() == 0) throw tsah::Error("wide collapse: the tree is empty");
-  if (auto problem = validate(bvh)) throw tsah::Error("wide collapse: invalid tree: " + *problem);
+  if (bvh.primCount() == 0) throw tsah::DataError("wide collapse: the tree is empty");
+  if (auto problem = validate(bvh)) throw tsah::DataError("wide collapse: invalid tree: " + *problem);
   const std::vector<double> w = normalizedWeights(weights, bvh.frameCount);
   const CollapsePlan plan(bvh, config_, areaWeights(bvh, w), false);
   if (weightedCost) *weightedCost = plan.cost(bvh.root);
-  return buildWide(bvh, plan, config_.width);
+  WideBvh wide = buildWide(bvh, plan, config_.width);
+  TSAH_ASSERT_VALID(validateWide(wide), "wide collapse: the wide tree");
+  return wide;
 }
 
 WideBvh WideCollapser::collapse(const Bvh& bvh) const {
@@ -268,7 +272,7 @@ WideCollapser::Config wideCollapseConfig(const Objective& objective, uint32_t wi
 }
 
 double wideFrameCost(const WideBvh& wide, uint32_t frame, const CostModel& model) {
-  if (frame >= wide.frameCount) throw tsah::Error("wide cost: frame index out of range");
+  if (frame >= wide.frameCount) throw tsah::ConfigError("wide cost: frame index out of range");
   double inner = 0.0, leaves = 0.0;
   uint64_t innerCount = 0;
   if (wide.rootRef < 0) {
@@ -306,8 +310,8 @@ double wideWeightedCost(const WideBvh& wide, std::span<const double> weights, co
 
 void refitWide(WideBvh& wide, const PrimitiveBoxes& prims) {
   if (prims.primCount != wide.primCount())
-    throw tsah::Error("wide refit: " + std::to_string(prims.primCount) + " primitive boxes for a tree of " +
-                      std::to_string(wide.primCount()));
+    throw tsah::DataError("wide refit: " + std::to_string(prims.primCount) + " primitive boxes for a tree of " +
+                          std::to_string(wide.primCount()));
   const uint32_t frames = prims.frameCount;
   wide.frameCount = frames;
   wide.childBoxes.assign(wide.children.size() * std::size_t(frames), Aabb{});

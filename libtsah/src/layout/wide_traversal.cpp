@@ -49,13 +49,13 @@ std::vector<SimdIsa> supportedIsas() {
 
 SimdIsa bestIsa() {
   const auto all = supportedIsas();
-  if (all.empty()) throw tsah::Error("wide traversal: this build has no SIMD kernels for this processor");
+  if (all.empty()) throw tsah::ConfigError("wide traversal: this build has no SIMD kernels for this processor");
   return all.back();
 }
 
 const WideKernels& wideKernels(SimdIsa isa) {
   if (!isaSupported(isa))
-    throw tsah::Error(std::string("wide traversal: the ") + name(isa) +
+    throw tsah::ConfigError(std::string("wide traversal: the ") + name(isa) +
                       " kernels are not in this build or this processor does not run them");
   return tables().table[static_cast<int>(isa)];
 }

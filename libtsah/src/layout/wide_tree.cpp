@@ -34,12 +34,12 @@ WideTree<N>::WideTree(const WideBvh& w, std::span<const uint32_t> indices, uint3
   else
     woopRows_ = wideKernels(isa).woopRows8;
   if (w.width > N)
-    throw tsah::Error("wide tree: a " + std::to_string(w.width) + "-wide topology does not fit " + std::to_string(N) +
-                      "-wide nodes");
-  if (auto problem = validateWide(w)) throw tsah::Error("wide tree: invalid topology: " + *problem);
+    throw tsah::DataError("wide tree: a " + std::to_string(w.width) + "-wide topology does not fit " +
+                          std::to_string(N) + "-wide nodes");
+  if (auto problem = validateWide(w)) throw tsah::DataError("wide tree: invalid topology: " + *problem);
   depth_ = w.depth();
   if (wideStackNeed<N>(depth_) > kWideStackSize)
-    throw tsah::Error("wide tree: depth " + std::to_string(depth_) + " exceeds the traversal stack");
+    throw tsah::DataError("wide tree: depth " + std::to_string(depth_) + " exceeds the traversal stack");
   triIndex_ = w.primIds;
   slotVertices_ = slotVertexIndices(triIndex_, indices, "wide tree");
   // Packets of a leaf over slots [first, first + count): lane l of packet p holds slot first + p*N + l.

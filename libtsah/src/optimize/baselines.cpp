@@ -6,7 +6,6 @@
 #include <exception>
 #include <limits>
 #include <mutex>
-#include <stdexcept>
 #include <thread>
 #include <tuple>
 #include <utility>
@@ -120,9 +119,9 @@ InsertionOptimizer::Config optimizerConfig(const BaselineConfig& config, int k, 
 }
 
 void checkFrames(const PrimitiveBoxes& rep) {
-  if (rep.frameCount == 0) throw std::invalid_argument("no representative frames");
+  if (rep.frameCount == 0) throw tsah::DataError("no representative frames");
   if (rep.boxes.size() != std::size_t(rep.frameCount) * rep.primCount)
-    throw std::invalid_argument("representative frame boxes do not match frames x primitives");
+    throw tsah::DataError("representative frame boxes do not match frames x primitives");
 }
 
 }  // namespace
@@ -252,14 +251,14 @@ Bvh buildMethod(const MethodSpec& method, const PrimitiveBoxes& rep, const Basel
     case Method::SahRebuild:
       break;
   }
-  throw std::invalid_argument("method " + method.name() + " builds one tree per frame, not one tree");
+  throw tsah::ConfigError("method " + method.name() + " builds one tree per frame, not one tree");
 }
 
 std::vector<double> evaluateFrames(const Bvh& bvh, const FrameSource& frames, const CostModel& cost,
                                    unsigned threads) {
   if (frames.primCount != bvh.primCount())
-    throw std::invalid_argument("evaluation frames hold " + std::to_string(frames.primCount) +
-                                " primitives, the tree " + std::to_string(bvh.primCount()));
+    throw tsah::DataError("evaluation frames hold " + std::to_string(frames.primCount) + " primitives, the tree " +
+                          std::to_string(bvh.primCount()));
   std::vector<double> costs(frames.frameCount, 0.0);
   const unsigned workers = workerCount(threads, frames.frameCount);
   std::vector<FrameCostEvaluator> evaluators(workers, FrameCostEvaluator(bvh, cost));
@@ -275,7 +274,7 @@ std::vector<MethodResult> compareMethods(std::span<const MethodSpec> methods, co
                                          const FrameSource& evaluation, const BaselineConfig& config) {
   checkFrames(rep);
   if (evaluation.primCount != rep.primCount)
-    throw std::invalid_argument("evaluation frames and representative frames differ in primitive count");
+    throw tsah::DataError("evaluation frames and representative frames differ in primitive count");
   ProgressSink progress(config);
   // Workers report through the one sink above (one message at a time); per-batch optimizer
   // callbacks would come from several threads at once, so they are not forwarded here.

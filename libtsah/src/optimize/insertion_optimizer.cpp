@@ -5,12 +5,13 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
-#include <stdexcept>
 #include <string>
 #include <utility>
 
 #include "optimize/random.hpp"
 #include "optimize/optimizer_run.hpp"
+#include "tsah/base/assert.hpp"
+#include "tsah/base/error.hpp"
 #include "tsah/core/cost_terms.hpp"
 
 namespace tsah {
@@ -76,12 +77,11 @@ struct InsertionSession::Impl {
 
   Impl(Bvh tree, const PrimitiveBoxes& primitives, const InsertionOptimizer::Config& cfg)
       : config(cfg), prims(&primitives), shape(std::move(tree)), rng(cfg.seed) {
-    if (config.k < 0) throw std::invalid_argument("InsertionOptimizer: the exponent k must be >= 0");
-    if (primitives.frameCount == 0) throw std::invalid_argument("InsertionOptimizer: no frames");
+    if (config.k < 0) throw tsah::ConfigError("InsertionOptimizer: the exponent k must be >= 0");
+    if (primitives.frameCount == 0) throw tsah::DataError("InsertionOptimizer: no frames");
     if (primitives.primCount != shape.primCount())
-      throw std::invalid_argument("InsertionOptimizer: the tree holds " +
-                                  std::to_string(shape.primCount()) + " primitives, the boxes " +
-                                  std::to_string(primitives.primCount));
+      throw tsah::DataError("InsertionOptimizer: the tree holds " + std::to_string(shape.primCount()) +
+                            " primitives, the boxes " + std::to_string(primitives.primCount));
     // The input's boxes are not needed: the records are refitted from the primitives directly
     // (the same boxes refit() gives), so every node's boxes are never held twice.
     shape.boxes.clear();
@@ -369,7 +369,7 @@ struct InsertionSession::Impl {
   }
 
   bool step(uint32_t n) {
-    if (!eligible(n)) throw std::invalid_argument("InsertionSession::step: node is not eligible");
+    if (!eligible(n)) throw tsah::ConfigError("InsertionSession::step: node is not eligible");
     ++steps;
     ++stepStamp;
     if (stepStamp == 0) {  // wrapped: clear the stamps so no node looks touched
@@ -528,11 +528,11 @@ uint64_t InsertionSession::steps() const { return impl_->steps; }
 uint64_t InsertionSession::acceptedSteps() const { return impl_->accepted; }
 
 InsertionOptimizer::InsertionOptimizer(Config config) : config_(std::move(config)) {
-  if (config_.k < 0) throw std::invalid_argument("InsertionOptimizer: the exponent k must be >= 0");
+  if (config_.k < 0) throw tsah::ConfigError("InsertionOptimizer: the exponent k must be >= 0");
   if (!(config_.batchFraction > 0.0) || config_.batchFraction > 1.0)
-    throw std::invalid_argument("InsertionOptimizer: batchFraction must be in (0, 1]");
+    throw tsah::ConfigError("InsertionOptimizer: batchFraction must be in (0, 1]");
   if (config_.batchesWithoutImprovement == 0)
-    throw std::invalid_argument("InsertionOptimizer: batchesWithoutImprovement must be >= 1");
+    throw tsah::ConfigError("InsertionOptimizer: batchesWithoutImprovement must be >= 1");
 }
 
 InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const PrimitiveBoxes& prims,
@@ -570,6 +570,10 @@ InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const Primitive
       }
     }
     session.endBatch();
+    // Debug builds: the tree is still a tree over every primitive, each box holding its children's
+    // and primitives' boxes in every frame (bvh() materializes the boxes; release builds skip both).
+    TSAH_ASSERT_VALID(validate(session.bvh(), &prims),
+                      "insertion optimizer: the tree after batch " + std::to_string(batch));
     if (run.endBatch(batch, state()) || run.limitReached(batch)) break;
   }
   run.finalState(state());

@@ -1,14 +1,27 @@
 #include "tsah/optimize/leaf_collapser.hpp"
 
 #include <algorithm>
-#include <stdexcept>
 #include <vector>
 
+#include "tsah/base/assert.hpp"
+#include "tsah/base/error.hpp"
 #include "tsah/core/cost_terms.hpp"
 
 namespace tsah {
 
 namespace {
+
+#ifndef NDEBUG
+// Debug builds: validate() of a tree whose boxes are not computed yet (its structure alone).
+std::optional<std::string> validateTopology(const Bvh& tree) {
+  Bvh structure;
+  structure.nodes = tree.nodes;
+  structure.primIds = tree.primIds;
+  structure.root = tree.root;
+  structure.frameCount = 0;
+  return validate(structure);
+}
+#endif
 
 // Eq. 1 per frame, summed over nodes in the order `nodeAt(i)` lists them, exactly as frameCosts(Bvh)
 // sums a tree whose node i is nodeAt(i): the same sums in the same order, so the same doubles.
@@ -123,8 +136,8 @@ CollapseSource CollapseSource::of(const Bvh& bvh) {
 }
 
 LeafCollapser::LeafCollapser(Config config) : config_(config) {
-  if (config_.maxLeafSize == 0) throw std::invalid_argument("LeafCollapser: maxLeafSize must be >= 1");
-  if (config_.k < 0) throw std::invalid_argument("LeafCollapser: the exponent k must be >= 0");
+  if (config_.maxLeafSize == 0) throw tsah::ConfigError("LeafCollapser: maxLeafSize must be >= 1");
+  if (config_.k < 0) throw tsah::ConfigError("LeafCollapser: the exponent k must be >= 0");
 }
 
 Bvh LeafCollapser::compact(const Bvh& bvh, std::span<const uint8_t> asLeaf) {
@@ -213,12 +226,15 @@ Bvh LeafCollapser::collapse(const Bvh& bvh) const {
   std::vector<uint32_t> origin;
   Bvh out = collapsedTopology(source, origin);
   copyBoxes(source, origin, out);
+  TSAH_ASSERT_VALID(validate(out), "leaf collapse: the collapsed tree");
   return out;
 }
 
 Bvh LeafCollapser::collapseTopology(const CollapseSource& source) const {
   std::vector<uint32_t> origin;
-  return collapsedTopology(source, origin);
+  Bvh out = collapsedTopology(source, origin);
+  TSAH_ASSERT_VALID(validateTopology(out), "leaf collapse: the collapsed topology");
+  return out;
 }
 
 }  // namespace tsah

@@ -1,16 +1,17 @@
 // The host side shared by every reinsertion backend (reinsertion_rounds.hpp): the optimizer's node
 // numbering, the levels of the first refit, the topology back as a Bvh, the input checks.
 #include <algorithm>
-#include <stdexcept>
 #include <string>
 #include <utility>
 
 #include "tsah/optimize/detail/reinsertion_rounds.hpp"
 
+#include "tsah/base/error.hpp"
+
 namespace tsah::reinsertion {
 
 NumberedTree numberTree(const Bvh& tree) {
-  if (tree.nodes.empty()) throw std::invalid_argument("ParallelReinsertionOptimizer: empty tree");
+  if (tree.nodes.empty()) throw tsah::DataError("ParallelReinsertionOptimizer: empty tree");
   NumberedTree out;
   const std::vector<uint32_t> order = childrenFirstOrder(tree);
   std::vector<uint32_t> id(tree.nodes.size(), kNone);
@@ -86,13 +87,13 @@ Bvh topologyOf(const std::vector<Links>& links, const std::vector<uint32_t>& pri
 void checkReinsertionInput(const Bvh& tree, const PrimitiveBoxes& prims,
                            const ParallelReinsertionOptimizer::Config& config,
                            const ParallelReinsertionOptimizer::Parallel& parallel) {
-  if (config.k < 0) throw std::invalid_argument("ParallelReinsertionOptimizer: the exponent k must be >= 0");
-  if (prims.frameCount == 0) throw std::invalid_argument("ParallelReinsertionOptimizer: no frames");
+  if (config.k < 0) throw tsah::ConfigError("ParallelReinsertionOptimizer: the exponent k must be >= 0");
+  if (prims.frameCount == 0) throw tsah::DataError("ParallelReinsertionOptimizer: no frames");
   if (prims.primCount != tree.primCount() || prims.boxes.size() != std::size_t(prims.frameCount) * prims.primCount)
-    throw std::invalid_argument("ParallelReinsertionOptimizer: the tree holds " + std::to_string(tree.primCount()) +
-                                " primitives, the boxes " + std::to_string(prims.primCount));
+    throw tsah::DataError("ParallelReinsertionOptimizer: the tree holds " + std::to_string(tree.primCount()) +
+                          " primitives, the boxes " + std::to_string(prims.primCount));
   if (!(parallel.candidateFraction > 0.0) || parallel.candidateFraction > 1.0)
-    throw std::invalid_argument("ParallelReinsertionOptimizer: candidateFraction must be in (0, 1]");
+    throw tsah::ConfigError("ParallelReinsertionOptimizer: candidateFraction must be in (0, 1]");
 }
 
 }  // namespace tsah::reinsertion

@@ -337,6 +337,7 @@ Bvh ReinsertionSession::bvh() const {
   refit(out, *impl_->prims);
   return out;
 }
+Bvh ReinsertionSession::topology() const { return impl_->topology(); }
 // The session's boxes are freed before the tree's are computed: the two are never held together.
 Bvh ReinsertionSession::release() {
   const PrimitiveBoxes& prims = *impl_->prims;

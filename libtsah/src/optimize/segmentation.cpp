@@ -4,8 +4,9 @@
 #include <chrono>
 #include <cmath>
 #include <map>
-#include <stdexcept>
 #include <thread>
+
+#include "tsah/base/error.hpp"
 
 namespace tsah {
 
@@ -174,12 +175,12 @@ std::vector<TimeRange> localSearch(Search& search, const Timeline& tl, std::vect
 
 void checkConfig(const Timeline& tl, const SegmentationConfig& c) {
   if (c.method.method == Method::SahRebuild)
-    throw std::invalid_argument("segmentation: SAH-rebuild builds a tree per frame, not one per part");
-  if (!(tl.end > tl.start)) throw std::invalid_argument("segmentation needs an animation (a time range of length > 0)");
-  if (c.evaluationFrames < 2) throw std::invalid_argument("segmentation needs at least 2 evaluation frames");
-  if (c.representativeFrames < 1) throw std::invalid_argument("segmentation needs at least 1 representative frame");
-  if (!(c.overlap >= 0) || !std::isfinite(c.overlap)) throw std::invalid_argument("the overlap must be >= 0");
-  if (!tl.boxesAt) throw std::invalid_argument("segmentation: the timeline has no boxes");
+    throw tsah::ConfigError("segmentation: SAH-rebuild builds a tree per frame, not one per part");
+  if (!(tl.end > tl.start)) throw tsah::DataError("segmentation needs an animation (a time range of length > 0)");
+  if (c.evaluationFrames < 2) throw tsah::ConfigError("segmentation needs at least 2 evaluation frames");
+  if (c.representativeFrames < 1) throw tsah::ConfigError("segmentation needs at least 1 representative frame");
+  if (!(c.overlap >= 0) || !std::isfinite(c.overlap)) throw tsah::ConfigError("the overlap must be >= 0");
+  if (!tl.boxesAt) throw tsah::DataError("segmentation: the timeline has no boxes");
 }
 
 // The per-frame optimized SAH cost at every evaluation frame: built on a uniform sample of them,
@@ -188,8 +189,8 @@ std::vector<double> referenceCosts(const Timeline& tl, const SegmentationConfig&
   const uint32_t m = static_cast<uint32_t>(times.size());
   if (!c.referenceCosts.empty()) {
     if (c.referenceCosts.size() != m)
-      throw std::invalid_argument("segmentation: " + std::to_string(c.referenceCosts.size()) +
-                                  " reference costs for " + std::to_string(m) + " evaluation frames");
+      throw tsah::ConfigError("segmentation: " + std::to_string(c.referenceCosts.size()) + " reference costs for " +
+                              std::to_string(m) + " evaluation frames");
     return c.referenceCosts;
   }
   const uint32_t r = c.referenceFrames == 0 || c.referenceFrames >= m ? m : std::max(2u, c.referenceFrames);
@@ -344,7 +345,7 @@ FrameSource Timeline::frames(std::vector<double> times) const {
 SegmentationResult evaluateParts(const Timeline& timeline, std::span<const TimeRange> parts,
                                  const SegmentationConfig& config) {
   checkConfig(timeline, config);
-  if (auto problem = validateTimeRanges(parts)) throw std::invalid_argument("segmentation: " + *problem);
+  if (auto problem = validateTimeRanges(parts)) throw tsah::ConfigError("segmentation: " + *problem);
   const auto start = std::chrono::steady_clock::now();
   Search search(timeline, config);
   SegmentationResult r = collect(search, std::vector<TimeRange>(parts.begin(), parts.end()));
@@ -360,12 +361,12 @@ SegmentationResult segmentTimeline(const Timeline& timeline, const SegmentationC
   const std::vector<double> interior(t.begin() + 1, t.end() - 1);
 
   if (config.mode == SegmentationConfig::Mode::Count) {
-    if (config.count == 0) throw std::invalid_argument("segmentation: the number of trees must be at least 1");
+    if (config.count == 0) throw tsah::ConfigError("segmentation: the number of trees must be at least 1");
     std::vector<double> boundaries;
     for (const TimeRange& p : equalTimeRanges(timeline.start, timeline.end, config.count))
       if (p.start > timeline.start) boundaries.push_back(p.start);
     if (config.count > 1 && (timeline.end - timeline.start) / config.count < config.overlap)
-      throw std::invalid_argument("segmentation: the overlap is longer than an equal-time part");
+      throw tsah::ConfigError("segmentation: the overlap is longer than an equal-time part");
     const bool peak = config.method.k > 0;
     const SplitObjective objective = [peak](std::span<const double> c) {
       double sum = 0.0, top = 0.0;
@@ -383,8 +384,8 @@ SegmentationResult segmentTimeline(const Timeline& timeline, const SegmentationC
   }
 
   if (!(config.budget > 0) || !std::isfinite(config.budget))
-    throw std::invalid_argument("segmentation: the budget must be a positive number");
-  if (config.maxTrees == 0) throw std::invalid_argument("segmentation: maxTrees must be at least 1");
+    throw tsah::ConfigError("segmentation: the budget must be a positive number");
+  if (config.maxTrees == 0) throw tsah::ConfigError("segmentation: maxTrees must be at least 1");
   std::vector<double> reference, bound(t.size(), config.budget);
   double referenceSeconds = 0.0;
   if (config.budgetRelative) {

@@ -16,14 +16,14 @@ float length(Vec3 v) { return std::sqrt(dot(v, v)); }
 
 void validateCamera(const Camera& c) {
   const Vec3 view = c.lookAt - c.eye;
-  if (!(length(view) > 0.0f)) throw tsah::Error("camera: eye and look-at point coincide");
+  if (!(length(view) > 0.0f)) throw tsah::ConfigError("camera: eye and look-at point coincide");
   if (!(length(cross(normalize(view), normalize(c.up))) > 1e-4f) || !(length(c.up) > 0.0f))
-    throw tsah::Error("camera: the up vector is zero or parallel to the view direction");
+    throw tsah::ConfigError("camera: the up vector is zero or parallel to the view direction");
   if (!(c.fovYDegrees > 0.0f && c.fovYDegrees < 180.0f))
-    throw tsah::Error("camera: the field of view must be between 0 and 180 degrees");
+    throw tsah::ConfigError("camera: the field of view must be between 0 and 180 degrees");
   for (const Vec3& v : {c.eye, c.lookAt, c.up})
     if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z))
-      throw tsah::Error("camera: a coordinate is not finite");
+      throw tsah::ConfigError("camera: a coordinate is not finite");
 }
 
 Camera fitCamera(const Aabb& bounds, Vec3 up, float fovYDegrees, float aspect) {

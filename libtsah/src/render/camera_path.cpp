@@ -16,7 +16,7 @@ Vec3 lerp(Vec3 a, Vec3 b, float s) { return a + (b - a) * s; }
 }  // namespace
 
 Camera cameraAt(std::span<const anim::CameraKey> path, double t) {
-  if (path.empty()) throw tsah::Error("camera path is empty");
+  if (path.empty()) throw tsah::ConfigError("camera path is empty");
   auto toCamera = [](const anim::CameraKey& k) {
     Camera c;
     c.eye = toVec3(k.eye);

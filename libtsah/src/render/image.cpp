@@ -42,11 +42,11 @@ void appendBytes(void* context, void* data, int size) {
 
 std::vector<uint8_t> encodePng(const Image& image) {
   if (image.width == 0 || image.height == 0 || image.rgb.size() != std::size_t(image.width) * image.height * 3)
-    throw tsah::Error("cannot encode an empty or inconsistent image as PNG");
+    throw tsah::DataError("cannot encode an empty or inconsistent image as PNG");
   std::vector<uint8_t> out;
   if (!stbi_write_png_to_func(appendBytes, &out, int(image.width), int(image.height), 3, image.rgb.data(),
                               int(image.width * 3)))
-    throw tsah::Error("PNG encoding failed");
+    throw tsah::Failure("PNG encoding failed");
   return out;
 }
 
@@ -67,8 +67,8 @@ Image loadPng(const std::string& path) { return decodePng(tsah::readFile(path, s
 
 ImageDifference compareImages(const Image& a, const Image& b, uint32_t threshold) {
   if (a.width != b.width || a.height != b.height || a.rgb.size() != b.rgb.size())
-    throw tsah::Error("images differ in size: " + std::to_string(a.width) + "x" + std::to_string(a.height) +
-                      " vs " + std::to_string(b.width) + "x" + std::to_string(b.height));
+    throw tsah::DataError("images differ in size: " + std::to_string(a.width) + "x" + std::to_string(a.height) +
+                          " vs " + std::to_string(b.width) + "x" + std::to_string(b.height));
   ImageDifference d;
   if (a.rgb.empty()) return d;
   uint64_t sum = 0, above = 0;

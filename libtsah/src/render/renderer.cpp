@@ -102,7 +102,7 @@ SceneLighting fitLighting(const Aabb& bounds, const Camera& camera, Vec3 up, flo
 
 RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const SceneLighting& lighting,
                         const RenderSettings& settings, Image& image) {
-  if (settings.width == 0 || settings.height == 0) throw tsah::Error("render: the image size must be positive");
+  if (settings.width == 0 || settings.height == 0) throw tsah::ConfigError("render: the image size must be positive");
   validateCamera(camera);
   const uint32_t width = settings.width, height = settings.height;
   const std::size_t pixels = std::size_t(width) * height;

@@ -58,9 +58,9 @@ CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint3
   const uint32_t hardware = std::max(1u, std::thread::hardware_concurrency());
   const uint32_t threads = config.threads == 0 ? hardware : std::min(config.threads, hardware);
   threads_ = std::make_unique<Threads>(threads);
-  if (indices_.size() % 3 != 0) throw tsah::Error("runtime: the index array is not a multiple of 3");
+  if (indices_.size() % 3 != 0) throw tsah::DataError("runtime: the index array is not a multiple of 3");
   for (uint32_t v : indices_)
-    if (v >= vertexCount_) throw tsah::Error("runtime: a triangle refers to a vertex out of range");
+    if (v >= vertexCount_) throw tsah::DataError("runtime: a triangle refers to a vertex out of range");
   setTree(topologyOf(tree));
   positions_.assign(std::size_t(vertexCount_) * 3, 0.0f);
   info_.layout = config.layout;
@@ -74,7 +74,7 @@ CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint3
   }
   kernels_ = kernelsFor(config.layout, config.isa);
   if (!kernels_)
-    throw tsah::Error(std::string("runtime: no ") + name(config.layout) + " kernels" +
+    throw tsah::ConfigError(std::string("runtime: no ") + name(config.layout) + " kernels" +
                       (config.isa ? std::string(" for ") + name(*config.isa) : std::string()) +
                       " run on this processor (bvh8 needs AVX2)");
   info_.isa = kernels_->isa;
@@ -102,7 +102,7 @@ namespace {
 
 const FlatBvh& firstTree(const TreeSet& set) {
   if (set.trees.empty() || set.ranges.size() != set.trees.size())
-    throw tsah::Error("runtime: the tree set holds no trees (or not one time range per tree)");
+    throw tsah::DataError("runtime: the tree set holds no trees (or not one time range per tree)");
   return set.trees.front();
 }
 
@@ -159,8 +159,8 @@ void CpuRuntime::parallelFor(std::size_t n, std::size_t grain,
 
 void CpuRuntime::setTree(FlatBvh tree) {
   if (tree.depth > kTraversalStackSize)
-    throw tsah::Error("runtime: tree depth " + std::to_string(tree.depth) + " exceeds the traversal stack of " +
-                      std::to_string(kTraversalStackSize));
+    throw tsah::DataError("runtime: tree depth " + std::to_string(tree.depth) + " exceeds the traversal stack of " +
+                          std::to_string(kTraversalStackSize));
   tree_ = std::move(tree);
   woop_.resize(tree_.triangleCount());
 
@@ -180,8 +180,8 @@ void CpuRuntime::setTree(FlatBvh tree) {
 
 void CpuRuntime::setPositions(std::span<const float> positions) {
   if (positions.size() != std::size_t(vertexCount_) * 3)
-    throw tsah::Error("runtime: got " + std::to_string(positions.size()) + " coordinates, expected " +
-                      std::to_string(std::size_t(vertexCount_) * 3));
+    throw tsah::DataError("runtime: got " + std::to_string(positions.size()) + " coordinates, expected " +
+                          std::to_string(std::size_t(vertexCount_) * 3));
   positions_.assign(positions.begin(), positions.end());
 }
 
@@ -260,8 +260,8 @@ CpuRuntime::RebuildTimings CpuRuntime::rebuild(std::span<const float> positions,
   timings.buildMs = msSince(start);
   start = std::chrono::steady_clock::now();
   if (bvh.primCount() != triangleCount())
-    throw tsah::Error("runtime: the rebuilt tree holds " + std::to_string(bvh.primCount()) + " triangles, expected " +
-                      std::to_string(triangleCount()));
+    throw tsah::DataError("runtime: the rebuilt tree holds " + std::to_string(bvh.primCount()) +
+                          " triangles, expected " + std::to_string(triangleCount()));
   FlatBvh flat = flattenBvh(bvh);
   if (flat.frameCount != 1) {  // keep frame 0 only
     flat.nodes.resize(flat.interiorCount);
@@ -302,12 +302,12 @@ bool CpuRuntime::anyHit(const Ray& ray, AnyHitOrder order) const {
 }
 
 const FlatBvh& CpuRuntime::tree() const {
-  if (info_.layout != Layout::Bvh2) throw tsah::Error("runtime: the binary tree is not kept up to date in a wide layout");
+  if (info_.layout != Layout::Bvh2) throw tsah::ConfigError("runtime: the binary tree is not kept up to date in a wide layout");
   return tree_;
 }
 
 BvhView CpuRuntime::view() const {
-  if (info_.layout != Layout::Bvh2) throw tsah::Error("runtime: the binary view is not kept up to date in a wide layout");
+  if (info_.layout != Layout::Bvh2) throw tsah::ConfigError("runtime: the binary view is not kept up to date in a wide layout");
   return binaryView();
 }
 

@@ -43,7 +43,7 @@ std::vector<uint8_t> readFileForUpdate(const std::string& path, std::size_t maxB
 // writers below refuse to replace one of them: `optimize a.tanim -o a.tanim` must not destroy a.tanim.
 void protectInputs(bool on);
 
-// Throws tsah::Failure when `path` does not end in `extension` (case-insensitive), e.g. a tree
+// Throws tsah::ConfigError when `path` does not end in `extension` (case-insensitive), e.g. a tree
 // written as x.tanim would later be read as an animation: "PATH: WHAT files must end in .EXT".
 void requireExtension(const std::string& path, const std::string& extension, const std::string& what);
 

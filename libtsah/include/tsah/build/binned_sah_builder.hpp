@@ -29,8 +29,9 @@ class BinnedSahBuilder {
 
   // Builds a tree over one frame of primitive boxes (indexed by primitive id); frameCount = 1,
   // the root is node 0, the two children of a node are adjacent, each leaf holds 1..maxLeafSize
-  // primitives. Throws std::invalid_argument for a non-finite box, an invalid configuration, or
-  // more primitives than 32-bit indices address. An empty input gives an empty tree.
+  // primitives. Throws tsah::ConfigError for an invalid configuration, tsah::DataError for an empty
+  // or non-finite box or more primitives than 32-bit indices address. An empty input gives an
+  // empty tree.
   Bvh build(std::span<const Aabb> primBoxes) const;
 
  private:

@@ -26,7 +26,7 @@ class SweepSahBuilder {
 
   // Builds a tree over one frame of primitive boxes (indexed by primitive id). The result holds one
   // box per node (frameCount = 1); refit() adds further frames. Nodes are numbered so that the root
-  // is 0 and the two children of a node are adjacent. Throws std::invalid_argument for a box with a
+  // is 0 and the two children of a node are adjacent. Throws tsah::DataError for a box with a
   // non-finite coordinate or more primitives than 32-bit node indices can address.
   Bvh build(std::span<const Aabb> primBoxes) const;
 

@@ -40,8 +40,9 @@ struct BvhFile {
 // stored in .tbvh files and checked by `tsah trace` / `tsah export` against the animation.
 uint32_t topologyHash(std::span<const uint32_t> indices);
 
-// Writes the tree in canonical order (see flat_bvh.hpp). Throws tsah::Error when the tree is
-// empty or invalid, a name does not fit, or info.triangleCount disagrees with the tree.
+// Writes the tree in canonical order (see flat_bvh.hpp). Throws tsah::DataError when the tree is
+// empty or invalid or info.triangleCount disagrees with the tree, tsah::ConfigError when a name
+// does not fit.
 std::vector<uint8_t> encodeBvhFile(const Bvh& bvh, const BvhBuildInfo& info);
 // Validates everything before use (magic, version, layout, sizes vs byte count, checksum, indices in
 // range, each triangle referenced exactly once, the node graph a tree); throws tsah::FileError

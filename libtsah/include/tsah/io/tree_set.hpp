@@ -31,7 +31,7 @@ struct TimeRange {
 };
 
 // count consecutive parts of [start, end] of equal length (the last ends exactly at end). Throws
-// std::invalid_argument when count is 0 or end < start.
+// tsah::ConfigError when count is 0 or end < start.
 std::vector<TimeRange> equalTimeRanges(double start, double end, uint32_t count);
 
 // The time where tree s hands over to tree s+1: the middle of ranges[s].end and ranges[s+1].start.
@@ -64,8 +64,9 @@ struct TreeSet {
 };
 
 // Writes K >= 1 trees as a version 2 file. builds[s].timeStart/timeEnd are set to ranges[s];
-// every tree must hold the same triangles (count, vertex count, topology hash). Throws tsah::Error
-// when the ranges break the rules above, the counts differ, or a tree cannot be encoded.
+// every tree must hold the same triangles (count, vertex count, topology hash). Throws
+// tsah::DataError when the ranges break the rules above, the counts differ, or a tree cannot be
+// encoded, tsah::ConfigError for a negative or non-finite overlap or budget or a name that does not fit.
 std::vector<uint8_t> encodeTreeSetFile(std::span<const Bvh> trees, std::span<const BvhBuildInfo> builds,
                                        std::span<const TimeRange> ranges, const TreeSetInfo& info);
 // Reads a version 1 (one tree; its time range is the part) or version 2 file, validating

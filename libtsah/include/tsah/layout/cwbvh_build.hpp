@@ -40,8 +40,9 @@ struct CwbvhTree {
 
 // The compressed layout of `wide` (width <= 8), quantized with its boxes of frame `frame`.
 // Children are placed in slots by the direction of their box centre from the node's centre,
-// averaged over all frames of `wide` (greedy assignment as in the paper). Throws tsah::Error when
-// the tree is wider than 8 or a node's leaf children hold more than 64 triangles.
+// averaged over all frames of `wide` (greedy assignment as in the paper). Throws tsah::DataError
+// when the tree is wider than 8 or a node's leaf children hold more than 64 triangles,
+// tsah::ConfigError when `wide` has no frame `frame`.
 CwbvhTree buildCwbvh(const WideBvh& wide, uint32_t frame = 0);
 
 // The 8-wide T-SAH collapse of a flat tree over all its frames for an objective (the tree file's

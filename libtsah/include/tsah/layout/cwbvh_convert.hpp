@@ -387,7 +387,7 @@ TSAH_HD void cwbvhWriteNode(const BinaryTreeView& t, const CwbvhOpening& o, uint
 // rootCount triangles for a tree that is one leaf) with box rootBox. The result always has a root
 // node (rootRef 0; a one-leaf tree becomes a node with one leaf child), exactBoxes (the binary
 // tree's child boxes), parentSlot, leaves and depth, so validateCwbvh and refitCwbvh apply.
-// Throws tsah::Error when t is not a valid binary tree over its triangles or a node's leaves
+// Throws tsah::DataError when t is not a valid binary tree over its triangles or a node's leaves
 // would hold more than 64 triangles. mergeLimit <= kCwbvhMaxLeafTriangles.
 CwbvhTree convertToCwbvh(const BinaryTreeView& t, int32_t rootRef, uint32_t rootCount, const Aabb& rootBox,
                          uint32_t mergeLimit = kCwbvhDefaultMergeTriangles);

@@ -38,7 +38,7 @@ struct FlatBvh {
 };
 
 // Converts a valid Bvh (see tsah::validate) with at least one primitive into canonical flat form,
-// keeping every frame's boxes. Throws tsah::Error when the tree is empty or invalid.
+// keeping every frame's boxes. Throws tsah::DataError when the tree is empty or invalid.
 FlatBvh flattenBvh(const Bvh& bvh);
 
 // The inverse: interior node i becomes Bvh node i, leaves follow in depth-first order, primIds is
@@ -53,7 +53,7 @@ Bvh unflattenBvh(const FlatBvh& flat);
 std::optional<std::string> validateFlatBvh(const FlatBvh& flat);
 
 // What a runtime (CPU or GPU) keeps of a tree it refits every frame: the structure with frame 0's
-// boxes only (each update recomputes them). Throws tsah::Error, the message starting with `who`
+// boxes only (each update recomputes them). Throws tsah::DataError, the message starting with `who`
 // ("runtime: ..."), unless the tree holds `triangles` triangles, is valid and is at most
 // `maxDepth` deep (the traversal stack).
 FlatBvh runtimeTopology(const FlatBvh& tree, uint32_t triangles, uint32_t maxDepth, const std::string& who);
@@ -63,7 +63,7 @@ std::vector<uint32_t> subtreeEnds(const FlatBvh& flat);
 
 // The vertex indices of each slot's triangle, 3 per slot (indices[3 * triIndex[s] + k]), so that a
 // refit streams them in slot order instead of gathering indices[3 * triIndex[s]] (a cache miss per
-// triangle). Throws tsah::Error, the message starting with `who`, for a triangle id past `indices`.
+// triangle). Throws tsah::DataError, the message starting with `who`, for a triangle id past `indices`.
 std::vector<uint32_t> slotVertexIndices(std::span<const uint32_t> triIndex, std::span<const uint32_t> indices,
                                         const std::string& who);
 

@@ -105,7 +105,7 @@ class WideCollapser {
 
   // The cost-optimal wide tree of `bvh` (which must pass tsah::validate and hold at least one
   // primitive) over the frames stored in it. Deterministic. O(nodes * (frames + width^2)).
-  // Throws tsah::Error for an invalid config or tree.
+  // Throws tsah::ConfigError for an invalid config or weights, tsah::DataError for an invalid tree.
   WideBvh collapse(const Bvh& bvh) const;
 
   // The same with given frame weights (one per frame of bvh, non-negative, not all zero; scaled to

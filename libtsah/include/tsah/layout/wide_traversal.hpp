@@ -63,7 +63,7 @@ struct WideKernels {
                     Aabb& bounds) = nullptr;
 };
 
-// The kernels of isa; throws tsah::Error when it is not supported (isaSupported).
+// The kernels of isa; throws tsah::ConfigError when it is not supported (isaSupported).
 const WideKernels& wideKernels(SimdIsa isa);
 
 }  // namespace tsah

@@ -26,8 +26,9 @@ class WideTree {
   // triangles (3 vertex indices per triangle id), the same for every frame; the tree keeps its own
   // copy in slot order. Boxes and triangles are zero until the first refit(). threads: how many
   // workers refit() will run on (it plans about 8 subtrees per thread). isa: whose SIMD code
-  // computes the Woop rows (the results are the same for every one). Throws tsah::Error when the
-  // isa is not supported or a triangle id is past the index array.
+  // computes the Woop rows (the results are the same for every one). Throws tsah::ConfigError when
+  // the isa is not supported, tsah::DataError when the topology is invalid, too wide or too deep, or a
+  // triangle id is past the index array.
   WideTree(const WideBvh& topology, std::span<const uint32_t> indices, uint32_t threads, SimdIsa isa = bestIsa());
 
   // This frame's vertices (xyz per vertex; every vertex index of the triangles must be in range).

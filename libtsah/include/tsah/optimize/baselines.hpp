@@ -82,7 +82,7 @@ Bvh buildSah0(const PrimitiveBoxes& rep, const BaselineConfig& config);
 Bvh buildSahStar(const PrimitiveBoxes& rep, const BaselineConfig& config);
 Bvh buildTSah(const PrimitiveBoxes& rep, int k, const BaselineConfig& config,
               InsertionOptimizer::Result* details = nullptr);
-// Any single-tree method (throws std::invalid_argument for SahRebuild, which builds many trees).
+// Any single-tree method (throws tsah::ConfigError for SahRebuild, which builds many trees).
 Bvh buildMethod(const MethodSpec& method, const PrimitiveBoxes& rep, const BaselineConfig& config,
                 InsertionOptimizer::Result* details = nullptr);
 // An optimized SAH tree for one frame (sweep SAH, insertion optimization, collapse), as SAH* and

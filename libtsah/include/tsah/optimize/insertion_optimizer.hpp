@@ -86,7 +86,7 @@ class InsertionOptimizer {
 class InsertionSession {
  public:
   // Refits bvh to prims (all frames) and computes the frame costs and weights. Throws
-  // std::invalid_argument when prims does not match the tree. prims must outlive the session.
+  // tsah::DataError when prims does not match the tree. prims must outlive the session.
   InsertionSession(Bvh bvh, const PrimitiveBoxes& prims, const InsertionOptimizer::Config& config);
   ~InsertionSession();
   InsertionSession(InsertionSession&&) noexcept;

@@ -91,6 +91,7 @@ class RoundSession {
   virtual double cost() const = 0;                  // C~^k of the tracked frame costs
   virtual std::vector<double> frameCostList() const = 0;  // C_i, updated by every applied move
   virtual Bvh bvh() const = 0;                      // the current tree with boxes for every frame
+  virtual Bvh topology() const = 0;                 // the same without boxes (frameCount 0)
   // The tree (collapsed by `collapse` when given); the session is unusable afterwards.
   virtual Bvh releaseTree(const LeafCollapser* collapse) = 0;
   virtual uint64_t searches() const = 0;
@@ -107,7 +108,7 @@ InsertionOptimizer::Result runReinsertionRounds(RoundSession& session, const Ins
 // tree after every round.
 class ReinsertionSession final : public RoundSession {
  public:
-  // Throws std::invalid_argument when prims does not match the tree. prims must outlive the session.
+  // Throws tsah::DataError when prims does not match the tree. prims must outlive the session.
   ReinsertionSession(Bvh bvh, const PrimitiveBoxes& prims, const ParallelReinsertionOptimizer::Config& config,
                      const ParallelReinsertionOptimizer::Parallel& parallel);
   ~ReinsertionSession() override;
@@ -121,6 +122,7 @@ class ReinsertionSession final : public RoundSession {
   std::span<const double> frameCosts() const;  // C_i, updated by every applied move
   std::vector<double> frameCostList() const override;
   Bvh bvh() const override;
+  Bvh topology() const override;
   Bvh release();                               // the tree; the session is unusable afterwards
   // collapser.collapse(release()), with the peak memory of the session alone (see the .cpp).
   Bvh releaseCollapsed(const LeafCollapser& collapser);

@@ -96,8 +96,9 @@ struct SegmentationResult {
   double searchSeconds = 0.0;          // everything, the reference included
 };
 
-// Runs the configured mode. Throws std::invalid_argument for a bad configuration (count 0, a
-// rebuild method, fewer than 2 evaluation frames, a time range of length 0, overlap too long).
+// Runs the configured mode. Throws tsah::ConfigError for a bad configuration (count 0, a rebuild
+// method, fewer than 2 evaluation frames, overlap too long), tsah::DataError for a timeline of
+// length 0 (not an animation) or without boxes.
 SegmentationResult segmentTimeline(const Timeline& timeline, const SegmentationConfig& config);
 
 // The same trees and evaluation for given parts (e.g. equalTimeRanges): no search.

@@ -17,7 +17,7 @@ struct Camera {
   float fovYDegrees = 45.0f;  // vertical field of view
 };
 
-// Throws tsah::Error when eye == lookAt, up is parallel to the view direction, or the field of
+// Throws tsah::ConfigError when eye == lookAt, up is parallel to the view direction, or the field of
 // view is outside (0, 180) degrees.
 void validateCamera(const Camera& camera);
 

@@ -9,7 +9,7 @@
 namespace tsah {
 
 // The camera of the path at time t: linear interpolation of the keys, clamped at the ends. Throws
-// tsah::Error when the path is empty.
+// tsah::ConfigError when the path is empty.
 Camera cameraAt(std::span<const anim::CameraKey> path, double t);
 
 }  // namespace tsah

@@ -18,7 +18,7 @@ struct Image {
 };
 
 std::vector<uint8_t> encodePng(const Image& image);
-// Atomic (temporary file + rename); throws tsah::Error naming the path on failure.
+// Atomic (temporary file + rename); throws tsah::Failure naming the path on failure.
 void savePng(const std::string& path, const Image& image);
 // Any PNG, converted to RGB; throws tsah::FileError naming the file.
 Image decodePng(std::span<const uint8_t> bytes, const std::string& file);

@@ -42,7 +42,7 @@ struct RenderStats {
 };
 
 // Renders the runtime's current frame into image (resized to the settings). Deterministic: the same
-// inputs give the same image for any thread count. Throws tsah::Error for an empty image size.
+// inputs give the same image for any thread count. Throws tsah::ConfigError for an empty image size.
 RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const SceneLighting& lighting,
                         const RenderSettings& settings, Image& image);
 

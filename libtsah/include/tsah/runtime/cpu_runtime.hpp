@@ -66,13 +66,14 @@ class CpuRuntime {
 
   // tree: the topology (boxes are recomputed by update(); a wide layout is collapsed using every
   // frame block the tree holds). indices: 3 per triangle, the animation's topology, each <
-  // vertexCount. Throws tsah::Error when the tree does not match the triangle count, is invalid, is
-  // deeper than the traversal stack allows, or the layout / instruction set is not supported.
+  // vertexCount. Throws tsah::DataError when the tree does not match the triangle count, is
+  // invalid or is deeper than the traversal stack allows, tsah::ConfigError when the layout /
+  // instruction set is not supported.
   CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint32_t vertexCount, Config config);
   CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint32_t vertexCount);
   // A tree set: every tree is checked as above and kept (a wide layout collapses each tree once,
   // here); selectTreeAt picks the one to refit and trace (tree 0 until then; layoutInfo() describes
-  // tree 0). Throws tsah::Error for an empty set.
+  // tree 0). Throws tsah::DataError for an empty set.
   CpuRuntime(const TreeSet& set, std::vector<uint32_t> indices, uint32_t vertexCount, Config config);
   ~CpuRuntime();
   CpuRuntime(const CpuRuntime&) = delete;
@@ -100,7 +101,7 @@ class CpuRuntime {
 
   const LayoutInfo& layoutInfo() const { return info_; }
   // The binary tree and its view: bvh2 only (the wide layouts do not refit the binary tree; both
-  // throw tsah::Error for them).
+  // throw tsah::ConfigError for them).
   BvhView view() const;
   const FlatBvh& tree() const;
   // The wide tree of a bvh4 / bvh8 runtime (null otherwise).

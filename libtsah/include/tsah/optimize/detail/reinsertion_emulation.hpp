@@ -10,8 +10,8 @@
 
 namespace tsah {
 
-// Throws std::invalid_argument for bad input or more than 16 representative frames. prims must
-// outlive the session. Parallel::threads is unused.
+// Throws tsah::DataError for bad input, tsah::ConfigError for more than 16 representative frames.
+// prims must outlive the session. Parallel::threads is unused.
 std::unique_ptr<RoundSession> makeEmulatedDeviceSession(Bvh bvh, const PrimitiveBoxes& prims,
                                                         const ParallelReinsertionOptimizer::Config& config,
                                                         const ParallelReinsertionOptimizer::Parallel& parallel);

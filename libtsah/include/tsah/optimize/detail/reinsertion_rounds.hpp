@@ -25,10 +25,10 @@
 #include <algorithm>
 #include <cstdint>
 #include <memory>
-#include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "tsah/base/error.hpp"
 #include "tsah/core/bvh.hpp"
 #include "tsah/optimize/leaf_collapser.hpp"
 #include "tsah/optimize/parallel_optimizer.hpp"
@@ -47,7 +47,7 @@ struct NumberedTree {
 };
 
 // The reachable nodes of a valid tree renumbered, without boxes or primIds (the caller moves the
-// tree's primIds: they keep their order). Throws std::invalid_argument for an empty tree.
+// tree's primIds: they keep their order). Throws tsah::DataError for an empty tree.
 NumberedTree numberTree(const Bvh& tree);
 // The interior nodes by height (leaves 0, a node one more than its higher child) into `order`;
 // returns the offsets of each height in it (heights 1, 2, ...; one more offset at the end).
@@ -57,7 +57,8 @@ BvhNode nodeOf(const Links& links, bool leaf);
 // The topology back as a Bvh without boxes (frameCount 0).
 Bvh topologyOf(const std::vector<Links>& links, const std::vector<uint32_t>& primIds, uint32_t root,
                uint32_t innerCount);
-// The checks every reinsertion optimizer makes of its input (std::invalid_argument).
+// The checks every reinsertion optimizer makes of its input (tsah::ConfigError for the settings,
+// tsah::DataError for a tree and boxes that do not match).
 void checkReinsertionInput(const Bvh& tree, const PrimitiveBoxes& prims,
                            const ParallelReinsertionOptimizer::Config& config,
                            const ParallelReinsertionOptimizer::Parallel& parallel);
@@ -101,8 +102,8 @@ class ReinsertionRounds {
       : b_(backend), config_(config), parallel_(parallel), prims_(&prims) {
     checkReinsertionInput(tree, prims, config, parallel);
     if (prims.frameCount > kMaxDeviceFrames)
-      throw std::invalid_argument("the GPU optimizer takes at most " + std::to_string(kMaxDeviceFrames) +
-                                  " representative frames (" + std::to_string(prims.frameCount) + " given)");
+      throw tsah::ConfigError("the GPU optimizer takes at most " + std::to_string(kMaxDeviceFrames) +
+                              " representative frames (" + std::to_string(prims.frameCount) + " given)");
     frames_ = prims.frameCount;
     NumberedTree numbered = numberTree(tree);
     numbered.primIds = std::move(tree.primIds);
@@ -322,6 +323,7 @@ class BackendSession final : public RoundSession {
     refit(out, *prims_);
     return out;
   }
+  Bvh topology() const override { return rounds_->topology(); }
   // The device state is freed before the host computes the boxes: the two are never held together.
   Bvh releaseTree(const LeafCollapser* collapse) override {
     Bvh out = rounds_->topology();
