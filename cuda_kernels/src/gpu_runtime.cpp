@@ -461,27 +461,22 @@ FlatBvh GpuRuntime::downloadTree() const {
   return flat;
 }
 
-Bvh GpuRuntime::downloadRebuiltTree() const {
-  const Impl& m = *impl_;
-  if (!m.rebuilder || !m.rebuilder->built()) throw tsah::ConfigError("GPU runtime: no tree has been rebuilt");
-  return m.rebuilder->download(m.stream);
+const detail::GpuRebuilder& GpuRuntime::Impl::lastRebuild() const {
+  if (!rebuilder || !rebuilder->built()) throw tsah::ConfigError("GPU runtime: no tree has been rebuilt");
+  return *rebuilder;
 }
 
+Bvh GpuRuntime::downloadRebuiltTree() const { return impl_->lastRebuild().download(impl_->stream); }
+
 CwbvhTree GpuRuntime::downloadRebuiltCwbvh() const {
-  const Impl& m = *impl_;
-  if (!m.rebuilder || !m.rebuilder->built()) throw tsah::ConfigError("GPU runtime: no tree has been rebuilt");
-  if (!m.rebuilder->wide())
-    throw tsah::ConfigError("GPU runtime: rebuilt trees are in the binary layout (layout bvh2)");
-  CwbvhTree t = m.rebuilder->wide()->download(m.stream);
+  const detail::GpuRebuilder& rebuilt = impl_->lastRebuild();
+  if (!rebuilt.wide()) throw tsah::ConfigError("GPU runtime: rebuilt trees are in the binary layout (layout bvh2)");
+  CwbvhTree t = rebuilt.wide()->download(impl_->stream);
   t.rootBox = bounds();
   return t;
 }
 
-FlatBvh GpuRuntime::downloadRebuiltArrays() const {
-  const Impl& m = *impl_;
-  if (!m.rebuilder || !m.rebuilder->built()) throw tsah::ConfigError("GPU runtime: no tree has been rebuilt");
-  return m.rebuilder->downloadArrays(m.stream);
-}
+FlatBvh GpuRuntime::downloadRebuiltArrays() const { return impl_->lastRebuild().downloadArrays(impl_->stream); }
 
 Aabb GpuRuntime::bounds() const {
   const Impl& m = *impl_;

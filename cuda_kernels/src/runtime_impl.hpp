@@ -117,6 +117,8 @@ struct GpuRuntime::Impl {
   bool woopValid = false;
   bool tracingRebuilt = false;
   std::unique_ptr<detail::GpuRebuilder> rebuilder;
+  // The rebuilder after its last rebuild; throws tsah::ConfigError when nothing was rebuilt yet.
+  const detail::GpuRebuilder& lastRebuild() const;
 
   // Scratch of the ray queries and the renderer, grown on demand.
   DeviceBuffer<uint32_t> words;          // ray counters, ray counts
