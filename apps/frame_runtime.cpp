@@ -158,14 +158,14 @@ class GpuFrameRuntime final : public FrameRuntime {
   uint32_t currentTree() const override { return runtime_.currentTree(); }
 
   std::string summary() const override {
-    return "GPU " + runtime_.device().name + ", " + cuda::treeLayoutName(runtime_.config().layout) + " layout";
+    return "GPU " + runtime_.device().name + ", " + tsah::name(runtime_.config().layout) + " layout";
   }
 
   void describe(nlohmann::json& out) const override {
     out["device"] = runtime_.device().name;
     out["gpu"] = deviceJson();
     out["timer"] = "CUDA events (device time)";
-    out["layout"] = cuda::treeLayoutName(runtime_.config().layout);
+    out["layout"] = tsah::name(runtime_.config().layout);
   }
 
  private:
@@ -180,7 +180,7 @@ std::unique_ptr<FrameRuntime> makeGpuFrameRuntime(const TreeSet& trees, const an
     throw Failure("no CUDA device found (no GPU, no NVIDIA driver, or CUDA_VISIBLE_DEVICES hides them); "
                   "use --device cpu");
   cuda::GpuRuntime::Config config;
-  if (options.layout != Layout::Auto) config.layout = cuda::parseTreeLayout(name(options.layout));
+  config.layout = options.layout;  // Auto: the runtime's default
   // The cwbvh collapse of trees without build infos (a set read from a file brings each tree's own).
   config.wideObjective = options.objective;
   std::optional<cuda::RebuildOptions> rebuild;
@@ -191,7 +191,7 @@ std::unique_ptr<FrameRuntime> makeGpuFrameRuntime(const TreeSet& trees, const an
     rebuild->maxLeafSize = std::max(1u, options.objective.maxLeafSize);
     // The compressed layout holds leaves of at most 8 triangles (64 per node), as its refit path's
     // collapse does.
-    if (config.layout == cuda::TreeLayout::Cwbvh)
+    if (config.layout == tsah::Layout::Cwbvh)
       rebuild->maxLeafSize = std::min(rebuild->maxLeafSize, kCwbvhMaxLeafTriangles);
   }
   return std::make_unique<GpuFrameRuntime>(trees, animation, rebuild, config);

@@ -48,7 +48,7 @@ tsah::FlatBvh sahTree(const anim::Animation& a) {
 
 tc::GpuRuntime::Config wide() {
   tc::GpuRuntime::Config c;
-  c.layout = tc::TreeLayout::Cwbvh;
+  c.layout = tsah::Layout::Cwbvh;
   return c;
 }
 
@@ -382,11 +382,19 @@ TEST(CudaCwbvh, ImagesEqualBinaryAndCpu) {
   }
 }
 
-TEST(CudaCwbvh, LayoutNames) {
-  EXPECT_EQ(tc::parseTreeLayout("cwbvh"), tc::TreeLayout::Cwbvh);
-  EXPECT_EQ(tc::parseTreeLayout("bvh2"), tc::TreeLayout::Bvh2);
-  EXPECT_STREQ(tc::treeLayoutName(tc::TreeLayout::Cwbvh), "cwbvh");
-  EXPECT_THROW(tc::parseTreeLayout("bvh8"), tsah::Error);
+// The GPU traces bvh2 and cwbvh; a CPU layout is refused, Auto is the default (bvh2).
+TEST(CudaCwbvh, RefusesTheCpuLayouts) {
+  REQUIRE_GPU();
+  const anim::Animation a = generatedAnimation(anim::GeneratorKind::Wave, 500, 3);
+  const tsah::FlatBvh tree = sahTree(a);
+  for (tsah::Layout layout : {tsah::Layout::Bvh4, tsah::Layout::Bvh8}) {
+    tc::GpuRuntime::Config config;
+    config.layout = layout;
+    EXPECT_THROW(tc::GpuRuntime(tree, a, config), tsah::ConfigError) << tsah::name(layout);
+  }
+  tc::GpuRuntime::Config automatic;
+  automatic.layout = tsah::Layout::Auto;
+  EXPECT_EQ(tc::GpuRuntime(tree, a, automatic).config().layout, tsah::Layout::Bvh2);
 }
 
 }  // namespace

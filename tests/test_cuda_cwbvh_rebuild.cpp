@@ -34,7 +34,7 @@ tsah::FlatBvh frameZeroTree(const anim::Animation& a) {
   return tsah::flattenBvh(tsah::SweepSahBuilder().build(boxes.frame(0)));
 }
 
-tc::GpuRuntime::Config config(tc::TreeLayout layout, bool graphs = true) {
+tc::GpuRuntime::Config config(tsah::Layout layout, bool graphs = true) {
   tc::GpuRuntime::Config c;
   c.layout = layout;
   c.useGraphs = graphs;
@@ -77,7 +77,7 @@ TEST(CudaCwbvhRebuild, ConversionEqualsHostEmulation) {
   for (auto kind : {anim::GeneratorKind::Explode, anim::GeneratorKind::Wave}) {
     const anim::Animation a = generatedAnimation(kind, tsah::test::shortCudaRun() ? 3000 : 30000, 6);
     const tsah::FlatBvh tree = frameZeroTree(a);
-    tc::GpuRuntime gpu(tree, a, config(tc::TreeLayout::Cwbvh));
+    tc::GpuRuntime gpu(tree, a, config(tsah::Layout::Cwbvh));
     for (auto method : {tc::RebuildMethod::Lbvh, tc::RebuildMethod::HlbvhSah})
       for (bool collapse : {true, false})
         for (double t : {a.startTime(), 2.5, a.endTime()}) {
@@ -103,8 +103,8 @@ TEST(CudaCwbvhRebuild, LargeTreeDeterministicWithAndWithoutGraphs) {
   REQUIRE_GPU();
   const anim::Animation a = generatedAnimation(anim::GeneratorKind::Explode, tsah::test::shortCudaRun() ? 20000 : 1000000, 3);
   const tsah::FlatBvh tree = frameZeroTree(a);
-  tc::GpuRuntime graphs(tree, a, config(tc::TreeLayout::Cwbvh, true));
-  tc::GpuRuntime direct(tree, a, config(tc::TreeLayout::Cwbvh, false));
+  tc::GpuRuntime graphs(tree, a, config(tsah::Layout::Cwbvh, true));
+  tc::GpuRuntime direct(tree, a, config(tsah::Layout::Cwbvh, false));
   for (bool collapse : {false, true}) {
     const tc::RebuildOptions o = options(tc::RebuildMethod::Lbvh, collapse);
     const tc::RebuildTimings first = graphs.rebuildAt(1.0, o);
@@ -128,8 +128,8 @@ TEST(CudaCwbvhRebuild, HitsEqualHostReferenceAndBinaryRebuild) {
   for (auto kind : {anim::GeneratorKind::Explode, anim::GeneratorKind::Swap}) {
     const anim::Animation a = generatedAnimation(kind, 8000, 6);
     const tsah::FlatBvh tree = frameZeroTree(a);
-    tc::GpuRuntime gpuWide(tree, a, config(tc::TreeLayout::Cwbvh));
-    tc::GpuRuntime gpuBinary(tree, a, config(tc::TreeLayout::Bvh2));
+    tc::GpuRuntime gpuWide(tree, a, config(tsah::Layout::Cwbvh));
+    tc::GpuRuntime gpuBinary(tree, a, config(tsah::Layout::Bvh2));
     for (auto method : {tc::RebuildMethod::Lbvh, tc::RebuildMethod::HlbvhSah}) {
       uint32_t hits = 0, ties = 0;
       for (double t : {0.0, 2.3}) {
@@ -169,8 +169,8 @@ TEST(CudaCwbvhRebuild, ImagesEqualBinaryRebuild) {
   REQUIRE_GPU();
   const anim::Animation a = generatedAnimation(anim::GeneratorKind::Explode, 20000, 5);
   const tsah::FlatBvh tree = frameZeroTree(a);
-  tc::GpuRuntime gpuWide(tree, a, config(tc::TreeLayout::Cwbvh));
-  tc::GpuRuntime gpuBinary(tree, a, config(tc::TreeLayout::Bvh2));
+  tc::GpuRuntime gpuWide(tree, a, config(tsah::Layout::Cwbvh));
+  tc::GpuRuntime gpuBinary(tree, a, config(tsah::Layout::Bvh2));
   const anim::Bounds ab = a.bounds();
   tsah::Aabb bounds;
   bounds.extend(Vec3{ab.min[0], ab.min[1], ab.min[2]});
@@ -205,13 +205,13 @@ TEST(CudaCwbvhRebuild, TinySceneLargeLeavesAndBackToRefit) {
   REQUIRE_GPU();
   const auto m = tsah::test::randomMovingTriangles(1, 2, 4, 0.1f);
   const anim::Animation one(m.indices, 3, m.positions, {0.0, 1.0});
-  tc::GpuRuntime tiny(frameZeroTree(one), one, config(tc::TreeLayout::Cwbvh));
+  tc::GpuRuntime tiny(frameZeroTree(one), one, config(tsah::Layout::Cwbvh));
   const tc::RebuildTimings timings = tiny.rebuildAt(0.0, options(tc::RebuildMethod::Lbvh, true));
   EXPECT_EQ(timings.wideNodes, 1u);
   expectEqualToHost(tiny, timings, one, 0.0);
 
   const anim::Animation a = generatedAnimation(anim::GeneratorKind::Wave, 5000, 3);
-  tc::GpuRuntime gpu(frameZeroTree(a), a, config(tc::TreeLayout::Cwbvh));
+  tc::GpuRuntime gpu(frameZeroTree(a), a, config(tsah::Layout::Cwbvh));
   tc::RebuildOptions large = options(tc::RebuildMethod::HlbvhSah, true);
   large.maxLeafSize = 16;  // 8 leaves of 16 would overflow a node's 64 triangles
   EXPECT_THROW(gpu.rebuildAt(0.0, large), tsah::Error);
@@ -221,7 +221,7 @@ TEST(CudaCwbvhRebuild, TinySceneLargeLeavesAndBackToRefit) {
   EXPECT_FALSE(gpu.tracingRebuiltTree());
   EXPECT_EQ(gpu.downloadCwbvhNodes().size(), tsah::buildCwbvh(frameZeroTree(a)).nodes.size());
   // The binary layout keeps binary rebuilds.
-  tc::GpuRuntime binary(frameZeroTree(a), a, config(tc::TreeLayout::Bvh2));
+  tc::GpuRuntime binary(frameZeroTree(a), a, config(tsah::Layout::Bvh2));
   const tc::RebuildTimings b = binary.rebuildAt(0.0, large);
   EXPECT_EQ(b.wideMs, 0.0);
   EXPECT_EQ(b.wideNodes, 0u);

@@ -185,7 +185,7 @@ struct FrameSeries {
 };
 
 // The cwbvh collapse follows the tree's objective, with the costs and leaf size of the command line.
-tc::GpuRuntime::Config runtimeConfig(const Options& opt, bool persistent, tc::TreeLayout layout,
+tc::GpuRuntime::Config runtimeConfig(const Options& opt, bool persistent, tsah::Layout layout,
                                      tsah::Objective objective) {
   tc::GpuRuntime::Config c{0, persistent, !opt.noGraphs, layout, !opt.noFuse};
   if (!opt.wideCost.empty()) objective.cost = {opt.wideCost[0], opt.wideCost[1]};
@@ -195,7 +195,7 @@ tc::GpuRuntime::Config runtimeConfig(const Options& opt, bool persistent, tc::Tr
 }
 
 json runRefit(const Tree& t, const anim::Animation& a, const std::vector<double>& times, const Scene& scene,
-              const Options& opt, bool persistent, tc::TreeLayout layout) {
+              const Options& opt, bool persistent, tsah::Layout layout) {
   const tsah::FlatBvh& tree = t.flat;
   const auto setupStart = std::chrono::steady_clock::now();
   tc::GpuRuntime rt(tree, a, runtimeConfig(opt, persistent, layout, t.objective));
@@ -218,10 +218,10 @@ json runRefit(const Tree& t, const anim::Animation& a, const std::vector<double>
   json j;
   j["name"] = t.name;
   j["kind"] = "refit";
-  j["layout"] = tc::treeLayoutName(layout);
+  j["layout"] = tsah::name(layout);
   j["setup_seconds"] = setupSeconds;  // upload (and for cwbvh the 8-wide collapse + layout on the host)
   j["traversal"] = persistent ? "persistent" : "simple";
-  if (layout == tc::TreeLayout::Cwbvh) {
+  if (layout == tsah::Layout::Cwbvh) {
     const tsah::Objective& o = rt.config().wideObjective;
     j["wide_collapse"] = {{"k", o.k},
                           {"ct", o.cost.ct},
@@ -248,7 +248,7 @@ json runRefit(const Tree& t, const anim::Animation& a, const std::vector<double>
 // conversion (phases_ms.wide) counts in the build and the update, as the binary Woop pass does.
 json runRebuild(tc::RebuildMethod method, const Tree& tree, const anim::Animation& a,
                 const std::vector<double>& times, const Scene& scene, const Options& opt, bool persistent,
-                tc::TreeLayout layout) {
+                tsah::Layout layout) {
   tc::GpuRuntime rt(tree.flat, a, runtimeConfig(opt, persistent, layout, tree.objective));
   const double mtris = double(a.triangleCount()) / 1e6;
   tsah::RenderSettings settings = scene.settings;
@@ -292,7 +292,7 @@ json runRebuild(tc::RebuildMethod method, const Tree& tree, const anim::Animatio
   json j;
   j["name"] = tc::rebuildMethodName(method);
   j["kind"] = "rebuild";
-  j["layout"] = tc::treeLayoutName(layout);
+  j["layout"] = tsah::name(layout);
   j["traversal"] = persistent ? "persistent" : "simple";
   j["bare_build_ms"] = summary(s.bareBuild);
   j["build_collapse_woop_ms"] = summary(s.build);
@@ -310,7 +310,7 @@ json runRebuild(tc::RebuildMethod method, const Tree& tree, const anim::Animatio
   j["interpolate_ms"] = summary(s.interpolate);
   j["tree"] = {{"leaves", summary(leaves)}, {"depth", summary(depth)}};
   if (method == tc::RebuildMethod::HlbvhSah) j["tree"]["clusters"] = summary(clusters);
-  if (layout == tc::TreeLayout::Cwbvh) {
+  if (layout == tsah::Layout::Cwbvh) {
     j["tree"]["wide_nodes"] = summary(wideNodes);
     j["tree"]["wide_levels"] = summary(wideLevels);
     j["wide_merge_triangles"] = opt.wideMerge;
@@ -323,7 +323,7 @@ json runRebuild(tc::RebuildMethod method, const Tree& tree, const anim::Animatio
 
 // One frame on the CPU renderer and on the GPU: how far apart the images are.
 json compareWithCpu(const Tree& tree, const anim::Animation& a, double t, const Scene& scene, const Options& opt,
-                    tc::TreeLayout layout) {
+                    tsah::Layout layout) {
   tsah::CpuRuntime cpu(tree.flat, {a.indices().begin(), a.indices().end()}, a.vertexCount());
   tc::GpuRuntime gpu(tree.flat, a, runtimeConfig(opt, false, layout, tree.objective));
   cpu.update(a.positionsAt(t));
@@ -337,9 +337,9 @@ json compareWithCpu(const Tree& tree, const anim::Animation& a, double t, const 
   if (!opt.imageDir.empty()) {
     std::filesystem::create_directories(opt.imageDir);
     tsah::savePng(opt.imageDir + "/cpu.png", cpuImage);  // the same for every layout
-    tsah::savePng(opt.imageDir + "/gpu-" + tc::treeLayoutName(layout) + ".png", gpuImage);
+    tsah::savePng(opt.imageDir + "/gpu-" + tsah::name(layout) + ".png", gpuImage);
   }
-  return {{"layout", tc::treeLayoutName(layout)},
+  return {{"layout", tsah::name(layout)},
           {"mean_abs", d.meanAbs},
           {"max_abs", d.maxAbs},
           {"fraction_above_16", d.fractionAbove},
@@ -411,16 +411,16 @@ void run(const Options& opt) {
   if (opt.traversal == "simple" || opt.traversal == "both") modes.push_back(false);
   if (modes.empty()) throw tsah::ConfigError("--traversal must be persistent, simple or both");
 
-  std::vector<tc::TreeLayout> layouts;
+  std::vector<tsah::Layout> layouts;
   {
     std::stringstream ss(opt.layout);
     std::string l;
-    while (std::getline(ss, l, ',')) layouts.push_back(tc::parseTreeLayout(l));
+    while (std::getline(ss, l, ',')) layouts.push_back(tsah::parse<tsah::Layout>(l));
   }
   if (layouts.empty()) throw tsah::ConfigError("--layout needs bvh2, cwbvh or both");
 
   json methods = json::array();
-  for (tc::TreeLayout layout : layouts)
+  for (tsah::Layout layout : layouts)
     for (bool persistent : modes) {
       for (const Tree& tree : trees) methods.push_back(runRefit(tree, a, times, scene, opt, persistent, layout));
     }
@@ -428,9 +428,9 @@ void run(const Options& opt) {
     std::stringstream ss(opt.rebuild);
     std::string m;
     while (std::getline(ss, m, ','))
-      for (tc::TreeLayout layout : layouts)
+      for (tsah::Layout layout : layouts)
         for (bool persistent : modes) {
-          if (layout == tc::TreeLayout::Cwbvh && persistent) continue;  // the wide kernel is one thread per ray
+          if (layout == tsah::Layout::Cwbvh && persistent) continue;  // the wide kernel is one thread per ray
           methods.push_back(
               runRebuild(tc::parseRebuildMethod(m), trees.front(), a, times, scene, opt, persistent, layout));
         }
@@ -438,7 +438,7 @@ void run(const Options& opt) {
   out["methods"] = methods;
   if (opt.cpuCompare) {
     out["cpu_compare"] = json::array();
-    for (tc::TreeLayout layout : layouts)
+    for (tsah::Layout layout : layouts)
       out["cpu_compare"].push_back(compareWithCpu(trees.front(), a, times.front(), scene, opt, layout));
   }
   std::cout << out.dump(1) << std::endl;

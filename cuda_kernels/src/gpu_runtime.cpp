@@ -19,14 +19,6 @@ const char* rebuildMethodName(RebuildMethod method) {
   return method == RebuildMethod::Lbvh ? "lbvh" : "hlbvh-sah";
 }
 
-const char* treeLayoutName(TreeLayout layout) { return layout == TreeLayout::Bvh2 ? "bvh2" : "cwbvh"; }
-
-TreeLayout parseTreeLayout(std::string_view name) {
-  if (name == "bvh2") return TreeLayout::Bvh2;
-  if (name == "cwbvh") return TreeLayout::Cwbvh;
-  throw tsah::ConfigError("unknown tree layout '" + std::string(name) + "' (expected bvh2 or cwbvh)");
-}
-
 RebuildMethod parseRebuildMethod(std::string_view name) {
   if (name == "lbvh") return RebuildMethod::Lbvh;
   if (name == "hlbvh-sah" || name == "hlbvh") return RebuildMethod::HlbvhSah;
@@ -34,6 +26,9 @@ RebuildMethod parseRebuildMethod(std::string_view name) {
 }
 
 GpuRuntime::Impl::Impl(const TreeSet& set, const anim::Animation& animation, Config cfg) : config(cfg) {
+  if (config.layout == Layout::Auto) config.layout = Layout::Bvh2;
+  if (config.layout != Layout::Bvh2 && config.layout != Layout::Cwbvh)
+    throw tsah::ConfigError(std::string("GPU runtime: ") + name(config.layout) + " is no GPU layout (bvh2 or cwbvh)");
   triangles = animation.triangleCount();
   vertices = animation.vertexCount();
   if (triangles == 0) throw tsah::DataError("GPU runtime: the animation has no triangles");
@@ -120,7 +115,7 @@ void GpuRuntime::Impl::uploadTree(const FlatBvh& tree, FlatBvh topologyOfTree, c
   // The refit and Woop pass of the binary layout stream the slots' vertex ids (the compressed
   // layout keeps its own, in its slot order).
   std::vector<uint32_t> slotVertices;
-  if (config.layout == TreeLayout::Bvh2) {
+  if (config.layout == Layout::Bvh2) {
     slotVertices = slotVertexIndices(topology.triIndex, hostIndices, "GPU runtime");
     d.slotVertices = DeviceBuffer<uint32_t>(std::span<const uint32_t>(slotVertices), stream);
   }
@@ -132,7 +127,7 @@ void GpuRuntime::Impl::uploadTree(const FlatBvh& tree, FlatBvh topologyOfTree, c
   r.interiorCount = topology.interiorCount;
   r.depth = topology.depth;
   d.root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&r, 1), stream);
-  if (config.layout == TreeLayout::Cwbvh) d.cwbvh = uploadCwbvh(tree, hostIndices, wideObjective, stream);
+  if (config.layout == Layout::Cwbvh) d.cwbvh = uploadCwbvh(tree, hostIndices, wideObjective, stream);
   // The host vectors above are freed when this returns: finish their uploads first.
   CUDA_CHECK(cudaStreamSynchronize(stream));
 }
@@ -362,15 +357,19 @@ UpdateTimings GpuRuntime::updateAt(double time) {
   return m.finishUpdate();
 }
 
+void GpuRuntime::Impl::uploadPositions(std::span<const float> given) {
+  if (given.size() != std::size_t(vertices) * 3)
+    throw tsah::DataError("GPU runtime: got " + std::to_string(given.size()) + " coordinates, expected " +
+                          std::to_string(std::size_t(vertices) * 3));
+  events.record(0, stream);
+  positions.upload(given, stream);
+  restInPlace = false;
+  events.record(1, stream);
+}
+
 UpdateTimings GpuRuntime::update(std::span<const float> positions) {
   Impl& m = *impl_;
-  if (positions.size() != std::size_t(m.vertices) * 3)
-    throw tsah::DataError("GPU runtime: got " + std::to_string(positions.size()) + " coordinates, expected " +
-                          std::to_string(std::size_t(m.vertices) * 3));
-  m.events.record(0, m.stream);
-  m.positions.upload(positions, m.stream);
-  m.restInPlace = false;
-  m.events.record(1, m.stream);
+  m.uploadPositions(positions);
   m.enqueueRefitAndWoop();
   return m.finishUpdate();
 }
@@ -416,13 +415,7 @@ RebuildTimings GpuRuntime::rebuildAt(double time, const RebuildOptions& options)
 
 RebuildTimings GpuRuntime::rebuild(std::span<const float> positions, const RebuildOptions& options) {
   Impl& m = *impl_;
-  if (positions.size() != std::size_t(m.vertices) * 3)
-    throw tsah::DataError("GPU runtime: got " + std::to_string(positions.size()) + " coordinates, expected " +
-                          std::to_string(std::size_t(m.vertices) * 3));
-  m.events.record(0, m.stream);
-  m.positions.upload(positions, m.stream);
-  m.restInPlace = false;
-  m.events.record(1, m.stream);
+  m.uploadPositions(positions);
   if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles, m.config.layout);
   m.woopValid = false;
   m.tracingRebuilt = true;

@@ -11,7 +11,7 @@
 
 namespace tsah::cuda::detail {
 
-GpuRebuilder::GpuRebuilder(uint32_t triangles, TreeLayout layout) : n_(triangles), events_(8) {  // see collect
+GpuRebuilder::GpuRebuilder(uint32_t triangles, Layout layout) : n_(triangles), events_(8) {  // see collect
   if (n_ == 0) throw tsah::DataError("GPU rebuild: no triangles");
   if (n_ > kMaxGpuTriangles) throw tsah::DataError("GPU rebuild: too many triangles");
   const std::size_t n = n_;
@@ -55,7 +55,7 @@ GpuRebuilder::GpuRebuilder(uint32_t triangles, TreeLayout layout) : n_(triangles
   CUDA_CHECK(cudaGetDevice(&device));
   CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
   boxBlocks_ = 8 * sms;
-  if (layout == TreeLayout::Cwbvh) wide_ = std::make_unique<GpuCwbvhConverter>(n_);
+  if (layout == Layout::Cwbvh) wide_ = std::make_unique<GpuCwbvhConverter>(n_);
 }
 
 GpuRebuilder::~GpuRebuilder() = default;

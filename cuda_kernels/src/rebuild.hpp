@@ -32,7 +32,7 @@ namespace tsah::cuda::detail {
 class GpuRebuilder {
  public:
   // layout cwbvh: every build is followed by its conversion into the compressed 8-wide layout.
-  GpuRebuilder(uint32_t triangles, TreeLayout layout);
+  GpuRebuilder(uint32_t triangles, Layout layout);
   ~GpuRebuilder();
   GpuRebuilder(const GpuRebuilder&) = delete;
   GpuRebuilder& operator=(const GpuRebuilder&) = delete;

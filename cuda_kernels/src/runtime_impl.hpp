@@ -1,5 +1,6 @@
 #pragma once
 // GpuRuntime's state (shared by gpu_runtime.cpp and render.cu).
+#include <span>
 #include <cuda_runtime_api.h>
 
 #include <memory>
@@ -117,6 +118,9 @@ struct GpuRuntime::Impl {
   bool woopValid = false;
   bool tracingRebuilt = false;
   std::unique_ptr<detail::GpuRebuilder> rebuilder;
+  // The caller's positions of every vertex (3 floats each) in place of the interpolated ones, timed
+  // by events 0 and 1; throws tsah::DataError for a wrong count.
+  void uploadPositions(std::span<const float> given);
   // The rebuilder after its last rebuild; throws tsah::ConfigError when nothing was rebuilt yet.
   const detail::GpuRebuilder& lastRebuild() const;
 

@@ -66,7 +66,7 @@ class GpuRuntime {
     bool useGraphs = true;
     // Layout of the traced tree: the refitted one, and the rebuilt ones (cwbvh: every rebuild is
     // converted into the compressed 8-wide layout on the device, RebuildTimings::wideMs).
-    TreeLayout layout = TreeLayout::Bvh2;
+    Layout layout = Layout::Bvh2;
     // Layout cwbvh: renderFrameGpu makes each ray in the kernel that traces it (three fused passes,
     // no ray buffers); false runs the separate generation and trace kernels of the binary layout.
     bool fuseWidePasses = true;

@@ -1,19 +1,14 @@
 #pragma once
-// The GPU runtime's small shared types (gpu_runtime.hpp is the front door): the layout a tree is
-// traced in, the per-frame rebuild baselines' options and their timings.
+// The GPU runtime's small shared types (gpu_runtime.hpp is the front door): the per-frame rebuild
+// baselines' options and their timings. (The layout a tree is traced in is tsah::Layout, Bvh2 or
+// Cwbvh on the GPU: core/kinds.hpp.)
 #include <cstdint>
 #include <string_view>
 
 #include "tsah/core/cost.hpp"
+#include "tsah/core/kinds.hpp"
 
 namespace tsah::cuda {
-
-// The node layout the refitted tree is traced in: the binary Aila-Laine node (gpu_layout.hpp) or
-// the compressed 8-wide node (cwbvh_layout.hpp; the 8-wide T-SAH collapse of the uploaded tree,
-// re-quantized every frame).
-enum class TreeLayout { Bvh2, Cwbvh };
-const char* treeLayoutName(TreeLayout layout);       // "bvh2", "cwbvh"
-TreeLayout parseTreeLayout(std::string_view name);   // throws tsah::ConfigError for anything else
 
 enum class RebuildMethod { Lbvh, HlbvhSah };
 const char* rebuildMethodName(RebuildMethod method);  // "lbvh", "hlbvh-sah"

@@ -84,7 +84,7 @@ CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint3
 
 void CpuRuntime::setWideTree(const Bvh& binary, bool reportCosts) {
   WideCollapser::Config c = collapse_;
-  c.width = static_cast<uint32_t>(info_.layout);
+  c.width = layoutWidth(info_.layout);
   c.leafPacket = c.width;  // the kernels test a leaf's triangles c.width at a time
   const WideBvh w = WideCollapser(c).collapse(binary);
   info_.binaryCost = reportCosts ? temporalCost(frameCosts(binary, c.cost), c.k) : 0.0;
