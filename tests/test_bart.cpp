@@ -4,7 +4,6 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-#include <fstream>
 #include <random>
 #include <string>
 #include <vector>
@@ -19,10 +18,8 @@ namespace {
 namespace fs = std::filesystem;
 constexpr double kPi = 3.14159265358979323846;
 
-void writeText(const fs::path& path, const std::string& text) {
-  fs::create_directories(path.parent_path());
-  std::ofstream(path, std::ios::binary) << text;
-}
+using tsah::test::throwsFileError;
+using tsah::test::writeText;
 
 struct Loaded {
   anim::Animation animation;
@@ -51,6 +48,14 @@ std::string errorOf(const std::string& text, const std::string& name = "scene.af
 std::array<float, 3> vertex(const anim::Animation& a, uint32_t k, uint32_t v) {
   const auto p = a.keyframe(k);
   return {p[3 * v], p[3 * v + 1], p[3 * v + 2]};
+}
+
+// Vertex v of keyframe k is `expected`, each coordinate within `tolerance`.
+void expectVertexNear(const anim::Animation& a, uint32_t k, uint32_t v, std::array<float, 3> expected,
+                      float tolerance) {
+  const auto p = vertex(a, k, v);
+  for (int i = 0; i < 3; ++i)
+    EXPECT_NEAR(p[i], expected[i], tolerance) << "keyframe " << k << " vertex " << v << " coordinate " << i;
 }
 
 // "f7.aff" (built with += because GCC 12 warns falsely about "f" + std::to_string(7)).
@@ -144,15 +149,9 @@ TEST(Bart, StaticTransformsApplyScaleThenRotationThenTranslationAndNest) {
                      "}\n")
                      .animation;
   // (1,0,0): scaled (2,0,0), rotated 90 degrees about z (0,2,0), translated (1,3,1).
-  const auto p = vertex(a, 0, 0);
-  EXPECT_NEAR(p[0], 1.0f, 1e-6f);
-  EXPECT_NEAR(p[1], 3.0f, 1e-6f);
-  EXPECT_NEAR(p[2], 1.0f, 1e-6f);
+  expectVertexNear(a, 0, 0, {1, 3, 1}, 1e-6f);
   // The inner block first moves by (0,0,5), then by the outer transform: (1,3,11).
-  const auto q = vertex(a, 0, 3);
-  EXPECT_NEAR(q[0], 1.0f, 1e-6f);
-  EXPECT_NEAR(q[1], 3.0f, 1e-6f);
-  EXPECT_NEAR(q[2], 11.0f, 1e-6f);
+  expectVertexNear(a, 0, 3, {1, 3, 11}, 1e-6f);
 }
 
 // ---- animation ------------------------------------------------------------------------------------
@@ -243,10 +242,7 @@ TEST(Bart, AnimatedTransformComposesTranslationRotationAndScale) {
                           "}\n")
                      .animation;
   // t = .5: uniform turn, 45 degrees. (1,0,0) -> scale (2,0,0) -> rotate (sqrt2,sqrt2,0) -> translate.
-  const auto p = vertex(a, 1, 0);
-  EXPECT_NEAR(p[0], std::sqrt(2.0f), 1e-5f);
-  EXPECT_NEAR(p[1], std::sqrt(2.0f), 1e-5f);
-  EXPECT_NEAR(p[2], 7.0f, 1e-5f);
+  expectVertexNear(a, 1, 0, {std::sqrt(2.0f), std::sqrt(2.0f), 7}, 1e-5f);
 }
 
 TEST(Bart, NestedAnimatedTransformsComposeParentFirst) {
@@ -256,10 +252,7 @@ TEST(Bart, NestedAnimatedTransformsComposeParentFirst) {
                           "k inner { rot 4 -1 0 0 1 0 0 0 0  0 0 0 1 0 0 0 0  1 0 0 1 90 0 0 0  2 0 0 1 180 0 0 0 }\n")
                      .animation;
   // t = 1: inner turns (1,0,0) to (0,1,0); xs lifts it to (0,2,0); outer moves it to (10,2,0).
-  const auto p = vertex(a, 1, 0);
-  EXPECT_NEAR(p[0], 10.0f, 1e-5f);
-  EXPECT_NEAR(p[1], 2.0f, 1e-5f);
-  EXPECT_NEAR(p[2], 0.0f, 1e-5f);
+  expectVertexNear(a, 1, 0, {10, 2, 0}, 1e-5f);
 }
 
 TEST(Bart, AnimatedTrianglesBlendTheirKeyShapesAndClamp) {
@@ -372,13 +365,8 @@ TEST(Bart, IncludeCyclesAreErrorsNamingTheChain) {
   const fs::path dir = tsah::test::scratchDir();
   writeText(dir / "a.aff", std::string(kTriangle) + "i 0 b.aff\n");
   writeText(dir / "b.aff", "\ni 0 a.aff\n");
-  try {
-    anim::importBart((dir / "a.aff").string());
-    FAIL() << "cycle accepted";
-  } catch (const tsah::FileError& e) {
-    const std::string m = e.what();
-    EXPECT_NE(m.find("b.aff: line 2: include cycle: a.aff -> b.aff -> a.aff"), std::string::npos) << m;
-  }
+  EXPECT_TRUE(throwsFileError([&] { anim::importBart((dir / "a.aff").string()); },
+                              {"b.aff: line 2: include cycle: a.aff -> b.aff -> a.aff"}));
   writeText(dir / "self.aff", "i 0 ./self.aff\n");
   EXPECT_THROW(anim::importBart((dir / "self.aff").string()), tsah::FileError);
 }
@@ -387,12 +375,7 @@ TEST(Bart, IncludeDepthIsBounded) {
   const fs::path dir = tsah::test::scratchDir();
   for (int i = 0; i < 40; ++i) writeText(dir / numberedFile("f", i), "i 0 " + numberedFile("f", i + 1) + "\n");
   writeText(dir / "f40.aff", kTriangle);
-  try {
-    anim::importBart((dir / "f0.aff").string());
-    FAIL() << "deep include chain accepted";
-  } catch (const tsah::FileError& e) {
-    EXPECT_NE(std::string(e.what()).find("nested deeper than 32"), std::string::npos) << e.what();
-  }
+  EXPECT_TRUE(throwsFileError([&] { anim::importBart((dir / "f0.aff").string()); }, {"nested deeper than 32"}));
   anim::BartOptions deep;
   deep.maxIncludeDepth = 64;
   EXPECT_EQ(anim::importBart((dir / "f0.aff").string(), deep).triangleCount(), 1u);
@@ -412,12 +395,8 @@ TEST(Bart, ExponentialIncludeFanOutIsRefusedBeforeExpanding) {
       text.replace(at, 4, numberedFile("l", level - 1));
     writeText(dir / numberedFile("l", level), text);
   }
-  try {
-    anim::importBart((dir / "l12.aff").string());  // 10^12 triangles if expanded
-    FAIL() << "include bomb accepted";
-  } catch (const tsah::FileError& e) {
-    EXPECT_NE(std::string(e.what()).find("expands to more than"), std::string::npos) << e.what();
-  }
+  // 10^12 triangles if expanded.
+  EXPECT_TRUE(throwsFileError([&] { anim::importBart((dir / "l12.aff").string()); }, {"expands to more than"}));
 }
 
 // ---- errors ---------------------------------------------------------------------------------------
@@ -459,12 +438,8 @@ TEST(Bart, HugeFrameCountsAreRefusedBeforeAllocating) {
   EXPECT_NE(message.find("exceeds the limit"), std::string::npos) << message;
   anim::BartOptions small;
   small.maxPositionBytes = 1000;
-  try {
-    loadText(std::string("a 0 1 1000\n") + kTriangle, small);
-    FAIL() << "limit ignored";
-  } catch (const tsah::FileError& e) {
-    EXPECT_NE(std::string(e.what()).find("more than the limit"), std::string::npos) << e.what();
-  }
+  EXPECT_TRUE(
+      throwsFileError([&] { loadText(std::string("a 0 1 1000\n") + kTriangle, small); }, {"more than the limit"}));
 }
 
 TEST(Bart, LoadDispatchesAffAndPassesFpsAndWarnings) {

@@ -22,10 +22,7 @@ namespace {
 namespace fs = std::filesystem;
 using tsah::bench::SceneSource;
 
-void writeFile(const fs::path& p, const std::string& text) {
-  fs::create_directories(p.parent_path());
-  std::ofstream(p) << text;
-}
+using tsah::test::writeText;
 
 // Every file below a folder with its size and modification time (to see that nothing changed).
 std::set<std::string> listing(const fs::path& dir) {
@@ -50,10 +47,7 @@ struct DataFolder {
     root = tsah::test::scratchDir();
     data = root / "data";
     cache = root / "cache";
-    anim::GeneratorOptions g;
-    g.triangles = 60;
-    g.frames = 3;
-    const anim::Animation wave = anim::generate(anim::GeneratorKind::Wave, g);
+    const anim::Animation wave = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 60, 3);
     // An OBJ sequence in a folder, and the same packed as .tar.xz in another folder.
     anim::saveObjSequence(wave, (data / "sequences" / "wave" / "f_%03d.obj").string());
     const fs::path staging = root / "pack";
@@ -70,18 +64,18 @@ struct DataFolder {
                                         (data / "models" / "squeezed.tanim.xz").string())
                     .ok());
     // Static meshes, plain and compressed: skipped.
-    writeFile(data / "static" / "tri.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
-    writeFile(root / "tri.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+    writeText(data / "static" / "tri.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    writeText(root / "tri.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
     EXPECT_TRUE(tsah::bench::runProcess({"xz", "-zc", (root / "tri.off").string()}, (data / "static" / "tri.off.xz").string()).ok());
     // BART: scene.aff (animation range, includes part.aff), broken.aff (includes a missing file),
     // part.aff (included: not a scene), still.aff (no animation range: not a scene), an editor backup.
-    writeFile(data / "bart" / "stage" / "scene.aff",
+    writeText(data / "bart" / "stage" / "scene.aff",
               "% a scene\na 0 2 5\nxs 1 1 1 0 0 1 0 0 0 0 {\ni 0 part.aff\n}\n");
-    writeFile(data / "bart" / "stage" / "part.aff", "p 3\n0 0 0\n1 0 0\n0 1 0\np 3\n0 0 1\n1 0 1\n0 1 1\n");
-    writeFile(data / "bart" / "stage" / "broken.aff", "a 0 1 3 # range\n{i 0 missing.aff}\n");
-    writeFile(data / "bart" / "stage" / "still.aff", "i 0 part.aff\n");
-    writeFile(data / "bart" / "stage" / "scene.aff~", "a 0 1 2\n");
-    writeFile(data / "README.md", "notes\n");
+    writeText(data / "bart" / "stage" / "part.aff", "p 3\n0 0 0\n1 0 0\n0 1 0\np 3\n0 0 1\n1 0 1\n0 1 1\n");
+    writeText(data / "bart" / "stage" / "broken.aff", "a 0 1 3 # range\n{i 0 missing.aff}\n");
+    writeText(data / "bart" / "stage" / "still.aff", "i 0 part.aff\n");
+    writeText(data / "bart" / "stage" / "scene.aff~", "a 0 1 2\n");
+    writeText(data / "README.md", "notes\n");
   }
 };
 
@@ -159,7 +153,7 @@ TEST(BenchData, UnpacksOnceAndAgainWhenTheArchiveChanges) {
 
 TEST(BenchData, BrokenArchivesAndMissingFoldersAreErrors) {
   const fs::path root = tsah::test::scratchDir();
-  writeFile(root / "data" / "bad.tar.xz", "this is not an xz stream");
+  writeText(root / "data" / "bad.tar.xz", "this is not an xz stream");
   EXPECT_THROW(tsah::bench::unpackArchive(root / "data" / "bad.tar.xz", root / "cache"), tsah::Error);
   EXPECT_THROW(tsah::bench::scanDataFolder(root / "data", {root / "cache", {}}), tsah::Error);
   // Nothing half-unpacked is left in the cache.

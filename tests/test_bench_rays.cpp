@@ -12,6 +12,7 @@
 #include "tsah/optimize/baselines.hpp"
 #include "tsah/layout/flat_bvh.hpp"
 #include "tsah/layout/traversal.hpp"
+#include "test_support.hpp"
 
 namespace {
 
@@ -21,18 +22,12 @@ struct Scene {
   tsah::Aabb bounds;
 
   explicit Scene(anim::GeneratorKind kind) {
-    anim::GeneratorOptions g;
-    g.triangles = 1500;
-    g.frames = 6;
-    g.seed = 11;
-    a = anim::generate(kind, g);
+    a = tsah::test::generatedAnimation(kind, 1500, 6, 11);
     const anim::Animation rep = a.resample(3);
     tsah::BaselineConfig config;
     config.threads = 2;
     tree = tsah::buildSah0(tsah::triangleBoxes(rep.indices(), rep.allPositions(), 3), config);
-    const anim::Bounds b = a.bounds();
-    bounds.extend(tsah::Vec3{b.min[0], b.min[1], b.min[2]});
-    bounds.extend(tsah::Vec3{b.max[0], b.max[1], b.max[2]});
+    bounds = tsah::test::boxOf(a.bounds());
   }
   tsah::CpuRuntime runtime() const {
     return tsah::CpuRuntime(tsah::flattenBvh(tree), {a.indices().begin(), a.indices().end()}, a.vertexCount(), {2});
@@ -103,10 +98,7 @@ TEST(BenchRays, EmbreeFindsWhatTheToolkitFindsAfterRebuildsAndRefits) {
       rt.update(positions);
       EXPECT_GE(peer.update(positions), 0.0);
       // Framed on this frame's fragments, so that most pixels see some.
-      const anim::Bounds b = scene.a.boundsAt(scene.a.times()[frame]);
-      tsah::Aabb now;
-      now.extend(tsah::Vec3{b.min[0], b.min[1], b.min[2]});
-      now.extend(tsah::Vec3{b.max[0], b.max[1], b.max[2]});
+      const tsah::Aabb now = tsah::test::boxOf(scene.a.boundsAt(scene.a.times()[frame]));
       const tsah::Camera camera = tsah::fitCamera(now, {0, 1, 0}, 45.0f, 64.0f / 48.0f);
       const tsah::SceneLighting lighting = tsah::fitLighting(now, camera, {0, 1, 0}, 0.1f, false);
       const tsah::bench::RayBatch batch = tsah::bench::makeRayBatch(rt, camera, lighting, smallSettings(frame));

@@ -10,17 +10,17 @@
 #include "bench/runtime_bench.hpp"
 #include "tsah/optimize/baselines.hpp"
 #include "tsah/layout/flat_bvh.hpp"
+#include "test_support.hpp"
 
 namespace {
+
+using tsah::test::generatedAnimation;
 
 // 48x36 pixels, 3 AO and 2 shadow rays per pixel, `frames` frames, a fixed fitted camera.
 tsah::bench::RuntimeSetup smallSetup(const anim::Animation& a, uint32_t frames) {
   tsah::bench::RuntimeSetup setup;
   setup.times = a.uniformTimes(frames);
-  const anim::Bounds b = a.bounds();
-  tsah::Aabb bounds;
-  bounds.extend(tsah::Vec3{b.min[0], b.min[1], b.min[2]});
-  bounds.extend(tsah::Vec3{b.max[0], b.max[1], b.max[2]});
+  const tsah::Aabb bounds = tsah::test::boxOf(a.bounds());
   const tsah::Camera camera = tsah::fitCamera(bounds, {0, 1, 0}, 45.0f, 48.0f / 36.0f);
   setup.camera = [camera](double) { return camera; };
   setup.lighting = tsah::fitLighting(bounds, camera, {0, 1, 0}, 0.1f, false);
@@ -32,12 +32,15 @@ tsah::bench::RuntimeSetup smallSetup(const anim::Animation& a, uint32_t frames) 
   return setup;
 }
 
+// A method of the Embree comparison that finds exactly what the toolkit finds: its hits_minus_toolkit
+// are zero in every pass.
+void expectSameHitsAsToolkit(const nlohmann::json& extra, const std::string& name) {
+  for (const char* pass : {"primary", "ao_occluded", "shadow_occluded"})
+    EXPECT_EQ(extra["hits_minus_toolkit"][pass], 0) << name << " " << pass;
+}
+
 TEST(BenchRuntime, EveryMethodTracesEveryFrameWithTheSameRays) {
-  anim::GeneratorOptions g;
-  g.triangles = 1200;
-  g.frames = 5;
-  g.seed = 4;
-  const anim::Animation a = anim::generate(anim::GeneratorKind::Swap, g);
+  const anim::Animation a = generatedAnimation(anim::GeneratorKind::Swap, 1200, 5, 4);
   const anim::Animation rep = a.resample(3);
   const tsah::PrimitiveBoxes boxes = tsah::triangleBoxes(rep.indices(), rep.allPositions(), 3);
   tsah::BaselineConfig config;
@@ -105,10 +108,7 @@ TEST(BenchRuntime, EveryMethodTracesEveryFrameWithTheSameRays) {
 
 TEST(BenchRuntime, EmbreeComparisonTracesEveryLayoutWithTheSameResults) {
   if (!tsah::bench::embreeAvailable()) GTEST_SKIP() << tsah::bench::embreeStatus();
-  anim::GeneratorOptions g;
-  g.triangles = 900;
-  g.frames = 4;
-  const anim::Animation a = anim::generate(anim::GeneratorKind::Explode, g);
+  const anim::Animation a = generatedAnimation(anim::GeneratorKind::Explode, 900, 4);
   const anim::Animation rep = a.resample(3);
   tsah::BaselineConfig config;
   config.threads = 2;
@@ -126,10 +126,7 @@ TEST(BenchRuntime, EmbreeComparisonTracesEveryLayoutWithTheSameResults) {
     EXPECT_EQ(m.frames[0].rays.ao.rays, methods[0].frames[0].rays.ao.rays);  // the same batch
     if (m.name.rfind("tsah0-", 0) == 0 && m.name != names[0]) {
       // Every toolkit layout finds exactly what the default one finds.
-      const auto& d = m.extra["hits_minus_toolkit"];
-      EXPECT_EQ(d["primary"], 0) << m.name;
-      EXPECT_EQ(d["ao_occluded"], 0) << m.name;
-      EXPECT_EQ(d["shadow_occluded"], 0) << m.name;
+      expectSameHitsAsToolkit(m.extra, m.name);
     }
     if (m.name.rfind("tsah0-", 0) == 0) {
       EXPECT_EQ(m.extra["layout"]["layout"], m.name.substr(6));
@@ -139,10 +136,7 @@ TEST(BenchRuntime, EmbreeComparisonTracesEveryLayoutWithTheSameResults) {
 
 TEST(BenchRuntime, EmbreeComparisonTracesTheTreeSetSwitchingTreesWithTheSameResults) {
   if (!tsah::bench::embreeAvailable()) GTEST_SKIP() << tsah::bench::embreeStatus();
-  anim::GeneratorOptions g;
-  g.triangles = 900;
-  g.frames = 4;
-  const anim::Animation a = anim::generate(anim::GeneratorKind::Wave, g);
+  const anim::Animation a = generatedAnimation(anim::GeneratorKind::Wave, 900, 4);
   tsah::BaselineConfig config;
   config.threads = 2;
   const double mid = 0.5 * (a.startTime() + a.endTime());
@@ -164,10 +158,7 @@ TEST(BenchRuntime, EmbreeComparisonTracesTheTreeSetSwitchingTreesWithTheSameResu
   EXPECT_EQ(it->extra["trees"], 2);
   ASSERT_EQ(it->frames.size(), 2u);
   EXPECT_EQ(it->frames[1].rays.ao.rays, methods[0].frames[1].rays.ao.rays);  // the same batch
-  const auto& d = it->extra["hits_minus_toolkit"];  // other trees over the same triangles: same answers
-  EXPECT_EQ(d["primary"], 0);
-  EXPECT_EQ(d["ao_occluded"], 0);
-  EXPECT_EQ(d["shadow_occluded"], 0);
+  expectSameHitsAsToolkit(it->extra, it->name);  // other trees over the same triangles: same answers
 }
 
 }  // namespace

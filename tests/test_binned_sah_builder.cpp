@@ -5,7 +5,6 @@
 #include <tbb/task_arena.h>
 
 #include <cmath>
-#include <cstring>
 #include <limits>
 #include <random>
 
@@ -14,14 +13,13 @@
 #include "tsah/build/binned_sah_builder.hpp"
 #include "tsah/core/cost.hpp"
 #include "tsah/build/sah_builder.hpp"
+#include "test_support.hpp"
 
 namespace {
 
-std::vector<tsah::Aabb> frameBoxes(const anim::Animation& a, uint32_t k) {
-  std::vector<tsah::Aabb> boxes(a.triangleCount());
-  tsah::triangleBoxes(a.indices(), a.keyframe(k), boxes);
-  return boxes;
-}
+using tsah::test::generatedAnimation;
+
+using tsah::test::keyframeBoxes;
 
 tsah::PrimitiveBoxes asPrimitiveBoxes(const std::vector<tsah::Aabb>& boxes) {
   tsah::PrimitiveBoxes p;
@@ -38,24 +36,10 @@ uint32_t largestLeaf(const tsah::Bvh& bvh) {
   return m;
 }
 
-bool sameTree(const tsah::Bvh& a, const tsah::Bvh& b) {
-  if (a.nodes.size() != b.nodes.size() || a.primIds != b.primIds || a.boxes.size() != b.boxes.size()) return false;
-  for (std::size_t i = 0; i < a.nodes.size(); ++i) {
-    const auto &x = a.nodes[i], &y = b.nodes[i];
-    if (x.parent != y.parent || x.left != y.left || x.right != y.right || x.primBegin != y.primBegin ||
-        x.primCount != y.primCount)
-      return false;
-  }
-  return std::memcmp(a.boxes.data(), b.boxes.data(), a.boxes.size() * sizeof(tsah::Aabb)) == 0;
-}
-
 TEST(BinnedSahBuilder, ValidTreesWithBoundedLeaves) {
-  anim::GeneratorOptions o;
-  o.triangles = 5000;
-  o.frames = 3;
   for (auto kind : {anim::GeneratorKind::Explode, anim::GeneratorKind::Wave, anim::GeneratorKind::Swap}) {
-    const auto a = anim::generate(kind, o);
-    const auto boxes = frameBoxes(a, 1);
+    const auto a = generatedAnimation(kind, 5000, 3);
+    const auto boxes = keyframeBoxes(a, 1);
     for (uint32_t maxLeaf : {1u, 4u, 8u}) {
       tsah::BinnedSahBuilder::Config c;
       c.maxLeafSize = maxLeaf;
@@ -76,17 +60,14 @@ TEST(BinnedSahBuilder, ValidTreesWithBoundedLeaves) {
 }
 
 TEST(BinnedSahBuilder, ResultDoesNotDependOnThreadsOrThreshold) {
-  anim::GeneratorOptions o;
-  o.triangles = 20000;
-  o.frames = 2;
-  const auto a = anim::generate(anim::GeneratorKind::Explode, o);
-  const auto boxes = frameBoxes(a, 1);
+  const auto a = generatedAnimation(anim::GeneratorKind::Explode, 20000, 2);
+  const auto boxes = keyframeBoxes(a, 1);
   tsah::BinnedSahBuilder::Config c;
   c.parallelThreshold = 500;  // many tasks, parallel binning at the top
   tsah::Bvh one, many;
   tbb::task_arena(1).execute([&] { one = tsah::BinnedSahBuilder(c).build(boxes); });
   tbb::task_arena(2).execute([&] { many = tsah::BinnedSahBuilder(c).build(boxes); });
-  EXPECT_TRUE(sameTree(one, many));
+  EXPECT_TRUE(tsah::test::identicalTree(one, many));
   // A different task split gives the same tree up to node numbering: compare the SAH cost.
   c.parallelThreshold = 1u << 30;
   const tsah::Bvh serial = tsah::BinnedSahBuilder(c).build(boxes);
@@ -95,12 +76,9 @@ TEST(BinnedSahBuilder, ResultDoesNotDependOnThreadsOrThreshold) {
 }
 
 TEST(BinnedSahBuilder, QualityCloseToFullSweep) {
-  anim::GeneratorOptions o;
-  o.triangles = 8000;
-  o.frames = 2;
   for (auto kind : {anim::GeneratorKind::Explode, anim::GeneratorKind::Wave}) {
-    const auto a = anim::generate(kind, o);
-    const auto boxes = frameBoxes(a, 0);
+    const auto a = generatedAnimation(kind, 8000, 2);
+    const auto boxes = keyframeBoxes(a, 0);
     tsah::BinnedSahBuilder::Config c;
     c.maxLeafSize = 1;  // compare like with like: one triangle per leaf
     const double binned = tsah::frameCost(tsah::BinnedSahBuilder(c).build(boxes), 0);

@@ -23,17 +23,9 @@ struct Scene {
 };
 
 Scene makeScene(anim::GeneratorKind kind, uint32_t triangles) {
-  anim::GeneratorOptions o;
-  o.triangles = triangles;
-  o.frames = 6;
-  o.seed = 3;
-  Scene s{anim::generate(kind, o), {}, {}};
-  std::vector<tsah::Aabb> boxes(s.animation.triangleCount());
-  tsah::triangleBoxes(s.animation.indices(), s.animation.keyframe(0), boxes);
-  s.tree = tsah::flattenBvh(tsah::BinnedSahBuilder().build(boxes));
-  const anim::Bounds b = s.animation.bounds();
-  s.bounds.extend(tsah::Vec3{b.min[0], b.min[1], b.min[2]});
-  s.bounds.extend(tsah::Vec3{b.max[0], b.max[1], b.max[2]});
+  Scene s{tsah::test::generatedAnimation(kind, triangles, 6, 3), {}, {}};
+  s.tree = tsah::flattenBvh(tsah::BinnedSahBuilder().build(tsah::test::keyframeBoxes(s.animation, 0)));
+  s.bounds = tsah::test::boxOf(s.animation.bounds());
   return s;
 }
 

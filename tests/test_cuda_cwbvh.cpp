@@ -35,10 +35,14 @@ namespace tc = tsah::cuda;
 
 using tsah::test::generatedAnimation;
 
-// Sweep SAH on the first keyframe, collapsed to leaves of up to 8 triangles, boxes of every keyframe.
-tsah::FlatBvh sahTree(const anim::Animation& a) {
+using tsah::test::cwbvhWoop;
+using tsah::test::GpuHits;
+using tsah::test::traceHits;
+
+// Sweep SAH on `keyframe`, collapsed to leaves of up to 8 triangles, boxes of every keyframe.
+tsah::FlatBvh sahTree(const anim::Animation& a, uint32_t keyframe = 0) {
   const tsah::PrimitiveBoxes boxes = tsah::triangleBoxes(a.indices(), a.allPositions(), a.keyframeCount());
-  tsah::Bvh bvh = tsah::SweepSahBuilder().build(boxes.frame(0));
+  tsah::Bvh bvh = tsah::SweepSahBuilder().build(boxes.frame(keyframe));
   tsah::LeafCollapser::Config c;
   c.maxLeafSize = 8;
   bvh = tsah::LeafCollapser(c).collapse(bvh);
@@ -46,11 +50,7 @@ tsah::FlatBvh sahTree(const anim::Animation& a) {
   return tsah::flattenBvh(bvh);
 }
 
-tc::GpuRuntime::Config wide() {
-  tc::GpuRuntime::Config c;
-  c.layout = tsah::Layout::Cwbvh;
-  return c;
-}
+tc::GpuRuntime::Config wide() { return tsah::test::gpuConfig(tsah::Layout::Cwbvh); }
 
 std::vector<tsah::Ray> randomRays(const tsah::Aabb& b, const anim::Animation& a, std::span<const float> pos,
                                   uint32_t count, uint32_t seed) {
@@ -76,18 +76,6 @@ std::vector<tsah::Ray> randomRays(const tsah::Aabb& b, const anim::Animation& a,
     r.tmax = i % 4 == 0 ? 2.0f * u01(rng) : 3.4e38f;
   }
   return rays;
-}
-
-// The Woop triangles of the layout's slots, made on the host.
-std::vector<tsah::WoopTriangle> hostWoop(const tsah::CwbvhTree& host, const anim::Animation& a,
-                                         std::span<const float> pos) {
-  std::vector<tsah::WoopTriangle> woop(host.triIndex.size());
-  for (size_t s = 0; s < woop.size(); ++s) {
-    const uint32_t* tri = a.indices().data() + 3 * std::size_t(host.triIndex[s]);
-    auto v = [&](uint32_t i) { return Vec3{pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]}; };
-    woop[s] = tsah::makeWoopTriangle(v(tri[0]), v(tri[1]), v(tri[2]));
-  }
-  return woop;
 }
 
 TEST(CudaCwbvh, NodesEqualHostRefitAtEveryTime) {
@@ -141,7 +129,7 @@ TEST(CudaCwbvh, CollapseFollowsTheObjective) {
       ASSERT_EQ(nodes.size(), tree->nodes.size()) << "t=" << t << " default " << isDefault;
       EXPECT_EQ(std::memcmp(nodes.data(), tree->nodes.data(), nodes.size() * sizeof(tsah::CwbvhNode)), 0)
           << "t=" << t << " default " << isDefault;
-      const std::vector<tsah::WoopTriangle> woop = hostWoop(*tree, a, pos);
+      const std::vector<tsah::WoopTriangle> woop = cwbvhWoop(*tree, a.indices(), pos);
       const std::vector<tsah::WoopTriangle> deviceWoop = runtime->downloadWoop();
       ASSERT_EQ(deviceWoop.size(), woop.size());
       EXPECT_EQ(std::memcmp(deviceWoop.data(), woop.data(), woop.size() * sizeof woop[0]), 0)
@@ -212,7 +200,7 @@ TEST(CudaCwbvh, TreeThatIsOneLeaf) {
     tsah::refitCwbvh(host, a.indices(), pos);
     const tsah::Aabb b = gpu.bounds();
     ASSERT_TRUE(b.contains(host.rootBox) && host.rootBox.contains(b)) << "t=" << t;
-    const std::vector<tsah::WoopTriangle> woop = hostWoop(host, a, pos);
+    const std::vector<tsah::WoopTriangle> woop = cwbvhWoop(host, a.indices(), pos);
     const tsah::CwbvhView view = host.view(woop.data(), a.indices().data(), pos.data());
     const auto rays = randomRays(b, a, pos, 3000, 7);
     const auto hits = gpu.closestHits(rays);
@@ -239,42 +227,28 @@ TEST(CudaCwbvh, HitsEqualCpuReferenceAndBinaryGpu) {
     tc::GpuRuntime gpuWidePersistent(tree, a, persistentConfig);
     tc::GpuRuntime gpuBinary(tree, a);
     tsah::CwbvhTree host = tsah::buildCwbvh(tree);
-    uint32_t hits = 0, ties = 0;
+    tsah::test::HitAgreement count;
     for (double t : {0.0, 2.3}) {
       gpuWide.updateAt(t);
       gpuWidePersistent.updateAt(t);
       gpuBinary.updateAt(t);
       const auto pos = a.positionsAt(t);
       tsah::refitCwbvh(host, a.indices(), pos);
-      const std::vector<tsah::WoopTriangle> woop = hostWoop(host, a, pos);
+      const std::vector<tsah::WoopTriangle> woop = cwbvhWoop(host, a.indices(), pos);
       EXPECT_EQ(std::memcmp(woop.data(), gpuWide.downloadWoop().data(), woop.size() * sizeof woop[0]), 0);
       const tsah::CwbvhView view = host.view(woop.data(), a.indices().data(), pos.data());
       const auto rays = randomRays(gpuBinary.bounds(), a, pos, 20000, 11);
-      const auto wideHits = gpuWide.closestHits(rays);
-      const auto binaryHits = gpuBinary.closestHits(rays);
-      const auto wideAny = gpuWide.anyHits(rays);
-      const auto binaryAny = gpuBinary.anyHits(rays);
+      const GpuHits wideHits = traceHits(gpuWide, rays), binaryHits = traceHits(gpuBinary, rays);
       // Persistent threads (rays taken from a counter as lanes finish): the same results, ray by ray.
-      const auto persistentHits = gpuWidePersistent.closestHits(rays);
-      const auto persistentAny = gpuWidePersistent.anyHits(rays);
-      ASSERT_EQ(std::memcmp(persistentHits.data(), wideHits.data(), wideHits.size() * sizeof wideHits[0]), 0);
-      ASSERT_EQ(persistentAny, wideAny);
-      for (size_t i = 0; i < rays.size(); ++i) {
-        // The GPU runs the reference code on the same data: bit-equal.
-        const tsah::Hit ref = tsah::cwbvhClosestHit(view, rays[i]);
-        ASSERT_EQ(std::memcmp(&ref, &wideHits[i], sizeof ref), 0) << "ray " << i;
-        ASSERT_EQ(wideAny[i] != 0, tsah::cwbvhAnyHit(view, rays[i])) << "ray " << i;
-        // Against the binary tree: the same hit or none; another triangle only at the same distance.
-        ASSERT_EQ(wideAny[i], binaryAny[i]) << "ray " << i;
-        ASSERT_EQ(wideHits[i].valid(), binaryHits[i].valid()) << "ray " << i;
-        if (!wideHits[i].valid()) continue;
-        ++hits;
-        ASSERT_EQ(wideHits[i].t, binaryHits[i].t) << "ray " << i;
-        if (wideHits[i].tri != binaryHits[i].tri) ++ties;
-      }
+      const GpuHits persistent = traceHits(gpuWidePersistent, rays);
+      ASSERT_EQ(std::memcmp(persistent.closest.data(), wideHits.closest.data(),
+                            wideHits.closest.size() * sizeof wideHits.closest[0]),
+                0);
+      ASSERT_EQ(persistent.any, wideHits.any);
+      ASSERT_NO_FATAL_FAILURE(tsah::test::expectWideHitsMatch(view, rays, wideHits, binaryHits, count));
     }
-    EXPECT_GT(hits, 10000u);
-    EXPECT_LE(ties, hits / 100) << "ties";
+    EXPECT_GT(count.hits, 10000u);
+    EXPECT_LE(count.ties, count.hits / 100) << "ties";
   }
 }
 
@@ -284,14 +258,7 @@ TEST(CudaCwbvh, TreeSetTracesTheTreeOfEachPartLikeTheBinaryLayout) {
   REQUIRE_GPU();
   const anim::Animation a = generatedAnimation(anim::GeneratorKind::Explode, 4000, 6);
   tsah::TreeSet set;
-  for (uint32_t k : {0u, 3u}) {
-    const tsah::PrimitiveBoxes boxes = tsah::triangleBoxes(a.indices(), a.allPositions(), a.keyframeCount());
-    tsah::LeafCollapser::Config c;
-    c.maxLeafSize = 8;
-    tsah::Bvh bvh = tsah::LeafCollapser(c).collapse(tsah::SweepSahBuilder().build(boxes.frame(k)));
-    tsah::refit(bvh, boxes);
-    set.trees.push_back(tsah::flattenBvh(bvh));
-  }
+  for (uint32_t k : {0u, 3u}) set.trees.push_back(sahTree(a, k));
   const double mid = 0.5 * (a.startTime() + a.endTime());
   set.ranges = {{a.startTime(), mid}, {mid, a.endTime()}};
   tc::GpuRuntime gpuWide(set, a, wide());
@@ -326,16 +293,7 @@ TEST(CudaCwbvh, ImagesEqualBinaryAndCpu) {
   tsah::CpuRuntime cpu(tree, {a.indices().begin(), a.indices().end()}, a.vertexCount(), {2});
   tc::GpuRuntime gpuWide(tree, a, wide());
   tc::GpuRuntime gpuBinary(tree, a);
-  const anim::Bounds ab = a.bounds();
-  tsah::Aabb bounds;
-  bounds.extend(Vec3{ab.min[0], ab.min[1], ab.min[2]});
-  bounds.extend(Vec3{ab.max[0], ab.max[1], ab.max[2]});
-  tsah::RenderSettings settings;
-  settings.width = 203;
-  settings.height = 157;
-  settings.aoSamples = 5;
-  settings.shadowSamples = 3;
-  const tsah::Camera camera = tsah::fitCamera(bounds, {0, 1, 0}, 45.0f, float(settings.width) / float(settings.height));
+  auto [bounds, settings, camera] = tsah::test::renderView(a);
   tsah::Camera away = camera;  // sees none of the mesh: the AO and shadow passes get an empty pixel list
   away.lookAt = camera.eye + (camera.eye - camera.lookAt);
   // With the ground every pixel below the horizon has a surface; without it the listed passes run
@@ -360,14 +318,10 @@ TEST(CudaCwbvh, ImagesEqualBinaryAndCpu) {
       const tsah::RenderStats b = tc::renderFrameGpu(gpuBinary, view.camera, lighting, settings, binaryImage);
       // Primary ties (another triangle at the same distance) change a pixel's normal, so the AO and
       // shadow ray counts may differ slightly, as between the CPU and GPU renderers.
-      EXPECT_EQ(w.primary.rays, b.primary.rays);
-      EXPECT_NEAR(double(w.ao.rays), double(b.ao.rays), 0.002 * double(b.ao.rays) + 8);
-      EXPECT_NEAR(double(w.shadow.rays), double(b.shadow.rays), 0.002 * double(b.shadow.rays) + 8);
-      for (const tsah::Image* other : {&binaryImage, &cpuImage}) {
-        const tsah::ImageDifference d = tsah::compareImages(wideImage, *other, 16);
-        EXPECT_LT(d.meanAbs, 0.2) << "frame " << frame << " ground " << view.ground;
-        EXPECT_LT(d.fractionAbove, 0.002) << "frame " << frame << " ground " << view.ground;
-      }
+      tsah::test::expectRayCountsClose(w, b);
+      for (const tsah::Image* other : {&binaryImage, &cpuImage})
+        tsah::test::expectImagesClose(wideImage, *other,
+                                      "frame " + std::to_string(frame) + " ground " + std::to_string(view.ground));
       if (seesMesh) {
         EXPECT_GT(c.ao.rays, 0u);
         // Mesh only: a strict subset of the pixels has a surface (the list is neither empty nor all).

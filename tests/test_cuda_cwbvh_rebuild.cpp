@@ -24,21 +24,15 @@
 
 namespace {
 
-using tsah::Vec3;
 namespace tc = tsah::cuda;
 
 using tsah::test::generatedAnimation;
+using tsah::test::gpuConfig;
+using tsah::test::traceHits;
 
 tsah::FlatBvh frameZeroTree(const anim::Animation& a) {
   const tsah::PrimitiveBoxes boxes = tsah::triangleBoxes(a.indices(), a.positionsAt(a.startTime()), 1);
   return tsah::flattenBvh(tsah::SweepSahBuilder().build(boxes.frame(0)));
-}
-
-tc::GpuRuntime::Config config(tsah::Layout layout, bool graphs = true) {
-  tc::GpuRuntime::Config c;
-  c.layout = layout;
-  c.useGraphs = graphs;
-  return c;
 }
 
 tc::RebuildOptions options(tc::RebuildMethod method, bool collapse) {
@@ -77,7 +71,7 @@ TEST(CudaCwbvhRebuild, ConversionEqualsHostEmulation) {
   for (auto kind : {anim::GeneratorKind::Explode, anim::GeneratorKind::Wave}) {
     const anim::Animation a = generatedAnimation(kind, tsah::test::shortCudaRun() ? 3000 : 30000, 6);
     const tsah::FlatBvh tree = frameZeroTree(a);
-    tc::GpuRuntime gpu(tree, a, config(tsah::Layout::Cwbvh));
+    tc::GpuRuntime gpu(tree, a, gpuConfig(tsah::Layout::Cwbvh));
     for (auto method : {tc::RebuildMethod::Lbvh, tc::RebuildMethod::HlbvhSah})
       for (bool collapse : {true, false})
         for (double t : {a.startTime(), 2.5, a.endTime()}) {
@@ -103,8 +97,8 @@ TEST(CudaCwbvhRebuild, LargeTreeDeterministicWithAndWithoutGraphs) {
   REQUIRE_GPU();
   const anim::Animation a = generatedAnimation(anim::GeneratorKind::Explode, tsah::test::shortCudaRun() ? 20000 : 1000000, 3);
   const tsah::FlatBvh tree = frameZeroTree(a);
-  tc::GpuRuntime graphs(tree, a, config(tsah::Layout::Cwbvh, true));
-  tc::GpuRuntime direct(tree, a, config(tsah::Layout::Cwbvh, false));
+  tc::GpuRuntime graphs(tree, a, gpuConfig(tsah::Layout::Cwbvh, true));
+  tc::GpuRuntime direct(tree, a, gpuConfig(tsah::Layout::Cwbvh, false));
   for (bool collapse : {false, true}) {
     const tc::RebuildOptions o = options(tc::RebuildMethod::Lbvh, collapse);
     const tc::RebuildTimings first = graphs.rebuildAt(1.0, o);
@@ -128,10 +122,10 @@ TEST(CudaCwbvhRebuild, HitsEqualHostReferenceAndBinaryRebuild) {
   for (auto kind : {anim::GeneratorKind::Explode, anim::GeneratorKind::Swap}) {
     const anim::Animation a = generatedAnimation(kind, 8000, 6);
     const tsah::FlatBvh tree = frameZeroTree(a);
-    tc::GpuRuntime gpuWide(tree, a, config(tsah::Layout::Cwbvh));
-    tc::GpuRuntime gpuBinary(tree, a, config(tsah::Layout::Bvh2));
+    tc::GpuRuntime gpuWide(tree, a, gpuConfig(tsah::Layout::Cwbvh));
+    tc::GpuRuntime gpuBinary(tree, a, gpuConfig(tsah::Layout::Bvh2));
     for (auto method : {tc::RebuildMethod::Lbvh, tc::RebuildMethod::HlbvhSah}) {
-      uint32_t hits = 0, ties = 0;
+      tsah::test::HitAgreement count;
       for (double t : {0.0, 2.3}) {
         gpuWide.rebuildAt(t, options(method, true));
         gpuBinary.rebuildAt(t, options(method, true));
@@ -145,22 +139,11 @@ TEST(CudaCwbvhRebuild, HitsEqualHostReferenceAndBinaryRebuild) {
         box.positions = pos.data();
         std::mt19937 rng(17);
         const auto rays = tsah::test::randomRays(box, a.triangleCount(), gpuBinary.bounds(), 20000, rng);
-        const auto wideHits = gpuWide.closestHits(rays), binaryHits = gpuBinary.closestHits(rays);
-        const auto wideAny = gpuWide.anyHits(rays), binaryAny = gpuBinary.anyHits(rays);
-        for (size_t i = 0; i < rays.size(); ++i) {
-          const tsah::Hit ref = tsah::cwbvhClosestHit(view, rays[i]);
-          ASSERT_EQ(std::memcmp(&ref, &wideHits[i], sizeof ref), 0) << "ray " << i;
-          ASSERT_EQ(wideAny[i] != 0, tsah::cwbvhAnyHit(view, rays[i])) << "ray " << i;
-          ASSERT_EQ(wideAny[i], binaryAny[i]) << "ray " << i;
-          ASSERT_EQ(wideHits[i].valid(), binaryHits[i].valid()) << "ray " << i;
-          if (!wideHits[i].valid()) continue;
-          ++hits;
-          ASSERT_EQ(wideHits[i].t, binaryHits[i].t) << "ray " << i;
-          if (wideHits[i].tri != binaryHits[i].tri) ++ties;
-        }
+        ASSERT_NO_FATAL_FAILURE(
+            tsah::test::expectWideHitsMatch(view, rays, traceHits(gpuWide, rays), traceHits(gpuBinary, rays), count));
       }
-      EXPECT_GT(hits, 10000u) << tc::rebuildMethodName(method);
-      EXPECT_LE(ties, hits / 100) << tc::rebuildMethodName(method);
+      EXPECT_GT(count.hits, 10000u) << tc::rebuildMethodName(method);
+      EXPECT_LE(count.ties, count.hits / 100) << tc::rebuildMethodName(method);
     }
   }
 }
@@ -169,18 +152,9 @@ TEST(CudaCwbvhRebuild, ImagesEqualBinaryRebuild) {
   REQUIRE_GPU();
   const anim::Animation a = generatedAnimation(anim::GeneratorKind::Explode, 20000, 5);
   const tsah::FlatBvh tree = frameZeroTree(a);
-  tc::GpuRuntime gpuWide(tree, a, config(tsah::Layout::Cwbvh));
-  tc::GpuRuntime gpuBinary(tree, a, config(tsah::Layout::Bvh2));
-  const anim::Bounds ab = a.bounds();
-  tsah::Aabb bounds;
-  bounds.extend(Vec3{ab.min[0], ab.min[1], ab.min[2]});
-  bounds.extend(Vec3{ab.max[0], ab.max[1], ab.max[2]});
-  tsah::RenderSettings settings;
-  settings.width = 203;
-  settings.height = 157;
-  settings.aoSamples = 5;
-  settings.shadowSamples = 3;
-  const tsah::Camera camera = tsah::fitCamera(bounds, {0, 1, 0}, 45.0f, float(settings.width) / float(settings.height));
+  tc::GpuRuntime gpuWide(tree, a, gpuConfig(tsah::Layout::Cwbvh));
+  tc::GpuRuntime gpuBinary(tree, a, gpuConfig(tsah::Layout::Bvh2));
+  auto [bounds, settings, camera] = tsah::test::renderView(a);
   const tsah::SceneLighting lighting = tsah::fitLighting(bounds, camera);
   for (auto method : {tc::RebuildMethod::Lbvh, tc::RebuildMethod::HlbvhSah}) {
     settings.frame = 2;
@@ -190,12 +164,8 @@ TEST(CudaCwbvhRebuild, ImagesEqualBinaryRebuild) {
     tsah::Image wideImage, binaryImage;
     const tsah::RenderStats w = tc::renderFrameGpu(gpuWide, camera, lighting, settings, wideImage);
     const tsah::RenderStats b = tc::renderFrameGpu(gpuBinary, camera, lighting, settings, binaryImage);
-    EXPECT_EQ(w.primary.rays, b.primary.rays);
-    EXPECT_NEAR(double(w.ao.rays), double(b.ao.rays), 0.002 * double(b.ao.rays) + 8);
-    EXPECT_NEAR(double(w.shadow.rays), double(b.shadow.rays), 0.002 * double(b.shadow.rays) + 8);
-    const tsah::ImageDifference d = tsah::compareImages(wideImage, binaryImage, 16);
-    EXPECT_LT(d.meanAbs, 0.2) << tc::rebuildMethodName(method);
-    EXPECT_LT(d.fractionAbove, 0.002) << tc::rebuildMethodName(method);
+    tsah::test::expectRayCountsClose(w, b);
+    tsah::test::expectImagesClose(wideImage, binaryImage, tc::rebuildMethodName(method));
   }
 }
 
@@ -205,13 +175,13 @@ TEST(CudaCwbvhRebuild, TinySceneLargeLeavesAndBackToRefit) {
   REQUIRE_GPU();
   const auto m = tsah::test::randomMovingTriangles(1, 2, 4, 0.1f);
   const anim::Animation one(m.indices, 3, m.positions, {0.0, 1.0});
-  tc::GpuRuntime tiny(frameZeroTree(one), one, config(tsah::Layout::Cwbvh));
+  tc::GpuRuntime tiny(frameZeroTree(one), one, gpuConfig(tsah::Layout::Cwbvh));
   const tc::RebuildTimings timings = tiny.rebuildAt(0.0, options(tc::RebuildMethod::Lbvh, true));
   EXPECT_EQ(timings.wideNodes, 1u);
   expectEqualToHost(tiny, timings, one, 0.0);
 
   const anim::Animation a = generatedAnimation(anim::GeneratorKind::Wave, 5000, 3);
-  tc::GpuRuntime gpu(frameZeroTree(a), a, config(tsah::Layout::Cwbvh));
+  tc::GpuRuntime gpu(frameZeroTree(a), a, gpuConfig(tsah::Layout::Cwbvh));
   tc::RebuildOptions large = options(tc::RebuildMethod::HlbvhSah, true);
   large.maxLeafSize = 16;  // 8 leaves of 16 would overflow a node's 64 triangles
   EXPECT_THROW(gpu.rebuildAt(0.0, large), tsah::Error);
@@ -221,7 +191,7 @@ TEST(CudaCwbvhRebuild, TinySceneLargeLeavesAndBackToRefit) {
   EXPECT_FALSE(gpu.tracingRebuiltTree());
   EXPECT_EQ(gpu.downloadCwbvhNodes().size(), tsah::buildCwbvh(frameZeroTree(a)).nodes.size());
   // The binary layout keeps binary rebuilds.
-  tc::GpuRuntime binary(frameZeroTree(a), a, config(tsah::Layout::Bvh2));
+  tc::GpuRuntime binary(frameZeroTree(a), a, gpuConfig(tsah::Layout::Bvh2));
   const tc::RebuildTimings b = binary.rebuildAt(0.0, large);
   EXPECT_EQ(b.wideMs, 0.0);
   EXPECT_EQ(b.wideNodes, 0u);

@@ -148,10 +148,8 @@ TEST(CudaOptimizer, CollapseAndBadInput) {
 TEST(CudaOptimizer, DISABLED_ProfileExplode) {
   REQUIRE_GPU();
   const char* size = std::getenv("TSAH_PROFILE_TRIANGLES");
-  anim::GeneratorOptions g;
-  g.triangles = size ? uint32_t(std::stoul(size)) : 200000u;
-  g.frames = 10;
-  const anim::Animation a = anim::generate(anim::GeneratorKind::Explode, g);
+  const uint32_t triangles = size ? uint32_t(std::stoul(size)) : 200000u;
+  const anim::Animation a = tsah::test::generatedAnimation(anim::GeneratorKind::Explode, triangles, 10);
   const tsah::PrimitiveBoxes prims = tsah::representativeBoxes(a, 5);
   std::printf("explode: %u triangles x %u frames\n", prims.primCount, prims.frameCount);
   ParallelReinsertionOptimizer::Config config;

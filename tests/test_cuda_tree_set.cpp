@@ -16,10 +16,13 @@
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 #include "cuda_test_support.hpp"
+#include "test_support.hpp"
 
 namespace {
 
 namespace tc = tsah::cuda;
+
+using tsah::test::generatedAnimation;
 
 // Three different trees (sweep SAH on keyframes 0, 3 and 6, leaves of <= 4), overlapping ranges.
 tsah::TreeSet makeSet(const anim::Animation& a) {
@@ -27,9 +30,8 @@ tsah::TreeSet makeSet(const anim::Animation& a) {
   tsah::LeafCollapser::Config l;
   l.maxLeafSize = 4;
   for (uint32_t k : {0u, 3u, 6u}) {
-    std::vector<tsah::Aabb> boxes(a.triangleCount());
-    tsah::triangleBoxes(a.indices(), a.keyframe(k), boxes);
-    set.trees.push_back(tsah::flattenBvh(tsah::LeafCollapser(l).collapse(tsah::SweepSahBuilder().build(boxes))));
+    const tsah::Bvh bvh = tsah::SweepSahBuilder().build(tsah::test::keyframeBoxes(a, k));
+    set.trees.push_back(tsah::flattenBvh(tsah::LeafCollapser(l).collapse(bvh)));
   }
   const double t0 = a.startTime(), d = (a.endTime() - a.startTime()) / 3.0;
   set.ranges = {{t0, t0 + 1.2 * d}, {t0 + 0.8 * d, t0 + 2 * d}, {t0 + 2 * d, a.endTime()}};
@@ -38,10 +40,7 @@ tsah::TreeSet makeSet(const anim::Animation& a) {
 
 TEST(CudaTreeSet, UpdateAtRefitsTheTreeOfEachFramesPartLikeTheCpuRuntime) {
   REQUIRE_GPU();
-  anim::GeneratorOptions o;
-  o.triangles = 2000;
-  o.frames = 8;
-  const anim::Animation a = anim::generate(anim::GeneratorKind::Wave, o);
+  const anim::Animation a = generatedAnimation(anim::GeneratorKind::Wave, 2000, 8);
   const tsah::TreeSet set = makeSet(a);
   tc::GpuRuntime gpu(set, a, tc::GpuRuntime::Config{});
   tsah::CpuRuntime cpu(set, {a.indices().begin(), a.indices().end()}, a.vertexCount(), {2});
@@ -73,10 +72,7 @@ TEST(CudaTreeSet, UpdateAtRefitsTheTreeOfEachFramesPartLikeTheCpuRuntime) {
 
 TEST(CudaTreeSet, RefusesAnEmptySetOrATreeOfOtherTriangles) {
   REQUIRE_GPU();
-  anim::GeneratorOptions o;
-  o.triangles = 500;
-  o.frames = 8;
-  const anim::Animation a = anim::generate(anim::GeneratorKind::Wave, o);
+  const anim::Animation a = generatedAnimation(anim::GeneratorKind::Wave, 500, 8);
   EXPECT_THROW(tc::GpuRuntime(tsah::TreeSet{}, a, tc::GpuRuntime::Config{}), tsah::Error);
   tsah::TreeSet set = makeSet(a);
   set.trees[2].triIndex.pop_back();

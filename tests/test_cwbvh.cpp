@@ -22,6 +22,8 @@
 
 namespace {
 
+using tsah::test::generatedAnimation;
+
 using tsah::Aabb;
 using tsah::CwbvhNode;
 using tsah::Vec3;
@@ -329,12 +331,9 @@ void compareWithBinary(const anim::Animation& a, uint32_t rayCount, uint32_t see
 }
 
 TEST(CwbvhTraversal, EqualsBinaryTraversal) {
-  anim::GeneratorOptions o;
-  o.triangles = 3000;
-  o.frames = 8;
-  compareWithBinary(anim::generate(anim::GeneratorKind::Explode, o), 3000, 1);
-  compareWithBinary(anim::generate(anim::GeneratorKind::Wave, o), 3000, 2);
-  compareWithBinary(anim::generate(anim::GeneratorKind::Swap, o), 3000, 3);
+  compareWithBinary(generatedAnimation(anim::GeneratorKind::Explode, 3000, 8), 3000, 1);
+  compareWithBinary(generatedAnimation(anim::GeneratorKind::Wave, 3000, 8), 3000, 2);
+  compareWithBinary(generatedAnimation(anim::GeneratorKind::Swap, 3000, 8), 3000, 3);
 }
 
 TEST(CwbvhTraversal, SingleLeafTree) {

@@ -33,38 +33,17 @@ ParallelReinsertionOptimizer::Parallel fraction(double f) {
 }
 
 TEST(EmulatedGpuOptimizer, InvariantsAndExactCostAfterEveryRound) {
-  for (uint32_t seed : {1u, 2u, 3u}) {
-    for (uint32_t frames : {1u, 4u}) {
-      for (int k : {0, 2}) {
-        const tsah::PrimitiveBoxes prims = movingTriangleBoxes(150 + 100 * seed, frames, seed);
-        ParallelReinsertionOptimizer::Config config;
-        config.k = k;
-        config.seed = seed;
-        const auto session =
-            tsah::makeEmulatedDeviceSession(frameZeroSahTree(prims), prims, config, fraction(seed == 3 ? 1.0 : 0.5));
-        const double start = session->cost();
-        const uint64_t applied = tsah::test::expectValidRounds(*session, prims, k, 12);
-        EXPECT_GT(applied, 0u) << "seed " << seed << " frames " << frames << " k " << k;
-        EXPECT_LT(session->cost(), start);
-        EXPECT_EQ(session->appliedMoves(), applied);
-      }
-    }
-  }
+  tsah::test::expectRoundsValidAndImproving(
+      [](Bvh tree, const tsah::PrimitiveBoxes& prims, const ParallelReinsertionOptimizer::Config& config, double f) {
+        return tsah::makeEmulatedDeviceSession(std::move(tree), prims, config, fraction(f));
+      });
 }
 
 TEST(EmulatedGpuOptimizer, NeverEndsAboveItsStartAndHistoryIsMonotone) {
-  for (int k : {0, 1, 4}) {
-    const tsah::PrimitiveBoxes prims = movingTriangleBoxes(800, 5, 7 + k);
-    ParallelReinsertionOptimizer::Config config;
-    config.k = k;
-    const auto result = tsah::optimizeEmulatedDevice(frameZeroSahTree(prims), prims, config, {});
-    ASSERT_FALSE(tsah::validate(result.bvh, &prims).has_value());
-    EXPECT_LT(result.finalCost, result.initialCost);
-    ASSERT_GE(result.history.size(), 2u);
-    for (std::size_t i = 1; i < result.history.size(); ++i)
-      EXPECT_LE(result.history[i].cost, result.history[i - 1].cost * (1 + 1e-12));
-    EXPECT_NEAR(result.finalCost, tsah::temporalCost(tsah::frameCosts(result.bvh), k), 1e-9 * result.finalCost);
-  }
+  tsah::test::expectRunsNeverEndAboveTheStart(
+      [](Bvh tree, const tsah::PrimitiveBoxes& prims, const ParallelReinsertionOptimizer::Config& config) {
+        return tsah::optimizeEmulatedDevice(std::move(tree), prims, config, {});
+      });
 }
 
 TEST(EmulatedGpuOptimizer, SameSeedSameTree) {

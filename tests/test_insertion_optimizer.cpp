@@ -32,15 +32,7 @@ Bvh initialTree(const tsah::PrimitiveBoxes& prims) {
 double bruteForceCost(const Bvh& bvh, int k) { return tsah::temporalCost(tsah::frameCosts(bvh), k); }
 
 bool sameTree(const Bvh& a, const Bvh& b) {
-  if (a.root != b.root || a.nodes.size() != b.nodes.size() || a.primIds != b.primIds ||
-      a.boxes.size() != b.boxes.size())
-    return false;
-  for (std::size_t n = 0; n < a.nodes.size(); ++n) {
-    const tsah::BvhNode &x = a.nodes[n], &y = b.nodes[n];
-    if (x.parent != y.parent || x.left != y.left || x.right != y.right || x.primBegin != y.primBegin ||
-        x.primCount != y.primCount)
-      return false;
-  }
+  if (!tsah::test::sameTopology(a, b) || a.boxes.size() != b.boxes.size()) return false;
   for (std::size_t i = 0; i < a.boxes.size(); ++i)
     if (a.boxes[i].lo.x != b.boxes[i].lo.x || a.boxes[i].hi.y != b.boxes[i].hi.y ||
         a.boxes[i].hi.z != b.boxes[i].hi.z || a.boxes[i].lo.z != b.boxes[i].lo.z)
@@ -79,41 +71,36 @@ uint32_t parentOfPrim(const Bvh& bvh, uint32_t prim) {
 }
 
 TEST(InsertionSession, InvariantsAndExactCostAfterEveryStep) {
-  for (uint32_t seed : {1u, 2u, 3u}) {
-    for (uint32_t frames : {1u, 3u}) {
-      for (int k : {0, 2}) {
-        const tsah::PrimitiveBoxes prims = movingTriangleBoxes(40 + 30 * seed, frames, seed);
-        InsertionOptimizer::Config config;
-        config.k = k;
-        config.seed = seed;
-        config.selection = seed == 2 ? Selection::Uniform : Selection::MetropolisHastings;
-        InsertionSession session(initialTree(prims), prims, config);
-        double previous = session.cost();
-        EXPECT_NEAR(previous, bruteForceCost(session.bvh(), k), 1e-9 * previous);
-        for (int step = 0; step < 300; ++step) {
-          const uint32_t node = session.selectNode();
-          ASSERT_TRUE(session.eligible(node));
-          const Bvh before = session.bvh();
-          const bool kept = session.step(node);
-          const auto problem = tsah::validate(session.bvh(), &prims);
-          ASSERT_FALSE(problem.has_value()) << "step " << step << ": " << *problem;
-          const double expected = bruteForceCost(session.bvh(), k);
-          ASSERT_NEAR(session.cost(), expected, 1e-9 * expected) << "step " << step;
-          const std::vector<double> perFrame = tsah::frameCosts(session.bvh());
-          for (uint32_t f = 0; f < frames; ++f)
-            ASSERT_NEAR(session.frameCosts()[f], perFrame[f], 1e-9 * perFrame[f]);
-          if (kept) {
-            EXPECT_LE(session.cost(), previous * (1 + 1e-12)) << "a kept step raised the cost";
-          } else {
-            EXPECT_TRUE(sameTree(before, session.bvh())) << "an undone step changed the tree";
-          }
-          previous = session.cost();
-        }
-        session.refresh();
-        EXPECT_NEAR(session.cost(), previous, 1e-9 * previous);
+  tsah::test::forEachSeedFramesAndK({1u, 3u}, 40, 30, [](const tsah::PrimitiveBoxes& prims, uint32_t seed, int k) {
+    InsertionOptimizer::Config config;
+    config.k = k;
+    config.seed = seed;
+    config.selection = seed == 2 ? Selection::Uniform : Selection::MetropolisHastings;
+    InsertionSession session(initialTree(prims), prims, config);
+    double previous = session.cost();
+    EXPECT_NEAR(previous, bruteForceCost(session.bvh(), k), 1e-9 * previous);
+    for (int step = 0; step < 300; ++step) {
+      const uint32_t node = session.selectNode();
+      ASSERT_TRUE(session.eligible(node));
+      const Bvh before = session.bvh();
+      const bool kept = session.step(node);
+      const auto problem = tsah::validate(session.bvh(), &prims);
+      ASSERT_FALSE(problem.has_value()) << "step " << step << ": " << *problem;
+      const double expected = bruteForceCost(session.bvh(), k);
+      ASSERT_NEAR(session.cost(), expected, 1e-9 * expected) << "step " << step;
+      const std::vector<double> perFrame = tsah::frameCosts(session.bvh());
+      for (uint32_t f = 0; f < prims.frameCount; ++f)
+        ASSERT_NEAR(session.frameCosts()[f], perFrame[f], 1e-9 * perFrame[f]);
+      if (kept) {
+        EXPECT_LE(session.cost(), previous * (1 + 1e-12)) << "a kept step raised the cost";
+      } else {
+        EXPECT_TRUE(sameTree(before, session.bvh())) << "an undone step changed the tree";
       }
+      previous = session.cost();
     }
-  }
+    session.refresh();
+    EXPECT_NEAR(session.cost(), previous, 1e-9 * previous);
+  });
 }
 
 TEST(InsertionSession, StepsOnEveryNodeKeepTheTreeValid) {

@@ -36,22 +36,10 @@ using tsah::test::identicalTree;
 bool sameTree(const Bvh& a, const Bvh& b) { return tsah::test::sameTopology(a, b) && a.boxes.size() == b.boxes.size(); }
 
 TEST(ReinsertionSession, InvariantsAndExactCostAfterEveryRound) {
-  for (uint32_t seed : {1u, 2u, 3u}) {
-    for (uint32_t frames : {1u, 4u}) {
-      for (int k : {0, 2}) {
-        const tsah::PrimitiveBoxes prims = movingTriangleBoxes(150 + 100 * seed, frames, seed);
-        ParallelReinsertionOptimizer::Config config;
-        config.k = k;
-        config.seed = seed;
-        ReinsertionSession session(frameZeroSahTree(prims), prims, config, settings(2, seed == 3 ? 1.0 : 0.5));
-        const double start = session.cost();
-        const uint64_t applied = tsah::test::expectValidRounds(session, prims, k, 12);
-        EXPECT_GT(applied, 0u);
-        EXPECT_LT(session.cost(), start);
-        EXPECT_EQ(session.appliedMoves(), applied);
-      }
-    }
-  }
+  tsah::test::expectRoundsValidAndImproving(
+      [](Bvh tree, const tsah::PrimitiveBoxes& prims, const ParallelReinsertionOptimizer::Config& config, double f) {
+        return std::make_unique<ReinsertionSession>(std::move(tree), prims, config, settings(2, f));
+      });
 }
 
 // Moves the subtree l next to x (as the search's moves do, reusing l's parent), then refits.
@@ -108,19 +96,13 @@ TEST(ReinsertionSession, ConvergedTreeHasNoImprovingSingleMove) {
 }
 
 TEST(ParallelReinsertionOptimizer, NeverEndsAboveItsStartAndHistoryIsMonotone) {
-  for (int k : {0, 1, 4}) {
-    const tsah::PrimitiveBoxes prims = movingTriangleBoxes(800, 5, 7 + k);
-    ParallelReinsertionOptimizer::Config config;
-    config.k = k;
-    const auto result = ParallelReinsertionOptimizer(config, settings(2)).optimize(frameZeroSahTree(prims), prims);
-    ASSERT_FALSE(tsah::validate(result.bvh, &prims).has_value());
-    EXPECT_LT(result.finalCost, result.initialCost);
-    ASSERT_GE(result.history.size(), 2u);
-    for (std::size_t i = 1; i < result.history.size(); ++i)
-      EXPECT_LE(result.history[i].cost, result.history[i - 1].cost * (1 + 1e-12));
-    EXPECT_NEAR(result.finalCost, tsah::temporalCost(tsah::frameCosts(result.bvh), k), 1e-9 * result.finalCost);
-    EXPECT_EQ(result.history.back().acceptedSteps, result.acceptedSteps);
-  }
+  tsah::test::expectRunsNeverEndAboveTheStart(
+      [](Bvh tree, const tsah::PrimitiveBoxes& prims, const ParallelReinsertionOptimizer::Config& config) {
+        return ParallelReinsertionOptimizer(config, settings(2)).optimize(std::move(tree), prims);
+      },
+      [](const ParallelReinsertionOptimizer::Result& result) {
+        EXPECT_EQ(result.history.back().acceptedSteps, result.acceptedSteps);
+      });
 }
 
 TEST(ParallelReinsertionOptimizer, SameSeedSameTreeForAnyThreadCount) {

@@ -73,11 +73,7 @@ std::string errorOf(std::span<const uint8_t> bytes, PointCacheFormat format) {
 }
 
 anim::Animation smallWave() {
-  anim::GeneratorOptions o;
-  o.triangles = 200;
-  o.frames = 6;
-  o.seed = 4;
-  return anim::generate(anim::GeneratorKind::Wave, o);
+  return tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 200, 6, 4);
 }
 
 void expectSameAnimation(const anim::Animation& a, const anim::Animation& b) {

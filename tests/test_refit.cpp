@@ -9,8 +9,11 @@
 #include "tsah/build/binned_sah_builder.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
 #include "tsah/build/sah_builder.hpp"
+#include "test_support.hpp"
 
 namespace {
+
+using tsah::test::generatedAnimation;
 
 // The reference: tsah::refit over the Bvh with boxes computed from scratch, then flattened.
 tsah::FlatBvh refitFromScratch(const tsah::Bvh& topology, const anim::Animation& a, double t) {
@@ -50,12 +53,9 @@ void checkRefit(const anim::Animation& a, const tsah::Bvh& topology, uint32_t th
 }
 
 TEST(Refit, EqualsRefitFromScratchAtSeveralTimes) {
-  anim::GeneratorOptions o;
-  o.triangles = 6000;  // enough nodes to split the refit into many parallel subtrees
-  o.frames = 10;
-  const auto a = anim::generate(anim::GeneratorKind::Explode, o);
-  std::vector<tsah::Aabb> boxes(a.triangleCount());
-  tsah::triangleBoxes(a.indices(), a.keyframe(0), boxes);
+  // 6000 triangles: enough nodes to split the refit into many parallel subtrees.
+  const auto a = generatedAnimation(anim::GeneratorKind::Explode, 6000, 10);
+  const std::vector<tsah::Aabb> boxes = tsah::test::keyframeBoxes(a, 0);
   const tsah::Bvh sweep = tsah::SweepSahBuilder().build(boxes);
   for (uint32_t threads : {1u, 2u, 7u}) checkRefit(a, sweep, threads);
   tsah::BinnedSahBuilder::Config c;
@@ -64,24 +64,15 @@ TEST(Refit, EqualsRefitFromScratchAtSeveralTimes) {
 }
 
 TEST(Refit, WaveAndSwap) {
-  anim::GeneratorOptions o;
-  o.triangles = 2000;
-  o.frames = 5;
   for (auto kind : {anim::GeneratorKind::Wave, anim::GeneratorKind::Swap}) {
-    const auto a = anim::generate(kind, o);
-    std::vector<tsah::Aabb> boxes(a.triangleCount());
-    tsah::triangleBoxes(a.indices(), a.keyframe(0), boxes);
-    checkRefit(a, tsah::SweepSahBuilder().build(boxes), 2);
+    const auto a = generatedAnimation(kind, 2000, 5);
+    checkRefit(a, tsah::SweepSahBuilder().build(tsah::test::keyframeBoxes(a, 0)), 2);
   }
 }
 
 TEST(Refit, RebuildGivesAValidTreeOfTheFrame) {
-  anim::GeneratorOptions o;
-  o.triangles = 3000;
-  o.frames = 4;
-  const auto a = anim::generate(anim::GeneratorKind::Explode, o);
-  std::vector<tsah::Aabb> boxes(a.triangleCount());
-  tsah::triangleBoxes(a.indices(), a.keyframe(0), boxes);
+  const auto a = generatedAnimation(anim::GeneratorKind::Explode, 3000, 4);
+  const std::vector<tsah::Aabb> boxes = tsah::test::keyframeBoxes(a, 0);
   tsah::CpuRuntime rt(tsah::flattenBvh(tsah::SweepSahBuilder().build(boxes)),
                       {a.indices().begin(), a.indices().end()}, a.vertexCount(), {2});
   const tsah::BinnedSahBuilder builder;
@@ -98,12 +89,8 @@ TEST(Refit, RebuildGivesAValidTreeOfTheFrame) {
 }
 
 TEST(Refit, RejectsMismatchedInput) {
-  anim::GeneratorOptions o;
-  o.triangles = 500;
-  o.frames = 2;
-  const auto a = anim::generate(anim::GeneratorKind::Wave, o);
-  std::vector<tsah::Aabb> boxes(a.triangleCount());
-  tsah::triangleBoxes(a.indices(), a.keyframe(0), boxes);
+  const auto a = generatedAnimation(anim::GeneratorKind::Wave, 500, 2);
+  const std::vector<tsah::Aabb> boxes = tsah::test::keyframeBoxes(a, 0);
   const tsah::FlatBvh flat = tsah::flattenBvh(tsah::SweepSahBuilder().build(boxes));
   std::vector<uint32_t> idx(a.indices().begin(), a.indices().end());
   std::vector<uint32_t> fewer(idx.begin(), idx.end() - 3);

@@ -3,7 +3,6 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-#include <fstream>
 
 #include "tsah/base/error.hpp"
 #include "anim/load.hpp"
@@ -16,11 +15,11 @@ namespace fs = std::filesystem;
 
 namespace {
 
-void write(const fs::path& p, const std::string& text) { std::ofstream(p) << text; }
+using tsah::test::writeText;
 
 // One triangle (1,0,0) (0,1,0) (0,0,1) as an OBJ.
 fs::path triangleObj(const fs::path& dir) {
-  write(dir / "tri.obj", "v 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\n");
+  writeText(dir / "tri.obj", "v 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\n");
   return dir / "tri.obj";
 }
 
@@ -50,7 +49,7 @@ std::string loadError(const fs::path& scene) {
 TEST(Scene, OneObjectEqualsLoadingItDirectly) {
   const fs::path dir = tsah::test::scratchDir();
   movingTanim(dir);
-  write(dir / "one.json", sceneWith(R"({"file": "mover.tanim"})", "\"fps\": 2"));
+  writeText(dir / "one.json", sceneWith(R"({"file": "mover.tanim"})", "\"fps\": 2"));
   const auto direct = anim::load((dir / "mover.tanim").string());
   const auto scene = anim::load((dir / "one.json").string());
   EXPECT_TRUE(anim::isSceneFile((dir / "one.json").string()));
@@ -63,7 +62,7 @@ TEST(Scene, OneObjectEqualsLoadingItDirectly) {
   EXPECT_EQ(scene.movingVertexCount(), 1u);  // the source's static vertices stay static
 
   triangleObj(dir);
-  write(dir / "static.json", sceneWith(R"({"file": "tri.obj"})"));
+  writeText(dir / "static.json", sceneWith(R"({"file": "tri.obj"})"));
   const auto mesh = anim::load((dir / "tri.obj").string());
   const auto s = anim::load((dir / "static.json").string());
   EXPECT_EQ(s.keyframeCount(), 1u);
@@ -73,7 +72,7 @@ TEST(Scene, OneObjectEqualsLoadingItDirectly) {
 TEST(Scene, StaticPlacementIsTheHandComputedTransform) {
   const fs::path dir = tsah::test::scratchDir();
   triangleObj(dir);
-  write(dir / "s.json", sceneWith(R"({"file": "tri.obj", "transform": {"translate": [1, 2, 3], "rotate": [0, 0, 90], "scale": 2}},
+  writeText(dir / "s.json", sceneWith(R"({"file": "tri.obj", "transform": {"translate": [1, 2, 3], "rotate": [0, 0, 90], "scale": 2}},
                                      {"file": "tri.obj", "transform": {"matrix": [0, 0, 1, 5,  1, 0, 0, 0,  0, 1, 0, 0,  0, 0, 0, 1]}})"));
   const auto a = anim::load((dir / "s.json").string());
   ASSERT_EQ(a.vertexCount(), 6u);
@@ -90,7 +89,7 @@ TEST(Scene, StaticPlacementIsTheHandComputedTransform) {
 TEST(Scene, KeyedPathMovesTheObject) {
   const fs::path dir = tsah::test::scratchDir();
   triangleObj(dir);
-  write(dir / "s.json", sceneWith(R"({"file": "tri.obj", "path": [{"time": 0}, {"time": 2, "translate": [10, 0, 0], "rotate": [0, 0, 180]}]})"));
+  writeText(dir / "s.json", sceneWith(R"({"file": "tri.obj", "path": [{"time": 0}, {"time": 2, "translate": [10, 0, 0], "rotate": [0, 0, 180]}]})"));
   const auto a = anim::load((dir / "s.json").string());
   EXPECT_EQ(a.keyframeCount(), 9u);  // [0, 2] at 4 fps
   EXPECT_EQ(a.movingVertexCount(), 3u);
@@ -107,7 +106,7 @@ TEST(Scene, KeyedPathMovesTheObject) {
 TEST(Scene, OffsetLoopAndHoldMapSceneTime) {
   const fs::path dir = tsah::test::scratchDir();
   movingTanim(dir);
-  write(dir / "s.json", sceneWith(R"({"name": "late", "file": "mover.tanim", "time": {"offset": 0.5}},
+  writeText(dir / "s.json", sceneWith(R"({"name": "late", "file": "mover.tanim", "time": {"offset": 0.5}},
                                      {"name": "fast", "file": "mover.tanim", "time": {"speed": 2, "outside": "loop"}},
                                      {"name": "held", "file": "mover.tanim", "transform": {"translate": [0, 0, 10]}})",
                                   "\"fps\": 8, \"time\": [0, 2]"));
@@ -131,7 +130,7 @@ TEST(Scene, OffsetLoopAndHoldMapSceneTime) {
 TEST(Scene, InstancesShareTheirSource) {
   const fs::path dir = tsah::test::scratchDir();
   movingTanim(dir);
-  write(dir / "s.json", sceneWith(R"({"name": "herd", "file": "mover.tanim", "instances": [
+  writeText(dir / "s.json", sceneWith(R"({"name": "herd", "file": "mover.tanim", "instances": [
       {"transform": {"translate": [0, 0, 0]}}, {"transform": {"translate": [5, 0, 0]}, "offset": 0.5},
       {"transform": {"translate": [10, 0, 0]}, "path": [{"time": 0}, {"time": 1, "translate": [0, 3, 0]}]}]},
       {"name": "again", "file": "./mover.tanim"})", "\"fps\": 2, \"time\": [0, 1]"));
@@ -195,7 +194,7 @@ TEST(Scene, LoopSubdivisionCountsAndStaysCloseToTheSurface) {
 TEST(Scene, SubdivideInASceneFile) {
   const fs::path dir = tsah::test::scratchDir();
   anim::saveTanim(octahedron(), (dir / "octa.tanim").string());
-  write(dir / "s.json", sceneWith(R"({"file": "octa.tanim", "subdivide": 2, "instances": [{}, {"transform": {"translate": [3, 0, 0]}}]})"));
+  writeText(dir / "s.json", sceneWith(R"({"file": "octa.tanim", "subdivide": 2, "instances": [{}, {"transform": {"translate": [3, 0, 0]}}]})"));
   const auto baked = anim::bakeScene((dir / "s.json").string());
   EXPECT_EQ(baked.animation.triangleCount(), 2u * 8 * 16);
   EXPECT_EQ(baked.objects[0].sourceTriangles, 8u * 16);
@@ -231,7 +230,7 @@ TEST(Scene, BadInputNamesTheSceneFileAndTheObject) {
   };
   for (const BadCase& c : cases) {
     const fs::path scene = dir / (std::string(c.name) + ".json");
-    write(scene, sceneWith(c.objects));
+    writeText(scene, sceneWith(c.objects));
     const std::string message = loadError(scene);
     EXPECT_NE(message.find(scene.string() + ": "), std::string::npos) << c.name << ": " << message;
     EXPECT_NE(message.find("bad"), std::string::npos) << c.name << ": " << message;
@@ -239,12 +238,12 @@ TEST(Scene, BadInputNamesTheSceneFileAndTheObject) {
     EXPECT_EQ(message.find('\n'), std::string::npos) << c.name;
   }
   // JSON has no NaN or infinity: an overflowing number is a JSON error of the file.
-  write(dir / "inf.json", sceneWith(R"({"name": "bad", "file": "tri.obj", "transform": {"translate": [1e999, 0, 0]}})"));
+  writeText(dir / "inf.json", sceneWith(R"({"name": "bad", "file": "tri.obj", "transform": {"translate": [1e999, 0, 0]}})"));
   EXPECT_NE(loadError(dir / "inf.json").find((dir / "inf.json").string() + ": not valid JSON"), std::string::npos)
       << loadError(dir / "inf.json");
   // 2000 moving instances x 1,000,001 keyframes: about 70 GiB, refused by the statement.
   const fs::path big = dir / "big.json";
-  write(big, sceneWith(hugeInstances, "\"fps\": 1000000, \"time\": [0, 1]"));
+  writeText(big, sceneWith(hugeInstances, "\"fps\": 1000000, \"time\": [0, 1]"));
   const std::string message = loadError(big);
   EXPECT_NE(message.find("object 'bad': 2000 instances"), std::string::npos) << message;
   EXPECT_NE(message.find("MiB of memory available"), std::string::npos) << message;
@@ -253,23 +252,23 @@ TEST(Scene, BadInputNamesTheSceneFileAndTheObject) {
 TEST(Scene, ScenesIncludingEachOtherAreACycle) {
   const fs::path dir = tsah::test::scratchDir();
   triangleObj(dir);
-  write(dir / "a.json", sceneWith(R"({"file": "tri.obj"}, {"name": "inner", "file": "b.json"})"));
-  write(dir / "b.json", sceneWith(R"({"name": "back", "file": "a.json"})"));
+  writeText(dir / "a.json", sceneWith(R"({"file": "tri.obj"}, {"name": "inner", "file": "b.json"})"));
+  writeText(dir / "b.json", sceneWith(R"({"name": "back", "file": "a.json"})"));
   const std::string message = loadError(dir / "a.json");
   EXPECT_NE(message.find("include each other"), std::string::npos) << message;
   EXPECT_NE(message.find("object 'inner'"), std::string::npos) << message;
-  write(dir / "self.json", sceneWith(R"({"name": "me", "file": "self.json"})"));
+  writeText(dir / "self.json", sceneWith(R"({"name": "me", "file": "self.json"})"));
   EXPECT_NE(loadError(dir / "self.json").find("object 'me': scene files include each other"), std::string::npos);
   // A scene of a scene (no cycle) composes.
-  write(dir / "outer.json", sceneWith(R"({"file": "b2.json", "transform": {"translate": [0, 0, 1]}})"));
-  write(dir / "b2.json", sceneWith(R"({"file": "tri.obj"})"));
+  writeText(dir / "outer.json", sceneWith(R"({"file": "b2.json", "transform": {"translate": [0, 0, 1]}})"));
+  writeText(dir / "b2.json", sceneWith(R"({"file": "tri.obj"})"));
   EXPECT_FLOAT_EQ(anim::load((dir / "outer.json").string()).positionsAt(0.0)[8], 2.0f);
 }
 
 TEST(Scene, DataPathsResolveThroughTheOption) {
   const fs::path dir = tsah::test::scratchDir();
   triangleObj(dir);
-  write(dir / "s.json", sceneWith(R"({"file": "data:somewhere/tri.obj"})"));
+  writeText(dir / "s.json", sceneWith(R"({"file": "data:somewhere/tri.obj"})"));
   anim::LoadOptions options;
   options.resolveDataPath = [&](const std::string& rel) {
     EXPECT_EQ(rel, "somewhere/tri.obj");

@@ -11,11 +11,7 @@
 namespace {
 
 anim::Animation sample() {
-  anim::GeneratorOptions o;
-  o.triangles = 300;
-  o.frames = 4;
-  o.seed = 7;
-  anim::Animation a = anim::generate(anim::GeneratorKind::Explode, o);
+  anim::Animation a = tsah::test::generatedAnimation(anim::GeneratorKind::Explode, 300, 4, 7);
   anim::CameraKey k;
   k.time = 1.5;
   k.eye = {1, 2, 3};

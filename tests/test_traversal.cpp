@@ -14,8 +14,11 @@
 #include "tsah/build/sah_builder.hpp"
 #include "tsah/render/sampling.hpp"
 #include "tsah/layout/traversal.hpp"
+#include "test_support.hpp"
 
 namespace {
+
+using tsah::test::generatedAnimation;
 
 using tsah::Vec3;
 
@@ -107,20 +110,14 @@ void checkAgainstBruteForce(const anim::Animation& a, bool binned, uint32_t rays
 }
 
 TEST(Traversal, MatchesBruteForceOnExplodingSphere) {
-  anim::GeneratorOptions o;
-  o.triangles = 1500;
-  o.frames = 8;
-  const auto a = anim::generate(anim::GeneratorKind::Explode, o);
+  const auto a = generatedAnimation(anim::GeneratorKind::Explode, 1500, 8);
   checkAgainstBruteForce(a, true, 2000, 1);
   checkAgainstBruteForce(a, false, 2000, 2);
 }
 
 TEST(Traversal, MatchesBruteForceOnWaveAndSwap) {
-  anim::GeneratorOptions o;
-  o.triangles = 1200;
-  o.frames = 6;
-  checkAgainstBruteForce(anim::generate(anim::GeneratorKind::Wave, o), true, 2000, 3);
-  checkAgainstBruteForce(anim::generate(anim::GeneratorKind::Swap, o), false, 2000, 4);
+  checkAgainstBruteForce(generatedAnimation(anim::GeneratorKind::Wave, 1200, 6), true, 2000, 3);
+  checkAgainstBruteForce(generatedAnimation(anim::GeneratorKind::Swap, 1200, 6), false, 2000, 4);
 }
 
 TEST(Traversal, SingleLeafTreeAndSingleTriangle) {

@@ -15,8 +15,11 @@
 #include "tsah/layout/wide_bvh.hpp"
 #include "tsah/layout/wide_tree.hpp"
 #include "tsah/layout/woop.hpp"
+#include "test_support.hpp"
 
 namespace {
+
+using tsah::test::generatedAnimation;
 
 using tsah::SimdIsa;
 using tsah::Vec3;
@@ -186,10 +189,7 @@ void refitWithEveryThreadCountAndIsa(const anim::Animation& a, const tsah::WideB
 }
 
 TEST(WideRefit, RefitHoldsExactRowsAndBoxesForEveryPlanAndInstructionSet) {
-  anim::GeneratorOptions o;
-  o.triangles = 3000;
-  o.frames = 4;
-  const anim::Animation a = anim::generate(anim::GeneratorKind::Wave, o);
+  const anim::Animation a = generatedAnimation(anim::GeneratorKind::Wave, 3000, 4);
   const tsah::PrimitiveBoxes boxes = tsah::triangleBoxes(a.indices(), a.positionsAt(a.startTime()), 1);
   const tsah::Bvh bvh = tsah::SweepSahBuilder().build(boxes.frame(0));
   for (uint32_t width : {4u, 8u}) {
@@ -206,10 +206,7 @@ TEST(WideRefit, RefitHoldsExactRowsAndBoxesForEveryPlanAndInstructionSet) {
 }
 
 TEST(WideRefit, RejectsAnIndexArrayShorterThanTheTree) {
-  anim::GeneratorOptions o;
-  o.triangles = 200;
-  o.frames = 1;
-  const anim::Animation a = anim::generate(anim::GeneratorKind::Wave, o);
+  const anim::Animation a = generatedAnimation(anim::GeneratorKind::Wave, 200, 1);
   const tsah::PrimitiveBoxes boxes = tsah::triangleBoxes(a.indices(), a.positionsAt(a.startTime()), 1);
   tsah::WideCollapser::Config c;
   c.width = 8;

@@ -21,6 +21,8 @@
 
 namespace {
 
+using tsah::test::generatedAnimation;
+
 using tsah::Layout;
 using tsah::SimdIsa;
 using tsah::Vec3;
@@ -157,11 +159,8 @@ TEST(WideTraversal, EveryDispatchTargetIsTested) {
 }
 
 TEST(WideTraversal, SameHitsAsBinaryOnGeneratedAnimations) {
-  anim::GeneratorOptions o;
-  o.triangles = 1500;
-  o.frames = 8;
   for (auto kind : {anim::GeneratorKind::Explode, anim::GeneratorKind::Wave, anim::GeneratorKind::Swap}) {
-    const auto a = anim::generate(kind, o);
+    const auto a = generatedAnimation(kind, 1500, 8);
     const double ts[] = {a.startTime(), 0.5 * (a.startTime() + a.endTime()), a.endTime()};
     for (uint32_t leaf : {1u, 4u, 8u}) {
       const uint64_t hits = expectSameHits(a, multiFrameTree(a, leaf, 3), ts, 600, leaf);
@@ -172,10 +171,7 @@ TEST(WideTraversal, SameHitsAsBinaryOnGeneratedAnimations) {
 
 TEST(WideTraversal, SingleLeafTreesAndEmptyRays) {
   // Few triangles: the collapse may make the whole tree one leaf.
-  anim::GeneratorOptions o;
-  o.triangles = 6;
-  o.frames = 2;
-  const auto a = anim::generate(anim::GeneratorKind::Explode, o);
+  const auto a = generatedAnimation(anim::GeneratorKind::Explode, 6, 2);
   const double ts[] = {a.startTime()};
   expectSameHits(a, multiFrameTree(a, 8, 2), ts, 300, 5);
   for (const auto& [layout, isa] : wideTargets()) {
@@ -191,10 +187,7 @@ TEST(WideTraversal, SingleLeafTreesAndEmptyRays) {
 TEST(WideTraversal, SameAnswersThroughEdgesAndVertices) {
   // Rays exactly through edges and vertices, where the watertight fallback decides: the wide
   // kernels must agree with the binary traversal (proven watertight in test_traversal).
-  anim::GeneratorOptions o;
-  o.triangles = 800;
-  o.frames = 2;
-  const auto a = anim::generate(anim::GeneratorKind::Wave, o);
+  const auto a = generatedAnimation(anim::GeneratorKind::Wave, 800, 2);
   const tsah::FlatBvh tree = multiFrameTree(a, 4, 2);
   tsah::CpuRuntime binary = runtime(a, tree, Layout::Bvh2);
   binary.update(a.positionsAt(a.startTime()));
@@ -252,10 +245,7 @@ void expectBoxesContainChildren(const tsah::WideTree<N>& w, const tsah::CpuRunti
 }
 
 TEST(WideTraversal, RefitBoxesContainChildrenInEveryFrameAndCostsAreReported) {
-  anim::GeneratorOptions o;
-  o.triangles = 3000;
-  o.frames = 10;
-  const auto a = anim::generate(anim::GeneratorKind::Explode, o);
+  const auto a = generatedAnimation(anim::GeneratorKind::Explode, 3000, 10);
   const tsah::FlatBvh tree = multiFrameTree(a, 4, 4);
   for (Layout layout : {Layout::Bvh4, Layout::Bvh8}) {
     if (!tsah::layoutSupported(layout)) continue;
@@ -274,10 +264,7 @@ TEST(WideTraversal, RefitBoxesContainChildrenInEveryFrameAndCostsAreReported) {
 }
 
 TEST(WideTraversal, RebuildKeepsTheLayout) {
-  anim::GeneratorOptions o;
-  o.triangles = 1000;
-  o.frames = 4;
-  const auto a = anim::generate(anim::GeneratorKind::Swap, o);
+  const auto a = generatedAnimation(anim::GeneratorKind::Swap, 1000, 4);
   const tsah::FlatBvh tree = multiFrameTree(a, 4, 2);
   tsah::CpuRuntime binary = runtime(a, tree, Layout::Bvh2);
   tsah::CpuRuntime wide = runtime(a, tree, tsah::fastestLayout());
@@ -293,10 +280,7 @@ TEST(WideTraversal, RebuildKeepsTheLayout) {
 }
 
 TEST(WideTraversal, RejectsUnsupportedKernels) {
-  anim::GeneratorOptions o;
-  o.triangles = 100;
-  o.frames = 2;
-  const auto a = anim::generate(anim::GeneratorKind::Swap, o);
+  const auto a = generatedAnimation(anim::GeneratorKind::Swap, 100, 2);
   EXPECT_THROW(runtime(a, multiFrameTree(a, 4, 1), Layout::Bvh8, SimdIsa::Sse), tsah::ConfigError);  // sse: 4-wide only
 }
 

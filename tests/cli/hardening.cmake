@@ -14,6 +14,12 @@ endfunction()
 function(tsah_hard_fixture name fixture)
   set_tests_properties(${name} PROPERTIES FIXTURES_REQUIRED ${fixture})
 endfunction()
+# tsah_bad_file(NAME FILE REGEX CONTENT): writes CONTENT to ${H}/FILE; `tsah info` on it must fail
+# with REGEX.
+function(tsah_bad_file name file regex content)
+  file(WRITE ${H}/${file} "${content}")
+  tsah_expect_error(${name} 1 "${regex}" info ${H}/${file})
+endfunction()
 
 # Fixtures: a small animation, a tree for it, a large animation for the memory statement.
 add_test(NAME hard.setup.anim COMMAND tsah generate wave -o ${H}/a.tanim --triangles 200 --frames 4)
@@ -38,63 +44,59 @@ tsah_hard_fixture(hard.missing.tree hard_anim)
 
 # ---- 2. PLY / OFF faces and counts --------------------------------------------------------------
 set(PLY_HEAD "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n")
-file(WRITE ${H}/bad_index.ply "${PLY_HEAD}0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 3 77\n")
-file(WRITE ${H}/negative_index.ply "${PLY_HEAD}0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 -3 2\n")
-file(WRITE ${H}/nan_vertex.ply "${PLY_HEAD}0 0 0\n1 nan 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 3 2\n")
-file(WRITE ${H}/word_vertex.ply "${PLY_HEAD}0 0 0\n1 zero 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 3 2\n")
-file(WRITE ${H}/short.ply "${PLY_HEAD}0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n")
-file(WRITE ${H}/two_vertex_face.ply "${PLY_HEAD}0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n2 1 3\n")
-file(WRITE ${H}/degenerate.ply "${PLY_HEAD}0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 1 2\n")
-file(WRITE ${H}/huge_count.ply "ply\nformat binary_little_endian 1.0\nelement vertex 4000000000\nproperty float x\nproperty float y\nproperty float z\nelement face 4000000000\nproperty list uchar int vertex_indices\nend_header\n")
-file(WRITE ${H}/bad_format.ply "ply\nformat ebcdic 1.0\nend_header\n")
+set(PLY_QUAD "${PLY_HEAD}0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n")  # the four vertices and a first good face
+tsah_bad_file(hard.ply.missing_vertex bad_index.ply
+  "bad_index.ply: face 1 references vertex 77 but the file has 4 vertices" "${PLY_QUAD}3 1 3 77\n")
+tsah_bad_file(hard.ply.negative_index negative_index.ply
+  "negative_index.ply: face 1 references vertex -3" "${PLY_QUAD}3 1 -3 2\n")
+tsah_bad_file(hard.ply.nan nan_vertex.ply
+  "nan_vertex.ply: vertex 1 has a NaN or infinite coordinate" "${PLY_HEAD}0 0 0\n1 nan 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 3 2\n")
+tsah_bad_file(hard.ply.word word_vertex.ply
+  "word_vertex.ply: vertex 1: property y is not a number: 'zero'" "${PLY_HEAD}0 0 0\n1 zero 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 3 2\n")
+tsah_bad_file(hard.ply.truncated short.ply
+  "short.ply: face 1: list length of vertex_indices is missing \\(the file ends early\\)" "${PLY_QUAD}")
+tsah_bad_file(hard.ply.two_vertices two_vertex_face.ply
+  "two_vertex_face.ply: face 1 has 2 vertices \\(at least 3 needed\\)" "${PLY_QUAD}2 1 3\n")
+tsah_bad_file(hard.ply.dropped_face degenerate.ply
+  "degenerate.ply: the mesh reader kept 4 of 4 vertices and 1 of 2 faces" "${PLY_QUAD}3 1 1 2\n")
+tsah_bad_file(hard.ply.huge_count huge_count.ply
+  "huge_count.ply: header declares 4000000000 vertices and 4000000000 faces \\(at least [0-9]+ bytes\\), but only 0 bytes follow it"
+  "ply\nformat binary_little_endian 1.0\nelement vertex 4000000000\nproperty float x\nproperty float y\nproperty float z\nelement face 4000000000\nproperty list uchar int vertex_indices\nend_header\n")
+tsah_bad_file(hard.ply.format bad_format.ply
+  "bad_format.ply: unknown PLY format 'ebcdic'" "ply\nformat ebcdic 1.0\nend_header\n")
 file(WRITE ${H}/bad_index.off "OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 3 77\n")
-file(WRITE ${H}/nan_vertex.off "OFF\n4 1 0\n0 0 0\n1 0 nan\n0 1 0\n1 1 0\n3 0 1 2\n")
-file(WRITE ${H}/huge_count.off "OFF\n3000000000 3000000000 0\n0 0 0\n")
-file(WRITE ${H}/bad_counts.off "OFF\nfour 1 0\n")
-file(WRITE ${H}/huge_coord.off "OFF\n3 1 0\n0 0 0\n1e30 0 0\n0 1 0\n3 0 1 2\n")
-tsah_expect_error(hard.ply.missing_vertex 1 "bad_index.ply: face 1 references vertex 77 but the file has 4 vertices" info ${H}/bad_index.ply)
-tsah_expect_error(hard.ply.negative_index 1 "negative_index.ply: face 1 references vertex -3" info ${H}/negative_index.ply)
-tsah_expect_error(hard.ply.nan 1 "nan_vertex.ply: vertex 1 has a NaN or infinite coordinate" info ${H}/nan_vertex.ply)
-tsah_expect_error(hard.ply.word 1 "word_vertex.ply: vertex 1: property y is not a number: 'zero'" info ${H}/word_vertex.ply)
-tsah_expect_error(hard.ply.truncated 1 "short.ply: face 1: list length of vertex_indices is missing \\(the file ends early\\)" info ${H}/short.ply)
-tsah_expect_error(hard.ply.two_vertices 1 "two_vertex_face.ply: face 1 has 2 vertices \\(at least 3 needed\\)" info ${H}/two_vertex_face.ply)
-tsah_expect_error(hard.ply.dropped_face 1 "degenerate.ply: the mesh reader kept 4 of 4 vertices and 1 of 2 faces" info ${H}/degenerate.ply)
-tsah_expect_error(hard.ply.huge_count 1 "huge_count.ply: header declares 4000000000 vertices and 4000000000 faces \\(at least [0-9]+ bytes\\), but only 0 bytes follow it" info ${H}/huge_count.ply)
-tsah_expect_error(hard.ply.format 1 "bad_format.ply: unknown PLY format 'ebcdic'" info ${H}/bad_format.ply)
 tsah_expect_error(hard.off.missing_vertex 1 "bad_index.off: face 1 references vertex 77 but the file has 4 vertices" optimize ${H}/bad_index.off -o ${H}/never.tbvh)
-tsah_expect_error(hard.off.nan 1 "nan_vertex.off: vertex 1 has a NaN or infinite coordinate" info ${H}/nan_vertex.off)
-tsah_expect_error(hard.off.huge_count 1 "huge_count.off: header declares 3000000000 vertices and 3000000000 faces" info ${H}/huge_count.off)
-tsah_expect_error(hard.off.bad_counts 1 "bad_counts.off: header needs the vertex, face and edge counts, got 'four'" info ${H}/bad_counts.off)
-tsah_expect_error(hard.off.huge_coordinate 1 "huge_coord.off: vertex 1 has coordinate 1e\\+30, beyond the supported magnitude 1e\\+18" info ${H}/huge_coord.off)
+tsah_bad_file(hard.off.nan nan_vertex.off
+  "nan_vertex.off: vertex 1 has a NaN or infinite coordinate" "OFF\n4 1 0\n0 0 0\n1 0 nan\n0 1 0\n1 1 0\n3 0 1 2\n")
+tsah_bad_file(hard.off.huge_count huge_count.off
+  "huge_count.off: header declares 3000000000 vertices and 3000000000 faces" "OFF\n3000000000 3000000000 0\n0 0 0\n")
+tsah_bad_file(hard.off.bad_counts bad_counts.off
+  "bad_counts.off: header needs the vertex, face and edge counts, got 'four'" "OFF\nfour 1 0\n")
+tsah_bad_file(hard.off.huge_coordinate huge_coord.off
+  "huge_coord.off: vertex 1 has coordinate 1e\\+30, beyond the supported magnitude 1e\\+18" "OFF\n3 1 0\n0 0 0\n1e30 0 0\n0 1 0\n3 0 1 2\n")
 
 # ---- OBJ, sequences, manifests, camera files -----------------------------------------------------
 file(WRITE ${H}/huge.obj "v 0 0 0\nv 3e38 0 0\nv 0 3e38 0\nf 1 2 3\n")
-file(WRITE ${H}/nan.obj "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n")
-file(WRITE ${H}/bad_index.obj "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n")
-file(WRITE ${H}/no_faces.obj "v 0 0 0\nv 1 0 0\nv 0 1 0\n")
-file(WRITE ${H}/empty.obj "")
-file(WRITE ${H}/word.obj "v 0 0 0\nv one 0 0\n")
 tsah_expect_error(hard.obj.overflow 1 "huge.obj: vertex 1 has coordinate 3e\\+38, beyond the supported magnitude" optimize ${H}/huge.obj -o ${H}/never.tbvh)
-tsah_expect_error(hard.obj.nan 1 "nan.obj: vertex 1 has a NaN or infinite coordinate" info ${H}/nan.obj)
-tsah_expect_error(hard.obj.index 1 "bad_index.obj: line 4: face references vertex 9 but 3 are defined" info ${H}/bad_index.obj)
-tsah_expect_error(hard.obj.no_faces 1 "no_faces.obj: has no faces" info ${H}/no_faces.obj)
-tsah_expect_error(hard.obj.empty 1 "empty.obj: no vertices" info ${H}/empty.obj)
-tsah_expect_error(hard.obj.word 1 "word.obj: line 2: vertex needs three numeric coordinates" info ${H}/word.obj)
+tsah_bad_file(hard.obj.nan nan.obj "nan.obj: vertex 1 has a NaN or infinite coordinate" "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n")
+tsah_bad_file(hard.obj.index bad_index.obj
+  "bad_index.obj: line 4: face references vertex 9 but 3 are defined" "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n")
+tsah_bad_file(hard.obj.no_faces no_faces.obj "no_faces.obj: has no faces" "v 0 0 0\nv 1 0 0\nv 0 1 0\n")
+tsah_bad_file(hard.obj.empty empty.obj "empty.obj: no vertices" "")
+tsah_bad_file(hard.obj.word word.obj "word.obj: line 2: vertex needs three numeric coordinates" "v 0 0 0\nv one 0 0\n")
 tsah_expect_error(hard.pattern.none 1 "nomatch_%04d.obj: matches no mesh files" info ${H}/nomatch_%04d.obj)
 tsah_expect_error(hard.pattern.two 1 "exactly one %d-style number" info ${H}/f_%d_%d.obj)
 
-file(WRITE ${H}/time_overflow.json "{\"frames\": [{\"file\": \"nan.obj\", \"time\": 1e999}]}")
-file(WRITE ${H}/not_json.json "{\"frames\": [")
-file(WRITE ${H}/no_frames.json "{\"files\": []}")
-file(WRITE ${H}/partial_times.json "{\"frames\": [{\"file\": \"a.obj\", \"time\": 0}, {\"file\": \"b.obj\"}]}")
-file(WRITE ${H}/frame_number.json "[\"a.obj\", 7]")
-file(WRITE ${H}/missing_frame.json "[\"not_there.obj\"]")
-tsah_expect_error(hard.manifest.time_overflow 1 "time_overflow.json: invalid JSON: number overflow parsing '1e999'" info ${H}/time_overflow.json)
-tsah_expect_error(hard.manifest.syntax 1 "not_json.json: invalid JSON: .*line 1" info ${H}/not_json.json)
-tsah_expect_error(hard.manifest.no_frames 1 "no_frames.json: manifest object has no \"frames\" array" info ${H}/no_frames.json)
-tsah_expect_error(hard.manifest.partial_times 1 "partial_times.json: times given for 1 of 2 frames: give all or none" info ${H}/partial_times.json)
-tsah_expect_error(hard.manifest.entry 1 "frame_number.json: frame 1 is neither a file name nor" info ${H}/frame_number.json)
-tsah_expect_error(hard.manifest.missing_file 1 "not_there.obj: no such file" info ${H}/missing_frame.json)
+tsah_bad_file(hard.manifest.time_overflow time_overflow.json
+  "time_overflow.json: invalid JSON: number overflow parsing '1e999'" "{\"frames\": [{\"file\": \"nan.obj\", \"time\": 1e999}]}")
+tsah_bad_file(hard.manifest.syntax not_json.json "not_json.json: invalid JSON: .*line 1" "{\"frames\": [")
+tsah_bad_file(hard.manifest.no_frames no_frames.json
+  "no_frames.json: manifest object has no \"frames\" array" "{\"files\": []}")
+tsah_bad_file(hard.manifest.partial_times partial_times.json
+  "partial_times.json: times given for 1 of 2 frames: give all or none"
+  "{\"frames\": [{\"file\": \"a.obj\", \"time\": 0}, {\"file\": \"b.obj\"}]}")
+tsah_bad_file(hard.manifest.entry frame_number.json "frame_number.json: frame 1 is neither a file name nor" "[\"a.obj\", 7]")
+tsah_bad_file(hard.manifest.missing_file missing_frame.json "not_there.obj: no such file" "[\"not_there.obj\"]")
 
 file(WRITE ${H}/camera_nan.json "{\"keys\": [{\"time\": 0, \"eye\": [1e39, 0, 0], \"look_at\": [0, 0, 0]}]}")
 file(WRITE ${H}/camera_same.json "{\"eye\": [0, 0, 0], \"look_at\": [0, 0, 0]}")

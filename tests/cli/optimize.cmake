@@ -17,10 +17,14 @@ add_test(NAME cli.optimize.tsah
 set_tests_properties(cli.optimize.tsah PROPERTIES FIXTURES_REQUIRED opt_input
   PASS_REGULAR_EXPRESSION "^\\{\"build_s\":[0-9.e-]+,\"cost\":\\{\"average\":[0-9.]+,\"maximum\":[0-9.]+,\"per_frame\":\\[[0-9.]+(,[0-9.]+)*\\]\\}.*\"k\":2,\"leaves\":[0-9]+,.*\"method\":\"tsah\",\"nodes\":[0-9]+,\"optimization\":\\{.*\"history\":\\[\\{.*\"selection\":\"mh\".*\"triangles\":[0-9]+\\}\n$")
 
-# The same seed gives the same tree: everything in the report but the timings agrees.
-file(WRITE ${W}/opt_same_seed.cmake [=[
-foreach(run a b)
-  execute_process(COMMAND ${TSAH} optimize ${INPUT} -o ${OUT}_${run}.tbvh --k 2 --seed 7 --json
+# Two runs that must give the same tree: for each of RUN_A and RUN_B, `tsah optimize INPUT -o
+# OUT_<run>.tbvh ARGS` with %RUN% in ARGS (separated by @@) replaced by the run's name; everything in
+# the two reports but the timings, the memory and the output path agrees.
+file(WRITE ${W}/opt_same_report.cmake [=[
+string(REPLACE "@@" ";" args "${ARGS}")
+foreach(run ${RUN_A} ${RUN_B})
+  string(REPLACE "%RUN%" "${run}" run_args "${args}")
+  execute_process(COMMAND ${TSAH} optimize ${INPUT} -o ${OUT}_${run}.tbvh ${run_args}
                   OUTPUT_VARIABLE json_${run} RESULT_VARIABLE status)
   if(NOT status EQUAL 0)
     message(FATAL_ERROR "tsah optimize failed: ${status}")
@@ -28,14 +32,21 @@ foreach(run a b)
   string(REGEX REPLACE "\"(build_s|elapsed_s|seconds|peak_rss_bytes)\":[0-9.e+-]+" "" json_${run} "${json_${run}}")
   string(REGEX REPLACE "\"output\":\"[^\"]*\"" "" json_${run} "${json_${run}}")
 endforeach()
-if(NOT json_a STREQUAL json_b)
-  message(FATAL_ERROR "same seed, different results:\n${json_a}\n${json_b}")
+if(NOT json_${RUN_A} STREQUAL json_${RUN_B})
+  message(FATAL_ERROR "${WHAT}, different results:\n${json_${RUN_A}}\n${json_${RUN_B}}")
 endif()
 ]=])
-add_test(NAME cli.optimize.deterministic
-         COMMAND ${CMAKE_COMMAND} -DTSAH=$<TARGET_FILE:tsah> -DINPUT=${W}/opt_swap.tanim -DOUT=${W}/opt_seed
-                 -P ${W}/opt_same_seed.cmake)
-set_tests_properties(cli.optimize.deterministic PROPERTIES FIXTURES_REQUIRED opt_input)
+# opt_same_report(NAME OUT WHAT RUN_A RUN_B ARG...): the script above on opt_swap.tanim.
+function(opt_same_report name out what run_a run_b)
+  string(REPLACE ";" "@@" args "${ARGN}")
+  add_test(NAME ${name}
+           COMMAND ${CMAKE_COMMAND} -DTSAH=$<TARGET_FILE:tsah> -DINPUT=${W}/opt_swap.tanim -DOUT=${W}/${out}
+                   -DRUN_A=${run_a} -DRUN_B=${run_b} "-DWHAT=${what}" "-DARGS=${args}" -P ${W}/opt_same_report.cmake)
+  set_tests_properties(${name} PROPERTIES FIXTURES_REQUIRED opt_input)
+endfunction()
+
+# The same seed gives the same tree.
+opt_same_report(cli.optimize.deterministic opt_seed "same seed" a b --k 2 --seed 7 --json)
 
 # SAH0 with one triangle per leaf: as many leaves as triangles; selection recorded as none.
 add_test(NAME cli.optimize.sah0
@@ -97,25 +108,8 @@ add_test(NAME cli.optimize.parallel
          COMMAND tsah optimize ${W}/opt_swap.tanim -o ${W}/opt_par.tbvh --optimizer parallel --threads 2 --json)
 set_tests_properties(cli.optimize.parallel PROPERTIES FIXTURES_REQUIRED opt_input
   PASS_REGULAR_EXPRESSION "\"optimizer\":\"parallel\".*\"selection\":\"parallel\"")
-file(WRITE ${W}/opt_par_threads.cmake [=[
-foreach(threads 1 2)
-  execute_process(COMMAND ${TSAH} optimize ${INPUT} -o ${OUT}_${threads}.tbvh --optimizer parallel --k 2
-                          --threads ${threads} --json
-                  OUTPUT_VARIABLE json_${threads} RESULT_VARIABLE status)
-  if(NOT status EQUAL 0)
-    message(FATAL_ERROR "tsah optimize failed: ${status}")
-  endif()
-  string(REGEX REPLACE "\"(build_s|elapsed_s|seconds|peak_rss_bytes)\":[0-9.e+-]+" "" json_${threads} "${json_${threads}}")
-  string(REGEX REPLACE "\"output\":\"[^\"]*\"" "" json_${threads} "${json_${threads}}")
-endforeach()
-if(NOT json_1 STREQUAL json_2)
-  message(FATAL_ERROR "1 and 2 threads, different results:\n${json_1}\n${json_2}")
-endif()
-]=])
-add_test(NAME cli.optimize.parallel.threads
-         COMMAND ${CMAKE_COMMAND} -DTSAH=$<TARGET_FILE:tsah> -DINPUT=${W}/opt_swap.tanim -DOUT=${W}/opt_par
-                 -P ${W}/opt_par_threads.cmake)
-set_tests_properties(cli.optimize.parallel.threads PROPERTIES FIXTURES_REQUIRED opt_input)
+opt_same_report(cli.optimize.parallel.threads opt_par "1 and 2 threads" 1 2
+                --optimizer parallel --k 2 --threads %RUN% --json)
 add_test(NAME cli.evaluate.parallel
          COMMAND tsah evaluate ${W}/opt_swap.tanim --methods sahstar,tsah0,rebuild --optimizer parallel --eval-frames 4 --json)
 set_tests_properties(cli.evaluate.parallel PROPERTIES FIXTURES_REQUIRED opt_input

@@ -40,6 +40,13 @@ add_test(NAME cli.trace.export.frame COMMAND tsah export ${W}/trace_explode.tbvh
 set_tests_properties(cli.trace.export.frame PROPERTIES FIXTURES_REQUIRED trace_tree
   PASS_REGULAR_EXPRESSION "^tsah: --frame 6 is out of range")
 
+# trace_on_tree(NAME REGEX ARG...): `tsah trace` of the explode animation and its tree with ARGs,
+# passing when the output matches REGEX.
+function(trace_on_tree name regex)
+  add_test(NAME ${name} COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh ${ARGN})
+  set_tests_properties(${name} PROPERTIES FIXTURES_REQUIRED trace_tree PASS_REGULAR_EXPRESSION "${regex}")
+endfunction()
+
 # tsah trace: PNG per frame and per-frame statistics.
 add_test(NAME cli.trace.json COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --frames 2
                                      --width 64 --height 48 --ao 4 --shadow 1 --out ${W}/trace_png --json)
@@ -48,39 +55,24 @@ set_tests_properties(cli.trace.json PROPERTIES FIXTURES_REQUIRED trace_tree FIXT
   "\"average\":{.*\"mrays_per_s\":{\"ao\":.*\"primary\":.*\"shadow\":.*\"total\":.*\"device\":\"cpu\".*\"frames\":\\[{.*\"update_ms\"")
 add_test(NAME cli.trace.png COMMAND ${CMAKE_COMMAND} -E md5sum ${W}/trace_png/frame_0001.png)
 set_tests_properties(cli.trace.png PROPERTIES FIXTURES_REQUIRED trace_png PASS_REGULAR_EXPRESSION "frame_0001.png")
-add_test(NAME cli.trace.text COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --frames 2
-                                     --width 32 --height 24 --no-images --no-ground)
-set_tests_properties(cli.trace.text PROPERTIES FIXTURES_REQUIRED trace_tree
-  PASS_REGULAR_EXPRESSION "update_ms +trace_ms +total_ms.*avg +- +[0-9.]+")
+trace_on_tree(cli.trace.text "update_ms +trace_ms +total_ms.*avg +- +[0-9.]+"
+              --frames 2 --width 32 --height 24 --no-images --no-ground)
 foreach(method binned sweep)
-  add_test(NAME cli.trace.rebuild.${method}
-           COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --frames 2 --width 32 --height 24
-                   --no-images --rebuild ${method} --json)
-  set_tests_properties(cli.trace.rebuild.${method} PROPERTIES FIXTURES_REQUIRED trace_tree
-    PASS_REGULAR_EXPRESSION "\"build_ms\":[0-9.e+-]+.*\"rebuild\":\"${method}\"")
+  trace_on_tree(cli.trace.rebuild.${method} "\"build_ms\":[0-9.e+-]+.*\"rebuild\":\"${method}\""
+                --frames 2 --width 32 --height 24 --no-images --rebuild ${method} --json)
 endforeach()
 foreach(layout bvh2 bvh4)
-  add_test(NAME cli.trace.layout.${layout}
-           COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --frames 1 --width 32 --height 24
-                   --no-images --layout ${layout} --json)
-  set_tests_properties(cli.trace.layout.${layout} PROPERTIES FIXTURES_REQUIRED trace_tree
-    PASS_REGULAR_EXPRESSION "\"layout\":\"${layout}\".*\"tree\":{.*\"tsah_cost\"")
+  trace_on_tree(cli.trace.layout.${layout} "\"layout\":\"${layout}\".*\"tree\":{.*\"tsah_cost\""
+                --frames 1 --width 32 --height 24 --no-images --layout ${layout} --json)
 endforeach()
-add_test(NAME cli.trace.layout.default COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --frames 1
-                                               --width 32 --height 24 --no-images)
-set_tests_properties(cli.trace.layout.default PROPERTIES FIXTURES_REQUIRED trace_tree
-  PASS_REGULAR_EXPRESSION "CPU threads, bvh[248]")
+trace_on_tree(cli.trace.layout.default "CPU threads, bvh[248]" --frames 1 --width 32 --height 24 --no-images)
 file(WRITE ${W}/trace_camera.json
   "{\"keys\": [{\"time\": 0, \"eye\": [0, 1, 6], \"look_at\": [0, 0, 0], \"fov\": 50},\n"
   "           {\"time\": 5, \"eye\": [6, 1, 0], \"look_at\": [0, 0, 0], \"up\": [0, 1, 0]}]}\n")
-add_test(NAME cli.trace.camera.file COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --frames 2
-                                            --width 32 --height 24 --no-images --camera ${W}/trace_camera.json)
-set_tests_properties(cli.trace.camera.file PROPERTIES FIXTURES_REQUIRED trace_tree
-  PASS_REGULAR_EXPRESSION "camera .*trace_camera.json")
-add_test(NAME cli.trace.camera.args COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --frames 1
-                                            --width 32 --height 24 --no-images --eye 0,2,8 --look-at 0,0,0 --fov 40)
-set_tests_properties(cli.trace.camera.args PROPERTIES FIXTURES_REQUIRED trace_tree
-  PASS_REGULAR_EXPRESSION "camera command line")
+trace_on_tree(cli.trace.camera.file "camera .*trace_camera.json"
+              --frames 2 --width 32 --height 24 --no-images --camera ${W}/trace_camera.json)
+trace_on_tree(cli.trace.camera.args "camera command line"
+              --frames 1 --width 32 --height 24 --no-images --eye 0,2,8 --look-at 0,0,0 --fov 40)
 
 # Errors: one line, non-zero exit.
 # --device cuda (built or not, with or without a GPU): trace_cuda.cmake.
@@ -94,11 +86,7 @@ file(WRITE ${W}/trace_garbage.tbvh "TSAHBVH-this is not a tree")
 add_test(NAME cli.trace.error.corrupt COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_garbage.tbvh)
 set_tests_properties(cli.trace.error.corrupt PROPERTIES FIXTURES_REQUIRED trace_anim
   PASS_REGULAR_EXPRESSION "^tsah: .*trace_garbage.tbvh: .*(bad magic|truncated)[^\n]*\n$")
-add_test(NAME cli.trace.error.eye COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --eye 1,2)
-set_tests_properties(cli.trace.error.eye PROPERTIES FIXTURES_REQUIRED trace_tree
-  PASS_REGULAR_EXPRESSION "^tsah: --eye and --look-at go together")
+trace_on_tree(cli.trace.error.eye "^tsah: --eye and --look-at go together" --eye 1,2)
 file(WRITE ${W}/trace_badcamera.json "{\"eye\": [0, 0, 1], \"look_at\": [0, 0, 1]}")
-add_test(NAME cli.trace.error.camera COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh
-                                             --camera ${W}/trace_badcamera.json)
-set_tests_properties(cli.trace.error.camera PROPERTIES FIXTURES_REQUIRED trace_tree
-  PASS_REGULAR_EXPRESSION "^tsah: .*trace_badcamera.json: camera: eye and look-at point coincide")
+trace_on_tree(cli.trace.error.camera "^tsah: .*trace_badcamera.json: camera: eye and look-at point coincide"
+              --camera ${W}/trace_badcamera.json)

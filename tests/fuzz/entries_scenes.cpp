@@ -3,9 +3,11 @@
 // file fuzz.aff / fuzz.json in a per-process scratch folder that also holds small objects to name.
 // The harness keeps the file system to that folder: inputs holding '/' or '\' or ".." are skipped.
 #include <cstdlib>
+#include <initializer_list>
 #include <stdexcept>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "anim/bart.hpp"
@@ -28,27 +30,37 @@ bool leavesScratchFolder(std::span<const uint8_t> data) {
   return text.find_first_of("/\\") != std::string_view::npos || text.find("..") != std::string_view::npos;
 }
 
+constexpr const char* kTriangleAff = "p 3\n1 0 0\n0 1 0\n0 0 1\n";
+
+// The folder `name` in the scratch folder, holding the given files (name, text).
+fs::path folderWith(const char* name, std::initializer_list<std::pair<const char*, std::string_view>> files) {
+  const fs::path d = scratchFolder() / name;
+  fs::create_directories(d);
+  for (const auto& [file, text] : files) writeText(d / file, text);
+  return d;
+}
+
 // The objects a fuzzed scene or manifest can name (written once per process).
 const fs::path& objectFolder() {
   static const fs::path dir = [] {
     ::setenv("TSAH_MEMORY_LIMIT_MB", kMemoryLimitMiB, 0);
-    const fs::path d = scratchFolder() / "objects";
-    fs::create_directories(d);
-    writeText(d / "tri.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
-    writeText(d / "quad.off", "OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n");
-    writeText(d / "f_0.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
-    writeText(d / "f_1.obj", "v 0 0 1\nv 1 0 1\nv 0 1 1\nf 1 2 3\n");
+    const fs::path d = folderWith(
+        "objects",
+        {{"tri.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"},
+         {"quad.off", "OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n"},
+         {"f_0.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"},
+         {"f_1.obj", "v 0 0 1\nv 1 0 1\nv 0 1 1\nf 1 2 3\n"},
+         {"tri.aff", kTriangleAff},
+         {"moving.json",
+          R"({"objects": [{"file": "tri.obj", "path": [{"time": 0}, {"time": 2, "translate": [1, 0, 0]}]}]})"},
+         {"cached.json", R"({"mesh": "tri.obj", "cache": "tri.pc2"})"},
+         {"frames.json", R"(["f_0.obj", "f_1.obj"])"},
+         {"back.json", R"({"objects": [{"file": "fuzz.json"}]})"}});  // a cycle through the input
     // Two keyframes of the triangle, as a .tanim and as point caches of tri.obj's points.
     const anim::Animation wave({0, 1, 2}, 3, {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 1, 0, 1, 0, 1, 1}, {0.0, 1.0}, "wave");
     writeBytes(d / "wave.tanim", anim::encodeTanim(wave));
     writeBytes(d / "tri.pc2", anim::encodePc2(wave));
     writeBytes(d / "tri.mdd", anim::encodeMdd(wave));
-    writeText(d / "tri.aff", "p 3\n1 0 0\n0 1 0\n0 0 1\n");
-    writeText(d / "moving.json",
-              R"({"objects": [{"file": "tri.obj", "path": [{"time": 0}, {"time": 2, "translate": [1, 0, 0]}]}]})");
-    writeText(d / "cached.json", R"({"mesh": "tri.obj", "cache": "tri.pc2"})");
-    writeText(d / "frames.json", R"(["f_0.obj", "f_1.obj"])");
-    writeText(d / "back.json", R"({"objects": [{"file": "fuzz.json"}]})");  // a cycle through the input
     return d;
   }();
   return dir;
@@ -56,15 +68,10 @@ const fs::path& objectFolder() {
 
 // The AFF include targets: a triangle, a file including it twice, one including fuzz.aff back.
 const fs::path& affFolder() {
-  static const fs::path dir = [] {
-    const fs::path d = scratchFolder() / "aff";
-    fs::create_directories(d);
-    writeText(d / "tri.aff", "p 3\n1 0 0\n0 1 0\n0 0 1\n");
-    writeText(d / "two.aff", "i 0 tri.aff\nxs 1 1 1 0 0 1 90 1 0 0 { i 0 tri.aff }\n");
-    writeText(d / "back.aff", "i 0 fuzz.aff\n");
-    writeText(d / "fuzz.aff", "i 0 two.aff\n");
-    return d;
-  }();
+  static const fs::path dir = folderWith("aff", {{"tri.aff", kTriangleAff},
+                                                 {"two.aff", "i 0 tri.aff\nxs 1 1 1 0 0 1 90 1 0 0 { i 0 tri.aff }\n"},
+                                                 {"back.aff", "i 0 fuzz.aff\n"},
+                                                 {"fuzz.aff", "i 0 two.aff\n"}});
   return dir;
 }
 

@@ -7,9 +7,11 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <random>
 #include <unistd.h>
 
+#include "tsah/base/error.hpp"
 #include "tsah/core/cost.hpp"
 #include "tsah/render/sampling.hpp"
 
@@ -62,6 +64,39 @@ std::filesystem::path scratchDir() {
   return dir;
 }
 
+std::filesystem::path writeText(const std::filesystem::path& path, std::string_view text) {
+  std::filesystem::create_directories(path.parent_path());
+  std::ofstream(path, std::ios::binary) << text;
+  return path;
+}
+
+::testing::AssertionResult throwsFileError(const std::function<void()>& action,
+                                           std::initializer_list<std::string_view> parts) {
+  try {
+    action();
+  } catch (const FileError& e) {
+    const std::string message = e.what();
+    for (std::string_view part : parts)
+      if (message.find(part) == std::string::npos)
+        return ::testing::AssertionFailure() << "the error '" << message << "' lacks '" << part << "'";
+    return ::testing::AssertionSuccess();
+  }
+  return ::testing::AssertionFailure() << "no tsah::FileError thrown";
+}
+
+Aabb boxOf(const anim::Bounds& b) {
+  Aabb box;
+  box.extend(Vec3{b.min[0], b.min[1], b.min[2]});
+  box.extend(Vec3{b.max[0], b.max[1], b.max[2]});
+  return box;
+}
+
+std::vector<Aabb> keyframeBoxes(const anim::Animation& a, uint32_t k) {
+  std::vector<Aabb> boxes(a.triangleCount());
+  triangleBoxes(a.indices(), a.keyframe(k), boxes);
+  return boxes;
+}
+
 MovingTriangles randomMovingTriangles(uint32_t triangles, uint32_t frames, uint32_t seed, float maxSpeed) {
   std::mt19937 rng(seed);
   std::uniform_real_distribution<float> pos(-20.0f, 20.0f), small(-1.0f, 1.0f), vel(-maxSpeed, maxSpeed);
@@ -95,9 +130,7 @@ FlatBvh singleLeafTree(const anim::Animation& a) {
   leaf.nodes[0].primCount = a.triangleCount();
   for (uint32_t i = 0; i < a.triangleCount(); ++i) leaf.primIds.push_back(i);
   leaf.boxes.resize(1);
-  std::vector<Aabb> boxes(a.triangleCount());
-  triangleBoxes(a.indices(), a.keyframe(0), boxes);
-  for (const Aabb& b : boxes) leaf.boxes[0].extend(b);
+  for (const Aabb& b : keyframeBoxes(a, 0)) leaf.boxes[0].extend(b);
   return flattenBvh(leaf);
 }
 
@@ -163,6 +196,49 @@ bool sameTopology(const Bvh& a, const Bvh& b) {
 bool identicalTree(const Bvh& a, const Bvh& b) {
   return sameTopology(a, b) && a.frameCount == b.frameCount && a.boxes.size() == b.boxes.size() &&
          std::memcmp(a.boxes.data(), b.boxes.data(), a.boxes.size() * sizeof(Aabb)) == 0;
+}
+
+void forEachSeedFramesAndK(std::initializer_list<uint32_t> frameCounts, uint32_t triangles, uint32_t perSeed,
+                           const SeedFramesK& body) {
+  for (uint32_t seed : {1u, 2u, 3u})
+    for (uint32_t frames : frameCounts)
+      for (int k : {0, 2}) {
+        SCOPED_TRACE("seed " + std::to_string(seed) + " frames " + std::to_string(frames) + " k " + std::to_string(k));
+        body(movingTriangleBoxes(triangles + perSeed * seed, frames, seed), seed, k);
+        if (::testing::Test::HasFatalFailure()) return;
+      }
+}
+
+void expectRoundsValidAndImproving(const MakeRoundSession& make) {
+  forEachSeedFramesAndK({1u, 4u}, 150, 100, [&](const PrimitiveBoxes& prims, uint32_t seed, int k) {
+    ParallelReinsertionOptimizer::Config config;
+    config.k = k;
+    config.seed = seed;
+    const std::unique_ptr<RoundSession> session = make(frameZeroSahTree(prims), prims, config, seed == 3 ? 1.0 : 0.5);
+    const double start = session->cost();
+    const uint64_t applied = expectValidRounds(*session, prims, k, 12);
+    EXPECT_GT(applied, 0u);
+    EXPECT_LT(session->cost(), start);
+    EXPECT_EQ(session->appliedMoves(), applied);
+  });
+}
+
+void expectRunsNeverEndAboveTheStart(const RunOptimizer& run,
+                                     const std::function<void(const InsertionOptimizer::Result&)>& alsoCheck) {
+  for (int k : {0, 1, 4}) {
+    SCOPED_TRACE("k " + std::to_string(k));
+    const PrimitiveBoxes prims = movingTriangleBoxes(800, 5, 7 + k);
+    ParallelReinsertionOptimizer::Config config;
+    config.k = k;
+    const InsertionOptimizer::Result result = run(frameZeroSahTree(prims), prims, config);
+    ASSERT_FALSE(validate(result.bvh, &prims).has_value());
+    EXPECT_LT(result.finalCost, result.initialCost);
+    ASSERT_GE(result.history.size(), 2u);
+    for (std::size_t i = 1; i < result.history.size(); ++i)
+      EXPECT_LE(result.history[i].cost, result.history[i - 1].cost * (1 + 1e-12));
+    EXPECT_NEAR(result.finalCost, temporalCost(frameCosts(result.bvh), k), 1e-9 * result.finalCost);
+    if (alsoCheck) alsoCheck(result);
+  }
 }
 
 uint64_t expectValidRounds(RoundSession& session, const PrimitiveBoxes& prims, int k, int rounds, double tolerance) {
@@ -267,6 +343,29 @@ void expectWideTraversalMatchesBinary(const anim::Animation& a, CpuRuntime& rt, 
   }
   EXPECT_GT(hits, rayCount / 4);
   EXPECT_LE(ties, hits / 100 + 5);
+}
+
+RenderView renderView(const anim::Animation& a) {
+  RenderView view;
+  view.bounds = boxOf(a.bounds());
+  view.settings.width = 203;
+  view.settings.height = 157;
+  view.settings.aoSamples = 5;
+  view.settings.shadowSamples = 3;
+  view.camera = fitCamera(view.bounds, {0, 1, 0}, 45.0f, float(view.settings.width) / float(view.settings.height));
+  return view;
+}
+
+void expectRayCountsClose(const RenderStats& got, const RenderStats& expect) {
+  EXPECT_EQ(got.primary.rays, expect.primary.rays);
+  EXPECT_NEAR(double(got.ao.rays), double(expect.ao.rays), 0.002 * double(expect.ao.rays) + 8);
+  EXPECT_NEAR(double(got.shadow.rays), double(expect.shadow.rays), 0.002 * double(expect.shadow.rays) + 8);
+}
+
+void expectImagesClose(const Image& a, const Image& b, const std::string& what) {
+  const ImageDifference d = compareImages(a, b, 16);
+  EXPECT_LT(d.meanAbs, 0.2) << what;
+  EXPECT_LT(d.fractionAbove, 0.002) << what;
 }
 
 }  // namespace tsah::test

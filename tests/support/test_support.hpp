@@ -1,15 +1,20 @@
 #pragma once
 // Helpers shared by the test executables.
+#include <gtest/gtest.h>
+
 #include <cstdint>
 #include <filesystem>
+#include <functional>
+#include <initializer_list>
+#include <memory>
+#include <random>
+#include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "anim/animation.hpp"
 #include "anim/generators.hpp"
-#include <functional>
-#include <random>
-#include <span>
 
 #include "tsah/core/bvh.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
@@ -17,6 +22,7 @@
 #include "tsah/layout/flat_bvh.hpp"
 #include "tsah/optimize/parallel_optimizer.hpp"
 #include "tsah/layout/traversal.hpp"
+#include "tsah/render/renderer.hpp"
 
 namespace tsah::test {
 
@@ -32,6 +38,19 @@ std::filesystem::path unpackedData(const std::string& archive, const std::string
 
 // A fresh empty directory under the system temp dir, unique to the running test.
 std::filesystem::path scratchDir();
+
+// Writes `text` to `path` (bytes as given), creating its folder; returns the path.
+std::filesystem::path writeText(const std::filesystem::path& path, std::string_view text);
+
+// Success when `action` throws tsah::FileError whose message holds every one of `parts`; the failure
+// says what it threw instead, or that it threw nothing. Other exceptions pass through.
+::testing::AssertionResult throwsFileError(const std::function<void()>& action,
+                                           std::initializer_list<std::string_view> parts);
+
+// anim's bounds (a.bounds(), a.boundsAt(t), ...) as a box.
+Aabb boxOf(const anim::Bounds& b);
+// The triangles' boxes at keyframe k.
+std::vector<Aabb> keyframeBoxes(const anim::Animation& a, uint32_t k);
 
 // Random small triangles (3 own vertices each) moving with random constant velocities, so a grouping
 // made on frame 0 degrades over time: the standard input of the optimizer and cost tests.
@@ -76,6 +95,32 @@ bool sameTopology(const Bvh& a, const Bvh& b);
 // sameTopology, the same frame count and every box bit for bit.
 bool identicalTree(const Bvh& a, const Bvh& b);
 
+// The optimizer sessions' grid: seeds 1, 2, 3 x `frameCounts` x k = 0, 2, each case on
+// movingTriangleBoxes(triangles + perSeed * seed, frames, seed). Stops at the first fatal failure.
+using SeedFramesK = std::function<void(const PrimitiveBoxes& prims, uint32_t seed, int k)>;
+void forEachSeedFramesAndK(std::initializer_list<uint32_t> frameCounts, uint32_t triangles, uint32_t perSeed,
+                           const SeedFramesK& body);
+
+// A round session on `tree` (the sweep-SAH tree of frame 0 of prims) for `config`, searching a
+// `candidateFraction` of the nodes per round.
+using MakeRoundSession =
+    std::function<std::unique_ptr<RoundSession>(Bvh tree, const PrimitiveBoxes& prims,
+                                                const ParallelReinsertionOptimizer::Config& config,
+                                                double candidateFraction)>;
+// Over forEachSeedFramesAndK({1, 4}, 150, 100) with config {k, seed} and candidate fraction 1 for
+// seed 3, else 0.5: 12 rounds of expectValidRounds that apply moves, end below the start cost, and
+// are counted by appliedMoves().
+void expectRoundsValidAndImproving(const MakeRoundSession& make);
+
+// A parallel-reinsertion run (any backend) from `tree`, the sweep-SAH tree of frame 0 of prims.
+using RunOptimizer = std::function<InsertionOptimizer::Result(Bvh tree, const PrimitiveBoxes& prims,
+                                                              const ParallelReinsertionOptimizer::Config& config)>;
+// For k = 0, 1, 4 on movingTriangleBoxes(800, 5, 7 + k), `run` with config.k = k gives a valid tree
+// below the start cost, a history of two or more entries that never rises, and a final cost equal to
+// C~^k recomputed from the tree; then `alsoCheck` (when given) runs on the result.
+void expectRunsNeverEndAboveTheStart(const RunOptimizer& run,
+                                     const std::function<void(const InsertionOptimizer::Result&)>& alsoCheck = {});
+
 // Runs `rounds` rounds (each followed by endRound) of a reinsertion session and checks after every
 // one: a valid tree (each primitive in one leaf, parent links, boxes containing their children in
 // every frame), tracked frame costs and C~^k equal to a brute-force recomputation (relative
@@ -106,5 +151,21 @@ HitAgreement expectSameHits(const BvhView& binary, const CwbvhView& wide, std::s
 using WideTreeAt = std::function<const CwbvhTree&(std::span<const float> positions, const BvhView& binary)>;
 void expectWideTraversalMatchesBinary(const anim::Animation& a, CpuRuntime& rt, uint32_t rayCount, uint32_t seed,
                                       const WideTreeAt& wideAt);
+
+// The render tests' frame: `a`'s box, a 203 x 157 image (not a multiple of the 8 x 4 tiles) with 5
+// AO and 3 shadow rays per pixel, and the camera fitted to the box (y up, 45 degrees).
+struct RenderView {
+  Aabb bounds;
+  RenderSettings settings;
+  Camera camera;
+};
+RenderView renderView(const anim::Animation& a);
+
+// Two exact tracers rendering the same frame: the same primary rays; AO and shadow ray counts within
+// 0.2% + 8 (a primary tie, another triangle at the same distance, changes a pixel's normal).
+void expectRayCountsClose(const RenderStats& got, const RenderStats& expect);
+// Images of the same frame: mean channel difference below 0.2, at most 0.2% of the channels off by
+// more than 16. `what` names the case in the failure messages.
+void expectImagesClose(const Image& a, const Image& b, const std::string& what);
 
 }  // namespace tsah::test
