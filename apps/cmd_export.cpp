@@ -173,7 +173,7 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
     int frame = -1;
     double time = std::nan("");
     unsigned threads = 0;
-    std::string layout = "bvh2";
+    tsah::Layout layout = tsah::Layout::Bvh2;
   };
   auto opt = std::make_shared<Options>();
   sub->add_option("BVH", opt->bvh, "Tree or tree set from `tsah optimize` (.tbvh; a set exports the tree of the frame's part)")
@@ -185,10 +185,10 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
   sub->add_option("-o,--out", opt->out, "Output folder (created if missing); with --boxes a .ply or .obj file")
       ->required();
   sub->add_option("--threads", opt->threads, "Worker threads (0: all cores)");
-  sub->add_option("--layout", opt->layout,
-                  "bvh2: the binary Aila-Laine nodes (default); bvh4 / bvh8: the wide SIMD layout, collapsed from the "
-                  "tree at export time (docs/wide-bvh.md)")
-      ->check(CLI::IsMember({"bvh2", "bvh4", "bvh8"}));
+  tsah::cli::addChoice(*sub, "--layout", opt->layout,
+                       "bvh2: the binary Aila-Laine nodes (default); bvh4 / bvh8: the wide SIMD layout, collapsed "
+                       "from the tree at export time (docs/wide-bvh.md)",
+                       {tsah::Layout::Bvh2, tsah::Layout::Bvh4, tsah::Layout::Bvh8});
   const auto boxes = tsah::cli::addBoxExportOptions(*sub);
   sub->callback([opt, boxes] {
     namespace fs = std::filesystem;
@@ -222,7 +222,7 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
     const uint32_t part = tsah::treeIndexAt(set.ranges, time);
     const tsah::BvhBuildInfo& info = set.builds[part];
     tsah::CpuRuntime::Config config(opt->threads);
-    config.layout = tsah::parse<tsah::Layout>(opt->layout);
+    config.layout = opt->layout;
     config.isa = tsah::SimdIsa::Sse;  // the layout does not depend on the kernels; sse runs everywhere...
     if (config.layout == tsah::Layout::Bvh8) config.isa.reset();  // ...but has no 8-wide kernels
     config.collapse = tsah::wideCollapseConfig(info.objective);
@@ -264,7 +264,8 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
     write("vertices.bin", bytesOf(rt.positions()));
     write("tsah_scene.h", {reinterpret_cast<const uint8_t*>(header.data()), header.size()});
     std::printf("wrote %s: %zu nodes, %zu Woop %s, %u vertices (time %g, %s layout) + tsah_scene.h\n", opt->out.c_str(),
-                nodes, woop, opt->layout == "bvh2" ? "triangles" : "packets", rt.vertexCount(), time, opt->layout.c_str());
+                nodes, woop, opt->layout == tsah::Layout::Bvh2 ? "triangles" : "packets", rt.vertexCount(), time,
+                tsah::name(opt->layout));
     if (set.size() > 1)
       std::printf("tree %u of the set's %u: the tree of this time's part (t %g .. %g)\n", part, set.size(),
                   set.ranges[part].start, set.ranges[part].end);
