@@ -10,11 +10,26 @@
 #include "test_support.hpp"
 #include "tsah/build/binned_sah_builder.hpp"
 #include "tsah/io/bvh_file.hpp"
+#include "tsah/io/tree_set.hpp"
+#include "tsah/layout/wide_bvh.hpp"
+#include "tsah/layout/wide_tree.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
 #include "tsah/render/camera.hpp"
 #include "tsah/render/camera_path.hpp"
 #include "tsah/render/renderer.hpp"
 
 namespace {
+
+// A wide tree's topology: every node's child references and leaf triangle counts.
+std::vector<int64_t> shapeOf(const tsah::WideTree<4>& tree) {
+  std::vector<int64_t> shape;
+  for (const auto& node : tree.nodes())
+    for (uint32_t c = 0; c < 4; ++c) {
+      shape.push_back(node.ref[c]);
+      shape.push_back(node.count[c]);
+    }
+  return shape;
+}
 
 struct Scene {
   anim::Animation animation;
@@ -206,4 +221,50 @@ TEST(CpuRuntime, PngRoundTrip) {
   EXPECT_THROW(tsah::decodePng(std::vector<uint8_t>(bytes.begin(), bytes.begin() + 20), "cut.png"), tsah::FileError);
 }
 
+// A tree set read from a file collapses each tree into the wide layout with the objective of its
+// own header, as the GPU runtime does; without build infos every tree takes the config's.
+TEST(CpuRuntime, TreeSetCollapsesEachTreeWithItsOwnObjective) {
+  const tsah::test::WideObjectiveCase c = tsah::test::wideObjectiveCase();
+  const anim::Animation& a = c.animation;
+  tsah::TreeSet set;
+  set.trees = {c.tree, c.tree};
+  const double mid = 0.5 * (a.startTime() + a.endTime());
+  set.ranges = {{a.startTime(), mid}, {mid, a.endTime()}};
+  set.builds.resize(2);
+  set.builds[0].objective = c.objective;  // tree 1 keeps the default objective
+  tsah::CpuRuntime::Config config(1);
+  config.layout = tsah::Layout::Bvh4;  // SSE kernels: every x86-64 processor runs them
+  config.isa = tsah::SimdIsa::Sse;
+  const tsah::Objective given{1, {2.0f, 1.0f}, 3};
+  config.collapse = tsah::wideCollapseConfig(given);
+  // The wide tree the runtime should hold: its child references and leaf counts.
+  const auto expectedShape = [&](const tsah::Objective& objective) {
+    tsah::WideCollapser::Config w = tsah::wideCollapseConfig(objective, 4);
+    w.leafPacket = 4;
+    const tsah::WideTree<4> tree(tsah::WideCollapser(w).collapse(tsah::unflattenBvh(c.tree)), a.indices(), 1,
+                                 tsah::SimdIsa::Sse);
+    return shapeOf(tree);
+  };
+  const tsah::Objective own[2] = {c.objective, tsah::Objective{}};
+  for (const tsah::Objective& o : own) ASSERT_NE(expectedShape(o), expectedShape(given));  // a meaningful input
+  tsah::TreeSet bare = set;
+  bare.builds.clear();
+  const std::vector<uint32_t> indices(a.indices().begin(), a.indices().end());
+  tsah::CpuRuntime withBuilds(set, indices, a.vertexCount(), config);
+  tsah::CpuRuntime withoutBuilds(bare, indices, a.vertexCount(), config);
+  for (double t : {a.startTime(), a.endTime()}) {
+    const uint32_t s = set.treeAt(t);
+    for (tsah::CpuRuntime* runtime : {&withBuilds, &withoutBuilds}) {
+      const bool builds = runtime == &withBuilds;
+      runtime->selectTreeAt(t);
+      ASSERT_EQ(runtime->currentTree(), s);
+      EXPECT_EQ(shapeOf(*runtime->wide4()), expectedShape(builds ? own[s] : given)) << "t=" << t << " builds " << builds;
+    }
+  }
+  tsah::TreeSet partial = set;
+  partial.builds.resize(1);
+  EXPECT_THROW(tsah::CpuRuntime(partial, indices, a.vertexCount(), config), tsah::DataError);
+}
+
 }  // namespace
+

@@ -110,20 +110,45 @@ const FlatBvh& firstTree(const TreeSet& set) {
 
 CpuRuntime::CpuRuntime(const TreeSet& set, std::vector<uint32_t> indices, uint32_t vertexCount, Config config)
     : CpuRuntime(firstTree(set), std::move(indices), vertexCount, config) {
-  if (set.size() == 1) return;
+  // Build infos (as read from a file): each tree is collapsed with its own objective, as the GPU
+  // runtime does; without them every tree takes config.collapse's.
+  const bool ownObjectives = !set.builds.empty();
+  if (ownObjectives && set.builds.size() != set.trees.size())
+    throw tsah::DataError("runtime: the tree set holds build infos, but not one per tree");
+  const WideCollapser::Config given = collapse_;
+  const auto collapseWith = [&](uint32_t s) {
+    collapse_ = given;
+    if (ownObjectives) static_cast<Objective&>(collapse_) = wideCollapseConfig(set.builds[s].objective);
+  };
+  // Tree 0 was collapsed with config.collapse: again only when its own objective differs.
+  const bool recollapseFirst = ownObjectives && info_.layout != Layout::Bvh2 &&
+                               !(static_cast<const Objective&>(wideCollapseConfig(set.builds[0].objective)) ==
+                                 static_cast<const Objective&>(given));
+  if (set.size() == 1) {
+    if (recollapseFirst) {
+      collapseWith(0);
+      setWideTree(unflattenBvh(set.trees[0]), true);
+    }
+    return;
+  }
   for (const FlatBvh& tree : set.trees) setTrees_.push_back(topologyOf(tree));
   setRanges_ = set.ranges;
   if (info_.layout == Layout::Bvh2) return;
   // Collapse every tree of the set now (from all its frame blocks), so a switch costs no collapse.
-  const LayoutInfo first = info_;
+  LayoutInfo first = info_;
   for (uint32_t s = 0; s < set.size(); ++s) {
-    if (s > 0) setWideTree(unflattenBvh(set.trees[s]), false);
+    if (s > 0 || recollapseFirst) {
+      collapseWith(s);
+      setWideTree(unflattenBvh(set.trees[s]), s == 0);
+      if (s == 0) first = info_;
+    }
     setWide4_.push_back(wide4_);
     setWide8_.push_back(wide8_);
   }
   wide4_ = setWide4_[0];
   wide8_ = setWide8_[0];
   info_ = first;
+  collapse_ = given;  // a rebuild collapses with the runtime's own settings
 }
 
 FlatBvh CpuRuntime::topologyOf(const FlatBvh& tree) const {

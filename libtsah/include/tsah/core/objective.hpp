@@ -10,6 +10,7 @@ namespace tsah {
 struct CostModel {
   float ct = 3.0f;  // cost of traversing an interior node
   float ci = 2.0f;  // cost of intersecting one triangle
+  bool operator==(const CostModel&) const = default;
 };
 
 struct Objective {
@@ -25,6 +26,7 @@ struct Objective {
   // The limits every user of an objective relies on: 0 <= k <= kMaxK, cT and cI finite and > 0,
   // 1 <= maxLeafSize <= kMaxLeafSize. Throws tsah::ConfigError naming `who` and the field.
   void validate(const char* who = "objective") const;
+  bool operator==(const Objective&) const = default;
 
   static constexpr int kMaxK = 16;                 // C_i^k of costs in the hundreds stays finite
   static constexpr uint32_t kMaxLeafSize = 256;    // the command line's --max-leaf limit

@@ -72,8 +72,10 @@ class CpuRuntime {
   CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint32_t vertexCount, Config config);
   CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint32_t vertexCount);
   // A tree set: every tree is checked as above and kept (a wide layout collapses each tree once,
-  // here); selectTreeAt picks the one to refit and trace (tree 0 until then; layoutInfo() describes
-  // tree 0). Throws tsah::DataError for an empty set.
+  // here: with the objective of its own build info when the set has one per tree, as read from a
+  // file, else with config.collapse's); selectTreeAt picks the one to refit and trace (tree 0 until
+  // then; layoutInfo() describes tree 0). Throws tsah::DataError for an empty set or build infos
+  // for only some trees.
   CpuRuntime(const TreeSet& set, std::vector<uint32_t> indices, uint32_t vertexCount, Config config);
   ~CpuRuntime();
   CpuRuntime(const CpuRuntime&) = delete;
