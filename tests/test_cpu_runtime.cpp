@@ -226,12 +226,7 @@ TEST(CpuRuntime, PngRoundTrip) {
 TEST(CpuRuntime, TreeSetCollapsesEachTreeWithItsOwnObjective) {
   const tsah::test::WideObjectiveCase c = tsah::test::wideObjectiveCase();
   const anim::Animation& a = c.animation;
-  tsah::TreeSet set;
-  set.trees = {c.tree, c.tree};
-  const double mid = 0.5 * (a.startTime() + a.endTime());
-  set.ranges = {{a.startTime(), mid}, {mid, a.endTime()}};
-  set.builds.resize(2);
-  set.builds[0].objective = c.objective;  // tree 1 keeps the default objective
+  const tsah::TreeSet set = tsah::test::twoPartObjectiveSet(c);  // tree 1 keeps the default objective
   tsah::CpuRuntime::Config config(1);
   config.layout = tsah::Layout::Bvh4;  // SSE kernels: every x86-64 processor runs them
   config.isa = tsah::SimdIsa::Sse;

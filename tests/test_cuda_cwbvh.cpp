@@ -148,12 +148,7 @@ TEST(CudaCwbvh, TreeSetCollapsesEachTreeWithItsOwnObjective) {
   using tsah::test::hostCwbvh;
   const tsah::test::WideObjectiveCase c = tsah::test::wideObjectiveCase();
   const anim::Animation& a = c.animation;
-  tsah::TreeSet set;
-  set.trees = {c.tree, c.tree};
-  const double mid = 0.5 * (a.startTime() + a.endTime());
-  set.ranges = {{a.startTime(), mid}, {mid, a.endTime()}};
-  set.builds.resize(2);
-  set.builds[0].objective = c.objective;  // tree 1 keeps the default objective
+  const tsah::TreeSet set = tsah::test::twoPartObjectiveSet(c);  // tree 1 keeps the default objective
   tc::GpuRuntime::Config config = wide();
   config.wideObjective = tsah::Objective{1, {2.0f, 1.0f}, 3};
   const tsah::Objective ownObjectives[2] = {c.objective, tsah::Objective{}};

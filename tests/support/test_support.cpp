@@ -147,6 +147,17 @@ WideObjectiveCase wideObjectiveCase() {
   return {std::move(a), std::move(tree), objective};
 }
 
+TreeSet twoPartObjectiveSet(const WideObjectiveCase& c) {
+  const anim::Animation& a = c.animation;
+  TreeSet set;
+  set.trees = {c.tree, c.tree};
+  const double mid = 0.5 * (a.startTime() + a.endTime());
+  set.ranges = {{a.startTime(), mid}, {mid, a.endTime()}};
+  set.builds.resize(2);
+  set.builds[0].objective = c.objective;
+  return set;
+}
+
 CwbvhTree hostCwbvh(const FlatBvh& tree, const Objective& objective) {
   return buildCwbvh(WideCollapser(wideCollapseConfig(objective, kCwbvhWidth)).collapse(unflattenBvh(tree)));
 }

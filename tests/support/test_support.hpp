@@ -16,6 +16,7 @@
 #include "anim/animation.hpp"
 #include "anim/generators.hpp"
 
+#include "tsah/io/tree_set.hpp"
 #include "tsah/core/bvh.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
 #include "tsah/layout/cwbvh_build.hpp"
@@ -84,6 +85,9 @@ struct WideObjectiveCase {
   Objective objective;
 };
 WideObjectiveCase wideObjectiveCase();
+// The case's tree twice, for the two halves of the animation's time range, as a set read from a
+// file: tree 0's build info has the case's objective, tree 1's the default one.
+TreeSet twoPartObjectiveSet(const WideObjectiveCase& c);
 // The host's compressed 8-wide tree of `tree` for `objective`, made as the CPU wide layouts make
 // theirs: WideCollapser(wideCollapseConfig(objective, 8)) over every frame, then buildCwbvh.
 CwbvhTree hostCwbvh(const FlatBvh& tree, const Objective& objective);
