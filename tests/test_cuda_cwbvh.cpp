@@ -331,6 +331,43 @@ TEST(CudaCwbvh, ImagesEqualBinaryAndCpu) {
   }
 }
 
+// The fused passes (each thread makes its ray and traces it, secondary rays over the listed pixels,
+// AO beside shadow) trace the same rays with the same traversal as the separate generation and trace
+// kernels: identical images and ray counts in both layouts, with and without the ground, and for a
+// camera that sees nothing (empty pixel list).
+TEST(CudaRender, FusedPassesEqualSeparatePassesInBothLayouts) {
+  REQUIRE_GPU();
+  const anim::Animation a = generatedAnimation(anim::GeneratorKind::Explode, 6000, 4);
+  const tsah::FlatBvh tree = sahTree(a);
+  auto [bounds, settings, camera] = tsah::test::renderView(a);
+  tsah::Camera away = camera;
+  away.lookAt = camera.eye + (camera.eye - camera.lookAt);
+  for (const tsah::Layout layout : {tsah::Layout::Bvh2, tsah::Layout::Cwbvh}) {
+    tc::GpuRuntime::Config fusedConfig = tsah::test::gpuConfig(layout), separateConfig = fusedConfig;
+    separateConfig.fusePasses = false;
+    tc::GpuRuntime fused(tree, a, fusedConfig), separate(tree, a, separateConfig);
+    for (const bool ground : {true, false}) {
+      for (const tsah::Camera* view : {&camera, &away}) {
+        const tsah::SceneLighting lighting = tsah::fitLighting(bounds, camera, {0, 1, 0}, 0.1f, ground);
+        settings.frame = 2;
+        const double t = a.uniformTimes(4)[2];
+        fused.updateAt(t);
+        separate.updateAt(t);
+        tsah::Image fusedImage, separateImage;
+        const tsah::RenderStats f = tc::renderFrameGpu(fused, *view, lighting, settings, fusedImage);
+        const tsah::RenderStats s = tc::renderFrameGpu(separate, *view, lighting, settings, separateImage);
+        const std::string what = std::string(tsah::name(layout)) + (ground ? " ground" : "") +
+                                 (view == &away ? " looking away" : "");
+        EXPECT_EQ(f.primary.rays, s.primary.rays) << what;
+        EXPECT_EQ(f.ao.rays, s.ao.rays) << what;
+        EXPECT_EQ(f.shadow.rays, s.shadow.rays) << what;
+        EXPECT_TRUE(fusedImage.rgb == separateImage.rgb) << what;
+        if (view == &camera) EXPECT_GT(f.ao.rays, 0u) << what;
+      }
+    }
+  }
+}
+
 // The GPU traces bvh2 and cwbvh; a CPU layout is refused, Auto is the default (bvh2).
 TEST(CudaCwbvh, RefusesTheCpuLayouts) {
   REQUIRE_GPU();

@@ -24,6 +24,15 @@ RuntimeMethod runFrames(cli::FrameRuntime& runtime, const RuntimeSetup& setup, R
   return method;
 }
 
+// The layout the method was traced in (with --layout auto: the one measured faster on the first
+// frame, and both measurements).
+void describeLayout(const cli::FrameRuntime& runtime, RuntimeMethod& m) {
+  nlohmann::json description;
+  runtime.describe(description);
+  m.extra["layout"] = description["layout"];
+  if (description.contains("layout_auto_ms")) m.extra["layout_auto_ms"] = description["layout_auto_ms"];
+}
+
 cli::FrameRuntimeOptions gpuOptions(const std::string& layout, const Objective& objective) {
   cli::FrameRuntimeOptions options;
   options.device = Device::Cuda;
@@ -38,8 +47,10 @@ RuntimeMethod runGpuRefit(const anim::Animation& a, const RefitTrees& trees, con
                           uint32_t imageFrame, const std::string& layout) {
   // One runtime with every tree uploaded once; each update refits the tree of the frame's part.
   const auto runtime = cli::makeFrameRuntime(treeSetOf(trees, a), a, gpuOptions(layout, setup.collapse));
-  return runFrames(*runtime, setup, {trees.name, trees.label, "refit", {}, nlohmann::json::object()}, image, imageFrame,
-                   nullptr);
+  RuntimeMethod m = runFrames(*runtime, setup, {trees.name, trees.label, "refit", {}, nlohmann::json::object()}, image,
+                              imageFrame, nullptr);
+  describeLayout(*runtime, m);
+  return m;
 }
 
 RuntimeMethod runGpuRebuild(const anim::Animation& a, const Bvh& initialTree, const std::string& method,
@@ -55,10 +66,8 @@ RuntimeMethod runGpuRebuild(const anim::Animation& a, const Bvh& initialTree, co
   double convertMs = 0.0;
   RuntimeMethod m = runFrames(*runtime, setup, {method, label, "rebuild", {}, nlohmann::json::object()}, nullptr, 0,
                               &convertMs);
-  nlohmann::json description;
-  runtime->describe(description);
-  m.extra["layout"] = description["layout"];
-  if (description["layout"] == "cwbvh")
+  describeLayout(*runtime, m);
+  if (m.extra["layout"] == "cwbvh")
     m.extra["wide_conversion_ms"] = setup.times.empty() ? 0.0 : convertMs / double(setup.times.size());
   return m;
 }

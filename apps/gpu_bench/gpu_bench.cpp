@@ -383,7 +383,7 @@ void run(const Options& opt) {
   out["settings"] = {{"frames", frames},       {"width", opt.width},   {"height", opt.height},
                      {"ao_samples", opt.ao},   {"shadow_samples", opt.shadow},
                      {"traversal", opt.traversal}, {"render", !opt.noRender}, {"graphs", !opt.noGraphs},
-                     {"fused_wide_passes", !opt.noFuse}, {"ground", opt.ground},
+                     {"fused_passes", !opt.noFuse}, {"ground", opt.ground},
                      {"camera", a.cameraPath().empty() ? "fitted to the animation bounds" : "the animation's camera path"}};
 
   // Trees: files, then SAH0 built here.
@@ -466,7 +466,7 @@ int main(int argc, char** argv) {
   app.add_option("--wide-merge", opt.wideMerge,
                  "cwbvh rebuilds: binary subtrees of at most this many triangles become one wide leaf (0-8, default 0: off)")
       ->check(CLI::Range(0u, tsah::kCwbvhMaxLeafTriangles));
-  app.add_flag("--no-fuse", opt.noFuse, "cwbvh: separate ray generation and trace kernels (as bvh2) instead of fused passes");
+  app.add_flag("--no-fuse", opt.noFuse, "separate ray generation and trace kernels over every padded pixel and sample instead of the fused passes");
   app.add_option("--cwbvh-cost", opt.wideCost,
                  "cwbvh: the 8-wide collapse's cost of a node visit and of a triangle instead of the tree's objective's "
                  "(a file's own; SAH0: 3 2)")

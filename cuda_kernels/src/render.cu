@@ -8,6 +8,7 @@
 #include <cuda/atomic>
 
 #include "tsah/base/error.hpp"
+#include "bvh2_traversal.cuh"
 #include "cwbvh_kernels.hpp"
 #include "kernels.hpp"
 #include "launch.hpp"
@@ -29,7 +30,7 @@ enum Word : uint32_t {
   kPrimaryCounter = 2,
   kAoCounter = 3,
   kShadowCounter = 4,
-  kActivePixels = 5,  // fused wide passes: entries of activePixels
+  kActivePixels = 5,  // fused passes: entries of activePixels
   kWords = 6          // GpuRuntime::Impl::words holds at least this many
 };
 
@@ -154,22 +155,37 @@ __global__ void shadowRaysKernel(Frame f, const float4* __restrict__ surfaces, R
   countRays(words + kShadowRays, valid);
 }
 
-// Fused passes for the compressed wide layout: each thread makes its ray and traces it at once
-// (cwbvhClosestHit / cwbvhAnyHit, the TSAH_HD traversal), so no ray or hit buffer is written and
-// read back (at 1024 x 768 with 8 AO rays that is about 0.4 GB of traffic per frame). Same rays,
-// same results as the separate kernels above.
+// Fused passes: each thread makes its ray and traces it at once (the layout's per-ray traversal:
+// bvh2ClosestHit / bvh2AnyHit, or the TSAH_HD cwbvhClosestHit / cwbvhAnyHit), so no ray or hit
+// buffer is written and read back (at 1024 x 768 with 8 AO rays that is about 0.4 GB of traffic per
+// frame). Same rays, same results as the separate kernels above.
 //
 // The primary pass lists the pixels that found a surface (activePixels), and the AO and shadow
 // passes run over that list only: warps take 32 (pixel, sample) entries at a time from a counter
 // until the list is done. A small character in a wide frame covers a few percent of the pixels,
 // and one thread per padded pixel and sample spent most of those passes on pixels without rays.
-__device__ __forceinline__ CwbvhView wideView(CwbvhView v, const RootInfo* root) {
-  v.rootBox = root->box;
-  return v;
-}
+struct Bvh2Tracer {
+  detail::TraceScene scene;
+  __device__ __forceinline__ Hit closestHit(const Ray& ray) const {
+    return detail::bvh2ClosestHit(scene, *scene.root, ray);
+  }
+  __device__ __forceinline__ bool anyHit(const Ray& ray) const { return detail::bvh2AnyHit(scene, *scene.root, ray); }
+};
 
-__global__ void __launch_bounds__(128) widePrimaryKernel(Frame f, CwbvhView view, const RootInfo* __restrict__ root,
-                                                          const uint32_t* __restrict__ indices,
+struct CwbvhTracer {
+  CwbvhView view;  // rootBox is read from root, which the refit writes on the device
+  const RootInfo* root;
+  __device__ __forceinline__ CwbvhView withRootBox() const {
+    CwbvhView v = view;
+    v.rootBox = root->box;
+    return v;
+  }
+  __device__ __forceinline__ Hit closestHit(const Ray& ray) const { return cwbvhClosestHit(withRootBox(), ray); }
+  __device__ __forceinline__ bool anyHit(const Ray& ray) const { return cwbvhAnyHit(withRootBox(), ray); }
+};
+
+template <class Tracer>
+__global__ void __launch_bounds__(128) fusedPrimaryKernel(Frame f, Tracer tracer, const uint32_t* __restrict__ indices,
                                                           const float* __restrict__ positions,
                                                           float4* __restrict__ surfaces,
                                                           uint32_t* __restrict__ activePixels,
@@ -180,7 +196,7 @@ __global__ void __launch_bounds__(128) widePrimaryKernel(Frame f, CwbvhView view
   Surface s;
   if (pixelOf(f, j, x, y)) {
     const Ray ray = cameraRay(f, x, y);
-    s = primarySurface(ray, cwbvhClosestHit(wideView(view, root), ray), indices, positions, f.light);
+    s = primarySurface(ray, tracer.closestHit(ray), indices, positions, f.light);
   }
   storeSurface(surfaces, j, s);
   // Listed with one atomic per warp; the order within the list does not matter (every ray's random
@@ -213,20 +229,20 @@ __device__ __forceinline__ SampleKey pixelKey(const Frame& f, uint32_t j) {
   return key;
 }
 
-__global__ void __launch_bounds__(128) wideAoKernel(Frame f, CwbvhView view, const RootInfo* __restrict__ root,
-                                                     const float4* __restrict__ surfaces,
+template <class Tracer>
+__global__ void __launch_bounds__(128) fusedAoKernel(Frame f, Tracer tracer, const float4* __restrict__ surfaces,
                                                      const uint32_t* __restrict__ activePixels,
                                                      uint8_t* __restrict__ occluded, uint32_t* __restrict__ words) {
   forEachListedSample(activePixels, words, words + kAoCounter, f.aoSamples, [&](uint32_t j, uint32_t sample) {
     const Surface s = loadSurface(surfaces, j);
     countRays(words + kAoRays, true);
     occluded[std::size_t(j) * f.aoSamples + sample] =
-        cwbvhAnyHit(wideView(view, root), aoRay(s, pixelKey(f, j), sample, f.light.aoDistance)) ? 1 : 0;
+        tracer.anyHit(aoRay(s, pixelKey(f, j), sample, f.light.aoDistance)) ? 1 : 0;
   });
 }
 
-__global__ void __launch_bounds__(128) wideShadowKernel(Frame f, CwbvhView view, const RootInfo* __restrict__ root,
-                                                         const float4* __restrict__ surfaces,
+template <class Tracer>
+__global__ void __launch_bounds__(128) fusedShadowKernel(Frame f, Tracer tracer, const float4* __restrict__ surfaces,
                                                          const uint32_t* __restrict__ activePixels,
                                                          uint8_t* __restrict__ occluded, uint8_t* __restrict__ traced,
                                                          uint32_t* __restrict__ words) {
@@ -238,7 +254,7 @@ __global__ void __launch_bounds__(128) wideShadowKernel(Frame f, CwbvhView view,
     countRays(words + kShadowRays, valid);
     const std::size_t r = std::size_t(j) * f.shadowSamples + sample;
     traced[r] = valid ? 1 : 0;
-    occluded[r] = valid && cwbvhAnyHit(wideView(view, root), ray) ? 1 : 0;
+    occluded[r] = valid && tracer.anyHit(ray) ? 1 : 0;
   });
 }
 
@@ -279,6 +295,61 @@ __global__ void shadeKernel(Frame f, const float4* __restrict__ surfaces, const 
   storeSrgb8(image + 3 * std::size_t(pixelIndex(f, x, y)), color);
 }
 
+// Vertex normals of the current positions on stream s (the triangles of each vertex are listed at
+// the first call).
+void enqueueVertexNormals(GpuRuntime::Impl& m, cudaStream_t s) {
+  if (m.vertexTris.empty()) m.buildVertexTriangles();
+  const unsigned block = 256;
+  vertexNormalsKernel<<<detail::gridFor(m.vertices, block), block, 0, s>>>(
+      m.vertices, m.vertexTriOffsets.data(), m.vertexTris.data(), m.indices.data(), m.positions.data(),
+      m.normals.data());
+  CUDA_CHECK_LAUNCH("vertexNormalsKernel");
+}
+
+// The three fused passes (events 1/2, 3/4, 5/6 around them, so a pass's time includes making its
+// rays), then the vertex normals; event 11 marks the start of shading.
+template <class Tracer>
+void enqueueFusedPasses(GpuRuntime::Impl& m, const Frame& f, const Tracer& tracer, uint64_t aoRays,
+                        uint64_t shadowRays, uint8_t* shadowTraced) {
+  cudaStream_t stream = m.stream;
+  auto& ev = m.events;
+  const unsigned block = 128;  // fixed by __launch_bounds__
+  ev.record(1, stream);
+  fusedPrimaryKernel<<<detail::gridFor(f.padded, block), block, 0, stream>>>(
+      f, tracer, m.indices.data(), m.positions.data(), m.surfaces.data(), m.activePixels.data(), m.words.data());
+  CUDA_CHECK_LAUNCH("fusedPrimaryKernel");
+  ev.record(2, stream);
+  ev.record(3, stream);
+  // The secondary passes loop over the listed pixels (their number is known on the device only):
+  // as many blocks as are resident at once, or fewer when the frame cannot have that many rays.
+  auto listGrid = [&](auto kernel, uint64_t rays) {
+    const int resident = detail::residentBlocks(kernel, int(block), 16);
+    return std::min<unsigned>(unsigned(resident), detail::gridFor(rays, block));
+  };
+  // The shadow pass (then the vertex normals) runs on the side stream beside the AO pass: both
+  // only read the surfaces, and each alone leaves most of the GPU idle on small frames (a few
+  // thousand warps of long any-hit rays). Event 10 joins them before shading.
+  cudaStream_t side = m.sideStream;
+  ev.streamWait(2, side);
+  if (aoRays > 0) {
+    fusedAoKernel<Tracer><<<listGrid(fusedAoKernel<Tracer>, aoRays), block, 0, stream>>>(
+        f, tracer, m.surfaces.data(), m.activePixels.data(), m.occluded.data(), m.words.data());
+    CUDA_CHECK_LAUNCH("fusedAoKernel");
+  }
+  ev.record(4, stream);
+  ev.record(5, side);
+  if (shadowRays > 0) {
+    fusedShadowKernel<Tracer><<<listGrid(fusedShadowKernel<Tracer>, shadowRays), block, 0, side>>>(
+        f, tracer, m.surfaces.data(), m.activePixels.data(), m.shadowOccluded.data(), shadowTraced, m.words.data());
+    CUDA_CHECK_LAUNCH("fusedShadowKernel");
+  }
+  ev.record(6, side);
+  enqueueVertexNormals(m, side);
+  ev.record(10, side);
+  ev.streamWait(10, stream);
+  ev.record(11, stream);
+}
+
 }  // namespace
 
 RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const SceneLighting& lighting,
@@ -304,9 +375,9 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   f.shadowSamples = settings.shadowSamples;
   f.base = {settings.seed, settings.frame, 0};
 
-  // Fused wide passes (Config::fuseWidePasses) need no ray or hit buffers.
+  // Fused passes (Config::fusePasses) need no ray or hit buffers.
   const detail::TraceScene scene = m.scene();
-  const bool fused = scene.cwbvhNodes != nullptr && m.config.fuseWidePasses;
+  const bool fused = m.config.fusePasses;
   if (!fused) {
     m.rays.reserve(std::max<uint64_t>(padded, aoRays));
     m.hits.reserve(padded);
@@ -323,58 +394,16 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   const unsigned block = 256;
   cudaStream_t stream = m.stream;
   auto& ev = m.events;
-  auto enqueueVertexNormals = [&](cudaStream_t s) {
-    if (m.vertexTris.empty()) m.buildVertexTriangles();
-    vertexNormalsKernel<<<detail::gridFor(m.vertices, block), block, 0, s>>>(
-        m.vertices, m.vertexTriOffsets.data(), m.vertexTris.data(), m.indices.data(), m.positions.data(),
-        m.normals.data());
-    CUDA_CHECK_LAUNCH("vertexNormalsKernel");
-  };
+
 
   m.words.reserve(kWords);
   m.words.fillBytes(0, stream);
   ev.record(0, stream);
   if (fused) {
-    // Compressed wide layout: three fused passes (events 1/2, 3/4, 5/6 around them, so a pass's time
-    // includes making its rays).
-    const CwbvhView view = detail::cwbvhView(scene);
-    const unsigned wideBlock = 128;  // fixed by __launch_bounds__
-    ev.record(1, stream);
-    widePrimaryKernel<<<detail::gridFor(padded, wideBlock), wideBlock, 0, stream>>>(
-        f, view, scene.root, m.indices.data(), m.positions.data(), m.surfaces.data(), m.activePixels.data(),
-        m.words.data());
-    CUDA_CHECK_LAUNCH("widePrimaryKernel");
-    ev.record(2, stream);
-    ev.record(3, stream);
-    // The secondary passes loop over the listed pixels (their number is known on the device only):
-    // as many blocks as are resident at once, or fewer when the frame cannot have that many rays.
-    auto listGrid = [&](auto kernel, uint64_t rays) {
-      const int resident = detail::residentBlocks(kernel, int(wideBlock), 16);
-      return std::min<unsigned>(unsigned(resident), detail::gridFor(rays, wideBlock));
-    };
-    // The shadow pass (then the vertex normals) runs on the side stream beside the AO pass: both
-    // only read the surfaces, and each alone leaves most of the GPU idle on small frames (a few
-    // thousand warps of long any-hit rays). Event 10 joins them before shading.
-    cudaStream_t side = m.sideStream;
-    ev.streamWait(2, side);
-    if (aoRays > 0) {
-      wideAoKernel<<<listGrid(wideAoKernel, aoRays), wideBlock, 0, stream>>>(
-          f, view, scene.root, m.surfaces.data(), m.activePixels.data(), m.occluded.data(), m.words.data());
-      CUDA_CHECK_LAUNCH("wideAoKernel");
-    }
-    ev.record(4, stream);
-    ev.record(5, side);
-    if (shadowRays > 0) {
-      wideShadowKernel<<<listGrid(wideShadowKernel, shadowRays), wideBlock, 0, side>>>(
-          f, view, scene.root, m.surfaces.data(), m.activePixels.data(), m.shadowOccluded.data(), shadowTraced,
-          m.words.data());
-      CUDA_CHECK_LAUNCH("wideShadowKernel");
-    }
-    ev.record(6, side);
-    enqueueVertexNormals(side);
-    ev.record(10, side);
-    ev.streamWait(10, stream);
-    ev.record(11, stream);
+    if (scene.cwbvhNodes)
+      enqueueFusedPasses(m, f, CwbvhTracer{detail::cwbvhView(scene), scene.root}, aoRays, shadowRays, shadowTraced);
+    else
+      enqueueFusedPasses(m, f, Bvh2Tracer{scene}, aoRays, shadowRays, shadowTraced);
   } else {
     primaryRaysKernel<<<detail::gridFor(padded, block), block, 0, stream>>>(f, m.rays.data());
     CUDA_CHECK_LAUNCH("primaryRaysKernel");
@@ -407,7 +436,7 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   }
   if (!fused) {
     ev.record(11, stream);
-    enqueueVertexNormals(stream);
+    enqueueVertexNormals(m, stream);
   }
   shadeKernel<<<detail::gridFor(padded, block), block, 0, stream>>>(f, m.surfaces.data(), m.occluded.data(),
                                                                     m.shadowOccluded.data(), shadowTraced,

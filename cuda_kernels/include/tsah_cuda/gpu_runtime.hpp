@@ -67,9 +67,11 @@ class GpuRuntime {
     // Layout of the traced tree: the refitted one, and the rebuilt ones (cwbvh: every rebuild is
     // converted into the compressed 8-wide layout on the device, RebuildTimings::wideMs).
     Layout layout = Layout::Bvh2;
-    // Layout cwbvh: renderFrameGpu makes each ray in the kernel that traces it (three fused passes,
-    // no ray buffers); false runs the separate generation and trace kernels of the binary layout.
-    bool fuseWidePasses = true;
+    // renderFrameGpu makes each ray in the kernel that traces it (three fused passes over the
+    // pixels that found a surface, no ray buffers; both layouts); false runs separate generation
+    // and trace kernels over every padded pixel and sample (the reference the fused passes are
+    // tested against).
+    bool fusePasses = true;
     // Layout cwbvh: the objective of the 8-wide collapse of an uploaded tree over all its frames
     // (tsah::buildCwbvh(tree, objective): k, cT, cI and the largest leaf, as the CPU wide layouts'
     // tsah::wideCollapseConfig; leaves of at most 8) for a tree that brings none: the FlatBvh
