@@ -15,24 +15,34 @@ namespace tsah::cli {
 
 std::shared_ptr<BoxExportOptions> addBoxExportOptions(CLI::App& sub) {
   auto o = std::make_shared<BoxExportOptions>();
-  sub.add_flag("--boxes", o->enabled,
+  auto* boxes = sub.add_flag("--boxes", o->enabled,
                "Write the tree's boxes at the frame as a mesh for a viewer: -o OUT.ply or OUT.obj (docs/box-view.md)");
+  // The view's options mean nothing without --boxes: refused then, not ignored.
   sub.add_option("--style", o->style, "Boxes: bars (thin bars along the edges) or lines")
-      ->check(CLI::IsMember({"bars", "lines"}));
+      ->check(CLI::IsMember({"bars", "lines"}))
+      ->needs(boxes);
   sub.add_option("--color", o->colour, "Colour by depth or by growth over the animation")
-      ->check(CLI::IsMember({"depth", "growth"}));
-  sub.add_option("--min-depth", o->minDepth, "Boxes at this depth or deeper (root: 0)");
-  sub.add_option("--max-depth", o->maxDepth, "Boxes at this depth or shallower");
+      ->check(CLI::IsMember({"depth", "growth"}))
+      ->needs(boxes);
+  sub.add_option("--min-depth", o->minDepth, "Boxes at this depth or deeper (root: 0)")
+      ->needs(boxes);
+  sub.add_option("--max-depth", o->maxDepth, "Boxes at this depth or shallower")
+      ->needs(boxes);
   sub.add_option("--min-share", o->minShare, "Boxes whose own share of the frame's cost is at least this many percent")
-      ->check(CLI::Range(0.0, 100.0));
+      ->check(CLI::Range(0.0, 100.0))
+      ->needs(boxes);
   sub.add_option("--min-growth", o->minGrowth,
                  "Boxes that grow at least this much over the animation (largest over smallest share of the scene)")
-      ->check(CLI::Range(1.0, 1e30));
+      ->check(CLI::Range(1.0, 1e30))
+      ->needs(boxes);
   sub.add_option("--bar-width", o->barWidth, "Bar thickness (default: 1/1000 of the scene's diagonal)")
-      ->check(CLI::PositiveNumber);
+      ->check(CLI::PositiveNumber)
+      ->needs(boxes);
   sub.add_option("--growth-frames", o->growthFrames, "Frames over the animation that measure growth (default 50)")
-      ->check(CLI::Range(2u, 100000u));
-  sub.add_flag("--with-mesh", o->withMesh, "Add the animation's triangles at the frame (grey)");
+      ->check(CLI::Range(2u, 100000u))
+      ->needs(boxes);
+  sub.add_flag("--with-mesh", o->withMesh, "Add the animation's triangles at the frame (grey)")
+      ->needs(boxes);
   return o;
 }
 

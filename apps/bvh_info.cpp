@@ -166,45 +166,109 @@ nlohmann::json treeQualityJson(const TreeShape& shape, const TreeQuality& qualit
 
 }  // namespace
 
-void describeTreeOverAnimation(const std::string& bvhPath, const std::string& animationPath, uint32_t frames,
-                               bool json) {
-  BvhBuildInfo info;
-  const FlatBvh flat = decodeFlatBvhFile(tsah::readFile(bvhPath), bvhPath, &info);
-  const anim::Animation a = loadInput(animationPath);
-  checkTreeMatchesAnimation(info, bvhPath, a, animationPath);
+namespace {
+
+// One tree over the frames at `times` (frame numbers `frameNumbers` of the chosen frames): its
+// shape and quality as JSON, with the tree's objective.
+nlohmann::json qualityOver(const FlatBvh& flat, const BvhBuildInfo& info, const anim::Animation& a,
+                           const std::vector<double>& times) {
   const Bvh bvh = unflattenBvh(flat);
-  std::vector<double> times = frames ? a.uniformTimes(frames) : std::vector<double>(a.times().begin(), a.times().end());
-  const TreeShape shape = treeShape(bvh);
-  const TreeQuality quality = evaluateTreeQuality(bvh, animationFrames(a, times), info.objective.cost);
-  nlohmann::json j = treeQualityJson(shape, quality, times);
-  j["tree"] = bvhPath;
-  j["animation"] = animationPath;
+  const TreeQuality quality = times.empty() ? TreeQuality{} : evaluateTreeQuality(bvh, animationFrames(a, times), info.objective.cost);
+  nlohmann::json j = treeQualityJson(treeShape(bvh), quality, times);
   j["method"] = info.method;
   j["ct"] = info.objective.cost.ct;
   j["ci"] = info.objective.cost.ci;
+  return j;
+}
+
+void printQuality(const nlohmann::json& j, const std::vector<uint32_t>& frameNumbers) {
+  const auto& shape = j["shape"];
+  std::printf("shape       %u interior, %u leaves, depth %u, leaves of %u..%u triangles (mean %.2f)\n",
+              shape["interior_nodes"].get<uint32_t>(), shape["leaves"].get<uint32_t>(), shape["depth"].get<uint32_t>(),
+              shape["smallest_leaf"].get<uint32_t>(), shape["largest_leaf"].get<uint32_t>(),
+              shape["mean_leaf_size"].get<double>());
+  std::string sizes;
+  const auto& leavesOfSize = shape["leaves_of_size"];
+  for (std::size_t s = 1; s < leavesOfSize.size(); ++s)
+    if (leavesOfSize[s].get<uint64_t>()) sizes += "  " + std::to_string(s) + ":" + leavesOfSize[s].dump();
+  std::printf("leaf sizes %s\n\n", sizes.c_str());
+  std::printf("%6s %10s %9s %9s %9s %10s %9s %9s %9s\n", "frame", "time", "cost", "inner", "leaf", "leaf depth",
+              "leaf size", "child 0", "child 1");
+  for (std::size_t f = 0; f < j["frames"].size(); ++f) {
+    const auto& q = j["frames"][f];
+    std::printf("%6u %10.4g %9.3f %9.3f %9.3f %10.2f %9.2f %9.3f %9.3f\n", frameNumbers[f], q["time"].get<double>(),
+                q["cost"].get<double>(), q["inner_cost"].get<double>(), q["leaf_cost"].get<double>(),
+                q["mean_leaf_depth"].get<double>(), q["mean_leaf_size"].get<double>(),
+                q["root_child_growth"][0].get<double>(), q["root_child_growth"][1].get<double>());
+  }
+  if (j["frames"].empty()) {
+    std::printf("(none of the chosen frames falls in this tree's part)\n");
+    return;
+  }
+  std::printf("\naverage cost %.3f, maximum %.3f (Eq. 1; child columns: area of the root's children over frame 0's)\n",
+              j["average_cost"].get<double>(), j["max_cost"].get<double>());
+}
+
+}  // namespace
+
+void describeTreeOverAnimation(const std::string& bvhPath, const std::string& animationPath, uint32_t frames,
+                               bool json) {
+  const TreeSet set = decodeTreeSetFile(tsah::readFile(bvhPath), bvhPath);
+  const anim::Animation a = loadInput(animationPath);
+  checkTreeMatchesAnimation(set.builds.front(), bvhPath, a, animationPath);
+  const std::vector<double> times =
+      frames ? a.uniformTimes(frames) : std::vector<double>(a.times().begin(), a.times().end());
+  // Each tree over the frames it is used for (all of them for a single tree), as the runtimes switch.
+  std::vector<std::vector<double>> partTimes(set.size());
+  std::vector<std::vector<uint32_t>> partFrames(set.size());
+  for (uint32_t f = 0; f < times.size(); ++f) {
+    const uint32_t s = set.treeAt(times[f]);
+    partTimes[s].push_back(times[f]);
+    partFrames[s].push_back(f);
+  }
+  if (set.version == kTbvhVersion) {  // one tree
+    const BvhBuildInfo& info = set.builds[0];
+    nlohmann::json j = qualityOver(set.trees[0], info, a, times);
+    j["tree"] = bvhPath;
+    j["animation"] = animationPath;
+    if (json) {
+      std::printf("%s\n", j.dump().c_str());
+      return;
+    }
+    std::printf("tree        %s (%s, k=%d, %u representative frames, cT=%g cI=%g)\n", bvhPath.c_str(),
+                info.method.c_str(), info.objective.k, info.representativeFrames, double(info.objective.cost.ct),
+                double(info.objective.cost.ci));
+    std::printf("animation   %s (%zu frames evaluated, time %g .. %g)\n", animationPath.c_str(), times.size(),
+                times.front(), times.back());
+    printQuality(j, partFrames[0]);
+    return;
+  }
+  nlohmann::json j;
+  j["tree_set"] = bvhPath;
+  j["animation"] = animationPath;
+  j["trees"] = nlohmann::json::array();
+  for (uint32_t s = 0; s < set.size(); ++s) {
+    nlohmann::json p = qualityOver(set.trees[s], set.builds[s], a, partTimes[s]);
+    p["index"] = s;
+    p["used"] = {s == 0 ? set.ranges[0].start : switchTime(set.ranges, s - 1),
+                 s + 1 == set.size() ? set.ranges[s].end : switchTime(set.ranges, s)};
+    j["trees"].push_back(p);
+  }
   if (json) {
     std::printf("%s\n", j.dump().c_str());
     return;
   }
-  std::printf("tree        %s (%s, k=%d, %u representative frames, cT=%g cI=%g)\n", bvhPath.c_str(), info.method.c_str(),
-              info.objective.k, info.representativeFrames, double(info.objective.cost.ct), double(info.objective.cost.ci));
-  std::printf("animation   %s (%zu frames evaluated, time %g .. %g)\n", animationPath.c_str(), times.size(),
-              times.front(), times.back());
-  std::printf("shape       %u interior, %u leaves, depth %u, leaves of %u..%u triangles (mean %.2f)\n", shape.innerCount,
-              shape.leafCount, shape.depth, shape.smallestLeaf, shape.largestLeaf, shape.meanLeafSize);
-  std::string sizes;
-  for (std::size_t s = 1; s < shape.leavesOfSize.size(); ++s)
-    if (shape.leavesOfSize[s]) sizes += "  " + std::to_string(s) + ":" + std::to_string(shape.leavesOfSize[s]);
-  std::printf("leaf sizes %s\n\n", sizes.c_str());
-  std::printf("%6s %10s %9s %9s %9s %10s %9s %9s %9s\n", "frame", "time", "cost", "inner", "leaf", "leaf depth",
-              "leaf size", "child 0", "child 1");
-  for (std::size_t f = 0; f < quality.frames.size(); ++f) {
-    const FrameQuality& q = quality.frames[f];
-    std::printf("%6zu %10.4g %9.3f %9.3f %9.3f %10.2f %9.2f %9.3f %9.3f\n", f, times[f], q.cost.total(), q.cost.inner(),
-                q.cost.leaves(), q.meanLeafDepth, q.meanLeafSize, q.rootChildGrowth[0], q.rootChildGrowth[1]);
+  std::printf("tree set    %s (%u trees)\n", bvhPath.c_str(), set.size());
+  std::printf("animation   %s (%zu frames evaluated, time %g .. %g; each with the tree of its part)\n",
+              animationPath.c_str(), times.size(), times.front(), times.back());
+  for (uint32_t s = 0; s < set.size(); ++s) {
+    const nlohmann::json& p = j["trees"][s];
+    const BvhBuildInfo& info = set.builds[s];
+    std::printf("\ntree %u      used for t %g .. %g (%s, k=%d, %u representative frames, cT=%g cI=%g)\n", s,
+                p["used"][0].get<double>(), p["used"][1].get<double>(), info.method.c_str(), info.objective.k,
+                info.representativeFrames, double(info.objective.cost.ct), double(info.objective.cost.ci));
+    printQuality(p, partFrames[s]);
   }
-  std::printf("\naverage cost %.3f, maximum %.3f (Eq. 1; child columns: area of the root's children over frame 0's)\n",
-              j["average_cost"].get<double>(), j["max_cost"].get<double>());
 }
 
 }  // namespace tsah::cli

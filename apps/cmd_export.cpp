@@ -184,12 +184,14 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
   sub->add_option("--time", opt->time, "Animation time instead of a keyframe (interpolated)")->excludes(frameOpt);
   sub->add_option("-o,--out", opt->out, "Output folder (created if missing); with --boxes a .ply or .obj file")
       ->required();
-  sub->add_option("--threads", opt->threads, "Worker threads (0: all cores)");
-  tsah::cli::addChoice(*sub, "--layout", opt->layout,
+  auto* threads = sub->add_option("--threads", opt->threads, "Worker threads (0: all cores)");
+  auto* layout = tsah::cli::addChoice(*sub, "--layout", opt->layout,
                        "bvh2: the binary Aila-Laine nodes (default); bvh4 / bvh8: the wide SIMD layout, collapsed "
                        "from the tree at export time (docs/wide-bvh.md)",
                        {tsah::Layout::Bvh2, tsah::Layout::Bvh4, tsah::Layout::Bvh8});
   const auto boxes = tsah::cli::addBoxExportOptions(*sub);
+  // The box view is drawn from the binary tree by one thread: refused, not ignored.
+  sub->get_option("--boxes")->excludes(layout)->excludes(threads);
   sub->callback([opt, boxes] {
     namespace fs = std::filesystem;
     // A tree set exports the tree of the frame's part (tsah::treeIndexAt), as the runtimes use it.

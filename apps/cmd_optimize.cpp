@@ -296,18 +296,26 @@ TSAH_REGISTER_COMMAND(40, [](CLI::App& app) {
       ->check(CLI::Range(1.0, 100.0));
   sub->add_option("--budget-cost", opt->budgetCost, "--segments auto: an absolute bound on every evaluation frame's cost")
       ->check(CLI::PositiveNumber);
-  sub->add_option("--overlap", opt->overlap,
+  auto* overlap = sub->add_option("--overlap", opt->overlap,
                   "Seconds of overlap between consecutive trees (each built for its part widened by half of it; "
                   "the runtimes switch in its middle)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
-  sub->add_option("--reference-frames", opt->referenceFrames,
+  auto* referenceFrames = sub->add_option("--reference-frames", opt->referenceFrames,
                   "--budget: per-frame optimized SAH trees on this many evaluation frames, linear in between "
                   "(0: every evaluation frame)")
       ->capture_default_str();
-  sub->add_option("--max-trees", opt->maxTrees, "--segments auto: at most this many trees")
+  auto* maxTrees = sub->add_option("--max-trees", opt->maxTrees, "--segments auto: at most this many trees")
       ->check(CLI::Range(1u, tsah::kTbvhMaxTrees))
       ->capture_default_str();
   sub->add_flag("--json", opt->json, "Print one JSON object");
-  sub->callback([opt] { run(*opt); });
+  // Options that only a tree set (or only the budget search) reads are refused elsewhere, not ignored.
+  sub->callback([opt, overlap, referenceFrames, maxTrees] {
+    using tsah::cli::UsageError;
+    if (overlap->count() && opt->segments == "1") throw UsageError("--overlap goes with --segments (a tree set)");
+    if (maxTrees->count() && opt->segments != "auto") throw UsageError("--max-trees goes with --segments auto");
+    if (referenceFrames->count() && (opt->segments != "auto" || opt->budgetCost > 0.0))
+      throw UsageError("--reference-frames goes with --segments auto and a relative --budget");
+    run(*opt);
+  });
 });

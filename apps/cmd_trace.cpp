@@ -100,6 +100,8 @@ void runTrace(const TraceOptions& opt) {
   runtimeOptions.device = opt.device;
   runtimeOptions.layout = opt.layout;
   if (opt.isa != "auto") runtimeOptions.isa = tsah::parse<tsah::SimdIsa>(opt.isa);
+  if (runtimeOptions.isa && opt.device == tsah::Device::Cuda)
+    throw UsageError("--isa chooses the CPU's kernels; it does not go with --device cuda");
   runtimeOptions.threads = opt.threads;
   runtimeOptions.rebuild = tsah::cli::parseRebuild(opt.rebuild);
   tsah::cli::checkRebuildForDevice(runtimeOptions.rebuild, opt.device);
@@ -298,15 +300,19 @@ TSAH_REGISTER_COMMAND(70, [](CLI::App& app) {
                        "cpu (default) or cuda (the GPU runtime, when built and a GPU is present)",
                        {tsah::Device::Cpu, tsah::Device::Cuda});
   sub->add_option("--frames", opt->frames,
-                  "Frames to trace, uniform over the animation's time range (default: one per keyframe, at most 50)");
+                  "Frames to trace, uniform over the animation's time range (default: one per keyframe, at most 50)")
+      ->check(CLI::Range(1u, 100000u));
   sub->add_option("--width", opt->width, "Image width (default 1024)")->check(CLI::Range(1u, 16384u));
   sub->add_option("--height", opt->height, "Image height (default 768)")->check(CLI::Range(1u, 16384u));
   sub->add_option("--ao", opt->ao, "Ambient-occlusion rays per pixel (default 8)")->check(CLI::Range(0u, 1024u));
   sub->add_option("--shadow", opt->shadow, "Shadow rays per pixel (default 2)")->check(CLI::Range(0u, 1024u));
-  sub->add_option("--ao-distance", opt->aoDistance, "Maximum AO ray length (default: --ao-fraction of the scene diagonal)");
-  sub->add_option("--ao-fraction", opt->aoFraction, "AO ray length as a fraction of the scene diagonal (default 0.1)");
-  sub->add_option("--out", opt->out, "Folder for frame_NNNN.png (default ./trace)");
-  sub->add_flag("--no-images", opt->noImages, "Do not write PNG files (timing runs)");
+  // Pairs where one option would silently override the other are refused (exit 2).
+  auto* aoDistance = sub->add_option("--ao-distance", opt->aoDistance,
+                                     "Maximum AO ray length (default: --ao-fraction of the scene diagonal)");
+  sub->add_option("--ao-fraction", opt->aoFraction, "AO ray length as a fraction of the scene diagonal (default 0.1)")
+      ->excludes(aoDistance);
+  auto* out = sub->add_option("--out", opt->out, "Folder for frame_NNNN.png (default ./trace)");
+  sub->add_flag("--no-images", opt->noImages, "Do not write PNG files (timing runs)")->excludes(out);
   sub->add_flag("--no-ground", opt->noGround, "No ground plane: only the animated mesh (as in the paper's runs)");
   sub->add_option("--rebuild", opt->rebuild,
                   "none: refit the given tree (default); otherwise build a new tree every frame (baseline): "
@@ -324,7 +330,7 @@ TSAH_REGISTER_COMMAND(70, [](CLI::App& app) {
                        "Tree layout: CPU bvh2 (the binary tree), bvh4 or bvh8 (wide trees collapsed from it at load "
                   "time); GPU bvh2 or cwbvh (compressed 8-wide, docs/cwbvh.md; for the refitted tree and the "
                   "--rebuild trees); default auto: on the CPU the widest "
-                  "the processor's SIMD kernels support, on the GPU the runtime's default",
+                  "the processor's SIMD kernels (or --isa's) support, on the GPU the runtime's default",
                        {tsah::Layout::Auto, tsah::Layout::Bvh2, tsah::Layout::Bvh4, tsah::Layout::Bvh8, tsah::Layout::Cwbvh});
   sub->add_option("--isa", opt->isa, "CPU SIMD kernels of a wide layout: sse, avx2 or avx512 (default auto: the best)")
       ->check(CLI::IsMember({"auto", "sse", "avx2", "avx512"}));

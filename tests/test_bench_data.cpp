@@ -151,6 +151,35 @@ TEST(BenchData, UnpacksOnceAndAgainWhenTheArchiveChanges) {
     EXPECT_EQ(e.path().filename().string().find(".staging"), std::string::npos) << e.path();
 }
 
+TEST(BenchData, DataPathsThatLeaveTheDataFolderAreRefused) {
+  DataFolder f;
+  auto refusal = [&](const std::string& rel) -> std::string {
+    try {
+      tsah::bench::resolveDataPath(f.data, f.cache, rel);
+    } catch (const tsah::DataError& e) {
+      return e.what();
+    }
+    return "resolved";
+  };
+  const std::string climbs = "must name a path inside the data folder (relative, without \"..\")";
+  EXPECT_EQ(refusal("../../../etc/passwd"), "\"data:../../../etc/passwd\" " + climbs);
+  EXPECT_EQ(refusal("/etc/passwd"), "\"data:/etc/passwd\" " + climbs);
+  EXPECT_EQ(refusal("archives/packed.tar.xz/../../x"), "\"data:archives/packed.tar.xz/../../x\" " + climbs);
+  // A symbolic link in the data folder, and one inside an archive, leading out of it.
+  fs::create_symlink("/etc", f.data / "etc");
+  EXPECT_EQ(refusal("etc/passwd"), "\"data:etc/passwd\" leads to /etc/passwd, outside the data folder (through a "
+                                   "symbolic link)");
+  fs::create_directories(f.root / "evil");
+  fs::create_symlink("/etc/passwd", f.root / "evil" / "passwd.obj");
+  ASSERT_TRUE(tsah::bench::runProcess({"tar", "-cJf", (f.data / "evil.tar.xz").string(), "-C",
+                                       (f.root / "evil").string(), "passwd.obj"})
+                  .ok());
+  EXPECT_EQ(refusal("evil.tar.xz/passwd.obj"), "\"data:evil.tar.xz/passwd.obj\" leads to /etc/passwd, outside the "
+                                               "data folder (through a symbolic link)");
+  // What stays inside resolves, through an archive too.
+  EXPECT_TRUE(fs::exists(tsah::bench::resolveDataPath(f.data, f.cache, "archives/packed.tar.xz/packed-wave/0001.obj")));
+}
+
 TEST(BenchData, BrokenArchivesAndMissingFoldersAreErrors) {
   const fs::path root = tsah::test::scratchDir();
   writeText(root / "data" / "bad.tar.xz", "this is not an xz stream");

@@ -154,6 +154,27 @@ TEST(PointCache, Pc2RefusesTimesOffAUniformGrid) {
   EXPECT_EQ(anim::decodeMdd(anim::encodeMdd(a), "u.mdd").times[2], 3.0);
 }
 
+TEST(PointCache, TimesBeyondFloat32AreRefusedBeforeAnyFileIsWritten) {
+  const fs::path dir = tsah::test::scratchDir();
+  auto refusal = [&](const anim::Animation& a, const char* file) -> std::string {
+    try {
+      anim::savePointCache(a, (dir / file).string());
+    } catch (const tsah::DataError& e) {
+      EXPECT_FALSE(fs::exists(dir / file)) << file;
+      return e.what();
+    }
+    return "written";
+  };
+  const anim::Animation late({0, 1, 2}, 3, std::vector<float>(18, 0.0f), {0.0, 1e39}, "late");
+  EXPECT_EQ(refusal(late, "late.pc2"), "late: keyframe 1 at time 1e+39 does not fit the float32 times of the PC2 format");
+  EXPECT_EQ(refusal(late, "late.mdd"), "late: keyframe 1 at time 1e+39 does not fit the float32 times of the MDD format");
+  // Each time fits, the step between them does not.
+  const anim::Animation wide({0, 1, 2}, 3, std::vector<float>(18, 0.0f), {-3e38, 3e38}, "wide");
+  EXPECT_EQ(refusal(wide, "wide.pc2"), "wide: the step 6e+38 between keyframes does not fit the float32 sample rate "
+                                       "of the PC2 format");
+  EXPECT_EQ(anim::decodeMdd(anim::encodeMdd(wide), "w.mdd").times[1], double(3e38f));
+}
+
 TEST(PointCache, PairedWithAMeshThroughEveryInputForm) {
   const fs::path dir = tsah::test::scratchDir();
   const anim::Animation a = smallWave();

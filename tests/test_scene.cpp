@@ -3,9 +3,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdlib>
 
 #include "tsah/base/error.hpp"
 #include "anim/load.hpp"
+#include "anim/point_cache.hpp"
 #include "anim/scene.hpp"
 #include "anim/subdivide.hpp"
 #include "anim/tanim.hpp"
@@ -227,6 +229,10 @@ TEST(Scene, BadInputNamesTheSceneFileAndTheObject) {
       {"subdivide-animated", R"({"name": "bad", "file": "mover.tanim", "subdivide": 1})", "static mesh"},
       {"subdivide-memory", R"({"name": "bad", "file": "tri.obj", "subdivide": 14})", "would need"},
       {"subdivide-count", R"({"name": "bad", "file": "tri.obj", "subdivide": 16})", "2^32"},
+      {"offset-twice", R"({"name": "bad", "file": "mover.tanim", "offset": 1, "time": {"offset": 2}})",
+       R"(both "offset" and "time": {"offset"} are given; keep one)"},
+      {"offset-twice-instance", R"({"name": "bad", "file": "mover.tanim", "instances": [{"offset": 1, "time": {"offset": 2}}]})",
+       R"(both "offset" and "time": {"offset"} are given; keep one)"},
   };
   for (const BadCase& c : cases) {
     const fs::path scene = dir / (std::string(c.name) + ".json");
@@ -275,6 +281,56 @@ TEST(Scene, DataPathsResolveThroughTheOption) {
     return (dir / "tri.obj").string();
   };
   EXPECT_EQ(anim::load((dir / "s.json").string(), options).triangleCount(), 1u);
+}
+
+TEST(Scene, DataPathsStayInsideTheDataFolder) {
+  const fs::path dir = tsah::test::scratchDir();
+  triangleObj(dir);
+  fs::create_directories(dir / "data");
+  fs::create_symlink(dir, dir / "data" / "out");  // a link leading out of the data folder
+  const char* old = std::getenv("TSAH_DATA_DIR");
+  const std::string saved = old ? old : "";
+  ::setenv("TSAH_DATA_DIR", (dir / "data").c_str(), 1);
+  const struct {
+    std::string file, expect;
+  } cases[] = {
+      {"data:../tri.obj", R"("data:../tri.obj" must name a path inside the data folder (relative, without ".."))"},
+      {"data:/etc/passwd", R"("data:/etc/passwd" must name a path inside the data folder (relative, without ".."))"},
+      {"data:", R"("data:" must name a path inside the data folder (relative, without ".."))"},
+      {"data:out/tri.obj", ("\"data:out/tri.obj\" leads to " + fs::canonical(dir / "tri.obj").string() +
+                            ", outside the data folder (through a symbolic link)")},
+  };
+  for (const auto& c : cases) {
+    writeText(dir / "s.json", sceneWith("{\"name\": \"bad\", \"file\": \"" + c.file + "\"}"));
+    EXPECT_EQ(loadError(dir / "s.json"), (dir / "s.json").string() + ": object 'bad': " + c.expect);
+  }
+  if (old) ::setenv("TSAH_DATA_DIR", saved.c_str(), 1);
+  else ::unsetenv("TSAH_DATA_DIR");
+  // The resolver of the options never sees a path that climbs out.
+  anim::LoadOptions options;
+  options.resolveDataPath = [](const std::string& rel) -> std::string { ADD_FAILURE() << rel; return rel; };
+  writeText(dir / "s.json", sceneWith(R"({"name": "bad", "file": "data:a/../../tri.obj"})"));
+  EXPECT_THROW(anim::load((dir / "s.json").string(), options), tsah::FileError);
+}
+
+TEST(Scene, EmptyFileIsRefused) {
+  const fs::path dir = tsah::test::scratchDir();
+  writeText(dir / "s.json", sceneWith(R"({"name": "bad", "file": ""})"));
+  EXPECT_EQ(loadError(dir / "s.json"), (dir / "s.json").string() +
+                                           ": object 'bad': \"file\" is empty (name an input, relative to the "
+                                           "scene file's folder)");
+}
+
+TEST(Scene, MeshAndCacheResolveAgainstTheScenesFolder) {
+  const fs::path dir = tsah::test::scratchDir() / "elsewhere";
+  fs::create_directories(dir);
+  triangleObj(dir);
+  anim::Animation mover = anim::load(movingTanim(dir).string());
+  anim::savePointCache(mover, (dir / "tri.pc2").string());
+  writeText(dir / "s.json", sceneWith(R"({"file": "tri.obj+tri.pc2"})", "\"fps\": 2"));
+  const anim::Animation a = anim::load((dir / "s.json").string());
+  EXPECT_EQ(a.keyframeCount(), 3u);
+  EXPECT_FLOAT_EQ(a.positionsAt(1.0)[0], 2.0f);
 }
 
 }  // namespace

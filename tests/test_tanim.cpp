@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstring>
 
 #include "tsah/base/binary_io.hpp"
@@ -116,4 +117,30 @@ TEST(Tanim, NameWithControlCharactersIsRefusedAndNeverWritten) {
   } catch (const tsah::FileError& e) {
     EXPECT_STREQ(e.what(), "n.tanim: the animation name holds a control character (byte 10 at 3)");
   }
+}
+
+// Camera keys with NaN or infinite vectors, or times that do not increase, are refused naming the
+// file and the key (not left for the camera maths of `tsah trace` to trip over).
+TEST(Tanim, BadCameraKeysAreRefusedNamingTheFile) {
+  auto refusal = [](std::vector<anim::CameraKey> keys) -> std::string {
+    anim::Animation a = sample();
+    a.setCameraPath(std::move(keys));
+    try {
+      anim::decodeTanim(anim::encodeTanim(a), "cam.tanim");
+    } catch (const tsah::FileError& e) {
+      return e.what();
+    }
+    return "accepted";
+  };
+  anim::CameraKey first, second;
+  second.time = 1.0;
+  EXPECT_EQ(refusal({first, second}), "accepted");
+  anim::CameraKey nanEye = second;
+  nanEye.eye[1] = std::nanf("");
+  EXPECT_EQ(refusal({first, nanEye}), "cam.tanim: camera key 1 has a non-finite eye");
+  anim::CameraKey infUp = first;
+  infUp.up[2] = INFINITY;
+  EXPECT_EQ(refusal({infUp}), "cam.tanim: camera key 0 has a non-finite up vector");
+  EXPECT_EQ(refusal({second, first}), "cam.tanim: camera key 1 time 0.000000 is not after the previous key's (1.000000)");
+  EXPECT_EQ(refusal({first, first}), "cam.tanim: camera key 1 time 0.000000 is not after the previous key's (0.000000)");
 }

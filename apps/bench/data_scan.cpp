@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include "tsah/base/error.hpp"
+#include "anim/scene.hpp"
 #include "bench/process.hpp"
 
 namespace tsah::bench {
@@ -301,7 +302,9 @@ SceneSource explicitScene(const fs::path& input) {
 }
 
 std::string resolveDataPath(const fs::path& dataFolder, const fs::path& cache, const std::string& rel) {
+  anim::checkDataPath(rel);
   fs::path at = dataFolder;
+  fs::path root = dataFolder;  // what `at` must stay inside: the data folder, or the archive unpacked last
   const fs::path relative(rel);
   for (auto part = relative.begin(); part != relative.end(); ++part) {
     at /= *part;
@@ -310,9 +313,13 @@ std::string resolveDataPath(const fs::path& dataFolder, const fs::path& cache, c
     std::string name = at.filename().string();
     std::transform(name.begin(), name.end(), name.begin(), [](unsigned char c) { return char(std::tolower(c)); });
     const bool last = std::next(part) == relative.end();
-    if ((!last && isTarArchive(name)) || (last && endsWith(name, ".xz") && !isTarArchive(name)))
+    if ((!last && isTarArchive(name)) || (last && endsWith(name, ".xz") && !isTarArchive(name))) {
+      anim::requireInsideDataFolder(root, at, rel);
       at = unpackArchive(at, cache);
+      root = at;
+    }
   }
+  anim::requireInsideDataFolder(root, at, rel);
   return at.string();
 }
 

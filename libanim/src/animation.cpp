@@ -78,6 +78,19 @@ Animation Animation::withStaticVertices(std::vector<uint32_t> indices, std::vect
   return a;
 }
 
+double Animation::largestExtent() const {
+  // Over the rest positions and every keyframe of the moving vertices: at least the true extent.
+  double low[3] = {INFINITY, INFINITY, INFINITY}, high[3] = {-INFINITY, -INFINITY, -INFINITY};
+  for (const std::vector<float>* block : {&rest_, &motion_})
+    for (std::size_t i = 0; i < block->size(); ++i) {
+      low[i % 3] = std::min(low[i % 3], double((*block)[i]));
+      high[i % 3] = std::max(high[i % 3], double((*block)[i]));
+    }
+  double extent = 0.0;
+  for (int a = 0; a < 3; ++a) extent = std::max(extent, high[a] - low[a]);
+  return extent;
+}
+
 void Animation::validate() {
   const std::string who = name_.empty() ? std::string("animation") : name_;
   if (indices_.size() % 3 != 0)
@@ -105,6 +118,12 @@ void Animation::validate() {
     const std::size_t m = (bad % perFrame) / 3;
     throw tsah::FileError(who, "keyframe " + std::to_string(bad / perFrame) + " vertex " +
                                std::to_string(allMoving() ? m : moving_[m]) + " " + describeBadCoordinate(motion_[bad]));
+  }
+  if (const double extent = largestExtent(); extent > 0.0 && extent < double(kMinExtent)) {
+    char text[160];
+    std::snprintf(text, sizeof text, "the model spans only %g (the largest side of its bounding box), below the "
+                  "supported %g (surface areas would underflow to zero); scale it up", extent, double(kMinExtent));
+    throw tsah::FileError(who, text);
   }
   degenerate_ = 0;
   const float* p0 = allMoving() ? motion_.data() : rest_.data();  // keyframe 0 of every vertex

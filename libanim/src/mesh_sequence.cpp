@@ -398,8 +398,12 @@ Animation importSequence(const FrameList& frames, const LoadOptions& options, st
     throw tsah::FileError(frames.files[bad / perFrame],
                       "vertex " + std::to_string((bad % perFrame) / 3) + " " + describeBadCoordinate(positions[bad]));
   if (first.indices.empty()) throw tsah::FileError(frames.files[0], "has no faces");
-  return Animation(first.indices, uint32_t(perFrame / 3), std::move(positions), std::move(times),
-                   std::move(name));
+  // The constructor's whole-model checks (a model too small for float32 areas) name the file when
+  // there is one; the animation keeps its name.
+  Animation a(first.indices, uint32_t(perFrame / 3), std::move(positions), std::move(times),
+              n == 1 ? frames.files[0] : name);
+  a.setName(std::move(name));
+  return a;
 }
 
 }  // namespace anim

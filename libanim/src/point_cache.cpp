@@ -7,8 +7,10 @@
 #include <bit>
 #include <cctype>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 
 #include "tsah/base/binary_io.hpp"
 #include "tsah/base/files.hpp"
@@ -78,11 +80,25 @@ void checkTimes(const std::vector<double>& times, const std::string& file) {
 
 std::span<const uint8_t> asBytes(const std::vector<uint8_t>& v) { return v; }
 
+bool fitsFloat32(double v) { return std::fabs(v) <= double(std::numeric_limits<float>::max()); }
+
+std::string formatNumber(double v) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%g", v);
+  return text;
+}
+
 void checkEncodable(const Animation& a, const char* format) {
   if (a.keyframeCount() == 0 || a.vertexCount() == 0)
     throw tsah::DataError(a.name() + ": nothing to write as " + format + " (no keyframes or no vertices)");
   if (a.keyframeCount() > uint32_t(INT32_MAX) || a.vertexCount() > uint32_t(INT32_MAX))
     throw tsah::DataError(a.name() + ": too many keyframes or vertices for " + format);
+  // Both formats store times as float32: a time beyond its range would be written as infinity,
+  // which every reader refuses. (Coordinates are float32 already and bounded by kMaxCoordinate.)
+  for (std::size_t k = 0; k < a.times().size(); ++k)
+    if (!fitsFloat32(a.times()[k]))
+      throw tsah::DataError(a.name() + ": keyframe " + std::to_string(k) + " at time " + formatNumber(a.times()[k]) +
+                            " does not fit the float32 times of the " + format + " format");
 }
 
 void writeBigEndian(tsah::ByteWriter& out, uint32_t bits) { out.write(swapBytes(bits)); }
@@ -151,7 +167,11 @@ std::vector<uint8_t> encodePc2(const Animation& a) {
   const auto times = a.times();
   const std::size_t n = times.size();
   const float start = float(times[0]);
-  const float rate = n > 1 ? float((times[n - 1] - times[0]) / double(n - 1)) : 1.0f;
+  const double step = n > 1 ? (times[n - 1] - times[0]) / double(n - 1) : 1.0;
+  if (!fitsFloat32(step))
+    throw tsah::DataError(a.name() + ": the step " + formatNumber(step) +
+                          " between keyframes does not fit the float32 sample rate of the PC2 format");
+  const float rate = float(step);
   for (std::size_t i = 0; i < n; ++i) {
     const double expected = double(start) + double(i) * double(rate);
     if (std::fabs(times[i] - expected) > kUniformTolerance * std::max(double(rate), std::fabs(expected)))

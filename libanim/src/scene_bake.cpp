@@ -38,7 +38,7 @@ std::string canonical(const std::string& path) {
 std::string mib(uint64_t bytes) { return std::to_string((bytes + (1u << 19)) >> 20) + " MiB"; }
 
 [[noreturn]] void failObject(const SceneDescription& scene, const SceneObject& object, const std::string& what) {
-  throw tsah::FileError(scene.file, "object '" + object.name + "': " + what);
+  throw tsah::FileError(scene.file, "object '" + tsah::printable(object.name) + "': " + what);
 }
 
 // Vertices of one instance that move: all of them when its path is keyed, none when its source

@@ -7,6 +7,7 @@
 
 #include "tsah/base/files.hpp"
 #include "tsah/base/error.hpp"
+#include "anim/point_cache.hpp"
 #include "anim/scene.hpp"
 
 namespace anim {
@@ -75,6 +76,26 @@ double TimeMapping::localTime(double sceneTime, double start, double end) const 
   return start + wrapped;
 }
 
+void checkDataPath(const std::string& rel) {
+  const std::filesystem::path p(rel);
+  const bool climbs = std::any_of(p.begin(), p.end(), [](const std::filesystem::path& part) { return part == ".."; });
+  if (rel.empty() || p.is_absolute() || climbs)
+    throw tsah::DataError("\"data:" + rel + "\" must name a path inside the data folder (relative, without \"..\")");
+}
+
+void requireInsideDataFolder(const std::filesystem::path& folder, const std::filesystem::path& path,
+                             const std::string& rel) {
+  std::error_code ec;
+  const auto root = std::filesystem::weakly_canonical(folder, ec);
+  const auto target = std::filesystem::weakly_canonical(path, ec);
+  if (ec) throw tsah::DataError("\"data:" + rel + "\" cannot be resolved (" + ec.message() + ")");
+  // Inside: the folder's parts are a prefix of the target's.
+  const auto [rootEnd, targetAt] = std::mismatch(root.begin(), root.end(), target.begin(), target.end());
+  if (rootEnd != root.end() && !(std::next(rootEnd) == root.end() && rootEnd->empty()))
+    throw tsah::DataError("\"data:" + rel + "\" leads to " + target.string() +
+                          ", outside the data folder (through a symbolic link)");
+}
+
 namespace {
 
 using nlohmann::json;
@@ -86,7 +107,7 @@ struct Context {
   std::string file;
   std::string object;  // empty at scene level
   [[noreturn]] void fail(const std::string& what) const {
-    throw tsah::FileError(file, object.empty() ? what : "object '" + object + "': " + what);
+    throw tsah::FileError(file, object.empty() ? what : "object '" + tsah::printable(object) + "': " + what);
   }
 };
 
@@ -192,21 +213,46 @@ SceneInstance instanceOf(const json& j, SceneInstance base, const Context& at) {
   if (j.contains("transform")) base.placement = placementOf(j["transform"], at);
   if (j.contains("path")) base.path = pathOf(j["path"], at);
   if (j.contains("time")) base.time = timeOf(j["time"], base.time, at);
-  if (j.contains("offset")) base.time.offset = number(j["offset"], "offset", at);
+  if (j.contains("offset")) {
+    // "offset" is short for "time": {"offset": ...}; both at once would silently drop one of them.
+    if (j.contains("time") && j["time"].is_object() && j["time"].contains("offset"))
+      at.fail("both \"offset\" and \"time\": {\"offset\"} are given; keep one");
+    base.time.offset = number(j["offset"], "offset", at);
+  }
   return base;
 }
 
-std::string resolveFile(const std::string& file, const std::filesystem::path& sceneFolder, const LoadOptions& options,
-                        const Context& at) {
-  if (file.rfind("data:", 0) == 0) {
-    const std::string rel = file.substr(5);
+// One input of an object: "data:REL" inside the data folder, else relative to the scene's folder.
+std::string resolveOne(const std::string& file, const std::filesystem::path& sceneFolder, const LoadOptions& options,
+                       const Context& at) {
+  if (file.rfind("data:", 0) != 0) {
+    const std::filesystem::path p(file);
+    return p.is_absolute() ? file : (sceneFolder / p).lexically_normal().string();
+  }
+  const std::string rel = file.substr(5);
+  try {
+    checkDataPath(rel);
     if (options.resolveDataPath) return options.resolveDataPath(rel);
     const char* env = std::getenv("TSAH_DATA_DIR");
     if (!env || !*env) at.fail("\"" + file + "\" needs the data folder (set TSAH_DATA_DIR)");
-    return (std::filesystem::path(env) / rel).string();
+    const std::filesystem::path resolved = std::filesystem::path(env) / rel;
+    requireInsideDataFolder(env, resolved, rel);
+    return resolved.string();
+  } catch (const tsah::FileError&) {
+    throw;
+  } catch (const tsah::DataError& e) {
+    at.fail(e.what());
   }
-  const std::filesystem::path p(file);
-  return p.is_absolute() ? file : (sceneFolder / p).lexically_normal().string();
+}
+
+// The object's "file": MESH+CACHE resolves each half on its own, so that the cache, like the mesh,
+// is found beside the scene file.
+std::string resolveFile(const std::string& file, const std::filesystem::path& sceneFolder, const LoadOptions& options,
+                        const Context& at) {
+  if (file.empty()) at.fail("\"file\" is empty (name an input, relative to the scene file's folder)");
+  if (const auto pair = splitPointCacheInput(file))
+    return resolveOne(pair->mesh, sceneFolder, options, at) + "+" + resolveOne(pair->cache, sceneFolder, options, at);
+  return resolveOne(file, sceneFolder, options, at);
 }
 
 SceneObject objectOf(const json& j, std::size_t index, const std::filesystem::path& folder, const LoadOptions& options,

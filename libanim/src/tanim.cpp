@@ -61,6 +61,26 @@ uint64_t payloadSize(const Header& h) {
   return size;
 }
 
+bool finite3(const std::array<float, 3>& v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
+
+// Every value finite and the times increasing: what the camera of `tsah trace` needs, refused here
+// so that the message names this file and the key.
+void checkCameraKeys(const std::vector<CameraKey>& keys, const std::string& file) {
+  for (std::size_t i = 0; i < keys.size(); ++i) {
+    const CameraKey& k = keys[i];
+    const char* bad = !std::isfinite(k.time)        ? "time"
+                      : !finite3(k.eye)              ? "eye"
+                      : !finite3(k.lookAt)           ? "look-at point"
+                      : !finite3(k.up)               ? "up vector"
+                      : !std::isfinite(k.fovyDegrees) ? "field of view"
+                                                     : nullptr;
+    if (bad) throw tsah::FileError(file, "camera key " + std::to_string(i) + " has a non-finite " + bad);
+    if (i > 0 && !(k.time > keys[i - 1].time))
+      throw tsah::FileError(file, "camera key " + std::to_string(i) + " time " + std::to_string(k.time) +
+                                  " is not after the previous key's (" + std::to_string(keys[i - 1].time) + ")");
+  }
+}
+
 bool isControl(char c) { return static_cast<unsigned char>(c) < 0x20 || c == 0x7f; }
 
 }  // namespace
@@ -164,9 +184,8 @@ Animation decodeTanim(std::span<const uint8_t> bytes, const std::string& file) {
     std::memcpy(k.lookAt.data(), r.lookAt, sizeof r.lookAt);
     std::memcpy(k.up.data(), r.up, sizeof r.up);
     k.fovyDegrees = r.fovyDegrees;
-    if (!std::isfinite(k.time) || !std::isfinite(k.fovyDegrees))
-      throw tsah::FileError(file, "camera key has a non-finite value");
   }
+  checkCameraKeys(camera, file);
   // The consistency checks (index range, times, NaN) name the file, never the stored name: that is
   // free text, and a name holding a line break would break the one-line error.
   Animation a = hasStaticPart(h) ? Animation::withStaticVertices(std::move(indices), std::move(rest), std::move(moving),

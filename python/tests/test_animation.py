@@ -107,3 +107,12 @@ def test_wrong_types_and_shapes_raise_clear_errors():
     # Non-contiguous input is accepted (copied).
     a = tsah.Animation(tri, np.asfortranarray(pos))
     np.testing.assert_array_equal(a.positions, pos)
+
+
+def test_scene_subdividing_a_flipped_face_raises_data_error(tmp_path):
+    # A tetrahedron whose last face is wound inwards: refused before the subdivider sees it.
+    (tmp_path / "flipped.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 4 3\n")
+    scene = tmp_path / "s.json"
+    scene.write_text('{"objects": [{"name": "rock", "file": "flipped.obj", "subdivide": 3}]}')
+    with pytest.raises(tsah.DataError, match=r"object 'rock': .*not consistently oriented"):
+        tsah.load(str(scene))

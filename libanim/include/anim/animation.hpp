@@ -56,6 +56,10 @@ struct CameraKey {
 // area in float (3 * (2e18)^2 << 3.4e38), with room for the sums of costs. Larger coordinates (or
 // NaN/Inf) are refused at import, naming the first offending vertex.
 inline constexpr float kMaxCoordinate = 1e18f;
+// Smallest extent (the largest side of the bounding box over every keyframe) accepted for a model
+// that is not a single point: the surface area of a box of this size is still a normal float
+// (1e-36 > 1.2e-38); below it the costs of a tree underflow to zero and the tree is degenerate.
+inline constexpr float kMinExtent = 1e-18f;
 // Index of the first coordinate that is NaN, infinite or beyond kMaxCoordinate; size() if none.
 std::size_t firstBadCoordinate(std::span<const float> positions);
 // "has a NaN or infinite coordinate" / "has coordinate 3e+38, beyond ..." for that coordinate.
@@ -143,6 +147,7 @@ class Animation {
 
  private:
   void validate();
+  double largestExtent() const;  // the largest side of the box over rest positions and keyframes
   void compactStaticVertices();
   // The moving vertices at time t: contiguous (movingCount*3) when scatter is null, else vertex
   // scatter[m] of a vertexCount*3 buffer. The one copy of the interpolation arithmetic.

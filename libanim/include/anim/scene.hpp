@@ -4,6 +4,7 @@
 // The file format (JSON) is documented in docs/scenes.md.
 #include <array>
 #include <cstdint>
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -73,6 +74,14 @@ struct SceneDescription {
 // True when `path` is a JSON file holding an object with an "objects" member (a scene, not a
 // frame manifest).
 bool isSceneFile(const std::string& path);
+
+// Scenes' "data:REL" paths (docs/scenes.md) name files inside the data folder and nothing else.
+// checkDataPath throws tsah::DataError when REL is empty or absolute or has a ".." part;
+// requireInsideDataFolder throws tsah::DataError when `path`, its symbolic links resolved, is not
+// inside `folder` (the data folder, or an archive of it unpacked into the cache), links resolved too.
+void checkDataPath(const std::string& rel);
+void requireInsideDataFolder(const std::filesystem::path& folder, const std::filesystem::path& path,
+                             const std::string& rel);
 
 // Reads and checks a scene file (transforms finite and invertible, speeds >= 0, keys increasing,
 // files resolved). Throws tsah::FileError naming the scene file and the object.

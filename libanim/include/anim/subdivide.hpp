@@ -21,10 +21,17 @@ MeshCounts loopSubdividedCounts(MeshCounts counts, uint32_t levels);
 // from the sizes of OpenMesh's connectivity and the subdivider's properties).
 uint64_t loopSubdivisionBytes(const MeshCounts& counts);
 
-// `levels` Loop levels of a one-keyframe animation. Triangles OpenMesh cannot link in (at a
-// non-manifold edge or vertex) get their own copies of their vertices and subdivide on their own,
-// so each level gives exactly 4x the triangles. Throws tsah::DataError when the mesh has several
-// keyframes or a triangle repeats a vertex, tsah::Failure when OpenMesh fails to subdivide.
+// Throws tsah::DataError naming the mesh and the first offending triangle unless the mesh is what a
+// half-edge mesh can hold: no triangle repeats a vertex, every edge has at most two triangles, and
+// the triangles are consistently oriented (each directed edge is walked by at most one triangle).
+void checkSubdivisionTopology(const Animation& mesh);
+
+// `levels` Loop levels of a one-keyframe animation. The mesh must pass checkSubdivisionTopology; a
+// triangle OpenMesh still cannot link in (at a non-manifold vertex) gets its own copies of its
+// vertices and subdivides on its own, so each level gives exactly 4x the triangles; vertices no
+// triangle uses are left out. Throws
+// tsah::DataError when the mesh has several keyframes or fails the check, tsah::Failure when
+// OpenMesh fails to subdivide.
 Animation subdivideLoop(const Animation& mesh, uint32_t levels);
 
 }  // namespace anim

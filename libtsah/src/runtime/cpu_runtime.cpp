@@ -37,9 +37,11 @@ bool layoutSupported(Layout layout) {
   return layout == Layout::Bvh2 || kernelsFor(layout, std::nullopt) != nullptr;
 }
 
-Layout fastestLayout() {
+Layout fastestLayout(std::optional<SimdIsa> isa) {
+  // An instruction set the processor lacks is left for the runtime to refuse by name.
+  if (isa && !isaSupported(*isa)) isa.reset();
   for (Layout l : {Layout::Bvh8, Layout::Bvh4})
-    if (layoutSupported(l)) return l;
+    if (kernelsFor(l, isa)) return l;
   return Layout::Bvh2;
 }
 

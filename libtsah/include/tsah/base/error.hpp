@@ -18,10 +18,30 @@
 //                tsah.Failure, also a RuntimeError.)
 // Error itself is the common base (catch it to handle all three); nothing throws a bare Error.
 // Internal invariants are not exceptions: they are TSAH_ASSERT (tsah/base/assert.hpp).
+#include <cstdio>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 
 namespace tsah {
+
+// `text` with every control character written as \xHH: a name taken from a file or the command line
+// (a file name, an object name) cannot break a one-line message or send escapes to a terminal.
+inline std::string printable(std::string_view text) {
+  std::string out;
+  out.reserve(text.size());
+  for (const char c : text) {
+    const auto byte = static_cast<unsigned char>(c);
+    if (byte >= 0x20 && byte != 0x7f) {
+      out += c;
+      continue;
+    }
+    char escaped[5];
+    std::snprintf(escaped, sizeof escaped, "\\x%02x", byte);
+    out += escaped;
+  }
+  return out;
+}
 
 class Error : public std::runtime_error {
  public:
@@ -41,7 +61,7 @@ class DataError : public Error {
 // Bad data read from a file: the message is "FILE: what is wrong".
 class FileError : public DataError {
  public:
-  FileError(const std::string& file, const std::string& what) : DataError(file + ": " + what), file_(file) {}
+  FileError(const std::string& file, const std::string& what) : DataError(printable(file) + ": " + what), file_(file) {}
   const std::string& file() const noexcept { return file_; }
 
  private:

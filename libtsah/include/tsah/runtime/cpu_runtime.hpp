@@ -29,8 +29,9 @@
 namespace tsah {
 
 // The CPU runtime traces Layout::Bvh2, Bvh4 and Bvh8 (core/kinds.hpp).
-// The layout with the most children the processor's best kernels support (bvh8 with AVX2).
-Layout fastestLayout();
+// The layout with the most children the processor's best kernels support (bvh8 with AVX2), or,
+// given an instruction set the processor runs, that set's kernels support (bvh4 with SSE).
+Layout fastestLayout(std::optional<SimdIsa> isa = std::nullopt);
 // False when no kernels of this build that the processor runs have this width.
 bool layoutSupported(Layout layout);
 
