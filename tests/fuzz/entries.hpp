@@ -34,6 +34,9 @@ void treeset(std::span<const uint8_t> data);   // .tbvh read as a tree set, vers
 void aff(std::span<const uint8_t> data);       // BART .aff with includes
 void scene(std::span<const uint8_t> data);     // a .json through anim::load: scene, point-cache or frame manifest
 
+// entries_writers.cpp: an animation made from the bytes through a writer and its own reader.
+void writers(std::span<const uint8_t> data);   // .tanim, PC2, MDD or a tree set (byte 0), see the file
+
 // Throws std::logic_error when an tsah::Error message is not one line (the CLI prints one line).
 void requireOneLine(const char* what);
 
