@@ -35,7 +35,7 @@ std::size_t resampleBytes(const anim::Animation& in, uint32_t frames, const std:
   const Wide animation = anim::Animation::memoryBytesFor(in.triangleCount(), in.vertexCount(), in.movingVertexCount(), keyframes);
   Wide file = 2 * animation;
   if (anim::pointCacheFormat(output))
-    file = 2 * Wide(keyframes) * in.vertexCount() * 12 + (mesh ? Wide(in.vertexCount() + in.triangleCount()) * 64 : 0);
+    file = 2 * Wide(keyframes) * in.vertexCount() * 12 + (mesh ? (Wide(in.vertexCount()) + in.triangleCount()) * 64 : 0);
   const Wide total = animation + file;
   return total > SIZE_MAX ? SIZE_MAX : std::size_t(total);
 }

@@ -191,7 +191,6 @@ struct Scanner {
   }
 };
 
-
 // What unpacking `archive` will write: for xz, the uncompressed size its index declares (for a
 // .tar.xz the tar stream, which bounds the files in it); a plain .tar is its own size.
 uint64_t expandedSize(const fs::path& archive, bool xz, uint64_t size) {
