@@ -83,8 +83,10 @@ void exportBoxes(const BoxExportOptions& o, const tsah::FlatBvh& flat, const tsa
   } else {
     const fs::path mtl = fs::path(out).replace_extension(".mtl");
     const std::string mtlText = tsah::encodeBoxViewMtl(), objText = tsah::encodeBoxViewObj(mesh, mtl.filename().string());
-    tsah::writeFileAtomically(mtl.string(), {reinterpret_cast<const uint8_t*>(mtlText.data()), mtlText.size()});
-    tsah::writeFileAtomically(out, {reinterpret_cast<const uint8_t*>(objText.data()), objText.size()});
+    tsah::AtomicFileSet files;  // the OBJ names the MTL: both appear or neither
+    files.write(mtl.string(), mtlText);
+    files.write(out, objText);
+    files.commit();
   }
   std::printf("wrote %s: %u boxes (depth %u..%u), coloured by %s, frame cost %.2f (time %g)\n", out.c_str(),
               mesh.boxCount, mesh.minDepth, mesh.maxDepth, o.colour.c_str(), frame.cost.total(), time);

@@ -94,13 +94,16 @@ std::string commandLine() {
   return out.empty() ? "tsah bench" : out;
 }
 
-void writeText(const fs::path& path, const std::string& text) {
-  tsah::writeFileAtomically(path.string(), std::span(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
+// A report's JSON and the markdown made from it are one output set: both appear, or neither.
+void writeReportPair(const fs::path& jsonPath, const std::string& jsonText, const fs::path& md, const std::string& mdText) {
+  tsah::AtomicFileSet files;
+  files.write(jsonPath.string(), jsonText);
+  files.write(md.string(), mdText);
+  files.commit();
 }
 
 void writeReport(const fs::path& out, const json& results) {
-  writeText(out / "results.json", results.dump(1) + "\n");
-  writeText(out / "results.md", tsah::bench::renderMarkdown(results));
+  writeReportPair(out / "results.json", results.dump(1) + "\n", out / "results.md", tsah::bench::renderMarkdown(results));
 }
 
 void makePlotsInto(json& results, const fs::path& out, ProgressLog& log) {
@@ -152,8 +155,8 @@ void runScalingMode(Options& opt, CLI::App* sub, const std::vector<tsah::bench::
   results["machine"] = tsah::bench::machineJson(false);
   log("plots", false);
   tsah::bench::makeScalingPlots(results, out);
-  writeText(out / "scaling.json", results.dump(1) + "\n");
-  writeText(out / "scaling.md", tsah::bench::renderScalingMarkdown(results));
+  writeReportPair(out / "scaling.json", results.dump(1) + "\n", out / "scaling.md",
+                  tsah::bench::renderScalingMarkdown(results));
   std::printf("%s\n%s\n", (out / "scaling.md").c_str(), (out / "scaling.json").c_str());
 }
 

@@ -238,9 +238,9 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
     fs::create_directories(opt->out, ec);
     if (ec) throw tsah::Failure(opt->out + ": cannot create the folder: " + ec.message());
     const fs::path out(opt->out);
-    auto write = [&](const char* name, std::span<const uint8_t> data) {
-      tsah::writeFileAtomically((out / name).string(), data);
-    };
+    // The buffers and the header describe one tree: all appear or none (tsah::AtomicFileSet).
+    tsah::AtomicFileSet files;
+    auto write = [&](const char* name, std::span<const uint8_t> data) { files.write((out / name).string(), data); };
     std::string header;
     std::size_t nodes = 0, woop = 0;
     if (const auto* w = rt.wide8()) {
@@ -264,7 +264,8 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
     }
     write("indices.bin", bytesOf(rt.indices()));
     write("vertices.bin", bytesOf(rt.positions()));
-    write("tsah_scene.h", {reinterpret_cast<const uint8_t*>(header.data()), header.size()});
+    files.write((out / "tsah_scene.h").string(), header);
+    files.commit();
     std::printf("wrote %s: %zu nodes, %zu Woop %s, %u vertices (time %g, %s layout) + tsah_scene.h\n", opt->out.c_str(),
                 nodes, woop, opt->layout == tsah::Layout::Bvh2 ? "triangles" : "packets", rt.vertexCount(), time,
                 tsah::name(opt->layout));

@@ -15,6 +15,7 @@
 
 #include "tsah/base/files.hpp"
 #include "tsah/base/error.hpp"
+#include "tsah/base/memory.hpp"
 #include "bvh_info.hpp"
 #include "camera_file.hpp"
 #include "tsah/io/tree_set.hpp"
@@ -166,6 +167,11 @@ void runTrace(const TraceOptions& opt) {
   settings.aoSamples = opt.ao;
   settings.shadowSamples = opt.shadow;
   settings.seed = opt.seed;
+  // The frame's buffers on either device (the CPU renderer's, or the host side of the GPU's) and its
+  // PNG (the raw rows and at most as much compressed), stated before the first frame is rendered.
+  const std::size_t pngBytes = opt.noImages ? 0 : std::size_t(opt.width) * opt.height * 3 * 2;
+  tsah::checkFitsInMemory(tsah::renderFrameBytes(settings, a.vertexCount()) + pngBytes, opt.input,
+                          "tracing " + std::to_string(opt.width) + "x" + std::to_string(opt.height) + " frames");
   rt->warmUp(times.front(), cameraAt, lighting, settings);
 
   const bool rebuilds = opt.rebuild != "none";

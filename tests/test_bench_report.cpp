@@ -197,4 +197,27 @@ TEST(BenchReport, PlotsWithGnuplotOrASkipThatSaysWhy) {
   EXPECT_EQ(quoted.files.size(), 5u) << quoted.status;
 }
 
+// `--segments 1` with the default budget records one tree and the budget mode, no K trees: the
+// report and the plots must still be made (they read segments.k_trees only where it exists).
+TEST(BenchReport, SegmentsWithoutKTreesStillReportAndPlot) {
+  json r = results("robot", 71708, false);
+  json& segments = r["scenes"][0]["segments"];
+  segments.erase("k_trees");
+  segments.erase("build_s");
+  segments["count"] = 1;
+  segments["budget_mode"] = {{"trees", 1},       {"split_times", json::array()}, {"methods", json::array()},
+                             {"build_s", 0.7},   {"search_s", 0.1},              {"candidate_trees", 1},
+                             {"average", 56.52}, {"maximum", 56.77},             {"per_frame", {56.0, 56.5, 57.0}},
+                             {"budget", 1.05},   {"met", true}};
+  std::string md;
+  EXPECT_NO_THROW(md = tsah::bench::renderMarkdown(r));
+  EXPECT_FALSE(contains(md, "one tree vs K trees")) << "no K-tree row without K trees";
+
+  if (!tsah::bench::programInPath("gnuplot")) GTEST_SKIP() << "gnuplot is not installed";
+  const auto dir = tsah::test::scratchDir() / "segments-one";
+  tsah::bench::PlotOutcome plots;
+  EXPECT_NO_THROW(plots = tsah::bench::makePlots(r, dir));
+  EXPECT_EQ(plots.files.size(), 5u) << plots.status;
+}
+
 }  // namespace

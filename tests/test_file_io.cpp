@@ -2,6 +2,8 @@
 // and removal of temporaries when the process is interrupted.
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <fcntl.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -93,4 +95,66 @@ TEST(FileIo, InterruptRemovesStagedFiles) {
   ASSERT_EQ(::waitpid(child, &status, 0), child);
   EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGTERM) << "status " << status;
   EXPECT_EQ(entries(dir), 0u) << "the staging folder was removed";
+}
+
+namespace {
+std::string contents(const fs::path& file) {
+  const std::vector<uint8_t> bytes = tsah::readFile(file.string());
+  return {bytes.begin(), bytes.end()};
+}
+}  // namespace
+
+TEST(FileIo, FailedCommitLeavesThePreviousSet) {
+  const fs::path dir = freshDir("fileio-rollback");
+  tsah::writeFileAtomically((dir / "x.pc2").string(), text("old cache"));
+  tsah::writeFileAtomically((dir / "x.obj").string(), text("old mesh"));
+  {
+    tsah::AtomicFileSet set;
+    set.write((dir / "x.pc2").string(), text("new cache"));
+    set.write((dir / "y.obj").string(), text("new mesh"));
+    fs::create_directory(dir / "y.obj");  // appears after staging: the second rename fails
+    EXPECT_THROW(set.commit(), tsah::Failure);
+  }
+  EXPECT_EQ(contents(dir / "x.pc2"), "old cache") << "the replaced file is put back";
+  EXPECT_TRUE(fs::is_directory(dir / "y.obj"));
+  EXPECT_EQ(entries(dir), 3u) << "nothing else is left (no staging folder)";
+}
+
+TEST(FileIo, CommitWaitsForTheFolderLock) {
+  const fs::path dir = freshDir("fileio-lock");
+  // Another writer holds the folder: a commit must wait for it instead of mixing its files in.
+  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY);
+  ASSERT_GE(fd, 0);
+  ASSERT_EQ(::flock(fd, LOCK_EX), 0);
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    ::close(fd);
+    tsah::AtomicFileSet set;
+    set.write((dir / "x.pc2").string(), text("cache"));
+    set.write((dir / "x.obj").string(), text("mesh"));
+    set.commit();
+    ::_exit(0);
+  }
+  ::usleep(300000);
+  EXPECT_FALSE(fs::exists(dir / "x.pc2")) << "committed while another writer held the folder";
+  ::flock(fd, LOCK_UN);
+  ::close(fd);
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << status;
+  EXPECT_TRUE(fs::exists(dir / "x.pc2"));
+  EXPECT_TRUE(fs::exists(dir / "x.obj"));
+}
+
+TEST(FileIo, StagedPathIsCommittedWithTheSet) {
+  const fs::path dir = freshDir("fileio-stage");
+  tsah::AtomicFileSet set;
+  set.write((dir / "plot.gp").string(), text("plot"));
+  const std::string png = set.stage((dir / "plot.png").string());
+  tsah::writeFileAtomically(png, text("png"));  // what an external program would write
+  EXPECT_FALSE(fs::exists(dir / "plot.png"));
+  set.commit();
+  EXPECT_EQ(contents(dir / "plot.png"), "png");
+  EXPECT_EQ(entries(dir), 2u);
 }

@@ -8,10 +8,12 @@
 #include <map>
 #include <set>
 #include <sstream>
+#include <sys/statvfs.h>
 #include <unistd.h>
 
 #include "tsah/base/error.hpp"
 #include "anim/scene.hpp"
+#include "tsah/base/memory.hpp"
 #include "bench/process.hpp"
 
 namespace tsah::bench {
@@ -190,6 +192,39 @@ struct Scanner {
   }
 };
 
+// What unpacking `archive` will write: for xz, the uncompressed size its index declares (for a
+// .tar.xz the tar stream, which bounds the files in it); a plain .tar is its own size.
+uint64_t expandedSize(const fs::path& archive, bool xz, uint64_t size) {
+  if (!xz) return size;
+  const ProcessResult r = runProcess({"xz", "--robot", "--list", "--", fs::absolute(archive).string()});
+  std::istringstream lines(r.output);
+  std::string line;
+  while (r.ok() && std::getline(lines, line)) {
+    // totals <streams> <blocks> <compressed> <uncompressed> ...
+    std::istringstream fields(line);
+    std::string kind;
+    uint64_t streams = 0, blocks = 0, compressed = 0, uncompressed = 0;
+    if (fields >> kind >> streams >> blocks >> compressed >> uncompressed && kind == "totals") return uncompressed;
+  }
+  throw tsah::FileError(archive.string(), "cannot read the size it expands to (xz --list" +
+                                              (r.output.empty() ? std::string(")") : ": " + r.output.substr(0, r.output.find('\n')) + ")"));
+}
+
+// Refuses an archive whose expanded size does not fit, before any of it is written: the disk of
+// the cache (the same headroom as memory: at most kMemoryBudgetFraction of the free space) and the
+// memory budget (the scenes it holds are read into memory).
+void checkUnpackFits(const fs::path& archive, uint64_t expanded, const fs::path& cache) {
+  struct statvfs disk {};
+  if (::statvfs(cache.c_str(), &disk) == 0) {
+    const uint64_t free = uint64_t(disk.f_bavail) * disk.f_frsize;
+    if (double(expanded) > double(free) * kMemoryBudgetFraction)
+      throw tsah::Failure(archive.string() + ": expands to " + std::to_string(expanded >> 20) + " MiB, more than " +
+                          std::to_string(int(kMemoryBudgetFraction * 100)) + "% of the " + std::to_string(free >> 20) +
+                          " MiB free in " + cache.string());
+  }
+  tsah::checkFitsInMemory(std::size_t(expanded), archive.string(), "unpacking");
+}
+
 }  // namespace
 
 bool isFrameSequenceFolder(const fs::path& folder) {
@@ -241,9 +276,10 @@ fs::path unpackArchive(const fs::path& archive, const fs::path& cache, const std
   const fs::path result = tar ? target : target / base;
   if (fs::exists(target / ".complete", ec)) return result;
 
-  if (onUnpack) onUnpack();
   fs::create_directories(cache, ec);
   if (ec) throw tsah::Failure(cache.string() + ": cannot create the cache folder (" + ec.message() + ")");
+  checkUnpackFits(archive, expandedSize(archive, !endsWith(name, ".tar"), uint64_t(size)), cache);
+  if (onUnpack) onUnpack();
   const fs::path staging = cache / (".staging-" + base + "-" + std::to_string(::getpid()));
   fs::remove_all(staging, ec);
   fs::create_directories(staging, ec);

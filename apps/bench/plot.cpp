@@ -31,19 +31,20 @@ bool Plotter::plot(const std::string& name, const std::string& title, const std:
       data << series[s].x[i] << " " << series[s].y[i] << "\n";
     data << "\n\n";
   }
-  const fs::path dat = dir_ / (name + ".dat"), gp = dir_ / (name + ".gp"), png = dir_ / (name + ".png");
-  const fs::path tmp = dir_ / (name + ".png.tmp");
+  // The PNG, its data and its script are one output set: all three appear or none. The script
+  // names its files relative to its own folder, so it can be rerun there by hand to restyle a figure.
+  const std::string dat = name + ".dat", gp = name + ".gp", png = name + ".png";
   std::ostringstream script;
-  script << "set terminal " << terminal_ << "\nset output " << quoted(tmp.string()) << "\nset title "
-         << quoted(title) << "\nset xlabel " << quoted(xlabel) << "\nset ylabel " << quoted(ylabel)
+  script << "set terminal " << terminal_ << "\nset output " << quoted(png) << "\nset title " << quoted(title)
+         << "\nset xlabel " << quoted(xlabel) << "\nset ylabel " << quoted(ylabel)
          << "\nset grid\nset key outside right top\n"
          << (logY ? "set logscale y\n" : "") << (logX ? "set logscale x\n" : "") << "plot ";
   bool first = true;
   for (std::size_t s = 0; s < series.size(); ++s) {
     if (series[s].x.empty()) continue;
-    script << (first ? "" : ", \\\n     ") << quoted(dat.string()) << " index " << s
-           << " using 1:2 with " << (series[s].pointsOnly ? "points pt 7 ps 1.2" : "linespoints pt 7 ps 0.5 lw 2")
-           << " title " << quoted(series[s].title);
+    script << (first ? "" : ", \\\n     ") << quoted(dat) << " index " << s << " using 1:2 with "
+           << (series[s].pointsOnly ? "points pt 7 ps 1.2" : "linespoints pt 7 ps 0.5 lw 2") << " title "
+           << quoted(series[s].title);
     first = false;
   }
   script << "\nunset output\n";
@@ -51,21 +52,18 @@ bool Plotter::plot(const std::string& name, const std::string& title, const std:
     error = name + ": nothing to plot";
     return false;
   }
-  const std::string d = data.str(), g = script.str();
-  tsah::writeFileAtomically(dat.string(), std::span(reinterpret_cast<const uint8_t*>(d.data()), d.size()));
-  tsah::writeFileAtomically(gp.string(), std::span(reinterpret_cast<const uint8_t*>(g.data()), g.size()));
-  const ProcessResult r = runProcess({"gnuplot", gp.string()});
+  tsah::AtomicFileSet files;
+  files.write((dir_ / dat).string(), data.str());
+  files.write((dir_ / gp).string(), script.str());
+  const fs::path stagedPng = files.stage((dir_ / png).string());
+  // gnuplot runs in the staging folder, where the script finds its data and writes the PNG.
+  const ProcessResult r = runProcess({"gnuplot", "-e", "cd " + quoted(stagedPng.parent_path().string()), gp});
   std::error_code ec;
-  if (!r.ok() || !fs::exists(tmp, ec)) {
-    fs::remove(tmp, ec);
+  if (!r.ok() || !fs::exists(stagedPng, ec)) {
     error = name + ": gnuplot failed" + (r.output.empty() ? "" : ": " + r.output.substr(0, r.output.find('\n')));
     return false;
   }
-  fs::rename(tmp, png, ec);
-  if (ec) {
-    error = png.string() + ": " + ec.message();
-    return false;
-  }
+  files.commit();
   return true;
 }
 

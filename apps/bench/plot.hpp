@@ -1,6 +1,6 @@
 #pragma once
 // Line plots through gnuplot for the bench reports: each plot is a PNG with its data file and
-// script kept next to it (so a figure can be restyled by hand).
+// script kept next to it (so a figure can be restyled by hand), the three written as one output set.
 #include <filesystem>
 #include <string>
 #include <vector>

@@ -51,6 +51,13 @@ std::string str(const json& j, const char* key, const std::string& fallback = {}
   return j.contains(key) && j[key].is_string() ? j[key].get<std::string>() : fallback;
 }
 
+// The segments experiment ran with K > 1 trees (--segments 1 with a budget records only the one
+// tree and the budget mode). A const json's operator[] must only see keys that exist.
+bool hasKTrees(const json& scene) {
+  return scene.contains("segments") && scene["segments"].is_object() && scene["segments"].contains("k_trees") &&
+         scene["segments"]["k_trees"].is_object();
+}
+
 const json* findByKey(const json& array, const char* key, const std::string& value) {
   if (!array.is_array()) return nullptr;
   for (const json& e : array)
@@ -375,13 +382,13 @@ std::string renderMarkdown(const json& results) {
 
   // Across scenes: segmenting and the Embree verdicts.
   bool anySegments = false;
-  for (const json& s : scenes) anySegments = anySegments || s.contains("segments");
+  for (const json& s : scenes) anySegments = anySegments || hasKTrees(s);
   if (anySegments) {
     md << "## Segmenting: one tree vs K trees (the paper's BART Museum*)\n\n"
        << "| scene | K | cost (1 tree) | max (1) | cost (K trees) | max (K) | total ms (1 tree) | total ms (K trees) |\n"
        << "|---|--:|--:|--:|--:|--:|--:|--:|\n";
     for (const json& s : scenes) {
-      if (!s.contains("segments")) continue;
+      if (!hasKTrees(s)) continue;
       const json& g = s["segments"];
       const int k = int(num(g, "count"));
       const json* one = runtimeMethod(s, "tsah0");
@@ -481,7 +488,7 @@ PlotOutcome makePlots(const json& results, const fs::path& outDir) {
         const std::vector<double> y = numbers(m["per_frame"]);
         series.push_back({str(m, "label"), indices(y.size()), y});
       }
-      if (scene.contains("segments")) {
+      if (hasKTrees(scene)) {
         const std::vector<double> y = numbers(scene["segments"]["k_trees"]["per_frame"]);
         series.push_back({"T-SAH k=0, " + std::to_string(int(num(scene["segments"], "count"))) + " trees",
                           indices(y.size()), y});

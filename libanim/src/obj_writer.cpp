@@ -35,8 +35,15 @@ std::string objText(const Animation& a, uint32_t k, const std::string& faces) {
   return text + faces;
 }
 
-void writeText(const std::string& path, const std::string& text) {
-  tsah::writeFileAtomically(path, std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
+std::span<const uint8_t> bytesOf(const std::string& text) {
+  return {reinterpret_cast<const uint8_t*>(text.data()), text.size()};
+}
+
+std::string frameText(const Animation& a, uint32_t keyframe, const std::string& path) {
+  if (keyframe >= a.keyframeCount())
+    throw tsah::ConfigError(path + ": keyframe " + std::to_string(keyframe) + " is out of range (" +
+                            std::to_string(a.keyframeCount()) + " keyframes)");
+  return objText(a, keyframe, faceLines(a));
 }
 
 }  // namespace
@@ -61,17 +68,18 @@ std::size_t saveObjSequence(const Animation& a, const std::string& pattern) {
       if (!parent.empty()) std::filesystem::create_directories(parent, ec);
     }
     const std::string text = objText(a, k, faces);
-    files.write(name, std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
+    files.write(name, bytesOf(text));
   }
   files.commit();
   return a.keyframeCount();
 }
 
 void saveObjFrame(const Animation& a, uint32_t keyframe, const std::string& path) {
-  if (keyframe >= a.keyframeCount())
-    throw tsah::ConfigError(path + ": keyframe " + std::to_string(keyframe) + " is out of range (" +
-                            std::to_string(a.keyframeCount()) + " keyframes)");
-  writeText(path, objText(a, keyframe, faceLines(a)));
+  tsah::writeFileAtomically(path, bytesOf(frameText(a, keyframe, path)));
+}
+
+void saveObjFrame(const Animation& a, uint32_t keyframe, const std::string& path, tsah::AtomicFileSet& set) {
+  set.write(path, bytesOf(frameText(a, keyframe, path)));
 }
 
 }  // namespace anim

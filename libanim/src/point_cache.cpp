@@ -210,10 +210,20 @@ std::vector<uint8_t> encodeMdd(const Animation& a) {
   return std::move(out.buffer());
 }
 
-void savePointCache(const Animation& animation, const std::string& path) {
+namespace {
+std::vector<uint8_t> encodeFor(const Animation& animation, const std::string& path) {
   const auto format = pointCacheFormat(path);
   if (!format) throw tsah::ConfigError(path + ": a point cache file must end in .pc2 or .mdd");
-  tsah::writeFileAtomically(path, asBytes(*format == PointCacheFormat::Pc2 ? encodePc2(animation) : encodeMdd(animation)));
+  return *format == PointCacheFormat::Pc2 ? encodePc2(animation) : encodeMdd(animation);
+}
+}  // namespace
+
+void savePointCache(const Animation& animation, const std::string& path) {
+  tsah::writeFileAtomically(path, asBytes(encodeFor(animation, path)));
+}
+
+void savePointCache(const Animation& animation, const std::string& path, tsah::AtomicFileSet& set) {
+  set.write(path, asBytes(encodeFor(animation, path)));
 }
 
 }  // namespace anim

@@ -49,6 +49,26 @@ uint64_t movingOf(const SceneInstance& instance, const Animation& source) {
   return source.movingVertexCount();
 }
 
+// An object that is itself a scene file, counted from the descriptions before any of it is baked
+// (only by the outermost scene: it counts every level below): a chain of scenes that doubles at
+// every level is refused at once instead of level by level as the bakes grow.
+void checkNestedSceneSize(const SceneDescription& scene, const SceneObject& object, const LoadOptions& own) {
+  std::string ext = std::filesystem::path(object.file).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  if (ext != ".json" || !isSceneFile(object.file)) return;
+  const SceneSize one = describedSceneSize(object.file, own);
+  __extension__ typedef unsigned __int128 Wide;
+  const Wide triangles = Wide(one.triangles) * object.instances.size(), vertices = Wide(one.vertices) * object.instances.size();
+  const std::string counted = std::to_string(object.instances.size()) + " instances of a scene of " +
+                              std::to_string(one.triangles) + " triangles (counted from its scene files)";
+  if (triangles > 0xffffffffu || vertices > 0xffffffffu)
+    failObject(scene, object, counted + " would make more than 2^32 triangles or vertices");
+  const uint64_t need = Animation::memoryBytesFor(uint64_t(triangles), uint64_t(vertices), 0, 1);
+  if (need > tsah::availableMemoryBytes())
+    failObject(scene, object, counted + " would need " + mib(need) + ", more than the " +
+                                  mib(tsah::availableMemoryBytes()) + " of memory available");
+}
+
 struct Source {
   std::shared_ptr<const Animation> animation;
   std::string key;
@@ -72,6 +92,7 @@ std::vector<Source> loadSources(const SceneDescription& scene, const LoadOptions
       own.fps = fps;
       own.clip = object.clip;
       own.progress = nullptr;
+      if (sceneStack.size() == 1) checkNestedSceneSize(scene, object, own);
       Animation a;
       try {
         a = load(object.file, own);
@@ -178,7 +199,8 @@ BakedScene bakeScene(const std::string& path, const LoadOptions& options) {
     st.movingVertices += r.movingVertices;
     scratch = std::max<uint64_t>(scratch, uint64_t(a.vertexCount()) * 12);
     st.animationBytes = Animation::memoryBytesFor(st.triangles, st.vertices, st.movingVertices, st.keyframes);
-    st.peakBytes = st.animationBytes + st.sourceBytes + scratch * sources.size();
+    // + the bake's own list of times, copied into the animation at the end.
+    st.peakBytes = st.animationBytes + st.sourceBytes + scratch * sources.size() + st.keyframes * 8;
     if (st.triangles > 0xffffffffull || st.vertices > 0xffffffffull)
       failObject(scene, object, std::to_string(r.instances) + " instances take the scene to " +
                                     std::to_string(st.triangles) + " triangles and " + std::to_string(st.vertices) +

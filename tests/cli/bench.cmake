@@ -250,3 +250,11 @@ endif()
 ]=])
 add_test(NAME cli.bench.scaling_check COMMAND ${CMAKE_COMMAND} -DOUT=${W}/scaling_out -P ${W}/scaling_check.cmake)
 set_tests_properties(cli.bench.scaling_check PROPERTIES FIXTURES_REQUIRED scaling_results)
+
+# --segments 1 with the default --budget: a segments section without K trees; the report and the
+# plots are still made (they used to end the run with json type_error 305).
+add_test(NAME cli.bench.one_segment
+         COMMAND tsah bench ${W}/bench_explode.tanim --quick --width 48 --height 36 --eval-frames 6 --trace-frames 2
+                 --threads 2 --segments 1 --no-embree --out ${W}/bench_one_segment)
+set_tests_properties(cli.bench.one_segment PROPERTIES FIXTURES_REQUIRED bench_input
+  PASS_REGULAR_EXPRESSION "bench_one_segment/results.md\n" FAIL_REGULAR_EXPRESSION "type_error;tsah: ")

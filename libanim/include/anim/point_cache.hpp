@@ -18,6 +18,10 @@
 #include "anim/animation.hpp"
 #include "anim/load_options.hpp"
 
+namespace tsah {
+class AtomicFileSet;
+}
+
 namespace anim {
 
 enum class PointCacheFormat { Pc2, Mdd };
@@ -46,8 +50,10 @@ PointCache decodePointCache(std::span<const uint8_t> bytes, const std::string& f
 std::vector<uint8_t> encodePc2(const Animation& animation);
 std::vector<uint8_t> encodeMdd(const Animation& animation);
 
-// Writes the cache in the format of the path's extension, atomically (temporary file + rename).
+// Writes the cache in the format of the path's extension, atomically (temporary file + rename),
+// or as one file of an output set (with its topology OBJ: tsah/base/files.hpp).
 void savePointCache(const Animation& animation, const std::string& path);
+void savePointCache(const Animation& animation, const std::string& path, tsah::AtomicFileSet& set);
 
 // A mesh (topology) and a cache (positions) to be loaded together.
 struct PointCacheInput {

@@ -87,6 +87,15 @@ void requireInsideDataFolder(const std::filesystem::path& folder, const std::fil
 // files resolved). Throws tsah::FileError naming the scene file and the object.
 SceneDescription parseScene(const std::string& path, const LoadOptions& options = {});
 
+// A scene's triangles and vertices counted from its description, before anything is baked: every
+// object's instances, nested scene files counted the same way (each file once, however often it
+// is used), subdivision levels applied. Object files that are not scenes are loaded to count them;
+// one that cannot be read counts as empty (the bake reports it). Saturates at 2^64 - 1.
+struct SceneSize {
+  uint64_t triangles = 0, vertices = 0;
+};
+SceneSize describedSceneSize(const std::string& path, const LoadOptions& options = {});
+
 // What each object contributes (all its instances together).
 struct SceneObjectReport {
   std::string name, file;

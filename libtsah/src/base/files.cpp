@@ -3,12 +3,15 @@
 // temporaries in flight when the process is interrupted.
 #include <fcntl.h>
 #include <signal.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
+#include <chrono>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <mutex>
@@ -126,11 +129,6 @@ void writeNewFile(const fs::path& file, const std::string& path, std::span<const
   }
 }
 
-void writeNewFile(const fs::path& file, const std::string& path, std::span<const uint8_t> bytes) {
-  const std::span<const uint8_t> whole[] = {bytes};
-  writeNewFile(file, path, std::span<const std::span<const uint8_t>>(whole));
-}
-
 void removeInFlight() {
   std::lock_guard lock(registry().mutex);
   for (const std::string& p : registry().inFlight) {
@@ -230,7 +228,7 @@ AtomicFileSet::~AtomicFileSet() {
   registry().inFlight.erase(staging_);
 }
 
-void AtomicFileSet::write(const std::string& path, std::span<const uint8_t> bytes) {
+std::string AtomicFileSet::begin(const std::string& path) {
   const fs::path target(path);
   const std::string folder = folderOf(target);
   if (staging_.empty()) {
@@ -251,27 +249,108 @@ void AtomicFileSet::write(const std::string& path, std::span<const uint8_t> byte
   refuseOverwritingInput(path);
   const std::string name = target.filename().string();
   if (name.size() > 255) throw ConfigError(path + ": file name too long");
-  writeNewFile(fs::path(staging_) / name, path, bytes);
+  if (std::find(names_.begin(), names_.end(), name) != names_.end())
+    throw ConfigError(path + ": written twice in one output set");
+  return name;
+}
+
+void AtomicFileSet::write(const std::string& path, std::span<const std::span<const uint8_t>> parts) {
+  const std::string name = begin(path);
+  writeNewFile(fs::path(staging_) / name, path, parts);
   names_.push_back(name);
 }
 
-void AtomicFileSet::commit() {
-  for (const std::string& name : names_) {
-    const fs::path from = fs::path(staging_) / name, to = fs::path(folder_) / name;
-    if (::rename(from.c_str(), to.c_str()) != 0)
-      throw Failure(to.string() + ": cannot rename the staged file into place: " + errnoText(errno));
+void AtomicFileSet::write(const std::string& path, std::span<const uint8_t> bytes) {
+  const std::span<const uint8_t> whole[] = {bytes};
+  write(path, std::span<const std::span<const uint8_t>>(whole));
+}
+
+void AtomicFileSet::write(const std::string& path, std::string_view text) {
+  write(path, std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
+}
+
+std::string AtomicFileSet::stage(const std::string& path) {
+  const std::string name = begin(path);
+  names_.push_back(name);
+  return (fs::path(staging_) / name).string();
+}
+
+namespace {
+
+// An exclusive flock(2) on a folder for the lifetime of the object: commits into one folder take
+// turns. Where the file system has no flock (some network mounts) the commit goes on unlocked.
+class FolderLock {
+ public:
+  explicit FolderLock(const std::string& folder) {
+    fd_ = ::open(folder.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (fd_ < 0) throw Failure(folder + ": cannot open the folder to lock it: " + errnoText(errno));
+    while (::flock(fd_, LOCK_EX) != 0) {
+      if (errno == EINTR) continue;
+      if (errno == ENOLCK || errno == EOPNOTSUPP || errno == EINVAL) break;
+      const int e = errno;
+      ::close(fd_);
+      throw Failure(folder + ": cannot lock the folder: " + errnoText(e));
+    }
   }
-  ::rmdir(staging_.c_str());
+  ~FolderLock() { ::close(fd_); }  // closing releases the lock
+  FolderLock(const FolderLock&) = delete;
+  FolderLock& operator=(const FolderLock&) = delete;
+
+ private:
+  int fd_ = -1;
+};
+
+// $TSAH_TEST_COMMIT_DELAY_MS: the test hook of AtomicFileSet::commit.
+void testCommitDelay() {
+  const char* text = std::getenv("TSAH_TEST_COMMIT_DELAY_MS");
+  if (text && *text) std::this_thread::sleep_for(std::chrono::milliseconds(std::strtoul(text, nullptr, 10)));
+}
+
+}  // namespace
+
+void AtomicFileSet::commit() {
+  if (names_.empty()) return;
+  testCommitDelay();
+  const FolderLock folderLock(folder_);
+  // Under the registry's lock: the interrupt cleanup waits until the set is wholly in place (or
+  // wholly rolled back) before it removes the staging folder and ends the process.
   std::lock_guard lock(registry().mutex);
+  // The files a rename replaces stay reachable as hard links in the staging folder until the end.
+  struct Placed {
+    fs::path target, kept;
+  };
+  std::vector<Placed> placed;
+  for (std::size_t i = 0; i < names_.size(); ++i) {
+    const fs::path from = fs::path(staging_) / names_[i], to = fs::path(folder_) / names_[i];
+    const fs::path kept = fs::path(staging_) / (".kept." + std::to_string(i));
+    const bool hadOld = ::link(to.c_str(), kept.c_str()) == 0;
+    if (::rename(from.c_str(), to.c_str()) != 0) {
+      const int e = errno;
+      // Put back what this commit replaced and remove what it added: the set stays as it was.
+      for (const Placed& p : placed) {
+        if (!p.kept.empty()) ::rename(p.kept.c_str(), p.target.c_str());
+        else ::unlink(p.target.c_str());
+      }
+      throw Failure(to.string() + ": cannot rename the staged file into place: " + errnoText(e));
+    }
+    placed.push_back({to, hadOld ? kept : fs::path()});
+  }
+  std::error_code ignore;
+  fs::remove_all(staging_, ignore);
   registry().inFlight.erase(staging_);
   staging_.clear();
+  names_.clear();
 }
 
 void installInterruptCleanup() {
   sigset_t signals;
   sigemptyset(&signals);
-  for (int s : {SIGINT, SIGTERM, SIGHUP}) sigaddset(&signals, s);
-  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+  for (int s : {SIGINT, SIGTERM, SIGHUP, SIGQUIT}) sigaddset(&signals, s);
+  // SIGXFSZ blocked (not waited for): a write past the file size limit then fails with EFBIG and is
+  // reported and cleaned up like a full disk, instead of killing the process half-way through a set.
+  sigset_t blocked = signals;
+  sigaddset(&blocked, SIGXFSZ);
+  pthread_sigmask(SIG_BLOCK, &blocked, nullptr);
   // A normal thread (not a signal handler) waits for them, so the cleanup may lock and allocate.
   std::thread([signals] {
     int sig = 0;

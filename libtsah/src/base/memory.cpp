@@ -36,37 +36,49 @@ std::size_t memoryLimitBytes() {
   return std::size_t(mib) << 20;
 }
 
-std::size_t capped(std::size_t bytes) {
-  const std::size_t limit = memoryLimitBytes();
-  return limit && limit < bytes ? limit : bytes;
-}
-
 std::size_t physicalMemoryBytes() {
   const long pages = ::sysconf(_SC_PHYS_PAGES), pageSize = ::sysconf(_SC_PAGE_SIZE);
   return pages > 0 && pageSize > 0 ? std::size_t(pages) * std::size_t(pageSize) : std::size_t(1) << 60;
 }
 
+std::string mib(uint64_t bytes) { return std::to_string(bytes >> 20); }
+
+// A request's budget out of `free` bytes, and the words that say how it was chosen.
+struct Budget {
+  uint64_t bytes = 0;
+  std::string why;
+};
+Budget budgetOf(uint64_t free, const char* freeWhat) {
+  const uint64_t share = uint64_t(double(free) * kMemoryBudgetFraction);
+  const std::size_t limit = memoryLimitBytes();
+  if (limit && limit < share) return {limit, "TSAH_MEMORY_LIMIT_MB"};
+  return {share, std::to_string(int(kMemoryBudgetFraction * 100)) + "% of the " + mib(free) + " MiB " + freeWhat};
+}
+
+Budget memoryBudget() {
+  const std::size_t available = meminfoBytes("MemAvailable:");
+  return available ? budgetOf(available, "free") : budgetOf(physicalMemoryBytes(), "of the machine");
+}
+
 }  // namespace
 
-std::size_t availableMemoryBytes() {
-  const std::size_t available = meminfoBytes("MemAvailable:");
-  return capped(available ? available : physicalMemoryBytes());
-}
+std::size_t availableMemoryBytes() { return std::size_t(memoryBudget().bytes); }
 
 void requireMemory(uint64_t bytes, const std::string& who, const std::string& what) {
   // MemAvailable + free swap is what one allocation can still get now.
   const std::size_t memory = meminfoBytes("MemAvailable:");
-  const uint64_t available = capped(memory ? memory + meminfoBytes("SwapFree:") : physicalMemoryBytes());
-  if (bytes > available)
-    throw Failure(who + ": " + what + " needs " + std::to_string((bytes + (1u << 20) - 1) >> 20) + " MiB, but only " +
-                std::to_string(available >> 20) + " MiB of memory are available");
+  const Budget budget = memory ? budgetOf(memory + meminfoBytes("SwapFree:"), "free with swap")
+                               : budgetOf(physicalMemoryBytes(), "of the machine");
+  if (bytes > budget.bytes)
+    throw Failure(who + ": " + what + " needs " + mib(bytes + (1u << 20) - 1) + " MiB, but only " + mib(budget.bytes) +
+                  " MiB of memory are available (" + budget.why + ")");
 }
 
 void checkFitsInMemory(std::size_t bytes, const std::string& who, const std::string& what) {
-  const std::size_t available = availableMemoryBytes();
-  if (bytes > available)
-    throw Failure(who + ": " + what + " would need " + std::to_string(bytes >> 20) + " MiB, more than the " +
-                std::to_string(available >> 20) + " MiB of memory available");
+  const Budget budget = memoryBudget();
+  if (bytes > budget.bytes)
+    throw Failure(who + ": " + what + " would need " + mib(bytes) + " MiB, more than the " + mib(budget.bytes) +
+                  " MiB of memory available (" + budget.why + ")");
 }
 
 }  // namespace tsah

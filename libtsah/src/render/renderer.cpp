@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "tsah/base/error.hpp"
+#include "tsah/base/memory.hpp"
 #include "tsah/render/shading.hpp"
 #include "tsah/layout/traversal.hpp"
 
@@ -100,10 +101,17 @@ SceneLighting fitLighting(const Aabb& bounds, const Camera& camera, Vec3 up, flo
   return l;
 }
 
+std::size_t renderFrameBytes(const RenderSettings& settings, uint32_t vertices) {
+  const std::size_t pixels = std::size_t(settings.width) * settings.height;
+  return pixels * (sizeof(Surface) + 2 * sizeof(float) + 3) + std::size_t(vertices) * 3 * sizeof(float);
+}
+
 RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const SceneLighting& lighting,
                         const RenderSettings& settings, Image& image) {
   if (settings.width == 0 || settings.height == 0) throw tsah::ConfigError("render: the image size must be positive");
   validateCamera(camera);
+  tsah::checkFitsInMemory(renderFrameBytes(settings, runtime.vertexCount()), "render",
+                          "a " + std::to_string(settings.width) + "x" + std::to_string(settings.height) + " frame");
   const uint32_t width = settings.width, height = settings.height;
   const std::size_t pixels = std::size_t(width) * height;
   if (image.width != width || image.height != height) image = Image(width, height);

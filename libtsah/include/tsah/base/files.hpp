@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "tsah/base/error.hpp"
@@ -48,17 +49,25 @@ void protectInputs(bool on);
 void requireExtension(const std::string& path, const std::string& extension, const std::string& what);
 
 // Writes bytes to `path` through a temporary file in the same folder and a rename; on any failure
-// (or SIGINT/SIGTERM once installInterruptCleanup ran) the temporary is removed and tsah::Failure is
+// (or one of the signals of installInterruptCleanup once it ran) the temporary is removed and tsah::Failure is
 // thrown naming the path and the reason.
 void writeFileAtomically(const std::string& path, std::span<const uint8_t> bytes);
 // The same for a file given in parts, written one after the other (a large file need not be
 // assembled in memory first).
 void writeFileAtomically(const std::string& path, std::span<const std::span<const uint8_t>> parts);
 
-// A group of output files in one folder that appear together or not at all (an OBJ sequence): each
-// write goes to a hidden staging folder next to them; commit() renames them into place. Destroyed
-// (or interrupted) before commit(), it removes the staging folder, so a failure (a full disk) never
-// leaves a shorter sequence that would read as a valid animation.
+// The one way to write a group of output files that belong together and must appear together or
+// not at all (a point cache and its topology OBJ, an exported tree's buffers and header, a box mesh
+// and its materials, an OBJ sequence, a bench report): each write goes to a hidden staging folder
+// next to them; commit() renames them into place as a unit.
+// - Destroyed, failed or interrupted (SIGINT, SIGTERM, SIGHUP, SIGQUIT) before commit(), the set
+//   removes its staging folder and leaves the previous files untouched: no half of a set is left.
+// - commit() holds an exclusive flock(2) on the target folder, so two processes committing sets
+//   into one folder take turns and the folder ends with one whole set, never a mix of both.
+// - A file the commit replaces is kept aside (a hard link) until every rename succeeded; when one
+//   fails, the renamed files are put back as they were.
+// - The interrupt cleanup waits for a commit in progress, so a signal never stops one half-way.
+// Every file of one set is in one folder.
 class AtomicFileSet {
  public:
   AtomicFileSet() = default;
@@ -66,16 +75,26 @@ class AtomicFileSet {
   AtomicFileSet(const AtomicFileSet&) = delete;
   AtomicFileSet& operator=(const AtomicFileSet&) = delete;
   void write(const std::string& path, std::span<const uint8_t> bytes);
+  void write(const std::string& path, std::span<const std::span<const uint8_t>> parts);
+  void write(const std::string& path, std::string_view text);
+  // The staging path at which a program the caller runs (gnuplot) creates the file `path`; it must
+  // exist when commit() runs.
+  std::string stage(const std::string& path);
+  // Moves every file into place. $TSAH_TEST_COMMIT_DELAY_MS (tests only) makes it wait that long
+  // first, so a test can interrupt a set that is staged but not committed.
   void commit();
 
  private:
+  std::string begin(const std::string& path);  // checks `path`, returns its name in the set
   std::string folder_, staging_;
   std::vector<std::string> names_;
 };
 
-// Blocks SIGINT, SIGTERM and SIGHUP in the calling thread (and so in every thread it starts later)
+// Blocks SIGINT, SIGTERM, SIGHUP and SIGQUIT in the calling thread (and so in every thread it starts later)
 // and starts a thread that, on one of them, removes the temporaries and staging folders in flight,
-// then ends the process with that signal. Call first thing in main(), before any thread exists.
+// then ends the process with that signal. SIGXFSZ is blocked too, so a write past the file size
+// limit fails (EFBIG) and is cleaned up like a full disk. Call first thing in main(), before any
+// thread exists.
 void installInterruptCleanup();
 
 }  // namespace tsah

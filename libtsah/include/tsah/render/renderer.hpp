@@ -4,6 +4,7 @@
 // shadow rays towards an area light (any hit). Each ray type is traced in its own pass over the
 // image so its rate can be measured alone, as separate GPU kernels would be. An optional ground
 // plane (analytic, not in the BVH) receives shadows and occlusion from the animated mesh.
+#include <cstddef>
 #include <cstdint>
 
 #include "tsah/render/camera.hpp"
@@ -41,8 +42,14 @@ struct RenderStats {
   }
 };
 
+// The memory renderFrame allocates for one frame of these settings: per pixel its surface, AO and
+// light factors and RGB, and the vertex normals of a mesh of `vertices`. (16384 x 16384: ~13 GiB.)
+std::size_t renderFrameBytes(const RenderSettings& settings, uint32_t vertices);
+
 // Renders the runtime's current frame into image (resized to the settings). Deterministic: the same
-// inputs give the same image for any thread count. Throws tsah::ConfigError for an empty image size.
+// inputs give the same image for any thread count. Throws tsah::ConfigError for an empty image size
+// and tsah::Failure when renderFrameBytes does not fit the memory (tsah/base/memory.hpp), before
+// allocating any of it.
 RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const SceneLighting& lighting,
                         const RenderSettings& settings, Image& image);
 
