@@ -2,6 +2,7 @@
 // of rays on the CPU (tsah::CpuRuntime) or the GPU (tsah::cuda::GpuRuntime, when built).
 #include <pybind11/stl.h>
 
+#include <cmath>
 #include <cstddef>
 #include <cstring>
 #include <limits>
@@ -68,8 +69,13 @@ py::array_t<bool> boolArray(const std::vector<uint8_t>& flags) {
   return out;
 }
 
+// Vertex positions for a refit: NaN or infinite coordinates are refused as anim::Animation refuses
+// them (their boxes would make every ray visit every node).
 std::vector<float> checkedPositions(py::handle positions, uint32_t vertices) {
   const auto p = checkedArray<float>(positions, "positions", Kind::Float, {vertices, 3});
+  for (py::ssize_t i = 0; i < p.size(); ++i)
+    if (!std::isfinite(p.data()[i]))
+      throw tsah::DataError("positions: vertex " + std::to_string(i / 3) + " has a NaN or infinite coordinate");
   return std::vector<float>(p.data(), p.data() + p.size());
 }
 

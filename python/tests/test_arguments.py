@@ -44,6 +44,8 @@ def test_the_tree_options_are_checked_as_on_the_command_line(sample):
         (lambda: tsah.evaluate(sample, "sah0", frames=1001), r"frames: must be in 1\.\.1000"),
         (lambda: tsah.optimize(sample, k=99), r"k must be in 0\.\.16, not 99"),
         (lambda: tsah.optimize(sample, k=-1), r"k must be in 0\.\.16, not -1"),
+        (lambda: tsah.optimize(sample, method="tsah99"), r"method 'tsah99': the T-SAH exponent k must be in 0\.\.16"),
+        (lambda: tsah.evaluate(sample, "sah0,tsah17"), r"method 'tsah17': the T-SAH exponent k must be in 0\.\.16"),
         (lambda: tsah.optimize(sample, time_limit=NAN), r"time_limit: must be a finite number"),
         (lambda: tsah.optimize(sample, time_limit=INF), r"time_limit: must be a finite number"),
         (lambda: tsah.optimize(sample, time_limit=-1.0), r"time_limit: must be a finite number"),
@@ -97,6 +99,13 @@ def test_frame_counts_of_an_animation_are_capped(sample):
     refused(lambda: sample.uniform_times(2**32), r"n: must be in 1\.\.1000000")
     refused(lambda: sample.resample(1000001), r"n: must be in 1\.\.1000000")
     assert sample.uniform_times(3).shape == (3,)
+
+
+def test_refit_positions_must_be_finite(runtime):
+    positions = np.zeros((runtime_vertices(runtime), 3), np.float32)
+    positions[1, 2] = np.nan
+    with pytest.raises(tsah.DataError, match=r"positions: vertex 1 has a NaN or infinite coordinate"):
+        runtime.refit_positions(positions)
 
 
 def test_runtime_threads_are_checked(tree, sample):
