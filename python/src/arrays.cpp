@@ -1,6 +1,7 @@
-// Argument checks of the Python module: bound objects must have been constructed; for numpy
-// arguments, wrong types raise tsah.ArgumentTypeError (a TypeError), wrong shapes or values tsah.ConfigError (a ValueError), always with the argument's name, before any
-// data reaches the C++ API.
+// Argument checks of the Python module: bound objects must have been constructed, integers must fit
+// their C++ type, times must be finite; for numpy arguments, wrong types raise
+// tsah.ArgumentTypeError (a TypeError), wrong shapes or values tsah.ConfigError (a ValueError), always
+// with the argument's name, before any data reaches the C++ API.
 #include <cfloat>
 #include <cmath>
 #include <limits>
@@ -12,7 +13,8 @@ namespace tsah::python {
 
 void requireConstructed(py::handle obj, const std::type_info& type) {
   const py::detail::type_info* bound = py::detail::get_type_info(type);
-  if (!bound || !obj || !PyObject_TypeCheck(obj.ptr(), bound->type)) return;  // not this class: pybind11 refuses it
+  // Not an instance of this class: pybind11's own load refuses it.
+  if (!bound || !obj || !PyObject_TypeCheck(obj.ptr(), bound->type)) return;
   auto* instance = reinterpret_cast<py::detail::instance*>(obj.ptr());
   if (instance->get_value_and_holder(bound).holder_constructed()) return;
   const std::string name = py::str(py::handle(reinterpret_cast<PyObject*>(bound->type)).attr("__name__"));
@@ -122,8 +124,8 @@ Array<T> checkedArray(py::handle obj, const std::string& name, Kind kind,
       for (py::ssize_t i = 0; i < wide.size(); ++i) {
         const double v = std::fabs(p[i]);
         if (std::isfinite(v) && (v > double(FLT_MAX) || (v > 0.0 && v < double(FLT_MIN))))
-          throw tsah::ConfigError(name + ": value " + std::string(py::str(py::float_(p[i]))) + " (index " + std::to_string(i) +
-                                  ") " + (v > 1.0 ? "overflows" : "underflows") + " float32");
+          throw tsah::ConfigError(name + ": value " + std::string(py::str(py::float_(p[i]))) + " (index " +
+                                  std::to_string(i) + ") " + (v > 1.0 ? "overflows" : "underflows") + " float32");
       }
     }
   }

@@ -36,9 +36,9 @@ struct Tree {
 class CpuTracer;  // tsah.CpuRuntime (runtime.cpp)
 class GpuTracer;  // tsah.GpuRuntime (runtime.cpp, CUDA builds)
 
-// The C++ classes bound as Python classes. Each is loaded through ConstructedCaster (below), so an
+// The C++ classes bound as Python classes. Each is loaded through the type_caster below, so an
 // object made by Class.__new__ without __init__ is refused wherever it is passed, `self` included;
-// tests/test_construction.py fails for a class bound without an entry here.
+// python/tests/test_construction.py fails for a class bound without an entry here.
 template <class T>
 struct IsBoundClass
     : std::bool_constant<std::is_same_v<T, anim::Animation> || std::is_same_v<T, Tree> ||
