@@ -160,7 +160,7 @@ void addLoadOptions(CLI::App& app) {
   app.fallthrough();
   app.add_option("--fps", commandLineLoadOptions().fps,
                  "Sampling rate for BART scenes and animated models (default: the file's own frames)")
-      ->check(CLI::Range(0.0, 10000.0));
+      ->check(CLI::Range(0.0, anim::LoadOptions::kMaxFps));
   app.add_option("--clip", commandLineLoadOptions().clip,
                  "Animation clip to bake when a model holds several (name or index)");
 }

@@ -56,7 +56,7 @@ TSAH_REGISTER_COMMAND(30, [](CLI::App& app) {
                   "Output: .tanim, or a point cache .pc2 / .mdd (with its topology as OUT.obj)")
       ->required();
   sub->add_option("--frames", opt->frames, "Uniformly spaced frames over the time range (default: keep every keyframe)")
-      ->check(CLI::Range(1u, 1000000u));
+      ->check(CLI::Range(1u, anim::Animation::kMaxResampleFrames));
   sub->add_flag("--no-mesh", opt->noMesh, "With a .pc2/.mdd output: do not write the topology OBJ next to it");
   sub->callback([opt] {
     const anim::Animation input = tsah::cli::loadInput(opt->input);

@@ -13,10 +13,10 @@ namespace tsah::cli {
 
 void addTreeOptions(CLI::App& sub, TreeOptions& tree, uint32_t& evalFrames) {
   sub.add_option("--frames", tree.frames, "Representative frames, uniform in time")
-      ->check(CLI::Range(1u, 1000u))
+      ->check(CLI::Range(1u, TreeOptions::kMaxFrames))
       ->capture_default_str();
   sub.add_option("--eval-frames", evalFrames, "Evaluation frames for the reported cost, uniform in time")
-      ->check(CLI::Range(1u, 100000u))
+      ->check(CLI::Range(1u, TreeOptions::kMaxEvalFrames))
       ->capture_default_str();
   sub.add_option("--max-leaf", tree.objective.maxLeafSize, "Largest leaf after collapse (1: one triangle per leaf)")
       ->check(CLI::Range(1u, 256u))

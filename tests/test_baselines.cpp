@@ -61,7 +61,7 @@ TEST(Baselines, MethodNamesRoundTrip) {
   EXPECT_EQ(MethodSpec::parse("tsah").name(), "tsah0");
   EXPECT_EQ(MethodSpec::parse("tsah2").k, 2);
   EXPECT_EQ(MethodSpec::parse("rebuild").method, Method::SahRebuild);
-  for (const char* bad : {"", "sah", "tsahx", "tsah-1", "SAH0", "tsah123"})
+  for (const char* bad : {"", "sah", "tsahx", "tsah-1", "SAH0", "tsah123", "tsah17", "tsah99"})
     EXPECT_THROW(MethodSpec::parse(bad), tsah::ConfigError) << bad;
 }
 

@@ -34,6 +34,9 @@ Animation load(const std::string& input, const LoadOptions& options) {
   namespace fs = std::filesystem;
   std::error_code ec;
   if (input.empty()) throw tsah::FileError("<input>", "empty input path");
+  if (!(options.fps >= 0.0 && options.fps <= LoadOptions::kMaxFps))  // NaN fails too
+    throw tsah::ConfigError("fps: must be in [0, " + std::to_string(int(LoadOptions::kMaxFps)) +
+                            "] (0: the input's own frames), not " + std::to_string(options.fps));
   if (input.find('%') != std::string::npos || input.find_first_of("*?[") != std::string::npos)
     return importSequence(listFrames(input), options, stemName(fs::path(input).parent_path().string()));
   if (fs::is_directory(input, ec)) return importSequence(listFrames(input), options, stemName(input));

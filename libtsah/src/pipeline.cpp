@@ -1,6 +1,7 @@
 #include "tsah/pipeline.hpp"
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 
 #include "tsah/base/error.hpp"
@@ -11,8 +12,38 @@ namespace tsah {
 
 MethodSpec TreeOptions::methodSpec() const { return {method, method == Method::TSah ? objective.k : 0}; }
 
-BaselineConfig TreeOptions::baselineConfig() const {
+void TreeOptions::validate() const {
+  if (frames < 1 || frames > kMaxFrames)
+    throw ConfigError("frames: must be in 1.." + std::to_string(kMaxFrames) + ", not " + std::to_string(frames));
+  if (!std::isfinite(timeLimit) || timeLimit < 0.0)
+    throw ConfigError("time_limit: must be a finite number of seconds >= 0 (0: none), not " + std::to_string(timeLimit));
+  if (!(minImprovement >= 0.0 && minImprovement <= 1.0))
+    throw ConfigError("min_improvement: must be in [0, 1], not " + std::to_string(minImprovement));
   objective.validate("tree options");
+}
+
+void checkEvalFrames(uint32_t evalFrames) {
+  if (evalFrames < 1 || evalFrames > TreeOptions::kMaxEvalFrames)
+    throw ConfigError("eval_frames: must be in 1.." + std::to_string(TreeOptions::kMaxEvalFrames) + ", not " +
+                      std::to_string(evalFrames));
+}
+
+void checkRays(std::span<const Ray> rays) {
+  const auto finite = [](const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); };
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    const Ray& r = rays[i];
+    const char* problem = !finite(r.org)                                        ? "origin is not finite"
+                          : !finite(r.dir)                                      ? "direction is not finite"
+                          : r.dir.x == 0.0f && r.dir.y == 0.0f && r.dir.z == 0.0f ? "direction is zero"
+                          : !std::isfinite(r.tmin) || r.tmin < 0.0f             ? "tmin must be finite and >= 0"
+                          : std::isnan(r.tmax)                                  ? "tmax is NaN"
+                                                                                : nullptr;
+    if (problem) throw ConfigError("rays: ray " + std::to_string(i) + ": " + problem);
+  }
+}
+
+BaselineConfig TreeOptions::baselineConfig() const {
+  validate();
   BaselineConfig config;
   config.objective = objective;
   config.threads = threads;
@@ -24,7 +55,7 @@ BaselineConfig TreeOptions::baselineConfig() const {
   config.parallel.threads = threads;
   config.progress = progress;
   if (device == Device::Cuda) {
-    if (!gpuOptimizer) throw ConfigError("--device cuda: this build of tsah has no CUDA support");
+    if (!gpuOptimizer) throw ConfigError("device 'cuda': this build of tsah has no CUDA support");
     config.deviceOptimizer = gpuOptimizer;
   }
   return config;
@@ -106,6 +137,8 @@ OptimizedTree optimizeAnimation(const anim::Animation& animation, const TreeOpti
 
 std::vector<double> evaluateAnimation(const Bvh& bvh, const anim::Animation& animation, uint32_t evalFrames,
                                       const CostModel& cost, unsigned threads) {
+  checkEvalFrames(evalFrames);
+  Objective{0, cost, 1}.validate("costs");
   if (bvh.primCount() != animation.triangleCount())
     throw tsah::DataError(animation.name() + ": the tree has " + std::to_string(bvh.primCount()) +
                           " triangles, the animation " + std::to_string(animation.triangleCount()));
@@ -115,6 +148,8 @@ std::vector<double> evaluateAnimation(const Bvh& bvh, const anim::Animation& ani
 
 std::vector<MethodResult> compareOnAnimation(const anim::Animation& animation, std::span<const MethodSpec> methods,
                                              const TreeOptions& options, uint32_t evalFrames) {
+  checkEvalFrames(evalFrames);
+  options.validate();
   if (animation.triangleCount() == 0) throw tsah::DataError(animation.name() + ": no triangles to build a tree over");
   const PrimitiveBoxes rep = representativeBoxes(animation, options.frames);
   return compareMethods(methods, rep,

@@ -1,12 +1,48 @@
-// numpy argument checks of the Python module: wrong types raise tsah.ArgumentTypeError (a TypeError),
-// wrong shapes or values tsah.ConfigError (a ValueError), always with the argument's name, before any
-// data reaches the C++ API.
+// Argument checks of the Python module: bound objects must have been constructed, integers must fit
+// their C++ type, times must be finite; for numpy arguments, wrong types raise
+// tsah.ArgumentTypeError (a TypeError), wrong shapes or values tsah.ConfigError (a ValueError), always
+// with the argument's name, before any data reaches the C++ API.
+#include <cfloat>
+#include <cmath>
 #include <limits>
 
 #include "bindings.hpp"
 #include "tsah/base/error.hpp"
 
 namespace tsah::python {
+
+void requireConstructed(py::handle obj, const std::type_info& type) {
+  const py::detail::type_info* bound = py::detail::get_type_info(type);
+  // Not an instance of this class: pybind11's own load refuses it.
+  if (!bound || !obj || !PyObject_TypeCheck(obj.ptr(), bound->type)) return;
+  auto* instance = reinterpret_cast<py::detail::instance*>(obj.ptr());
+  if (instance->get_value_and_holder(bound).holder_constructed()) return;
+  const std::string name = py::str(py::handle(reinterpret_cast<PyObject*>(bound->type)).attr("__name__"));
+  throw tsah::ConfigError("tsah." + name + " is not initialised (made by " + name +
+                          ".__new__ without __init__): call tsah." + name + "(...)");
+}
+
+template <class T>
+T checkedInteger(py::handle value, const char* name, T lo, T hi) {
+  if (!py::isinstance<py::int_>(value) || py::isinstance<py::bool_>(value))
+    throw ArgumentTypeError(std::string(name) + ": expected an int, got " +
+                            std::string(py::str(value.get_type().attr("__name__"))));
+  const py::int_ low(lo), high(hi);
+  if (value < low || value > high)
+    throw tsah::ConfigError(std::string(name) + ": must be in " + std::to_string(lo) + ".." + std::to_string(hi) +
+                            ", not " + std::string(py::str(value)));
+  return value.cast<T>();
+}
+
+template uint64_t checkedInteger<uint64_t>(py::handle, const char*, uint64_t, uint64_t);
+template uint32_t checkedInteger<uint32_t>(py::handle, const char*, uint32_t, uint32_t);
+template int checkedInteger<int>(py::handle, const char*, int, int);
+
+double checkedTime(double t, const char* name) {
+  if (!std::isfinite(t))
+    throw tsah::ConfigError(std::string(name) + ": must be a finite time, not " + std::string(py::str(py::float_(t))));
+  return t;
+}
 
 std::string shapeText(const py::array& a) {
   std::string text = "(";
@@ -77,6 +113,20 @@ Array<T> checkedArray(py::handle obj, const std::string& name, Kind kind,
       for (py::ssize_t i = 0; i < wide.size(); ++i)
         if (p[i] < int64_t(std::numeric_limits<T>::min()) || uint64_t(p[i]) > uint64_t(std::numeric_limits<T>::max()))
           throw tsah::ConfigError(name + ": value " + std::to_string(p[i]) + " is out of range");
+    }
+  }
+  if constexpr (std::is_same_v<T, float>) {
+    // Wider floats must survive the narrowing: no finite value may become infinite (|v| > FLT_MAX)
+    // or lose all its digits (0 < |v| < FLT_MIN, the smallest normal float32).
+    if (a.dtype().kind() == 'f' && a.dtype().itemsize() > 4) {
+      const auto wide = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(a);
+      const double* p = wide.data();
+      for (py::ssize_t i = 0; i < wide.size(); ++i) {
+        const double v = std::fabs(p[i]);
+        if (std::isfinite(v) && (v > double(FLT_MAX) || (v > 0.0 && v < double(FLT_MIN))))
+          throw tsah::ConfigError(name + ": value " + std::string(py::str(py::float_(p[i]))) + " (index " +
+                                  std::to_string(i) + ") " + (v > 1.0 ? "overflows" : "underflows") + " float32");
+      }
     }
   }
   auto result = Array<T>::ensure(a);

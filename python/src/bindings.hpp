@@ -6,13 +6,20 @@
 #include <pybind11/pybind11.h>
 
 #include <cstdint>
+#include <limits>
 #include <string>
+#include <type_traits>
+#include <typeinfo>
 #include <vector>
 
 #include "tsah/base/error.hpp"
 #include "tsah/core/bvh.hpp"
 #include "tsah/io/bvh_file.hpp"
 #include "tsah/optimize/insertion_optimizer.hpp"
+
+namespace anim {
+class Animation;
+}
 
 namespace tsah::python {
 
@@ -25,6 +32,22 @@ struct Tree {
   bool optimized = false;
   InsertionOptimizer::Result optimization;
 };
+
+class CpuTracer;  // tsah.CpuRuntime (runtime.cpp)
+class GpuTracer;  // tsah.GpuRuntime (runtime.cpp, CUDA builds)
+
+// The C++ classes bound as Python classes. Each is loaded through the type_caster below, so an
+// object made by Class.__new__ without __init__ is refused wherever it is passed, `self` included;
+// python/tests/test_construction.py fails for a class bound without an entry here.
+template <class T>
+struct IsBoundClass
+    : std::bool_constant<std::is_same_v<T, anim::Animation> || std::is_same_v<T, Tree> ||
+                         std::is_same_v<T, CpuTracer> || std::is_same_v<T, GpuTracer>> {};
+
+// Throws tsah::ConfigError when `obj` is an instance of the Python class bound to `type` whose C++
+// object was never constructed (Class.__new__(Class) without __init__). pybind11 itself would hand
+// the method freshly allocated, uninitialised memory of the class's size.
+void requireConstructed(py::handle obj, const std::type_info& type);
 
 // A Python argument of the wrong type or dtype: a tsah::ConfigError that Python sees as
 // tsah.ArgumentTypeError, a subclass of tsah.ConfigError and of TypeError (module.cpp).
@@ -55,7 +78,30 @@ template <class T>
 Array<T> checkedArray(py::handle obj, const std::string& name, Kind kind,
                                                 std::initializer_list<py::ssize_t> shape);
 
+// `value`, a Python int, as T: ArgumentTypeError unless it is an int, tsah::ConfigError naming `name`
+// unless it is in [lo, hi] (so -1 is refused instead of pybind11's "incompatible arguments").
+template <class T>
+T checkedInteger(py::handle value, const char* name, T lo = std::numeric_limits<T>::min(),
+                 T hi = std::numeric_limits<T>::max());
+
+// `t` unless it is NaN or infinite (tsah::ConfigError naming `name`).
+double checkedTime(double t, const char* name);
+
 // The shape of `a` as text, e.g. "(4, 3)".
 std::string shapeText(const py::array& a);
 
 }  // namespace tsah::python
+
+namespace pybind11::detail {
+
+// pybind11's caster for the bound classes, with requireConstructed before the object is used.
+template <class T>
+class type_caster<T, enable_if_t<tsah::python::IsBoundClass<T>::value>> : public type_caster_base<T> {
+ public:
+  bool load(handle src, bool convert) {
+    tsah::python::requireConstructed(src, typeid(T));
+    return type_caster_base<T>::load(src, convert);
+  }
+};
+
+}  // namespace pybind11::detail

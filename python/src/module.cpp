@@ -185,19 +185,30 @@ data (an index out of range, times not increasing, NaN or infinite coordinates).
       .def(
           "positions_at",
           [](const anim::Animation& a, double t) {
-            return floatArray(a.positionsAt(t), {a.vertexCount(), 3});
+            return floatArray(a.positionsAt(checkedTime(t, "t")), {a.vertexCount(), 3});
           },
           "t"_a, "Vertex positions at time t, float32 array (V, 3) (linear between keyframes, clamped).")
       .def(
           "uniform_times",
-          [](const anim::Animation& a, uint32_t n) {
-            const std::vector<double> t = a.uniformTimes(n);
+          [](const anim::Animation& a, py::handle n) {
+            const std::vector<double> t =
+                a.uniformTimes(checkedInteger<uint32_t>(n, "n", 1, anim::Animation::kMaxResampleFrames));
             return py::array_t<double>(py::ssize_t(t.size()), t.data());
           },
           "n"_a, "n times spread uniformly over [start_time, end_time], both ends included.")
-      .def("resample", &anim::Animation::resample, "n"_a,
+      .def(
+          "resample",
+          [](const anim::Animation& a, py::handle n) {
+            return a.resample(checkedInteger<uint32_t>(n, "n", 1, anim::Animation::kMaxResampleFrames));
+          },
+          "n"_a,
            "A new animation with n keyframes at uniform_times(n) (what `tsah resample --frames n` writes).")
-      .def("segment", &anim::Animation::segment, "t0"_a, "t1"_a,
+      .def(
+          "segment",
+          [](const anim::Animation& a, double t0, double t1) {
+            return a.segment(checkedTime(t0, "t0"), checkedTime(t1, "t1"));
+          },
+          "t0"_a, "t1"_a,
            "The part between t0 and t1: keyframes at t0, t1 and every original keyframe between them.")
       .def(
           "save",
@@ -218,11 +229,11 @@ message ('FILE: problem') when the input cannot be read.
 
   m.def(
       "generate",
-      [](const std::string& kind, uint32_t triangles, uint32_t frames, uint64_t seed) {
+      [](const std::string& kind, py::handle triangles, py::handle frames, py::handle seed) {
         anim::GeneratorOptions options;
-        options.triangles = triangles;
-        options.frames = frames;
-        options.seed = seed;
+        options.triangles = checkedInteger<uint32_t>(triangles, "triangles");
+        options.frames = checkedInteger<uint32_t>(frames, "frames");
+        options.seed = checkedInteger<uint64_t>(seed, "seed");
         return anim::generate(anim::parseGeneratorKind(kind), options);
       },
       "kind"_a, "triangles"_a = 4000, "frames"_a = 30, "seed"_a = 1,

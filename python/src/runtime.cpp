@@ -2,6 +2,7 @@
 // of rays on the CPU (tsah::CpuRuntime) or the GPU (tsah::cuda::GpuRuntime, when built).
 #include <pybind11/stl.h>
 
+#include <cmath>
 #include <cstddef>
 #include <cstring>
 #include <limits>
@@ -45,6 +46,7 @@ std::vector<Ray> makeRays(py::handle origins, py::handle directions, py::handle 
   const float* d = dir.data();
   for (std::size_t i = 0; i < n; ++i)
     rays[i] = {{o[3 * i], o[3 * i + 1], o[3 * i + 2]}, lo[i], {d[3 * i], d[3 * i + 1], d[3 * i + 2]}, hi[i]};
+  checkRays(rays);
   return rays;
 }
 
@@ -67,10 +69,17 @@ py::array_t<bool> boolArray(const std::vector<uint8_t>& flags) {
   return out;
 }
 
+// Vertex positions for a refit: NaN or infinite coordinates are refused as anim::Animation refuses
+// them (their boxes would make every ray visit every node).
 std::vector<float> checkedPositions(py::handle positions, uint32_t vertices) {
   const auto p = checkedArray<float>(positions, "positions", Kind::Float, {vertices, 3});
+  for (py::ssize_t i = 0; i < p.size(); ++i)
+    if (!std::isfinite(p.data()[i]))
+      throw tsah::DataError("positions: vertex " + std::to_string(i / 3) + " has a NaN or infinite coordinate");
   return std::vector<float>(p.data(), p.data() + p.size());
 }
+
+}  // namespace
 
 // The tree refitted to frames of its animation on the CPU.
 class CpuTracer {
@@ -85,6 +94,7 @@ class CpuTracer {
     refit(animation_.startTime());
   }
   void refit(double time) {
+    checkedTime(time, "time");
     py::gil_scoped_release release;
     runtime_->update(animation_.positionsAt(time));
   }
@@ -135,6 +145,7 @@ class GpuTracer {
     refit(animation.startTime());
   }
   void refit(double time) {
+    checkedTime(time, "time");
     py::gil_scoped_release release;
     runtime_->updateAt(time);
   }
@@ -164,6 +175,8 @@ class GpuTracer {
 };
 #endif
 
+namespace {
+
 constexpr const char* kTraceDoc = R"doc(
 Closest hits of rays against the current frame. origins, directions: float arrays (N, 3) (directions
 need not be normalized; t is in units of the direction); tmin, tmax: numbers or arrays (N,).
@@ -181,7 +194,10 @@ void bindRuntimes(py::module_& m) {
 CpuRuntime(tree, animation, threads=0): the tree refitted to a frame of the animation it was built
 for (checked: triangle count, vertex count, topology), traced on the CPU. Starts at the first frame.
 )doc")
-      .def(py::init<const Tree&, anim::Animation, unsigned>(), "tree"_a, "animation"_a, "threads"_a = 0)
+      .def(py::init([](const Tree& tree, anim::Animation animation, py::handle threads) {
+             return std::make_unique<CpuTracer>(tree, std::move(animation), checkedInteger<unsigned>(threads, "threads"));
+           }),
+           "tree"_a, "animation"_a, "threads"_a = 0)
       .def("refit", &CpuTracer::refit, "time"_a,
            "Refits the boxes to the animation at this time (interpolated, clamped) and recomputes the Woop triangles.")
       .def("refit_positions", &CpuTracer::refitPositions, "positions"_a,
@@ -198,7 +214,10 @@ for (checked: triangle count, vertex count, topology), traced on the CPU. Starts
 GpuRuntime(tree, animation, device=0): the same as CpuRuntime on a CUDA device (all keyframes are
 uploaded once; refit and traversal run on the GPU). Raises tsah.Failure when no device is usable.
 )doc")
-      .def(py::init<const Tree&, const anim::Animation&, int>(), "tree"_a, "animation"_a, "device"_a = 0)
+      .def(py::init([](const Tree& tree, const anim::Animation& animation, py::handle device) {
+             return std::make_unique<GpuTracer>(tree, animation, checkedInteger<int>(device, "device", 0));
+           }),
+           "tree"_a, "animation"_a, "device"_a = 0)
       .def("refit", &GpuTracer::refit, "time"_a, "Refits on the device to the animation at this time.")
       .def("refit_positions", &GpuTracer::refitPositions, "positions"_a, "Refits to given vertex positions (V, 3).")
       .def("trace", &GpuTracer::trace, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf, kTraceDoc)

@@ -10,6 +10,7 @@
 #include "tsah/pipeline.hpp"
 #if TSAH_HAVE_CUDA
 #include "tsah/base/error.hpp"
+#include "tsah_cuda/device.hpp"
 #include "tsah_cuda/gpu_optimizer.hpp"
 #endif
 
@@ -24,29 +25,34 @@ py::array_t<double> doubleArray(const std::vector<double>& values) {
 }
 
 // The command line's options, with its defaults, as keyword arguments.
-TreeOptions treeOptions(const std::string& method, int k, uint32_t frames, const std::string& selection, uint64_t seed,
-                        float ct, float ci, uint32_t maxLeaf, double timeLimit, double minImprovement,
-                        unsigned threads, const std::string& optimizer, const std::string& device) {
+// Checked as the command line checks them (TreeOptions::validate): the limits live there.
+TreeOptions treeOptions(const std::string& method, py::handle k, py::handle frames, const std::string& selection,
+                        py::handle seed, float ct, float ci, py::handle maxLeaf, double timeLimit,
+                        double minImprovement, py::handle threads, const std::string& optimizer,
+                        const std::string& device) {
   if (device != "cpu" && device != "cuda") throw tsah::ConfigError("device: expected 'cpu' or 'cuda'");
-  if (frames < 1) throw tsah::ConfigError("frames: must be at least 1");
-  if (maxLeaf < 1) throw tsah::ConfigError("max_leaf: must be at least 1");
-  if (!(ct > 0.0f) || !(ci > 0.0f)) throw tsah::ConfigError("ct, ci: must be positive");
-  if (k < 0) throw tsah::ConfigError("k: must be 0 or more");
+#if TSAH_HAVE_CUDA
+  if (device == "cuda" && !cuda::deviceAvailable())
+    throw tsah::ConfigError("device 'cuda': no CUDA device found (no GPU, no NVIDIA driver, or CUDA_VISIBLE_DEVICES "
+                            "hides them); use device 'cpu'");
+#endif
   TreeOptions o;
   const MethodSpec spec = MethodSpec::parse(method);  // "tsah<k>" names its own k
   o.method = spec.method;
-  o.objective = {method == "tsah" ? k : spec.k, {ct, ci}, maxLeaf};
-  o.frames = frames;
+  o.objective = {method == "tsah" ? checkedInteger<int>(k, "k") : spec.k, {ct, ci},
+                 checkedInteger<uint32_t>(maxLeaf, "max_leaf")};
+  o.frames = checkedInteger<uint32_t>(frames, "frames");
   o.selection = parse<Selection>(selection);
-  o.seed = seed;
+  o.seed = checkedInteger<uint64_t>(seed, "seed");
   o.timeLimit = timeLimit;
   o.minImprovement = minImprovement;
-  o.threads = threads;
+  o.threads = checkedInteger<unsigned>(threads, "threads");
   o.optimizer = parse<OptimizerKind>(optimizer);
   o.device = parse<Device>(device);
 #if TSAH_HAVE_CUDA
   o.gpuOptimizer = cuda::gpuTreeOptimizer();
 #endif
+  o.validate();
   return o;
 }
 
@@ -70,9 +76,9 @@ py::object optimizationDict(const Tree& tree) {
                   "seconds"_a = r.seconds, "time_limit_reached"_a = r.timeLimitReached, "history"_a = history);
 }
 
-Tree optimize(const anim::Animation& animation, const std::string& method, int k, uint32_t frames,
-              const std::string& selection, uint64_t seed, float ct, float ci, uint32_t maxLeaf, double timeLimit,
-              double minImprovement, unsigned threads, const std::string& optimizer, const std::string& device) {
+Tree optimize(const anim::Animation& animation, const std::string& method, py::handle k, py::handle frames,
+              const std::string& selection, py::handle seed, float ct, float ci, py::handle maxLeaf, double timeLimit,
+              double minImprovement, py::handle threads, const std::string& optimizer, const std::string& device) {
   const TreeOptions options =
       treeOptions(method, k, frames, selection, seed, ct, ci, maxLeaf, timeLimit, minImprovement, threads, optimizer,
                   device);
@@ -105,16 +111,17 @@ std::vector<std::string> methodNames(py::handle methods) {
   return names;
 }
 
-py::dict evaluate(const anim::Animation& animation, py::handle methodsArg, uint32_t frames, uint32_t evalFrames,
-                  uint32_t maxLeaf, float ct, float ci, const std::string& selection, uint64_t seed, double timeLimit,
-                  double minImprovement, unsigned threads, const std::string& optimizer, const std::string& device) {
+py::dict evaluate(const anim::Animation& animation, py::handle methodsArg, py::handle frames, py::handle evalFramesArg,
+                  py::handle maxLeaf, float ct, float ci, const std::string& selection, py::handle seed,
+                  double timeLimit, double minImprovement, py::handle threads, const std::string& optimizer,
+                  const std::string& device) {
   const std::vector<std::string> names = methodNames(methodsArg);
   std::vector<MethodSpec> methods;
   for (const std::string& name : names) methods.push_back(MethodSpec::parse(name));  // ConfigError when unknown
-  if (evalFrames < 1) throw tsah::ConfigError("eval_frames: must be at least 1");
-  const TreeOptions options =
-      treeOptions("tsah", 0, frames, selection, seed, ct, ci, maxLeaf, timeLimit, minImprovement, threads, optimizer,
-                  device);
+  const uint32_t evalFrames = checkedInteger<uint32_t>(evalFramesArg, "eval_frames");
+  checkEvalFrames(evalFrames);
+  const TreeOptions options = treeOptions("tsah", py::int_(0), frames, selection, seed, ct, ci, maxLeaf, timeLimit,
+                                          minImprovement, threads, optimizer, device);
   std::vector<MethodResult> results;
   {
     py::gil_scoped_release release;
@@ -125,8 +132,8 @@ py::dict evaluate(const anim::Animation& animation, py::handle methodsArg, uint3
     rows.append(py::dict("name"_a = names[m], "build_s"_a = results[m].buildSeconds, "average"_a = results[m].average,
                          "maximum"_a = results[m].maximum, "per_frame"_a = doubleArray(results[m].perFrame)));
   return py::dict("input"_a = animation.name(), "triangles"_a = animation.triangleCount(),
-                  "frames"_a = framesFor(animation, frames), "eval_frames"_a = framesFor(animation, evalFrames),
-                  "max_leaf"_a = maxLeaf, "ct"_a = ct, "ci"_a = ci, "methods"_a = rows);
+                  "frames"_a = framesFor(animation, options.frames), "eval_frames"_a = framesFor(animation, evalFrames),
+                  "max_leaf"_a = options.objective.maxLeafSize, "ct"_a = ct, "ci"_a = ci, "methods"_a = rows);
 }
 
 Tree treeFromFile(BvhFile file) {
@@ -165,14 +172,16 @@ header of its .tbvh file (how it was built). Made by tsah.optimize or tsah.read_
       .def(
           "frame_costs",
           [](const Tree& t, float ct, float ci) {
+            Objective{0, {ct, ci}, 1}.validate("frame_costs");
             return doubleArray(frameCosts(t.file.bvh, {ct, ci}));
           },
           "ct"_a = 3.0f, "ci"_a = 2.0f, "Eq. 1 cost at each stored (representative) frame, float64 array.")
       .def(
           "costs",
-          [](const Tree& t, const anim::Animation& animation, uint32_t evalFrames, py::object ct, py::object ci,
-             unsigned threads) {
-            if (evalFrames < 1) throw tsah::ConfigError("eval_frames: must be at least 1");
+          [](const Tree& t, const anim::Animation& animation, py::handle evalFramesArg, py::object ct, py::object ci,
+             py::handle threadsArg) {
+            const uint32_t evalFrames = checkedInteger<uint32_t>(evalFramesArg, "eval_frames");
+            const unsigned threads = checkedInteger<unsigned>(threadsArg, "threads");
             const CostModel cost{ct.is_none() ? t.file.info.objective.cost.ct : ct.cast<float>(),
                                  ci.is_none() ? t.file.info.objective.cost.ci : ci.cast<float>()};
             std::vector<double> costs;

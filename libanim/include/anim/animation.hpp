@@ -131,6 +131,7 @@ class Animation {
   // A new animation with n keyframes at uniformTimes(n): the paper's representative frames
   // (default 5) or evaluation frames (default 50).
   Animation resample(uint32_t n) const;
+  static constexpr uint32_t kMaxResampleFrames = 1000000;  // `tsah resample --frames` and Python's limit
   // The part of the animation between t0 and t1 (clamped), keyframes at t0, t1 and every original
   // keyframe strictly between them.
   Animation segment(double t0, double t1) const;

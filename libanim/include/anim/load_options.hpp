@@ -8,8 +8,10 @@ namespace anim {
 
 struct LoadOptions {
   // Sampling rate for formats that store continuous animation (AFF, skeletal, morph targets);
-  // 0 means the format's own frame rate / frame count.
+  // 0 means the format's own frame rate / frame count. At most kMaxFps (the command line's --fps
+  // limit); load() refuses a value outside [0, kMaxFps] with tsah::ConfigError.
   double fps = 0.0;
+  static constexpr double kMaxFps = 10000.0;
   // Which animation clip to bake when a file holds several (name or index); empty: the first.
   std::string clip;
   // Called as work progresses (done, total); may be empty. Libraries never print.

@@ -41,13 +41,30 @@ struct TreeOptions {
   TreeOptimizerFunction gpuOptimizer;
   std::function<void(const std::string&)> progress;  // optional progress messages
 
+  // The limits of the command line's --frames, --eval-frames and --time-limit, and of Python's
+  // frames, eval_frames and time_limit: one place for both.
+  static constexpr uint32_t kMaxFrames = 1000;
+  static constexpr uint32_t kMaxEvalFrames = 100000;
+
   // The method with the objective's k (T-SAH) or 0 (the others).
   MethodSpec methodSpec() const;
+  // Throws tsah::ConfigError naming the field (frames, time_limit, min_improvement, or the
+  // objective's) unless 1 <= frames <= kMaxFrames, timeLimit is finite and >= 0, minImprovement
+  // is in [0, 1] and the objective is valid.
+  void validate() const;
   // The builders' settings (objective, optimizer selection/seed/limits, threads, progress). Throws
-  // tsah::ConfigError for an invalid objective, or device Cuda without a gpuOptimizer (a build
+  // tsah::ConfigError for invalid options (validate), or device Cuda without a gpuOptimizer (a build
   // without CUDA).
   BaselineConfig baselineConfig() const;
 };
+
+// Throws tsah::ConfigError ("eval_frames: ...") unless 1 <= evalFrames <= TreeOptions::kMaxEvalFrames.
+void checkEvalFrames(uint32_t evalFrames);
+
+// Throws tsah::ConfigError naming the first bad ray ("rays: ray 3: ...") when an origin or a
+// direction is not finite, a direction is zero, tmin is not finite or negative, or tmax is NaN
+// (a NaN ray makes traversal visit every node).
+void checkRays(std::span<const Ray> rays);
 
 // Frames of `animation` at each of `times` as a lazily filled FrameSource (triangle boxes). The
 // animation must outlive the source.
@@ -78,6 +95,7 @@ struct OptimizedTree {
 OptimizedTree optimizeAnimation(const anim::Animation& animation, const TreeOptions& options);
 
 // Eq. 1 at framesFor(animation, evalFrames) times uniform over the animation, the tree refitted to each.
+// Throws tsah::ConfigError for evalFrames out of range (checkEvalFrames) or an invalid cost model.
 std::vector<double> evaluateAnimation(const Bvh& bvh, const anim::Animation& animation, uint32_t evalFrames,
                                       const CostModel& cost = {}, unsigned threads = 0);
 

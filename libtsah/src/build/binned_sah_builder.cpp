@@ -296,7 +296,9 @@ Bvh BinnedSahBuilder::build(std::span<const Aabb> primBoxes) const {
         !std::isfinite(b.hi.y) || !std::isfinite(b.hi.z) || b.empty())
       throw tsah::DataError("binned SAH: a primitive box is empty or not finite");
   Build build(config_, primBoxes);
-  return build.run();
+  Bvh bvh = build.run();
+  limitDepth(bvh);  // SAH splits of boxes spread over many scales can chain
+  return bvh;
 }
 
 }  // namespace tsah

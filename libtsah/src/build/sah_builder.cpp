@@ -142,6 +142,7 @@ Bvh SweepSahBuilder::build(std::span<const Aabb> boxes) const {
     stack.push_back({left, task.begin, mid});
   }
   bvh.primIds = std::move(order[0]);
+  limitDepth(bvh);  // SAH splits of boxes spread over many scales can chain
   return bvh;
 }
 

@@ -200,6 +200,9 @@ FlatBvh decodeFlatBvhFile(std::span<const uint8_t> bytes, const std::string& fil
   r.readArray(flat.rootBoxes, flat.frameCount, "root boxes");
   r.readArray(flat.triIndex, triangleCount, "triangle index array");
   if (auto problem = validateFlatBvh(flat)) throw tsah::FileError(file, *problem);
+  if (flat.depth > kMaxBvhDepth)  // tsah never writes one; the runtimes' stacks could not trace it
+    throw tsah::FileError(file, "tree depth " + std::to_string(flat.depth) + " exceeds the limit of " +
+                                    std::to_string(kMaxBvhDepth) + " levels");
   if (infoOut) *infoOut = std::move(info);
   return flat;
 }

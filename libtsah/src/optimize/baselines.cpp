@@ -164,8 +164,12 @@ std::string MethodSpec::name() const {
 
 MethodSpec MethodSpec::parse(const std::string& name) {
   if (name.rfind("tsah", 0) == 0 && name.size() > 4 && name.size() <= 6 &&
-      std::all_of(name.begin() + 4, name.end(), [](char c) { return c >= '0' && c <= '9'; }))
-    return {Method::TSah, std::stoi(name.substr(4))};
+      std::all_of(name.begin() + 4, name.end(), [](char c) { return c >= '0' && c <= '9'; })) {
+    const int k = std::stoi(name.substr(4));
+    if (k > Objective::kMaxK)
+      throw ConfigError("method '" + name + "': the T-SAH exponent k must be in 0.." + std::to_string(Objective::kMaxK));
+    return {Method::TSah, k};
+  }
   try {
     return {tsah::parse<Method>(name), 0};
   } catch (const ConfigError&) {

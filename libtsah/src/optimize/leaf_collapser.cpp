@@ -226,6 +226,7 @@ Bvh LeafCollapser::collapse(const Bvh& bvh) const {
   std::vector<uint32_t> origin;
   Bvh out = collapsedTopology(source, origin);
   copyBoxes(source, origin, out);
+  limitDepth(out);
   TSAH_ASSERT_VALID(validate(out), "leaf collapse: the collapsed tree");
   return out;
 }

@@ -92,7 +92,9 @@ class OptimizerRun {
     result_.seconds = elapsed();
   }
 
+  // The result with the optimizer's tree (collapsed when asked), its depth bounded by limitDepth.
   InsertionOptimizer::Result finish(Bvh tree) {
+    limitDepth(tree);
     result_.bvh = std::move(tree);
     return std::move(result_);
   }

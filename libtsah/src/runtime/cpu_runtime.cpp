@@ -184,6 +184,8 @@ void CpuRuntime::parallelFor(std::size_t n, std::size_t grain,
   });
 }
 
+static_assert(kMaxBvhDepth <= kTraversalStackSize, "every tree the library makes must fit the traversal stack");
+
 void CpuRuntime::setTree(FlatBvh tree) {
   if (tree.depth > kTraversalStackSize)
     throw tsah::DataError("runtime: tree depth " + std::to_string(tree.depth) + " exceeds the traversal stack of " +

@@ -14,6 +14,11 @@ namespace tsah {
 
 inline constexpr uint32_t kInvalidIndex = 0xffffffffu;
 
+// The deepest tree (root at depth 0) the library makes: every builder, optimizer and leaf collapse
+// ends with limitDepth, so any tree it writes fits the runtimes' traversal stacks
+// (kTraversalStackSize, the CUDA traversal's stack) and the wide layouts' stacks.
+inline constexpr uint32_t kMaxBvhDepth = 128;
+
 struct BvhNode {
   uint32_t parent = kInvalidIndex;  // kInvalidIndex for the root
   uint32_t left = kInvalidIndex;    // children of an interior node
@@ -72,6 +77,14 @@ void refit(Bvh& bvh, const PrimitiveBoxes& prims);
 // The same boxes written to other storage: boxesOf(node) is where node's prims.frameCount boxes go
 // (children are written before their parent and read back from there); bvh.boxes is not used.
 void refitInto(const Bvh& bvh, const PrimitiveBoxes& prims, const std::function<Aabb*(uint32_t node)>& boxesOf);
+
+// Makes the tree at most maxDepth deep by rebuilding the lowest subtrees that would be deeper as
+// balanced subtrees over their leaves (split at the middle of their left-to-right order, which keeps
+// neighbours together). Leaves, their primitives and every node index stay; the rebuilt interior
+// nodes get new children and, when the tree has boxes, the union of their children's boxes in every
+// frame, so the tree stays valid. Returns whether anything changed (never for a shallow enough tree).
+// Throws tsah::ConfigError when even a balanced tree over all leaves would be deeper than maxDepth.
+bool limitDepth(Bvh& bvh, uint32_t maxDepth = kMaxBvhDepth);
 
 // Checks the tree invariants: the root has no parent, parent/child links agree, every node is
 // reachable from the root exactly once (no cycles, no orphans), every primitive sits in exactly one

@@ -17,7 +17,7 @@
 namespace tsah {
 
 // Traversal needs one stack entry per tree level; trees deeper than this are refused up front by
-// the runtimes (CpuRuntime checks FlatBvh::depth).
+// the runtimes (CpuRuntime checks FlatBvh::depth). Every tree the library makes fits: kMaxBvhDepth.
 inline constexpr uint32_t kTraversalStackSize = 128;
 
 // Everything a traversal reads for one frame. Raw pointers and counts only: pass by value.

@@ -48,7 +48,8 @@ struct MethodSpec {
 
   // "sah0", "sahstar", "rebuild", "tsah<k>".
   std::string name() const;
-  // Parses a name as above ("tsah" alone means tsah0); throws tsah::ConfigError otherwise.
+  // Parses a name as above ("tsah" alone means tsah0); throws tsah::ConfigError otherwise and for
+  // k > Objective::kMaxK (tsah17).
   static MethodSpec parse(const std::string& name);
 };
 

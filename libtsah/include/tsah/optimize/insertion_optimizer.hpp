@@ -73,7 +73,9 @@ class InsertionOptimizer {
   // Optimizes a valid tree over prims (any leaf sizes; its boxes are recomputed from prims for all
   // prims.frameCount frames). Deterministic for a given seed. With `collapse`, Result::bvh is the
   // optimized tree collapsed by it: the same tree as collapse->collapse() of the tree returned
-  // without it, made without a second copy of every node's boxes (memory).
+  // without it, made without a second copy of every node's boxes (memory). Result::bvh is at most
+  // kMaxBvhDepth deep (limitDepth); the costs are those of the optimized tree before the collapse
+  // and the depth bound.
   Result optimize(Bvh bvh, const PrimitiveBoxes& prims, const LeafCollapser* collapse = nullptr) const;
 
  private:
