@@ -125,8 +125,13 @@ class GpuFrameRuntime final : public FrameRuntime {
                   std::optional<cuda::RebuildOptions> rebuild, const cuda::GpuRuntime::Config& config)
       : runtime_(trees, animation, config), ranges_(trees.ranges), rebuild_(rebuild) {}
 
+  // The runtime's GPU current while it is released.
+  ~GpuFrameRuntime() override { cuda::useDevice(runtime_.config().device); }
+
+  // Each call first makes the runtime's GPU the calling thread's (the threads of --devices).
   void warmUp(double firstTime, const std::function<Camera(double)>& cameraAt, const SceneLighting& lighting,
               const RenderSettings& settings) override {
+    cuda::useDevice(runtime_.config().device);
     // The first update of each tree captures its CUDA graph: a time inside each tree's part reaches
     // every tree (a rebuild has one graph).
     const std::size_t trees = rebuild_ ? 1 : ranges_.size();
@@ -138,6 +143,7 @@ class GpuFrameRuntime final : public FrameRuntime {
   }
 
   FrameUpdate update(double time) override {
+    cuda::useDevice(runtime_.config().device);
     if (rebuild_) {
       const cuda::RebuildTimings t = runtime_.rebuildAt(time, *rebuild_);
       return {t.interpolateMs, t.woopMs, t.buildMs() + t.wideMs, t.wideMs, t.totalMs()};  // cwbvh: with the conversion
@@ -148,6 +154,7 @@ class GpuFrameRuntime final : public FrameRuntime {
 
   FrameRender render(const Camera& camera, const SceneLighting& lighting, const RenderSettings& settings,
                      Image* image) override {
+    cuda::useDevice(runtime_.config().device);
     cuda::GpuRenderTimings timings;
     FrameRender r;
     r.rays = cuda::renderFrameGpu(runtime_, camera, lighting, settings, image, &timings);
@@ -163,7 +170,7 @@ class GpuFrameRuntime final : public FrameRuntime {
 
   void describe(nlohmann::json& out) const override {
     out["device"] = runtime_.device().name;
-    out["gpu"] = deviceJson();
+    out["gpu"] = deviceJson(runtime_.config().device);
     out["timer"] = "CUDA events (device time)";
     out["layout"] = tsah::name(runtime_.config().layout);
   }
@@ -180,6 +187,7 @@ std::unique_ptr<FrameRuntime> makeGpuFrameRuntime(const TreeSet& trees, const an
     throw Failure("no CUDA device found (no GPU, no NVIDIA driver, or CUDA_VISIBLE_DEVICES hides them); "
                   "use --device cpu");
   cuda::GpuRuntime::Config config;
+  config.device = options.gpu;
   config.layout = options.layout;  // Auto: the runtime's default
   // The cwbvh collapse of trees without build infos (a set read from a file brings each tree's own).
   config.wideObjective = options.objective;
@@ -241,9 +249,9 @@ std::unique_ptr<FrameRuntime> makeFrameRuntime(const TreeSet& trees, const anim:
 #if TSAH_HAVE_CUDA
 bool gpuAvailable() { return cuda::deviceAvailable(); }
 
-nlohmann::json deviceJson() {
+nlohmann::json deviceJson(int index) {
   if (!cuda::deviceAvailable()) return nullptr;
-  const cuda::DeviceInfo d = cuda::describeDevice(0);
+  const cuda::DeviceInfo d = cuda::describeDevice(index);
   return {{"name", d.name},
           {"compute_capability", std::to_string(d.computeMajor) + "." + std::to_string(d.computeMinor)},
           {"multiprocessors", d.multiprocessors},
@@ -253,7 +261,7 @@ nlohmann::json deviceJson() {
 }
 #else
 bool gpuAvailable() { return false; }
-nlohmann::json deviceJson() { return nullptr; }
+nlohmann::json deviceJson(int) { return nullptr; }
 #endif
 
 }  // namespace tsah::cli
