@@ -24,9 +24,10 @@ RuntimeMethod runFrames(cli::FrameRuntime& runtime, const RuntimeSetup& setup, R
   return method;
 }
 
-cli::FrameRuntimeOptions gpuOptions(const std::string& layout, const Objective& objective) {
+cli::FrameRuntimeOptions gpuOptions(const std::string& layout, const Objective& objective, int gpu) {
   cli::FrameRuntimeOptions options;
   options.device = Device::Cuda;
+  options.gpu = gpu;
   options.layout = layout.empty() ? Layout::Auto : parse<Layout>(layout);
   options.objective = objective;
   return options;
@@ -37,7 +38,7 @@ cli::FrameRuntimeOptions gpuOptions(const std::string& layout, const Objective& 
 RuntimeMethod runGpuRefit(const anim::Animation& a, const RefitTrees& trees, const RuntimeSetup& setup, Image* image,
                           uint32_t imageFrame, const std::string& layout) {
   // One runtime with every tree uploaded once; each update refits the tree of the frame's part.
-  const auto runtime = cli::makeFrameRuntime(treeSetOf(trees, a), a, gpuOptions(layout, setup.collapse));
+  const auto runtime = cli::makeFrameRuntime(treeSetOf(trees, a), a, gpuOptions(layout, setup.collapse, setup.gpu));
   return runFrames(*runtime, setup, {trees.name, trees.label, "refit", {}, nlohmann::json::object()}, image, imageFrame,
                    nullptr);
 }
@@ -45,7 +46,7 @@ RuntimeMethod runGpuRefit(const anim::Animation& a, const RefitTrees& trees, con
 RuntimeMethod runGpuRebuild(const anim::Animation& a, const Bvh& initialTree, const std::string& method,
                             const CostModel& cost, uint32_t maxLeaf, const RuntimeSetup& setup,
                             const std::string& layout) {
-  cli::FrameRuntimeOptions options = gpuOptions(layout, Objective{0, cost, maxLeaf});
+  cli::FrameRuntimeOptions options = gpuOptions(layout, Objective{0, cost, maxLeaf}, setup.gpu);
   options.rebuild = cli::parseRebuild(method);
   TreeSet first;
   first.trees.push_back(flattenBvh(initialTree));

@@ -12,16 +12,20 @@ add_test(NAME cli.scale.setup.optimize
 set_tests_properties(cli.scale.setup.optimize PROPERTIES FIXTURES_REQUIRED scale_anim FIXTURES_SETUP scale_tree)
 
 # scale_same(NAME MODE LAUNCH RANGES ARG...): tests/support/scale_out_same.cmake on the wave and its
-# tree set (LAUNCH and RANGES as ;-lists in one argument, "-" for none).
+# tree set (LAUNCH and RANGES as ;-lists in one argument, "-" for none; SCALE_SPLIT: the split run's
+# own arguments).
 set(SCALE_TRACE_ARGS --frames 6 --width 48 --height 32 --ao 2 --shadow 1 --threads 1)
 function(scale_same name mode launch ranges)
   string(REPLACE ";" "@@" args "${ARGN}")
   string(REPLACE ";" "@@" launch "${launch}")
+  string(REPLACE ";" "@@" split "${SCALE_SPLIT}")
   add_test(NAME ${name}
            COMMAND ${CMAKE_COMMAND} -DTSAH=$<TARGET_FILE:tsah> -DMODE=${mode} "-DLAUNCH=${launch}" "-DRANGES=${ranges}"
                    -DINPUT=${SO}/wave.tanim -DTREE=${SO}/wave.tbvh -DOUT=${SO}/${name} -DFRAMES=6 "-DARGS=${args}"
+                   "-DSPLIT=${split}"
                    -P ${PROJECT_SOURCE_DIR}/tests/support/scale_out_same.cmake)
-  set_tests_properties(${name} PROPERTIES FIXTURES_REQUIRED "scale_anim;scale_tree")
+  set_tests_properties(${name} PROPERTIES FIXTURES_REQUIRED "scale_anim;scale_tree"
+                       SKIP_REGULAR_EXPRESSION "no CUDA device found|GPU runtime is not built")
 endfunction()
 
 # Three chunks (given out of order) merged equal one run: PNG bytes and the statistics.
@@ -57,6 +61,12 @@ tsah_expect_error(cli.scale.range.bounds 2 "--range 4:9: needs 0 <= START < END 
 tsah_expect_error(cli.scale.range.text 2 "--range expects START:END" trace ${SO}/wave.tanim ${SO}/wave.tbvh
                   --range 3 --no-images)
 set_tests_properties(cli.scale.range.bounds cli.scale.range.text PROPERTIES FIXTURES_REQUIRED "scale_anim;scale_tree")
+# On a machine with GPUs (skipped elsewhere): every GPU against one, the same PNGs and statistics;
+# with MPI, two ranks on the GPUs of their local ranks against one process.
+set(SCALE_SPLIT --devices all)
+scale_same(cli.scale.gpu.devices split - - ${SCALE_TRACE_ARGS} --device cuda)
+set(SCALE_SPLIT)
+
 # --devices without a GPU (CUDA_VISIBLE_DEVICES hides them all; or a build without CUDA): a usage error.
 tsah_expect_error(cli.scale.devices.none 2 "--devices all: no CUDA device found" trace ${SO}/wave.tanim
                   ${SO}/wave.tbvh --device cuda --devices all --no-images)
@@ -77,7 +87,8 @@ set_tests_properties(cli.scale.resample.bounds PROPERTIES FIXTURES_REQUIRED scal
 find_program(TSAH_MPIRUN NAMES mpirun mpiexec)
 if(TSAH_HAVE_MPI AND TSAH_MPIRUN)
   set(MPI2 ${TSAH_MPIRUN} --oversubscribe --allow-run-as-root -n 2)
-  scale_same(cli.scale.mpi.trace mpi "${MPI2}" - ${SCALE_TRACE_ARGS})
+  scale_same(cli.scale.mpi.trace split "${MPI2}" - ${SCALE_TRACE_ARGS})
+  scale_same(cli.scale.gpu.mpi split "${MPI2}" - ${SCALE_TRACE_ARGS} --device cuda)
   scale_same(cli.scale.mpi.optimize optimize "${MPI2}" - --segments auto --budget 1.01 --frames 3 --eval-frames 8
              --reference-frames 4 --threads 1 --reproducible)
   # A rank that cannot read its input (rank 1 is given a missing file): one line naming the rank,

@@ -3,12 +3,17 @@
 # then, by MODE:
 #   chunks: tsah trace ... --range R --out OUT/split --stats OUT/chunk_I.json for each R of RANGES,
 #           merged by `tsah report`
-#   mpi:    LAUNCH tsah trace ... --out OUT/split --stats OUT/split.json (LAUNCH: mpirun -n 2 ...)
+#   split:  LAUNCH tsah trace ... SPLIT --out OUT/split --stats OUT/split.json (LAUNCH: mpirun -n 2 ...
+#           or nothing; SPLIT: more arguments such as --devices all)
 # and requires byte-identical PNGs for the FRAMES frames and the same statistics once the timings
 # are taken out. MODE optimize: `tsah optimize INPUT -o OUT/whole.tbvh ARGS` against
 # `LAUNCH tsah optimize INPUT -o OUT/split.tbvh ARGS`, byte-identical files.
 string(REPLACE "@@" ";" args "${ARGS}")
 string(REPLACE "@@" ";" launch "${LAUNCH}")
+string(REPLACE "@@" ";" split_args "${SPLIT}")
+if(launch STREQUAL "-")
+  set(launch)
+endif()
 file(REMOVE_RECURSE ${OUT})
 file(MAKE_DIRECTORY ${OUT})
 
@@ -43,7 +48,7 @@ if(MODE STREQUAL "chunks")
   endforeach()
   run(${TSAH} report ${files} --json)
 else()
-  run(${launch} ${TSAH} trace ${INPUT} ${TREE} ${args} --out ${OUT}/split --stats ${OUT}/split.json)
+  run(${launch} ${TSAH} trace ${INPUT} ${TREE} ${args} ${split_args} --out ${OUT}/split --stats ${OUT}/split.json)
   run(${TSAH} report ${OUT}/split.json --json)
 endif()
 set(split "${output}")
