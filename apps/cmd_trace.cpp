@@ -73,7 +73,12 @@ void checkDeviceAndLayout(const TraceOptions& opt) {
 #endif
 }
 
+double secondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
 void runTrace(const TraceOptions& opt) {
+  const auto started = std::chrono::steady_clock::now();
   namespace fs = std::filesystem;
   tsah::cli::FrameRuntimeOptions runtimeOptions;
   runtimeOptions.device = opt.device;
@@ -172,9 +177,10 @@ void runTrace(const TraceOptions& opt) {
   std::vector<tsah::Image> images(runtimes.size());
   std::atomic<uint32_t> done{0};
   tsah::cli::Progress progress("tracing");
-  const auto dealer = tsah::cli::makeDealer(unsigned(runtimes.size()), [&](unsigned w) {
-    runtimes[w]->warmUp(times.front(), cameraAt, lighting, settings);
-  });
+  for (const auto& runtime : runtimes) runtime->warmUp(times.front(), cameraAt, lighting, settings);
+  const double loadSeconds = secondsSince(started);
+  const auto loopStart = std::chrono::steady_clock::now();
+  const auto dealer = tsah::cli::makeDealer(unsigned(runtimes.size()));
   const std::vector<uint32_t> units = tsah::unitRange(first, end);
   const std::vector<tsah::UnitResult> results = dealer->deal(units, [&](uint32_t f, unsigned w) {
     tsah::cli::FrameResult r;
@@ -196,6 +202,7 @@ void runTrace(const TraceOptions& opt) {
     const std::string text = tsah::cli::frameJson(r, rebuilds).dump();
     return tsah::UnitResult(text.begin(), text.end());
   });
+  const double loopSeconds = secondsSince(loopStart);
   if (!leader) return;
 
   nlohmann::json out;
@@ -218,6 +225,9 @@ void runTrace(const TraceOptions& opt) {
   out["seed"] = opt.seed;
   out["run_frames"] = frameCount;
   out["range"] = {first, end};
+  // Wall time on rank 0: reading, baking and uploading up to the warmed-up runtimes; the frame
+  // loop (update, trace, shading, PNG written) of the whole range, every rank's frames gathered.
+  out["wall_s"] = {{"load", loadSeconds}, {"frames", loopSeconds}};
   if (!opt.noImages) out["images"] = opt.out;
   std::vector<tsah::cli::FrameResult> frames;
   for (const tsah::UnitResult& bytes : results)

@@ -99,3 +99,14 @@ if(TSAH_HAVE_MPI AND TSAH_MPIRUN)
   set_tests_properties(cli.scale.mpi.rank_fails PROPERTIES FIXTURES_REQUIRED "scale_anim;scale_tree" TIMEOUT 60
     PASS_REGULAR_EXPRESSION "^tsah: rank 1: [^\n]*missing.tanim[^\n]*\n(.*\n)?exit=[1-9]")
 endif()
+
+# A process bound to one core (as mpirun binds each rank): the CPU runtime takes one thread, and
+# TBB has nothing to warn about.
+find_program(TSAH_TASKSET taskset)
+if(TSAH_TASKSET)
+  add_test(NAME cli.scale.bound_to_one_core
+           COMMAND ${TSAH_TASKSET} -c 0 $<TARGET_FILE:tsah> trace ${SO}/wave.tanim ${SO}/wave.tbvh --frames 2
+                   --width 32 --height 24 --no-images --json)
+  set_tests_properties(cli.scale.bound_to_one_core PROPERTIES FIXTURES_REQUIRED "scale_anim;scale_tree"
+                       PASS_REGULAR_EXPRESSION "\"threads\":1," FAIL_REGULAR_EXPRESSION "TBB Warning")
+endif()

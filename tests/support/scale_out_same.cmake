@@ -68,7 +68,7 @@ endforeach()
 
 # The statistics without what differs between runs: timings, rates, the output folder, who ran it.
 foreach(v whole split)
-  string(REGEX REPLACE ",?\"workers\":{[^}]*}" "" ${v} "${${v}}")
+  string(REGEX REPLACE ",?\"(workers|wall_s)\":{[^}]*}" "" ${v} "${${v}}")
   string(REGEX REPLACE "\"(trace_ms_by_type|mrays_per_s)\":{[^}]*}" "" ${v} "${${v}}")
   string(REGEX REPLACE "\"[a-z_]+_ms\":[0-9.e+-]+" "" ${v} "${${v}}")
   string(REPLACE "${OUT}/split" "${OUT}/whole" ${v} "${${v}}")
