@@ -318,10 +318,13 @@ std::vector<double> referenceCosts(const Timeline& tl, const SegmentationConfig&
   const uint32_t r = c.referenceFrames == 0 || c.referenceFrames >= m ? m : std::max(2u, c.referenceFrames);
   std::vector<uint32_t> sample(r);
   for (uint32_t q = 0; q < r; ++q) sample[q] = static_cast<uint32_t>(std::lround(double(q) * (m - 1) / (r - 1)));
-  // One tree per sampled frame, each on one thread, dealt to the workers.
+  // One tree per sampled frame, each on one thread: on this process's threads, or dealt to the
+  // dealer's workers where they are GPUs (the device optimizer) or other processes.
   const unsigned hardware = std::max(1u, std::thread::hardware_concurrency());
   ThreadDealer threads(std::min<unsigned>(r, c.baseline.threads == 0 ? hardware : c.baseline.threads));
-  WorkDealer& dealer = c.dealer ? *c.dealer : threads;
+  const bool spread =
+      c.dealer && (c.baseline.deviceOptimizer || c.dealer->totalWorkers() > c.dealer->localWorkers());
+  WorkDealer& dealer = spread ? *c.dealer : threads;
   BaselineConfig single = c.baseline;
   single.threads = 1;
   single.progress = nullptr;
