@@ -16,13 +16,12 @@ std::vector<UnitResult> ThreadDealer::deal(std::span<const uint32_t> units, cons
   std::vector<std::exception_ptr> errors(units.size());
   std::atomic<std::size_t> next{0};
   std::atomic<bool> failed{false};
+  std::vector<std::exception_ptr> startErrors(workers_);
   auto run = [&](unsigned worker) {
     try {
       if (start_) start_(worker);
-    } catch (...) {
-      // A worker that cannot start (its GPU refused) fails the deal through the first unit it would take.
-      const std::size_t i = next.fetch_add(1);
-      if (i < units.size()) errors[i] = std::current_exception();
+    } catch (...) {  // a worker that cannot start (its GPU refused) fails the deal
+      startErrors[worker] = std::current_exception();
       failed = true;
       return;
     }
@@ -41,6 +40,8 @@ std::vector<UnitResult> ThreadDealer::deal(std::span<const uint32_t> units, cons
   if (!units.empty()) run(0);
   for (std::thread& t : pool) t.join();
   for (const std::exception_ptr& e : errors)
+    if (e) std::rethrow_exception(e);
+  for (const std::exception_ptr& e : startErrors)
     if (e) std::rethrow_exception(e);
   return results;
 }

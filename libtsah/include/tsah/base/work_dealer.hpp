@@ -24,7 +24,8 @@ class WorkDealer {
   virtual unsigned totalWorkers() const { return localWorkers(); }
   // Runs work for every unit in `units` and returns their results in the order of `units`. An error
   // of a unit is rethrown here after the other workers stopped taking units (the lowest such unit's
-  // error, so that the message does not depend on timing).
+  // error, so that the message does not depend on timing); so is the error of a worker that could
+  // not start.
   virtual std::vector<UnitResult> deal(std::span<const uint32_t> units, const UnitWork& work) = 0;
 };
 
