@@ -17,7 +17,7 @@ nlohmann::json passesJson(const RenderStats& s, auto value) {
 constexpr const char* kRunKeys[] = {"animation", "bvh",    "method",  "trees",  "rebuild",  "width",
                                     "height",    "ao_rays_per_pixel", "shadow_rays_per_pixel",
                                     "ao_distance", "ground", "camera", "triangles", "seed", "run_frames",
-                                    "layout",    "images"};
+                                    "layout"};
 
 }  // namespace
 
@@ -171,6 +171,9 @@ nlohmann::json mergeChunks(const std::vector<std::pair<std::string, nlohmann::js
                     std::to_string(total) + " are in no chunk (the last is " + *sorted.back().file + ")");
   nlohmann::json run = *first.run;
   run["range"] = {0, total};
+  // The images' folder where every chunk wrote into the same one (each frame names its PNG anyway).
+  for (const Chunk& c : sorted)
+    if (c.run->value("images", nlohmann::json()) != run.value("images", nlohmann::json())) run.erase("images");
   setFrames(run, std::move(frames));
   return run;
 }

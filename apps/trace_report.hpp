@@ -36,7 +36,8 @@ void printTraceSummary(const nlohmann::json& run);
 
 // The whole run from its chunks' objects ({file, object} each): refuses (DataError naming the
 // file) objects of another run (a different animation, tree, image size, camera, seed, ... or
-// frame count), overlapping ranges and missing frames. The run's description is the first chunk's.
+// frame count), overlapping ranges and missing frames. The run's description is the first chunk's;
+// "images" only where every chunk wrote its PNGs into the same folder.
 nlohmann::json mergeChunks(const std::vector<std::pair<std::string, nlohmann::json>>& chunks);
 
 }  // namespace tsah::cli

@@ -38,7 +38,8 @@ add_test(NAME cli.scale.setup.chunks
                  "$<TARGET_FILE:tsah> trace wave.tanim wave.tbvh ${trace_args} --no-images --range 0:3 --stats c03.json >/dev/null && \
                   $<TARGET_FILE:tsah> trace wave.tanim wave.tbvh ${trace_args} --no-images --range 2:6 --stats c26.json >/dev/null && \
                   $<TARGET_FILE:tsah> trace wave.tanim wave.tbvh ${trace_args} --no-images --range 4:6 --stats c46.json >/dev/null && \
-                  $<TARGET_FILE:tsah> trace wave.tanim wave.tbvh ${trace_args} --no-images --range 3:6 --seed 2 --stats s2.json >/dev/null")
+                  $<TARGET_FILE:tsah> trace wave.tanim wave.tbvh ${trace_args} --no-images --range 3:6 --seed 2 --stats s2.json >/dev/null && \
+                  $<TARGET_FILE:tsah> trace wave.tanim wave.tbvh ${trace_args} --out other --range 3:6 --stats i36.json >/dev/null")
 set_tests_properties(cli.scale.setup.chunks PROPERTIES FIXTURES_REQUIRED "scale_anim;scale_tree" FIXTURES_SETUP scale_chunks)
 foreach(case "overlap;c03.json;c26.json;c26.json: frames 2..2 are also in another chunk"
              "gap;c46.json;c03.json;frames 3..3 of 6 are in no chunk \\(the next is .*c46.json\\)"
@@ -55,6 +56,11 @@ foreach(case "overlap;c03.json;c26.json;c26.json: frames 2..2 are also in anothe
   tsah_expect_error(cli.scale.report.${what} 1 "${regex}" report ${paths})
   set_tests_properties(cli.scale.report.${what} PROPERTIES FIXTURES_REQUIRED scale_chunks)
 endforeach()
+# Chunks whose PNGs went to different folders (here: none, and other/) still make one run; the
+# summary names no single folder.
+add_test(NAME cli.scale.report.folders COMMAND tsah report ${SO}/i36.json ${SO}/c03.json)
+set_tests_properties(cli.scale.report.folders PROPERTIES FIXTURES_REQUIRED scale_chunks
+                     PASS_REGULAR_EXPRESSION "\n    5 .*\n  avg " FAIL_REGULAR_EXPRESSION "images in")
 # --range out of the run: a usage error.
 tsah_expect_error(cli.scale.range.bounds 2 "--range 4:9: needs 0 <= START < END <= 6" trace ${SO}/wave.tanim
                   ${SO}/wave.tbvh --frames 6 --range 4:9 --no-images)
