@@ -90,8 +90,16 @@ tsah_expect_error(cli.scale.resample.bounds 2 "--range 9:12: needs 0 <= START < 
 set_tests_properties(cli.scale.resample.bounds PROPERTIES FIXTURES_REQUIRED scale_anim)
 
 # MPI: two ranks on the CPU against one process.
+# (Open MPI's mpirun: the flags below are its own.)
 find_program(TSAH_MPIRUN NAMES mpirun mpiexec)
-if(TSAH_HAVE_MPI AND TSAH_MPIRUN)
+set(TSAH_MPIRUN_IS_OPEN_MPI OFF)
+if(TSAH_MPIRUN)
+  execute_process(COMMAND ${TSAH_MPIRUN} --version OUTPUT_VARIABLE mpirun_version ERROR_QUIET)
+  if(mpirun_version MATCHES "Open MPI")
+    set(TSAH_MPIRUN_IS_OPEN_MPI ON)
+  endif()
+endif()
+if(TSAH_HAVE_MPI AND TSAH_MPIRUN_IS_OPEN_MPI)
   set(MPI2 ${TSAH_MPIRUN} --oversubscribe --allow-run-as-root -n 2)
   scale_same(cli.scale.mpi.trace split "${MPI2}" - ${SCALE_TRACE_ARGS})
   scale_same(cli.scale.gpu.mpi split "${MPI2}" - ${SCALE_TRACE_ARGS} --device cuda)
