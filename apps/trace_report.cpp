@@ -134,6 +134,9 @@ nlohmann::json mergeChunks(const std::vector<std::pair<std::string, nlohmann::js
   for (const auto& [file, run] : chunks) {
     if (!run.is_object() || !run.contains("range") || !run.contains("frames") || !run.contains("run_frames"))
       throw FileError(file, "not the statistics of `tsah trace --stats` (no range, frames or run_frames)");
+    if (!run.at("frames").is_array() || !run.at("run_frames").is_number_unsigned() ||
+        !run.value("rebuild", nlohmann::json()).is_string())
+      throw FileError(file, "frames must be a list, run_frames a count and rebuild a name");
     const nlohmann::json& range = run.at("range");
     if (!range.is_array() || range.size() != 2 || !range[0].is_number_unsigned() || !range[1].is_number_unsigned())
       throw FileError(file, "range must be [start, end]");

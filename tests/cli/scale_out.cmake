@@ -61,6 +61,13 @@ endforeach()
 add_test(NAME cli.scale.report.folders COMMAND tsah report ${SO}/i36.json ${SO}/c03.json)
 set_tests_properties(cli.scale.report.folders PROPERTIES FIXTURES_REQUIRED scale_chunks
                      PASS_REGULAR_EXPRESSION "\n    5 .*\n  avg " FAIL_REGULAR_EXPRESSION "images in")
+# Files that are not chunk statistics.
+file(WRITE ${SO}/no_range.json "{\"frames\": []}")
+file(WRITE ${SO}/bad_types.json "{\"range\": [0, 1], \"frames\": {}, \"run_frames\": 1}")
+tsah_expect_error(cli.scale.report.not_stats 1 "no_range.json: not the statistics of `tsah trace --stats`" report
+                  ${SO}/no_range.json)
+tsah_expect_error(cli.scale.report.bad_types 1 "bad_types.json: frames must be a list, run_frames a count" report
+                  ${SO}/bad_types.json)
 # --range out of the run: a usage error.
 tsah_expect_error(cli.scale.range.bounds 2 "--range 4:9: needs 0 <= START < END <= 6" trace ${SO}/wave.tanim
                   ${SO}/wave.tbvh --frames 6 --range 4:9 --no-images)
