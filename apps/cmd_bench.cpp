@@ -15,6 +15,7 @@
 #include "tsah/base/files.hpp"
 #include "tsah/base/error.hpp"
 #include "bench/bench.hpp"
+#include "scale_out.hpp"
 #include "bench/data_scan.hpp"
 #include "bench/embree_peer.hpp"
 #include "bench/paper.hpp"
@@ -44,6 +45,7 @@ struct Options {
   std::string data, out = "bench", cache;
   std::vector<std::string> notes;
   tsah::bench::BenchOptions bench;
+  std::string devices;  // --devices all|0,2,...
   bool list = false, reportOnly = false, noEmbree = false, noConvergence = false;
   bool scaling = false;  // --scaling: the optimizers' scaling mode (bench/scaling.hpp) instead
   tsah::bench::ScalingOptions scalingOptions;
@@ -187,6 +189,10 @@ void run(Options opt, CLI::App* sub) {
                                    ? ": no CUDA device is available on this machine"
                                    : ": this tsah was built without the CUDA runtime"));
   };
+  if (!opt.devices.empty()) {
+    if (b.device != tsah::Device::Cuda) throw UsageError("--devices chooses GPUs: use it with --device cuda");
+    b.devices = tsah::cli::parseDevices(opt.devices);
+  }
   if (b.device == tsah::Device::Cuda) requireGpu("--device cuda");
   if (b.optimizer == "cuda") requireGpu("--optimizer cuda");
   ProgressLog log;
@@ -361,6 +367,9 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
       ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
   sub->add_option("--threads", b.threads, "CPU worker threads (0: all cores)")->capture_default_str();
+  sub->add_option("--devices", opt->devices,
+                  "With --device cuda: all, or GPU indices such as 0,2: the GPU methods of Table 2 dealt to these "
+                  "GPUs, each method's frames on one GPU (per-method figures as on one GPU, the run shorter)");
   sub->add_option("--optimizer", b.optimizer,
                   "Optimizer of SAH*, SAH-rebuild and T-SAH: sequential (the paper's), parallel (all cores) or "
                   "cuda (parallel reinsertion on the GPU)")

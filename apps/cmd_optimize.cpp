@@ -7,6 +7,7 @@
 // set instead (docs/segmentation.md): K trees, or the fewest trees that keep every evaluation frame
 // within the budget, with split points chosen by tsah::segmentTimeline, written as one .tbvh set
 // file (version 2) that `tsah trace`, `export`, `info` and `bench` switch through by themselves.
+#include <algorithm>
 #include <cstdio>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -14,11 +15,15 @@
 #include "animation_frames.hpp"
 #include "cli.hpp"
 #include "optimizer_options.hpp"
+#include "scale_out.hpp"
 #include "tsah/optimize/baselines.hpp"
 #include "tsah/io/bvh_file.hpp"
 #include "tsah/pipeline.hpp"
 #include "tsah/optimize/segmentation.hpp"
 #include "tsah/io/tree_set.hpp"
+#if TSAH_HAVE_CUDA
+#include "tsah_cuda/device.hpp"
+#endif
 
 namespace {
 
@@ -33,6 +38,8 @@ struct Options {
   uint32_t referenceFrames = tsah::SegmentationConfig{}.referenceFrames;
   uint32_t maxTrees = tsah::SegmentationConfig{}.maxTrees;
   bool json = false;
+  bool reproducible = false;  // build times written as 0
+  std::string devices;        // --devices all|0,2,...
 };
 
 
@@ -101,13 +108,25 @@ void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim:
     setInfo.segmentation = method.k > 0 ? "count-peak" : "count";
     progress.message("choosing split points for " + opt.segments + " trees");
   }
+  // The candidate trees dealt to the GPUs of --devices (each worker thread on its own GPU; the GPU
+  // optimizer uses the thread's), to this rank's GPU, or built here on the CPU; and to the ranks.
+  std::vector<int> gpus;
+  if (opt.tree.device == tsah::Device::Cuda)
+    gpus = opt.devices.empty() ? std::vector<int>{tsah::cli::rankDevice()} : tsah::cli::parseDevices(opt.devices);
+  const auto dealer = tsah::cli::makeDealer(unsigned(std::max<std::size_t>(1, gpus.size())), [&gpus](unsigned w) {
+#if TSAH_HAVE_CUDA
+    if (!gpus.empty()) tsah::cuda::useDevice(gpus[w]);
+#endif
+  });
+  sc.dealer = dealer.get();
   const tsah::SegmentationResult r = tsah::segmentTimeline(tsah::cli::animationTimeline(a), sc);
+  if (!tsah::cli::job::leader()) return;  // every rank has the result; one writes it
 
   std::vector<tsah::BvhBuildInfo> builds;
   nlohmann::json parts = nlohmann::json::array();
   for (uint32_t s = 0; s < r.trees.size(); ++s) {
-    tsah::BvhBuildInfo info =
-        tsah::treeBuildInfo(opt.tree, a, frames, r.buildSeconds[s], r.buildRanges[s].start, r.buildRanges[s].end);
+    tsah::BvhBuildInfo info = tsah::treeBuildInfo(opt.tree, a, frames, opt.reproducible ? 0.0 : r.buildSeconds[s],
+                                                  r.buildRanges[s].start, r.buildRanges[s].end);
     if (r.methods[s] == "sah-frame") {
       info.method = "sah-frame";
       info.objective.k = 0;
@@ -148,6 +167,7 @@ void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim:
   j["trees"] = r.trees.size();
   j["overlap"] = opt.overlap;
   j["candidate_trees_built"] = r.treesBuilt;
+  j["workers"] = {{"ranks", tsah::cli::job::size()}, {"per_rank", dealer->localWorkers()}};
   j["search_s"] = r.searchSeconds;
   j["cost"] = {{"average", r.average}, {"maximum", r.maximum}, {"per_frame", r.costs}};
   if (sc.mode == tsah::SegmentationConfig::Mode::Budget) {
@@ -199,6 +219,8 @@ void run(const Options& opt) {
   tsah::TreeOptions treeOpt = opt.tree;
   const tsah::MethodSpec method = treeOpt.methodSpec();
   tsah::cli::checkTreeDevice(treeOpt);
+  if (!opt.devices.empty() && treeOpt.device != tsah::Device::Cuda)
+    throw tsah::cli::UsageError("--devices chooses GPUs: use it with --device cuda");
   const anim::Animation a = tsah::cli::loadInput(opt.input);
   if (a.triangleCount() == 0) throw tsah::cli::UsageError(opt.input + ": no triangles to build a tree over");
   // A static input has one frame: resampling it would only repeat that frame.
@@ -223,12 +245,16 @@ void run(const Options& opt) {
     if (evalFrames < 2) throw tsah::cli::UsageError("--segments needs at least 2 --eval-frames");
     return runSegments(opt, method, a, frames, evalFrames, treeOpt.baselineConfig(), progress);
   }
+  if (!opt.devices.empty()) throw tsah::cli::UsageError("--devices deals the candidate trees of --segments");
+  // One tree is one unit of work: the other ranks of a job have nothing to do.
+  if (!tsah::cli::job::leader()) return;
 
   const tsah::OptimizedTree tree = tsah::optimizeAnimation(a, treeOpt);
   const tsah::Bvh& bvh = tree.bvh;
   const tsah::InsertionOptimizer::Result& details = tree.optimization;
-  const tsah::BvhBuildInfo& info = tree.info;
-  const double buildSeconds = info.buildSeconds;
+  const double buildSeconds = tree.info.buildSeconds;
+  tsah::BvhBuildInfo info = tree.info;
+  if (opt.reproducible) info.buildSeconds = 0.0;
 
   progress.message("evaluating " + std::to_string(evalFrames) + " frames");
   const std::vector<double> perFrame = tsah::evaluateAnimation(bvh, a, evalFrames, opt.tree.objective.cost, opt.tree.threads);
@@ -309,6 +335,12 @@ TSAH_REGISTER_COMMAND(40, [](CLI::App& app) {
       ->check(CLI::Range(1u, tsah::kTbvhMaxTrees))
       ->capture_default_str();
   sub->add_flag("--json", opt->json, "Print one JSON object");
+  sub->add_flag("--reproducible", opt->reproducible,
+                "Write 0 as every tree's build time: the same inputs give the same file bytes, however the work "
+                "was split (--devices, MPI ranks)");
+  sub->add_option("--devices", opt->devices,
+                  "--segments with --device cuda: all, or GPU indices such as 0,2: candidate trees optimized on "
+                  "these GPUs at once");
   // Options that only a tree set (or only the budget search) reads are refused elsewhere, not ignored.
   sub->callback([opt, overlap, referenceFrames, maxTrees] {
     using tsah::cli::UsageError;

@@ -1,4 +1,4 @@
-// tsah resample INPUT -o OUT.tanim|OUT.pc2|OUT.mdd [--frames N] [--no-mesh]
+// tsah resample INPUT -o OUT.tanim|OUT.pc2|OUT.mdd [--frames N] [--range START:END] [--no-mesh]
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
@@ -7,6 +7,7 @@
 #include "anim/point_cache.hpp"
 #include "anim/tanim.hpp"
 #include "cli.hpp"
+#include "scale_out.hpp"
 #include "tsah/base/files.hpp"
 #include "tsah/base/memory.hpp"
 
@@ -48,6 +49,7 @@ TSAH_REGISTER_COMMAND(30, [](CLI::App& app) {
   struct Options {
     std::string input, output;
     uint32_t frames = 0;
+    std::string range;  // START:END over the output's keyframes, half-open
     bool noMesh = false;
   };
   auto opt = std::make_shared<Options>();
@@ -57,12 +59,17 @@ TSAH_REGISTER_COMMAND(30, [](CLI::App& app) {
       ->required();
   sub->add_option("--frames", opt->frames, "Uniformly spaced frames over the time range (default: keep every keyframe)")
       ->check(CLI::Range(1u, anim::Animation::kMaxResampleFrames));
+  sub->add_option("--range", opt->range,
+                  "START:END: only the output keyframes START .. END-1 (half-open), at their times in the whole output");
   sub->add_flag("--no-mesh", opt->noMesh, "With a .pc2/.mdd output: do not write the topology OBJ next to it");
   sub->callback([opt] {
     const anim::Animation input = tsah::cli::loadInput(opt->input);
     tsah::checkFitsInMemory(resampleBytes(input, opt->frames, opt->output, !opt->noMesh), input.name(),
                             std::to_string(opt->frames ? opt->frames : input.keyframeCount()) + " frames");
-    const anim::Animation out = opt->frames ? input.resample(opt->frames) : input;
+    const anim::Animation whole = opt->frames ? input.resample(opt->frames) : input;
+    const auto [first, end] = tsah::cli::parseFrameRange(opt->range, whole.keyframeCount());
+    const anim::Animation out =
+        opt->range.empty() ? whole : whole.segment(whole.times()[first], whole.times()[end - 1]);
     std::string extra;
     if (anim::pointCacheFormat(opt->output)) {
       tsah::AtomicFileSet files;

@@ -2,6 +2,7 @@
 // and trace primary, ambient-occlusion and shadow rays, on the CPU (tsah::CpuRuntime) or on the GPU
 // (tsah::cuda::GpuRuntime); one PNG per frame and timings.
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -21,6 +22,8 @@
 #include "tsah/io/tree_set.hpp"
 #include "cli.hpp"
 #include "frame_runtime.hpp"
+#include "scale_out.hpp"
+#include "trace_report.hpp"
 #include "tsah/render/camera.hpp"
 #include "tsah/render/camera_path.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
@@ -32,10 +35,6 @@
 namespace {
 
 using tsah::cli::UsageError;
-
-double msSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-}
 
 tsah::Vec3 parseVec3(const std::string& text, const std::string& option) {
   std::stringstream in(text);
@@ -57,6 +56,9 @@ struct TraceOptions {
   uint32_t frames = 0, width = 1024, height = 768, ao = 8, shadow = 2, threads = 0, seed = 1;
   float fov = 45.0f, aoDistance = 0.0f, aoFraction = 0.1f;
   bool json = false, noImages = false, noGround = false;
+  std::string range;    // START:END, half-open over the frame indices (empty: every frame)
+  std::string stats;    // file for the JSON statistics (--stats)
+  std::string devices;  // --devices all|0,2,...
 };
 
 void checkDeviceAndLayout(const TraceOptions& opt) {
@@ -72,30 +74,12 @@ void checkDeviceAndLayout(const TraceOptions& opt) {
 #endif
 }
 
-struct FrameResult {
-  uint32_t frame = 0;
-  double time = 0.0;
-  uint32_t tree = 0;  // of a tree set: the tree of the frame's part
-  tsah::cli::FrameUpdate update;
-  tsah::RenderStats render;
-  double pngMs = 0.0;
-  std::string image;
-};
-
-nlohmann::json raysJson(const tsah::RenderStats& s) {
-  return {{"primary", s.primary.rays}, {"ao", s.ao.rays}, {"shadow", s.shadow.rays}, {"total", s.total().rays}};
-}
-nlohmann::json rateJson(const tsah::RenderStats& s) {
-  return {{"primary", s.primary.mraysPerSecond()},
-          {"ao", s.ao.mraysPerSecond()},
-          {"shadow", s.shadow.mraysPerSecond()},
-          {"total", s.total().mraysPerSecond()}};
-}
-nlohmann::json traceMsJson(const tsah::RenderStats& s) {
-  return {{"primary", s.primary.ms}, {"ao", s.ao.ms}, {"shadow", s.shadow.ms}};
+double secondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
 void runTrace(const TraceOptions& opt) {
+  const auto started = std::chrono::steady_clock::now();
   namespace fs = std::filesystem;
   tsah::cli::FrameRuntimeOptions runtimeOptions;
   runtimeOptions.device = opt.device;
@@ -106,6 +90,10 @@ void runTrace(const TraceOptions& opt) {
   runtimeOptions.threads = opt.threads;
   runtimeOptions.rebuild = tsah::cli::parseRebuild(opt.rebuild);
   tsah::cli::checkRebuildForDevice(runtimeOptions.rebuild, opt.device);
+  if (!opt.devices.empty() && opt.device != tsah::Device::Cuda)
+    throw UsageError("--devices chooses GPUs: use it with --device cuda");
+  const std::vector<int> devices = !opt.devices.empty() ? tsah::cli::parseDevices(opt.devices)
+                                   : std::vector<int>{opt.device == tsah::Device::Cuda ? tsah::cli::rankDevice() : 0};
   checkDeviceAndLayout(opt);
   if (opt.eye.empty() != opt.lookAt.empty()) throw UsageError("--eye and --look-at go together");
   if (!opt.camera.empty() && !opt.eye.empty()) throw UsageError("give either --camera or --eye/--look-at");
@@ -122,10 +110,17 @@ void runTrace(const TraceOptions& opt) {
   const anim::Animation a = tsah::cli::loadInput(opt.input);
   tsah::cli::checkTreeMatchesAnimation(info, opt.bvh, a, opt.input);
   runtimeOptions.objective = info.objective;
-  const std::unique_ptr<tsah::cli::FrameRuntime> rt = tsah::cli::makeFrameRuntime(trees, a, runtimeOptions);
-
   const uint32_t frameCount = opt.frames ? opt.frames : std::min<uint32_t>(a.keyframeCount(), 50);
+  const auto [first, end] = tsah::cli::parseFrameRange(opt.range, frameCount);
   const std::vector<double> times = a.uniformTimes(frameCount);
+  // One runtime per GPU of --devices (each on its own GPU), else one: the CPU, or the GPU of this
+  // rank.
+  std::vector<std::unique_ptr<tsah::cli::FrameRuntime>> runtimes;
+  for (int gpu : devices) {
+    runtimeOptions.gpu = gpu;
+    runtimes.push_back(tsah::cli::makeFrameRuntime(trees, a, runtimeOptions));
+  }
+  const tsah::cli::FrameRuntime& rt = *runtimes.front();
 
   // Camera: a file, the command line, the animation's own camera path, or fitted to the bounds
   // of all frames (so it does not move while the animation plays).
@@ -168,130 +163,93 @@ void runTrace(const TraceOptions& opt) {
   settings.shadowSamples = opt.shadow;
   settings.seed = opt.seed;
   // The frame's buffers on either device (the CPU renderer's, or the host side of the GPU's) and its
-  // PNG (the raw rows and at most as much compressed), stated before the first frame is rendered.
+  // PNG (the raw rows and at most as much compressed), one of each per runtime, stated before the
+  // first frame is rendered.
   const std::size_t pngBytes = opt.noImages ? 0 : std::size_t(opt.width) * opt.height * 3 * 2;
-  tsah::checkFitsInMemory(tsah::renderFrameBytes(settings, a.vertexCount()) + pngBytes, opt.input,
+  tsah::checkFitsInMemory((tsah::renderFrameBytes(settings, a.vertexCount()) + pngBytes) * runtimes.size(), opt.input,
                           "tracing " + std::to_string(opt.width) + "x" + std::to_string(opt.height) + " frames");
-  rt->warmUp(times.front(), cameraAt, lighting, settings);
-
   const bool rebuilds = opt.rebuild != "none";
   const std::string mode =
       rebuilds ? "rebuild " + opt.rebuild + (tsah::cli::isGpuRebuild(runtimeOptions.rebuild) ? " (GPU)" : " (CPU)")
                : trees.size() > 1 ? "refit of the tree of each frame's part (" + std::to_string(trees.size()) + " trees)"
                                   : "refit";
-  if (!opt.json)
-    std::printf("%u frames, %ux%u, %u AO + %u shadow rays per pixel, %s, %s, camera %s\n", frameCount, opt.width,
-                opt.height, opt.ao, opt.shadow, rt->summary().c_str(), mode.c_str(), cameraSource.c_str());
-  tsah::Image image;
-  std::vector<FrameResult> results;
+  const bool leader = tsah::cli::job::leader();
+  if (!opt.json && leader)
+    std::printf("%u frames, %ux%u, %u AO + %u shadow rays per pixel, %s%s, %s, camera %s\n", end - first, opt.width,
+                opt.height, opt.ao, opt.shadow, rt.summary().c_str(),
+                runtimes.size() > 1 ? (" (x" + std::to_string(runtimes.size()) + ")").c_str() : "", mode.c_str(),
+                cameraSource.c_str());
+  std::fflush(stdout);
+
+  // The frames of the range, dealt to the runtimes (and the ranks of an MPI job); each frame's
+  // picture depends on its index only, so who renders it does not matter.
+  std::vector<tsah::Image> images(runtimes.size());
+  std::atomic<uint32_t> done{0};
   tsah::cli::Progress progress("tracing");
-  for (uint32_t f = 0; f < frameCount; ++f) {
-    progress.update(f, frameCount);
-    FrameResult r;
+  for (const auto& runtime : runtimes) runtime->warmUp(times.front(), cameraAt, lighting, settings);
+  const double loadSeconds = secondsSince(started);
+  const auto loopStart = std::chrono::steady_clock::now();
+  const auto dealer = tsah::cli::makeDealer(unsigned(runtimes.size()));
+  const std::vector<uint32_t> units = tsah::unitRange(first, end);
+  const std::vector<tsah::UnitResult> results = dealer->deal(units, [&](uint32_t f, unsigned w) {
+    tsah::cli::FrameResult r;
     r.frame = f;
     r.time = times[f];
-    r.update = rt->update(r.time);
-    r.tree = rt->currentTree();
-    settings.frame = f;
-    r.render = rt->render(cameraAt(r.time), lighting, settings, opt.noImages ? nullptr : &image).rays;
+    r.update = runtimes[w]->update(r.time);
+    r.tree = runtimes[w]->currentTree();
+    tsah::RenderSettings frameSettings = settings;
+    frameSettings.frame = f;
+    r.render = runtimes[w]->render(cameraAt(r.time), lighting, frameSettings, opt.noImages ? nullptr : &images[w]).rays;
     if (!opt.noImages) {
-      const auto s = std::chrono::steady_clock::now();
       char name[32];
       std::snprintf(name, sizeof name, "frame_%04u.png", f);
       r.image = (fs::path(opt.out) / name).string();
-      tsah::savePng(r.image, image);
-      r.pngMs = msSince(s);
+      tsah::savePng(r.image, images[w]);
     }
-    results.push_back(r);
-  }
+    ++done;
+    if (w == 0) progress.update(done, units.size() / std::size_t(tsah::cli::job::size()));  // one thread prints
+    const std::string text = tsah::cli::frameJson(r, rebuilds).dump();
+    return tsah::UnitResult(text.begin(), text.end());
+  });
+  const double loopSeconds = secondsSince(loopStart);
+  if (!leader) return;
 
-  // Averages: times are means over frames, rates are total rays over total time per ray type.
-  FrameResult avg;
-  tsah::RenderStats sum;
-  for (const FrameResult& r : results) {
-    avg.update.interpolateMs += r.update.interpolateMs / frameCount;
-    avg.update.refitMs += r.update.refitMs / frameCount;
-    avg.update.buildMs += r.update.buildMs / frameCount;
-    avg.update.updateMs += r.update.updateMs / frameCount;
-    avg.render.shadeMs += r.render.shadeMs / frameCount;
-    for (auto [total, part] : {std::pair{&sum.primary, &r.render.primary}, std::pair{&sum.ao, &r.render.ao},
-                               std::pair{&sum.shadow, &r.render.shadow}}) {
-      total->rays += part->rays;
-      total->ms += part->ms;
-    }
+  nlohmann::json out;
+  rt.describe(out);
+  if (runtimes.size() > 1 || tsah::cli::job::size() > 1)
+    out["workers"] = {{"ranks", tsah::cli::job::size()}, {"runtimes_per_rank", runtimes.size()}};
+  out["animation"] = opt.input;
+  out["bvh"] = opt.bvh;
+  out["method"] = info.method;
+  out["trees"] = trees.size();
+  out["rebuild"] = opt.rebuild;
+  out["width"] = opt.width;
+  out["height"] = opt.height;
+  out["ao_rays_per_pixel"] = opt.ao;
+  out["shadow_rays_per_pixel"] = opt.shadow;
+  out["ao_distance"] = lighting.aoDistance;
+  out["ground"] = lighting.ground;
+  out["camera"] = cameraSource;
+  out["triangles"] = a.triangleCount();
+  out["seed"] = opt.seed;
+  out["run_frames"] = frameCount;
+  out["range"] = {first, end};
+  // Wall time on rank 0: reading, baking and uploading up to the warmed-up runtimes; the frame
+  // loop (update, trace, shading, PNG written) of the whole range, every rank's frames gathered.
+  out["wall_s"] = {{"load", loadSeconds}, {"frames", loopSeconds}};
+  if (!opt.noImages) out["images"] = opt.out;
+  std::vector<tsah::cli::FrameResult> frames;
+  for (const tsah::UnitResult& bytes : results)
+    frames.push_back(tsah::cli::frameFromJson(nlohmann::json::parse(bytes.begin(), bytes.end())));
+  tsah::cli::setFrames(out, std::move(frames));
+  if (!opt.stats.empty()) {
+    const std::string text = out.dump() + "\n";
+    tsah::writeFileAtomically(opt.stats, std::span(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
   }
-  auto traceMs = [](const tsah::RenderStats& s) { return s.total().ms; };
-
-  if (opt.json) {
-    nlohmann::json out;
-    rt->describe(out);
-    out["animation"] = opt.input;
-    out["bvh"] = opt.bvh;
-    out["method"] = info.method;
-    out["trees"] = trees.size();
-    out["rebuild"] = opt.rebuild;
-    out["width"] = opt.width;
-    out["height"] = opt.height;
-    out["ao_rays_per_pixel"] = opt.ao;
-    out["shadow_rays_per_pixel"] = opt.shadow;
-    out["ao_distance"] = lighting.aoDistance;
-    out["ground"] = lighting.ground;
-    out["camera"] = cameraSource;
-    out["triangles"] = a.triangleCount();
-    nlohmann::json frames = nlohmann::json::array();
-    for (const FrameResult& r : results) {
-      nlohmann::json j;
-      j["frame"] = r.frame;
-      j["time"] = r.time;
-      if (!rebuilds) j["tree"] = r.tree;
-      j["update_ms"] = r.update.updateMs;
-      j["interpolate_ms"] = r.update.interpolateMs;
-      j["refit_ms"] = r.update.refitMs;
-      if (rebuilds) j["build_ms"] = r.update.buildMs;
-      j["trace_ms"] = traceMs(r.render);
-      j["trace_ms_by_type"] = traceMsJson(r.render);
-      j["shade_ms"] = r.render.shadeMs;
-      j["total_ms"] = r.update.updateMs + traceMs(r.render);
-      j["rays"] = raysJson(r.render);
-      j["mrays_per_s"] = rateJson(r.render);
-      if (!r.image.empty()) j["image"] = r.image;
-      frames.push_back(j);
-    }
-    out["frames"] = frames;
-    nlohmann::json av;
-    av["update_ms"] = avg.update.updateMs;
-    av["interpolate_ms"] = avg.update.interpolateMs;
-    av["refit_ms"] = avg.update.refitMs;
-    if (rebuilds) av["build_ms"] = avg.update.buildMs;
-    av["trace_ms"] = traceMs(sum) / frameCount;
-    tsah::RenderStats perFrame = sum;
-    for (auto* p : {&perFrame.primary, &perFrame.ao, &perFrame.shadow}) p->ms /= frameCount;
-    av["trace_ms_by_type"] = traceMsJson(perFrame);
-    av["shade_ms"] = avg.render.shadeMs;
-    av["total_ms"] = avg.update.updateMs + traceMs(sum) / frameCount;
-    av["mrays_per_s"] = rateJson(sum);
-    out["average"] = av;
+  if (opt.json)
     std::printf("%s\n", out.dump().c_str());
-    return;
-  }
-  std::printf("%5s %8s %10s %9s %9s %9s %9s %9s %9s\n", "frame", "time", "update_ms", "trace_ms", "total_ms",
-              "MR/s prim", "MR/s ao", "MR/s shad", "MR/s all");
-  auto row = [&](const char* label, const std::string& time, double update, const tsah::RenderStats& s,
-                 double frames) {
-    std::printf("%5s %8s %10.3f %9.3f %9.3f %9.2f %9.2f %9.2f %9.2f\n", label, time.c_str(), update,
-                s.total().ms / frames, update + s.total().ms / frames, s.primary.mraysPerSecond(),
-                s.ao.mraysPerSecond(), s.shadow.mraysPerSecond(), s.total().mraysPerSecond());
-  };
-  for (const FrameResult& r : results) {
-    char time[32];
-    std::snprintf(time, sizeof time, "%.3f", r.time);
-    row(std::to_string(r.frame).c_str(), time, r.update.updateMs, r.render, 1.0);
-  }
-  row("avg", "-", avg.update.updateMs, sum, frameCount);
-  std::printf("update = interpolate %.3f + %s %.3f ms per frame; shading %.3f ms (not in total)\n",
-              avg.update.interpolateMs, rebuilds ? "rebuild" : "refit+Woop",
-              avg.update.updateMs - avg.update.interpolateMs, avg.render.shadeMs);
-  if (!opt.noImages) std::printf("images in %s/frame_NNNN.png\n", opt.out.c_str());
+  else
+    tsah::cli::printTraceSummary(out);
 }
 
 }  // namespace
@@ -342,5 +300,12 @@ TSAH_REGISTER_COMMAND(70, [](CLI::App& app) {
       ->check(CLI::IsMember({"auto", "sse", "avx2", "avx512"}));
   sub->add_option("--seed", opt->seed, "Seed of the per-pixel random numbers (default 1)");
   sub->add_flag("--json", opt->json, "Print one JSON object {device, frames: [...], average: {...}}");
+  sub->add_option("--range", opt->range,
+                  "START:END: only the frames START .. END-1 of the run (half-open, over the frame indices of "
+                  "--frames), with the same pictures and figures as in the whole run (a render farm's chunk)");
+  sub->add_option("--stats", opt->stats,
+                  "Also write the JSON object of --json to this file (a chunk's statistics: `tsah report` merges them)");
+  sub->add_option("--devices", opt->devices,
+                  "With --device cuda: all, or GPU indices such as 0,2: one runtime per GPU, frames dealt to them");
   sub->callback([opt] { runTrace(*opt); });
 });

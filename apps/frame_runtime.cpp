@@ -119,132 +119,66 @@ class CpuFrameRuntime final : public FrameRuntime {
 };
 
 #if TSAH_HAVE_CUDA
-// The rebuild options of a GPU rebuild baseline in `layout`.
-std::optional<cuda::RebuildOptions> gpuRebuildOptions(Rebuild rebuild, const Objective& objective, Layout layout) {
-  if (rebuild == Rebuild::None) return std::nullopt;
-  cuda::RebuildOptions o;
-  o.method = rebuild == Rebuild::Lbvh ? cuda::RebuildMethod::Lbvh : cuda::RebuildMethod::HlbvhSah;
-  o.cost = objective.cost;
-  o.maxLeafSize = std::max(1u, objective.maxLeafSize);
-  // The compressed layout holds leaves of at most 8 triangles (64 per node), as its refit path's
-  // collapse does.
-  if (layout == Layout::Cwbvh) o.maxLeafSize = std::min(o.maxLeafSize, kCwbvhMaxLeafTriangles);
-  return o;
-}
-
 class GpuFrameRuntime final : public FrameRuntime {
  public:
-  // config.layout Auto: a runtime in each GPU layout; warmUp measures both on the first frame and
-  // keeps the faster (until then the binary one is used).
-  GpuFrameRuntime(const TreeSet& trees, const anim::Animation& animation, Rebuild rebuild, const Objective& objective,
-                  const cuda::GpuRuntime::Config& config)
-      : ranges_(trees.ranges) {
-    const bool measure = config.layout == Layout::Auto;
-    for (const Layout layout : measure ? std::vector{Layout::Bvh2, Layout::Cwbvh} : std::vector{config.layout}) {
-      cuda::GpuRuntime::Config c = config;
-      c.layout = layout;
-      candidates_.push_back({std::make_unique<cuda::GpuRuntime>(trees, animation, c),
-                             gpuRebuildOptions(rebuild, objective, layout), 0.0});
-    }
-  }
+  GpuFrameRuntime(const TreeSet& trees, const anim::Animation& animation,
+                  std::optional<cuda::RebuildOptions> rebuild, const cuda::GpuRuntime::Config& config)
+      : runtime_(trees, animation, config), ranges_(trees.ranges), rebuild_(rebuild) {}
 
+  // The runtime's GPU current while it is released.
+  ~GpuFrameRuntime() override { cuda::useDevice(runtime_.config().device); }
+
+  // Each call first makes the runtime's GPU the calling thread's (the threads of --devices).
   void warmUp(double firstTime, const std::function<Camera(double)>& cameraAt, const SceneLighting& lighting,
               const RenderSettings& settings) override {
-    for (std::size_t i = 0; i < candidates_.size(); ++i) {
-      current_ = i;
-      warmUpCurrent(firstTime, cameraAt, lighting, settings);
+    cuda::useDevice(runtime_.config().device);
+    // The first update of each tree captures its CUDA graph: a time inside each tree's part reaches
+    // every tree (a rebuild has one graph).
+    const std::size_t trees = rebuild_ ? 1 : ranges_.size();
+    for (std::size_t s = 0; s < trees; ++s) {
+      const double t = s == 0 ? firstTime : switchTime(ranges_, uint32_t(s - 1));
+      update(t);
+      cuda::renderFrameGpu(runtime_, cameraAt(t), lighting, settings, nullptr, nullptr);
     }
-    if (candidates_.size() == 1) return;
-    // Which layout traces a scene faster depends on the scene and the view (the compressed one wins
-    // on small characters, the binary one on some large BART scenes), so --layout auto measures it:
-    // the first frame's update and render, best of kAutoRuns, in each layout; the faster is kept and
-    // the other runtime freed.
-    std::size_t best = 0;
-    for (std::size_t i = 0; i < candidates_.size(); ++i) {
-      current_ = i;
-      double ms = 0.0;
-      for (int run = 0; run < kAutoRuns; ++run) {
-        const double total = update(firstTime).updateMs + render(cameraAt(firstTime), lighting, settings, nullptr).frameMs;
-        ms = run == 0 ? total : std::min(ms, total);
-      }
-      candidates_[i].autoMs = ms;
-      if (ms < candidates_[best].autoMs) best = i;
-    }
-    for (const Candidate& c : candidates_) autoChoice_[tsah::name(c.runtime->config().layout)] = c.autoMs;
-    Candidate kept = std::move(candidates_[best]);
-    candidates_.clear();
-    candidates_.push_back(std::move(kept));
-    current_ = 0;
   }
 
   FrameUpdate update(double time) override {
-    Candidate& c = candidates_[current_];
-    if (c.rebuild) {
-      const cuda::RebuildTimings t = c.runtime->rebuildAt(time, *c.rebuild);
+    cuda::useDevice(runtime_.config().device);
+    if (rebuild_) {
+      const cuda::RebuildTimings t = runtime_.rebuildAt(time, *rebuild_);
       return {t.interpolateMs, t.woopMs, t.buildMs() + t.wideMs, t.wideMs, t.totalMs()};  // cwbvh: with the conversion
     }
-    const cuda::UpdateTimings t = c.runtime->updateAt(time);
+    const cuda::UpdateTimings t = runtime_.updateAt(time);
     return {t.interpolateMs, t.refitMs + t.woopMs, 0.0, 0.0, t.totalMs()};
   }
 
   FrameRender render(const Camera& camera, const SceneLighting& lighting, const RenderSettings& settings,
                      Image* image) override {
+    cuda::useDevice(runtime_.config().device);
     cuda::GpuRenderTimings timings;
     FrameRender r;
-    r.rays = cuda::renderFrameGpu(runtime(), camera, lighting, settings, image, &timings);
+    r.rays = cuda::renderFrameGpu(runtime_, camera, lighting, settings, image, &timings);
     r.frameMs = timings.totalMs;
     return r;
   }
 
-  uint32_t currentTree() const override { return runtime().currentTree(); }
+  uint32_t currentTree() const override { return runtime_.currentTree(); }
 
   std::string summary() const override {
-    std::string s = "GPU " + runtime().device().name + ", " + tsah::name(runtime().config().layout) + " layout";
-    if (!autoChoice_.empty()) {
-      char why[96];
-      std::snprintf(why, sizeof why, " (auto: first frame bvh2 %.3f ms, cwbvh %.3f ms)",
-                    autoChoice_["bvh2"].get<double>(), autoChoice_["cwbvh"].get<double>());
-      s += why;
-    }
-    return s;
+    return "GPU " + runtime_.device().name + ", " + tsah::name(runtime_.config().layout) + " layout";
   }
 
   void describe(nlohmann::json& out) const override {
-    out["device"] = runtime().device().name;
-    out["gpu"] = deviceJson();
+    out["device"] = runtime_.device().name;
+    out["gpu"] = deviceJson(runtime_.config().device);
     out["timer"] = "CUDA events (device time)";
-    out["layout"] = tsah::name(runtime().config().layout);
-    // --layout auto: the first frame's update + render in each layout (best of kAutoRuns), ms.
-    if (!autoChoice_.empty()) out["layout_auto_ms"] = autoChoice_;
+    out["layout"] = tsah::name(runtime_.config().layout);
   }
 
  private:
-  static constexpr int kAutoRuns = 3;
-
-  struct Candidate {
-    std::unique_ptr<cuda::GpuRuntime> runtime;
-    std::optional<cuda::RebuildOptions> rebuild;
-    double autoMs;
-  };
-
-  cuda::GpuRuntime& runtime() const { return *candidates_[current_].runtime; }
-
-  // The first update of each tree captures its CUDA graph: a time inside each tree's part reaches
-  // every tree (a rebuild has one graph).
-  void warmUpCurrent(double firstTime, const std::function<Camera(double)>& cameraAt, const SceneLighting& lighting,
-                     const RenderSettings& settings) {
-    const std::size_t trees = candidates_[current_].rebuild ? 1 : ranges_.size();
-    for (std::size_t s = 0; s < trees; ++s) {
-      const double t = s == 0 ? firstTime : switchTime(ranges_, uint32_t(s - 1));
-      update(t);
-      cuda::renderFrameGpu(runtime(), cameraAt(t), lighting, settings, nullptr, nullptr);
-    }
-  }
-
+  cuda::GpuRuntime runtime_;
   std::vector<TimeRange> ranges_;
-  std::vector<Candidate> candidates_;  // one, or with --layout auto both GPU layouts until warmUp
-  std::size_t current_ = 0;
-  nlohmann::json autoChoice_ = nlohmann::json::object();
+  std::optional<cuda::RebuildOptions> rebuild_;
 };
 
 std::unique_ptr<FrameRuntime> makeGpuFrameRuntime(const TreeSet& trees, const anim::Animation& animation,
@@ -253,10 +187,25 @@ std::unique_ptr<FrameRuntime> makeGpuFrameRuntime(const TreeSet& trees, const an
     throw Failure("no CUDA device found (no GPU, no NVIDIA driver, or CUDA_VISIBLE_DEVICES hides them); "
                   "use --device cpu");
   cuda::GpuRuntime::Config config;
-  config.layout = options.layout;  // Auto: measured on the first frame (GpuFrameRuntime::warmUp)
+  config.device = options.gpu;
+  // Auto: bvh2, the runtime's default. With the fused passes the binary frame was the shorter on all
+  // eight data scenes (docs/cwbvh.md); a rule, not a timing, so that chunks, GPUs and MPI ranks of
+  // one run trace in the same layout and give the same images.
+  config.layout = options.layout;
   // The cwbvh collapse of trees without build infos (a set read from a file brings each tree's own).
   config.wideObjective = options.objective;
-  return std::make_unique<GpuFrameRuntime>(trees, animation, options.rebuild, options.objective, config);
+  std::optional<cuda::RebuildOptions> rebuild;
+  if (options.rebuild != Rebuild::None) {
+    rebuild.emplace();
+    rebuild->method = options.rebuild == Rebuild::Lbvh ? cuda::RebuildMethod::Lbvh : cuda::RebuildMethod::HlbvhSah;
+    rebuild->cost = options.objective.cost;
+    rebuild->maxLeafSize = std::max(1u, options.objective.maxLeafSize);
+    // The compressed layout holds leaves of at most 8 triangles (64 per node), as its refit path's
+    // collapse does.
+    if (config.layout == tsah::Layout::Cwbvh)
+      rebuild->maxLeafSize = std::min(rebuild->maxLeafSize, kCwbvhMaxLeafTriangles);
+  }
+  return std::make_unique<GpuFrameRuntime>(trees, animation, rebuild, config);
 }
 #endif
 
@@ -294,7 +243,7 @@ std::unique_ptr<FrameRuntime> makeFrameRuntime(const TreeSet& trees, const anim:
 #endif
   }
   CpuRuntime::Config config(options.threads);
-  config.layout = options.layout == Layout::Auto ? fastestLayout(options.isa) : options.layout;
+  config.layout = options.layout == Layout::Auto ? fastestLayout() : options.layout;
   config.isa = options.isa;
   config.collapse = wideCollapseConfig(options.objective);
   return std::make_unique<CpuFrameRuntime>(trees, animation, config, cpuRebuilder(options.rebuild, options.objective));
@@ -303,9 +252,9 @@ std::unique_ptr<FrameRuntime> makeFrameRuntime(const TreeSet& trees, const anim:
 #if TSAH_HAVE_CUDA
 bool gpuAvailable() { return cuda::deviceAvailable(); }
 
-nlohmann::json deviceJson() {
+nlohmann::json deviceJson(int index) {
   if (!cuda::deviceAvailable()) return nullptr;
-  const cuda::DeviceInfo d = cuda::describeDevice(0);
+  const cuda::DeviceInfo d = cuda::describeDevice(index);
   return {{"name", d.name},
           {"compute_capability", std::to_string(d.computeMajor) + "." + std::to_string(d.computeMinor)},
           {"multiprocessors", d.multiprocessors},
@@ -315,7 +264,7 @@ nlohmann::json deviceJson() {
 }
 #else
 bool gpuAvailable() { return false; }
-nlohmann::json deviceJson() { return nullptr; }
+nlohmann::json deviceJson(int) { return nullptr; }
 #endif
 
 }  // namespace tsah::cli

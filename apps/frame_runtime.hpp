@@ -68,6 +68,7 @@ class FrameRuntime {
 // What a runtime traces and how it updates.
 struct FrameRuntimeOptions {
   Device device = Device::Cpu;
+  int gpu = 0;                       // the GPU of Device::Cuda
   Layout layout = Layout::Auto;      // Auto: the device's fastest
   std::optional<SimdIsa> isa;        // CPU wide layouts: the kernels (default: the best the processor runs)
   unsigned threads = 0;              // CPU worker threads (0: all cores)
@@ -84,9 +85,9 @@ struct FrameRuntimeOptions {
 std::unique_ptr<FrameRuntime> makeFrameRuntime(const TreeSet& trees, const anim::Animation& animation,
                                                const FrameRuntimeOptions& options);
 
-// The GPU the runtime would use (index 0) as JSON: name, compute_capability, multiprocessors,
+// GPU `index` as JSON: name, compute_capability, multiprocessors,
 // memory_mib, driver_version, runtime_version; null without CUDA or without a device.
-nlohmann::json deviceJson();
+nlohmann::json deviceJson(int index = 0);
 bool gpuAvailable();
 
 }  // namespace tsah::cli

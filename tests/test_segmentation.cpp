@@ -252,4 +252,41 @@ TEST(Segmentation, BudgetHoldsOnARealAnimation) {
   expectBudgetHolds(a, r);
 }
 
+// Candidate trees dealt to workers (ThreadDealer: the path of --devices and MPI ranks, whose
+// candidates also travel as bytes): the same trees, parts and costs as the search on its own, in
+// both modes; only the count of candidates built may grow (speculative builds).
+TEST(Segmentation, DealtCandidatesGiveTheSameTreeSet) {
+  const anim::Animation a = movingAnimation(200, 10, 9);
+  for (const auto mode : {SegmentationConfig::Mode::Count, SegmentationConfig::Mode::Budget}) {
+    SegmentationConfig c = smallConfig(15);
+    c.mode = mode;
+    c.count = 3;
+    c.budget = 1.2;
+    c.referenceFrames = 5;
+    const tsah::SegmentationResult alone = tsah::segmentTimeline(timelineOf(a), c);
+    for (unsigned workers : {1u, 3u}) {
+      tsah::ThreadDealer dealer(workers);
+      c.dealer = &dealer;
+      const tsah::SegmentationResult dealt = tsah::segmentTimeline(timelineOf(a), c);
+      EXPECT_EQ(dealt.parts, alone.parts);
+      EXPECT_EQ(dealt.costs, alone.costs);
+      EXPECT_EQ(dealt.reference, alone.reference);
+      EXPECT_EQ(dealt.methods, alone.methods);
+      ASSERT_EQ(dealt.trees.size(), alone.trees.size());
+      for (std::size_t s = 0; s < alone.trees.size(); ++s) {
+        EXPECT_EQ(dealt.trees[s].root, alone.trees[s].root);
+        EXPECT_EQ(dealt.trees[s].primIds, alone.trees[s].primIds);
+        ASSERT_EQ(dealt.trees[s].nodes.size(), alone.trees[s].nodes.size());
+        for (std::size_t n = 0; n < alone.trees[s].nodes.size(); ++n) {
+          EXPECT_EQ(dealt.trees[s].nodes[n].left, alone.trees[s].nodes[n].left);
+          EXPECT_EQ(dealt.trees[s].nodes[n].primCount, alone.trees[s].nodes[n].primCount);
+        }
+        EXPECT_EQ(dealt.optimizations[s].finalCost, alone.optimizations[s].finalCost);
+      }
+      if (workers == 1) EXPECT_EQ(dealt.treesBuilt, alone.treesBuilt);  // one worker: nothing speculative
+      else EXPECT_GE(dealt.treesBuilt, alone.treesBuilt);
+    }
+  }
+}
+
 }  // namespace

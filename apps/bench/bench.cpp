@@ -5,9 +5,11 @@
 #include <chrono>
 #include <fstream>
 #include <sstream>
+#include <mutex>
 #include <thread>
 
 #include "tsah/base/error.hpp"
+#include "tsah/base/work_dealer.hpp"
 #include "anim/load.hpp"
 #include "bench/embree_peer.hpp"
 #include "bench/runtime_bench.hpp"
@@ -278,13 +280,33 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
     runtime["skipped"] = "--embree-only";
   } else if (gpu) {
     const std::string gpuLayoutName = o.layout == Layout::Auto ? std::string() : name(o.layout);
-    for (const RefitTrees& r : refits)
-      runtime["methods"].push_back(toJson(runGpuRefit(a, r, setup, r.name == "tsah0" ? &picture : nullptr, pictureFrame,
-                                                    gpuLayoutName)));
-    for (const char* method : {"lbvh", "hlbvh-sah"})
-      runtime["methods"].push_back(toJson(runGpuRebuild(a, tsahTree, method, config.objective.cost,
-                                                        config.objective.maxLeafSize, setup, gpuLayoutName)));
-    runtime["schedule"] = "method by method (device times from CUDA events)";
+    // The methods (the refits, then the two rebuilds) dealt to the GPUs of --devices: each
+    // method's frames on one GPU, so its figures are one GPU's.
+    const std::vector<int> gpus = o.devices.empty() ? std::vector<int>{0} : o.devices;
+    const std::size_t methodCount = refits.size() + 2;
+    std::vector<RuntimeMethod> done(methodCount);
+    std::mutex progressLock;
+    RuntimeSetup shared = setup;
+    shared.progress = [&](const std::string& m) {
+      const std::lock_guard lock(progressLock);
+      setup.progress(m);
+    };
+    ThreadDealer dealer(unsigned(gpus.size()));
+    dealer.deal(unitRange(0, uint32_t(methodCount)), [&](uint32_t m, unsigned worker) {
+      RuntimeSetup mine = shared;
+      mine.gpu = gpus[worker];
+      if (m < refits.size())
+        done[m] = runGpuRefit(a, refits[m], mine, refits[m].name == "tsah0" ? &picture : nullptr, pictureFrame,
+                              gpuLayoutName);
+      else
+        done[m] = runGpuRebuild(a, tsahTree, m == refits.size() ? "lbvh" : "hlbvh-sah", config.objective.cost,
+                                config.objective.maxLeafSize, mine, gpuLayoutName);
+      return UnitResult();
+    });
+    for (const RuntimeMethod& m : done) runtime["methods"].push_back(toJson(m));
+    runtime["schedule"] = gpus.size() > 1 ? "methods dealt to " + std::to_string(gpus.size()) +
+                                                " GPUs, each method on one (device times from CUDA events)"
+                                          : "method by method (device times from CUDA events)";
   } else {
     std::vector<CpuMethodSpec> cpuMethods;
     for (const RefitTrees& r : refits) cpuMethods.push_back({r, std::nullopt});

@@ -41,6 +41,7 @@ struct BenchOptions {
   uint32_t segments = 3;        // K of the equal-time parts and of the count mode (1: skip)
   double budget = 1.05;         // budget mode: factor of SAH-rebuild's cost per evaluation frame (0: skip)
   unsigned threads = 0;         // CPU threads (0: all cores)
+  std::vector<int> devices;     // --device cuda: the GPUs the runtime methods are dealt to (empty: GPU 0)
   std::string optimizer = "sequential";  // optimizer of SAH*, SAH-rebuild and T-SAH: sequential | parallel | cuda
   bool embree = true;           // run the Embree peer when built with it (CPU device only)
   bool embreeOnly = false;      // only the T-SAH tree and the toolkit-vs-Embree comparison (no Tables 1/2)

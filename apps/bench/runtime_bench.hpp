@@ -34,6 +34,7 @@ struct RuntimeSetup {
   SceneLighting lighting;
   RenderSettings settings;                       // image size, AO/shadow rays, seed (frame is set per frame)
   unsigned threads = 0;                          // CPU worker threads (0: all cores)
+  int gpu = 0;                                   // GPU: the device the method runs on
   Layout layout = fastestLayout();            // CPU: the layout every refit and rebuild traces
   WideCollapser::Config collapse;                // wide layouts (CPU, GPU cwbvh): cost constants, k, leaf size
   std::function<void(const std::string&)> progress;

@@ -24,18 +24,17 @@ RuntimeMethod runFrames(cli::FrameRuntime& runtime, const RuntimeSetup& setup, R
   return method;
 }
 
-// The layout the method was traced in (with --layout auto: the one measured faster on the first
-// frame, and both measurements).
+// The layout the method was traced in (--layout auto: the runtime's default).
 void describeLayout(const cli::FrameRuntime& runtime, RuntimeMethod& m) {
   nlohmann::json description;
   runtime.describe(description);
   m.extra["layout"] = description["layout"];
-  if (description.contains("layout_auto_ms")) m.extra["layout_auto_ms"] = description["layout_auto_ms"];
 }
 
-cli::FrameRuntimeOptions gpuOptions(const std::string& layout, const Objective& objective) {
+cli::FrameRuntimeOptions gpuOptions(const std::string& layout, const Objective& objective, int gpu) {
   cli::FrameRuntimeOptions options;
   options.device = Device::Cuda;
+  options.gpu = gpu;
   options.layout = layout.empty() ? Layout::Auto : parse<Layout>(layout);
   options.objective = objective;
   return options;
@@ -46,7 +45,7 @@ cli::FrameRuntimeOptions gpuOptions(const std::string& layout, const Objective& 
 RuntimeMethod runGpuRefit(const anim::Animation& a, const RefitTrees& trees, const RuntimeSetup& setup, Image* image,
                           uint32_t imageFrame, const std::string& layout) {
   // One runtime with every tree uploaded once; each update refits the tree of the frame's part.
-  const auto runtime = cli::makeFrameRuntime(treeSetOf(trees, a), a, gpuOptions(layout, setup.collapse));
+  const auto runtime = cli::makeFrameRuntime(treeSetOf(trees, a), a, gpuOptions(layout, setup.collapse, setup.gpu));
   RuntimeMethod m = runFrames(*runtime, setup, {trees.name, trees.label, "refit", {}, nlohmann::json::object()}, image,
                               imageFrame, nullptr);
   describeLayout(*runtime, m);
@@ -56,7 +55,7 @@ RuntimeMethod runGpuRefit(const anim::Animation& a, const RefitTrees& trees, con
 RuntimeMethod runGpuRebuild(const anim::Animation& a, const Bvh& initialTree, const std::string& method,
                             const CostModel& cost, uint32_t maxLeaf, const RuntimeSetup& setup,
                             const std::string& layout) {
-  cli::FrameRuntimeOptions options = gpuOptions(layout, Objective{0, cost, maxLeaf});
+  cli::FrameRuntimeOptions options = gpuOptions(layout, Objective{0, cost, maxLeaf}, setup.gpu);
   options.rebuild = cli::parseRebuild(method);
   TreeSet first;
   first.trees.push_back(flattenBvh(initialTree));

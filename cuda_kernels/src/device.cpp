@@ -17,15 +17,19 @@ void throwCudaError(cudaError_t code, const char* call, const char* file, int li
                             std::to_string(line) + "): " + cudaGetErrorName(code) + ": " + cudaGetErrorString(code));
 }
 
-bool deviceAvailable() {
+int deviceCount() {
   int count = 0;
   const cudaError_t status = cudaGetDeviceCount(&count);
   if (status != cudaSuccess) {
     (void)cudaGetLastError();  // clear the error so later calls do not report it
-    return false;
+    return 0;
   }
-  return count > 0;
+  return count;
 }
+
+bool deviceAvailable() { return deviceCount() > 0; }
+
+void useDevice(int index) { CUDA_CHECK(cudaSetDevice(index)); }
 
 DeviceInfo describeDevice(int index) {
   cudaDeviceProp prop{};

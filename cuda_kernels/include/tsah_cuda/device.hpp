@@ -8,6 +8,11 @@ namespace tsah::cuda {
 // True when a CUDA driver and at least one device are present. Never throws: a machine without a
 // GPU or driver (CI) gets false, and the tests skip.
 bool deviceAvailable();
+// The number of CUDA devices (0 without a driver or a device). Never throws.
+int deviceCount();
+// Makes device `index` the calling thread's current device (cudaSetDevice): the GPU its kernels,
+// allocations and the GPU optimizer use. Throws CudaError when it does not exist.
+void useDevice(int index);
 
 struct DeviceInfo {
   int index = 0;

@@ -3,9 +3,12 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <map>
+#include <mutex>
 #include <thread>
 
+#include "tsah/base/binary_io.hpp"
 #include "tsah/base/error.hpp"
 
 namespace tsah {
@@ -56,42 +59,55 @@ class Search {
   // The part's tree, built once (a part is identified by its range; the build range follows).
   const Candidate& candidate(const TimeRange& part) {
     const auto key = std::make_pair(part.start, part.end);
-    if (auto it = cache_.find(key); it != cache_.end()) return it->second;
-    Candidate c;
-    const double half = 0.5 * config_.overlap;
-    c.build = {part.start == timeline_.start ? part.start : std::max(timeline_.start, part.start - half),
-               part.end == timeline_.end ? part.end : std::min(timeline_.end, part.end + half)};
-    if (config_.baseline.progress)
-      config_.baseline.progress("tree " + std::to_string(cache_.size() + 1) + " for t " + timeText(c.build.start) +
-                                " .. " + timeText(c.build.end));
-    const auto start = std::chrono::steady_clock::now();
-    if (auto frame = frameTrees_.find(key); frame != frameTrees_.end()) {
-      std::vector<Aabb> boxes(timeline_.primCount);
-      timeline_.boxesAt(times_[frame->second], boxes);
-      c.tree = buildOptimizedSah(boxes, config_.baseline, frameSeed(config_, frame->second));
-      c.method = "sah-frame";
-    } else {
-      const std::vector<double> repTimes =
-          Timeline::uniformTimes(c.build.start, c.build.end, config_.representativeFrames);
-      c.tree = buildMethod(config_.method, timeline_.sample(repTimes), config_.baseline, &c.optimization);
-      c.method = config_.method.method == Method::TSah ? "tsah" : config_.method.name();
-    }
-    c.buildSeconds = secondsSince(start);
-    ++built_;
-    std::vector<double> inside;
-    for (uint32_t f = 0; f < times_.size(); ++f)
-      if (times_[f] >= part.start && times_[f] <= part.end) {
-        if (inside.empty()) c.firstFrame = f;
-        inside.push_back(times_[f]);
+    if (auto it = cache_.find(key); it == cache_.end()) {
+      if (config_.dealer) {
+        prefetch(std::span<const TimeRange>(&part, 1));
+      } else {
+        if (config_.baseline.progress)
+          config_.baseline.progress("tree " + std::to_string(cache_.size() + 1) + " for t " + timeText(part.start) +
+                                    " .. " + timeText(part.end));
+        cache_.emplace(key, build(part, config_.baseline));
+        ++built_;
       }
-    if (!inside.empty())
-      c.costs = evaluateFrames(c.tree, timeline_.frames(std::move(inside)), config_.baseline.objective.cost,
-                               config_.baseline.threads);
-    return cache_.emplace(key, std::move(c)).first->second;
+    }
+    return cache_.at(key);
+  }
+
+  // True when building several candidates at once saves time: more than one worker in all.
+  bool speculates() const { return config_.dealer && config_.dealer->totalWorkers() > 1; }
+  unsigned workers() const { return config_.dealer ? config_.dealer->totalWorkers() : 1; }
+
+  // Builds the trees of the parts not in the cache yet, dealt to the dealer's workers (nothing
+  // without a dealer: candidate() builds on demand).
+  void prefetch(std::span<const TimeRange> parts) {
+    if (!config_.dealer) return;
+    std::vector<TimeRange> missing;
+    for (const TimeRange& p : parts)
+      if (!cache_.count({p.start, p.end}) &&
+          std::none_of(missing.begin(), missing.end(), [&](const TimeRange& m) { return m.start == p.start && m.end == p.end; }))
+        missing.push_back(p);
+    if (missing.empty()) return;
+    if (config_.baseline.progress)
+      config_.baseline.progress(std::to_string(missing.size()) + " trees from tree " + std::to_string(built_ + 1));
+    // The workers' optimizer progress comes from several threads: one message at a time.
+    std::mutex progressLock;
+    BaselineConfig worker = config_.baseline;
+    if (worker.progress)
+      worker.progress = [&](const std::string& m) {
+        const std::lock_guard lock(progressLock);
+        config_.baseline.progress(m);
+      };
+    const std::vector<uint32_t> units = unitRange(0, uint32_t(missing.size()));
+    const std::vector<UnitResult> results = config_.dealer->deal(
+        units, [&](uint32_t unit, unsigned) { return encode(build(missing[unit], worker)); });
+    for (std::size_t i = 0; i < missing.size(); ++i)
+      cache_.emplace(std::make_pair(missing[i].start, missing[i].end), decode(results[i], missing[i]));
+    built_ += missing.size();
   }
 
   // Cost at every evaluation frame, each with the tree of its part.
   std::vector<double> costs(std::span<const TimeRange> parts) {
+    prefetch(parts);
     std::vector<double> out(times_.size());
     for (uint32_t f = 0; f < times_.size(); ++f) {
       const Candidate& c = candidate(parts[treeIndexAt(parts, times_[f])]);
@@ -101,6 +117,101 @@ class Search {
   }
 
  private:
+  // What a part's tree is built for: the part widened by half the overlap on its inner sides.
+  TimeRange buildRange(const TimeRange& part) const {
+    const double half = 0.5 * config_.overlap;
+    return {part.start == timeline_.start ? part.start : std::max(timeline_.start, part.start - half),
+            part.end == timeline_.end ? part.end : std::min(timeline_.end, part.end + half)};
+  }
+
+  // The part's tree and its costs at the evaluation frames inside it. Reads the search state but
+  // changes nothing, so that workers may run it at once.
+  Candidate build(const TimeRange& part, const BaselineConfig& baseline) const {
+    Candidate c;
+    c.build = buildRange(part);
+    const auto start = std::chrono::steady_clock::now();
+    if (auto frame = frameTrees_.find({part.start, part.end}); frame != frameTrees_.end()) {
+      std::vector<Aabb> boxes(timeline_.primCount);
+      timeline_.boxesAt(times_[frame->second], boxes);
+      c.tree = buildOptimizedSah(boxes, baseline, frameSeed(config_, frame->second));
+      c.method = "sah-frame";
+    } else {
+      const std::vector<double> repTimes =
+          Timeline::uniformTimes(c.build.start, c.build.end, config_.representativeFrames);
+      c.tree = buildMethod(config_.method, timeline_.sample(repTimes), baseline, &c.optimization);
+      c.method = config_.method.method == Method::TSah ? "tsah" : config_.method.name();
+    }
+    c.buildSeconds = secondsSince(start);
+    std::vector<double> inside;
+    for (uint32_t f = 0; f < times_.size(); ++f)
+      if (times_[f] >= part.start && times_[f] <= part.end) {
+        if (inside.empty()) c.firstFrame = f;
+        inside.push_back(times_[f]);
+      }
+    if (!inside.empty())
+      c.costs = evaluateFrames(c.tree, timeline_.frames(std::move(inside)), baseline.objective.cost, baseline.threads);
+    return c;
+  }
+
+  // A candidate as bytes for the dealer (the build range follows from the part).
+  static UnitResult encode(const Candidate& c) {
+    ByteWriter w;
+    auto writeVector = [&w](const auto& v) {
+      w.write(uint64_t(v.size()));
+      w.writeArray(std::span(v));
+    };
+    w.write(uint64_t(c.method.size()));
+    w.append(c.method.data(), c.method.size());
+    w.write(c.tree.frameCount);
+    w.write(c.tree.root);
+    writeVector(c.tree.nodes);
+    writeVector(c.tree.primIds);
+    writeVector(c.tree.boxes);
+    w.write(c.buildSeconds);
+    const InsertionOptimizer::Result& o = c.optimization;
+    writeVector(o.initialFrameCosts);
+    writeVector(o.finalFrameCosts);
+    w.write(o.initialCost);
+    w.write(o.finalCost);
+    writeVector(o.history);
+    w.write(o.steps);
+    w.write(o.acceptedSteps);
+    w.write(o.seconds);
+    w.write(uint8_t(o.timeLimitReached));
+    w.write(c.firstFrame);
+    writeVector(c.costs);
+    return std::move(w.buffer());
+  }
+
+  Candidate decode(const UnitResult& bytes, const TimeRange& part) const {
+    ByteReader r(bytes, "candidate tree");
+    auto readVector = [&r](auto& v, const char* what) { r.readArray(v, r.read<uint64_t>(what), what); };
+    Candidate c;
+    std::vector<char> method;
+    readVector(method, "method");
+    c.method.assign(method.begin(), method.end());
+    c.tree.frameCount = r.read<uint32_t>("frame count");
+    c.tree.root = r.read<uint32_t>("root");
+    readVector(c.tree.nodes, "nodes");
+    readVector(c.tree.primIds, "primitive ids");
+    readVector(c.tree.boxes, "boxes");
+    c.buildSeconds = r.read<double>("build seconds");
+    InsertionOptimizer::Result& o = c.optimization;
+    readVector(o.initialFrameCosts, "initial frame costs");
+    readVector(o.finalFrameCosts, "final frame costs");
+    o.initialCost = r.read<double>("initial cost");
+    o.finalCost = r.read<double>("final cost");
+    readVector(o.history, "history");
+    o.steps = r.read<uint64_t>("steps");
+    o.acceptedSteps = r.read<uint64_t>("accepted steps");
+    o.seconds = r.read<double>("seconds");
+    o.timeLimitReached = r.read<uint8_t>("time limit") != 0;
+    c.firstFrame = r.read<uint32_t>("first frame");
+    readVector(c.costs, "costs");
+    c.build = buildRange(part);
+    return c;
+  }
+
   const Timeline& timeline_;
   const SegmentationConfig& config_;
   std::vector<double> times_;
@@ -134,18 +245,22 @@ std::vector<TimeRange> localSearch(Search& search, const Timeline& tl, std::vect
   positions.erase(std::unique(positions.begin(), positions.end()), positions.end());
   std::vector<std::size_t> at;  // boundary -> index into positions
   for (double b : boundaries) at.push_back(std::lower_bound(positions.begin(), positions.end(), b) - positions.begin());
-  auto evaluate = [&](const std::vector<std::size_t>& idx) {
+  auto boundariesAt = [&](const std::vector<std::size_t>& idx) {
     std::vector<double> b;
     for (std::size_t i : idx) b.push_back(positions[i]);
-    const std::vector<TimeRange> parts = partsFromBoundaries(tl, b);
-    return objective(search.costs(parts));
+    return b;
+  };
+  auto evaluate = [&](const std::vector<std::size_t>& idx) {
+    return objective(search.costs(partsFromBoundaries(tl, boundariesAt(idx))));
   };
   double best = evaluate(at);
   const std::size_t firstStep = std::max<std::size_t>(1, positions.size() / (4 * (at.size() + 1)));
   for (uint32_t pass = 0; pass < maxPasses; ++pass) {
     bool improved = false;
     for (std::size_t step = firstStep;; step /= 2) {
-      for (std::size_t s = 0; s < at.size(); ++s)
+      for (std::size_t s = 0; s < at.size(); ++s) {
+        // The allowed moves of boundary s, tried in this order (down first).
+        std::vector<std::vector<std::size_t>> trials;
         for (int dir : {-1, +1}) {
           if (dir < 0 && at[s] < step) continue;
           const std::size_t moved = dir < 0 ? at[s] - step : at[s] + step;
@@ -154,8 +269,16 @@ std::vector<TimeRange> localSearch(Search& search, const Timeline& tl, std::vect
           const double before = s > 0 ? positions[at[s - 1]] : tl.start;
           const double after = s + 1 < at.size() ? positions[at[s + 1]] : tl.end;
           if (positions[moved] - before < minLength || after - positions[moved] < minLength) continue;
-          std::vector<std::size_t> trial = at;
-          trial[s] = moved;
+          trials.push_back(at);
+          trials.back()[s] = moved;
+        }
+        if (search.speculates() && trials.size() > 1) {  // both moves' trees at once
+          std::vector<TimeRange> parts;
+          for (const auto& trial : trials)
+            for (const TimeRange& p : partsFromBoundaries(tl, boundariesAt(trial))) parts.push_back(p);
+          search.prefetch(parts);
+        }
+        for (const std::vector<std::size_t>& trial : trials) {
           const double value = evaluate(trial);
           if (value < best - 1e-12 * std::abs(best)) {
             best = value;
@@ -164,13 +287,12 @@ std::vector<TimeRange> localSearch(Search& search, const Timeline& tl, std::vect
             break;
           }
         }
+      }
       if (step == 1) break;
     }
     if (!improved) break;
   }
-  std::vector<double> b;
-  for (std::size_t i : at) b.push_back(positions[i]);
-  return partsFromBoundaries(tl, b);
+  return partsFromBoundaries(tl, boundariesAt(at));
 }
 
 void checkConfig(const Timeline& tl, const SegmentationConfig& c) {
@@ -196,31 +318,29 @@ std::vector<double> referenceCosts(const Timeline& tl, const SegmentationConfig&
   const uint32_t r = c.referenceFrames == 0 || c.referenceFrames >= m ? m : std::max(2u, c.referenceFrames);
   std::vector<uint32_t> sample(r);
   for (uint32_t q = 0; q < r; ++q) sample[q] = static_cast<uint32_t>(std::lround(double(q) * (m - 1) / (r - 1)));
-  std::vector<double> sampled(r);
+  // One tree per sampled frame, each on one thread: on this process's threads, or dealt to the
+  // dealer's workers where they are GPUs (the device optimizer) or other processes.
   const unsigned hardware = std::max(1u, std::thread::hardware_concurrency());
-  const unsigned workers = std::min<unsigned>(r, c.baseline.threads == 0 ? hardware : c.baseline.threads);
+  ThreadDealer threads(std::min<unsigned>(r, c.baseline.threads == 0 ? hardware : c.baseline.threads));
+  const bool spread =
+      c.dealer && (c.baseline.deviceOptimizer || c.dealer->totalWorkers() > c.dealer->localWorkers());
+  WorkDealer& dealer = spread ? *c.dealer : threads;
   BaselineConfig single = c.baseline;
   single.threads = 1;
   single.progress = nullptr;
-  std::vector<std::thread> pool;
-  std::vector<std::exception_ptr> errors(workers);
-  for (unsigned w = 0; w < workers; ++w)
-    pool.emplace_back([&, w] {
-      try {
-        for (uint32_t q = w; q < r; q += workers) {
-          std::vector<Aabb> boxes(tl.primCount);
-          tl.boxesAt(times[sample[q]], boxes);
-          const Bvh tree = buildOptimizedSah(boxes, single, frameSeed(c, sample[q]));
-          PrimitiveBoxes one{1, tl.primCount, std::move(boxes)};
-          sampled[q] = evaluateFrames(tree, FrameSource::fromBoxes(one), c.baseline.objective.cost, 1).front();
-        }
-      } catch (...) {
-        errors[w] = std::current_exception();
-      }
-    });
-  for (std::thread& t : pool) t.join();
-  for (const auto& e : errors)
-    if (e) std::rethrow_exception(e);
+  const std::vector<UnitResult> results =
+      dealer.deal(unitRange(0, r), [&](uint32_t q, unsigned) {
+        std::vector<Aabb> boxes(tl.primCount);
+        tl.boxesAt(times[sample[q]], boxes);
+        const Bvh tree = buildOptimizedSah(boxes, single, frameSeed(c, sample[q]));
+        PrimitiveBoxes one{1, tl.primCount, std::move(boxes)};
+        const double cost = evaluateFrames(tree, FrameSource::fromBoxes(one), c.baseline.objective.cost, 1).front();
+        UnitResult bytes(sizeof cost);
+        std::memcpy(bytes.data(), &cost, sizeof cost);
+        return bytes;
+      });
+  std::vector<double> sampled(r);
+  for (uint32_t q = 0; q < r; ++q) std::memcpy(&sampled[q], results[q].data(), sizeof(double));
   std::vector<double> out(m);
   for (uint32_t q = 0; q + 1 < r; ++q)
     for (uint32_t f = sample[q]; f <= sample[q + 1]; ++f) {
@@ -252,6 +372,23 @@ SegmentationResult collect(Search& search, std::vector<TimeRange> parts) {
   return r;
 }
 
+// The parts from `from` to the evaluation frames the binary search over [good, bad) tests next,
+// level by level (its next test, then both possible tests after it, ...), one per worker.
+void prefetchBisection(Search& search, double from, uint32_t good, uint32_t bad) {
+  const std::vector<double>& t = search.times();
+  std::vector<TimeRange> parts;
+  std::vector<std::pair<uint32_t, uint32_t>> queue{{good, bad}};
+  for (std::size_t q = 0; q < queue.size() && parts.size() < search.workers(); ++q) {
+    const auto [g, b] = queue[q];
+    if (b - g <= 1) continue;
+    const uint32_t mid = g + (b - g) / 2;
+    parts.push_back({from, t[mid]});
+    queue.push_back({mid, b});  // it fits: the search goes on above mid
+    queue.push_back({g, mid});
+  }
+  search.prefetch(parts);
+}
+
 // Budget mode, greedy: from each part's start, the farthest evaluation frame such that the part's
 // tree keeps every frame it serves within the bound (binary search, assuming that a longer part
 // never fits better). A part of one evaluation interval whose tree misses the bound gets a
@@ -281,6 +418,7 @@ std::vector<double> greedyBudgetBoundaries(Search& search, std::span<const doubl
     if (good >= bad) break;  // no room for a boundary: the rest is one part
     if (good == i + 1) fitsOrFrameTree({t[i], t[good]}, i);
     while (bad - good > 1) {
+      if (search.speculates()) prefetchBisection(search, t[i], good, bad);
       const uint32_t mid = good + (bad - good) / 2;
       if (fits({t[i], t[mid]}))
         good = mid;

@@ -2,6 +2,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/info.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -56,8 +57,9 @@ CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint3
 
 CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint32_t vertexCount, Config config)
     : indices_(std::move(indices)), vertexCount_(vertexCount) {
-  // More workers than hardware threads only oversubscribe (and make TBB warn): cap the count.
-  const uint32_t hardware = std::max(1u, std::thread::hardware_concurrency());
+  // More workers than the cores this process may run on (all, or those an MPI rank is bound to)
+  // only oversubscribe, and make TBB warn: cap the count.
+  const uint32_t hardware = uint32_t(std::max(1, tbb::info::default_concurrency()));
   const uint32_t threads = config.threads == 0 ? hardware : std::min(config.threads, hardware);
   threads_ = std::make_unique<Threads>(threads);
   if (indices_.size() % 3 != 0) throw tsah::DataError("runtime: the index array is not a multiple of 3");

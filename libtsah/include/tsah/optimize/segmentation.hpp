@@ -16,6 +16,13 @@
 // Candidate split points are evaluation frames (and, in count mode, the equal-time boundaries).
 // Every candidate part's tree and its costs on the evaluation frames are cached, so a part is
 // built once however often the search considers it. Deterministic for a seed.
+//
+// With a WorkDealer (SegmentationConfig::dealer) the candidate trees and the reference trees are
+// built by its workers (threads owning a GPU each, MPI ranks): every process runs the same search,
+// and where it will need several candidates (both moves of a split point, the next levels of a
+// binary search) it builds them at once, one per worker, possibly some it will not use. The search
+// takes the same decisions from the same trees, so the result is the same as without a dealer;
+// only treesBuilt (and the time) differ.
 // libtsah never sees an animation: the caller provides primitive boxes at any time (Timeline).
 #include <cstdint>
 #include <functional>
@@ -23,6 +30,7 @@
 #include <string>
 #include <vector>
 
+#include "tsah/base/work_dealer.hpp"
 #include "tsah/optimize/baselines.hpp"
 #include "tsah/core/bvh.hpp"
 #include "tsah/io/tree_set.hpp"
@@ -72,6 +80,9 @@ struct SegmentationConfig {
 
   uint32_t maxPasses = 3;             // local search passes over all split points
   BaselineConfig baseline;            // cost, leaf size, optimizer (seed), threads, progress
+  // Who builds the candidate and reference trees (see above); null: this process, the candidates
+  // one at a time and the reference trees on `baseline.threads` threads.
+  WorkDealer* dealer = nullptr;
 };
 
 struct SegmentationResult {

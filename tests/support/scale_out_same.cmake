@@ -1,0 +1,82 @@
+# Checks that a split run gives the same outputs as one process (docs/scale-out.md). Runs
+#   tsah trace INPUT TREE ARGS --out OUT/whole --stats OUT/whole.json   (one process, every frame)
+# then, by MODE:
+#   chunks: tsah trace ... --range R --out OUT/split --stats OUT/chunk_I.json for each R of RANGES,
+#           merged by `tsah report`
+#   split:  LAUNCH tsah trace ... SPLIT --out OUT/split --stats OUT/split.json (LAUNCH: mpirun -n 2 ...
+#           or nothing; SPLIT: more arguments such as --devices all)
+# and requires byte-identical PNGs for the FRAMES frames and the same statistics once the timings
+# are taken out. MODE optimize: `tsah optimize INPUT -o OUT/whole.tbvh ARGS` against
+# `LAUNCH tsah optimize INPUT -o OUT/split.tbvh ARGS`, byte-identical files.
+string(REPLACE "@@" ";" args "${ARGS}")
+string(REPLACE "@@" ";" launch "${LAUNCH}")
+string(REPLACE "@@" ";" split_args "${SPLIT}")
+if(launch STREQUAL "-")
+  set(launch)
+endif()
+file(REMOVE_RECURSE ${OUT})
+file(MAKE_DIRECTORY ${OUT})
+
+function(run)
+  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err TIMEOUT 300)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "failed (${rc}): ${ARGN}\n${out}\n${err}")
+  endif()
+  set(output "${out}" PARENT_SCOPE)
+endfunction()
+
+if(MODE STREQUAL "optimize")
+  run(${TSAH} optimize ${INPUT} -o ${OUT}/whole.tbvh ${args})
+  run(${launch} ${TSAH} optimize ${INPUT} -o ${OUT}/split.tbvh ${args})
+  execute_process(COMMAND ${CMAKE_COMMAND} -E compare_files ${OUT}/whole.tbvh ${OUT}/split.tbvh RESULT_VARIABLE differ)
+  if(differ)
+    message(FATAL_ERROR "the tree-set files differ")
+  endif()
+  return()
+endif()
+
+run(${TSAH} trace ${INPUT} ${TREE} ${args} --out ${OUT}/whole --stats ${OUT}/whole.json)
+run(${TSAH} report ${OUT}/whole.json --json)
+set(whole "${output}")
+if(MODE STREQUAL "chunks")
+  set(files)
+  set(i 0)
+  foreach(range ${RANGES})
+    run(${TSAH} trace ${INPUT} ${TREE} ${args} --range ${range} --out ${OUT}/split --stats ${OUT}/chunk_${i}.json)
+    list(APPEND files ${OUT}/chunk_${i}.json)
+    math(EXPR i "${i} + 1")
+  endforeach()
+  run(${TSAH} report ${files} --json)
+else()
+  run(${launch} ${TSAH} trace ${INPUT} ${TREE} ${args} ${split_args} --out ${OUT}/split --stats ${OUT}/split.json)
+  run(${TSAH} report ${OUT}/split.json --json)
+endif()
+set(split "${output}")
+
+math(EXPR last "${FRAMES} - 1")
+foreach(f RANGE ${last})
+  string(SUBSTRING "000${f}" 0 -1 padded)
+  string(LENGTH "${padded}" n)
+  math(EXPR from "${n} - 4")
+  string(SUBSTRING "${padded}" ${from} 4 padded)
+  execute_process(COMMAND ${CMAKE_COMMAND} -E compare_files ${OUT}/whole/frame_${padded}.png
+                          ${OUT}/split/frame_${padded}.png RESULT_VARIABLE differ)
+  if(differ)
+    message(FATAL_ERROR "frame_${padded}.png differs from the one-process run's")
+  endif()
+endforeach()
+
+# The statistics without what differs between runs: timings, rates, the output folder, who ran it.
+foreach(v whole split)
+  string(REGEX REPLACE ",?\"(workers|wall_s)\":{[^}]*}" "" ${v} "${${v}}")
+  string(REGEX REPLACE "\"(trace_ms_by_type|mrays_per_s)\":{[^}]*}" "" ${v} "${${v}}")
+  string(REGEX REPLACE "\"[a-z_]+_ms\":[0-9.e+-]+" "" ${v} "${${v}}")
+  string(REPLACE "${OUT}/split" "${OUT}/whole" ${v} "${${v}}")
+endforeach()
+if(NOT whole STREQUAL split)
+  message(FATAL_ERROR "the statistics differ:\n${whole}\n${split}")
+endif()
+if(NOT whole MATCHES "\"frames\":\\[{\"frame\":0,.*\"rays\":{\"ao\":[1-9]")
+  message(FATAL_ERROR "no per-frame rays in the statistics:\n${whole}")
+endif()
+message(STATUS "same outputs: ${FRAMES} PNGs and the statistics")
