@@ -199,7 +199,10 @@ void runTrace(const TraceOptions& opt) {
     r.tree = runtimes[w]->currentTree();
     tsah::RenderSettings frameSettings = settings;
     frameSettings.frame = f;
-    r.render = runtimes[w]->render(cameraAt(r.time), lighting, frameSettings, opt.noImages ? nullptr : &images[w]).rays;
+    const tsah::cli::FrameRender rendered =
+        runtimes[w]->render(cameraAt(r.time), lighting, frameSettings, opt.noImages ? nullptr : &images[w]);
+    r.render = rendered.rays;
+    r.frameMs = rendered.frameMs;
     if (!opt.noImages) {
       char name[32];
       std::snprintf(name, sizeof name, "frame_%04u.png", f);

@@ -243,7 +243,7 @@ std::unique_ptr<FrameRuntime> makeFrameRuntime(const TreeSet& trees, const anim:
 #endif
   }
   CpuRuntime::Config config(options.threads);
-  config.layout = options.layout == Layout::Auto ? fastestLayout() : options.layout;
+  config.layout = options.layout == Layout::Auto ? fastestLayout(options.isa) : options.layout;
   config.isa = options.isa;
   config.collapse = wideCollapseConfig(options.objective);
   return std::make_unique<CpuFrameRuntime>(trees, animation, config, cpuRebuilder(options.rebuild, options.objective));

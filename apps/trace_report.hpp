@@ -20,7 +20,8 @@ struct FrameResult {
   uint32_t tree = 0;  // of a tree set: the tree of the frame's part
   FrameUpdate update;
   RenderStats render;
-  std::string image;  // the PNG written, if any
+  double frameMs = 0.0;  // the whole frame (FrameRender::frameMs): GPU passes overlap, so not their sum
+  std::string image;     // the PNG written, if any
 };
 
 // One frame's entry ("tree" without a rebuild, "build_ms" with one) and back.

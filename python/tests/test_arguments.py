@@ -149,8 +149,9 @@ def test_float64_values_that_float32_cannot_hold_are_refused(runtime):
         bad = positions.copy()
         bad[1, 2] = value
         refused(lambda: tsah.Animation(triangles, bad), rf"positions: value .* \(index 5\) {word} float32")
-    small = positions * 1e-30  # tiny but normal float32: kept
-    assert tsah.Animation(triangles, small).positions[0, 1, 0] == np.float32(1e-30)
+    # Small but normal float32, and a model above the smallest supported extent (1e-18): kept.
+    small = positions * 1e-12
+    assert tsah.Animation(triangles, small).positions[0, 1, 0] == np.float32(1e-12)
     origins, directions = one_ray()
     refused(lambda: runtime.trace(origins.astype(np.float64) * 1e39, directions), r"origins: value .* overflows float32")
     refused(lambda: runtime.trace(origins, directions.astype(np.float64) * 1e-300),
