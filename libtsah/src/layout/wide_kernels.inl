@@ -275,6 +275,7 @@ inline void coordinateLanes(F& out, const float* positions, const uint32_t (*ver
   out = F{positions[3 * std::size_t(vertex[Lane][k]) + axis]...};
 }
 
+
 template <uint32_t N, class D, class F, class I>
 TSAH_KERNEL void woopRowsKernel(const float* positions, const uint32_t* vertices, uint32_t lanes, WoopPacket<N>& pk,
                                 Aabb& bounds) {
@@ -317,7 +318,16 @@ TSAH_KERNEL void woopRowsKernel(const float* positions, const uint32_t* vertices
     for (uint32_t half = N / 2; half > 0; half /= 2) {
       I rotate;
       for (uint32_t lane = 0; lane < N; ++lane) rotate[lane] = int32_t((lane + half) % N);
+      // GCC's one-instruction permute; clang (the fuzzing build) has no variable-index form of it.
+#if defined(__clang__)
+      F l = lo, h = hi;
+      for (uint32_t lane = 0; lane < N; ++lane) {
+        l[lane] = lo[rotate[lane]];
+        h[lane] = hi[rotate[lane]];
+      }
+#else
       const F l = __builtin_shuffle(lo, rotate), h = __builtin_shuffle(hi, rotate);
+#endif
       lo = l < lo ? l : lo;
       hi = h > hi ? h : hi;
     }
