@@ -4,6 +4,9 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <memory>
+#include <optional>
+#include <random>
 
 #include "tsah/base/error.hpp"
 #include "anim/generators.hpp"
@@ -13,6 +16,7 @@
 #include "tsah/io/tree_set.hpp"
 #include "tsah/layout/wide_bvh.hpp"
 #include "tsah/layout/wide_tree.hpp"
+#include "tsah/pipeline.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
 #include "tsah/render/camera.hpp"
 #include "tsah/render/camera_path.hpp"
@@ -223,6 +227,68 @@ TEST(CpuRuntime, PngRoundTrip) {
 
 // A tree set read from a file collapses each tree into the wide layout with the objective of its
 // own header, as the GPU runtime does; without build infos every tree takes the config's.
+// The batch queries trace in the runtime's own layout: in bvh4 and bvh8 (every ISA this processor
+// runs) they give the binary layout's hits, up to ties between triangles at the same distance.
+TEST(CpuRuntime, BatchQueriesWorkInEveryLayout) {
+  const Scene s = makeScene(anim::GeneratorKind::Explode, 3000);
+  const std::vector<uint32_t> indices(s.animation.indices().begin(), s.animation.indices().end());
+  const double t = s.animation.uniformTimes(3)[1];
+  const auto runtimeIn = [&](tsah::Layout layout, std::optional<tsah::SimdIsa> isa) {
+    tsah::CpuRuntime::Config config(2);
+    config.layout = layout;
+    config.isa = isa;
+    auto rt = std::make_unique<tsah::CpuRuntime>(s.tree, indices, s.animation.vertexCount(), config);
+    rt->update(s.animation.positionsAt(t));
+    return rt;
+  };
+  // Rays from around the scene at random triangles' centres (every third one short, so that it may
+  // end before the triangle).
+  const std::vector<float> p = s.animation.positionsAt(t);
+  const auto vertex = [&](uint32_t v) { return tsah::Vec3{p[3 * v], p[3 * v + 1], p[3 * v + 2]}; };
+  std::vector<tsah::Ray> rays;
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  const tsah::Vec3 size = s.bounds.extent();
+  for (int i = 0; i < 4000; ++i) {
+    const uint32_t* tri = indices.data() + 3 * (rng() % s.animation.triangleCount());
+    const tsah::Vec3 centre = (vertex(tri[0]) + vertex(tri[1]) + vertex(tri[2])) * (1.0f / 3.0f);
+    tsah::Ray r;
+    r.org = s.bounds.center() + tsah::Vec3{(u(rng) - 0.5f) * size.x, (u(rng) - 0.5f) * size.y, (u(rng) - 0.5f) * size.z} * 3.0f;
+    r.dir = centre - r.org;
+    r.tmin = 0.0f;
+    r.tmax = i % 3 == 0 ? 0.5f : 3.4e38f;
+    rays.push_back(r);
+  }
+  const auto binary = runtimeIn(tsah::Layout::Bvh2, std::nullopt);
+  const std::vector<tsah::Hit> expected = tsah::closestHits(*binary, rays);
+  const std::vector<uint8_t> expectedAny = tsah::anyHits(*binary, rays);
+  uint32_t hits = 0;
+  for (const tsah::Hit& h : expected) hits += h.valid() ? 1 : 0;
+  ASSERT_GT(hits, rays.size() / 2);  // a meaningful batch
+  for (const tsah::SimdIsa isa : {tsah::SimdIsa::Sse, tsah::SimdIsa::Avx2, tsah::SimdIsa::Avx512}) {
+    for (const tsah::Layout layout : {tsah::Layout::Bvh4, tsah::Layout::Bvh8}) {
+      std::unique_ptr<tsah::CpuRuntime> wide;
+      try {
+        wide = runtimeIn(layout, isa);
+      } catch (const tsah::ConfigError&) {
+        continue;  // this processor does not run these kernels
+      }
+      const std::string what = std::string(tsah::name(layout)) + " " + tsah::name(isa);
+      const std::vector<tsah::Hit> got = tsah::closestHits(*wide, rays);
+      const std::vector<uint8_t> any = tsah::anyHits(*wide, rays);
+      uint32_t ties = 0;
+      for (std::size_t i = 0; i < rays.size(); ++i) {
+        ASSERT_EQ(got[i].valid(), expected[i].valid()) << what << " ray " << i;
+        EXPECT_EQ(any[i], expectedAny[i]) << what << " ray " << i;
+        if (!got[i].valid()) continue;
+        EXPECT_NEAR(got[i].t, expected[i].t, 1e-5f * std::max(1.0f, expected[i].t)) << what << " ray " << i;
+        ties += got[i].tri != expected[i].tri ? 1 : 0;
+      }
+      EXPECT_LE(ties, hits / 100) << what << ": other triangles at the same distance";
+    }
+  }
+}
+
 TEST(CpuRuntime, TreeSetCollapsesEachTreeWithItsOwnObjective) {
   const tsah::test::WideObjectiveCase c = tsah::test::wideObjectiveCase();
   const anim::Animation& a = c.animation;

@@ -178,18 +178,16 @@ void checkTreeMatchesAnimation(const tsah::BvhBuildInfo& info, const std::string
 
 std::vector<Hit> closestHits(const CpuRuntime& runtime, std::span<const Ray> rays) {
   std::vector<Hit> hits(rays.size());
-  const BvhView view = runtime.view();
   runtime.parallelFor(rays.size(), 1024, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) hits[i] = closestHit(view, rays[i]);
+    for (std::size_t i = begin; i < end; ++i) hits[i] = runtime.closestHit(rays[i]);
   });
   return hits;
 }
 
 std::vector<uint8_t> anyHits(const CpuRuntime& runtime, std::span<const Ray> rays) {
   std::vector<uint8_t> occluded(rays.size());
-  const BvhView view = runtime.view();
   runtime.parallelFor(rays.size(), 1024, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) occluded[i] = anyHit(view, rays[i]) ? 1 : 0;
+    for (std::size_t i = begin; i < end; ++i) occluded[i] = runtime.anyHit(rays[i]) ? 1 : 0;
   });
   return occluded;
 }

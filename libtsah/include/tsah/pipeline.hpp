@@ -108,8 +108,9 @@ std::vector<MethodResult> compareOnAnimation(const anim::Animation& animation, s
 void checkTreeMatchesAnimation(const BvhBuildInfo& info, const std::string& bvhPath, const anim::Animation& animation,
                                const std::string& animationPath);
 
-// Closest hits (tsah::closestHit) and occlusion (tsah::anyHit) of a batch of rays against the
-// runtime's current frame, on the runtime's threads; results in ray order.
+// Closest hits and occlusion of a batch of rays against the runtime's current frame, in the
+// runtime's layout (CpuRuntime::closestHit / anyHit: binary, or the SIMD kernels of bvh4/bvh8), on
+// the runtime's threads; results in ray order.
 std::vector<Hit> closestHits(const CpuRuntime& runtime, std::span<const Ray> rays);
 std::vector<uint8_t> anyHits(const CpuRuntime& runtime, std::span<const Ray> rays);
 
