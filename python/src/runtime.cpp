@@ -7,11 +7,14 @@
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <string>
 
 #include "anim/animation.hpp"
 #include "bindings.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
 #include "tsah/layout/flat_bvh.hpp"
+#include "tsah/layout/wide_bvh.hpp"
+#include "tsah/core/kinds.hpp"
 #include "tsah/pipeline.hpp"
 #include "tsah/core/ray.hpp"
 #if defined(TSAH_HAVE_CUDA)
@@ -84,10 +87,17 @@ std::vector<float> checkedPositions(py::handle positions, uint32_t vertices) {
 // The tree refitted to frames of its animation on the CPU.
 class CpuTracer {
  public:
-  CpuTracer(const Tree& tree, anim::Animation animation, unsigned threads) : animation_(std::move(animation)) {
+  // layout: "auto" (the widest this processor's SIMD kernels support, as `tsah trace`), "bvh2",
+  // "bvh4" or "bvh8"; a wide layout is collapsed with the tree's own objective (its .tbvh header).
+  CpuTracer(const Tree& tree, anim::Animation animation, unsigned threads, const std::string& layout)
+      : animation_(std::move(animation)) {
     checkTreeMatchesAnimation(tree.file.info, "the tree", animation_, "'" + animation_.name() + "'");
+    const Layout chosen = parse<Layout>(layout);
+    if (chosen == Layout::Cwbvh) throw tsah::ConfigError("layout: cwbvh is a GPU layout (the CPU's are bvh2, bvh4, bvh8)");
     CpuRuntime::Config config;
     config.threads = threads;
+    config.layout = chosen == Layout::Auto ? fastestLayout() : chosen;
+    config.collapse = wideCollapseConfig(tree.file.info.objective);
     runtime_ = std::make_unique<CpuRuntime>(flattenBvh(tree.file.bvh),
                                             std::vector<uint32_t>(animation_.indices().begin(), animation_.indices().end()),
                                             animation_.vertexCount(), config);
@@ -117,6 +127,7 @@ class CpuTracer {
     }
     return boolArray(flags);
   }
+  std::string layout() const { return name(runtime_->layoutInfo().layout); }
   py::array_t<float> bounds() const {
     const Aabb b = runtime_->bounds();
     py::array_t<float> out(std::vector<py::ssize_t>{2, 3});
@@ -191,13 +202,16 @@ constexpr const char* kOccludedDoc =
 void bindRuntimes(py::module_& m) {
   const float inf = std::numeric_limits<float>::infinity();
   py::class_<CpuTracer>(m, "CpuRuntime", R"doc(
-CpuRuntime(tree, animation, threads=0): the tree refitted to a frame of the animation it was built
-for (checked: triangle count, vertex count, topology), traced on the CPU. Starts at the first frame.
+CpuRuntime(tree, animation, threads=0, layout="auto"): the tree refitted to a frame of the animation
+it was built for (checked: triangle count, vertex count, topology), traced on the CPU. Starts at the
+first frame. layout: "auto" (the widest layout this processor's SIMD kernels support, as `tsah
+trace`), "bvh2", "bvh4" or "bvh8"; a wide layout is the tree collapsed with its own objective.
 )doc")
-      .def(py::init([](const Tree& tree, anim::Animation animation, py::handle threads) {
-             return std::make_unique<CpuTracer>(tree, std::move(animation), checkedInteger<unsigned>(threads, "threads"));
+      .def(py::init([](const Tree& tree, anim::Animation animation, py::handle threads, const std::string& layout) {
+             return std::make_unique<CpuTracer>(tree, std::move(animation), checkedInteger<unsigned>(threads, "threads"),
+                                                layout);
            }),
-           "tree"_a, "animation"_a, "threads"_a = 0)
+           "tree"_a, "animation"_a, "threads"_a = 0, "layout"_a = "auto")
       .def("refit", &CpuTracer::refit, "time"_a,
            "Refits the boxes to the animation at this time (interpolated, clamped) and recomputes the Woop triangles.")
       .def("refit_positions", &CpuTracer::refitPositions, "positions"_a,
@@ -205,7 +219,8 @@ for (checked: triangle count, vertex count, topology), traced on the CPU. Starts
       .def("trace", &CpuTracer::trace, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf, kTraceDoc)
       .def("occluded", &CpuTracer::occluded, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf,
            kOccludedDoc)
-      .def_property_readonly("bounds", &CpuTracer::bounds, "Bounds of the current frame, float32 (2, 3).");
+      .def_property_readonly("bounds", &CpuTracer::bounds, "Bounds of the current frame, float32 (2, 3).")
+      .def_property_readonly("layout", &CpuTracer::layout, "The layout traced: bvh2, bvh4 or bvh8.");
 
 #if defined(TSAH_HAVE_CUDA)
   m.attr("cuda_built") = true;

@@ -51,9 +51,15 @@ def brute_force(points, triangles, origins, directions):
     return nearest, triangle, margin
 
 
-def test_trace_matches_brute_force(wave):
+@pytest.mark.parametrize("layout", ["auto", "bvh2", "bvh4", "bvh8"])
+def test_trace_matches_brute_force(wave, layout):
     animation, tree = wave
-    runtime = tsah.CpuRuntime(tree, animation)
+    try:
+        runtime = tsah.CpuRuntime(tree, animation, layout=layout)
+    except tsah.ConfigError as e:  # bvh8 needs AVX2: a processor without it refuses that layout
+        assert layout == "bvh8" and "AVX2" in str(e)
+        pytest.skip(str(e))
+    assert runtime.layout == layout or (layout == "auto" and runtime.layout in ("bvh4", "bvh8"))
     for time in [animation.start_time, 2.3, animation.end_time]:
         runtime.refit(time)
         origins, directions = random_rays(animation, time, 400, seed=int(time * 10))
@@ -75,6 +81,14 @@ def test_trace_matches_brute_force(wave):
         np.testing.assert_allclose(on_triangle, on_ray, atol=1e-4)
         # Occlusion over the whole ray agrees with the closest hit.
         np.testing.assert_array_equal(runtime.occluded(origins, directions), got)
+
+
+def test_cpu_layout_is_checked(wave):
+    animation, tree = wave
+    with pytest.raises(tsah.ConfigError, match="cwbvh is a GPU layout"):
+        tsah.CpuRuntime(tree, animation, layout="cwbvh")
+    with pytest.raises(tsah.ConfigError, match="bvh8"):  # the message lists the choices
+        tsah.CpuRuntime(tree, animation, layout="bvh16")
 
 
 def test_tmax_and_refit_positions(wave):
