@@ -8,6 +8,7 @@
 #include <limits>
 #include <memory>
 #include <string>
+#include <utility>
 
 #include "anim/animation.hpp"
 #include "bindings.hpp"
@@ -54,8 +55,10 @@ std::vector<Ray> makeRays(py::handle origins, py::handle directions, py::handle 
 }
 
 // tsah::Hit as a numpy record: t, u, v (float32) and triangle (int32, -1 when nothing was hit: the
-// bits of tsah::kNoHit).
-py::array hitArray(const std::vector<Hit>& hits) {
+// bits of tsah::kNoHit). A miss has t = inf (as in Embree and Warp) and u = v = 0.
+py::array hitArray(std::vector<Hit> hits) {
+  for (Hit& h : hits)
+    if (!h.valid()) h = Hit{std::numeric_limits<float>::infinity(), 0.0f, 0.0f, h.tri};
   static_assert(sizeof(Hit) == 16 && offsetof(Hit, tri) == 12);
   py::dict spec("names"_a = py::make_tuple("t", "u", "v", "triangle"),
                 "formats"_a = py::make_tuple("<f4", "<f4", "<f4", "<i4"), "offsets"_a = py::make_tuple(0, 4, 8, 12),
@@ -116,7 +119,7 @@ class CpuTracer {
       py::gil_scoped_release release;
       hits = closestHits(*runtime_, rays);
     }
-    return hitArray(hits);
+    return hitArray(std::move(hits));
   }
   py::array_t<bool> occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax) const {
     const std::vector<Ray> rays = makeRays(o, d, tmin, tmax);
@@ -168,7 +171,7 @@ class GpuTracer {
       py::gil_scoped_release release;
       hits = runtime_->closestHits(rays);
     }
-    return hitArray(hits);
+    return hitArray(std::move(hits));
   }
   py::array_t<bool> occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax) {
     const std::vector<Ray> rays = makeRays(o, d, tmin, tmax);

@@ -79,6 +79,10 @@ def test_trace_matches_brute_force(wave, layout):
         on_triangle = (1 - u - v) * points[:, 0] + u * points[:, 1] + v * points[:, 2]
         on_ray = origins[got] + hits["t"][got, None] * directions[got]
         np.testing.assert_allclose(on_triangle, on_ray, atol=1e-4)
+        # A miss: t = inf, triangle -1, u = v = 0.
+        assert (~got).sum() > 0
+        assert np.all(np.isinf(hits["t"][~got])) and np.all(hits["triangle"][~got] == -1)
+        assert np.all(hits["u"][~got] == 0) and np.all(hits["v"][~got] == 0)
         # Occlusion over the whole ray agrees with the closest hit.
         np.testing.assert_array_equal(runtime.occluded(origins, directions), got)
 
