@@ -188,10 +188,7 @@ std::unique_ptr<FrameRuntime> makeGpuFrameRuntime(const TreeSet& trees, const an
                   "use --device cpu");
   cuda::GpuRuntime::Config config;
   config.device = options.gpu;
-  // Auto: bvh2, the runtime's default. With the fused passes the binary frame was the shorter on all
-  // eight data scenes (docs/cwbvh.md); a rule, not a timing, so that chunks, GPUs and MPI ranks of
-  // one run trace in the same layout and give the same images.
-  config.layout = options.layout;
+  config.layout = gpuLayout(options.layout);
   // The cwbvh collapse of trees without build infos (a set read from a file brings each tree's own).
   config.wideObjective = options.objective;
   std::optional<cuda::RebuildOptions> rebuild;

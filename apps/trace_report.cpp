@@ -127,7 +127,7 @@ void printTraceSummary(const nlohmann::json& run) {
               "(shading %.3f ms%s)\n",
               interpolate, run.at("rebuild").get<std::string>() != "none" ? "rebuild" : "refit+Woop",
               update - interpolate, av.at("frame_ms").get<double>(), av.at("shade_ms").get<double>(),
-              run.value("timer", std::string()).find("CUDA") != std::string::npos
+              run.contains("gpu")
                   ? " and the download in it; trace_ms sums the ray passes, which overlap"
                   : ", not in it");
   if (run.contains("images")) std::printf("images in %s/frame_NNNN.png\n", run.at("images").get<std::string>().c_str());

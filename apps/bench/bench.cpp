@@ -255,7 +255,7 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
       std::to_string(o.shadowRays) + " shadow rays per pixel");
   nlohmann::json runtime;
   runtime["device"] = gpu ? "cuda" : "cpu";
-  runtime["layout"] = gpu ? name(o.layout) : name(setup.layout);  // GPU auto: each method's own in its "layout"
+  runtime["layout"] = name(gpu ? gpuLayout(o.layout) : setup.layout);
   runtime["frames"] = setup.times.size();
   runtime["width"] = o.width;
   runtime["height"] = o.height;

@@ -26,7 +26,7 @@ RebuildMethod parseRebuildMethod(std::string_view name) {
 }
 
 GpuRuntime::Impl::Impl(const TreeSet& set, const anim::Animation& animation, Config cfg) : config(cfg) {
-  if (config.layout == Layout::Auto) config.layout = Layout::Bvh2;
+  config.layout = gpuLayout(config.layout);
   if (config.layout != Layout::Bvh2 && config.layout != Layout::Cwbvh)
     throw tsah::ConfigError(std::string("GPU runtime: ") + name(config.layout) + " is no GPU layout (bvh2 or cwbvh)");
   triangles = animation.triangleCount();

@@ -55,6 +55,11 @@ template <typename E>
 std::string choices();
 
 // Children per node of a CPU layout (2, 4 or 8); 0 for Auto and Cwbvh.
+// The layout the GPU traces for `layout`: Auto is the binary one, which with the fused render
+// passes framed all eight data scenes faster than the compressed 8-wide one (docs/cwbvh.md); a
+// rule, so that every chunk, GPU and MPI rank of one run traces the same layout.
+inline Layout gpuLayout(Layout layout) { return layout == Layout::Auto ? Layout::Bvh2 : layout; }
+
 inline uint32_t layoutWidth(Layout layout) {
   return layout == Layout::Bvh2 || layout == Layout::Bvh4 || layout == Layout::Bvh8 ? uint32_t(layout) : 0u;
 }
