@@ -18,22 +18,18 @@ tsah_expect_error(hard.subdivide.non_manifold 1
   "subdivide_fin.json: object 'rock': fin: cannot subdivide: edge 0-1 is shared by more than two triangles \\(0, 1, 4\\): a non-manifold edge"
   info ${H}/subdivide_fin.json)
 
-file(WRITE ${H}/data_climb.json "{\"objects\": [{\"name\": \"x\", \"file\": \"data:../../../etc/passwd\"}]}")
-file(WRITE ${H}/data_absolute.json "{\"objects\": [{\"name\": \"x\", \"file\": \"data:/etc/passwd\"}]}")
-tsah_expect_error(hard.data.climb 1
+tsah_bad_file(hard.data.climb data_climb.json
   "data_climb.json: object 'x': \"data:../../../etc/passwd\" must name a path inside the data folder \\(relative, without \"..\"\\)"
-  info ${H}/data_climb.json)
-tsah_expect_error(hard.data.absolute 1
+  "{\"objects\": [{\"name\": \"x\", \"file\": \"data:../../../etc/passwd\"}]}")
+tsah_bad_file(hard.data.absolute data_absolute.json
   "data_absolute.json: object 'x': \"data:/etc/passwd\" must name a path inside the data folder"
-  info ${H}/data_absolute.json)
-file(WRITE ${H}/empty_file.json "{\"objects\": [{\"name\": \"x\", \"file\": \"\"}]}")
-tsah_expect_error(hard.scene.empty_file 1
+  "{\"objects\": [{\"name\": \"x\", \"file\": \"data:/etc/passwd\"}]}")
+tsah_bad_file(hard.scene.empty_file empty_file.json
   "empty_file.json: object 'x': \"file\" is empty \\(name an input, relative to the scene file's folder\\)"
-  info ${H}/empty_file.json)
-file(WRITE ${H}/offset_twice.json "{\"objects\": [{\"name\": \"x\", \"file\": \"a.tanim\", \"offset\": 1, \"time\": {\"offset\": 2}}]}")
-tsah_expect_error(hard.scene.offset_twice 1
+  "{\"objects\": [{\"name\": \"x\", \"file\": \"\"}]}")
+tsah_bad_file(hard.scene.offset_twice offset_twice.json
   "offset_twice.json: object 'x': both \"offset\" and \"time\": {\"offset\"} are given; keep one"
-  info ${H}/offset_twice.json)
+  "{\"objects\": [{\"name\": \"x\", \"file\": \"a.tanim\", \"offset\": 1, \"time\": {\"offset\": 2}}]}")
 tsah_hard_fixture(hard.scene.offset_twice hard_anim)
 # In a scene, MESH+CACHE finds the cache beside the scene file (the test runs in another folder).
 file(MAKE_DIRECTORY ${H}/cache_scene)

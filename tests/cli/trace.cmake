@@ -53,6 +53,13 @@ add_test(NAME cli.trace.json COMMAND tsah trace ${W}/trace_explode.tanim ${W}/tr
 set_tests_properties(cli.trace.json PROPERTIES FIXTURES_REQUIRED trace_tree FIXTURES_SETUP trace_png
   PASS_REGULAR_EXPRESSION
   "\"average\":{.*\"mrays_per_s\":{\"ao\":.*\"primary\":.*\"shadow\":.*\"total\":.*\"device\":\"cpu\".*\"frames\":\\[{.*\"update_ms\"")
+# total_ms = update_ms + frame_ms (the whole frame, not the sum of passes that overlap on the GPU).
+add_test(NAME cli.trace.totals.run COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --frames 2
+                                           --width 32 --height 24 --no-images --stats ${W}/trace_totals.json)
+set_tests_properties(cli.trace.totals.run PROPERTIES FIXTURES_REQUIRED trace_tree FIXTURES_SETUP trace_totals)
+add_test(NAME cli.trace.totals COMMAND ${Python3_EXECUTABLE} ${PROJECT_SOURCE_DIR}/tests/support/check_trace_totals.py
+                                       ${W}/trace_totals.json)
+set_tests_properties(cli.trace.totals PROPERTIES FIXTURES_REQUIRED trace_totals)
 add_test(NAME cli.trace.png COMMAND ${CMAKE_COMMAND} -E md5sum ${W}/trace_png/frame_0001.png)
 set_tests_properties(cli.trace.png PROPERTIES FIXTURES_REQUIRED trace_png PASS_REGULAR_EXPRESSION "frame_0001.png")
 trace_on_tree(cli.trace.text "update_ms +trace_ms +total_ms.*avg +- +[0-9.]+"
