@@ -128,10 +128,6 @@ class LongCall {
 // naming `name` otherwise (bytes paths included).
 std::string pathArgument(py::handle path, const char* name);
 
-// A numeric argument given as a Python sequence (list, tuple) or a numpy scalar: as a numpy array
-// (np.asarray) for checkedArray; anything else unchanged (checkedArray judges it).
-py::object arrayArgument(py::handle value);
-
 // Creates tsah.Error, ConfigError, DataError, FileError, Failure and ArgumentTypeError in `m` and
 // translates the C++ exceptions to them (tsah::Cancelled to KeyboardInterrupt).
 void bindErrors(py::module_& m);
@@ -175,7 +171,12 @@ template <class T>
 Array<T> checkedArray(py::handle obj, const std::string& name, Kind kind,
                                                 std::initializer_list<py::ssize_t> shape);
 
-// `value`, a Python int, as T: ArgumentTypeError unless it is an int, tsah::ConfigError naming `name`
+// A numeric argument given as a Python sequence (list, tuple) or a numpy scalar: as a numpy array
+// (np.asarray; float64 for a Float argument) for checkedArray; anything else unchanged
+// (checkedArray judges it). ArgumentTypeError naming `name` for a ragged or non-numeric sequence.
+py::object arrayArgument(py::handle value, const char* name, Kind kind);
+
+// `value`, a Python int (or a numpy integer), as T: ArgumentTypeError unless it is one, tsah::ConfigError naming `name`
 // unless it is in [lo, hi] (so -1 is refused instead of pybind11's "incompatible arguments").
 template <class T>
 T checkedInteger(py::handle value, const char* name, T lo = std::numeric_limits<T>::min(),

@@ -23,8 +23,9 @@ py::array_t<float> floatArray(std::span<const float> values, std::vector<py::ssi
 
 anim::Animation makeAnimation(py::handle trianglesArg, py::handle positionsArg, py::handle timesArg,
                               const std::string& name) {
-  const py::object triangles = arrayArgument(trianglesArg), positions = arrayArgument(positionsArg),
-                   times = arrayArgument(timesArg);
+  const py::object triangles = arrayArgument(trianglesArg, "triangles", Kind::Integer),
+                   positions = arrayArgument(positionsArg, "positions", Kind::Float),
+                   times = arrayArgument(timesArg, "times", Kind::Number);
   const auto tri = checkedArray<uint32_t>(triangles, "triangles", Kind::Integer, {-1, 3});
   const py::array posArray = py::isinstance<py::array>(positions) ? py::reinterpret_borrow<py::array>(positions) : py::array();
   // One frame may be given as (V, 3); otherwise (F, V, 3).
@@ -107,11 +108,16 @@ std::string pathArgument(py::handle path, const char* name) {
   return text.cast<std::string>();
 }
 
-py::object arrayArgument(py::handle value) {
+py::object arrayArgument(py::handle value, const char* name, Kind kind) {
+  const py::module_ numpy = py::module_::import("numpy");
   const bool sequence = py::isinstance<py::list>(value) || py::isinstance<py::tuple>(value);
-  const bool numpyScalar = py::isinstance(value, py::module_::import("numpy").attr("generic"));
-  if (sequence || numpyScalar) return py::module_::import("numpy").attr("asarray")(value);
-  return py::reinterpret_borrow<py::object>(value);
+  if (!sequence && !py::isinstance(value, numpy.attr("generic"))) return py::reinterpret_borrow<py::object>(value);
+  try {
+    // Numbers in a list have no dtype: a float target takes ints as floats.
+    return kind == Kind::Float ? numpy.attr("asarray")(value, "dtype"_a = "float64") : numpy.attr("asarray")(value);
+  } catch (py::error_already_set&) {  // ragged or not numbers
+    throw ArgumentTypeError(std::string(name) + ": expected numbers in a rectangular sequence");
+  }
 }
 
 void bindErrors(py::module_& m) {
