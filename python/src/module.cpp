@@ -184,11 +184,11 @@ data (an index out of range, times not increasing, NaN or infinite coordinates).
 )doc")
       .def(py::init(&makeAnimation), "triangles"_a, "positions"_a, "times"_a = py::none(), "name"_a = "")
       .def_property_readonly("name", &anim::Animation::name, "Name of the input (file stem) or the given name.")
-      .def_property_readonly("triangle_count", &anim::Animation::triangleCount)
-      .def_property_readonly("vertex_count", &anim::Animation::vertexCount)
-      .def_property_readonly("keyframe_count", &anim::Animation::keyframeCount)
-      .def_property_readonly("start_time", &anim::Animation::startTime)
-      .def_property_readonly("end_time", &anim::Animation::endTime)
+      .def_property_readonly("triangle_count", &anim::Animation::triangleCount, "Number of triangles.")
+      .def_property_readonly("vertex_count", &anim::Animation::vertexCount, "Number of vertices.")
+      .def_property_readonly("keyframe_count", &anim::Animation::keyframeCount, "Number of keyframes.")
+      .def_property_readonly("start_time", &anim::Animation::startTime, "Time of the first keyframe.")
+      .def_property_readonly("end_time", &anim::Animation::endTime, "Time of the last keyframe.")
       .def_property_readonly(
           "triangles",
           [](const anim::Animation& a) {
