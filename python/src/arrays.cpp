@@ -24,8 +24,9 @@ void requireConstructed(py::handle obj, const std::type_info& type) {
 
 template <class T>
 T checkedInteger(py::handle arg, const char* name, T lo, T hi) {
-  // An int or anything with __index__ (numpy integer scalars); never a bool.
-  if (py::isinstance<py::bool_>(arg) || !PyIndex_Check(arg.ptr()))
+  // An int or anything with __index__ (numpy integer scalars); never a bool (numpy's neither).
+  const bool isBool = py::isinstance<py::bool_>(arg) || py::isinstance(arg, py::module_::import("numpy").attr("bool_"));
+  if (isBool || !PyIndex_Check(arg.ptr()))
     throw ArgumentTypeError(std::string(name) + ": expected an int, got " +
                             std::string(py::str(arg.get_type().attr("__name__"))));
   const auto value = py::reinterpret_steal<py::int_>(PyNumber_Index(arg.ptr()));

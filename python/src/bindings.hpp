@@ -121,7 +121,7 @@ class LongCall {
  private:
   void runErased(const std::function<void()>& work);
   struct State;
-  std::shared_ptr<State> state_;
+  std::unique_ptr<State> state_;
 };
 
 // A path argument: str or any os.PathLike (pathlib.Path), through os.fspath; ArgumentTypeError

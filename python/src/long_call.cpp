@@ -25,7 +25,7 @@ struct LongCall::State {
   py::object progress;
 };
 
-LongCall::LongCall(py::object progress) : state_(std::make_shared<State>()) {
+LongCall::LongCall(py::object progress) : state_(std::make_unique<State>()) {
   if (!progress.is_none() && !PyCallable_Check(progress.ptr()))
     throw ArgumentTypeError("progress: expected a callable or None, got " +
                             std::string(py::str(progress.get_type().attr("__name__"))));
@@ -35,8 +35,10 @@ LongCall::LongCall(py::object progress) : state_(std::make_shared<State>()) {
 // The callback is a Python object: released with the GIL held (the destructor runs in the binding).
 LongCall::~LongCall() = default;
 
+// The flag, not the state: copies of the check made on worker threads must not own the state and
+// its Python callback (released without the GIL). The LongCall outlives run(), and so the work.
 std::function<bool()> LongCall::cancelled() const {
-  return [state = state_] { return state->cancel.load(std::memory_order_relaxed); };
+  return [flag = &state_->cancel] { return flag->load(std::memory_order_relaxed); };
 }
 
 bool LongCall::reports() const { return !state_->progress.is_none(); }

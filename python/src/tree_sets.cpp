@@ -38,7 +38,7 @@ py::object segmentationDict(const TreeSetObject& s) {
 
 Tree treeAt(const TreeSetObject& s, py::handle indexArg) {
   const auto count = py::ssize_t(s.set.size());
-  py::ssize_t index = py::int_(py::reinterpret_borrow<py::object>(indexArg)).cast<py::ssize_t>();
+  py::ssize_t index = checkedInteger<int>(indexArg, "index");
   if (index < 0) index += count;
   if (index < 0 || index >= count) throw py::index_error("TreeSet index out of range");
   Tree tree;

@@ -193,5 +193,6 @@ def test_paths_lists_and_numpy_scalars_are_accepted(sample_path, tmp_path):
         tsah.read_tree(3)
     with pytest.raises(tsah.ArgumentTypeError, match="seed: expected an int, got float"):
         tsah.optimize(animation, seed=1.5)
-    with pytest.raises(tsah.ArgumentTypeError, match="frames: expected an int, got bool"):
-        tsah.optimize(animation, frames=True)
+    for flag, name in [(True, "bool"), (np.True_, "bool_")]:
+        with pytest.raises(tsah.ArgumentTypeError, match=f"frames: expected an int, got {name}$"):
+            tsah.optimize(animation, frames=flag)
