@@ -81,33 +81,20 @@ std::pair<double, double> averageAndMaximum(const std::vector<double>& costs) {
   return {average, maximum};
 }
 
-// --segments K|auto: a tree set, written as one file after every tree is built.
-void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim::Animation& a, uint32_t frames,
-                 uint32_t evalFrames, const tsah::BaselineConfig& config, tsah::cli::Progress& progress) {
-  tsah::SegmentationConfig sc;
-  sc.method = method;
-  sc.representativeFrames = frames;
-  sc.evaluationFrames = evalFrames;
-  sc.overlap = opt.overlap;
-  sc.baseline = config;
-  sc.referenceFrames = opt.referenceFrames;
-  sc.maxTrees = opt.maxTrees;
-  tsah::TreeSetInfo setInfo;
-  setInfo.overlap = opt.overlap;
-  if (opt.segments == "auto") {
-    sc.mode = tsah::SegmentationConfig::Mode::Budget;
-    sc.budgetRelative = opt.budgetCost == 0.0;
-    sc.budget = sc.budgetRelative ? (opt.budget > 0.0 ? opt.budget : 1.05) : opt.budgetCost;
-    setInfo.segmentation = "budget";
-    setInfo.budget = sc.budget;
-    setInfo.budgetRelative = sc.budgetRelative;
-    progress.message("budget segmentation");
-  } else {
-    sc.mode = tsah::SegmentationConfig::Mode::Count;
-    sc.count = static_cast<uint32_t>(std::stoul(opt.segments));
-    setInfo.segmentation = method.k > 0 ? "count-peak" : "count";
-    progress.message("choosing split points for " + opt.segments + " trees");
-  }
+// --segments K|auto: a tree set (tsah::optimizeTreeSet), written as one file after every tree is built.
+void runSegments(const Options& opt, const tsah::TreeOptions& treeOpt, const anim::Animation& a, uint32_t frames,
+                 uint32_t evalFrames, tsah::cli::Progress& progress) {
+  const tsah::MethodSpec method = treeOpt.methodSpec();
+  tsah::TreeSetOptions so;
+  so.tree = treeOpt;
+  so.evalFrames = evalFrames;
+  so.segments = opt.segments == "auto" ? 0u : static_cast<uint32_t>(std::stoul(opt.segments));
+  so.budget = opt.budget;
+  so.budgetCost = opt.budgetCost;
+  so.overlap = opt.overlap;
+  so.referenceFrames = opt.referenceFrames;
+  so.maxTrees = opt.maxTrees;
+  so.reproducible = opt.reproducible;
   // The candidate trees dealt to the GPUs of --devices (each worker thread on its own GPU; the GPU
   // optimizer uses the thread's), to this rank's GPU, or built here on the CPU; and to the ranks.
   std::vector<int> gpus;
@@ -118,21 +105,16 @@ void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim:
     if (!gpus.empty()) tsah::cuda::useDevice(gpus[w]);
 #endif
   });
-  sc.dealer = dealer.get();
-  const tsah::SegmentationResult r = tsah::segmentTimeline(tsah::cli::animationTimeline(a), sc);
+  so.dealer = dealer.get();
+  const tsah::OptimizedTreeSet set = tsah::optimizeTreeSet(a, so);
   if (!tsah::cli::job::leader()) return;  // every rank has the result; one writes it
+  const tsah::SegmentationResult& r = set.search;
+  const tsah::TreeSetInfo& setInfo = set.info;
+  const bool budgetMode = so.segments == 0;
 
-  std::vector<tsah::BvhBuildInfo> builds;
   nlohmann::json parts = nlohmann::json::array();
-  for (uint32_t s = 0; s < r.trees.size(); ++s) {
-    tsah::BvhBuildInfo info = tsah::treeBuildInfo(opt.tree, a, frames, opt.reproducible ? 0.0 : r.buildSeconds[s],
-                                                  r.buildRanges[s].start, r.buildRanges[s].end);
-    if (r.methods[s] == "sah-frame") {
-      info.method = "sah-frame";
-      info.objective.k = 0;
-      info.representativeFrames = 1;
-    }
-    builds.push_back(info);
+  for (uint32_t s = 0; s < set.trees.size(); ++s) {
+    const tsah::BvhBuildInfo& info = set.builds[s];
     std::vector<double> mine;
     for (std::size_t f = 0; f < r.times.size(); ++f)
       if (tsah::treeIndexAt(r.parts, r.times[f]) == s) mine.push_back(r.costs[f]);
@@ -142,8 +124,8 @@ void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim:
                         {"time_end", r.parts[s].end},
                         {"build_range", {r.buildRanges[s].start, r.buildRanges[s].end}},
                         {"method", info.method},
-                        {"nodes", r.trees[s].nodeCount()},
-                        {"depth", r.trees[s].depth()},
+                        {"nodes", set.trees[s].nodeCount()},
+                        {"depth", set.trees[s].depth()},
                         {"build_s", r.buildSeconds[s]},
                         {"eval_frames", mine.size()},
                         {"cost", {{"average", average}, {"maximum", maximum}}}};
@@ -151,7 +133,7 @@ void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim:
       j["optimization"] = optimizationJson(r.optimizations[s]);
     parts.push_back(j);
   }
-  tsah::saveTreeSetFile(opt.output, r.trees, builds, r.buildRanges, setInfo);
+  set.save(opt.output);
   progress.message("done");
 
   nlohmann::json j;
@@ -164,19 +146,19 @@ void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim:
   j["frames"] = frames;
   j["eval_frames"] = evalFrames;
   j["triangles"] = a.triangleCount();
-  j["trees"] = r.trees.size();
+  j["trees"] = set.trees.size();
   j["overlap"] = opt.overlap;
   j["candidate_trees_built"] = r.treesBuilt;
   j["workers"] = {{"ranks", tsah::cli::job::size()}, {"per_rank", dealer->localWorkers()}};
   j["search_s"] = r.searchSeconds;
   j["cost"] = {{"average", r.average}, {"maximum", r.maximum}, {"per_frame", r.costs}};
-  if (sc.mode == tsah::SegmentationConfig::Mode::Budget) {
-    j["budget"] = {{"value", sc.budget},
-                   {"relative", sc.budgetRelative},
+  if (budgetMode) {
+    j["budget"] = {{"value", setInfo.budget},
+                   {"relative", setInfo.budgetRelative},
                    {"met", r.budgetMet},
                    {"bound_per_frame", r.bound},
                    {"reference_s", r.referenceSeconds}};
-    if (sc.budgetRelative) {
+    if (setInfo.budgetRelative) {
       double peakRatio = 0.0, ratioSum = 0.0, refSum = 0.0;
       for (std::size_t f = 0; f < r.costs.size(); ++f) {
         peakRatio = std::max(peakRatio, r.costs[f] / r.reference[f]);
@@ -194,7 +176,7 @@ void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim:
     return;
   }
   std::printf("%s: a set of %zu trees (%s segmentation, %s), %u triangles; %u candidate trees built in %.2f s\n",
-              opt.output.c_str(), r.trees.size(), setInfo.segmentation.c_str(), method.name().c_str(),
+              opt.output.c_str(), set.trees.size(), setInfo.segmentation.c_str(), method.name().c_str(),
               a.triangleCount(), r.treesBuilt, r.searchSeconds);
   for (const nlohmann::json& p : parts)
     std::printf("  tree %u: t %.4g .. %.4g (%s), %u nodes, build %.2f s, cost over %zu evaluation frames: average %.3f, maximum %.3f\n",
@@ -205,12 +187,12 @@ void runSegments(const Options& opt, const tsah::MethodSpec& method, const anim:
   std::printf("cost over %u evaluation frames, each with the tree of its part: average %.3f, maximum %.3f\n", evalFrames,
               r.average, r.maximum);
   if (j.contains("budget")) {
-    if (sc.budgetRelative)
-      std::printf("budget %.3gx the per-frame optimized cost: %s; peak ratio %.4f, average ratio %.4f\n", sc.budget,
+    if (setInfo.budgetRelative)
+      std::printf("budget %.3gx the per-frame optimized cost: %s; peak ratio %.4f, average ratio %.4f\n", setInfo.budget,
                   r.budgetMet ? "met on every evaluation frame" : "MISSED on some evaluation frames",
                   j["budget"]["peak_ratio"].get<double>(), j["budget"]["average_ratio"].get<double>());
     else
-      std::printf("budget: cost <= %.4g: %s\n", sc.budget,
+      std::printf("budget: cost <= %.4g: %s\n", setInfo.budget,
                   r.budgetMet ? "met on every evaluation frame" : "MISSED on some evaluation frames");
   }
 }
@@ -243,7 +225,7 @@ void run(const Options& opt) {
     if (a.keyframeCount() <= 1)
       throw tsah::cli::UsageError(opt.input + ": --segments needs an animation (this input has one frame)");
     if (evalFrames < 2) throw tsah::cli::UsageError("--segments needs at least 2 --eval-frames");
-    return runSegments(opt, method, a, frames, evalFrames, treeOpt.baselineConfig(), progress);
+    return runSegments(opt, treeOpt, a, frames, evalFrames, progress);
   }
   if (!opt.devices.empty()) throw tsah::cli::UsageError("--devices deals the candidate trees of --segments");
   // One tree is one unit of work: the other ranks of a job have nothing to do.

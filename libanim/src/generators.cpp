@@ -259,9 +259,9 @@ Animation swap(const GeneratorOptions& o) {
 
 Animation generate(GeneratorKind kind, const GeneratorOptions& options) {
   if (options.triangles == 0 || options.triangles > 50'000'000u)
-    throw tsah::ConfigError("generate: --triangles must be between 1 and 50,000,000");
+    throw tsah::ConfigError("generate: triangles must be between 1 and 50,000,000");
   if (options.frames == 0 || options.frames > 100'000u)
-    throw tsah::ConfigError("generate: --frames must be between 1 and 100,000");
+    throw tsah::ConfigError("generate: frames must be between 1 and 100,000");
   if (double(options.triangles) * options.frames > 5e8)
     throw tsah::ConfigError("generate: triangles x frames is too large (positions would not fit in memory)");
   switch (kind) {

@@ -6,6 +6,7 @@
 
 #include "tsah/base/error.hpp"
 #include "tsah/base/memory.hpp"
+#include "tsah/layout/flat_bvh.hpp"
 #include "tsah/layout/traversal.hpp"
 
 namespace tsah {
@@ -54,6 +55,8 @@ BaselineConfig TreeOptions::baselineConfig() const {
   config.optimizerKind = optimizer;
   config.parallel.threads = threads;
   config.progress = progress;
+  config.optimizer.progress = batchProgress;
+  config.optimizer.cancelled = cancelled;
   if (device == Device::Cuda) {
     if (!gpuOptimizer) throw ConfigError("device 'cuda': this build of tsah has no CUDA support");
     config.deviceOptimizer = gpuOptimizer;
@@ -133,6 +136,119 @@ OptimizedTree optimizeAnimation(const anim::Animation& animation, const TreeOpti
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   tree.info = treeBuildInfo(options, animation, frames, seconds, animation.startTime(), animation.endTime());
   return tree;
+}
+
+void TreeSetOptions::validate() const {
+  tree.validate();
+  if (evalFrames < 2 || evalFrames > TreeOptions::kMaxEvalFrames)
+    throw ConfigError("eval_frames: a tree set needs 2.." + std::to_string(TreeOptions::kMaxEvalFrames) +
+                      " evaluation frames, not " + std::to_string(evalFrames));
+  if (segments > kMaxSegments)
+    throw ConfigError("segments: must be 1.." + std::to_string(kMaxSegments) + " trees or auto, not " +
+                      std::to_string(segments));
+  if (!(budget == 0.0 || (budget >= 1.0 && budget <= 100.0)))
+    throw ConfigError("budget: must be a factor in [1, 100], not " + std::to_string(budget));
+  if (!(budgetCost == 0.0 || (budgetCost > 0.0 && std::isfinite(budgetCost))))
+    throw ConfigError("budget_cost: must be a finite cost > 0, not " + std::to_string(budgetCost));
+  if (budget > 0.0 && budgetCost > 0.0) throw ConfigError("budget, budget_cost: give one of them, not both");
+  if (segments != 0 && (budget > 0.0 || budgetCost > 0.0))
+    throw ConfigError("budget: goes with segments auto (the fewest trees within the budget), not a count");
+  if (!std::isfinite(overlap) || overlap < 0.0)
+    throw ConfigError("overlap: must be a finite number of seconds >= 0, not " + std::to_string(overlap));
+  if (maxTrees < 1 || maxTrees > kTbvhMaxTrees)
+    throw ConfigError("max_trees: must be in 1.." + std::to_string(kTbvhMaxTrees) + ", not " + std::to_string(maxTrees));
+}
+
+TreeSet OptimizedTreeSet::treeSet() const {
+  TreeSet set;
+  set.info = info;
+  set.ranges = ranges;
+  set.builds = builds;
+  for (const Bvh& tree : trees) set.trees.push_back(flattenBvh(tree));
+  return set;
+}
+
+std::vector<uint8_t> OptimizedTreeSet::encode() const { return encodeTreeSetFile(trees, builds, ranges, info); }
+
+void OptimizedTreeSet::save(const std::string& path) const { saveTreeSetFile(path, trees, builds, ranges, info); }
+
+OptimizedTreeSet optimizeTreeSet(const anim::Animation& animation, const TreeSetOptions& options) {
+  options.validate();
+  if (animation.triangleCount() == 0) throw tsah::DataError(animation.name() + ": no triangles to build a tree over");
+  if (animation.keyframeCount() <= 1)
+    throw tsah::DataError(animation.name() + ": a tree set needs an animation (this input has one frame)");
+  const MethodSpec method = options.tree.methodSpec();
+  const uint32_t frames = framesFor(animation, options.tree.frames);
+  SegmentationConfig sc;
+  sc.method = method;
+  sc.representativeFrames = frames;
+  sc.evaluationFrames = options.evalFrames;
+  sc.overlap = options.overlap;
+  sc.baseline = options.tree.baselineConfig();
+  sc.referenceFrames = options.referenceFrames;
+  sc.maxTrees = options.maxTrees;
+  sc.dealer = options.dealer;
+  OptimizedTreeSet out;
+  out.info.overlap = options.overlap;
+  if (options.segments == 0) {
+    sc.mode = SegmentationConfig::Mode::Budget;
+    sc.budgetRelative = options.budgetCost == 0.0;
+    sc.budget = sc.budgetRelative ? (options.budget > 0.0 ? options.budget : 1.05) : options.budgetCost;
+    out.info.segmentation = "budget";
+    out.info.budget = sc.budget;
+    out.info.budgetRelative = sc.budgetRelative;
+    if (options.tree.progress) options.tree.progress("budget segmentation");
+  } else {
+    sc.mode = SegmentationConfig::Mode::Count;
+    sc.count = options.segments;
+    out.info.segmentation = method.k > 0 ? "count-peak" : "count";
+    if (options.tree.progress)
+      options.tree.progress("choosing split points for " + std::to_string(options.segments) + " trees");
+  }
+  out.search = segmentTimeline(animationTimeline(animation), sc);
+  SegmentationResult& r = out.search;
+  for (uint32_t s = 0; s < r.trees.size(); ++s) {
+    BvhBuildInfo info = treeBuildInfo(options.tree, animation, frames, options.reproducible ? 0.0 : r.buildSeconds[s],
+                                      r.buildRanges[s].start, r.buildRanges[s].end);
+    // A budget part too short to split further: an optimized SAH tree of one frame.
+    if (r.methods[s] == "sah-frame") {
+      info.method = "sah-frame";
+      info.objective.k = 0;
+      info.representativeFrames = 1;
+    }
+    out.builds.push_back(std::move(info));
+  }
+  out.trees = std::move(r.trees);
+  r.trees.clear();
+  out.ranges = r.buildRanges;
+  return out;
+}
+
+std::vector<double> evaluateTreeSet(const TreeSet& set, const anim::Animation& animation, uint32_t evalFrames,
+                                    const CostModel& cost, unsigned threads) {
+  checkEvalFrames(evalFrames);
+  Objective{0, cost, 1}.validate("costs");
+  if (set.size() == 0 || set.trees[0].triangleCount() != animation.triangleCount())
+    throw tsah::DataError(animation.name() + ": the tree set has " +
+                          std::to_string(set.size() ? set.trees[0].triangleCount() : 0) + " triangles, the animation " +
+                          std::to_string(animation.triangleCount()));
+  const std::vector<double> times = animation.uniformTimes(framesFor(animation, evalFrames));
+  std::vector<double> costs(times.size());
+  // Each tree over the evaluation frames its time selects.
+  for (uint32_t s = 0; s < set.size(); ++s) {
+    std::vector<double> mine;
+    std::vector<std::size_t> where;
+    for (std::size_t f = 0; f < times.size(); ++f)
+      if (set.treeAt(times[f]) == s) {
+        mine.push_back(times[f]);
+        where.push_back(f);
+      }
+    if (mine.empty()) continue;
+    const std::vector<double> c = evaluateFrames(unflattenBvh(set.trees[s]), animationFrames(animation, std::move(mine)),
+                                                 cost, threads);
+    for (std::size_t i = 0; i < where.size(); ++i) costs[where[i]] = c[i];
+  }
+  return costs;
 }
 
 std::vector<double> evaluateAnimation(const Bvh& bvh, const anim::Animation& animation, uint32_t evalFrames,

@@ -23,14 +23,18 @@ void requireConstructed(py::handle obj, const std::type_info& type) {
 }
 
 template <class T>
-T checkedInteger(py::handle value, const char* name, T lo, T hi) {
-  if (!py::isinstance<py::int_>(value) || py::isinstance<py::bool_>(value))
+T checkedInteger(py::handle arg, const char* name, T lo, T hi) {
+  // An int or anything with __index__ (numpy integer scalars); never a bool (numpy's neither).
+  const bool isBool = py::isinstance<py::bool_>(arg) || py::isinstance(arg, py::module_::import("numpy").attr("bool_"));
+  if (isBool || !PyIndex_Check(arg.ptr()))
     throw ArgumentTypeError(std::string(name) + ": expected an int, got " +
-                            std::string(py::str(value.get_type().attr("__name__"))));
+                            std::string(py::str(arg.get_type().attr("__name__"))));
+  const auto value = py::reinterpret_steal<py::int_>(PyNumber_Index(arg.ptr()));
+  if (!value) throw py::error_already_set();
   const py::int_ low(lo), high(hi);
   if (value < low || value > high)
     throw tsah::ConfigError(std::string(name) + ": must be in " + std::to_string(lo) + ".." + std::to_string(hi) +
-                            ", not " + std::string(py::str(value)));
+                            ", not " + std::string(py::str(py::handle(value))));
   return value.cast<T>();
 }
 

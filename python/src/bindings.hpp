@@ -6,6 +6,10 @@
 #include <pybind11/pybind11.h>
 
 #include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <span>
 #include <limits>
 #include <string>
 #include <type_traits>
@@ -15,10 +19,15 @@
 #include "tsah/base/error.hpp"
 #include "tsah/core/bvh.hpp"
 #include "tsah/io/bvh_file.hpp"
+#include "tsah/io/tree_set.hpp"
 #include "tsah/optimize/insertion_optimizer.hpp"
+#include "tsah/optimize/segmentation.hpp"
 
 namespace anim {
 class Animation;
+}
+namespace tsah {
+struct OptimizedTreeSet;
 }
 
 namespace tsah::python {
@@ -33,6 +42,16 @@ struct Tree {
   InsertionOptimizer::Result optimization;
 };
 
+// A tree set as the module hands it out (tsah.TreeSet, trees.cpp): the decoded set that the
+// runtimes take (tsah::CpuRuntime / GpuRuntime accept `set`), the bytes of its .tbvh file (what
+// save, to_bytes and pickling write), and for a set built in this process the search's record.
+struct TreeSetObject {
+  tsah::TreeSet set;
+  std::vector<uint8_t> bytes;
+  bool optimized = false;
+  SegmentationResult search;  // when optimized: parts, costs, budget (its trees moved out)
+};
+
 class CpuTracer;  // tsah.CpuRuntime (runtime.cpp)
 class GpuTracer;  // tsah.GpuRuntime (runtime.cpp, CUDA builds)
 
@@ -42,7 +61,8 @@ class GpuTracer;  // tsah.GpuRuntime (runtime.cpp, CUDA builds)
 template <class T>
 struct IsBoundClass
     : std::bool_constant<std::is_same_v<T, anim::Animation> || std::is_same_v<T, Tree> ||
-                         std::is_same_v<T, CpuTracer> || std::is_same_v<T, GpuTracer>> {};
+                         std::is_same_v<T, TreeSetObject> || std::is_same_v<T, CpuTracer> ||
+                         std::is_same_v<T, GpuTracer>> {};
 
 // Throws tsah::ConfigError when `obj` is an instance of the Python class bound to `type` whose C++
 // object was never constructed (Class.__new__(Class) without __init__). pybind11 itself would hand
@@ -56,12 +76,85 @@ class ArgumentTypeError : public tsah::ConfigError {
   using tsah::ConfigError::ConfigError;
 };
 
+// Runs a long C++ call so that Ctrl-C stops it, with progress reported to Python:
+//
+//   LongCall call(progress);                       // a Python callable or None
+//   options.cancelled = call.cancelled();          // TreeOptions / InsertionOptimizer::Config
+//   options.batchProgress = [&call](const auto& r) { call.report([r] { return py::dict(...); }); };
+//   Result result = call.run([&] { return longWork(options); });
+//
+// run() is called with the GIL held. The work runs on a worker thread; the calling thread releases
+// the GIL and wakes every 50 ms (and at every report) to take the GIL, call the progress callback
+// with each queued event, and run Python's signal handlers (PyErr_CheckSignals). When a handler
+// raises (KeyboardInterrupt for Ctrl-C) or the callback raises, the cancel flag is set, run() waits
+// for the work to return, and raises that Python exception. Cancellation is cooperative: the work
+// must poll cancelled() (the optimizers do, through their configs, within 32 steps or a round) and
+// throw tsah::Cancelled, or Ctrl-C acts only when the work ends. A tsah::Cancelled that reaches the
+// exception translator becomes KeyboardInterrupt. Per-thread state of the C++ side (the CUDA
+// device chosen with cudaSetDevice) must be set inside the work, which runs on another thread.
+class LongCall {
+ public:
+  explicit LongCall(py::object progress = py::none());
+  ~LongCall();
+  LongCall(const LongCall&) = delete;
+  LongCall& operator=(const LongCall&) = delete;
+
+  // The cancel check to hand to the C++ side: cheap, thread-safe, true once the call is cancelled.
+  std::function<bool()> cancelled() const;
+  // Queues a progress event from any thread; `event` is called on the calling thread with the GIL
+  // held and its result passed to the progress callback. Nothing happens without a callback.
+  void report(std::function<py::object()> event);
+  bool reports() const;  // whether there is a callback to report to
+
+  template <class Work>
+  auto run(Work work) -> std::invoke_result_t<Work> {
+    using Result = std::invoke_result_t<Work>;
+    if constexpr (std::is_void_v<Result>) {
+      runErased([&work] { work(); });
+    } else {
+      std::optional<Result> out;
+      runErased([&work, &out] { out.emplace(work()); });
+      return std::move(*out);
+    }
+  }
+
+ private:
+  void runErased(const std::function<void()>& work);
+  struct State;
+  std::unique_ptr<State> state_;
+};
+
+// A path argument: str or any os.PathLike (pathlib.Path), through os.fspath; ArgumentTypeError
+// naming `name` otherwise (bytes paths included).
+std::string pathArgument(py::handle path, const char* name);
+
 // Creates tsah.Error, ConfigError, DataError, FileError, Failure and ArgumentTypeError in `m` and
-// translates the C++ exceptions to them.
+// translates the C++ exceptions to them (tsah::Cancelled to KeyboardInterrupt).
 void bindErrors(py::module_& m);
 void bindAnimation(py::module_& m);
 void bindTrees(py::module_& m);
 void bindRuntimes(py::module_& m);
+void bindTreeSets(py::module_& m);  // tsah.TreeSet (tree_sets.cpp), called by bindTrees
+
+// A tree set for Python from a set file's bytes and their decoded set (read_tree, tree_from_bytes),
+// or from a set built in this process (optimize with segments).
+TreeSetObject treeSetFromBytes(std::vector<uint8_t> bytes, tsah::TreeSet decoded);
+TreeSetObject treeSetFromOptimized(OptimizedTreeSet built);
+
+// decode() of bytes handed over in memory: they are data, not a file, so the decoder's
+// tsah::FileError ("NAME: problem") becomes a tsah::DataError with the same message.
+template <class Decode>
+auto inMemory(Decode decode) -> std::invoke_result_t<Decode> {
+  try {
+    return decode();
+  } catch (const tsah::FileError& e) {
+    throw tsah::DataError(e.what());
+  }
+}
+
+// Copies as Python objects: a float64 array, bytes.
+py::array_t<double> doubleArray(const std::vector<double>& values);
+py::bytes bytesObject(std::span<const uint8_t> bytes);
 
 // A C-contiguous numpy array of T (converted from the caller's dtype when needed).
 template <class T>
@@ -78,7 +171,12 @@ template <class T>
 Array<T> checkedArray(py::handle obj, const std::string& name, Kind kind,
                                                 std::initializer_list<py::ssize_t> shape);
 
-// `value`, a Python int, as T: ArgumentTypeError unless it is an int, tsah::ConfigError naming `name`
+// A numeric argument given as a Python sequence (list, tuple) or a numpy scalar: as a numpy array
+// (np.asarray; float64 for a Float argument) for checkedArray; anything else unchanged
+// (checkedArray judges it). ArgumentTypeError naming `name` for a ragged or non-numeric sequence.
+py::object arrayArgument(py::handle value, const char* name, Kind kind);
+
+// `value`, a Python int (or a numpy integer), as T: ArgumentTypeError unless it is one, tsah::ConfigError naming `name`
 // unless it is in [lo, hi] (so -1 is refused instead of pybind11's "incompatible arguments").
 template <class T>
 T checkedInteger(py::handle value, const char* name, T lo = std::numeric_limits<T>::min(),

@@ -21,7 +21,11 @@ py::array_t<float> floatArray(std::span<const float> values, std::vector<py::ssi
   return out;
 }
 
-anim::Animation makeAnimation(py::handle triangles, py::handle positions, py::handle times, const std::string& name) {
+anim::Animation makeAnimation(py::handle trianglesArg, py::handle positionsArg, py::handle timesArg,
+                              const std::string& name) {
+  const py::object triangles = arrayArgument(trianglesArg, "triangles", Kind::Integer),
+                   positions = arrayArgument(positionsArg, "positions", Kind::Float),
+                   times = arrayArgument(timesArg, "times", Kind::Number);
   const auto tri = checkedArray<uint32_t>(triangles, "triangles", Kind::Integer, {-1, 3});
   const py::array posArray = py::isinstance<py::array>(positions) ? py::reinterpret_borrow<py::array>(positions) : py::array();
   // One frame may be given as (V, 3); otherwise (F, V, 3).
@@ -45,17 +49,15 @@ anim::Animation makeAnimation(py::handle triangles, py::handle positions, py::ha
                          std::vector<float>(pos.data(), pos.data() + pos.size()), std::move(keyTimes), name);
 }
 
-anim::Animation loadAnimation(const std::string& path, double fps, const std::string& clip) {
+anim::Animation loadAnimation(py::handle pathArg, double fps, const std::string& clip) {
+  const std::string path = pathArgument(pathArg, "path");
   anim::LoadOptions options;
   options.fps = fps;
   options.clip = clip;
   std::vector<std::string> warnings;
   options.warning = [&warnings](const std::string& w) { warnings.push_back(w); };
-  anim::Animation a;
-  {
-    py::gil_scoped_release release;
-    a = anim::load(path, options);
-  }
+  // The importers take no cancel check: Ctrl-C is raised when the load returns.
+  anim::Animation a = LongCall().run([&] { return anim::load(path, options); });
   for (const std::string& w : warnings) PyErr_WarnEx(PyExc_UserWarning, w.c_str(), 1);
   return a;
 }
@@ -95,6 +97,29 @@ PyObject* newErrorClass(py::module_& m, const char* name, const char* doc, std::
 
 }  // namespace
 
+std::string pathArgument(py::handle path, const char* name) {
+  if (!py::isinstance<py::str>(path) && !py::hasattr(path, "__fspath__"))
+    throw ArgumentTypeError(std::string(name) + ": expected a str or os.PathLike path, got " +
+                            std::string(py::str(path.get_type().attr("__name__"))));
+  const py::object text = py::module_::import("os").attr("fspath")(path);
+  if (!py::isinstance<py::str>(text))
+    throw ArgumentTypeError(std::string(name) + ": expected a str path, got " +
+                            std::string(py::str(text.get_type().attr("__name__"))));
+  return text.cast<std::string>();
+}
+
+py::object arrayArgument(py::handle value, const char* name, Kind kind) {
+  const py::module_ numpy = py::module_::import("numpy");
+  const bool sequence = py::isinstance<py::list>(value) || py::isinstance<py::tuple>(value);
+  if (!sequence && !py::isinstance(value, numpy.attr("generic"))) return py::reinterpret_borrow<py::object>(value);
+  try {
+    // Numbers in a list have no dtype: a float target takes ints as floats.
+    return kind == Kind::Float ? numpy.attr("asarray")(value, "dtype"_a = "float64") : numpy.attr("asarray")(value);
+  } catch (py::error_already_set&) {  // ragged or not numbers
+    throw ArgumentTypeError(std::string(name) + ": expected numbers in a rectangular sequence");
+  }
+}
+
 void bindErrors(py::module_& m) {
   ErrorClasses& c = errorClasses;
   c.error = newErrorClass(m, "Error",
@@ -126,6 +151,8 @@ void bindErrors(py::module_& m) {
     const ErrorClasses& classes = errorClasses;
     try {
       if (p) std::rethrow_exception(p);
+    } catch (const tsah::Cancelled&) {
+      PyErr_SetNone(PyExc_KeyboardInterrupt);  // what Python's Ctrl-C raises; nothing was produced
     } catch (const ArgumentTypeError& e) {
       PyErr_SetString(classes.argumentType, e.what());
     } catch (const tsah::FileError& e) {
@@ -157,11 +184,11 @@ data (an index out of range, times not increasing, NaN or infinite coordinates).
 )doc")
       .def(py::init(&makeAnimation), "triangles"_a, "positions"_a, "times"_a = py::none(), "name"_a = "")
       .def_property_readonly("name", &anim::Animation::name, "Name of the input (file stem) or the given name.")
-      .def_property_readonly("triangle_count", &anim::Animation::triangleCount)
-      .def_property_readonly("vertex_count", &anim::Animation::vertexCount)
-      .def_property_readonly("keyframe_count", &anim::Animation::keyframeCount)
-      .def_property_readonly("start_time", &anim::Animation::startTime)
-      .def_property_readonly("end_time", &anim::Animation::endTime)
+      .def_property_readonly("triangle_count", &anim::Animation::triangleCount, "Number of triangles.")
+      .def_property_readonly("vertex_count", &anim::Animation::vertexCount, "Number of vertices.")
+      .def_property_readonly("keyframe_count", &anim::Animation::keyframeCount, "Number of keyframes.")
+      .def_property_readonly("start_time", &anim::Animation::startTime, "Time of the first keyframe.")
+      .def_property_readonly("end_time", &anim::Animation::endTime, "Time of the last keyframe.")
       .def_property_readonly(
           "triangles",
           [](const anim::Animation& a) {
@@ -212,7 +239,7 @@ data (an index out of range, times not increasing, NaN or infinite coordinates).
            "The part between t0 and t1: keyframes at t0, t1 and every original keyframe between them.")
       .def(
           "save",
-          [](const anim::Animation& a, const std::string& path) { anim::saveTanim(a, path); }, "path"_a,
+          [](const anim::Animation& a, py::handle path) { anim::saveTanim(a, pathArgument(path, "path")); }, "path"_a,
           "Writes the animation as a .tanim file (atomically), as `tsah resample` does.")
       .def("__repr__", [](const anim::Animation& a) {
         return "<tsah.Animation '" + a.name() + "': " + std::to_string(a.triangleCount()) + " triangles, " +

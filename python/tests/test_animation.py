@@ -81,8 +81,9 @@ def test_wrong_types_and_shapes_raise_clear_errors():
         tsah.Animation(tri.astype(np.float64), pos)
     with pytest.raises(TypeError, match="positions: expected a floating-point array"):
         tsah.Animation(tri, pos.astype(np.int32))
-    with pytest.raises(TypeError, match="positions: expected a numpy array, got list"):
-        tsah.Animation(tri, pos.tolist())
+    assert tsah.Animation(tri, pos.tolist()).positions.tolist() == pos.tolist()  # lists are arrays too
+    with pytest.raises(TypeError, match="positions: expected a numpy array, got str"):
+        tsah.Animation(tri, "positions")
     with pytest.raises(TypeError, match="positions"):
         tsah.Animation(tri, pos.astype(np.complex64))
     with pytest.raises(ValueError, match=r"triangles: expected shape \(N, 3\), got \(1, 4\)"):

@@ -20,10 +20,11 @@ def bound_classes():
 
 
 def methods_and_properties(cls):
-    """Names of the class's own C++ methods and properties (not __init__/__new__ or object's)."""
+    """Names of the class's own C++ methods and properties (not __init__/__new__/__setstate__, which
+    construct, or object's)."""
     names = []
     for name, value in vars(cls).items():
-        if name in ("__init__", "__new__", "__doc__", "__module__", "__dict__", "__weakref__"):
+        if name in ("__init__", "__new__", "__setstate__", "__doc__", "__module__", "__dict__", "__weakref__"):
             continue
         if isinstance(value, property) or type(value).__name__ in ("instancemethod", "builtin_function_or_method"):
             names.append(name)
@@ -47,7 +48,8 @@ def bare(cls):
 def made(sample):
     """A real instance of each class (for the methods that take a bare object as an argument)."""
     tree = tsah.optimize(sample, method="sah0")
-    objects = {"Animation": sample, "Tree": tree, "CpuRuntime": tsah.CpuRuntime(tree, sample)}
+    objects = {"Animation": sample, "Tree": tree, "CpuRuntime": tsah.CpuRuntime(tree, sample),
+               "TreeSet": tsah.optimize(sample, method="sah0", segments=2, eval_frames=4)}
     if tsah.cuda_built and tsah.cuda_available():
         objects["GpuRuntime"] = tsah.GpuRuntime(tree, sample)
     return objects
@@ -55,7 +57,7 @@ def made(sample):
 
 def test_the_module_binds_the_classes_this_file_expects():
     names = {cls.__name__ for cls in bound_classes()}
-    assert {"Animation", "Tree", "CpuRuntime"} <= names
+    assert {"Animation", "Tree", "TreeSet", "CpuRuntime"} <= names
     assert ("GpuRuntime" in names) == tsah.cuda_built
 
 

@@ -33,13 +33,13 @@ def test_optimize_matches_cli_bytes_and_costs(cli, sample, sample_path, tmp_path
         assert tree.optimization is None
 
 
-def test_device_cuda_matches_cli_or_says_why_not(cli, sample, sample_path, tmp_path):
-    with pytest.raises(ValueError, match="device"):
-        tsah.optimize(sample, device="tpu")
+def test_optimizer_gpu_matches_cli_or_says_why_not(cli, sample, sample_path, tmp_path):
+    with pytest.raises(ValueError, match="optimizer"):
+        tsah.optimize(sample, optimizer="tpu")
     try:
-        tree = tsah.optimize(sample, seed=6, device="cuda")
+        tree = tsah.optimize(sample, seed=6, optimizer="gpu")
     except tsah.ConfigError as caught:  # a build without CUDA, or no device: in the module's own words
-        assert str(caught).startswith("device 'cuda': ")
+        assert str(caught).startswith("optimizer='gpu': ")
         return
     out = tmp_path / "cuda.tbvh"
     report = cli.json("optimize", sample_path, "-o", out, "--device", "cuda", "--seed", 6)
@@ -120,7 +120,7 @@ def test_bad_trees_and_options_raise(cli, sample, sample_path, tmp_path):
         assert str(caught.value).startswith(str(path) + ": ")
         # `tsah export` reads its first argument as a .tbvh whatever it holds.
         assert str(caught.value) == cli.error("export", path, sample_path, "-o", tmp_path / "export")
-    with pytest.raises(tsah.FileError):
+    with pytest.raises(tsah.DataError):
         tsah.tree_from_bytes(data[:-1])
     with pytest.raises(ValueError, match="unknown"):
         tsah.optimize(sample, method="fastest")
@@ -129,7 +129,7 @@ def test_bad_trees_and_options_raise(cli, sample, sample_path, tmp_path):
     with pytest.raises(ValueError, match="rebuild"):
         tsah.optimize(sample, method="rebuild")
     with pytest.raises(ValueError, match="unknown optimizer"):
-        tsah.optimize(sample, optimizer="gpu")
+        tsah.optimize(sample, optimizer="cuda")
     with pytest.raises(ValueError, match="unknown optimizer"):
         tsah.evaluate(sample, "tsah0", optimizer="fast")
     with pytest.raises(ValueError):

@@ -8,6 +8,7 @@ as the ``tsah`` command line:
 >>> tree = tsah.optimize(animation, seed=1)              # as `tsah optimize`
 >>> costs = tree.costs(animation, eval_frames=50)        # Eq. 1 per evaluation frame (numpy)
 >>> tree.save("explode.tbvh")                            # the same .tbvh as the command line's
+>>> trees = tsah.optimize(animation, segments=3)         # a TreeSet, as `tsah optimize --segments 3`
 >>> runtime = tsah.CpuRuntime(tree, animation)
 >>> runtime.refit(animation.end_time)
 >>> hits = runtime.trace(origins, directions)            # numpy (N, 3) arrays -> record array
@@ -16,7 +17,8 @@ Errors carry the command line's one-line messages. All are tsah.Error (a Runtime
 tsah.ConfigError (also a ValueError) for a bad option or argument, tsah.DataError (also a
 ValueError) for unusable data, its subclass tsah.FileError for an unreadable file, tsah.Failure when
 the work itself failed (a write error, no memory, a GPU error). Wrong types and dtypes raise
-tsah.ArgumentTypeError, a tsah.ConfigError that is also a TypeError.
+tsah.ArgumentTypeError, a tsah.ConfigError that is also a TypeError. Ctrl-C stops optimize,
+evaluate and load with KeyboardInterrupt.
 """
 from ._tsah import (  # noqa: F401  (the public API)
     Animation,
@@ -28,6 +30,7 @@ from ._tsah import (  # noqa: F401  (the public API)
     Failure,
     FileError,
     Tree,
+    TreeSet,
     __version__,
     cuda_available,
     cuda_built,
@@ -44,6 +47,6 @@ if cuda_built:
 
 __all__ = [
     "Animation", "ArgumentTypeError", "ConfigError", "CpuRuntime", "DataError", "Error", "Failure", "FileError",
-    "Tree", "__version__", "cuda_available", "cuda_built",
+    "Tree", "TreeSet", "__version__", "cuda_available", "cuda_built",
     "evaluate", "generate", "load", "optimize", "read_tree", "tree_from_bytes",
 ] + (["GpuRuntime"] if cuda_built else [])

@@ -1,6 +1,7 @@
 #pragma once
 // The toolkit's steps on a whole anim::Animation, as `tsah optimize`, `tsah evaluate` and the
-// Python module run them: representative frames, one optimized tree with its .tbvh header, costs
+// Python module run them: representative frames, one optimized tree with its .tbvh header, a tree
+// set (`tsah optimize --segments`), costs
 // over evaluation frames, the paper's Table 1, and batches of rays traced on the CPU runtime.
 //
 // This is the one place where libtsah meets an Animation; the builders themselves (baselines.hpp)
@@ -21,6 +22,8 @@
 #include "tsah/optimize/insertion_optimizer.hpp"
 #include "tsah/core/ray.hpp"
 #include "tsah/optimize/segmentation.hpp"
+#include "tsah/io/tree_set.hpp"
+#include "tsah/base/work_dealer.hpp"
 
 namespace tsah {
 
@@ -40,6 +43,14 @@ struct TreeOptions {
   Device device = Device::Cpu;
   TreeOptimizerFunction gpuOptimizer;
   std::function<void(const std::string&)> progress;  // optional progress messages
+  // Optional: called after every batch (round) of every T-SAH optimization with its cost (the
+  // history of InsertionOptimizer::Result as it grows); from the optimizing thread (with a tree
+  // set's WorkDealer, from each worker's).
+  std::function<void(const InsertionOptimizer::BatchRecord&)> batchProgress;
+  // Optional cancel check, polled by every optimization (InsertionOptimizer::Config::cancelled)
+  // and between trees: once it returns true the call throws tsah::Cancelled within a batch (32
+  // steps) or a round. Must be cheap and thread-safe (an atomic flag).
+  std::function<bool()> cancelled;
 
   // The limits of the command line's --frames, --eval-frames and --time-limit, and of Python's
   // frames, eval_frames and time_limit: one place for both.
@@ -93,6 +104,53 @@ struct OptimizedTree {
 // Throws tsah::DataError when the animation has no triangles, tsah::ConfigError for method
 // SahRebuild (no single tree) or an invalid objective.
 OptimizedTree optimizeAnimation(const anim::Animation& animation, const TreeOptions& options);
+
+// What `tsah optimize --segments K|auto` does (docs/segmentation.md): the options of each tree,
+// and how the animation is split.
+struct TreeSetOptions {
+  TreeOptions tree;             // how each tree is built (method, k, frames, optimizer, seed, ...)
+  uint32_t evalFrames = 50;     // where costs are measured, uniform over the animation (>= 2)
+  uint32_t segments = 0;        // K in 1..kMaxSegments: count mode, K trees; 0: auto (budget mode)
+  double budget = 0.0;          // auto: every frame within this factor (>= 1) of a per-frame
+                                //   optimized SAH tree's cost; 0 with budgetCost 0: 1.05
+  double budgetCost = 0.0;      // auto: an absolute bound on every frame's cost instead (> 0)
+  double overlap = 0.0;         // seconds shared by consecutive trees (>= 0)
+  uint32_t referenceFrames = SegmentationConfig{}.referenceFrames;  // relative budget's reference trees
+  uint32_t maxTrees = SegmentationConfig{}.maxTrees;  // auto: at most this many trees (1..kTbvhMaxTrees)
+  bool reproducible = false;    // every build time recorded as 0: the same bytes on every run
+  WorkDealer* dealer = nullptr; // who builds the candidate trees (SegmentationConfig::dealer)
+
+  static constexpr uint32_t kMaxSegments = 1000;
+  // Throws tsah::ConfigError naming the field (segments, eval_frames, budget, budget_cost,
+  // overlap, max_trees, or the tree options') for a value out of range or budgets given together
+  // (or a budget with a count).
+  void validate() const;
+};
+
+struct OptimizedTreeSet {
+  std::vector<Bvh> trees;              // one per part, boxes for its representative frames
+  std::vector<BvhBuildInfo> builds;    // each tree's header, its time range the tree's build range
+  std::vector<TimeRange> ranges;       // the build ranges (what the file stores)
+  TreeSetInfo info;                    // segmentation, overlap, budget
+  SegmentationResult search;           // parts, costs per evaluation frame, budget (trees moved out)
+
+  // The set as the runtimes take it (CpuRuntime, GpuRuntime; what loadTreeSetFile returns).
+  TreeSet treeSet() const;
+  // The .tbvh set file (version 2), as `tsah optimize --segments` writes it.
+  std::vector<uint8_t> encode() const;
+  void save(const std::string& path) const;  // atomic
+};
+
+// A tree set for the whole animation, exactly as `tsah optimize --segments` builds it (same seed,
+// same trees, same file bytes with `reproducible`). Throws tsah::ConfigError for invalid options
+// (TreeSetOptions::validate, TreeOptions::validate), tsah::DataError when the animation has no
+// triangles or only one keyframe, tsah::Cancelled when options.tree.cancelled says so.
+OptimizedTreeSet optimizeTreeSet(const anim::Animation& animation, const TreeSetOptions& options);
+
+// Eq. 1 at framesFor(animation, evalFrames) times uniform over the animation, each with the tree of
+// the set that its time selects (TreeSet::treeAt), refitted to it. Throws as evaluateAnimation.
+std::vector<double> evaluateTreeSet(const TreeSet& set, const anim::Animation& animation, uint32_t evalFrames,
+                                    const CostModel& cost = {}, unsigned threads = 0);
 
 // Eq. 1 at framesFor(animation, evalFrames) times uniform over the animation, the tree refitted to each.
 // Throws tsah::ConfigError for evalFrames out of range (checkEvalFrames) or an invalid cost model.

@@ -527,6 +527,10 @@ uint32_t InsertionSession::nodeCount() const { return impl_->nodeCount; }
 uint64_t InsertionSession::steps() const { return impl_->steps; }
 uint64_t InsertionSession::acceptedSteps() const { return impl_->accepted; }
 
+void throwIfCancelled(const InsertionOptimizer::Config& config) {
+  if (config.cancelled && config.cancelled()) throw Cancelled("optimization cancelled");
+}
+
 InsertionOptimizer::InsertionOptimizer(Config config) : config_(std::move(config)) {
   if (config_.k < 0) throw tsah::ConfigError("InsertionOptimizer: the exponent k must be >= 0");
   if (!(config_.batchFraction > 0.0) || config_.batchFraction > 1.0)
@@ -547,8 +551,12 @@ InsertionOptimizer::Result InsertionOptimizer::optimize(Bvh bvh, const Primitive
   const uint32_t nodeCount = session.nodeCount();  // not bvh(): that would copy every node's boxes
   const auto batchSize = static_cast<uint32_t>(std::max(
       {1.0, double(config_.minBatchSize), std::round(config_.batchFraction * double(nodeCount))}));
-  // Within a batch the time limit is looked at every 32 steps.
-  const auto outOfTime = [&run](std::size_t i) { return run.timeLimited() && (i & 31) == 31 && run.pastTimeLimit(); };
+  // Within a batch the cancel check and the time limit are looked at every 32 steps.
+  const auto outOfTime = [&run](std::size_t i) {
+    if ((i & 31) != 31) return false;
+    run.throwIfCancelled();
+    return run.pastTimeLimit();
+  };
   bool anyEligible = true;
   for (uint32_t batch = 1; anyEligible; ++batch) {
     if (config_.selection == Selection::BatchSort) {

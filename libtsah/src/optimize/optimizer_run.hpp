@@ -70,8 +70,13 @@ class OptimizerRun {
   bool timeLimited() const { return config_.timeLimitSeconds > 0.0; }
   bool pastTimeLimit() const { return timeLimited() && elapsed() >= config_.timeLimitSeconds; }
 
-  // Records a finished batch; true when it stalled the run (the stop rule).
+  // Throws tsah::Cancelled once the caller's cancel check says so.
+  void throwIfCancelled() const { tsah::throwIfCancelled(config_); }
+
+  // Records a finished batch; true when it stalled the run (the stop rule). Throws tsah::Cancelled
+  // when the caller cancelled the run.
   bool endBatch(uint32_t batch, const RunState& state) {
+    throwIfCancelled();
     record(batch, state);
     return stall_.stalledAfter(state.cost);
   }

@@ -60,6 +60,7 @@ class Search {
   const Candidate& candidate(const TimeRange& part) {
     const auto key = std::make_pair(part.start, part.end);
     if (auto it = cache_.find(key); it == cache_.end()) {
+      throwIfCancelled(config_.baseline.optimizer);  // SAH0 parts run no optimizer to ask
       if (config_.dealer) {
         prefetch(std::span<const TimeRange>(&part, 1));
       } else {
@@ -87,6 +88,7 @@ class Search {
           std::none_of(missing.begin(), missing.end(), [&](const TimeRange& m) { return m.start == p.start && m.end == p.end; }))
         missing.push_back(p);
     if (missing.empty()) return;
+    throwIfCancelled(config_.baseline.optimizer);
     if (config_.baseline.progress)
       config_.baseline.progress(std::to_string(missing.size()) + " trees from tree " + std::to_string(built_ + 1));
     // The workers' optimizer progress comes from several threads: one message at a time.

@@ -73,4 +73,11 @@ class Failure : public Error {
   using Error::Error;
 };
 
+// The caller asked a long computation to stop (a cancel check it handed over returned true, e.g.
+// Ctrl-C in Python, which raises KeyboardInterrupt for it). Nothing it would have produced exists.
+class Cancelled : public Failure {
+ public:
+  using Failure::Failure;
+};
+
 }  // namespace tsah

@@ -54,6 +54,10 @@ class InsertionOptimizer {
     double timeLimitSeconds = 0.0;          // 0: no limit
     uint32_t maxBatches = 0;                // 0: no limit
     std::function<void(const BatchRecord&)> progress;  // called after every batch
+    // Polled every 32 steps and after every batch (round); once it returns true the optimizer
+    // throws tsah::Cancelled. Several optimizations may run at once (SAH*, tree sets): it must be
+    // cheap and safe to call from several threads (an atomic flag).
+    std::function<bool()> cancelled;
   };
 
   struct Result {
@@ -81,6 +85,10 @@ class InsertionOptimizer {
  private:
   Config config_;
 };
+
+// Throws tsah::Cancelled when config.cancelled is set and returns true (the optimizers, and the
+// builders between the trees they build, call it).
+void throwIfCancelled(const InsertionOptimizer::Config& config);
 
 // The step-level machinery behind InsertionOptimizer: one tree under optimization with its cached
 // multi-frame areas, frame costs and weights. Public so that tests (and experiments) can drive

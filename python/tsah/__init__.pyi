@@ -1,0 +1,273 @@
+"""Type stubs of the tsah package (the names of tsah.__all__; the extension tsah._tsah holds them).
+
+python/tests/test_stubs.py compares these names with the module's own, so the two cannot drift.
+"""
+import os
+from typing import Any, Callable, Iterator, Sequence, Union, overload
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+cuda_built: bool
+
+_PathLike = Union[str, os.PathLike[str]]
+_Integer = Union[int, np.integer[Any]]
+_Number = Union[float, int, np.floating[Any], np.integer[Any]]
+_ArrayLike = npt.ArrayLike
+_ProgressCallback = Callable[[dict[str, Any]], object]
+
+
+class Error(RuntimeError):
+    """An error of the toolkit, with its one-line message ('FILE: problem'). The base of ConfigError,
+    DataError (FileError) and Failure; a RuntimeError."""
+
+
+class ConfigError(Error, ValueError):
+    """An invalid request: an option or argument out of range, an unknown name, settings that
+    contradict each other, a call the object cannot serve (a tsah.Error and a ValueError)."""
+
+
+class DataError(Error, ValueError):
+    """Unusable data: NaN coordinates, a tree that is not a tree, a tree built for another animation,
+    bytes that are not a tree file (a tsah.Error and a ValueError)."""
+
+
+class FileError(DataError):
+    """An input or tree file that cannot be read; the message starts with the file name (a
+    tsah.DataError)."""
+
+
+class Failure(Error):
+    """The request and the data were fine but the work failed: a write error, a full disk, not
+    enough memory, a GPU error (a tsah.Error, so a RuntimeError)."""
+
+
+class ArgumentTypeError(ConfigError, TypeError):
+    """An argument of the wrong type or dtype (a tsah.ConfigError and a TypeError)."""
+
+
+class Animation:
+    """An animated triangle mesh: one triangle list for all frames, vertex positions per keyframe
+    and the keyframe times; positions between keyframes are interpolated linearly (clamped)."""
+
+    def __init__(self, triangles: _ArrayLike, positions: _ArrayLike, times: _ArrayLike | None = None,
+                 name: str = "") -> None:
+        """triangles: integers (T, 3); positions: floats (F, V, 3) or (V, 3) for one frame; times:
+        strictly increasing (F,) (default 0 .. F-1). Arrays, lists or tuples."""
+    @property
+    def name(self) -> str:
+        """Name of the input (file stem) or the given name."""
+    @property
+    def triangle_count(self) -> int:
+        """_Number of triangles."""
+    @property
+    def vertex_count(self) -> int:
+        """_Number of vertices."""
+    @property
+    def keyframe_count(self) -> int:
+        """_Number of keyframes."""
+    @property
+    def start_time(self) -> float:
+        """Time of the first keyframe."""
+    @property
+    def end_time(self) -> float:
+        """Time of the last keyframe."""
+    @property
+    def triangles(self) -> npt.NDArray[np.uint32]:
+        """Vertex indices, uint32 array (T, 3) (a copy)."""
+    @property
+    def positions(self) -> npt.NDArray[np.float32]:
+        """Keyframe positions, float32 array (F, V, 3) (a copy)."""
+    @property
+    def times(self) -> npt.NDArray[np.float64]:
+        """Keyframe times, float64 array (F,)."""
+    @property
+    def bounds(self) -> npt.NDArray[np.float32]:
+        """Bounds over every keyframe: float32 array (2, 3), minimum then maximum."""
+    def positions_at(self, t: _Number) -> npt.NDArray[np.float32]:
+        """Vertex positions at time t, float32 array (V, 3) (linear between keyframes, clamped)."""
+    def uniform_times(self, n: _Integer) -> npt.NDArray[np.float64]:
+        """n times spread uniformly over [start_time, end_time], both ends included."""
+    def resample(self, n: _Integer) -> Animation:
+        """A new animation with n keyframes at uniform_times(n) (`tsah resample --frames n`)."""
+    def segment(self, t0: _Number, t1: _Number) -> Animation:
+        """The part between t0 and t1: keyframes at t0, t1 and every original keyframe between them."""
+    def save(self, path: _PathLike) -> None:
+        """Writes the animation as a .tanim file (atomically), as `tsah resample` does."""
+
+
+class Tree:
+    """One BVH over the triangles of an animation, with node boxes for each representative frame
+    and the header of its .tbvh file. Made by optimize, read_tree or TreeSet[i]; pickled as its
+    .tbvh bytes."""
+
+    @property
+    def node_count(self) -> int:
+        """Nodes of the tree (interior and leaves)."""
+    @property
+    def leaf_count(self) -> int:
+        """Leaves of the tree."""
+    @property
+    def depth(self) -> int:
+        """Depth of the deepest leaf (the root: 0)."""
+    @property
+    def triangle_count(self) -> int:
+        """Triangles in the tree."""
+    @property
+    def frame_count(self) -> int:
+        """Box sets stored per node (the representative frames)."""
+    @property
+    def info(self) -> dict[str, Any]:
+        """The .tbvh header as a dict (the keys of `tsah info --json`)."""
+    @property
+    def optimization(self) -> dict[str, Any] | None:
+        """For a T-SAH tree built in this process: the optimizer's costs and batch history; None otherwise."""
+    @property
+    def triangle_order(self) -> npt.NDArray[np.uint32]:
+        """Triangle id of each slot of the .tbvh triangle array (leaves own consecutive slots)."""
+    def frame_costs(self, ct: _Number = 3.0, ci: _Number = 2.0) -> npt.NDArray[np.float64]:
+        """Eq. 1 cost at each stored (representative) frame."""
+    def costs(self, animation: Animation, eval_frames: _Integer = 50, ct: _Number | None = None,
+              ci: _Number | None = None, threads: _Integer = 0) -> npt.NDArray[np.float64]:
+        """Eq. 1 cost of the tree refitted to eval_frames frames uniform over the animation."""
+    def save(self, path: _PathLike) -> None:
+        """Writes the tree as a .tbvh file (atomically), byte for byte what `tsah optimize` writes."""
+    def to_bytes(self) -> bytes:
+        """The .tbvh file's bytes."""
+
+
+class TreeSet:
+    """K trees over one animation, each built for one part of its time range; tree_at(t) picks the
+    tree of a time. Made by optimize(..., segments=...) or read_tree of a set file; pickled as its
+    .tbvh bytes."""
+
+    def __len__(self) -> int:
+        """The number of trees."""
+    def __getitem__(self, index: _Integer) -> Tree:
+        """Tree `index` (negative indices count from the end)."""
+    def __iter__(self) -> Iterator[Tree]:
+        """The trees in time order."""
+    @property
+    def ranges(self) -> list[tuple[float, float]]:
+        """Each tree's build range (start, end) in seconds, in order."""
+    @property
+    def switch_times(self) -> list[float]:
+        """The times where tree i hands over to tree i + 1 (the middle of their overlap)."""
+    def tree_at(self, t: _Number) -> int:
+        """The index of the tree used at time t."""
+    @property
+    def triangle_count(self) -> int:
+        """Triangles in every tree."""
+    @property
+    def info(self) -> dict[str, Any]:
+        """The set's header: segmentation, overlap, budget, budget_relative, trees."""
+    @property
+    def segmentation(self) -> dict[str, Any] | None:
+        """For a set built in this process: the search's record (parts, costs, ...); None otherwise."""
+    def costs(self, animation: Animation, eval_frames: _Integer = 50, ct: _Number = 3.0, ci: _Number = 2.0,
+              threads: _Integer = 0) -> npt.NDArray[np.float64]:
+        """Eq. 1 cost at eval_frames uniform times, each with the tree of its time refitted to it."""
+    def save(self, path: _PathLike) -> None:
+        """Writes the set as one .tbvh file (atomically), what `tsah optimize --segments` writes."""
+    def to_bytes(self) -> bytes:
+        """The .tbvh set file's bytes."""
+
+
+class CpuRuntime:
+    """A tree refitted to a frame of the animation it was built for, traced on the CPU."""
+
+    def __init__(self, tree: Tree, animation: Animation, threads: _Integer = 0, layout: str = "auto") -> None:
+        """layout: 'auto' (the widest SIMD layout of this processor), 'bvh2', 'bvh4' or 'bvh8'."""
+    def refit(self, time: _Number) -> None:
+        """Refits the boxes to the animation at this time (interpolated, clamped)."""
+    def refit_positions(self, positions: _ArrayLike) -> None:
+        """Refits to given vertex positions, a float array (V, 3)."""
+    def trace(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
+              tmax: _ArrayLike = float("inf")) -> np.recarray[Any, Any]:
+        """Closest hits: a record array (N,) with t, u, v and triangle (-1 and t = inf for a miss)."""
+    def occluded(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
+                 tmax: _ArrayLike = float("inf")) -> npt.NDArray[np.bool_]:
+        """True for each ray that hits anything within (tmin, tmax)."""
+    @property
+    def bounds(self) -> npt.NDArray[np.float32]:
+        """Bounds of the current frame, float32 (2, 3)."""
+    @property
+    def layout(self) -> str:
+        """The layout traced: bvh2, bvh4 or bvh8."""
+
+
+class GpuRuntime:
+    """The same as CpuRuntime on a CUDA device (only when cuda_built)."""
+
+    def __init__(self, tree: Tree, animation: Animation, device: _Integer = 0) -> None:
+        """device: the CUDA device index. Raises tsah.Failure when no device is usable."""
+    def refit(self, time: _Number) -> None:
+        """Refits on the device to the animation at this time."""
+    def refit_positions(self, positions: _ArrayLike) -> None:
+        """Refits to given vertex positions (V, 3)."""
+    def trace(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
+              tmax: _ArrayLike = float("inf")) -> np.recarray[Any, Any]:
+        """Closest hits, as CpuRuntime.trace."""
+    def occluded(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
+                 tmax: _ArrayLike = float("inf")) -> npt.NDArray[np.bool_]:
+        """True for each ray that hits anything within (tmin, tmax)."""
+    @property
+    def device_name(self) -> str:
+        """The name of the CUDA device."""
+
+
+def cuda_available() -> bool:
+    """True when the CUDA runtime was built and a GPU is present."""
+
+
+def load(path: _PathLike, fps: _Number = 0.0, clip: str = "") -> Animation:
+    """Loads any input the command line reads (.tanim, .aff, animated models, mesh files and
+    sequences, JSON manifests); importer warnings become UserWarnings. Ctrl-C is raised when the
+    load returns."""
+
+
+def generate(kind: str, triangles: _Integer = 4000, frames: _Integer = 30, seed: _Integer = 1) -> Animation:
+    """A procedural animation ('explode', 'wave' or 'swap'), as `tsah generate` makes it."""
+
+
+@overload
+def optimize(animation: Animation, method: str = "tsah", k: _Integer = 0, frames: _Integer = 5,
+             selection: str = "mh", seed: _Integer = 1, ct: _Number = 3.0, ci: _Number = 2.0,
+             max_leaf: _Integer = 8, time_limit: _Number = 0.0, min_improvement: _Number = 1e-05,
+             threads: _Integer = 0, optimizer: str = "sequential", segments: None = None,
+             budget: _Number | None = None, budget_cost: _Number | None = None, overlap: _Number | None = None,
+             eval_frames: _Integer | None = None, reference_frames: _Integer | None = None,
+             max_trees: _Integer | None = None, reproducible: bool = False,
+             progress: _ProgressCallback | None = None) -> Tree:
+    """One Tree for the whole animation, exactly as `tsah optimize` builds it (same options and
+    defaults). optimizer: 'sequential', 'parallel' or 'gpu'. progress(event) is called on this
+    thread with a dict ('message'; for optimizer batches 'batch', 'cost', 'average', 'elapsed_s',
+    'steps'); an exception in it cancels the call. Ctrl-C stops the call (KeyboardInterrupt)."""
+@overload
+def optimize(animation: Animation, method: str = "tsah", k: _Integer = 0, frames: _Integer = 5,
+             selection: str = "mh", seed: _Integer = 1, ct: _Number = 3.0, ci: _Number = 2.0,
+             max_leaf: _Integer = 8, time_limit: _Number = 0.0, min_improvement: _Number = 1e-05,
+             threads: _Integer = 0, optimizer: str = "sequential", *, segments: _Integer | str,
+             budget: _Number | None = None, budget_cost: _Number | None = None, overlap: _Number | None = None,
+             eval_frames: _Integer | None = None, reference_frames: _Integer | None = None,
+             max_trees: _Integer | None = None, reproducible: bool = False,
+             progress: _ProgressCallback | None = None) -> TreeSet:
+    """With segments (K trees, or 'auto': the fewest trees within budget / budget_cost) a TreeSet,
+    exactly as `tsah optimize --segments` builds it (reproducible: build times 0, the same bytes)."""
+
+
+def evaluate(animation: Animation, methods: str | Sequence[str] = "sah0,sahstar,tsah0,tsah2,tsah4,rebuild",
+             frames: _Integer = 5, eval_frames: _Integer = 50, max_leaf: _Integer = 8, ct: _Number = 3.0,
+             ci: _Number = 2.0, selection: str = "mh", seed: _Integer = 1, time_limit: _Number = 0.0,
+             min_improvement: _Number = 1e-05, threads: _Integer = 0, optimizer: str = "sequential",
+             progress: _ProgressCallback | None = None) -> dict[str, Any]:
+    """The paper's Table 1 for one animation, as `tsah evaluate --json` computes it."""
+
+
+def read_tree(path: _PathLike) -> Tree | TreeSet:
+    """Reads and validates a .tbvh file: a Tree for a file of one tree, a TreeSet for a set file."""
+
+
+def tree_from_bytes(data: bytes | bytearray | memoryview, name: str = "<bytes>") -> Tree | TreeSet:
+    """A Tree or a TreeSet from the bytes of a .tbvh file; tsah.DataError when they are not one."""
