@@ -241,7 +241,7 @@ uploaded once; refit and traversal run on the GPU). Raises tsah.Failure when no 
       .def("trace", &GpuTracer::trace, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf, kTraceDoc)
       .def("occluded", &GpuTracer::occluded, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf,
            kOccludedDoc)
-      .def_property_readonly("device_name", &GpuTracer::deviceName);
+      .def_property_readonly("device_name", &GpuTracer::deviceName, "The name of the GPU the runtime uses.");
 #else
   m.attr("cuda_built") = false;
   m.def("cuda_available", [] { return false; }, "True when the CUDA runtime was built and a GPU is present.");
