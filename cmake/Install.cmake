@@ -1,6 +1,6 @@
 # `cmake --install`: the public headers, the static libraries, the `tsah` program and a CMake package
 # (tsahConfig.cmake, tsahConfigVersion.cmake) exporting tsah::base, tsah::anim, tsah::tsah and, when the CUDA
-# runtime was built, tsah::cuda. The public API is listed in docs/api.md. Included at the end of the
+# runtime was built, the component cuda (tsah::cuda). The public API is listed in docs/api.md. Included at the end of the
 # top-level CMakeLists.txt, after every target exists.
 include(GNUInstallDirs)
 include(CMakePackageConfigHelpers)
@@ -23,7 +23,6 @@ set(TSAH_EXPORTED_TARGETS tsah_base anim tsah_core)
 set(TSAH_PUBLIC_INCLUDE_DIRS ${PROJECT_SOURCE_DIR}/libanim/include/ ${PROJECT_SOURCE_DIR}/libtsah/include/)
 if(TSAH_HAVE_CUDA)
   set_target_properties(tsah_cuda PROPERTIES EXPORT_NAME cuda)
-  list(APPEND TSAH_EXPORTED_TARGETS tsah_cuda)
   list(APPEND TSAH_PUBLIC_INCLUDE_DIRS ${PROJECT_SOURCE_DIR}/cuda_kernels/include/)
 endif()
 
@@ -35,6 +34,13 @@ install(TARGETS tsah RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
 install(DIRECTORY ${TSAH_PUBLIC_INCLUDE_DIRS} DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}
         FILES_MATCHING PATTERN "*.hpp" PATTERN "*.h")
 install(EXPORT tsahTargets NAMESPACE tsah:: DESTINATION ${TSAH_INSTALL_CMAKEDIR})
+# tsah::cuda in its own file, loaded only for find_package(tsah COMPONENTS cuda): a CPU-only
+# consumer never looks for the CUDA toolkit.
+if(TSAH_HAVE_CUDA)
+  install(TARGETS tsah_cuda EXPORT tsahCudaTargets ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
+          INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
+  install(EXPORT tsahCudaTargets NAMESPACE tsah:: DESTINATION ${TSAH_INSTALL_CMAKEDIR})
+endif()
 
 configure_package_config_file(${PROJECT_SOURCE_DIR}/cmake/tsahConfig.cmake.in
                               ${PROJECT_BINARY_DIR}/tsahConfig.cmake

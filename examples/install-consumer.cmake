@@ -27,25 +27,57 @@ if(private_headers)
   message(FATAL_ERROR "private headers were installed: ${private_headers}")
 endif()
 
-set(configure_args -S ${CONSUMER_DIR} -B ${WORK_DIR}/build -DCMAKE_PREFIX_PATH=${prefix} -DCMAKE_BUILD_TYPE=Release)
-if(CXX_COMPILER)
-  list(APPEND configure_args -DCMAKE_CXX_COMPILER=${CXX_COMPILER})
-endif()
-if(CXX_LAUNCHER)
-  list(APPEND configure_args -DCMAKE_CXX_COMPILER_LAUNCHER=${CXX_LAUNCHER})
-endif()
-execute_process(COMMAND ${CMAKE_COMMAND} ${configure_args} OUTPUT_QUIET COMMAND_ERROR_IS_FATAL ANY)
-execute_process(COMMAND ${CMAKE_COMMAND} --build ${WORK_DIR}/build OUTPUT_QUIET COMMAND_ERROR_IS_FATAL ANY)
+# The package names no development package of tsah's private dependencies (they are linked as the
+# runtime packages' library files) and no CUDA outside the cuda component.
+file(READ ${prefix}/lib/cmake/tsah/tsahTargets.cmake targets)
+file(STRINGS ${prefix}/lib/cmake/tsah/tsahConfig.cmake config REGEX "^[^#]")  # code, not comments
+foreach(pattern "assimp::" "TBB::" "PkgConfig::" "nlohmann_json::" "draco::" "CUDA::" "[;\"]OpenMesh(Core|Tools)[;\"]"
+                "find_dependency\\((assimp|OpenMesh|TBB|nlohmann_json|PkgConfig|CUDAToolkit)\\)")
+  string(REGEX MATCH "${pattern}" found "${targets}${config}")
+  if(found AND NOT (found MATCHES "CUDAToolkit" AND config MATCHES "IN_LIST tsah_FIND_COMPONENTS"))
+    message(FATAL_ERROR "the installed tsah package names ${found} outside the cuda component")
+  endif()
+endforeach()
 
-execute_process(COMMAND ${WORK_DIR}/build/tsah_consumer ${INPUT} ${WORK_DIR}/out.tbvh
-                OUTPUT_VARIABLE output COMMAND_ERROR_IS_FATAL ANY)
-message("${output}")
-if(NOT output MATCHES "out.tbvh: [0-9]+ triangles, [0-9]+ nodes, 5 frames, average cost [0-9.]+")
-  message(FATAL_ERROR "the consumer did not describe its tree")
-endif()
-if(NOT output MATCHES "ray [0-9]: triangle [0-9]+ at t = ")
-  message(FATAL_ERROR "the consumer's rays hit nothing")
-endif()
+# Two consumers: CPU only, with the dependencies' CMake packages and the CUDA toolkit hidden (what a
+# machine without their development packages sees) and no build type given (the example's default:
+# Release); then the full example (the GPU part when tsah has it).
+set(hidden)
+foreach(package assimp OpenMesh TBB nlohmann_json PkgConfig CUDAToolkit draco)
+  list(APPEND hidden -DCMAKE_DISABLE_FIND_PACKAGE_${package}=ON)
+endforeach()
+set(variants cpu full)
+set(cpu_args -DCONSUMER_CPU_ONLY=ON ${hidden})
+set(full_args -DCMAKE_BUILD_TYPE=Release)
+foreach(variant IN LISTS variants)
+  set(configure_args -S ${CONSUMER_DIR} -B ${WORK_DIR}/build-${variant} -DCMAKE_PREFIX_PATH=${prefix} ${${variant}_args})
+  if(CXX_COMPILER)
+    list(APPEND configure_args -DCMAKE_CXX_COMPILER=${CXX_COMPILER})
+  endif()
+  if(CXX_LAUNCHER)
+    list(APPEND configure_args -DCMAKE_CXX_COMPILER_LAUNCHER=${CXX_LAUNCHER})
+  endif()
+  execute_process(COMMAND ${CMAKE_COMMAND} ${configure_args} OUTPUT_VARIABLE configure_output
+                  ERROR_VARIABLE configure_output RESULT_VARIABLE configure_result)
+  if(NOT configure_result EQUAL 0)
+    message(FATAL_ERROR "the ${variant} consumer did not configure:\n${configure_output}")
+  endif()
+  execute_process(COMMAND ${CMAKE_COMMAND} --build ${WORK_DIR}/build-${variant} OUTPUT_QUIET COMMAND_ERROR_IS_FATAL ANY)
+  file(STRINGS ${WORK_DIR}/build-${variant}/CMakeCache.txt build_type REGEX "^CMAKE_BUILD_TYPE:")
+  if(NOT build_type MATCHES "=Release$")
+    message(FATAL_ERROR "the ${variant} consumer was not built as Release: ${build_type}")
+  endif()
+
+  execute_process(COMMAND ${WORK_DIR}/build-${variant}/tsah_consumer ${INPUT} ${WORK_DIR}/out.tbvh
+                  OUTPUT_VARIABLE output COMMAND_ERROR_IS_FATAL ANY)
+  message("${variant}: ${output}")
+  if(NOT output MATCHES "out.tbvh: [0-9]+ triangles, [0-9]+ nodes, 5 frames, average cost [0-9.]+")
+    message(FATAL_ERROR "the ${variant} consumer did not describe its tree")
+  endif()
+  if(NOT output MATCHES "ray [0-9]: triangle [0-9]+ at t = ")
+    message(FATAL_ERROR "the ${variant} consumer's rays hit nothing")
+  endif()
+endforeach()
 
 # The installed program reads the tree the library wrote.
 execute_process(COMMAND ${prefix}/bin/tsah info ${WORK_DIR}/out.tbvh OUTPUT_VARIABLE info COMMAND_ERROR_IS_FATAL ANY)
