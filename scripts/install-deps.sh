@@ -12,6 +12,7 @@ packages=(
   libgtest-dev googletest
   python3
   python3-dev pybind11-dev python3-pybind11 python3-numpy python3-pytest   # the Python module, its tests
+  python3-venv python3-pip python3-setuptools python3-wheel   # pip install . (scripts/test-pip-install.sh)
   libembree-dev gnuplot-nox   # tsah bench: the CPU peer (optional at build time) and its plots
   clang libclang-rt-14-dev    # scripts/fuzz.sh: clang 14 with libFuzzer and the sanitizers
   libopenmpi-dev openmpi-bin  # MPI runs of tsah trace / optimize --segments (optional at build time)

@@ -20,6 +20,15 @@ the work itself failed (a write error, no memory, a GPU error). Wrong types and 
 tsah.ArgumentTypeError, a tsah.ConfigError that is also a TypeError. Ctrl-C stops optimize,
 evaluate and load with KeyboardInterrupt.
 """
+import sys as _sys
+
+try:
+    import numpy as _numpy  # noqa: F401  (every array the module takes or gives is numpy's)
+except ImportError as _error:
+    raise ImportError(
+        f"tsah needs numpy, which this interpreter ({_sys.executable}) cannot import: install it for this "
+        "interpreter (Debian: apt install python3-numpy; a virtual environment: pip install numpy)") from _error
+
 from ._tsah import (  # noqa: F401  (the public API)
     Animation,
     CpuRuntime,
