@@ -19,6 +19,7 @@
 #include "tsah/optimize/leaf_collapser.hpp"
 #include "tsah/render/renderer.hpp"
 #include "tsah/build/sah_builder.hpp"
+#include "tsah/layout/moving_parts.hpp"
 #include "tsah/layout/traversal.hpp"
 #include "tsah_cuda/cuda_check.hpp"
 #include "tsah_cuda/device.hpp"
@@ -223,21 +224,9 @@ TEST(CudaRuntime, UpdateEqualsTheCpuRuntimeExactly) {
 // update equals the CPU runtime's bit for bit, also after host positions overwrote the static part.
 TEST(CudaRuntime, UpdateOfAMostlyStaticSceneEqualsTheCpuRuntime) {
   REQUIRE_GPU();
-  const auto still = generatedAnimation(anim::GeneratorKind::Wave, 4000, 1, 3);
-  const auto mover = generatedAnimation(anim::GeneratorKind::Explode, 1000, 5, 4);
-  std::vector<uint32_t> idx(still.indices().begin(), still.indices().end());
-  for (uint32_t v : mover.indices()) idx.push_back(v + still.vertexCount());
-  std::vector<float> pos;
-  const std::vector<float> rest = still.keyframe(0);
-  for (uint32_t k = 0; k < mover.keyframeCount(); ++k) {
-    pos.insert(pos.end(), rest.begin(), rest.end());
-    const auto m = mover.keyframe(k);
-    pos.insert(pos.end(), m.begin(), m.end());
-  }
-  const anim::Animation a(idx, still.vertexCount() + mover.vertexCount(), pos,
-                          {mover.times().begin(), mover.times().end()}, "mostly-static");
+  const anim::Animation a = tsah::test::mostlyStaticAnimation();
   ASSERT_FALSE(a.allMoving());
-  ASSERT_LE(a.movingVertexCount(), mover.vertexCount());
+  ASSERT_LT(a.movingVertexCount(), a.vertexCount() / 2);
   const tsah::FlatBvh tree = sahTree(a, 8);
   tsah::CpuRuntime cpu = cpuRuntime(tree, a);
   for (bool graphs : {true, false}) {
@@ -259,6 +248,52 @@ TEST(CudaRuntime, UpdateOfAMostlyStaticSceneEqualsTheCpuRuntime) {
       ASSERT_EQ(0, std::memcmp(&gpu.downloadTree().rootBoxes[0], &cpu.tree().rootBoxes[0], sizeof(tsah::Aabb)));
     }
   }
+}
+
+// Static subtrees (moving_parts.hpp): once a full update put them in place, updateAt refits only the
+// moving leaves and recomputes only the moving slots' Woop triangles (counted by slotsUpdated), and
+// every node box, the root box and every Woop triangle still equal the CPU runtime's full refit bit
+// for bit. Host positions and rebuilds, which may change the static part or the Woop buffer, make
+// the next update a full one again.
+TEST(CudaRuntime, StaticSubtreesAreSkippedAndTheTreeEqualsAFullRefit) {
+  REQUIRE_GPU();
+  const anim::Animation a = tsah::test::mostlyStaticAnimation();
+  const tsah::FlatBvh tree = sahTree(a, 8);
+  const tsah::MovingParts parts = tsah::findMovingParts(tree, a.indices(), a.movingVertices(), a.vertexCount());
+  ASSERT_GT(parts.movingSlots, 0u);
+  ASSERT_LT(parts.movingSlots, a.triangleCount() / 2);
+  tsah::CpuRuntime cpu = cpuRuntime(tree, a);
+  const double t0 = a.startTime(), t1 = a.endTime();
+  for (bool graphs : {true, false}) {
+    SCOPED_TRACE(graphs ? "graphs" : "launches");
+    tc::GpuRuntime gpu(tree, a, tsah::test::gpuConfig(tsah::Layout::Bvh2, graphs));
+    const auto updateAndCompare = [&](double t, uint32_t slotsUpdated) {
+      SCOPED_TRACE("t = " + std::to_string(t));
+      cpu.update(a.positionsAt(t));
+      EXPECT_EQ(gpu.updateAt(t).slotsUpdated, slotsUpdated);
+      const tsah::FlatBvh got = gpu.downloadTree();
+      ASSERT_EQ(0, std::memcmp(&got.rootBoxes[0], &cpu.tree().rootBoxes[0], sizeof(tsah::Aabb)));
+      for (uint32_t i = 0; i < tree.interiorCount; ++i)
+        ASSERT_EQ(0, std::memcmp(&got.nodes[i], &cpu.tree().nodes[i], sizeof(tsah::GpuBvhNode))) << "node " << i;
+      const std::vector<tsah::WoopTriangle> woop = gpu.downloadWoop();
+      ASSERT_EQ(0, std::memcmp(woop.data(), cpu.woop().data(), woop.size() * sizeof(tsah::WoopTriangle)));
+    };
+    const uint32_t all = a.triangleCount(), moving = parts.movingSlots;
+    updateAndCompare(t0, all);  // the first update puts the static subtrees in place
+    for (double f : {0.37, 0.9, 0.1}) updateAndCompare(t0 + f * (t1 - t0), moving);
+    updateAndCompare(a.times()[2], moving);
+    gpu.update(a.positionsAt(t1));  // host positions: the static part may have moved
+    updateAndCompare(t0 + 0.5 * (t1 - t0), all);
+    updateAndCompare(t1, moving);
+    gpu.rebuildAt(t0);  // writes its own Woop triangles
+    updateAndCompare(t0 + 0.25 * (t1 - t0), all);
+    updateAndCompare(t0 + 0.75 * (t1 - t0), moving);
+  }
+  // Every vertex moving: every update refits everything.
+  const auto everything = generatedAnimation(anim::GeneratorKind::Explode, 2000, 4);
+  tc::GpuRuntime gpu(sahTree(everything, 8), everything, tsah::test::gpuConfig(tsah::Layout::Bvh2, true));
+  for (double t : {everything.startTime(), everything.endTime()})
+    EXPECT_EQ(gpu.updateAt(t).slotsUpdated, everything.triangleCount());
 }
 
 TEST(CudaRuntime, HitsEqualTheCpuTraversal) {

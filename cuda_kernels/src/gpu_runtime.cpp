@@ -9,6 +9,7 @@
 #include "cwbvh_kernels.hpp"
 #include "kernels.hpp"
 #include "runtime_impl.hpp"
+#include "tsah/layout/moving_parts.hpp"
 
 #include <utility>
 #include "tsah/layout/traversal.hpp"
@@ -73,6 +74,7 @@ void GpuRuntime::Impl::createOnDevice(const TreeSet& set, const anim::Animation&
   hostIndices.assign(idx.begin(), idx.end());
   positions.resize(std::size_t(vertices) * 3);
   if (!hostRest.empty()) positions.upload(std::span<const float>(hostRest), stream);
+  if (!animation.allMoving()) movingVertexIds.assign(animation.movingVertices().begin(), animation.movingVertices().end());
   trees.reserve(set.trees.size());
   for (std::size_t i = 0; i < set.trees.size(); ++i) {
     const Objective& wideObjective = set.builds.empty() ? config.wideObjective : set.builds[i].objective;
@@ -120,6 +122,35 @@ void GpuRuntime::Impl::uploadTree(const FlatBvh& tree, FlatBvh topologyOfTree, c
     d.slotVertices = DeviceBuffer<uint32_t>(std::span<const uint32_t>(slotVertices), stream);
   }
   d.leaves = DeviceBuffer<detail::LeafRecord>(std::span<const detail::LeafRecord>(leafRecords), stream);
+  std::vector<detail::LeafRecord> movingLeafRecords;
+  std::vector<uint32_t> staticChildren, movingSlotList;
+  if (config.layout == Layout::Bvh2 && !movingVertexIds.empty() && topology.interiorCount > 0) {
+    const MovingParts parts = findMovingParts(topology, hostIndices, movingVertexIds, vertices);
+    if (parts.movingSlots < topology.triangleCount()) {
+      d.hasStaticParts = true;
+      for (const detail::LeafRecord& leaf : leafRecords)
+        if (std::any_of(parts.slotMoves.begin() + leaf.first, parts.slotMoves.begin() + leaf.first + leaf.count,
+                        [](uint8_t m) { return m != 0; }))
+          movingLeafRecords.push_back(leaf);
+      staticChildren.assign(topology.interiorCount, 0);
+      for (uint32_t i = 0; i < topology.interiorCount; ++i) {
+        const GpuBvhNode& n = topology.nodes[i];
+        for (int c = 0; c < 2; ++c) {
+          const int32_t ref = n.childRef(c);
+          const bool moves = isLeafRef(ref) ? std::any_of(parts.slotMoves.begin() + leafFirstSlot(ref),
+                                                          parts.slotMoves.begin() + leafFirstSlot(ref) + n.childCount(c),
+                                                          [](uint8_t m) { return m != 0; })
+                                            : parts.nodeMoves[uint32_t(ref)] != 0;
+          staticChildren[i] += moves ? 0u : 1u;
+        }
+      }
+      for (uint32_t s = 0; s < topology.triangleCount(); ++s)
+        if (parts.slotMoves[s]) movingSlotList.push_back(s);
+      d.movingLeaves = DeviceBuffer<detail::LeafRecord>(std::span<const detail::LeafRecord>(movingLeafRecords), stream);
+      d.staticChildren = DeviceBuffer<uint32_t>(std::span<const uint32_t>(staticChildren), stream);
+      d.movingSlots = DeviceBuffer<uint32_t>(std::span<const uint32_t>(movingSlotList), stream);
+    }
+  }
   detail::RootInfo r;
   r.box = topology.rootBoxes[0];
   r.ref = topology.rootRef;
@@ -136,7 +167,10 @@ GpuRuntime::Impl::~Impl() { releaseDevice(); }
 
 void GpuRuntime::Impl::releaseDevice() noexcept {
   if (stream) cudaStreamSynchronize(stream);
-  for (DeviceTree& t : trees) destroy(t.updateGraph);
+  for (DeviceTree& t : trees) {
+    destroy(t.updateGraph);
+    destroy(t.partialUpdateGraph);
+  }
   for (auto& g : rebuildGraphs) destroy(g.graph);
   if (sideStream) cudaStreamSynchronize(sideStream);
   if (stream) cudaStreamDestroy(std::exchange(stream, nullptr));
@@ -275,7 +309,12 @@ void GpuRuntime::Impl::requireTraceable() const {
     throw tsah::ConfigError("GPU runtime: nothing to trace yet (call update/updateAt, or rebuild with Woop triangles)");
 }
 
-void GpuRuntime::Impl::enqueueRefitAndWoop() {
+bool GpuRuntime::Impl::partialUpdatePossible() const {
+  const DeviceTree& t = tree();
+  return t.hasStaticParts && t.staticBoxesValid && woopTree == int(current) && restInPlace && !t.cwbvh;
+}
+
+void GpuRuntime::Impl::enqueueRefitAndWoop(bool movingOnly) {
   // The Woop pass (bandwidth-bound) runs on the side stream beside the refit (latency-bound: a
   // chain of small launches or atomics up the tree); both only read the positions. Events 12 and
   // 13 fork and join the side stream; 2 follows the refit, 3 both.
@@ -283,12 +322,21 @@ void GpuRuntime::Impl::enqueueRefitAndWoop() {
   Cwbvh* c = t.cwbvh.get();
   events.mark(12, stream);
   events.streamWait(12, sideStream);
-  detail::launchSlotWoop(c ? c->slotVertices.data() : t.slotVertices.data(), triangles, positions.data(), woop.data(),
-                         sideStream);
+  if (movingOnly)
+    detail::launchMovingSlotWoop(t.movingSlots.data(), uint32_t(t.movingSlots.size()), t.slotVertices.data(),
+                                 positions.data(), woop.data(), sideStream);
+  else
+    detail::launchSlotWoop(c ? c->slotVertices.data() : t.slotVertices.data(), triangles, positions.data(),
+                           woop.data(), sideStream);
   events.mark(13, sideStream);
   if (c) {  // refit + re-quantize the compressed layout
     detail::launchCwbvhRefit(c->refit, c->nodes.data(), c->nodeBoxes.data(), c->slotVertices.data(), positions.data(),
                              c->root.data(), stream);
+  } else if (movingOnly) {  // a static child counts as arrived: the moving one carries on at once
+    CUDA_CHECK(cudaMemcpyAsync(t.counters.data(), t.staticChildren.data(), t.staticChildren.bytes(),
+                               cudaMemcpyDeviceToDevice, stream));
+    detail::launchRefit(t.nodes.data(), t.nodeParent.data(), t.movingLeaves.data(), uint32_t(t.movingLeaves.size()),
+                        t.slotVertices.data(), positions.data(), t.counters.data(), t.root.data(), stream);
   } else {
     t.counters.fillBytes(0, stream);
     detail::launchRefit(t.nodes.data(), t.nodeParent.data(), t.leaves.data(), uint32_t(t.leaves.size()),
@@ -299,8 +347,9 @@ void GpuRuntime::Impl::enqueueRefitAndWoop() {
   events.record(3, stream);
 }
 
-UpdateTimings GpuRuntime::Impl::finishUpdate() {
+UpdateTimings GpuRuntime::Impl::finishUpdate(uint32_t slotsUpdated) {
   UpdateTimings timings;
+  timings.slotsUpdated = slotsUpdated;
   events.wait(3);
   timings.interpolateMs = events.ms(0, 1);
   timings.refitMs = events.ms(1, 2);
@@ -343,18 +392,24 @@ UpdateTimings GpuRuntime::updateAt(double time) {
   m.current = treeIndexAt(m.ranges, time);
   m.setFrame(time);
   m.restoreStaticPositions();
+  const bool movingOnly = m.partialUpdatePossible();
   auto enqueue = [&] {
     m.enqueueInterpolation();
-    m.enqueueRefitAndWoop();
+    m.enqueueRefitAndWoop(movingOnly);
   };
+  Impl::DeviceTree& t = m.tree();
   if (m.config.useGraphs) {
-    Impl::CapturedGraph& graph = m.tree().updateGraph;
+    Impl::CapturedGraph& graph = movingOnly ? t.partialUpdateGraph : t.updateGraph;
     if (!graph.exec) graph = m.capture(enqueue);
     m.launch(graph);
   } else {
     enqueue();
   }
-  return m.finishUpdate();
+  const UpdateTimings timings = m.finishUpdate(movingOnly ? uint32_t(t.movingSlots.size()) : m.triangles);
+  // The static vertices were at rest: the static subtrees' boxes and triangles stay valid.
+  t.staticBoxesValid = true;
+  m.woopTree = int(m.current);
+  return timings;
 }
 
 void GpuRuntime::Impl::uploadPositions(std::span<const float> given) {
@@ -371,7 +426,10 @@ UpdateTimings GpuRuntime::update(std::span<const float> positions) {
   Impl& m = *impl_;
   m.uploadPositions(positions);
   m.enqueueRefitAndWoop();
-  return m.finishUpdate();
+  // The caller's positions may move the static vertices too: the next updateAt refits everything.
+  m.tree().staticBoxesValid = false;
+  m.woopTree = -1;
+  return m.finishUpdate(m.triangles);
 }
 
 namespace {
@@ -391,6 +449,7 @@ RebuildTimings GpuRuntime::rebuildAt(double time, const RebuildOptions& options)
   m.setFrame(time);
   m.restoreStaticPositions();
   m.woopValid = false;
+  m.woopTree = -1;  // the rebuild writes its own triangles into woop
   m.tracingRebuilt = true;
   auto enqueue = [&] {
     m.enqueueInterpolation();
@@ -418,6 +477,8 @@ RebuildTimings GpuRuntime::rebuild(std::span<const float> positions, const Rebui
   m.uploadPositions(positions);
   if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles, m.config.layout);
   m.woopValid = false;
+  m.woopTree = -1;
+  m.tree().staticBoxesValid = false;
   m.tracingRebuilt = true;
   RebuildTimings timings = m.rebuilder->build(m.indices.data(), m.positions.data(), options, m.woop.data(), m.stream);
   timings.interpolateMs = m.events.ms(0, 1);

@@ -41,6 +41,10 @@ void launchWoop(const uint32_t* triIndex, uint32_t slots, const uint32_t* indice
                 WoopTriangle* woop, cudaStream_t stream);
 void launchSlotWoop(const uint32_t* slotVertices, uint32_t slots, const float* positions, WoopTriangle* woop,
                     cudaStream_t stream);
+// The Woop triangles of the slots listed in movingSlots only (the others keep theirs): the update of
+// a tree whose static subtrees were refitted before (moving_parts.hpp).
+void launchMovingSlotWoop(const uint32_t* movingSlots, uint32_t count, const uint32_t* slotVertices,
+                          const float* positions, WoopTriangle* woop, cudaStream_t stream);
 
 // Traversal of `count` rays: closest hit into hits (when hits != nullptr) or any hit into
 // occluded (1 = something hit). rayCounter: one device word, zero on entry (persistent launch).

@@ -27,9 +27,14 @@ struct GpuRuntime::Impl {
   // Throws unless there is a traceable frame (an update or a rebuild with Woop triangles).
   void requireTraceable() const;
   // The refit on the stream and the Woop pass beside it (events 2 and 3, 12 and 13); finishUpdate
-  // waits and reads the timings (events 0..3).
-  void enqueueRefitAndWoop();
-  UpdateTimings finishUpdate();
+  // waits and reads the timings (events 0..3). movingOnly: only the current tree's moving parts
+  // (partialUpdatePossible must hold).
+  void enqueueRefitAndWoop(bool movingOnly = false);
+  // True when updateAt may refit only the moving parts of the current tree: it has static parts, a
+  // full update from the animation put their boxes in place, the Woop buffer holds that tree's
+  // triangles since then, and the static vertices are at their rest positions.
+  bool partialUpdatePossible() const;
+  UpdateTimings finishUpdate(uint32_t slotsUpdated);
   // The triangles of every vertex in increasing order (once, at the first render).
   void buildVertexTriangles();
   // Puts the interpolation of time t on the stream (events 0 and 1 around it): setFrame chooses the
@@ -97,6 +102,15 @@ struct GpuRuntime::Impl {
     DeviceBuffer<detail::LeafRecord> leaves;
     DeviceBuffer<detail::RootInfo> root;
     CapturedGraph updateGraph;              // updateAt's graph for this tree (captured at first use)
+    // Static subtrees (tsah/layout/moving_parts.hpp), binary layout: when some triangles never move,
+    // updateAt refits from the moving leaves only, every node's arrival counter starting at its count
+    // of static children, and recomputes the Woop triangles of the moving slots only.
+    bool hasStaticParts = false;
+    bool staticBoxesValid = false;          // a full update from the animation refitted the static subtrees
+    DeviceBuffer<detail::LeafRecord> movingLeaves;
+    DeviceBuffer<uint32_t> staticChildren;  // per interior node: children whose subtree never moves
+    DeviceBuffer<uint32_t> movingSlots;     // slots whose triangle moves
+    CapturedGraph partialUpdateGraph;       // updateAt's graph when only the moving parts are refitted
     std::unique_ptr<Cwbvh> cwbvh;           // the compressed layout, when Config::layout == cwbvh
   };
   // Validates one tree against the animation and uploads it (and its compressed layout).
@@ -116,6 +130,8 @@ struct GpuRuntime::Impl {
 
   DeviceBuffer<WoopTriangle> woop;       // per slot of the traced tree
   bool woopValid = false;
+  int woopTree = -1;                     // the tree whose every slot `woop` holds (full update), or -1
+  std::vector<uint32_t> movingVertexIds; // the animation's moving vertices (empty: all move)
   bool tracingRebuilt = false;
   std::unique_ptr<detail::GpuRebuilder> rebuilder;
   // The caller's positions of every vertex (3 floats each) in place of the interpolated ones, timed

@@ -116,6 +116,19 @@ void launchWoopKernel(VertexIds ids, uint32_t slots, const float* positions, Woo
   CUDA_CHECK_LAUNCH("woopKernel");
 }
 
+// One thread per listed slot: a static scene's moving triangles are few and scattered, so each
+// thread stores its own triangle (the others stay as the last full update left them).
+__global__ void movingSlotWoopKernel(const uint32_t* __restrict__ movingSlots, uint32_t count,
+                                     const uint32_t* __restrict__ slotVertices, const float* __restrict__ positions,
+                                     WoopTriangle* __restrict__ woop) {
+  const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= count) return;
+  const uint32_t s = __ldg(movingSlots + i);
+  const uint32_t* tri = slotVertices + 3 * std::size_t(s);
+  woop[s] = makeWoopTriangle(loadVertex(positions, __ldg(tri)), loadVertex(positions, __ldg(tri + 1)),
+                             loadVertex(positions, __ldg(tri + 2)));
+}
+
 }  // namespace
 
 void launchInterpolateFrame(const float* keyframes, const uint32_t* movingIds, const FrameParams& params, float* out,
@@ -171,6 +184,14 @@ void launchWoop(const uint32_t* triIndex, uint32_t slots, const uint32_t* indice
 void launchSlotWoop(const uint32_t* slotVertices, uint32_t slots, const float* positions, WoopTriangle* woop,
                     cudaStream_t stream) {
   launchWoopKernel(SlotOrderedIds{slotVertices}, slots, positions, woop, stream);
+}
+
+void launchMovingSlotWoop(const uint32_t* movingSlots, uint32_t count, const uint32_t* slotVertices,
+                          const float* positions, WoopTriangle* woop, cudaStream_t stream) {
+  if (count == 0) return;
+  const uint32_t block = 128;
+  movingSlotWoopKernel<<<gridFor(count, block), block, 0, stream>>>(movingSlots, count, slotVertices, positions, woop);
+  CUDA_CHECK_LAUNCH("movingSlotWoopKernel");
 }
 
 }  // namespace tsah::cuda::detail

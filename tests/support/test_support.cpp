@@ -25,6 +25,22 @@ anim::Animation generatedAnimation(anim::GeneratorKind kind, uint32_t triangles,
   return anim::generate(kind, o);
 }
 
+anim::Animation mostlyStaticAnimation(uint32_t staticTriangles, uint32_t movingTriangles) {
+  const auto still = generatedAnimation(anim::GeneratorKind::Wave, staticTriangles, 1, 3);
+  const auto mover = generatedAnimation(anim::GeneratorKind::Explode, movingTriangles, 5, 4);
+  std::vector<uint32_t> idx(still.indices().begin(), still.indices().end());
+  for (uint32_t v : mover.indices()) idx.push_back(v + still.vertexCount());
+  std::vector<float> pos;
+  const std::vector<float> rest = still.keyframe(0);
+  for (uint32_t k = 0; k < mover.keyframeCount(); ++k) {
+    pos.insert(pos.end(), rest.begin(), rest.end());
+    const auto m = mover.keyframe(k);
+    pos.insert(pos.end(), m.begin(), m.end());
+  }
+  return anim::Animation(idx, still.vertexCount() + mover.vertexCount(), pos,
+                         {mover.times().begin(), mover.times().end()}, "mostly-static");
+}
+
 std::filesystem::path dataDir() {
   if (const char* env = std::getenv("TSAH_DATA_DIR")) return env;
   return TSAH_DATA_DIR;

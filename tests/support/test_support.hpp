@@ -30,6 +30,11 @@ namespace tsah::test {
 // A generated animation (anim::generate) of about `triangles` triangles over `frames` keyframes.
 anim::Animation generatedAnimation(anim::GeneratorKind kind, uint32_t triangles, uint32_t frames, uint64_t seed = 1);
 
+// A scene with a big static part: a generated wave mesh at rest (about `staticTriangles`, never
+// moving: stored once as rest positions) next to an exploding mesh (about `movingTriangles`, 5
+// keyframes), so that most of a tree over it never moves.
+anim::Animation mostlyStaticAnimation(uint32_t staticTriangles = 4000, uint32_t movingTriangles = 1000);
+
 // The real-data folder (../shared/data by default, TSAH_DATA_DIR in the environment overrides).
 std::filesystem::path dataDir();
 

@@ -41,6 +41,9 @@ struct UpdateTimings {
   double interpolateMs = 0.0;  // update(positions): the upload instead
   double refitMs = 0.0;  // the refit (and re-quantization)
   double woopMs = 0.0;   // the Woop pass, which runs beside the refit: only the part after the refit ends
+  // Triangles whose Woop form (and leaf boxes) the update recomputed: all of them, or only the
+  // moving ones once the static subtrees are in place (updateAt on a scene with static vertices).
+  uint32_t slotsUpdated = 0;
   double totalMs() const { return interpolateMs + refitMs + woopMs; }
 };
 
