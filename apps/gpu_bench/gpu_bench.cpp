@@ -56,7 +56,7 @@ struct Options {
   uint32_t frames = 50, width = 1024, height = 768, ao = 8, shadow = 2;
   std::string traversal = "simple";
   std::string layout = "bvh2,cwbvh";  // layouts of the refitted trees, comma separated
-  bool noRender = false, cpuCompare = false, noGraphs = false, noFuse = false;
+  bool noRender = false, cpuCompare = false, noGraphs = false, noFuse = false, fullRefit = false;
   bool ground = false;  // the analytic ground plane (off: the meshes alone, as tsah bench and the paper)
   std::vector<float> wideCost;  // cwbvh collapse: cT, cI instead of the tree's objective's (empty: the tree's)
   uint32_t wideLeaf = 0;        // cwbvh collapse: largest leaf instead of the tree's objective's (0: the tree's)
@@ -188,6 +188,7 @@ struct FrameSeries {
 tc::GpuRuntime::Config runtimeConfig(const Options& opt, bool persistent, tsah::Layout layout,
                                      tsah::Objective objective) {
   tc::GpuRuntime::Config c{0, persistent, !opt.noGraphs, layout, !opt.noFuse};
+  c.skipStaticSubtrees = !opt.fullRefit;
   if (!opt.wideCost.empty()) objective.cost = {opt.wideCost[0], opt.wideCost[1]};
   if (opt.wideLeaf != 0) objective.maxLeafSize = opt.wideLeaf;
   c.wideObjective = objective;
@@ -383,6 +384,7 @@ void run(const Options& opt) {
   out["settings"] = {{"frames", frames},       {"width", opt.width},   {"height", opt.height},
                      {"ao_samples", opt.ao},   {"shadow_samples", opt.shadow},
                      {"traversal", opt.traversal}, {"render", !opt.noRender}, {"graphs", !opt.noGraphs},
+                     {"skip_static_subtrees", !opt.fullRefit},
                      {"fused_passes", !opt.noFuse}, {"ground", opt.ground},
                      {"camera", a.cameraPath().empty() ? "fitted to the animation bounds" : "the animation's camera path"}};
 
@@ -477,6 +479,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1u, tsah::kCwbvhMaxLeafTriangles));
   app.add_flag("--ground", opt.ground, "Add the analytic ground plane (default: the meshes alone, as tsah bench)");
   app.add_flag("--no-graphs", opt.noGraphs, "Launch every kernel instead of replaying CUDA graphs");
+  app.add_flag("--full-refit", opt.fullRefit, "Refit every subtree every frame, the static ones too (binary layout)");
   app.add_flag("--no-render", opt.noRender, "Time the updates and rebuilds only");
   app.add_flag("--cpu-compare", opt.cpuCompare, "Render the first frame on the CPU too and compare the images");
   app.add_option("--image-dir", opt.imageDir, "Where --cpu-compare writes cpu.png and gpu.png");

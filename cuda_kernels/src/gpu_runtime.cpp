@@ -124,7 +124,8 @@ void GpuRuntime::Impl::uploadTree(const FlatBvh& tree, FlatBvh topologyOfTree, c
   d.leaves = DeviceBuffer<detail::LeafRecord>(std::span<const detail::LeafRecord>(leafRecords), stream);
   std::vector<detail::LeafRecord> movingLeafRecords;
   std::vector<uint32_t> staticChildren, movingSlotList;
-  if (config.layout == Layout::Bvh2 && !movingVertexIds.empty() && topology.interiorCount > 0) {
+  if (config.skipStaticSubtrees && config.layout == Layout::Bvh2 && !movingVertexIds.empty() &&
+      topology.interiorCount > 0) {
     const MovingParts parts = findMovingParts(topology, hostIndices, movingVertexIds, vertices);
     if (parts.movingSlots < topology.triangleCount()) {
       d.hasStaticParts = true;

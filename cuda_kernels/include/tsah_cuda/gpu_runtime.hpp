@@ -81,6 +81,9 @@ class GpuRuntime {
     // constructors' tree and every tree of a set without build infos. A set with one BvhBuildInfo
     // per tree (as a .tbvh file gives) collapses each tree with its own objective.
     Objective wideObjective{};
+    // Binary layout: updateAt refits the subtrees whose triangles never move only once
+    // (docs/cuda-runtime.md#static-subtrees); false refits everything every time (the reference).
+    bool skipStaticSubtrees = true;
   };
 
   // tree: the topology to refit (frame 0's block; its boxes are recomputed by updateAt). Throws
