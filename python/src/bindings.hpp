@@ -21,6 +21,13 @@ namespace anim {
 class Animation;
 }
 
+namespace tsah {
+class CpuRuntime;
+namespace cuda {
+class GpuRuntime;
+}
+}  // namespace tsah
+
 namespace tsah::python {
 
 namespace py = pybind11;
@@ -35,6 +42,11 @@ struct Tree {
 
 class CpuTracer;  // tsah.CpuRuntime (runtime.cpp)
 class GpuTracer;  // tsah.GpuRuntime (runtime.cpp, CUDA builds)
+// The C++ runtime of a tsah.CpuRuntime / tsah.GpuRuntime object (checked as every bound argument).
+const CpuRuntime& cpuRuntimeOf(py::handle self);
+#if defined(TSAH_HAVE_CUDA)
+cuda::GpuRuntime& gpuRuntimeOf(py::handle self);
+#endif
 
 // The C++ classes bound as Python classes. Each is loaded through the type_caster below, so an
 // object made by Class.__new__ without __init__ is refused wherever it is passed, `self` included;
@@ -62,6 +74,7 @@ void bindErrors(py::module_& m);
 void bindAnimation(py::module_& m);
 void bindTrees(py::module_& m);
 void bindRuntimes(py::module_& m);
+void bindQueries(py::module_& m);  // after bindRuntimes: adds methods to its classes (queries.cpp)
 
 // A C-contiguous numpy array of T (converted from the caller's dtype when needed).
 template <class T>

@@ -250,4 +250,5 @@ PYBIND11_MODULE(_tsah, m) {
   tsah::python::bindAnimation(m);
   tsah::python::bindTrees(m);
   tsah::python::bindRuntimes(m);
+  tsah::python::bindQueries(m);
 }
