@@ -1,5 +1,7 @@
 // Closest points and box overlap as methods of tsah.CpuRuntime and tsah.GpuRuntime (the classes
 // are bound in runtime.cpp; the queries are tsah/runtime/queries.hpp and tsah_cuda/gpu_queries.hpp).
+#include <algorithm>
+#include <cstddef>
 #include <cstring>
 #include <limits>
 
@@ -17,6 +19,7 @@ using namespace pybind11::literals;
 
 // points (N, 3) as Vec3; radius a number or an array (N,) (the library checks the values).
 std::vector<Vec3> pointsOf(py::handle points) {
+  static_assert(sizeof(Vec3) == 3 * sizeof(float));
   const auto a = checkedArray<float>(points, "points", Kind::Number, {-1, 3});
   std::vector<Vec3> out(std::size_t(a.shape(0)));
   if (!out.empty()) std::memcpy(out.data(), a.data(), out.size() * sizeof(Vec3));
