@@ -30,6 +30,13 @@ namespace tsah {
 struct OptimizedTreeSet;
 }
 
+namespace tsah {
+class CpuRuntime;
+namespace cuda {
+class GpuRuntime;
+}
+}  // namespace tsah
+
 namespace tsah::python {
 
 namespace py = pybind11;
@@ -54,6 +61,11 @@ struct TreeSetObject {
 
 class CpuTracer;  // tsah.CpuRuntime (runtime.cpp)
 class GpuTracer;  // tsah.GpuRuntime (runtime.cpp, CUDA builds)
+// The C++ runtime of a tsah.CpuRuntime / tsah.GpuRuntime object (checked as every bound argument).
+const CpuRuntime& cpuRuntimeOf(py::handle self);
+#if defined(TSAH_HAVE_CUDA)
+cuda::GpuRuntime& gpuRuntimeOf(py::handle self);
+#endif
 
 // The C++ classes bound as Python classes. Each is loaded through the type_caster below, so an
 // object made by Class.__new__ without __init__ is refused wherever it is passed, `self` included;
@@ -134,6 +146,7 @@ void bindErrors(py::module_& m);
 void bindAnimation(py::module_& m);
 void bindTrees(py::module_& m);
 void bindRuntimes(py::module_& m);
+void bindQueries(py::module_& m);  // after bindRuntimes: adds methods to its classes (queries.cpp)
 void bindTreeSets(py::module_& m);  // tsah.TreeSet (tree_sets.cpp), called by bindTrees
 
 // A tree set for Python from a set file's bytes and their decoded set (read_tree, tree_from_bytes),

@@ -277,4 +277,5 @@ PYBIND11_MODULE(_tsah, m) {
   tsah::python::bindAnimation(m);
   tsah::python::bindTrees(m);
   tsah::python::bindRuntimes(m);
+  tsah::python::bindQueries(m);
 }

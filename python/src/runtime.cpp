@@ -131,6 +131,7 @@ class CpuTracer {
     return boolArray(flags);
   }
   std::string layout() const { return name(runtime_->layoutInfo().layout); }
+  const CpuRuntime& runtime() const { return *runtime_; }
   py::array_t<float> bounds() const {
     const Aabb b = runtime_->bounds();
     py::array_t<float> out(std::vector<py::ssize_t>{2, 3});
@@ -183,6 +184,7 @@ class GpuTracer {
     return boolArray(flags);
   }
   std::string deviceName() const { return runtime_->device().name; }
+  cuda::GpuRuntime& runtime() { return *runtime_; }
 
  private:
   std::unique_ptr<cuda::GpuRuntime> runtime_;
@@ -247,5 +249,10 @@ uploaded once; refit and traversal run on the GPU). Raises tsah.Failure when no 
   m.def("cuda_available", [] { return false; }, "True when the CUDA runtime was built and a GPU is present.");
 #endif
 }
+
+const CpuRuntime& cpuRuntimeOf(py::handle self) { return self.cast<const CpuTracer&>().runtime(); }
+#if defined(TSAH_HAVE_CUDA)
+cuda::GpuRuntime& gpuRuntimeOf(py::handle self) { return self.cast<GpuTracer&>().runtime(); }
+#endif
 
 }  // namespace tsah::python

@@ -151,6 +151,7 @@ class GpuRuntime {
  private:
   friend RenderStats renderFrameGpu(GpuRuntime&, const Camera&, const SceneLighting&, const RenderSettings&, Image*,
                                     GpuRenderTimings*);
+  friend struct QueryAccess;  // gpu_queries.hpp's entry points
   std::unique_ptr<Impl> impl_;
 };
 
