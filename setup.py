@@ -54,6 +54,15 @@ class CMakeBuild(build_ext):
         target = pathlib.Path(self.get_ext_fullpath(ext.name))
         target.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(modules[0], target)
+        # What the module was built with (pybind11's version), read by tsah/__init__.py.
+        shutil.copyfile(built / "_build_info.py", target.parent / "_build_info.py")
+
+
+def numpy_requirement():
+    """pybind11 before 2.12 (Debian 12 has 2.10) supports numpy 1.x only: its module must not meet numpy 2."""
+    import pybind11
+    major_minor = tuple(int(part) for part in pybind11.__version__.split(".")[:2])
+    return "numpy>=1.24" if major_minor >= (2, 12) else "numpy>=1.24,<2"
 
 
 def pyproject_version():
@@ -63,4 +72,5 @@ def pyproject_version():
 
 if pyproject_version() != cmake_version():
     raise SystemExit(f"tsah: pyproject.toml says {pyproject_version()} but CMakeLists.txt says {cmake_version()}")
-setup(ext_modules=[CMakeExtension("tsah._tsah")], cmdclass={"build_ext": CMakeBuild})
+setup(install_requires=[numpy_requirement()], ext_modules=[CMakeExtension("tsah._tsah")],
+      cmdclass={"build_ext": CMakeBuild})

@@ -39,15 +39,17 @@ foreach(pattern "assimp::" "TBB::" "PkgConfig::" "nlohmann_json::" "draco::" "CU
   endif()
 endforeach()
 
-# Two consumers: CPU only, with the dependencies' CMake packages and the CUDA toolkit hidden (what a
+# Three consumers: CPU only, with the dependencies' CMake packages and the CUDA toolkit hidden (what a
 # machine without their development packages sees) and no build type given (the example's default:
-# Release); then the full example (the GPU part when tsah has it).
+# Release); the full example (OPTIONAL_COMPONENTS cuda) where the CUDA toolkit is missing, which
+# must still find the CPU part; then the full example (the GPU part when tsah has it).
 set(hidden)
 foreach(package assimp OpenMesh TBB nlohmann_json PkgConfig CUDAToolkit draco)
   list(APPEND hidden -DCMAKE_DISABLE_FIND_PACKAGE_${package}=ON)
 endforeach()
-set(variants cpu full)
+set(variants cpu no-toolkit full)
 set(cpu_args -DCONSUMER_CPU_ONLY=ON ${hidden})
+set(no-toolkit_args -DCMAKE_BUILD_TYPE=Release -DCMAKE_DISABLE_FIND_PACKAGE_CUDAToolkit=ON)
 set(full_args -DCMAKE_BUILD_TYPE=Release)
 foreach(variant IN LISTS variants)
   set(configure_args -S ${CONSUMER_DIR} -B ${WORK_DIR}/build-${variant} -DCMAKE_PREFIX_PATH=${prefix} ${${variant}_args})

@@ -18,7 +18,7 @@ export TSAH_CUDA=${TSAH_CUDA:-off}
 "$work/venv/bin/pip" install --quiet --no-build-isolation "$source_dir"
 "$work/venv/bin/pip" wheel --quiet --no-build-isolation --no-deps --wheel-dir "$work/wheels" "$source_dir"
 wheel=$(ls "$work"/wheels/tsah-*.whl)
-for member in tsah/__init__.py tsah/__init__.pyi tsah/py.typed 'tsah/_tsah\.cpython-[^/]*\.so'; do
+for member in tsah/__init__.py tsah/__init__.pyi tsah/py.typed tsah/_build_info.py 'tsah/_tsah\.cpython-[^/]*\.so'; do
   /usr/bin/python3 -c "import re, sys, zipfile; names = zipfile.ZipFile(sys.argv[1]).namelist(); \
 sys.exit(0 if any(re.fullmatch(sys.argv[2], n) for n in names) else f'{sys.argv[1]}: no {sys.argv[2]}')" "$wheel" "$member"
 done

@@ -29,6 +29,21 @@ except ImportError as _error:
         f"tsah needs numpy, which this interpreter ({_sys.executable}) cannot import: install it for this "
         "interpreter (Debian: apt install python3-numpy; a virtual environment: pip install numpy)") from _error
 
+# pybind11 before 2.12 reads numpy 1.x's dtype struct directly (itemsize, the strides of new arrays),
+# which numpy 2 changed: refuse numpy 2 rather than hand out arrays with wrong strides.
+from ._build_info import pybind11_version as _pybind11_version  # noqa: E402
+
+
+def _major_minor(version):
+    return tuple(int(part) for part in version.split(".")[:2] if part.isdigit())
+
+
+if _major_minor(_numpy.__version__) >= (2,) and _major_minor(_pybind11_version) < (2, 12):
+    raise ImportError(
+        f"tsah was built with pybind11 {_pybind11_version}, which does not support numpy {_numpy.__version__} "
+        f"of this interpreter ({_sys.executable}): use numpy 1.x (pip install 'numpy<2') or rebuild tsah with "
+        "pybind11 2.12 or newer")
+
 from ._tsah import (  # noqa: F401  (the public API)
     Animation,
     CpuRuntime,
