@@ -189,6 +189,12 @@ class CpuRuntime:
     def occluded(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
                  tmax: _ArrayLike = float("inf")) -> npt.NDArray[np.bool_]:
         """True for each ray that hits anything within (tmin, tmax)."""
+    def closest_points(self, points: _ArrayLike, radius: _ArrayLike = float("inf")) -> np.recarray[Any, Any]:
+        """For each point (N, 3), the closest point on the current frame's triangles within radius: a record
+        array (N,) with distance (inf when none), triangle (-1 then), u, v and point."""
+    def overlapping_triangles(self, lo: _ArrayLike,
+                              hi: _ArrayLike) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int32]]:
+        """For each box (lo, hi: (N, 3)), the triangles whose current box overlaps it: (offsets, ids)."""
     @property
     def bounds(self) -> npt.NDArray[np.float32]:
         """Bounds of the current frame, float32 (2, 3)."""
@@ -212,6 +218,12 @@ class GpuRuntime:
     def occluded(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
                  tmax: _ArrayLike = float("inf")) -> npt.NDArray[np.bool_]:
         """True for each ray that hits anything within (tmin, tmax)."""
+    def closest_points(self, points: _ArrayLike, radius: _ArrayLike = float("inf")) -> np.recarray[Any, Any]:
+        """For each point (N, 3), the closest point on the current frame's triangles within radius: a record
+        array (N,) with distance (inf when none), triangle (-1 then), u, v and point."""
+    def overlapping_triangles(self, lo: _ArrayLike,
+                              hi: _ArrayLike) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int32]]:
+        """For each box (lo, hi: (N, 3)), the triangles whose current box overlaps it: (offsets, ids)."""
     @property
     def device_name(self) -> str:
         """The name of the CUDA device."""
