@@ -1,0 +1,50 @@
+#pragma once
+// Embree 3's motion-blur BVH, the peer of the toolkit's blurred frames: triangles with a vertex
+// buffer per time step, a ray's time in Embree's [0, 1]. Built over the whole animation once (its
+// keyframes as the time steps) or per frame over the shutter's keys (a rebuild every frame).
+// Compiled only with Embree (TSAH_HAVE_EMBREE), beside embree_peer.cpp.
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "tsah/core/ray.hpp"
+
+namespace tsah::bench {
+
+// Embree spaces the time steps evenly over [0, 1]; keys (increasing times) need not be. Between two
+// consecutive keys the animation and Embree both move every vertex linearly, so `time` at fraction
+// f of segment [keys[s], keys[s+1]] is Embree's time (s + f) / (K - 1): the same positions. Times
+// outside the keys are clamped; one key gives 0.
+float embreeStepTime(std::span<const double> keys, double time);
+
+#if TSAH_HAVE_EMBREE
+class EmbreeMotionPeer {
+ public:
+  static constexpr uint32_t kMiss = 0xffffffffu;
+
+  // indices: 3 per triangle, each < vertexCount. threads: Embree's build threads (0: all cores).
+  // Throws tsah::Failure when Embree cannot create its device.
+  EmbreeMotionPeer(std::span<const uint32_t> indices, uint32_t vertexCount, unsigned threads);
+  ~EmbreeMotionPeer();
+  EmbreeMotionPeer(const EmbreeMotionPeer&) = delete;
+  EmbreeMotionPeer& operator=(const EmbreeMotionPeer&) = delete;
+
+  // Builds a new motion-blur BVH (RTC_BUILD_QUALITY_MEDIUM) with one time step per entry of
+  // stepPositions (vertexCount * 3 floats each, at least one); returns the milliseconds spent,
+  // copies included. Throws tsah::DataError for a wrong coordinate count.
+  double build(std::span<const std::vector<float>> stepPositions);
+  uint32_t timeSteps() const;
+
+  // rtcIntersect1 / rtcOccluded1 at Embree time `time` (embreeStepTime): the triangle hit first
+  // (kMiss for none), or whether anything lies on the ray.
+  uint32_t closestTriangle(const Ray& ray, float time) const;
+  bool occluded(const Ray& ray, float time) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+#endif
+
+}  // namespace tsah::bench
