@@ -307,6 +307,7 @@ UpdateTimings GpuRuntime::Impl::finishUpdate() {
   timings.woopMs = events.ms(2, 3);
   tracingRebuilt = false;
   woopValid = true;
+  shutterKeys = 0;  // an update ends a blurred frame (updateShutter sets its keys after its updates)
   return timings;
 }
 
@@ -392,6 +393,7 @@ RebuildTimings GpuRuntime::rebuildAt(double time, const RebuildOptions& options)
   m.restoreStaticPositions();
   m.woopValid = false;
   m.tracingRebuilt = true;
+  m.shutterKeys = 0;
   auto enqueue = [&] {
     m.enqueueInterpolation();
     m.rebuilder->enqueue(m.indices.data(), m.positions.data(), options, m.woop.data(), m.stream);
@@ -419,6 +421,7 @@ RebuildTimings GpuRuntime::rebuild(std::span<const float> positions, const Rebui
   if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles, m.config.layout);
   m.woopValid = false;
   m.tracingRebuilt = true;
+  m.shutterKeys = 0;
   RebuildTimings timings = m.rebuilder->build(m.indices.data(), m.positions.data(), options, m.woop.data(), m.stream);
   timings.interpolateMs = m.events.ms(0, 1);
   m.woopValid = options.woop;

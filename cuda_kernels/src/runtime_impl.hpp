@@ -124,6 +124,16 @@ struct GpuRuntime::Impl {
   // The rebuilder after its last rebuild; throws tsah::ConfigError when nothing was rebuilt yet.
   const detail::GpuRebuilder& lastRebuild() const;
 
+  // Motion blur: the keys of the last updateShutter (0 when the frame is not blurred), and per key
+  // the traced tree's nodes, root and the positions (key-major).
+  uint32_t shutterKeys = 0;
+  std::vector<float> shutterKeyTimes;
+  DeviceBuffer<GpuBvhNode> keyNodes;
+  DeviceBuffer<detail::RootInfo> keyRoots;
+  DeviceBuffer<float> keyPositions;
+  // Throws tsah::ConfigError unless the frame is blurred and key < shutterKeys.
+  void requireKey(uint32_t key) const;
+
   // Scratch of the ray queries and the renderer, grown on demand.
   DeviceBuffer<uint32_t> words;          // ray counters, ray counts
   DeviceBuffer<Ray> rays;

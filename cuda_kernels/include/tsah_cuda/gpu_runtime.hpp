@@ -109,6 +109,20 @@ class GpuRuntime {
   RebuildTimings rebuildAt(double time, const RebuildOptions& options = {});
   RebuildTimings rebuild(std::span<const float> positions, const RebuildOptions& options = {});
 
+  // Motion blur (docs/cuda-runtime.md): the current tree (selectTreeAt) refitted at every key of a
+  // shutter from host positions, one box array per key. keyPositions[k]: vertexCount * 3 floats at
+  // key k; keyTimes[k]: its shutter fraction (first 0, last 1, increasing). One key is update().
+  // Tracing without times afterwards sees the last key. Throws tsah::ConfigError for bad key times
+  // or, with two keys or more, for layout cwbvh; tsah::DataError for a wrong coordinate count.
+  UpdateTimings updateShutter(std::span<const float> keyTimes, std::span<const std::span<const float>> keyPositions);
+  // true after updateShutter with two keys or more, until the next update, updateAt or rebuild.
+  bool blurred() const;
+  uint32_t shutterKeyCount() const;  // keys of the last updateShutter while blurred, else 0
+  // Host copies of key k of a blurred frame (throws tsah::ConfigError when not blurred or k is out
+  // of range): the refitted tree as downloadTree gives it, and the positions.
+  FlatBvh downloadKeyTree(uint32_t key) const;
+  std::vector<float> downloadKeyPositions(uint32_t key) const;
+
   bool tracingRebuiltTree() const;
   uint32_t triangleCount() const;
   uint32_t vertexCount() const;
