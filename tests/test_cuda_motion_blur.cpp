@@ -102,6 +102,47 @@ TEST(CudaMotionBlur, EveryKeyEqualsTheCpuUpdateAtItsPositionsExactly) {
   }
 }
 
+// updateShutterAt interpolates and refits every key on the device: each key equals the CPU update
+// at the animation's positions of that key time, and updateShutter from those host positions.
+TEST(CudaMotionBlur, ShutterAtKeyframesEqualsTheCpuUpdateAtEveryKey) {
+  REQUIRE_GPU();
+  const auto a = generatedAnimation(anim::GeneratorKind::Explode, 3000, 7, 5);
+  const double t0 = a.startTime(), span = a.endTime() - a.startTime();
+  const tsah::FlatBvh tree = sahTree(a, 8);
+  tsah::CpuRuntime cpu = cpuRuntime(tree, a);
+  for (bool graphs : {true, false}) {
+    tc::GpuRuntime gpu(tree, a, tsah::test::gpuConfig(tsah::Layout::Bvh2, graphs));
+    tc::GpuRuntime fromHost(tree, a, tsah::test::gpuConfig(tsah::Layout::Bvh2, graphs));
+    // Inside one keyframe interval, over several, starting on a keyframe, the whole animation.
+    for (auto [open, close] : {std::pair{t0 + 0.02 * span, t0 + 0.07 * span}, std::pair{t0 + 0.3 * span, t0 + 0.8 * span},
+                               std::pair{a.times()[2], a.times()[4] + 0.01 * span}, std::pair{t0, t0 + span}}) {
+      const ShutterKeys keys = shutterKeys(a, open, close);
+      gpu.updateShutterAt(open, close);
+      fromHost.updateShutter(keys.fractions, keys.spans());
+      ASSERT_TRUE(gpu.blurred());
+      ASSERT_EQ(gpu.shutterKeyCount(), keys.fractions.size()) << "keys of [" << open << ", " << close << "]";
+      for (uint32_t k = 0; k < keys.fractions.size(); ++k) {
+        const std::string what = "graphs " + std::to_string(graphs) + ", shutter [" + std::to_string(open) + ", " +
+                                 std::to_string(close) + "], key " + std::to_string(k);
+        cpu.update(keys.positions[k]);
+        const std::vector<float> pos = gpu.downloadKeyPositions(k);
+        ASSERT_EQ(0, std::memcmp(pos.data(), keys.positions[k].data(), pos.size() * sizeof(float))) << what;
+        const tsah::FlatBvh got = gpu.downloadKeyTree(k);
+        expectSameTree(got, cpu.tree(), what);
+        expectSameTree(fromHost.downloadKeyTree(k), got, "host positions, " + what);
+      }
+    }
+    // A closed shutter is the instant: not blurred, the tree of updateAt.
+    const double t = t0 + 0.41 * span;
+    gpu.updateShutterAt(t, t);
+    EXPECT_FALSE(gpu.blurred());
+    cpu.update(a.positionsAt(t));
+    expectSameTree(gpu.downloadTree(), cpu.tree(), "closed shutter");
+    EXPECT_THROW(gpu.updateShutterAt(t, t - 0.1), tsah::ConfigError);
+    EXPECT_THROW(gpu.updateShutterAt(std::nan(""), t), tsah::ConfigError);
+  }
+}
+
 TEST(CudaMotionBlur, AnUpdateOrRebuildEndsTheBlurredFrame) {
   REQUIRE_GPU();
   const auto a = generatedAnimation(anim::GeneratorKind::Wave, 1500, 4);
@@ -176,6 +217,7 @@ TEST(CudaMotionBlur, TheCompressedLayoutRefusesABlurredFrame) {
     EXPECT_NE(std::string(e.what()).find("motion blur traces the binary layout on the GPU"), std::string::npos)
         << e.what();
   }
+  EXPECT_THROW(gpu.updateShutterAt(a.startTime(), a.endTime()), tsah::ConfigError);
   EXPECT_FALSE(gpu.blurred());
   const std::vector<std::span<const float>> one{keys.positions[0]};
   EXPECT_NO_THROW(gpu.updateShutter(std::vector<float>{0.0f}, one));  // one key: a plain update

@@ -342,6 +342,11 @@ uint32_t GpuRuntime::currentTree() const { return impl_->current; }
 UpdateTimings GpuRuntime::updateAt(double time) {
   Impl& m = *impl_;
   m.current = treeIndexAt(m.ranges, time);
+  return m.refitAt(time);
+}
+
+UpdateTimings GpuRuntime::Impl::refitAt(double time) {
+  Impl& m = *this;
   m.setFrame(time);
   m.restoreStaticPositions();
   auto enqueue = [&] {

@@ -2,6 +2,7 @@
 // one copy of the traced tree's nodes, root and positions per key (docs/cuda-runtime.md).
 #include <cmath>
 #include <string>
+#include <vector>
 
 #include "tsah/base/error.hpp"
 #include "cwbvh_kernels.hpp"
@@ -28,6 +29,17 @@ void checkKeyTimes(std::span<const float> keyTimes, std::size_t positionSets) {
     if (!(keyTimes[k] > keyTimes[k - 1])) throw tsah::ConfigError(where + "key times must increase");
 }
 
+// The key times of the shutter [open, close]: open, every keyframe strictly inside, close; one key
+// when open == close.
+std::vector<double> shutterKeyTimes(std::span<const double> keyframes, double open, double close) {
+  std::vector<double> keys{open};
+  if (close == open) return keys;
+  for (double t : keyframes)
+    if (t > open && t < close) keys.push_back(t);
+  keys.push_back(close);
+  return keys;
+}
+
 }  // namespace
 
 void GpuRuntime::Impl::requireKey(uint32_t key) const {
@@ -37,43 +49,64 @@ void GpuRuntime::Impl::requireKey(uint32_t key) const {
                             std::to_string(shutterKeys) + " keys");
 }
 
+// Runs refitKey(k) for every key and keeps each key's nodes, root and positions.
+template <typename RefitKey>
+UpdateTimings GpuRuntime::Impl::refitKeys(std::span<const float> keyTimes, RefitKey&& refitKey) {
+  if (config.layout != Layout::Bvh2)
+    throw tsah::ConfigError("GPU runtime: motion blur traces the binary layout on the GPU (layout bvh2, not " +
+                            std::string(name(config.layout)) + ")");
+  const auto keys = static_cast<uint32_t>(keyTimes.size());
+  DeviceTree& t = tree();
+  const std::size_t interior = t.topology.interiorCount, coords = std::size_t(vertices) * 3;
+  keyNodes.reserve(std::size_t(keys) * interior);
+  keyRoots.reserve(keys);
+  keyPositions.reserve(std::size_t(keys) * coords);
+  UpdateTimings total;
+  for (uint32_t k = 0; k < keys; ++k) {
+    // Each key is a whole update (bit-identical to CpuRuntime::update at its positions), kept.
+    const UpdateTimings one = refitKey(k);
+    total.interpolateMs += one.interpolateMs;
+    total.refitMs += one.refitMs;
+    total.woopMs += one.woopMs;
+    if (interior)
+      CUDA_CHECK(cudaMemcpyAsync(keyNodes.data() + k * interior, t.nodes.data(), interior * sizeof(GpuBvhNode),
+                                 cudaMemcpyDeviceToDevice, stream));
+    CUDA_CHECK(cudaMemcpyAsync(keyRoots.data() + k, t.root.data(), sizeof(detail::RootInfo),
+                               cudaMemcpyDeviceToDevice, stream));
+    CUDA_CHECK(cudaMemcpyAsync(keyPositions.data() + k * coords, positions.data(), coords * sizeof(float),
+                               cudaMemcpyDeviceToDevice, stream));
+  }
+  CUDA_CHECK(cudaStreamSynchronize(stream));
+  shutterKeys = keys;
+  shutterKeyTimes.assign(keyTimes.begin(), keyTimes.end());
+  return total;
+}
+
 UpdateTimings GpuRuntime::updateShutter(std::span<const float> keyTimes,
                                         std::span<const std::span<const float>> keyPositions) {
   Impl& m = *impl_;
   checkKeyTimes(keyTimes, keyPositions.size());
   if (keyTimes.size() == 1) return update(keyPositions[0]);
-  if (m.config.layout != Layout::Bvh2)
-    throw tsah::ConfigError("GPU runtime: motion blur traces the binary layout on the GPU (layout bvh2, not " +
-                            std::string(name(m.config.layout)) + ")");
   for (std::span<const float> p : keyPositions)  // before anything is refitted
     if (p.size() != std::size_t(m.vertices) * 3)
       throw tsah::DataError("GPU runtime: updateShutter got " + std::to_string(p.size()) +
                             " coordinates for a key, expected " + std::to_string(std::size_t(m.vertices) * 3));
-  const auto keys = static_cast<uint32_t>(keyTimes.size());
-  Impl::DeviceTree& t = m.tree();
-  const std::size_t interior = t.topology.interiorCount, coords = std::size_t(m.vertices) * 3;
-  m.keyNodes.reserve(std::size_t(keys) * interior);
-  m.keyRoots.reserve(keys);
-  m.keyPositions.reserve(std::size_t(keys) * coords);
-  UpdateTimings total;
-  for (uint32_t k = 0; k < keys; ++k) {
-    // Each key is the update from host positions (bit-identical to CpuRuntime::update), kept.
-    const UpdateTimings one = update(keyPositions[k]);
-    total.interpolateMs += one.interpolateMs;
-    total.refitMs += one.refitMs;
-    total.woopMs += one.woopMs;
-    if (interior)
-      CUDA_CHECK(cudaMemcpyAsync(m.keyNodes.data() + k * interior, t.nodes.data(), interior * sizeof(GpuBvhNode),
-                                 cudaMemcpyDeviceToDevice, m.stream));
-    CUDA_CHECK(cudaMemcpyAsync(m.keyRoots.data() + k, t.root.data(), sizeof(detail::RootInfo),
-                               cudaMemcpyDeviceToDevice, m.stream));
-    CUDA_CHECK(cudaMemcpyAsync(m.keyPositions.data() + k * coords, m.positions.data(), coords * sizeof(float),
-                               cudaMemcpyDeviceToDevice, m.stream));
-  }
-  CUDA_CHECK(cudaStreamSynchronize(m.stream));
-  m.shutterKeys = keys;
-  m.shutterKeyTimes.assign(keyTimes.begin(), keyTimes.end());
-  return total;
+  return m.refitKeys(keyTimes, [&](uint32_t k) { return update(keyPositions[k]); });
+}
+
+UpdateTimings GpuRuntime::updateShutterAt(double open, double close) {
+  Impl& m = *impl_;
+  if (!(open <= close))
+    throw tsah::ConfigError("GPU runtime: updateShutterAt: the shutter opens at " + std::to_string(open) +
+                            ", after it closes at " + std::to_string(close));
+  // One tree for the whole shutter: the one of its middle (the frame's time for a centered shutter).
+  m.current = treeIndexAt(m.ranges, 0.5 * (open + close));
+  const std::vector<double> times = shutterKeyTimes(m.times, open, close);
+  if (times.size() == 1) return m.refitAt(times[0]);
+  std::vector<float> fractions(times.size());
+  for (std::size_t k = 0; k < times.size(); ++k)
+    fractions[k] = k + 1 == times.size() ? 1.0f : float((times[k] - open) / (close - open));
+  return m.refitKeys(fractions, [&](uint32_t k) { return m.refitAt(times[k]); });
 }
 
 bool GpuRuntime::blurred() const { return impl_->shutterKeys >= 2; }

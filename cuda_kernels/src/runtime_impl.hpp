@@ -37,6 +37,8 @@ struct GpuRuntime::Impl {
   // launch(), so the same work is captured once.
   void setFrame(double time);
   void enqueueInterpolation();
+  // The current tree refitted to the animation at `time` (its captured graph), Woop included.
+  UpdateTimings refitAt(double time);
   // Puts the static vertices' rest positions back into `positions` when an update from host
   // positions overwrote them (the interpolation writes only the moving vertices).
   void restoreStaticPositions();
@@ -131,6 +133,10 @@ struct GpuRuntime::Impl {
   DeviceBuffer<GpuBvhNode> keyNodes;
   DeviceBuffer<detail::RootInfo> keyRoots;
   DeviceBuffer<float> keyPositions;
+  // Refits the current tree once per key (refitKey(k) leaves key k in `positions` and the tree) and
+  // keeps every key; throws tsah::ConfigError for a layout other than bvh2.
+  template <typename RefitKey>
+  UpdateTimings refitKeys(std::span<const float> keyTimes, RefitKey&& refitKey);
   // Throws tsah::ConfigError unless the frame is blurred and key < shutterKeys.
   void requireKey(uint32_t key) const;
 

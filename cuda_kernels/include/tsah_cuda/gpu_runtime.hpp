@@ -115,7 +115,12 @@ class GpuRuntime {
   // Tracing without times afterwards sees the last key. Throws tsah::ConfigError for bad key times
   // or, with two keys or more, for layout cwbvh; tsah::DataError for a wrong coordinate count.
   UpdateTimings updateShutter(std::span<const float> keyTimes, std::span<const std::span<const float>> keyPositions);
-  // true after updateShutter with two keys or more, until the next update, updateAt or rebuild.
+  // The same from the uploaded keyframes for the shutter [open, close] (animation times): the keys are
+  // open, every keyframe strictly inside and close; each key is interpolated and refitted on the
+  // device by the captured update graph. The tree of a set is the one of the shutter's middle.
+  // open == close is updateAt(open). Throws tsah::ConfigError for open > close.
+  UpdateTimings updateShutterAt(double open, double close);
+  // true after updateShutter(At) with two keys or more, until the next update, updateAt or rebuild.
   bool blurred() const;
   uint32_t shutterKeyCount() const;  // keys of the last updateShutter while blurred, else 0
   // Host copies of key k of a blurred frame (throws tsah::ConfigError when not blurred or k is out
