@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "tsah/base/error.hpp"
+#include "blurred_trace.hpp"
 #include "cwbvh_kernels.hpp"
 #include "runtime_impl.hpp"
 
@@ -79,6 +80,9 @@ UpdateTimings GpuRuntime::Impl::refitKeys(std::span<const float> keyTimes, Refit
   CUDA_CHECK(cudaStreamSynchronize(stream));
   shutterKeys = keys;
   shutterKeyTimes.assign(keyTimes.begin(), keyTimes.end());
+  keyFractions.reserve(keys);
+  keyFractions.upload(keyTimes, stream);
+  CUDA_CHECK(cudaStreamSynchronize(stream));
   return total;
 }
 
@@ -137,6 +141,70 @@ std::vector<float> GpuRuntime::downloadKeyPositions(uint32_t key) const {
                              cudaMemcpyDeviceToHost, m.stream));
   CUDA_CHECK(cudaStreamSynchronize(m.stream));
   return out;
+}
+
+namespace {
+
+template <typename Result>
+std::vector<Result> traceBlurred(GpuRuntime::Impl& m, std::span<const Ray> rays, std::span<const float> times,
+                                 bool anyHit, RayPassStats* stats) {
+  std::vector<Result> out(rays.size());
+  if (rays.empty()) {
+    if (stats) *stats = {};
+    return out;
+  }
+  if (rays.size() > 0xffffffffu) throw tsah::ConfigError("GPU runtime: too many rays in one call");
+  const auto count = static_cast<uint32_t>(rays.size());
+  m.rays.reserve(count);
+  m.rays.upload(rays, m.stream);
+  m.rayTimes.reserve(count);
+  m.rayTimes.upload(times, m.stream);
+  if (anyHit)
+    m.occluded.reserve(count);
+  else
+    m.hits.reserve(count);
+  detail::BlurredScene scene;
+  scene.keyNodes = m.keyNodes.data();
+  scene.keyRoots = m.keyRoots.data();
+  scene.keyPositions = m.keyPositions.data();
+  scene.keyTimes = m.keyFractions.data();
+  scene.triIndex = m.tree().triIndex.data();
+  scene.indices = m.indices.data();
+  scene.keys = m.shutterKeys;
+  scene.interiorCount = m.tree().topology.interiorCount;
+  scene.vertexCoords = uint64_t(m.vertices) * 3;
+  m.events.record(0, m.stream);
+  detail::launchBlurredTrace(scene, m.rays.data(), m.rayTimes.data(), count, anyHit ? nullptr : m.hits.data(),
+                             anyHit ? m.occluded.data() : nullptr, m.stream);
+  m.events.record(1, m.stream);
+  m.events.wait(1);
+  if (stats) *stats = {count, m.events.ms(0, 1)};
+  void* src = anyHit ? static_cast<void*>(m.occluded.data()) : static_cast<void*>(m.hits.data());
+  CUDA_CHECK(cudaMemcpyAsync(out.data(), src, out.size() * sizeof(Result), cudaMemcpyDeviceToHost, m.stream));
+  CUDA_CHECK(cudaStreamSynchronize(m.stream));
+  return out;
+}
+
+void checkTimeCount(std::span<const Ray> rays, std::span<const float> times) {
+  if (rays.size() != times.size())
+    throw tsah::ConfigError("GPU runtime: " + std::to_string(times.size()) + " ray times for " +
+                            std::to_string(rays.size()) + " rays");
+}
+
+}  // namespace
+
+std::vector<Hit> GpuRuntime::closestHits(std::span<const Ray> rays, std::span<const float> times,
+                                         RayPassStats* stats) {
+  checkTimeCount(rays, times);
+  if (!blurred()) return closestHits(rays, stats);
+  return traceBlurred<Hit>(*impl_, rays, times, false, stats);
+}
+
+std::vector<uint8_t> GpuRuntime::anyHits(std::span<const Ray> rays, std::span<const float> times,
+                                         RayPassStats* stats) {
+  checkTimeCount(rays, times);
+  if (!blurred()) return anyHits(rays, stats);
+  return traceBlurred<uint8_t>(*impl_, rays, times, true, stats);
 }
 
 }  // namespace tsah::cuda

@@ -133,6 +133,8 @@ struct GpuRuntime::Impl {
   DeviceBuffer<GpuBvhNode> keyNodes;
   DeviceBuffer<detail::RootInfo> keyRoots;
   DeviceBuffer<float> keyPositions;
+  DeviceBuffer<float> keyFractions;      // the keys' shutter fractions
+  DeviceBuffer<float> rayTimes;          // scratch: the shutter fraction of each host ray
   // Refits the current tree once per key (refitKey(k) leaves key k in `positions` and the tree) and
   // keeps every key; throws tsah::ConfigError for a layout other than bvh2.
   template <typename RefitKey>

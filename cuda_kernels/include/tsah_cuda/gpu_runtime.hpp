@@ -159,6 +159,13 @@ class GpuRuntime {
   std::vector<Hit> closestHits(std::span<const Ray> rays, RayPassStats* stats = nullptr);
   std::vector<uint8_t> anyHits(std::span<const Ray> rays, RayPassStats* stats = nullptr);
 
+  // The same for rays at shutter fractions times[i] in [0, 1] (one per ray; outside values are
+  // clamped) against a blurred frame (updateShutter, binary layout): boxes and triangles at each
+  // ray's time. A frame that is not blurred ignores the times. Throws tsah::ConfigError when the
+  // counts differ.
+  std::vector<Hit> closestHits(std::span<const Ray> rays, std::span<const float> times, RayPassStats* stats = nullptr);
+  std::vector<uint8_t> anyHits(std::span<const Ray> rays, std::span<const float> times, RayPassStats* stats = nullptr);
+
   struct Impl;
 
  private:
