@@ -7,6 +7,7 @@
 #include "tsah/base/error.hpp"
 #include "blurred_trace.hpp"
 #include "cwbvh_kernels.hpp"
+#include "tsah/layout/motion_blur.hpp"
 #include "runtime_impl.hpp"
 
 namespace tsah::cuda {
@@ -28,17 +29,6 @@ void checkKeyTimes(std::span<const float> keyTimes, std::size_t positionSets) {
     throw tsah::ConfigError(where + "the first key time must be 0 and the last 1");
   for (std::size_t k = 1; k < keyTimes.size(); ++k)
     if (!(keyTimes[k] > keyTimes[k - 1])) throw tsah::ConfigError(where + "key times must increase");
-}
-
-// The key times of the shutter [open, close]: open, every keyframe strictly inside, close; one key
-// when open == close.
-std::vector<double> shutterKeyTimes(std::span<const double> keyframes, double open, double close) {
-  std::vector<double> keys{open};
-  if (close == open) return keys;
-  for (double t : keyframes)
-    if (t > open && t < close) keys.push_back(t);
-  keys.push_back(close);
-  return keys;
 }
 
 }  // namespace
@@ -105,11 +95,9 @@ UpdateTimings GpuRuntime::updateShutterAt(double open, double close) {
                             ", after it closes at " + std::to_string(close));
   // One tree for the whole shutter: the one of its middle (the frame's time for a centered shutter).
   m.current = treeIndexAt(m.ranges, 0.5 * (open + close));
-  const std::vector<double> times = shutterKeyTimes(m.times, open, close);
+  const std::vector<double> times = motion::shutterKeys(m.times, open, close);
   if (times.size() == 1) return m.refitAt(times[0]);
-  std::vector<float> fractions(times.size());
-  for (std::size_t k = 0; k < times.size(); ++k)
-    fractions[k] = k + 1 == times.size() ? 1.0f : float((times[k] - open) / (close - open));
+  const std::vector<float> fractions = motion::keyFractions(times);
   return m.refitKeys(fractions, [&](uint32_t k) { return m.refitAt(times[k]); });
 }
 
