@@ -6,7 +6,6 @@
 
 #if TSAH_HAVE_CUDA
 
-#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <limits>
