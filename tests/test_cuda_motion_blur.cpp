@@ -196,7 +196,8 @@ TimedRays timedRays(const anim::Animation& a, const ShutterKeys& keys, uint32_t 
       ray.org = b.center() + unit() * diag;
       ray.dir = target - ray.org;
     } else {
-      ray.org = b.lo + (b.hi - b.lo) * u01(rng);
+      const tsah::Vec3 e = b.extent();
+      ray.org = b.lo + tsah::Vec3{e.x * u01(rng), e.y * u01(rng), e.z * u01(rng)};
       ray.dir = unit();
     }
     ray.tmin = 0.0f;
