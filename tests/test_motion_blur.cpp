@@ -77,15 +77,17 @@ TEST(MotionBlurSegment, ClampsTimesOutsideTheShutter) {
   EXPECT_EQ(s.f, 0.0f);
 }
 
-// The vertex's lerp with every operation rounded down (Down) or up (Up): every rounding of the
-// vertex's lerp lies between the two, so a box containing both contains them all.
-template <tsah::rounding::Round R>
-float lerpRounded(float a, float b, float f) {
+// Interval bounds [lower, upper] on the vertex's lerp (1 - f) * a + f * b under any rounding of
+// each operation (directed rounding of each step; every step is monotone in its rounded input).
+struct Bounds {
+  float lower, upper;
+};
+Bounds lerpBounds(float a, float b, float f) {
   namespace r = tsah::rounding;
-  // f >= 0: f * (b - a) is monotone in b - a.
-  const float d = r::sub<R>(b, a);
-  const float p = r::mul<R>(f, d);
-  return r::sub<R>(a, -p);
+  const float gl = r::subDown(1.0f, f), gh = r::subUp(1.0f, f);
+  const float pl = std::fmin(r::mulDown(gl, a), r::mulDown(gh, a));
+  const float ph = std::fmax(r::mulUp(gl, a), r::mulUp(gh, a));
+  return {r::addDown(pl, r::mulDown(f, b)), r::addUp(ph, r::mulUp(f, b))};
 }
 
 // Boxes at two keys around random vertices of the given magnitude, then random f: the lerped box
@@ -113,10 +115,9 @@ void checkContainment(float magnitude, uint32_t seed, bool tightBoxes) {
     for (int a = 0; a < 3; ++a) {
       ASSERT_LE(box.lo[a], v[a]) << "axis " << a << " f " << f;
       ASSERT_GE(box.hi[a], v[a]) << "axis " << a << " f " << f;
-      const float down = lerpRounded<tsah::rounding::Round::Down>(v0[a], v1[a], f);
-      const float up = lerpRounded<tsah::rounding::Round::Up>(v0[a], v1[a], f);
-      ASSERT_LE(box.lo[a], down);
-      ASSERT_GE(box.hi[a], up);
+      const Bounds bounds = lerpBounds(v0[a], v1[a], f);
+      ASSERT_LE(box.lo[a], bounds.lower);
+      ASSERT_GE(box.hi[a], bounds.upper);
       // The exact lerp of the vertex (double holds it to well within a float ulp).
       const double exact = v0[a] + double(f) * (double(v1[a]) - v0[a]);
       ASSERT_LE(box.lo[a], exact);
@@ -141,8 +142,7 @@ TEST(MotionBlurLerp, UnpaddedLerpWouldMissVertices) {
   int misses = 0;
   for (int trial = 0; trial < 20000 && misses == 0; ++trial) {
     const float a = coord(rng), b = coord(rng), f = unit(rng);
-    const float down = lerpRounded<tsah::rounding::Round::Down>(a, b, f);
-    if (m::lerp(a, b, f) > down) ++misses;
+    if (m::lerp(a, b, f) > lerpBounds(a, b, f).lower) ++misses;
   }
   EXPECT_GT(misses, 0);
 }
@@ -158,8 +158,12 @@ TEST(MotionBlurLerp, EndsAreTheKeyBoxesPadded) {
   EXPECT_TRUE(at1.contains(b1));
   EXPECT_NEAR(at0.lo.x, 0.0f, 1e-4f);
   EXPECT_NEAR(at1.hi.z, 7.0f, 1e-4f);
-  EXPECT_EQ(m::lerpVertex(Vec3{1, 2, 3}, Vec3{5, 6, 7}, 0.0f).x, 1.0f);
-  EXPECT_EQ(m::lerpVertex(Vec3{1, 2, 3}, Vec3{5, 6, 7}, 1.0f).z, 7.0f);
+  // The vertex lerp is exact at the ends: a segment's ends are its keys bit for bit.
+  const Vec3 a{0.1f, -3.7f, 1e7f}, b{-2.3f, 5.9f, 3e-5f};
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_EQ(m::lerpVertex(a, b, 0.0f)[i], a[i]);
+    EXPECT_EQ(m::lerpVertex(a, b, 1.0f)[i], b[i]);
+  }
 }
 
 TEST(MotionBlurLerp, EmptyBoxStaysEmpty) {

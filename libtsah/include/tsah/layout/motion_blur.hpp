@@ -61,20 +61,21 @@ TSAH_HD Segment segmentAt(const float* keys, int count, float tau) {
   return seg;
 }
 
-// The one lerp formula of motion blur, for boxes and vertices alike: a + f * (b - a) in float with
-// round-to-nearest (the wide kernels repeat it lane by lane in SIMD, operation for operation).
-TSAH_HD float lerp(float a, float b, float f) { return a + f * (b - a); }
+// The one lerp formula of motion blur, for boxes and vertices alike: (1 - f) * a + f * b in float
+// with round-to-nearest. It gives a at f = 0 and b at f = 1 exactly, so the ends of a segment are
+// its keys bit for bit (the wide kernels repeat it lane by lane in SIMD, operation for operation).
+TSAH_HD float lerp(float a, float b, float f) { return (1.0f - f) * a + f * b; }
 
 TSAH_HD Vec3 lerpVertex(Vec3 a, Vec3 b, float f) {
   return {lerp(a.x, b.x, f), lerp(a.y, b.y, f), lerp(a.z, b.z, f)};
 }
 
 // The outward pad of a lerped box side on an axis whose four box coordinates (lo and hi at both
-// keys) are at most m in magnitude. Each computed lerp of values bounded by m is within 7u*m of the
-// exact one (u = 2^-24: b - a, f * (b - a), a + ... each add a relative error u); the box's and the
-// vertex's lerps together err by at most 14u*m, and subtracting the pad in round-to-nearest keeps
-// at least 30u*m of the 32u*m = m * 2^-19. The absolute 2^-120 covers underflow (an error of at
-// most 2^-149 per operation near zero). docs/motion-blur.md has the derivation.
+// keys) are at most m in magnitude. A computed lerp of values bounded by m errs by at most about
+// 4u*m (u = 2^-24: 1 - f, the two products and the sum each add a relative error u; a contracted
+// fma only removes some), so the box's and the vertex's lerps together by at most 8u*m; the pad is
+// 32u*m = m * 2^-19, of which subtracting it in round-to-nearest keeps at least 30u*m. The absolute
+// 2^-120 covers underflow (at most 2^-149 per operation near zero). docs/motion-blur.md derives it.
 TSAH_HD float lerpPad(float m) { return m * 0x1p-19f + 0x1p-120f; }
 
 TSAH_HD float maxMagnitude(float a, float b, float c, float d) {
