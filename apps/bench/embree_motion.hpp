@@ -12,11 +12,12 @@
 
 namespace tsah::bench {
 
-// Embree spaces the time steps evenly over [0, 1]; keys (increasing times) need not be. Between two
-// consecutive keys the animation and Embree both move every vertex linearly, so `time` at fraction
-// f of segment [keys[s], keys[s+1]] is Embree's time (s + f) / (K - 1): the same positions. Times
-// outside the keys are clamped; one key gives 0.
-float embreeStepTime(std::span<const double> keys, double time);
+// Embree spaces the time steps evenly over [0, 1]; the keys need not be. A ray's time tau (a
+// fraction of the keys' span) lies at f in segment s of keyFractions (motion::segmentAt: first 0,
+// last 1, increasing, as motion::keyFractions gives them); between two consecutive keys the
+// animation and Embree both move every vertex linearly, so Embree's time (s + f) / (K - 1) gives the
+// same positions. One key gives 0.
+float embreeStepTime(std::span<const float> keyFractions, float tau);
 
 #if TSAH_HAVE_EMBREE
 class EmbreeMotionPeer {
