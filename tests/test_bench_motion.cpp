@@ -65,9 +65,7 @@ struct Moving {
 TEST(EmbreeMotionPeer, TheWholeAnimationAtAnyTimeIsTheFrameAtThatTime) {
   Moving m(anim::GeneratorKind::Wave);
   tsah::bench::EmbreeMotionPeer peer(m.a.indices(), m.a.vertexCount(), 2);
-  std::vector<std::vector<float>> steps;
-  for (double t : m.a.times()) steps.push_back(m.a.positionsAt(t));
-  EXPECT_GE(peer.build(steps), 0.0);
+  EXPECT_GE(peer.build(m.a, m.a.times()), 0.0);
   EXPECT_EQ(peer.timeSteps(), m.a.keyframeCount());
   const std::span<const double> times = m.a.times();
   const std::vector<float> keys = tsah::motion::keyFractions(times);
@@ -89,6 +87,23 @@ TEST(EmbreeMotionPeer, UnevenKeysInsideAShutterFollowTheAnimation) {
   std::vector<std::vector<float>> steps;
   for (double t : times) steps.push_back(m.a.positionsAt(t));
   peer.build(steps);
+  // A shutter over two keyframe segments: three keys, the middle one the keyframe.
+  const double shutterOpen = m.a.times()[1] + 0.5 * (open - m.a.times()[1]);
+  const std::vector<double> shutter =
+      tsah::motion::shutterKeys(m.a.times(), shutterOpen, open + 0.25 * (close - open));
+  ASSERT_EQ(shutter.size(), 3u);
+  tsah::bench::EmbreeMotionPeer perFrame(m.a.indices(), m.a.vertexCount(), 2);
+  EXPECT_GE(perFrame.build(m.a, shutter), 0.0);
+  EXPECT_EQ(perFrame.timeSteps(), 3u);
+  for (float tau : {0.1f, 0.5f, 0.9f}) {
+    uint32_t shutterHits = 0;
+    const double at = shutter.front() + double(tau) * (shutter.back() - shutter.front());
+    EXPECT_GE(m.agreement(perFrame, at, tsah::bench::embreeStepTime(tsah::motion::keyFractions(shutter), tau),
+                          &shutterHits),
+              0.999)
+        << "tau " << tau;
+    EXPECT_GT(shutterHits, 30u);
+  }
   const double time = open + 0.55 * (close - open);
   uint32_t hits = 0;
   const std::vector<float> keys = tsah::motion::keyFractions(times);

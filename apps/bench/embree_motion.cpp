@@ -104,6 +104,15 @@ double EmbreeMotionPeer::build(std::span<const std::vector<float>> stepPositions
   return ms;
 }
 
+double EmbreeMotionPeer::build(const anim::Animation& animation, std::span<const double> keyTimes) {
+  const auto start = std::chrono::steady_clock::now();
+  std::vector<std::vector<float>> steps;
+  for (double t : keyTimes) steps.push_back(animation.positionsAt(t));
+  const double interpolateMs =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  return interpolateMs + build(steps);
+}
+
 namespace {
 
 RTCRay embreeRay(const Ray& r, float time) {

@@ -8,6 +8,7 @@
 #include <span>
 #include <vector>
 
+#include "anim/animation.hpp"
 #include "tsah/core/ray.hpp"
 
 namespace tsah::bench {
@@ -35,6 +36,10 @@ class EmbreeMotionPeer {
   // stepPositions (vertexCount * 3 floats each, at least one); returns the milliseconds spent,
   // copies included. Throws tsah::DataError for a wrong coordinate count.
   double build(std::span<const std::vector<float>> stepPositions);
+  // The same with the animation's vertices at each of keyTimes (increasing: its keyframe times for
+  // the whole animation, motion::shutterKeys for one frame's shutter); the interpolation counts in
+  // the milliseconds, as it does in the toolkit's update.
+  double build(const anim::Animation& animation, std::span<const double> keyTimes);
   uint32_t timeSteps() const;
 
   // rtcIntersect1 / rtcOccluded1 at Embree time `time` (embreeStepTime): the triangle hit first
