@@ -11,21 +11,24 @@
 #include "tsah/base/error.hpp"
 #include "tsah/build/binned_sah_builder.hpp"
 #include "tsah/layout/flat_bvh.hpp"
+#include "tsah/layout/motion_blur.hpp"
 #include "tsah/render/camera.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
 #include "test_support.hpp"
 
 TEST(EmbreeStepTime, MapsUnevenKeysPieceByPiece) {
-  const std::vector<double> keys{0.0, 1.0, 3.0, 4.0};
-  EXPECT_FLOAT_EQ(tsah::bench::embreeStepTime(keys, 0.0), 0.0f);
-  EXPECT_FLOAT_EQ(tsah::bench::embreeStepTime(keys, 0.5), 1.0f / 6.0f);
-  EXPECT_FLOAT_EQ(tsah::bench::embreeStepTime(keys, 1.0), 1.0f / 3.0f);
-  EXPECT_FLOAT_EQ(tsah::bench::embreeStepTime(keys, 2.0), 0.5f);  // the middle of the long segment
-  EXPECT_FLOAT_EQ(tsah::bench::embreeStepTime(keys, 3.5), 5.0f / 6.0f);
-  EXPECT_FLOAT_EQ(tsah::bench::embreeStepTime(keys, 4.0), 1.0f);
-  EXPECT_FLOAT_EQ(tsah::bench::embreeStepTime(keys, 9.0), 1.0f);
-  EXPECT_FLOAT_EQ(tsah::bench::embreeStepTime(keys, -1.0), 0.0f);
-  EXPECT_FLOAT_EQ(tsah::bench::embreeStepTime(std::vector<double>{2.0}, 2.0), 0.0f);
+  // Keys at times 0, 1, 3 and 4: fractions 0, 1/4, 3/4, 1; Embree's steps at 0, 1/3, 2/3, 1.
+  const std::vector<float> keys = tsah::motion::keyFractions(std::vector<double>{0.0, 1.0, 3.0, 4.0});
+  const auto at = [&](double time) { return tsah::bench::embreeStepTime(keys, float(time / 4.0)); };
+  EXPECT_FLOAT_EQ(at(0.0), 0.0f);
+  EXPECT_FLOAT_EQ(at(0.5), 1.0f / 6.0f);
+  EXPECT_FLOAT_EQ(at(1.0), 1.0f / 3.0f);
+  EXPECT_FLOAT_EQ(at(2.0), 0.5f);  // the middle of the long segment
+  EXPECT_FLOAT_EQ(at(3.5), 5.0f / 6.0f);
+  EXPECT_FLOAT_EQ(at(4.0), 1.0f);
+  EXPECT_FLOAT_EQ(at(9.0), 1.0f);
+  EXPECT_FLOAT_EQ(at(-1.0), 0.0f);
+  EXPECT_FLOAT_EQ(tsah::bench::embreeStepTime(std::vector<float>{0.0f}, 0.5f), 0.0f);
 }
 
 #if TSAH_HAVE_EMBREE
@@ -62,15 +65,14 @@ struct Moving {
 TEST(EmbreeMotionPeer, TheWholeAnimationAtAnyTimeIsTheFrameAtThatTime) {
   Moving m(anim::GeneratorKind::Wave);
   tsah::bench::EmbreeMotionPeer peer(m.a.indices(), m.a.vertexCount(), 2);
-  std::vector<std::vector<float>> steps;
-  for (double t : m.a.times()) steps.push_back(m.a.positionsAt(t));
-  EXPECT_GE(peer.build(steps), 0.0);
+  EXPECT_GE(peer.build(m.a, m.a.times()), 0.0);
   EXPECT_EQ(peer.timeSteps(), m.a.keyframeCount());
-  const std::span<const double> keys = m.a.times();
+  const std::span<const double> times = m.a.times();
+  const std::vector<float> keys = tsah::motion::keyFractions(times);
   for (double f : {0.0, 0.37, 0.5, 0.81, 1.0}) {
-    const double time = keys.front() + f * (keys.back() - keys.front());
+    const double time = times.front() + f * (times.back() - times.front());
     uint32_t hits = 0;
-    EXPECT_GE(m.agreement(peer, time, tsah::bench::embreeStepTime(keys, time), &hits), 0.999) << "time " << time;
+    EXPECT_GE(m.agreement(peer, time, tsah::bench::embreeStepTime(keys, float(f)), &hits), 0.999) << "time " << time;
     EXPECT_GT(hits, 100u);
   }
 }
@@ -81,13 +83,31 @@ TEST(EmbreeMotionPeer, UnevenKeysInsideAShutterFollowTheAnimation) {
   Moving m(anim::GeneratorKind::Explode);
   tsah::bench::EmbreeMotionPeer peer(m.a.indices(), m.a.vertexCount(), 2);
   const double open = m.a.times()[2], close = m.a.times()[3];
-  const std::vector<double> keys{open, open + 0.1 * (close - open), close};
+  const std::vector<double> times{open, open + 0.1 * (close - open), close};
   std::vector<std::vector<float>> steps;
-  for (double t : keys) steps.push_back(m.a.positionsAt(t));
+  for (double t : times) steps.push_back(m.a.positionsAt(t));
   peer.build(steps);
+  // A shutter over two keyframe segments: three keys, the middle one the keyframe.
+  const double shutterOpen = m.a.times()[1] + 0.5 * (open - m.a.times()[1]);
+  const std::vector<double> shutter =
+      tsah::motion::shutterKeys(m.a.times(), shutterOpen, open + 0.25 * (close - open));
+  ASSERT_EQ(shutter.size(), 3u);
+  tsah::bench::EmbreeMotionPeer perFrame(m.a.indices(), m.a.vertexCount(), 2);
+  EXPECT_GE(perFrame.build(m.a, shutter), 0.0);
+  EXPECT_EQ(perFrame.timeSteps(), 3u);
+  for (float tau : {0.1f, 0.5f, 0.9f}) {
+    uint32_t shutterHits = 0;
+    const double at = shutter.front() + double(tau) * (shutter.back() - shutter.front());
+    EXPECT_GE(m.agreement(perFrame, at, tsah::bench::embreeStepTime(tsah::motion::keyFractions(shutter), tau),
+                          &shutterHits),
+              0.999)
+        << "tau " << tau;
+    EXPECT_GT(shutterHits, 30u);
+  }
   const double time = open + 0.55 * (close - open);
   uint32_t hits = 0;
-  EXPECT_GE(m.agreement(peer, time, tsah::bench::embreeStepTime(keys, time), &hits), 0.999);
+  const std::vector<float> keys = tsah::motion::keyFractions(times);
+  EXPECT_GE(m.agreement(peer, time, tsah::bench::embreeStepTime(keys, 0.55f), &hits), 0.999);
   EXPECT_GT(hits, 100u);
   EXPECT_LT(m.agreement(peer, time, 0.55f, &hits), 0.99);  // the even mapping is wrong here
   EXPECT_THROW(peer.build(std::vector<std::vector<float>>{std::vector<float>(3)}), tsah::DataError);

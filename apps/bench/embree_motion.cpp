@@ -3,6 +3,8 @@
 
 #include <algorithm>
 
+#include "tsah/layout/motion_blur.hpp"
+
 #if TSAH_HAVE_EMBREE
 #include <embree3/rtcore.h>
 
@@ -16,16 +18,11 @@
 
 namespace tsah::bench {
 
-float embreeStepTime(std::span<const double> keys, double time) {
-  if (keys.size() < 2) return 0.0f;
-  const std::size_t segments = keys.size() - 1;
-  // The last key not after `time` (the last segment for the last key itself).
-  const std::size_t s =
-      std::min<std::size_t>(segments - 1, std::size_t(std::upper_bound(keys.begin() + 1, keys.end() - 1, time) -
-                                                      (keys.begin() + 1)));
-  const double length = keys[s + 1] - keys[s];
-  const double f = length > 0.0 ? std::clamp((time - keys[s]) / length, 0.0, 1.0) : 0.0;
-  return float(std::clamp((double(s) + f) / double(segments), 0.0, 1.0));
+float embreeStepTime(std::span<const float> keyFractions, float tau) {
+  if (keyFractions.size() < 2) return 0.0f;
+  const int count = int(keyFractions.size());
+  const motion::Segment segment = motion::segmentAt(keyFractions.data(), count, tau);
+  return std::min(1.0f, (float(segment.index) + segment.f) / float(count - 1));
 }
 
 #if TSAH_HAVE_EMBREE
@@ -105,6 +102,15 @@ double EmbreeMotionPeer::build(std::span<const std::vector<float>> stepPositions
   m.check("building the motion-blur scene");
   m.steps = uint32_t(stepPositions.size());
   return ms;
+}
+
+double EmbreeMotionPeer::build(const anim::Animation& animation, std::span<const double> keyTimes) {
+  const auto start = std::chrono::steady_clock::now();
+  std::vector<std::vector<float>> steps;
+  for (double t : keyTimes) steps.push_back(animation.positionsAt(t));
+  const double interpolateMs =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  return interpolateMs + build(steps);
 }
 
 namespace {

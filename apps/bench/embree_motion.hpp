@@ -8,15 +8,17 @@
 #include <span>
 #include <vector>
 
+#include "anim/animation.hpp"
 #include "tsah/core/ray.hpp"
 
 namespace tsah::bench {
 
-// Embree spaces the time steps evenly over [0, 1]; keys (increasing times) need not be. Between two
-// consecutive keys the animation and Embree both move every vertex linearly, so `time` at fraction
-// f of segment [keys[s], keys[s+1]] is Embree's time (s + f) / (K - 1): the same positions. Times
-// outside the keys are clamped; one key gives 0.
-float embreeStepTime(std::span<const double> keys, double time);
+// Embree spaces the time steps evenly over [0, 1]; the keys need not be. A ray's time tau (a
+// fraction of the keys' span) lies at f in segment s of keyFractions (motion::segmentAt: first 0,
+// last 1, increasing, as motion::keyFractions gives them); between two consecutive keys the
+// animation and Embree both move every vertex linearly, so Embree's time (s + f) / (K - 1) gives the
+// same positions. One key gives 0.
+float embreeStepTime(std::span<const float> keyFractions, float tau);
 
 #if TSAH_HAVE_EMBREE
 class EmbreeMotionPeer {
@@ -34,6 +36,10 @@ class EmbreeMotionPeer {
   // stepPositions (vertexCount * 3 floats each, at least one); returns the milliseconds spent,
   // copies included. Throws tsah::DataError for a wrong coordinate count.
   double build(std::span<const std::vector<float>> stepPositions);
+  // The same with the animation's vertices at each of keyTimes (increasing: its keyframe times for
+  // the whole animation, motion::shutterKeys for one frame's shutter); the interpolation counts in
+  // the milliseconds, as it does in the toolkit's update.
+  double build(const anim::Animation& animation, std::span<const double> keyTimes);
   uint32_t timeSteps() const;
 
   // rtcIntersect1 / rtcOccluded1 at Embree time `time` (embreeStepTime): the triangle hit first
