@@ -209,7 +209,8 @@ TimedRays timedRays(const anim::Animation& a, const ShutterKeys& keys, uint32_t 
   return out;
 }
 
-// Closest and any hits of a blurred frame equal a brute force over the geometry at each ray's time,
+// Closest and any hits of a blurred frame equal the CPU runtime's blurred frame (updateShutter with
+// the same keys) and a brute force over the geometry at each ray's time,
 // lerped and tested with the same float operations (no fused multiply-adds on either side): the
 // same answer to "is there a hit", the same distance bit for bit, the same triangle and weights
 // unless two triangles lie at that distance.
@@ -219,11 +220,15 @@ TEST(CudaMotionBlur, BlurredHitsEqualABruteForceAtEachRaysTime) {
     const auto a = generatedAnimation(kind, 600, 6, 3);
     const double t0 = a.startTime(), span = a.endTime() - a.startTime();
     for (uint32_t maxLeaf : {1u, 4u}) {
-      tc::GpuRuntime gpu(sahTree(a, maxLeaf), a);
+      const tsah::FlatBvh tree = sahTree(a, maxLeaf);
+      tc::GpuRuntime gpu(tree, a);
+      tsah::CpuRuntime cpu = cpuRuntime(tree, a);
       const double open = t0 + 0.1 * span, close = t0 + 0.85 * span;
       const ShutterKeys keys = shutterKeys(a, open, close);
       gpu.updateShutterAt(open, close);
+      cpu.updateShutter(keys.fractions, keys.spans());
       ASSERT_TRUE(gpu.blurred());
+      ASSERT_TRUE(cpu.blurred());
       const TimedRays r = timedRays(a, keys, 4000, 17 + maxLeaf);
       tsah::RayPassStats stats;
       const std::vector<tsah::Hit> got = gpu.closestHits(r.rays, r.times, &stats);
@@ -233,6 +238,14 @@ TEST(CudaMotionBlur, BlurredHitsEqualABruteForceAtEachRaysTime) {
       for (std::size_t i = 0; i < r.rays.size(); ++i) {
         const tsah::Hit expect = bruteForce(a, positionsAtFraction(keys, r.times[i]), r.rays[i]);
         ASSERT_EQ(got[i].valid() ? 1 : 0, occluded[i]) << "any hit against closest hit, ray " << i;
+        // The CPU runtime's blurred frame: the same hit (its traversal order may pick the other
+        // triangle of a tie), and the same any-hit answer.
+        const tsah::Hit onCpu = cpu.closestHit(r.rays[i], r.times[i]);
+        ASSERT_EQ(onCpu.valid(), got[i].valid()) << "CPU runtime, ray " << i;
+        ASSERT_EQ(cpu.anyHit(r.rays[i], r.times[i]) ? 1 : 0, occluded[i]) << "CPU runtime any hit, ray " << i;
+        if (onCpu.valid()) {
+          ASSERT_EQ(onCpu.t, got[i].t) << "CPU runtime, ray " << i;
+        }
         ASSERT_EQ(expect.valid(), got[i].valid()) << "ray " << i << " at " << r.times[i];
         if (!expect.valid()) continue;
         ++hits;
