@@ -329,3 +329,37 @@ TEST(CpuRuntime, TreeSetCollapsesEachTreeWithItsOwnObjective) {
 
 }  // namespace
 
+
+namespace {
+
+// The frame blurred over the shutter [open, close] of the animation (tsah::updateShutter).
+tsah::Image renderBlurred(const Scene& s, double open, double close, uint32_t threads,
+                          const tsah::RenderSettings& settings) {
+  tsah::CpuRuntime rt(s.tree, {s.animation.indices().begin(), s.animation.indices().end()}, s.animation.vertexCount(),
+                      tsah::CpuRuntime::Config(threads));
+  tsah::updateShutter(rt, s.animation, open, close);
+  const float aspect = float(settings.width) / float(settings.height);
+  const tsah::Camera cam = tsah::fitCamera(s.bounds, {0, 1, 0}, 45.0f, aspect);
+  const tsah::SceneLighting light = tsah::fitLighting(s.bounds, cam, {0, 1, 0}, 0.1f, true);
+  tsah::Image image;
+  tsah::renderFrame(rt, cam, light, settings, image);
+  return image;
+}
+
+}  // namespace
+
+TEST(CpuRuntime, AClosedShutterGivesTheInstantImage) {
+  const Scene s = makeScene(anim::GeneratorKind::Swap, 3000);
+  EXPECT_EQ(renderBlurred(s, 2.5, 2.5, 2, small(80, 60)).rgb, render(s, 2.5, 2, small(80, 60)).rgb);
+}
+
+TEST(CpuRuntime, BlurredImageMixesTheShutterAndIsDeterministic) {
+  // Each pixel sees the scene at its own time in [2, 3]: unlike the instant at either end, and the
+  // same picture for any thread count.
+  const Scene s = makeScene(anim::GeneratorKind::Swap, 3000);
+  const tsah::Image blurred = renderBlurred(s, 2.0, 3.0, 1, small(80, 60));
+  EXPECT_EQ(blurred.rgb, renderBlurred(s, 2.0, 3.0, 2, small(80, 60)).rgb);
+  EXPECT_EQ(blurred.rgb, renderBlurred(s, 2.0, 3.0, 4, small(80, 60)).rgb);
+  for (double instant : {2.0, 3.0})
+    EXPECT_GT(tsah::compareImages(blurred, render(s, instant, 2, small(80, 60))).fractionAbove, 0.002) << instant;
+}

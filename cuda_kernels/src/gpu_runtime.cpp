@@ -357,6 +357,7 @@ UpdateTimings GpuRuntime::Impl::finishUpdate(uint32_t slotsUpdated) {
   timings.woopMs = events.ms(2, 3);
   tracingRebuilt = false;
   woopValid = true;
+  shutterKeys = 0;  // an update ends a blurred frame (updateShutter sets its keys after its updates)
   return timings;
 }
 
@@ -391,6 +392,11 @@ uint32_t GpuRuntime::currentTree() const { return impl_->current; }
 UpdateTimings GpuRuntime::updateAt(double time) {
   Impl& m = *impl_;
   m.current = treeIndexAt(m.ranges, time);
+  return m.refitAt(time);
+}
+
+UpdateTimings GpuRuntime::Impl::refitAt(double time) {
+  Impl& m = *this;
   m.setFrame(time);
   m.restoreStaticPositions();
   const bool movingOnly = m.partialUpdatePossible();
@@ -452,6 +458,7 @@ RebuildTimings GpuRuntime::rebuildAt(double time, const RebuildOptions& options)
   m.woopValid = false;
   m.woopTree = -1;  // the rebuild writes its own triangles into woop
   m.tracingRebuilt = true;
+  m.shutterKeys = 0;
   auto enqueue = [&] {
     m.enqueueInterpolation();
     m.rebuilder->enqueue(m.indices.data(), m.positions.data(), options, m.woop.data(), m.stream);
@@ -481,6 +488,7 @@ RebuildTimings GpuRuntime::rebuild(std::span<const float> positions, const Rebui
   m.woopTree = -1;
   m.tree().staticBoxesValid = false;
   m.tracingRebuilt = true;
+  m.shutterKeys = 0;
   RebuildTimings timings = m.rebuilder->build(m.indices.data(), m.positions.data(), options, m.woop.data(), m.stream);
   timings.interpolateMs = m.events.ms(0, 1);
   m.woopValid = options.woop;

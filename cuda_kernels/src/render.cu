@@ -358,6 +358,8 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   validateCamera(camera);
   GpuRuntime::Impl& m = *runtime.impl_;
   m.requireTraceable();
+  if (runtime.blurred())
+    throw tsah::ConfigError("render: the GPU renderer draws no blurred frame yet (update the runtime to one time)");
 
   Frame f;
   f.width = settings.width;

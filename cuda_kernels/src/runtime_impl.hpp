@@ -42,6 +42,8 @@ struct GpuRuntime::Impl {
   // launch(), so the same work is captured once.
   void setFrame(double time);
   void enqueueInterpolation();
+  // The current tree refitted to the animation at `time` (its captured graph), Woop included.
+  UpdateTimings refitAt(double time);
   // Puts the static vertices' rest positions back into `positions` when an update from host
   // positions overwrote them (the interpolation writes only the moving vertices).
   void restoreStaticPositions();
@@ -139,6 +141,22 @@ struct GpuRuntime::Impl {
   void uploadPositions(std::span<const float> given);
   // The rebuilder after its last rebuild; throws tsah::ConfigError when nothing was rebuilt yet.
   const detail::GpuRebuilder& lastRebuild() const;
+
+  // Motion blur: the keys of the last updateShutter (0 when the frame is not blurred), and per key
+  // the traced tree's nodes, root and the positions (key-major).
+  uint32_t shutterKeys = 0;
+  std::vector<float> shutterKeyTimes;
+  DeviceBuffer<GpuBvhNode> keyNodes;
+  DeviceBuffer<detail::RootInfo> keyRoots;
+  DeviceBuffer<float> keyPositions;
+  DeviceBuffer<float> keyFractions;      // the keys' shutter fractions
+  DeviceBuffer<float> rayTimes;          // scratch: the shutter fraction of each host ray
+  // Refits the current tree once per key (refitKey(k) leaves key k in `positions` and the tree) and
+  // keeps every key; throws tsah::ConfigError for a layout other than bvh2.
+  template <typename RefitKey>
+  UpdateTimings refitKeys(std::span<const float> keyTimes, RefitKey&& refitKey);
+  // Throws tsah::ConfigError unless the frame is blurred and key < shutterKeys.
+  void requireKey(uint32_t key) const;
 
   // Scratch of the ray queries and the renderer, grown on demand.
   DeviceBuffer<uint32_t> words;          // ray counters, ray counts

@@ -1,5 +1,6 @@
 #include "tsah/pipeline.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -7,6 +8,7 @@
 #include "tsah/base/error.hpp"
 #include "tsah/base/memory.hpp"
 #include "tsah/layout/flat_bvh.hpp"
+#include "tsah/layout/motion_blur.hpp"
 #include "tsah/layout/traversal.hpp"
 
 namespace tsah {
@@ -292,20 +294,58 @@ void checkTreeMatchesAnimation(const tsah::BvhBuildInfo& info, const std::string
   }
 }
 
-std::vector<Hit> closestHits(const CpuRuntime& runtime, std::span<const Ray> rays) {
+namespace {
+
+void checkTimes(std::span<const Ray> rays, std::span<const float> times) {
+  if (!times.empty() && times.size() != rays.size())
+    throw tsah::ConfigError("rays: " + std::to_string(times.size()) + " times for " + std::to_string(rays.size()) +
+                            " rays");
+}
+
+}  // namespace
+
+std::vector<Hit> closestHits(const CpuRuntime& runtime, std::span<const Ray> rays, std::span<const float> times) {
+  checkTimes(rays, times);
   std::vector<Hit> hits(rays.size());
   runtime.parallelFor(rays.size(), 1024, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) hits[i] = runtime.closestHit(rays[i]);
+    for (std::size_t i = begin; i < end; ++i)
+      hits[i] = times.empty() ? runtime.closestHit(rays[i]) : runtime.closestHit(rays[i], times[i]);
   });
   return hits;
 }
 
-std::vector<uint8_t> anyHits(const CpuRuntime& runtime, std::span<const Ray> rays) {
+std::vector<uint8_t> anyHits(const CpuRuntime& runtime, std::span<const Ray> rays, std::span<const float> times) {
+  checkTimes(rays, times);
   std::vector<uint8_t> occluded(rays.size());
   runtime.parallelFor(rays.size(), 1024, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) occluded[i] = runtime.anyHit(rays[i]) ? 1 : 0;
+    for (std::size_t i = begin; i < end; ++i)
+      occluded[i] = (times.empty() ? runtime.anyHit(rays[i]) : runtime.anyHit(rays[i], times[i])) ? 1 : 0;
   });
   return occluded;
+}
+
+std::pair<double, double> shutterInterval(const anim::Animation& animation, double time, double interval,
+                                          const Shutter& shutter) {
+  if (!(shutter.fraction >= 0.0 && shutter.fraction <= 1.0))
+    throw tsah::ConfigError("shutter: the fraction must lie in [0, 1], got " + std::to_string(shutter.fraction));
+  if (!(interval >= 0.0))
+    throw tsah::ConfigError("shutter: the frame interval must not be negative, got " + std::to_string(interval));
+  const double length = shutter.fraction * interval;
+  double open = shutter.mode == Shutter::Mode::Centered ? time - length / 2 : time;
+  double close = open + length;
+  open = std::clamp(open, animation.startTime(), animation.endTime());
+  close = std::clamp(close, animation.startTime(), animation.endTime());
+  return {open, close};
+}
+
+void updateShutter(CpuRuntime& runtime, const anim::Animation& animation, double open, double close) {
+  const std::vector<double> keys = motion::shutterKeys(animation.times(), open, close);
+  const std::vector<float> fractions = motion::keyFractions(keys);
+  std::vector<std::vector<float>> positions;
+  positions.reserve(keys.size());
+  for (double t : keys) positions.push_back(animation.positionsAt(t));
+  const std::vector<std::span<const float>> spans(positions.begin(), positions.end());
+  runtime.updateShutter(fractions, spans);
 }
 
 }  // namespace tsah

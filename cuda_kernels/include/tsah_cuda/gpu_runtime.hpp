@@ -115,6 +115,25 @@ class GpuRuntime {
   RebuildTimings rebuildAt(double time, const RebuildOptions& options = {});
   RebuildTimings rebuild(std::span<const float> positions, const RebuildOptions& options = {});
 
+  // Motion blur (docs/cuda-runtime.md): the current tree (selectTreeAt) refitted at every key of a
+  // shutter from host positions, one box array per key. keyPositions[k]: vertexCount * 3 floats at
+  // key k; keyTimes[k]: its shutter fraction (first 0, last 1, increasing). One key is update().
+  // Tracing without times afterwards sees the last key. Throws tsah::ConfigError for bad key times
+  // or, with two keys or more, for layout cwbvh; tsah::DataError for a wrong coordinate count.
+  UpdateTimings updateShutter(std::span<const float> keyTimes, std::span<const std::span<const float>> keyPositions);
+  // The same from the uploaded keyframes for the shutter [open, close] (animation times): the keys are
+  // open, every keyframe strictly inside and close; each key is interpolated and refitted on the
+  // device by the captured update graph. The tree of a set is the one of the shutter's middle.
+  // open == close is updateAt(open). Throws tsah::ConfigError for open > close.
+  UpdateTimings updateShutterAt(double open, double close);
+  // true after updateShutter(At) with two keys or more, until the next update, updateAt or rebuild.
+  bool blurred() const;
+  uint32_t shutterKeyCount() const;  // keys of the last updateShutter while blurred, else 0
+  // Host copies of key k of a blurred frame (throws tsah::ConfigError when not blurred or k is out
+  // of range): the refitted tree as downloadTree gives it, and the positions.
+  FlatBvh downloadKeyTree(uint32_t key) const;
+  std::vector<float> downloadKeyPositions(uint32_t key) const;
+
   bool tracingRebuiltTree() const;
   uint32_t triangleCount() const;
   uint32_t vertexCount() const;
@@ -145,6 +164,13 @@ class GpuRuntime {
   // traversal kernel's device time.
   std::vector<Hit> closestHits(std::span<const Ray> rays, RayPassStats* stats = nullptr);
   std::vector<uint8_t> anyHits(std::span<const Ray> rays, RayPassStats* stats = nullptr);
+
+  // The same for rays at shutter fractions times[i] in [0, 1] (one per ray; outside values are
+  // clamped) against a blurred frame (updateShutter, binary layout): boxes and triangles at each
+  // ray's time. A frame that is not blurred ignores the times. Throws tsah::ConfigError when the
+  // counts differ.
+  std::vector<Hit> closestHits(std::span<const Ray> rays, std::span<const float> times, RayPassStats* stats = nullptr);
+  std::vector<uint8_t> anyHits(std::span<const Ray> rays, std::span<const float> times, RayPassStats* stats = nullptr);
 
   struct Impl;
 

@@ -168,8 +168,25 @@ void checkTreeMatchesAnimation(const BvhBuildInfo& info, const std::string& bvhP
 
 // Closest hits and occlusion of a batch of rays against the runtime's current frame, in the
 // runtime's layout (CpuRuntime::closestHit / anyHit: binary, or the SIMD kernels of bvh4/bvh8), on
-// the runtime's threads; results in ray order.
-std::vector<Hit> closestHits(const CpuRuntime& runtime, std::span<const Ray> rays);
-std::vector<uint8_t> anyHits(const CpuRuntime& runtime, std::span<const Ray> rays);
+// the runtime's threads; results in ray order. times: empty, or one shutter fraction per ray
+// (CpuRuntime::closestHit(ray, time); tsah::ConfigError when the counts differ).
+std::vector<Hit> closestHits(const CpuRuntime& runtime, std::span<const Ray> rays,
+                             std::span<const float> times = {});
+std::vector<uint8_t> anyHits(const CpuRuntime& runtime, std::span<const Ray> rays,
+                             std::span<const float> times = {});
+
+// Motion blur (docs/motion-blur.md): the shutter of a traced frame as a fraction of the frame
+// interval, centered on the frame's time or opening at it.
+struct Shutter {
+  double fraction = 0.0;  // in [0, 1]; 0: the instant
+  enum class Mode { Centered, Open } mode = Mode::Centered;
+};
+// [open, close] of the frame at `time` for frame interval `interval`, clamped to the animation's
+// time range. Throws tsah::ConfigError for a fraction outside [0, 1] or a negative interval.
+std::pair<double, double> shutterInterval(const anim::Animation& animation, double time, double interval,
+                                          const Shutter& shutter);
+// Refits the runtime over [open, close] of the animation: the positions at every key of
+// motion::shutterKeys (update() when open == close).
+void updateShutter(CpuRuntime& runtime, const anim::Animation& animation, double open, double close);
 
 }  // namespace tsah

@@ -9,6 +9,7 @@
 #include "tsah/base/error.hpp"
 #include "tsah/base/memory.hpp"
 #include "tsah/render/shading.hpp"
+#include "tsah/layout/motion_blur.hpp"
 #include "tsah/layout/traversal.hpp"
 
 namespace tsah {
@@ -59,6 +60,31 @@ RayPassStats surfacePass(const CpuRuntime& runtime, uint32_t width, const std::v
     rays += local;
   });
   return {rays.load(), msSince(start)};
+}
+
+// The surface a primary ray at shutter fraction `time` finds in a blurred frame: the hit triangle's
+// vertices lerped at that time (as the traversal lerps them), as a one-triangle mesh.
+Surface blurredSurface(const CpuRuntime& runtime, const Ray& ray, float time, const SceneLighting& lighting) {
+  const Hit hit = runtime.closestHit(ray, time);
+  if (!hit.valid()) return primarySurface(ray, hit, nullptr, nullptr, lighting);
+  const MotionBvhView& view = runtime.motionView();
+  const motion::Segment seg = motion::segmentAt(view.keyTimes, int(view.keyCount), time);
+  const float* p0 = view.keyPositions + std::size_t(seg.index) * view.vertexCount * 3;
+  const float* p1 = p0 + std::size_t(view.vertexCount) * 3;
+  float triangle[9];
+  for (int k = 0; k < 3; ++k) {
+    const uint32_t vertex = runtime.indices()[3 * std::size_t(hit.tri) + k];
+    const Vec3 v = motion::lerpVertex(loadVec3(p0, vertex), loadVec3(p1, vertex), seg.f);
+    triangle[3 * k] = v.x;
+    triangle[3 * k + 1] = v.y;
+    triangle[3 * k + 2] = v.z;
+  }
+  static constexpr uint32_t kOneTriangle[3] = {0, 1, 2};
+  Hit local = hit;
+  local.tri = 0;
+  Surface s = primarySurface(ray, local, kOneTriangle, triangle, lighting);
+  if (s.kind == SurfaceKind::Mesh) s.tri = hit.tri;
+  return s;
 }
 
 }  // namespace
@@ -123,6 +149,13 @@ RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const S
   std::vector<float> ao(pixels, 1.0f), visibility(pixels, 1.0f);
   RenderStats stats;
   const SampleKey base{settings.seed, settings.frame, 0};
+  // A blurred frame: every ray of a pixel at the pixel's shutter time; otherwise the instant.
+  const bool blurred = runtime.blurred();
+  auto pixelTime = [&](std::size_t pixel) {
+    SampleKey key = base;
+    key.pixel = uint32_t(pixel);
+    return pixelShutterTime(key);
+  };
 
   // Pass 1: primary rays, closest hit; the ground plane is intersected analytically.
   std::atomic<uint64_t> rays{0};
@@ -131,7 +164,9 @@ RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const S
     for (std::size_t y = y0; y < y1; ++y)
       for (uint32_t x = 0; x < width; ++x) {
         const Ray ray = cam.ray(float(x) + 0.5f, float(y) + 0.5f);
-        surfaces[y * width + x] = primarySurface(ray, runtime.closestHit(ray), indices, positions, lighting);
+        const std::size_t i = y * width + x;
+        surfaces[i] = blurred ? blurredSurface(runtime, ray, pixelTime(i), lighting)
+                              : primarySurface(ray, runtime.closestHit(ray), indices, positions, lighting);
       }
     rays += (y1 - y0) * width;
   });
@@ -142,7 +177,11 @@ RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const S
     stats.ao = surfacePass(runtime, width, surfaces, base, [&](std::size_t i, const Surface& s, SampleKey key) {
       uint32_t occluded = 0;
       for (uint32_t k = 0; k < settings.aoSamples; ++k)
-        occluded += runtime.anyHit(aoRay(s, key, k, lighting.aoDistance), AnyHitOrder::TreeOrder) ? 1u : 0u;
+        occluded += (blurred ? runtime.anyHit(aoRay(s, key, k, lighting.aoDistance), pixelTime(i),
+                                              AnyHitOrder::TreeOrder)
+                             : runtime.anyHit(aoRay(s, key, k, lighting.aoDistance), AnyHitOrder::TreeOrder))
+                        ? 1u
+                        : 0u;
       ao[i] = aoFactor(occluded, settings.aoSamples);
       return settings.aoSamples;
     });
@@ -155,13 +194,14 @@ RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const S
         Ray ray;
         if (!shadowRay(s, lighting, key, k, ray)) continue;  // the light point is behind the surface
         ++cast;
-        visible += runtime.anyHit(ray) ? 0u : 1u;
+        visible += (blurred ? runtime.anyHit(ray, pixelTime(i)) : runtime.anyHit(ray)) ? 0u : 1u;
       }
       visibility[i] = lightVisibility(visible, settings.shadowSamples);
       return cast;
     });
 
-  // Shading: diffuse sun with soft shadows + sky light scaled by ambient occlusion.
+  // Shading: diffuse sun with soft shadows + sky light scaled by ambient occlusion. (Blurred frames
+  // take the smooth normals from the runtime's current positions; the geometric ones are exact.)
   start = std::chrono::steady_clock::now();
   const std::vector<float> normals = vertexNormals(indices, positions, runtime.triangleCount(), runtime.vertexCount());
   runtime.parallelFor(height, 4, [&](std::size_t y0, std::size_t y1) {

@@ -163,6 +163,7 @@ uint32_t CpuRuntime::selectTreeAt(double time) {
   if (setTrees_.empty()) return 0;
   const uint32_t index = treeIndexAt(setRanges_, time);
   if (index != current_) {
+    clearShutter();
     setTree(setTrees_[index]);
     if (!setWide4_.empty()) {
       wide4_ = setWide4_[index];
@@ -271,12 +272,14 @@ void CpuRuntime::refitAndWoop() {
 }
 
 void CpuRuntime::update(std::span<const float> positions) {
+  clearShutter();
   setPositions(positions);
   refitAndWoop();
 }
 
 CpuRuntime::RebuildTimings CpuRuntime::rebuild(std::span<const float> positions, const TreeBuilder& builder) {
   RebuildTimings timings;
+  clearShutter();
   setPositions(positions);
   auto start = std::chrono::steady_clock::now();
   std::vector<Aabb> boxes(triangleCount());

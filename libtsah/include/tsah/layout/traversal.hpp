@@ -12,6 +12,7 @@
 #include "tsah/layout/gpu_layout.hpp"
 #include "tsah/core/hd.hpp"
 #include "tsah/core/ray.hpp"
+#include "tsah/layout/motion_blur.hpp"
 #include "tsah/layout/woop.hpp"
 
 namespace tsah {
@@ -32,6 +33,83 @@ struct BvhView {
   Aabb rootBox;
 
   TSAH_HD Vec3 vertex(uint32_t i) const { return {positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]}; }
+
+  // What the shared traversal loop reads (detail::traverse): the root box, a node, a slot's test.
+  TSAH_HD const Aabb& root() const { return rootBox; }
+  TSAH_HD const GpuBvhNode& node(int32_t ref) const { return nodes[ref]; }
+  TSAH_HD bool intersectSlot(const Ray& ray, const RayPrep& prep, uint32_t s, float tmax, float& t, float& u,
+                             float& v) const {
+    auto fetch = [&](Vec3& v0, Vec3& v1, Vec3& v2) {
+      const uint32_t* tri = indices + 3 * std::size_t(triIndex[s]);
+      v0 = vertex(tri[0]);
+      v1 = vertex(tri[1]);
+      v2 = vertex(tri[2]);
+    };
+    return intersectTriangle(ray, prep, woop[s], tmax, fetch, t, u, v);
+  }
+};
+
+// A blurred frame (docs/motion-blur.md): the tree refitted at every key of the shutter. Raw
+// pointers and counts only: pass by value.
+struct MotionBvhView {
+  const GpuBvhNode* keyNodes = nullptr;  // keyCount blocks of nodeCount interior nodes, one per key
+  const Aabb* keyRootBoxes = nullptr;    // per key
+  const float* keyPositions = nullptr;   // keyCount blocks of vertexCount * 3 floats
+  const float* keyTimes = nullptr;       // shutter fractions: first 0, last 1, increasing
+  uint32_t keyCount = 0, nodeCount = 0, vertexCount = 0;
+  const uint32_t* triIndex = nullptr;  // slot -> triangle id
+  const uint32_t* indices = nullptr;   // 3 vertex indices per triangle id
+  int32_t rootRef = makeLeafRef(0);
+  uint32_t rootCount = 0;
+};
+
+// One ray's view of a blurred frame: boxes and triangles lerped between the two keys of its time's
+// segment (the same loop as the instant frame; only what it reads differs).
+struct MotionFrame {
+  const GpuBvhNode* nodes0;
+  const GpuBvhNode* nodes1;
+  const float* positions0;
+  const float* positions1;
+  const uint32_t* triIndex;
+  const uint32_t* indices;
+  int32_t rootRef;
+  uint32_t rootCount;
+  float f;
+  Aabb rootBox;
+
+  TSAH_HD MotionFrame(const MotionBvhView& m, float time) {
+    const motion::Segment seg = motion::segmentAt(m.keyTimes, int(m.keyCount), time);
+    const uint32_t k0 = uint32_t(seg.index), k1 = m.keyCount > 1 ? k0 + 1 : k0;
+    nodes0 = m.keyNodes + std::size_t(k0) * m.nodeCount;
+    nodes1 = m.keyNodes + std::size_t(k1) * m.nodeCount;
+    positions0 = m.keyPositions + std::size_t(k0) * m.vertexCount * 3;
+    positions1 = m.keyPositions + std::size_t(k1) * m.vertexCount * 3;
+    triIndex = m.triIndex;
+    indices = m.indices;
+    rootRef = m.rootRef;
+    rootCount = m.rootCount;
+    f = seg.f;
+    rootBox = motion::lerpBox(m.keyRootBoxes[k0], m.keyRootBoxes[k1], f);
+  }
+
+  TSAH_HD const Aabb& root() const { return rootBox; }
+  TSAH_HD GpuBvhNode node(int32_t ref) const {
+    GpuBvhNode n = nodes0[ref];
+    const GpuBvhNode& n1 = nodes1[ref];
+    for (int c = 0; c < 2; ++c) n.setChildBox(c, motion::lerpBox(n.childBox(c), n1.childBox(c), f));
+    return n;
+  }
+  TSAH_HD Vec3 vertex(uint32_t i) const {
+    const Vec3 a{positions0[3 * i], positions0[3 * i + 1], positions0[3 * i + 2]};
+    const Vec3 b{positions1[3 * i], positions1[3 * i + 1], positions1[3 * i + 2]};
+    return motion::lerpVertex(a, b, f);
+  }
+  // The watertight test on the lerped vertices (no Woop triangles for a blurred frame).
+  TSAH_HD bool intersectSlot(const Ray& ray, const RayPrep& prep, uint32_t s, float tmax, float& t, float& u,
+                             float& v) const {
+    const uint32_t* tri = indices + 3 * std::size_t(triIndex[s]);
+    return intersectWatertight(prep, vertex(tri[0]), vertex(tri[1]), vertex(tri[2]), ray.tmin, tmax, t, u, v);
+  }
 };
 
 // Slab tests of both children of a node: bit 0 / bit 1 set when child 0 / 1 is entered within
@@ -91,19 +169,13 @@ TSAH_HD int intersectChildren(const NodeRayPrep& p, const GpuBvhNode& node, floa
 namespace detail {
 
 // Tests the triangles of one leaf; returns true when one was hit (and, for closest hit, shortened tmax).
-template <bool AnyHit>
-TSAH_HD bool intersectLeaf(const BvhView& bvh, const Ray& ray, const RayPrep& prep, uint32_t first, uint32_t count,
+template <bool AnyHit, typename Frame>
+TSAH_HD bool intersectLeaf(const Frame& bvh, const Ray& ray, const RayPrep& prep, uint32_t first, uint32_t count,
                            float& tmax, Hit& hit) {
   bool found = false;
   for (uint32_t s = first; s < first + count; ++s) {
     float t, u, v;
-    auto fetch = [&](Vec3& v0, Vec3& v1, Vec3& v2) {
-      const uint32_t* tri = bvh.indices + 3 * std::size_t(bvh.triIndex[s]);
-      v0 = bvh.vertex(tri[0]);
-      v1 = bvh.vertex(tri[1]);
-      v2 = bvh.vertex(tri[2]);
-    };
-    if (intersectTriangle(ray, prep, bvh.woop[s], tmax, fetch, t, u, v)) {
+    if (bvh.intersectSlot(ray, prep, s, tmax, t, u, v)) {
       found = true;
       tmax = t;
       hit.t = t;
@@ -116,15 +188,17 @@ TSAH_HD bool intersectLeaf(const BvhView& bvh, const Ray& ray, const RayPrep& pr
   return found;
 }
 
-template <bool AnyHit>
-TSAH_HD Hit traverse(const BvhView& bvh, const Ray& ray) {
+// The one traversal loop; Frame supplies the root box, the nodes and the triangle test (BvhView:
+// the instant frame; MotionFrame: a blurred frame at one ray's time).
+template <bool AnyHit, typename Frame>
+TSAH_HD Hit traverse(const Frame& bvh, const Ray& ray) {
   Hit hit;
   const RayPrep prep = prepareRay(ray);
   const NodeRayPrep nodePrep = prepareNodeRay(prep);
   float tmax = ray.tmax;
   float tEntry;
   if (bvh.rootCount == 0 && isLeafRef(bvh.rootRef)) return hit;  // empty tree
-  if (!intersectBox(prep, bvh.rootBox, ray.tmin, tmax, tEntry)) return hit;
+  if (!intersectBox(prep, bvh.root(), ray.tmin, tmax, tEntry)) return hit;
   if (isLeafRef(bvh.rootRef)) {
     intersectLeaf<AnyHit>(bvh, ray, prep, leafFirstSlot(bvh.rootRef), bvh.rootCount, tmax, hit);
     return hit;
@@ -140,7 +214,7 @@ TSAH_HD Hit traverse(const BvhView& bvh, const Ray& ray) {
     if (isLeafRef(ref)) {
       if (intersectLeaf<AnyHit>(bvh, ray, prep, leafFirstSlot(ref), count, tmax, hit) && AnyHit) return hit;
     } else {
-      const GpuBvhNode& node = bvh.nodes[ref];
+      const auto& node = bvh.node(ref);  // a reference, or the lerped node (lifetime extended)
       float t0, t1;
       const int mask = intersectChildren(nodePrep, node, ray.tmin, tmax, t0, t1);
       const bool hit0 = (mask & 1) != 0, hit1 = (mask & 2) != 0;
@@ -178,5 +252,13 @@ TSAH_HD Hit closestHit(const BvhView& bvh, const Ray& ray) { return detail::trav
 
 // True when anything is hit in (ray.tmin, ray.tmax) (occlusion).
 TSAH_HD bool anyHit(const BvhView& bvh, const Ray& ray) { return detail::traverse<true>(bvh, ray).valid(); }
+
+// The same in a blurred frame at the ray's time (shutter fraction in [0, 1]).
+TSAH_HD Hit closestHit(const MotionBvhView& bvh, const Ray& ray, float time) {
+  return detail::traverse<false>(MotionFrame(bvh, time), ray);
+}
+TSAH_HD bool anyHit(const MotionBvhView& bvh, const Ray& ray, float time) {
+  return detail::traverse<true>(MotionFrame(bvh, time), ray).valid();
+}
 
 }  // namespace tsah

@@ -46,7 +46,9 @@ struct RenderStats {
 // light factors and RGB, and the vertex normals of a mesh of `vertices`. (16384 x 16384: ~13 GiB.)
 std::size_t renderFrameBytes(const RenderSettings& settings, uint32_t vertices);
 
-// Renders the runtime's current frame into image (resized to the settings). Deterministic: the same
+// Renders the runtime's current frame into image (resized to the settings). A blurred runtime
+// (CpuRuntime::updateShutter): each pixel's primary, AO and shadow rays share the pixel's time,
+// pixelShutterTime (tsah/render/sampling.hpp). Deterministic: the same
 // inputs give the same image for any thread count. Throws tsah::ConfigError for an empty image size
 // and tsah::Failure when renderFrameBytes does not fit the memory (tsah/base/memory.hpp), before
 // allocating any of it.

@@ -36,6 +36,18 @@ TSAH_HD float sampleUniform(const SampleKey& key, uint32_t sample, uint32_t dime
   return float(h >> 8) * (1.0f / 16777216.0f);
 }
 
+// The camera-sample time of a pixel in a motion-blurred frame, a fraction of the shutter in
+// [0, 1) shared by the pixel's primary, ambient-occlusion and shadow rays. The golden-ratio (R1)
+// sequence over the pixel index, rotated by a hash of (seed, frame): any n consecutive pixels
+// spread their times over the shutter with gaps of at most ~2.6/n (stratified, unlike independent
+// random times), and the same seed and frame give the same times. Computed in 32-bit fixed point,
+// so host and device produce the same float.
+TSAH_HD float pixelShutterTime(const SampleKey& key) {
+  const uint32_t rotation = hash32(hash32(key.seed ^ 0x85ebca6bU) ^ key.frame);
+  const uint32_t position = rotation + key.pixel * 0x9e3779b9U;  // 2^32 / golden ratio
+  return float(position >> 8) * (1.0f / 16777216.0f);
+}
+
 // v / |v| with an IEEE square root and division on host and device alike (CUDA's rsqrtf would
 // round differently), so CPU and GPU renderers compute the same directions; (0, 0, 1) for a zero
 // or non-finite length.

@@ -102,6 +102,23 @@ class CpuRuntime {
   Hit closestHit(const Ray& ray) const;
   bool anyHit(const Ray& ray, AnyHitOrder order = AnyHitOrder::FarthestFirst) const;
 
+  // Motion blur (docs/motion-blur.md). Refits the current tree at every key of a shutter:
+  // keyPositions[k] = vertexCount*3 floats at key k, keyTimes[k] the key's shutter fraction (first
+  // 0, last 1, increasing). One key is update(keyPositions[0]). Throws tsah::ConfigError for bad key
+  // times or a key count that differs from the position sets, tsah::DataError for a position set of
+  // the wrong size, tsah::Failure when the key sets do not fit in memory. update(), rebuild() and
+  // selectTreeAt() return to the instant state.
+  void updateShutter(std::span<const float> keyTimes, std::span<const std::span<const float>> keyPositions);
+  // True after updateShutter with two keys or more (until update()).
+  bool blurred() const { return !keyTimes_.empty(); }
+  std::span<const float> keyTimes() const { return keyTimes_; }
+  // Nearest hit / any hit at the ray's time, a shutter fraction in [0, 1] (outside: the nearer end).
+  // Not blurred: closestHit(ray) / anyHit(ray, order).
+  Hit closestHit(const Ray& ray, float time) const;
+  bool anyHit(const Ray& ray, float time, AnyHitOrder order = AnyHitOrder::FarthestFirst) const;
+  // The blurred bvh2 frame (valid while blurred()).
+  const MotionBvhView& motionView() const { return motionView_; }
+
   const LayoutInfo& layoutInfo() const { return info_; }
   // The binary tree and its view: bvh2 only (the wide layouts do not refit the binary tree; both
   // throw tsah::ConfigError for them).
@@ -128,6 +145,7 @@ class CpuRuntime {
   BvhView binaryView() const;
   void setPositions(std::span<const float> positions);
   void refitAndWoop();
+  void clearShutter();
   void refitNode(uint32_t node);
   Aabb refitLeaf(uint32_t firstSlot, uint32_t count);
 
@@ -157,6 +175,13 @@ class CpuRuntime {
   uint32_t current_ = 0;
   std::vector<std::shared_ptr<WideTree<4>>> setWide4_;
   std::vector<std::shared_ptr<WideTree<8>>> setWide8_;
+  // Motion blur: the key times and, per key, the refitted nodes, root box and positions (empty
+  // when not blurred).
+  std::vector<float> keyTimes_;
+  std::vector<GpuBvhNode> keyNodes_;
+  std::vector<Aabb> keyRootBoxes_;
+  std::vector<float> keyPositions_;
+  MotionBvhView motionView_;
 };
 
 }  // namespace tsah

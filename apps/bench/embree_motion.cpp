@@ -1,0 +1,159 @@
+// Embree 3's motion-blur BVH (see embree_motion.hpp).
+#include "bench/embree_motion.hpp"
+
+#include <algorithm>
+
+#include "tsah/layout/motion_blur.hpp"
+
+#if TSAH_HAVE_EMBREE
+#include <embree3/rtcore.h>
+
+#include <chrono>
+#include <cstring>
+#include <mutex>
+#include <string>
+
+#include "tsah/base/error.hpp"
+#endif
+
+namespace tsah::bench {
+
+float embreeStepTime(std::span<const float> keyFractions, float tau) {
+  if (keyFractions.size() < 2) return 0.0f;
+  const int count = int(keyFractions.size());
+  const motion::Segment segment = motion::segmentAt(keyFractions.data(), count, tau);
+  return std::min(1.0f, (float(segment.index) + segment.f) / float(count - 1));
+}
+
+#if TSAH_HAVE_EMBREE
+
+struct EmbreeMotionPeer::Impl {
+  RTCDevice device = nullptr;
+  RTCScene scene = nullptr;
+  std::vector<uint32_t> indices;
+  uint32_t vertexCount = 0, steps = 0;
+  std::mutex errorMutex;
+  std::string error;  // the first error Embree reported
+
+  void check(const char* what) {
+    if (rtcGetDeviceError(device) == RTC_ERROR_NONE) return;
+    std::lock_guard<std::mutex> lock(errorMutex);
+    throw tsah::Failure(std::string("Embree: ") + what + " failed" + (error.empty() ? "" : ": " + error));
+  }
+};
+
+EmbreeMotionPeer::EmbreeMotionPeer(std::span<const uint32_t> indices, uint32_t vertexCount, unsigned threads)
+    : impl_(std::make_unique<Impl>()) {
+  Impl& m = *impl_;
+  m.indices.assign(indices.begin(), indices.end());
+  m.vertexCount = vertexCount;
+  const std::string config = threads > 0 ? "threads=" + std::to_string(threads) : std::string();
+  m.device = rtcNewDevice(config.empty() ? nullptr : config.c_str());
+  if (!m.device) throw tsah::Failure("Embree: cannot create a device (rtcNewDevice)");
+  rtcSetDeviceErrorFunction(
+      m.device,
+      [](void* user, RTCError, const char* message) {
+        auto* impl = static_cast<Impl*>(user);
+        std::lock_guard<std::mutex> lock(impl->errorMutex);
+        if (impl->error.empty() && message) impl->error = message;
+      },
+      &m);
+}
+
+EmbreeMotionPeer::~EmbreeMotionPeer() {
+  if (impl_->scene) rtcReleaseScene(impl_->scene);
+  if (impl_->device) rtcReleaseDevice(impl_->device);
+}
+
+uint32_t EmbreeMotionPeer::timeSteps() const { return impl_->steps; }
+
+double EmbreeMotionPeer::build(std::span<const std::vector<float>> stepPositions) {
+  Impl& m = *impl_;
+  const std::size_t coordinates = std::size_t(m.vertexCount) * 3;
+  if (stepPositions.empty()) throw tsah::DataError("Embree motion peer: no time steps");
+  for (const std::vector<float>& p : stepPositions)
+    if (p.size() != coordinates)
+      throw tsah::DataError("Embree motion peer: expected " + std::to_string(coordinates) + " coordinates, got " +
+                            std::to_string(p.size()));
+  const auto start = std::chrono::steady_clock::now();
+  // A new scene each time: the number of time steps may change from frame to frame.
+  if (m.scene) rtcReleaseScene(m.scene);
+  m.scene = rtcNewScene(m.device);
+  rtcSetSceneBuildQuality(m.scene, RTC_BUILD_QUALITY_MEDIUM);
+  RTCGeometry geometry = rtcNewGeometry(m.device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  rtcSetGeometryTimeStepCount(geometry, unsigned(stepPositions.size()));
+  for (std::size_t k = 0; k < stepPositions.size(); ++k) {
+    auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, unsigned(k),
+                                                          RTC_FORMAT_FLOAT3, 3 * sizeof(float), m.vertexCount));
+    if (!v) {
+      rtcReleaseGeometry(geometry);
+      m.check("allocating a vertex buffer");
+      throw tsah::Failure("Embree: cannot allocate a vertex buffer");
+    }
+    std::memcpy(v, stepPositions[k].data(), coordinates * sizeof(float));
+  }
+  rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, m.indices.data(), 0,
+                             3 * sizeof(uint32_t), m.indices.size() / 3);
+  rtcCommitGeometry(geometry);
+  rtcAttachGeometry(m.scene, geometry);
+  rtcReleaseGeometry(geometry);  // the scene holds it
+  rtcCommitScene(m.scene);
+  const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  m.check("building the motion-blur scene");
+  m.steps = uint32_t(stepPositions.size());
+  return ms;
+}
+
+double EmbreeMotionPeer::build(const anim::Animation& animation, std::span<const double> keyTimes) {
+  const auto start = std::chrono::steady_clock::now();
+  std::vector<std::vector<float>> steps;
+  for (double t : keyTimes) steps.push_back(animation.positionsAt(t));
+  const double interpolateMs =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  return interpolateMs + build(steps);
+}
+
+namespace {
+
+RTCRay embreeRay(const Ray& r, float time) {
+  RTCRay ray;
+  ray.org_x = r.org.x;
+  ray.org_y = r.org.y;
+  ray.org_z = r.org.z;
+  ray.tnear = r.tmin;
+  ray.dir_x = r.dir.x;
+  ray.dir_y = r.dir.y;
+  ray.dir_z = r.dir.z;
+  ray.time = time;
+  ray.tfar = r.tmax;
+  ray.mask = 0xffffffffu;
+  ray.id = 0;
+  ray.flags = 0;
+  return ray;
+}
+
+}  // namespace
+
+uint32_t EmbreeMotionPeer::closestTriangle(const Ray& ray, float time) const {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRayHit rh;
+  rh.ray = embreeRay(ray, time);
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(impl_->scene, &context, &rh);
+  return rh.hit.geomID != RTC_INVALID_GEOMETRY_ID ? rh.hit.primID : kMiss;
+}
+
+bool EmbreeMotionPeer::occluded(const Ray& ray, float time) const {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRay r = embreeRay(ray, time);
+  rtcOccluded1(impl_->scene, &context, &r);
+  return r.tfar < 0.0f;  // Embree sets tfar to -inf for an occluded ray
+}
+
+#endif
+
+}  // namespace tsah::bench

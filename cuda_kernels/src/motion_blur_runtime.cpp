@@ -1,0 +1,198 @@
+// GpuRuntime's motion blur from host positions: the current tree refitted at every key of a shutter,
+// one copy of the traced tree's nodes, root and positions per key (docs/cuda-runtime.md).
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "tsah/base/error.hpp"
+#include "blurred_trace.hpp"
+#include "cwbvh_kernels.hpp"
+#include "tsah/layout/motion_blur.hpp"
+#include "runtime_impl.hpp"
+
+namespace tsah::cuda {
+
+namespace {
+
+// The key times of the design: one key anywhere in [0, 1], else first 0, last 1, increasing.
+void checkKeyTimes(std::span<const float> keyTimes, std::size_t positionSets) {
+  const std::string where = "GPU runtime: updateShutter: ";
+  if (keyTimes.empty()) throw tsah::ConfigError(where + "no keys");
+  if (keyTimes.size() != positionSets)
+    throw tsah::ConfigError(where + std::to_string(keyTimes.size()) + " key times for " +
+                            std::to_string(positionSets) + " sets of positions");
+  for (float k : keyTimes)
+    if (!std::isfinite(k) || k < 0.0f || k > 1.0f)
+      throw tsah::ConfigError(where + "key time " + std::to_string(k) + " is outside [0, 1]");
+  if (keyTimes.size() == 1) return;
+  if (keyTimes.front() != 0.0f || keyTimes.back() != 1.0f)
+    throw tsah::ConfigError(where + "the first key time must be 0 and the last 1");
+  for (std::size_t k = 1; k < keyTimes.size(); ++k)
+    if (!(keyTimes[k] > keyTimes[k - 1])) throw tsah::ConfigError(where + "key times must increase");
+}
+
+}  // namespace
+
+void GpuRuntime::Impl::requireKey(uint32_t key) const {
+  if (shutterKeys == 0) throw tsah::ConfigError("GPU runtime: the frame is not blurred (no updateShutter)");
+  if (key >= shutterKeys)
+    throw tsah::ConfigError("GPU runtime: key " + std::to_string(key) + " of a shutter with " +
+                            std::to_string(shutterKeys) + " keys");
+}
+
+// Runs refitKey(k) for every key and keeps each key's nodes, root and positions.
+template <typename RefitKey>
+UpdateTimings GpuRuntime::Impl::refitKeys(std::span<const float> keyTimes, RefitKey&& refitKey) {
+  if (config.layout != Layout::Bvh2)
+    throw tsah::ConfigError("GPU runtime: motion blur traces the binary layout on the GPU (layout bvh2, not " +
+                            std::string(name(config.layout)) + ")");
+  const auto keys = static_cast<uint32_t>(keyTimes.size());
+  DeviceTree& t = tree();
+  const std::size_t interior = t.topology.interiorCount, coords = std::size_t(vertices) * 3;
+  keyNodes.reserve(std::size_t(keys) * interior);
+  keyRoots.reserve(keys);
+  keyPositions.reserve(std::size_t(keys) * coords);
+  UpdateTimings total;
+  for (uint32_t k = 0; k < keys; ++k) {
+    // Each key is a whole update (bit-identical to CpuRuntime::update at its positions), kept.
+    const UpdateTimings one = refitKey(k);
+    total.interpolateMs += one.interpolateMs;
+    total.refitMs += one.refitMs;
+    total.woopMs += one.woopMs;
+    if (interior)
+      CUDA_CHECK(cudaMemcpyAsync(keyNodes.data() + k * interior, t.nodes.data(), interior * sizeof(GpuBvhNode),
+                                 cudaMemcpyDeviceToDevice, stream));
+    CUDA_CHECK(cudaMemcpyAsync(keyRoots.data() + k, t.root.data(), sizeof(detail::RootInfo),
+                               cudaMemcpyDeviceToDevice, stream));
+    CUDA_CHECK(cudaMemcpyAsync(keyPositions.data() + k * coords, positions.data(), coords * sizeof(float),
+                               cudaMemcpyDeviceToDevice, stream));
+  }
+  CUDA_CHECK(cudaStreamSynchronize(stream));
+  shutterKeys = keys;
+  shutterKeyTimes.assign(keyTimes.begin(), keyTimes.end());
+  keyFractions.reserve(keys);
+  keyFractions.upload(keyTimes, stream);
+  CUDA_CHECK(cudaStreamSynchronize(stream));
+  return total;
+}
+
+UpdateTimings GpuRuntime::updateShutter(std::span<const float> keyTimes,
+                                        std::span<const std::span<const float>> keyPositions) {
+  Impl& m = *impl_;
+  checkKeyTimes(keyTimes, keyPositions.size());
+  if (keyTimes.size() == 1) return update(keyPositions[0]);
+  for (std::span<const float> p : keyPositions)  // before anything is refitted
+    if (p.size() != std::size_t(m.vertices) * 3)
+      throw tsah::DataError("GPU runtime: updateShutter got " + std::to_string(p.size()) +
+                            " coordinates for a key, expected " + std::to_string(std::size_t(m.vertices) * 3));
+  return m.refitKeys(keyTimes, [&](uint32_t k) { return update(keyPositions[k]); });
+}
+
+UpdateTimings GpuRuntime::updateShutterAt(double open, double close) {
+  Impl& m = *impl_;
+  if (!(open <= close))
+    throw tsah::ConfigError("GPU runtime: updateShutterAt: the shutter opens at " + std::to_string(open) +
+                            ", after it closes at " + std::to_string(close));
+  // One tree for the whole shutter: the one of its middle (the frame's time for a centered shutter).
+  m.current = treeIndexAt(m.ranges, 0.5 * (open + close));
+  const std::vector<double> times = motion::shutterKeys(m.times, open, close);
+  if (times.size() == 1) return m.refitAt(times[0]);
+  const std::vector<float> fractions = motion::keyFractions(times);
+  return m.refitKeys(fractions, [&](uint32_t k) { return m.refitAt(times[k]); });
+}
+
+bool GpuRuntime::blurred() const { return impl_->shutterKeys >= 2; }
+uint32_t GpuRuntime::shutterKeyCount() const { return impl_->shutterKeys; }
+
+FlatBvh GpuRuntime::downloadKeyTree(uint32_t key) const {
+  const Impl& m = *impl_;
+  m.requireKey(key);
+  FlatBvh flat = m.tree().topology;
+  const std::size_t interior = flat.interiorCount;
+  flat.nodes.resize(interior);
+  if (interior)
+    CUDA_CHECK(cudaMemcpyAsync(flat.nodes.data(), m.keyNodes.data() + key * interior, interior * sizeof(GpuBvhNode),
+                               cudaMemcpyDeviceToHost, m.stream));
+  detail::RootInfo root;
+  CUDA_CHECK(cudaMemcpyAsync(&root, m.keyRoots.data() + key, sizeof root, cudaMemcpyDeviceToHost, m.stream));
+  CUDA_CHECK(cudaStreamSynchronize(m.stream));
+  flat.rootBoxes = {root.box};
+  return flat;
+}
+
+std::vector<float> GpuRuntime::downloadKeyPositions(uint32_t key) const {
+  const Impl& m = *impl_;
+  m.requireKey(key);
+  const std::size_t coords = std::size_t(m.vertices) * 3;
+  std::vector<float> out(coords);
+  CUDA_CHECK(cudaMemcpyAsync(out.data(), m.keyPositions.data() + key * coords, coords * sizeof(float),
+                             cudaMemcpyDeviceToHost, m.stream));
+  CUDA_CHECK(cudaStreamSynchronize(m.stream));
+  return out;
+}
+
+namespace {
+
+template <typename Result>
+std::vector<Result> traceBlurred(GpuRuntime::Impl& m, std::span<const Ray> rays, std::span<const float> times,
+                                 bool anyHit, RayPassStats* stats) {
+  std::vector<Result> out(rays.size());
+  if (rays.empty()) {
+    if (stats) *stats = {};
+    return out;
+  }
+  if (rays.size() > 0xffffffffu) throw tsah::ConfigError("GPU runtime: too many rays in one call");
+  const auto count = static_cast<uint32_t>(rays.size());
+  m.rays.reserve(count);
+  m.rays.upload(rays, m.stream);
+  m.rayTimes.reserve(count);
+  m.rayTimes.upload(times, m.stream);
+  if (anyHit)
+    m.occluded.reserve(count);
+  else
+    m.hits.reserve(count);
+  detail::BlurredScene scene;
+  scene.keyNodes = m.keyNodes.data();
+  scene.keyRoots = m.keyRoots.data();
+  scene.keyPositions = m.keyPositions.data();
+  scene.keyTimes = m.keyFractions.data();
+  scene.triIndex = m.tree().triIndex.data();
+  scene.indices = m.indices.data();
+  scene.keys = m.shutterKeys;
+  scene.interiorCount = m.tree().topology.interiorCount;
+  scene.vertexCoords = uint64_t(m.vertices) * 3;
+  m.events.record(0, m.stream);
+  detail::launchBlurredTrace(scene, m.rays.data(), m.rayTimes.data(), count, anyHit ? nullptr : m.hits.data(),
+                             anyHit ? m.occluded.data() : nullptr, m.stream);
+  m.events.record(1, m.stream);
+  m.events.wait(1);
+  if (stats) *stats = {count, m.events.ms(0, 1)};
+  void* src = anyHit ? static_cast<void*>(m.occluded.data()) : static_cast<void*>(m.hits.data());
+  CUDA_CHECK(cudaMemcpyAsync(out.data(), src, out.size() * sizeof(Result), cudaMemcpyDeviceToHost, m.stream));
+  CUDA_CHECK(cudaStreamSynchronize(m.stream));
+  return out;
+}
+
+void checkTimeCount(std::span<const Ray> rays, std::span<const float> times) {
+  if (rays.size() != times.size())
+    throw tsah::ConfigError("GPU runtime: " + std::to_string(times.size()) + " ray times for " +
+                            std::to_string(rays.size()) + " rays");
+}
+
+}  // namespace
+
+std::vector<Hit> GpuRuntime::closestHits(std::span<const Ray> rays, std::span<const float> times,
+                                         RayPassStats* stats) {
+  checkTimeCount(rays, times);
+  if (!blurred()) return closestHits(rays, stats);
+  return traceBlurred<Hit>(*impl_, rays, times, false, stats);
+}
+
+std::vector<uint8_t> GpuRuntime::anyHits(std::span<const Ray> rays, std::span<const float> times,
+                                         RayPassStats* stats) {
+  checkTimeCount(rays, times);
+  if (!blurred()) return anyHits(rays, stats);
+  return traceBlurred<uint8_t>(*impl_, rays, times, true, stats);
+}
+
+}  // namespace tsah::cuda

@@ -1,0 +1,103 @@
+#pragma once
+// Motion blur: the pieces the CPU runtime, the CUDA kernels, the exporter and the tests share
+// (docs/motion-blur.md). A blurred frame keeps one tree topology refitted at the KEY TIMES of its
+// shutter; a ray's time tau in [0, 1] (the fraction of the shutter) picks the segment between two
+// keys, and the boxes and the triangles' vertices are lerped there with the same formula.
+//
+// The TSAH_HD functions take plain pointers and counts (no std:: containers) so nvcc compiles them
+// for the device; shutterKeys runs on the host only.
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "tsah/core/aabb.hpp"
+#include "tsah/core/hd.hpp"
+
+namespace tsah::motion {
+
+// The key times of the shutter [open, close]: open, every keyframe time strictly inside, close
+// (one key when open == close). Between two consecutive keys every vertex moves linearly, because
+// the animation interpolates linearly between its keyframes. keyframeTimes: increasing.
+inline std::vector<double> shutterKeys(std::span<const double> keyframeTimes, double open,
+                                       double close) {
+  std::vector<double> keys{open};
+  if (close <= open) return keys;
+  for (double t : keyframeTimes)
+    if (t > open && t < close) keys.push_back(t);
+  keys.push_back(close);
+  return keys;
+}
+
+// The keys as fractions of the shutter (first 0, last 1, increasing), as the runtime keeps them;
+// one key gives {0}.
+inline std::vector<float> keyFractions(std::span<const double> keys) {
+  std::vector<float> fractions(keys.size(), 0.0f);
+  if (keys.size() < 2) return fractions;
+  const double span = keys.back() - keys.front();
+  for (size_t k = 1; k + 1 < keys.size(); ++k)
+    fractions[k] = static_cast<float>((keys[k] - keys.front()) / span);
+  fractions.back() = 1.0f;
+  return fractions;
+}
+
+// A ray's place among the keys: segment s (keys s and s + 1) and f in [0, 1] along it.
+struct Segment {
+  int index = 0;
+  float f = 0.0f;
+};
+
+// Segment of tau for keys[0..count) (first 0, last 1, increasing): the last key with
+// keys[s] <= tau, the last segment for tau >= 1; f = (tau - keys[s]) / (keys[s+1] - keys[s])
+// clamped to [0, 1] (so a tau outside [0, 1] or a NaN lands on an end key). One key: {0, 0}.
+TSAH_HD Segment segmentAt(const float* keys, int count, float tau) {
+  Segment seg;
+  if (count < 2) return seg;
+  int s = 0;
+  while (s + 2 < count && keys[s + 1] <= tau) ++s;  // few keys: a linear scan is cheapest
+  float f = (tau - keys[s]) / (keys[s + 1] - keys[s]);
+  f = f > 0.0f ? f : 0.0f;  // NaN -> 0
+  seg.index = s;
+  seg.f = f < 1.0f ? f : 1.0f;
+  return seg;
+}
+
+// The one lerp formula of motion blur, for boxes and vertices alike: (1 - f) * a + f * b in float
+// with round-to-nearest. It gives a at f = 0 and b at f = 1 exactly, so the ends of a segment are
+// its keys bit for bit (the wide kernels repeat it lane by lane in SIMD, operation for operation).
+TSAH_HD float lerp(float a, float b, float f) { return (1.0f - f) * a + f * b; }
+
+TSAH_HD Vec3 lerpVertex(Vec3 a, Vec3 b, float f) {
+  return {lerp(a.x, b.x, f), lerp(a.y, b.y, f), lerp(a.z, b.z, f)};
+}
+
+// The outward pad of a lerped box side on an axis whose four box coordinates (lo and hi at both
+// keys) are at most m in magnitude. A computed lerp of values bounded by m errs by at most about
+// 4u*m (u = 2^-24: 1 - f, the two products and the sum each add a relative error u; a contracted
+// fma only removes some), so the box's and the vertex's lerps together by at most 8u*m; the pad is
+// 32u*m = m * 2^-19, of which subtracting it in round-to-nearest keeps at least 30u*m. The absolute
+// 2^-120 covers underflow (at most 2^-149 per operation near zero). docs/motion-blur.md derives it.
+TSAH_HD float lerpPad(float m) { return m * 0x1p-19f + 0x1p-120f; }
+
+TSAH_HD float maxMagnitude(float a, float b, float c, float d) {
+  a = a < 0.0f ? -a : a;
+  b = b < 0.0f ? -b : b;
+  c = c < 0.0f ? -c : c;
+  d = d < 0.0f ? -d : d;
+  const float ab = a > b ? a : b, cd = c > d ? c : d;
+  return ab > cd ? ab : cd;
+}
+
+// The box at f between b0 (key s) and b1 (key s + 1), padded so that it contains lerpVertex(v0, v1,
+// f) of every vertex with v0 in b0 and v1 in b1, for every f in [0, 1], under float rounding.
+// An empty box (the default) stays empty.
+TSAH_HD Aabb lerpBox(const Aabb& b0, const Aabb& b1, float f) {
+  Aabb out;
+  for (int a = 0; a < 3; ++a) {
+    const float pad = lerpPad(maxMagnitude(b0.lo[a], b0.hi[a], b1.lo[a], b1.hi[a]));
+    out.lo[a] = lerp(b0.lo[a], b1.lo[a], f) - pad;
+    out.hi[a] = lerp(b0.hi[a], b1.hi[a], f) + pad;
+  }
+  return out;
+}
+
+}  // namespace tsah::motion

@@ -1,0 +1,117 @@
+// The bench's Embree motion-blur peer (bench/embree_motion.hpp): the mapping of times onto Embree's
+// evenly spaced time steps, and, when Embree is built, that a ray at a time finds what the toolkit
+// finds in the animation's frame at that time.
+#include <gtest/gtest.h>
+
+#include <vector>
+
+#include "anim/generators.hpp"
+#include "bench/embree_motion.hpp"
+#include "bench/embree_peer.hpp"
+#include "tsah/base/error.hpp"
+#include "tsah/build/binned_sah_builder.hpp"
+#include "tsah/layout/flat_bvh.hpp"
+#include "tsah/layout/motion_blur.hpp"
+#include "tsah/render/camera.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
+#include "test_support.hpp"
+
+TEST(EmbreeStepTime, MapsUnevenKeysPieceByPiece) {
+  // Keys at times 0, 1, 3 and 4: fractions 0, 1/4, 3/4, 1; Embree's steps at 0, 1/3, 2/3, 1.
+  const std::vector<float> keys = tsah::motion::keyFractions(std::vector<double>{0.0, 1.0, 3.0, 4.0});
+  const auto at = [&](double time) { return tsah::bench::embreeStepTime(keys, float(time / 4.0)); };
+  EXPECT_FLOAT_EQ(at(0.0), 0.0f);
+  EXPECT_FLOAT_EQ(at(0.5), 1.0f / 6.0f);
+  EXPECT_FLOAT_EQ(at(1.0), 1.0f / 3.0f);
+  EXPECT_FLOAT_EQ(at(2.0), 0.5f);  // the middle of the long segment
+  EXPECT_FLOAT_EQ(at(3.5), 5.0f / 6.0f);
+  EXPECT_FLOAT_EQ(at(4.0), 1.0f);
+  EXPECT_FLOAT_EQ(at(9.0), 1.0f);
+  EXPECT_FLOAT_EQ(at(-1.0), 0.0f);
+  EXPECT_FLOAT_EQ(tsah::bench::embreeStepTime(std::vector<float>{0.0f}, 0.5f), 0.0f);
+}
+
+#if TSAH_HAVE_EMBREE
+namespace {
+
+struct Moving {
+  explicit Moving(anim::GeneratorKind kind) : a(tsah::test::generatedAnimation(kind, 1500, 6, 5)) {}
+  anim::Animation a;
+  tsah::CpuRuntime rt{tsah::flattenBvh(tsah::BinnedSahBuilder().build(tsah::test::keyframeBoxes(a, 0))),
+                      {a.indices().begin(), a.indices().end()}, a.vertexCount(), {2}};
+
+  // The fraction of camera rays (framed on the animation at `time`) for which Embree at
+  // `embreeTime` and the toolkit refitted to the animation at `time` hit the same triangle.
+  double agreement(const tsah::bench::EmbreeMotionPeer& peer, double time, float embreeTime, uint32_t* hits) {
+    rt.update(a.positionsAt(time));
+    const tsah::Aabb now = tsah::test::boxOf(a.boundsAt(time));
+    const tsah::CameraRays cam = tsah::cameraRays(tsah::fitCamera(now, {0, 1, 0}, 45.0f, 1.0f), 64, 64);
+    uint32_t same = 0;
+    *hits = 0;
+    for (uint32_t y = 0; y < 64; ++y)
+      for (uint32_t x = 0; x < 64; ++x) {
+        const tsah::Ray ray = cam.ray(float(x) + 0.5f, float(y) + 0.5f);
+        const tsah::Hit own = rt.closestHit(ray);
+        const uint32_t other = peer.closestTriangle(ray, embreeTime);
+        same += (own.valid() ? own.tri : tsah::bench::EmbreeMotionPeer::kMiss) == other ? 1u : 0u;
+        *hits += own.valid() ? 1u : 0u;
+      }
+    return double(same) / (64.0 * 64.0);
+  }
+};
+
+}  // namespace
+
+TEST(EmbreeMotionPeer, TheWholeAnimationAtAnyTimeIsTheFrameAtThatTime) {
+  Moving m(anim::GeneratorKind::Wave);
+  tsah::bench::EmbreeMotionPeer peer(m.a.indices(), m.a.vertexCount(), 2);
+  EXPECT_GE(peer.build(m.a, m.a.times()), 0.0);
+  EXPECT_EQ(peer.timeSteps(), m.a.keyframeCount());
+  const std::span<const double> times = m.a.times();
+  const std::vector<float> keys = tsah::motion::keyFractions(times);
+  for (double f : {0.0, 0.37, 0.5, 0.81, 1.0}) {
+    const double time = times.front() + f * (times.back() - times.front());
+    uint32_t hits = 0;
+    EXPECT_GE(m.agreement(peer, time, tsah::bench::embreeStepTime(keys, float(f)), &hits), 0.999) << "time " << time;
+    EXPECT_GT(hits, 100u);
+  }
+}
+
+TEST(EmbreeMotionPeer, UnevenKeysInsideAShutterFollowTheAnimation) {
+  // Keys at 0, 0.1 and 1 of one keyframe segment (the motion is linear there): a time between
+  // them must be mapped piece by piece; evenly spaced steps would put the fragments elsewhere.
+  Moving m(anim::GeneratorKind::Explode);
+  tsah::bench::EmbreeMotionPeer peer(m.a.indices(), m.a.vertexCount(), 2);
+  const double open = m.a.times()[2], close = m.a.times()[3];
+  const std::vector<double> times{open, open + 0.1 * (close - open), close};
+  std::vector<std::vector<float>> steps;
+  for (double t : times) steps.push_back(m.a.positionsAt(t));
+  peer.build(steps);
+  // A shutter over two keyframe segments: three keys, the middle one the keyframe.
+  const double shutterOpen = m.a.times()[1] + 0.5 * (open - m.a.times()[1]);
+  const std::vector<double> shutter =
+      tsah::motion::shutterKeys(m.a.times(), shutterOpen, open + 0.25 * (close - open));
+  ASSERT_EQ(shutter.size(), 3u);
+  tsah::bench::EmbreeMotionPeer perFrame(m.a.indices(), m.a.vertexCount(), 2);
+  EXPECT_GE(perFrame.build(m.a, shutter), 0.0);
+  EXPECT_EQ(perFrame.timeSteps(), 3u);
+  for (float tau : {0.1f, 0.5f, 0.9f}) {
+    uint32_t shutterHits = 0;
+    const double at = shutter.front() + double(tau) * (shutter.back() - shutter.front());
+    EXPECT_GE(m.agreement(perFrame, at, tsah::bench::embreeStepTime(tsah::motion::keyFractions(shutter), tau),
+                          &shutterHits),
+              0.999)
+        << "tau " << tau;
+    EXPECT_GT(shutterHits, 30u);
+  }
+  const double time = open + 0.55 * (close - open);
+  uint32_t hits = 0;
+  const std::vector<float> keys = tsah::motion::keyFractions(times);
+  EXPECT_GE(m.agreement(peer, time, tsah::bench::embreeStepTime(keys, 0.55f), &hits), 0.999);
+  EXPECT_GT(hits, 100u);
+  EXPECT_LT(m.agreement(peer, time, 0.55f, &hits), 0.99);  // the even mapping is wrong here
+  EXPECT_THROW(peer.build(std::vector<std::vector<float>>{std::vector<float>(3)}), tsah::DataError);
+}
+#else
+TEST(EmbreeMotionPeer, NeedsEmbree) { EXPECT_FALSE(tsah::bench::embreeAvailable()); }
+#endif

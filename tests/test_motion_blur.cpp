@@ -1,0 +1,173 @@
+// tsah/layout/motion_blur.hpp: the shutter's key times, the segment of a ray's time, and the
+// conservativeness of the lerped box (it contains every vertex lerped with the same f, under
+// round-to-nearest and under any rounding of the vertex's lerp).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "tsah/core/directed_rounding.hpp"
+#include "tsah/layout/motion_blur.hpp"
+
+namespace {
+
+namespace m = tsah::motion;
+using tsah::Aabb;
+using tsah::Vec3;
+
+const std::vector<double> kKeyframes{0.0, 1.0, 2.0, 3.0};
+
+TEST(MotionBlurKeys, ShutterInsideOneSegmentHasTwoKeys) {
+  EXPECT_EQ(m::shutterKeys(kKeyframes, 1.25, 1.75), (std::vector<double>{1.25, 1.75}));
+}
+
+TEST(MotionBlurKeys, ShutterSpanningKeyframesKeepsThoseStrictlyInside) {
+  EXPECT_EQ(m::shutterKeys(kKeyframes, 0.5, 2.5), (std::vector<double>{0.5, 1.0, 2.0, 2.5}));
+  // A shutter ending on a keyframe does not repeat it.
+  EXPECT_EQ(m::shutterKeys(kKeyframes, 1.0, 2.0), (std::vector<double>{1.0, 2.0}));
+}
+
+TEST(MotionBlurKeys, ShutterAtTheEndsOfTheAnimation) {
+  EXPECT_EQ(m::shutterKeys(kKeyframes, 0.0, 0.5), (std::vector<double>{0.0, 0.5}));
+  EXPECT_EQ(m::shutterKeys(kKeyframes, 2.5, 3.0), (std::vector<double>{2.5, 3.0}));
+  EXPECT_EQ(m::shutterKeys(kKeyframes, 0.0, 3.0), (std::vector<double>{0.0, 1.0, 2.0, 3.0}));
+}
+
+TEST(MotionBlurKeys, ClosedShutterIsOneKey) {
+  EXPECT_EQ(m::shutterKeys(kKeyframes, 1.0, 1.0), (std::vector<double>{1.0}));
+  EXPECT_EQ(m::keyFractions(std::vector<double>{1.0}), (std::vector<float>{0.0f}));
+}
+
+TEST(MotionBlurKeys, FractionsRunFromZeroToOne) {
+  const std::vector<float> f = m::keyFractions(m::shutterKeys(kKeyframes, 0.5, 2.5));
+  EXPECT_EQ(f, (std::vector<float>{0.0f, 0.25f, 0.75f, 1.0f}));
+}
+
+TEST(MotionBlurSegment, PicksTheLastKeyAtOrBelowTau) {
+  const float keys[] = {0.0f, 0.25f, 0.75f, 1.0f};
+  m::Segment s = m::segmentAt(keys, 4, 0.0f);
+  EXPECT_EQ(s.index, 0);
+  EXPECT_EQ(s.f, 0.0f);
+  s = m::segmentAt(keys, 4, 0.25f);  // on a key: the segment starting there
+  EXPECT_EQ(s.index, 1);
+  EXPECT_EQ(s.f, 0.0f);
+  s = m::segmentAt(keys, 4, 0.5f);
+  EXPECT_EQ(s.index, 1);
+  EXPECT_FLOAT_EQ(s.f, 0.5f);
+  s = m::segmentAt(keys, 4, 1.0f);  // the close: the end of the last segment
+  EXPECT_EQ(s.index, 2);
+  EXPECT_EQ(s.f, 1.0f);
+}
+
+TEST(MotionBlurSegment, ClampsTimesOutsideTheShutter) {
+  const float keys[] = {0.0f, 0.5f, 1.0f};
+  m::Segment s = m::segmentAt(keys, 3, -0.5f);
+  EXPECT_EQ(s.index, 0);
+  EXPECT_EQ(s.f, 0.0f);
+  s = m::segmentAt(keys, 3, 2.0f);
+  EXPECT_EQ(s.index, 1);
+  EXPECT_EQ(s.f, 1.0f);
+  s = m::segmentAt(keys, 3, std::nanf(""));
+  EXPECT_EQ(s.index, 0);
+  EXPECT_EQ(s.f, 0.0f);
+  const float one[] = {0.0f};
+  s = m::segmentAt(one, 1, 0.7f);
+  EXPECT_EQ(s.index, 0);
+  EXPECT_EQ(s.f, 0.0f);
+}
+
+// Interval bounds [lower, upper] on the vertex's lerp (1 - f) * a + f * b under any rounding of
+// each operation (directed rounding of each step; every step is monotone in its rounded input).
+struct Bounds {
+  float lower, upper;
+};
+Bounds lerpBounds(float a, float b, float f) {
+  namespace r = tsah::rounding;
+  const float gl = r::subDown(1.0f, f), gh = r::subUp(1.0f, f);
+  const float pl = std::fmin(r::mulDown(gl, a), r::mulDown(gh, a));
+  const float ph = std::fmax(r::mulUp(gl, a), r::mulUp(gh, a));
+  return {r::addDown(pl, r::mulDown(f, b)), r::addUp(ph, r::mulUp(f, b))};
+}
+
+// Boxes at two keys around random vertices of the given magnitude, then random f: the lerped box
+// contains the vertex lerped with f (round-to-nearest) and every directed rounding of it.
+void checkContainment(float magnitude, uint32_t seed, bool tightBoxes) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> coord(-magnitude, magnitude);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  for (int trial = 0; trial < 20000; ++trial) {
+    const Vec3 v0{coord(rng), coord(rng), coord(rng)};
+    const Vec3 v1{coord(rng), coord(rng), coord(rng)};
+    Aabb b0, b1;
+    b0.extend(v0);
+    b1.extend(v1);
+    if (!tightBoxes) {  // other vertices widen the boxes
+      b0.extend(Vec3{coord(rng), coord(rng), coord(rng)});
+      b1.extend(Vec3{coord(rng), coord(rng), coord(rng)});
+    }
+    // f near the ends too, where the rounding of f * (b - a) matters most.
+    float f = unit(rng);
+    if (trial % 4 == 1) f = 1.0f - f * 1e-6f;
+    if (trial % 4 == 2) f = f * 1e-6f;
+    const Aabb box = m::lerpBox(b0, b1, f);
+    const Vec3 v = m::lerpVertex(v0, v1, f);
+    for (int a = 0; a < 3; ++a) {
+      ASSERT_LE(box.lo[a], v[a]) << "axis " << a << " f " << f;
+      ASSERT_GE(box.hi[a], v[a]) << "axis " << a << " f " << f;
+      const Bounds bounds = lerpBounds(v0[a], v1[a], f);
+      ASSERT_LE(box.lo[a], bounds.lower);
+      ASSERT_GE(box.hi[a], bounds.upper);
+      // The exact lerp of the vertex (double holds it to well within a float ulp).
+      const double exact = v0[a] + double(f) * (double(v1[a]) - v0[a]);
+      ASSERT_LE(box.lo[a], exact);
+      ASSERT_GE(box.hi[a], exact);
+    }
+  }
+}
+
+TEST(MotionBlurLerp, BoxContainsLerpedVertexUnderRounding) {
+  checkContainment(1.0f, 1, true);
+  checkContainment(1e4f, 2, true);
+  checkContainment(1e-30f, 3, true);
+  checkContainment(1e30f, 4, true);
+  checkContainment(100.0f, 5, false);
+}
+
+// Without the pad the lerped box misses some lerped vertices: the pad is needed, not decoration.
+TEST(MotionBlurLerp, UnpaddedLerpWouldMissVertices) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> coord(-1000.0f, 1000.0f);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  int misses = 0;
+  for (int trial = 0; trial < 20000 && misses == 0; ++trial) {
+    const float a = coord(rng), b = coord(rng), f = unit(rng);
+    if (m::lerp(a, b, f) > lerpBounds(a, b, f).lower) ++misses;
+  }
+  EXPECT_GT(misses, 0);
+}
+
+TEST(MotionBlurLerp, EndsAreTheKeyBoxesPadded) {
+  Aabb b0, b1;
+  b0.extend(Vec3{0.0f, 1.0f, 2.0f});
+  b0.extend(Vec3{1.0f, 2.0f, 3.0f});
+  b1.extend(Vec3{4.0f, 5.0f, 6.0f});
+  b1.extend(Vec3{5.0f, 6.0f, 7.0f});
+  const Aabb at0 = m::lerpBox(b0, b1, 0.0f), at1 = m::lerpBox(b0, b1, 1.0f);
+  EXPECT_TRUE(at0.contains(b0));
+  EXPECT_TRUE(at1.contains(b1));
+  EXPECT_NEAR(at0.lo.x, 0.0f, 1e-4f);
+  EXPECT_NEAR(at1.hi.z, 7.0f, 1e-4f);
+  // The vertex lerp is exact at the ends: a segment's ends are its keys bit for bit.
+  const Vec3 a{0.1f, -3.7f, 1e7f}, b{-2.3f, 5.9f, 3e-5f};
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_EQ(m::lerpVertex(a, b, 0.0f)[i], a[i]);
+    EXPECT_EQ(m::lerpVertex(a, b, 1.0f)[i], b[i]);
+  }
+}
+
+TEST(MotionBlurLerp, EmptyBoxStaysEmpty) {
+  EXPECT_TRUE(m::lerpBox(Aabb{}, Aabb{}, 0.5f).empty());
+}
+
+}  // namespace
