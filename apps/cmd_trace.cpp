@@ -59,7 +59,25 @@ struct TraceOptions {
   std::string range;    // START:END, half-open over the frame indices (empty: every frame)
   std::string stats;    // file for the JSON statistics (--stats)
   std::string devices;  // --devices all|0,2,...
+  double shutter = 0.0;                  // motion blur: fraction of the frame interval
+  std::string shutterMode = "centered";  // centered | open
 };
+
+// --shutter: the shutter of each frame; usage errors for values and combinations it cannot serve.
+tsah::Shutter parseShutter(const TraceOptions& opt, uint32_t frameCount) {
+  tsah::Shutter shutter;
+  if (!(opt.shutter >= 0.0 && opt.shutter <= 1.0))
+    throw UsageError("--shutter must be between 0 and 1 (a fraction of the time between frames)");
+  shutter.fraction = opt.shutter;
+  shutter.mode = opt.shutterMode == "open" ? tsah::Shutter::Mode::Open : tsah::Shutter::Mode::Centered;
+  if (shutter.fraction == 0.0) return shutter;
+  if (opt.rebuild != "none") throw UsageError("--shutter refits the given tree; it does not go with --rebuild");
+  if (opt.device != tsah::Device::Cpu) throw UsageError("--shutter traces on the CPU (--device cpu)");
+  if (opt.layout != tsah::Layout::Auto && opt.layout != tsah::Layout::Bvh2)
+    throw UsageError("--shutter traces the bvh2 layout (--layout bvh2 or auto)");
+  if (frameCount < 2) throw UsageError("--shutter needs at least two frames (it is a fraction of the time between them)");
+  return shutter;
+}
 
 void checkDeviceAndLayout(const TraceOptions& opt) {
   tsah::cli::checkLayoutForDevice(opt.layout, opt.device);
@@ -113,6 +131,11 @@ void runTrace(const TraceOptions& opt) {
   const uint32_t frameCount = opt.frames ? opt.frames : std::min<uint32_t>(a.keyframeCount(), 50);
   const auto [first, end] = tsah::cli::parseFrameRange(opt.range, frameCount);
   const std::vector<double> times = a.uniformTimes(frameCount);
+  runtimeOptions.shutter = parseShutter(opt, frameCount);
+  if (runtimeOptions.shutter.fraction > 0.0) {
+    runtimeOptions.layout = tsah::Layout::Bvh2;  // the layout motion blur traces
+    runtimeOptions.frameInterval = times[1] - times[0];
+  }
   // One runtime per GPU of --devices (each on its own GPU), else one: the CPU, or the GPU of this
   // rank.
   std::vector<std::unique_ptr<tsah::cli::FrameRuntime>> runtimes;
@@ -169,10 +192,13 @@ void runTrace(const TraceOptions& opt) {
   tsah::checkFitsInMemory((tsah::renderFrameBytes(settings, a.vertexCount()) + pngBytes) * runtimes.size(), opt.input,
                           "tracing " + std::to_string(opt.width) + "x" + std::to_string(opt.height) + " frames");
   const bool rebuilds = opt.rebuild != "none";
+  char blur[64] = "";
+  if (runtimeOptions.shutter.fraction > 0.0)
+    std::snprintf(blur, sizeof blur, ", shutter %g %s", opt.shutter, opt.shutterMode.c_str());
   const std::string mode =
       rebuilds ? "rebuild " + opt.rebuild + (tsah::cli::isGpuRebuild(runtimeOptions.rebuild) ? " (GPU)" : " (CPU)")
                : trees.size() > 1 ? "refit of the tree of each frame's part (" + std::to_string(trees.size()) + " trees)"
-                                  : "refit";
+                                  : std::string("refit") + blur;
   const bool leader = tsah::cli::job::leader();
   if (!opt.json && leader)
     std::printf("%u frames, %ux%u, %u AO + %u shadow rays per pixel, %s%s, %s, camera %s\n", end - first, opt.width,
@@ -235,6 +261,7 @@ void runTrace(const TraceOptions& opt) {
   out["camera"] = cameraSource;
   out["triangles"] = a.triangleCount();
   out["seed"] = opt.seed;
+  out["shutter"] = {{"fraction", opt.shutter}, {"mode", opt.shutterMode}};
   out["run_frames"] = frameCount;
   out["range"] = {first, end};
   // Wall time on rank 0: reading, baking and uploading up to the warmed-up runtimes; the frame
@@ -302,6 +329,14 @@ TSAH_REGISTER_COMMAND(70, [](CLI::App& app) {
   sub->add_option("--isa", opt->isa, "CPU SIMD kernels of a wide layout: sse, avx2 or avx512 (default auto: the best)")
       ->check(CLI::IsMember({"auto", "sse", "avx2", "avx512"}));
   sub->add_option("--seed", opt->seed, "Seed of the per-pixel random numbers (default 1)");
+  auto* shutter = sub->add_option("--shutter", opt->shutter,
+                                  "Motion blur: the shutter's length as a fraction of the time between traced frames, "
+                                  "0 to 1 (default 0: the instant); each frame is refitted at the shutter's key times "
+                                  "and each pixel traced at its own time (CPU, bvh2; docs/motion-blur.md)");
+  sub->add_option("--shutter-mode", opt->shutterMode,
+                  "centered: the shutter around the frame's time (default); open: starting at it")
+      ->check(CLI::IsMember({"centered", "open"}))
+      ->needs(shutter);
   sub->add_flag("--json", opt->json, "Print one JSON object {device, frames: [...], average: {...}}");
   sub->add_option("--range", opt->range,
                   "START:END: only the frames START .. END-1 of the run (half-open, over the frame indices of "

@@ -51,8 +51,10 @@ CpuRuntime::TreeBuilder cpuRebuilder(Rebuild rebuild, const Objective& objective
 class CpuFrameRuntime final : public FrameRuntime {
  public:
   CpuFrameRuntime(const TreeSet& trees, const anim::Animation& animation, const CpuRuntime::Config& config,
-                  CpuRuntime::TreeBuilder builder)
-      : animation_(animation),
+                  CpuRuntime::TreeBuilder builder, Shutter shutter, double frameInterval)
+      : shutter_(shutter),
+        frameInterval_(frameInterval),
+        animation_(animation),
         runtime_(trees, {animation.indices().begin(), animation.indices().end()}, animation.vertexCount(), config),
         builder_(std::move(builder)),
         positions_(animation.positionsAt(animation.startTime())) {}  // the static vertices, once
@@ -64,13 +66,20 @@ class CpuFrameRuntime final : public FrameRuntime {
   FrameUpdate update(double time) override {
     FrameUpdate u;
     const auto start = std::chrono::steady_clock::now();
-    animation_.movingPositionsAt(time, positions_);
-    u.interpolateMs = msSince(start);
-    if (builder_) {
+    if (shutter_.fraction > 0.0) {
+      // Interpolation and the refit at every key (tsah::updateShutter does both).
+      const auto [open, close] = shutterInterval(animation_, time, frameInterval_, shutter_);
+      runtime_.selectTreeAt(time);
+      updateShutter(runtime_, animation_, open, close);
+      u.refitMs = msSince(start);
+      u.keys = runtime_.blurred() ? uint32_t(runtime_.keyTimes().size()) : 1u;
+    } else if (builder_) {
+      interpolate(time, u);
       const CpuRuntime::RebuildTimings t = runtime_.rebuild(positions_, builder_);
       u.buildMs = t.boxesMs + t.buildMs + t.flattenMs;
       u.refitMs = t.refitMs;
     } else {
+      interpolate(time, u);
       const auto s = std::chrono::steady_clock::now();
       runtime_.selectTreeAt(time);  // a tree set: the tree of this frame's part
       runtime_.update(positions_);
@@ -111,6 +120,14 @@ class CpuFrameRuntime final : public FrameRuntime {
   }
 
  private:
+  void interpolate(double time, FrameUpdate& u) {
+    const auto start = std::chrono::steady_clock::now();
+    animation_.movingPositionsAt(time, positions_);
+    u.interpolateMs = msSince(start);
+  }
+
+  Shutter shutter_;
+  double frameInterval_;
   const anim::Animation& animation_;
   CpuRuntime runtime_;
   CpuRuntime::TreeBuilder builder_;
@@ -243,7 +260,8 @@ std::unique_ptr<FrameRuntime> makeFrameRuntime(const TreeSet& trees, const anim:
   config.layout = options.layout == Layout::Auto ? fastestLayout(options.isa) : options.layout;
   config.isa = options.isa;
   config.collapse = wideCollapseConfig(options.objective);
-  return std::make_unique<CpuFrameRuntime>(trees, animation, config, cpuRebuilder(options.rebuild, options.objective));
+  return std::make_unique<CpuFrameRuntime>(trees, animation, config, cpuRebuilder(options.rebuild, options.objective),
+                                           options.shutter, options.frameInterval);
 }
 
 #if TSAH_HAVE_CUDA

@@ -15,6 +15,7 @@
 #include "tsah/core/kinds.hpp"
 #include "tsah/core/objective.hpp"
 #include "tsah/io/tree_set.hpp"
+#include "tsah/pipeline.hpp"
 #include "tsah/render/camera.hpp"
 #include "tsah/render/image.hpp"
 #include "tsah/render/renderer.hpp"
@@ -27,6 +28,7 @@ namespace tsah::cli {
 // layout, also given alone as convertMs) and all of it.
 struct FrameUpdate {
   double interpolateMs = 0.0, refitMs = 0.0, buildMs = 0.0, convertMs = 0.0, updateMs = 0.0;
+  uint32_t keys = 1;  // the shutter's key times refitted (1: the instant)
 };
 
 // One rendered frame: the rays and milliseconds of each pass, and the whole frame (GPU: device time
@@ -76,6 +78,10 @@ struct FrameRuntimeOptions {
   // The tree's objective: cT, cI and the largest leaf of the rebuilds; with k, the collapse into the
   // wide layouts (CPU bvh4/bvh8, GPU cwbvh).
   Objective objective;
+  // Motion blur (CPU, bvh2): each frame refitted over its shutter (tsah::shutterInterval with
+  // frameInterval, the time between traced frames) and traced at each pixel's time.
+  Shutter shutter;
+  double frameInterval = 0.0;
 };
 
 // The runtime of `trees` (each refitted in its part of the animation, or trees.trees[0] the first

@@ -28,6 +28,7 @@ nlohmann::json frameJson(const FrameResult& r, bool rebuilds) {
   j["time"] = r.time;
   if (!rebuilds) j["tree"] = r.tree;
   j["update_ms"] = r.update.updateMs;
+  j["keys"] = r.update.keys;  // the shutter's key times (1: the instant)
   j["interpolate_ms"] = r.update.interpolateMs;
   j["refit_ms"] = r.update.refitMs;
   if (rebuilds) j["build_ms"] = r.update.buildMs;
@@ -52,6 +53,7 @@ FrameResult frameFromJson(const nlohmann::json& j) {
   r.time = j.at("time").get<double>();
   r.tree = j.value("tree", 0u);
   r.update.updateMs = j.at("update_ms").get<double>();
+  r.update.keys = j.value("keys", 1u);
   r.update.interpolateMs = j.at("interpolate_ms").get<double>();
   r.update.refitMs = j.at("refit_ms").get<double>();
   r.update.buildMs = j.value("build_ms", 0.0);

@@ -1,0 +1,28 @@
+# tsah trace --shutter: motion-blurred frames (refit at the shutter's keys, per-pixel times) and the
+# usage errors of the option.
+set(W ${TSAH_CLI_WORK})
+
+# 4 frames of a 6-keyframe animation: a centered shutter of 0.9 of the frame interval (1.5 keyframe
+# intervals) holds two keyframes in the middle frames (4 keys), one at the clamped ends (2 keys).
+add_test(NAME cli.trace.shutter.json
+         COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --frames 4 --width 32 --height 24
+                 --no-images --shutter 0.9 --json)
+set_tests_properties(cli.trace.shutter.json PROPERTIES FIXTURES_REQUIRED trace_tree
+  PASS_REGULAR_EXPRESSION "\"keys\":2.*\"keys\":4.*\"layout\":\"bvh2\".*\"shutter\":\\{\"fraction\":0.9,\"mode\":\"centered\"\\}")
+add_test(NAME cli.trace.shutter.summary
+         COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --frames 3 --width 32 --height 24
+                 --no-images --shutter 0.5 --shutter-mode open)
+set_tests_properties(cli.trace.shutter.summary PROPERTIES FIXTURES_REQUIRED trace_tree
+  PASS_REGULAR_EXPRESSION "refit, shutter 0.5 open")
+
+# Usage errors: exit 2, one line naming the option (tsah_expect_error: tests/cli/hardening.cmake).
+set(T trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --no-images --width 8 --height 8)
+tsah_expect_error(cli.trace.shutter.error.range 2 "--shutter must be between 0 and 1" ${T} --shutter 1.5)
+tsah_expect_error(cli.trace.shutter.error.rebuild 2 "does not go with --rebuild" ${T} --shutter 0.5 --rebuild binned)
+tsah_expect_error(cli.trace.shutter.error.layout 2 "--shutter traces the bvh2 layout" ${T} --shutter 0.5 --layout bvh8)
+tsah_expect_error(cli.trace.shutter.error.frames 2 "--shutter needs at least two frames" ${T} --shutter 0.5 --frames 1)
+tsah_expect_error(cli.trace.shutter.error.mode 2 "--shutter-mode requires --shutter" ${T} --shutter-mode open)
+tsah_expect_error(cli.trace.shutter.error.modename 2 "--shutter-mode" ${T} --shutter 0.5 --shutter-mode closed)
+foreach(name range rebuild layout frames mode modename)
+  set_tests_properties(cli.trace.shutter.error.${name} PROPERTIES FIXTURES_REQUIRED trace_tree)
+endforeach()
