@@ -6,8 +6,10 @@
 #include <filesystem>
 #include <memory>
 #include <optional>
+#include <limits>
 #include <random>
 
+#include "tsah/base/coordinates.hpp"
 #include "tsah/base/error.hpp"
 #include "anim/generators.hpp"
 #include "test_support.hpp"
@@ -362,4 +364,32 @@ TEST(CpuRuntime, BlurredImageMixesTheShutterAndIsDeterministic) {
   EXPECT_EQ(blurred.rgb, renderBlurred(s, 2.0, 3.0, 4, small(80, 60)).rgb);
   for (double instant : {2.0, 3.0})
     EXPECT_GT(tsah::compareImages(blurred, render(s, instant, 2, small(80, 60))).fractionAbove, 0.002) << instant;
+}
+
+// A caller's buffer passes the check an imported animation passes: the count, then every
+// coordinate finite and within tsah::kMaxCoordinate, one DataError naming the vertex.
+TEST(CpuRuntime, UpdateRefusesBadCallerPositions) {
+  const Scene s = makeScene(anim::GeneratorKind::Explode, 200);
+  tsah::CpuRuntime rt(s.tree, {s.animation.indices().begin(), s.animation.indices().end()}, s.animation.vertexCount(),
+                      tsah::CpuRuntime::Config(1));
+  const std::vector<float> good = s.animation.positionsAt(0.0);
+  const auto messageOf = [&](std::vector<float> positions) {
+    try {
+      rt.update(positions);
+    } catch (const tsah::DataError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_EQ(messageOf(std::vector<float>(good.begin(), good.end() - 3)),
+            "runtime: got " + std::to_string(good.size() - 3) + " coordinates, expected " + std::to_string(good.size()));
+  std::vector<float> bad = good;
+  bad[3 * 7 + 1] = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_EQ(messageOf(bad), "runtime: vertex 7 has a NaN or infinite coordinate");
+  bad = good;
+  bad[3 * 5] = -1e30f;
+  EXPECT_EQ(messageOf(bad), "runtime: vertex 5 has coordinate -1e+30, beyond the supported magnitude 1e+18 "
+                            "(surface areas would overflow)");
+  bad[3 * 5] = tsah::kMaxCoordinate;  // the limit itself is accepted
+  EXPECT_EQ(messageOf(bad), "no error");
 }

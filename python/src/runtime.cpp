@@ -7,6 +7,7 @@
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <span>
 #include <string>
 #include <utility>
 
@@ -18,6 +19,7 @@
 #include "tsah/core/kinds.hpp"
 #include "tsah/pipeline.hpp"
 #include "tsah/core/ray.hpp"
+#include "tsah/base/coordinates.hpp"
 #if defined(TSAH_HAVE_CUDA)
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
@@ -29,60 +31,125 @@ namespace {
 
 using namespace pybind11::literals;
 
-// origins (N, 3), directions (N, 3), tmin and tmax each a number or an array (N,).
-std::vector<Ray> makeRays(py::handle origins, py::handle directions, py::handle tmin, py::handle tmax) {
-  const auto org = checkedArray<float>(origins, "origins", Kind::Float, {-1, 3});
-  const auto dir = checkedArray<float>(directions, "directions", Kind::Float, {org.shape(0), 3});
-  const std::size_t n = std::size_t(org.shape(0));
-  auto limits = [n](py::handle value, const char* name) {
+// A float array (..., 3) as a C-contiguous (N, 3) float32 array, and its batch shape (the leading
+// dimensions, the shape of the results).
+struct Points {
+  Array<float> rows;
+  std::vector<py::ssize_t> batch;
+};
+
+Points checkedPoints(py::handle obj, const std::string& name) {
+  if (py::isinstance<py::array>(obj)) {
+    const auto a = py::reinterpret_borrow<py::array>(obj);
+    if (a.ndim() < 1 || a.shape(a.ndim() - 1) != 3)
+      throw tsah::ConfigError(name + ": expected shape (..., 3), got " + shapeText(a));
+    std::vector<py::ssize_t> batch(a.shape(), a.shape() + a.ndim() - 1);
+    const py::array rows = a.attr("reshape")(-1, 3);
+    return {checkedArray<float>(rows, name, Kind::Float, {-1, 3}), std::move(batch)};
+  }
+  return {checkedArray<float>(obj, name, Kind::Float, {-1, 3}), {}};  // refused there: not an array
+}
+
+std::string batchText(const std::vector<py::ssize_t>& shape) {
+  std::string text = "(";
+  for (std::size_t d = 0; d < shape.size(); ++d) text += (d ? ", " : "") + std::to_string(shape[d]);
+  return text + (shape.size() == 1 ? ",)" : ")");
+}
+
+// origins (..., 3), directions of the same shape, tmin and tmax each a number or an array of the
+// batch shape (...). Returns the rays and the batch shape.
+std::vector<Ray> makeRays(py::handle origins, py::handle directions, py::handle tmin, py::handle tmax,
+                          std::vector<py::ssize_t>& batch) {
+  Points org = checkedPoints(origins, "origins");
+  const Points dir = checkedPoints(directions, "directions");
+  if (dir.batch != org.batch)
+    throw tsah::ConfigError("directions: expected the shape of origins " + shapeText(py::reinterpret_borrow<py::array>(origins)) + ", got " +
+                            shapeText(py::reinterpret_borrow<py::array>(directions)));
+  batch = org.batch;
+  const std::size_t n = std::size_t(org.rows.shape(0));
+  auto limits = [&](py::handle value, const char* name) {
     std::vector<float> out(n);
+    py::object flat;  // holds a reshaped view while `value` refers to it
     if (py::isinstance<py::float_>(value) || py::isinstance<py::int_>(value)) {
       std::fill(out.begin(), out.end(), value.cast<float>());
-    } else {
-      const auto a = checkedArray<float>(value, name, Kind::Number, {py::ssize_t(n)});
-      std::copy(a.data(), a.data() + n, out.begin());
+      return out;
     }
+    if (py::isinstance<py::array>(value)) {
+      const auto a = py::reinterpret_borrow<py::array>(value);
+      if (std::vector<py::ssize_t>(a.shape(), a.shape() + a.ndim()) != batch)
+        throw tsah::ConfigError(std::string(name) + ": expected shape " + batchText(batch) + ", got " +
+                                shapeText(a));
+      flat = a.attr("reshape")(-1);
+      value = flat;
+    }
+    const auto a = checkedArray<float>(value, name, Kind::Number, {py::ssize_t(n)});
+    std::copy(a.data(), a.data() + n, out.begin());
     return out;
   };
   const std::vector<float> lo = limits(tmin, "tmin"), hi = limits(tmax, "tmax");
   std::vector<Ray> rays(n);
-  const float* o = org.data();
-  const float* d = dir.data();
+  const float* o = org.rows.data();
+  const float* d = dir.rows.data();
   for (std::size_t i = 0; i < n; ++i)
     rays[i] = {{o[3 * i], o[3 * i + 1], o[3 * i + 2]}, lo[i], {d[3 * i], d[3 * i + 1], d[3 * i + 2]}, hi[i]};
   checkRays(rays);
   return rays;
 }
 
-// tsah::Hit as a numpy record: t, u, v (float32) and triangle (int32, -1 when nothing was hit: the
-// bits of tsah::kNoHit). A miss has t = inf (as in Embree and Warp) and u = v = 0.
-py::array hitArray(std::vector<Hit> hits) {
-  for (Hit& h : hits)
-    if (!h.valid()) h = Hit{std::numeric_limits<float>::infinity(), 0.0f, 0.0f, h.tri};
+// The numpy record dtype of tsah::Hit.
+py::dtype hitDtype() {
   static_assert(sizeof(Hit) == 16 && offsetof(Hit, tri) == 12);
   py::dict spec("names"_a = py::make_tuple("t", "u", "v", "triangle"),
                 "formats"_a = py::make_tuple("<f4", "<f4", "<f4", "<i4"), "offsets"_a = py::make_tuple(0, 4, 8, 12),
                 "itemsize"_a = 16);
-  py::array out(py::dtype::from_args(spec), std::vector<py::ssize_t>{py::ssize_t(hits.size())});
+  return py::dtype::from_args(spec);
+}
+
+// The array results go to: the caller's `out` (checked: a writeable C-contiguous numpy array of
+// `dtype` and the batch shape) or a new one.
+py::array resultArray(py::handle out, const py::dtype& dtype, const std::vector<py::ssize_t>& batch) {
+  if (out.is_none()) return py::array(dtype, batch);
+  if (!py::isinstance<py::array>(out))
+    throw ArgumentTypeError("out: expected a numpy array, got " + std::string(py::str(out.get_type().attr("__name__"))));
+  auto a = py::reinterpret_borrow<py::array>(out);
+  if (!a.dtype().equal(dtype))
+    throw ArgumentTypeError("out: expected dtype " + std::string(py::str(py::handle(dtype))) + ", got " + std::string(py::str(a.dtype())));
+  if (std::vector<py::ssize_t>(a.shape(), a.shape() + a.ndim()) != batch)
+    throw tsah::ConfigError("out: expected shape " + batchText(batch) + ", got " + shapeText(a));
+  if (!(a.flags() & py::array::c_style)) throw tsah::ConfigError("out: must be C-contiguous");
+  if (!a.writeable()) throw tsah::ConfigError("out: is read-only");
+  return a;
+}
+
+// tsah::Hit as a numpy record: t, u, v (float32) and triangle (int32, -1 when nothing was hit: the
+// bits of tsah::kNoHit). A miss has t = inf (as in Embree and Warp) and u = v = 0.
+py::array hitArray(std::vector<Hit> hits, py::array out) {
+  for (Hit& h : hits)
+    if (!h.valid()) h = Hit{std::numeric_limits<float>::infinity(), 0.0f, 0.0f, h.tri};
   if (!hits.empty()) std::memcpy(out.mutable_data(), hits.data(), hits.size() * sizeof(Hit));
   return out;
 }
 
-py::array_t<bool> boolArray(const std::vector<uint8_t>& flags) {
-  py::array_t<bool> out(py::ssize_t(flags.size()));
-  bool* p = out.mutable_data();
+py::array boolArray(const std::vector<uint8_t>& flags, py::array out) {
+  bool* p = static_cast<bool*>(out.mutable_data());
   for (std::size_t i = 0; i < flags.size(); ++i) p[i] = flags[i] != 0;
   return out;
 }
 
-// Vertex positions for a refit: NaN or infinite coordinates are refused as anim::Animation refuses
-// them (their boxes would make every ray visit every node).
-std::vector<float> checkedPositions(py::handle positions, uint32_t vertices) {
-  const auto p = checkedArray<float>(positions, "positions", Kind::Float, {vertices, 3});
-  for (py::ssize_t i = 0; i < p.size(); ++i)
-    if (!std::isfinite(p.data()[i]))
-      throw tsah::DataError("positions: vertex " + std::to_string(i / 3) + " has a NaN or infinite coordinate");
-  return std::vector<float>(p.data(), p.data() + p.size());
+// Vertex positions for a refit, a float32 array (V, 3) used in place (C-contiguous numpy; other
+// float dtypes are converted). Coordinates that are NaN, infinite or beyond tsah::kMaxCoordinate
+// are refused as anim::Animation refuses them (their boxes would make every ray visit every node).
+Array<float> checkedPositions(py::handle positions, uint32_t vertices) {
+  auto p = checkedArray<float>(positions, "positions", Kind::Float, {vertices, 3});
+  const std::span<const float> values(p.data(), std::size_t(p.size()));
+  if (const std::size_t bad = firstBadCoordinate(values); bad < values.size())
+    throw tsah::DataError("positions: vertex " + std::to_string(bad / 3) + " " + describeBadCoordinate(values[bad]));
+  return p;
+}
+
+// refit's argument: a time (a Python or numpy scalar number) or vertex positions (an array).
+bool isTime(py::handle value) {
+  return !py::isinstance<py::array>(value) && !py::isinstance<py::bool_>(value) && PyNumber_Check(value.ptr()) != 0;
 }
 
 }  // namespace
@@ -92,8 +159,9 @@ class CpuTracer {
  public:
   // layout: "auto" (the widest this processor's SIMD kernels support, as `tsah trace`), "bvh2",
   // "bvh4" or "bvh8"; a wide layout is collapsed with the tree's own objective (its .tbvh header).
-  CpuTracer(const Tree& tree, anim::Animation animation, unsigned threads, const std::string& layout)
-      : animation_(std::move(animation)) {
+  // Shares the caller's Animation (kept alive by holding its Python object) instead of copying it.
+  CpuTracer(const Tree& tree, py::object animation, unsigned threads, const std::string& layout)
+      : owner_(std::move(animation)), animation_(owner_.cast<const anim::Animation&>()) {
     checkTreeMatchesAnimation(tree.file.info, "the tree", animation_, "'" + animation_.name() + "'");
     const Layout chosen = parse<Layout>(layout);
     if (chosen == Layout::Cwbvh) throw tsah::ConfigError("layout: cwbvh is a GPU layout (the CPU's are bvh2, bvh4, bvh8)");
@@ -104,31 +172,43 @@ class CpuTracer {
     runtime_ = std::make_unique<CpuRuntime>(flattenBvh(tree.file.bvh),
                                             std::vector<uint32_t>(animation_.indices().begin(), animation_.indices().end()),
                                             animation_.vertexCount(), config);
-    refit(animation_.startTime());
+    refitTime(animation_.startTime());
   }
-  void refit(double time) {
+  void refit(py::handle timeOrPositions) {
+    if (!isTime(timeOrPositions)) return refitPositions(timeOrPositions);
+    refitTime(timeOrPositions.cast<double>());
+  }
+  void refitTime(double time) {
     checkedTime(time, "time");
     py::gil_scoped_release release;
     runtime_->update(animation_.positionsAt(time));
   }
-  void refitPositions(py::handle positions) { runtime_->update(checkedPositions(positions, runtime_->vertexCount())); }
-  py::array trace(py::handle o, py::handle d, py::handle tmin, py::handle tmax) const {
-    const std::vector<Ray> rays = makeRays(o, d, tmin, tmax);
+  void refitPositions(py::handle vertices) {
+    const Array<float> positions = checkedPositions(vertices, runtime_->vertexCount());
+    py::gil_scoped_release release;
+    runtime_->update(std::span<const float>(positions.data(), std::size_t(positions.size())));
+  }
+  py::array trace(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out) const {
+    std::vector<py::ssize_t> batch;
+    const std::vector<Ray> rays = makeRays(o, d, tmin, tmax, batch);
+    py::array result = resultArray(out, hitDtype(), batch);
     std::vector<Hit> hits;
     {
       py::gil_scoped_release release;
       hits = closestHits(*runtime_, rays);
     }
-    return hitArray(std::move(hits));
+    return hitArray(std::move(hits), result);
   }
-  py::array_t<bool> occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax) const {
-    const std::vector<Ray> rays = makeRays(o, d, tmin, tmax);
+  py::array occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out) const {
+    std::vector<py::ssize_t> batch;
+    const std::vector<Ray> rays = makeRays(o, d, tmin, tmax, batch);
+    py::array result = resultArray(out, py::dtype::of<bool>(), batch);
     std::vector<uint8_t> flags;
     {
       py::gil_scoped_release release;
       flags = anyHits(*runtime_, rays);
     }
-    return boolArray(flags);
+    return boolArray(flags, result);
   }
   std::string layout() const { return name(runtime_->layoutInfo().layout); }
   const CpuRuntime& runtime() const { return *runtime_; }
@@ -143,7 +223,8 @@ class CpuTracer {
   }
 
  private:
-  anim::Animation animation_;
+  py::object owner_;  // the tsah.Animation animation_ refers to
+  const anim::Animation& animation_;
   std::unique_ptr<CpuRuntime> runtime_;
 };
 
@@ -157,31 +238,43 @@ class GpuTracer {
     config.device = device;
     config.wideObjective = tree.file.info.objective;
     runtime_ = std::make_unique<cuda::GpuRuntime>(flattenBvh(tree.file.bvh), animation, config);
-    refit(animation.startTime());
+    refitTime(animation.startTime());
   }
-  void refit(double time) {
+  void refit(py::handle timeOrPositions) {
+    if (!isTime(timeOrPositions)) return refitPositions(timeOrPositions);
+    refitTime(timeOrPositions.cast<double>());
+  }
+  void refitTime(double time) {
     checkedTime(time, "time");
     py::gil_scoped_release release;
     runtime_->updateAt(time);
   }
-  void refitPositions(py::handle positions) { runtime_->update(checkedPositions(positions, runtime_->vertexCount())); }
-  py::array trace(py::handle o, py::handle d, py::handle tmin, py::handle tmax) {
-    const std::vector<Ray> rays = makeRays(o, d, tmin, tmax);
+  void refitPositions(py::handle vertices) {
+    const Array<float> positions = checkedPositions(vertices, runtime_->vertexCount());
+    py::gil_scoped_release release;
+    runtime_->update(std::span<const float>(positions.data(), std::size_t(positions.size())));
+  }
+  py::array trace(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out) {
+    std::vector<py::ssize_t> batch;
+    const std::vector<Ray> rays = makeRays(o, d, tmin, tmax, batch);
+    py::array result = resultArray(out, hitDtype(), batch);
     std::vector<Hit> hits;
     {
       py::gil_scoped_release release;
       hits = runtime_->closestHits(rays);
     }
-    return hitArray(std::move(hits));
+    return hitArray(std::move(hits), result);
   }
-  py::array_t<bool> occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax) {
-    const std::vector<Ray> rays = makeRays(o, d, tmin, tmax);
+  py::array occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out) {
+    std::vector<py::ssize_t> batch;
+    const std::vector<Ray> rays = makeRays(o, d, tmin, tmax, batch);
+    py::array result = resultArray(out, py::dtype::of<bool>(), batch);
     std::vector<uint8_t> flags;
     {
       py::gil_scoped_release release;
       flags = runtime_->anyHits(rays);
     }
-    return boolArray(flags);
+    return boolArray(flags, result);
   }
   std::string deviceName() const { return runtime_->device().name; }
   cuda::GpuRuntime& runtime() { return *runtime_; }
@@ -193,14 +286,22 @@ class GpuTracer {
 
 namespace {
 
+constexpr const char* kRefitDoc = R"doc(
+refit(time) (a float): refits to the animation at this time (interpolated, clamped). refit(positions): refits to
+these vertex positions, a float array (V, 3) (float32 is used in place); every coordinate must be
+finite and within 1e18, as in an imported animation. The GIL is released while the refit runs.
+)doc";
 constexpr const char* kTraceDoc = R"doc(
-Closest hits of rays against the current frame. origins, directions: float arrays (N, 3) (directions
-need not be normalized; t is in units of the direction); tmin, tmax: numbers or arrays (N,).
-Returns a numpy record array (N,) with fields t, u, v (float32) and triangle (int32: the triangle id
-in the animation, -1 when the ray hits nothing); the hit point is (1-u-v)*v0 + u*v1 + v*v2.
+Closest hits of rays against the current frame. origins, directions: float arrays (..., 3) of one
+shape (directions need not be normalized; t is in units of the direction); tmin, tmax: numbers or
+arrays of the batch shape (...). Returns a numpy record array of the batch shape with fields t, u, v
+(float32) and triangle (int32: the triangle id in the animation, -1 when the ray hits nothing; t is
+inf then); the hit point is (1-u-v)*v0 + u*v1 + v*v2. out: a C-contiguous array of that dtype and
+shape to write into (returned). The GIL is released while tracing.
 )doc";
 constexpr const char* kOccludedDoc =
-    "True for each ray that hits anything within (tmin, tmax) (shadow / ambient-occlusion queries).";
+    "True for each ray that hits anything within (tmin, tmax) (shadow / ambient-occlusion queries); a bool "
+    "array of the batch shape, or written into out= (bool, C-contiguous).";
 
 }  // namespace
 
@@ -212,18 +313,17 @@ it was built for (checked: triangle count, vertex count, topology), traced on th
 first frame. layout: "auto" (the widest layout this processor's SIMD kernels support, as `tsah
 trace`), "bvh2", "bvh4" or "bvh8"; a wide layout is the tree collapsed with its own objective.
 )doc")
-      .def(py::init([](const Tree& tree, anim::Animation animation, py::handle threads, const std::string& layout) {
+      .def(py::init([](const Tree& tree, py::object animation, py::handle threads, const std::string& layout) {
              return std::make_unique<CpuTracer>(tree, std::move(animation), checkedInteger<unsigned>(threads, "threads"),
                                                 layout);
            }),
            "tree"_a, "animation"_a, "threads"_a = 0, "layout"_a = "auto")
-      .def("refit", &CpuTracer::refit, "time"_a,
-           "Refits the boxes to the animation at this time (interpolated, clamped) and recomputes the Woop triangles.")
-      .def("refit_positions", &CpuTracer::refitPositions, "positions"_a,
-           "Refits to given vertex positions, a float array (V, 3).")
-      .def("trace", &CpuTracer::trace, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf, kTraceDoc)
+      .def("refit", &CpuTracer::refit, "time"_a, kRefitDoc)
+      .def("refit_positions", &CpuTracer::refitPositions, "positions"_a, "The same as refit(positions) (vertex positions only).")
+      .def("trace", &CpuTracer::trace, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf,
+           "out"_a = py::none(), kTraceDoc)
       .def("occluded", &CpuTracer::occluded, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf,
-           kOccludedDoc)
+           "out"_a = py::none(), kOccludedDoc)
       .def_property_readonly("bounds", &CpuTracer::bounds, "Bounds of the current frame, float32 (2, 3).")
       .def_property_readonly("layout", &CpuTracer::layout, "The layout traced: bvh2, bvh4 or bvh8.");
 
@@ -238,11 +338,12 @@ uploaded once; refit and traversal run on the GPU). Raises tsah.Failure when no 
              return std::make_unique<GpuTracer>(tree, animation, checkedInteger<int>(device, "device", 0));
            }),
            "tree"_a, "animation"_a, "device"_a = 0)
-      .def("refit", &GpuTracer::refit, "time"_a, "Refits on the device to the animation at this time.")
-      .def("refit_positions", &GpuTracer::refitPositions, "positions"_a, "Refits to given vertex positions (V, 3).")
-      .def("trace", &GpuTracer::trace, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf, kTraceDoc)
+      .def("refit", &GpuTracer::refit, "time"_a, kRefitDoc)
+      .def("refit_positions", &GpuTracer::refitPositions, "positions"_a, "The same as refit(positions) (vertex positions only).")
+      .def("trace", &GpuTracer::trace, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf,
+           "out"_a = py::none(), kTraceDoc)
       .def("occluded", &GpuTracer::occluded, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf,
-           kOccludedDoc)
+           "out"_a = py::none(), kOccludedDoc)
       .def_property_readonly("device_name", &GpuTracer::deviceName, "The name of the GPU the runtime uses.");
 #else
   m.attr("cuda_built") = false;

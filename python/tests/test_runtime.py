@@ -137,15 +137,15 @@ def test_wrong_ray_arrays_raise_clear_errors(wave):
         runtime.trace(o.astype(np.int64), d)
     with pytest.raises(TypeError, match="directions: expected a numpy array"):
         runtime.trace(o, [[1, 1, 1]] * 4)
-    with pytest.raises(ValueError, match=r"origins: expected shape \(N, 3\), got \(4, 2\)"):
+    with pytest.raises(ValueError, match=r"origins: expected shape \(\.\.\., 3\), got \(4, 2\)"):
         runtime.trace(o[:, :2], d)
-    with pytest.raises(ValueError, match=r"directions: expected shape \(4, 3\), got \(3, 3\)"):
+    with pytest.raises(ValueError, match=r"directions: expected the shape of origins \(4, 3\), got \(3, 3\)"):
         runtime.trace(o, d[:3])
     with pytest.raises(ValueError, match=r"tmax: expected shape \(4,\), got \(5,\)"):
         runtime.occluded(o, d, tmax=np.ones(5))
     with pytest.raises(TypeError, match="tmin"):
         runtime.trace(o, d, tmin="near")
-    with pytest.raises(ValueError, match="positions"):
+    with pytest.raises(ValueError, match=r"positions: expected shape \(\d+, 3\)"):
         runtime.refit_positions(np.zeros((animation.vertex_count + 1, 3), dtype=np.float32))
     with pytest.raises(TypeError):
         runtime.refit_positions(np.zeros((animation.vertex_count, 3), dtype=np.int32))

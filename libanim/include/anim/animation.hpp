@@ -14,6 +14,8 @@
 #include <string>
 #include <vector>
 
+#include "tsah/base/coordinates.hpp"
+
 namespace anim {
 
 struct Bounds {
@@ -52,18 +54,15 @@ struct CameraKey {
   float fovyDegrees = 45.0f;
 };
 
-// Largest coordinate magnitude accepted anywhere: a box of this extent still has a finite surface
-// area in float (3 * (2e18)^2 << 3.4e38), with room for the sums of costs. Larger coordinates (or
-// NaN/Inf) are refused at import, naming the first offending vertex.
-inline constexpr float kMaxCoordinate = 1e18f;
+// Largest coordinate magnitude accepted anywhere (tsah/base/coordinates.hpp).
+using tsah::kMaxCoordinate;
 // Smallest extent (the largest side of the bounding box over every keyframe) accepted for a model
 // that is not a single point: the surface area of a box of this size is still a normal float
 // (1e-36 > 1.2e-38); below it the costs of a tree underflow to zero and the tree is degenerate.
 inline constexpr float kMinExtent = 1e-18f;
-// Index of the first coordinate that is NaN, infinite or beyond kMaxCoordinate; size() if none.
-std::size_t firstBadCoordinate(std::span<const float> positions);
-// "has a NaN or infinite coordinate" / "has coordinate 3e+38, beyond ..." for that coordinate.
-std::string describeBadCoordinate(float value);
+// The coordinate check (tsah/base/coordinates.hpp), shared with the runtimes' caller buffers.
+using tsah::describeBadCoordinate;
+using tsah::firstBadCoordinate;
 
 class Animation {
  public:

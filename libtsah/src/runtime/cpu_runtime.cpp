@@ -9,6 +9,7 @@
 #include <chrono>
 #include <thread>
 
+#include "tsah/base/coordinates.hpp"
 #include "tsah/base/error.hpp"
 #include "tsah/core/cost.hpp"
 #include "layout/refit_plan.hpp"
@@ -214,6 +215,9 @@ void CpuRuntime::setPositions(std::span<const float> positions) {
   if (positions.size() != std::size_t(vertexCount_) * 3)
     throw tsah::DataError("runtime: got " + std::to_string(positions.size()) + " coordinates, expected " +
                           std::to_string(std::size_t(vertexCount_) * 3));
+  // The limit every imported animation obeys: a NaN or huge coordinate would make every box infinite.
+  if (const std::size_t bad = firstBadCoordinate(positions); bad < positions.size())
+    throw tsah::DataError("runtime: vertex " + std::to_string(bad / 3) + " " + describeBadCoordinate(positions[bad]));
   positions_.assign(positions.begin(), positions.end());
 }
 

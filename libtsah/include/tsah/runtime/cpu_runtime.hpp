@@ -83,7 +83,8 @@ class CpuRuntime {
   CpuRuntime& operator=(const CpuRuntime&) = delete;
 
   // Takes this frame's vertex positions (vertexCount * 3 floats), refits every box and recomputes
-  // the Woop triangles.
+  // the Woop triangles. Throws tsah::DataError ("runtime: ...") for a wrong count or a coordinate
+  // that is NaN, infinite or beyond tsah::kMaxCoordinate (the limit imported animations obey).
   void update(std::span<const float> positions);
   // Takes this frame's positions and replaces the tree by builder(triangle boxes), then refits as
   // update() does (which also computes the Woop triangles).
