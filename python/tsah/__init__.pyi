@@ -179,15 +179,15 @@ class CpuRuntime:
 
     def __init__(self, tree: Tree, animation: Animation, threads: _Integer = 0, layout: str = "auto") -> None:
         """layout: 'auto' (the widest SIMD layout of this processor), 'bvh2', 'bvh4' or 'bvh8'."""
-    def refit(self, time: _Number) -> None:
-        """Refits the boxes to the animation at this time (interpolated, clamped)."""
+    def refit(self, time: _Number | _ArrayLike) -> None:
+        """Refits to the animation at this time (interpolated, clamped), or to vertex positions, a float array (V, 3)."""
     def refit_positions(self, positions: _ArrayLike) -> None:
         """Refits to given vertex positions, a float array (V, 3)."""
     def trace(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
-              tmax: _ArrayLike = float("inf")) -> np.recarray[Any, Any]:
+              tmax: _ArrayLike = float("inf"), out: Any = None) -> np.recarray[Any, Any]:
         """Closest hits: a record array (N,) with t, u, v and triangle (-1 and t = inf for a miss)."""
     def occluded(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
-                 tmax: _ArrayLike = float("inf")) -> npt.NDArray[np.bool_]:
+                 tmax: _ArrayLike = float("inf"), out: Any = None) -> npt.NDArray[np.bool_]:
         """True for each ray that hits anything within (tmin, tmax)."""
     def closest_points(self, points: _ArrayLike, radius: _ArrayLike = float("inf")) -> np.recarray[Any, Any]:
         """For each point (N, 3), the closest point on the current frame's triangles within radius: a record
@@ -208,15 +208,15 @@ class GpuRuntime:
 
     def __init__(self, tree: Tree, animation: Animation, device: _Integer = 0) -> None:
         """device: the CUDA device index. Raises tsah.Failure when no device is usable."""
-    def refit(self, time: _Number) -> None:
-        """Refits on the device to the animation at this time."""
+    def refit(self, time: _Number | _ArrayLike) -> None:
+        """Refits on the device to the animation at this time, or to vertex positions (V, 3)."""
     def refit_positions(self, positions: _ArrayLike) -> None:
         """Refits to given vertex positions (V, 3)."""
     def trace(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
-              tmax: _ArrayLike = float("inf")) -> np.recarray[Any, Any]:
+              tmax: _ArrayLike = float("inf"), out: Any = None) -> np.recarray[Any, Any]:
         """Closest hits, as CpuRuntime.trace."""
     def occluded(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
-                 tmax: _ArrayLike = float("inf")) -> npt.NDArray[np.bool_]:
+                 tmax: _ArrayLike = float("inf"), out: Any = None) -> npt.NDArray[np.bool_]:
         """True for each ray that hits anything within (tmin, tmax)."""
     def closest_points(self, points: _ArrayLike, radius: _ArrayLike = float("inf")) -> np.recarray[Any, Any]:
         """For each point (N, 3), the closest point on the current frame's triangles within radius: a record
