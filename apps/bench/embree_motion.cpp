@@ -10,9 +10,11 @@
 
 #include <chrono>
 #include <cstring>
+#include <memory>
 #include <mutex>
 #include <string>
 
+#include "bench/embree_device.hpp"
 #include "tsah/base/error.hpp"
 #endif
 
@@ -28,18 +30,12 @@ float embreeStepTime(std::span<const float> keyFractions, float tau) {
 #if TSAH_HAVE_EMBREE
 
 struct EmbreeMotionPeer::Impl {
-  RTCDevice device = nullptr;
+  std::unique_ptr<EmbreeDevice> device;
   RTCScene scene = nullptr;
   std::vector<uint32_t> indices;
   uint32_t vertexCount = 0, steps = 0;
-  std::mutex errorMutex;
-  std::string error;  // the first error Embree reported
 
-  void check(const char* what) {
-    if (rtcGetDeviceError(device) == RTC_ERROR_NONE) return;
-    std::lock_guard<std::mutex> lock(errorMutex);
-    throw tsah::Failure(std::string("Embree: ") + what + " failed" + (error.empty() ? "" : ": " + error));
-  }
+  void check(const char* what) { device->check(what); }
 };
 
 EmbreeMotionPeer::EmbreeMotionPeer(std::span<const uint32_t> indices, uint32_t vertexCount, unsigned threads)
@@ -47,22 +43,11 @@ EmbreeMotionPeer::EmbreeMotionPeer(std::span<const uint32_t> indices, uint32_t v
   Impl& m = *impl_;
   m.indices.assign(indices.begin(), indices.end());
   m.vertexCount = vertexCount;
-  const std::string config = threads > 0 ? "threads=" + std::to_string(threads) : std::string();
-  m.device = rtcNewDevice(config.empty() ? nullptr : config.c_str());
-  if (!m.device) throw tsah::Failure("Embree: cannot create a device (rtcNewDevice)");
-  rtcSetDeviceErrorFunction(
-      m.device,
-      [](void* user, RTCError, const char* message) {
-        auto* impl = static_cast<Impl*>(user);
-        std::lock_guard<std::mutex> lock(impl->errorMutex);
-        if (impl->error.empty() && message) impl->error = message;
-      },
-      &m);
+  m.device = std::make_unique<EmbreeDevice>(threads);
 }
 
 EmbreeMotionPeer::~EmbreeMotionPeer() {
   if (impl_->scene) rtcReleaseScene(impl_->scene);
-  if (impl_->device) rtcReleaseDevice(impl_->device);
 }
 
 uint32_t EmbreeMotionPeer::timeSteps() const { return impl_->steps; }
@@ -78,9 +63,9 @@ double EmbreeMotionPeer::build(std::span<const std::vector<float>> stepPositions
   const auto start = std::chrono::steady_clock::now();
   // A new scene each time: the number of time steps may change from frame to frame.
   if (m.scene) rtcReleaseScene(m.scene);
-  m.scene = rtcNewScene(m.device);
+  m.scene = rtcNewScene(m.device->get());
   rtcSetSceneBuildQuality(m.scene, RTC_BUILD_QUALITY_MEDIUM);
-  RTCGeometry geometry = rtcNewGeometry(m.device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  RTCGeometry geometry = rtcNewGeometry(m.device->get(), RTC_GEOMETRY_TYPE_TRIANGLE);
   rtcSetGeometryTimeStepCount(geometry, unsigned(stepPositions.size()));
   for (std::size_t k = 0; k < stepPositions.size(); ++k) {
     auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, unsigned(k),

@@ -6,28 +6,45 @@
 #include <chrono>
 #include <cstring>
 #include <limits>
+#include <memory>
 #include <mutex>
 
+#include "bench/embree_device.hpp"
 #include "tsah/base/error.hpp"
 
 namespace tsah::bench {
 
 struct EmbreePeer::Impl {
-  RTCDevice device = nullptr;
+  std::unique_ptr<EmbreeDevice> device;
   RTCScene scene = nullptr;
   RTCGeometry geometry = nullptr;
   float* vertices = nullptr;
   uint32_t vertexCount = 0;
-  std::mutex errorMutex;
-  std::string error;  // the first error Embree reported
 
-  void check(const char* what) {
-    const RTCError code = rtcGetDeviceError(device);
-    if (code == RTC_ERROR_NONE) return;
-    std::lock_guard<std::mutex> lock(errorMutex);
-    throw tsah::Failure(std::string("Embree: ") + what + " failed" + (error.empty() ? "" : ": " + error));
-  }
+  void check(const char* what) { device->check(what); }
 };
+
+EmbreeDevice::EmbreeDevice(unsigned threads) {
+  const std::string config = threads > 0 ? "threads=" + std::to_string(threads) : std::string();
+  device_ = rtcNewDevice(config.empty() ? nullptr : config.c_str());
+  if (!device_) throw tsah::Failure("Embree: cannot create a device (rtcNewDevice)");
+  rtcSetDeviceErrorFunction(
+      device_,
+      [](void* user, RTCError, const char* message) {
+        auto* self = static_cast<EmbreeDevice*>(user);
+        std::lock_guard<std::mutex> lock(self->mutex_);
+        if (self->error_.empty() && message) self->error_ = message;
+      },
+      this);
+}
+
+EmbreeDevice::~EmbreeDevice() { rtcReleaseDevice(device_); }
+
+void EmbreeDevice::check(const char* what) {
+  if (rtcGetDeviceError(device_) == RTC_ERROR_NONE) return;
+  std::lock_guard<std::mutex> lock(mutex_);
+  throw tsah::Failure(std::string("Embree: ") + what + " failed" + (error_.empty() ? "" : ": " + error_));
+}
 
 const char* EmbreePeer::modeName(Mode mode) {
   switch (mode) {
@@ -42,18 +59,8 @@ EmbreePeer::EmbreePeer(std::span<const uint32_t> indices, uint32_t vertexCount, 
     : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   m.vertexCount = vertexCount;
-  const std::string config = threads > 0 ? "threads=" + std::to_string(threads) : std::string();
-  m.device = rtcNewDevice(config.empty() ? nullptr : config.c_str());
-  if (!m.device) throw tsah::Failure("Embree: cannot create a device (rtcNewDevice)");
-  rtcSetDeviceErrorFunction(
-      m.device,
-      [](void* user, RTCError, const char* message) {
-        auto* impl = static_cast<Impl*>(user);
-        std::lock_guard<std::mutex> lock(impl->errorMutex);
-        if (impl->error.empty() && message) impl->error = message;
-      },
-      &m);
-  m.scene = rtcNewScene(m.device);
+  m.device = std::make_unique<EmbreeDevice>(threads);
+  m.scene = rtcNewScene(m.device->get());
   // Refit needs the two-level mode (scene quality LOW), the only one in which Embree honours a
   // per-geometry build quality; the rebuilds use one BVH over all triangles of the given quality.
   switch (mode) {
@@ -64,7 +71,7 @@ EmbreePeer::EmbreePeer(std::span<const uint32_t> indices, uint32_t vertexCount, 
       rtcSetSceneFlags(m.scene, RTC_SCENE_FLAG_DYNAMIC);
       break;
   }
-  m.geometry = rtcNewGeometry(m.device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  m.geometry = rtcNewGeometry(m.device->get(), RTC_GEOMETRY_TYPE_TRIANGLE);
   if (mode == Mode::Refit) rtcSetGeometryBuildQuality(m.geometry, RTC_BUILD_QUALITY_REFIT);
   m.vertices = static_cast<float*>(rtcSetNewGeometryBuffer(m.geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
                                                            3 * sizeof(float), vertexCount));
@@ -82,7 +89,6 @@ EmbreePeer::EmbreePeer(std::span<const uint32_t> indices, uint32_t vertexCount, 
 EmbreePeer::~EmbreePeer() {
   if (impl_->geometry) rtcReleaseGeometry(impl_->geometry);
   if (impl_->scene) rtcReleaseScene(impl_->scene);
-  if (impl_->device) rtcReleaseDevice(impl_->device);
 }
 
 double EmbreePeer::update(std::span<const float> positions) {
