@@ -552,42 +552,23 @@ Aabb GpuRuntime::bounds() const {
 namespace {
 
 template <typename Result>
-std::vector<Result> traceHostRays(GpuRuntime::Impl& m, std::span<const Ray> rays, bool anyHit, RayPassStats* stats) {
+std::vector<Result> traceInstant(GpuRuntime::Impl& m, std::span<const Ray> rays, RayPassStats* stats) {
   m.requireTraceable();
-  std::vector<Result> out(rays.size());
-  if (rays.empty()) {
-    if (stats) *stats = {};
-    return out;
-  }
-  if (rays.size() > 0xffffffffu) throw tsah::ConfigError("GPU runtime: too many rays in one call");
-  const auto count = static_cast<uint32_t>(rays.size());
-  m.rays.reserve(count);
-  m.rays.upload(rays, m.stream);
-  if (anyHit)
-    m.occluded.reserve(count);
-  else
-    m.hits.reserve(count);
-  m.words.fillBytes(0, m.stream);
-  m.events.record(0, m.stream);
-  detail::launchTrace(m.scene(), m.rays.data(), count, anyHit ? nullptr : m.hits.data(),
-                      anyHit ? m.occluded.data() : nullptr, m.words.data(), m.traceLaunch(), m.stream);
-  m.events.record(1, m.stream);
-  m.events.wait(1);
-  if (stats) *stats = {count, m.events.ms(0, 1)};
-  void* src = anyHit ? static_cast<void*>(m.occluded.data()) : static_cast<void*>(m.hits.data());
-  CUDA_CHECK(cudaMemcpyAsync(out.data(), src, out.size() * sizeof(Result), cudaMemcpyDeviceToHost, m.stream));
-  CUDA_CHECK(cudaStreamSynchronize(m.stream));
-  return out;
+  return traceHostRays<Result>(
+      m, rays, stats, [&](uint32_t) { m.words.fillBytes(0, m.stream); },
+      [&](uint32_t count, Hit* hits, uint8_t* occluded) {
+        detail::launchTrace(m.scene(), m.rays.data(), count, hits, occluded, m.words.data(), m.traceLaunch(), m.stream);
+      });
 }
 
 }  // namespace
 
 std::vector<Hit> GpuRuntime::closestHits(std::span<const Ray> rays, RayPassStats* stats) {
-  return traceHostRays<Hit>(*impl_, rays, false, stats);
+  return traceInstant<Hit>(*impl_, rays, stats);
 }
 
 std::vector<uint8_t> GpuRuntime::anyHits(std::span<const Ray> rays, RayPassStats* stats) {
-  return traceHostRays<uint8_t>(*impl_, rays, true, stats);
+  return traceInstant<uint8_t>(*impl_, rays, stats);
 }
 
 }  // namespace tsah::cuda

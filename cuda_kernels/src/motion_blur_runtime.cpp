@@ -135,22 +135,7 @@ namespace {
 
 template <typename Result>
 std::vector<Result> traceBlurred(GpuRuntime::Impl& m, std::span<const Ray> rays, std::span<const float> times,
-                                 bool anyHit, RayPassStats* stats) {
-  std::vector<Result> out(rays.size());
-  if (rays.empty()) {
-    if (stats) *stats = {};
-    return out;
-  }
-  if (rays.size() > 0xffffffffu) throw tsah::ConfigError("GPU runtime: too many rays in one call");
-  const auto count = static_cast<uint32_t>(rays.size());
-  m.rays.reserve(count);
-  m.rays.upload(rays, m.stream);
-  m.rayTimes.reserve(count);
-  m.rayTimes.upload(times, m.stream);
-  if (anyHit)
-    m.occluded.reserve(count);
-  else
-    m.hits.reserve(count);
+                                 RayPassStats* stats) {
   detail::BlurredScene scene;
   scene.keyNodes = m.keyNodes.data();
   scene.keyRoots = m.keyRoots.data();
@@ -161,16 +146,15 @@ std::vector<Result> traceBlurred(GpuRuntime::Impl& m, std::span<const Ray> rays,
   scene.keys = m.shutterKeys;
   scene.interiorCount = m.tree().topology.interiorCount;
   scene.vertexCoords = uint64_t(m.vertices) * 3;
-  m.events.record(0, m.stream);
-  detail::launchBlurredTrace(scene, m.rays.data(), m.rayTimes.data(), count, anyHit ? nullptr : m.hits.data(),
-                             anyHit ? m.occluded.data() : nullptr, m.stream);
-  m.events.record(1, m.stream);
-  m.events.wait(1);
-  if (stats) *stats = {count, m.events.ms(0, 1)};
-  void* src = anyHit ? static_cast<void*>(m.occluded.data()) : static_cast<void*>(m.hits.data());
-  CUDA_CHECK(cudaMemcpyAsync(out.data(), src, out.size() * sizeof(Result), cudaMemcpyDeviceToHost, m.stream));
-  CUDA_CHECK(cudaStreamSynchronize(m.stream));
-  return out;
+  return traceHostRays<Result>(
+      m, rays, stats,
+      [&](uint32_t count) {
+        m.rayTimes.reserve(count);
+        m.rayTimes.upload(times, m.stream);
+      },
+      [&](uint32_t count, Hit* hits, uint8_t* occluded) {
+        detail::launchBlurredTrace(scene, m.rays.data(), m.rayTimes.data(), count, hits, occluded, m.stream);
+      });
 }
 
 void checkTimeCount(std::span<const Ray> rays, std::span<const float> times) {
@@ -185,14 +169,14 @@ std::vector<Hit> GpuRuntime::closestHits(std::span<const Ray> rays, std::span<co
                                          RayPassStats* stats) {
   checkTimeCount(rays, times);
   if (!blurred()) return closestHits(rays, stats);
-  return traceBlurred<Hit>(*impl_, rays, times, false, stats);
+  return traceBlurred<Hit>(*impl_, rays, times, stats);
 }
 
 std::vector<uint8_t> GpuRuntime::anyHits(std::span<const Ray> rays, std::span<const float> times,
                                          RayPassStats* stats) {
   checkTimeCount(rays, times);
   if (!blurred()) return anyHits(rays, stats);
-  return traceBlurred<uint8_t>(*impl_, rays, times, true, stats);
+  return traceBlurred<uint8_t>(*impl_, rays, times, stats);
 }
 
 }  // namespace tsah::cuda

@@ -4,6 +4,7 @@
 #include <cuda_runtime_api.h>
 
 #include <memory>
+#include <type_traits>
 #include <vector>
 
 #include "device_types.hpp"
@@ -11,6 +12,8 @@
 #include "kernels.hpp"
 #include "rebuild.hpp"
 #include "tsah/layout/cwbvh_build.hpp"
+#include "tsah/base/error.hpp"
+#include "tsah_cuda/cuda_check.hpp"
 #include "tsah_cuda/device_buffer.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 
@@ -170,5 +173,37 @@ struct GpuRuntime::Impl {
   DeviceBuffer<float> normals;           // smooth shading normals of the current frame
   DeviceBuffer<uint8_t> image;
 };
+
+// Traces host rays: uploads them, runs prepare(count) (more uploads), then launch(count, hits,
+// occluded) between events 0 and 1 on the runtime's stream, and downloads the closest hits (Result
+// Hit) or the occlusion flags (Result uint8_t). stats: the ray count and the launch's device time.
+template <typename Result, typename Prepare, typename Launch>
+std::vector<Result> traceHostRays(GpuRuntime::Impl& m, std::span<const Ray> rays, RayPassStats* stats,
+                                  Prepare&& prepare, Launch&& launch) {
+  constexpr bool anyHit = std::is_same_v<Result, uint8_t>;
+  std::vector<Result> out(rays.size());
+  if (rays.empty()) {
+    if (stats) *stats = {};
+    return out;
+  }
+  if (rays.size() > 0xffffffffu) throw tsah::ConfigError("GPU runtime: too many rays in one call");
+  const auto count = static_cast<uint32_t>(rays.size());
+  m.rays.reserve(count);
+  m.rays.upload(rays, m.stream);
+  if (anyHit)
+    m.occluded.reserve(count);
+  else
+    m.hits.reserve(count);
+  prepare(count);
+  m.events.record(0, m.stream);
+  launch(count, anyHit ? nullptr : m.hits.data(), anyHit ? m.occluded.data() : nullptr);
+  m.events.record(1, m.stream);
+  m.events.wait(1);
+  if (stats) *stats = {count, m.events.ms(0, 1)};
+  void* src = anyHit ? static_cast<void*>(m.occluded.data()) : static_cast<void*>(m.hits.data());
+  CUDA_CHECK(cudaMemcpyAsync(out.data(), src, out.size() * sizeof(Result), cudaMemcpyDeviceToHost, m.stream));
+  CUDA_CHECK(cudaStreamSynchronize(m.stream));
+  return out;
+}
 
 }  // namespace tsah::cuda
