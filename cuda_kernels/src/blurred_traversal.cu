@@ -1,6 +1,7 @@
 // The trace kernel of a blurred frame over a ray buffer with one shutter fraction per ray: one
-// thread per ray, blurred_traversal.cuh's traversal.
-#include "blurred_traversal.cuh"
+// thread per ray, the CPU runtime's traversal of a MotionBvhView (tsah/layout/traversal.hpp: boxes
+// and triangles lerped at the ray's time by tsah/layout/motion_blur.hpp).
+#include "blurred_trace.hpp"
 #include "launch.hpp"
 
 namespace tsah::cuda::detail {
@@ -8,28 +9,27 @@ namespace tsah::cuda::detail {
 namespace {
 
 template <bool AnyHit>
-__global__ void __launch_bounds__(128) blurredTraceKernel(BlurredScene scene, const Ray* __restrict__ rays,
+__global__ void __launch_bounds__(128) blurredTraceKernel(MotionBvhView frame, const Ray* __restrict__ rays,
                                                           const float* __restrict__ times, uint32_t count,
                                                           Hit* __restrict__ hits, uint8_t* __restrict__ occluded) {
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= count) return;
-  const Hit h = blurredTrace<AnyHit>(scene, rays[i], times[i]);
   if constexpr (AnyHit)
-    occluded[i] = h.valid() ? 1 : 0;
+    occluded[i] = anyHit(frame, rays[i], times[i]) ? 1 : 0;
   else
-    hits[i] = h;
+    hits[i] = closestHit(frame, rays[i], times[i]);
 }
 
 }  // namespace
 
-void launchBlurredTrace(const BlurredScene& scene, const Ray* rays, const float* times, uint32_t count, Hit* hits,
+void launchBlurredTrace(const MotionBvhView& frame, const Ray* rays, const float* times, uint32_t count, Hit* hits,
                         uint8_t* occluded, cudaStream_t stream) {
   if (count == 0) return;
   const unsigned block = 128;
   if (occluded)
-    blurredTraceKernel<true><<<gridFor(count, block), block, 0, stream>>>(scene, rays, times, count, hits, occluded);
+    blurredTraceKernel<true><<<gridFor(count, block), block, 0, stream>>>(frame, rays, times, count, hits, occluded);
   else
-    blurredTraceKernel<false><<<gridFor(count, block), block, 0, stream>>>(scene, rays, times, count, hits, occluded);
+    blurredTraceKernel<false><<<gridFor(count, block), block, 0, stream>>>(frame, rays, times, count, hits, occluded);
   CUDA_CHECK_LAUNCH("blurredTraceKernel");
 }
 

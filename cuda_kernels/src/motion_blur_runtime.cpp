@@ -50,7 +50,7 @@ UpdateTimings GpuRuntime::Impl::refitKeys(std::span<const float> keyTimes, Refit
   DeviceTree& t = tree();
   const std::size_t interior = t.topology.interiorCount, coords = std::size_t(vertices) * 3;
   keyNodes.reserve(std::size_t(keys) * interior);
-  keyRoots.reserve(keys);
+  keyRootBoxes.reserve(keys);
   keyPositions.reserve(std::size_t(keys) * coords);
   UpdateTimings total;
   for (uint32_t k = 0; k < keys; ++k) {
@@ -62,8 +62,8 @@ UpdateTimings GpuRuntime::Impl::refitKeys(std::span<const float> keyTimes, Refit
     if (interior)
       CUDA_CHECK(cudaMemcpyAsync(keyNodes.data() + k * interior, t.nodes.data(), interior * sizeof(GpuBvhNode),
                                  cudaMemcpyDeviceToDevice, stream));
-    CUDA_CHECK(cudaMemcpyAsync(keyRoots.data() + k, t.root.data(), sizeof(detail::RootInfo),
-                               cudaMemcpyDeviceToDevice, stream));
+    CUDA_CHECK(cudaMemcpyAsync(keyRootBoxes.data() + k, &t.root.data()->box, sizeof(Aabb), cudaMemcpyDeviceToDevice,
+                               stream));
     CUDA_CHECK(cudaMemcpyAsync(keyPositions.data() + k * coords, positions.data(), coords * sizeof(float),
                                cudaMemcpyDeviceToDevice, stream));
   }
@@ -113,10 +113,10 @@ FlatBvh GpuRuntime::downloadKeyTree(uint32_t key) const {
   if (interior)
     CUDA_CHECK(cudaMemcpyAsync(flat.nodes.data(), m.keyNodes.data() + key * interior, interior * sizeof(GpuBvhNode),
                                cudaMemcpyDeviceToHost, m.stream));
-  detail::RootInfo root;
-  CUDA_CHECK(cudaMemcpyAsync(&root, m.keyRoots.data() + key, sizeof root, cudaMemcpyDeviceToHost, m.stream));
+  flat.rootBoxes.resize(1);
+  CUDA_CHECK(cudaMemcpyAsync(flat.rootBoxes.data(), m.keyRootBoxes.data() + key, sizeof(Aabb), cudaMemcpyDeviceToHost,
+                             m.stream));
   CUDA_CHECK(cudaStreamSynchronize(m.stream));
-  flat.rootBoxes = {root.box};
   return flat;
 }
 
@@ -136,16 +136,19 @@ namespace {
 template <typename Result>
 std::vector<Result> traceBlurred(GpuRuntime::Impl& m, std::span<const Ray> rays, std::span<const float> times,
                                  RayPassStats* stats) {
-  detail::BlurredScene scene;
-  scene.keyNodes = m.keyNodes.data();
-  scene.keyRoots = m.keyRoots.data();
-  scene.keyPositions = m.keyPositions.data();
-  scene.keyTimes = m.keyFractions.data();
-  scene.triIndex = m.tree().triIndex.data();
-  scene.indices = m.indices.data();
-  scene.keys = m.shutterKeys;
-  scene.interiorCount = m.tree().topology.interiorCount;
-  scene.vertexCoords = uint64_t(m.vertices) * 3;
+  const FlatBvh& topology = m.tree().topology;
+  MotionBvhView frame;
+  frame.keyNodes = m.keyNodes.data();
+  frame.keyRootBoxes = m.keyRootBoxes.data();
+  frame.keyPositions = m.keyPositions.data();
+  frame.keyTimes = m.keyFractions.data();
+  frame.keyCount = m.shutterKeys;
+  frame.nodeCount = topology.interiorCount;
+  frame.vertexCount = m.vertices;
+  frame.triIndex = m.tree().triIndex.data();
+  frame.indices = m.indices.data();
+  frame.rootRef = topology.rootRef;
+  frame.rootCount = topology.rootCount;
   return traceHostRays<Result>(
       m, rays, stats,
       [&](uint32_t count) {
@@ -153,7 +156,7 @@ std::vector<Result> traceBlurred(GpuRuntime::Impl& m, std::span<const Ray> rays,
         m.rayTimes.upload(times, m.stream);
       },
       [&](uint32_t count, Hit* hits, uint8_t* occluded) {
-        detail::launchBlurredTrace(scene, m.rays.data(), m.rayTimes.data(), count, hits, occluded, m.stream);
+        detail::launchBlurredTrace(frame, m.rays.data(), m.rayTimes.data(), count, hits, occluded, m.stream);
       });
 }
 

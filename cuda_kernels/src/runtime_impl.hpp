@@ -150,7 +150,7 @@ struct GpuRuntime::Impl {
   uint32_t shutterKeys = 0;
   std::vector<float> shutterKeyTimes;
   DeviceBuffer<GpuBvhNode> keyNodes;
-  DeviceBuffer<detail::RootInfo> keyRoots;
+  DeviceBuffer<Aabb> keyRootBoxes;
   DeviceBuffer<float> keyPositions;
   DeviceBuffer<float> keyFractions;      // the keys' shutter fractions
   DeviceBuffer<float> rayTimes;          // scratch: the shutter fraction of each host ray
