@@ -129,18 +129,18 @@ void GpuRuntime::Impl::uploadTree(const FlatBvh& tree, FlatBvh topologyOfTree, c
     const MovingParts parts = findMovingParts(topology, hostIndices, movingVertexIds, vertices);
     if (parts.movingSlots < topology.triangleCount()) {
       d.hasStaticParts = true;
+      const auto slotsMove = [&](uint32_t first, uint32_t count) {
+        return std::any_of(parts.slotMoves.begin() + first, parts.slotMoves.begin() + first + count,
+                           [](uint8_t m) { return m != 0; });
+      };
       for (const detail::LeafRecord& leaf : leafRecords)
-        if (std::any_of(parts.slotMoves.begin() + leaf.first, parts.slotMoves.begin() + leaf.first + leaf.count,
-                        [](uint8_t m) { return m != 0; }))
-          movingLeafRecords.push_back(leaf);
+        if (slotsMove(leaf.first, leaf.count)) movingLeafRecords.push_back(leaf);
       staticChildren.assign(topology.interiorCount, 0);
       for (uint32_t i = 0; i < topology.interiorCount; ++i) {
         const GpuBvhNode& n = topology.nodes[i];
         for (int c = 0; c < 2; ++c) {
           const int32_t ref = n.childRef(c);
-          const bool moves = isLeafRef(ref) ? std::any_of(parts.slotMoves.begin() + leafFirstSlot(ref),
-                                                          parts.slotMoves.begin() + leafFirstSlot(ref) + n.childCount(c),
-                                                          [](uint8_t m) { return m != 0; })
+          const bool moves = isLeafRef(ref) ? slotsMove(leafFirstSlot(ref), n.childCount(c))
                                             : parts.nodeMoves[uint32_t(ref)] != 0;
           staticChildren[i] += moves ? 0u : 1u;
         }

@@ -12,27 +12,6 @@
 
 namespace tsah::cuda {
 
-namespace {
-
-// The key times of the design: one key anywhere in [0, 1], else first 0, last 1, increasing.
-void checkKeyTimes(std::span<const float> keyTimes, std::size_t positionSets) {
-  const std::string where = "GPU runtime: updateShutter: ";
-  if (keyTimes.empty()) throw tsah::ConfigError(where + "no keys");
-  if (keyTimes.size() != positionSets)
-    throw tsah::ConfigError(where + std::to_string(keyTimes.size()) + " key times for " +
-                            std::to_string(positionSets) + " sets of positions");
-  for (float k : keyTimes)
-    if (!std::isfinite(k) || k < 0.0f || k > 1.0f)
-      throw tsah::ConfigError(where + "key time " + std::to_string(k) + " is outside [0, 1]");
-  if (keyTimes.size() == 1) return;
-  if (keyTimes.front() != 0.0f || keyTimes.back() != 1.0f)
-    throw tsah::ConfigError(where + "the first key time must be 0 and the last 1");
-  for (std::size_t k = 1; k < keyTimes.size(); ++k)
-    if (!(keyTimes[k] > keyTimes[k - 1])) throw tsah::ConfigError(where + "key times must increase");
-}
-
-}  // namespace
-
 void GpuRuntime::Impl::requireKey(uint32_t key) const {
   if (shutterKeys == 0) throw tsah::ConfigError("GPU runtime: the frame is not blurred (no updateShutter)");
   if (key >= shutterKeys)
@@ -79,7 +58,7 @@ UpdateTimings GpuRuntime::Impl::refitKeys(std::span<const float> keyTimes, Refit
 UpdateTimings GpuRuntime::updateShutter(std::span<const float> keyTimes,
                                         std::span<const std::span<const float>> keyPositions) {
   Impl& m = *impl_;
-  checkKeyTimes(keyTimes, keyPositions.size());
+  motion::checkKeyTimes(keyTimes, keyPositions.size(), "GPU runtime: updateShutter: ");
   if (keyTimes.size() == 1) return update(keyPositions[0]);
   for (std::span<const float> p : keyPositions)  // before anything is refitted
     if (p.size() != std::size_t(m.vertices) * 3)

@@ -5,28 +5,11 @@
 #include <string>
 
 #include "tsah/base/error.hpp"
+#include "tsah/layout/motion_blur.hpp"
 #include "tsah/base/memory.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
 
 namespace tsah {
-
-namespace {
-
-// Key times are the caller's: first 0, last 1, strictly increasing.
-void checkKeyTimes(std::span<const float> keyTimes, std::size_t positionSets) {
-  if (keyTimes.empty()) throw tsah::ConfigError("runtime: a shutter needs at least one key");
-  if (keyTimes.size() != positionSets)
-    throw tsah::ConfigError("runtime: " + std::to_string(keyTimes.size()) + " key times but " +
-                            std::to_string(positionSets) + " position sets");
-  if (keyTimes.size() == 1) return;
-  if (keyTimes.front() != 0.0f || keyTimes.back() != 1.0f)
-    throw tsah::ConfigError("runtime: the shutter's key times must run from 0 to 1");
-  for (std::size_t k = 1; k < keyTimes.size(); ++k)
-    if (!(keyTimes[k] > keyTimes[k - 1]))
-      throw tsah::ConfigError("runtime: the shutter's key times must increase (key " + std::to_string(k) + ")");
-}
-
-}  // namespace
 
 void CpuRuntime::clearShutter() {
   keyTimes_.clear();
@@ -38,7 +21,7 @@ void CpuRuntime::clearShutter() {
 
 void CpuRuntime::updateShutter(std::span<const float> keyTimes,
                                std::span<const std::span<const float>> keyPositions) {
-  checkKeyTimes(keyTimes, keyPositions.size());
+  motion::checkKeyTimes(keyTimes, keyPositions.size(), "runtime: ");
   if (keyTimes.size() == 1) {
     update(keyPositions[0]);
     return;

@@ -8,12 +8,18 @@
 // for the device; shutterKeys runs on the host only.
 #include <cstdint>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "tsah/core/aabb.hpp"
 #include "tsah/core/hd.hpp"
 
 namespace tsah::motion {
+
+// The caller's key times, as the runtimes take them: one key anywhere in [0, 1], else first 0, last 1,
+// strictly increasing; one per set of positions. Throws tsah::ConfigError starting with `who`
+// ("runtime: ", "GPU runtime: updateShutter: ") otherwise. Host only.
+void checkKeyTimes(std::span<const float> keyTimes, std::size_t positionSets, const std::string& who);
 
 // The key times of the shutter [open, close]: open, every keyframe time strictly inside, close
 // (one key when open == close). Between two consecutive keys every vertex moves linearly, because
