@@ -43,7 +43,8 @@ std::string mib(uint64_t bytes) { return std::to_string((bytes + (1u << 19)) >> 
 
 // Vertices of one instance that move: all of them when its path is keyed, none when its source
 // never moves (or is frozen by speed 0), else the source's moving vertices.
-uint64_t movingOf(const SceneInstance& instance, const Animation& source) {
+template <class Instance>  // SceneInstance or SceneSourceInstance
+uint64_t movingOf(const Instance& instance, const Animation& source) {
   if (instance.keyed()) return source.vertexCount();
   if (source.keyframeCount() < 2 || instance.time.speed == 0.0) return 0;
   return source.movingVertexCount();
@@ -69,25 +70,20 @@ void checkNestedSceneSize(const SceneDescription& scene, const SceneObject& obje
                                   mib(tsah::availableMemoryBytes()) + " of memory available");
 }
 
-struct Source {
-  std::shared_ptr<const Animation> animation;
-  std::string key;
-};
-
 // Loads (and subdivides) each object's file once; objects naming the same file with the same
 // options share it.
-std::vector<Source> loadSources(const SceneDescription& scene, const LoadOptions& options, uint64_t& sourceBytes,
-                                uint32_t& distinct) {
-  std::map<std::string, std::shared_ptr<const Animation>> loaded;
-  std::vector<Source> sources;
+void loadSources(const LoadOptions& options, SceneSources& out) {
+  const SceneDescription& scene = out.description;
+  uint64_t& sourceBytes = out.sourceBytes;
+  std::map<std::string, uint32_t> loaded;
   for (const SceneObject& object : scene.objects) {
     const std::string file = canonical(object.file);
     for (const std::string& outer : sceneStack)
       if (outer == file) failObject(scene, object, "scene files include each other (" + object.file + " is being baked already)");
     const double fps = object.fps > 0.0 ? object.fps : options.fps;
     const std::string key = file + "\n" + std::to_string(fps) + "\n" + object.clip + "\n" + std::to_string(object.subdivide);
-    auto& slot = loaded[key];
-    if (!slot) {
+    const auto found = loaded.find(key);
+    if (found == loaded.end()) {
       LoadOptions own = options;
       own.fps = fps;
       own.clip = object.clip;
@@ -119,21 +115,23 @@ std::vector<Source> loadSources(const SceneDescription& scene, const LoadOptions
         }
       }
       sourceBytes += a.memoryBytes();
-      slot = std::make_shared<const Animation>(std::move(a));
-      ++distinct;
+      loaded.emplace(key, uint32_t(out.sources.size()));
+      out.objectSource.push_back(uint32_t(out.sources.size()));
+      out.sources.push_back(std::make_shared<const Animation>(std::move(a)));
+    } else {
+      out.objectSource.push_back(found->second);
     }
-    sources.push_back({slot, key});
   }
-  return sources;
 }
 
 // The scene's time range: given, or from 0 to where the last object's motion ends (one pass of a
 // looping object, the last key of a path); [0, 0] for a static scene.
-std::pair<double, double> timeRange(const SceneDescription& scene, const std::vector<Source>& sources) {
+std::pair<double, double> timeRange(const SceneSources& loaded) {
+  const SceneDescription& scene = loaded.description;
   if (scene.hasTimeRange) return {scene.start, scene.end};
   double end = 0.0;
   for (std::size_t o = 0; o < scene.objects.size(); ++o) {
-    const Animation& a = *sources[o].animation;
+    const Animation& a = *loaded.sources[loaded.objectSource[o]];
     for (const SceneInstance& i : scene.objects[o].instances) {
       if (a.keyframeCount() > 1 && i.time.speed > 0.0)
         end = std::max(end, i.time.offset + (a.endTime() - a.startTime()) / i.time.speed);
@@ -162,31 +160,49 @@ std::vector<double> bakeTimes(double start, double end, double fps) {
 
 }  // namespace
 
-BakedScene bakeScene(const std::string& path, const LoadOptions& options) {
-  BakedScene baked;
-  baked.description = parseScene(path, options);
-  const SceneDescription& scene = baked.description;
-  const SceneStackEntry entry(canonical(path));
-  SceneStatement& st = baked.statement;
-  const std::vector<Source> sources = loadSources(scene, options, st.sourceBytes, baked.distinctSources);
-  const auto [start, end] = timeRange(scene, sources);
-  const double fps = options.fps > 0.0 ? options.fps : scene.fps;
-  const double keyframes = bakeKeyframeCount(start, end, fps);
+std::vector<double> SceneSources::frameTimes() const { return bakeTimes(start, end, fps); }
+
+SceneSources loadSceneSources(const std::string& path, const LoadOptions& options) {
+  SceneSources loaded;
+  loaded.description = parseScene(path, options);
+  const SceneDescription& scene = loaded.description;
+  {
+    const SceneStackEntry entry(canonical(path));
+    loadSources(options, loaded);
+  }
+  for (std::size_t o = 0; o < scene.objects.size(); ++o)
+    for (const SceneInstance& i : scene.objects[o].instances)
+      loaded.instances.push_back({uint32_t(o), loaded.objectSource[o], i.placement, i.path, i.time});
+  std::tie(loaded.start, loaded.end) = timeRange(loaded);
+  loaded.fps = options.fps > 0.0 ? options.fps : scene.fps;
+  const double keyframes = bakeKeyframeCount(loaded.start, loaded.end, loaded.fps);
   if (!(keyframes < 4294967296.0)) {
     char text[160];
     std::snprintf(text, sizeof text, "the time range [%g, %g] at %g keyframes per second needs more than 2^32 keyframes",
-                  start, end, fps);
+                  loaded.start, loaded.end, loaded.fps);
     throw tsah::FileError(path, text);
   }
+  loaded.frameCount = uint64_t(keyframes);
+  return loaded;
+}
+
+BakedScene bakeScene(const std::string& path, const LoadOptions& options) {
+  SceneSources loaded = loadSceneSources(path, options);
+  BakedScene baked;
+  baked.description = loaded.description;
+  const SceneDescription& scene = baked.description;
+  baked.distinctSources = uint32_t(loaded.sources.size());
+  SceneStatement& st = baked.statement;
+  st.sourceBytes = loaded.sourceBytes;
 
   // The statement, object by object: the first object that takes the scene past the available
   // memory is the one named in the error.
-  st.keyframes = uint64_t(keyframes);
+  st.keyframes = loaded.frameCount;
   st.availableBytes = tsah::availableMemoryBytes();
   uint64_t scratch = 0;
   for (std::size_t o = 0; o < scene.objects.size(); ++o) {
     const SceneObject& object = scene.objects[o];
-    const Animation& a = *sources[o].animation;
+    const Animation& a = *loaded.sources[loaded.objectSource[o]];
     SceneObjectReport r{object.name, object.file, uint32_t(object.instances.size()), a.triangleCount(),
                         a.vertexCount(), a.keyframeCount(), object.subdivide, 0, 0, 0};
     for (const SceneInstance& i : object.instances) {
@@ -200,7 +216,7 @@ BakedScene bakeScene(const std::string& path, const LoadOptions& options) {
     scratch = std::max<uint64_t>(scratch, uint64_t(a.vertexCount()) * 12);
     st.animationBytes = Animation::memoryBytesFor(st.triangles, st.vertices, st.movingVertices, st.keyframes);
     // + the bake's own list of times, copied into the animation at the end.
-    st.peakBytes = st.animationBytes + st.sourceBytes + scratch * sources.size() + st.keyframes * 8;
+    st.peakBytes = st.animationBytes + st.sourceBytes + scratch * scene.objects.size() + st.keyframes * 8;
     if (st.triangles > 0xffffffffull || st.vertices > 0xffffffffull)
       failObject(scene, object, std::to_string(r.instances) + " instances take the scene to " +
                                     std::to_string(st.triangles) + " triangles and " + std::to_string(st.vertices) +
@@ -213,7 +229,7 @@ BakedScene bakeScene(const std::string& path, const LoadOptions& options) {
     baked.objects.push_back(std::move(r));
   }
 
-  const std::vector<double> times = bakeTimes(start, end, fps);
+  const std::vector<double> times = loaded.frameTimes();
 
   // The bake: rest positions and triangles of every instance, then the moving vertices keyframe
   // by keyframe. Each source keeps one scratch frame whose static entries stay at rest.
@@ -229,38 +245,35 @@ BakedScene bakeScene(const std::string& path, const LoadOptions& options) {
   uint32_t base = 0;
   std::size_t movingBase = 0;
   const std::size_t movingPerFrame = std::size_t(st.movingVertices) * 3;
-  for (std::size_t o = 0; o < scene.objects.size(); ++o) {
-    const Animation& a = *sources[o].animation;
+  for (const SceneSourceInstance& instance : loaded.instances) {
+    const Animation& a = loaded.sourceOf(instance);
     std::vector<float>& frame = scratchFrames[&a];
     if (frame.empty()) frame = a.positionsAt(a.startTime());
-    for (const SceneInstance& instance : scene.objects[o].instances) {
-      for (uint32_t v : a.indices()) indices.push_back(base + v);
-      auto world = [&](double t) { return multiply(pathMatrix(instance.path, t), instance.placement); };
-      auto local = [&](double t) { return instance.time.localTime(t, a.startTime(), a.endTime()); };
-      a.positionsAt(local(times.front()), frame);
-      std::copy(frame.begin(), frame.end(), rest.begin() + std::ptrdiff_t(base) * 3);
-      transformPoints(world(times.front()), rest.data() + std::size_t(base) * 3, a.vertexCount());
-      const uint64_t movingCount = movingOf(instance, a);
-      if (movingCount > 0) {
-        const bool all = movingCount == a.vertexCount();
-        for (uint32_t m = 0; m < movingCount; ++m) moving.push_back(base + (all ? m : a.movingVertices()[m]));
-        for (std::size_t k = 0; k < times.size(); ++k) {
-          float* out = motion.data() + k * movingPerFrame + movingBase * 3;
-          if (all) {
-            a.positionsAt(local(times[k]), frame);
-            std::copy(frame.begin(), frame.end(), out);
-          } else {
-            a.movingPositionsAt(local(times[k]), frame);
-            for (uint32_t m = 0; m < movingCount; ++m)
-              std::copy_n(frame.data() + 3 * std::size_t(a.movingVertices()[m]), 3, out + 3 * std::size_t(m));
-          }
-          transformPoints(world(times[k]), out, movingCount);
+    for (uint32_t v : a.indices()) indices.push_back(base + v);
+    auto local = [&](double t) { return instance.localTime(t, a); };
+    a.positionsAt(local(times.front()), frame);
+    std::copy(frame.begin(), frame.end(), rest.begin() + std::ptrdiff_t(base) * 3);
+    transformPoints(instance.worldAt(times.front()), rest.data() + std::size_t(base) * 3, a.vertexCount());
+    const uint64_t movingCount = movingOf(instance, a);
+    if (movingCount > 0) {
+      const bool all = movingCount == a.vertexCount();
+      for (uint32_t m = 0; m < movingCount; ++m) moving.push_back(base + (all ? m : a.movingVertices()[m]));
+      for (std::size_t k = 0; k < times.size(); ++k) {
+        float* out = motion.data() + k * movingPerFrame + movingBase * 3;
+        if (all) {
+          a.positionsAt(local(times[k]), frame);
+          std::copy(frame.begin(), frame.end(), out);
+        } else {
+          a.movingPositionsAt(local(times[k]), frame);
+          for (uint32_t m = 0; m < movingCount; ++m)
+            std::copy_n(frame.data() + 3 * std::size_t(a.movingVertices()[m]), 3, out + 3 * std::size_t(m));
         }
-        a.positionsAt(a.startTime(), frame);  // static entries back at rest for the next instance
+        transformPoints(instance.worldAt(times[k]), out, movingCount);
       }
-      base += a.vertexCount();
-      movingBase += movingCount;
+      a.positionsAt(a.startTime(), frame);  // static entries back at rest for the next instance
     }
+    base += a.vertexCount();
+    movingBase += movingCount;
   }
   try {
     baked.animation = Animation::withStaticVertices(std::move(indices), std::move(rest), std::move(moving),

@@ -5,6 +5,7 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -122,7 +123,44 @@ struct BakedScene {
   uint32_t distinctSources = 0;  // objects loaded (instances and repeated files share one)
 };
 
-// Loads every object once, states the memory, refuses (tsah::FileError naming the scene and the object
+// A scene loaded without baking: each distinct source once, in its own time, and every instance
+// as (source, world transform over time, time mapping). bakeScene bakes exactly this. An object
+// that is itself a scene file is one source (that scene baked, anim::load).
+struct SceneSourceInstance {
+  uint32_t object = 0;   // index into SceneDescription::objects
+  uint32_t source = 0;   // index into SceneSources::sources
+  Matrix4 placement = identityMatrix();
+  std::vector<TransformKey> path;
+  TimeMapping time;
+  bool keyed() const { return path.size() > 1; }
+  Matrix4 worldAt(double sceneTime) const { return multiply(pathMatrix(path, sceneTime), placement); }
+  // The source's own time shown at sceneTime.
+  double localTime(double sceneTime, const Animation& animation) const {
+    return time.localTime(sceneTime, animation.startTime(), animation.endTime());
+  }
+};
+
+struct SceneSources {
+  SceneDescription description;
+  std::vector<std::shared_ptr<const Animation>> sources;  // distinct (file, fps, clip, subdivision)
+  std::vector<uint32_t> objectSource;                     // per object: its source
+  // Every instance in bake order: objects in file order, each object's instances in order; the
+  // baked animation holds instance i's triangles after those of instances 0..i-1.
+  std::vector<SceneSourceInstance> instances;
+  uint64_t sourceBytes = 0;  // the loaded (and subdivided) sources
+  double start = 0.0, end = 0.0, fps = 30.0;  // the scene's time range and frame rate
+  uint64_t frameCount = 1;                    // keyframes of the bake (< 2^32)
+
+  const Animation& sourceOf(const SceneSourceInstance& instance) const { return *sources[instance.source]; }
+  // The bake's keyframe times: start, every 1/fps after it below end, and end.
+  std::vector<double> frameTimes() const;
+};
+
+// Parses the scene and loads every distinct source once (the checks and errors of bakeScene's
+// loading: missing files, cycles, subdivision limits, more than 2^32 keyframes).
+SceneSources loadSceneSources(const std::string& path, const LoadOptions& options = {});
+
+// Loads every object once (loadSceneSources), states the memory, refuses (tsah::FileError naming the scene and the object
 // that crosses the line) a scene that would not fit, then bakes keyframes at the scene's rate (or
 // options.fps) over its time range.
 BakedScene bakeScene(const std::string& path, const LoadOptions& options = {});
