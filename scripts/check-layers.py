@@ -19,6 +19,8 @@ LIBRARY_RANK = {"base": 0, "anim": 1, "tsah": 2, "cuda": 3}
 # libtsah's rooms, lowest first (libtsah/include/tsah/<room>/, libtsah/src/<room>/).
 TSAH_ROOMS = ["core", "build", "layout", "io", "optimize", "inspect", "runtime", "render"]
 TSAH_FRONT_DOOR = len(TSAH_ROOMS)  # tsah/pipeline.hpp and pipeline.cpp
+# Above the front door: two-level scenes, built from scene sources with the pipeline's steps.
+TSAH_ABOVE_FRONT_DOOR = {"scene": TSAH_FRONT_DOOR + 1}
 
 # libanim: the model and the importers' options, the importers, scenes, the front door.
 ANIM_RANK = {"animation.hpp": 0, "load_options.hpp": 0, "mesh_check.hpp": 0,
@@ -34,7 +36,7 @@ CUDA_PRIVATE = 1   # cuda_kernels/src/*.hpp, *.cuh
 CUDA_SOURCE = 2    # cuda_kernels/src/*.cu, *.cpp
 
 # libtsah rooms whose files may see the animation model (device code never does).
-ROOMS_SEEING_ANIM = {"render", "pipeline"}
+ROOMS_SEEING_ANIM = {"render", "pipeline", "scene"}
 
 
 def place(path):
@@ -48,6 +50,8 @@ def place(path):
         if not inner:
             return ("tsah", TSAH_FRONT_DOOR, "pipeline") if name.startswith("pipeline.") else None
         room = inner[0]
+        if room in TSAH_ABOVE_FRONT_DOOR:
+            return ("tsah", TSAH_ABOVE_FRONT_DOOR[room], "/".join(inner))
         if room not in TSAH_ROOMS:
             return None
         return ("tsah", TSAH_ROOMS.index(room), "/".join(inner))
@@ -120,7 +124,7 @@ def check():
             if upward:
                 problems.append(f"{path} ({me[0]}/{me[2]}): includes {dep_path} ({dep[0]}/{dep[2]}), a room above it")
             if dep[0] == "anim" and me[0] == "tsah" and me[2].split("/")[0] not in ROOMS_SEEING_ANIM:
-                problems.append(f"{path} ({me[2]}): includes {dep_path}; only the render and pipeline rooms "
+                problems.append(f"{path} ({me[2]}): includes {dep_path}; only the render, pipeline and scene rooms "
                                 "see the animation model")
             if dep[2] == "optimize/detail" and not (me[2].startswith("optimize") or me[0] == "cuda"):
                 problems.append(f"{path}: includes {dep_path}, the optimizer's internals")

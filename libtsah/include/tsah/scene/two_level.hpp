@@ -1,0 +1,80 @@
+#pragma once
+// Two-level scenes (docs/two-level.md): a scene file kept as its distinct sources and instances
+// instead of one baked animation. One bottom-level tree (BLAS) per source, built once in the
+// source's own time; one top-level tree (TLAS) over the instances, optimized with the T-SAH cost
+// over the scene's frames (the instances' world boxes along their paths are known ahead of time).
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "anim/scene.hpp"
+#include "tsah/core/bvh.hpp"
+#include "tsah/layout/flat_bvh.hpp"
+#include "tsah/pipeline.hpp"
+
+namespace tsah {
+
+// One source's tree. Static sources (one keyframe): SAH + the insertion optimizer on that frame;
+// animated sources: a T-SAH tree over their own keyframes, exactly as `tsah optimize` builds one
+// for the source alone (optimizeAnimation).
+struct Blas {
+  uint32_t source = 0;     // index into SceneSources::sources
+  bool animated = false;   // the source has two keyframes or more
+  Bvh bvh;                 // boxes of its build frames
+  FlatBvh flat;            // canonical form (what the runtimes trace)
+  std::vector<double> frameCosts;  // Eq. 1 at each build frame
+  double cost = 0.0;               // C~^k over the build frames (static: the SAH cost)
+};
+
+// A distinct (animated source, time mapping): the instances showing it share its refitted boxes.
+struct Pose {
+  uint32_t blas = 0;
+  anim::TimeMapping time;
+};
+
+struct TwoLevelScene {
+  anim::SceneSources scene;           // sources, instances (world(t) = path(t) * placement), frames
+  Objective objective;                // k, cT, cI, largest TLAS leaf
+  std::vector<Blas> blases;           // one per source, blases[s].source == s
+  std::vector<Pose> poses;            // of animated sources only
+  std::vector<uint32_t> instancePose; // per instance: its pose, kInvalidIndex for a static source
+  std::vector<double> frameTimes;     // the scene's frames (SceneSources::frameTimes)
+  PrimitiveBoxes instanceBoxes;       // world box of every instance at every scene frame
+  Bvh tlas;                           // over instanceBoxes, boxes for every scene frame
+  std::vector<double> tlasFrameCosts; // Eq. 1 of the TLAS at each scene frame
+  double tlasCost = 0.0;              // C~^k over the scene frames
+
+  uint32_t instanceCount() const { return static_cast<uint32_t>(scene.instances.size()); }
+  const Blas& blasOf(uint32_t instance) const { return blases[scene.instances[instance].source]; }
+  // Bytes of the trees: every BLAS (nodes, boxes of its build frames, primitive ids), the TLAS
+  // (the same over the scene frames), and the instance table with its per-frame boxes.
+  uint64_t blasBytes() const;
+  uint64_t tlasBytes() const;
+  uint64_t memoryBytes() const;
+};
+
+// The box of the 8 corners of `box` transformed by the affine `m` (empty stays empty).
+Aabb transformBox(const Aabb& box, const anim::Matrix4& m);
+
+// The box of a source's triangles at its own time `localTime` (the root box of its refitted BLAS).
+Aabb sourceBox(const anim::Animation& source, double localTime);
+
+// Instance `instance`'s world box at scene time t: its source's box at the instance's local time,
+// transformed by world(t).
+Aabb instanceWorldBox(const anim::SceneSources& scene, uint32_t instance, double sceneTime);
+
+// Builds the two-level structure: options.method must be tsah (the BLAS of animated sources and
+// the TLAS use options.objective's k; static BLAS use k = 0 on their single frame); options.frames
+// representative frames per animated source. Every tree is checked with tsah::validate. Throws
+// tsah::ConfigError for other methods or invalid options, tsah::DataError for a source without
+// triangles, tsah::Failure when a built tree is invalid.
+TwoLevelScene buildTwoLevelScene(anim::SceneSources scene, const TreeOptions& options);
+// loadSceneSources(path, load) then buildTwoLevelScene.
+TwoLevelScene loadTwoLevelScene(const std::string& path, const anim::LoadOptions& load, const TreeOptions& options);
+
+// The per-frame reference: a sweep-SAH TLAS over one frame's instance boxes (leaves of at most
+// objective.maxLeafSize instances when that is not more expensive).
+Bvh rebuildTlas(std::span<const Aabb> instanceBoxes, const Objective& objective);
+
+}  // namespace tsah

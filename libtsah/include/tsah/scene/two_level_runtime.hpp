@@ -1,0 +1,105 @@
+#pragma once
+// The CPU runtime of a two-level scene (docs/two-level.md), bvh2 layout. Per frame (update(t)):
+// each pose's positions at its local time and its BLAS refit (static BLAS are refitted once, at
+// construction; a pose whose local time did not change is not refitted), the instances' world
+// matrices and inverses at t, then the TLAS refitted (or rebuilt, the per-frame reference) from the
+// instances' world boxes. Rays are traced through the TLAS; at a TLAS leaf the ray is moved into
+// the instance's space (origin by the inverse affine transform, direction by its linear part, not
+// normalized, so t is the world ray's parameter) and traced through the instance's BLAS with the
+// same traversal loop and watertight triangle test as a single tree.
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "tsah/core/ray.hpp"
+#include "tsah/layout/flat_bvh.hpp"
+#include "tsah/runtime/cpu_runtime.hpp"
+#include "tsah/scene/two_level.hpp"
+
+namespace tsah {
+
+// A hit of a two-level scene: the instance and the triangle of its source.
+struct TwoLevelHit {
+  float t = 0.0f, u = 0.0f, v = 0.0f;
+  uint32_t instance = kNoHit;
+  uint32_t prim = kNoHit;  // triangle id in the instance's source
+  bool valid() const { return instance != kNoHit; }
+};
+
+// Row-major 3x4 affine transform in float (the last row 0 0 0 1 implied).
+struct Affine3x4 {
+  float m[12] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
+  Vec3 point(const Vec3& p) const {
+    return {m[0] * p.x + m[1] * p.y + m[2] * p.z + m[3], m[4] * p.x + m[5] * p.y + m[6] * p.z + m[7],
+            m[8] * p.x + m[9] * p.y + m[10] * p.z + m[11]};
+  }
+  Vec3 vector(const Vec3& d) const {
+    return {m[0] * d.x + m[1] * d.y + m[2] * d.z, m[4] * d.x + m[5] * d.y + m[6] * d.z,
+            m[8] * d.x + m[9] * d.y + m[10] * d.z};
+  }
+};
+
+// The inverse of an affine (invertible) transform, in double.
+anim::Matrix4 inverseAffine(const anim::Matrix4& m);
+
+class TwoLevelRuntime {
+ public:
+  enum class TlasUpdate { Refit, Rebuild };
+  struct Config {
+    uint32_t threads = 0;  // 0: one per hardware thread
+    TlasUpdate tlas = TlasUpdate::Refit;
+  };
+
+  // Keeps a reference to `scene` (it must outlive the runtime). Refits every static BLAS once and
+  // runs update(first frame time). Throws tsah::DataError for a tree the runtimes refuse
+  // (CpuRuntime's checks).
+  TwoLevelRuntime(const TwoLevelScene& scene, Config config);
+  explicit TwoLevelRuntime(const TwoLevelScene& scene) : TwoLevelRuntime(scene, Config{}) {}
+  ~TwoLevelRuntime();
+  TwoLevelRuntime(const TwoLevelRuntime&) = delete;
+  TwoLevelRuntime& operator=(const TwoLevelRuntime&) = delete;
+
+  // The scene at time t: poses whose local time changed refitted, world transforms, TLAS.
+  void update(double sceneTime);
+
+  TwoLevelHit closestHit(const Ray& ray) const;
+  bool anyHit(const Ray& ray) const;
+
+  // BLAS refits: by the last update(), and in all (construction's static refits included).
+  uint32_t lastUpdateBlasRefits() const { return lastRefits_; }
+  uint64_t blasRefits() const { return totalRefits_; }
+  double time() const { return time_; }
+
+  // The instances' world boxes at the current time, and the TLAS in canonical form (its node boxes
+  // those of the current time; slots hold instance ids).
+  std::span<const Aabb> instanceBoxes() const { return instanceBoxes_; }
+  const FlatBvh& tlas() const { return tlas_; }
+  // The BLAS runtime an instance traces (its pose's, or its static source's).
+  const CpuRuntime& blasOf(uint32_t instance) const;
+  // Bytes the runtime holds: every BLAS runtime's tree, triangles and positions, the TLAS, the
+  // instance transforms and boxes.
+  uint64_t memoryBytes() const;
+
+ private:
+  void refitTlas();
+  const CpuRuntime& runtimeOf(uint32_t instance) const;
+
+  const TwoLevelScene& scene_;
+  Config config_;
+  struct Pool;
+  std::unique_ptr<Pool> pool_;
+  std::vector<std::unique_ptr<CpuRuntime>> staticBlas_;  // per BLAS: null for animated sources
+  std::vector<std::unique_ptr<CpuRuntime>> poses_;       // per pose
+  std::vector<double> poseLocalTime_;                    // local time of each pose's last refit
+  std::vector<std::vector<float>> poseScratch_;
+  std::vector<Affine3x4> toInstance_;                    // per instance: world -> instance space
+  std::vector<Aabb> instanceBoxes_;
+  std::vector<BvhView> views_;                           // per instance: its BLAS's view
+  FlatBvh tlas_;
+  double time_ = 0.0;
+  uint32_t lastRefits_ = 0;
+  uint64_t totalRefits_ = 0;
+};
+
+}  // namespace tsah

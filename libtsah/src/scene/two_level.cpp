@@ -1,0 +1,146 @@
+#include "tsah/scene/two_level.hpp"
+
+#include <cmath>
+#include <map>
+#include <tuple>
+
+#include "tsah/base/error.hpp"
+#include "tsah/base/memory.hpp"
+#include "tsah/build/sah_builder.hpp"
+#include "tsah/core/cost.hpp"
+
+namespace tsah {
+
+namespace {
+
+uint64_t bvhBytes(const Bvh& bvh) {
+  return bvh.nodes.size() * sizeof(BvhNode) + bvh.boxes.size() * sizeof(Aabb) + bvh.primIds.size() * sizeof(uint32_t);
+}
+
+void requireValid(const Bvh& bvh, const PrimitiveBoxes& prims, const std::string& what) {
+  if (const auto problem = validate(bvh, &prims)) throw Failure(what + ": invalid tree: " + *problem);
+}
+
+// The objective's settings for one tree of the structure.
+TreeOptions treeOptionsWithK(const TreeOptions& options, int k) {
+  TreeOptions own = options;
+  own.objective.k = k;
+  return own;
+}
+
+}  // namespace
+
+Aabb transformBox(const Aabb& box, const anim::Matrix4& m) {
+  if (box.empty()) return box;
+  Aabb out;
+  for (int corner = 0; corner < 8; ++corner) {
+    const double p[3] = {(corner & 1) ? box.hi.x : box.lo.x, (corner & 2) ? box.hi.y : box.lo.y,
+                         (corner & 4) ? box.hi.z : box.lo.z};
+    double q[3];
+    for (int r = 0; r < 3; ++r) q[r] = m[4 * r] * p[0] + m[4 * r + 1] * p[1] + m[4 * r + 2] * p[2] + m[4 * r + 3];
+    // Rounded outward: the float box must contain the float points the runtime transforms rays against.
+    out.extend(Vec3{std::nextafter(float(q[0]), -3.4e38f), std::nextafter(float(q[1]), -3.4e38f),
+                    std::nextafter(float(q[2]), -3.4e38f)});
+    out.extend(Vec3{std::nextafter(float(q[0]), 3.4e38f), std::nextafter(float(q[1]), 3.4e38f),
+                    std::nextafter(float(q[2]), 3.4e38f)});
+  }
+  return out;
+}
+
+Aabb sourceBox(const anim::Animation& source, double localTime) {
+  const std::vector<float> p = source.positionsAt(localTime);
+  Aabb box;
+  for (uint32_t v : source.indices()) box.extend(Vec3{p[3 * v], p[3 * v + 1], p[3 * v + 2]});
+  return box;
+}
+
+Aabb instanceWorldBox(const anim::SceneSources& scene, uint32_t instance, double sceneTime) {
+  const anim::SceneSourceInstance& i = scene.instances[instance];
+  const anim::Animation& source = scene.sourceOf(i);
+  return transformBox(sourceBox(source, i.localTime(sceneTime, source)), i.worldAt(sceneTime));
+}
+
+uint64_t TwoLevelScene::blasBytes() const {
+  uint64_t bytes = 0;
+  for (const Blas& b : blases) bytes += bvhBytes(b.bvh);
+  return bytes;
+}
+
+uint64_t TwoLevelScene::tlasBytes() const { return bvhBytes(tlas); }
+
+uint64_t TwoLevelScene::memoryBytes() const {
+  return blasBytes() + tlasBytes() + instanceBoxes.boxes.size() * sizeof(Aabb) +
+         scene.instances.size() * (sizeof(anim::SceneSourceInstance) + sizeof(uint32_t)) + poses.size() * sizeof(Pose);
+}
+
+Bvh rebuildTlas(std::span<const Aabb> instanceBoxes, const Objective& objective) {
+  SweepSahBuilder::Config config;
+  config.cost = objective.cost;
+  config.maxLeafSize = objective.maxLeafSize;
+  return SweepSahBuilder(config).build(instanceBoxes);
+}
+
+TwoLevelScene buildTwoLevelScene(anim::SceneSources scene, const TreeOptions& options) {
+  options.validate();
+  if (options.method != Method::TSah)
+    throw ConfigError(std::string("method: a two-level scene builds T-SAH trees, not ") + name(options.method));
+  if (scene.instances.empty()) throw DataError(scene.description.file + ": the scene has no instances");
+  TwoLevelScene out;
+  out.objective = options.objective;
+
+  // One BLAS per source, in the source's own time.
+  for (uint32_t s = 0; s < scene.sources.size(); ++s) {
+    const anim::Animation& source = *scene.sources[s];
+    Blas blas;
+    blas.source = s;
+    blas.animated = source.keyframeCount() > 1;
+    const int k = blas.animated ? options.objective.k : 0;
+    OptimizedTree tree = optimizeAnimation(source, treeOptionsWithK(options, k));
+    const std::string what = scene.description.file + ": source " + std::to_string(s) + " (" + source.name() + ")";
+    requireValid(tree.bvh, representativeBoxes(source, framesFor(source, options.frames)), what);
+    blas.frameCosts = frameCosts(tree.bvh, options.objective.cost);
+    blas.cost = temporalCost(blas.frameCosts, k);
+    blas.flat = flattenBvh(tree.bvh);
+    blas.bvh = std::move(tree.bvh);
+    out.blases.push_back(std::move(blas));
+  }
+
+  // Poses: instances of one animated source with the same time mapping show the same pose.
+  std::map<std::tuple<uint32_t, double, double, int>, uint32_t> poseOf;
+  for (const anim::SceneSourceInstance& i : scene.instances) {
+    if (!out.blases[i.source].animated) {
+      out.instancePose.push_back(kInvalidIndex);
+      continue;
+    }
+    const auto key = std::make_tuple(i.source, i.time.offset, i.time.speed, int(i.time.outside));
+    const auto [it, added] = poseOf.emplace(key, uint32_t(out.poses.size()));
+    if (added) out.poses.push_back({i.source, i.time});
+    out.instancePose.push_back(it->second);
+  }
+
+  // The TLAS: instance world boxes at every scene frame, SAH on the first, T-SAH over all.
+  out.frameTimes = scene.frameTimes();
+  const uint32_t frames = uint32_t(out.frameTimes.size()), count = uint32_t(scene.instances.size());
+  checkFitsInMemory(std::size_t(frames) * count * sizeof(Aabb), scene.description.file,
+                    std::to_string(frames) + " frames of " + std::to_string(count) + " instance boxes");
+  out.instanceBoxes.frameCount = frames;
+  out.instanceBoxes.primCount = count;
+  out.instanceBoxes.boxes.resize(std::size_t(frames) * count);
+  for (uint32_t f = 0; f < frames; ++f)
+    for (uint32_t i = 0; i < count; ++i)
+      out.instanceBoxes.boxes[std::size_t(f) * count + i] = instanceWorldBox(scene, i, out.frameTimes[f]);
+  const BaselineConfig config = options.baselineConfig();
+  out.tlas = buildTSah(out.instanceBoxes, options.objective.k, config);
+  requireValid(out.tlas, out.instanceBoxes, scene.description.file + ": TLAS");
+  out.tlasFrameCosts = frameCosts(out.tlas, options.objective.cost);
+  out.tlasCost = temporalCost(out.tlasFrameCosts, options.objective.k);
+  out.scene = std::move(scene);
+  return out;
+}
+
+TwoLevelScene loadTwoLevelScene(const std::string& path, const anim::LoadOptions& load, const TreeOptions& options) {
+  options.validate();
+  return buildTwoLevelScene(anim::loadSceneSources(path, load), options);
+}
+
+}  // namespace tsah

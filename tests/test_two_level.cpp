@@ -1,0 +1,324 @@
+// Two-level scenes (docs/two-level.md): one BLAS per source, poses, a TLAS optimized over the
+// scene's frames, and the CPU runtime, checked against the flat baked scene.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+
+#include "anim/scene.hpp"
+#include "anim/tanim.hpp"
+#include "tsah/base/error.hpp"
+#include "tsah/core/cost.hpp"
+#include "tsah/layout/flat_bvh.hpp"
+#include "tsah/pipeline.hpp"
+#include "tsah/scene/two_level.hpp"
+#include "tsah/scene/two_level_runtime.hpp"
+#include "test_support.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+using tsah::test::writeText;
+
+// Relative tolerance on the hit distance: the flat scene intersects triangles transformed into the
+// world in float, the two-level runtime the ray transformed into instance space in float.
+constexpr float kRelativeT = 1e-4f;
+
+// Sources: a static mesh (the first frame of a generated wave, one keyframe) and an animated one
+// (a generated wave over keyframes at 0..8). The scene places them with rotations, non-uniform
+// scales, a mirrored placement, keyed paths (ending at 12, after the animation's last frame), and
+// instances of the animated source with different time offsets (two of them showing one pose).
+fs::path writeScene(const fs::path& dir) {
+  const anim::Animation wave = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 300, 9, 3);
+  anim::saveTanim(wave, (dir / "wave.tanim").string());
+  const std::vector<float> first = wave.positionsAt(wave.startTime());
+  const std::vector<uint32_t> indices(wave.indices().begin(), wave.indices().end());
+  anim::saveTanim(anim::Animation(indices, wave.vertexCount(), first, {0.0}, "ground"), (dir / "ground.tanim").string());
+  writeText(dir / "scene.json", R"({"fps": 2, "objects": [
+    {"name": "ground", "file": "ground.tanim", "instances": [
+      {"transform": {"translate": [0, -1, 0], "rotate": [10, 20, 30], "scale": [3, 0.5, 2]}},
+      {"transform": {"matrix": [-1, 0, 0, 4,  0, 1, 0, 0,  0, 0, 1, 1,  0, 0, 0, 1]}},
+      {"transform": {"translate": [2, 1, -2]},
+       "path": [{"time": 0}, {"time": 12, "translate": [1, 2, 3], "rotate": [0, 90, 0], "scale": [1, 2, 1]}]}]},
+    {"name": "cloth", "file": "wave.tanim", "instances": [
+      {"transform": {"translate": [0, 2, 0]}},
+      {"offset": 1.5, "transform": {"translate": [0, 2, 4], "rotate": [0, 45, 0], "scale": [1, 1, -1]}},
+      {"time": {"offset": 3, "outside": "loop"}, "transform": {"rotate": [90, 0, 0], "scale": [0.5, 2, 1]},
+       "path": [{"time": 0}, {"time": 6, "translate": [0, 1, 0]}, {"time": 12, "translate": [-3, 0, 1], "rotate": [0, 0, 45]}]},
+      {"transform": {"translate": [5, 2, 0], "scale": [1, 1.5, 1]}}]}
+  ]})");
+  return dir / "scene.json";
+}
+
+tsah::TreeOptions smallOptions() {
+  tsah::TreeOptions options;
+  options.frames = 3;
+  options.objective.k = 2;
+  options.objective.maxLeafSize = 4;
+  options.threads = 2;
+  return options;
+}
+
+// The flat baked scene traced by one tree, and the map from its triangle ids to (instance,
+// triangle of the source) by the bake order.
+struct FlatScene {
+  anim::BakedScene baked;
+  std::unique_ptr<tsah::CpuRuntime> runtime;
+  std::vector<uint32_t> firstTriangle, firstVertex;  // per instance, in bake order
+
+  FlatScene(const fs::path& scene, const anim::SceneSources& sources) : baked(anim::bakeScene(scene.string())) {
+    const tsah::OptimizedTree tree = tsah::optimizeAnimation(baked.animation, smallOptions());
+    const auto& a = baked.animation;
+    runtime = std::make_unique<tsah::CpuRuntime>(tsah::flattenBvh(tree.bvh),
+                                                 std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
+                                                 a.vertexCount(), tsah::CpuRuntime::Config(2));
+    uint32_t t = 0, v = 0;
+    for (const auto& i : sources.instances) {
+      firstTriangle.push_back(t);
+      firstVertex.push_back(v);
+      t += sources.sourceOf(i).triangleCount();
+      v += sources.sourceOf(i).vertexCount();
+    }
+  }
+  std::pair<uint32_t, uint32_t> instanceOf(uint32_t tri) const {
+    const auto it = std::upper_bound(firstTriangle.begin(), firstTriangle.end(), tri);
+    const uint32_t instance = uint32_t(it - firstTriangle.begin()) - 1;
+    return {instance, tri - firstTriangle[instance]};
+  }
+};
+
+tsah::Vec3 vertexOf(const std::vector<float>& p, uint32_t v) { return {p[3 * v], p[3 * v + 1], p[3 * v + 2]}; }
+
+bool containsPoint(const tsah::Aabb& b, const tsah::Vec3& p) {
+  return p.x >= b.lo.x && p.x <= b.hi.x && p.y >= b.lo.y && p.y <= b.hi.y && p.z >= b.lo.z && p.z <= b.hi.z;
+}
+
+// The TLAS box holding each instance (its leaf's box in the parent node, or the root box).
+std::vector<tsah::Aabb> tlasLeafBoxes(const tsah::FlatBvh& tlas) {
+  std::vector<tsah::Aabb> out(tlas.triangleCount());
+  auto assign = [&](int32_t ref, uint32_t count, const tsah::Aabb& box) {
+    for (uint32_t s = tsah::leafFirstSlot(ref); s < tsah::leafFirstSlot(ref) + count; ++s) out[tlas.triIndex[s]] = box;
+  };
+  if (tlas.interiorCount == 0) assign(tlas.rootRef, tlas.rootCount, tlas.rootBoxes[0]);
+  for (uint32_t n = 0; n < tlas.interiorCount; ++n)
+    for (int c = 0; c < 2; ++c)
+      if (tsah::isLeafRef(tlas.nodes[n].childRef(c))) assign(tlas.nodes[n].childRef(c), tlas.nodes[n].childCount(c), tlas.nodes[n].childBox(c));
+  return out;
+}
+
+class TwoLevel : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir = tsah::test::scratchDir();
+    scenePath = writeScene(dir);
+    scene = std::make_unique<tsah::TwoLevelScene>(tsah::loadTwoLevelScene(scenePath.string(), {}, smallOptions()));
+  }
+  fs::path dir, scenePath;
+  std::unique_ptr<tsah::TwoLevelScene> scene;
+};
+
+TEST_F(TwoLevel, StructureOneBlasPerSourcePosesPerTimeMappingValidTrees) {
+  ASSERT_EQ(scene->blases.size(), 2u);
+  EXPECT_FALSE(scene->blases[0].animated);
+  EXPECT_TRUE(scene->blases[1].animated);
+  EXPECT_EQ(scene->blases[0].bvh.frameCount, 1u);
+  EXPECT_EQ(scene->blases[1].bvh.frameCount, 3u);  // the source's own representative frames
+  // Cloth instances: offsets 0, 1.5, 3 (loop) and 0 again: three poses, the first and last share one.
+  ASSERT_EQ(scene->poses.size(), 3u);
+  EXPECT_EQ(scene->instancePose[0], tsah::kInvalidIndex);
+  EXPECT_EQ(scene->instancePose[3], scene->instancePose[6]);
+  EXPECT_NE(scene->instancePose[3], scene->instancePose[4]);
+  for (const tsah::Blas& b : scene->blases) {
+    const anim::Animation& source = *scene->scene.sources[b.source];
+    const tsah::PrimitiveBoxes rep = tsah::representativeBoxes(source, b.bvh.frameCount);
+    EXPECT_EQ(tsah::validate(b.bvh, &rep), std::nullopt);
+    EXPECT_GT(b.cost, 0.0);
+  }
+  EXPECT_EQ(tsah::validate(scene->tlas, &scene->instanceBoxes), std::nullopt);
+  EXPECT_EQ(scene->tlas.frameCount, scene->frameTimes.size());
+  EXPECT_EQ(scene->frameTimes.size(), 25u);  // [0, 12] at 2 fps
+  EXPECT_EQ(scene->tlasFrameCosts.size(), scene->frameTimes.size());
+  EXPECT_GT(scene->tlasCost, 0.0);
+  EXPECT_GT(scene->blasBytes(), 0u);
+  EXPECT_GT(scene->tlasBytes(), 0u);
+  EXPECT_GT(scene->memoryBytes(), scene->blasBytes() + scene->tlasBytes());
+  // Each instance's TLAS box at frame f is its world box there.
+  for (uint32_t f = 0; f < scene->frameTimes.size(); f += 6)
+    for (uint32_t i = 0; i < scene->instanceCount(); ++i)
+      EXPECT_EQ(scene->instanceBoxes.at(f, i).lo.x, tsah::instanceWorldBox(scene->scene, i, scene->frameTimes[f]).lo.x);
+}
+
+TEST_F(TwoLevel, ClosestHitsEqualTheFlatBakedScene) {
+  const FlatScene flat(scenePath, scene->scene);
+  tsah::TwoLevelRuntime runtime(*scene, {2, tsah::TwoLevelRuntime::TlasUpdate::Refit});
+  tsah::TwoLevelRuntime rebuilt(*scene, {2, tsah::TwoLevelRuntime::TlasUpdate::Rebuild});
+  std::mt19937 rng(7);
+  uint32_t rays = 0, hits = 0, ties = 0;
+  for (uint32_t f = 0; f < scene->frameTimes.size(); f += 3) {
+    const double t = scene->frameTimes[f];
+    const std::vector<float> world = flat.baked.animation.positionsAt(t);
+    flat.runtime->update(world);
+    runtime.update(t);
+    rebuilt.update(t);
+    const tsah::Aabb bounds = flat.runtime->bounds();
+    std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+    std::uniform_int_distribution<uint32_t> pick(0, flat.baked.animation.triangleCount() - 1);
+    for (int r = 0; r < 200; ++r, ++rays) {
+      // From a random point around the scene at a random triangle's centroid (never an edge).
+      const uint32_t* tri = flat.baked.animation.indices().data() + 3 * std::size_t(pick(rng));
+      const tsah::Vec3 c = (vertexOf(world, tri[0]) + vertexOf(world, tri[1]) + vertexOf(world, tri[2])) * (1.0f / 3.0f);
+      const tsah::Vec3 e = bounds.extent();
+      const tsah::Vec3 o{bounds.lo.x + e.x * (2 * unit(rng) - 0.5f), bounds.lo.y + e.y * (2 * unit(rng) - 0.5f),
+                         bounds.lo.z + e.z * (2 * unit(rng) - 0.5f)};
+      tsah::Ray ray;
+      ray.org = o;
+      ray.dir = c - o;  // unnormalized: t = 1 at the centroid
+      ray.tmin = 0.0f;
+      ray.tmax = 1e30f;
+      const tsah::Hit expected = flat.runtime->closestHit(ray);
+      const tsah::TwoLevelHit got = runtime.closestHit(ray);
+      const tsah::TwoLevelHit again = rebuilt.closestHit(ray);
+      ASSERT_EQ(got.valid(), expected.valid()) << "frame " << f << " ray " << r;
+      ASSERT_EQ(again.valid(), expected.valid());
+      if (!expected.valid()) continue;
+      ++hits;
+      const float tolerance = kRelativeT * std::max(1.0f, expected.t);
+      ASSERT_NEAR(got.t, expected.t, tolerance) << "frame " << f << " ray " << r;
+      ASSERT_NEAR(again.t, got.t, tolerance);
+      const auto [instance, prim] = flat.instanceOf(expected.tri);
+      // A tie: two surfaces at the same distance (within the tolerance) may be reported either way.
+      if (got.instance != instance || got.prim != prim) ++ties;
+      // Any hit: a ray stopping halfway sees what the flat scene sees there.
+      tsah::Ray shorter = ray;
+      shorter.tmax = expected.t * 0.5f;
+      EXPECT_EQ(runtime.anyHit(shorter), flat.runtime->anyHit(shorter));
+      EXPECT_TRUE(runtime.anyHit(ray));
+    }
+  }
+  EXPECT_GT(hits, rays / 2);
+  EXPECT_LE(ties, hits / 50) << ties << " ties in " << hits << " hits";
+}
+
+TEST_F(TwoLevel, TlasBoxesContainEveryInstanceAtEveryFrameAfterRefit) {
+  const anim::BakedScene baked = anim::bakeScene(scenePath.string());
+  const FlatScene flat(scenePath, scene->scene);
+  tsah::TwoLevelRuntime runtime(*scene, {2, tsah::TwoLevelRuntime::TlasUpdate::Refit});
+  for (const double t : scene->frameTimes) {
+    runtime.update(t);
+    const std::vector<float> world = baked.animation.positionsAt(t);
+    const std::vector<tsah::Aabb> leafBoxes = tlasLeafBoxes(runtime.tlas());
+    for (uint32_t i = 0; i < scene->instanceCount(); ++i) {
+      EXPECT_TRUE(leafBoxes[i].contains(runtime.instanceBoxes()[i])) << "t " << t << " instance " << i;
+      const uint32_t count = scene->scene.sourceOf(scene->scene.instances[i]).vertexCount();
+      for (uint32_t v = flat.firstVertex[i]; v < flat.firstVertex[i] + count; ++v)
+        ASSERT_TRUE(containsPoint(leafBoxes[i], vertexOf(world, v))) << "t " << t << " instance " << i << " vertex " << v;
+    }
+    EXPECT_EQ(tsah::validateFlatBvh(runtime.tlas()), std::nullopt) << "t " << t;
+  }
+}
+
+TEST_F(TwoLevel, InstancesOfOneBlasWithDifferentOffsetsTraceTheirOwnPoses) {
+  tsah::TwoLevelRuntime runtime(*scene);
+  const anim::SceneSources& s = scene->scene;
+  const anim::Animation& wave = *s.sources[1];
+  const double t = 2.0;
+  runtime.update(t);
+  // Instances 3 (offset 0) and 4 (offset 1.5) share the cloth BLAS but show it at 2.0 and 0.5.
+  EXPECT_NE(&runtime.blasOf(3), &runtime.blasOf(4));
+  EXPECT_EQ(&runtime.blasOf(3), &runtime.blasOf(6));
+  for (const uint32_t instance : {3u, 4u}) {
+    const anim::SceneSourceInstance& i = s.instances[instance];
+    std::vector<float> p = wave.positionsAt(i.localTime(t, wave));
+    anim::transformPoints(i.worldAt(t), p.data(), wave.vertexCount());
+    uint32_t found = 0;
+    for (uint32_t tri = 0; tri < wave.triangleCount(); tri += 17) {
+      const uint32_t* v = wave.indices().data() + 3 * tri;
+      const tsah::Vec3 c = (vertexOf(p, v[0]) + vertexOf(p, v[1]) + vertexOf(p, v[2])) * (1.0f / 3.0f);
+      tsah::Ray ray;
+      ray.org = c + tsah::Vec3{0.0f, 20.0f, 0.0f};
+      ray.dir = {0.0f, -1.0f, 0.0f};
+      ray.tmin = 0.0f;
+      ray.tmax = 40.0f;
+      const tsah::TwoLevelHit hit = runtime.closestHit(ray);
+      ASSERT_TRUE(hit.valid());
+      // Nothing of this instance's own pose lies above its own centroid further than the hit.
+      if (hit.instance == instance && hit.prim == tri) {
+        EXPECT_NEAR(hit.t, 20.0f, 1e-3f);
+        ++found;
+      }
+    }
+    EXPECT_GT(found, 0u) << "instance " << instance;
+  }
+  // The two poses differ: the same triangle sits elsewhere in each instance's own space.
+  EXPECT_NE(runtime.blasOf(3).bounds().lo.y, runtime.blasOf(4).bounds().lo.y);
+}
+
+TEST_F(TwoLevel, AFrameWithOnlyRigidMotionRefitsNoBlas) {
+  tsah::TwoLevelRuntime runtime(*scene);
+  runtime.update(2.0);
+  EXPECT_EQ(runtime.lastUpdateBlasRefits(), 3u);  // the three poses move at 2.0
+  runtime.update(2.0);
+  EXPECT_EQ(runtime.lastUpdateBlasRefits(), 0u);  // nothing changed
+  // After 9.5 the source's last frame holds for offsets 0 and 1.5; the looping pose keeps moving.
+  runtime.update(9.5);
+  const uint64_t before = runtime.blasRefits();
+  const tsah::Aabb pathBefore = runtime.instanceBoxes()[2];
+  runtime.update(10.0);
+  EXPECT_EQ(runtime.lastUpdateBlasRefits(), 1u);  // the looping pose only
+  EXPECT_EQ(runtime.blasRefits(), before + 1);
+  EXPECT_NE(runtime.instanceBoxes()[2].lo.x, pathBefore.lo.x);  // the keyed instance did move
+}
+
+TEST(TwoLevelRigid, OnlyPathsAndHeldPosesRefitNothing) {
+  const fs::path dir = tsah::test::scratchDir();
+  const anim::Animation wave = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 200, 5, 2);
+  anim::saveTanim(wave, (dir / "wave.tanim").string());
+  writeText(dir / "s.json", R"({"fps": 4, "objects": [{"file": "wave.tanim", "instances": [
+    {"path": [{"time": 0}, {"time": 8, "translate": [5, 0, 0], "rotate": [0, 180, 0]}]},
+    {"offset": 1, "transform": {"scale": [-1, 1, 1]}}]}]})");
+  const tsah::TwoLevelScene s = tsah::loadTwoLevelScene((dir / "s.json").string(), {}, smallOptions());
+  tsah::TwoLevelRuntime runtime(s);
+  runtime.update(3.0);
+  EXPECT_EQ(runtime.lastUpdateBlasRefits(), 2u);
+  runtime.update(5.0);  // both poses reach their last frame (local time 4)
+  EXPECT_EQ(runtime.lastUpdateBlasRefits(), 2u);
+  for (const double t : {6.0, 6.25, 7.0, 8.0}) {  // and hold it while the path moves on
+    runtime.update(t);
+    EXPECT_EQ(runtime.lastUpdateBlasRefits(), 0u) << "t " << t;
+  }
+}
+
+TEST(TwoLevelAffine, InverseOfAMirroredScaledRotation) {
+  const anim::Matrix4 m = anim::multiply(anim::trsMatrix({1, 2, 3}, {10, 20, 30}, {2, -0.5, 3}), anim::identityMatrix());
+  const anim::Matrix4 product = anim::multiply(m, tsah::inverseAffine(m));
+  for (int i = 0; i < 16; ++i) EXPECT_NEAR(product[i], anim::identityMatrix()[i], 1e-12) << i;
+  anim::Matrix4 singular = anim::identityMatrix();
+  singular[5] = 0.0;
+  EXPECT_THROW(tsah::inverseAffine(singular), tsah::DataError);
+}
+
+TEST(TwoLevelOptions, OnlyTSahTrees) {
+  const fs::path dir = tsah::test::scratchDir();
+  writeText(dir / "tri.obj", "v 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\n");
+  writeText(dir / "s.json", R"({"objects": [{"file": "tri.obj"}]})");
+  tsah::TreeOptions options;
+  options.method = tsah::Method::Sah0;
+  EXPECT_THROW(tsah::loadTwoLevelScene((dir / "s.json").string(), {}, options), tsah::ConfigError);
+  options.method = tsah::Method::TSah;
+  const tsah::TwoLevelScene one = tsah::loadTwoLevelScene((dir / "s.json").string(), {}, options);
+  tsah::TwoLevelRuntime runtime(one);
+  tsah::Ray ray;
+  ray.org = {0.0f, 0.0f, 0.0f};
+  ray.dir = {1.0f, 1.0f, 1.0f};
+  ray.tmin = 0.0f;
+  ray.tmax = 10.0f;
+  const tsah::TwoLevelHit hit = runtime.closestHit(ray);
+  ASSERT_TRUE(hit.valid());
+  EXPECT_EQ(hit.instance, 0u);
+  EXPECT_EQ(hit.prim, 0u);
+  EXPECT_NEAR(hit.t, 1.0f / 3.0f, 1e-6f);
+}
+
+}  // namespace
