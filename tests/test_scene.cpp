@@ -152,6 +152,45 @@ TEST(Scene, InstancesShareTheirSource) {
   EXPECT_EQ(baked.statement.animationBytes, baked.animation.memoryBytes());
 }
 
+TEST(Scene, SourcesAndInstancesWithoutBakingAreWhatTheBakeBakes) {
+  const fs::path dir = tsah::test::scratchDir();
+  movingTanim(dir);
+  triangleObj(dir);
+  writeText(dir / "s.json", sceneWith(R"({"name": "herd", "file": "mover.tanim", "instances": [
+      {}, {"transform": {"translate": [5, 0, 0]}, "offset": 0.5},
+      {"path": [{"time": 0}, {"time": 3, "translate": [0, 3, 0]}]}]},
+      {"name": "rock", "file": "tri.obj", "transform": {"scale": [1, -2, 1]}},
+      {"name": "again", "file": "./mover.tanim", "time": {"speed": 2}})", "\"fps\": 2"));
+  const anim::SceneSources loaded = anim::loadSceneSources((dir / "s.json").string());
+  ASSERT_EQ(loaded.sources.size(), 2u);  // mover.tanim once, tri.obj once
+  EXPECT_EQ(loaded.objectSource, (std::vector<uint32_t>{0, 1, 0}));
+  ASSERT_EQ(loaded.instances.size(), 5u);
+  EXPECT_EQ(loaded.instances[1].object, 0u);
+  EXPECT_EQ(loaded.instances[3].object, 1u);
+  EXPECT_EQ(loaded.instances[4].source, 0u);
+  EXPECT_DOUBLE_EQ(loaded.instances[1].time.offset, 0.5);
+  EXPECT_DOUBLE_EQ(loaded.instances[4].localTime(0.25, *loaded.sources[0]), 0.5);
+  EXPECT_DOUBLE_EQ(loaded.instances[2].worldAt(1.5)[7], 1.5);  // halfway along the path
+  EXPECT_DOUBLE_EQ(loaded.end, 3.0);
+  EXPECT_EQ(loaded.frameCount, 7u);
+  // The bake holds, instance after instance, each source at its local time moved by world(t).
+  const anim::BakedScene baked = anim::bakeScene((dir / "s.json").string());
+  const std::vector<double> times = loaded.frameTimes();
+  ASSERT_EQ(times.size(), baked.animation.keyframeCount());
+  for (std::size_t k = 0; k < times.size(); ++k) {
+    EXPECT_DOUBLE_EQ(times[k], baked.animation.times()[k]);
+    const std::vector<float> flat = baked.animation.positionsAt(times[k]);
+    std::size_t at = 0;
+    for (const anim::SceneSourceInstance& i : loaded.instances) {
+      const anim::Animation& source = loaded.sourceOf(i);
+      std::vector<float> p = source.positionsAt(i.localTime(times[k], source));
+      anim::transformPoints(i.worldAt(times[k]), p.data(), source.vertexCount());
+      for (float c : p) EXPECT_FLOAT_EQ(flat[at++], c);
+    }
+    EXPECT_EQ(at, flat.size());
+  }
+}
+
 // An octahedron inscribed in the unit sphere.
 anim::Animation octahedron() {
   std::vector<float> p{1, 0, 0, -1, 0, 0, 0, 1, 0, 0, -1, 0, 0, 0, 1, 0, 0, -1};
