@@ -25,7 +25,7 @@ struct TlasFrame {
   const GpuBvhNode* nodes = nullptr;
   const uint32_t* triIndex = nullptr;  // slot -> instance id
   const Affine3x4* toInstance = nullptr;
-  const BvhView* blas = nullptr;       // per instance
+  const CpuRuntime* const* blas = nullptr;  // per instance, traced in its own layout
   int32_t rootRef = makeLeafRef(0);
   uint32_t rootCount = 0;
   Aabb rootBox;
@@ -40,7 +40,13 @@ struct TlasFrame {
     local.org = m.point(ray.org);
     local.dir = m.vector(ray.dir);
     local.tmax = tmax;
-    const Hit h = detail::traverse<AnyHit>(blas[instance], local);
+    if (AnyHit) {  // the loop stops at the first accepted slot: no distance needed
+      if (!blas[instance]->anyHit(local)) return false;
+      t = tmax;
+      u = v = 0.0f;
+      return true;
+    }
+    const Hit h = blas[instance]->closestHit(local);
     if (!h.valid() || !(h.t < tmax)) return false;
     t = h.t;
     u = h.u;
@@ -91,7 +97,13 @@ TwoLevelRuntime::TwoLevelRuntime(const TwoLevelScene& scene, Config config) : sc
   // Each BLAS runtime refits on one thread: the poses are refitted side by side.
   auto blasRuntime = [&](const Blas& blas) {
     const anim::Animation& source = *sources.sources[blas.source];
-    return std::make_unique<CpuRuntime>(blas.flat, std::vector<uint32_t>(source.indices().begin(), source.indices().end()), source.vertexCount(), CpuRuntime::Config(1));
+    CpuRuntime::Config own(1);
+    own.layout = config.layout;
+    Objective objective = scene.objective;
+    objective.k = blas.animated ? objective.k : 0;  // the objective the BLAS was built with
+    own.collapse = wideCollapseConfig(objective);
+    return std::make_unique<CpuRuntime>(
+        blas.flat, std::vector<uint32_t>(source.indices().begin(), source.indices().end()), source.vertexCount(), own);
   };
   for (const Blas& blas : scene.blases) {
     if (blas.animated) {
@@ -112,7 +124,7 @@ TwoLevelRuntime::TwoLevelRuntime(const TwoLevelScene& scene, Config config) : sc
   const uint32_t count = scene.instanceCount();
   toInstance_.resize(count);
   instanceBoxes_.resize(count);
-  views_.resize(count);
+  blas_.resize(count);
   tlas_ = runtimeTopology(flattenBvh(scene.tlas), count, kTraversalStackSize, "two-level runtime: TLAS");
   update(scene.frameTimes.empty() ? sources.start : scene.frameTimes.front());
 }
@@ -154,9 +166,8 @@ void TwoLevelRuntime::update(double sceneTime) {
   for (uint32_t i = 0; i < scene_.instanceCount(); ++i) {
     const anim::Matrix4 world = sources.instances[i].worldAt(sceneTime);
     toInstance_[i] = toFloat(inverseAffine(world));
-    const CpuRuntime& blas = runtimeOf(i);
-    views_[i] = blas.view();
-    instanceBoxes_[i] = transformBox(blas.bounds(), world);
+    blas_[i] = &runtimeOf(i);
+    instanceBoxes_[i] = transformBox(blas_[i]->bounds(), world);
   }
   if (config_.tlas == TlasUpdate::Rebuild)
     tlas_ = runtimeTopology(flattenBvh(rebuildTlas(instanceBoxes_, scene_.objective)), scene_.instanceCount(),
@@ -188,12 +199,12 @@ void TwoLevelRuntime::refitTlas() {
 
 template <bool AnyHit>
 static TlasFrame<AnyHit> tlasFrame(const FlatBvh& tlas, const std::vector<Affine3x4>& toInstance,
-                                   const std::vector<BvhView>& views) {
+                                   const std::vector<const CpuRuntime*>& blas) {
   TlasFrame<AnyHit> f;
   f.nodes = tlas.nodes.data();
   f.triIndex = tlas.triIndex.data();
   f.toInstance = toInstance.data();
-  f.blas = views.data();
+  f.blas = blas.data();
   f.rootRef = tlas.rootRef;
   f.rootCount = tlas.rootCount;
   f.rootBox = tlas.rootBoxes[0];
@@ -201,7 +212,7 @@ static TlasFrame<AnyHit> tlasFrame(const FlatBvh& tlas, const std::vector<Affine
 }
 
 TwoLevelHit TwoLevelRuntime::closestHit(const Ray& ray) const {
-  const TlasFrame<false> frame = tlasFrame<false>(tlas_, toInstance_, views_);
+  const TlasFrame<false> frame = tlasFrame<false>(tlas_, toInstance_, blas_);
   const Hit h = detail::traverse<false>(frame, ray);
   TwoLevelHit hit;
   if (!h.valid()) return hit;
@@ -214,22 +225,28 @@ TwoLevelHit TwoLevelRuntime::closestHit(const Ray& ray) const {
 }
 
 bool TwoLevelRuntime::anyHit(const Ray& ray) const {
-  return detail::traverse<true>(tlasFrame<true>(tlas_, toInstance_, views_), ray).valid();
+  return detail::traverse<true>(tlasFrame<true>(tlas_, toInstance_, blas_), ray).valid();
 }
 
 uint64_t TwoLevelRuntime::memoryBytes() const {
   uint64_t bytes = 0;
   const auto runtimeBytes = [](const CpuRuntime& r) {
-    return uint64_t(r.tree().nodes.size()) * sizeof(GpuBvhNode) + r.tree().triIndex.size() * sizeof(uint32_t) +
-           r.woop().size() * sizeof(WoopTriangle) + r.positions().size() * sizeof(float) +
-           r.indices().size() * sizeof(uint32_t);
+    uint64_t tree = 0;
+    if (const WideTree<4>* w = r.wide4())
+      tree = w->nodes().size_bytes() + w->packets().size_bytes() + w->triIndex().size_bytes();
+    else if (const WideTree<8>* w8 = r.wide8())
+      tree = w8->nodes().size_bytes() + w8->packets().size_bytes() + w8->triIndex().size_bytes();
+    else
+      tree = uint64_t(r.tree().nodes.size()) * sizeof(GpuBvhNode) + r.tree().triIndex.size() * sizeof(uint32_t) +
+             r.woop().size() * sizeof(WoopTriangle);
+    return tree + r.positions().size() * sizeof(float) + r.indices().size() * sizeof(uint32_t);
   };
   for (const auto& r : staticBlas_)
     if (r) bytes += runtimeBytes(*r);
   for (const auto& r : poses_) bytes += runtimeBytes(*r);
   for (const auto& s : poseScratch_) bytes += s.size() * sizeof(float);
   bytes += tlas_.nodes.size() * sizeof(GpuBvhNode) + tlas_.triIndex.size() * sizeof(uint32_t);
-  bytes += toInstance_.size() * sizeof(Affine3x4) + instanceBoxes_.size() * sizeof(Aabb) + views_.size() * sizeof(BvhView);
+  bytes += toInstance_.size() * sizeof(Affine3x4) + instanceBoxes_.size() * sizeof(Aabb) + blas_.size() * sizeof(const CpuRuntime*);
   return bytes;
 }
 

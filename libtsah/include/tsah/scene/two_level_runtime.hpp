@@ -1,12 +1,14 @@
 #pragma once
-// The CPU runtime of a two-level scene (docs/two-level.md), bvh2 layout. Per frame (update(t)):
+// The CPU runtime of a two-level scene (docs/two-level.md): a binary TLAS over BLAS runtimes in
+// any CPU layout (bvh2, bvh4, bvh8). Per frame (update(t)):
 // each pose's positions at its local time and its BLAS refit (static BLAS are refitted once, at
 // construction; a pose whose local time did not change is not refitted), the instances' world
 // matrices and inverses at t, then the TLAS refitted (or rebuilt, the per-frame reference) from the
 // instances' world boxes. Rays are traced through the TLAS; at a TLAS leaf the ray is moved into
 // the instance's space (origin by the inverse affine transform, direction by its linear part, not
-// normalized, so t is the world ray's parameter) and traced through the instance's BLAS with the
-// same traversal loop and watertight triangle test as a single tree.
+// normalized, so t is the world ray's parameter) and traced by the instance's BLAS runtime
+// (CpuRuntime::closestHit / anyHit: the same traversal and watertight triangle test as a single
+// tree); the TLAS itself is traced by the binary traversal loop (detail::traverse).
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -49,6 +51,9 @@ class TwoLevelRuntime {
   struct Config {
     uint32_t threads = 0;  // 0: one per hardware thread
     TlasUpdate tlas = TlasUpdate::Refit;
+    // The BLAS layout: bvh2, or bvh4 / bvh8 collapsed once per BLAS runtime with the scene's
+    // objective (CpuRuntime's wide layouts and SIMD kernels). The TLAS is always binary.
+    Layout layout = Layout::Bvh2;
   };
 
   // Keeps a reference to `scene` (it must outlive the runtime). Refits every static BLAS once and
@@ -95,7 +100,7 @@ class TwoLevelRuntime {
   std::vector<std::vector<float>> poseScratch_;
   std::vector<Affine3x4> toInstance_;                    // per instance: world -> instance space
   std::vector<Aabb> instanceBoxes_;
-  std::vector<BvhView> views_;                           // per instance: its BLAS's view
+  std::vector<const CpuRuntime*> blas_;                  // per instance: the BLAS runtime it traces
   FlatBvh tlas_;
   double time_ = 0.0;
   uint32_t lastRefits_ = 0;
