@@ -276,6 +276,7 @@ TEST_F(TwoLevel, InstancesOfOneBlasWithDifferentOffsetsTraceTheirOwnPoses) {
 
 TEST_F(TwoLevel, AFrameWithOnlyRigidMotionRefitsNoBlas) {
   tsah::TwoLevelRuntime runtime(*scene);
+  EXPECT_EQ(runtime.blasRefits(), 1u + 3u);  // the static BLAS once, the three poses at the first frame
   runtime.update(2.0);
   EXPECT_EQ(runtime.lastUpdateBlasRefits(), 3u);  // the three poses move at 2.0
   runtime.update(2.0);
@@ -316,6 +317,12 @@ TEST(TwoLevelAffine, InverseOfAMirroredScaledRotation) {
   anim::Matrix4 singular = anim::identityMatrix();
   singular[5] = 0.0;
   EXPECT_THROW(tsah::inverseAffine(singular), tsah::DataError);
+}
+
+TEST_F(TwoLevel, AStructureWithoutInstancesIsRefused) {
+  anim::SceneSources empty = anim::loadSceneSources(scenePath.string());
+  empty.instances.clear();
+  EXPECT_THROW(tsah::buildTwoLevelScene(std::move(empty), smallOptions()), tsah::DataError);
 }
 
 TEST(TwoLevelOptions, OnlyTSahTrees) {
