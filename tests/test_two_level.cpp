@@ -310,6 +310,28 @@ TEST(TwoLevelRigid, OnlyPathsAndHeldPosesRefitNothing) {
   }
 }
 
+TEST(TwoLevelRigid, AnInstanceFlattenedByItsPathIsNeverHitThenAndTracesAgainAfter) {
+  const fs::path dir = tsah::test::scratchDir();
+  writeText(dir / "tri.obj", "v 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\n");
+  // The scale goes from 1 to -1 in x: at t = 1 the instance is flat (a singular world transform).
+  writeText(dir / "s.json", R"({"fps": 2, "objects": [{"file": "tri.obj",
+    "path": [{"time": 0}, {"time": 2, "scale": [-1, 1, 1]}]}]})");
+  const tsah::TwoLevelScene s = tsah::loadTwoLevelScene((dir / "s.json").string(), {}, smallOptions());
+  tsah::TwoLevelRuntime runtime(s);
+  tsah::Ray across;  // along x through (x, 1/3, 1/3)
+  across.org = {-2.0f, 1.0f / 3.0f, 1.0f / 3.0f};
+  across.dir = {1.0f, 0.0f, 0.0f};
+  across.tmin = 0.0f;
+  across.tmax = 10.0f;
+  runtime.update(1.0);
+  EXPECT_FALSE(runtime.closestHit(across).valid());
+  EXPECT_FALSE(runtime.anyHit(across));
+  runtime.update(2.0);  // mirrored: (-1,0,0) (0,1,0) (0,0,1), crossed at x = -1/3
+  const tsah::TwoLevelHit hit = runtime.closestHit(across);
+  ASSERT_TRUE(hit.valid());
+  EXPECT_NEAR(hit.t, 2.0f - 1.0f / 3.0f, 1e-5f);
+}
+
 TEST(TwoLevelAffine, InverseOfAMirroredScaledRotation) {
   const anim::Matrix4 m = anim::multiply(anim::trsMatrix({1, 2, 3}, {10, 20, 30}, {2, -0.5, 3}), anim::identityMatrix());
   const anim::Matrix4 product = anim::multiply(m, tsah::inverseAffine(m));

@@ -126,9 +126,17 @@ TwoLevelScene buildTwoLevelScene(anim::SceneSources scene, const TreeOptions& op
   out.instanceBoxes.frameCount = frames;
   out.instanceBoxes.primCount = count;
   out.instanceBoxes.boxes.resize(std::size_t(frames) * count);
+  // A source's box at one local time is computed once, however many instances show it there.
+  std::map<std::pair<uint32_t, double>, Aabb> localBoxes;
   for (uint32_t f = 0; f < frames; ++f)
-    for (uint32_t i = 0; i < count; ++i)
-      out.instanceBoxes.boxes[std::size_t(f) * count + i] = instanceWorldBox(scene, i, out.frameTimes[f]);
+    for (uint32_t i = 0; i < count; ++i) {
+      const anim::SceneSourceInstance& instance = scene.instances[i];
+      const anim::Animation& source = scene.sourceOf(instance);
+      const double local = out.blases[instance.source].animated ? instance.localTime(out.frameTimes[f], source) : 0.0;
+      auto [at, added] = localBoxes.try_emplace({instance.source, local});
+      if (added) at->second = sourceBox(source, local);
+      out.instanceBoxes.boxes[std::size_t(f) * count + i] = transformBox(at->second, instance.worldAt(out.frameTimes[f]));
+    }
   const BaselineConfig config = options.baselineConfig();
   out.tlas = buildTSah(out.instanceBoxes, options.objective.k, config);
   requireValid(out.tlas, out.instanceBoxes, scene.description.file + ": TLAS");

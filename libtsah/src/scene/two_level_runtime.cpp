@@ -25,6 +25,7 @@ struct TlasFrame {
   const GpuBvhNode* nodes = nullptr;
   const uint32_t* triIndex = nullptr;  // slot -> instance id
   const Affine3x4* toInstance = nullptr;
+  const uint8_t* visible = nullptr;         // per instance: 0 while its world transform is singular
   const CpuRuntime* const* blas = nullptr;  // per instance, traced in its own layout
   int32_t rootRef = makeLeafRef(0);
   uint32_t rootCount = 0;
@@ -35,6 +36,7 @@ struct TlasFrame {
   const GpuBvhNode& node(int32_t ref) const { return nodes[ref]; }
   bool intersectSlot(const Ray& ray, const RayPrep&, uint32_t s, float tmax, float& t, float& u, float& v) const {
     const uint32_t instance = triIndex[s];
+    if (!visible[instance]) return false;
     const Affine3x4& m = toInstance[instance];
     Ray local = ray;
     local.org = m.point(ray.org);
@@ -125,6 +127,7 @@ TwoLevelRuntime::TwoLevelRuntime(const TwoLevelScene& scene, Config config) : sc
   toInstance_.resize(count);
   instanceBoxes_.resize(count);
   blas_.resize(count);
+  visible_.resize(count);
   tlas_ = runtimeTopology(flattenBvh(scene.tlas), count, kTraversalStackSize, "two-level runtime: TLAS");
   update(scene.frameTimes.empty() ? sources.start : scene.frameTimes.front());
 }
@@ -165,9 +168,13 @@ void TwoLevelRuntime::update(double sceneTime) {
 
   for (uint32_t i = 0; i < scene_.instanceCount(); ++i) {
     const anim::Matrix4 world = sources.instances[i].worldAt(sceneTime);
-    toInstance_[i] = toFloat(inverseAffine(world));
     blas_[i] = &runtimeOf(i);
-    instanceBoxes_[i] = transformBox(blas_[i]->bounds(), world);
+    // A path that interpolates a scale through 0 flattens the instance for an instant: it has no
+    // area then (the flat scene's triangles are degenerate and never hit), so it is skipped.
+    const double det = anim::linearDeterminant(world);
+    visible_[i] = std::isfinite(det) && det != 0.0;
+    toInstance_[i] = visible_[i] ? toFloat(inverseAffine(world)) : Affine3x4{};
+    instanceBoxes_[i] = transformBox(blas_[i]->bounds(), world);  // flat while singular, still a box
   }
   if (config_.tlas == TlasUpdate::Rebuild)
     tlas_ = runtimeTopology(flattenBvh(rebuildTlas(instanceBoxes_, scene_.objective)), scene_.instanceCount(),
@@ -199,12 +206,13 @@ void TwoLevelRuntime::refitTlas() {
 
 template <bool AnyHit>
 static TlasFrame<AnyHit> tlasFrame(const FlatBvh& tlas, const std::vector<Affine3x4>& toInstance,
-                                   const std::vector<const CpuRuntime*>& blas) {
+                                   const std::vector<uint8_t>& visible, const std::vector<const CpuRuntime*>& blas) {
   TlasFrame<AnyHit> f;
   f.nodes = tlas.nodes.data();
   f.triIndex = tlas.triIndex.data();
   f.toInstance = toInstance.data();
   f.blas = blas.data();
+  f.visible = visible.data();
   f.rootRef = tlas.rootRef;
   f.rootCount = tlas.rootCount;
   f.rootBox = tlas.rootBoxes[0];
@@ -212,7 +220,7 @@ static TlasFrame<AnyHit> tlasFrame(const FlatBvh& tlas, const std::vector<Affine
 }
 
 TwoLevelHit TwoLevelRuntime::closestHit(const Ray& ray) const {
-  const TlasFrame<false> frame = tlasFrame<false>(tlas_, toInstance_, blas_);
+  const TlasFrame<false> frame = tlasFrame<false>(tlas_, toInstance_, visible_, blas_);
   const Hit h = detail::traverse<false>(frame, ray);
   TwoLevelHit hit;
   if (!h.valid()) return hit;
@@ -225,7 +233,7 @@ TwoLevelHit TwoLevelRuntime::closestHit(const Ray& ray) const {
 }
 
 bool TwoLevelRuntime::anyHit(const Ray& ray) const {
-  return detail::traverse<true>(tlasFrame<true>(tlas_, toInstance_, blas_), ray).valid();
+  return detail::traverse<true>(tlasFrame<true>(tlas_, toInstance_, visible_, blas_), ray).valid();
 }
 
 uint64_t TwoLevelRuntime::memoryBytes() const {

@@ -77,7 +77,8 @@ class TwoLevelRuntime {
   double time() const { return time_; }
 
   // The instances' world boxes at the current time, and the TLAS in canonical form (its node boxes
-  // those of the current time; slots hold instance ids).
+  // those of the current time; slots hold instance ids). An instance whose world transform is
+  // singular (a path scale passing through 0) has no area at that time and is never hit.
   std::span<const Aabb> instanceBoxes() const { return instanceBoxes_; }
   const FlatBvh& tlas() const { return tlas_; }
   // The BLAS runtime an instance traces (its pose's, or its static source's).
@@ -99,6 +100,7 @@ class TwoLevelRuntime {
   std::vector<double> poseLocalTime_;                    // local time of each pose's last refit
   std::vector<std::vector<float>> poseScratch_;
   std::vector<Affine3x4> toInstance_;                    // per instance: world -> instance space
+  std::vector<uint8_t> visible_;                         // per instance: world transform invertible now
   std::vector<Aabb> instanceBoxes_;
   std::vector<const CpuRuntime*> blas_;                  // per instance: the BLAS runtime it traces
   FlatBvh tlas_;
