@@ -238,13 +238,7 @@ Aabb CpuRuntime::refitLeaf(uint32_t firstSlot, uint32_t count) {
 }
 
 void CpuRuntime::refitNode(uint32_t i) {
-  GpuBvhNode& node = tree_.nodes[i];
-  for (int c = 0; c < 2; ++c) {
-    const int32_t ref = node.childRef(c);
-    const Aabb box = isLeafRef(ref) ? refitLeaf(leafFirstSlot(ref), node.childCount(c))
-                                    : tree_.nodes[static_cast<uint32_t>(ref)].bounds();
-    node.setChildBox(c, box);
-  }
+  refitFlatNode(tree_.frameNodes(0), i, [this](uint32_t first, uint32_t count) { return refitLeaf(first, count); });
 }
 
 void CpuRuntime::refitAndWoop() {

@@ -183,25 +183,11 @@ void TwoLevelRuntime::update(double sceneTime) {
 }
 
 void TwoLevelRuntime::refitTlas() {
-  const auto leafBox = [&](uint32_t first, uint32_t count) {
+  refitFlat(tlas_, [&](uint32_t first, uint32_t count) {
     Aabb box;
     for (uint32_t s = first; s < first + count; ++s) box.extend(instanceBoxes_[tlas_.triIndex[s]]);
     return box;
-  };
-  if (tlas_.interiorCount == 0) {
-    tlas_.rootBoxes[0] = leafBox(0, tlas_.rootCount);
-    return;
-  }
-  // Canonical order: every child has a larger index than its parent.
-  for (uint32_t n = tlas_.interiorCount; n-- > 0;) {
-    GpuBvhNode& node = tlas_.nodes[n];
-    for (int c = 0; c < 2; ++c) {
-      const int32_t ref = node.childRef(c);
-      node.setChildBox(c, isLeafRef(ref) ? leafBox(leafFirstSlot(ref), node.childCount(c))
-                                         : tlas_.nodes[static_cast<uint32_t>(ref)].bounds());
-    }
-  }
-  tlas_.rootBoxes[0] = tlas_.nodes[0].bounds();
+  });
 }
 
 template <bool AnyHit>

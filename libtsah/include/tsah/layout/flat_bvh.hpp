@@ -58,6 +58,31 @@ std::optional<std::string> validateFlatBvh(const FlatBvh& flat);
 // `maxDepth` deep (the traversal stack).
 FlatBvh runtimeTopology(const FlatBvh& tree, uint32_t triangles, uint32_t maxDepth, const std::string& who);
 
+// The one step of every binary refit: interior node i's two child boxes, a leaf child's from
+// leafBox(firstSlot, count), an interior child's the union of that child's (already refitted) boxes.
+template <class LeafBox>
+void refitFlatNode(std::span<GpuBvhNode> nodes, uint32_t i, const LeafBox& leafBox) {
+  GpuBvhNode& node = nodes[i];
+  for (int c = 0; c < 2; ++c) {
+    const int32_t ref = node.childRef(c);
+    node.setChildBox(c, isLeafRef(ref) ? leafBox(leafFirstSlot(ref), node.childCount(c))
+                                       : nodes[static_cast<uint32_t>(ref)].bounds());
+  }
+}
+
+// Frame 0 of the tree refitted bottom-up on one thread (canonical order: every child after its
+// parent), root box included.
+template <class LeafBox>
+void refitFlat(FlatBvh& flat, const LeafBox& leafBox) {
+  if (flat.interiorCount == 0) {
+    flat.rootBoxes[0] = leafBox(0u, flat.rootCount);
+    return;
+  }
+  const std::span<GpuBvhNode> nodes = flat.frameNodes(0);
+  for (uint32_t i = flat.interiorCount; i-- > 0;) refitFlatNode(nodes, i, leafBox);
+  flat.rootBoxes[0] = nodes[0].bounds();
+}
+
 // For each interior node i, one past the last interior node of its subtree (canonical order).
 std::vector<uint32_t> subtreeEnds(const FlatBvh& flat);
 
