@@ -138,6 +138,8 @@ FlatBvh decodeFlatBvhFile(std::span<const uint8_t> bytes, const std::string& fil
   const auto version = r.read<uint32_t>("version");
   if (version == 2)
     r.fail("holds a tree set (.tbvh version 2): read it with the tree-set reader (tsah::decodeTreeSetFile)");
+  if (version == 3)
+    r.fail("holds a two-level scene (.tbvh version 3): read it with its scene (tsah::loadTwoLevelSceneFile)");
   if (version != kTbvhVersion)
     r.fail("unsupported .tbvh version " + std::to_string(version) + " (this reader knows " +
            std::to_string(kTbvhVersion) + ")");

@@ -144,6 +144,8 @@ TreeSet decodeTreeSetFile(std::span<const uint8_t> bytes, const std::string& fil
   if (r.read<std::array<char, 8>>("magic") != detail::kTbvhMagic) r.fail("not a .tbvh file (bad magic)");
   const auto version = r.read<uint32_t>("version");
   if (version == kTbvhVersion) return decodeVersion1(bytes, file);
+  if (version == 3)
+    r.fail("holds a two-level scene (.tbvh version 3): read it with its scene (tsah::loadTwoLevelSceneFile)");
   if (version != kTbvhSetVersion)
     r.fail("unsupported .tbvh version " + std::to_string(version) + " (this reader knows 1 and 2)");
   if (r.read<uint32_t>("header size") != kTbvhSetHeaderBytes)

@@ -1,5 +1,6 @@
 #include "tsah/scene/two_level.hpp"
 
+#include <chrono>
 #include <cmath>
 #include <map>
 #include <tuple>
@@ -8,6 +9,7 @@
 #include "tsah/base/memory.hpp"
 #include "tsah/build/sah_builder.hpp"
 #include "tsah/core/cost.hpp"
+#include "scene/two_level_parts.hpp"
 
 namespace tsah {
 
@@ -54,6 +56,58 @@ Aabb sourceBox(const anim::Animation& source, double localTime) {
   return box;
 }
 
+void assignPoses(const anim::SceneSources& scene, TwoLevelScene& out) {
+  // Instances of one animated source with the same time mapping show the same pose.
+  std::map<std::tuple<uint32_t, double, double, int>, uint32_t> poseOf;
+  for (const anim::SceneSourceInstance& i : scene.instances) {
+    if (!out.blases[i.source].animated) {
+      out.instancePose.push_back(kInvalidIndex);
+      continue;
+    }
+    const auto key = std::make_tuple(i.source, i.time.offset, i.time.speed, int(i.time.outside));
+    const auto [it, added] = poseOf.emplace(key, uint32_t(out.poses.size()));
+    if (added) out.poses.push_back({i.source, i.time});
+    out.instancePose.push_back(it->second);
+  }
+}
+
+PrimitiveBoxes instanceBoxesOverFrames(const anim::SceneSources& scene, const TwoLevelScene& out) {
+  const uint32_t frames = uint32_t(out.frameTimes.size()), count = uint32_t(scene.instances.size());
+  checkFitsInMemory(std::size_t(frames) * count * sizeof(Aabb), scene.description.file,
+                    std::to_string(frames) + " frames of " + std::to_string(count) + " instance boxes");
+  PrimitiveBoxes boxes;
+  boxes.frameCount = frames;
+  boxes.primCount = count;
+  boxes.boxes.resize(std::size_t(frames) * count);
+  // A source's box at one local time is computed once, however many instances show it there.
+  std::map<std::pair<uint32_t, double>, Aabb> localBoxes;
+  for (uint32_t f = 0; f < frames; ++f)
+    for (uint32_t i = 0; i < count; ++i) {
+      const anim::SceneSourceInstance& instance = scene.instances[i];
+      const anim::Animation& source = scene.sourceOf(instance);
+      const double local = out.blases[instance.source].animated ? instance.localTime(out.frameTimes[f], source) : 0.0;
+      auto [at, added] = localBoxes.try_emplace({instance.source, local});
+      if (added) at->second = sourceBox(source, local);
+      boxes.boxes[std::size_t(f) * count + i] = transformBox(at->second, instance.worldAt(out.frameTimes[f]));
+    }
+  return boxes;
+}
+
+void computeLevelCosts(TwoLevelScene& out) {
+  for (Blas& blas : out.blases) {
+    blas.frameCosts = frameCosts(blas.bvh, out.objective.cost);
+    blas.cost = temporalCost(blas.frameCosts, blas.animated ? out.objective.k : 0);
+  }
+  out.tlasFrameCosts = frameCosts(out.tlas, out.objective.cost);
+  out.tlasCost = temporalCost(out.tlasFrameCosts, out.objective.k);
+}
+
+uint32_t instanceTableHash(const anim::SceneSources& scene) {
+  std::vector<uint32_t> sources;
+  for (const anim::SceneSourceInstance& i : scene.instances) sources.push_back(i.source);
+  return topologyHash(sources);
+}
+
 Aabb instanceWorldBox(const anim::SceneSources& scene, uint32_t instance, double sceneTime) {
   const anim::SceneSourceInstance& i = scene.instances[instance];
   const anim::Animation& source = scene.sourceOf(i);
@@ -98,50 +152,27 @@ TwoLevelScene buildTwoLevelScene(anim::SceneSources scene, const TreeOptions& op
     OptimizedTree tree = optimizeAnimation(source, treeOptionsWithK(options, k));
     const std::string what = scene.description.file + ": source " + std::to_string(s) + " (" + source.name() + ")";
     requireValid(tree.bvh, representativeBoxes(source, framesFor(source, options.frames)), what);
-    blas.frameCosts = frameCosts(tree.bvh, options.objective.cost);
-    blas.cost = temporalCost(blas.frameCosts, k);
+    blas.info = tree.info;
     blas.flat = flattenBvh(tree.bvh);
     blas.bvh = std::move(tree.bvh);
     out.blases.push_back(std::move(blas));
   }
 
-  // Poses: instances of one animated source with the same time mapping show the same pose.
-  std::map<std::tuple<uint32_t, double, double, int>, uint32_t> poseOf;
-  for (const anim::SceneSourceInstance& i : scene.instances) {
-    if (!out.blases[i.source].animated) {
-      out.instancePose.push_back(kInvalidIndex);
-      continue;
-    }
-    const auto key = std::make_tuple(i.source, i.time.offset, i.time.speed, int(i.time.outside));
-    const auto [it, added] = poseOf.emplace(key, uint32_t(out.poses.size()));
-    if (added) out.poses.push_back({i.source, i.time});
-    out.instancePose.push_back(it->second);
-  }
-
-  // The TLAS: instance world boxes at every scene frame, SAH on the first, T-SAH over all.
+  assignPoses(scene, out);
   out.frameTimes = scene.frameTimes();
-  const uint32_t frames = uint32_t(out.frameTimes.size()), count = uint32_t(scene.instances.size());
-  checkFitsInMemory(std::size_t(frames) * count * sizeof(Aabb), scene.description.file,
-                    std::to_string(frames) + " frames of " + std::to_string(count) + " instance boxes");
-  out.instanceBoxes.frameCount = frames;
-  out.instanceBoxes.primCount = count;
-  out.instanceBoxes.boxes.resize(std::size_t(frames) * count);
-  // A source's box at one local time is computed once, however many instances show it there.
-  std::map<std::pair<uint32_t, double>, Aabb> localBoxes;
-  for (uint32_t f = 0; f < frames; ++f)
-    for (uint32_t i = 0; i < count; ++i) {
-      const anim::SceneSourceInstance& instance = scene.instances[i];
-      const anim::Animation& source = scene.sourceOf(instance);
-      const double local = out.blases[instance.source].animated ? instance.localTime(out.frameTimes[f], source) : 0.0;
-      auto [at, added] = localBoxes.try_emplace({instance.source, local});
-      if (added) at->second = sourceBox(source, local);
-      out.instanceBoxes.boxes[std::size_t(f) * count + i] = transformBox(at->second, instance.worldAt(out.frameTimes[f]));
-    }
+  out.instanceBoxes = instanceBoxesOverFrames(scene, out);
   const BaselineConfig config = options.baselineConfig();
+  const auto start = std::chrono::steady_clock::now();
   out.tlas = buildTSah(out.instanceBoxes, options.objective.k, config);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   requireValid(out.tlas, out.instanceBoxes, scene.description.file + ": TLAS");
-  out.tlasFrameCosts = frameCosts(out.tlas, options.objective.cost);
-  out.tlasCost = temporalCost(out.tlasFrameCosts, options.objective.k);
+  // The TLAS's header: the options of the first source's, counts and hash of the instance table.
+  out.tlasInfo = treeBuildInfo(options, *scene.sources[0], uint32_t(out.frameTimes.size()), seconds, scene.start, scene.end);
+  out.tlasInfo.representativeFrames = uint32_t(out.frameTimes.size());
+  out.tlasInfo.triangleCount = uint32_t(scene.instances.size());
+  out.tlasInfo.vertexCount = 0;
+  out.tlasInfo.topologyHash = instanceTableHash(scene);
+  computeLevelCosts(out);
   out.scene = std::move(scene);
   return out;
 }

@@ -10,6 +10,7 @@
 
 #include "anim/scene.hpp"
 #include "tsah/core/bvh.hpp"
+#include "tsah/io/bvh_file.hpp"
 #include "tsah/layout/flat_bvh.hpp"
 #include "tsah/pipeline.hpp"
 
@@ -23,6 +24,7 @@ struct Blas {
   bool animated = false;   // the source has two keyframes or more
   Bvh bvh;                 // boxes of its build frames
   FlatBvh flat;            // canonical form (what the runtimes trace)
+  BvhBuildInfo info;       // its .tbvh header (optimizeAnimation's, for the source alone)
   std::vector<double> frameCosts;  // Eq. 1 at each build frame
   double cost = 0.0;               // C~^k over the build frames (static: the SAH cost)
 };
@@ -42,6 +44,9 @@ struct TwoLevelScene {
   std::vector<double> frameTimes;     // the scene's frames (SceneSources::frameTimes)
   PrimitiveBoxes instanceBoxes;       // world box of every instance at every scene frame
   Bvh tlas;                           // over instanceBoxes, boxes for every scene frame
+  // Its .tbvh header: the build options, triangleCount = instances, vertexCount 0, topologyHash the
+  // CRC-32 of the instances' source ids (u32 each), representativeFrames = the scene's frames.
+  BvhBuildInfo tlasInfo;
   std::vector<double> tlasFrameCosts; // Eq. 1 of the TLAS at each scene frame
   double tlasCost = 0.0;              // C~^k over the scene frames
 
@@ -72,6 +77,18 @@ Aabb instanceWorldBox(const anim::SceneSources& scene, uint32_t instance, double
 TwoLevelScene buildTwoLevelScene(anim::SceneSources scene, const TreeOptions& options);
 // loadSceneSources(path, load) then buildTwoLevelScene.
 TwoLevelScene loadTwoLevelScene(const std::string& path, const anim::LoadOptions& load, const TreeOptions& options);
+
+// The two-level .tbvh file (version 3, docs/tbvh-format.md) of a structure: every BLAS, the TLAS
+// and the instance and pose tables. save is atomic. Throws as encodeTwoLevelFile.
+std::vector<uint8_t> encodeTwoLevelScene(const TwoLevelScene& twoLevel);
+void saveTwoLevelScene(const std::string& path, const TwoLevelScene& twoLevel);
+// Reads a version 3 file (decodeTwoLevelFile: tsah::FileError for a corrupt file) and checks it
+// against the scene it was built for: one BLAS per source with the source's triangles, vertices
+// and topology hash, the instance table and poses the scene gives, the TLAS over the scene's
+// frames with boxes that contain every instance's world box there; tsah::DataError ("TREE was not
+// built for SCENE: ...") otherwise. The objective is the TLAS header's; costs are recomputed from
+// the stored boxes.
+TwoLevelScene loadTwoLevelSceneFile(const std::string& treePath, anim::SceneSources scene);
 
 // The per-frame reference: a sweep-SAH TLAS over one frame's instance boxes (leaves of at most
 // objective.maxLeafSize instances when that is not more expensive).

@@ -1,0 +1,209 @@
+#include "tsah/io/two_level_file.hpp"
+
+#include <cmath>
+#include <cstring>
+
+#include "tsah/base/assert.hpp"
+#include "tsah/base/binary_io.hpp"
+#include "tsah/base/error.hpp"
+#include "io/tbvh_io.hpp"
+
+namespace tsah {
+
+namespace {
+
+constexpr uint32_t kInstanceEntryBytes = 8;   // u32 blas, u32 pose
+constexpr uint32_t kPoseEntryBytes = 24;      // u32 blas, u32 outside, f64 offset, f64 speed
+constexpr uint32_t kTreeEntryBytes = 16;      // u64 offset, u64 size
+// The smallest valid version 1 file: header, no interior node, one root box, one slot, checksum.
+constexpr uint64_t kMinTreeBytes = kTbvhHeaderBytes + sizeof(Aabb) + 4 + 4;
+
+uint64_t align16(uint64_t x) { return (x + 15) & ~uint64_t(15); }
+
+uint64_t tablesEnd(uint64_t blasCount, uint64_t instances, uint64_t poses) {
+  return kTbvhTwoLevelHeaderBytes + kInstanceEntryBytes * instances + kPoseEntryBytes * poses +
+         kTreeEntryBytes * (blasCount + 1);
+}
+
+}  // namespace
+
+std::optional<std::string> validateTwoLevelTables(uint32_t blasCount, std::span<const uint32_t> instanceBlas,
+                                                  std::span<const uint32_t> instancePose,
+                                                  std::span<const TwoLevelPoseRecord> poses) {
+  if (blasCount == 0) return "a two-level scene needs at least one BLAS";
+  if (instanceBlas.empty()) return "a two-level scene needs at least one instance";
+  if (instancePose.size() != instanceBlas.size()) return "the instance table's columns differ in length";
+  for (std::size_t p = 0; p < poses.size(); ++p) {
+    const TwoLevelPoseRecord& pose = poses[p];
+    if (pose.blas >= blasCount) return "pose " + std::to_string(p) + " names BLAS " + std::to_string(pose.blas) + " of " + std::to_string(blasCount);
+    if (pose.outside > 1) return "pose " + std::to_string(p) + " has an unknown outside mode " + std::to_string(pose.outside);
+    if (!std::isfinite(pose.offset) || !std::isfinite(pose.speed) || pose.speed < 0.0)
+      return "pose " + std::to_string(p) + " has a non-finite offset or a speed that is not finite and >= 0";
+  }
+  // Per BLAS: -1 unknown, 0 static (no pose), 1 animated (posed).
+  std::vector<int> posed(blasCount, -1);
+  std::vector<uint8_t> used(poses.size(), 0);
+  for (std::size_t i = 0; i < instanceBlas.size(); ++i) {
+    const std::string which = "instance " + std::to_string(i);
+    const uint32_t blas = instanceBlas[i], pose = instancePose[i];
+    if (blas >= blasCount) return which + " names BLAS " + std::to_string(blas) + " of " + std::to_string(blasCount);
+    if (pose != kTbvhNoPose && pose >= poses.size()) return which + " names pose " + std::to_string(pose) + " of " + std::to_string(poses.size());
+    if (pose != kTbvhNoPose && poses[pose].blas != blas) return which + "'s pose belongs to another BLAS";
+    const int kind = pose == kTbvhNoPose ? 0 : 1;
+    if (posed[blas] != -1 && posed[blas] != kind) return "the instances of BLAS " + std::to_string(blas) + " are posed and unposed";
+    posed[blas] = kind;
+    if (pose != kTbvhNoPose) used[pose] = 1;
+  }
+  for (std::size_t p = 0; p < poses.size(); ++p)
+    if (!used[p]) return "pose " + std::to_string(p) + " is shown by no instance";
+  return std::nullopt;
+}
+
+std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh> blases, std::span<const BvhBuildInfo> blasBuilds,
+                                        const Bvh& tlas, const BvhBuildInfo& tlasBuild,
+                                        std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
+                                        std::span<const TwoLevelPoseRecord> poses) {
+  if (blases.size() != blasBuilds.size() || blases.size() > kTbvhTwoLevelMaxBlas)
+    throw DataError(".tbvh two-level: " + std::to_string(blases.size()) + " BLAS and " +
+                    std::to_string(blasBuilds.size()) + " build records");
+  if (auto problem = validateTwoLevelTables(uint32_t(blases.size()), instanceBlas, instancePose, poses))
+    throw DataError(".tbvh two-level: " + *problem);
+  if (tlas.primCount() != instanceBlas.size())
+    throw DataError(".tbvh two-level: the TLAS holds " + std::to_string(tlas.primCount()) + " instances, the table " +
+                    std::to_string(instanceBlas.size()));
+  std::vector<std::vector<uint8_t>> images;
+  for (std::size_t b = 0; b < blases.size(); ++b) images.push_back(encodeBvhFile(blases[b], blasBuilds[b]));
+  images.push_back(encodeBvhFile(tlas, tlasBuild));
+
+  ByteWriter w;
+  w.write(detail::kTbvhMagic);
+  w.write(kTbvhTwoLevelVersion);
+  w.write(kTbvhTwoLevelHeaderBytes);
+  w.write(uint32_t(blases.size()));
+  w.write(uint32_t(instanceBlas.size()));
+  w.write(uint32_t(poses.size()));
+  w.write(uint32_t{0});
+  w.write(tlasBuild.timeStart);
+  w.write(tlasBuild.timeEnd);
+  for (int i = 0; i < 4; ++i) w.write(uint32_t{0});
+  TSAH_ASSERT(w.buffer().size() == kTbvhTwoLevelHeaderBytes, ".tbvh two-level header size mismatch");
+  for (std::size_t i = 0; i < instanceBlas.size(); ++i) {
+    w.write(instanceBlas[i]);
+    w.write(instancePose[i]);
+  }
+  for (const TwoLevelPoseRecord& p : poses) {
+    w.write(p.blas);
+    w.write(p.outside);
+    w.write(p.offset);
+    w.write(p.speed);
+  }
+  uint64_t offset = align16(tablesEnd(blases.size(), instanceBlas.size(), poses.size()));
+  for (const std::vector<uint8_t>& image : images) {
+    w.write(offset);
+    w.write(uint64_t(image.size()));
+    offset = align16(offset + image.size());
+  }
+  for (const std::vector<uint8_t>& image : images) {
+    while (w.buffer().size() % 16 != 0) w.write(uint8_t{0});
+    w.writeArray(std::span<const uint8_t>(image));
+  }
+  w.write(crc32(w.buffer().data(), w.buffer().size()));
+  return std::move(w.buffer());
+}
+
+TwoLevelFile decodeTwoLevelFile(std::span<const uint8_t> bytes, const std::string& file) {
+  ByteReader r(bytes, file);
+  if (r.read<std::array<char, 8>>("magic") != detail::kTbvhMagic) r.fail("not a .tbvh file (bad magic)");
+  const auto version = r.read<uint32_t>("version");
+  if (version != kTbvhTwoLevelVersion)
+    r.fail("is a .tbvh version " + std::to_string(version) + " file, not a two-level scene (version 3)");
+  if (r.read<uint32_t>("header size") != kTbvhTwoLevelHeaderBytes)
+    r.fail("two-level header size is not " + std::to_string(kTbvhTwoLevelHeaderBytes));
+  const auto blasCount = r.read<uint32_t>("BLAS count");
+  const auto instanceCount = r.read<uint32_t>("instance count");
+  const auto poseCount = r.read<uint32_t>("pose count");
+  bool reservedZero = r.read<uint32_t>("reserved") == 0;
+  const auto timeStart = r.read<double>("time start");
+  const auto timeEnd = r.read<double>("time end");
+  for (int i = 0; i < 4; ++i) reservedZero = r.read<uint32_t>("reserved") == 0 && reservedZero;
+  if (!reservedZero) r.fail("reserved header words must be 0");
+
+  // Counts against the byte count before any allocation.
+  if (blasCount == 0 || blasCount > kTbvhTwoLevelMaxBlas)
+    r.fail("BLAS count " + std::to_string(blasCount) + " is not in 1.." + std::to_string(kTbvhTwoLevelMaxBlas));
+  if (instanceCount == 0 || instanceCount > kMaxGpuTriangles)
+    r.fail("instance count " + std::to_string(instanceCount) + " is not in 1.." + std::to_string(kMaxGpuTriangles));
+  if (poseCount > instanceCount)
+    r.fail("pose count " + std::to_string(poseCount) + " exceeds the instance count " + std::to_string(instanceCount));
+  const uint64_t tables = tablesEnd(blasCount, instanceCount, poseCount);
+  if (bytes.size() < tables + (uint64_t(blasCount) + 1) * kMinTreeBytes + 4)
+    r.fail("file size " + std::to_string(bytes.size()) + " is too small for " + std::to_string(blasCount) +
+           " BLAS, " + std::to_string(instanceCount) + " instances and " + std::to_string(poseCount) + " poses");
+  const std::size_t crcOffset = bytes.size() - 4;
+  uint32_t storedCrc;
+  std::memcpy(&storedCrc, bytes.data() + crcOffset, 4);
+  if (crc32(bytes.data(), crcOffset) != storedCrc) r.fail("checksum mismatch (the file is corrupt)");
+  if (!std::isfinite(timeStart) || !std::isfinite(timeEnd) || timeEnd < timeStart)
+    r.fail("time range must be finite and ordered");
+
+  TwoLevelFile out;
+  out.instanceBlas.resize(instanceCount);
+  out.instancePose.resize(instanceCount);
+  for (uint32_t i = 0; i < instanceCount; ++i) {
+    out.instanceBlas[i] = r.read<uint32_t>("instance BLAS");
+    out.instancePose[i] = r.read<uint32_t>("instance pose");
+  }
+  out.poses.resize(poseCount);
+  for (TwoLevelPoseRecord& p : out.poses) {
+    p.blas = r.read<uint32_t>("pose BLAS");
+    p.outside = r.read<uint32_t>("pose outside");
+    p.offset = r.read<double>("pose offset");
+    p.speed = r.read<double>("pose speed");
+  }
+  if (auto problem = validateTwoLevelTables(blasCount, out.instanceBlas, out.instancePose, out.poses)) r.fail(*problem);
+
+  const uint32_t trees = blasCount + 1;
+  std::vector<std::pair<uint64_t, uint64_t>> entries(trees);
+  uint64_t expected = align16(tables);
+  for (uint32_t s = 0; s < trees; ++s) {
+    auto& [offset, size] = entries[s];
+    offset = r.read<uint64_t>("tree offset");
+    size = r.read<uint64_t>("tree size");
+    const std::string which = s == blasCount ? std::string("the TLAS") : "BLAS " + std::to_string(s);
+    if (offset != expected)
+      r.fail(which + " starts at byte " + std::to_string(offset) + ", expected " + std::to_string(expected));
+    if (size < kMinTreeBytes || size > crcOffset - std::min<uint64_t>(expected, crcOffset))
+      r.fail(which + " size " + std::to_string(size) + " does not fit the file");
+    expected = align16(offset + size);
+  }
+  if (entries.back().first + entries.back().second != crcOffset) r.fail("the TLAS does not end where the checksum starts");
+  for (uint64_t b = tables; b < entries[0].first; ++b)
+    if (bytes[b] != 0) r.fail("padding before BLAS 0 must be 0");
+  for (uint32_t s = 0; s + 1 < trees; ++s)
+    for (uint64_t b = entries[s].first + entries[s].second; b < entries[s + 1].first; ++b)
+      if (bytes[b] != 0) r.fail("padding after tree " + std::to_string(s) + " must be 0");
+
+  for (uint32_t s = 0; s < trees; ++s) {
+    const bool isTlas = s == blasCount;
+    const std::string which = isTlas ? std::string("TLAS") : "BLAS " + std::to_string(s);
+    const auto image = bytes.subspan(entries[s].first, entries[s].second);
+    uint32_t innerVersion;
+    std::memcpy(&innerVersion, image.data() + 8, 4);
+    if (innerVersion != kTbvhVersion) r.fail(which + " is not a version 1 tree");
+    BvhBuildInfo build;
+    FlatBvh tree = decodeFlatBvhFile(image, file + " (" + which + ")", &build);
+    if (isTlas) {
+      if (build.triangleCount != instanceCount)
+        r.fail("the TLAS holds " + std::to_string(build.triangleCount) + " instances, the table " + std::to_string(instanceCount));
+      if (build.timeStart != timeStart || build.timeEnd != timeEnd) r.fail("the TLAS's time range differs from the header's");
+      out.tlas = std::move(tree);
+      out.tlasBuild = std::move(build);
+    } else {
+      out.blases.push_back(std::move(tree));
+      out.blasBuilds.push_back(std::move(build));
+    }
+  }
+  return out;
+}
+
+}  // namespace tsah

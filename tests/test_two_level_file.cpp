@@ -1,0 +1,219 @@
+// The two-level .tbvh file (version 3, docs/tbvh-format.md): round trip, corrupt input, the
+// other versions' readers, and a file read with a scene it was not built for.
+#include <gtest/gtest.h>
+
+#include <cstring>
+
+#include "anim/scene.hpp"
+#include "anim/tanim.hpp"
+#include "tsah/base/binary_io.hpp"
+#include "tsah/base/error.hpp"
+#include "tsah/base/files.hpp"
+#include "tsah/io/bvh_file.hpp"
+#include "tsah/io/tree_set.hpp"
+#include "tsah/io/two_level_file.hpp"
+#include "tsah/scene/two_level.hpp"
+#include "tsah/scene/two_level_runtime.hpp"
+#include "test_support.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+using tsah::test::writeText;
+
+// A static source twice (one mirrored), an animated one with two offsets and a keyed path.
+fs::path writeScene(const fs::path& dir, const std::string& name, const std::string& secondOffset = "1.5") {
+  const anim::Animation wave = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 200, 6, 5);
+  anim::saveTanim(wave, (dir / "wave.tanim").string());
+  writeText(dir / "tri.obj", "v 1 0 0\nv 0 1 0\nv 0 0 1\nv 2 0 0\nf 1 2 3\nf 2 3 4\n");
+  writeText(dir / name, R"({"fps": 2, "objects": [
+    {"file": "tri.obj", "instances": [{}, {"transform": {"translate": [3, 0, 0], "scale": [-1, 2, 1]}}]},
+    {"file": "wave.tanim", "instances": [{"transform": {"rotate": [0, 30, 0]}},
+      {"offset": )" + secondOffset + R"(, "path": [{"time": 0}, {"time": 6, "translate": [0, 4, 0]}]}]}]})");
+  return dir / name;
+}
+
+tsah::TreeOptions options() {
+  tsah::TreeOptions o;
+  o.frames = 3;
+  o.objective.k = 1;
+  o.objective.maxLeafSize = 2;
+  o.threads = 1;
+  return o;
+}
+
+// The bytes with their trailing checksum recomputed (to reach the checks behind it).
+std::vector<uint8_t> withCrc(std::vector<uint8_t> bytes) {
+  const uint32_t crc = tsah::crc32(bytes.data(), bytes.size() - 4);
+  std::memcpy(bytes.data() + bytes.size() - 4, &crc, 4);
+  return bytes;
+}
+
+template <class T>
+void put(std::vector<uint8_t>& bytes, std::size_t offset, T value) {
+  std::memcpy(bytes.data() + offset, &value, sizeof value);
+}
+
+std::string decodeError(const std::vector<uint8_t>& bytes) {
+  try {
+    tsah::decodeTwoLevelFile(bytes, "x.tbvh");
+  } catch (const tsah::FileError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+class TwoLevelFile : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir = tsah::test::scratchDir();
+    scenePath = writeScene(dir, "scene.json");
+    built = std::make_unique<tsah::TwoLevelScene>(tsah::loadTwoLevelScene(scenePath.string(), {}, options()));
+    bytes = tsah::encodeTwoLevelScene(*built);
+  }
+  fs::path dir, scenePath;
+  std::unique_ptr<tsah::TwoLevelScene> built;
+  std::vector<uint8_t> bytes;
+};
+
+TEST_F(TwoLevelFile, RoundTripKeepsEveryTreeAndTracesTheSame) {
+  const fs::path tree = dir / "scene.tbvh";
+  tsah::saveTwoLevelScene(tree.string(), *built);
+  const tsah::TwoLevelScene read = tsah::loadTwoLevelSceneFile(tree.string(), anim::loadSceneSources(scenePath.string()));
+  ASSERT_EQ(read.blases.size(), built->blases.size());
+  for (std::size_t b = 0; b < read.blases.size(); ++b) {
+    EXPECT_EQ(read.blases[b].flat.nodes.size(), built->blases[b].flat.nodes.size());
+    EXPECT_EQ(0, std::memcmp(read.blases[b].flat.nodes.data(), built->blases[b].flat.nodes.data(),
+                             read.blases[b].flat.nodes.size() * sizeof(tsah::GpuBvhNode)));
+    EXPECT_EQ(read.blases[b].flat.triIndex, built->blases[b].flat.triIndex);
+    EXPECT_DOUBLE_EQ(read.blases[b].cost, built->blases[b].cost);
+    EXPECT_EQ(read.blases[b].animated, built->blases[b].animated);
+  }
+  EXPECT_EQ(read.tlas.primIds, built->tlas.primIds);
+  EXPECT_EQ(read.tlas.frameCount, built->tlas.frameCount);
+  EXPECT_DOUBLE_EQ(read.tlasCost, built->tlasCost);
+  EXPECT_EQ(read.objective, built->objective);
+  EXPECT_EQ(read.instancePose, built->instancePose);
+  EXPECT_EQ(read.poses.size(), 2u);
+  // The same bytes again, and the same hits.
+  EXPECT_EQ(tsah::encodeTwoLevelScene(read), tsah::readFile(tree.string()));
+  tsah::TwoLevelRuntime a(*built), b(read);
+  a.update(2.5);
+  b.update(2.5);
+  for (int i = 0; i < 64; ++i) {
+    tsah::Ray ray;
+    ray.org = {0.1f * float(i % 8) - 0.3f, 8.0f, 0.1f * float(i / 8) - 0.3f};
+    ray.dir = {0.05f, -1.0f, 0.02f};
+    ray.tmin = 0.0f;
+    ray.tmax = 100.0f;
+    const tsah::TwoLevelHit ha = a.closestHit(ray), hb = b.closestHit(ray);
+    EXPECT_EQ(ha.instance, hb.instance);
+    EXPECT_EQ(ha.prim, hb.prim);
+    EXPECT_EQ(ha.t, hb.t);
+  }
+}
+
+TEST_F(TwoLevelFile, CorruptFilesAreRefusedWithOneLine) {
+  EXPECT_EQ(decodeError(bytes), "");
+  std::vector<uint8_t> flipped = bytes;
+  flipped[100] ^= 0x10;
+  EXPECT_NE(decodeError(flipped).find("checksum mismatch"), std::string::npos);
+  EXPECT_NE(decodeError(std::vector<uint8_t>(bytes.begin(), bytes.begin() + 200)).find("too small"), std::string::npos);
+  // Header fields (offsets: docs/tbvh-format.md, version 3).
+  struct Case {
+    std::size_t offset;
+    uint32_t value;
+    const char* expected;
+  };
+  const uint32_t instances = uint32_t(built->instanceCount());
+  const std::size_t poseTable = 64 + 8 * std::size_t(instances);
+  for (const Case& c : std::vector<Case>{
+           {12, 65, "header size is not 64"},
+           {16, 0, "BLAS count 0"},
+           {16, 1u << 30, "BLAS count 1073741824"},
+           {16, 3, "BLAS 0 starts at byte"},
+           {20, 0, "instance count 0"},
+           {24, 100, "pose count 100 exceeds"},
+           {28, 1, "reserved header words"},
+           {60, 1, "reserved header words"},
+           {64, 7, "instance 0 names BLAS 7 of 2"},
+           {64 + 4, 0, "instance 0's pose belongs to another BLAS"},
+           {64 + 8 * 2 + 4, 0xffffffffu, "the instances of BLAS 1 are posed and unposed"},
+           {poseTable, 0, "instance 2's pose belongs to another BLAS"},
+           {poseTable + 4, 2, "unknown outside mode 2"},
+       }) {
+    std::vector<uint8_t> bad = bytes;
+    put(bad, c.offset, c.value);
+    const std::string message = decodeError(withCrc(bad));
+    EXPECT_NE(message.find(c.expected), std::string::npos) << "offset " << c.offset << ": " << message;
+    EXPECT_EQ(message.find('\n'), std::string::npos);
+  }
+  std::vector<uint8_t> badSpeed = bytes;
+  put(badSpeed, poseTable + 16, -1.0);
+  EXPECT_NE(decodeError(withCrc(badSpeed)).find("speed"), std::string::npos);
+  const std::size_t treeTable = poseTable + 24 * built->poses.size();
+  std::vector<uint8_t> badOffset = bytes;
+  put(badOffset, treeTable, uint64_t(8));
+  EXPECT_NE(decodeError(withCrc(badOffset)).find("BLAS 0 starts at byte 8"), std::string::npos);
+  std::vector<uint8_t> badTime = bytes;
+  put(badTime, 40, -1.0);  // time end before time start
+  EXPECT_NE(decodeError(withCrc(badTime)).find("time range"), std::string::npos);
+  // A BLAS image whose own checksum breaks: named by the inner reader.
+  uint64_t firstTree;
+  std::memcpy(&firstTree, bytes.data() + treeTable, 8);
+  std::vector<uint8_t> badTree = bytes;
+  badTree[firstTree + 170] ^= 1;
+  EXPECT_NE(decodeError(withCrc(badTree)).find("(BLAS 0)"), std::string::npos) << decodeError(withCrc(badTree));
+}
+
+TEST_F(TwoLevelFile, OtherVersionsReadersPointToEachOther) {
+  try {
+    tsah::decodeTreeSetFile(bytes, "x.tbvh");
+    ADD_FAILURE() << "a version 3 file read as a tree set";
+  } catch (const tsah::FileError& e) {
+    EXPECT_NE(std::string(e.what()).find("two-level scene (.tbvh version 3)"), std::string::npos) << e.what();
+  }
+  try {
+    tsah::decodeFlatBvhFile(bytes, "x.tbvh");
+    ADD_FAILURE() << "a version 3 file read as one tree";
+  } catch (const tsah::FileError& e) {
+    EXPECT_NE(std::string(e.what()).find("two-level scene (.tbvh version 3)"), std::string::npos) << e.what();
+  }
+  const std::vector<uint8_t> single = tsah::encodeBvhFile(built->blases[0].bvh, built->blases[0].info);
+  EXPECT_NE(decodeError(single).find("is a .tbvh version 1 file, not a two-level scene"), std::string::npos);
+}
+
+TEST_F(TwoLevelFile, AFileReadWithAnotherSceneIsRefused) {
+  const fs::path tree = dir / "scene.tbvh";
+  tsah::saveTwoLevelScene(tree.string(), *built);
+  const auto refused = [&](const fs::path& other, const std::string& part) {
+    try {
+      tsah::loadTwoLevelSceneFile(tree.string(), anim::loadSceneSources(other.string()));
+    } catch (const tsah::DataError& e) {
+      const std::string message = e.what();
+      EXPECT_NE(message.find(tree.string() + " was not built for " + other.string()), std::string::npos) << message;
+      EXPECT_NE(message.find(part), std::string::npos) << message;
+      return;
+    }
+    ADD_FAILURE() << other << " was accepted";
+  };
+  // Another time offset: another pose.
+  refused(writeScene(dir, "offset.json", "2.5"), "poses differ");
+  // Another mesh for the static source.
+  writeText(dir / "other" / "tri.obj", "v 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\n");
+  fs::copy_file(dir / "wave.tanim", dir / "other" / "wave.tanim");
+  fs::copy_file(dir / "scene.json", dir / "other" / "scene.json");
+  refused(dir / "other" / "scene.json", "triangles");
+  // A path moved far away: the stored TLAS boxes no longer hold the instance.
+  std::string text = "";
+  {
+    const std::vector<uint8_t> raw = tsah::readFile(scenePath.string());
+    text.assign(raw.begin(), raw.end());
+  }
+  text.replace(text.find("[0, 4, 0]"), 9, "[0, 400, 0]");
+  writeText(dir / "moved.json", text);
+  refused(dir / "moved.json", "TLAS boxes");
+}
+
+}  // namespace
