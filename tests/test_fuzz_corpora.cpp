@@ -29,7 +29,7 @@ constexpr Entry kEntries[] = {
     {"md2", tsah::fuzz::md2},     {"manifest", tsah::fuzz::manifest}, {"camera", tsah::fuzz::camera},
     {"pc2", tsah::fuzz::pc2},     {"mdd", tsah::fuzz::mdd},           {"tbvh", tsah::fuzz::tbvh},
     {"treeset", tsah::fuzz::treeset}, {"aff", tsah::fuzz::aff},       {"scene", tsah::fuzz::scene},
-    {"writers", tsah::fuzz::writers},
+    {"writers", tsah::fuzz::writers}, {"twolevel", tsah::fuzz::twolevel},
 };
 
 const fs::path& corpusRoot() {

@@ -29,6 +29,7 @@ void mdd(std::span<const uint8_t> data);       // MDD point caches
 // entries_trees.cpp: tree files.
 void tbvh(std::span<const uint8_t> data);      // version 1 .tbvh (bit 0 of byte 0: repair the CRC)
 void treeset(std::span<const uint8_t> data);   // .tbvh read as a tree set, version 1 or 2 (byte 0: CRC repairs)
+void twolevel(std::span<const uint8_t> data);  // .tbvh version 3, two-level scenes (byte 0: CRC repairs)
 
 // entries_scenes.cpp: inputs that name other files, read in a scratch folder of small objects.
 void aff(std::span<const uint8_t> data);       // BART .aff with includes

@@ -1,4 +1,5 @@
-// Fuzz entries for tree files: the version 1 .tbvh reader and the tree-set reader (versions 1 and 2).
+// Fuzz entries for tree files: the version 1 .tbvh reader, the tree-set reader (versions 1 and 2)
+// and the two-level reader (version 3).
 // Byte 0 of an input selects checksum repairs, so mutations get past the CRCs to the structural
 // checks behind them; the rest is the file.
 #include <cstring>
@@ -9,6 +10,7 @@
 #include "entries.hpp"
 #include "tsah/io/bvh_file.hpp"
 #include "tsah/io/tree_set.hpp"
+#include "tsah/io/two_level_file.hpp"
 
 namespace tsah::fuzz {
 
@@ -76,6 +78,34 @@ void treeset(std::span<const uint8_t> data) {
     for (const FlatBvh& tree : set.trees) trees.push_back(unflattenBvh(tree));
     if (encodeTreeSetFile(trees, set.builds, set.ranges, set.info) != bytes)
       throw std::logic_error("treeset: accepted file does not re-encode");
+  });
+}
+
+void twolevel(std::span<const uint8_t> data) {
+  if (data.empty()) return;
+  std::vector<uint8_t> bytes(data.begin() + 1, data.end());
+  // Bit 1: repair each tree's own CRC as the tree table places it; bit 0: then the file's CRC.
+  if ((data[0] & 2) && bytes.size() >= kTbvhTwoLevelHeaderBytes && readU32(bytes, 8) == kTbvhTwoLevelVersion) {
+    const uint64_t trees = uint64_t(readU32(bytes, 16)) + 1;
+    const uint64_t table = kTbvhTwoLevelHeaderBytes + 8 * uint64_t(readU32(bytes, 20)) + 24 * uint64_t(readU32(bytes, 24));
+    for (uint64_t s = 0; s < trees && table + (s + 1) * 16 <= bytes.size(); ++s)
+      repairCrc(bytes, readU64(bytes, table + s * 16), readU64(bytes, table + s * 16 + 8));
+  }
+  if (data[0] & 1) repairCrc(bytes, 0, bytes.size());
+  refuseCleanly([&] {
+    const TwoLevelFile file = decodeTwoLevelFile(bytes, "fuzz.tbvh");
+    if (const auto problem = validateTwoLevelTables(uint32_t(file.blases.size()), file.instanceBlas, file.instancePose, file.poses))
+      throw std::logic_error("twolevel: accepted tables: " + *problem);
+    std::vector<Bvh> blases;
+    for (const FlatBvh& tree : file.blases) {
+      if (const auto problem = validateFlatBvh(tree)) throw std::logic_error("twolevel: accepted a broken BLAS: " + *problem);
+      blases.push_back(unflattenBvh(tree));
+    }
+    if (const auto problem = validateFlatBvh(file.tlas)) throw std::logic_error("twolevel: accepted a broken TLAS: " + *problem);
+    // An accepted file is canonical: the encoder writes the same bytes.
+    if (encodeTwoLevelFile(blases, file.blasBuilds, unflattenBvh(file.tlas), file.tlasBuild, file.instanceBlas,
+                           file.instancePose, file.poses) != bytes)
+      throw std::logic_error("twolevel: accepted file does not re-encode");
   });
 }
 
