@@ -208,6 +208,14 @@ void expectFlatHits(const tsah::TwoLevelScene& scene, const fs::path& scenePath,
   EXPECT_LE(ties, hits / 50) << ties << " ties in " << hits << " hits";
 }
 
+TEST_F(TwoLevel, TheTopLevelOptimizedOverTimeCostsNoMoreThanSahOnTheFirstFrame) {
+  // SAH0: the sweep-SAH TLAS of the first frame refitted to the others, collapsed the same way.
+  tsah::BaselineConfig config = smallOptions().baselineConfig();
+  const tsah::Bvh sah0 = tsah::buildSah0(scene->instanceBoxes, config);
+  const double sah0Cost = tsah::temporalCost(tsah::frameCosts(sah0, config.objective.cost), smallOptions().objective.k);
+  EXPECT_LE(scene->tlasCost, sah0Cost * (1 + 1e-9));
+}
+
 TEST_F(TwoLevel, ClosestHitsEqualTheFlatBakedScene) { expectFlatHits(*scene, scenePath, tsah::Layout::Bvh2); }
 
 TEST_F(TwoLevel, WideBlasHitsEqualTheFlatBakedScene) {
