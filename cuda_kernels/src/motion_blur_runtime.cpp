@@ -110,24 +110,41 @@ std::vector<float> GpuRuntime::downloadKeyPositions(uint32_t key) const {
   return out;
 }
 
+MotionBvhView GpuRuntime::Impl::motionView() const {
+  const FlatBvh& topology = tree().topology;
+  MotionBvhView view;
+  view.keyNodes = keyNodes.data();
+  view.keyRootBoxes = keyRootBoxes.data();
+  view.keyPositions = keyPositions.data();
+  view.keyTimes = keyFractions.data();
+  view.keyCount = shutterKeys;
+  view.nodeCount = topology.interiorCount;
+  view.vertexCount = vertices;
+  view.triIndex = tree().triIndex.data();
+  view.indices = indices.data();
+  view.rootRef = topology.rootRef;
+  view.rootCount = topology.rootCount;
+  return view;
+}
+
+GpuRuntime::FrameBytes GpuRuntime::frameBytes() const {
+  const Impl& m = *impl_;
+  const FlatBvh& topology = m.tree().topology;
+  const std::size_t nodes = std::size_t(topology.interiorCount) * sizeof(GpuBvhNode);
+  const std::size_t positions = std::size_t(m.vertices) * 3 * sizeof(float);
+  FrameBytes b;
+  b.instant = nodes + sizeof(detail::RootInfo) + positions + std::size_t(m.triangles) * sizeof(WoopTriangle);
+  const std::size_t keys = m.shutterKeys;
+  if (keys >= 2) b.blurred = keys * (nodes + sizeof(Aabb) + positions + sizeof(float));
+  return b;
+}
+
 namespace {
 
 template <typename Result>
 std::vector<Result> traceBlurred(GpuRuntime::Impl& m, std::span<const Ray> rays, std::span<const float> times,
                                  RayPassStats* stats) {
-  const FlatBvh& topology = m.tree().topology;
-  MotionBvhView frame;
-  frame.keyNodes = m.keyNodes.data();
-  frame.keyRootBoxes = m.keyRootBoxes.data();
-  frame.keyPositions = m.keyPositions.data();
-  frame.keyTimes = m.keyFractions.data();
-  frame.keyCount = m.shutterKeys;
-  frame.nodeCount = topology.interiorCount;
-  frame.vertexCount = m.vertices;
-  frame.triIndex = m.tree().triIndex.data();
-  frame.indices = m.indices.data();
-  frame.rootRef = topology.rootRef;
-  frame.rootCount = topology.rootCount;
+  const MotionBvhView frame = m.motionView();
   return traceHostRays<Result>(
       m, rays, stats,
       [&](uint32_t count) {

@@ -10,7 +10,8 @@
 //                 15 Morton bits, spatial median below), then leaf collapse (<= 8 triangles), with
 //                 layout cwbvh the conversion into the compressed 8-wide layout, and Woop;
 //   renderFrameGpu: primary (closest hit), ambient-occlusion and shadow rays (any hit) with the
-//                 CPU renderer's random numbers and shading.
+//                 CPU renderer's random numbers and shading; a blurred frame (updateShutter) at
+//                 each pixel's shutter time, as the CPU renderer.
 // Every phase is timed with CUDA events. Positions, boxes and Woop triangles of updateAt are
 // bit-identical to the CPU runtime's; hits agree up to ties between triangles at equal distance.
 #include <cstdint>
@@ -133,6 +134,14 @@ class GpuRuntime {
   // of range): the refitted tree as downloadTree gives it, and the positions.
   FlatBvh downloadKeyTree(uint32_t key) const;
   std::vector<float> downloadKeyPositions(uint32_t key) const;
+  // Device bytes of the geometry a frame's tracing reads, the triangle indices and slot order
+  // (which both read) left out. instant: the current tree's nodes and root, the positions and the
+  // Woop triangles; blurred (0 unless blurred): per key one node set, root box, position set and
+  // shutter fraction.
+  struct FrameBytes {
+    std::size_t instant = 0, blurred = 0;
+  };
+  FrameBytes frameBytes() const;
 
   bool tracingRebuiltTree() const;
   uint32_t triangleCount() const;
@@ -182,7 +191,8 @@ class GpuRuntime {
 };
 
 // tsah::renderFrame on the GPU for the runtime's current frame: the same passes, random numbers and
-// shading. image == nullptr skips the download (benchmarks). Throws tsah::ConfigError for an
+// shading; a blurred frame (blurred()) traces every ray of a pixel at the pixel's shutter time
+// (tsah::pixelShutterTime), as the CPU renderer does. image == nullptr skips the download (benchmarks). Throws tsah::ConfigError for an
 // empty image size or an invalid camera, as the CPU renderer does.
 RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const SceneLighting& lighting,
                            const RenderSettings& settings, Image* image, GpuRenderTimings* timings = nullptr);
