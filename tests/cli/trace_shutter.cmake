@@ -23,6 +23,12 @@ tsah_expect_error(cli.trace.shutter.error.layout 2 "--shutter traces the bvh2 la
 tsah_expect_error(cli.trace.shutter.error.frames 2 "--shutter needs at least two frames" ${T} --shutter 0.5 --frames 1)
 tsah_expect_error(cli.trace.shutter.error.mode 2 "--shutter-mode requires --shutter" ${T} --shutter-mode open)
 tsah_expect_error(cli.trace.shutter.error.modename 2 "--shutter-mode" ${T} --shutter 0.5 --shutter-mode closed)
-foreach(name range rebuild layout frames mode modename)
+# With --device cuda the option is checked before the device is looked for, so these run without a
+# GPU too: motion blur traces the bvh2 layout and refits the given tree on the GPU as well.
+tsah_expect_error(cli.trace.shutter.error.gpulayout 2 "--shutter traces the bvh2 layout" ${T} --device cuda --shutter 0.5
+                  --layout cwbvh)
+tsah_expect_error(cli.trace.shutter.error.gpurebuild 2 "does not go with --rebuild" ${T} --device cuda --shutter 0.5
+                  --rebuild lbvh)
+foreach(name range rebuild layout frames mode modename gpulayout gpurebuild)
   set_tests_properties(cli.trace.shutter.error.${name} PROPERTIES FIXTURES_REQUIRED trace_tree)
 endforeach()
