@@ -119,7 +119,8 @@ class GpuRuntime {
   // Motion blur (docs/cuda-runtime.md): the current tree (selectTreeAt) refitted at every key of a
   // shutter from host positions, one box array per key. keyPositions[k]: vertexCount * 3 floats at
   // key k; keyTimes[k]: its shutter fraction (first 0, last 1, increasing). One key is update().
-  // Tracing without times afterwards sees the last key. Throws tsah::ConfigError for bad key times
+  // Tracing without times afterwards sees the last key. The timings add up the keys' updates; the
+  // refit's includes copying each key's nodes and positions. Throws tsah::ConfigError for bad key times
   // or, with two keys or more, for layout cwbvh; tsah::DataError for a wrong coordinate count.
   UpdateTimings updateShutter(std::span<const float> keyTimes, std::span<const std::span<const float>> keyPositions);
   // The same from the uploaded keyframes for the shutter [open, close] (animation times): the keys are
