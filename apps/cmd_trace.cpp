@@ -63,8 +63,9 @@ struct TraceOptions {
   std::string shutterMode = "centered";  // centered | open
 };
 
-// --shutter: the shutter of each frame; usage errors for values and combinations it cannot serve.
-tsah::Shutter parseShutter(const TraceOptions& opt, uint32_t frameCount) {
+// --shutter: the shutter of each frame; usage errors for values and combinations it cannot serve
+// (checked before the device is looked for). The frame count is checked once the input is read.
+tsah::Shutter parseShutter(const TraceOptions& opt) {
   tsah::Shutter shutter;
   if (!(opt.shutter >= 0.0 && opt.shutter <= 1.0))
     throw UsageError("--shutter must be between 0 and 1 (a fraction of the time between frames)");
@@ -72,10 +73,8 @@ tsah::Shutter parseShutter(const TraceOptions& opt, uint32_t frameCount) {
   shutter.mode = opt.shutterMode == "open" ? tsah::Shutter::Mode::Open : tsah::Shutter::Mode::Centered;
   if (shutter.fraction == 0.0) return shutter;
   if (opt.rebuild != "none") throw UsageError("--shutter refits the given tree; it does not go with --rebuild");
-  if (opt.device != tsah::Device::Cpu) throw UsageError("--shutter traces on the CPU (--device cpu)");
   if (opt.layout != tsah::Layout::Auto && opt.layout != tsah::Layout::Bvh2)
     throw UsageError("--shutter traces the bvh2 layout (--layout bvh2 or auto)");
-  if (frameCount < 2) throw UsageError("--shutter needs at least two frames (it is a fraction of the time between them)");
   return shutter;
 }
 
@@ -112,6 +111,7 @@ void runTrace(const TraceOptions& opt) {
     throw UsageError("--devices chooses GPUs: use it with --device cuda");
   const std::vector<int> devices = !opt.devices.empty() ? tsah::cli::parseDevices(opt.devices)
                                    : std::vector<int>{opt.device == tsah::Device::Cuda ? tsah::cli::rankDevice() : 0};
+  runtimeOptions.shutter = parseShutter(opt);
   checkDeviceAndLayout(opt);
   if (opt.eye.empty() != opt.lookAt.empty()) throw UsageError("--eye and --look-at go together");
   if (!opt.camera.empty() && !opt.eye.empty()) throw UsageError("give either --camera or --eye/--look-at");
@@ -131,8 +131,9 @@ void runTrace(const TraceOptions& opt) {
   const uint32_t frameCount = opt.frames ? opt.frames : std::min<uint32_t>(a.keyframeCount(), 50);
   const auto [first, end] = tsah::cli::parseFrameRange(opt.range, frameCount);
   const std::vector<double> times = a.uniformTimes(frameCount);
-  runtimeOptions.shutter = parseShutter(opt, frameCount);
   if (runtimeOptions.shutter.fraction > 0.0) {
+    if (frameCount < 2)
+      throw UsageError("--shutter needs at least two frames (it is a fraction of the time between them)");
     runtimeOptions.layout = tsah::Layout::Bvh2;  // the layout motion blur traces
     runtimeOptions.frameInterval = times[1] - times[0];
   }
@@ -332,7 +333,7 @@ TSAH_REGISTER_COMMAND(70, [](CLI::App& app) {
   auto* shutter = sub->add_option("--shutter", opt->shutter,
                                   "Motion blur: the shutter's length as a fraction of the time between traced frames, "
                                   "0 to 1 (default 0: the instant); each frame is refitted at the shutter's key times "
-                                  "and each pixel traced at its own time (CPU, bvh2; docs/motion-blur.md)");
+                                  "and each pixel traced at its own time (bvh2, CPU or GPU; docs/motion-blur.md)");
   sub->add_option("--shutter-mode", opt->shutterMode,
                   "centered: the shutter around the frame's time (default); open: starting at it")
       ->check(CLI::IsMember({"centered", "open"}))

@@ -139,8 +139,14 @@ class CpuFrameRuntime final : public FrameRuntime {
 class GpuFrameRuntime final : public FrameRuntime {
  public:
   GpuFrameRuntime(const TreeSet& trees, const anim::Animation& animation,
-                  std::optional<cuda::RebuildOptions> rebuild, const cuda::GpuRuntime::Config& config)
-      : runtime_(trees, animation, config), ranges_(trees.ranges), rebuild_(rebuild) {}
+                  std::optional<cuda::RebuildOptions> rebuild, const cuda::GpuRuntime::Config& config,
+                  Shutter shutter, double frameInterval)
+      : runtime_(trees, animation, config),
+        ranges_(trees.ranges),
+        rebuild_(rebuild),
+        animation_(animation),
+        shutter_(shutter),
+        frameInterval_(frameInterval) {}
 
   // The runtime's GPU current while it is released.
   ~GpuFrameRuntime() override { cuda::useDevice(runtime_.config().device); }
@@ -164,6 +170,12 @@ class GpuFrameRuntime final : public FrameRuntime {
     if (rebuild_) {
       const cuda::RebuildTimings t = runtime_.rebuildAt(time, *rebuild_);
       return {t.interpolateMs, t.woopMs, t.buildMs() + t.wideMs, t.wideMs, t.totalMs()};  // cwbvh: with the conversion
+    }
+    if (shutter_.fraction > 0.0) {
+      // Interpolation and the refit at every key, on the device (updateShutterAt does both).
+      const auto [open, close] = shutterInterval(animation_, time, frameInterval_, shutter_);
+      const cuda::UpdateTimings t = runtime_.updateShutterAt(open, close);
+      return {t.interpolateMs, t.refitMs + t.woopMs, 0.0, 0.0, t.totalMs(), std::max(1u, runtime_.shutterKeyCount())};
     }
     const cuda::UpdateTimings t = runtime_.updateAt(time);
     return {t.interpolateMs, t.refitMs + t.woopMs, 0.0, 0.0, t.totalMs()};
@@ -196,6 +208,9 @@ class GpuFrameRuntime final : public FrameRuntime {
   cuda::GpuRuntime runtime_;
   std::vector<TimeRange> ranges_;
   std::optional<cuda::RebuildOptions> rebuild_;
+  const anim::Animation& animation_;
+  Shutter shutter_;
+  double frameInterval_;
 };
 
 std::unique_ptr<FrameRuntime> makeGpuFrameRuntime(const TreeSet& trees, const anim::Animation& animation,
@@ -219,7 +234,7 @@ std::unique_ptr<FrameRuntime> makeGpuFrameRuntime(const TreeSet& trees, const an
     if (config.layout == tsah::Layout::Cwbvh)
       rebuild->maxLeafSize = std::min(rebuild->maxLeafSize, kCwbvhMaxLeafTriangles);
   }
-  return std::make_unique<GpuFrameRuntime>(trees, animation, rebuild, config);
+  return std::make_unique<GpuFrameRuntime>(trees, animation, rebuild, config, options.shutter, options.frameInterval);
 }
 #endif
 

@@ -78,8 +78,8 @@ struct FrameRuntimeOptions {
   // The tree's objective: cT, cI and the largest leaf of the rebuilds; with k, the collapse into the
   // wide layouts (CPU bvh4/bvh8, GPU cwbvh).
   Objective objective;
-  // Motion blur (CPU, bvh2): each frame refitted over its shutter (tsah::shutterInterval with
-  // frameInterval, the time between traced frames) and traced at each pixel's time.
+  // Motion blur (bvh2, CPU or GPU): each frame refitted over its shutter (tsah::shutterInterval
+  // with frameInterval, the time between traced frames) and traced at each pixel's time.
   Shutter shutter;
   double frameInterval = 0.0;
 };

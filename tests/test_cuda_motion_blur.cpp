@@ -19,7 +19,6 @@
 #include "tsah/layout/motion_blur.hpp"
 #include "tsah/layout/woop.hpp"
 #include "tsah/optimize/leaf_collapser.hpp"
-#include "tsah/render/renderer.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
@@ -277,24 +276,6 @@ TEST(CudaMotionBlur, ClosedShutterHitsAreTheInstantsBitForBit) {
   const std::vector<tsah::Hit> timed = gpu.closestHits(r.rays, r.times), plain = gpu.closestHits(r.rays);
   ASSERT_EQ(0, std::memcmp(timed.data(), plain.data(), plain.size() * sizeof(tsah::Hit)));
   EXPECT_EQ(gpu.anyHits(r.rays, r.times), gpu.anyHits(r.rays));
-}
-
-// The renderer draws no blurred frame: it says so instead of drawing the last key.
-TEST(CudaMotionBlur, RenderingABlurredFrameIsRefused) {
-  REQUIRE_GPU();
-  const auto a = generatedAnimation(anim::GeneratorKind::Explode, 1000, 5);
-  tc::GpuRuntime gpu(sahTree(a, 4), a);
-  auto [bounds, settings, camera] = tsah::test::renderView(a);
-  const tsah::SceneLighting lighting = tsah::fitLighting(bounds, camera);
-  gpu.updateShutterAt(a.startTime(), a.endTime());
-  try {
-    tc::renderFrameGpu(gpu, camera, lighting, settings, nullptr);
-    FAIL() << "a blurred frame was rendered";
-  } catch (const tsah::ConfigError& e) {
-    EXPECT_NE(std::string(e.what()).find("no blurred frame"), std::string::npos) << e.what();
-  }
-  gpu.updateAt(a.startTime());
-  EXPECT_NO_THROW(tc::renderFrameGpu(gpu, camera, lighting, settings, nullptr));
 }
 
 TEST(CudaMotionBlur, AnUpdateOrRebuildEndsTheBlurredFrame) {

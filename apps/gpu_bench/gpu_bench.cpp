@@ -5,6 +5,7 @@
 //                  [--frames 50] [--width 1024] [--height 768] [--ao 8] [--shadow 2]
 //                  [--traversal simple|persistent|both] [--layout bvh2,cwbvh] [--no-graphs] [--no-render] [--cpu-compare]
 //                  [--image-dir DIR] [--builder sweep|binned] [--ground]
+//                  [--shutter S [--shutter-mode centered|open]]
 //
 // For every tree (from .tbvh files, or SAH0 built here: sweep SAH on the first frame, collapsed to
 // at most 8 triangles per leaf) and every GPU rebuild method, over `frames` times spread uniformly
@@ -12,6 +13,12 @@
 // + build + collapse + Woop, and the bare build without collapse and Woop), trace MRays/s of the
 // primary, ambient-occlusion and shadow passes, and the total ms of the frame. Timings are CUDA
 // events (device time); summaries give mean, median, min and max.
+//
+// --shutter S (layout bvh2): every refit frame is also drawn motion-blurred in the same runtime,
+// refitted at the keys of its shutter (GpuRuntime::updateShutterAt over tsah::shutterInterval, S
+// of the time between timed frames) and traced at each pixel's time; each refit method then gives
+// "blurred" (its update, trace and frame figures, the keys, the bytes of the blurred geometry
+// against the instant one) and "blurred_over_instant" (the ratios of the mean times).
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
@@ -22,6 +29,7 @@
 #include <functional>
 #include <iostream>
 #include <map>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -63,6 +71,8 @@ struct Options {
   std::string imageDir;
   std::string builder = "sweep";
   uint32_t wideMerge = tsah::kCwbvhDefaultMergeTriangles;  // RebuildOptions::wideMergeTriangles
+  double shutter = 0.0;                   // motion blur: fraction of the time between timed frames
+  std::string shutterMode = "centered";   // centered | open
 };
 
 json summary(std::vector<double> v) {
@@ -132,7 +142,7 @@ struct Scene {
 
 // Accumulates one method's per-frame figures.
 struct FrameSeries {
-  std::vector<double> update, interpolate, refit, woop, build, bareBuild, total;
+  std::vector<double> update, interpolate, refit, woop, build, bareBuild, render, total;
   std::vector<double> primary, ao, shadow, all;  // MRays/s per frame
   uint64_t rays[3] = {0, 0, 0};
   double traceMs[3] = {0, 0, 0};
@@ -160,6 +170,7 @@ struct FrameSeries {
       rays[i] += passes[i].rays;
       traceMs[i] += passes[i].ms;
     }
+    render.push_back(g.totalMs);
     total.push_back(updateMs + g.totalMs);
   }
 
@@ -195,6 +206,65 @@ tc::GpuRuntime::Config runtimeConfig(const Options& opt, bool persistent, tsah::
   return c;
 }
 
+// The motion-blurred frames of a refit run (--shutter): the shutter of each frame and its figures.
+struct BlurredFrames {
+  tsah::Shutter shutter;
+  double interval = 0.0;  // between timed frames
+  FrameSeries series;
+  std::vector<double> keys;
+  tc::GpuRuntime::FrameBytes bytes;
+
+  // The frame at `time` refitted over its shutter and rendered.
+  void frame(tc::GpuRuntime& rt, const anim::Animation& a, const Scene& scene, tsah::RenderSettings& settings,
+             uint32_t f, double time, bool noRender) {
+    const auto [open, close] = tsah::shutterInterval(a, time, interval, shutter);
+    const tc::UpdateTimings u = rt.updateShutterAt(open, close);
+    series.update.push_back(u.totalMs());
+    series.interpolate.push_back(u.interpolateMs);
+    series.refit.push_back(u.refitMs + u.woopMs);
+    keys.push_back(std::max(1u, rt.shutterKeyCount()));
+    if (rt.blurred()) bytes = rt.frameBytes();
+    series.finishFrame(rt, scene, settings, f, time, u.totalMs(), noRender);
+  }
+
+  // "blurred" and "blurred_over_instant" of the run's JSON.
+  void report(json& j, const FrameSeries& instant, bool noRender) const {
+    json b;
+    b["shutter"] = {{"fraction", shutter.fraction},
+                    {"mode", shutter.mode == tsah::Shutter::Mode::Open ? "open" : "centered"},
+                    {"interval", interval}};
+    b["keys"] = summary(keys);
+    b["update_ms"] = summary(series.update);
+    b["interpolate_ms"] = summary(series.interpolate);
+    b["refit_ms"] = summary(series.refit);
+    if (!noRender) {
+      b["trace"] = series.traceJson();
+      b["render_ms"] = summary(series.render);
+    }
+    b["total_ms"] = summary(series.total);
+    b["bytes"] = {{"instant", bytes.instant},
+                  {"blurred", bytes.blurred},
+                  {"blurred_over_instant", bytes.instant ? double(bytes.blurred) / double(bytes.instant) : 0.0}};
+    b["per_frame"] = {{"keys", keys}, {"update_ms", series.update}, {"total_ms", series.total}};
+    j["blurred"] = b;
+    auto ratio = [](const std::vector<double>& blurred, const std::vector<double>& base) {
+      const double m = base.empty() ? 0.0 : summary(base)["mean"].get<double>();
+      return m > 0.0 ? summary(blurred)["mean"].get<double>() / m : 0.0;
+    };
+    json r = {{"update", ratio(series.update, instant.update)}, {"total", ratio(series.total, instant.total)}};
+    if (!noRender) {
+      double blurredTrace = 0.0, instantTrace = 0.0;
+      for (int i = 0; i < 3; ++i) {
+        blurredTrace += series.traceMs[i];
+        instantTrace += instant.traceMs[i];
+      }
+      r["trace"] = instantTrace > 0.0 ? blurredTrace / instantTrace : 0.0;
+      r["render"] = ratio(series.render, instant.render);
+    }
+    j["blurred_over_instant"] = r;
+  }
+};
+
 json runRefit(const Tree& t, const anim::Animation& a, const std::vector<double>& times, const Scene& scene,
               const Options& opt, bool persistent, tsah::Layout layout) {
   const tsah::FlatBvh& tree = t.flat;
@@ -203,12 +273,23 @@ json runRefit(const Tree& t, const anim::Animation& a, const std::vector<double>
   const double setupSeconds = seconds(setupStart);
   const double mtris = double(a.triangleCount()) / 1e6;
   tsah::RenderSettings settings = scene.settings;
+  std::optional<BlurredFrames> blur;
+  if (opt.shutter > 0.0) {
+    blur.emplace();
+    blur->shutter.fraction = opt.shutter;
+    blur->shutter.mode = opt.shutterMode == "open" ? tsah::Shutter::Mode::Open : tsah::Shutter::Mode::Centered;
+    blur->interval = times[1] - times[0];
+    // Warm-up of the blurred path too: the key refits replay the update graph, the render its kernels.
+    BlurredFrames warm = *blur;
+    warm.frame(rt, a, scene, settings, 0, times.front(), opt.noRender);
+  }
   // Warm-up: module load, allocations, first-touch of the ray buffers.
   rt.updateAt(times.front());
   if (!opt.noRender) tc::renderFrameGpu(rt, scene.camera(times.front()), scene.lighting, settings, nullptr);
 
   FrameSeries s;
   for (uint32_t f = 0; f < times.size(); ++f) {
+    if (blur) blur->frame(rt, a, scene, settings, f, times[f], opt.noRender);  // then the instant frame
     const tc::UpdateTimings u = rt.updateAt(times[f]);
     s.update.push_back(u.totalMs());
     s.interpolate.push_back(u.interpolateMs);
@@ -242,6 +323,7 @@ json runRefit(const Tree& t, const anim::Animation& a, const std::vector<double>
   if (!opt.noRender) j["trace"] = s.traceJson();
   j["total_ms"] = summary(s.total);
   j["per_frame"] = {{"update_ms", s.update}, {"total_ms", s.total}, {"ao_mrays_per_s", s.ao}};
+  if (blur) blur->report(j, s, opt.noRender);
   return j;
 }
 
@@ -351,8 +433,20 @@ json compareWithCpu(const Tree& tree, const anim::Animation& a, double t, const 
           {"rays_gpu", {gs.primary.rays, gs.ao.rays, gs.shadow.rays}}};
 }
 
+// --shutter's combinations, before the device is looked for.
+void checkShutter(const Options& opt) {
+  if (opt.shutter == 0.0) return;
+  if (opt.frames < 2)
+    throw tsah::ConfigError("--shutter needs at least two frames (it is a fraction of the time between them)");
+  std::stringstream ss(opt.layout);
+  for (std::string l; std::getline(ss, l, ',');)
+    if (tsah::parse<tsah::Layout>(l) != tsah::Layout::Bvh2)
+      throw tsah::ConfigError("--shutter: motion blur traces the bvh2 layout on the GPU (give --layout bvh2)");
+}
+
 void run(const Options& opt) {
   if (opt.input.empty() == opt.generate.empty()) throw tsah::ConfigError("give exactly one of --input and --generate");
+  checkShutter(opt);
   if (!tc::deviceAvailable()) throw tsah::Failure("no CUDA device");
   json out;
   out["device"] = tsah::cli::deviceJson();
@@ -385,7 +479,7 @@ void run(const Options& opt) {
                      {"ao_samples", opt.ao},   {"shadow_samples", opt.shadow},
                      {"traversal", opt.traversal}, {"render", !opt.noRender}, {"graphs", !opt.noGraphs},
                      {"skip_static_subtrees", !opt.fullRefit},
-                     {"fused_passes", !opt.noFuse}, {"ground", opt.ground},
+                     {"fused_passes", !opt.noFuse}, {"ground", opt.ground}, {"shutter", opt.shutter},
                      {"camera", a.cameraPath().empty() ? "fitted to the animation bounds" : "the animation's camera path"}};
 
   // Trees: files, then SAH0 built here.
@@ -481,10 +575,18 @@ int main(int argc, char** argv) {
   app.add_flag("--no-graphs", opt.noGraphs, "Launch every kernel instead of replaying CUDA graphs");
   app.add_flag("--full-refit", opt.fullRefit, "Refit every subtree every frame, the static ones too (binary layout)");
   app.add_flag("--no-render", opt.noRender, "Time the updates and rebuilds only");
+  auto* shutter = app.add_option("--shutter", opt.shutter,
+                                 "Motion blur: also draw every refit frame blurred over a shutter of this fraction "
+                                 "(0 to 1) of the time between timed frames, bvh2 layout (default 0: none)")
+                      ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--shutter-mode", opt.shutterMode, "centered (default) or open")
+      ->check(CLI::IsMember({"centered", "open"}))
+      ->needs(shutter);
   app.add_flag("--cpu-compare", opt.cpuCompare, "Render the first frame on the CPU too and compare the images");
   app.add_option("--image-dir", opt.imageDir, "Where --cpu-compare writes cpu.png and gpu.png");
   try {
     app.parse(argc, argv);
+    if (opt.shutter > 0.0 && app.count("--layout") == 0) opt.layout = "bvh2";  // the layout blur traces
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }

@@ -38,6 +38,8 @@ UpdateTimings GpuRuntime::Impl::refitKeys(std::span<const float> keyTimes, Refit
     total.interpolateMs += one.interpolateMs;
     total.refitMs += one.refitMs;
     total.woopMs += one.woopMs;
+    // Keeping the key (events 14 and 15: free outside an update and a render) counts in the refit.
+    events.record(14, stream);
     if (interior)
       CUDA_CHECK(cudaMemcpyAsync(keyNodes.data() + k * interior, t.nodes.data(), interior * sizeof(GpuBvhNode),
                                  cudaMemcpyDeviceToDevice, stream));
@@ -45,6 +47,9 @@ UpdateTimings GpuRuntime::Impl::refitKeys(std::span<const float> keyTimes, Refit
                                stream));
     CUDA_CHECK(cudaMemcpyAsync(keyPositions.data() + k * coords, positions.data(), coords * sizeof(float),
                                cudaMemcpyDeviceToDevice, stream));
+    events.record(15, stream);
+    events.wait(15);
+    total.refitMs += events.ms(14, 15);
   }
   CUDA_CHECK(cudaStreamSynchronize(stream));
   shutterKeys = keys;
@@ -110,24 +115,41 @@ std::vector<float> GpuRuntime::downloadKeyPositions(uint32_t key) const {
   return out;
 }
 
+MotionBvhView GpuRuntime::Impl::motionView() const {
+  const FlatBvh& topology = tree().topology;
+  MotionBvhView view;
+  view.keyNodes = keyNodes.data();
+  view.keyRootBoxes = keyRootBoxes.data();
+  view.keyPositions = keyPositions.data();
+  view.keyTimes = keyFractions.data();
+  view.keyCount = shutterKeys;
+  view.nodeCount = topology.interiorCount;
+  view.vertexCount = vertices;
+  view.triIndex = tree().triIndex.data();
+  view.indices = indices.data();
+  view.rootRef = topology.rootRef;
+  view.rootCount = topology.rootCount;
+  return view;
+}
+
+GpuRuntime::FrameBytes GpuRuntime::frameBytes() const {
+  const Impl& m = *impl_;
+  const FlatBvh& topology = m.tree().topology;
+  const std::size_t nodes = std::size_t(topology.interiorCount) * sizeof(GpuBvhNode);
+  const std::size_t positions = std::size_t(m.vertices) * 3 * sizeof(float);
+  FrameBytes b;
+  b.instant = nodes + sizeof(detail::RootInfo) + positions + std::size_t(m.triangles) * sizeof(WoopTriangle);
+  const std::size_t keys = m.shutterKeys;
+  if (keys >= 2) b.blurred = keys * (nodes + sizeof(Aabb) + positions + sizeof(float));
+  return b;
+}
+
 namespace {
 
 template <typename Result>
 std::vector<Result> traceBlurred(GpuRuntime::Impl& m, std::span<const Ray> rays, std::span<const float> times,
                                  RayPassStats* stats) {
-  const FlatBvh& topology = m.tree().topology;
-  MotionBvhView frame;
-  frame.keyNodes = m.keyNodes.data();
-  frame.keyRootBoxes = m.keyRootBoxes.data();
-  frame.keyPositions = m.keyPositions.data();
-  frame.keyTimes = m.keyFractions.data();
-  frame.keyCount = m.shutterKeys;
-  frame.nodeCount = topology.interiorCount;
-  frame.vertexCount = m.vertices;
-  frame.triIndex = m.tree().triIndex.data();
-  frame.indices = m.indices.data();
-  frame.rootRef = topology.rootRef;
-  frame.rootCount = topology.rootCount;
+  const MotionBvhView frame = m.motionView();
   return traceHostRays<Result>(
       m, rays, stats,
       [&](uint32_t count) {

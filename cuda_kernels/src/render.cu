@@ -2,12 +2,18 @@
 // shadows), one kernel per step. The per-pixel math (camera rays, the primary surface, the AO and
 // shadow rays, vertex normals, shading) is libtsah's shading.hpp, which the CPU renderer uses too.
 //
+// A blurred frame (GpuRuntime::updateShutter) is rendered as the CPU renderer renders one: every
+// ray of a pixel at the pixel's shutter time (pixelShutterTime), traced by tsah::closestHit /
+// anyHit of a MotionBvhView (the traversal of the blurred batch queries, blurred_traversal.cu), the
+// primary surface on the hit triangle lerped at that time (blurredPrimarySurface).
+//
 // Compiled with -fmad=false, so that math rounds exactly as on the CPU (see shading.hpp); only
 // cosf/sinf/powf/expf (the sample warps and the sRGB curve) can differ from the C library in the
 // last bit.
 #include <cuda/atomic>
 
 #include "tsah/base/error.hpp"
+#include "blurred_trace.hpp"
 #include "bvh2_traversal.cuh"
 #include "cwbvh_kernels.hpp"
 #include "kernels.hpp"
@@ -55,6 +61,18 @@ __device__ __forceinline__ Ray cameraRay(const Frame& f, uint32_t x, uint32_t y)
   return f.cam.ray(float(x) + 0.5f, float(y) + 0.5f);
 }
 
+// The random-number key of padded pixel j (its pixel index in the image).
+__device__ __forceinline__ SampleKey pixelKey(const Frame& f, uint32_t j) {
+  uint32_t x, y;
+  pixelOf(f, j, x, y);
+  SampleKey key = f.base;
+  key.pixel = pixelIndex(f, x, y);
+  return key;
+}
+
+// A blurred frame: the view of its keys (keyCount >= 2); an instant frame has keyCount 0.
+__device__ __forceinline__ bool isBlurred(const MotionBvhView& view) { return view.keyCount >= 2; }
+
 __device__ __forceinline__ Ray noRay() {
   Ray r;
   r.org = {0.0f, 0.0f, 0.0f};
@@ -95,21 +113,27 @@ __device__ __forceinline__ Surface loadSurface(const float4* surfaces, uint32_t 
   return {{a.x, a.y, a.z}, {b.x, b.y, b.z}, SurfaceKind(__float_as_uint(a.w)), __float_as_uint(b.w), c.x, c.y};
 }
 
-__global__ void primaryRaysKernel(Frame f, Ray* __restrict__ rays) {
+// times (a blurred frame, else null): each ray's shutter time, its pixel's.
+__global__ void primaryRaysKernel(Frame f, Ray* __restrict__ rays, float* __restrict__ times) {
   const uint32_t j = blockIdx.x * blockDim.x + threadIdx.x;
   if (j >= f.padded) return;
   uint32_t x, y;
   storeRay(rays, j, pixelOf(f, j, x, y) ? cameraRay(f, x, y) : noRay());
+  if (times) times[j] = pixelShutterTime(pixelKey(f, j));
 }
 
-// The primary pass's surface: mesh hit or the analytic ground, offset along the normal.
+// The primary pass's surface: mesh hit or the analytic ground, offset along the normal. A blurred
+// frame (view): the hit triangle at the pixel's time.
 __global__ void surfaceKernel(Frame f, const Hit* __restrict__ hits, const uint32_t* __restrict__ indices,
-                              const float* __restrict__ positions, float4* __restrict__ surfaces) {
+                              const float* __restrict__ positions, MotionBvhView view, float4* __restrict__ surfaces) {
   const uint32_t j = blockIdx.x * blockDim.x + threadIdx.x;
   if (j >= f.padded) return;
   uint32_t x, y;
   Surface s;
-  if (pixelOf(f, j, x, y)) s = primarySurface(cameraRay(f, x, y), hits[j], indices, positions, f.light);
+  if (pixelOf(f, j, x, y))
+    s = isBlurred(view) ? blurredPrimarySurface(cameraRay(f, x, y), hits[j], view, pixelShutterTime(pixelKey(f, j)),
+                                                f.light)
+                        : primarySurface(cameraRay(f, x, y), hits[j], indices, positions, f.light);
   storeSurface(surfaces, j, s);
 }
 
@@ -134,16 +158,17 @@ __device__ __forceinline__ SecondarySample secondarySample(const Frame& f, const
 }
 
 __global__ void aoRaysKernel(Frame f, const float4* __restrict__ surfaces, Ray* __restrict__ rays,
-                             uint32_t* __restrict__ words) {
+                             float* __restrict__ times, uint32_t* __restrict__ words) {
   const uint64_t r = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (r >= uint64_t(f.padded) * f.aoSamples) return;
   const SecondarySample p = secondarySample(f, surfaces, r, f.aoSamples);
   storeRay(rays, r, p.valid ? aoRay(p.surface, p.key, p.sample, f.light.aoDistance) : noRay());
+  if (times) times[r] = pixelShutterTime(p.key);
   countRays(words + kAoRays, p.valid);
 }
 
 __global__ void shadowRaysKernel(Frame f, const float4* __restrict__ surfaces, Ray* __restrict__ rays,
-                                 uint8_t* __restrict__ traced, uint32_t* __restrict__ words) {
+                                 float* __restrict__ times, uint8_t* __restrict__ traced, uint32_t* __restrict__ words) {
   const uint64_t r = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (r >= uint64_t(f.padded) * f.shadowSamples) return;
   const SecondarySample p = secondarySample(f, surfaces, r, f.shadowSamples);
@@ -151,6 +176,7 @@ __global__ void shadowRaysKernel(Frame f, const float4* __restrict__ surfaces, R
   // A light point behind the surface: no ray, not lit.
   const bool valid = p.valid && shadowRay(p.surface, f.light, p.key, p.sample, ray);
   storeRay(rays, r, valid ? ray : noRay());
+  if (times) times[r] = pixelShutterTime(p.key);
   traced[r] = valid ? 1 : 0;
   countRays(words + kShadowRays, valid);
 }
@@ -164,15 +190,22 @@ __global__ void shadowRaysKernel(Frame f, const float4* __restrict__ surfaces, R
 // passes run over that list only: warps take 32 (pixel, sample) entries at a time from a counter
 // until the list is done. A small character in a wide frame covers a few percent of the pixels,
 // and one thread per padded pixel and sample spent most of those passes on pixels without rays.
+//
+// Every tracer takes each ray's shutter time; kTimed: whether it reads it (the instant tracers do
+// not, and the kernels then compute no time).
 struct Bvh2Tracer {
+  static constexpr bool kTimed = false;
   detail::TraceScene scene;
-  __device__ __forceinline__ Hit closestHit(const Ray& ray) const {
+  __device__ __forceinline__ Hit closestHit(const Ray& ray, float) const {
     return detail::bvh2ClosestHit(scene, *scene.root, ray);
   }
-  __device__ __forceinline__ bool anyHit(const Ray& ray) const { return detail::bvh2AnyHit(scene, *scene.root, ray); }
+  __device__ __forceinline__ bool anyHit(const Ray& ray, float) const {
+    return detail::bvh2AnyHit(scene, *scene.root, ray);
+  }
 };
 
 struct CwbvhTracer {
+  static constexpr bool kTimed = false;
   CwbvhView view;  // rootBox is read from root, which the refit writes on the device
   const RootInfo* root;
   __device__ __forceinline__ CwbvhView withRootBox() const {
@@ -180,9 +213,26 @@ struct CwbvhTracer {
     v.rootBox = root->box;
     return v;
   }
-  __device__ __forceinline__ Hit closestHit(const Ray& ray) const { return cwbvhClosestHit(withRootBox(), ray); }
-  __device__ __forceinline__ bool anyHit(const Ray& ray) const { return cwbvhAnyHit(withRootBox(), ray); }
+  __device__ __forceinline__ Hit closestHit(const Ray& ray, float) const { return cwbvhClosestHit(withRootBox(), ray); }
+  __device__ __forceinline__ bool anyHit(const Ray& ray, float) const { return cwbvhAnyHit(withRootBox(), ray); }
 };
+
+// A blurred frame: the traversal of the blurred batch queries at the ray's time.
+struct BlurredTracer {
+  static constexpr bool kTimed = true;
+  MotionBvhView view;
+  __device__ __forceinline__ Hit closestHit(const Ray& ray, float time) const {
+    return tsah::closestHit(view, ray, time);
+  }
+  __device__ __forceinline__ bool anyHit(const Ray& ray, float time) const { return tsah::anyHit(view, ray, time); }
+};
+
+// The shutter time of a pixel's rays for the tracer (0: an instant tracer reads none).
+template <class Tracer>
+__device__ __forceinline__ float rayTime(const SampleKey& pixel) {
+  if constexpr (Tracer::kTimed) return pixelShutterTime(pixel);
+  return 0.0f;
+}
 
 template <class Tracer>
 __global__ void __launch_bounds__(128) fusedPrimaryKernel(Frame f, Tracer tracer, const uint32_t* __restrict__ indices,
@@ -196,7 +246,12 @@ __global__ void __launch_bounds__(128) fusedPrimaryKernel(Frame f, Tracer tracer
   Surface s;
   if (pixelOf(f, j, x, y)) {
     const Ray ray = cameraRay(f, x, y);
-    s = primarySurface(ray, tracer.closestHit(ray), indices, positions, f.light);
+    if constexpr (Tracer::kTimed) {
+      const float time = rayTime<Tracer>(pixelKey(f, j));
+      s = blurredPrimarySurface(ray, tracer.closestHit(ray, time), tracer.view, time, f.light);
+    } else {
+      s = primarySurface(ray, tracer.closestHit(ray, 0.0f), indices, positions, f.light);
+    }
   }
   storeSurface(surfaces, j, s);
   // Listed with one atomic per warp; the order within the list does not matter (every ray's random
@@ -221,23 +276,16 @@ __device__ __forceinline__ void forEachListedSample(const uint32_t* __restrict__
   }
 }
 
-__device__ __forceinline__ SampleKey pixelKey(const Frame& f, uint32_t j) {
-  uint32_t x, y;
-  pixelOf(f, j, x, y);
-  SampleKey key = f.base;
-  key.pixel = pixelIndex(f, x, y);
-  return key;
-}
-
 template <class Tracer>
 __global__ void __launch_bounds__(128) fusedAoKernel(Frame f, Tracer tracer, const float4* __restrict__ surfaces,
                                                      const uint32_t* __restrict__ activePixels,
                                                      uint8_t* __restrict__ occluded, uint32_t* __restrict__ words) {
   forEachListedSample(activePixels, words, words + kAoCounter, f.aoSamples, [&](uint32_t j, uint32_t sample) {
     const Surface s = loadSurface(surfaces, j);
+    const SampleKey key = pixelKey(f, j);
     countRays(words + kAoRays, true);
     occluded[std::size_t(j) * f.aoSamples + sample] =
-        tracer.anyHit(aoRay(s, pixelKey(f, j), sample, f.light.aoDistance)) ? 1 : 0;
+        tracer.anyHit(aoRay(s, key, sample, f.light.aoDistance), rayTime<Tracer>(key)) ? 1 : 0;
   });
 }
 
@@ -248,13 +296,14 @@ __global__ void __launch_bounds__(128) fusedShadowKernel(Frame f, Tracer tracer,
                                                          uint32_t* __restrict__ words) {
   forEachListedSample(activePixels, words, words + kShadowCounter, f.shadowSamples, [&](uint32_t j, uint32_t sample) {
     const Surface s = loadSurface(surfaces, j);
+    const SampleKey key = pixelKey(f, j);
     Ray ray;
     // A light point behind the surface: no ray, not lit.
-    const bool valid = shadowRay(s, f.light, pixelKey(f, j), sample, ray);
+    const bool valid = shadowRay(s, f.light, key, sample, ray);
     countRays(words + kShadowRays, valid);
     const std::size_t r = std::size_t(j) * f.shadowSamples + sample;
     traced[r] = valid ? 1 : 0;
-    occluded[r] = valid && tracer.anyHit(ray) ? 1 : 0;
+    occluded[r] = valid && tracer.anyHit(ray, rayTime<Tracer>(key)) ? 1 : 0;
   });
 }
 
@@ -358,8 +407,6 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   validateCamera(camera);
   GpuRuntime::Impl& m = *runtime.impl_;
   m.requireTraceable();
-  if (runtime.blurred())
-    throw tsah::ConfigError("render: the GPU renderer draws no blurred frame yet (update the runtime to one time)");
 
   Frame f;
   f.width = settings.width;
@@ -380,6 +427,21 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   // Fused passes (Config::fusePasses) need no ray or hit buffers.
   const detail::TraceScene scene = m.scene();
   const bool fused = m.config.fusePasses;
+  // A blurred frame traces its key arrays (keyCount 0: the instant frame).
+  const bool blurred = runtime.blurred();
+  const MotionBvhView blur = blurred ? m.motionView() : MotionBvhView{};
+  float* times = nullptr;  // separate passes of a blurred frame: each ray's shutter time
+  if (blurred && !fused) {
+    m.rayTimes.reserve(std::max({padded, aoRays, shadowRays}));
+    times = m.rayTimes.data();
+  }
+  // The separate passes' trace: the instant frame's kernel, or the blurred traversal at each ray's time.
+  auto trace = [&](const Ray* rays, uint32_t count, Hit* hits, uint8_t* occluded, uint32_t* counter) {
+    if (blurred)
+      detail::launchBlurredTrace(blur, rays, times, count, hits, occluded, m.stream);
+    else
+      detail::launchTrace(scene, rays, count, hits, occluded, counter, m.traceLaunch(), m.stream);
+  };
   if (!fused) {
     m.rays.reserve(std::max<uint64_t>(padded, aoRays));
     m.hits.reserve(padded);
@@ -392,7 +454,6 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   m.image.reserve(std::size_t(f.width) * f.height * 3);
   uint8_t* shadowTraced = m.shadowOccluded.data() + shadowRays;
 
-  const detail::TraceLaunch launch = m.traceLaunch();
   const unsigned block = 256;
   cudaStream_t stream = m.stream;
   auto& ev = m.events;
@@ -402,38 +463,37 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   m.words.fillBytes(0, stream);
   ev.record(0, stream);
   if (fused) {
-    if (scene.cwbvhNodes)
+    if (blurred)
+      enqueueFusedPasses(m, f, BlurredTracer{blur}, aoRays, shadowRays, shadowTraced);
+    else if (scene.cwbvhNodes)
       enqueueFusedPasses(m, f, CwbvhTracer{detail::cwbvhView(scene), scene.root}, aoRays, shadowRays, shadowTraced);
     else
       enqueueFusedPasses(m, f, Bvh2Tracer{scene}, aoRays, shadowRays, shadowTraced);
   } else {
-    primaryRaysKernel<<<detail::gridFor(padded, block), block, 0, stream>>>(f, m.rays.data());
+    primaryRaysKernel<<<detail::gridFor(padded, block), block, 0, stream>>>(f, m.rays.data(), times);
     CUDA_CHECK_LAUNCH("primaryRaysKernel");
     ev.record(1, stream);
-    detail::launchTrace(scene, m.rays.data(), f.padded, m.hits.data(), nullptr, m.words.data() + kPrimaryCounter, launch,
-                        stream);
+    trace(m.rays.data(), f.padded, m.hits.data(), nullptr, m.words.data() + kPrimaryCounter);
     ev.record(2, stream);
     surfaceKernel<<<detail::gridFor(padded, block), block, 0, stream>>>(f, m.hits.data(), m.indices.data(),
-                                                                        m.positions.data(), m.surfaces.data());
+                                                                        m.positions.data(), blur, m.surfaces.data());
     CUDA_CHECK_LAUNCH("surfaceKernel");
     if (aoRays > 0) {
-      aoRaysKernel<<<detail::gridFor(aoRays, block), block, 0, stream>>>(f, m.surfaces.data(), m.rays.data(),
+      aoRaysKernel<<<detail::gridFor(aoRays, block), block, 0, stream>>>(f, m.surfaces.data(), m.rays.data(), times,
                                                                          m.words.data());
       CUDA_CHECK_LAUNCH("aoRaysKernel");
     }
     ev.record(3, stream);
-    detail::launchTrace(scene, m.rays.data(), uint32_t(aoRays), nullptr, m.occluded.data(), m.words.data() + kAoCounter,
-                        launch, stream);
+    trace(m.rays.data(), uint32_t(aoRays), nullptr, m.occluded.data(), m.words.data() + kAoCounter);
     ev.record(4, stream);
     if (shadowRays > 0) {
       shadowRaysKernel<<<detail::gridFor(shadowRays, block), block, 0, stream>>>(f, m.surfaces.data(),
-                                                                                 m.shadowRays.data(), shadowTraced,
-                                                                                 m.words.data());
+                                                                                 m.shadowRays.data(), times,
+                                                                                 shadowTraced, m.words.data());
       CUDA_CHECK_LAUNCH("shadowRaysKernel");
     }
     ev.record(5, stream);
-    detail::launchTrace(scene, m.shadowRays.data(), uint32_t(shadowRays), nullptr, m.shadowOccluded.data(),
-                        m.words.data() + kShadowCounter, launch, stream);
+    trace(m.shadowRays.data(), uint32_t(shadowRays), nullptr, m.shadowOccluded.data(), m.words.data() + kShadowCounter);
     ev.record(6, stream);
   }
   if (!fused) {

@@ -160,6 +160,9 @@ struct GpuRuntime::Impl {
   UpdateTimings refitKeys(std::span<const float> keyTimes, RefitKey&& refitKey);
   // Throws tsah::ConfigError unless the frame is blurred and key < shutterKeys.
   void requireKey(uint32_t key) const;
+  // The blurred frame's device arrays as the traversal reads them (the batch queries and the
+  // renderer); only while blurred.
+  MotionBvhView motionView() const;
 
   // Scratch of the ray queries and the renderer, grown on demand.
   DeviceBuffer<uint32_t> words;          // ray counters, ray counts

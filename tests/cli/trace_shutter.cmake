@@ -15,6 +15,16 @@ add_test(NAME cli.trace.shutter.summary
 set_tests_properties(cli.trace.shutter.summary PROPERTIES FIXTURES_REQUIRED trace_tree
   PASS_REGULAR_EXPRESSION "refit, shutter 0.5 open")
 
+# The same frames on the GPU where this machine has one (the key counts are the CPU's); without a GPU
+# the one-line error.
+if(TSAH_HAVE_CUDA)
+  add_test(NAME cli.trace.shutter.cuda
+           COMMAND tsah trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --device cuda --frames 4 --width 32
+                   --height 24 --no-images --shutter 0.9 --json)
+  set_tests_properties(cli.trace.shutter.cuda PROPERTIES FIXTURES_REQUIRED trace_tree
+    PASS_REGULAR_EXPRESSION "^tsah: no CUDA device found[^\n]*\n$|\"keys\":2.*\"keys\":4.*\"layout\":\"bvh2\".*\"shutter\":\\{\"fraction\":0.9,\"mode\":\"centered\"\\}")
+endif()
+
 # Usage errors: exit 2, one line naming the option (tsah_expect_error: tests/cli/hardening.cmake).
 set(T trace ${W}/trace_explode.tanim ${W}/trace_explode.tbvh --no-images --width 8 --height 8)
 tsah_expect_error(cli.trace.shutter.error.range 2 "--shutter must be between 0 and 1" ${T} --shutter 1.5)
@@ -23,6 +33,12 @@ tsah_expect_error(cli.trace.shutter.error.layout 2 "--shutter traces the bvh2 la
 tsah_expect_error(cli.trace.shutter.error.frames 2 "--shutter needs at least two frames" ${T} --shutter 0.5 --frames 1)
 tsah_expect_error(cli.trace.shutter.error.mode 2 "--shutter-mode requires --shutter" ${T} --shutter-mode open)
 tsah_expect_error(cli.trace.shutter.error.modename 2 "--shutter-mode" ${T} --shutter 0.5 --shutter-mode closed)
-foreach(name range rebuild layout frames mode modename)
+# With --device cuda the option is checked before the device is looked for, so these run without a
+# GPU too: motion blur traces the bvh2 layout and refits the given tree on the GPU as well.
+tsah_expect_error(cli.trace.shutter.error.gpulayout 2 "--shutter traces the bvh2 layout" ${T} --device cuda --shutter 0.5
+                  --layout cwbvh)
+tsah_expect_error(cli.trace.shutter.error.gpurebuild 2 "does not go with --rebuild" ${T} --device cuda --shutter 0.5
+                  --rebuild lbvh)
+foreach(name range rebuild layout frames mode modename gpulayout gpurebuild)
   set_tests_properties(cli.trace.shutter.error.${name} PROPERTIES FIXTURES_REQUIRED trace_tree)
 endforeach()

@@ -10,7 +10,8 @@
 //                 15 Morton bits, spatial median below), then leaf collapse (<= 8 triangles), with
 //                 layout cwbvh the conversion into the compressed 8-wide layout, and Woop;
 //   renderFrameGpu: primary (closest hit), ambient-occlusion and shadow rays (any hit) with the
-//                 CPU renderer's random numbers and shading.
+//                 CPU renderer's random numbers and shading; a blurred frame (updateShutter) at
+//                 each pixel's shutter time, as the CPU renderer.
 // Every phase is timed with CUDA events. Positions, boxes and Woop triangles of updateAt are
 // bit-identical to the CPU runtime's; hits agree up to ties between triangles at equal distance.
 #include <cstdint>
@@ -118,7 +119,8 @@ class GpuRuntime {
   // Motion blur (docs/cuda-runtime.md): the current tree (selectTreeAt) refitted at every key of a
   // shutter from host positions, one box array per key. keyPositions[k]: vertexCount * 3 floats at
   // key k; keyTimes[k]: its shutter fraction (first 0, last 1, increasing). One key is update().
-  // Tracing without times afterwards sees the last key. Throws tsah::ConfigError for bad key times
+  // Tracing without times afterwards sees the last key. The timings add up the keys' updates; the
+  // refit's includes copying each key's nodes and positions. Throws tsah::ConfigError for bad key times
   // or, with two keys or more, for layout cwbvh; tsah::DataError for a wrong coordinate count.
   UpdateTimings updateShutter(std::span<const float> keyTimes, std::span<const std::span<const float>> keyPositions);
   // The same from the uploaded keyframes for the shutter [open, close] (animation times): the keys are
@@ -133,6 +135,14 @@ class GpuRuntime {
   // of range): the refitted tree as downloadTree gives it, and the positions.
   FlatBvh downloadKeyTree(uint32_t key) const;
   std::vector<float> downloadKeyPositions(uint32_t key) const;
+  // Device bytes of the geometry a frame's tracing reads, the triangle indices and slot order
+  // (which both read) left out. instant: the current tree's nodes and root, the positions and the
+  // Woop triangles; blurred (0 unless blurred): per key one node set, root box, position set and
+  // shutter fraction.
+  struct FrameBytes {
+    std::size_t instant = 0, blurred = 0;
+  };
+  FrameBytes frameBytes() const;
 
   bool tracingRebuiltTree() const;
   uint32_t triangleCount() const;
@@ -182,7 +192,8 @@ class GpuRuntime {
 };
 
 // tsah::renderFrame on the GPU for the runtime's current frame: the same passes, random numbers and
-// shading. image == nullptr skips the download (benchmarks). Throws tsah::ConfigError for an
+// shading; a blurred frame (blurred()) traces every ray of a pixel at the pixel's shutter time
+// (tsah::pixelShutterTime), as the CPU renderer does. image == nullptr skips the download (benchmarks). Throws tsah::ConfigError for an
 // empty image size or an invalid camera, as the CPU renderer does.
 RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const SceneLighting& lighting,
                            const RenderSettings& settings, Image* image, GpuRenderTimings* timings = nullptr);

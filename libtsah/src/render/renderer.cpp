@@ -9,7 +9,6 @@
 #include "tsah/base/error.hpp"
 #include "tsah/base/memory.hpp"
 #include "tsah/render/shading.hpp"
-#include "tsah/layout/motion_blur.hpp"
 #include "tsah/layout/traversal.hpp"
 
 namespace tsah {
@@ -60,31 +59,6 @@ RayPassStats surfacePass(const CpuRuntime& runtime, uint32_t width, const std::v
     rays += local;
   });
   return {rays.load(), msSince(start)};
-}
-
-// The surface a primary ray at shutter fraction `time` finds in a blurred frame: the hit triangle's
-// vertices lerped at that time (as the traversal lerps them), as a one-triangle mesh.
-Surface blurredSurface(const CpuRuntime& runtime, const Ray& ray, float time, const SceneLighting& lighting) {
-  const Hit hit = runtime.closestHit(ray, time);
-  if (!hit.valid()) return primarySurface(ray, hit, nullptr, nullptr, lighting);
-  const MotionBvhView& view = runtime.motionView();
-  const motion::Segment seg = motion::segmentAt(view.keyTimes, int(view.keyCount), time);
-  const float* p0 = view.keyPositions + std::size_t(seg.index) * view.vertexCount * 3;
-  const float* p1 = p0 + std::size_t(view.vertexCount) * 3;
-  float triangle[9];
-  for (int k = 0; k < 3; ++k) {
-    const uint32_t vertex = runtime.indices()[3 * std::size_t(hit.tri) + k];
-    const Vec3 v = motion::lerpVertex(loadVec3(p0, vertex), loadVec3(p1, vertex), seg.f);
-    triangle[3 * k] = v.x;
-    triangle[3 * k + 1] = v.y;
-    triangle[3 * k + 2] = v.z;
-  }
-  static constexpr uint32_t kOneTriangle[3] = {0, 1, 2};
-  Hit local = hit;
-  local.tri = 0;
-  Surface s = primarySurface(ray, local, kOneTriangle, triangle, lighting);
-  if (s.kind == SurfaceKind::Mesh) s.tri = hit.tri;
-  return s;
 }
 
 }  // namespace
@@ -165,8 +139,12 @@ RenderStats renderFrame(const CpuRuntime& runtime, const Camera& camera, const S
       for (uint32_t x = 0; x < width; ++x) {
         const Ray ray = cam.ray(float(x) + 0.5f, float(y) + 0.5f);
         const std::size_t i = y * width + x;
-        surfaces[i] = blurred ? blurredSurface(runtime, ray, pixelTime(i), lighting)
-                              : primarySurface(ray, runtime.closestHit(ray), indices, positions, lighting);
+        if (blurred) {
+          const float time = pixelTime(i);
+          surfaces[i] = blurredPrimarySurface(ray, runtime.closestHit(ray, time), runtime.motionView(), time, lighting);
+        } else {
+          surfaces[i] = primarySurface(ray, runtime.closestHit(ray), indices, positions, lighting);
+        }
       }
     rays += (y1 - y0) * width;
   });

@@ -16,6 +16,8 @@
 #include "tsah/core/aabb.hpp"
 #include "tsah/core/hd.hpp"
 #include "tsah/core/ray.hpp"
+#include "tsah/layout/motion_blur.hpp"
+#include "tsah/layout/traversal.hpp"  // MotionBvhView
 #include "tsah/render/sampling.hpp"
 
 namespace tsah {
@@ -85,6 +87,31 @@ TSAH_HD Surface primarySurface(const Ray& ray, const Hit& hit, const uint32_t* i
     s.normal = l.up;
     s.kind = SurfaceKind::Ground;
   }
+  return s;
+}
+
+// The surface a primary ray at shutter fraction `time` finds in a blurred frame (hit: the closest
+// hit at that time): the hit triangle's vertices lerped at that time, as the traversal lerps them,
+// then primarySurface on that one triangle; s.tri is the hit's triangle id.
+TSAH_HD Surface blurredPrimarySurface(const Ray& ray, const Hit& hit, const MotionBvhView& view, float time,
+                                      const SceneLighting& l) {
+  if (!hit.valid()) return primarySurface(ray, hit, nullptr, nullptr, l);
+  const motion::Segment seg = motion::segmentAt(view.keyTimes, int(view.keyCount), time);
+  const float* p0 = view.keyPositions + std::size_t(seg.index) * view.vertexCount * 3;
+  const float* p1 = view.keyCount > 1 ? p0 + std::size_t(view.vertexCount) * 3 : p0;
+  float triangle[9];
+  for (int k = 0; k < 3; ++k) {
+    const uint32_t vertex = view.indices[3 * std::size_t(hit.tri) + k];
+    const Vec3 v = motion::lerpVertex(loadVec3(p0, vertex), loadVec3(p1, vertex), seg.f);
+    triangle[3 * k] = v.x;
+    triangle[3 * k + 1] = v.y;
+    triangle[3 * k + 2] = v.z;
+  }
+  const uint32_t oneTriangle[3] = {0, 1, 2};
+  Hit local = hit;
+  local.tri = 0;
+  Surface s = primarySurface(ray, local, oneTriangle, triangle, l);
+  if (s.kind == SurfaceKind::Mesh) s.tri = hit.tri;
   return s;
 }
 
