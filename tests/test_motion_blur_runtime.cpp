@@ -37,9 +37,31 @@ Scene makeScene(anim::GeneratorKind kind, uint32_t triangles) {
   return s;
 }
 
-std::unique_ptr<CpuRuntime> makeRuntime(const Scene& s, tsah::Layout layout = tsah::Layout::Bvh2) {
+// A layout and, for the wide ones, the kernels' instruction set.
+struct Case {
+  tsah::Layout layout = tsah::Layout::Bvh2;
+  tsah::SimdIsa isa = tsah::SimdIsa::Sse;
+};
+
+// bvh2, and bvh4 / bvh8 with every instruction set this machine runs.
+std::vector<Case> cases() {
+  std::vector<Case> all{{tsah::Layout::Bvh2, tsah::SimdIsa::Sse}};
+  for (tsah::SimdIsa isa : {tsah::SimdIsa::Sse, tsah::SimdIsa::Avx2, tsah::SimdIsa::Avx512}) {
+    if (!tsah::isaSupported(isa)) continue;
+    all.push_back({tsah::Layout::Bvh4, isa});
+    if (isa != tsah::SimdIsa::Sse) all.push_back({tsah::Layout::Bvh8, isa});
+  }
+  return all;
+}
+
+std::string describe(const Case& c) {
+  return std::string(tsah::name(c.layout)) + (c.layout == tsah::Layout::Bvh2 ? "" : std::string(" ") + tsah::name(c.isa));
+}
+
+std::unique_ptr<CpuRuntime> makeRuntime(const Scene& s, Case c = {}) {
   CpuRuntime::Config config(2);
-  config.layout = layout;
+  config.layout = c.layout;
+  if (c.layout != tsah::Layout::Bvh2) config.isa = c.isa;
   return std::make_unique<CpuRuntime>(
       s.tree, std::vector<uint32_t>(s.animation.indices().begin(), s.animation.indices().end()),
       s.animation.vertexCount(), config);
@@ -47,21 +69,42 @@ std::unique_ptr<CpuRuntime> makeRuntime(const Scene& s, tsah::Layout layout = ts
 
 double keyframeTime(const anim::Animation& a, uint32_t k) { return a.times()[k]; }
 
+// Rays aimed at the scene as the runtime's positions place it (any layout).
 std::vector<Ray> raysFor(const CpuRuntime& rt, uint32_t count, uint32_t seed) {
   std::mt19937 rng(seed);
-  return tsah::test::randomRays(rt.view(), rt.triangleCount(), rt.bounds(), count, rng);
+  tsah::BvhView v;
+  v.indices = rt.indices().data();
+  v.positions = rt.positions().data();
+  return tsah::test::randomRays(v, rt.triangleCount(), rt.bounds(), count, rng);
 }
 
-// The nearest hit of the triangles lerped at the frame's time (brute force, the same lerp).
-Hit bruteForce(const CpuRuntime& rt, const MotionFrame& frame, const Ray& ray) {
+// The triangles of a shutter at a time: the animation's positions at the shutter's keys, lerped.
+struct ShutterGeometry {
+  std::vector<float> fractions;
+  std::vector<std::vector<float>> positions;
+  ShutterGeometry(const anim::Animation& a, double open, double close) {
+    const std::vector<double> keys = tsah::motion::shutterKeys(a.times(), open, close);
+    fractions = tsah::motion::keyFractions(keys);
+    for (double t : keys) positions.push_back(a.positionsAt(t));
+  }
+  Vec3 vertex(uint32_t i, float time) const {
+    const tsah::motion::Segment seg = tsah::motion::segmentAt(fractions.data(), int(fractions.size()), time);
+    const float* p0 = positions[seg.index].data() + 3 * std::size_t(i);
+    const float* p1 = positions[seg.index + 1].data() + 3 * std::size_t(i);
+    return tsah::motion::lerpVertex({p0[0], p0[1], p0[2]}, {p1[0], p1[1], p1[2]}, seg.f);
+  }
+};
+
+// The nearest hit of the triangles lerped at the ray's time (brute force).
+Hit bruteForce(const CpuRuntime& rt, const ShutterGeometry& g, float time, const Ray& ray) {
   const tsah::RayPrep prep = tsah::prepareRay(ray);
   Hit best;
   float tmax = ray.tmax;
   const auto idx = rt.indices();
   for (uint32_t tri = 0; tri < rt.triangleCount(); ++tri) {
     float t, u, v;
-    if (tsah::intersectWatertight(prep, frame.vertex(idx[3 * tri]), frame.vertex(idx[3 * tri + 1]),
-                                  frame.vertex(idx[3 * tri + 2]), ray.tmin, tmax, t, u, v)) {
+    if (tsah::intersectWatertight(prep, g.vertex(idx[3 * tri], time), g.vertex(idx[3 * tri + 1], time),
+                                  g.vertex(idx[3 * tri + 2], time), ray.tmin, tmax, t, u, v)) {
       best = Hit{t, u, v, tri};
       tmax = t;
     }
@@ -72,12 +115,10 @@ Hit bruteForce(const CpuRuntime& rt, const MotionFrame& frame, const Ray& ray) {
 // A blurred scene spanning several keyframes, with the shutter opening and closing between them.
 struct Blurred {
   Scene scene = makeScene(anim::GeneratorKind::Swap, 1500);
-  std::unique_ptr<CpuRuntime> rt = makeRuntime(scene);
-  Blurred() {
-    const double open = 0.5 * (keyframeTime(scene.animation, 1) + keyframeTime(scene.animation, 2));
-    const double close = 0.3 * keyframeTime(scene.animation, 3) + 0.7 * keyframeTime(scene.animation, 4);
-    tsah::updateShutter(*rt, scene.animation, open, close);
-  }
+  double open = 0.5 * (keyframeTime(scene.animation, 1) + keyframeTime(scene.animation, 2));
+  double close = 0.3 * keyframeTime(scene.animation, 3) + 0.7 * keyframeTime(scene.animation, 4);
+  std::unique_ptr<CpuRuntime> rt;
+  explicit Blurred(Case c = {}) : rt(makeRuntime(scene, c)) { tsah::updateShutter(*rt, scene.animation, open, close); }
 };
 
 TEST(MotionBlurRuntime, KeysAreTheShutterKeys) {
@@ -125,7 +166,10 @@ TEST(MotionBlurRuntime, NodeBoxesContainTheirTrianglesAtRandomTimes) {
 // Closest hit = brute force at the ray's time: the same triangle, or (a tie) another one hit at
 // the same t within 1e-5 relative; t within 1e-5 relative. Any hit agrees with closest hit.
 TEST(MotionBlurRuntime, ClosestHitMatchesBruteForceAtEachRaysTime) {
-  Blurred b;
+  for (const Case& c : cases()) {
+  SCOPED_TRACE(describe(c));
+  Blurred b(c);
+  const ShutterGeometry geometry(b.scene.animation, b.open, b.close);
   const std::vector<Ray> rays = raysFor(*b.rt, 1500, 11);
   std::mt19937 rng(12);
   std::uniform_real_distribution<float> u01(0, 1);
@@ -137,7 +181,7 @@ TEST(MotionBlurRuntime, ClosestHitMatchesBruteForceAtEachRaysTime) {
   const std::vector<uint8_t> any = tsah::anyHits(*b.rt, rays, times);
   uint32_t hitCount = 0;
   for (std::size_t i = 0; i < rays.size(); ++i) {
-    const Hit ref = bruteForce(*b.rt, MotionFrame(b.rt->motionView(), times[i]), rays[i]);
+    const Hit ref = bruteForce(*b.rt, geometry, times[i], rays[i]);
     ASSERT_EQ(hits[i].valid(), ref.valid()) << "ray " << i;
     ASSERT_EQ(any[i] != 0, ref.valid()) << "ray " << i;
     ASSERT_EQ(b.rt->closestHit(rays[i], times[i]).tri, hits[i].tri);
@@ -147,8 +191,10 @@ TEST(MotionBlurRuntime, ClosestHitMatchesBruteForceAtEachRaysTime) {
     if (hits[i].tri != ref.tri) continue;  // a tie at the same t
     EXPECT_EQ(hits[i].u, ref.u);
     EXPECT_EQ(hits[i].v, ref.v);
+    ASSERT_EQ(b.rt->anyHit(rays[i], times[i], tsah::AnyHitOrder::TreeOrder), ref.valid());
   }
   EXPECT_GT(hitCount, rays.size() / 10);  // the rays do hit the scene
+  }
 }
 
 // Blurred results differ from the instant ones: the time is used.
@@ -168,7 +214,9 @@ bool sameBits(const Hit& a, const Hit& b) { return std::memcmp(&a, &b, sizeof(Hi
 TEST(MotionBlurRuntime, ClosedShutterIsTheInstant) {
   const Scene s = makeScene(anim::GeneratorKind::Swap, 1500);
   const double t = 0.4 * keyframeTime(s.animation, 2) + 0.6 * keyframeTime(s.animation, 3);
-  auto instant = makeRuntime(s), shutter = makeRuntime(s);
+  for (const Case& c : cases()) {
+  SCOPED_TRACE(describe(c));
+  auto instant = makeRuntime(s, c), shutter = makeRuntime(s, c);
   instant->update(s.animation.positionsAt(t));
   const tsah::Shutter closed;  // fraction 0
   const auto [open, close] = tsah::shutterInterval(s.animation, t, 0.1, closed);
@@ -183,6 +231,7 @@ TEST(MotionBlurRuntime, ClosedShutterIsTheInstant) {
     ASSERT_TRUE(sameBits(shutter->closestHit(ray), want));
     ASSERT_EQ(shutter->anyHit(ray, 0.3f), instant->anyHit(ray));
   }
+  }
 }
 
 // A two-key shutter between keyframes: at time 0 and 1 the same hits as the instant runtime at
@@ -192,7 +241,9 @@ TEST(MotionBlurRuntime, ClosedShutterIsTheInstant) {
 TEST(MotionBlurRuntime, ShutterEndsAreTheKeyframes) {
   const Scene s = makeScene(anim::GeneratorKind::Swap, 1500);
   const double t1 = keyframeTime(s.animation, 1), t2 = keyframeTime(s.animation, 2);
-  auto blurred = makeRuntime(s), instant = makeRuntime(s);
+  for (const Case& c : cases()) {
+  SCOPED_TRACE(describe(c));
+  auto blurred = makeRuntime(s, c), instant = makeRuntime(s, c);
   tsah::updateShutter(*blurred, s.animation, t1, t2);
   ASSERT_EQ(blurred->keyTimes().size(), 2u);
   for (const auto& [time, at] : {std::pair{0.0f, t1}, std::pair{1.0f, t2}}) {
@@ -209,6 +260,7 @@ TEST(MotionBlurRuntime, ShutterEndsAreTheKeyframes) {
       ASSERT_NEAR(got.v, want.v, 1e-3f);
     }
     EXPECT_GT(hits, 0u);
+  }
   }
 }
 

@@ -5,6 +5,7 @@
 #include <type_traits>
 
 #include "tsah/core/ray.hpp"
+#include "tsah/layout/motion_blur.hpp"
 #include "tsah/layout/wide_layout.hpp"
 #include "tsah/layout/wide_traversal.hpp"
 #include "tsah/layout/woop.hpp"

@@ -144,11 +144,59 @@ inline bool intersectLeaf(const WideView<V::N>& bvh, const Ray& ray, LazyPrep& p
   return found;
 }
 
+// A blurred leaf: the watertight test on each slot's triangle lerped at f (motion_blur.hpp).
+template <class V, bool AnyHit>
+inline bool intersectMotionLeaf(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, const Ray& ray,
+                                LazyPrep& prep, uint32_t first, uint32_t count, float& tmax, Hit& hit) {
+  constexpr uint32_t N = V::N;
+  const auto vertex = [&](uint32_t i) {
+    const Vec3 a{bvh.positions[3 * i], bvh.positions[3 * i + 1], bvh.positions[3 * i + 2]};
+    const Vec3 b{m.positions1[3 * i], m.positions1[3 * i + 1], m.positions1[3 * i + 2]};
+    return motion::lerpVertex(a, b, m.f);
+  };
+  bool found = false;
+  for (uint32_t i = 0; i < count; ++i) {
+    const uint32_t slot = bvh.packets[first + i / N].slot[i % N];
+    const uint32_t* tri = bvh.indices + 3 * std::size_t(bvh.triIndex[slot]);
+    float t, u, v;
+    if (intersectWatertight(prep.watertight(ray), vertex(tri[0]), vertex(tri[1]), vertex(tri[2]), ray.tmin, tmax, t,
+                            u, v)) {
+      tmax = t;
+      hit = {t, u, v, bvh.triIndex[slot]};
+      found = true;
+      if (AnyHit) return true;
+    }
+  }
+  return found;
+}
+
+// The six box rows of a node: loaded, or (blurred) lerped between the two keys and padded outward
+// (motion::lerpBox, lane by lane, operation for operation).
+template <class V, bool Blurred>
+inline void nodeRows(const WideSoaNode<V::N>& node, const WideMotionFrame<V::N>& m, int32_t ref, V rows[6]) {
+  if constexpr (!Blurred) {
+    for (int i = 0; i < 6; ++i) rows[i] = V::load(node.box[i]);
+  } else {
+    const WideSoaNode<V::N>& node1 = m.nodes1[ref];
+    const V f = V::set1(m.f), g = V::set1(1.0f) - f;
+    for (int a = 0; a < 3; ++a) {
+      const V lo0 = V::load(node.box[a]), hi0 = V::load(node.box[a + 3]);
+      const V lo1 = V::load(node1.box[a]), hi1 = V::load(node1.box[a + 3]);
+      const V mag = V::max(V::max(V::abs(lo0), V::abs(hi0)), V::max(V::abs(lo1), V::abs(hi1)));
+      const V pad = mag * V::set1(0x1p-19f) + V::set1(0x1p-120f);
+      rows[a] = (g * lo0 + f * lo1) - pad;
+      rows[a + 3] = (g * hi0 + f * hi1) + pad;
+    }
+  }
+}
+
 // What a traversal looks for, and for any hit in which order it visits the entered children.
 enum class Query { Closest, AnyFarthestFirst, AnyTreeOrder };
 
-template <class V, Query Q>
-inline Hit traverse(const WideView<V::N>& bvh, const Ray& ray) {
+// Blurred: bvh holds key s (nodes, positions, the lerped root box) and m key s + 1 (see
+// WideMotionFrame); otherwise m is not read.
+template <class V, Query Q, bool Blurred = false>
+inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, const Ray& ray) {
   constexpr uint32_t N = V::N;
   constexpr bool AnyHit = Q != Query::Closest;
   Hit hit;
@@ -159,7 +207,10 @@ inline Hit traverse(const WideView<V::N>& bvh, const Ray& ray) {
   if (isLeafRef(bvh.rootRef)) {
     float tEntry;
     if (!intersectBox(prep.prep, bvh.rootBox, ray.tmin, tmax, tEntry)) return hit;
-    intersectLeaf<V, AnyHit>(bvh, ray, prep, r, leafFirstSlot(bvh.rootRef), bvh.rootCount, tmax, hit);
+    if constexpr (Blurred)
+      intersectMotionLeaf<V, AnyHit>(bvh, m, ray, prep, leafFirstSlot(bvh.rootRef), bvh.rootCount, tmax, hit);
+    else
+      intersectLeaf<V, AnyHit>(bvh, ray, prep, r, leafFirstSlot(bvh.rootRef), bvh.rootCount, tmax, hit);
     return hit;
   }
   // An interior root's box is not tested: it is the union of its children's boxes, and the slab
@@ -179,12 +230,14 @@ inline Hit traverse(const WideView<V::N>& bvh, const Ray& ray) {
   for (;;) {
     if (!isLeafRef(ref)) {
       const WideSoaNode<N>& node = bvh.nodes[ref];
-      const V tnx = (V::load(node.box[r.nearPlane[0]]) - r.org[0]) * r.inv[0];
-      const V tny = (V::load(node.box[r.nearPlane[1]]) - r.org[1]) * r.inv[1];
-      const V tnz = (V::load(node.box[r.nearPlane[2]]) - r.org[2]) * r.inv[2];
-      const V tfx = (V::load(node.box[r.farPlane[0]]) - r.org[0]) * r.inv[0];
-      const V tfy = (V::load(node.box[r.farPlane[1]]) - r.org[1]) * r.inv[1];
-      const V tfz = (V::load(node.box[r.farPlane[2]]) - r.org[2]) * r.inv[2];
+      V rows[6];
+      nodeRows<V, Blurred>(node, m, ref, rows);
+      const V tnx = (rows[r.nearPlane[0]] - r.org[0]) * r.inv[0];
+      const V tny = (rows[r.nearPlane[1]] - r.org[1]) * r.inv[1];
+      const V tnz = (rows[r.nearPlane[2]] - r.org[2]) * r.inv[2];
+      const V tfx = (rows[r.farPlane[0]] - r.org[0]) * r.inv[0];
+      const V tfy = (rows[r.farPlane[1]] - r.org[1]) * r.inv[1];
+      const V tfz = (rows[r.farPlane[2]] - r.org[2]) * r.inv[2];
       const V tn = V::max(V::max(tnx, tny), V::max(tnz, vtmin));
       const V tf = V::min(V::min(tfx, tfy), V::min(tfz, V::set1(tmax))) * farScale;
       uint32_t mask = V::bits(V::le(tn, tf));
@@ -243,8 +296,13 @@ inline Hit traverse(const WideView<V::N>& bvh, const Ray& ray) {
         count = stack[sp].count;
         continue;
       }
-    } else if (intersectLeaf<V, AnyHit>(bvh, ray, prep, r, leafFirstSlot(ref), count, tmax, hit) && AnyHit) {
-      return hit;
+    } else {
+      bool found;
+      if constexpr (Blurred)
+        found = intersectMotionLeaf<V, AnyHit>(bvh, m, ray, prep, leafFirstSlot(ref), count, tmax, hit);
+      else
+        found = intersectLeaf<V, AnyHit>(bvh, ray, prep, r, leafFirstSlot(ref), count, tmax, hit);
+      if (found && AnyHit) return hit;
     }
     do {
       if (sp == 0) return hit;
@@ -338,12 +396,22 @@ TSAH_KERNEL void woopRowsKernel(const float* positions, const uint32_t* vertices
 
 template <class V>
 TSAH_KERNEL Hit closestKernel(const WideView<V::N>& bvh, const Ray& ray) {
-  return traverse<V, Query::Closest>(bvh, ray);
+  return traverse<V, Query::Closest>(bvh, {}, ray);
 }
 template <class V>
 TSAH_KERNEL bool anyKernel(const WideView<V::N>& bvh, const Ray& ray, AnyHitOrder order) {
-  return order == AnyHitOrder::TreeOrder ? traverse<V, Query::AnyTreeOrder>(bvh, ray).valid()
-                                         : traverse<V, Query::AnyFarthestFirst>(bvh, ray).valid();
+  return order == AnyHitOrder::TreeOrder ? traverse<V, Query::AnyTreeOrder>(bvh, {}, ray).valid()
+                                         : traverse<V, Query::AnyFarthestFirst>(bvh, {}, ray).valid();
+}
+template <class V>
+TSAH_KERNEL Hit closestMotionKernel(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, const Ray& ray) {
+  return traverse<V, Query::Closest, true>(bvh, m, ray);
+}
+template <class V>
+TSAH_KERNEL bool anyMotionKernel(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, const Ray& ray,
+                                 AnyHitOrder order) {
+  return order == AnyHitOrder::TreeOrder ? traverse<V, Query::AnyTreeOrder, true>(bvh, m, ray).valid()
+                                         : traverse<V, Query::AnyFarthestFirst, true>(bvh, m, ray).valid();
 }
 
 // This instruction set's kernels as the dispatch table: four-lane nodes always, eight-lane nodes
@@ -354,9 +422,13 @@ WideKernels kernelTable(SimdIsa isa) {
   k.isa = isa;
   k.closest4 = &closestKernel<V4>;
   k.any4 = &anyKernel<V4>;
+  k.closestMotion4 = &closestMotionKernel<V4>;
+  k.anyMotion4 = &anyMotionKernel<V4>;
   if constexpr (!std::is_void_v<V8>) {
     k.closest8 = &closestKernel<V8>;
     k.any8 = &anyKernel<V8>;
+    k.closestMotion8 = &closestMotionKernel<V8>;
+    k.anyMotion8 = &anyMotionKernel<V8>;
   }
   k.woopRows4 = &woopRowsKernel<4, DoubleLanes4, FloatLanes4, IntLanes4>;
   k.woopRows8 = &woopRowsKernel<8, DoubleLanes8, FloatLanes8, IntLanes8>;

@@ -107,6 +107,17 @@ struct WideView {
   TSAH_HD Vec3 vertex(uint32_t i) const { return {positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]}; }
 };
 
+// What a blurred frame (docs/motion-blur.md) adds to the WideView of key s for one ray: the nodes
+// and positions of key s + 1 and the ray's place f between them. The view's nodes, positions and
+// root box are then key s's (the root box already lerped); the Woop packets are not read, only
+// their slots.
+template <uint32_t N>
+struct WideMotionFrame {
+  const WideSoaNode<N>* nodes1 = nullptr;
+  const float* positions1 = nullptr;
+  float f = 0.0f;
+};
+
 // Traversal stack entries a wide tree of this depth needs at most (one level pushes up to N - 1).
 template <uint32_t N>
 TSAH_HD uint32_t wideStackNeed(uint32_t depth) {

@@ -52,6 +52,11 @@ struct WideKernels {
   bool (*any4)(const WideView<4>& bvh, const Ray& ray, AnyHitOrder order) = nullptr;
   Hit (*closest8)(const WideView<8>& bvh, const Ray& ray) = nullptr;
   bool (*any8)(const WideView<8>& bvh, const Ray& ray, AnyHitOrder order) = nullptr;
+  // The same at a blurred frame's time (WideMotionFrame): lerped child boxes and triangles.
+  Hit (*closestMotion4)(const WideView<4>& bvh, const WideMotionFrame<4>& m, const Ray& ray) = nullptr;
+  bool (*anyMotion4)(const WideView<4>& bvh, const WideMotionFrame<4>& m, const Ray& ray, AnyHitOrder order) = nullptr;
+  Hit (*closestMotion8)(const WideView<8>& bvh, const WideMotionFrame<8>& m, const Ray& ray) = nullptr;
+  bool (*anyMotion8)(const WideView<8>& bvh, const WideMotionFrame<8>& m, const Ray& ray, AnyHitOrder order) = nullptr;
   // The refit's inner step (WideTree::refit), in every table: the Woop rows of one packet whose
   // lane l < lanes holds the triangle of vertex indices vertices[3l], [3l + 1], [3l + 2] (xyz per
   // vertex in `positions`), bit for bit makeWoopTriangle's (lanes from `lanes` on and degenerate

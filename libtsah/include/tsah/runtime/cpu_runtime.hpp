@@ -117,7 +117,7 @@ class CpuRuntime {
   // Not blurred: closestHit(ray) / anyHit(ray, order).
   Hit closestHit(const Ray& ray, float time) const;
   bool anyHit(const Ray& ray, float time, AnyHitOrder order = AnyHitOrder::FarthestFirst) const;
-  // The blurred bvh2 frame (valid while blurred()).
+  // The blurred bvh2 frame (valid while blurred(); the wide layouts keep their own node sets).
   const MotionBvhView& motionView() const { return motionView_; }
 
   const LayoutInfo& layoutInfo() const { return info_; }
@@ -183,6 +183,14 @@ class CpuRuntime {
   std::vector<Aabb> keyRootBoxes_;
   std::vector<float> keyPositions_;
   MotionBvhView motionView_;
+  std::vector<WideSoaNode<4>> keyWide4_;  // wide layouts: one node set per key
+  std::vector<WideSoaNode<8>> keyWide8_;
+  template <uint32_t N>
+  void keepWideKey(const WideTree<N>& tree, std::vector<WideSoaNode<N>>& keyNodes, std::size_t key);
+  template <uint32_t N>
+  std::pair<WideView<N>, WideMotionFrame<N>> motionFrame(const WideView<N>& view,
+                                                          const std::vector<WideSoaNode<N>>& keyNodes,
+                                                          float time) const;
 };
 
 }  // namespace tsah
