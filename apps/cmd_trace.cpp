@@ -73,8 +73,9 @@ tsah::Shutter parseShutter(const TraceOptions& opt) {
   shutter.mode = opt.shutterMode == "open" ? tsah::Shutter::Mode::Open : tsah::Shutter::Mode::Centered;
   if (shutter.fraction == 0.0) return shutter;
   if (opt.rebuild != "none") throw UsageError("--shutter refits the given tree; it does not go with --rebuild");
-  if (opt.layout != tsah::Layout::Auto && opt.layout != tsah::Layout::Bvh2)
-    throw UsageError("--shutter traces the bvh2 layout (--layout bvh2 or auto)");
+  // The CPU traces blurred frames in every layout it has; the GPU in the binary one.
+  if (opt.device == tsah::Device::Cuda && opt.layout != tsah::Layout::Auto && opt.layout != tsah::Layout::Bvh2)
+    throw UsageError("--shutter traces the bvh2 layout on the GPU (--layout bvh2 or auto)");
   return shutter;
 }
 
@@ -134,7 +135,7 @@ void runTrace(const TraceOptions& opt) {
   if (runtimeOptions.shutter.fraction > 0.0) {
     if (frameCount < 2)
       throw UsageError("--shutter needs at least two frames (it is a fraction of the time between them)");
-    runtimeOptions.layout = tsah::Layout::Bvh2;  // the layout motion blur traces
+    if (opt.device == tsah::Device::Cuda) runtimeOptions.layout = tsah::Layout::Bvh2;  // the GPU's blurred layout
     runtimeOptions.frameInterval = times[1] - times[0];
   }
   // One runtime per GPU of --devices (each on its own GPU), else one: the CPU, or the GPU of this
@@ -333,7 +334,7 @@ TSAH_REGISTER_COMMAND(70, [](CLI::App& app) {
   auto* shutter = sub->add_option("--shutter", opt->shutter,
                                   "Motion blur: the shutter's length as a fraction of the time between traced frames, "
                                   "0 to 1 (default 0: the instant); each frame is refitted at the shutter's key times "
-                                  "and each pixel traced at its own time (bvh2, CPU or GPU; docs/motion-blur.md)");
+                                  "and each pixel traced at its own time (CPU: bvh2, bvh4, bvh8; GPU: bvh2; docs/motion-blur.md)");
   sub->add_option("--shutter-mode", opt->shutterMode,
                   "centered: the shutter around the frame's time (default); open: starting at it")
       ->check(CLI::IsMember({"centered", "open"}))

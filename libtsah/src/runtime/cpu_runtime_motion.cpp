@@ -67,37 +67,30 @@ void CpuRuntime::updateShutter(std::span<const float> keyTimes,
   checkFitsInMemory(keys * (nodes + floats * sizeof(float) + sizeof(Aabb)), "runtime",
                     "a shutter of " + std::to_string(keys) + " keys");
   clearShutter();
-  if (wide4_ || wide8_) {
-    keyRootBoxes_.resize(keys);
-    keyPositions_.resize(keys * floats);
-    for (std::size_t k = 0; k < keys; ++k) {  // the instant refit at each key
-      setPositions(keyPositions[k]);
-      refitAndWoop();
-      if (wide4_) keepWideKey(*wide4_, keyWide4_, k);
-      if (wide8_) keepWideKey(*wide8_, keyWide8_, k);
-      keyRootBoxes_[k] = bounds();
-      std::copy(positions_.begin(), positions_.end(), keyPositions_.begin() + std::ptrdiff_t(k * floats));
-    }
-    keyTimes_.assign(keyTimes.begin(), keyTimes.end());
-    return;
-  }
-  const std::size_t nodeCount = tree_.interiorCount;
+  // The instant refit at each key; the layout traced keeps its node set per key (the wide layouts
+  // do not refit the binary tree).
+  const bool wide = wide4_ || wide8_;
+  const std::size_t nodeCount = wide ? 0 : tree_.interiorCount;
   std::vector<GpuBvhNode> nodeSets(keys * nodeCount);
   std::vector<Aabb> rootBoxes(keys);
   std::vector<float> positionSets(keys * floats);
-  for (std::size_t k = 0; k < keys; ++k) {  // the instant refit at each key
+  for (std::size_t k = 0; k < keys; ++k) {
     setPositions(keyPositions[k]);
     refitAndWoop();
-    std::copy_n(tree_.nodes.begin(), nodeCount, nodeSets.begin() + std::ptrdiff_t(k * nodeCount));
-    rootBoxes[k] = tree_.rootBoxes[0];
+    if (wide4_) keepWideKey(*wide4_, keyWide4_, k);
+    if (wide8_) keepWideKey(*wide8_, keyWide8_, k);
+    if (!wide) std::copy_n(tree_.nodes.begin(), nodeCount, nodeSets.begin() + std::ptrdiff_t(k * nodeCount));
+    rootBoxes[k] = bounds();
     std::copy(positions_.begin(), positions_.end(), positionSets.begin() + std::ptrdiff_t(k * floats));
   }
   keyTimes_.assign(keyTimes.begin(), keyTimes.end());
   keyNodes_ = std::move(nodeSets);
   keyRootBoxes_ = std::move(rootBoxes);
   keyPositions_ = std::move(positionSets);
+  // The key positions, times and triangles in every layout (the renderer's blurred surfaces read
+  // them); the binary key nodes in bvh2 only.
   MotionBvhView& v = motionView_;
-  v.keyNodes = keyNodes_.data();
+  v.keyNodes = wide ? nullptr : keyNodes_.data();
   v.keyRootBoxes = keyRootBoxes_.data();
   v.keyPositions = keyPositions_.data();
   v.keyTimes = keyTimes_.data();

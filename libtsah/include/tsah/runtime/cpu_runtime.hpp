@@ -117,7 +117,9 @@ class CpuRuntime {
   // Not blurred: closestHit(ray) / anyHit(ray, order).
   Hit closestHit(const Ray& ray, float time) const;
   bool anyHit(const Ray& ray, float time, AnyHitOrder order = AnyHitOrder::FarthestFirst) const;
-  // The blurred bvh2 frame (valid while blurred(); the wide layouts keep their own node sets).
+  // The blurred frame (valid while blurred()): key times, positions, root boxes and triangles in
+  // every layout; the binary key nodes (keyNodes) in bvh2 only, null in the wide layouts, which keep
+  // their own node set per key and trace through closestHit / anyHit(ray, time).
   const MotionBvhView& motionView() const { return motionView_; }
 
   const LayoutInfo& layoutInfo() const { return info_; }
