@@ -10,7 +10,13 @@
 //   tri_index.bin  uint32[triangle_count]        slot -> triangle id
 //   indices.bin    uint32[3 * triangle_count]    the animation's triangles (vertex ids)
 //   vertices.bin   float[3 * vertex_count]       this frame's vertex positions
-// Every file is written to a temporary name and renamed.
+// With --shutter S (docs/motion-blur.md), the tree refitted at the K key times of the frame's
+// shutter, for a renderer that lerps boxes and triangles at each ray's time:
+//   key_times.bin       float[K]                    shutter fractions: 0 first, 1 last, increasing
+//   key_nodes.bin       node type[K][node_count]    the nodes refitted at each key (same order)
+//   key_root_boxes.bin  float[K][6]                 the root box at each key (lo xyz, hi xyz)
+//   key_vertices.bin    float[K][3 * vertex_count]  the vertex positions at each key
+// Every file is written to a temporary name and renamed; all appear or none.
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -21,6 +27,7 @@
 #include "box_export.hpp"
 #include "bvh_info.hpp"
 #include "cli.hpp"
+#include "tsah/pipeline.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
 
 namespace {
@@ -125,6 +132,7 @@ std::string cHeaderWide(const tsah::CpuRuntime& rt, const tsah::WideTree<N>& w, 
  */
 #ifndef TSAH_SCENE_H
 #define TSAH_SCENE_H
+#include <stdint.h>
 
 )";
   h += "#define TSAH_WIDTH " + n + "u\n";
@@ -164,6 +172,39 @@ std::string cHeaderWide(const tsah::CpuRuntime& rt, const tsah::WideTree<N>& w, 
   return h;
 }
 
+// The motion-blur part of the header (--shutter): the key files and how a ray's time reads them,
+// the formulas of tsah/layout/motion_blur.hpp (segmentAt, lerp, lerpPad, lerpBox).
+std::string cMotionHeader(const tsah::CpuRuntime& rt, double open, double close, const std::string& nodeType) {
+  std::string h = "\n/* Motion blur (tsah export --shutter; docs/motion-blur.md): the tree refitted at TSAH_KEY_COUNT key\n";
+  h += " * times of the shutter [TSAH_SHUTTER_OPEN, TSAH_SHUTTER_CLOSE] (animation time): its open and close\n";
+  h += " * and every keyframe between. Between two keys every vertex moves linearly.\n";
+  h += " *   key_times.bin       float[TSAH_KEY_COUNT]: shutter fractions, 0 first, 1 last, increasing\n";
+  h += " *   key_nodes.bin       " + nodeType + "[TSAH_KEY_COUNT][TSAH_NODE_COUNT]: the nodes at each key\n";
+  h += " *   key_root_boxes.bin  TsahBox[TSAH_KEY_COUNT]: the root box at each key\n";
+  h += " *   key_vertices.bin    float[TSAH_KEY_COUNT][3 * TSAH_VERTEX_COUNT]: the vertices at each key\n";
+  h += R"( * A ray's time tau is a shutter fraction in [0, 1]. Its segment s is the last key with
+ * key_times[s] <= tau, at most TSAH_KEY_COUNT - 2; f = (tau - key_times[s]) / (key_times[s + 1] -
+ * key_times[s]) clamped to [0, 1]. With lerp(a, b) = (1 - f) * a + f * b in float:
+ *   a child box side: lo = lerp(lo_s, lo_s1) - pad, hi = lerp(hi_s, hi_s1) + pad, per axis, with
+ *     pad = m * 0x1p-19f + 0x1p-120f and m the largest magnitude of that axis's four values
+ *     (lo and hi at keys s and s + 1): the box then contains the triangles at tau under rounding;
+ *   a vertex: lerp of its positions at keys s and s + 1; test the lerped triangle watertight
+ *     (Woop, Benthin, Wald 2013): the Woop rows (woop.bin) hold the exported frame only.
+ */
+typedef struct TsahBox { float lo[3], hi[3]; } TsahBox; /* 24 bytes */
+)";
+  h += "#define TSAH_KEY_COUNT " + std::to_string(rt.keyTimes().size()) + "u\n";
+  char times[96];
+  std::snprintf(times, sizeof times, "#define TSAH_SHUTTER_OPEN %.17g\n#define TSAH_SHUTTER_CLOSE %.17g\n", open, close);
+  h += times;
+  return h;
+}
+
+// Puts `part` before the header's closing #endif.
+void insertBeforeEnd(std::string& header, const std::string& part) {
+  header.insert(header.rfind("\n#endif /* TSAH_SCENE_H */"), part);
+}
+
 }  // namespace
 
 TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
@@ -174,6 +215,9 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
     double time = std::nan("");
     unsigned threads = 0;
     tsah::Layout layout = tsah::Layout::Bvh2;
+    double shutter = 0.0;
+    std::string shutterMode = "centered";
+    double frameInterval = std::nan("");
   };
   auto opt = std::make_shared<Options>();
   sub->add_option("BVH", opt->bvh, "Tree or tree set from `tsah optimize` (.tbvh; a set exports the tree of the frame's part)")
@@ -189,12 +233,27 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
                        "bvh2: the binary Aila-Laine nodes (default); bvh4 / bvh8: the wide SIMD layout, collapsed "
                        "from the tree at export time (docs/wide-bvh.md)",
                        {tsah::Layout::Bvh2, tsah::Layout::Bvh4, tsah::Layout::Bvh8});
+  auto* shutter = sub->add_option("--shutter", opt->shutter,
+                                  "Motion blur: also write the tree refitted at the key times of the frame's shutter, "
+                                  "its length a fraction (0 to 1) of --frame-interval (docs/motion-blur.md)");
+  sub->add_option("--shutter-mode", opt->shutterMode,
+                  "centered: the shutter around the frame's time (default); open: starting at it")
+      ->check(CLI::IsMember({"centered", "open"}))
+      ->needs(shutter);
+  sub->add_option("--frame-interval", opt->frameInterval,
+                  "The time between rendered frames that --shutter is a fraction of (default: the animation's "
+                  "keyframe spacing, its duration over its keyframe intervals)")
+      ->needs(shutter);
   const auto boxes = tsah::cli::addBoxExportOptions(*sub);
   // The box view is drawn from the binary tree by one thread: refused, not ignored.
-  sub->get_option("--boxes")->excludes(layout)->excludes(threads);
+  sub->get_option("--boxes")->excludes(layout)->excludes(threads)->excludes(shutter);
   sub->callback([opt, boxes] {
     namespace fs = std::filesystem;
     // A tree set exports the tree of the frame's part (tsah::treeIndexAt), as the runtimes use it.
+    if (!(opt->shutter >= 0.0 && opt->shutter <= 1.0))
+      throw tsah::cli::UsageError("--shutter must be between 0 and 1 (a fraction of the frame interval)");
+    if (!(opt->frameInterval > 0.0) && !std::isnan(opt->frameInterval))
+      throw tsah::cli::UsageError("--frame-interval must be a positive time");
     const tsah::TreeSet set = tsah::decodeTreeSetFile(tsah::readFile(opt->bvh), opt->bvh);
     const anim::Animation a = tsah::cli::loadInput(opt->input);
     tsah::cli::checkTreeMatchesAnimation(set.builds.front(), opt->bvh, a, opt->input);
@@ -264,11 +323,48 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
     }
     write("indices.bin", bytesOf(rt.indices()));
     write("vertices.bin", bytesOf(rt.positions()));
+    std::string blurNote;
+    if (opt->shutter > 0.0) {
+      // The shutter of the frame at `time` (tsah trace's rule), the tree refitted at its keys.
+      const double interval = std::isnan(opt->frameInterval)
+                                  ? (a.endTime() - a.startTime()) / double(std::max<uint32_t>(a.keyframeCount() - 1, 1))
+                                  : opt->frameInterval;
+      tsah::Shutter frameShutter;
+      frameShutter.fraction = opt->shutter;
+      frameShutter.mode = opt->shutterMode == "open" ? tsah::Shutter::Mode::Open : tsah::Shutter::Mode::Centered;
+      const auto [open, close] = tsah::shutterInterval(a, time, interval, frameShutter);
+      tsah::updateShutter(rt, a, open, close);
+      if (!rt.blurred())
+        throw tsah::cli::UsageError("--shutter: the shutter of time " + std::to_string(time) + " is one instant (" +
+                                    opt->input + " does not move over it, or --frame-interval is 0)");
+      const tsah::MotionBvhView& m = rt.motionView();
+      const std::size_t keys = rt.keyTimes().size();
+      std::string nodeType;
+      if (rt.wide8()) {
+        write("key_nodes.bin", bytesOf(rt.keyWideNodes8()));
+        nodeType = "TsahBvh8Node";
+      } else if (rt.wide4()) {
+        write("key_nodes.bin", bytesOf(rt.keyWideNodes4()));
+        nodeType = "TsahBvh4Node";
+      } else {
+        write("key_nodes.bin", bytesOf(std::span<const tsah::GpuBvhNode>(m.keyNodes, keys * m.nodeCount)));
+        nodeType = "TsahBvhNode";
+      }
+      write("key_times.bin", bytesOf(rt.keyTimes()));
+      write("key_root_boxes.bin", bytesOf(std::span<const tsah::Aabb>(m.keyRootBoxes, keys)));
+      write("key_vertices.bin", bytesOf(std::span<const float>(m.keyPositions, keys * 3 * std::size_t(m.vertexCount))));
+      insertBeforeEnd(header, cMotionHeader(rt, open, close, nodeType));
+      char note[160];
+      std::snprintf(note, sizeof note, "shutter %g %s: %zu keys over t %g .. %g (key_*.bin)\n", opt->shutter,
+                    opt->shutterMode.c_str(), keys, open, close);
+      blurNote = note;
+    }
     files.write((out / "tsah_scene.h").string(), header);
     files.commit();
     std::printf("wrote %s: %zu nodes, %zu Woop %s, %u vertices (time %g, %s layout) + tsah_scene.h\n", opt->out.c_str(),
                 nodes, woop, opt->layout == tsah::Layout::Bvh2 ? "triangles" : "packets", rt.vertexCount(), time,
                 tsah::name(opt->layout));
+    std::fputs(blurNote.c_str(), stdout);
     if (set.size() > 1)
       std::printf("tree %u of the set's %u: the tree of this time's part (t %g .. %g)\n", part, set.size(),
                   set.ranges[part].start, set.ranges[part].end);

@@ -58,3 +58,23 @@ tsah_expect_error(cli.trace.shutter.error.gpurebuild 2 "does not go with --rebui
 foreach(name range rebuild frames mode modename gpulayout gpurebuild)
   set_tests_properties(cli.trace.shutter.error.${name} PROPERTIES FIXTURES_REQUIRED trace_tree)
 endforeach()
+
+# tsah export --shutter: the key files as a renderer reads them (tests/support/check_export_motion.py:
+# the header compiles as C11, sizes, key times, the first and last keys equal plain exports at the
+# shutter's open and close), in every layout; and its usage errors.
+foreach(layout bvh2 bvh4 bvh8)
+  add_test(NAME cli.export.shutter.${layout}
+           COMMAND ${Python3_EXECUTABLE} ${PROJECT_SOURCE_DIR}/tests/support/check_export_motion.py $<TARGET_FILE:tsah>
+                   ${W}/trace_explode.tbvh ${W}/trace_explode.tanim ${W} ${layout} ${CMAKE_C_COMPILER})
+  set_tests_properties(cli.export.shutter.${layout} PROPERTIES FIXTURES_REQUIRED trace_tree
+    PASS_REGULAR_EXPRESSION "export --shutter ${layout}: [0-9]+ keys.*: ok")
+endforeach()
+set(E export ${W}/trace_explode.tbvh ${W}/trace_explode.tanim -o ${W}/export_shutter_bad)
+tsah_expect_error(cli.export.shutter.error.range 2 "--shutter must be between 0 and 1" ${E} --shutter 1.5)
+tsah_expect_error(cli.export.shutter.error.interval 2 "--frame-interval must be a positive time" ${E} --shutter 0.5
+                  --frame-interval 0)
+tsah_expect_error(cli.export.shutter.error.mode 2 "--shutter-mode requires --shutter" ${E} --shutter-mode open)
+tsah_expect_error(cli.export.shutter.error.boxes 2 "--shutter excludes --boxes" ${E} --shutter 0.5 --boxes)
+foreach(name range interval mode boxes)
+  set_tests_properties(cli.export.shutter.error.${name} PROPERTIES FIXTURES_REQUIRED trace_tree)
+endforeach()

@@ -121,6 +121,10 @@ class CpuRuntime {
   // every layout; the binary key nodes (keyNodes) in bvh2 only, null in the wide layouts, which keep
   // their own node set per key and trace through closestHit / anyHit(ray, time).
   const MotionBvhView& motionView() const { return motionView_; }
+  // The wide layouts' blurred node sets: keyTimes().size() blocks of wide4()/wide8()->nodes().size()
+  // nodes, one per key (empty when not blurred or in another layout).
+  std::span<const WideSoaNode<4>> keyWideNodes4() const { return keyWide4_; }
+  std::span<const WideSoaNode<8>> keyWideNodes8() const { return keyWide8_; }
 
   const LayoutInfo& layoutInfo() const { return info_; }
   // The binary tree and its view: bvh2 only (the wide layouts do not refit the binary tree; both
