@@ -1,10 +1,12 @@
 #pragma once
 // An Embree 3 device that keeps the first error Embree reports, shared by the bench's Embree peers
-// (embree_peer.cpp, embree_motion.cpp). Compiled only with Embree (TSAH_HAVE_EMBREE).
+// (embree_peer.cpp, embree_motion.cpp), and the ray queries both trace with. Compiled only with Embree (TSAH_HAVE_EMBREE).
 #include <embree3/rtcore.h>
 
 #include <mutex>
 #include <string>
+
+#include "bench/ray_batch.hpp"
 
 namespace tsah::bench {
 
@@ -26,5 +28,15 @@ class EmbreeDevice {
   std::mutex mutex_;
   std::string error_;  // the first error Embree reported
 };
+
+// One ray in Embree's form at Embree time `time`, and the two queries both peers trace with.
+RTCRay embreeRay(const Ray& ray, float time);
+Hit embreeClosest(RTCScene scene, const Ray& ray, float time);  // triangle (kNoHit: a miss), t, u, v
+bool embreeOccluded(RTCScene scene, const Ray& ray, float time);
+
+// rtcIntersect1 / rtcOccluded1 on `scene` as a BatchTracer, at each ray's time in Embree's
+// convention (none: 0). needsTimes: for a motion-blur scene, the name its ConfigError gives when the
+// rays come without times; null for a scene of one time step.
+BatchTracer embreeTracer(RTCScene scene, const char* needsTimes);
 
 }  // namespace tsah::bench

@@ -98,46 +98,14 @@ double EmbreeMotionPeer::build(const anim::Animation& animation, std::span<const
   return interpolateMs + build(steps);
 }
 
-namespace {
-
-RTCRay embreeRay(const Ray& r, float time) {
-  RTCRay ray;
-  ray.org_x = r.org.x;
-  ray.org_y = r.org.y;
-  ray.org_z = r.org.z;
-  ray.tnear = r.tmin;
-  ray.dir_x = r.dir.x;
-  ray.dir_y = r.dir.y;
-  ray.dir_z = r.dir.z;
-  ray.time = time;
-  ray.tfar = r.tmax;
-  ray.mask = 0xffffffffu;
-  ray.id = 0;
-  ray.flags = 0;
-  return ray;
-}
-
-}  // namespace
-
 uint32_t EmbreeMotionPeer::closestTriangle(const Ray& ray, float time) const {
-  RTCIntersectContext context;
-  rtcInitIntersectContext(&context);
-  RTCRayHit rh;
-  rh.ray = embreeRay(ray, time);
-  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-  rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
-  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-  rtcIntersect1(impl_->scene, &context, &rh);
-  return rh.hit.geomID != RTC_INVALID_GEOMETRY_ID ? rh.hit.primID : kMiss;
+  const Hit hit = embreeClosest(impl_->scene, ray, time);
+  return hit.valid() ? hit.tri : kMiss;
 }
 
-bool EmbreeMotionPeer::occluded(const Ray& ray, float time) const {
-  RTCIntersectContext context;
-  rtcInitIntersectContext(&context);
-  RTCRay r = embreeRay(ray, time);
-  rtcOccluded1(impl_->scene, &context, &r);
-  return r.tfar < 0.0f;  // Embree sets tfar to -inf for an occluded ray
-}
+bool EmbreeMotionPeer::occluded(const Ray& ray, float time) const { return embreeOccluded(impl_->scene, ray, time); }
+
+BatchTracer EmbreeMotionPeer::tracer() const { return embreeTracer(impl_->scene, "Embree motion peer"); }
 
 #endif
 

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "anim/animation.hpp"
+#include "bench/ray_batch.hpp"
 #include "tsah/core/ray.hpp"
 
 namespace tsah::bench {
@@ -46,6 +47,9 @@ class EmbreeMotionPeer {
   // (kMiss for none), or whether anything lies on the ray.
   uint32_t closestTriangle(const Ray& ray, float time) const;
   bool occluded(const Ray& ray, float time) const;
+  // The same for a batch, each ray at its time in Embree's convention (mapTimes with
+  // embreeStepTime); a batch without times is a ConfigError.
+  BatchTracer tracer() const;
 
  private:
   struct Impl;

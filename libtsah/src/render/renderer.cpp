@@ -62,6 +62,8 @@ RayPassStats surfacePass(const CpuRuntime& runtime, uint32_t width, const std::v
   return {rays.load(), msSince(start)};
 }
 
+}  // namespace
+
 // The surface a primary ray at shutter fraction `time` finds in a blurred frame: the hit triangle's
 // vertices lerped at that time (as the traversal lerps them), as a one-triangle mesh.
 Surface blurredSurface(const CpuRuntime& runtime, const Ray& ray, float time, const SceneLighting& lighting) {
@@ -86,8 +88,6 @@ Surface blurredSurface(const CpuRuntime& runtime, const Ray& ray, float time, co
   if (s.kind == SurfaceKind::Mesh) s.tri = hit.tri;
   return s;
 }
-
-}  // namespace
 
 SceneLighting fitLighting(const Aabb& bounds, const Camera& camera, Vec3 up, float aoFraction, bool ground) {
   SceneLighting l;

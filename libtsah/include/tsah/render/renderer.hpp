@@ -46,6 +46,11 @@ struct RenderStats {
 // light factors and RGB, and the vertex normals of a mesh of `vertices`. (16384 x 16384: ~13 GiB.)
 std::size_t renderFrameBytes(const RenderSettings& settings, uint32_t vertices);
 
+// The surface the primary ray `ray` finds in the runtime's blurred frame at shutter fraction
+// `time` (renderFrame's first pass for a blurred runtime): the hit triangle's vertices lerped at
+// that time, as the traversal lerps them. The runtime must be blurred().
+Surface blurredSurface(const CpuRuntime& runtime, const Ray& ray, float time, const SceneLighting& lighting);
+
 // Renders the runtime's current frame into image (resized to the settings). A blurred runtime
 // (CpuRuntime::updateShutter): each pixel's primary, AO and shadow rays share the pixel's time,
 // pixelShutterTime (tsah/render/sampling.hpp). Deterministic: the same
