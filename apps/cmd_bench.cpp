@@ -339,6 +339,8 @@ void run(Options opt, CLI::App* sub) {
   writeReport(out, results);
   if (results["scenes"].empty())
     throw tsah::Failure("no scene could be benchmarked (see " + (out / "results.md").string() + ")");
+  const std::string blurTable = motionBlurSummary(results["scenes"]);  // the motion-blur part's table, when run
+  if (!blurTable.empty()) std::printf("%s", blurTable.c_str());
   std::printf("%s\n%s\n", (out / "results.md").c_str(), (out / "results.json").c_str());
 }
 
