@@ -38,7 +38,8 @@ TEST(EmbreeStepTime, MapsUnevenKeysPieceByPiece) {
 namespace {
 
 struct Moving {
-  explicit Moving(anim::GeneratorKind kind) : a(tsah::test::generatedAnimation(kind, 1500, 6, 5)) {}
+  explicit Moving(anim::GeneratorKind kind, uint32_t keyframes = 6)
+      : a(tsah::test::generatedAnimation(kind, 1500, keyframes, 5)) {}
   anim::Animation a;
   tsah::CpuRuntime rt{tsah::flattenBvh(tsah::BinnedSahBuilder().build(tsah::test::keyframeBoxes(a, 0))),
                       {a.indices().begin(), a.indices().end()}, a.vertexCount(), {2}};
@@ -76,6 +77,25 @@ TEST(EmbreeMotionPeer, TheWholeAnimationAtAnyTimeIsTheFrameAtThatTime) {
     const double time = times.front() + f * (times.back() - times.front());
     uint32_t hits = 0;
     EXPECT_GE(m.agreement(peer, time, tsah::bench::embreeStepTime(keys, float(f)), &hits), 0.999) << "time " << time;
+    EXPECT_GT(hits, 100u);
+  }
+}
+
+TEST(EmbreeMotionPeer, MoreKeyframesThanEmbreeTakesPerGeometryStillFollowTheAnimation) {
+  // 300 keyframes: Embree holds at most 129 time steps per geometry, so the peer spreads them over
+  // three geometries, each over its part of the time.
+  Moving m(anim::GeneratorKind::Wave, 300);
+  tsah::bench::EmbreeMotionPeer peer(m.a.indices(), m.a.vertexCount(), 2);
+  EXPECT_GE(peer.build(m.a, m.a.times()), 0.0);
+  EXPECT_EQ(peer.timeSteps(), 300u);
+  const std::span<const double> times = m.a.times();
+  const std::vector<float> keys = tsah::motion::keyFractions(times);
+  // Inside each geometry, at the boundaries between them (keyframes 128 and 256) and at the ends.
+  for (double k : {0.0, 60.3, 127.9, 128.0, 128.2, 200.5, 256.0, 280.7, 299.0}) {
+    const double f = k / 299.0;
+    const double time = times.front() + f * (times.back() - times.front());
+    uint32_t hits = 0;
+    EXPECT_GE(m.agreement(peer, time, tsah::bench::embreeStepTime(keys, float(f)), &hits), 0.999) << "keyframe " << k;
     EXPECT_GT(hits, 100u);
   }
 }

@@ -65,23 +65,35 @@ double EmbreeMotionPeer::build(std::span<const std::vector<float>> stepPositions
   if (m.scene) rtcReleaseScene(m.scene);
   m.scene = rtcNewScene(m.device->get());
   rtcSetSceneBuildQuality(m.scene, RTC_BUILD_QUALITY_MEDIUM);
-  RTCGeometry geometry = rtcNewGeometry(m.device->get(), RTC_GEOMETRY_TYPE_TRIANGLE);
-  rtcSetGeometryTimeStepCount(geometry, unsigned(stepPositions.size()));
-  for (std::size_t k = 0; k < stepPositions.size(); ++k) {
-    auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, unsigned(k),
-                                                          RTC_FORMAT_FLOAT3, 3 * sizeof(float), m.vertexCount));
-    if (!v) {
-      rtcReleaseGeometry(geometry);
-      m.check("allocating a vertex buffer");
-      throw tsah::Failure("Embree: cannot allocate a vertex buffer");
+  // Embree takes at most RTC_MAX_TIME_STEP_COUNT time steps per geometry: longer motions become
+  // geometries of consecutive steps sharing their boundary step, each present over its part of
+  // Embree's time (rtcSetGeometryTimeRange, bounds computed as embreeStepTime computes ray times),
+  // so one scene holds the whole motion and a ray at any time meets the triangles once or, at a
+  // boundary, twice at the same place.
+  const std::size_t n = stepPositions.size();
+  const std::size_t perGeometry = RTC_MAX_TIME_STEP_COUNT - 1;  // time segments per geometry
+  for (std::size_t first = 0; first == 0 || first + 1 < n; first += perGeometry) {
+    const std::size_t last = std::min(first + perGeometry, n - 1);
+    RTCGeometry geometry = rtcNewGeometry(m.device->get(), RTC_GEOMETRY_TYPE_TRIANGLE);
+    rtcSetGeometryTimeStepCount(geometry, unsigned(last - first + 1));
+    if (n > RTC_MAX_TIME_STEP_COUNT)
+      rtcSetGeometryTimeRange(geometry, float(first) / float(n - 1), float(last) / float(n - 1));
+    for (std::size_t k = first; k <= last; ++k) {
+      auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, unsigned(k - first),
+                                                            RTC_FORMAT_FLOAT3, 3 * sizeof(float), m.vertexCount));
+      if (!v) {
+        rtcReleaseGeometry(geometry);
+        m.check("allocating a vertex buffer");
+        throw tsah::Failure("Embree: cannot allocate a vertex buffer");
+      }
+      std::memcpy(v, stepPositions[k].data(), coordinates * sizeof(float));
     }
-    std::memcpy(v, stepPositions[k].data(), coordinates * sizeof(float));
+    rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, m.indices.data(), 0,
+                               3 * sizeof(uint32_t), m.indices.size() / 3);
+    rtcCommitGeometry(geometry);
+    rtcAttachGeometry(m.scene, geometry);
+    rtcReleaseGeometry(geometry);  // the scene holds it
   }
-  rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, m.indices.data(), 0,
-                             3 * sizeof(uint32_t), m.indices.size() / 3);
-  rtcCommitGeometry(geometry);
-  rtcAttachGeometry(m.scene, geometry);
-  rtcReleaseGeometry(geometry);  // the scene holds it
   rtcCommitScene(m.scene);
   const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   m.check("building the motion-blur scene");

@@ -34,8 +34,9 @@ class EmbreeMotionPeer {
   EmbreeMotionPeer& operator=(const EmbreeMotionPeer&) = delete;
 
   // Builds a new motion-blur BVH (RTC_BUILD_QUALITY_MEDIUM) with one time step per entry of
-  // stepPositions (vertexCount * 3 floats each, at least one); returns the milliseconds spent,
-  // copies included. Throws tsah::DataError for a wrong coordinate count.
+  // stepPositions (vertexCount * 3 floats each, at least one; beyond Embree's 129 steps per
+  // geometry, several geometries over consecutive parts of the time); returns the milliseconds
+  // spent, copies included. Throws tsah::DataError for a wrong coordinate count.
   double build(std::span<const std::vector<float>> stepPositions);
   // The same with the animation's vertices at each of keyTimes (increasing: its keyframe times for
   // the whole animation, motion::shutterKeys for one frame's shutter); the interpolation counts in
