@@ -34,9 +34,6 @@ RTCRay embreeRay(const Ray& ray, float time);
 Hit embreeClosest(RTCScene scene, const Ray& ray, float time);  // triangle (kNoHit: a miss), t, u, v
 bool embreeOccluded(RTCScene scene, const Ray& ray, float time);
 
-// rtcIntersect1 / rtcOccluded1 on `scene` as a BatchTracer, at each ray's time in Embree's
-// convention (none: 0). needsTimes: for a motion-blur scene, the name its ConfigError gives when the
-// rays come without times; null for a scene of one time step.
-BatchTracer embreeTracer(RTCScene scene, const char* needsTimes);
+
 
 }  // namespace tsah::bench

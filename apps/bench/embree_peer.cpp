@@ -106,10 +106,6 @@ double EmbreePeer::update(std::span<const float> positions) {
   return ms;
 }
 
-BatchTracer EmbreePeer::tracer() const {
-  return embreeTracer(impl_->scene, nullptr);
-}
-
 RTCRay embreeRay(const Ray& r, float time) {
   RTCRay ray;
   ray.org_x = r.org.x;
@@ -153,21 +149,16 @@ bool embreeOccluded(RTCScene scene, const Ray& ray, float time) {
   return r.tfar < 0.0f;  // Embree sets tfar to -inf for an occluded ray
 }
 
-BatchTracer embreeTracer(RTCScene scene, const char* needsTimes) {
+BatchTracer EmbreePeer::tracer() const {
+  const RTCScene scene = impl_->scene;
   BatchTracer tracer;
-  // A scene without time steps traces every ray at time 0; a motion-blur scene needs each ray's.
-  const auto check = [needsTimes](const float* times) {
-    if (needsTimes && !times) throw tsah::ConfigError(std::string(needsTimes) + ": the rays carry no times");
-  };
-  tracer.closest = [scene, check](const Ray* rays, const float* times, std::size_t count, Hit* hits) {
-    check(times);
-    for (std::size_t i = 0; i < count; ++i) hits[i] = embreeClosest(scene, rays[i], times ? times[i] : 0.0f);
+  // One time step: the rays' times (a blurred batch's) do not move anything.
+  tracer.closest = [scene](const Ray* rays, const float*, std::size_t count, Hit* hits) {
+    for (std::size_t i = 0; i < count; ++i) hits[i] = embreeClosest(scene, rays[i], 0.0f);
   };
   // Embree has no choice of order for occlusion rays (it never sorts them): the order is ignored.
-  tracer.occluded = [scene, check](const Ray* rays, const float* times, std::size_t count, AnyHitOrder,
-                                   uint8_t* occluded) {
-    check(times);
-    for (std::size_t i = 0; i < count; ++i) occluded[i] = embreeOccluded(scene, rays[i], times ? times[i] : 0.0f) ? 1 : 0;
+  tracer.occluded = [scene](const Ray* rays, const float*, std::size_t count, AnyHitOrder, uint8_t* occluded) {
+    for (std::size_t i = 0; i < count; ++i) occluded[i] = embreeOccluded(scene, rays[i], 0.0f) ? 1 : 0;
   };
   return tracer;
 }
