@@ -261,9 +261,10 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
     return t;
   };
   const std::string k = std::to_string(o.segments);
-  say(std::string("Table 2 on the ") + (gpu ? "GPU" : "CPU") + ": " + std::to_string(setup.times.size()) + " frames at " +
-      std::to_string(o.width) + "x" + std::to_string(o.height) + ", 1 primary + " + std::to_string(o.aoRays) + " AO + " +
-      std::to_string(o.shadowRays) + " shadow rays per pixel");
+  if (!comparisonOnly)
+    say(std::string("Table 2 on the ") + (gpu ? "GPU" : "CPU") + ": " + std::to_string(setup.times.size()) +
+        " frames at " + std::to_string(o.width) + "x" + std::to_string(o.height) + ", 1 primary + " +
+        std::to_string(o.aoRays) + " AO + " + std::to_string(o.shadowRays) + " shadow rays per pixel");
   nlohmann::json runtime;
   runtime["device"] = gpu ? "cuda" : "cpu";
   runtime["layout"] = name(gpu ? gpuLayout(o.layout) : setup.layout);
