@@ -1,6 +1,7 @@
 #pragma once
 // An Embree 3 device that keeps the first error Embree reports, shared by the bench's Embree peers
-// (embree_peer.cpp, embree_motion.cpp), and the ray queries both trace with. Compiled only with Embree (TSAH_HAVE_EMBREE).
+// (embree_peer.cpp, embree_motion.cpp), and the ray queries both trace with. Compiled only with
+// Embree (TSAH_HAVE_EMBREE).
 #include <embree3/rtcore.h>
 
 #include <mutex>
@@ -33,7 +34,5 @@ class EmbreeDevice {
 RTCRay embreeRay(const Ray& ray, float time);
 Hit embreeClosest(RTCScene scene, const Ray& ray, float time);  // triangle (kNoHit: a miss), t, u, v
 bool embreeOccluded(RTCScene scene, const Ray& ray, float time);
-
-
 
 }  // namespace tsah::bench

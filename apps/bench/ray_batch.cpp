@@ -3,7 +3,6 @@
 #include <chrono>
 
 #include "tsah/base/error.hpp"
-
 #include "tsah/render/sampling.hpp"
 #include "tsah/render/shading.hpp"
 #include "tsah/layout/traversal.hpp"
