@@ -47,6 +47,8 @@ struct Options {
   tsah::bench::BenchOptions bench;
   std::string devices;  // --devices all|0,2,...
   bool list = false, reportOnly = false, noEmbree = false, noConvergence = false;
+  double shutter = 0.0;                  // --shutter: the motion-blur part
+  std::string shutterMode = "centered";  // --shutter-mode centered|open
   bool scaling = false;  // --scaling: the optimizers' scaling mode (bench/scaling.hpp) instead
   tsah::bench::ScalingOptions scalingOptions;
 };
@@ -162,6 +164,26 @@ void runScalingMode(Options& opt, CLI::App* sub, const std::vector<tsah::bench::
   std::printf("%s\n%s\n", (out / "scaling.md").c_str(), (out / "scaling.json").c_str());
 }
 
+// --shutter and --motion-blur-only: the motion-blur part runs on the CPU against Embree, over the
+// time between two traced frames or more (checked after --quick has set the frame count).
+void checkShutter(const Options& opt, tsah::bench::BenchOptions& b) {
+  if (!(opt.shutter >= 0.0 && opt.shutter <= 1.0))
+    throw UsageError("--shutter must be between 0 and 1 (a fraction of the time between traced frames)");
+  b.shutter.fraction = opt.shutter;
+  b.shutter.mode = opt.shutterMode == "open" ? tsah::Shutter::Mode::Open : tsah::Shutter::Mode::Centered;
+  if (b.motionBlurOnly && b.shutter.fraction == 0.0)
+    throw UsageError("--motion-blur-only runs the motion-blur part: give --shutter S with S > 0");
+  if (b.motionBlurOnly && b.embreeOnly)
+    throw UsageError("--motion-blur-only and --embree-only each run one comparison alone: give one of them");
+  if (b.shutter.fraction == 0.0) return;
+  if (b.device != tsah::Device::Cpu) throw UsageError("--shutter: the motion-blur part runs on the CPU (--device cpu)");
+  if (opt.noEmbree) throw UsageError("--shutter compares the toolkit with Embree's motion blur: not with --no-embree");
+  if (!tsah::bench::embreeAvailable()) throw UsageError("--shutter: " + tsah::bench::embreeStatus());
+  if (b.traceFrames < 2)
+    throw UsageError("--shutter needs at least two traced frames (--trace-frames): it is a fraction of the time "
+                     "between them");
+}
+
 void run(Options opt, CLI::App* sub) {
   using namespace tsah::bench;
   if (opt.reportOnly) return reportOnly(opt);
@@ -183,6 +205,7 @@ void run(Options opt, CLI::App* sub) {
     if (!given("--width")) b.width = 192;
     if (!given("--height")) b.height = 144;
   }
+  checkShutter(opt, b);
   const auto requireGpu = [](const std::string& option) {
     if (tsah::cli::gpuAvailable()) return;
     throw UsageError(option + (versionsJson()["cuda_runtime_built"].get<bool>()
@@ -316,6 +339,8 @@ void run(Options opt, CLI::App* sub) {
   writeReport(out, results);
   if (results["scenes"].empty())
     throw tsah::Failure("no scene could be benchmarked (see " + (out / "results.md").string() + ")");
+  const std::string blurTable = motionBlurSummary(results["scenes"]);  // the motion-blur part's table, when run
+  if (!blurTable.empty()) std::printf("%s", blurTable.c_str());
   std::printf("%s\n%s\n", (out / "results.md").c_str(), (out / "results.json").c_str());
 }
 
@@ -385,6 +410,18 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
                   "or cwbvh (compressed 8-wide: the refitted trees and the LBVH / HLBVH-SAH rebuilds, whose "
                   "conversion on the GPU counts in their update)",
                        {tsah::Layout::Auto, tsah::Layout::Bvh2, tsah::Layout::Bvh4, tsah::Layout::Bvh8, tsah::Layout::Cwbvh});
+  auto* shutter = sub->add_option(
+      "--shutter", opt->shutter,
+      "Motion-blur part (CPU): the shutter's length as a fraction of the time between traced frames, 0 to 1 "
+      "(default 0: no motion-blur part); the toolkit's refit at the shutter's keys against Embree's motion-blur BVH "
+      "(built once, and rebuilt every frame) on the same rays at the same times");
+  sub->add_option("--shutter-mode", opt->shutterMode,
+                  "centered: the shutter around each traced frame's time (default); open: starting at it")
+      ->check(CLI::IsMember({"centered", "open"}))
+      ->needs(shutter);
+  sub->add_flag("--motion-blur-only", b.motionBlurOnly,
+                "Only the T-SAH tree and the motion-blur part (with --shutter): no Tables 1 and 2, convergence runs, "
+                "segments or instant Embree comparison");
   sub->add_flag("--no-convergence", opt->noConvergence, "Skip the random and batch-sort optimizations of the convergence plot");
   sub->add_option("--note", opt->notes,
                   "A note for results.md (repeatable), e.g. what else ran on the machine; with --report-only it is "

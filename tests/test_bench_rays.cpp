@@ -3,6 +3,7 @@
 // toolkit finds on them, after rebuilds and after refits.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstring>
 
 #include "tsah/base/error.hpp"
@@ -12,6 +13,8 @@
 #include "tsah/optimize/baselines.hpp"
 #include "tsah/layout/flat_bvh.hpp"
 #include "tsah/layout/traversal.hpp"
+#include "tsah/pipeline.hpp"
+#include "tsah/render/sampling.hpp"
 #include "test_support.hpp"
 
 namespace {
@@ -85,6 +88,51 @@ TEST(BenchRays, TheBatchHoldsTheRenderersRaysAndTracesLikeOneLoop) {
   }
 }
 
+TEST(BenchRays, ABlurredFramesBatchHoldsTheRenderersRaysAtEachPixelsTime) {
+  // A wave over a shutter of two keyframe intervals (three keys).
+  const Scene scene(anim::GeneratorKind::Wave);
+  tsah::CpuRuntime rt = scene.runtime();
+  tsah::updateShutter(rt, scene.a, scene.a.times()[2], scene.a.times()[4]);
+  ASSERT_TRUE(rt.blurred());
+  const tsah::Aabb now = tsah::test::boxOf(scene.a.boundsAt(scene.a.times()[3]));
+  const tsah::Camera camera = tsah::fitCamera(now, {0, 1, 0}, 45.0f, 64.0f / 48.0f);
+  const tsah::SceneLighting lighting = tsah::fitLighting(now, camera, {0, 1, 0}, 0.1f, false);
+  const tsah::RenderSettings settings = smallSettings(3);
+  tsah::Image image;
+  const tsah::RenderStats stats = tsah::renderFrame(rt, camera, lighting, settings, image);
+  const tsah::bench::RayBatch batch = tsah::bench::makeRayBatch(rt, camera, lighting, settings);
+  EXPECT_EQ(batch.primary.size(), stats.primary.rays);
+  EXPECT_EQ(batch.ao.size(), stats.ao.rays);
+  EXPECT_EQ(batch.shadow.size(), stats.shadow.rays);
+  ASSERT_GT(batch.ao.size(), 0u);
+  ASSERT_EQ(batch.times.primary.size(), batch.primary.size());
+  ASSERT_EQ(batch.times.ao.size(), batch.ao.size());
+  ASSERT_EQ(batch.times.shadow.size(), batch.shadow.size());
+  for (std::size_t i = 0; i < batch.primary.size(); ++i)
+    ASSERT_EQ(batch.times.primary[i], tsah::pixelShutterTime({settings.seed, settings.frame, uint32_t(i)}));
+  // The AO rays of a pixel share its time: aoSamples in a row with the same time.
+  for (std::size_t i = 0; i < batch.ao.size(); i += settings.aoSamples)
+    for (uint32_t k = 1; k < settings.aoSamples; ++k) ASSERT_EQ(batch.times.ao[i + k], batch.times.ao[i]);
+
+  // Traced at the rays' times: each result is the runtime's own query at that time.
+  const tsah::bench::BatchTrace t = tsah::bench::traceBatch(rt, batch, tsah::bench::toolkitTracer(rt));
+  ASSERT_EQ(t.closest.size(), batch.primary.size());
+  uint64_t hits = 0;
+  for (std::size_t i = 0; i < batch.primary.size(); ++i) {
+    const tsah::Hit h = rt.closestHit(batch.primary[i], batch.times.primary[i]);
+    ASSERT_EQ(t.closest[i].tri, h.tri) << "ray " << i;
+    hits += h.valid();
+  }
+  for (std::size_t i = 0; i < batch.ao.size(); ++i)
+    ASSERT_EQ(t.aoResults[i], rt.anyHit(batch.ao[i], batch.times.ao[i], tsah::AnyHitOrder::TreeOrder) ? 1 : 0);
+  EXPECT_EQ(t.primaryHits, hits);
+  EXPECT_GT(hits, 100u);
+  // Other times of the right shape are taken; a batch with times of another shape is refused.
+  tsah::bench::RayTimes wrong = batch.times;
+  wrong.ao.pop_back();
+  EXPECT_THROW(tsah::bench::traceBatch(rt, batch, tsah::bench::toolkitTracer(rt), &wrong), tsah::ConfigError);
+}
+
 #if TSAH_HAVE_EMBREE
 TEST(BenchRays, EmbreeFindsWhatTheToolkitFindsAfterRebuildsAndRefits) {
   // Fragments flying apart: a stale (not refitted) tree would miss most of them in later frames.
@@ -126,9 +174,11 @@ TEST(BenchRays, EmbreeFindsWhatTheToolkitFindsAfterRebuildsAndRefits) {
                              positions[3 * idx[3 * t + k] + 2]} * (1.0f / 3.0f);
         aimed.push_back({camera.eye, 0.0f, c - camera.eye, 1.001f});
       }
-      uint64_t hits = 0;
-      peer.tracer().closest(aimed, 0, aimed.size(), hits);
-      EXPECT_EQ(hits, aimed.size()) << name << " frame " << frame;
+      std::vector<tsah::Hit> aimedHits(aimed.size());
+      peer.tracer().closest(aimed.data(), nullptr, aimed.size(), aimedHits.data());
+      EXPECT_EQ(std::count_if(aimedHits.begin(), aimedHits.end(), [](const tsah::Hit& h) { return h.valid(); }),
+                std::ptrdiff_t(aimed.size()))
+          << name << " frame " << frame;
     }
     EXPECT_THROW(peer.update(std::vector<float>(3)), tsah::Error);
   }

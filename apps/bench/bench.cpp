@@ -3,6 +3,7 @@
 #include <sys/utsname.h>
 
 #include <chrono>
+#include <cstdio>
 #include <fstream>
 #include <sstream>
 #include <mutex>
@@ -12,6 +13,7 @@
 #include "tsah/base/work_dealer.hpp"
 #include "anim/load.hpp"
 #include "bench/embree_peer.hpp"
+#include "bench/motion_bench.hpp"
 #include "bench/runtime_bench.hpp"
 #include "frame_runtime.hpp"
 #include "animation_frames.hpp"
@@ -66,6 +68,13 @@ Image halfSize(const Image& in) {
         out.pixel(x, y)[c] = static_cast<uint8_t>((sum + 2) / 4);
       }
   return out;
+}
+
+// "0.5 centered": the shutter as the progress line names it.
+std::string formatShutter(const Shutter& shutter) {
+  char text[48];
+  std::snprintf(text, sizeof text, "%g %s", shutter.fraction, shutter.mode == Shutter::Mode::Open ? "open" : "centered");
+  return text;
 }
 
 const std::vector<std::string> kTable1Methods = {"rebuild", "sahstar", "sah0", "tsah0", "tsah2", "tsah4"};
@@ -145,7 +154,9 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
 
   // --- Table 1 ------------------------------------------------------------------------------
   std::vector<MethodResult> table1;
-  if (!o.embreeOnly) {
+  // --embree-only and --motion-blur-only: the T-SAH tree and their comparison alone.
+  const bool comparisonOnly = o.embreeOnly || o.motionBlurOnly;
+  if (!comparisonOnly) {
     say("Table 1: SAH-rebuild, SAH*, SAH0, T-SAH k=0/2/4 over " + std::to_string(o.evalFrames) + " frames");
     start = std::chrono::steady_clock::now();
     std::vector<MethodSpec> specs;
@@ -175,7 +186,7 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   Bvh tsahTree;
   j["convergence"] = nlohmann::json::array();
   for (const auto& [id, selection] : selections) {
-    if (id != "mh" && (!o.convergence || o.embreeOnly)) continue;
+    if (id != "mh" && (!o.convergence || comparisonOnly)) continue;
     say("T-SAH k=0 optimization, " + id + " node selection");
     BaselineConfig c = config;
     c.optimizer.selection = selection;
@@ -197,12 +208,12 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
     if (id == "mh") tsahTree = std::move(tree);
   }
   say("SAH0 and SAH* trees for the runtime");
-  const Bvh sah0Tree = o.embreeOnly ? Bvh{} : buildSah0(repBoxes, config);
-  const Bvh sahStarTree = o.embreeOnly ? Bvh{} : buildSahStar(repBoxes, config);
+  const Bvh sah0Tree = comparisonOnly ? Bvh{} : buildSah0(repBoxes, config);
+  const Bvh sahStarTree = comparisonOnly ? Bvh{} : buildSahStar(repBoxes, config);
 
   // --- Segments: equal-time parts, count and budget modes (tsah/segmentation.hpp) -------------
   SegmentRuns segmentRuns;
-  if ((o.segments > 1 || o.budget > 0.0) && !o.embreeOnly) {  // --embree-only has no Table 1
+  if ((o.segments > 1 || o.budget > 0.0) && !comparisonOnly) {  // no Table 1 to compare with
     SegmentExperiment experiment;
     experiment.count = o.segments;
     experiment.budget = o.budget;
@@ -250,9 +261,10 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
     return t;
   };
   const std::string k = std::to_string(o.segments);
-  say(std::string("Table 2 on the ") + (gpu ? "GPU" : "CPU") + ": " + std::to_string(setup.times.size()) + " frames at " +
-      std::to_string(o.width) + "x" + std::to_string(o.height) + ", 1 primary + " + std::to_string(o.aoRays) + " AO + " +
-      std::to_string(o.shadowRays) + " shadow rays per pixel");
+  if (!comparisonOnly)
+    say(std::string("Table 2 on the ") + (gpu ? "GPU" : "CPU") + ": " + std::to_string(setup.times.size()) +
+        " frames at " + std::to_string(o.width) + "x" + std::to_string(o.height) + ", 1 primary + " +
+        std::to_string(o.aoRays) + " AO + " + std::to_string(o.shadowRays) + " shadow rays per pixel");
   nlohmann::json runtime;
   runtime["device"] = gpu ? "cuda" : "cpu";
   runtime["layout"] = name(gpu ? gpuLayout(o.layout) : setup.layout);
@@ -276,8 +288,8 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
     refits.push_back(setOf("tsah0-budget",
                            "T-SAH k=0 refit, budget mode (" + std::to_string(segmentRuns.budget.trees.size()) + " trees)",
                            segmentRuns.budget));
-  if (o.embreeOnly) {
-    runtime["skipped"] = "--embree-only";
+  if (comparisonOnly) {
+    runtime["skipped"] = o.embreeOnly ? "--embree-only" : "--motion-blur-only";
   } else if (gpu) {
     const std::string gpuLayoutName = o.layout == Layout::Auto ? std::string() : name(o.layout);
     // The methods (the refits, then the two rebuilds) dealt to the GPUs of --devices: each
@@ -318,7 +330,7 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
       runtime["methods"].push_back(toJson(m));
   }
   runtime["wall_s"] = secondsSince(start);
-  if (!o.embreeOnly) j["runtime"] = runtime;
+  if (!comparisonOnly) j["runtime"] = runtime;
   if (picture.width > 0) {
     std::error_code ec;
     fs::create_directories(outDir / "images", ec);
@@ -333,7 +345,9 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   // --- Embree peer (CPU) ------------------------------------------------------------------------
   nlohmann::json peer;
   peer["status"] = embreeStatus();
-  if (!gpu && o.embree && embreeAvailable()) {
+  if (o.motionBlurOnly) {
+    peer["skipped"] = "--motion-blur-only";
+  } else if (!gpu && o.embree && embreeAvailable()) {
     say("the toolkit's T-SAH refit against Embree on the same rays");
     start = std::chrono::steady_clock::now();
     peer["frames"] = setup.times.size();
@@ -355,6 +369,15 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
     peer["skipped"] = "--no-embree";
   }
   j["embree"] = peer;
+
+  // --- Motion blur (CPU): the toolkit's blurred frames against Embree's motion-blur BVH -----------
+  if (o.shutter.fraction > 0.0) {
+    say("motion blur: shutter " + formatShutter(o.shutter) + ", the toolkit against Embree's motion-blur BVH");
+    start = std::chrono::steady_clock::now();
+    nlohmann::json blur = runMotionBlurComparison(a, tsahTree, "toolkit: T-SAH k=0 refit", setup, o.shutter);
+    blur["wall_s"] = secondsSince(start);
+    j["motion_blur"] = blur;
+  }
   say("done");
   return j;
 }
@@ -405,7 +428,9 @@ nlohmann::json optionsJson(const BenchOptions& o) {
           {"ct", o.objective.cost.ct}, {"ci", o.objective.cost.ci},                {"segments", o.segments},   {"budget", o.budget},
           {"threads", o.threads},   {"embree", o.embree},        {"convergence", o.convergence},
           {"optimizer", o.optimizer},
-          {"layout", name(o.layout)},     {"embree_only", o.embreeOnly}};
+          {"layout", name(o.layout)},     {"embree_only", o.embreeOnly},
+          {"shutter", o.shutter.fraction}, {"shutter_mode", o.shutter.mode == Shutter::Mode::Open ? "open" : "centered"},
+          {"motion_blur_only", o.motionBlurOnly}};
 }
 
 }  // namespace tsah::bench

@@ -13,6 +13,8 @@
 //                and the K segment trees versus per-frame rebuilds (CPU: sweep and binned SAH;
 //                GPU: LBVH and HLBVH-SAH)
 //   embree       CPU only: the toolkit's T-SAH refit against Embree rebuilds and refit on the same rays
+//   motion_blur  CPU only, with a shutter: the toolkit's blurred frames against Embree's motion-blur
+//                BVH (built once, and rebuilt every frame) on the same rays at the same times
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -24,6 +26,7 @@
 #include "tsah/core/kinds.hpp"
 #include "tsah/core/objective.hpp"
 #include "tsah/base/error.hpp"
+#include "tsah/pipeline.hpp"
 
 namespace tsah::bench {
 
@@ -45,6 +48,8 @@ struct BenchOptions {
   std::string optimizer = "sequential";  // optimizer of SAH*, SAH-rebuild and T-SAH: sequential | parallel | cuda
   bool embree = true;           // run the Embree peer when built with it (CPU device only)
   bool embreeOnly = false;      // only the T-SAH tree and the toolkit-vs-Embree comparison (no Tables 1/2)
+  Shutter shutter;              // fraction > 0: the motion-blur part (CPU, the toolkit vs Embree's motion blur)
+  bool motionBlurOnly = false;  // only the T-SAH tree and the motion-blur part
   Layout layout = Layout::Auto;  // tree layout of the runtime part: Auto (the device's fastest); CPU bvh2,
                                  // bvh4, bvh8; cuda bvh2 or cwbvh
   bool convergence = true;      // run the three node selections for the convergence plot

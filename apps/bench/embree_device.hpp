@@ -1,10 +1,13 @@
 #pragma once
 // An Embree 3 device that keeps the first error Embree reports, shared by the bench's Embree peers
-// (embree_peer.cpp, embree_motion.cpp). Compiled only with Embree (TSAH_HAVE_EMBREE).
+// (embree_peer.cpp, embree_motion.cpp), and the ray queries both trace with. Compiled only with
+// Embree (TSAH_HAVE_EMBREE).
 #include <embree3/rtcore.h>
 
 #include <mutex>
 #include <string>
+
+#include "bench/ray_batch.hpp"
 
 namespace tsah::bench {
 
@@ -26,5 +29,10 @@ class EmbreeDevice {
   std::mutex mutex_;
   std::string error_;  // the first error Embree reported
 };
+
+// One ray in Embree's form at Embree time `time`, and the two queries both peers trace with.
+RTCRay embreeRay(const Ray& ray, float time);
+Hit embreeClosest(RTCScene scene, const Ray& ray, float time);  // triangle (kNoHit: a miss), t, u, v
+bool embreeOccluded(RTCScene scene, const Ray& ray, float time);
 
 }  // namespace tsah::bench

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "anim/animation.hpp"
+#include "bench/ray_batch.hpp"
 #include "tsah/core/ray.hpp"
 
 namespace tsah::bench {
@@ -33,19 +34,25 @@ class EmbreeMotionPeer {
   EmbreeMotionPeer& operator=(const EmbreeMotionPeer&) = delete;
 
   // Builds a new motion-blur BVH (RTC_BUILD_QUALITY_MEDIUM) with one time step per entry of
-  // stepPositions (vertexCount * 3 floats each, at least one); returns the milliseconds spent,
-  // copies included. Throws tsah::DataError for a wrong coordinate count.
+  // stepPositions (vertexCount * 3 floats each, at least one; beyond Embree's 129 steps per
+  // geometry, one BVH per piece of 128 time segments, each ray traced in the piece of its time);
+  // returns the milliseconds spent, copies included. Throws tsah::DataError for a wrong
+  // coordinate count.
   double build(std::span<const std::vector<float>> stepPositions);
   // The same with the animation's vertices at each of keyTimes (increasing: its keyframe times for
   // the whole animation, motion::shutterKeys for one frame's shutter); the interpolation counts in
   // the milliseconds, as it does in the toolkit's update.
   double build(const anim::Animation& animation, std::span<const double> keyTimes);
   uint32_t timeSteps() const;
+  uint32_t pieces() const;  // BVHs the time steps are spread over (1 up to 129 steps)
 
   // rtcIntersect1 / rtcOccluded1 at Embree time `time` (embreeStepTime): the triangle hit first
   // (kMiss for none), or whether anything lies on the ray.
   uint32_t closestTriangle(const Ray& ray, float time) const;
   bool occluded(const Ray& ray, float time) const;
+  // The same for a batch, each ray at its time in Embree's convention (mapTimes with
+  // embreeStepTime); a batch without times is a ConfigError.
+  BatchTracer tracer() const;
 
  private:
   struct Impl;

@@ -106,56 +106,59 @@ double EmbreePeer::update(std::span<const float> positions) {
   return ms;
 }
 
+RTCRay embreeRay(const Ray& r, float time) {
+  RTCRay ray;
+  ray.org_x = r.org.x;
+  ray.org_y = r.org.y;
+  ray.org_z = r.org.z;
+  ray.tnear = r.tmin;
+  ray.dir_x = r.dir.x;
+  ray.dir_y = r.dir.y;
+  ray.dir_z = r.dir.z;
+  ray.time = time;
+  ray.tfar = r.tmax;
+  ray.mask = 0xffffffffu;
+  ray.id = 0;
+  ray.flags = 0;
+  return ray;
+}
+
+Hit embreeClosest(RTCScene scene, const Ray& ray, float time) {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRayHit rh;
+  rh.ray = embreeRay(ray, time);
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(scene, &context, &rh);
+  Hit hit;
+  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return hit;
+  hit.tri = rh.hit.primID;
+  hit.t = rh.ray.tfar;
+  hit.u = rh.hit.u;
+  hit.v = rh.hit.v;
+  return hit;
+}
+
+bool embreeOccluded(RTCScene scene, const Ray& ray, float time) {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRay r = embreeRay(ray, time);
+  rtcOccluded1(scene, &context, &r);
+  return r.tfar < 0.0f;  // Embree sets tfar to -inf for an occluded ray
+}
+
 BatchTracer EmbreePeer::tracer() const {
   const RTCScene scene = impl_->scene;
   BatchTracer tracer;
-  tracer.closest = [scene](const std::vector<Ray>& rays, std::size_t first, std::size_t count, uint64_t& hits) {
-    RTCIntersectContext context;
-    rtcInitIntersectContext(&context);
-    for (std::size_t i = first; i < first + count; ++i) {
-      const Ray& r = rays[i];
-      RTCRayHit rh;
-      rh.ray.org_x = r.org.x;
-      rh.ray.org_y = r.org.y;
-      rh.ray.org_z = r.org.z;
-      rh.ray.tnear = r.tmin;
-      rh.ray.dir_x = r.dir.x;
-      rh.ray.dir_y = r.dir.y;
-      rh.ray.dir_z = r.dir.z;
-      rh.ray.time = 0.0f;
-      rh.ray.tfar = r.tmax;
-      rh.ray.mask = 0xffffffffu;
-      rh.ray.id = 0;
-      rh.ray.flags = 0;
-      rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-      rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-      rtcIntersect1(scene, &context, &rh);
-      hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID ? 1u : 0u;
-    }
+  // One time step: the rays' times (a blurred batch's) do not move anything.
+  tracer.closest = [scene](const Ray* rays, const float*, std::size_t count, Hit* hits) {
+    for (std::size_t i = 0; i < count; ++i) hits[i] = embreeClosest(scene, rays[i], 0.0f);
   };
   // Embree has no choice of order for occlusion rays (it never sorts them): the order is ignored.
-  tracer.occluded = [scene](const std::vector<Ray>& rays, std::size_t first, std::size_t count, AnyHitOrder,
-                            uint64_t& occluded) {
-    RTCIntersectContext context;
-    rtcInitIntersectContext(&context);
-    for (std::size_t i = first; i < first + count; ++i) {
-      const Ray& r = rays[i];
-      RTCRay ray;
-      ray.org_x = r.org.x;
-      ray.org_y = r.org.y;
-      ray.org_z = r.org.z;
-      ray.tnear = r.tmin;
-      ray.dir_x = r.dir.x;
-      ray.dir_y = r.dir.y;
-      ray.dir_z = r.dir.z;
-      ray.time = 0.0f;
-      ray.tfar = r.tmax;
-      ray.mask = 0xffffffffu;
-      ray.id = 0;
-      ray.flags = 0;
-      rtcOccluded1(scene, &context, &ray);
-      occluded += ray.tfar < 0.0f ? 1u : 0u;  // Embree sets tfar to -inf for an occluded ray
-    }
+  tracer.occluded = [scene](const Ray* rays, const float*, std::size_t count, AnyHitOrder, uint8_t* occluded) {
+    for (std::size_t i = 0; i < count; ++i) occluded[i] = embreeOccluded(scene, rays[i], 0.0f) ? 1 : 0;
   };
   return tracer;
 }

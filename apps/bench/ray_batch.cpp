@@ -1,8 +1,8 @@
 #include "bench/ray_batch.hpp"
 
-#include <atomic>
 #include <chrono>
 
+#include "tsah/base/error.hpp"
 #include "tsah/render/sampling.hpp"
 #include "tsah/render/shading.hpp"
 #include "tsah/layout/traversal.hpp"
@@ -17,13 +17,27 @@ RayBatch makeRayBatch(const CpuRuntime& runtime, const Camera& camera, const Sce
   RayBatch batch;
   batch.primary.resize(pixels);
   std::vector<Surface> surfaces(pixels);
+  const SampleKey base{settings.seed, settings.frame, 0};
+  // A blurred frame: every ray of a pixel at the pixel's shutter time, as renderFrame traces it.
+  const bool blurred = runtime.blurred();
+  if (blurred) {
+    batch.times.primary.resize(pixels);
+    for (std::size_t i = 0; i < pixels; ++i) {
+      SampleKey key = base;
+      key.pixel = uint32_t(i);
+      batch.times.primary[i] = pixelShutterTime(key);
+    }
+  }
   runtime.parallelFor(height, 1, [&](std::size_t y0, std::size_t y1) {
     for (std::size_t y = y0; y < y1; ++y)
       for (uint32_t x = 0; x < width; ++x) {
         const std::size_t i = y * width + x;
         batch.primary[i] = cam.ray(float(x) + 0.5f, float(y) + 0.5f);
-        surfaces[i] = primarySurface(batch.primary[i], runtime.closestHit(batch.primary[i]), runtime.indices().data(),
-                                     runtime.positions().data(), lighting);
+        const float time = blurred ? batch.times.primary[i] : 0.0f;
+        surfaces[i] = blurred ? blurredPrimarySurface(batch.primary[i], runtime.closestHit(batch.primary[i], time),
+                                                      runtime.motionView(), time, lighting)
+                              : primarySurface(batch.primary[i], runtime.closestHit(batch.primary[i]),
+                                               runtime.indices().data(), runtime.positions().data(), lighting);
       }
   });
   // Secondary rays in pixel order: AO rays at fixed offsets, shadow rays gathered per row.
@@ -31,8 +45,9 @@ RayBatch makeRayBatch(const CpuRuntime& runtime, const Camera& camera, const Sce
   for (std::size_t i = 0; i < pixels; ++i)
     aoFirst[i + 1] = aoFirst[i] + (surfaces[i].kind == SurfaceKind::None ? 0 : settings.aoSamples);
   batch.ao.resize(aoFirst[pixels]);
+  if (blurred) batch.times.ao.resize(aoFirst[pixels]);
   std::vector<std::vector<Ray>> shadowRows(height);
-  const SampleKey base{settings.seed, settings.frame, 0};
+  std::vector<std::vector<float>> shadowTimeRows(height);
   runtime.parallelFor(height, 1, [&](std::size_t y0, std::size_t y1) {
     for (std::size_t y = y0; y < y1; ++y)
       for (uint32_t x = 0; x < width; ++x) {
@@ -41,63 +56,97 @@ RayBatch makeRayBatch(const CpuRuntime& runtime, const Camera& camera, const Sce
         if (s.kind == SurfaceKind::None) continue;
         SampleKey key = base;
         key.pixel = uint32_t(i);
-        for (uint32_t k = 0; k < settings.aoSamples; ++k) batch.ao[aoFirst[i] + k] = aoRay(s, key, k, lighting.aoDistance);
+        for (uint32_t k = 0; k < settings.aoSamples; ++k) {
+          batch.ao[aoFirst[i] + k] = aoRay(s, key, k, lighting.aoDistance);
+          if (blurred) batch.times.ao[aoFirst[i] + k] = batch.times.primary[i];
+        }
         for (uint32_t k = 0; k < settings.shadowSamples; ++k) {
           Ray ray;
-          if (shadowRay(s, lighting, key, k, ray)) shadowRows[y].push_back(ray);
+          if (!shadowRay(s, lighting, key, k, ray)) continue;
+          shadowRows[y].push_back(ray);
+          if (blurred) shadowTimeRows[y].push_back(batch.times.primary[i]);
         }
       }
   });
   for (const auto& row : shadowRows) batch.shadow.insert(batch.shadow.end(), row.begin(), row.end());
+  for (const auto& row : shadowTimeRows) batch.times.shadow.insert(batch.times.shadow.end(), row.begin(), row.end());
   return batch;
+}
+
+RayTimes mapTimes(const RayTimes& times, const std::function<float(float)>& f) {
+  RayTimes out = times;
+  for (std::vector<float>* pass : {&out.primary, &out.ao, &out.shadow})
+    for (float& t : *pass) t = f(t);
+  return out;
 }
 
 namespace {
 
-template <typename Trace>
-RayPassStats timedPass(const CpuRuntime& runtime, const std::vector<Ray>& rays, uint64_t& resultCount, Trace trace) {
+// Traces rays [first, first + count) per task with trace(rays, times, count, results); times and
+// results are parallel to the rays (times empty: the instant).
+template <typename Result, typename Trace>
+RayPassStats timedPass(const CpuRuntime& runtime, const std::vector<Ray>& rays, const std::vector<float>& times,
+                       std::vector<Result>& results, Trace trace) {
   constexpr std::size_t kChunk = 4096;  // rays per task: enough work per task, enough tasks per thread
-  std::atomic<uint64_t> count{0};
+  results.assign(rays.size(), Result{});
   const auto start = std::chrono::steady_clock::now();
   const std::size_t chunks = (rays.size() + kChunk - 1) / kChunk;
   runtime.parallelFor(chunks, 1, [&](std::size_t c0, std::size_t c1) {
-    uint64_t local = 0;
     for (std::size_t c = c0; c < c1; ++c) {
       const std::size_t first = c * kChunk;
-      trace(rays, first, std::min(kChunk, rays.size() - first), local);
+      trace(rays.data() + first, times.empty() ? nullptr : times.data() + first, std::min(kChunk, rays.size() - first),
+            results.data() + first);
     }
-    count += local;
   });
   const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-  resultCount = count.load();
   return {rays.size(), ms};
+}
+
+uint64_t countSet(const std::vector<uint8_t>& flags) {
+  uint64_t n = 0;
+  for (uint8_t f : flags) n += f ? 1u : 0u;
+  return n;
 }
 
 }  // namespace
 
-BatchTrace traceBatch(const CpuRuntime& runtime, const RayBatch& batch, const BatchTracer& tracer) {
+BatchTrace traceBatch(const CpuRuntime& runtime, const RayBatch& batch, const BatchTracer& tracer,
+                      const RayTimes* times) {
+  const RayTimes& at = times ? *times : batch.times;
+  if (!at.empty() && (at.primary.size() != batch.primary.size() || at.ao.size() != batch.ao.size() ||
+                      at.shadow.size() != batch.shadow.size()))
+    throw tsah::ConfigError("bench: the ray times do not match the batch's rays");
   BatchTrace t;
-  t.primary = timedPass(runtime, batch.primary, t.primaryHits, tracer.closest);
+  t.primary = timedPass(runtime, batch.primary, at.primary, t.closest, tracer.closest);
   // The renderer's any-hit orders (renderer.cpp): tree order for the short AO rays, farthest
   // first for the shadow rays.
   auto occluded = [&tracer](AnyHitOrder order) {
-    return [&tracer, order](const std::vector<Ray>& rays, std::size_t first, std::size_t count, uint64_t& n) {
-      tracer.occluded(rays, first, count, order, n);
+    return [&tracer, order](const Ray* rays, const float* rayTimes, std::size_t count, uint8_t* out) {
+      tracer.occluded(rays, rayTimes, count, order, out);
     };
   };
-  t.ao = timedPass(runtime, batch.ao, t.aoOccluded, occluded(AnyHitOrder::TreeOrder));
-  t.shadow = timedPass(runtime, batch.shadow, t.shadowOccluded, occluded(AnyHitOrder::FarthestFirst));
+  t.ao = timedPass(runtime, batch.ao, at.ao, t.aoResults, occluded(AnyHitOrder::TreeOrder));
+  t.shadow = timedPass(runtime, batch.shadow, at.shadow, t.shadowResults, occluded(AnyHitOrder::FarthestFirst));
+  for (const Hit& h : t.closest) t.primaryHits += h.valid() ? 1u : 0u;
+  t.aoOccluded = countSet(t.aoResults);
+  t.shadowOccluded = countSet(t.shadowResults);
   return t;
 }
 
 BatchTracer toolkitTracer(const CpuRuntime& runtime) {
   BatchTracer tracer;
-  tracer.closest = [&runtime](const std::vector<Ray>& rays, std::size_t first, std::size_t count, uint64_t& hits) {
-    for (std::size_t i = first; i < first + count; ++i) hits += runtime.closestHit(rays[i]).valid() ? 1u : 0u;
+  tracer.closest = [&runtime](const Ray* rays, const float* times, std::size_t count, Hit* hits) {
+    if (times)
+      for (std::size_t i = 0; i < count; ++i) hits[i] = runtime.closestHit(rays[i], times[i]);
+    else
+      for (std::size_t i = 0; i < count; ++i) hits[i] = runtime.closestHit(rays[i]);
   };
-  tracer.occluded = [&runtime](const std::vector<Ray>& rays, std::size_t first, std::size_t count, AnyHitOrder order,
-                               uint64_t& occluded) {
-    for (std::size_t i = first; i < first + count; ++i) occluded += runtime.anyHit(rays[i], order) ? 1u : 0u;
+  tracer.occluded = [&runtime](const Ray* rays, const float* times, std::size_t count, AnyHitOrder order,
+                               uint8_t* occluded) {
+    if (times)
+      for (std::size_t i = 0; i < count; ++i) occluded[i] = runtime.anyHit(rays[i], times[i], order) ? 1 : 0;
+    else
+      for (std::size_t i = 0; i < count; ++i) occluded[i] = runtime.anyHit(rays[i], order) ? 1 : 0;
   };
   return tracer;
 }

@@ -377,6 +377,7 @@ std::string renderMarkdown(const json& results) {
     table2Section(md, s, device);
     segmentsSection(md, s);
     embreeSection(md, s);
+    md << motionBlurSection(s);
     plotsSection(md, results, s);
   }
 
@@ -423,6 +424,7 @@ std::string renderMarkdown(const json& results) {
         md << "- **" << str(s, "name") << "**: " << embreeVerdict(s["embree"]["methods"]) << "\n";
     md << "\n";
   }
+  md << motionBlurSummary(scenes);
   md << "## Source of the paper's figures\n\n" << str(results, "paper_source") << ".\n";
   return md.str();
 }

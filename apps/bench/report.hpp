@@ -15,6 +15,12 @@ namespace tsah::bench {
 // comparison with a sentence on where each wins, and links to the plots listed in results["plots"].
 std::string renderMarkdown(const nlohmann::json& results);
 
+// The motion-blur part (results.json's scene.motion_blur) as Markdown: one scene's table with the
+// agreement and the ratios, and one table across scenes (empty when no scene has the part). The
+// command prints the second to stdout too.
+std::string motionBlurSection(const nlohmann::json& scene);
+std::string motionBlurSummary(const nlohmann::json& scenes);
+
 struct PlotOutcome {
   bool made = false;
   std::string status;               // "gnuplot 5.4 patchlevel 4" or why plots were skipped

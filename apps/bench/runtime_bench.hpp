@@ -6,6 +6,7 @@
 // The CPU side also runs the Embree peer on the same frames and rays.
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -91,6 +92,13 @@ struct CpuMethodSpec {
 std::vector<RuntimeMethod> runCpuMethods(const anim::Animation& animation, const std::vector<CpuMethodSpec>& methods,
                                          const CostModel& cost, uint32_t maxLeaf, const RuntimeSetup& setup,
                                          Image* image = nullptr, std::size_t imageMethod = 0, uint32_t imageFrame = 0);
+
+// The toolkit's CPU runtime of `tree` for the animation's triangles, in `layout` (setup's threads
+// and collapse).
+std::unique_ptr<CpuRuntime> makeRuntime(const anim::Animation& animation, const Bvh& tree, const RuntimeSetup& setup,
+                                        Layout layout);
+// Wakes the runtime's worker threads, so that what is timed next does not pay for it.
+void startWorkers(const CpuRuntime& runtime);
 
 // CPU peer: the toolkit's CPU runtime refitting `tree`, in every layout the processor supports
 // (setup.layout first, then bvh8, bvh4, bvh2: methods NAME-bvhN, extra.layout describing the tree

@@ -17,21 +17,11 @@ double msSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
-void startWorkers(const CpuRuntime& rt) {
-  rt.parallelFor(rt.threadCount() * 4, 1, [](std::size_t, std::size_t) {});  // before anything is timed
-}
-
 CpuRuntime::Config runtimeConfig(const RuntimeSetup& setup, Layout layout) {
   CpuRuntime::Config c(setup.threads);
   c.layout = layout;
   c.collapse = setup.collapse;
   return c;
-}
-
-std::unique_ptr<CpuRuntime> makeRuntime(const anim::Animation& a, const Bvh& tree, const RuntimeSetup& setup,
-                                        Layout layout) {
-  return std::make_unique<CpuRuntime>(flattenBvh(tree), std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
-                                      a.vertexCount(), runtimeConfig(setup, layout));
 }
 
 // A tree set's runtime (each frame selects the tree of its part).
@@ -67,6 +57,16 @@ nlohmann::json layoutJson(const CpuRuntime& rt) {
 }
 
 }  // namespace
+
+void startWorkers(const CpuRuntime& rt) {
+  rt.parallelFor(rt.threadCount() * 4, 1, [](std::size_t, std::size_t) {});  // before anything is timed
+}
+
+std::unique_ptr<CpuRuntime> makeRuntime(const anim::Animation& a, const Bvh& tree, const RuntimeSetup& setup,
+                                        Layout layout) {
+  return std::make_unique<CpuRuntime>(flattenBvh(tree), std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
+                                      a.vertexCount(), runtimeConfig(setup, layout));
+}
 
 std::vector<RuntimeMethod> runCpuMethods(const anim::Animation& a, const std::vector<CpuMethodSpec>& specs,
                                          const CostModel& cost, uint32_t maxLeaf, const RuntimeSetup& setup, Image* image,
