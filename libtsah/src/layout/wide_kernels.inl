@@ -183,9 +183,9 @@ inline void nodeRows(const WideSoaNode<V::N>& node, const WideMotionFrame<V::N>&
       const V lo0 = V::load(node.box[a]), hi0 = V::load(node.box[a + 3]);
       const V lo1 = V::load(node1.box[a]), hi1 = V::load(node1.box[a + 3]);
       const V mag = V::max(V::max(V::abs(lo0), V::abs(hi0)), V::max(V::abs(lo1), V::abs(hi1)));
-      const V pad = mag * V::set1(0x1p-19f) + V::set1(0x1p-120f);
-      rows[a] = (g * lo0 + f * lo1) - pad;
-      rows[a + 3] = (g * hi0 + f * hi1) + pad;
+      const V pad = motion::padOf(mag, V::set1(motion::kPadPerMagnitude), V::set1(motion::kPadFloor));
+      rows[a] = motion::lerpOf(lo0, lo1, f, g) - pad;
+      rows[a + 3] = motion::lerpOf(hi0, hi1, f, g) + pad;
     }
   }
 }

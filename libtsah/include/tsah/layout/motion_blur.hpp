@@ -69,8 +69,14 @@ TSAH_HD Segment segmentAt(const float* keys, int count, float tau) {
 
 // The one lerp formula of motion blur, for boxes and vertices alike: (1 - f) * a + f * b in float
 // with round-to-nearest. It gives a at f = 0 and b at f = 1 exactly, so the ends of a segment are
-// its keys bit for bit (the wide kernels repeat it lane by lane in SIMD, operation for operation).
-TSAH_HD float lerp(float a, float b, float f) { return (1.0f - f) * a + f * b; }
+// its keys bit for bit.
+// lerpOf and padOf take a float or a SIMD lane vector T (g = 1 - f; the scalars broadcast as T),
+// so that the wide kernels run these very operations lane by lane.
+template <class T>
+TSAH_HD T lerpOf(T a, T b, T f, T g) {
+  return g * a + f * b;
+}
+TSAH_HD float lerp(float a, float b, float f) { return lerpOf(a, b, f, 1.0f - f); }
 
 TSAH_HD Vec3 lerpVertex(Vec3 a, Vec3 b, float f) {
   return {lerp(a.x, b.x, f), lerp(a.y, b.y, f), lerp(a.z, b.z, f)};
@@ -82,7 +88,13 @@ TSAH_HD Vec3 lerpVertex(Vec3 a, Vec3 b, float f) {
 // fma only removes some), so the box's and the vertex's lerps together by at most 8u*m; the pad is
 // 32u*m = m * 2^-19, of which subtracting it in round-to-nearest keeps at least 30u*m. The absolute
 // 2^-120 covers underflow (at most 2^-149 per operation near zero). docs/motion-blur.md derives it.
-TSAH_HD float lerpPad(float m) { return m * 0x1p-19f + 0x1p-120f; }
+inline constexpr float kPadPerMagnitude = 0x1p-19f;
+inline constexpr float kPadFloor = 0x1p-120f;
+template <class T>
+TSAH_HD T padOf(T m, T perMagnitude, T floor) {
+  return m * perMagnitude + floor;
+}
+TSAH_HD float lerpPad(float m) { return padOf(m, kPadPerMagnitude, kPadFloor); }
 
 TSAH_HD float maxMagnitude(float a, float b, float c, float d) {
   a = a < 0.0f ? -a : a;
