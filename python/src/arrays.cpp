@@ -83,11 +83,25 @@ const char* kindName(Kind kind) {
   return "a";
 }
 
+// Device-memory arrays (CUDA's __cuda_array_interface__, or __dlpack__ on a device other than the
+// host's) hold pointers the CPU cannot read; numpy would fail on them with an unrelated message.
+void refuseDeviceArray(py::handle obj, const std::string& name) {
+  if (py::hasattr(obj, "__cuda_array_interface__"))
+    throw tsah::ConfigError(name + ": a CUDA device array (__cuda_array_interface__); this call takes host arrays (numpy)");
+  if (py::isinstance<py::array>(obj) || !py::hasattr(obj, "__dlpack_device__")) return;
+  const auto device = obj.attr("__dlpack_device__")().cast<std::pair<int, int>>();
+  constexpr int kDLCPU = 1, kDLCUDAHost = 3;  // DLPack's device types readable by the host
+  if (device.first != kDLCPU && device.first != kDLCUDAHost)
+    throw tsah::ConfigError(name + ": a device array (DLPack device type " + std::to_string(device.first) +
+                            "); this call takes host arrays (numpy)");
+}
+
 }  // namespace
 
 template <class T>
 Array<T> checkedArray(py::handle obj, const std::string& name, Kind kind,
                                                 std::initializer_list<py::ssize_t> shape) {
+  refuseDeviceArray(obj, name);
   if (!py::isinstance<py::array>(obj))
     throw ArgumentTypeError(name + ": expected a numpy array, got " +
                             std::string(py::str(obj.get_type().attr("__name__"))));

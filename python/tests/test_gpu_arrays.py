@@ -144,3 +144,34 @@ def test_cpu_runtime_shares_the_animation(wave):
     del runtime
     gc.collect()
     assert ref() is None
+
+
+class FakeCudaArray:
+    """Exposes __cuda_array_interface__ over a host buffer: what a CUDA array looks like to the module."""
+    def __init__(self, array):
+        self.array = array
+        self.__cuda_array_interface__ = {"shape": array.shape, "typestr": array.dtype.str, "strides": None,
+                                         "data": (array.ctypes.data, False), "version": 3, "stream": None}
+
+
+class FakeDlpackDevice:
+    """Exposes a DLPack device other than the host's (2: kDLCUDA)."""
+    def __dlpack_device__(self):
+        return (2, 0)
+
+
+@pytest.mark.parametrize("kind", RUNTIMES)
+def test_device_arrays_are_refused_with_a_clear_error(kind, wave):
+    animation, _ = wave
+    runtime = make_runtime(kind, wave)
+    positions = animation.positions_at(1.0).astype(np.float32)
+    o, d = rays(animation, 1.0, (10,))
+    cuda = "a CUDA device array \\(__cuda_array_interface__\\); this call takes host arrays \\(numpy\\)"
+    with pytest.raises(tsah.ConfigError, match="positions: " + cuda):
+        runtime.refit(FakeCudaArray(positions))
+    with pytest.raises(tsah.ConfigError, match="origins: " + cuda):
+        runtime.trace(FakeCudaArray(o), d)
+    with pytest.raises(tsah.ConfigError, match="directions: " + cuda):
+        runtime.occluded(o, FakeCudaArray(d))
+    with pytest.raises(tsah.ConfigError, match=r"positions: a device array \(DLPack device type 2\); this call takes host"):
+        runtime.refit(FakeDlpackDevice())
