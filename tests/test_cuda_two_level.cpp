@@ -187,7 +187,10 @@ TEST(CudaTwoLevelRigid, OnlyPathsAndHeldPosesRefitNothing) {
     for (std::size_t r = 0; r < rays.size(); ++r) {
       const tsah::TwoLevelHit expected = cpu.closestHit(rays[r]);
       ASSERT_EQ(got[r].valid(), expected.valid()) << "t " << t << " ray " << r;
-      if (expected.valid()) EXPECT_EQ(got[r].prim, expected.prim) << "t " << t << " ray " << r;
+      if (expected.valid()) {
+        EXPECT_EQ(got[r].instance, expected.instance) << "t " << t << " ray " << r;
+        EXPECT_EQ(got[r].prim, expected.prim) << "t " << t << " ray " << r;
+      }
     }
   }
 }

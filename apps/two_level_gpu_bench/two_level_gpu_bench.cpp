@@ -1,5 +1,6 @@
 // tsah_two_level_gpu_bench: the GPU two-level runtime (tsah_cuda/gpu_two_level.hpp) per frame.
-//   tsah_two_level_gpu_bench SCENE.json [--tree TREE.tbvh] [--frames 50] [--width 1024] [--height 768]
+//   tsah_two_level_gpu_bench SCENE.json [--tree TREE.tbvh | --save-tree TREE.tbvh [--build-only]]
+//                            [--frames 50] [--width 1024] [--height 768]
 //                            [--ao 4] [--k 2] [--build-frames 5] [--no-rebuild-reference]
 // Builds the two-level structure (or loads a version 3 .tbvh built for the scene), then for each of
 // --frames times spread over the scene's time range: updateAt (upload of the instance transforms,
@@ -27,10 +28,11 @@
 namespace {
 
 struct Options {
-  std::string scene, tree;
+  std::string scene, tree, saveTree;
   uint32_t frames = 50, width = 1024, height = 768, ao = 4, buildFrames = 5;
-  float k = 2.0f;
+  int k = 2;
   bool rebuildReference = true;
+  bool buildOnly = false;  // build and save (--save-tree), no device needed
 };
 
 double median(std::vector<double> v) {
@@ -77,6 +79,8 @@ int run(const Options& opt) {
   const tsah::TwoLevelScene scene =
       opt.tree.empty() ? tsah::loadTwoLevelScene(opt.scene, {}, build)
                        : tsah::loadTwoLevelSceneFile(opt.tree, anim::loadSceneSources(opt.scene, {}));
+  if (!opt.saveTree.empty()) tsah::saveTwoLevelScene(opt.saveTree, scene);
+  if (opt.buildOnly) return 0;
   tsah::cuda::GpuTwoLevelRuntime gpu(scene);
   const double start = scene.frameTimes.empty() ? scene.scene.start : scene.frameTimes.front();
   const double end = scene.frameTimes.empty() ? start : scene.frameTimes.back();
@@ -148,9 +152,11 @@ int main(int argc, char** argv) {
   app.add_option("--width", opt.width, "Image width (default 1024)")->check(CLI::Range(1u, 16384u));
   app.add_option("--height", opt.height, "Image height (default 768)")->check(CLI::Range(1u, 16384u));
   app.add_option("--ao", opt.ao, "Occlusion rays per primary hit (default 4)")->check(CLI::Range(0u, 64u));
-  app.add_option("--k", opt.k, "T-SAH k of the built trees (default 2)")->check(CLI::Range(0.0f, 1000.0f));
+  app.add_option("--k", opt.k, "T-SAH k of the built trees (default 2)")->check(CLI::Range(0, 1000));
+  app.add_option("--save-tree", opt.saveTree, "Save the built structure (.tbvh version 3) for later --tree runs");
   app.add_option("--build-frames", opt.buildFrames, "Representative frames per animated source (default 5)")
       ->check(CLI::Range(1u, 1000u));
+  app.add_flag("--build-only", opt.buildOnly, "Only build the structure (and save it with --save-tree): no device needed");
   app.add_flag("--no-rebuild-reference", noRebuild, "Skip the per-frame host TLAS rebuild reference");
   CLI11_PARSE(app, argc, argv);
   opt.rebuildReference = !noRebuild;
