@@ -5,6 +5,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <vector>
 
 #include "device_types.hpp"
 
@@ -26,6 +27,9 @@ struct InterpolationNode {
   cudaKernelNodeParams launch{};
 };
 InterpolationNode findInterpolationNode(cudaGraph_t graph);
+// Every interpolation node of a graph that interpolates several animations (the two-level runtime's
+// poses); a node's output buffer is *static_cast<float**>(launch.kernelParams[3]).
+std::vector<InterpolationNode> findInterpolationNodes(cudaGraph_t graph);
 void setInterpolationParams(cudaGraphExec_t exec, const InterpolationNode& node, const FrameParams& params);
 
 // Bottom-up refit of an uploaded tree: one thread per leaf record, atomic counters per interior node

@@ -141,6 +141,12 @@ void launchInterpolateFrame(const float* keyframes, const uint32_t* movingIds, c
 }
 
 InterpolationNode findInterpolationNode(cudaGraph_t graph) {
+  const std::vector<InterpolationNode> found = findInterpolationNodes(graph);
+  return found.empty() ? InterpolationNode{} : found.front();
+}
+
+std::vector<InterpolationNode> findInterpolationNodes(cudaGraph_t graph) {
+  std::vector<InterpolationNode> all;
   std::size_t count = 0;
   CUDA_CHECK(cudaGraphGetNodes(graph, nullptr, &count));
   std::vector<cudaGraphNode_t> nodes(count);
@@ -151,9 +157,9 @@ InterpolationNode findInterpolationNode(cudaGraph_t graph) {
     if (type != cudaGraphNodeTypeKernel) continue;
     InterpolationNode found{node, {}};
     CUDA_CHECK(cudaGraphKernelNodeGetParams(node, &found.launch));
-    if (found.launch.func == reinterpret_cast<void*>(&interpolateFrameKernel)) return found;
+    if (found.launch.func == reinterpret_cast<void*>(&interpolateFrameKernel)) all.push_back(found);
   }
-  return {};
+  return all;
 }
 
 void setInterpolationParams(cudaGraphExec_t exec, const InterpolationNode& node, const FrameParams& params) {

@@ -1,0 +1,172 @@
+// tsah_two_level_gpu_bench: the GPU two-level runtime (tsah_cuda/gpu_two_level.hpp) per frame.
+//   tsah_two_level_gpu_bench SCENE.json [--tree TREE.tbvh | --save-tree TREE.tbvh [--build-only]]
+//                            [--frames 50] [--width 1024] [--height 768]
+//                            [--ao 4] [--k 2] [--build-frames 5] [--no-rebuild-reference]
+// Builds the two-level structure (or loads a version 3 .tbvh built for the scene), then for each of
+// --frames times spread over the scene's time range: updateAt (upload of the instance transforms,
+// BLAS refits, TLAS refit: CUDA events), then primary rays (a camera fitted to the instances' boxes,
+// one ray per pixel: closest hit) and --ao occlusion rays per primary hit (cosine-distributed
+// around the reversed primary ray, from the hit point, 10% of the scene's diagonal long: any hit).
+// The TLAS rebuild reference is tsah::rebuildTlas on the host over the frame's instance boxes
+// (wall clock). Prints one JSON object (per-frame values and medians).
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <iostream>
+#include <random>
+
+#include "anim/load_options.hpp"
+#include "tsah/base/error.hpp"
+#include "tsah/render/camera.hpp"
+#include "tsah/render/sampling.hpp"
+#include "tsah/scene/two_level.hpp"
+#include "tsah_cuda/gpu_two_level.hpp"
+
+namespace {
+
+struct Options {
+  std::string scene, tree, saveTree;
+  uint32_t frames = 50, width = 1024, height = 768, ao = 4, buildFrames = 5;
+  int k = 2;
+  bool rebuildReference = true;
+  bool buildOnly = false;  // build and save (--save-tree), no device needed
+};
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+std::vector<tsah::Ray> primaryRays(const tsah::Camera& camera, uint32_t width, uint32_t height) {
+  const tsah::CameraRays gen = tsah::cameraRays(camera, width, height);
+  std::vector<tsah::Ray> rays;
+  rays.reserve(std::size_t(width) * height);
+  for (uint32_t y = 0; y < height; ++y)
+    for (uint32_t x = 0; x < width; ++x) rays.push_back(gen.ray(float(x) + 0.5f, float(y) + 0.5f));
+  return rays;
+}
+
+std::vector<tsah::Ray> occlusionRays(std::span<const tsah::Ray> primary, std::span<const tsah::TwoLevelHit> hits,
+                                     uint32_t perHit, float length, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  std::vector<tsah::Ray> rays;
+  for (std::size_t i = 0; i < primary.size(); ++i) {
+    if (!hits[i].valid()) continue;
+    const tsah::Ray& p = primary[i];
+    const tsah::Vec3 back = tsah::normalize(p.dir * -1.0f);
+    const tsah::Vec3 at = p.org + p.dir * (hits[i].t * 0.9999f);
+    for (uint32_t k = 0; k < perHit; ++k) {
+      tsah::Ray r;
+      r.org = at;
+      r.dir = tsah::cosineHemisphere(back, unit(rng), unit(rng));
+      r.tmin = 0.0f;
+      r.tmax = length;
+      rays.push_back(r);
+    }
+  }
+  return rays;
+}
+
+int run(const Options& opt) {
+  tsah::TreeOptions build;
+  build.objective.k = opt.k;
+  build.frames = opt.buildFrames;
+  const tsah::TwoLevelScene scene =
+      opt.tree.empty() ? tsah::loadTwoLevelScene(opt.scene, {}, build)
+                       : tsah::loadTwoLevelSceneFile(opt.tree, anim::loadSceneSources(opt.scene, {}));
+  if (!opt.saveTree.empty()) tsah::saveTwoLevelScene(opt.saveTree, scene);
+  if (opt.buildOnly) return 0;
+  tsah::cuda::GpuTwoLevelRuntime gpu(scene);
+  const double start = scene.frameTimes.empty() ? scene.scene.start : scene.frameTimes.front();
+  const double end = scene.frameTimes.empty() ? start : scene.frameTimes.back();
+  tsah::Aabb all;
+  for (const tsah::Aabb& b : scene.instanceBoxes.boxes) all.extend(b);
+  const tsah::Camera camera = tsah::fitCamera(all, {0, 1, 0}, 45.0f, float(opt.width) / float(opt.height));
+  const std::vector<tsah::Ray> primary = primaryRays(camera, opt.width, opt.height);
+  const tsah::Vec3 e = all.extent();
+  const float aoLength = 0.1f * std::sqrt(e.x * e.x + e.y * e.y + e.z * e.z);
+
+  std::vector<double> upload, blas, tlas, update, primaryMs, aoMs, rebuildMs, refits;
+  nlohmann::json frames = nlohmann::json::array();
+  for (uint32_t f = 0; f < opt.frames; ++f) {
+    const double t = opt.frames > 1 ? start + (end - start) * double(f) / double(opt.frames - 1) : start;
+    const tsah::cuda::TwoLevelUpdateTimings u = gpu.updateAt(t);
+    tsah::RayPassStats ps, as;
+    const std::vector<tsah::TwoLevelHit> hits = gpu.closestHits(primary, &ps);
+    const std::vector<tsah::Ray> ao = occlusionRays(primary, hits, opt.ao, aoLength, f + 1);
+    gpu.anyHits(ao, &as);
+    double rebuild = 0.0;
+    if (opt.rebuildReference) {
+      const std::vector<tsah::Aabb> boxes = gpu.downloadInstanceBoxes();
+      const auto t0 = std::chrono::steady_clock::now();
+      const tsah::Bvh rebuilt = tsah::rebuildTlas(boxes, scene.objective);
+      rebuild = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+      (void)rebuilt;
+    }
+    upload.push_back(u.uploadMs);
+    blas.push_back(u.blasMs);
+    tlas.push_back(u.tlasMs);
+    update.push_back(u.totalMs());
+    primaryMs.push_back(ps.ms);
+    aoMs.push_back(as.ms);
+    rebuildMs.push_back(rebuild);
+    refits.push_back(u.blasRefits);
+    frames.push_back({{"time", t}, {"upload_ms", u.uploadMs}, {"blas_refit_ms", u.blasMs}, {"tlas_update_ms", u.tlasMs},
+                      {"update_ms", u.totalMs()}, {"blas_refits", u.blasRefits}, {"primary_rays", ps.rays},
+                      {"primary_ms", ps.ms}, {"ao_rays", as.rays}, {"ao_ms", as.ms},
+                      {"tlas_rebuild_cpu_ms", rebuild}});
+  }
+  nlohmann::json j;
+  j["scene"] = opt.scene;
+  j["tree"] = opt.tree;
+  j["device"] = gpu.device().name;
+  j["instances"] = scene.instanceCount();
+  j["blas"] = scene.blases.size();
+  j["poses"] = scene.poses.size();
+  j["tlas_interior_nodes"] = gpu.updateAt(start).tlasNodes;
+  j["image"] = {opt.width, opt.height};
+  j["ao_per_hit"] = opt.ao;
+  j["median"] = {{"upload_ms", median(upload)}, {"blas_refit_ms", median(blas)}, {"tlas_update_ms", median(tlas)},
+                 {"update_ms", median(update)}, {"primary_ms", median(primaryMs)}, {"ao_ms", median(aoMs)},
+                 {"tlas_rebuild_cpu_ms", median(rebuildMs)}, {"blas_refits", median(refits)}};
+  j["frames"] = frames;
+  std::cout << j.dump(2) << "\n";
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"The GPU two-level runtime per frame: update (BLAS and TLAS refits) and trace times, JSON"};
+  Options opt;
+  bool noRebuild = false;
+  app.add_option("scene", opt.scene, "Scene file (JSON)")->required();
+  app.add_option("--tree", opt.tree, "A version 3 .tbvh built for the scene (default: build it)");
+  app.add_option("--frames", opt.frames, "Frames timed, spread over the scene's time range (default 50)")
+      ->check(CLI::Range(1u, 100000u));
+  app.add_option("--width", opt.width, "Image width (default 1024)")->check(CLI::Range(1u, 16384u));
+  app.add_option("--height", opt.height, "Image height (default 768)")->check(CLI::Range(1u, 16384u));
+  app.add_option("--ao", opt.ao, "Occlusion rays per primary hit (default 4)")->check(CLI::Range(0u, 64u));
+  app.add_option("--k", opt.k, "T-SAH k of the built trees (default 2)")->check(CLI::Range(0, 1000));
+  app.add_option("--save-tree", opt.saveTree, "Save the built structure (.tbvh version 3) for later --tree runs");
+  app.add_option("--build-frames", opt.buildFrames, "Representative frames per animated source (default 5)")
+      ->check(CLI::Range(1u, 1000u));
+  app.add_flag("--build-only", opt.buildOnly, "Only build the structure (and save it with --save-tree): no device needed");
+  app.add_flag("--no-rebuild-reference", noRebuild, "Skip the per-frame host TLAS rebuild reference");
+  CLI11_PARSE(app, argc, argv);
+  opt.rebuildReference = !noRebuild;
+  try {
+    return run(opt);
+  } catch (const tsah::ConfigError& e) {
+    std::cerr << "tsah_two_level_gpu_bench: " << e.what() << "\n";
+    return 2;
+  } catch (const std::exception& e) {
+    std::cerr << "tsah_two_level_gpu_bench: " << e.what() << "\n";
+    return 1;
+  }
+}

@@ -1,0 +1,73 @@
+#pragma once
+// The GPU runtime of a two-level scene (docs/two-level.md), the device counterpart of
+// tsah::TwoLevelRuntime. Uploaded once: every BLAS topology (triangle indices, slot vertex ids,
+// parents and leaves; instances of one source share them), each source's keyframes, the static
+// BLAS refitted once at their source's start time, one node/box array, positions and Woop triangles
+// per pose, and the TLAS topology. updateAt(t) runs one CUDA graph (captured at its first use,
+// replayed after): the instances' transforms (computed on the host, 3x4 each) uploaded, each pose's
+// positions at its local time (the flat runtime's interpolation kernel) and its BLAS refit and Woop
+// pass, the instances' world boxes from their BLAS root boxes, and the TLAS refit. A frame whose
+// poses all keep their local time replays a second graph without the BLAS work. Rays traverse the
+// TLAS with the CPU's traversal loop (tsah::detail::traverse); at a TLAS leaf the ray is moved into
+// the instance's space and traced by the same loop through the instance's BLAS, as the CPU does.
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "tsah/core/aabb.hpp"
+#include "tsah/core/ray.hpp"
+#include "tsah/render/renderer.hpp"
+#include "tsah/scene/two_level.hpp"
+#include "tsah/scene/two_level_runtime.hpp"
+#include "tsah_cuda/device.hpp"
+
+namespace tsah::cuda {
+
+// Device time of one updateAt (CUDA events, milliseconds) and what it did.
+struct TwoLevelUpdateTimings {
+  double uploadMs = 0.0;  // the instance transforms and pose frames, host to device
+  double blasMs = 0.0;    // every pose's interpolation, refit and Woop pass
+  double tlasMs = 0.0;    // instance world boxes and the TLAS refit
+  uint32_t blasRefits = 0;  // poses refitted (0 when no pose's local time changed)
+  uint32_t instances = 0;
+  uint32_t tlasNodes = 0;   // interior nodes of the TLAS
+  double totalMs() const { return uploadMs + blasMs + tlasMs; }
+};
+
+class GpuTwoLevelRuntime {
+ public:
+  struct Config {
+    int device = 0;
+  };
+
+  // Keeps a reference to `scene` (it must outlive the runtime) and runs updateAt(first frame time).
+  // Throws tsah::DataError for a tree deeper than the traversal stack or a source without keyframes.
+  GpuTwoLevelRuntime(const TwoLevelScene& scene, Config config);
+  explicit GpuTwoLevelRuntime(const TwoLevelScene& scene) : GpuTwoLevelRuntime(scene, Config{}) {}
+  ~GpuTwoLevelRuntime();
+  GpuTwoLevelRuntime(const GpuTwoLevelRuntime&) = delete;
+  GpuTwoLevelRuntime& operator=(const GpuTwoLevelRuntime&) = delete;
+
+  // The scene at time t, on the device (synchronizes to read the timings).
+  TwoLevelUpdateTimings updateAt(double sceneTime);
+  double time() const;
+  uint64_t blasRefits() const;  // in all, the static BLAS' refits at construction included
+
+  // Batch queries of host rays (closest hit: instance, triangle of its source, t; any hit).
+  std::vector<TwoLevelHit> closestHits(std::span<const Ray> rays, RayPassStats* stats = nullptr);
+  std::vector<uint8_t> anyHits(std::span<const Ray> rays, RayPassStats* stats = nullptr);
+
+  // Host copies of the current state: the instances' world boxes, and the TLAS in canonical form
+  // with this frame's node boxes (frameCount 1).
+  std::vector<Aabb> downloadInstanceBoxes() const;
+  FlatBvh downloadTlas() const;
+  const DeviceInfo& device() const;
+
+  struct Impl;
+
+ private:
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace tsah::cuda

@@ -1,0 +1,67 @@
+#pragma once
+// The two-level runtime's device data and kernels (two_level_kernels.cu); no CUDA syntax here, so
+// the C++ compiler reads it too.
+#include <cuda_runtime_api.h>
+
+#include <cstdint>
+#include <type_traits>
+
+#include "device_types.hpp"
+#include "tsah/core/aabb.hpp"
+#include "tsah/core/ray.hpp"
+#include "tsah/layout/gpu_layout.hpp"
+#include "tsah/layout/woop.hpp"
+
+namespace tsah::cuda::detail {
+
+// One traceable BLAS on the device: a static source's, or a pose's (its own nodes, positions and
+// Woop triangles; triIndex and indices are its source's, shared). root holds ref, count and the
+// box of this frame (written by the refit).
+struct BlasView {
+  const GpuBvhNode* nodes = nullptr;
+  const WoopTriangle* woop = nullptr;
+  const uint32_t* triIndex = nullptr;
+  const uint32_t* indices = nullptr;
+  const float* positions = nullptr;
+  const RootInfo* root = nullptr;
+};
+
+// Per instance, written by the host each frame: world(t) in double (its box is transformed exactly
+// as tsah::transformBox does), world -> instance in float (tsah::Affine3x4's rows), the BLAS view
+// it traces and whether world(t) is invertible (a singular instance is never hit).
+struct InstanceState {
+  double world[12];
+  float toInstance[12];
+  uint32_t view;
+  uint32_t visible;
+};
+static_assert(std::is_trivially_copyable_v<InstanceState>);
+
+// A hit of the two-level trace (tsah::TwoLevelHit's fields).
+struct InstanceHit {
+  float t, u, v;
+  uint32_t instance, prim;
+};
+
+// The TLAS as the trace reads it.
+struct TlasScene {
+  const GpuBvhNode* nodes = nullptr;
+  const uint32_t* triIndex = nullptr;  // slot -> instance
+  const RootInfo* root = nullptr;
+  const InstanceState* instances = nullptr;
+  const BlasView* views = nullptr;
+};
+
+// Per instance, its world box: its BLAS root box transformed by world(t), rounded outward
+// (tsah::transformBox).
+void launchInstanceBoxes(const InstanceState* instances, const BlasView* views, uint32_t count, Aabb* boxes,
+                         cudaStream_t stream);
+// Bottom-up refit of the TLAS from the instance boxes (counters zero on entry), root->box included.
+void launchTlasRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
+                     const uint32_t* triIndex, const Aabb* instanceBoxes, uint32_t* counters, RootInfo* root,
+                     cudaStream_t stream);
+// One thread per ray: closest hits into hits, or (occluded non-null) any hits into occluded.
+void launchTwoLevelTrace(const TlasScene& scene, const Ray* rays, uint32_t count, InstanceHit* hits,
+                         uint8_t* occluded, cudaStream_t stream);
+
+}  // namespace tsah::cuda::detail

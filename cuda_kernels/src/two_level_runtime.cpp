@@ -1,0 +1,398 @@
+// tsah::cuda::GpuTwoLevelRuntime (gpu_two_level.hpp): uploads, the per-frame graphs, the queries.
+#include <cuda_runtime_api.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "event_timer.hpp"
+#include "kernels.hpp"
+#include "tsah/base/error.hpp"
+#include "tsah/layout/traversal.hpp"
+#include "tsah_cuda/cuda_check.hpp"
+#include "tsah_cuda/device_buffer.hpp"
+#include "tsah_cuda/gpu_two_level.hpp"
+#include "two_level_kernels.hpp"
+
+namespace tsah::cuda {
+
+namespace {
+
+// A tree's refit data: parents of interior nodes and one record per leaf (the flat runtime's
+// bottom-up refit reads them).
+struct RefitTopology {
+  std::vector<uint32_t> parent;
+  std::vector<detail::LeafRecord> leaves;
+};
+
+RefitTopology refitTopology(const FlatBvh& tree) {
+  RefitTopology r;
+  r.parent.assign(tree.interiorCount, detail::kNoParent);
+  if (tree.interiorCount == 0) {
+    r.leaves.push_back({detail::kNoParent, 0, tree.rootCount});
+    return r;
+  }
+  for (uint32_t i = 0; i < tree.interiorCount; ++i) {
+    const GpuBvhNode& n = tree.nodes[i];
+    for (int c = 0; c < 2; ++c) {
+      const int32_t ref = n.childRef(c);
+      const uint32_t slot = (i << 1) | uint32_t(c);
+      if (isLeafRef(ref))
+        r.leaves.push_back({slot, leafFirstSlot(ref), n.childCount(c)});
+      else
+        r.parent[uint32_t(ref)] = slot;
+    }
+  }
+  return r;
+}
+
+detail::RootInfo rootOf(const FlatBvh& tree) {
+  detail::RootInfo root;
+  root.ref = tree.rootRef;
+  root.count = tree.rootCount;
+  root.box = tree.rootBoxes.empty() ? Aabb{} : tree.rootBoxes[0];
+  return root;
+}
+
+template <typename T>
+DeviceBuffer<T> toDevice(const std::vector<T>& host, cudaStream_t stream) {
+  return DeviceBuffer<T>(std::span<const T>(host), stream);
+}
+
+}  // namespace
+
+struct GpuTwoLevelRuntime::Impl {
+  // A source's shared data: topology, indices, keyframes of its moving vertices.
+  struct Source {
+    FlatBvh topology;
+    uint32_t leafCount = 0;
+    DeviceBuffer<uint32_t> indices, triIndex, slotVertices, nodeParent, movingIds;
+    DeviceBuffer<detail::LeafRecord> leaves;
+    DeviceBuffer<float> keyframes;  // every keyframe of the moving vertices (animated sources)
+    uint32_t movingCount = 0;
+  };
+  // A traced BLAS (a static source's or a pose's): its boxes, positions and Woop triangles.
+  struct Traced {
+    uint32_t source = 0;
+    DeviceBuffer<GpuBvhNode> nodes;
+    DeviceBuffer<float> positions;
+    DeviceBuffer<WoopTriangle> woop;
+    DeviceBuffer<uint32_t> counters;
+    DeviceBuffer<detail::RootInfo> root;
+  };
+  struct Graph {
+    cudaGraph_t graph = nullptr;
+    cudaGraphExec_t exec = nullptr;
+    std::vector<std::pair<uint32_t, detail::InterpolationNode>> interpolations;  // (pose, node)
+  };
+
+  Impl(const TwoLevelScene& s, Config c);
+  ~Impl();
+  void enqueueBlasRefit(Traced& t);
+  void enqueueFrame(bool refitPoses);
+  Graph capture(bool refitPoses);
+  detail::TlasScene tlasScene() const;
+  template <bool AnyHit, typename Result>
+  std::vector<Result> trace(std::span<const Ray> rays, RayPassStats* stats);
+
+  const TwoLevelScene& scene;
+  Config config;
+  DeviceInfo device;
+  cudaStream_t stream = nullptr;
+  detail::EventTimer events;
+  std::vector<Source> sources;
+  std::vector<Traced> traced;              // static sources' BLAS, then one per pose
+  std::vector<uint32_t> staticView;        // per source: its view, or kInvalidIndex when animated
+  uint32_t firstPoseView = 0;
+  DeviceBuffer<detail::BlasView> views;
+  std::vector<detail::FrameParams> poseFrames;
+  std::vector<double> poseLocalTime;
+  detail::InstanceState* hostInstances = nullptr;  // pinned: the graphs copy it to `instances`
+  DeviceBuffer<detail::InstanceState> instances;
+  DeviceBuffer<Aabb> instanceBoxes;
+  FlatBvh tlasTopology;
+  uint32_t tlasLeafCount = 0;
+  DeviceBuffer<GpuBvhNode> tlasNodes;
+  DeviceBuffer<uint32_t> tlasParent, tlasCounters, tlasTriIndex;
+  DeviceBuffer<detail::LeafRecord> tlasLeaves;
+  DeviceBuffer<detail::RootInfo> tlasRoot;
+  Graph fullGraph, rigidGraph;  // with and without the poses' BLAS refits
+  double time = 0.0;
+  uint64_t refits = 0;
+  DeviceBuffer<Ray> rays;
+  DeviceBuffer<detail::InstanceHit> hits;
+  DeviceBuffer<uint8_t> occluded;
+};
+
+GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), config(c) {
+  device = describeDevice(config.device);
+  CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
+  events.create(4);
+  const anim::SceneSources& src = scene.scene;
+  for (const Blas& blas : scene.blases) {
+    const anim::Animation& a = *src.sources[blas.source];
+    if (a.keyframeCount() == 0) throw DataError("GPU two-level runtime: a source has no keyframes");
+    Source& d = sources.emplace_back();
+    d.topology = runtimeTopology(blas.flat, a.triangleCount(), kTraversalStackSize, "GPU two-level runtime: BLAS");
+    const RefitTopology r = refitTopology(d.topology);
+    d.leafCount = uint32_t(r.leaves.size());
+    d.indices = DeviceBuffer<uint32_t>(a.indices(), stream);
+    d.triIndex = toDevice(d.topology.triIndex, stream);
+    d.slotVertices = toDevice(slotVertexIndices(d.topology.triIndex, a.indices(), "GPU two-level runtime"), stream);
+    d.nodeParent = toDevice(r.parent, stream);
+    d.leaves = toDevice(r.leaves, stream);
+    if (blas.animated) {
+      d.keyframes = DeviceBuffer<float>(a.motion(), stream);
+      d.movingIds = DeviceBuffer<uint32_t>(a.movingVertices(), stream);
+      d.movingCount = a.movingVertexCount();
+    }
+  }
+  // A traced BLAS starts from its source's positions at `localTime` (the rest positions of the
+  // static vertices stay; a pose's interpolation rewrites the moving ones).
+  auto addTraced = [&](uint32_t source, double localTime) {
+    const anim::Animation& a = *src.sources[source];
+    const Source& d = sources[source];
+    Traced& t = traced.emplace_back();
+    t.source = source;
+    t.nodes = toDevice(d.topology.nodes, stream);
+    t.positions = toDevice(a.positionsAt(localTime), stream);
+    t.woop.resize(d.topology.triangleCount());
+    t.counters.resize(d.topology.interiorCount);
+    const detail::RootInfo root = rootOf(d.topology);
+    t.root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&root, 1), stream);
+  };
+  staticView.assign(scene.blases.size(), kInvalidIndex);
+  for (uint32_t b = 0; b < scene.blases.size(); ++b) {
+    if (scene.blases[b].animated) continue;
+    staticView[b] = uint32_t(traced.size());
+    addTraced(b, src.sources[b]->startTime());
+    enqueueBlasRefit(traced.back());  // once: static BLAS never change
+    ++refits;
+  }
+  firstPoseView = uint32_t(traced.size());
+  for (const Pose& pose : scene.poses) addTraced(pose.blas, src.sources[pose.blas]->startTime());
+  std::vector<detail::BlasView> hostViews;
+  for (const Traced& t : traced) {
+    const Source& d = sources[t.source];
+    hostViews.push_back({t.nodes.data(), t.woop.data(), d.triIndex.data(), d.indices.data(), t.positions.data(),
+                         t.root.data()});
+  }
+  views = toDevice(hostViews, stream);
+  poseFrames.resize(scene.poses.size());
+  poseLocalTime.assign(scene.poses.size(), std::numeric_limits<double>::quiet_NaN());
+
+  const uint32_t count = scene.instanceCount();
+  CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&hostInstances),
+                            std::max<std::size_t>(1, count) * sizeof(detail::InstanceState)));
+  instances.resize(count);
+  instanceBoxes.resize(count);
+  tlasTopology = runtimeTopology(flattenBvh(scene.tlas), count, kTraversalStackSize, "GPU two-level runtime: TLAS");
+  const RefitTopology r = refitTopology(tlasTopology);
+  tlasLeafCount = uint32_t(r.leaves.size());
+  tlasNodes = toDevice(tlasTopology.nodes, stream);
+  tlasParent = toDevice(r.parent, stream);
+  tlasCounters.resize(tlasTopology.interiorCount);
+  tlasTriIndex = toDevice(tlasTopology.triIndex, stream);
+  tlasLeaves = toDevice(r.leaves, stream);
+  const detail::RootInfo root = rootOf(tlasTopology);
+  tlasRoot = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&root, 1), stream);
+  CUDA_CHECK(cudaStreamSynchronize(stream));
+}
+
+GpuTwoLevelRuntime::Impl::~Impl() {
+  for (Graph* g : {&fullGraph, &rigidGraph}) {
+    if (g->exec) cudaGraphExecDestroy(g->exec);
+    if (g->graph) cudaGraphDestroy(g->graph);
+  }
+  if (stream) cudaStreamSynchronize(stream);
+  if (hostInstances) cudaFreeHost(hostInstances);
+  if (stream) cudaStreamDestroy(stream);
+}
+
+void GpuTwoLevelRuntime::Impl::enqueueBlasRefit(Traced& t) {
+  const Source& d = sources[t.source];
+  if (t.counters.size()) CUDA_CHECK(cudaMemsetAsync(t.counters.data(), 0, t.counters.size() * sizeof(uint32_t), stream));
+  detail::launchRefit(t.nodes.data(), d.nodeParent.data(), d.leaves.data(), d.leafCount, d.slotVertices.data(),
+                      t.positions.data(), t.counters.data(), t.root.data(), stream);
+  detail::launchSlotWoop(d.slotVertices.data(), d.topology.triangleCount(), t.positions.data(), t.woop.data(), stream);
+}
+
+void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
+  const uint32_t count = scene.instanceCount();
+  events.record(0, stream);
+  if (count)
+    CUDA_CHECK(cudaMemcpyAsync(instances.data(), hostInstances, count * sizeof(detail::InstanceState),
+                               cudaMemcpyHostToDevice, stream));
+  events.record(1, stream);
+  if (refitPoses)
+    for (uint32_t p = 0; p < scene.poses.size(); ++p) {
+      Traced& t = traced[firstPoseView + p];
+      const Source& d = sources[t.source];
+      detail::launchInterpolateFrame(d.keyframes.data(), d.movingIds.size() ? d.movingIds.data() : nullptr,
+                                     poseFrames[p], t.positions.data(), d.movingCount, stream);
+      enqueueBlasRefit(t);
+    }
+  events.record(2, stream);
+  detail::launchInstanceBoxes(instances.data(), views.data(), count, instanceBoxes.data(), stream);
+  if (tlasCounters.size())
+    CUDA_CHECK(cudaMemsetAsync(tlasCounters.data(), 0, tlasCounters.size() * sizeof(uint32_t), stream));
+  detail::launchTlasRefit(tlasNodes.data(), tlasParent.data(), tlasLeaves.data(), tlasLeafCount, tlasTriIndex.data(),
+                          instanceBoxes.data(), tlasCounters.data(), tlasRoot.data(), stream);
+  events.record(3, stream);
+}
+
+GpuTwoLevelRuntime::Impl::Graph GpuTwoLevelRuntime::Impl::capture(bool refitPoses) {
+  Graph g;
+  CUDA_CHECK(cudaStreamBeginCapture(stream, cudaStreamCaptureModeThreadLocal));
+  try {
+    enqueueFrame(refitPoses);
+  } catch (...) {
+    cudaGraph_t broken = nullptr;
+    cudaStreamEndCapture(stream, &broken);
+    if (broken) cudaGraphDestroy(broken);
+    throw;
+  }
+  CUDA_CHECK(cudaStreamEndCapture(stream, &g.graph));
+  // Each pose's interpolation node, found by its output buffer, gets the pose's frame per launch.
+  for (const detail::InterpolationNode& node : detail::findInterpolationNodes(g.graph)) {
+    const float* out = *static_cast<float**>(node.launch.kernelParams[3]);
+    for (uint32_t p = 0; p < scene.poses.size(); ++p)
+      if (traced[firstPoseView + p].positions.data() == out) g.interpolations.emplace_back(p, node);
+  }
+  CUDA_CHECK(cudaGraphInstantiate(&g.exec, g.graph, 0));
+  return g;
+}
+
+detail::TlasScene GpuTwoLevelRuntime::Impl::tlasScene() const {
+  return {tlasNodes.data(), tlasTriIndex.data(), tlasRoot.data(), instances.data(), views.data()};
+}
+
+GpuTwoLevelRuntime::GpuTwoLevelRuntime(const TwoLevelScene& scene, Config config)
+    : impl_(std::make_unique<Impl>(scene, config)) {
+  updateAt(scene.frameTimes.empty() ? scene.scene.start : scene.frameTimes.front());
+}
+
+GpuTwoLevelRuntime::~GpuTwoLevelRuntime() = default;
+
+TwoLevelUpdateTimings GpuTwoLevelRuntime::updateAt(double sceneTime) {
+  Impl& m = *impl_;
+  const TwoLevelScene& scene = m.scene;
+  const anim::SceneSources& src = scene.scene;
+  m.time = sceneTime;
+  // Each pose's local time (the time of any of its instances) and keyframe blend.
+  std::vector<double> local(scene.poses.size(), std::numeric_limits<double>::quiet_NaN());
+  for (uint32_t i = 0; i < scene.instanceCount(); ++i) {
+    const uint32_t p = scene.instancePose[i];
+    if (p != kInvalidIndex) local[p] = src.instances[i].localTime(sceneTime, *src.sources[scene.poses[p].blas]);
+  }
+  bool posesMove = false;
+  for (uint32_t p = 0; p < scene.poses.size(); ++p) {
+    posesMove = posesMove || !(local[p] == m.poseLocalTime[p]);
+    const anim::Animation& a = *src.sources[scene.poses[p].blas];
+    const auto [k, alpha] = anim::keyframeBlend(a.times(), local[p]);
+    const uint64_t perFrame = uint64_t(a.movingVertexCount()) * 3;
+    m.poseFrames[p].a = k * perFrame;
+    m.poseFrames[p].b = (alpha == 0.0f ? k : k + 1) * perFrame;
+    m.poseFrames[p].alpha = alpha;
+  }
+  // The instances' transforms (tsah::TwoLevelRuntime::update's): world(t), its inverse, the view.
+  for (uint32_t i = 0; i < scene.instanceCount(); ++i) {
+    const anim::Matrix4 world = src.instances[i].worldAt(sceneTime);
+    detail::InstanceState& s = m.hostInstances[i];
+    const uint32_t p = scene.instancePose[i];
+    s.view = p == kInvalidIndex ? m.staticView[src.instances[i].source] : m.firstPoseView + p;
+    const double det = anim::linearDeterminant(world);
+    s.visible = std::isfinite(det) && det != 0.0 ? 1u : 0u;
+    const anim::Matrix4 inverse = s.visible ? inverseAffine(world) : anim::identityMatrix();
+    for (int k = 0; k < 12; ++k) {
+      s.world[k] = world[k];
+      s.toInstance[k] = float(inverse[k]);
+    }
+  }
+  Impl::Graph& g = posesMove ? m.fullGraph : m.rigidGraph;
+  if (!g.exec) g = m.capture(posesMove);
+  for (const auto& [p, node] : g.interpolations) detail::setInterpolationParams(g.exec, node, m.poseFrames[p]);
+  CUDA_CHECK(cudaGraphLaunch(g.exec, m.stream));
+  m.events.wait(3);
+  TwoLevelUpdateTimings t;
+  t.uploadMs = m.events.ms(0, 1);
+  t.blasMs = m.events.ms(1, 2);
+  t.tlasMs = m.events.ms(2, 3);
+  t.blasRefits = posesMove ? uint32_t(scene.poses.size()) : 0u;
+  t.instances = scene.instanceCount();
+  t.tlasNodes = m.tlasTopology.interiorCount;
+  m.refits += t.blasRefits;
+  m.poseLocalTime = local;
+  return t;
+}
+
+template <bool AnyHit, typename Result>
+std::vector<Result> GpuTwoLevelRuntime::Impl::trace(std::span<const Ray> in, RayPassStats* stats) {
+  std::vector<Result> out(in.size());
+  if (stats) *stats = {};
+  if (in.empty()) return out;
+  if (in.size() > 0xffffffffu) throw ConfigError("GPU two-level runtime: too many rays in one call");
+  const auto count = uint32_t(in.size());
+  rays.reserve(count);
+  rays.upload(in, stream);
+  if (AnyHit)
+    occluded.reserve(count);
+  else
+    hits.reserve(count);
+  events.record(0, stream);
+  detail::launchTwoLevelTrace(tlasScene(), rays.data(), count, AnyHit ? nullptr : hits.data(),
+                              AnyHit ? occluded.data() : nullptr, stream);
+  events.record(1, stream);
+  events.wait(1);
+  if (stats) *stats = {count, events.ms(0, 1)};
+  if constexpr (AnyHit) {
+    CUDA_CHECK(cudaMemcpyAsync(out.data(), occluded.data(), count, cudaMemcpyDeviceToHost, stream));
+    CUDA_CHECK(cudaStreamSynchronize(stream));
+  } else {
+    std::vector<detail::InstanceHit> found(count);
+    CUDA_CHECK(cudaMemcpyAsync(found.data(), hits.data(), count * sizeof(detail::InstanceHit), cudaMemcpyDeviceToHost,
+                               stream));
+    CUDA_CHECK(cudaStreamSynchronize(stream));
+    for (uint32_t i = 0; i < count; ++i) {
+      if (found[i].instance == kNoHit) continue;
+      out[i].t = found[i].t;
+      out[i].u = found[i].u;
+      out[i].v = found[i].v;
+      out[i].instance = found[i].instance;
+      out[i].prim = found[i].prim;
+    }
+  }
+  return out;
+}
+
+std::vector<TwoLevelHit> GpuTwoLevelRuntime::closestHits(std::span<const Ray> rays, RayPassStats* stats) {
+  return impl_->trace<false, TwoLevelHit>(rays, stats);
+}
+
+std::vector<uint8_t> GpuTwoLevelRuntime::anyHits(std::span<const Ray> rays, RayPassStats* stats) {
+  return impl_->trace<true, uint8_t>(rays, stats);
+}
+
+std::vector<Aabb> GpuTwoLevelRuntime::downloadInstanceBoxes() const {
+  std::vector<Aabb> boxes(impl_->instanceBoxes.size());
+  if (!boxes.empty())
+    CUDA_CHECK(cudaMemcpy(boxes.data(), impl_->instanceBoxes.data(), boxes.size() * sizeof(Aabb), cudaMemcpyDeviceToHost));
+  return boxes;
+}
+
+FlatBvh GpuTwoLevelRuntime::downloadTlas() const {
+  FlatBvh tree = impl_->tlasTopology;
+  if (!tree.nodes.empty())
+    CUDA_CHECK(cudaMemcpy(tree.nodes.data(), impl_->tlasNodes.data(), tree.nodes.size() * sizeof(GpuBvhNode),
+                          cudaMemcpyDeviceToHost));
+  detail::RootInfo root;
+  CUDA_CHECK(cudaMemcpy(&root, impl_->tlasRoot.data(), sizeof(root), cudaMemcpyDeviceToHost));
+  tree.rootBoxes.assign(1, root.box);
+  return tree;
+}
+
+double GpuTwoLevelRuntime::time() const { return impl_->time; }
+uint64_t GpuTwoLevelRuntime::blasRefits() const { return impl_->refits; }
+const DeviceInfo& GpuTwoLevelRuntime::device() const { return impl_->device; }
+
+}  // namespace tsah::cuda

@@ -1,0 +1,200 @@
+// The GPU two-level runtime (tsah_cuda/gpu_two_level.hpp) against the CPU one (TwoLevelRuntime):
+// the same hits (instance, triangle, t), TLAS boxes holding every instance, no BLAS refit on a
+// frame of rigid motion only. Every test skips without a GPU.
+#include <gtest/gtest.h>
+
+#if TSAH_HAVE_CUDA
+
+#include <algorithm>
+#include <random>
+
+#include "anim/tanim.hpp"
+#include "tsah/layout/flat_bvh.hpp"
+#include "tsah/scene/two_level.hpp"
+#include "tsah/scene/two_level_runtime.hpp"
+#include "tsah_cuda/gpu_two_level.hpp"
+#include "cuda_test_support.hpp"
+#include "test_support.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// Relative tolerance on t: both runtimes move the ray into instance space with the same float
+// operations and run the same traversal; only the compilers' rounding of the transform may differ.
+constexpr float kRelativeT = 1e-5f;
+
+// The scene of test_two_level.cpp: a static and an animated source placed with rotations,
+// non-uniform and mirrored scales, keyed paths and time offsets (two instances share a pose).
+fs::path writeScene(const fs::path& dir) {
+  const anim::Animation wave = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 300, 9, 3);
+  anim::saveTanim(wave, (dir / "wave.tanim").string());
+  const std::vector<float> first = wave.positionsAt(wave.startTime());
+  const std::vector<uint32_t> indices(wave.indices().begin(), wave.indices().end());
+  anim::saveTanim(anim::Animation(indices, wave.vertexCount(), first, {0.0}, "ground"), (dir / "ground.tanim").string());
+  tsah::test::writeText(dir / "scene.json", R"({"fps": 2, "objects": [
+    {"name": "ground", "file": "ground.tanim", "instances": [
+      {"transform": {"translate": [0, -1, 0], "rotate": [10, 20, 30], "scale": [3, 0.5, 2]}},
+      {"transform": {"matrix": [-1, 0, 0, 4,  0, 1, 0, 0,  0, 0, 1, 1,  0, 0, 0, 1]}},
+      {"transform": {"translate": [2, 1, -2]},
+       "path": [{"time": 0}, {"time": 12, "translate": [1, 2, 3], "rotate": [0, 90, 0], "scale": [1, 2, 1]}]}]},
+    {"name": "cloth", "file": "wave.tanim", "instances": [
+      {"transform": {"translate": [0, 2, 0]}},
+      {"offset": 1.5, "transform": {"translate": [0, 2, 4], "rotate": [0, 45, 0], "scale": [1, 1, -1]}},
+      {"time": {"offset": 3, "outside": "loop"}, "transform": {"rotate": [90, 0, 0], "scale": [0.5, 2, 1]},
+       "path": [{"time": 0}, {"time": 6, "translate": [0, 1, 0]}, {"time": 12, "translate": [-3, 0, 1], "rotate": [0, 0, 45]}]},
+      {"transform": {"translate": [5, 2, 0], "scale": [1, 1.5, 1]}}]}
+  ]})");
+  return dir / "scene.json";
+}
+
+tsah::TreeOptions smallOptions() {
+  tsah::TreeOptions options;
+  options.frames = 3;
+  options.objective.k = 2;
+  options.objective.maxLeafSize = 4;
+  options.threads = 2;
+  return options;
+}
+
+// Rays from random points around the scene's box to random points inside it (most hit something).
+std::vector<tsah::Ray> randomRays(const tsah::Aabb& bounds, uint32_t count, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  const tsah::Vec3 e = bounds.extent();
+  auto around = [&](float spread) {
+    return tsah::Vec3{bounds.lo.x + e.x * (spread * unit(rng) + 0.5f * (1 - spread)),
+                      bounds.lo.y + e.y * (spread * unit(rng) + 0.5f * (1 - spread)),
+                      bounds.lo.z + e.z * (spread * unit(rng) + 0.5f * (1 - spread))};
+  };
+  std::vector<tsah::Ray> rays(count);
+  for (tsah::Ray& ray : rays) {
+    ray.org = around(2.0f);
+    ray.dir = around(1.0f) - ray.org;  // unnormalized
+    ray.tmin = 0.0f;
+    ray.tmax = 1e30f;
+  }
+  return rays;
+}
+
+tsah::Aabb unionOf(std::span<const tsah::Aabb> boxes) {
+  tsah::Aabb all;
+  for (const tsah::Aabb& b : boxes) all.extend(b);
+  return all;
+}
+
+// The TLAS box holding each instance (its leaf's box in the parent node, or the root box).
+std::vector<tsah::Aabb> tlasLeafBoxes(const tsah::FlatBvh& tlas) {
+  std::vector<tsah::Aabb> out(tlas.triangleCount());
+  auto assign = [&](int32_t ref, uint32_t count, const tsah::Aabb& box) {
+    for (uint32_t s = tsah::leafFirstSlot(ref); s < tsah::leafFirstSlot(ref) + count; ++s) out[tlas.triIndex[s]] = box;
+  };
+  if (tlas.interiorCount == 0) assign(tlas.rootRef, tlas.rootCount, tlas.rootBoxes[0]);
+  for (uint32_t n = 0; n < tlas.interiorCount; ++n)
+    for (int c = 0; c < 2; ++c)
+      if (tsah::isLeafRef(tlas.nodes[n].childRef(c)))
+        assign(tlas.nodes[n].childRef(c), tlas.nodes[n].childCount(c), tlas.nodes[n].childBox(c));
+  return out;
+}
+
+class CudaTwoLevel : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    REQUIRE_GPU();
+    dir = tsah::test::scratchDir();
+    scene = std::make_unique<tsah::TwoLevelScene>(tsah::loadTwoLevelScene(writeScene(dir).string(), {}, smallOptions()));
+  }
+  fs::path dir;
+  std::unique_ptr<tsah::TwoLevelScene> scene;
+};
+
+TEST_F(CudaTwoLevel, HitsEqualTheCpuRuntimeAtSeveralTimes) {
+  tsah::TwoLevelRuntime cpu(*scene, {2, tsah::TwoLevelRuntime::TlasUpdate::Refit, tsah::Layout::Bvh2});
+  tsah::cuda::GpuTwoLevelRuntime gpu(*scene);
+  uint32_t hits = 0, total = 0;
+  for (const double t : {0.0, 2.0, 3.25, 7.5, 10.0, 12.0}) {
+    cpu.update(t);
+    gpu.updateAt(t);
+    const std::vector<tsah::Ray> rays = randomRays(unionOf(cpu.instanceBoxes()), 2000, uint32_t(t * 4) + 1);
+    const std::vector<tsah::TwoLevelHit> got = gpu.closestHits(rays);
+    const std::vector<uint8_t> occluded = gpu.anyHits(rays);
+    ASSERT_EQ(got.size(), rays.size());
+    for (std::size_t r = 0; r < rays.size(); ++r, ++total) {
+      const tsah::TwoLevelHit expected = cpu.closestHit(rays[r]);
+      ASSERT_EQ(got[r].valid(), expected.valid()) << "t " << t << " ray " << r;
+      EXPECT_EQ(occluded[r] != 0, cpu.anyHit(rays[r])) << "t " << t << " ray " << r;
+      if (!expected.valid()) continue;
+      ++hits;
+      EXPECT_EQ(got[r].instance, expected.instance) << "t " << t << " ray " << r;
+      EXPECT_EQ(got[r].prim, expected.prim) << "t " << t << " ray " << r;
+      EXPECT_NEAR(got[r].t, expected.t, kRelativeT * std::max(1.0f, expected.t)) << "t " << t << " ray " << r;
+    }
+  }
+  EXPECT_GT(hits, total / 4);  // the comparison saw real hits
+}
+
+TEST_F(CudaTwoLevel, TlasBoxesContainEveryInstanceAfterEachUpdate) {
+  tsah::TwoLevelRuntime cpu(*scene);
+  tsah::cuda::GpuTwoLevelRuntime gpu(*scene);
+  for (const double t : scene->frameTimes) {
+    cpu.update(t);
+    gpu.updateAt(t);
+    const std::vector<tsah::Aabb> boxes = gpu.downloadInstanceBoxes();
+    const tsah::FlatBvh tlas = gpu.downloadTlas();
+    const std::vector<tsah::Aabb> leafBoxes = tlasLeafBoxes(tlas);
+    ASSERT_EQ(boxes.size(), scene->instanceCount());
+    for (uint32_t i = 0; i < scene->instanceCount(); ++i) {
+      // The device's world box is the CPU's (the same transform and rounding) and inside its leaf.
+      EXPECT_TRUE(boxes[i].contains(cpu.instanceBoxes()[i])) << "t " << t << " instance " << i;
+      EXPECT_TRUE(leafBoxes[i].contains(boxes[i])) << "t " << t << " instance " << i;
+      EXPECT_TRUE(tlas.rootBoxes[0].contains(boxes[i])) << "t " << t << " instance " << i;
+    }
+    EXPECT_EQ(tsah::validateFlatBvh(tlas), std::nullopt) << "t " << t;
+  }
+}
+
+TEST_F(CudaTwoLevel, AFrameWithOnlyRigidMotionRefitsNoBlas) {
+  tsah::cuda::GpuTwoLevelRuntime gpu(*scene);
+  EXPECT_EQ(gpu.blasRefits(), 1u + 3u);  // the static BLAS once, the three poses at the first frame
+  const tsah::cuda::TwoLevelUpdateTimings moving = gpu.updateAt(2.0);
+  EXPECT_EQ(moving.blasRefits, 3u);
+  EXPECT_EQ(moving.instances, scene->instanceCount());
+  EXPECT_EQ(moving.tlasNodes, tsah::flattenBvh(scene->tlas).interiorCount);
+  const tsah::cuda::TwoLevelUpdateTimings same = gpu.updateAt(2.0);
+  EXPECT_EQ(same.blasRefits, 0u);
+  EXPECT_EQ(gpu.blasRefits(), 1u + 3u + 3u);
+}
+
+TEST(CudaTwoLevelRigid, OnlyPathsAndHeldPosesRefitNothing) {
+  REQUIRE_GPU();
+  const fs::path dir = tsah::test::scratchDir();
+  const anim::Animation wave = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 200, 5, 2);
+  anim::saveTanim(wave, (dir / "wave.tanim").string());
+  tsah::test::writeText(dir / "s.json", R"({"fps": 4, "objects": [{"file": "wave.tanim", "instances": [
+    {"path": [{"time": 0}, {"time": 8, "translate": [5, 0, 0], "rotate": [0, 180, 0]}]},
+    {"offset": 1, "transform": {"scale": [-1, 1, 1]}}]}]})");
+  const tsah::TwoLevelScene s = tsah::loadTwoLevelScene((dir / "s.json").string(), {}, smallOptions());
+  tsah::TwoLevelRuntime cpu(s);
+  tsah::cuda::GpuTwoLevelRuntime gpu(s);
+  EXPECT_EQ(gpu.updateAt(3.0).blasRefits, 2u);
+  EXPECT_EQ(gpu.updateAt(5.0).blasRefits, 2u);  // both poses reach their last frame (local time 4)
+  for (const double t : {6.0, 6.25, 7.0, 8.0}) {  // and hold it while the path moves on
+    EXPECT_EQ(gpu.updateAt(t).blasRefits, 0u) << "t " << t;
+    cpu.update(t);
+    // The rigid graph still moved the instances: the hits follow the path.
+    const std::vector<tsah::Ray> rays = randomRays(unionOf(cpu.instanceBoxes()), 500, 3);
+    const std::vector<tsah::TwoLevelHit> got = gpu.closestHits(rays);
+    for (std::size_t r = 0; r < rays.size(); ++r) {
+      const tsah::TwoLevelHit expected = cpu.closestHit(rays[r]);
+      ASSERT_EQ(got[r].valid(), expected.valid()) << "t " << t << " ray " << r;
+      if (expected.valid()) {
+        EXPECT_EQ(got[r].instance, expected.instance) << "t " << t << " ray " << r;
+        EXPECT_EQ(got[r].prim, expected.prim) << "t " << t << " ray " << r;
+      }
+    }
+  }
+}
+
+}  // namespace
+
+#endif  // TSAH_HAVE_CUDA
