@@ -153,15 +153,15 @@ class TwoLevelFrameRuntime final : public FrameRuntime {
     runtime_.parallelFor(64, 1, [](std::size_t, std::size_t) {});
   }
 
-  // update: the poses' refits, the instances' transforms and the TLAS (refitMs, with the BLAS
-  // refits counted); the world mesh the renderer shades from is not part of the update (interpolateMs).
+  // update: the poses' refits, the instances' transforms and the TLAS (refitMs). The world mesh
+  // the renderer shades from is shading work: its time is added to the frame's shading time.
   FrameUpdate update(double time) override {
     FrameUpdate u;
     const auto start = std::chrono::steady_clock::now();
     runtime_.update(time);
     u.refitMs = msSince(start);
     u.updateMs = u.refitMs;
-    u.interpolateMs = view_.updateMesh();
+    meshMs_ = view_.updateMesh();
     return u;
   }
 
@@ -169,6 +169,7 @@ class TwoLevelFrameRuntime final : public FrameRuntime {
                      Image* image) override {
     FrameRender r;
     r.rays = renderFrame(view_, camera, lighting, settings, image ? *image : scratch_);
+    r.rays.shadeMs += meshMs_;
     r.frameMs = r.rays.total().ms;
     return r;
   }
@@ -199,6 +200,7 @@ class TwoLevelFrameRuntime final : public FrameRuntime {
   Layout layout_;
   TwoLevelRuntime::TlasUpdate tlas_;
   Image scratch_;
+  double meshMs_ = 0.0;  // the last updateMesh
 };
 
 }  // namespace
