@@ -27,6 +27,7 @@
 #include "box_export.hpp"
 #include "bvh_info.hpp"
 #include "cli.hpp"
+#include "two_level_cli.hpp"
 #include "tsah/pipeline.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
 
@@ -254,6 +255,9 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
       throw tsah::cli::UsageError("--shutter must be between 0 and 1 (a fraction of the frame interval)");
     if (!(opt->frameInterval > 0.0) && !std::isnan(opt->frameInterval))
       throw tsah::cli::UsageError("--frame-interval must be a positive time");
+    if (tsah::cli::isTwoLevelTreeFile(opt->bvh))
+      throw tsah::cli::UsageError(opt->bvh + " holds a two-level scene (.tbvh version 3): tsah export writes flat "
+                                  "trees; optimize the scene with --structure flat to export it");
     const tsah::TreeSet set = tsah::decodeTreeSetFile(tsah::readFile(opt->bvh), opt->bvh);
     const anim::Animation a = tsah::cli::loadInput(opt->input);
     tsah::cli::checkTreeMatchesAnimation(set.builds.front(), opt->bvh, a, opt->input);

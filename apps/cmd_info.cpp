@@ -6,6 +6,7 @@
 #include "anim/scene.hpp"
 #include "bvh_info.hpp"
 #include "cli.hpp"
+#include "two_level_cli.hpp"
 
 namespace {
 
@@ -99,11 +100,19 @@ TSAH_REGISTER_COMMAND(10, [](CLI::App& app) {
                   ".tanim, scene .json) or a .tbvh tree")
       ->required();
   sub->add_option("ANIMATION", opt->animation,
-                  "With a .tbvh INPUT: the animation it was built for; prints per-frame quality figures");
+                  "With a .tbvh INPUT: the animation it was built for; prints per-frame quality figures (a two-level "
+                  "tree: its scene file; prints the structure and each level's cost and memory)");
   sub->add_option("--frames", opt->frames, "With ANIMATION: this many uniformly spaced frames (default: every keyframe)")
       ->check(CLI::Range(1u, 1000000u));
   sub->add_flag("--json", opt->json, "Print one JSON object");
   sub->callback([opt] {
+    if (tsah::cli::isTwoLevelTreeFile(opt->input)) {  // version 3: read only with its scene
+      if (opt->animation.empty())
+        throw tsah::cli::UsageError(opt->input + " holds a two-level scene (.tbvh version 3): give its scene too: "
+                                    "tsah info TREE SCENE");
+      if (opt->frames) throw tsah::cli::UsageError("--frames goes with a flat tree; a two-level tree reports the scene's frames");
+      return tsah::cli::describeTwoLevelFile(opt->input, opt->animation, opt->json);
+    }
     if (!opt->animation.empty())  // tsah info TREE ANIMATION: the tree over the animation's frames
       return tsah::cli::describeTreeOverAnimation(opt->input, opt->animation, opt->frames, opt->json);
     if (opt->frames) throw tsah::cli::UsageError("--frames needs a tree and its animation: tsah info TREE ANIMATION");

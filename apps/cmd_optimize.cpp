@@ -1,12 +1,14 @@
 // tsah optimize INPUT -o OUT.tbvh [--method tsah|sah0|sahstar] [--k K] [--frames N]
 //   [--eval-frames M] [--selection mh|random|batch] [--seed S] [--ct 3] [--ci 2] [--max-leaf 8]
 //   [--time-limit SEC] [--threads T] [--segments K|auto] [--budget X | --budget-cost C]
-//   [--overlap S] [--reference-frames N] [--max-trees N] [--json]
+//   [--overlap S] [--reference-frames N] [--max-trees N] [--structure flat|two-level|auto] [--json]
 // Builds one tree for the whole animation, writes it as .tbvh and reports its cost over the
 // evaluation frames. With --segments K > 1 (count mode) or --segments auto (budget mode), a tree
 // set instead (docs/segmentation.md): K trees, or the fewest trees that keep every evaluation frame
 // within the budget, with split points chosen by tsah::segmentTimeline, written as one .tbvh set
 // file (version 2) that `tsah trace`, `export`, `info` and `bench` switch through by themselves.
+// A scene file may instead be kept as two levels (--structure two-level, or auto's choice: one tree
+// per source and a top-level tree over the instances, docs/two-level.md), written as a version 3 file.
 #include <algorithm>
 #include <cstdio>
 #include <memory>
@@ -21,6 +23,7 @@
 #include "tsah/pipeline.hpp"
 #include "tsah/optimize/segmentation.hpp"
 #include "tsah/io/tree_set.hpp"
+#include "two_level_cli.hpp"
 #if TSAH_HAVE_CUDA
 #include "tsah_cuda/device.hpp"
 #endif
@@ -40,6 +43,7 @@ struct Options {
   bool json = false;
   bool reproducible = false;  // build times written as 0
   std::string devices;        // --devices all|0,2,...
+  std::string structure;      // flat, two-level, auto; empty: auto for scene files, flat otherwise
 };
 
 
@@ -197,12 +201,41 @@ void runSegments(const Options& opt, const tsah::TreeOptions& treeOpt, const ani
   }
 }
 
+// --structure: true when the scene is to be kept as two levels (then written here). Two-level is
+// refused for inputs that are not scene files and with the options only a flat tree reads; auto
+// (the default for scene files) applies tsah::cli::chooseStructure unless such options ask for a
+// flat tree.
+bool runTwoLevel(const Options& opt) {
+  using tsah::cli::UsageError;
+  const bool scene = anim::isSceneFile(opt.input);
+  const std::string structure = opt.structure.empty() ? (scene ? "auto" : "flat") : opt.structure;
+  if (structure == "flat") return false;
+  const bool asked = structure == "two-level";
+  if (asked && !scene)
+    throw UsageError("--structure two-level needs a scene file (.json with objects); " + opt.input +
+                     " is one animation: use --structure flat");
+  const bool flatOnly = opt.segments != "1" || opt.tree.device == tsah::Device::Cuda || !opt.devices.empty() ||
+                        opt.tree.method != tsah::Method::TSah;
+  if (asked && flatOnly)
+    throw UsageError("--structure two-level builds T-SAH trees on the CPU: it does not go with --segments, "
+                     "--device cuda, --devices or --method other than tsah");
+  if (!scene || flatOnly) return false;
+  anim::SceneSources sources = tsah::cli::loadSceneSourcesForCli(opt.input);
+  const tsah::cli::StructureChoice choice = tsah::cli::chooseStructure(sources);
+  if (!asked && !choice.twoLevel) return false;
+  if (!tsah::cli::job::leader()) return true;
+  tsah::cli::optimizeTwoLevel(std::move(sources), opt.input, opt.output, opt.tree, asked ? "" : choice.reason,
+                              opt.json);
+  return true;
+}
+
 void run(const Options& opt) {
   tsah::TreeOptions treeOpt = opt.tree;
   const tsah::MethodSpec method = treeOpt.methodSpec();
   tsah::cli::checkTreeDevice(treeOpt);
   if (!opt.devices.empty() && treeOpt.device != tsah::Device::Cuda)
     throw tsah::cli::UsageError("--devices chooses GPUs: use it with --device cuda");
+  if (runTwoLevel(opt)) return;
   const anim::Animation a = tsah::cli::loadInput(opt.input);
   if (a.triangleCount() == 0) throw tsah::cli::UsageError(opt.input + ": no triangles to build a tree over");
   // A static input has one frame: resampling it would only repeat that frame.
@@ -316,6 +349,12 @@ TSAH_REGISTER_COMMAND(40, [](CLI::App& app) {
   auto* maxTrees = sub->add_option("--max-trees", opt->maxTrees, "--segments auto: at most this many trees")
       ->check(CLI::Range(1u, tsah::kTbvhMaxTrees))
       ->capture_default_str();
+  sub->add_option("--structure", opt->structure,
+                  "flat: one tree over the baked scene; two-level: one tree per source and a top-level tree over "
+                  "the instances (scene files, .tbvh version 3); auto (the default for scene files): two-level "
+                  "when a source has several instances, an instance moves along a path, or animated and static "
+                  "sources meet, else flat")
+      ->check(CLI::IsMember({"flat", "two-level", "auto"}));
   sub->add_flag("--json", opt->json, "Print one JSON object");
   sub->add_flag("--reproducible", opt->reproducible,
                 "Write 0 as every tree's build time: the same inputs give the same file bytes, however the work "

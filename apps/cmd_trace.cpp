@@ -24,6 +24,7 @@
 #include "frame_runtime.hpp"
 #include "scale_out.hpp"
 #include "trace_report.hpp"
+#include "two_level_cli.hpp"
 #include "tsah/render/camera.hpp"
 #include "tsah/render/camera_path.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
@@ -61,6 +62,7 @@ struct TraceOptions {
   std::string devices;  // --devices all|0,2,...
   double shutter = 0.0;                  // motion blur: fraction of the frame interval
   std::string shutterMode = "centered";  // centered | open
+  std::string tlas;                      // two-level trees: refit (default) | rebuild
 };
 
 // --shutter: the shutter of each frame; usage errors for values and combinations it cannot serve
@@ -123,11 +125,28 @@ void runTrace(const TraceOptions& opt) {
   if (!(tsah::dot(up, up) > 0.0f)) throw UsageError("--up must not be zero");
 
   // Inputs: the tree (or tree set: each frame refits the tree of its part) is validated completely
-  // by the reader; then it must match the animation.
-  const tsah::TreeSet trees = tsah::decodeTreeSetFile(tsah::readFile(opt.bvh), opt.bvh);
-  const tsah::BvhBuildInfo& info = trees.builds.front();
+  // by the reader; then it must match the animation. A two-level tree (version 3) is read with its
+  // scene, which checks that it was built for it.
+  const bool twoLevel = tsah::cli::isTwoLevelTreeFile(opt.bvh);
+  std::shared_ptr<const tsah::TwoLevelScene> twoLevelScene;
+  tsah::TreeSet trees;
+  if (twoLevel) {
+    if (opt.device == tsah::Device::Cuda || runtimeOptions.rebuild != tsah::cli::Rebuild::None ||
+        runtimeOptions.shutter.fraction > 0.0 || !opt.devices.empty() || runtimeOptions.isa)
+      throw UsageError(opt.bvh + " holds a two-level scene: it is traced on the CPU, without --device cuda, "
+                       "--devices, --rebuild (see --tlas rebuild), --shutter or --isa");
+    if (!anim::isSceneFile(opt.input))
+      throw UsageError(opt.bvh + " holds a two-level scene: trace it with its scene file, not " + opt.input);
+    twoLevelScene = std::make_shared<const tsah::TwoLevelScene>(
+        tsah::loadTwoLevelSceneFile(opt.bvh, tsah::cli::loadSceneSourcesForCli(opt.input)));
+  } else {
+    if (!opt.tlas.empty())
+      throw UsageError("--tlas goes with a two-level tree (.tbvh version 3); " + opt.bvh + " is a flat tree");
+    trees = tsah::decodeTreeSetFile(tsah::readFile(opt.bvh), opt.bvh);
+  }
+  const tsah::BvhBuildInfo& info = twoLevel ? twoLevelScene->tlasInfo : trees.builds.front();
   const anim::Animation a = tsah::cli::loadInput(opt.input);
-  tsah::cli::checkTreeMatchesAnimation(info, opt.bvh, a, opt.input);
+  if (!twoLevel) tsah::cli::checkTreeMatchesAnimation(info, opt.bvh, a, opt.input);
   runtimeOptions.objective = info.objective;
   const uint32_t frameCount = opt.frames ? opt.frames : std::min<uint32_t>(a.keyframeCount(), 50);
   const auto [first, end] = tsah::cli::parseFrameRange(opt.range, frameCount);
@@ -143,7 +162,11 @@ void runTrace(const TraceOptions& opt) {
   std::vector<std::unique_ptr<tsah::cli::FrameRuntime>> runtimes;
   for (int gpu : devices) {
     runtimeOptions.gpu = gpu;
-    runtimes.push_back(tsah::cli::makeFrameRuntime(trees, a, runtimeOptions));
+    runtimes.push_back(twoLevel ? tsah::cli::makeTwoLevelFrameRuntime(
+                                      twoLevelScene, runtimeOptions.layout, runtimeOptions.threads,
+                                      opt.tlas == "rebuild" ? tsah::TwoLevelRuntime::TlasUpdate::Rebuild
+                                                            : tsah::TwoLevelRuntime::TlasUpdate::Refit)
+                                : tsah::cli::makeFrameRuntime(trees, a, runtimeOptions));
   }
   const tsah::cli::FrameRuntime& rt = *runtimes.front();
 
@@ -198,7 +221,9 @@ void runTrace(const TraceOptions& opt) {
   if (runtimeOptions.shutter.fraction > 0.0)
     std::snprintf(blur, sizeof blur, ", shutter %g %s", opt.shutter, opt.shutterMode.c_str());
   const std::string mode =
-      rebuilds ? "rebuild " + opt.rebuild + (tsah::cli::isGpuRebuild(runtimeOptions.rebuild) ? " (GPU)" : " (CPU)")
+      twoLevel ? "two-level, TLAS " + std::string(opt.tlas == "rebuild" ? "rebuilt (sweep SAH)" : "refitted") +
+                     " every frame"
+      : rebuilds ? "rebuild " + opt.rebuild + (tsah::cli::isGpuRebuild(runtimeOptions.rebuild) ? " (GPU)" : " (CPU)")
                : trees.size() > 1 ? "refit of the tree of each frame's part (" + std::to_string(trees.size()) + " trees)"
                                   : std::string("refit") + blur;
   const bool leader = tsah::cli::job::leader();
@@ -253,6 +278,7 @@ void runTrace(const TraceOptions& opt) {
   out["bvh"] = opt.bvh;
   out["method"] = info.method;
   out["trees"] = trees.size();
+  out["structure"] = twoLevel ? "two-level" : "flat";
   out["rebuild"] = opt.rebuild;
   out["width"] = opt.width;
   out["height"] = opt.height;
@@ -291,7 +317,7 @@ TSAH_REGISTER_COMMAND(70, [](CLI::App& app) {
       "trace", "Trace every frame with only a refit (or a rebuild): PNG per frame, update and ray-tracing times");
   auto opt = std::make_shared<TraceOptions>();
   sub->add_option("ANIMATION", opt->input, "The animation (any input `tsah info` reads)")->required();
-  sub->add_option("BVH", opt->bvh, "Tree from `tsah optimize` (.tbvh) built for this animation")->required();
+  sub->add_option("BVH", opt->bvh, "Tree from `tsah optimize` (.tbvh) built for this animation (a two-level tree: for this scene file)")->required();
   tsah::cli::addChoice(*sub, "--device", opt->device,
                        "cpu (default) or cuda (the GPU runtime, when built and a GPU is present)",
                        {tsah::Device::Cpu, tsah::Device::Cuda});
@@ -316,6 +342,10 @@ TSAH_REGISTER_COMMAND(70, [](CLI::App& app) {
                   "with --layout cwbvh each rebuilt tree is converted to the compressed 8-wide layout on the GPU, "
                   "and the conversion counts in the update)")
       ->check(CLI::IsMember({"none", "sweep", "binned", "lbvh", "hlbvh-sah"}));
+  sub->add_option("--tlas", opt->tlas,
+                  "A two-level tree (.tbvh version 3): refit (default: the top-level tree optimized over the "
+                  "scene's frames, refitted) or rebuild (a sweep-SAH top-level tree built every frame, the reference)")
+      ->check(CLI::IsMember({"refit", "rebuild"}));
   sub->add_option("--camera", opt->camera, "Camera JSON file: {eye, look_at, up, fov} or {keys: [{time, ...}]}");
   sub->add_option("--eye", opt->eye, "Camera position x,y,z (with --look-at)");
   sub->add_option("--look-at", opt->lookAt, "Point the camera looks at x,y,z");

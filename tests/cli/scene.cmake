@@ -17,7 +17,7 @@ add_test(NAME cli.scene.resample.info COMMAND tsah info ${W}/scene_demo.tanim --
 set_tests_properties(cli.scene.resample.info PROPERTIES FIXTURES_REQUIRED scene_tanim
   PASS_REGULAR_EXPRESSION "\"frames\":21,.*\"moving_vertices\":[1-9][0-9]*,.*\"triangles\":12240")
 
-add_test(NAME cli.scene.optimize COMMAND tsah optimize ${SCENE} -o ${W}/scene_demo.tbvh --frames 3)
+add_test(NAME cli.scene.optimize COMMAND tsah optimize ${SCENE} -o ${W}/scene_demo.tbvh --frames 3 --structure flat)
 set_tests_properties(cli.scene.optimize PROPERTIES FIXTURES_SETUP scene_tree)
 add_test(NAME cli.scene.evaluate COMMAND tsah evaluate ${SCENE} --methods sah0,tsah --eval-frames 5 --json)
 set_tests_properties(cli.scene.evaluate PROPERTIES PASS_REGULAR_EXPRESSION "\"tsah")

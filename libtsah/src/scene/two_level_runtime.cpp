@@ -92,6 +92,15 @@ struct TwoLevelRuntime::Pool {
   tbb::task_arena arena;
 };
 
+void TwoLevelRuntime::parallelFor(std::size_t n, std::size_t grain,
+                                  const std::function<void(std::size_t, std::size_t)>& body) const {
+  if (n == 0) return;
+  pool_->arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, std::max<std::size_t>(1, grain)),
+                      [&](const tbb::blocked_range<std::size_t>& r) { body(r.begin(), r.end()); });
+  });
+}
+
 TwoLevelRuntime::TwoLevelRuntime(const TwoLevelScene& scene, Config config) : scene_(scene), config_(config) {
   const uint32_t hardware = uint32_t(std::max(1, tbb::info::default_concurrency()));
   pool_ = std::make_unique<Pool>(config.threads == 0 ? hardware : std::min(config.threads, hardware));

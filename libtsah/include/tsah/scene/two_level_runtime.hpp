@@ -10,6 +10,7 @@
 // (CpuRuntime::closestHit / anyHit: the same traversal and watertight triangle test as a single
 // tree); the TLAS itself is traced by the binary traversal loop (detail::traverse).
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <span>
 #include <vector>
@@ -75,6 +76,9 @@ class TwoLevelRuntime {
   uint32_t lastUpdateBlasRefits() const { return lastRefits_; }
   uint64_t blasRefits() const { return totalRefits_; }
   double time() const { return time_; }
+  const TwoLevelScene& scene() const { return scene_; }
+  // Runs body over [0, n) in chunks of at least `grain` on the runtime's threads (the renderer's passes).
+  void parallelFor(std::size_t n, std::size_t grain, const std::function<void(std::size_t, std::size_t)>& body) const;
 
   // The instances' world boxes at the current time, and the TLAS in canonical form (its node boxes
   // those of the current time; slots hold instance ids). An instance whose world transform is

@@ -1,0 +1,217 @@
+#include "two_level_cli.hpp"
+
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+
+#include "bvh_info.hpp"
+#include "cli.hpp"
+#include "tsah/base/error.hpp"
+#include "tsah/base/files.hpp"
+#include "tsah/io/two_level_file.hpp"
+#include "tsah/scene/two_level_render.hpp"
+
+namespace tsah::cli {
+
+bool isTwoLevelTreeFile(const std::string& path) {
+  if (!looksLikeBvhFile(path)) return false;
+  const InputFile in(path);
+  uint32_t version = 0;
+  return ::pread(in.fd(), &version, sizeof version, 8) == ssize_t(sizeof version) && version == kTbvhTwoLevelVersion;
+}
+
+anim::SceneSources loadSceneSourcesForCli(const std::string& scenePath) {
+  anim::LoadOptions load = commandLineLoadOptions();
+  load.resolveDataPath = dataPathResolver();
+  load.warning = [](const std::string& text) { std::fprintf(stderr, "tsah: warning: %s\n", text.c_str()); };
+  return anim::loadSceneSources(scenePath, load);
+}
+
+StructureChoice chooseStructure(const anim::SceneSources& scene) {
+  const auto objectName = [&](const anim::SceneSourceInstance& i) {
+    return "'" + scene.description.objects[i.object].name + "'";
+  };
+  std::vector<uint32_t> instancesOf(scene.sources.size(), 0);
+  for (const anim::SceneSourceInstance& i : scene.instances)
+    if (++instancesOf[i.source] == 2) return {true, "object " + objectName(i) + " has more than one instance"};
+  for (const anim::SceneSourceInstance& i : scene.instances)
+    if (i.keyed()) return {true, "object " + objectName(i) + " moves along a keyed path"};
+  bool animated = false, still = false;
+  for (const auto& source : scene.sources) (source->keyframeCount() > 1 ? animated : still) = true;
+  if (animated && still) return {true, "animated objects move among static ones"};
+  return {false, "every object is one instance without a path, all of them animated or all static"};
+}
+
+nlohmann::json describeTwoLevel(const TwoLevelScene& s) {
+  nlohmann::json blases = nlohmann::json::array();
+  uint32_t animated = 0;
+  for (const Blas& b : s.blases) {
+    const anim::Animation& source = *s.scene.sources[b.source];
+    animated += b.animated ? 1 : 0;
+    blases.push_back({{"source", b.source},
+                      {"name", source.name()},
+                      {"animated", b.animated},
+                      {"triangles", source.triangleCount()},
+                      {"keyframes", source.keyframeCount()},
+                      {"nodes", b.bvh.nodeCount()},
+                      {"build_frames", b.frameCosts.size()},
+                      {"cost", b.cost}});
+  }
+  double average = 0.0, maximum = 0.0;
+  for (double c : s.tlasFrameCosts) {
+    average += c / double(s.tlasFrameCosts.size());
+    maximum = std::max(maximum, c);
+  }
+  return {{"structure", "two-level"},
+          {"blas", {{"count", s.blases.size()}, {"static", s.blases.size() - animated}, {"animated", animated}}},
+          {"instances", s.instanceCount()},
+          {"poses", s.poses.size()},
+          {"scene_frames", s.frameTimes.size()},
+          {"k", s.objective.k},
+          {"tlas", {{"nodes", s.tlas.nodeCount()},
+                    {"cost", s.tlasCost},
+                    {"frame_cost", {{"average", average}, {"maximum", maximum}}}}},
+          {"blases", blases},
+          {"bytes", {{"blas", s.blasBytes()}, {"tlas", s.tlasBytes()}, {"total", s.memoryBytes()}}}};
+}
+
+namespace {
+
+double mib(uint64_t bytes) { return double(bytes) / (1024.0 * 1024.0); }
+
+void printTwoLevel(const nlohmann::json& j) {
+  const auto& b = j["blas"];
+  std::printf("structure   two-level: %u BLAS (%u static, %u animated), %u instances, %u poses\n",
+              b["count"].get<unsigned>(), b["static"].get<unsigned>(), b["animated"].get<unsigned>(),
+              j["instances"].get<unsigned>(), j["poses"].get<unsigned>());
+  const auto& t = j["tlas"];
+  std::printf("TLAS        %u nodes; T-SAH cost (k=%d) %.3f over %u scene frames (per frame: average %.3f, maximum %.3f)\n",
+              t["nodes"].get<unsigned>(), j["k"].get<int>(), t["cost"].get<double>(), j["scene_frames"].get<unsigned>(),
+              t["frame_cost"]["average"].get<double>(), t["frame_cost"]["maximum"].get<double>());
+  for (const auto& blas : j["blases"])
+    std::printf("BLAS %-6u %-8s %u triangles, %u keyframes, %u nodes, cost %.3f over %u build frames  %s\n",
+                blas["source"].get<unsigned>(), blas["animated"].get<bool>() ? "animated" : "static",
+                blas["triangles"].get<unsigned>(), blas["keyframes"].get<unsigned>(), blas["nodes"].get<unsigned>(),
+                blas["cost"].get<double>(), blas["build_frames"].get<unsigned>(), blas["name"].get<std::string>().c_str());
+  const auto& m = j["bytes"];
+  std::printf("memory      BLAS %.2f MiB, TLAS %.2f MiB, total with the instance table %.2f MiB\n",
+              mib(m["blas"].get<uint64_t>()), mib(m["tlas"].get<uint64_t>()), mib(m["total"].get<uint64_t>()));
+}
+
+}  // namespace
+
+void optimizeTwoLevel(anim::SceneSources scene, const std::string& input, const std::string& output,
+                      const TreeOptions& options, const std::string& reason, bool json) {
+  const auto start = std::chrono::steady_clock::now();
+  const TwoLevelScene twoLevel = buildTwoLevelScene(std::move(scene), options);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  saveTwoLevelScene(output, twoLevel);
+  nlohmann::json j = describeTwoLevel(twoLevel);
+  j["input"] = input;
+  j["output"] = output;
+  j["structure_rule"] = reason.empty() ? "asked for (--structure two-level)" : "auto: " + reason;
+  j["build_s"] = seconds;
+  if (json) {
+    std::printf("%s\n", j.dump().c_str());
+    return;
+  }
+  std::printf("%s: two-level scene (%s)\n", output.c_str(), j["structure_rule"].get<std::string>().c_str());
+  printTwoLevel(j);
+  std::printf("build       %.2f s\n", seconds);
+}
+
+void describeTwoLevelFile(const std::string& treePath, const std::string& scenePath, bool json) {
+  const TwoLevelScene twoLevel = loadTwoLevelSceneFile(treePath, loadSceneSourcesForCli(scenePath));
+  nlohmann::json j = describeTwoLevel(twoLevel);
+  j["format"] = "tbvh";
+  j["version"] = kTbvhTwoLevelVersion;
+  j["file"] = treePath;
+  j["scene"] = scenePath;
+  if (json) {
+    std::printf("%s\n", j.dump().c_str());
+    return;
+  }
+  std::printf("file        %s (.tbvh version 3) for %s\n", treePath.c_str(), scenePath.c_str());
+  printTwoLevel(j);
+}
+
+namespace {
+
+double msSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+class TwoLevelFrameRuntime final : public FrameRuntime {
+ public:
+  TwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, TwoLevelRuntime::Config config)
+      : scene_(std::move(scene)), runtime_(*scene_, config), view_(runtime_), layout_(config.layout), tlas_(config.tlas) {}
+
+  void warmUp(double, const std::function<Camera(double)>&, const SceneLighting&, const RenderSettings&) override {
+    runtime_.parallelFor(64, 1, [](std::size_t, std::size_t) {});
+  }
+
+  // update: the poses' refits, the instances' transforms and the TLAS (refitMs). The world mesh
+  // the renderer shades from is shading work: its time is added to the frame's shading time.
+  FrameUpdate update(double time) override {
+    FrameUpdate u;
+    const auto start = std::chrono::steady_clock::now();
+    runtime_.update(time);
+    u.refitMs = msSince(start);
+    u.updateMs = u.refitMs;
+    meshMs_ = view_.updateMesh();
+    return u;
+  }
+
+  FrameRender render(const Camera& camera, const SceneLighting& lighting, const RenderSettings& settings,
+                     Image* image) override {
+    FrameRender r;
+    r.rays = renderFrame(view_, camera, lighting, settings, image ? *image : scratch_);
+    r.rays.shadeMs += meshMs_;
+    r.frameMs = r.rays.total().ms;
+    return r;
+  }
+
+  uint32_t currentTree() const override { return 0; }
+
+  std::string summary() const override {
+    return "CPU, two-level: " + std::to_string(scene_->blases.size()) + " BLAS in " + name(layout_) + ", " +
+           std::to_string(scene_->instanceCount()) + " instances, TLAS " +
+           (tlas_ == TwoLevelRuntime::TlasUpdate::Refit ? "refitted" : "rebuilt") + " per frame";
+  }
+
+  void describe(nlohmann::json& out) const override {
+    out["device"] = "cpu";
+    out["timer"] = "host steady clock";
+    out["layout"] = name(layout_);
+    out["two_level"] = describeTwoLevel(*scene_);
+    out["two_level"].erase("blases");
+    out["two_level"]["tlas_update"] = tlas_ == TwoLevelRuntime::TlasUpdate::Refit ? "refit" : "rebuild";
+    out["two_level"]["runtime_bytes"] = runtime_.memoryBytes();
+    out["two_level"]["blas_refits"] = runtime_.blasRefits();
+  }
+
+ private:
+  std::shared_ptr<const TwoLevelScene> scene_;
+  TwoLevelRuntime runtime_;
+  TwoLevelRenderView view_;
+  Layout layout_;
+  TwoLevelRuntime::TlasUpdate tlas_;
+  Image scratch_;
+  double meshMs_ = 0.0;  // the last updateMesh
+};
+
+}  // namespace
+
+std::unique_ptr<FrameRuntime> makeTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, Layout layout,
+                                                       unsigned threads, TwoLevelRuntime::TlasUpdate tlas) {
+  TwoLevelRuntime::Config config;
+  config.threads = threads;
+  config.tlas = tlas;
+  config.layout = layout == Layout::Auto ? fastestLayout() : layout;
+  return std::make_unique<TwoLevelFrameRuntime>(std::move(scene), config);
+}
+
+}  // namespace tsah::cli

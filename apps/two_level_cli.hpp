@@ -1,0 +1,47 @@
+#pragma once
+// Two-level scenes on the command line (docs/two-level.md): `tsah optimize --structure`, `tsah info`
+// of a version 3 .tbvh file with its scene, and the frame runtime `tsah trace` uses for one.
+#include <memory>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "anim/scene.hpp"
+#include "frame_runtime.hpp"
+#include "tsah/pipeline.hpp"
+#include "tsah/scene/two_level.hpp"
+#include "tsah/scene/two_level_runtime.hpp"
+
+namespace tsah::cli {
+
+// True when `path` is a .tbvh file of version 3 (a two-level scene).
+bool isTwoLevelTreeFile(const std::string& path);
+
+// The scene's sources and instances with the command line's load options (fps, clip, data folder).
+anim::SceneSources loadSceneSourcesForCli(const std::string& scenePath);
+
+// --structure auto: "two-level" or "flat", and the rule's reason in words (docs/two-level.md).
+struct StructureChoice {
+  bool twoLevel = false;
+  std::string reason;
+};
+StructureChoice chooseStructure(const anim::SceneSources& scene);
+
+// `tsah optimize SCENE --structure two-level`: builds and writes the version 3 file and prints the
+// structure (text, or one JSON object), with `reason` the rule that chose it ("" when asked for).
+void optimizeTwoLevel(anim::SceneSources scene, const std::string& input, const std::string& output,
+                      const TreeOptions& options, const std::string& reason, bool json);
+
+// The structure as JSON: BLAS (static / animated, each one's cost and bytes), instances, poses, the
+// TLAS cost over the scene frames, the bytes of each level.
+nlohmann::json describeTwoLevel(const TwoLevelScene& scene);
+
+// `tsah info TREE SCENE` for a version 3 TREE.
+void describeTwoLevelFile(const std::string& treePath, const std::string& scenePath, bool json);
+
+// The frame runtime of a two-level scene on the CPU (TwoLevelRuntime + the renderer's loop through
+// it). Owns the scene.
+std::unique_ptr<FrameRuntime> makeTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, Layout layout,
+                                                       unsigned threads, TwoLevelRuntime::TlasUpdate tlas);
+
+}  // namespace tsah::cli

@@ -1,0 +1,68 @@
+# Two-level scenes on the command line (docs/two-level.md): tsah optimize --structure, tsah info
+# TREE SCENE, tsah trace of a version 3 tree (the same images as the flat tree's at the scene's
+# frames), and the bad inputs of each.
+set(W ${TSAH_CLI_WORK})
+set(SCENE ${CMAKE_SOURCE_DIR}/samples/scenes/demo.json)
+set(TL_TRACE --frames 21 --width 64 --height 48 --ao 2 --shadow 1)
+
+# auto (the default for scene files) keeps demo.json as two levels: the pillars have four instances.
+add_test(NAME cli.two_level.optimize.auto COMMAND tsah optimize ${SCENE} -o ${W}/tl_auto.tbvh --frames 3)
+set_tests_properties(cli.two_level.optimize.auto PROPERTIES FIXTURES_SETUP tl_tree PASS_REGULAR_EXPRESSION
+  "two-level scene \\(auto: object 'pillars' has more than one instance\\).*3 BLAS \\(2 static, 1 animated\\), 7 instances, 2 poses.*TLAS .*T-SAH cost.*memory .*BLAS .*MiB.*build ")
+add_test(NAME cli.two_level.optimize.json
+         COMMAND tsah optimize ${SCENE} -o ${W}/tl_asked.tbvh --frames 3 --structure two-level --json)
+set_tests_properties(cli.two_level.optimize.json PROPERTIES PASS_REGULAR_EXPRESSION
+  "\"blas\":\\{\"animated\":1,\"count\":3,\"static\":2\\}.*\"instances\":7,.*\"poses\":2,.*\"structure_rule\":\"asked for")
+add_test(NAME cli.two_level.optimize.flat COMMAND tsah optimize ${SCENE} -o ${W}/tl_flat.tbvh --frames 3 --structure flat)
+set_tests_properties(cli.two_level.optimize.flat PROPERTIES FIXTURES_SETUP tl_flat
+  PASS_REGULAR_EXPRESSION "tl_flat.tbvh: tsah0 tree, 12240 triangles")
+
+add_test(NAME cli.two_level.info COMMAND tsah info ${W}/tl_auto.tbvh ${SCENE})
+set_tests_properties(cli.two_level.info PROPERTIES FIXTURES_REQUIRED tl_tree PASS_REGULAR_EXPRESSION
+  "\\.tbvh version 3.*3 BLAS \\(2 static, 1 animated\\), 7 instances, 2 poses.*TLAS .*over 21 scene frames.*BLAS 2 +animated.*memory ")
+add_test(NAME cli.two_level.info.json COMMAND tsah info ${W}/tl_auto.tbvh ${SCENE} --json)
+set_tests_properties(cli.two_level.info.json PROPERTIES FIXTURES_REQUIRED tl_tree PASS_REGULAR_EXPRESSION
+  "\"bytes\":\\{\"blas\":[1-9][0-9]*,\"tlas\":[1-9][0-9]*,\"total\".*\"scene_frames\":21,.*\"version\":3")
+
+# The two-level trace (TLAS refitted, and rebuilt every frame) gives the flat tree's images, byte for
+# byte, at the scene's 21 frames (the library allows ties between coincident surfaces; this scene
+# has none).
+add_test(NAME cli.two_level.trace.flat COMMAND tsah trace ${SCENE} ${W}/tl_flat.tbvh ${TL_TRACE} --out ${W}/tl_img_flat)
+set_tests_properties(cli.two_level.trace.flat PROPERTIES FIXTURES_REQUIRED tl_flat FIXTURES_SETUP tl_img_flat)
+foreach(tlas refit rebuild)
+  add_test(NAME cli.two_level.trace.${tlas}
+           COMMAND tsah trace ${SCENE} ${W}/tl_auto.tbvh ${TL_TRACE} --tlas ${tlas} --out ${W}/tl_img_${tlas} --json)
+  set_tests_properties(cli.two_level.trace.${tlas} PROPERTIES FIXTURES_REQUIRED tl_tree FIXTURES_SETUP tl_img_${tlas}
+    PASS_REGULAR_EXPRESSION "\"structure\":\"two-level\".*\"tlas_update\":\"${tlas}\"")
+  foreach(frame 0000 0007 0013 0020)
+    add_test(NAME cli.two_level.trace.${tlas}.same_image.${frame}
+             COMMAND ${CMAKE_COMMAND} -E compare_files ${W}/tl_img_flat/frame_${frame}.png ${W}/tl_img_${tlas}/frame_${frame}.png)
+    set_tests_properties(cli.two_level.trace.${tlas}.same_image.${frame} PROPERTIES
+      FIXTURES_REQUIRED "tl_img_flat;tl_img_${tlas}")
+  endforeach()
+endforeach()
+
+# Bad inputs: one line naming the file or option, exit 1 (data) or 2 (usage)
+# (tsah_expect_error: tests/cli/hardening.cmake).
+function(tl_error name code regex)
+  tsah_expect_error(${name} ${code} "${regex}" ${ARGN})
+  set_tests_properties(${name} PROPERTIES FIXTURES_REQUIRED "tl_tree;tl_flat")
+endfunction()
+file(READ ${SCENE} tl_other)
+string(REPLACE "../explode" "${CMAKE_SOURCE_DIR}/samples/explode" tl_other "${tl_other}")
+string(REPLACE "\"offset\": 0.5" "\"offset\": 0.25" tl_other "${tl_other}")
+file(WRITE ${W}/tl_other_scene.json "${tl_other}")
+tl_error(cli.two_level.error.wrong_scene 1 "[^\n]*tl_auto.tbvh was not built for [^\n]*tl_other_scene.json"
+         trace ${W}/tl_other_scene.json ${W}/tl_auto.tbvh --frames 1 --no-images)
+tl_error(cli.two_level.error.info_without_scene 2 "[^\n]*tl_auto.tbvh holds a two-level scene \\(.tbvh version 3\\): give its scene too"
+         info ${W}/tl_auto.tbvh)
+tl_error(cli.two_level.error.export 2 "[^\n]*tl_auto.tbvh holds a two-level scene \\(.tbvh version 3\\): tsah export writes flat trees"
+         export ${W}/tl_auto.tbvh ${SCENE} -o ${W}/tl_export)
+tl_error(cli.two_level.error.tlas_flat 2 "--tlas goes with a two-level tree[^\n]*tl_flat.tbvh is a flat tree"
+         trace ${SCENE} ${W}/tl_flat.tbvh --tlas rebuild --frames 1 --no-images)
+tl_error(cli.two_level.error.trace_rebuild 2 "[^\n]*tl_auto.tbvh holds a two-level scene: it is traced on the CPU, without"
+         trace ${SCENE} ${W}/tl_auto.tbvh --rebuild sweep --frames 1 --no-images)
+tl_error(cli.two_level.error.not_a_scene 2 "--structure two-level needs a scene file[^\n]*explode is one animation"
+         optimize ${CMAKE_SOURCE_DIR}/samples/explode -o ${W}/tl_bad.tbvh --structure two-level)
+tl_error(cli.two_level.error.segments 2 "--structure two-level builds T-SAH trees on the CPU: it does not go with --segments"
+         optimize ${SCENE} -o ${W}/tl_bad.tbvh --structure two-level --segments 2)
