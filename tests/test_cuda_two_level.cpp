@@ -15,6 +15,7 @@
 #include "tsah_cuda/gpu_two_level.hpp"
 #include "cuda_test_support.hpp"
 #include "test_support.hpp"
+#include "two_level_scene.hpp"
 
 namespace fs = std::filesystem;
 
@@ -23,39 +24,6 @@ namespace {
 // Relative tolerance on t: both runtimes move the ray into instance space with the same float
 // operations and run the same traversal; only the compilers' rounding of the transform may differ.
 constexpr float kRelativeT = 1e-5f;
-
-// The scene of test_two_level.cpp: a static and an animated source placed with rotations,
-// non-uniform and mirrored scales, keyed paths and time offsets (two instances share a pose).
-fs::path writeScene(const fs::path& dir) {
-  const anim::Animation wave = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 300, 9, 3);
-  anim::saveTanim(wave, (dir / "wave.tanim").string());
-  const std::vector<float> first = wave.positionsAt(wave.startTime());
-  const std::vector<uint32_t> indices(wave.indices().begin(), wave.indices().end());
-  anim::saveTanim(anim::Animation(indices, wave.vertexCount(), first, {0.0}, "ground"), (dir / "ground.tanim").string());
-  tsah::test::writeText(dir / "scene.json", R"({"fps": 2, "objects": [
-    {"name": "ground", "file": "ground.tanim", "instances": [
-      {"transform": {"translate": [0, -1, 0], "rotate": [10, 20, 30], "scale": [3, 0.5, 2]}},
-      {"transform": {"matrix": [-1, 0, 0, 4,  0, 1, 0, 0,  0, 0, 1, 1,  0, 0, 0, 1]}},
-      {"transform": {"translate": [2, 1, -2]},
-       "path": [{"time": 0}, {"time": 12, "translate": [1, 2, 3], "rotate": [0, 90, 0], "scale": [1, 2, 1]}]}]},
-    {"name": "cloth", "file": "wave.tanim", "instances": [
-      {"transform": {"translate": [0, 2, 0]}},
-      {"offset": 1.5, "transform": {"translate": [0, 2, 4], "rotate": [0, 45, 0], "scale": [1, 1, -1]}},
-      {"time": {"offset": 3, "outside": "loop"}, "transform": {"rotate": [90, 0, 0], "scale": [0.5, 2, 1]},
-       "path": [{"time": 0}, {"time": 6, "translate": [0, 1, 0]}, {"time": 12, "translate": [-3, 0, 1], "rotate": [0, 0, 45]}]},
-      {"transform": {"translate": [5, 2, 0], "scale": [1, 1.5, 1]}}]}
-  ]})");
-  return dir / "scene.json";
-}
-
-tsah::TreeOptions smallOptions() {
-  tsah::TreeOptions options;
-  options.frames = 3;
-  options.objective.k = 2;
-  options.objective.maxLeafSize = 4;
-  options.threads = 2;
-  return options;
-}
 
 // Rays from random points around the scene's box to random points inside it (most hit something).
 std::vector<tsah::Ray> randomRays(const tsah::Aabb& bounds, uint32_t count, uint32_t seed) {
@@ -102,7 +70,7 @@ class CudaTwoLevel : public ::testing::Test {
   void SetUp() override {
     REQUIRE_GPU();
     dir = tsah::test::scratchDir();
-    scene = std::make_unique<tsah::TwoLevelScene>(tsah::loadTwoLevelScene(writeScene(dir).string(), {}, smallOptions()));
+    scene = std::make_unique<tsah::TwoLevelScene>(tsah::loadTwoLevelScene(tsah::test::writeTwoLevelScene(dir).string(), {}, tsah::test::smallTwoLevelOptions()));
   }
   fs::path dir;
   std::unique_ptr<tsah::TwoLevelScene> scene;
@@ -173,7 +141,7 @@ TEST(CudaTwoLevelRigid, OnlyPathsAndHeldPosesRefitNothing) {
   tsah::test::writeText(dir / "s.json", R"({"fps": 4, "objects": [{"file": "wave.tanim", "instances": [
     {"path": [{"time": 0}, {"time": 8, "translate": [5, 0, 0], "rotate": [0, 180, 0]}]},
     {"offset": 1, "transform": {"scale": [-1, 1, 1]}}]}]})");
-  const tsah::TwoLevelScene s = tsah::loadTwoLevelScene((dir / "s.json").string(), {}, smallOptions());
+  const tsah::TwoLevelScene s = tsah::loadTwoLevelScene((dir / "s.json").string(), {}, tsah::test::smallTwoLevelOptions());
   tsah::TwoLevelRuntime cpu(s);
   tsah::cuda::GpuTwoLevelRuntime gpu(s);
   EXPECT_EQ(gpu.updateAt(3.0).blasRefits, 2u);

@@ -15,6 +15,7 @@
 #include "tsah/scene/two_level.hpp"
 #include "tsah/scene/two_level_runtime.hpp"
 #include "test_support.hpp"
+#include "two_level_scene.hpp"
 
 namespace fs = std::filesystem;
 
@@ -26,41 +27,6 @@ using tsah::test::writeText;
 // world in float, the two-level runtime the ray transformed into instance space in float.
 constexpr float kRelativeT = 1e-4f;
 
-// Sources: a static mesh (the first frame of a generated wave, one keyframe) and an animated one
-// (a generated wave over keyframes at 0..8). The scene places them with rotations, non-uniform
-// scales, a mirrored placement, keyed paths (ending at 12, after the animation's last frame), and
-// instances of the animated source with different time offsets (two of them showing one pose).
-fs::path writeScene(const fs::path& dir) {
-  const anim::Animation wave = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 300, 9, 3);
-  anim::saveTanim(wave, (dir / "wave.tanim").string());
-  const std::vector<float> first = wave.positionsAt(wave.startTime());
-  const std::vector<uint32_t> indices(wave.indices().begin(), wave.indices().end());
-  anim::saveTanim(anim::Animation(indices, wave.vertexCount(), first, {0.0}, "ground"), (dir / "ground.tanim").string());
-  writeText(dir / "scene.json", R"({"fps": 2, "objects": [
-    {"name": "ground", "file": "ground.tanim", "instances": [
-      {"transform": {"translate": [0, -1, 0], "rotate": [10, 20, 30], "scale": [3, 0.5, 2]}},
-      {"transform": {"matrix": [-1, 0, 0, 4,  0, 1, 0, 0,  0, 0, 1, 1,  0, 0, 0, 1]}},
-      {"transform": {"translate": [2, 1, -2]},
-       "path": [{"time": 0}, {"time": 12, "translate": [1, 2, 3], "rotate": [0, 90, 0], "scale": [1, 2, 1]}]}]},
-    {"name": "cloth", "file": "wave.tanim", "instances": [
-      {"transform": {"translate": [0, 2, 0]}},
-      {"offset": 1.5, "transform": {"translate": [0, 2, 4], "rotate": [0, 45, 0], "scale": [1, 1, -1]}},
-      {"time": {"offset": 3, "outside": "loop"}, "transform": {"rotate": [90, 0, 0], "scale": [0.5, 2, 1]},
-       "path": [{"time": 0}, {"time": 6, "translate": [0, 1, 0]}, {"time": 12, "translate": [-3, 0, 1], "rotate": [0, 0, 45]}]},
-      {"transform": {"translate": [5, 2, 0], "scale": [1, 1.5, 1]}}]}
-  ]})");
-  return dir / "scene.json";
-}
-
-tsah::TreeOptions smallOptions() {
-  tsah::TreeOptions options;
-  options.frames = 3;
-  options.objective.k = 2;
-  options.objective.maxLeafSize = 4;
-  options.threads = 2;
-  return options;
-}
-
 // The flat baked scene traced by one tree, and the map from its triangle ids to (instance,
 // triangle of the source) by the bake order.
 struct FlatScene {
@@ -69,7 +35,7 @@ struct FlatScene {
   std::vector<uint32_t> firstTriangle, firstVertex;  // per instance, in bake order
 
   FlatScene(const fs::path& scene, const anim::SceneSources& sources) : baked(anim::bakeScene(scene.string())) {
-    const tsah::OptimizedTree tree = tsah::optimizeAnimation(baked.animation, smallOptions());
+    const tsah::OptimizedTree tree = tsah::optimizeAnimation(baked.animation, tsah::test::smallTwoLevelOptions());
     const auto& a = baked.animation;
     runtime = std::make_unique<tsah::CpuRuntime>(tsah::flattenBvh(tree.bvh),
                                                  std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
@@ -112,8 +78,8 @@ class TwoLevel : public ::testing::Test {
  protected:
   void SetUp() override {
     dir = tsah::test::scratchDir();
-    scenePath = writeScene(dir);
-    scene = std::make_unique<tsah::TwoLevelScene>(tsah::loadTwoLevelScene(scenePath.string(), {}, smallOptions()));
+    scenePath = tsah::test::writeTwoLevelScene(dir);
+    scene = std::make_unique<tsah::TwoLevelScene>(tsah::loadTwoLevelScene(scenePath.string(), {}, tsah::test::smallTwoLevelOptions()));
   }
   fs::path dir, scenePath;
   std::unique_ptr<tsah::TwoLevelScene> scene;
@@ -210,9 +176,9 @@ void expectFlatHits(const tsah::TwoLevelScene& scene, const fs::path& scenePath,
 
 TEST_F(TwoLevel, TheTopLevelOptimizedOverTimeCostsNoMoreThanSahOnTheFirstFrame) {
   // SAH0: the sweep-SAH TLAS of the first frame refitted to the others, collapsed the same way.
-  tsah::BaselineConfig config = smallOptions().baselineConfig();
+  tsah::BaselineConfig config = tsah::test::smallTwoLevelOptions().baselineConfig();
   const tsah::Bvh sah0 = tsah::buildSah0(scene->instanceBoxes, config);
-  const double sah0Cost = tsah::temporalCost(tsah::frameCosts(sah0, config.objective.cost), smallOptions().objective.k);
+  const double sah0Cost = tsah::temporalCost(tsah::frameCosts(sah0, config.objective.cost), tsah::test::smallTwoLevelOptions().objective.k);
   EXPECT_LE(scene->tlasCost, sah0Cost * (1 + 1e-9));
 }
 
@@ -306,7 +272,7 @@ TEST(TwoLevelRigid, OnlyPathsAndHeldPosesRefitNothing) {
   writeText(dir / "s.json", R"({"fps": 4, "objects": [{"file": "wave.tanim", "instances": [
     {"path": [{"time": 0}, {"time": 8, "translate": [5, 0, 0], "rotate": [0, 180, 0]}]},
     {"offset": 1, "transform": {"scale": [-1, 1, 1]}}]}]})");
-  const tsah::TwoLevelScene s = tsah::loadTwoLevelScene((dir / "s.json").string(), {}, smallOptions());
+  const tsah::TwoLevelScene s = tsah::loadTwoLevelScene((dir / "s.json").string(), {}, tsah::test::smallTwoLevelOptions());
   tsah::TwoLevelRuntime runtime(s);
   runtime.update(3.0);
   EXPECT_EQ(runtime.lastUpdateBlasRefits(), 2u);
@@ -324,7 +290,7 @@ TEST(TwoLevelRigid, AnInstanceFlattenedByItsPathIsNeverHitThenAndTracesAgainAfte
   // The scale goes from 1 to -1 in x: at t = 1 the instance is flat (a singular world transform).
   writeText(dir / "s.json", R"({"fps": 2, "objects": [{"file": "tri.obj",
     "path": [{"time": 0}, {"time": 2, "scale": [-1, 1, 1]}]}]})");
-  const tsah::TwoLevelScene s = tsah::loadTwoLevelScene((dir / "s.json").string(), {}, smallOptions());
+  const tsah::TwoLevelScene s = tsah::loadTwoLevelScene((dir / "s.json").string(), {}, tsah::test::smallTwoLevelOptions());
   tsah::TwoLevelRuntime runtime(s);
   tsah::Ray across;  // along x through (x, 1/3, 1/3)
   across.org = {-2.0f, 1.0f / 3.0f, 1.0f / 3.0f};
@@ -352,7 +318,7 @@ TEST(TwoLevelAffine, InverseOfAMirroredScaledRotation) {
 TEST_F(TwoLevel, AStructureWithoutInstancesIsRefused) {
   anim::SceneSources empty = anim::loadSceneSources(scenePath.string());
   empty.instances.clear();
-  EXPECT_THROW(tsah::buildTwoLevelScene(std::move(empty), smallOptions()), tsah::DataError);
+  EXPECT_THROW(tsah::buildTwoLevelScene(std::move(empty), tsah::test::smallTwoLevelOptions()), tsah::DataError);
 }
 
 TEST(TwoLevelOptions, OnlyTSahTrees) {

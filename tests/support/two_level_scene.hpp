@@ -1,0 +1,49 @@
+#pragma once
+// The two-level test scene shared by the CPU and GPU two-level tests: two sources (a static ground
+// and an animated cloth) placed with rotations, non-uniform scales, a mirrored placement, keyed
+// paths and time offsets, and the small tree options they build it with.
+#include <filesystem>
+#include <vector>
+
+#include "anim/tanim.hpp"
+#include "tsah/pipeline.hpp"
+#include "test_support.hpp"
+
+namespace tsah::test {
+
+// Sources: a static mesh (the first frame of a generated wave, one keyframe) and an animated one
+// (a generated wave over keyframes at 0..8). The scene places them with rotations, non-uniform
+// scales, a mirrored placement, keyed paths (ending at 12, after the animation's last frame), and
+// instances of the animated source with different time offsets (two of them showing one pose).
+inline std::filesystem::path writeTwoLevelScene(const std::filesystem::path& dir) {
+  const anim::Animation wave = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 300, 9, 3);
+  anim::saveTanim(wave, (dir / "wave.tanim").string());
+  const std::vector<float> first = wave.positionsAt(wave.startTime());
+  const std::vector<uint32_t> indices(wave.indices().begin(), wave.indices().end());
+  anim::saveTanim(anim::Animation(indices, wave.vertexCount(), first, {0.0}, "ground"), (dir / "ground.tanim").string());
+  tsah::test::writeText(dir / "scene.json", R"({"fps": 2, "objects": [
+    {"name": "ground", "file": "ground.tanim", "instances": [
+      {"transform": {"translate": [0, -1, 0], "rotate": [10, 20, 30], "scale": [3, 0.5, 2]}},
+      {"transform": {"matrix": [-1, 0, 0, 4,  0, 1, 0, 0,  0, 0, 1, 1,  0, 0, 0, 1]}},
+      {"transform": {"translate": [2, 1, -2]},
+       "path": [{"time": 0}, {"time": 12, "translate": [1, 2, 3], "rotate": [0, 90, 0], "scale": [1, 2, 1]}]}]},
+    {"name": "cloth", "file": "wave.tanim", "instances": [
+      {"transform": {"translate": [0, 2, 0]}},
+      {"offset": 1.5, "transform": {"translate": [0, 2, 4], "rotate": [0, 45, 0], "scale": [1, 1, -1]}},
+      {"time": {"offset": 3, "outside": "loop"}, "transform": {"rotate": [90, 0, 0], "scale": [0.5, 2, 1]},
+       "path": [{"time": 0}, {"time": 6, "translate": [0, 1, 0]}, {"time": 12, "translate": [-3, 0, 1], "rotate": [0, 0, 45]}]},
+      {"transform": {"translate": [5, 2, 0], "scale": [1, 1.5, 1]}}]}
+  ]})");
+  return dir / "scene.json";
+}
+
+inline tsah::TreeOptions smallTwoLevelOptions() {
+  tsah::TreeOptions options;
+  options.frames = 3;
+  options.objective.k = 2;
+  options.objective.maxLeafSize = 4;
+  options.threads = 2;
+  return options;
+}
+
+}  // namespace tsah::test
