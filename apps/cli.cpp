@@ -165,6 +165,21 @@ void addLoadOptions(CLI::App& app) {
                  "Animation clip to bake when a model holds several (name or index)");
 }
 
+CLI::Option* ShutterOptions::add(CLI::App& sub, const std::string& fractionHelp, const std::string& modeHelp) {
+  CLI::Option* shutter = sub.add_option("--shutter", fraction, fractionHelp);
+  sub.add_option("--shutter-mode", mode, modeHelp)->check(CLI::IsMember({"centered", "open"}))->needs(shutter);
+  return shutter;
+}
+
+tsah::Shutter ShutterOptions::checked(const std::string& fractionOf) const {
+  if (!(fraction >= 0.0 && fraction <= 1.0))
+    throw UsageError("--shutter must be between 0 and 1 (a fraction of " + fractionOf + ")");
+  tsah::Shutter shutter;
+  shutter.fraction = fraction;
+  shutter.mode = mode == "open" ? tsah::Shutter::Mode::Open : tsah::Shutter::Mode::Centered;
+  return shutter;
+}
+
 anim::Animation loadInput(const std::string& input, anim::LoadOptions options) {
   if (options.fps == 0.0) options.fps = commandLineLoadOptions().fps;
   if (options.clip.empty()) options.clip = commandLineLoadOptions().clip;

@@ -13,6 +13,7 @@
 #include "anim/load.hpp"
 #include "tsah/base/error.hpp"
 #include "tsah/core/kinds.hpp"
+#include "tsah/pipeline.hpp"
 
 namespace tsah::cli {
 
@@ -39,6 +40,16 @@ void setupAllCommands(CLI::App& app);
 void hardenNumericOptions(CLI::App& app);
 // A CLI11 message as one line with compact numbers ("0 to 1", not "0.000000 to 1.000000").
 std::string compactNumbers(const std::string& text);
+// --shutter FRACTION and --shutter-mode centered|open, as trace, export and bench take them.
+struct ShutterOptions {
+  double fraction = 0.0;          // --shutter
+  std::string mode = "centered";  // --shutter-mode
+  // Adds both options (--shutter-mode needs --shutter) and returns --shutter.
+  CLI::Option* add(CLI::App& sub, const std::string& fractionHelp, const std::string& modeHelp);
+  // The shutter; a UsageError "--shutter must be between 0 and 1 (a fraction of FRACTIONOF)" outside [0, 1].
+  tsah::Shutter checked(const std::string& fractionOf) const;
+};
+
 
 // An option naming a value of E (tsah/core/kinds.hpp), one of `allowed`: CLI11 refuses any other
 // name ("--flag: x not in {a,b}", exit 2) and the value is parsed once, into `target`, by

@@ -47,8 +47,7 @@ struct Options {
   tsah::bench::BenchOptions bench;
   std::string devices;  // --devices all|0,2,...
   bool list = false, reportOnly = false, noEmbree = false, noConvergence = false;
-  double shutter = 0.0;                  // --shutter: the motion-blur part
-  std::string shutterMode = "centered";  // --shutter-mode centered|open
+  tsah::cli::ShutterOptions shutter;  // --shutter, --shutter-mode: the motion-blur part
   bool scaling = false;  // --scaling: the optimizers' scaling mode (bench/scaling.hpp) instead
   tsah::bench::ScalingOptions scalingOptions;
 };
@@ -167,10 +166,7 @@ void runScalingMode(Options& opt, CLI::App* sub, const std::vector<tsah::bench::
 // --shutter and --motion-blur-only: the motion-blur part runs on the CPU against Embree, over the
 // time between two traced frames or more (checked after --quick has set the frame count).
 void checkShutter(const Options& opt, tsah::bench::BenchOptions& b) {
-  if (!(opt.shutter >= 0.0 && opt.shutter <= 1.0))
-    throw UsageError("--shutter must be between 0 and 1 (a fraction of the time between traced frames)");
-  b.shutter.fraction = opt.shutter;
-  b.shutter.mode = opt.shutterMode == "open" ? tsah::Shutter::Mode::Open : tsah::Shutter::Mode::Centered;
+  b.shutter = opt.shutter.checked("the time between traced frames");
   if (b.motionBlurOnly && b.shutter.fraction == 0.0)
     throw UsageError("--motion-blur-only runs the motion-blur part: give --shutter S with S > 0");
   if (b.motionBlurOnly && b.embreeOnly)
@@ -410,15 +406,12 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
                   "or cwbvh (compressed 8-wide: the refitted trees and the LBVH / HLBVH-SAH rebuilds, whose "
                   "conversion on the GPU counts in their update)",
                        {tsah::Layout::Auto, tsah::Layout::Bvh2, tsah::Layout::Bvh4, tsah::Layout::Bvh8, tsah::Layout::Cwbvh});
-  auto* shutter = sub->add_option(
-      "--shutter", opt->shutter,
+  opt->shutter.add(
+      *sub,
       "Motion-blur part (CPU): the shutter's length as a fraction of the time between traced frames, 0 to 1 "
       "(default 0: no motion-blur part); the toolkit's refit at the shutter's keys against Embree's motion-blur BVH "
-      "(built once, and rebuilt every frame) on the same rays at the same times");
-  sub->add_option("--shutter-mode", opt->shutterMode,
-                  "centered: the shutter around each traced frame's time (default); open: starting at it")
-      ->check(CLI::IsMember({"centered", "open"}))
-      ->needs(shutter);
+      "(built once, and rebuilt every frame) on the same rays at the same times",
+      "centered: the shutter around each traced frame's time (default); open: starting at it");
   sub->add_flag("--motion-blur-only", b.motionBlurOnly,
                 "Only the T-SAH tree and the motion-blur part (with --shutter): no Tables 1 and 2, convergence runs, "
                 "segments or instant Embree comparison");

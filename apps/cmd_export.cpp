@@ -216,8 +216,7 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
     double time = std::nan("");
     unsigned threads = 0;
     tsah::Layout layout = tsah::Layout::Bvh2;
-    double shutter = 0.0;
-    std::string shutterMode = "centered";
+    tsah::cli::ShutterOptions shutter;
     double frameInterval = std::nan("");
   };
   auto opt = std::make_shared<Options>();
@@ -234,13 +233,10 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
                        "bvh2: the binary Aila-Laine nodes (default); bvh4 / bvh8: the wide SIMD layout, collapsed "
                        "from the tree at export time (docs/wide-bvh.md)",
                        {tsah::Layout::Bvh2, tsah::Layout::Bvh4, tsah::Layout::Bvh8});
-  auto* shutter = sub->add_option("--shutter", opt->shutter,
-                                  "Motion blur: also write the tree refitted at the key times of the frame's shutter, "
-                                  "its length a fraction (0 to 1) of --frame-interval (docs/motion-blur.md)");
-  sub->add_option("--shutter-mode", opt->shutterMode,
-                  "centered: the shutter around the frame's time (default); open: starting at it")
-      ->check(CLI::IsMember({"centered", "open"}))
-      ->needs(shutter);
+  auto* shutter = opt->shutter.add(*sub,
+                                   "Motion blur: also write the tree refitted at the key times of the frame's shutter, "
+                                   "its length a fraction (0 to 1) of --frame-interval (docs/motion-blur.md)",
+                                   "centered: the shutter around the frame's time (default); open: starting at it");
   sub->add_option("--frame-interval", opt->frameInterval,
                   "The time between rendered frames that --shutter is a fraction of (default: the animation's "
                   "keyframe spacing, its duration over its keyframe intervals)")
@@ -250,11 +246,10 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
   sub->get_option("--boxes")->excludes(layout)->excludes(threads)->excludes(shutter);
   sub->callback([opt, boxes] {
     namespace fs = std::filesystem;
-    // A tree set exports the tree of the frame's part (tsah::treeIndexAt), as the runtimes use it.
-    if (!(opt->shutter >= 0.0 && opt->shutter <= 1.0))
-      throw tsah::cli::UsageError("--shutter must be between 0 and 1 (a fraction of the frame interval)");
+    const tsah::Shutter frameShutter = opt->shutter.checked("the frame interval");
     if (!(opt->frameInterval > 0.0) && !std::isnan(opt->frameInterval))
       throw tsah::cli::UsageError("--frame-interval must be a positive time");
+    // A tree set exports the tree of the frame's part (tsah::treeIndexAt), as the runtimes use it.
     if (tsah::cli::isTwoLevelTreeFile(opt->bvh))
       throw tsah::cli::UsageError(opt->bvh + " holds a two-level scene (.tbvh version 3): tsah export writes flat "
                                   "trees; optimize the scene with --structure flat to export it");
@@ -328,14 +323,11 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
     write("indices.bin", bytesOf(rt.indices()));
     write("vertices.bin", bytesOf(rt.positions()));
     std::string blurNote;
-    if (opt->shutter > 0.0) {
+    if (frameShutter.fraction > 0.0) {
       // The shutter of the frame at `time` (tsah trace's rule), the tree refitted at its keys.
       const double interval = std::isnan(opt->frameInterval)
                                   ? (a.endTime() - a.startTime()) / double(std::max<uint32_t>(a.keyframeCount() - 1, 1))
                                   : opt->frameInterval;
-      tsah::Shutter frameShutter;
-      frameShutter.fraction = opt->shutter;
-      frameShutter.mode = opt->shutterMode == "open" ? tsah::Shutter::Mode::Open : tsah::Shutter::Mode::Centered;
       const auto [open, close] = tsah::shutterInterval(a, time, interval, frameShutter);
       tsah::updateShutter(rt, a, open, close);
       if (!rt.blurred())
@@ -359,8 +351,8 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
       write("key_vertices.bin", bytesOf(std::span<const float>(m.keyPositions, keys * 3 * std::size_t(m.vertexCount))));
       insertBeforeEnd(header, cMotionHeader(rt, open, close, nodeType));
       char note[160];
-      std::snprintf(note, sizeof note, "shutter %g %s: %zu keys over t %g .. %g (key_*.bin)\n", opt->shutter,
-                    opt->shutterMode.c_str(), keys, open, close);
+      std::snprintf(note, sizeof note, "shutter %g %s: %zu keys over t %g .. %g (key_*.bin)\n", opt->shutter.fraction,
+                    opt->shutter.mode.c_str(), keys, open, close);
       blurNote = note;
     }
     files.write((out / "tsah_scene.h").string(), header);

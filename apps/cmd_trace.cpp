@@ -60,19 +60,14 @@ struct TraceOptions {
   std::string range;    // START:END, half-open over the frame indices (empty: every frame)
   std::string stats;    // file for the JSON statistics (--stats)
   std::string devices;  // --devices all|0,2,...
-  double shutter = 0.0;                  // motion blur: fraction of the frame interval
-  std::string shutterMode = "centered";  // centered | open
+  tsah::cli::ShutterOptions shutter;  // motion blur: --shutter, --shutter-mode
   std::string tlas;                      // two-level trees: refit (default) | rebuild
 };
 
 // --shutter: the shutter of each frame; usage errors for values and combinations it cannot serve
 // (checked before the device is looked for). The frame count is checked once the input is read.
 tsah::Shutter parseShutter(const TraceOptions& opt) {
-  tsah::Shutter shutter;
-  if (!(opt.shutter >= 0.0 && opt.shutter <= 1.0))
-    throw UsageError("--shutter must be between 0 and 1 (a fraction of the time between frames)");
-  shutter.fraction = opt.shutter;
-  shutter.mode = opt.shutterMode == "open" ? tsah::Shutter::Mode::Open : tsah::Shutter::Mode::Centered;
+  const tsah::Shutter shutter = opt.shutter.checked("the time between frames");
   if (shutter.fraction == 0.0) return shutter;
   if (opt.rebuild != "none") throw UsageError("--shutter refits the given tree; it does not go with --rebuild");
   // The CPU traces blurred frames in every layout it has; the GPU in the binary one.
@@ -219,7 +214,7 @@ void runTrace(const TraceOptions& opt) {
   const bool rebuilds = opt.rebuild != "none";
   char blur[64] = "";
   if (runtimeOptions.shutter.fraction > 0.0)
-    std::snprintf(blur, sizeof blur, ", shutter %g %s", opt.shutter, opt.shutterMode.c_str());
+    std::snprintf(blur, sizeof blur, ", shutter %g %s", opt.shutter.fraction, opt.shutter.mode.c_str());
   const std::string mode =
       twoLevel ? "two-level, TLAS " + std::string(opt.tlas == "rebuild" ? "rebuilt (sweep SAH)" : "refitted") +
                      " every frame"
@@ -289,7 +284,7 @@ void runTrace(const TraceOptions& opt) {
   out["camera"] = cameraSource;
   out["triangles"] = a.triangleCount();
   out["seed"] = opt.seed;
-  out["shutter"] = {{"fraction", opt.shutter}, {"mode", opt.shutterMode}};
+  out["shutter"] = {{"fraction", opt.shutter.fraction}, {"mode", opt.shutter.mode}};
   out["run_frames"] = frameCount;
   out["range"] = {first, end};
   // Wall time on rank 0: reading, baking and uploading up to the warmed-up runtimes; the frame
@@ -361,14 +356,11 @@ TSAH_REGISTER_COMMAND(70, [](CLI::App& app) {
   sub->add_option("--isa", opt->isa, "CPU SIMD kernels of a wide layout: sse, avx2 or avx512 (default auto: the best)")
       ->check(CLI::IsMember({"auto", "sse", "avx2", "avx512"}));
   sub->add_option("--seed", opt->seed, "Seed of the per-pixel random numbers (default 1)");
-  auto* shutter = sub->add_option("--shutter", opt->shutter,
-                                  "Motion blur: the shutter's length as a fraction of the time between traced frames, "
-                                  "0 to 1 (default 0: the instant); each frame is refitted at the shutter's key times "
-                                  "and each pixel traced at its own time (CPU: bvh2, bvh4, bvh8; GPU: bvh2; docs/motion-blur.md)");
-  sub->add_option("--shutter-mode", opt->shutterMode,
-                  "centered: the shutter around the frame's time (default); open: starting at it")
-      ->check(CLI::IsMember({"centered", "open"}))
-      ->needs(shutter);
+  opt->shutter.add(*sub,
+                   "Motion blur: the shutter's length as a fraction of the time between traced frames, "
+                   "0 to 1 (default 0: the instant); each frame is refitted at the shutter's key times "
+                   "and each pixel traced at its own time (CPU: bvh2, bvh4, bvh8; GPU: bvh2; docs/motion-blur.md)",
+                   "centered: the shutter around the frame's time (default); open: starting at it");
   sub->add_flag("--json", opt->json, "Print one JSON object {device, frames: [...], average: {...}}");
   sub->add_option("--range", opt->range,
                   "START:END: only the frames START .. END-1 of the run (half-open, over the frame indices of "
