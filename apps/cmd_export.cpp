@@ -195,7 +195,7 @@ std::string cMotionHeader(const tsah::CpuRuntime& rt, double open, double close,
 typedef struct TsahBox { float lo[3], hi[3]; } TsahBox; /* 24 bytes */
 )";
   h += "#define TSAH_KEY_COUNT " + std::to_string(rt.keyTimes().size()) + "u\n";
-  char times[96];
+  char times[128];
   std::snprintf(times, sizeof times, "#define TSAH_SHUTTER_OPEN %.17g\n#define TSAH_SHUTTER_CLOSE %.17g\n", open, close);
   h += times;
   return h;
