@@ -214,11 +214,10 @@ bool runTwoLevel(const Options& opt) {
   if (asked && !scene)
     throw UsageError("--structure two-level needs a scene file (.json with objects); " + opt.input +
                      " is one animation: use --structure flat");
-  const bool flatOnly = opt.segments != "1" || opt.tree.device == tsah::Device::Cuda || !opt.devices.empty() ||
-                        opt.tree.method != tsah::Method::TSah;
+  const bool flatOnly = opt.segments != "1" || !opt.devices.empty() || opt.tree.method != tsah::Method::TSah;
   if (asked && flatOnly)
-    throw UsageError("--structure two-level builds T-SAH trees on the CPU: it does not go with --segments, "
-                     "--device cuda, --devices or --method other than tsah");
+    throw UsageError("--structure two-level builds one T-SAH tree per source and the top level: it does not go "
+                     "with --segments, --devices or --method other than tsah");
   if (!scene || flatOnly) return false;
   anim::SceneSources sources = tsah::cli::loadSceneSourcesForCli(opt.input);
   const tsah::cli::StructureChoice choice = tsah::cli::chooseStructure(sources);

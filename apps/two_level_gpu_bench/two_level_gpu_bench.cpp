@@ -2,6 +2,7 @@
 //   tsah_two_level_gpu_bench SCENE.json [--tree TREE.tbvh | --save-tree TREE.tbvh [--build-only]]
 //                            [--frames 50] [--width 1024] [--height 768]
 //                            [--ao 4] [--k 2] [--build-frames 5] [--no-rebuild-reference]
+//                            [--global-refits]
 // Builds the two-level structure (or loads a version 3 .tbvh built for the scene), then for each of
 // --frames times spread over the scene's time range: updateAt (upload of the instance transforms,
 // BLAS refits, TLAS refit: CUDA events), then primary rays (a camera fitted to the instances' boxes,
@@ -33,6 +34,7 @@ struct Options {
   int k = 2;
   bool rebuildReference = true;
   bool buildOnly = false;  // build and save (--save-tree), no device needed
+  bool blockRefits = true;  // GpuTwoLevelRuntime::Config::blockRefits
 };
 
 double median(std::vector<double> v) {
@@ -81,7 +83,9 @@ int run(const Options& opt) {
                        : tsah::loadTwoLevelSceneFile(opt.tree, anim::loadSceneSources(opt.scene, {}));
   if (!opt.saveTree.empty()) tsah::saveTwoLevelScene(opt.saveTree, scene);
   if (opt.buildOnly) return 0;
-  tsah::cuda::GpuTwoLevelRuntime gpu(scene);
+  tsah::cuda::GpuTwoLevelRuntime::Config config;
+  config.blockRefits = opt.blockRefits;
+  tsah::cuda::GpuTwoLevelRuntime gpu(scene, config);
   const double start = scene.frameTimes.empty() ? scene.scene.start : scene.frameTimes.front();
   const double end = scene.frameTimes.empty() ? start : scene.frameTimes.back();
   tsah::Aabb all;
@@ -131,6 +135,7 @@ int run(const Options& opt) {
   j["tlas_interior_nodes"] = gpu.updateAt(start).tlasNodes;
   j["image"] = {opt.width, opt.height};
   j["ao_per_hit"] = opt.ao;
+  j["block_refits"] = opt.blockRefits;
   j["median"] = {{"upload_ms", median(upload)}, {"blas_refit_ms", median(blas)}, {"tlas_update_ms", median(tlas)},
                  {"update_ms", median(update)}, {"primary_ms", median(primaryMs)}, {"ao_ms", median(aoMs)},
                  {"tlas_rebuild_cpu_ms", median(rebuildMs)}, {"blas_refits", median(refits)}};
@@ -144,7 +149,7 @@ int run(const Options& opt) {
 int main(int argc, char** argv) {
   CLI::App app{"The GPU two-level runtime per frame: update (BLAS and TLAS refits) and trace times, JSON"};
   Options opt;
-  bool noRebuild = false;
+  bool noRebuild = false, globalRefits = false;
   app.add_option("scene", opt.scene, "Scene file (JSON)")->required();
   app.add_option("--tree", opt.tree, "A version 3 .tbvh built for the scene (default: build it)");
   app.add_option("--frames", opt.frames, "Frames timed, spread over the scene's time range (default 50)")
@@ -158,8 +163,11 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1u, 1000u));
   app.add_flag("--build-only", opt.buildOnly, "Only build the structure (and save it with --save-tree): no device needed");
   app.add_flag("--no-rebuild-reference", noRebuild, "Skip the per-frame host TLAS rebuild reference");
+  app.add_flag("--global-refits", globalRefits,
+               "Refit every tree by the global-memory walk, not in one block's shared memory (the reference)");
   CLI11_PARSE(app, argc, argv);
   opt.rebuildReference = !noRebuild;
+  opt.blockRefits = !globalRefits;
   try {
     return run(opt);
   } catch (const tsah::ConfigError& e) {

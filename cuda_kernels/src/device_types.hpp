@@ -57,6 +57,18 @@ struct alignas(16) FrameParams {
   uint32_t pad[3] = {0, 0, 0};
 };
 
+// Trees of one topology updated together by one launch per kernel (the two-level runtime's poses of
+// one source, each with its own positions, boxes and Woop triangles): member b of the batch reads and
+// writes its arrays at b times these strides (in elements); it has its own root (root + b) and, in
+// the interpolation, its own frame (frames[b]). A single tree is a batch of one with zero strides.
+struct BatchStrides {
+  uint64_t positions = 0, nodes = 0, woop = 0, counters = 0;
+};
+
+// Shared-memory bytes of a block refit (refit_walk.cuh's blockRefit) of a tree with interiorCount
+// interior nodes: an arrival counter and the two child boxes (12 floats) per node.
+constexpr uint64_t blockRefitBytes(uint32_t interiorCount) { return uint64_t(interiorCount) * 13u * 4u; }
+
 struct TraceLaunch {
   bool persistent = true;   // Aila-Laine persistent warps fetching rays from a global counter
   uint32_t blockSize = 128;

@@ -27,9 +27,6 @@ struct InterpolationNode {
   cudaKernelNodeParams launch{};
 };
 InterpolationNode findInterpolationNode(cudaGraph_t graph);
-// Every interpolation node of a graph that interpolates several animations (the two-level runtime's
-// poses); a node's output buffer is *static_cast<float**>(launch.kernelParams[3]).
-std::vector<InterpolationNode> findInterpolationNodes(cudaGraph_t graph);
 void setInterpolationParams(cudaGraphExec_t exec, const InterpolationNode& node, const FrameParams& params);
 
 // Bottom-up refit of an uploaded tree: one thread per leaf record, atomic counters per interior node
@@ -38,6 +35,17 @@ void setInterpolationParams(cudaGraphExec_t exec, const InterpolationNode& node,
 void launchRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
                  const uint32_t* slotVertices, const float* positions, uint32_t* counters, RootInfo* root,
                  cudaStream_t stream);
+
+// The same three steps for a batch of trees of one topology (BatchStrides): member b interpolates
+// frames[b] into out + b * outStride, refits its nodes into roots[b], recomputes its Woop triangles.
+// Counters of every member zero on entry, as for launchRefit.
+void launchBatchInterpolate(const float* keyframes, const uint32_t* movingIds, const FrameParams* frames, float* out,
+                            uint32_t movingCount, uint32_t batchCount, uint64_t outStride, cudaStream_t stream);
+void launchBatchRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
+                      const uint32_t* slotVertices, const float* positions, uint32_t* counters, RootInfo* roots,
+                      uint32_t batchCount, const BatchStrides& batch, cudaStream_t stream);
+void launchBatchSlotWoop(const uint32_t* slotVertices, uint32_t slots, const float* positions, WoopTriangle* woop,
+                         uint32_t batchCount, const BatchStrides& batch, cudaStream_t stream);
 
 // Woop triangle of every slot, the vertex ids found through the slot's triangle id (the rebuilds)
 // or in slot order (launchSlotWoop: the refits' slotVertices).

@@ -1,9 +1,10 @@
 // The two-level runtime's kernels: instance world boxes, the TLAS refit over them, and the trace
 // through instances with the CPU's traversal loop (tsah/layout/traversal.hpp) at both levels.
 // Compiled with -fmad=false (see CMakeLists.txt): boxes and hits round as on the CPU.
-#include <cuda/atomic>
-
 #include "launch.hpp"
+#include "refit_walk.cuh"
+#include "triangle_boxes.cuh"
+#include "tsah/core/box_transform.hpp"
 #include "tsah/layout/traversal.hpp"
 #include "two_level_kernels.hpp"
 
@@ -16,48 +17,10 @@ __global__ void instanceBoxesKernel(const InstanceState* __restrict__ instances,
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= count) return;
   const InstanceState& inst = instances[i];
-  const Aabb box = views[inst.view].root->box;
-  Aabb out;
-  if (box.empty()) {
-    boxes[i] = box;
-    return;
-  }
-  // tsah::transformBox: the 8 corners in double, each rounded to float and widened by one ulp.
-  const double* m = inst.world;
-  for (int corner = 0; corner < 8; ++corner) {
-    const double p[3] = {(corner & 1) ? box.hi.x : box.lo.x, (corner & 2) ? box.hi.y : box.lo.y,
-                         (corner & 4) ? box.hi.z : box.lo.z};
-    float q[3];
-    for (int r = 0; r < 3; ++r)
-      q[r] = float(m[4 * r] * p[0] + m[4 * r + 1] * p[1] + m[4 * r + 2] * p[2] + m[4 * r + 3]);
-    out.extend(Vec3{nextafterf(q[0], -3.4e38f), nextafterf(q[1], -3.4e38f), nextafterf(q[2], -3.4e38f)});
-    out.extend(Vec3{nextafterf(q[0], 3.4e38f), nextafterf(q[1], 3.4e38f), nextafterf(q[2], 3.4e38f)});
-  }
-  boxes[i] = out;
+  boxes[i] = transformBoxRows(views[inst.view].root->box, inst.world);
 }
 
-// GpuBvhNode's child box layout (gpu_layout.hpp): child 0 x/y at floats 0..3, child 1 at 4..7, z at 8 / 10.
-__device__ __forceinline__ void writeChildBox(GpuBvhNode* node, int side, const Aabb& b) {
-  float* f = reinterpret_cast<float*>(node);
-  const int xy = side == 0 ? 0 : 4, z = side == 0 ? 8 : 10;
-  f[xy + 0] = b.lo.x;
-  f[xy + 1] = b.hi.x;
-  f[xy + 2] = b.lo.y;
-  f[xy + 3] = b.hi.y;
-  f[z + 0] = b.lo.z;
-  f[z + 1] = b.hi.z;
-}
-
-__device__ __forceinline__ Aabb readChildBox(const GpuBvhNode* node, int side) {
-  const float* f = reinterpret_cast<const float*>(node);  // written by another thread: through L2
-  const int xy = side == 0 ? 0 : 4, z = side == 0 ? 8 : 10;
-  Aabb b;
-  b.lo = {__ldcg(f + xy + 0), __ldcg(f + xy + 2), __ldcg(f + z + 0)};
-  b.hi = {__ldcg(f + xy + 1), __ldcg(f + xy + 3), __ldcg(f + z + 1)};
-  return b;
-}
-
-// The flat runtime's refit walk (update_kernels.cu) with instance boxes as the leaves' content.
+// The flat runtime's refit walk with instance boxes as the leaves' content.
 __global__ void tlasRefitKernel(GpuBvhNode* __restrict__ nodes, const uint32_t* __restrict__ nodeParent,
                                 const LeafRecord* __restrict__ leaves, uint32_t leafCount,
                                 const uint32_t* __restrict__ triIndex, const Aabb* __restrict__ instanceBoxes,
@@ -67,17 +30,48 @@ __global__ void tlasRefitKernel(GpuBvhNode* __restrict__ nodes, const uint32_t* 
   const LeafRecord leaf = leaves[i];
   Aabb box;
   for (uint32_t s = leaf.first; s < leaf.first + leaf.count; ++s) box.extend(instanceBoxes[triIndex[s]]);
-  uint32_t slot = leaf.parentSlot;
-  while (slot != kNoParent) {
-    const uint32_t node = slot >> 1;
-    const int side = int(slot & 1);
-    writeChildBox(nodes + node, side, box);
-    ::cuda::atomic_ref<uint32_t, ::cuda::thread_scope_device> arrivals(counters[node]);
-    if (arrivals.fetch_add(1, ::cuda::memory_order_acq_rel) == 0) return;
-    box.extend(readChildBox(nodes + node, 1 - side));
-    slot = nodeParent[node];
+  refitUpwards(nodes, nodeParent, leaf.parentSlot, box, counters, root);
+}
+
+// Block refits: kBlockThreads threads per tree.
+constexpr uint32_t kBlockThreads = 512;
+
+// One block per pose of a group (blockIdx.x): its Woop triangles and its refit, both from the
+// positions the batched interpolation wrote before this launch.
+__global__ void __launch_bounds__(kBlockThreads)
+    poseBlasBlockKernel(GpuBvhNode* __restrict__ nodes, const uint32_t* __restrict__ nodeParent,
+                        const LeafRecord* __restrict__ leaves, uint32_t leafCount, uint32_t interiorCount,
+                        const uint32_t* __restrict__ slotVertices, uint32_t slots, const float* __restrict__ positions,
+                        WoopTriangle* __restrict__ woop, RootInfo* __restrict__ roots, BatchStrides batch) {
+  extern __shared__ uint32_t shared[];
+  const uint32_t b = blockIdx.x;
+  const float* own = positions + b * batch.positions;
+  WoopTriangle* ownWoop = woop + b * batch.woop;
+  for (uint32_t s = threadIdx.x; s < slots; s += blockDim.x) {
+    const uint32_t* tri = slotVertices + 3 * std::size_t(s);
+    ownWoop[s] = makeWoopTriangle(loadVertex(own, __ldg(tri)), loadVertex(own, __ldg(tri + 1)),
+                                  loadVertex(own, __ldg(tri + 2)));
   }
-  root->box = box;
+  const auto leafBoxOf = [&](const LeafRecord& leaf) { return leafBox(leaf.first, leaf.count, slotVertices, own); };
+  blockRefit(nodes + b * batch.nodes, nodeParent, leaves, leafCount, interiorCount, leafBoxOf, roots + b, shared);
+}
+
+// One block: every instance's world box, then the TLAS refit over them.
+__global__ void __launch_bounds__(kBlockThreads)
+    tlasBlockKernel(const InstanceState* __restrict__ instances, const BlasView* __restrict__ views, uint32_t count,
+                    Aabb* instanceBoxes, GpuBvhNode* __restrict__ nodes, const uint32_t* __restrict__ nodeParent,
+                    const LeafRecord* __restrict__ leaves, uint32_t leafCount, uint32_t interiorCount,
+                    const uint32_t* __restrict__ triIndex, RootInfo* __restrict__ root) {
+  extern __shared__ uint32_t shared[];
+  for (uint32_t i = threadIdx.x; i < count; i += blockDim.x)
+    instanceBoxes[i] = transformBoxRows(views[instances[i].view].root->box, instances[i].world);
+  __syncthreads();  // the boxes of other threads, read below (plain loads: written in this launch)
+  const auto leafBoxOf = [&](const LeafRecord& leaf) {
+    Aabb box;
+    for (uint32_t s = leaf.first; s < leaf.first + leaf.count; ++s) box.extend(instanceBoxes[triIndex[s]]);
+    return box;
+  };
+  blockRefit(nodes, nodeParent, leaves, leafCount, interiorCount, leafBoxOf, root, shared);
 }
 
 __device__ Vec3 transformPoint(const float* m, const Vec3& p) {
@@ -174,6 +168,34 @@ void launchTlasRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRe
   tlasRefitKernel<<<gridFor(leafCount, block), block, 0, stream>>>(nodes, nodeParent, leaves, leafCount, triIndex,
                                                                    instanceBoxes, counters, root);
   CUDA_CHECK_LAUNCH("tlasRefitKernel");
+}
+
+uint64_t prepareBlockRefits() {
+  int device = 0, optIn = 0;
+  CUDA_CHECK(cudaGetDevice(&device));
+  CUDA_CHECK(cudaDeviceGetAttribute(&optIn, cudaDevAttrMaxSharedMemoryPerBlockOptin, device));
+  CUDA_CHECK(cudaFuncSetAttribute(poseBlasBlockKernel, cudaFuncAttributeMaxDynamicSharedMemorySize, optIn));
+  CUDA_CHECK(cudaFuncSetAttribute(tlasBlockKernel, cudaFuncAttributeMaxDynamicSharedMemorySize, optIn));
+  return uint64_t(optIn);
+}
+
+void launchPoseBlasBlocks(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
+                          uint32_t interiorCount, const uint32_t* slotVertices, uint32_t slots, const float* positions,
+                          WoopTriangle* woop, RootInfo* roots, uint32_t poseCount, const BatchStrides& batch,
+                          cudaStream_t stream) {
+  if (poseCount == 0) return;
+  poseBlasBlockKernel<<<poseCount, kBlockThreads, blockRefitBytes(interiorCount), stream>>>(
+      nodes, nodeParent, leaves, leafCount, interiorCount, slotVertices, slots, positions, woop, roots, batch);
+  CUDA_CHECK_LAUNCH("poseBlasBlockKernel");
+}
+
+void launchTlasBlock(const InstanceState* instances, const BlasView* views, uint32_t count, Aabb* instanceBoxes,
+                     GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
+                     uint32_t interiorCount, const uint32_t* triIndex, RootInfo* root, cudaStream_t stream) {
+  if (count == 0) return;
+  tlasBlockKernel<<<1, kBlockThreads, blockRefitBytes(interiorCount), stream>>>(
+      instances, views, count, instanceBoxes, nodes, nodeParent, leaves, leafCount, interiorCount, triIndex, root);
+  CUDA_CHECK_LAUNCH("tlasBlockKernel");
 }
 
 void launchTwoLevelTrace(const TlasScene& scene, const Ray* rays, uint32_t count, InstanceHit* hits, uint8_t* occluded,

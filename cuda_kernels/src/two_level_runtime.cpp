@@ -71,8 +71,8 @@ struct GpuTwoLevelRuntime::Impl {
     DeviceBuffer<float> keyframes;  // every keyframe of the moving vertices (animated sources)
     uint32_t movingCount = 0;
   };
-  // A traced BLAS (a static source's or a pose's): its boxes, positions and Woop triangles.
-  struct Traced {
+  // A static source's BLAS: its boxes, positions and Woop triangles, refitted once.
+  struct StaticBlas {
     uint32_t source = 0;
     DeviceBuffer<GpuBvhNode> nodes;
     DeviceBuffer<float> positions;
@@ -80,15 +80,27 @@ struct GpuTwoLevelRuntime::Impl {
     DeviceBuffer<uint32_t> counters;
     DeviceBuffer<detail::RootInfo> root;
   };
+  // The poses of one animated source, updated together: one launch per step for all of them
+  // (detail::BatchStrides); pose i of the group has its arrays at i times the strides.
+  struct PoseGroup {
+    uint32_t source = 0;
+    std::vector<uint32_t> poses;  // the scene's pose ids, in batch order
+    uint32_t firstFrame = 0;      // its poses' frames in poseFrames / devicePoseFrames
+    detail::BatchStrides strides;
+    bool blockRefit = false;  // its BLAS fits one block's shared memory (launchPoseBlasBlocks)
+    DeviceBuffer<GpuBvhNode> nodes;
+    DeviceBuffer<float> positions;
+    DeviceBuffer<WoopTriangle> woop;
+    DeviceBuffer<uint32_t> counters;
+    DeviceBuffer<detail::RootInfo> roots;
+  };
   struct Graph {
     cudaGraph_t graph = nullptr;
     cudaGraphExec_t exec = nullptr;
-    std::vector<std::pair<uint32_t, detail::InterpolationNode>> interpolations;  // (pose, node)
   };
 
   Impl(const TwoLevelScene& s, Config c);
   ~Impl();
-  void enqueueBlasRefit(Traced& t);
   void enqueueFrame(bool refitPoses);
   Graph capture(bool refitPoses);
   detail::TlasScene tlasScene() const;
@@ -101,11 +113,14 @@ struct GpuTwoLevelRuntime::Impl {
   cudaStream_t stream = nullptr;
   detail::EventTimer events;
   std::vector<Source> sources;
-  std::vector<Traced> traced;              // static sources' BLAS, then one per pose
-  std::vector<uint32_t> staticView;        // per source: its view, or kInvalidIndex when animated
-  uint32_t firstPoseView = 0;
+  std::vector<StaticBlas> statics;
+  std::vector<PoseGroup> groups;
+  std::vector<uint32_t> staticView;  // per source: its view, or kInvalidIndex when animated
+  uint32_t firstPoseView = 0;        // views: the static BLAS, then one per pose in the scene's order
   DeviceBuffer<detail::BlasView> views;
-  std::vector<detail::FrameParams> poseFrames;
+  detail::FrameParams* poseFrames = nullptr;  // pinned, in the groups' batch order: the graphs copy it
+  std::vector<uint32_t> poseFrameIndex;       // per pose: its entry in poseFrames
+  DeviceBuffer<detail::FrameParams> devicePoseFrames;
   std::vector<double> poseLocalTime;
   detail::InstanceState* hostInstances = nullptr;  // pinned: the graphs copy it to `instances`
   DeviceBuffer<detail::InstanceState> instances;
@@ -116,6 +131,8 @@ struct GpuTwoLevelRuntime::Impl {
   DeviceBuffer<uint32_t> tlasParent, tlasCounters, tlasTriIndex;
   DeviceBuffer<detail::LeafRecord> tlasLeaves;
   DeviceBuffer<detail::RootInfo> tlasRoot;
+  uint64_t blockRefitLimit = 0;  // shared bytes a block refit may use (prepareBlockRefits)
+  bool tlasBlockRefit = false;
   Graph fullGraph, rigidGraph;  // with and without the poses' BLAS refits
   double time = 0.0;
   uint64_t refits = 0;
@@ -128,6 +145,7 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
   device = describeDevice(config.device);
   CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
   events.create(4);
+  blockRefitLimit = config.blockRefits ? detail::prepareBlockRefits() : 0;
   const anim::SceneSources& src = scene.scene;
   for (const Blas& blas : scene.blases) {
     const anim::Animation& a = *src.sources[blas.source];
@@ -147,38 +165,86 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
       d.movingCount = a.movingVertexCount();
     }
   }
-  // A traced BLAS starts from its source's positions at `localTime` (the rest positions of the
-  // static vertices stay; a pose's interpolation rewrites the moving ones).
-  auto addTraced = [&](uint32_t source, double localTime) {
-    const anim::Animation& a = *src.sources[source];
-    const Source& d = sources[source];
-    Traced& t = traced.emplace_back();
-    t.source = source;
+  // A BLAS starts from its source's positions at its start time (the rest positions of the static
+  // vertices stay; a pose's interpolation rewrites the moving ones).
+  std::vector<detail::BlasView> hostViews;
+  staticView.assign(scene.blases.size(), kInvalidIndex);
+  for (uint32_t b = 0; b < scene.blases.size(); ++b) {
+    if (scene.blases[b].animated) continue;
+    const Source& d = sources[b];
+    StaticBlas& t = statics.emplace_back();
+    t.source = b;
     t.nodes = toDevice(d.topology.nodes, stream);
-    t.positions = toDevice(a.positionsAt(localTime), stream);
+    t.positions = toDevice(src.sources[b]->positionsAt(src.sources[b]->startTime()), stream);
     t.woop.resize(d.topology.triangleCount());
     t.counters.resize(d.topology.interiorCount);
     const detail::RootInfo root = rootOf(d.topology);
     t.root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&root, 1), stream);
-  };
-  staticView.assign(scene.blases.size(), kInvalidIndex);
-  for (uint32_t b = 0; b < scene.blases.size(); ++b) {
-    if (scene.blases[b].animated) continue;
-    staticView[b] = uint32_t(traced.size());
-    addTraced(b, src.sources[b]->startTime());
-    enqueueBlasRefit(traced.back());  // once: static BLAS never change
+    // Refitted once: static BLAS never change.
+    if (t.counters.size()) CUDA_CHECK(cudaMemsetAsync(t.counters.data(), 0, t.counters.bytes(), stream));
+    detail::launchRefit(t.nodes.data(), d.nodeParent.data(), d.leaves.data(), d.leafCount, d.slotVertices.data(),
+                        t.positions.data(), t.counters.data(), t.root.data(), stream);
+    detail::launchSlotWoop(d.slotVertices.data(), d.topology.triangleCount(), t.positions.data(), t.woop.data(),
+                           stream);
     ++refits;
-  }
-  firstPoseView = uint32_t(traced.size());
-  for (const Pose& pose : scene.poses) addTraced(pose.blas, src.sources[pose.blas]->startTime());
-  std::vector<detail::BlasView> hostViews;
-  for (const Traced& t : traced) {
-    const Source& d = sources[t.source];
+    staticView[b] = uint32_t(hostViews.size());
     hostViews.push_back({t.nodes.data(), t.woop.data(), d.triIndex.data(), d.indices.data(), t.positions.data(),
                          t.root.data()});
   }
+  // The poses, grouped by source; each group's arrays hold its poses one after another.
+  std::vector<uint32_t> groupOfSource(scene.blases.size(), kInvalidIndex);
+  for (uint32_t p = 0; p < scene.poses.size(); ++p) {
+    const uint32_t source = scene.poses[p].blas;
+    if (groupOfSource[source] == kInvalidIndex) {
+      groupOfSource[source] = uint32_t(groups.size());
+      groups.emplace_back().source = source;
+    }
+    groups[groupOfSource[source]].poses.push_back(p);
+  }
+  firstPoseView = uint32_t(hostViews.size());
+  hostViews.resize(hostViews.size() + scene.poses.size());
+  poseFrameIndex.assign(scene.poses.size(), 0);
+  uint32_t frameCount = 0;
+  for (PoseGroup& g : groups) {
+    const anim::Animation& a = *src.sources[g.source];
+    const Source& d = sources[g.source];
+    const auto members = uint32_t(g.poses.size());
+    const std::vector<float> start = a.positionsAt(a.startTime());
+    g.strides.positions = start.size();
+    g.strides.nodes = d.topology.nodes.size();
+    g.strides.woop = d.topology.triangleCount();
+    g.strides.counters = d.topology.interiorCount;
+    g.blockRefit = config.blockRefits && detail::blockRefitBytes(d.topology.interiorCount) <= blockRefitLimit;
+    g.firstFrame = frameCount;
+    std::vector<float> positions;
+    positions.reserve(start.size() * members);
+    std::vector<GpuBvhNode> nodes;
+    nodes.reserve(d.topology.nodes.size() * members);
+    for (uint32_t i = 0; i < members; ++i) {
+      positions.insert(positions.end(), start.begin(), start.end());
+      nodes.insert(nodes.end(), d.topology.nodes.begin(), d.topology.nodes.end());
+    }
+    g.positions = toDevice(positions, stream);
+    g.nodes = toDevice(nodes, stream);
+    g.woop.resize(g.strides.woop * members);
+    if (!g.blockRefit) g.counters.resize(g.strides.counters * members);
+    g.roots = toDevice(std::vector<detail::RootInfo>(members, rootOf(d.topology)), stream);
+    for (uint32_t i = 0; i < members; ++i) {
+      const uint32_t p = g.poses[i];
+      poseFrameIndex[p] = frameCount++;
+      hostViews[firstPoseView + p] = {g.nodes.data() + i * g.strides.nodes,
+                                      g.woop.data() + i * g.strides.woop,
+                                      d.triIndex.data(),
+                                      d.indices.data(),
+                                      g.positions.data() + i * g.strides.positions,
+                                      g.roots.data() + i};
+    }
+  }
   views = toDevice(hostViews, stream);
-  poseFrames.resize(scene.poses.size());
+  CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&poseFrames),
+                            std::max<std::size_t>(1, frameCount) * sizeof(detail::FrameParams)));
+  std::fill_n(poseFrames, std::max<uint32_t>(1, frameCount), detail::FrameParams{});
+  devicePoseFrames.resize(frameCount);
   poseLocalTime.assign(scene.poses.size(), std::numeric_limits<double>::quiet_NaN());
 
   const uint32_t count = scene.instanceCount();
@@ -191,7 +257,8 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
   tlasLeafCount = uint32_t(r.leaves.size());
   tlasNodes = toDevice(tlasTopology.nodes, stream);
   tlasParent = toDevice(r.parent, stream);
-  tlasCounters.resize(tlasTopology.interiorCount);
+  tlasBlockRefit = config.blockRefits && detail::blockRefitBytes(tlasTopology.interiorCount) <= blockRefitLimit;
+  if (!tlasBlockRefit) tlasCounters.resize(tlasTopology.interiorCount);
   tlasTriIndex = toDevice(tlasTopology.triIndex, stream);
   tlasLeaves = toDevice(r.leaves, stream);
   const detail::RootInfo root = rootOf(tlasTopology);
@@ -206,15 +273,8 @@ GpuTwoLevelRuntime::Impl::~Impl() {
   }
   if (stream) cudaStreamSynchronize(stream);
   if (hostInstances) cudaFreeHost(hostInstances);
+  if (poseFrames) cudaFreeHost(poseFrames);
   if (stream) cudaStreamDestroy(stream);
-}
-
-void GpuTwoLevelRuntime::Impl::enqueueBlasRefit(Traced& t) {
-  const Source& d = sources[t.source];
-  if (t.counters.size()) CUDA_CHECK(cudaMemsetAsync(t.counters.data(), 0, t.counters.size() * sizeof(uint32_t), stream));
-  detail::launchRefit(t.nodes.data(), d.nodeParent.data(), d.leaves.data(), d.leafCount, d.slotVertices.data(),
-                      t.positions.data(), t.counters.data(), t.root.data(), stream);
-  detail::launchSlotWoop(d.slotVertices.data(), d.topology.triangleCount(), t.positions.data(), t.woop.data(), stream);
 }
 
 void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
@@ -223,21 +283,42 @@ void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
   if (count)
     CUDA_CHECK(cudaMemcpyAsync(instances.data(), hostInstances, count * sizeof(detail::InstanceState),
                                cudaMemcpyHostToDevice, stream));
+  if (refitPoses && devicePoseFrames.size())
+    CUDA_CHECK(cudaMemcpyAsync(devicePoseFrames.data(), poseFrames, devicePoseFrames.bytes(), cudaMemcpyHostToDevice,
+                               stream));
   events.record(1, stream);
   if (refitPoses)
-    for (uint32_t p = 0; p < scene.poses.size(); ++p) {
-      Traced& t = traced[firstPoseView + p];
-      const Source& d = sources[t.source];
-      detail::launchInterpolateFrame(d.keyframes.data(), d.movingIds.size() ? d.movingIds.data() : nullptr,
-                                     poseFrames[p], t.positions.data(), d.movingCount, stream);
-      enqueueBlasRefit(t);
+    for (PoseGroup& g : groups) {
+      const Source& d = sources[g.source];
+      const auto members = uint32_t(g.poses.size());
+      detail::launchBatchInterpolate(d.keyframes.data(), d.movingIds.size() ? d.movingIds.data() : nullptr,
+                                     devicePoseFrames.data() + g.firstFrame, g.positions.data(), d.movingCount,
+                                     members, g.strides.positions, stream);
+      if (g.blockRefit) {
+        detail::launchPoseBlasBlocks(g.nodes.data(), d.nodeParent.data(), d.leaves.data(), d.leafCount,
+                                     d.topology.interiorCount, d.slotVertices.data(), d.topology.triangleCount(),
+                                     g.positions.data(), g.woop.data(), g.roots.data(), members, g.strides, stream);
+        continue;
+      }
+      if (g.counters.size()) CUDA_CHECK(cudaMemsetAsync(g.counters.data(), 0, g.counters.bytes(), stream));
+      detail::launchBatchRefit(g.nodes.data(), d.nodeParent.data(), d.leaves.data(), d.leafCount,
+                               d.slotVertices.data(), g.positions.data(), g.counters.data(), g.roots.data(), members,
+                               g.strides, stream);
+      detail::launchBatchSlotWoop(d.slotVertices.data(), d.topology.triangleCount(), g.positions.data(),
+                                  g.woop.data(), members, g.strides, stream);
     }
   events.record(2, stream);
-  detail::launchInstanceBoxes(instances.data(), views.data(), count, instanceBoxes.data(), stream);
-  if (tlasCounters.size())
-    CUDA_CHECK(cudaMemsetAsync(tlasCounters.data(), 0, tlasCounters.size() * sizeof(uint32_t), stream));
-  detail::launchTlasRefit(tlasNodes.data(), tlasParent.data(), tlasLeaves.data(), tlasLeafCount, tlasTriIndex.data(),
-                          instanceBoxes.data(), tlasCounters.data(), tlasRoot.data(), stream);
+  if (tlasBlockRefit) {
+    detail::launchTlasBlock(instances.data(), views.data(), count, instanceBoxes.data(), tlasNodes.data(),
+                            tlasParent.data(), tlasLeaves.data(), tlasLeafCount, tlasTopology.interiorCount,
+                            tlasTriIndex.data(), tlasRoot.data(), stream);
+  } else {
+    detail::launchInstanceBoxes(instances.data(), views.data(), count, instanceBoxes.data(), stream);
+    if (tlasCounters.size())
+      CUDA_CHECK(cudaMemsetAsync(tlasCounters.data(), 0, tlasCounters.size() * sizeof(uint32_t), stream));
+    detail::launchTlasRefit(tlasNodes.data(), tlasParent.data(), tlasLeaves.data(), tlasLeafCount,
+                            tlasTriIndex.data(), instanceBoxes.data(), tlasCounters.data(), tlasRoot.data(), stream);
+  }
   events.record(3, stream);
 }
 
@@ -253,12 +334,6 @@ GpuTwoLevelRuntime::Impl::Graph GpuTwoLevelRuntime::Impl::capture(bool refitPose
     throw;
   }
   CUDA_CHECK(cudaStreamEndCapture(stream, &g.graph));
-  // Each pose's interpolation node, found by its output buffer, gets the pose's frame per launch.
-  for (const detail::InterpolationNode& node : detail::findInterpolationNodes(g.graph)) {
-    const float* out = *static_cast<float**>(node.launch.kernelParams[3]);
-    for (uint32_t p = 0; p < scene.poses.size(); ++p)
-      if (traced[firstPoseView + p].positions.data() == out) g.interpolations.emplace_back(p, node);
-  }
   CUDA_CHECK(cudaGraphInstantiate(&g.exec, g.graph, 0));
   return g;
 }
@@ -291,9 +366,10 @@ TwoLevelUpdateTimings GpuTwoLevelRuntime::updateAt(double sceneTime) {
     const anim::Animation& a = *src.sources[scene.poses[p].blas];
     const auto [k, alpha] = anim::keyframeBlend(a.times(), local[p]);
     const uint64_t perFrame = uint64_t(a.movingVertexCount()) * 3;
-    m.poseFrames[p].a = k * perFrame;
-    m.poseFrames[p].b = (alpha == 0.0f ? k : k + 1) * perFrame;
-    m.poseFrames[p].alpha = alpha;
+    detail::FrameParams& frame = m.poseFrames[m.poseFrameIndex[p]];
+    frame.a = k * perFrame;
+    frame.b = (alpha == 0.0f ? k : k + 1) * perFrame;
+    frame.alpha = alpha;
   }
   // The instances' transforms (tsah::TwoLevelRuntime::update's): world(t), its inverse, the view.
   for (uint32_t i = 0; i < scene.instanceCount(); ++i) {
@@ -311,7 +387,6 @@ TwoLevelUpdateTimings GpuTwoLevelRuntime::updateAt(double sceneTime) {
   }
   Impl::Graph& g = posesMove ? m.fullGraph : m.rigidGraph;
   if (!g.exec) g = m.capture(posesMove);
-  for (const auto& [p, node] : g.interpolations) detail::setInterpolationParams(g.exec, node, m.poseFrames[p]);
   CUDA_CHECK(cudaGraphLaunch(g.exec, m.stream));
   m.events.wait(3);
   TwoLevelUpdateTimings t;

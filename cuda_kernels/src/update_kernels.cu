@@ -1,24 +1,32 @@
 // The per-frame update of an uploaded tree: vertex interpolation, bottom-up refit, Woop triangles.
 // Compiled with -fmad=false (see CMakeLists.txt) so every result is bit-identical to the CPU path.
-#include <cuda/atomic>
-
+#include <algorithm>
 #include <vector>
 
 #include "kernels.hpp"
 #include "launch.hpp"
+#include "refit_walk.cuh"
 #include "triangle_boxes.cuh"
 
 namespace tsah::cuda::detail {
 
 namespace {
 
-__global__ void interpolateFrameKernel(const float* __restrict__ keyframes, const uint32_t* __restrict__ movingIds,
-                                       FrameParams p, float* __restrict__ out, std::size_t count) {
+// A launch's grid has at most 65535 rows: a larger batch goes in chunks of rows, f(first, count).
+template <class F>
+void forEachBatchChunk(uint32_t batchCount, F&& f) {
+  constexpr uint32_t kMaxRows = 65535;
+  for (uint32_t first = 0; first < batchCount; first += kMaxRows) f(first, std::min(kMaxRows, batchCount - first));
+}
+
+// Same operations and rounding as anim::Animation::positionsAt: beta * a + alpha * b. Scalar
+// accesses: a keyframe starts wherever movingCount * 3 floats put it, not on a 16-byte boundary.
+// count = 3 * movingCount; coordinate i belongs to moving vertex i / 3, written at its own vertex.
+__device__ __forceinline__ void interpolateCoordinates(const float* __restrict__ keyframes,
+                                                       const uint32_t* __restrict__ movingIds, const FrameParams& p,
+                                                       float* __restrict__ out, std::size_t count) {
   const float* a = keyframes + p.a;
   const float* b = keyframes + p.b;
-  // Same operations and rounding as anim::Animation::positionsAt: beta * a + alpha * b. Scalar
-  // accesses: a keyframe starts wherever movingCount * 3 floats put it, not on a 16-byte boundary.
-  // count = 3 * movingCount; coordinate i belongs to moving vertex i / 3, written at its own vertex.
   const std::size_t stride = std::size_t(gridDim.x) * blockDim.x;
   const float beta = 1.0f - p.alpha;
   for (std::size_t i = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x; i < count; i += stride) {
@@ -28,49 +36,28 @@ __global__ void interpolateFrameKernel(const float* __restrict__ keyframes, cons
   }
 }
 
-__device__ __forceinline__ void writeChildBox(GpuBvhNode* node, int side, const Aabb& b) {
-  float* f = reinterpret_cast<float*>(node);
-  // Layout (gpu_layout.hpp): n0xy, n1xy, nz; child 1's x/y start at float 4, z boxes at 8 / 10.
-  const int xy = side == 0 ? 0 : 4, z = side == 0 ? 8 : 10;
-  f[xy + 0] = b.lo.x;
-  f[xy + 1] = b.hi.x;
-  f[xy + 2] = b.lo.y;
-  f[xy + 3] = b.hi.y;
-  f[z + 0] = b.lo.z;
-  f[z + 1] = b.hi.z;
+__global__ void interpolateFrameKernel(const float* __restrict__ keyframes, const uint32_t* __restrict__ movingIds,
+                                       FrameParams p, float* __restrict__ out, std::size_t count) {
+  interpolateCoordinates(keyframes, movingIds, p, out, count);
 }
 
-__device__ __forceinline__ Aabb readChildBox(const GpuBvhNode* node, int side) {
-  // Written by another thread of this launch: read through L2 (never a stale L1 line).
-  const float* f = reinterpret_cast<const float*>(node);
-  const int xy = side == 0 ? 0 : 4, z = side == 0 ? 8 : 10;
-  Aabb b;
-  b.lo = {__ldcg(f + xy + 0), __ldcg(f + xy + 2), __ldcg(f + z + 0)};
-  b.hi = {__ldcg(f + xy + 1), __ldcg(f + xy + 3), __ldcg(f + z + 1)};
-  return b;
+// A batch: member blockIdx.y blends its own frame into its own positions.
+__global__ void interpolateBatchKernel(const float* __restrict__ keyframes, const uint32_t* __restrict__ movingIds,
+                                       const FrameParams* __restrict__ frames, float* __restrict__ out,
+                                       std::size_t count, uint64_t outStride) {
+  interpolateCoordinates(keyframes, movingIds, frames[blockIdx.y], out + blockIdx.y * outStride, count);
 }
 
 __global__ void refitKernel(GpuBvhNode* __restrict__ nodes, const uint32_t* __restrict__ nodeParent,
                             const LeafRecord* __restrict__ leaves, uint32_t leafCount,
-                            const uint32_t* __restrict__ slotVertices,
-                            const float* __restrict__ positions, uint32_t* __restrict__ counters,
-                            RootInfo* __restrict__ root) {
+                            const uint32_t* __restrict__ slotVertices, const float* __restrict__ positions,
+                            uint32_t* __restrict__ counters, RootInfo* __restrict__ root, BatchStrides batch) {
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= leafCount) return;
+  const uint32_t b = blockIdx.y;
   const LeafRecord leaf = leaves[i];
-  Aabb box = leafBox(leaf.first, leaf.count, slotVertices, positions);
-  uint32_t slot = leaf.parentSlot;
-  // Walk up: the second thread to arrive at a node has both child boxes and carries on.
-  while (slot != kNoParent) {
-    const uint32_t node = slot >> 1;
-    const int side = int(slot & 1);
-    writeChildBox(nodes + node, side, box);
-    ::cuda::atomic_ref<uint32_t, ::cuda::thread_scope_device> arrivals(counters[node]);
-    if (arrivals.fetch_add(1, ::cuda::memory_order_acq_rel) == 0) return;  // the sibling finishes the node
-    box.extend(readChildBox(nodes + node, 1 - side));
-    slot = nodeParent[node];
-  }
-  root->box = box;
+  const Aabb box = leafBox(leaf.first, leaf.count, slotVertices, positions + b * batch.positions);
+  refitUpwards(nodes + b * batch.nodes, nodeParent, leaf.parentSlot, box, counters + b * batch.counters, root + b);
 }
 
 // Where the Woop pass finds the vertex ids of slot s: in slot order (the refits' slotVertices,
@@ -92,8 +79,10 @@ constexpr uint32_t kWoopBlock = 128;
 template <class VertexIds>
 __global__ void __launch_bounds__(kWoopBlock) woopKernel(VertexIds ids, uint32_t slots,
                                                          const float* __restrict__ positions,
-                                                         WoopTriangle* __restrict__ woop) {
+                                                         WoopTriangle* __restrict__ woop, BatchStrides batch) {
   __shared__ float4 rows[3 * kWoopBlock];
+  positions += blockIdx.y * batch.positions;
+  woop += blockIdx.y * batch.woop;
   const uint32_t first = blockIdx.x * kWoopBlock, s = first + threadIdx.x;
   if (s < slots) {
     const uint32_t* tri = ids(s);
@@ -110,10 +99,15 @@ __global__ void __launch_bounds__(kWoopBlock) woopKernel(VertexIds ids, uint32_t
 }
 
 template <class VertexIds>
-void launchWoopKernel(VertexIds ids, uint32_t slots, const float* positions, WoopTriangle* woop, cudaStream_t stream) {
+void launchWoopKernel(VertexIds ids, uint32_t slots, const float* positions, WoopTriangle* woop, uint32_t batchCount,
+                      const BatchStrides& batch, cudaStream_t stream) {
   if (slots == 0) return;
-  woopKernel<<<gridFor(slots, kWoopBlock), kWoopBlock, 0, stream>>>(ids, slots, positions, woop);
-  CUDA_CHECK_LAUNCH("woopKernel");
+  forEachBatchChunk(batchCount, [&](uint32_t first, uint32_t count) {
+    const dim3 grid(gridFor(slots, kWoopBlock), count);
+    woopKernel<<<grid, kWoopBlock, 0, stream>>>(ids, slots, positions + first * batch.positions,
+                                                woop + first * batch.woop, batch);
+    CUDA_CHECK_LAUNCH("woopKernel");
+  });
 }
 
 // One thread per listed slot: a static scene's moving triangles are few and scattered, so each
@@ -141,12 +135,6 @@ void launchInterpolateFrame(const float* keyframes, const uint32_t* movingIds, c
 }
 
 InterpolationNode findInterpolationNode(cudaGraph_t graph) {
-  const std::vector<InterpolationNode> found = findInterpolationNodes(graph);
-  return found.empty() ? InterpolationNode{} : found.front();
-}
-
-std::vector<InterpolationNode> findInterpolationNodes(cudaGraph_t graph) {
-  std::vector<InterpolationNode> all;
   std::size_t count = 0;
   CUDA_CHECK(cudaGraphGetNodes(graph, nullptr, &count));
   std::vector<cudaGraphNode_t> nodes(count);
@@ -157,9 +145,9 @@ std::vector<InterpolationNode> findInterpolationNodes(cudaGraph_t graph) {
     if (type != cudaGraphNodeTypeKernel) continue;
     InterpolationNode found{node, {}};
     CUDA_CHECK(cudaGraphKernelNodeGetParams(node, &found.launch));
-    if (found.launch.func == reinterpret_cast<void*>(&interpolateFrameKernel)) all.push_back(found);
+    if (found.launch.func == reinterpret_cast<void*>(&interpolateFrameKernel)) return found;
   }
-  return all;
+  return {};
 }
 
 void setInterpolationParams(cudaGraphExec_t exec, const InterpolationNode& node, const FrameParams& params) {
@@ -175,21 +163,50 @@ void setInterpolationParams(cudaGraphExec_t exec, const InterpolationNode& node,
 void launchRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
                  const uint32_t* slotVertices, const float* positions, uint32_t* counters, RootInfo* root,
                  cudaStream_t stream) {
+  launchBatchRefit(nodes, nodeParent, leaves, leafCount, slotVertices, positions, counters, root, 1, BatchStrides{},
+                   stream);
+}
+
+void launchBatchRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
+                      const uint32_t* slotVertices, const float* positions, uint32_t* counters, RootInfo* roots,
+                      uint32_t batchCount, const BatchStrides& batch, cudaStream_t stream) {
   if (leafCount == 0) return;
   const uint32_t block = 128;
-  refitKernel<<<gridFor(leafCount, block), block, 0, stream>>>(nodes, nodeParent, leaves, leafCount,
-                                                               slotVertices, positions, counters, root);
-  CUDA_CHECK_LAUNCH("refitKernel");
+  forEachBatchChunk(batchCount, [&](uint32_t first, uint32_t count) {
+    const dim3 grid(gridFor(leafCount, block), count);
+    refitKernel<<<grid, block, 0, stream>>>(nodes + first * batch.nodes, nodeParent, leaves, leafCount, slotVertices,
+                                            positions + first * batch.positions, counters + first * batch.counters,
+                                            roots + first, batch);
+    CUDA_CHECK_LAUNCH("refitKernel");
+  });
+}
+
+void launchBatchInterpolate(const float* keyframes, const uint32_t* movingIds, const FrameParams* frames, float* out,
+                            uint32_t movingCount, uint32_t batchCount, uint64_t outStride, cudaStream_t stream) {
+  const std::size_t count = std::size_t(movingCount) * 3;
+  if (count == 0) return;
+  const uint32_t block = 256;
+  forEachBatchChunk(batchCount, [&](uint32_t first, uint32_t rows) {
+    const dim3 grid(gridFor(count, block), rows);
+    interpolateBatchKernel<<<grid, block, 0, stream>>>(keyframes, movingIds, frames + first, out + first * outStride,
+                                                       count, outStride);
+    CUDA_CHECK_LAUNCH("interpolateBatchKernel");
+  });
 }
 
 void launchWoop(const uint32_t* triIndex, uint32_t slots, const uint32_t* indices, const float* positions,
                 WoopTriangle* woop, cudaStream_t stream) {
-  launchWoopKernel(GatheredIds{triIndex, indices}, slots, positions, woop, stream);
+  launchWoopKernel(GatheredIds{triIndex, indices}, slots, positions, woop, 1, BatchStrides{}, stream);
 }
 
 void launchSlotWoop(const uint32_t* slotVertices, uint32_t slots, const float* positions, WoopTriangle* woop,
                     cudaStream_t stream) {
-  launchWoopKernel(SlotOrderedIds{slotVertices}, slots, positions, woop, stream);
+  launchWoopKernel(SlotOrderedIds{slotVertices}, slots, positions, woop, 1, BatchStrides{}, stream);
+}
+
+void launchBatchSlotWoop(const uint32_t* slotVertices, uint32_t slots, const float* positions, WoopTriangle* woop,
+                         uint32_t batchCount, const BatchStrides& batch, cudaStream_t stream) {
+  launchWoopKernel(SlotOrderedIds{slotVertices}, slots, positions, woop, batchCount, batch, stream);
 }
 
 void launchMovingSlotWoop(const uint32_t* movingSlots, uint32_t count, const uint32_t* slotVertices,

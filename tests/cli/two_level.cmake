@@ -64,5 +64,5 @@ tl_error(cli.two_level.error.trace_rebuild 2 "[^\n]*tl_auto.tbvh holds a two-lev
          trace ${SCENE} ${W}/tl_auto.tbvh --rebuild sweep --frames 1 --no-images)
 tl_error(cli.two_level.error.not_a_scene 2 "--structure two-level needs a scene file[^\n]*explode is one animation"
          optimize ${CMAKE_SOURCE_DIR}/samples/explode -o ${W}/tl_bad.tbvh --structure two-level)
-tl_error(cli.two_level.error.segments 2 "--structure two-level builds T-SAH trees on the CPU: it does not go with --segments"
+tl_error(cli.two_level.error.segments 2 "--structure two-level builds one T-SAH tree per source and the top level: it does not go with --segments"
          optimize ${SCENE} -o ${W}/tl_bad.tbvh --structure two-level --segments 2)

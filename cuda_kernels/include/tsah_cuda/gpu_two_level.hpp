@@ -39,6 +39,10 @@ class GpuTwoLevelRuntime {
  public:
   struct Config {
     int device = 0;
+    // Refit each pose's BLAS and the TLAS in one block's shared memory when they fit (the device's
+    // opt-in shared memory per block: 13 * 4 bytes per interior node); false: the global-memory
+    // walk for every tree (the reference; the boxes are the same bit for bit).
+    bool blockRefits = true;
   };
 
   // Keeps a reference to `scene` (it must outlive the runtime) and runs updateAt(first frame time).

@@ -8,6 +8,7 @@
 #include "tsah/base/error.hpp"
 #include "tsah/base/memory.hpp"
 #include "tsah/build/sah_builder.hpp"
+#include "tsah/core/box_transform.hpp"
 #include "tsah/core/cost.hpp"
 #include "scene/two_level_parts.hpp"
 
@@ -32,22 +33,7 @@ TreeOptions treeOptionsWithK(const TreeOptions& options, int k) {
 
 }  // namespace
 
-Aabb transformBox(const Aabb& box, const anim::Matrix4& m) {
-  if (box.empty()) return box;
-  Aabb out;
-  for (int corner = 0; corner < 8; ++corner) {
-    const double p[3] = {(corner & 1) ? box.hi.x : box.lo.x, (corner & 2) ? box.hi.y : box.lo.y,
-                         (corner & 4) ? box.hi.z : box.lo.z};
-    double q[3];
-    for (int r = 0; r < 3; ++r) q[r] = m[4 * r] * p[0] + m[4 * r + 1] * p[1] + m[4 * r + 2] * p[2] + m[4 * r + 3];
-    // Rounded outward: the float box must contain the float points the runtime transforms rays against.
-    out.extend(Vec3{std::nextafter(float(q[0]), -3.4e38f), std::nextafter(float(q[1]), -3.4e38f),
-                    std::nextafter(float(q[2]), -3.4e38f)});
-    out.extend(Vec3{std::nextafter(float(q[0]), 3.4e38f), std::nextafter(float(q[1]), 3.4e38f),
-                    std::nextafter(float(q[2]), 3.4e38f)});
-  }
-  return out;
-}
+Aabb transformBox(const Aabb& box, const anim::Matrix4& m) { return transformBoxRows(box, m.data()); }
 
 Aabb sourceBox(const anim::Animation& source, double localTime) {
   const std::vector<float> p = source.positionsAt(localTime);
@@ -161,7 +147,10 @@ TwoLevelScene buildTwoLevelScene(anim::SceneSources scene, const TreeOptions& op
   assignPoses(scene, out);
   out.frameTimes = scene.frameTimes();
   out.instanceBoxes = instanceBoxesOverFrames(scene, out);
-  const BaselineConfig config = options.baselineConfig();
+  // The TLAS is optimized on the CPU whatever the device: it has one leaf per instance, and its
+  // objective covers every scene frame (the GPU optimizer takes at most 16 representative frames).
+  BaselineConfig config = options.baselineConfig();
+  config.deviceOptimizer = nullptr;
   const auto start = std::chrono::steady_clock::now();
   out.tlas = buildTSah(out.instanceBoxes, options.objective.k, config);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

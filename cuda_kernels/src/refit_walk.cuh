@@ -1,0 +1,95 @@
+#pragma once
+// The bottom-up refit walk shared by the flat runtime's refit (triangle leaves) and the two-level
+// runtime's refits (pose BLAS, TLAS over instance boxes): a leaf's thread writes its box into the
+// parent's child slot; the second thread to arrive at a node has both child boxes and carries on
+// upwards. refitUpwards walks through global memory (any tree size, one thread per leaf of a grid);
+// blockRefit keeps a small tree's walk in one block's shared memory.
+#include <cuda/atomic>
+
+#include "device_types.hpp"
+
+namespace tsah::cuda::detail {
+
+__device__ __forceinline__ void writeChildBox(GpuBvhNode* node, int side, const Aabb& b) {
+  float* f = reinterpret_cast<float*>(node);
+  // Layout (gpu_layout.hpp): n0xy, n1xy, nz; child 1's x/y start at float 4, z boxes at 8 / 10.
+  const int xy = side == 0 ? 0 : 4, z = side == 0 ? 8 : 10;
+  f[xy + 0] = b.lo.x;
+  f[xy + 1] = b.hi.x;
+  f[xy + 2] = b.lo.y;
+  f[xy + 3] = b.hi.y;
+  f[z + 0] = b.lo.z;
+  f[z + 1] = b.hi.z;
+}
+
+__device__ __forceinline__ Aabb readChildBox(const GpuBvhNode* node, int side) {
+  // Written by another thread of this launch: read through L2 (never a stale L1 line).
+  const float* f = reinterpret_cast<const float*>(node);
+  const int xy = side == 0 ? 0 : 4, z = side == 0 ? 8 : 10;
+  Aabb b;
+  b.lo = {__ldcg(f + xy + 0), __ldcg(f + xy + 2), __ldcg(f + z + 0)};
+  b.hi = {__ldcg(f + xy + 1), __ldcg(f + xy + 3), __ldcg(f + z + 1)};
+  return b;
+}
+
+// From the leaf at parentSlot with box `box` up to where a sibling is still missing, or to the root
+// (root->box). counters: one per interior node, zero before the launch.
+__device__ __forceinline__ void refitUpwards(GpuBvhNode* __restrict__ nodes, const uint32_t* __restrict__ nodeParent,
+                                             uint32_t slot, Aabb box, uint32_t* __restrict__ counters,
+                                             RootInfo* __restrict__ root) {
+  while (slot != kNoParent) {
+    const uint32_t node = slot >> 1;
+    const int side = int(slot & 1);
+    writeChildBox(nodes + node, side, box);
+    ::cuda::atomic_ref<uint32_t, ::cuda::thread_scope_device> arrivals(counters[node]);
+    if (arrivals.fetch_add(1, ::cuda::memory_order_acq_rel) == 0) return;  // the sibling finishes the node
+    box.extend(readChildBox(nodes + node, 1 - side));
+    slot = nodeParent[node];
+  }
+  root->box = box;
+}
+
+// One block refits one whole tree (a small one: a character's BLAS, a TLAS over some thousand
+// instances). Arrivals are counted and child boxes kept in shared memory, written to the nodes at
+// the end, so a level of the walk costs shared-memory latency instead of refitUpwards' round trips
+// to L2. leafBoxOf(leaf) gives a leaf's box; the boxes equal refitUpwards' (the same extends in the
+// same order). shared: blockRefitBytes(interiorCount) bytes (device_types.hpp).
+template <class LeafBoxOf>
+__device__ void blockRefit(GpuBvhNode* __restrict__ nodes, const uint32_t* __restrict__ nodeParent,
+                           const LeafRecord* __restrict__ leaves, uint32_t leafCount, uint32_t interiorCount,
+                           LeafBoxOf leafBoxOf, RootInfo* __restrict__ root, uint32_t* shared) {
+  uint32_t* counters = shared;
+  volatile float* boxes = reinterpret_cast<volatile float*>(shared + interiorCount);
+  for (uint32_t n = threadIdx.x; n < interiorCount; n += blockDim.x) counters[n] = 0;
+  __syncthreads();
+  for (uint32_t i = threadIdx.x; i < leafCount; i += blockDim.x) {
+    const LeafRecord leaf = leaves[i];
+    Aabb box = leafBoxOf(leaf);
+    uint32_t slot = leaf.parentSlot;
+    bool reachedRoot = true;
+    while (slot != kNoParent) {
+      const uint32_t node = slot >> 1;
+      const int side = int(slot & 1);
+      volatile float* mine = boxes + 12 * std::size_t(node) + 6 * side;
+      mine[0] = box.lo.x, mine[1] = box.lo.y, mine[2] = box.lo.z;
+      mine[3] = box.hi.x, mine[4] = box.hi.y, mine[5] = box.hi.z;
+      __threadfence_block();  // the box before the arrival: the sibling reads it after its own
+      if (atomicAdd(counters + node, 1u) == 0) {
+        reachedRoot = false;  // the sibling finishes the node
+        break;
+      }
+      __threadfence_block();
+      volatile const float* other = boxes + 12 * std::size_t(node) + 6 * (1 - side);
+      box.extend(Aabb{{other[0], other[1], other[2]}, {other[3], other[4], other[5]}});
+      slot = nodeParent[node];
+    }
+    if (reachedRoot) root->box = box;
+  }
+  __syncthreads();
+  for (uint32_t k = threadIdx.x; k < 2 * interiorCount; k += blockDim.x) {
+    volatile const float* b = boxes + 6 * std::size_t(k);
+    writeChildBox(nodes + k / 2, int(k & 1), Aabb{{b[0], b[1], b[2]}, {b[3], b[4], b[5]}});
+  }
+}
+
+}  // namespace tsah::cuda::detail
