@@ -33,8 +33,9 @@ __global__ void tlasRefitKernel(GpuBvhNode* __restrict__ nodes, const uint32_t* 
   refitUpwards(nodes, nodeParent, leaf.parentSlot, box, counters, root);
 }
 
-// Block refits: kBlockThreads threads per tree.
+// Block refits: threads per pose's tree, and for the TLAS (one block for the whole frame's instances).
 constexpr uint32_t kBlockThreads = 512;
+constexpr uint32_t kTlasBlockThreads = 1024;
 
 // One block per pose of a group (blockIdx.x): its Woop triangles and its refit, both from the
 // positions the batched interpolation wrote before this launch.
@@ -57,7 +58,7 @@ __global__ void __launch_bounds__(kBlockThreads)
 }
 
 // One block: every instance's world box, then the TLAS refit over them.
-__global__ void __launch_bounds__(kBlockThreads)
+__global__ void __launch_bounds__(kTlasBlockThreads)
     tlasBlockKernel(const InstanceState* __restrict__ instances, const BlasView* __restrict__ views, uint32_t count,
                     Aabb* instanceBoxes, GpuBvhNode* __restrict__ nodes, const uint32_t* __restrict__ nodeParent,
                     const LeafRecord* __restrict__ leaves, uint32_t leafCount, uint32_t interiorCount,
@@ -193,7 +194,7 @@ void launchTlasBlock(const InstanceState* instances, const BlasView* views, uint
                      GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
                      uint32_t interiorCount, const uint32_t* triIndex, RootInfo* root, cudaStream_t stream) {
   if (count == 0) return;
-  tlasBlockKernel<<<1, kBlockThreads, blockRefitBytes(interiorCount), stream>>>(
+  tlasBlockKernel<<<1, kTlasBlockThreads, blockRefitBytes(interiorCount), stream>>>(
       instances, views, count, instanceBoxes, nodes, nodeParent, leaves, leafCount, interiorCount, triIndex, root);
   CUDA_CHECK_LAUNCH("tlasBlockKernel");
 }

@@ -50,6 +50,7 @@ BaselineConfig TreeOptions::baselineConfig() const {
   BaselineConfig config;
   config.objective = objective;
   config.threads = threads;
+  config.binnedInitialTree = binnedInitialTree;
   config.optimizer.selection = selection;
   config.optimizer.seed = seed;
   config.optimizer.timeLimitSeconds = timeLimit;

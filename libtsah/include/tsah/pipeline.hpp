@@ -38,6 +38,7 @@ struct TreeOptions {
   double timeLimit = 0.0;        // seconds per optimization, 0: none
   double minImprovement = InsertionOptimizer::Config{}.minImprovement;
   unsigned threads = 0;          // 0: all cores
+  bool binnedInitialTree = false;  // BaselineConfig::binnedInitialTree
   // Cpu, or Cuda: every optimization by the GPU parallel reinsertion optimizer, which the caller
   // provides as gpuOptimizer (libtsah has no CUDA code; baselineConfig throws without it).
   Device device = Device::Cpu;

@@ -12,6 +12,7 @@
 
 #include "tsah/base/error.hpp"
 #include "tsah/optimize/leaf_collapser.hpp"
+#include "tsah/build/binned_sah_builder.hpp"
 #include "tsah/build/sah_builder.hpp"
 
 namespace tsah {
@@ -177,9 +178,23 @@ MethodSpec MethodSpec::parse(const std::string& name) {
   }
 }
 
+namespace {
+
+// The tree every method starts from: one primitive per leaf, by the sweep SAH builder (the paper's),
+// or the multithreaded binned one when the configuration asks for it.
+Bvh initialTree(std::span<const Aabb> frame, const BaselineConfig& config) {
+  if (!config.binnedInitialTree) return SweepSahBuilder({config.objective.cost, 1}).build(frame);
+  BinnedSahBuilder::Config binned;
+  binned.cost = config.objective.cost;
+  binned.maxLeafSize = 1;
+  return BinnedSahBuilder(binned).build(frame);
+}
+
+}  // namespace
+
 Bvh buildSah0(const PrimitiveBoxes& rep, const BaselineConfig& config) {
   checkFrames(rep);
-  Bvh bvh = SweepSahBuilder({config.objective.cost, 1}).build(rep.frame(0));
+  Bvh bvh = initialTree(rep.frame(0), config);
   bvh = collapseLeaves(bvh, config, 0);  // with the cost of frame 0, the only frame SAH0 knows
   refit(bvh, rep);
   return bvh;
@@ -187,7 +202,7 @@ Bvh buildSah0(const PrimitiveBoxes& rep, const BaselineConfig& config) {
 
 Bvh buildOptimizedSah(std::span<const Aabb> frame, const BaselineConfig& config, uint64_t seed) {
   const PrimitiveBoxes boxes = singleFrame(frame);
-  Bvh bvh = SweepSahBuilder({config.objective.cost, 1}).build(frame);
+  Bvh bvh = initialTree(frame, config);
   return optimizeAndCollapse(std::move(bvh), boxes, optimizerConfig(config, 0, seed), config).bvh;
 }
 
@@ -226,7 +241,7 @@ Bvh buildTSah(const PrimitiveBoxes& rep, int k, const BaselineConfig& config,
               InsertionOptimizer::Result* details) {
   checkFrames(rep);
   ProgressSink progress(config);
-  Bvh bvh = SweepSahBuilder({config.objective.cost, 1}).build(rep.frame(0));
+  Bvh bvh = initialTree(rep.frame(0), config);
   InsertionOptimizer::Config oc = optimizerConfig(config, k, config.optimizer.seed);
   const std::string label = "tsah" + std::to_string(k);
   oc.progress = [&](const InsertionOptimizer::BatchRecord& r) {

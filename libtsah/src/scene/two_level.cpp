@@ -135,7 +135,9 @@ TwoLevelScene buildTwoLevelScene(anim::SceneSources scene, const TreeOptions& op
     blas.source = s;
     blas.animated = source.keyframeCount() > 1;
     const int k = blas.animated ? options.objective.k : 0;
-    OptimizedTree tree = optimizeAnimation(source, treeOptionsWithK(options, k));
+    TreeOptions own = treeOptionsWithK(options, k);
+    own.binnedInitialTree = own.binnedInitialTree || !blas.animated;  // static: often millions of triangles
+    OptimizedTree tree = optimizeAnimation(source, own);
     const std::string what = scene.description.file + ": source " + std::to_string(s) + " (" + source.name() + ")";
     requireValid(tree.bvh, representativeBoxes(source, framesFor(source, options.frames)), what);
     blas.info = tree.info;

@@ -71,6 +71,9 @@ struct BaselineConfig {
   // When set, every optimization runs here instead (optimizerKind is then unused).
   TreeOptimizerFunction deviceOptimizer;
   unsigned threads = 0;  // worker threads for independent trees and frames; 0: all cores
+  // Start from the multithreaded binned SAH tree instead of the sweep SAH tree (single-threaded:
+  // most of the build time of a static object of millions of triangles optimized on the GPU).
+  bool binnedInitialTree = false;
   // Progress messages (which method, which frame, optimizer batches). May be called from worker
   // threads, one call at a time.
   std::function<void(const std::string& message)> progress;
