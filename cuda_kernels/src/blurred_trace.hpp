@@ -1,6 +1,6 @@
 #pragma once
 // The blurred frame's trace on the device (blurred_traversal.cu): the frame as tsah::MotionBvhView
-// (device pointers), traced by the same tsah::closestHit / anyHit as the CPU runtime's.
+// (device pointers), traced by the binary layout's device loop with the CPU runtime's lerps.
 #include <cstdint>
 #include <cuda_runtime_api.h>
 

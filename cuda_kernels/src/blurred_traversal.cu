@@ -1,7 +1,9 @@
 // The trace kernel of a blurred frame over a ray buffer with one shutter fraction per ray: one
-// thread per ray, the CPU runtime's traversal of a MotionBvhView (tsah/layout/traversal.hpp: boxes
-// and triangles lerped at the ray's time by tsah/layout/motion_blur.hpp).
+// thread per ray, the binary layout's device traversal (bvh2_traversal.cuh) over the two keys of
+// the ray's segment, boxes and triangles lerped at the ray's time as the CPU runtime lerps them
+// (tsah/layout/motion_blur.hpp).
 #include "blurred_trace.hpp"
+#include "bvh2_traversal.cuh"
 #include "launch.hpp"
 
 namespace tsah::cuda::detail {
@@ -15,9 +17,9 @@ __global__ void __launch_bounds__(128) blurredTraceKernel(MotionBvhView frame, c
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= count) return;
   if constexpr (AnyHit)
-    occluded[i] = anyHit(frame, rays[i], times[i]) ? 1 : 0;
+    occluded[i] = bvh2BlurredAnyHit(frame, rays[i], times[i]) ? 1 : 0;
   else
-    hits[i] = closestHit(frame, rays[i], times[i]);
+    hits[i] = bvh2BlurredClosestHit(frame, rays[i], times[i]);
 }
 
 }  // namespace

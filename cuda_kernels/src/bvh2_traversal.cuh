@@ -9,6 +9,7 @@
 // The box test and the triangle test are the CPU runtime's own (ray.hpp, woop.hpp: the same
 // arithmetic and the watertight fallback near edges), so hits agree with the CPU path.
 #include "device_types.hpp"
+#include "tsah/layout/motion_blur.hpp"
 #include "tsah/layout/traversal.hpp"
 
 namespace tsah::cuda::detail {
@@ -34,6 +35,94 @@ __device__ __forceinline__ bool bvh2Slab(const RayPrep& r, float loX, float hiX,
   const float tf = fminf(fminf(fmaxf(x0, x1), fmaxf(y0, y1)), fminf(fmaxf(z0, z1), tmax)) * kSlabFarScale;
   tEntry = tn;
   return tn <= tf;
+}
+
+// What the loop reads of a frame, for the instant frame (TraceScene: packed nodes, Woop triangles)
+// and a blurred one (Bvh2MotionFrame): a node's two child boxes as the packed rows n0xy, n1xy, nz
+// (gpu_layout.hpp) with its references, a slot's triangle test, a slot's triangle id.
+__device__ __forceinline__ void loadBvh2Node(const TraceScene& scene, int32_t ref, float4& n0xy, float4& n1xy,
+                                             float4& nz, int4& refs) {
+  const float4* n = reinterpret_cast<const float4*>(scene.nodes + ref);
+  n0xy = __ldg(n), n1xy = __ldg(n + 1), nz = __ldg(n + 2);
+  refs = __ldg(reinterpret_cast<const int4*>(n + 3));
+}
+
+__device__ __forceinline__ bool intersectBvh2Slot(const TraceScene& scene, const Ray& ray, const RayPrep& prep,
+                                                  uint32_t s, float tmax, float& t, float& u, float& v) {
+  const WoopTriangle w = loadWoop(scene.woop, s);
+  auto fetch = [&](Vec3& v0, Vec3& v1, Vec3& v2) {
+    const uint32_t* tri = scene.indices + 3 * std::size_t(__ldg(scene.triIndex + s));
+    const float* p = scene.positions;
+    const uint32_t a = __ldg(tri), b = __ldg(tri + 1), c = __ldg(tri + 2);
+    v0 = {__ldg(p + 3 * a), __ldg(p + 3 * a + 1), __ldg(p + 3 * a + 2)};
+    v1 = {__ldg(p + 3 * b), __ldg(p + 3 * b + 1), __ldg(p + 3 * b + 2)};
+    v2 = {__ldg(p + 3 * c), __ldg(p + 3 * c + 1), __ldg(p + 3 * c + 2)};
+  };
+  return intersectTriangle(ray, prep, w, tmax, fetch, t, u, v);
+}
+
+__device__ __forceinline__ uint32_t slotTriangle(const TraceScene& scene, uint32_t s) {
+  return __ldg(scene.triIndex + s);
+}
+
+// A blurred frame at one ray's time: the two keys of its segment, lerped as tsah::MotionFrame
+// (traversal.hpp) lerps them on the CPU (motion::lerpBox per child box, motion::lerpVertex per
+// vertex, the watertight test), so hits are the CPU runtime's; only the loop is the one above.
+struct Bvh2MotionFrame {
+  const GpuBvhNode* nodes0;
+  const GpuBvhNode* nodes1;
+  const float* positions0;
+  const float* positions1;
+  const uint32_t* triIndex;
+  const uint32_t* indices;
+  float f;
+  RootInfo root;
+
+  __device__ __forceinline__ Bvh2MotionFrame(const MotionBvhView& m, float time) {
+    const motion::Segment seg = motion::segmentAt(m.keyTimes, int(m.keyCount), time);
+    const uint32_t k0 = uint32_t(seg.index), k1 = m.keyCount > 1 ? k0 + 1 : k0;
+    nodes0 = m.keyNodes + std::size_t(k0) * m.nodeCount;
+    nodes1 = m.keyNodes + std::size_t(k1) * m.nodeCount;
+    positions0 = m.keyPositions + std::size_t(k0) * m.vertexCount * 3;
+    positions1 = m.keyPositions + std::size_t(k1) * m.vertexCount * 3;
+    triIndex = m.triIndex;
+    indices = m.indices;
+    f = seg.f;
+    root.box = motion::lerpBox(m.keyRootBoxes[k0], m.keyRootBoxes[k1], f);
+    root.ref = m.rootRef;
+    root.count = m.rootCount;
+  }
+};
+
+__device__ __forceinline__ void loadBvh2Node(const Bvh2MotionFrame& m, int32_t ref, float4& n0xy, float4& n1xy,
+                                             float4& nz, int4& refs) {
+  const float4* a = reinterpret_cast<const float4*>(m.nodes0 + ref);
+  const float4* b = reinterpret_cast<const float4*>(m.nodes1 + ref);
+  const float4 a0 = __ldg(a), a1 = __ldg(a + 1), az = __ldg(a + 2);
+  const float4 b0 = __ldg(b), b1 = __ldg(b + 1), bz = __ldg(b + 2);
+  refs = __ldg(reinterpret_cast<const int4*>(a + 3));
+  const Aabb c0 = motion::lerpBox(Aabb{{a0.x, a0.z, az.x}, {a0.y, a0.w, az.y}}, Aabb{{b0.x, b0.z, bz.x}, {b0.y, b0.w, bz.y}}, m.f);
+  const Aabb c1 = motion::lerpBox(Aabb{{a1.x, a1.z, az.z}, {a1.y, a1.w, az.w}}, Aabb{{b1.x, b1.z, bz.z}, {b1.y, b1.w, bz.w}}, m.f);
+  n0xy = make_float4(c0.lo.x, c0.hi.x, c0.lo.y, c0.hi.y);
+  n1xy = make_float4(c1.lo.x, c1.hi.x, c1.lo.y, c1.hi.y);
+  nz = make_float4(c0.lo.z, c0.hi.z, c1.lo.z, c1.hi.z);
+}
+
+__device__ __forceinline__ Vec3 lerpedVertex(const Bvh2MotionFrame& m, uint32_t i) {
+  const Vec3 a{__ldg(m.positions0 + 3 * i), __ldg(m.positions0 + 3 * i + 1), __ldg(m.positions0 + 3 * i + 2)};
+  const Vec3 b{__ldg(m.positions1 + 3 * i), __ldg(m.positions1 + 3 * i + 1), __ldg(m.positions1 + 3 * i + 2)};
+  return motion::lerpVertex(a, b, m.f);
+}
+
+__device__ __forceinline__ bool intersectBvh2Slot(const Bvh2MotionFrame& m, const Ray& ray, const RayPrep& prep,
+                                                  uint32_t s, float tmax, float& t, float& u, float& v) {
+  const uint32_t* tri = m.indices + 3 * std::size_t(__ldg(m.triIndex + s));
+  const uint32_t a = __ldg(tri), b = __ldg(tri + 1), c = __ldg(tri + 2);
+  return intersectWatertight(prep, lerpedVertex(m, a), lerpedVertex(m, b), lerpedVertex(m, c), ray.tmin, tmax, t, u, v);
+}
+
+__device__ __forceinline__ uint32_t slotTriangle(const Bvh2MotionFrame& m, uint32_t s) {
+  return __ldg(m.triIndex + s);
 }
 
 // Postponed far children: (reference, leaf count); entry 0 is the "empty" sentinel. Kept outside
@@ -89,14 +178,14 @@ struct Bvh2Traversal {
 
   // Traverses until the ray is finished or, with DynamicFetch, until fewer than
   // kDynamicFetchThreshold lanes of the warp are still in the loop (call again to go on).
-  template <bool DynamicFetch>
-  __device__ __forceinline__ void run(const TraceScene& scene, Bvh2Stack& stack) {
+  template <bool DynamicFetch, class Frame>
+  __device__ __forceinline__ void run(const Frame& scene, Bvh2Stack& stack) {
     while (nodeRef != kBvh2StackEmpty || leafRef < 0) {
       // Interior nodes until every live lane has found a leaf (or finished).
       while (isInterior(nodeRef)) {
-        const float4* n = reinterpret_cast<const float4*>(scene.nodes + nodeRef);
-        const float4 n0xy = __ldg(n), n1xy = __ldg(n + 1), nz = __ldg(n + 2);
-        const int4 refs = __ldg(reinterpret_cast<const int4*>(n + 3));
+        float4 n0xy, n1xy, nz;
+        int4 refs;
+        loadBvh2Node(scene, nodeRef, n0xy, n1xy, nz, refs);
         float t0, t1;
         const bool hit0 = bvh2Slab(prep, n0xy.x, n0xy.y, n0xy.z, n0xy.w, nz.x, nz.y, ray.tmin, hitT, t0);
         const bool hit1 = bvh2Slab(prep, n1xy.x, n1xy.y, n1xy.z, n1xy.w, nz.z, nz.w, ray.tmin, hitT, t1);
@@ -122,17 +211,8 @@ struct Bvh2Traversal {
         const uint32_t first = leafFirstSlot(leafRef);
         bool done = false;
         for (uint32_t s = first; s < first + leafCount; ++s) {
-          const WoopTriangle w = loadWoop(scene.woop, s);
-          auto fetch = [&](Vec3& v0, Vec3& v1, Vec3& v2) {
-            const uint32_t* tri = scene.indices + 3 * std::size_t(__ldg(scene.triIndex + s));
-            const float* p = scene.positions;
-            const uint32_t a = __ldg(tri), b = __ldg(tri + 1), c = __ldg(tri + 2);
-            v0 = {__ldg(p + 3 * a), __ldg(p + 3 * a + 1), __ldg(p + 3 * a + 2)};
-            v1 = {__ldg(p + 3 * b), __ldg(p + 3 * b + 1), __ldg(p + 3 * b + 2)};
-            v2 = {__ldg(p + 3 * c), __ldg(p + 3 * c + 1), __ldg(p + 3 * c + 2)};
-          };
           float t, u, v;
-          if (intersectTriangle(ray, prep, w, hitT, fetch, t, u, v)) {
+          if (intersectBvh2Slot(scene, ray, prep, s, hitT, t, u, v)) {
             hitT = t;
             hit.t = t;
             hit.u = u;
@@ -160,9 +240,10 @@ struct Bvh2Traversal {
   }
 
   // After the traversal: the closest hit with its triangle id, or whether anything was hit.
-  __device__ __forceinline__ Hit closestHit(const TraceScene& scene) const {
+  template <class Frame>
+  __device__ __forceinline__ Hit closestHit(const Frame& scene) const {
     Hit h = hit;
-    if (h.valid()) h.tri = __ldg(scene.triIndex + h.tri);
+    if (h.valid()) h.tri = slotTriangle(scene, h.tri);
     return h;
   }
   __device__ __forceinline__ bool occluded() const { return hit.valid(); }
@@ -182,6 +263,26 @@ __device__ __forceinline__ bool bvh2AnyHit(const TraceScene& scene, const RootIn
   Bvh2Traversal<true> walk;
   walk.start(root, ray, stack);
   walk.run<false>(scene, stack);
+  return walk.occluded();
+}
+
+// One ray of a blurred frame at its shutter fraction `time` (the blurred batch kernel, the render's
+// blurred passes).
+__device__ __forceinline__ Hit bvh2BlurredClosestHit(const MotionBvhView& view, const Ray& ray, float time) {
+  const Bvh2MotionFrame frame(view, time);
+  Bvh2Stack stack;
+  Bvh2Traversal<false> walk;
+  walk.start(frame.root, ray, stack);
+  walk.run<false>(frame, stack);
+  return walk.closestHit(frame);
+}
+
+__device__ __forceinline__ bool bvh2BlurredAnyHit(const MotionBvhView& view, const Ray& ray, float time) {
+  const Bvh2MotionFrame frame(view, time);
+  Bvh2Stack stack;
+  Bvh2Traversal<true> walk;
+  walk.start(frame.root, ray, stack);
+  walk.run<false>(frame, stack);
   return walk.occluded();
 }
 

@@ -3,9 +3,10 @@
 // shadow rays, vertex normals, shading) is libtsah's shading.hpp, which the CPU renderer uses too.
 //
 // A blurred frame (GpuRuntime::updateShutter) is rendered as the CPU renderer renders one: every
-// ray of a pixel at the pixel's shutter time (pixelShutterTime), traced by tsah::closestHit /
-// anyHit of a MotionBvhView (the traversal of the blurred batch queries, blurred_traversal.cu), the
-// primary surface on the hit triangle lerped at that time (blurredPrimarySurface).
+// ray of a pixel at the pixel's shutter time (pixelShutterTime), traced by the binary traversal
+// over the keys of its segment (bvh2BlurredClosestHit / AnyHit, as the blurred batch queries,
+// blurred_traversal.cu), the primary surface on the hit triangle lerped at that time
+// (blurredPrimarySurface).
 //
 // Compiled with -fmad=false, so that math rounds exactly as on the CPU (see shading.hpp); only
 // cosf/sinf/powf/expf (the sample warps and the sRGB curve) can differ from the C library in the
@@ -222,9 +223,11 @@ struct BlurredTracer {
   static constexpr bool kTimed = true;
   MotionBvhView view;
   __device__ __forceinline__ Hit closestHit(const Ray& ray, float time) const {
-    return tsah::closestHit(view, ray, time);
+    return detail::bvh2BlurredClosestHit(view, ray, time);
   }
-  __device__ __forceinline__ bool anyHit(const Ray& ray, float time) const { return tsah::anyHit(view, ray, time); }
+  __device__ __forceinline__ bool anyHit(const Ray& ray, float time) const {
+    return detail::bvh2BlurredAnyHit(view, ray, time);
+  }
 };
 
 // The shutter time of a pixel's rays for the tracer (0: an instant tracer reads none).
