@@ -1,5 +1,6 @@
 // GpuRuntime's motion blur from host positions: the current tree refitted at every key of a shutter,
 // one copy of the traced tree's nodes, root and positions per key (docs/cuda-runtime.md).
+#include <algorithm>
 #include <cmath>
 #include <string>
 #include <vector>
@@ -7,6 +8,7 @@
 #include "tsah/base/error.hpp"
 #include "blurred_trace.hpp"
 #include "cwbvh_kernels.hpp"
+#include "kernels.hpp"
 #include "tsah/layout/motion_blur.hpp"
 #include "runtime_impl.hpp"
 
@@ -19,18 +21,23 @@ void GpuRuntime::Impl::requireKey(uint32_t key) const {
                             std::to_string(shutterKeys) + " keys");
 }
 
-// Runs refitKey(k) for every key and keeps each key's nodes, root and positions.
-template <typename RefitKey>
-UpdateTimings GpuRuntime::Impl::refitKeys(std::span<const float> keyTimes, RefitKey&& refitKey) {
+void GpuRuntime::Impl::requireBinaryLayout() const {
   if (config.layout != Layout::Bvh2)
     throw tsah::ConfigError("GPU runtime: motion blur traces the binary layout on the GPU (layout bvh2, not " +
                             std::string(name(config.layout)) + ")");
+}
+
+// Runs refitKey(k) for every key and keeps each key's nodes, root and positions.
+template <typename RefitKey>
+UpdateTimings GpuRuntime::Impl::refitKeys(std::span<const float> keyTimes, RefitKey&& refitKey) {
+  requireBinaryLayout();
   const auto keys = static_cast<uint32_t>(keyTimes.size());
   DeviceTree& t = tree();
   const std::size_t interior = t.topology.interiorCount, coords = std::size_t(vertices) * 3;
   keyNodes.reserve(std::size_t(keys) * interior);
   keyRootBoxes.reserve(keys);
   keyPositions.reserve(std::size_t(keys) * coords);
+  keySlotsReady = 0;  // the slots get the caller's positions of every vertex
   UpdateTimings total;
   for (uint32_t k = 0; k < keys; ++k) {
     // Each key is a whole update (bit-identical to CpuRuntime::update at its positions), kept.
@@ -82,7 +89,67 @@ UpdateTimings GpuRuntime::updateShutterAt(double open, double close) {
   const std::vector<double> times = motion::shutterKeys(m.times, open, close);
   if (times.size() == 1) return m.refitAt(times[0]);
   const std::vector<float> fractions = motion::keyFractions(times);
-  return m.refitKeys(fractions, [&](uint32_t k) { return m.refitAt(times[k]); });
+  m.requireBinaryLayout();
+  return m.refitAnimationKeys(times, fractions);
+}
+
+UpdateTimings GpuRuntime::Impl::refitAnimationKeys(std::span<const double> keyTimes, std::span<const float> fractions) {
+  // The instant state first (tracing without times sees the last key); it also puts the rest
+  // positions of the static vertices in `positions`, which every key slot starts from.
+  UpdateTimings total = refitAt(keyTimes.back());
+  const auto keys = static_cast<uint32_t>(keyTimes.size());
+  DeviceTree& t = tree();
+  const std::size_t interior = t.topology.interiorCount, coords = std::size_t(vertices) * 3;
+  if (keyNodes.size() < std::size_t(keys) * interior || keyPositions.size() < std::size_t(keys) * coords ||
+      keySlotsTree != int(current))
+    keySlotsReady = 0;  // reallocated, or another tree's references
+  keyNodes.reserve(std::size_t(keys) * interior);
+  keyRootBoxes.reserve(keys);
+  keyPositions.reserve(std::size_t(keys) * coords);
+  keyCounters.reserve(std::size_t(keys) * interior);
+  keyRoots.reserve(keys);
+  keyFrames.reserve(keys);
+  std::vector<detail::FrameParams> blends(keys);
+  for (uint32_t k = 0; k < keys; ++k) {
+    setFrame(keyTimes[k]);
+    blends[k] = frame;
+  }
+  keyFrames.upload(blends, stream);
+  detail::BatchStrides strides;
+  strides.positions = coords;
+  strides.nodes = interior;
+  strides.counters = interior;
+  events.record(0, stream);
+  // A slot starts as the instant state once: the static vertices' rest positions (the batch moves
+  // the others) and the nodes' child references (the batch rewrites the boxes).
+  for (uint32_t k = keySlotsReady; k < keys; ++k) {
+    CUDA_CHECK(cudaMemcpyAsync(keyPositions.data() + k * coords, positions.data(), coords * sizeof(float),
+                               cudaMemcpyDeviceToDevice, stream));
+    if (interior)
+      CUDA_CHECK(cudaMemcpyAsync(keyNodes.data() + k * interior, t.nodes.data(), interior * sizeof(GpuBvhNode),
+                                 cudaMemcpyDeviceToDevice, stream));
+  }
+  keySlotsReady = std::max(keySlotsReady, keys);
+  keySlotsTree = int(current);
+  detail::launchBatchInterpolate(keyframes.data(), movingIds.size() ? movingIds.data() : nullptr, keyFrames.data(),
+                                 keyPositions.data(), movingVertices, keys, coords, stream);
+  events.record(1, stream);
+  if (interior) CUDA_CHECK(cudaMemsetAsync(keyCounters.data(), 0, std::size_t(keys) * interior * sizeof(uint32_t), stream));
+  detail::launchBatchRefit(keyNodes.data(), t.nodeParent.data(), t.leaves.data(), uint32_t(t.leaves.size()),
+                           t.slotVertices.data(), keyPositions.data(), keyCounters.data(), keyRoots.data(), keys,
+                           strides, stream);
+  CUDA_CHECK(cudaMemcpy2DAsync(keyRootBoxes.data(), sizeof(Aabb), &keyRoots.data()->box, sizeof(detail::RootInfo),
+                               sizeof(Aabb), keys, cudaMemcpyDeviceToDevice, stream));
+  events.record(2, stream);
+  events.wait(2);
+  total.interpolateMs += events.ms(0, 1);
+  total.refitMs += events.ms(1, 2);
+  shutterKeys = keys;
+  shutterKeyTimes.assign(fractions.begin(), fractions.end());
+  keyFractions.reserve(keys);
+  keyFractions.upload(fractions, stream);
+  CUDA_CHECK(cudaStreamSynchronize(stream));
+  return total;
 }
 
 bool GpuRuntime::blurred() const { return impl_->shutterKeys >= 2; }

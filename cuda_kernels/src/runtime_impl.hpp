@@ -158,6 +158,19 @@ struct GpuRuntime::Impl {
   // keeps every key; throws tsah::ConfigError for a layout other than bvh2.
   template <typename RefitKey>
   UpdateTimings refitKeys(std::span<const float> keyTimes, RefitKey&& refitKey);
+  // updateShutterAt's keys from the animation: the current tree refitted at every key time in one
+  // batch (one launch per step for all keys, detail::BatchStrides) straight into the key arrays,
+  // and the instant state updated at the last key (what tracing without times sees).
+  UpdateTimings refitAnimationKeys(std::span<const double> keyTimes, std::span<const float> fractions);
+  DeviceBuffer<detail::FrameParams> keyFrames;  // per key: its keyframe blend
+  DeviceBuffer<uint32_t> keyCounters;           // per key: the refit's arrival counters
+  DeviceBuffer<detail::RootInfo> keyRoots;      // per key: the refit's root
+  // Key slots [0, keySlotsReady) hold tree keySlotsTree's child references and the rest positions
+  // of the static vertices (refitAnimationKeys copies them into new slots only).
+  uint32_t keySlotsReady = 0;
+  int keySlotsTree = -1;
+  // Throws tsah::ConfigError unless the layout is bvh2 (the only one traced blurred on the GPU).
+  void requireBinaryLayout() const;
   // Throws tsah::ConfigError unless the frame is blurred and key < shutterKeys.
   void requireKey(uint32_t key) const;
   // The blurred frame's device arrays as the traversal reads them (the batch queries and the
