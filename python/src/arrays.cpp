@@ -41,6 +41,7 @@ T checkedInteger(py::handle arg, const char* name, T lo, T hi) {
 template uint64_t checkedInteger<uint64_t>(py::handle, const char*, uint64_t, uint64_t);
 template uint32_t checkedInteger<uint32_t>(py::handle, const char*, uint32_t, uint32_t);
 template int checkedInteger<int>(py::handle, const char*, int, int);
+template long checkedInteger<long>(py::handle, const char*, long, long);
 
 double checkedTime(double t, const char* name) {
   if (!std::isfinite(t))
@@ -48,11 +49,13 @@ double checkedTime(double t, const char* name) {
   return t;
 }
 
-std::string shapeText(const py::array& a) {
+std::string shapeText(const std::vector<py::ssize_t>& shape) {
   std::string text = "(";
-  for (py::ssize_t d = 0; d < a.ndim(); ++d) text += (d ? ", " : "") + std::to_string(a.shape(d));
-  return text + (a.ndim() == 1 ? ",)" : ")");
+  for (std::size_t d = 0; d < shape.size(); ++d) text += (d ? ", " : "") + std::to_string(shape[d]);
+  return text + (shape.size() == 1 ? ",)" : ")");
 }
+
+std::string shapeText(const py::array& a) { return shapeText(std::vector<py::ssize_t>(a.shape(), a.shape() + a.ndim())); }
 
 namespace {
 

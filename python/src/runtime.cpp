@@ -2,9 +2,11 @@
 // of rays on the CPU (tsah::CpuRuntime) or the GPU (tsah::cuda::GpuRuntime, when built).
 #include <pybind11/stl.h>
 
+#include <chrono>
 #include <cmath>
 #include <cstddef>
 #include <cstring>
+#include <deque>
 #include <limits>
 #include <memory>
 #include <span>
@@ -13,12 +15,14 @@
 
 #include "anim/animation.hpp"
 #include "bindings.hpp"
+#include "device_arrays.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
 #include "tsah/layout/flat_bvh.hpp"
 #include "tsah/layout/wide_bvh.hpp"
 #include "tsah/core/kinds.hpp"
 #include "tsah/pipeline.hpp"
 #include "tsah/core/ray.hpp"
+#include "tsah/render/renderer.hpp"
 #include "tsah/base/coordinates.hpp"
 #if defined(TSAH_HAVE_CUDA)
 #include "tsah_cuda/device.hpp"
@@ -50,12 +54,6 @@ Points checkedPoints(py::handle obj, const std::string& name) {
   return {checkedArray<float>(obj, name, Kind::Float, {-1, 3}), {}};  // refused there: not an array
 }
 
-std::string batchText(const std::vector<py::ssize_t>& shape) {
-  std::string text = "(";
-  for (std::size_t d = 0; d < shape.size(); ++d) text += (d ? ", " : "") + std::to_string(shape[d]);
-  return text + (shape.size() == 1 ? ",)" : ")");
-}
-
 // origins (..., 3), directions of the same shape, tmin and tmax each a number or an array of the
 // batch shape (...). Returns the rays and the batch shape.
 std::vector<Ray> makeRays(py::handle origins, py::handle directions, py::handle tmin, py::handle tmax,
@@ -77,7 +75,7 @@ std::vector<Ray> makeRays(py::handle origins, py::handle directions, py::handle 
     if (py::isinstance<py::array>(value)) {
       const auto a = py::reinterpret_borrow<py::array>(value);
       if (std::vector<py::ssize_t>(a.shape(), a.shape() + a.ndim()) != batch)
-        throw tsah::ConfigError(std::string(name) + ": expected shape " + batchText(batch) + ", got " +
+        throw tsah::ConfigError(std::string(name) + ": expected shape " + shapeText(batch) + ", got " +
                                 shapeText(a));
       flat = a.attr("reshape")(-1);
       value = flat;
@@ -115,7 +113,7 @@ py::array resultArray(py::handle out, const py::dtype& dtype, const std::vector<
   if (!a.dtype().equal(dtype))
     throw ArgumentTypeError("out: expected dtype " + std::string(py::str(py::handle(dtype))) + ", got " + std::string(py::str(a.dtype())));
   if (std::vector<py::ssize_t>(a.shape(), a.shape() + a.ndim()) != batch)
-    throw tsah::ConfigError("out: expected shape " + batchText(batch) + ", got " + shapeText(a));
+    throw tsah::ConfigError("out: expected shape " + shapeText(batch) + ", got " + shapeText(a));
   if (!(a.flags() & py::array::c_style)) throw tsah::ConfigError("out: must be C-contiguous");
   if (!a.writeable()) throw tsah::ConfigError("out: is read-only");
   return a;
@@ -151,6 +149,26 @@ Array<float> checkedPositions(py::handle positions, uint32_t vertices) {
 bool isTime(py::handle value) {
   return !py::isinstance<py::array>(value) && !py::isinstance<py::bool_>(value) && PyNumber_Check(value.ptr()) != 0;
 }
+
+// Wall time of the C++ batch call in its scope (the CPU runtime's RayPassStats: the batch call
+// alone, without the conversions to and from numpy).
+class PassClock {
+ public:
+  PassClock(RayPassStats& stats, std::size_t rays) : stats_(stats), rays_(rays) {}
+  ~PassClock() {
+    stats_.rays = rays_;
+    stats_.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start_).count();
+  }
+  PassClock(const PassClock&) = delete;
+  PassClock& operator=(const PassClock&) = delete;
+
+ private:
+  RayPassStats& stats_;
+  std::size_t rays_;
+  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+};
+
+py::dict rayPassDict(const RayPassStats& s) { return py::dict("rays"_a = s.rays, "ms"_a = s.ms); }
 
 }  // namespace
 
@@ -195,6 +213,7 @@ class CpuTracer {
     std::vector<Hit> hits;
     {
       py::gil_scoped_release release;
+      const PassClock clock(lastPass_, rays.size());
       hits = closestHits(*runtime_, rays);
     }
     return hitArray(std::move(hits), result);
@@ -206,11 +225,13 @@ class CpuTracer {
     std::vector<uint8_t> flags;
     {
       py::gil_scoped_release release;
+      const PassClock clock(lastPass_, rays.size());
       flags = anyHits(*runtime_, rays);
     }
     return boolArray(flags, result);
   }
   std::string layout() const { return name(runtime_->layoutInfo().layout); }
+  py::dict lastRayPass() const { return rayPassDict(lastPass_); }
   const CpuRuntime& runtime() const { return *runtime_; }
   py::array_t<float> bounds() const {
     const Aabb b = runtime_->bounds();
@@ -226,9 +247,77 @@ class CpuTracer {
   py::object owner_;  // the tsah.Animation animation_ refers to
   const anim::Animation& animation_;
   std::unique_ptr<CpuRuntime> runtime_;
+  mutable RayPassStats lastPass_;  // of the last trace / occluded
 };
 
 #if defined(TSAH_HAVE_CUDA)
+// Rays given as device arrays (docs/python.md#device-arrays): origins and directions (..., 3)
+// float32, tmin and tmax numbers or float32 arrays of the batch shape, all used in place.
+struct DeviceRayBatch {
+  std::vector<DeviceArrayArg> arrays;  // every array of the call, kept (DLPack: alive) until it returns
+  cuda::GpuRuntime::DeviceRays rays;
+  std::vector<py::ssize_t> batch;
+};
+
+// The GPU runtime's arguments that may be device arrays, checked in the order of the parameters.
+class DeviceArguments {
+ public:
+  DeviceArguments(int device, std::uintptr_t stream) : device_(device), stream_(stream) {}
+  const DeviceArrayArg& add(py::handle obj, const std::string& name, const std::vector<std::string>& typestrs,
+                            bool writable = false) {
+    arrays_.push_back(checkedDeviceArray(obj, name, typestrs, writable, device_, stream_));
+    return arrays_.back();
+  }
+  const DeviceArrayArg& add(py::handle obj, const std::string& name, const std::vector<std::string>& typestrs,
+                            const std::vector<py::ssize_t>& shape, bool writable = false) {
+    const DeviceArrayArg& a = add(obj, name, typestrs, writable);
+    if (a.shape != shape) throw tsah::ConfigError(name + ": expected shape " + shapeText(shape) + ", got " + shapeText(a.shape));
+    return a;
+  }
+  // Every array's producer stream (CUDA interface v3) is waited for on the call's stream.
+  void waitForProducers() const {
+    for (const DeviceArrayArg& a : arrays_) waitForProducer(a, stream_);
+  }
+  std::uintptr_t stream() const { return stream_; }
+  int device() const { return device_; }
+
+ private:
+  int device_;
+  std::uintptr_t stream_;
+  std::deque<DeviceArrayArg> arrays_;  // stable references
+};
+
+template <class T>
+T* pointerOf(const DeviceArrayArg& a) {
+  return reinterpret_cast<T*>(a.data);
+}
+
+void addDeviceRays(DeviceArguments& args, py::handle origins, py::handle directions, py::handle tmin, py::handle tmax,
+                   cuda::GpuRuntime::DeviceRays& rays, std::vector<py::ssize_t>& batch) {
+  const DeviceArrayArg& o = args.add(origins, "origins", {"<f4"});
+  if (o.shape.empty() || o.shape.back() != 3)
+    throw tsah::ConfigError("origins: expected shape (..., 3), got " + shapeText(o.shape));
+  const DeviceArrayArg& d = args.add(directions, "directions", {"<f4"});
+  if (d.shape != o.shape)
+    throw tsah::ConfigError("directions: expected the shape of origins " + shapeText(o.shape) + ", got " + shapeText(d.shape));
+  batch.assign(o.shape.begin(), o.shape.end() - 1);
+  rays.origins = pointerOf<const float>(o);
+  rays.directions = pointerOf<const float>(d);
+  rays.count = o.size() / 3;
+  const auto limit = [&](py::handle value, const char* name, const float*& array, float& scalar) {
+    if (py::isinstance<py::float_>(value) || py::isinstance<py::int_>(value)) {
+      scalar = value.cast<float>();
+      return;
+    }
+    if (!isDeviceArray(value))
+      throw ArgumentTypeError(std::string(name) + ": expected a number or a float32 device array like origins, got " +
+                              std::string(py::str(value.get_type().attr("__name__"))));
+    array = pointerOf<const float>(args.add(value, name, {"<f4"}, batch));
+  };
+  limit(tmin, "tmin", rays.tmin, rays.tminValue);
+  limit(tmax, "tmax", rays.tmax, rays.tmaxValue);
+}
+
 // The same on the GPU: all keyframes uploaded once, refit and traversal on the device.
 class GpuTracer {
  public:
@@ -240,47 +329,119 @@ class GpuTracer {
     runtime_ = std::make_unique<cuda::GpuRuntime>(flattenBvh(tree.file.bvh), animation, config);
     refitTime(animation.startTime());
   }
-  void refit(py::handle timeOrPositions) {
-    if (!isTime(timeOrPositions)) return refitPositions(timeOrPositions);
+  void refit(py::handle timeOrPositions, py::handle stream) {
+    if (!isTime(timeOrPositions)) return refitPositions(timeOrPositions, stream);
     refitTime(timeOrPositions.cast<double>());
   }
   void refitTime(double time) {
     checkedTime(time, "time");
     py::gil_scoped_release release;
-    runtime_->updateAt(time);
+    lastUpdate_ = runtime_->updateAt(time);
   }
-  void refitPositions(py::handle vertices) {
+  void refitPositions(py::handle vertices, py::handle stream) {
+    if (isDeviceArray(vertices)) return refitDevice(vertices, streamArgument(stream));
     const Array<float> positions = checkedPositions(vertices, runtime_->vertexCount());
     py::gil_scoped_release release;
-    runtime_->update(std::span<const float>(positions.data(), std::size_t(positions.size())));
+    lastUpdate_ = runtime_->update(std::span<const float>(positions.data(), std::size_t(positions.size())));
   }
-  py::array trace(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out) {
+  py::object trace(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out, py::handle stream) {
+    if (isDeviceArray(o) || isDeviceArray(d)) return traceDevice(o, d, tmin, tmax, out, streamArgument(stream));
     std::vector<py::ssize_t> batch;
     const std::vector<Ray> rays = makeRays(o, d, tmin, tmax, batch);
     py::array result = resultArray(out, hitDtype(), batch);
     std::vector<Hit> hits;
     {
       py::gil_scoped_release release;
-      hits = runtime_->closestHits(rays);
+      hits = runtime_->closestHits(rays, &lastPass_);
     }
     return hitArray(std::move(hits), result);
   }
-  py::array occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out) {
+  py::object occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out, py::handle stream) {
+    if (isDeviceArray(o) || isDeviceArray(d)) return occludedDevice(o, d, tmin, tmax, out, streamArgument(stream));
     std::vector<py::ssize_t> batch;
     const std::vector<Ray> rays = makeRays(o, d, tmin, tmax, batch);
     py::array result = resultArray(out, py::dtype::of<bool>(), batch);
     std::vector<uint8_t> flags;
     {
       py::gil_scoped_release release;
-      flags = runtime_->anyHits(rays);
+      flags = runtime_->anyHits(rays, &lastPass_);
     }
     return boolArray(flags, result);
   }
   std::string deviceName() const { return runtime_->device().name; }
   cuda::GpuRuntime& runtime() { return *runtime_; }
+  py::dict lastUpdate() const {
+    return py::dict("interpolate_ms"_a = lastUpdate_.interpolateMs, "refit_ms"_a = lastUpdate_.refitMs,
+                    "woop_ms"_a = lastUpdate_.woopMs, "total_ms"_a = lastUpdate_.totalMs());
+  }
+  py::dict lastRayPass() const { return rayPassDict(lastPass_); }
 
  private:
+  int device() const { return runtime_->config().device; }
+  void refitDevice(py::handle vertices, std::uintptr_t stream) {
+    DeviceArguments args(device(), stream);
+    const uint32_t v = runtime_->vertexCount();
+    const float* positions = pointerOf<const float>(args.add(vertices, "positions", {"<f4"}, {py::ssize_t(v), 3}));
+    args.waitForProducers();
+    py::gil_scoped_release release;
+    runtime_->updateFromDevice(positions, v, reinterpret_cast<void*>(stream));
+  }
+  py::object traceDevice(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out,
+                         std::uintptr_t stream) {
+    DeviceArguments args(device(), stream);
+    cuda::GpuRuntime::DeviceRays rays;
+    std::vector<py::ssize_t> batch;
+    addDeviceRays(args, o, d, tmin, tmax, rays, batch);
+    static const char* const kFields[] = {"t", "u", "v", "triangle"};
+    py::dict results;
+    if (out.is_none()) {
+      for (const char* field : kFields)
+        results[field] = newDeviceArray(batch, field == std::string("triangle") ? "<i4" : "<f4", device(), stream);
+    } else if (py::isinstance<py::dict>(out)) {
+      results = py::reinterpret_borrow<py::dict>(out);
+      for (auto item : results) {
+        const std::string key = py::str(item.first);
+        if (std::find(std::begin(kFields), std::end(kFields), key) == std::end(kFields))
+          throw tsah::ConfigError("out: unknown field '" + key + "' (t, u, v, triangle)");
+      }
+    } else {
+      throw ArgumentTypeError("out: expected a dict of device arrays (t, u, v, triangle) for device rays, got " +
+                              std::string(py::str(out.get_type().attr("__name__"))));
+    }
+    cuda::GpuRuntime::DeviceHits hits;
+    float** floats[] = {&hits.t, &hits.u, &hits.v};
+    for (int f = 0; f < 3; ++f)
+      if (results.contains(kFields[f]))
+        *floats[f] = pointerOf<float>(args.add(results[kFields[f]], std::string("out['") + kFields[f] + "']", {"<f4"}, batch, true));
+    if (results.contains("triangle"))
+      hits.triangle = pointerOf<uint32_t>(args.add(results["triangle"], "out['triangle']", {"<i4", "<u4"}, batch, true));
+    args.waitForProducers();
+    {
+      py::gil_scoped_release release;
+      runtime_->closestHitsOnDevice(rays, hits, reinterpret_cast<void*>(stream));
+    }
+    return results;
+  }
+  py::object occludedDevice(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out,
+                            std::uintptr_t stream) {
+    DeviceArguments args(device(), stream);
+    cuda::GpuRuntime::DeviceRays rays;
+    std::vector<py::ssize_t> batch;
+    addDeviceRays(args, o, d, tmin, tmax, rays, batch);
+    const py::object result = out.is_none() ? newDeviceArray(batch, "|b1", device(), stream)
+                                            : py::reinterpret_borrow<py::object>(out);
+    auto* flags = pointerOf<uint8_t>(args.add(result, "out", {"|b1", "|u1"}, batch, true));
+    args.waitForProducers();
+    {
+      py::gil_scoped_release release;
+      runtime_->anyHitsOnDevice(rays, flags, reinterpret_cast<void*>(stream));
+    }
+    return result;
+  }
+
   std::unique_ptr<cuda::GpuRuntime> runtime_;
+  cuda::UpdateTimings lastUpdate_;
+  RayPassStats lastPass_;
 };
 #endif
 
@@ -302,6 +463,19 @@ shape to write into (returned). The GIL is released while tracing.
 constexpr const char* kOccludedDoc =
     "True for each ray that hits anything within (tmin, tmax) (shadow / ambient-occlusion queries); a bool "
     "array of the batch shape, or written into out= (bool, C-contiguous).";
+constexpr const char* kDeviceDoc = R"doc(
+Device arrays (objects with __cuda_array_interface__ or a CUDA __dlpack__, e.g. torch or CuPy
+arrays on the runtime's device; float32, C-contiguous) are used in place: refit(positions) checks
+them on the device; trace returns a dict of tsah.DeviceArray t, u, v (float32) and triangle
+(int32) of the batch shape, occluded a bool tsah.DeviceArray, or they write into out= (a dict of
+device arrays for trace, any of its four fields; a bool or uint8 device array for occluded). The
+work is ordered after what the caller queued on `stream` (None: the legacy default stream; an int
+cudaStream_t, or an object with __cuda_stream__ or cuda_stream) and before what it queues there
+next; device traces do not wait for the device (synchronize the stream before reading on the host).
+)doc";
+constexpr const char* kLastRayPassDoc =
+    "The last host-array trace or occluded call: {'rays': count, 'ms': time of the library's batch alone (GPU: the "
+    "traversal kernel's device time; CPU: the C++ batch call's wall time)}.";
 
 }  // namespace
 
@@ -325,7 +499,8 @@ trace`), "bvh2", "bvh4" or "bvh8"; a wide layout is the tree collapsed with its 
       .def("occluded", &CpuTracer::occluded, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf,
            "out"_a = py::none(), kOccludedDoc)
       .def_property_readonly("bounds", &CpuTracer::bounds, "Bounds of the current frame, float32 (2, 3).")
-      .def_property_readonly("layout", &CpuTracer::layout, "The layout traced: bvh2, bvh4 or bvh8.");
+      .def_property_readonly("layout", &CpuTracer::layout, "The layout traced: bvh2, bvh4 or bvh8.")
+      .def_property_readonly("last_ray_pass", &CpuTracer::lastRayPass, kLastRayPassDoc);
 
 #if defined(TSAH_HAVE_CUDA)
   m.attr("cuda_built") = true;
@@ -338,13 +513,19 @@ uploaded once; refit and traversal run on the GPU). Raises tsah.Failure when no 
              return std::make_unique<GpuTracer>(tree, animation, checkedInteger<int>(device, "device", 0));
            }),
            "tree"_a, "animation"_a, "device"_a = 0)
-      .def("refit", &GpuTracer::refit, "time"_a, kRefitDoc)
-      .def("refit_positions", &GpuTracer::refitPositions, "positions"_a, "The same as refit(positions) (vertex positions only).")
+      .def("refit", &GpuTracer::refit, "time"_a, py::kw_only(), "stream"_a = py::none(),
+           (std::string(kRefitDoc) + kDeviceDoc).c_str())
+      .def("refit_positions", &GpuTracer::refitPositions, "positions"_a, py::kw_only(), "stream"_a = py::none(),
+           "The same as refit(positions) (vertex positions only).")
       .def("trace", &GpuTracer::trace, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf,
-           "out"_a = py::none(), kTraceDoc)
+           "out"_a = py::none(), py::kw_only(), "stream"_a = py::none(), (std::string(kTraceDoc) + kDeviceDoc).c_str())
       .def("occluded", &GpuTracer::occluded, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf,
-           "out"_a = py::none(), kOccludedDoc)
-      .def_property_readonly("device_name", &GpuTracer::deviceName, "The name of the GPU the runtime uses.");
+           "out"_a = py::none(), py::kw_only(), "stream"_a = py::none(), (std::string(kOccludedDoc) + kDeviceDoc).c_str())
+      .def_property_readonly("device_name", &GpuTracer::deviceName, "The name of the GPU the runtime uses.")
+      .def_property_readonly("last_ray_pass", &GpuTracer::lastRayPass, kLastRayPassDoc)
+      .def_property_readonly("last_update", &GpuTracer::lastUpdate,
+                             "Device time of the last refit from a time or host positions (ms): interpolate_ms (the "
+                             "upload for positions), refit_ms, woop_ms, total_ms.");
 #else
   m.attr("cuda_built") = false;
   m.def("cuda_available", [] { return false; }, "True when the CUDA runtime was built and a GPU is present.");
