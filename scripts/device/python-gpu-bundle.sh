@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# Packs what scripts/device/python-gpu-check.sh needs on the GPU machine into one ignored folder
+# (default .gpu-python), to be carried there with the working tree (whose python/ it builds):
+#   prefix/  the gpu-hopper build (sm_90, CUDA) installed with cmake --install;
+#   lib/     the shared libraries of Debian packages that the installed tsah links by absolute path
+#            (tsahTargets-release.cmake: Assimp, OpenMeshCore, OpenMeshTools, TBB, stb) and those
+#            they load that a bare machine lacks (Assimp's Draco and minizip), under their sonames;
+#   bin/     test_cuda_device_arrays.
+# usage (repository root, after cmake --preset gpu-hopper):  bash scripts/device/python-gpu-bundle.sh [OUT]
+set -euo pipefail
+out=${1:-.gpu-python}
+build=build/gpu-hopper
+cmake --build "$build" -j2 --target tsah tsah_python test_cuda_device_arrays
+rm -rf "$out"
+mkdir -p "$out/lib" "$out/bin"
+cmake --install "$build" --prefix "$out/prefix" > /dev/null
+# Neither the command line nor the module built for this machine's Python is used there (the carry
+# limit is 64 MiB; the tsah program alone needs Embree and MPI's libraries).
+rm -rf "$out/prefix/bin" "$out"/prefix/lib/python3*
+cp "$build/tests/test_cuda_device_arrays" "$out/bin/"
+# Libraries every Linux machine with the NVIDIA driver and a CUDA toolkit provides: never copied.
+system='^(linux-vdso|ld-linux|libc\.|libm\.|libdl\.|librt\.|libpthread\.|libstdc\+\+|libgcc_s|libz\.|libcuda\.|libcudart\.|libnvidia)'
+copy() {  # a library file under its soname (and its real name, which the installed targets name)
+  local real name
+  real=$(readlink -f "$1")
+  name=$(objdump -p "$real" | awk '/SONAME/{print $2}')
+  cp -n "$real" "$out/lib/"
+  [ -n "$name" ] && [ ! -e "$out/lib/$name" ] && ln -s "$(basename "$real")" "$out/lib/$name"
+  true
+}
+for file in $(grep -ho '/usr/lib/x86_64-linux-gnu/[^;" ]*\.so[.0-9]*' "$out"/prefix/lib/cmake/tsah/tsah*Targets*.cmake | sort -u); do
+  copy "$file"
+done
+for f in "$out"/bin/* "$out"/lib/*; do
+  ldd "$f" | awk '/=> \//{print $1" "$3}' | while read -r name path; do
+    [[ $name =~ $system ]] || [ -e "$out/lib/$name" ] || copy "$path"
+  done
+done
+echo "python-gpu-bundle: $(ls "$out/lib" | wc -l) library names, $(du -sh "$out" | cut -f1) in $out"
+echo "device run: carry [\"$out\"], command: bash scripts/device/python-gpu-check.sh $out"
