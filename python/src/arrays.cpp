@@ -7,6 +7,7 @@
 #include <limits>
 
 #include "bindings.hpp"
+#include "device_arrays.hpp"
 #include "tsah/base/error.hpp"
 
 namespace tsah::python {
@@ -93,8 +94,7 @@ void refuseDeviceArray(py::handle obj, const std::string& name) {
     throw tsah::ConfigError(name + ": a CUDA device array (__cuda_array_interface__); this call takes host arrays (numpy)");
   if (py::isinstance<py::array>(obj) || !py::hasattr(obj, "__dlpack_device__")) return;
   const auto device = obj.attr("__dlpack_device__")().cast<std::pair<int, int>>();
-  constexpr int kDLCPU = 1, kDLCUDAHost = 3;  // DLPack's device types readable by the host
-  if (device.first != kDLCPU && device.first != kDLCUDAHost)
+  if (device.first != dlpack::kCPU && device.first != dlpack::kCUDAHost)  // the host reads those
     throw tsah::ConfigError(name + ": a device array (DLPack device type " + std::to_string(device.first) +
                             "); this call takes host arrays (numpy)");
 }

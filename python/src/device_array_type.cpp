@@ -15,32 +15,14 @@ namespace {
 
 using namespace pybind11::literals;
 
-// DLPack's ABI, as device_arrays.cpp reads it (the unversioned capsule "dltensor").
-struct DLTensorOut {
-  void* data;
-  int32_t deviceType, deviceId;
-  int32_t ndim;
-  uint8_t code, bits;
-  uint16_t lanes;
-  int64_t* shape;
-  int64_t* strides;
-  uint64_t byteOffset;
-};
-struct DLManagedTensorOut {
-  DLTensorOut tensor;
-  void* managerCtx;
-  void (*deleter)(DLManagedTensorOut*);
-};
-constexpr int32_t kDLCUDA = 2;
-
 // What a capsule's tensor owns: its shape, and a reference to the DeviceArray holding the memory.
 struct Export {
-  DLManagedTensorOut managed{};
+  dlpack::ManagedTensor managed{};
   std::vector<int64_t> shape;
   PyObject* owner = nullptr;
 };
 
-void deleteExport(DLManagedTensorOut* t) {
+void deleteExport(dlpack::ManagedTensor* t) {
   auto* e = static_cast<Export*>(t->managerCtx);
   const PyGILState_STATE gil = PyGILState_Ensure();  // consumers may delete from any thread
   Py_XDECREF(e->owner);
@@ -51,7 +33,7 @@ void deleteExport(DLManagedTensorOut* t) {
 // The capsule's destructor: a tensor nobody consumed (the name is still "dltensor") is deleted here.
 void deleteUnusedCapsule(PyObject* capsule) {
   if (!PyCapsule_IsValid(capsule, "dltensor")) return;
-  auto* t = static_cast<DLManagedTensorOut*>(PyCapsule_GetPointer(capsule, "dltensor"));
+  auto* t = static_cast<dlpack::ManagedTensor*>(PyCapsule_GetPointer(capsule, "dltensor"));
   if (t && t->deleter) t->deleter(t);
 }
 
@@ -99,24 +81,23 @@ class DeviceArray {
     return py::dict("shape"_a = shape(), "typestr"_a = typestr_, "data"_a = py::make_tuple(data(), false),
                     "version"_a = 3, "strides"_a = py::none(), "stream"_a = protocolStream(stream_));
   }
-  py::tuple dlpackDevice() const { return py::make_tuple(kDLCUDA, device_); }
+  py::tuple dlpackDevice() const { return py::make_tuple(dlpack::kCUDA, device_); }
   // The protocol's __dlpack__: the consumer's stream waits for this array's (none when it is -1 or
   // the same); max_version and copy are accepted (always the unversioned capsule, never a copy).
   py::capsule dlpack(py::handle self, py::handle stream, py::handle dlDevice, py::handle copy) const {
     if (!copy.is_none() && copy.cast<bool>()) throw py::buffer_error("tsah.DeviceArray: __dlpack__ makes no copies");
-    if (!dlDevice.is_none() && dlDevice.cast<std::pair<int, int>>() != std::pair<int, int>(kDLCUDA, device_))
+    if (!dlDevice.is_none() && dlDevice.cast<std::pair<int, int>>() != std::pair<int, int>(dlpack::kCUDA, device_))
       throw py::buffer_error("tsah.DeviceArray: lives on CUDA device " + std::to_string(device_));
     const long long consumer = stream.is_none() ? 1 : stream.cast<long long>();  // None: the legacy default
     if (consumer != -1 && std::uintptr_t(consumer) != protocolStream(stream_)) streamWaits(std::uintptr_t(consumer), stream_);
     auto* e = new Export;
     e->shape.assign(shape_.begin(), shape_.end());
     e->owner = self.inc_ref().ptr();
-    DLManagedTensorOut& m = e->managed;
+    dlpack::ManagedTensor& m = e->managed;
     const char kind = typestr_[1];
-    m.tensor = {buffer_.data() ? static_cast<void*>(const_cast<uint8_t*>(buffer_.data())) : nullptr,
-                kDLCUDA, device_, int32_t(shape_.size()),
-                uint8_t(kind == 'f' ? 2 : kind == 'i' ? 0 : kind == 'b' ? 6 : 1), uint8_t(typestr_[2] == '4' ? 32 : 8),
-                1, e->shape.data(), nullptr, 0};
+    const uint8_t code = kind == 'f' ? dlpack::kFloat : kind == 'i' ? dlpack::kInt : kind == 'b' ? dlpack::kBool : dlpack::kUInt;
+    m.tensor = {const_cast<uint8_t*>(buffer_.data()), {dlpack::kCUDA, device_}, int32_t(shape_.size()),
+                {code, uint8_t(typestr_[2] == '4' ? 32 : 8), 1}, e->shape.data(), nullptr, 0};
     m.managerCtx = e;
     m.deleter = deleteExport;
     return py::reinterpret_steal<py::capsule>(PyCapsule_New(&m, "dltensor", deleteUnusedCapsule));

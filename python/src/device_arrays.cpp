@@ -13,44 +13,18 @@ namespace {
 
 using namespace pybind11::literals;
 
-// DLPack's ABI (dlpack.h, v0.8 and later: the unversioned DLManagedTensor that __dlpack__ returns in
-// a capsule named "dltensor" when no max_version is asked for).
-struct DLDevice {
-  int32_t device_type;
-  int32_t device_id;
-};
-struct DLDataType {
-  uint8_t code;
-  uint8_t bits;
-  uint16_t lanes;
-};
-struct DLTensor {
-  void* data;
-  DLDevice device;
-  int32_t ndim;
-  DLDataType dtype;
-  int64_t* shape;
-  int64_t* strides;  // in elements; null: C-contiguous
-  uint64_t byte_offset;
-};
-struct DLManagedTensor {
-  DLTensor dl_tensor;
-  void* manager_ctx;
-  void (*deleter)(DLManagedTensor*);
-};
-constexpr int kDLCPU = 1, kDLCUDA = 2, kDLCUDAHost = 3, kDLCUDAManaged = 13;
-constexpr uint8_t kDLInt = 0, kDLUInt = 1, kDLFloat = 2, kDLBool = 6;
+using namespace dlpack;
 
 // numpy's typestr of a DLPack dtype ("" for one numpy has no name for).
-std::string typestrOf(const DLDataType& t) {
+std::string typestrOf(const DataType& t) {
   if (t.lanes != 1 || t.bits % 8 != 0) return "";
   const std::string size = std::to_string(t.bits / 8);
   const std::string order = t.bits == 8 ? "|" : "<";
   switch (t.code) {
-    case kDLInt: return order + "i" + size;
-    case kDLUInt: return order + "u" + size;
-    case kDLFloat: return order + "f" + size;
-    case kDLBool: return t.bits == 8 ? "|b1" : "";
+    case kInt: return order + "i" + size;
+    case kUInt: return order + "u" + size;
+    case kFloat: return order + "f" + size;
+    case kBool: return t.bits == 8 ? "|b1" : "";
     default: return "";
   }
 }
@@ -124,7 +98,7 @@ DeviceArrayArg fromCudaArrayInterface(py::handle obj, const std::string& name, b
 DeviceArrayArg fromDlpack(py::handle obj, const std::string& name, bool writable, int device,
                           std::uintptr_t consumerStream) {
   const auto where = obj.attr("__dlpack_device__")().cast<std::pair<int, int>>();
-  if (where.first != kDLCUDA && where.first != kDLCUDAManaged)
+  if (where.first != kCUDA && where.first != kCUDAManaged)
     throw tsah::ConfigError(name + ": a DLPack array on device type " + std::to_string(where.first) +
                             ", not a CUDA device");
   if (where.second != device)
@@ -133,21 +107,21 @@ DeviceArrayArg fromDlpack(py::handle obj, const std::string& name, bool writable
   const py::object capsule = obj.attr("__dlpack__")("stream"_a = protocolStream(consumerStream));
   if (!PyCapsule_IsValid(capsule.ptr(), "dltensor"))
     throw tsah::ConfigError(name + ": __dlpack__ did not return a DLPack capsule (or it was used already)");
-  auto* managed = static_cast<DLManagedTensor*>(PyCapsule_GetPointer(capsule.ptr(), "dltensor"));
+  auto* managed = static_cast<ManagedTensor*>(PyCapsule_GetPointer(capsule.ptr(), "dltensor"));
   // Consumed: the capsule no longer deletes the tensor, we do (when the last DeviceArrayArg goes).
   if (PyCapsule_SetName(capsule.ptr(), "used_dltensor") != 0) throw py::error_already_set();
   DeviceArrayArg a;
   a.hold = std::shared_ptr<void>(managed, [](void* p) {
-    auto* t = static_cast<DLManagedTensor*>(p);
+    auto* t = static_cast<ManagedTensor*>(p);
     if (t->deleter) t->deleter(t);
   });
-  const DLTensor& t = managed->dl_tensor;
-  if (t.device.device_type != where.first || t.device.device_id != where.second)
+  const Tensor& t = managed->tensor;
+  if (t.device.type != where.first || t.device.id != where.second)
     throw tsah::ConfigError(name + ": the DLPack tensor's device differs from __dlpack_device__'s");
   a.shape.assign(t.shape, t.shape + t.ndim);
   a.typestr = typestrOf(t.dtype);
-  a.device = t.device.device_id;
-  a.data = reinterpret_cast<std::uintptr_t>(t.data) + t.byte_offset;
+  a.device = t.device.id;
+  a.data = reinterpret_cast<std::uintptr_t>(t.data) + t.byteOffset;
   if (t.strides && !cContiguous(a.shape, std::vector<py::ssize_t>(t.strides, t.strides + t.ndim), 1))
     throw tsah::ConfigError(name + ": must be C-contiguous");
   if (a.typestr.empty())
@@ -170,7 +144,7 @@ bool isDeviceArray(py::handle obj) {
   if (py::hasattr(obj, "__cuda_array_interface__")) return true;
   if (!py::hasattr(obj, "__dlpack_device__") || !py::hasattr(obj, "__dlpack__")) return false;
   const int type = obj.attr("__dlpack_device__")().cast<std::pair<int, int>>().first;
-  return type != kDLCPU && type != kDLCUDAHost;
+  return type != kCPU && type != kCUDAHost;
 }
 
 DeviceArrayArg checkedDeviceArray(py::handle obj, const std::string& name, const std::vector<std::string>& typestrs,

@@ -12,6 +12,36 @@
 
 namespace tsah::python {
 
+// DLPack's ABI (dlpack.h v0.8 and later): the unversioned DLManagedTensor that travels in a capsule
+// named "dltensor" (renamed "used_dltensor" by the consumer that takes it).
+namespace dlpack {
+struct Device {
+  int32_t type;
+  int32_t id;
+};
+struct DataType {
+  uint8_t code;
+  uint8_t bits;
+  uint16_t lanes;
+};
+struct Tensor {
+  void* data;
+  Device device;
+  int32_t ndim;
+  DataType dtype;
+  int64_t* shape;
+  int64_t* strides;  // in elements; null: C-contiguous
+  uint64_t byteOffset;
+};
+struct ManagedTensor {
+  Tensor tensor;
+  void* managerCtx;
+  void (*deleter)(ManagedTensor*);
+};
+inline constexpr int32_t kCPU = 1, kCUDA = 2, kCUDAHost = 3, kCUDAManaged = 13;
+inline constexpr uint8_t kInt = 0, kUInt = 1, kFloat = 2, kBool = 6;
+}  // namespace dlpack
+
 // True when obj offers device memory: a __cuda_array_interface__, or a __dlpack_device__ naming a
 // CUDA device (kDLCUDA, kDLCUDAManaged). Host arrays (numpy, kDLCPU, kDLCUDAHost) are not.
 bool isDeviceArray(py::handle obj);

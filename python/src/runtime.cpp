@@ -145,9 +145,13 @@ Array<float> checkedPositions(py::handle positions, uint32_t vertices) {
   return p;
 }
 
-// refit's argument: a time (a Python or numpy scalar number) or vertex positions (an array).
+// refit's argument: a time (a Python or numpy scalar number) or vertex positions (an array). torch
+// and CuPy arrays implement the number protocol too (float(tensor)): they are positions.
 bool isTime(py::handle value) {
-  return !py::isinstance<py::array>(value) && !py::isinstance<py::bool_>(value) && PyNumber_Check(value.ptr()) != 0;
+  if (py::isinstance<py::array>(value) || py::isinstance<py::bool_>(value)) return false;
+  if (py::isinstance(value, py::module_::import("numpy").attr("number"))) return true;
+  return PyNumber_Check(value.ptr()) != 0 && !py::hasattr(value, "__cuda_array_interface__") &&
+         !py::hasattr(value, "__dlpack__");
 }
 
 // Wall time of the C++ batch call in its scope (the CPU runtime's RayPassStats: the batch call

@@ -158,6 +158,12 @@ class FakeCudaArray:
         self.__cuda_array_interface__.update(fields)
 
 
+class FakeTensor(FakeCudaArray):
+    """Like torch and CuPy arrays also a number to Python's C API (float(a) works for one element)."""
+    def __float__(self):
+        raise TypeError("only one element tensors can be converted to Python scalars")
+
+
 class FakeDlpackDevice:
     """Exposes a DLPack device other than the host's (2: kDLCUDA)."""
     def __dlpack_device__(self):
@@ -175,6 +181,8 @@ def test_cpu_runtime_refuses_device_arrays_with_a_clear_error(wave):
     cuda = "a CUDA device array \\(__cuda_array_interface__\\); this call takes host arrays \\(numpy\\)"
     with pytest.raises(tsah.ConfigError, match="positions: " + cuda):
         runtime.refit(FakeCudaArray(positions))
+    with pytest.raises(tsah.ConfigError, match="positions: " + cuda):
+        runtime.refit(FakeTensor(positions))  # positions, not a time
     with pytest.raises(tsah.ConfigError, match="origins: " + cuda):
         runtime.trace(FakeCudaArray(o), d)
     with pytest.raises(tsah.ConfigError, match="directions: " + cuda):
