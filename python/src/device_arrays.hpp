@@ -3,12 +3,16 @@
 // through __cuda_array_interface__ (v2, v3) or DLPack, used in place, and the module's own results
 // on the device (tsah.DeviceArray, CUDA builds), which export both protocols.
 #include <cstdint>
+#include <deque>
 #include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "bindings.hpp"
+#if defined(TSAH_HAVE_CUDA)
+#include "tsah_cuda/gpu_runtime.hpp"
+#endif
 
 namespace tsah::python {
 
@@ -83,6 +87,36 @@ void bindDeviceArrays(py::module_& m);
 py::object newDeviceArray(const std::vector<py::ssize_t>& shape, const std::string& typestr, int device,
                           std::uintptr_t stream);
 void bindDeviceArrayType(py::module_& m);
+// The GPU runtime's arguments that may be device arrays (device_rays.cpp), checked in the order of
+// the parameters and kept (DLPack: alive) until the call returns.
+class DeviceArguments {
+ public:
+  DeviceArguments(int device, std::uintptr_t stream) : device_(device), stream_(stream) {}
+  // checkedDeviceArray, and the shape when one is given.
+  const DeviceArrayArg& add(py::handle obj, const std::string& name, const std::vector<std::string>& typestrs,
+                            bool writable = false);
+  const DeviceArrayArg& add(py::handle obj, const std::string& name, const std::vector<std::string>& typestrs,
+                            const std::vector<py::ssize_t>& shape, bool writable = false);
+  // Every array's producer stream (CUDA interface v3) is waited for on the call's stream.
+  void waitForProducers() const;
+  std::uintptr_t stream() const { return stream_; }
+
+ private:
+  int device_;
+  std::uintptr_t stream_;
+  std::deque<DeviceArrayArg> arrays_;  // stable references
+};
+
+template <class T>
+T* pointerOf(const DeviceArrayArg& a) {
+  return reinterpret_cast<T*>(a.data);
+}
+
+// origins and directions: float32 device arrays (..., 3) of one shape; tmin and tmax: numbers or
+// float32 device arrays of the batch shape (...), which it sets.
+cuda::GpuRuntime::DeviceRays deviceRays(DeviceArguments& args, py::handle origins, py::handle directions,
+                                        py::handle tmin, py::handle tmax, std::vector<py::ssize_t>& batch);
+
 // The CUDA interface (v3) asks its consumer to wait for the producer's stream before using the
 // data: makes `consumer` wait for a.stream (nothing when it names none or the same stream).
 void waitForProducer(const DeviceArrayArg& a, std::uintptr_t consumer);

@@ -2,15 +2,17 @@
 // of rays on the CPU (tsah::CpuRuntime) or the GPU (tsah::cuda::GpuRuntime, when built).
 #include <pybind11/stl.h>
 
+#include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstddef>
 #include <cstring>
-#include <deque>
 #include <limits>
 #include <memory>
 #include <span>
 #include <string>
+#include <thread>
 #include <utility>
 
 #include "anim/animation.hpp"
@@ -34,6 +36,23 @@ namespace tsah::python {
 namespace {
 
 using namespace pybind11::literals;
+
+// fn(begin, end) over [0, n) in chunks on the machine's hardware threads: the conversions between
+// numpy and a batch (which the runtimes trace on all cores) would otherwise be serial beside it.
+// fn must not throw.
+template <class Fn>
+void inParallel(std::size_t n, Fn&& fn) {
+  constexpr std::size_t kChunk = std::size_t(1) << 16;  // below this a thread costs more than it saves
+  const std::size_t threads = std::min<std::size_t>(std::max(1u, std::thread::hardware_concurrency()),
+                                                    (n + kChunk - 1) / kChunk);
+  if (threads <= 1) return fn(std::size_t(0), n);
+  const std::size_t per = (n + threads - 1) / threads;
+  std::vector<std::thread> pool;
+  for (std::size_t t = 1; t < threads; ++t)
+    pool.emplace_back([&fn, t, per, n] { fn(std::min(n, t * per), std::min(n, (t + 1) * per)); });
+  fn(std::size_t(0), std::min(n, per));
+  for (std::thread& thread : pool) thread.join();
+}
 
 // A float array (..., 3) as a C-contiguous (N, 3) float32 array, and its batch shape (the leading
 // dimensions, the shape of the results).
@@ -88,9 +107,17 @@ std::vector<Ray> makeRays(py::handle origins, py::handle directions, py::handle 
   std::vector<Ray> rays(n);
   const float* o = org.rows.data();
   const float* d = dir.rows.data();
-  for (std::size_t i = 0; i < n; ++i)
-    rays[i] = {{o[3 * i], o[3 * i + 1], o[3 * i + 2]}, lo[i], {d[3 * i], d[3 * i + 1], d[3 * i + 2]}, hi[i]};
-  checkRays(rays);
+  std::atomic<bool> bad{false};
+  inParallel(n, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i)
+      rays[i] = {{o[3 * i], o[3 * i + 1], o[3 * i + 2]}, lo[i], {d[3 * i], d[3 * i + 1], d[3 * i + 2]}, hi[i]};
+    try {
+      checkRays(std::span<const Ray>(rays).subspan(begin, end - begin));
+    } catch (const tsah::ConfigError&) {
+      bad = true;
+    }
+  });
+  if (bad) checkRays(rays);  // again over all of them: the message names the first bad ray
   return rays;
 }
 
@@ -121,16 +148,20 @@ py::array resultArray(py::handle out, const py::dtype& dtype, const std::vector<
 
 // tsah::Hit as a numpy record: t, u, v (float32) and triangle (int32, -1 when nothing was hit: the
 // bits of tsah::kNoHit). A miss has t = inf (as in Embree and Warp) and u = v = 0.
-py::array hitArray(std::vector<Hit> hits, py::array out) {
-  for (Hit& h : hits)
-    if (!h.valid()) h = Hit{std::numeric_limits<float>::infinity(), 0.0f, 0.0f, h.tri};
-  if (!hits.empty()) std::memcpy(out.mutable_data(), hits.data(), hits.size() * sizeof(Hit));
+py::array hitArray(const std::vector<Hit>& hits, py::array out) {
+  Hit* p = static_cast<Hit*>(out.mutable_data());
+  inParallel(hits.size(), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i)
+      p[i] = hits[i].valid() ? hits[i] : Hit{std::numeric_limits<float>::infinity(), 0.0f, 0.0f, hits[i].tri};
+  });
   return out;
 }
 
 py::array boolArray(const std::vector<uint8_t>& flags, py::array out) {
   bool* p = static_cast<bool*>(out.mutable_data());
-  for (std::size_t i = 0; i < flags.size(); ++i) p[i] = flags[i] != 0;
+  inParallel(flags.size(), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) p[i] = flags[i] != 0;
+  });
   return out;
 }
 
@@ -220,7 +251,7 @@ class CpuTracer {
       const PassClock clock(lastPass_, rays.size());
       hits = closestHits(*runtime_, rays);
     }
-    return hitArray(std::move(hits), result);
+    return hitArray(hits, result);
   }
   py::array occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out) const {
     std::vector<py::ssize_t> batch;
@@ -255,73 +286,6 @@ class CpuTracer {
 };
 
 #if defined(TSAH_HAVE_CUDA)
-// Rays given as device arrays (docs/python.md#device-arrays): origins and directions (..., 3)
-// float32, tmin and tmax numbers or float32 arrays of the batch shape, all used in place.
-struct DeviceRayBatch {
-  std::vector<DeviceArrayArg> arrays;  // every array of the call, kept (DLPack: alive) until it returns
-  cuda::GpuRuntime::DeviceRays rays;
-  std::vector<py::ssize_t> batch;
-};
-
-// The GPU runtime's arguments that may be device arrays, checked in the order of the parameters.
-class DeviceArguments {
- public:
-  DeviceArguments(int device, std::uintptr_t stream) : device_(device), stream_(stream) {}
-  const DeviceArrayArg& add(py::handle obj, const std::string& name, const std::vector<std::string>& typestrs,
-                            bool writable = false) {
-    arrays_.push_back(checkedDeviceArray(obj, name, typestrs, writable, device_, stream_));
-    return arrays_.back();
-  }
-  const DeviceArrayArg& add(py::handle obj, const std::string& name, const std::vector<std::string>& typestrs,
-                            const std::vector<py::ssize_t>& shape, bool writable = false) {
-    const DeviceArrayArg& a = add(obj, name, typestrs, writable);
-    if (a.shape != shape) throw tsah::ConfigError(name + ": expected shape " + shapeText(shape) + ", got " + shapeText(a.shape));
-    return a;
-  }
-  // Every array's producer stream (CUDA interface v3) is waited for on the call's stream.
-  void waitForProducers() const {
-    for (const DeviceArrayArg& a : arrays_) waitForProducer(a, stream_);
-  }
-  std::uintptr_t stream() const { return stream_; }
-  int device() const { return device_; }
-
- private:
-  int device_;
-  std::uintptr_t stream_;
-  std::deque<DeviceArrayArg> arrays_;  // stable references
-};
-
-template <class T>
-T* pointerOf(const DeviceArrayArg& a) {
-  return reinterpret_cast<T*>(a.data);
-}
-
-void addDeviceRays(DeviceArguments& args, py::handle origins, py::handle directions, py::handle tmin, py::handle tmax,
-                   cuda::GpuRuntime::DeviceRays& rays, std::vector<py::ssize_t>& batch) {
-  const DeviceArrayArg& o = args.add(origins, "origins", {"<f4"});
-  if (o.shape.empty() || o.shape.back() != 3)
-    throw tsah::ConfigError("origins: expected shape (..., 3), got " + shapeText(o.shape));
-  const DeviceArrayArg& d = args.add(directions, "directions", {"<f4"});
-  if (d.shape != o.shape)
-    throw tsah::ConfigError("directions: expected the shape of origins " + shapeText(o.shape) + ", got " + shapeText(d.shape));
-  batch.assign(o.shape.begin(), o.shape.end() - 1);
-  rays.origins = pointerOf<const float>(o);
-  rays.directions = pointerOf<const float>(d);
-  rays.count = o.size() / 3;
-  const auto limit = [&](py::handle value, const char* name, const float*& array, float& scalar) {
-    if (py::isinstance<py::float_>(value) || py::isinstance<py::int_>(value)) {
-      scalar = value.cast<float>();
-      return;
-    }
-    if (!isDeviceArray(value))
-      throw ArgumentTypeError(std::string(name) + ": expected a number or a float32 device array like origins, got " +
-                              std::string(py::str(value.get_type().attr("__name__"))));
-    array = pointerOf<const float>(args.add(value, name, {"<f4"}, batch));
-  };
-  limit(tmin, "tmin", rays.tmin, rays.tminValue);
-  limit(tmax, "tmax", rays.tmax, rays.tmaxValue);
-}
-
 // The same on the GPU: all keyframes uploaded once, refit and traversal on the device.
 class GpuTracer {
  public:
@@ -358,7 +322,7 @@ class GpuTracer {
       py::gil_scoped_release release;
       hits = runtime_->closestHits(rays, &lastPass_);
     }
-    return hitArray(std::move(hits), result);
+    return hitArray(hits, result);
   }
   py::object occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out, py::handle stream) {
     if (isDeviceArray(o) || isDeviceArray(d)) return occludedDevice(o, d, tmin, tmax, out, streamArgument(stream));
@@ -393,9 +357,8 @@ class GpuTracer {
   py::object traceDevice(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out,
                          std::uintptr_t stream) {
     DeviceArguments args(device(), stream);
-    cuda::GpuRuntime::DeviceRays rays;
     std::vector<py::ssize_t> batch;
-    addDeviceRays(args, o, d, tmin, tmax, rays, batch);
+    const cuda::GpuRuntime::DeviceRays rays = deviceRays(args, o, d, tmin, tmax, batch);
     static const char* const kFields[] = {"t", "u", "v", "triangle"};
     py::dict results;
     if (out.is_none()) {
@@ -429,9 +392,8 @@ class GpuTracer {
   py::object occludedDevice(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out,
                             std::uintptr_t stream) {
     DeviceArguments args(device(), stream);
-    cuda::GpuRuntime::DeviceRays rays;
     std::vector<py::ssize_t> batch;
-    addDeviceRays(args, o, d, tmin, tmax, rays, batch);
+    const cuda::GpuRuntime::DeviceRays rays = deviceRays(args, o, d, tmin, tmax, batch);
     const py::object result = out.is_none() ? newDeviceArray(batch, "|b1", device(), stream)
                                             : py::reinterpret_borrow<py::object>(out);
     auto* flags = pointerOf<uint8_t>(args.add(result, "out", {"|b1", "|u1"}, batch, true));
