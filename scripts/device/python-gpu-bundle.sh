@@ -4,7 +4,8 @@
 #   prefix/  the gpu-hopper build (sm_90, CUDA) installed with cmake --install;
 #   lib/     the shared libraries of Debian packages that the installed tsah links by absolute path
 #            (tsahTargets-release.cmake: Assimp, OpenMeshCore, OpenMeshTools, TBB, stb) and those
-#            they load that a bare machine lacks (Assimp's Draco and minizip), under their sonames;
+#            they load that a bare machine lacks (Assimp's Draco and minizip, the CUDA runtime),
+#            under their sonames;
 #   bin/     test_cuda_device_arrays.
 # usage (repository root, after cmake --preset gpu-hopper):  bash scripts/device/python-gpu-bundle.sh [OUT]
 set -euo pipefail
@@ -18,8 +19,9 @@ cmake --install "$build" --prefix "$out/prefix" > /dev/null
 # limit is 64 MiB; the tsah program alone needs Embree and MPI's libraries).
 rm -rf "$out/prefix/bin" "$out"/prefix/lib/python3*
 cp "$build/tests/test_cuda_device_arrays" "$out/bin/"
-# Libraries every Linux machine with the NVIDIA driver and a CUDA toolkit provides: never copied.
-system='^(linux-vdso|ld-linux|libc\.|libm\.|libdl\.|librt\.|libpthread\.|libstdc\+\+|libgcc_s|libz\.|libcuda\.|libcudart\.|libnvidia)'
+# Libraries every Linux machine with the NVIDIA driver provides: never copied (libcudart is: the
+# test program needs the one it was built with, and /usr/local/cuda/lib64 may not be on the path).
+system='^(linux-vdso|ld-linux|libc\.|libm\.|libdl\.|librt\.|libpthread\.|libstdc\+\+|libgcc_s|libz\.|libcuda\.|libnvidia)'
 copy() {  # a library file under its soname (and its real name, which the installed targets name)
   local real name
   real=$(readlink -f "$1")
