@@ -10,6 +10,7 @@
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <thread>
@@ -73,10 +74,18 @@ Points checkedPoints(py::handle obj, const std::string& name) {
   return {checkedArray<float>(obj, name, Kind::Float, {-1, 3}), {}};  // refused there: not an array
 }
 
+// A host batch's rays, left uninitialised until makeRays fills them in parallel (so that the first
+// touch of their pages is parallel too).
+struct RayBatch {
+  std::unique_ptr<Ray[]> rays;
+  std::size_t count = 0;
+  operator std::span<const Ray>() const { return {rays.get(), count}; }
+};
+
 // origins (..., 3), directions of the same shape, tmin and tmax each a number or an array of the
 // batch shape (...). Returns the rays and the batch shape.
-std::vector<Ray> makeRays(py::handle origins, py::handle directions, py::handle tmin, py::handle tmax,
-                          std::vector<py::ssize_t>& batch) {
+RayBatch makeRays(py::handle origins, py::handle directions, py::handle tmin, py::handle tmax,
+                  std::vector<py::ssize_t>& batch) {
   Points org = checkedPoints(origins, "origins");
   const Points dir = checkedPoints(directions, "directions");
   if (dir.batch != org.batch)
@@ -84,13 +93,19 @@ std::vector<Ray> makeRays(py::handle origins, py::handle directions, py::handle 
                             shapeText(py::reinterpret_borrow<py::array>(directions)));
   batch = org.batch;
   const std::size_t n = std::size_t(org.rows.shape(0));
+  // A number for every ray, or a float32 array of n (kept alive here).
+  struct Limit {
+    std::optional<Array<float>> array;
+    float value = 0.0f;
+    float at(std::size_t i) const { return array ? array->data()[i] : value; }
+  };
   auto limits = [&](py::handle value, const char* name) {
-    std::vector<float> out(n);
-    py::object flat;  // holds a reshaped view while `value` refers to it
+    Limit out;
     if (py::isinstance<py::float_>(value) || py::isinstance<py::int_>(value)) {
-      std::fill(out.begin(), out.end(), value.cast<float>());
+      out.value = value.cast<float>();
       return out;
     }
+    py::object flat;  // holds a reshaped view while `value` refers to it
     if (py::isinstance<py::array>(value)) {
       const auto a = py::reinterpret_borrow<py::array>(value);
       if (std::vector<py::ssize_t>(a.shape(), a.shape() + a.ndim()) != batch)
@@ -99,26 +114,26 @@ std::vector<Ray> makeRays(py::handle origins, py::handle directions, py::handle 
       flat = a.attr("reshape")(-1);
       value = flat;
     }
-    const auto a = checkedArray<float>(value, name, Kind::Number, {py::ssize_t(n)});
-    std::copy(a.data(), a.data() + n, out.begin());
+    out.array = checkedArray<float>(value, name, Kind::Number, {py::ssize_t(n)});
     return out;
   };
-  const std::vector<float> lo = limits(tmin, "tmin"), hi = limits(tmax, "tmax");
-  std::vector<Ray> rays(n);
+  const Limit lo = limits(tmin, "tmin"), hi = limits(tmax, "tmax");
+  RayBatch result{std::make_unique_for_overwrite<Ray[]>(n), n};
+  Ray* rays = result.rays.get();
   const float* o = org.rows.data();
   const float* d = dir.rows.data();
   std::atomic<bool> bad{false};
   inParallel(n, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i)
-      rays[i] = {{o[3 * i], o[3 * i + 1], o[3 * i + 2]}, lo[i], {d[3 * i], d[3 * i + 1], d[3 * i + 2]}, hi[i]};
+      rays[i] = {{o[3 * i], o[3 * i + 1], o[3 * i + 2]}, lo.at(i), {d[3 * i], d[3 * i + 1], d[3 * i + 2]}, hi.at(i)};
     try {
-      checkRays(std::span<const Ray>(rays).subspan(begin, end - begin));
+      checkRays(std::span<const Ray>(rays + begin, end - begin));
     } catch (const tsah::ConfigError&) {
       bad = true;
     }
   });
-  if (bad) checkRays(rays);  // again over all of them: the message names the first bad ray
-  return rays;
+  if (bad) checkRays(result);  // again over all of them: the message names the first bad ray
+  return result;
 }
 
 // The numpy record dtype of tsah::Hit.
@@ -243,24 +258,24 @@ class CpuTracer {
   }
   py::array trace(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out) const {
     std::vector<py::ssize_t> batch;
-    const std::vector<Ray> rays = makeRays(o, d, tmin, tmax, batch);
+    const RayBatch rays = makeRays(o, d, tmin, tmax, batch);
     py::array result = resultArray(out, hitDtype(), batch);
     std::vector<Hit> hits;
     {
       py::gil_scoped_release release;
-      const PassClock clock(lastPass_, rays.size());
+      const PassClock clock(lastPass_, rays.count);
       hits = closestHits(*runtime_, rays);
     }
     return hitArray(hits, result);
   }
   py::array occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out) const {
     std::vector<py::ssize_t> batch;
-    const std::vector<Ray> rays = makeRays(o, d, tmin, tmax, batch);
+    const RayBatch rays = makeRays(o, d, tmin, tmax, batch);
     py::array result = resultArray(out, py::dtype::of<bool>(), batch);
     std::vector<uint8_t> flags;
     {
       py::gil_scoped_release release;
-      const PassClock clock(lastPass_, rays.size());
+      const PassClock clock(lastPass_, rays.count);
       flags = anyHits(*runtime_, rays);
     }
     return boolArray(flags, result);
@@ -315,7 +330,7 @@ class GpuTracer {
   py::object trace(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out, py::handle stream) {
     if (isDeviceArray(o) || isDeviceArray(d)) return traceDevice(o, d, tmin, tmax, out, streamArgument(stream));
     std::vector<py::ssize_t> batch;
-    const std::vector<Ray> rays = makeRays(o, d, tmin, tmax, batch);
+    const RayBatch rays = makeRays(o, d, tmin, tmax, batch);
     py::array result = resultArray(out, hitDtype(), batch);
     std::vector<Hit> hits;
     {
@@ -327,7 +342,7 @@ class GpuTracer {
   py::object occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out, py::handle stream) {
     if (isDeviceArray(o) || isDeviceArray(d)) return occludedDevice(o, d, tmin, tmax, out, streamArgument(stream));
     std::vector<py::ssize_t> batch;
-    const std::vector<Ray> rays = makeRays(o, d, tmin, tmax, batch);
+    const RayBatch rays = makeRays(o, d, tmin, tmax, batch);
     py::array result = resultArray(out, py::dtype::of<bool>(), batch);
     std::vector<uint8_t> flags;
     {
