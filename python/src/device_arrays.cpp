@@ -88,16 +88,30 @@ DeviceArrayArg fromCudaArrayInterface(py::handle obj, const std::string& name, b
       throw tsah::ConfigError(name + ": must be C-contiguous");
   }
   if (d.contains("stream") && !d["stream"].is_none()) {  // v3: the producer's stream; 0 is not allowed
-    const auto stream = d["stream"].cast<std::uintptr_t>();
+    std::uintptr_t stream = 0;
+    try {
+      stream = d["stream"].cast<std::uintptr_t>();
+    } catch (const py::cast_error&) {
+      throw bad("stream is not a stream address (an int >= 1) or None");
+    }
     if (stream == 0) throw bad("stream 0 is not allowed (1: the legacy default stream)");
     a.stream = stream;
   }
   return a;
 }
 
+// obj.__dlpack_device__(): (device type, device id).
+std::pair<int, int> dlpackDevice(py::handle obj, const std::string& name) {
+  try {
+    return obj.attr("__dlpack_device__")().cast<std::pair<int, int>>();
+  } catch (const py::cast_error&) {
+    throw tsah::ConfigError(name + ": __dlpack_device__() must return (device type, device id)");
+  }
+}
+
 DeviceArrayArg fromDlpack(py::handle obj, const std::string& name, bool writable, int device,
                           std::uintptr_t consumerStream) {
-  const auto where = obj.attr("__dlpack_device__")().cast<std::pair<int, int>>();
+  const auto where = dlpackDevice(obj, name);
   if (where.first != kCUDA && where.first != kCUDAManaged)
     throw tsah::ConfigError(name + ": a DLPack array on device type " + std::to_string(where.first) +
                             ", not a CUDA device");
@@ -143,7 +157,7 @@ bool isDeviceArray(py::handle obj) {
   if (py::isinstance<py::array>(obj)) return false;
   if (py::hasattr(obj, "__cuda_array_interface__")) return true;
   if (!py::hasattr(obj, "__dlpack_device__") || !py::hasattr(obj, "__dlpack__")) return false;
-  const int type = obj.attr("__dlpack_device__")().cast<std::pair<int, int>>().first;
+  const int type = dlpackDevice(obj, "array").first;
   return type != kCPU && type != kCUDAHost;
 }
 

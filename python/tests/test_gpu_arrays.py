@@ -215,6 +215,7 @@ def test_cuda_array_interface_is_read_as_the_protocol_says():
     ({"stream": 0}, tsah.ConfigError, "positions: __cuda_array_interface__ stream 0 is not allowed"),
     ({"mask": object()}, tsah.ConfigError, "positions: __cuda_array_interface__ has a mask"),
     ({"data": "0x10"}, tsah.ConfigError, "positions: __cuda_array_interface__ has a field of the wrong type"),
+    ({"stream": -3}, tsah.ConfigError, "positions: __cuda_array_interface__ stream is not a stream address"),
 ])
 def test_bad_cuda_array_interfaces_get_one_clear_line(fields, error, message):
     with pytest.raises(error, match=message):
