@@ -20,8 +20,6 @@ nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader
 status=0
 
 if has build; then
-  # The installed targets name Debian's library files by absolute path: point them at the bundle's.
-  sed -i "s#/usr/lib/x86_64-linux-gnu/#$bundle/lib/#g" "$bundle"/prefix/lib/cmake/tsah/tsah*Targets*.cmake
   start=$SECONDS
   { cmake -S python -B "$module" -DCMAKE_BUILD_TYPE=Release -DCMAKE_PREFIX_PATH="$bundle/prefix" \
       -Dpybind11_DIR="$("$python" -m pybind11 --cmakedir)" -DPython3_EXECUTABLE="$python" &&
