@@ -5,9 +5,10 @@
 #include <cuda_runtime_api.h>
 #include <pybind11/stl.h>
 
+#include <memory>
+
 #include "device_arrays.hpp"
 #include "tsah_cuda/cuda_check.hpp"
-#include "tsah_cuda/device_buffer.hpp"
 
 namespace tsah::python {
 
@@ -64,13 +65,18 @@ class DeviceArray {
       if (n < 0) throw tsah::ConfigError("shape: extents must be >= 0, got " + shapeText(shape_));
       bytes *= std::size_t(n);
     }
+    // Plain cudaMalloc, not DeviceBuffer (which zeroes and waits for the legacy stream): making the
+    // results of a device trace must not wait for the device. cudaFree waits for it when the array goes.
     int current = 0;
     CUDA_CHECK(cudaGetDevice(&current));
     CUDA_CHECK(cudaSetDevice(device_));
-    buffer_ = cuda::DeviceBuffer<uint8_t>(bytes);
+    void* p = nullptr;
+    const cudaError_t allocated = bytes ? cudaMalloc(&p, bytes) : cudaSuccess;
     CUDA_CHECK(cudaSetDevice(current));
+    CUDA_CHECK(allocated);
+    memory_.reset(p);
   }
-  std::uintptr_t data() const { return reinterpret_cast<std::uintptr_t>(buffer_.data()); }
+  std::uintptr_t data() const { return reinterpret_cast<std::uintptr_t>(memory_.get()); }
   py::tuple shape() const { return py::tuple(py::cast(shape_)); }
   const std::string& typestr() const { return typestr_; }
   int device() const { return device_; }
@@ -96,7 +102,7 @@ class DeviceArray {
     dlpack::ManagedTensor& m = e->managed;
     const char kind = typestr_[1];
     const uint8_t code = kind == 'f' ? dlpack::kFloat : kind == 'i' ? dlpack::kInt : kind == 'b' ? dlpack::kBool : dlpack::kUInt;
-    m.tensor = {const_cast<uint8_t*>(buffer_.data()), {dlpack::kCUDA, device_}, int32_t(shape_.size()),
+    m.tensor = {memory_.get(), {dlpack::kCUDA, device_}, int32_t(shape_.size()),
                 {code, uint8_t(typestr_[2] == '4' ? 32 : 8), 1}, e->shape.data(), nullptr, 0};
     m.managerCtx = e;
     m.deleter = deleteExport;
@@ -108,7 +114,10 @@ class DeviceArray {
   std::string typestr_;
   int device_;
   std::uintptr_t stream_;  // cudaStream_t value: 0 the legacy default stream
-  cuda::DeviceBuffer<uint8_t> buffer_;
+  struct Free {
+    void operator()(void* p) const noexcept { cudaFree(p); }
+  };
+  std::unique_ptr<void, Free> memory_;
 };
 
 py::object newDeviceArray(const std::vector<py::ssize_t>& shape, const std::string& typestr, int device,
