@@ -133,6 +133,24 @@ def test_out_arrays(kind, wave):
         runtime.occluded(o, d, out=frozen)
 
 
+@pytest.mark.parametrize("kind", RUNTIMES)
+def test_large_batches_their_first_bad_ray_and_the_batch_time(kind, wave):
+    """Batches above 65536 rays are converted on several threads: the same hits as small batches,
+    the first bad ray named, and last_ray_pass timing the library's batch alone."""
+    animation, _ = wave
+    runtime = make_runtime(kind, wave)
+    o, d = rays(animation, 0.0, (300000,))
+    hits = runtime.trace(o, d)
+    assert runtime.last_ray_pass["rays"] == 300000 and runtime.last_ray_pass["ms"] > 0
+    np.testing.assert_array_equal(hits[::1000], runtime.trace(o[::1000], d[::1000]))
+    np.testing.assert_array_equal(runtime.occluded(o, d)[::1000], runtime.occluded(o[::1000], d[::1000]))
+    assert runtime.last_ray_pass["rays"] == 300
+    d[200000] = 0.0
+    d[290000, 1] = np.nan
+    with pytest.raises(tsah.ConfigError, match="rays: ray 200000: direction is zero"):
+        runtime.trace(o, d)
+
+
 def test_cpu_runtime_shares_the_animation(wave):
     """The runtime keeps the caller's Animation alive instead of copying it."""
     import gc
@@ -405,6 +423,7 @@ def test_device_refit_and_trace_equal_the_host_path(wave, protocol):
     expected = host.trace(o, d)
     assert (expected["triangle"] >= 0).sum() > 100
     np.testing.assert_array_equal(device.trace(o, d), expected)  # the refit itself
+    assert host.last_update["total_ms"] > 0 and host.last_ray_pass["rays"] == 500
     hits = device.trace(device_input(o, protocol), device_input(d, protocol))
     synchronize()
     assert set(hits) == {"t", "u", "v", "triangle"} and hits["t"].shape == (20, 25)
