@@ -355,10 +355,14 @@ UpdateTimings GpuRuntime::Impl::finishUpdate(uint32_t slotsUpdated) {
   timings.interpolateMs = events.ms(0, 1);
   timings.refitMs = events.ms(1, 2);
   timings.woopMs = events.ms(2, 3);
+  markUpdated();
+  return timings;
+}
+
+void GpuRuntime::Impl::markUpdated() {
   tracingRebuilt = false;
   woopValid = true;
   shutterKeys = 0;  // an update ends a blurred frame (updateShutter sets its keys after its updates)
-  return timings;
 }
 
 namespace {

@@ -19,6 +19,8 @@
 
 namespace tsah::cuda {
 
+struct DeviceArrayState;  // device_arrays_runtime.cpp
+
 struct GpuRuntime::Impl {
   Impl(const TreeSet& set, const anim::Animation& animation, Config config);
   ~Impl();
@@ -38,6 +40,9 @@ struct GpuRuntime::Impl {
   // triangles since then, and the static vertices are at their rest positions.
   bool partialUpdatePossible() const;
   UpdateTimings finishUpdate(uint32_t slotsUpdated);
+  // What finishUpdate records of a queued update without waiting for it: the frame is traceable,
+  // the refitted tree is traced, a blurred frame ends.
+  void markUpdated();
   // The triangles of every vertex in increasing order (once, at the first render).
   void buildVertexTriangles();
   // Puts the interpolation of time t on the stream (events 0 and 1 around it): setFrame chooses the
@@ -188,6 +193,9 @@ struct GpuRuntime::Impl {
   DeviceBuffer<uint32_t> vertexTriOffsets, vertexTris;  // triangles of each vertex (CSR), for normals
   DeviceBuffer<float> normals;           // smooth shading normals of the current frame
   DeviceBuffer<uint8_t> image;
+
+  // The device-array entry points' events and flag word (device_arrays_runtime.cpp), made at first use.
+  std::shared_ptr<DeviceArrayState> deviceArrays;
 };
 
 // Traces host rays: uploads them, runs prepare(count) (more uploads), then launch(count, hits,

@@ -7,6 +7,7 @@
 #include <limits>
 
 #include "bindings.hpp"
+#include "device_arrays.hpp"
 #include "tsah/base/error.hpp"
 
 namespace tsah::python {
@@ -41,6 +42,7 @@ T checkedInteger(py::handle arg, const char* name, T lo, T hi) {
 template uint64_t checkedInteger<uint64_t>(py::handle, const char*, uint64_t, uint64_t);
 template uint32_t checkedInteger<uint32_t>(py::handle, const char*, uint32_t, uint32_t);
 template int checkedInteger<int>(py::handle, const char*, int, int);
+template long checkedInteger<long>(py::handle, const char*, long, long);
 
 double checkedTime(double t, const char* name) {
   if (!std::isfinite(t))
@@ -48,11 +50,13 @@ double checkedTime(double t, const char* name) {
   return t;
 }
 
-std::string shapeText(const py::array& a) {
+std::string shapeText(const std::vector<py::ssize_t>& shape) {
   std::string text = "(";
-  for (py::ssize_t d = 0; d < a.ndim(); ++d) text += (d ? ", " : "") + std::to_string(a.shape(d));
-  return text + (a.ndim() == 1 ? ",)" : ")");
+  for (std::size_t d = 0; d < shape.size(); ++d) text += (d ? ", " : "") + std::to_string(shape[d]);
+  return text + (shape.size() == 1 ? ",)" : ")");
 }
+
+std::string shapeText(const py::array& a) { return shapeText(std::vector<py::ssize_t>(a.shape(), a.shape() + a.ndim())); }
 
 namespace {
 
@@ -90,8 +94,7 @@ void refuseDeviceArray(py::handle obj, const std::string& name) {
     throw tsah::ConfigError(name + ": a CUDA device array (__cuda_array_interface__); this call takes host arrays (numpy)");
   if (py::isinstance<py::array>(obj) || !py::hasattr(obj, "__dlpack_device__")) return;
   const auto device = obj.attr("__dlpack_device__")().cast<std::pair<int, int>>();
-  constexpr int kDLCPU = 1, kDLCUDAHost = 3;  // DLPack's device types readable by the host
-  if (device.first != kDLCPU && device.first != kDLCUDAHost)
+  if (device.first != dlpack::kCPU && device.first != dlpack::kCUDAHost)  // the host reads those
     throw tsah::ConfigError(name + ": a device array (DLPack device type " + std::to_string(device.first) +
                             "); this call takes host arrays (numpy)");
 }

@@ -61,6 +61,7 @@ struct TreeSetObject {
 
 class CpuTracer;  // tsah.CpuRuntime (runtime.cpp)
 class GpuTracer;  // tsah.GpuRuntime (runtime.cpp, CUDA builds)
+class DeviceArray;  // tsah.DeviceArray (device_array_type.cpp, CUDA builds)
 // The C++ runtime of a tsah.CpuRuntime / tsah.GpuRuntime object (checked as every bound argument).
 const CpuRuntime& cpuRuntimeOf(py::handle self);
 #if defined(TSAH_HAVE_CUDA)
@@ -74,7 +75,7 @@ template <class T>
 struct IsBoundClass
     : std::bool_constant<std::is_same_v<T, anim::Animation> || std::is_same_v<T, Tree> ||
                          std::is_same_v<T, TreeSetObject> || std::is_same_v<T, CpuTracer> ||
-                         std::is_same_v<T, GpuTracer>> {};
+                         std::is_same_v<T, GpuTracer> || std::is_same_v<T, DeviceArray>> {};
 
 // Throws tsah::ConfigError when `obj` is an instance of the Python class bound to `type` whose C++
 // object was never constructed (Class.__new__(Class) without __init__). pybind11 itself would hand
@@ -200,6 +201,7 @@ double checkedTime(double t, const char* name);
 
 // The shape of `a` as text, e.g. "(4, 3)".
 std::string shapeText(const py::array& a);
+std::string shapeText(const std::vector<py::ssize_t>& shape);
 
 }  // namespace tsah::python
 

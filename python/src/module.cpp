@@ -7,6 +7,7 @@
 #include "anim/load.hpp"
 #include "anim/tanim.hpp"
 #include "bindings.hpp"
+#include "device_arrays.hpp"
 
 namespace tsah::python {
 
@@ -278,4 +279,5 @@ PYBIND11_MODULE(_tsah, m) {
   tsah::python::bindTrees(m);
   tsah::python::bindRuntimes(m);
   tsah::python::bindQueries(m);
+  tsah::python::bindDeviceArrays(m);
 }

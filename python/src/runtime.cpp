@@ -2,23 +2,30 @@
 // of rays on the CPU (tsah::CpuRuntime) or the GPU (tsah::cuda::GpuRuntime, when built).
 #include <pybind11/stl.h>
 
+#include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstddef>
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
+#include <thread>
 #include <utility>
 
 #include "anim/animation.hpp"
 #include "bindings.hpp"
+#include "device_arrays.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
 #include "tsah/layout/flat_bvh.hpp"
 #include "tsah/layout/wide_bvh.hpp"
 #include "tsah/core/kinds.hpp"
 #include "tsah/pipeline.hpp"
 #include "tsah/core/ray.hpp"
+#include "tsah/render/renderer.hpp"
 #include "tsah/base/coordinates.hpp"
 #if defined(TSAH_HAVE_CUDA)
 #include "tsah_cuda/device.hpp"
@@ -30,6 +37,23 @@ namespace tsah::python {
 namespace {
 
 using namespace pybind11::literals;
+
+// fn(begin, end) over [0, n) in chunks on the machine's hardware threads: the conversions between
+// numpy and a batch (which the runtimes trace on all cores) would otherwise be serial beside it.
+// fn must not throw.
+template <class Fn>
+void inParallel(std::size_t n, Fn&& fn) {
+  constexpr std::size_t kChunk = std::size_t(1) << 16;  // below this a thread costs more than it saves
+  const std::size_t threads = std::min<std::size_t>(std::max(1u, std::thread::hardware_concurrency()),
+                                                    (n + kChunk - 1) / kChunk);
+  if (threads <= 1) return fn(std::size_t(0), n);
+  const std::size_t per = (n + threads - 1) / threads;
+  std::vector<std::thread> pool;
+  for (std::size_t t = 1; t < threads; ++t)
+    pool.emplace_back([&fn, t, per, n] { fn(std::min(n, t * per), std::min(n, (t + 1) * per)); });
+  fn(std::size_t(0), std::min(n, per));
+  for (std::thread& thread : pool) thread.join();
+}
 
 // A float array (..., 3) as a C-contiguous (N, 3) float32 array, and its batch shape (the leading
 // dimensions, the shape of the results).
@@ -50,16 +74,18 @@ Points checkedPoints(py::handle obj, const std::string& name) {
   return {checkedArray<float>(obj, name, Kind::Float, {-1, 3}), {}};  // refused there: not an array
 }
 
-std::string batchText(const std::vector<py::ssize_t>& shape) {
-  std::string text = "(";
-  for (std::size_t d = 0; d < shape.size(); ++d) text += (d ? ", " : "") + std::to_string(shape[d]);
-  return text + (shape.size() == 1 ? ",)" : ")");
-}
+// A host batch's rays, left uninitialised until makeRays fills them in parallel (so that the first
+// touch of their pages is parallel too).
+struct RayBatch {
+  std::unique_ptr<Ray[]> rays;
+  std::size_t count = 0;
+  operator std::span<const Ray>() const { return {rays.get(), count}; }
+};
 
 // origins (..., 3), directions of the same shape, tmin and tmax each a number or an array of the
 // batch shape (...). Returns the rays and the batch shape.
-std::vector<Ray> makeRays(py::handle origins, py::handle directions, py::handle tmin, py::handle tmax,
-                          std::vector<py::ssize_t>& batch) {
+RayBatch makeRays(py::handle origins, py::handle directions, py::handle tmin, py::handle tmax,
+                  std::vector<py::ssize_t>& batch) {
   Points org = checkedPoints(origins, "origins");
   const Points dir = checkedPoints(directions, "directions");
   if (dir.batch != org.batch)
@@ -67,33 +93,47 @@ std::vector<Ray> makeRays(py::handle origins, py::handle directions, py::handle 
                             shapeText(py::reinterpret_borrow<py::array>(directions)));
   batch = org.batch;
   const std::size_t n = std::size_t(org.rows.shape(0));
+  // A number for every ray, or a float32 array of n (kept alive here).
+  struct Limit {
+    std::optional<Array<float>> array;
+    float value = 0.0f;
+    float at(std::size_t i) const { return array ? array->data()[i] : value; }
+  };
   auto limits = [&](py::handle value, const char* name) {
-    std::vector<float> out(n);
-    py::object flat;  // holds a reshaped view while `value` refers to it
+    Limit out;
     if (py::isinstance<py::float_>(value) || py::isinstance<py::int_>(value)) {
-      std::fill(out.begin(), out.end(), value.cast<float>());
+      out.value = value.cast<float>();
       return out;
     }
+    py::object flat;  // holds a reshaped view while `value` refers to it
     if (py::isinstance<py::array>(value)) {
       const auto a = py::reinterpret_borrow<py::array>(value);
       if (std::vector<py::ssize_t>(a.shape(), a.shape() + a.ndim()) != batch)
-        throw tsah::ConfigError(std::string(name) + ": expected shape " + batchText(batch) + ", got " +
+        throw tsah::ConfigError(std::string(name) + ": expected shape " + shapeText(batch) + ", got " +
                                 shapeText(a));
       flat = a.attr("reshape")(-1);
       value = flat;
     }
-    const auto a = checkedArray<float>(value, name, Kind::Number, {py::ssize_t(n)});
-    std::copy(a.data(), a.data() + n, out.begin());
+    out.array = checkedArray<float>(value, name, Kind::Number, {py::ssize_t(n)});
     return out;
   };
-  const std::vector<float> lo = limits(tmin, "tmin"), hi = limits(tmax, "tmax");
-  std::vector<Ray> rays(n);
+  const Limit lo = limits(tmin, "tmin"), hi = limits(tmax, "tmax");
+  RayBatch result{std::make_unique_for_overwrite<Ray[]>(n), n};
+  Ray* rays = result.rays.get();
   const float* o = org.rows.data();
   const float* d = dir.rows.data();
-  for (std::size_t i = 0; i < n; ++i)
-    rays[i] = {{o[3 * i], o[3 * i + 1], o[3 * i + 2]}, lo[i], {d[3 * i], d[3 * i + 1], d[3 * i + 2]}, hi[i]};
-  checkRays(rays);
-  return rays;
+  std::atomic<bool> bad{false};
+  inParallel(n, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i)
+      rays[i] = {{o[3 * i], o[3 * i + 1], o[3 * i + 2]}, lo.at(i), {d[3 * i], d[3 * i + 1], d[3 * i + 2]}, hi.at(i)};
+    try {
+      checkRays(std::span<const Ray>(rays + begin, end - begin));
+    } catch (const tsah::ConfigError&) {
+      bad = true;
+    }
+  });
+  if (bad) checkRays(result);  // again over all of them: the message names the first bad ray
+  return result;
 }
 
 // The numpy record dtype of tsah::Hit.
@@ -115,7 +155,7 @@ py::array resultArray(py::handle out, const py::dtype& dtype, const std::vector<
   if (!a.dtype().equal(dtype))
     throw ArgumentTypeError("out: expected dtype " + std::string(py::str(py::handle(dtype))) + ", got " + std::string(py::str(a.dtype())));
   if (std::vector<py::ssize_t>(a.shape(), a.shape() + a.ndim()) != batch)
-    throw tsah::ConfigError("out: expected shape " + batchText(batch) + ", got " + shapeText(a));
+    throw tsah::ConfigError("out: expected shape " + shapeText(batch) + ", got " + shapeText(a));
   if (!(a.flags() & py::array::c_style)) throw tsah::ConfigError("out: must be C-contiguous");
   if (!a.writeable()) throw tsah::ConfigError("out: is read-only");
   return a;
@@ -123,16 +163,20 @@ py::array resultArray(py::handle out, const py::dtype& dtype, const std::vector<
 
 // tsah::Hit as a numpy record: t, u, v (float32) and triangle (int32, -1 when nothing was hit: the
 // bits of tsah::kNoHit). A miss has t = inf (as in Embree and Warp) and u = v = 0.
-py::array hitArray(std::vector<Hit> hits, py::array out) {
-  for (Hit& h : hits)
-    if (!h.valid()) h = Hit{std::numeric_limits<float>::infinity(), 0.0f, 0.0f, h.tri};
-  if (!hits.empty()) std::memcpy(out.mutable_data(), hits.data(), hits.size() * sizeof(Hit));
+py::array hitArray(const std::vector<Hit>& hits, py::array out) {
+  Hit* p = static_cast<Hit*>(out.mutable_data());
+  inParallel(hits.size(), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i)
+      p[i] = hits[i].valid() ? hits[i] : Hit{std::numeric_limits<float>::infinity(), 0.0f, 0.0f, hits[i].tri};
+  });
   return out;
 }
 
 py::array boolArray(const std::vector<uint8_t>& flags, py::array out) {
   bool* p = static_cast<bool*>(out.mutable_data());
-  for (std::size_t i = 0; i < flags.size(); ++i) p[i] = flags[i] != 0;
+  inParallel(flags.size(), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) p[i] = flags[i] != 0;
+  });
   return out;
 }
 
@@ -147,10 +191,34 @@ Array<float> checkedPositions(py::handle positions, uint32_t vertices) {
   return p;
 }
 
-// refit's argument: a time (a Python or numpy scalar number) or vertex positions (an array).
+// refit's argument: a time (a Python or numpy scalar number) or vertex positions (an array). torch
+// and CuPy arrays implement the number protocol too (float(tensor)): they are positions.
 bool isTime(py::handle value) {
-  return !py::isinstance<py::array>(value) && !py::isinstance<py::bool_>(value) && PyNumber_Check(value.ptr()) != 0;
+  if (py::isinstance<py::array>(value) || py::isinstance<py::bool_>(value)) return false;
+  if (py::isinstance(value, py::module_::import("numpy").attr("number"))) return true;
+  return PyNumber_Check(value.ptr()) != 0 && !py::hasattr(value, "__cuda_array_interface__") &&
+         !py::hasattr(value, "__dlpack__");
 }
+
+// Wall time of the C++ batch call in its scope (the CPU runtime's RayPassStats: the batch call
+// alone, without the conversions to and from numpy).
+class PassClock {
+ public:
+  PassClock(RayPassStats& stats, std::size_t rays) : stats_(stats), rays_(rays) {}
+  ~PassClock() {
+    stats_.rays = rays_;
+    stats_.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start_).count();
+  }
+  PassClock(const PassClock&) = delete;
+  PassClock& operator=(const PassClock&) = delete;
+
+ private:
+  RayPassStats& stats_;
+  std::size_t rays_;
+  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+};
+
+py::dict rayPassDict(const RayPassStats& s) { return py::dict("rays"_a = s.rays, "ms"_a = s.ms); }
 
 }  // namespace
 
@@ -190,27 +258,30 @@ class CpuTracer {
   }
   py::array trace(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out) const {
     std::vector<py::ssize_t> batch;
-    const std::vector<Ray> rays = makeRays(o, d, tmin, tmax, batch);
+    const RayBatch rays = makeRays(o, d, tmin, tmax, batch);
     py::array result = resultArray(out, hitDtype(), batch);
     std::vector<Hit> hits;
     {
       py::gil_scoped_release release;
+      const PassClock clock(lastPass_, rays.count);
       hits = closestHits(*runtime_, rays);
     }
-    return hitArray(std::move(hits), result);
+    return hitArray(hits, result);
   }
   py::array occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out) const {
     std::vector<py::ssize_t> batch;
-    const std::vector<Ray> rays = makeRays(o, d, tmin, tmax, batch);
+    const RayBatch rays = makeRays(o, d, tmin, tmax, batch);
     py::array result = resultArray(out, py::dtype::of<bool>(), batch);
     std::vector<uint8_t> flags;
     {
       py::gil_scoped_release release;
+      const PassClock clock(lastPass_, rays.count);
       flags = anyHits(*runtime_, rays);
     }
     return boolArray(flags, result);
   }
   std::string layout() const { return name(runtime_->layoutInfo().layout); }
+  py::dict lastRayPass() const { return rayPassDict(lastPass_); }
   const CpuRuntime& runtime() const { return *runtime_; }
   py::array_t<float> bounds() const {
     const Aabb b = runtime_->bounds();
@@ -226,6 +297,7 @@ class CpuTracer {
   py::object owner_;  // the tsah.Animation animation_ refers to
   const anim::Animation& animation_;
   std::unique_ptr<CpuRuntime> runtime_;
+  mutable RayPassStats lastPass_;  // of the last trace / occluded
 };
 
 #if defined(TSAH_HAVE_CUDA)
@@ -240,47 +312,117 @@ class GpuTracer {
     runtime_ = std::make_unique<cuda::GpuRuntime>(flattenBvh(tree.file.bvh), animation, config);
     refitTime(animation.startTime());
   }
-  void refit(py::handle timeOrPositions) {
-    if (!isTime(timeOrPositions)) return refitPositions(timeOrPositions);
+  void refit(py::handle timeOrPositions, py::handle stream) {
+    if (!isTime(timeOrPositions)) return refitPositions(timeOrPositions, stream);
     refitTime(timeOrPositions.cast<double>());
   }
   void refitTime(double time) {
     checkedTime(time, "time");
     py::gil_scoped_release release;
-    runtime_->updateAt(time);
+    lastUpdate_ = runtime_->updateAt(time);
   }
-  void refitPositions(py::handle vertices) {
+  void refitPositions(py::handle vertices, py::handle stream) {
+    if (isDeviceArray(vertices)) return refitDevice(vertices, streamArgument(stream));
     const Array<float> positions = checkedPositions(vertices, runtime_->vertexCount());
     py::gil_scoped_release release;
-    runtime_->update(std::span<const float>(positions.data(), std::size_t(positions.size())));
+    lastUpdate_ = runtime_->update(std::span<const float>(positions.data(), std::size_t(positions.size())));
   }
-  py::array trace(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out) {
+  py::object trace(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out, py::handle stream) {
+    if (isDeviceArray(o) || isDeviceArray(d)) return traceDevice(o, d, tmin, tmax, out, streamArgument(stream));
     std::vector<py::ssize_t> batch;
-    const std::vector<Ray> rays = makeRays(o, d, tmin, tmax, batch);
+    const RayBatch rays = makeRays(o, d, tmin, tmax, batch);
     py::array result = resultArray(out, hitDtype(), batch);
     std::vector<Hit> hits;
     {
       py::gil_scoped_release release;
-      hits = runtime_->closestHits(rays);
+      hits = runtime_->closestHits(rays, &lastPass_);
     }
-    return hitArray(std::move(hits), result);
+    return hitArray(hits, result);
   }
-  py::array occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out) {
+  py::object occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out, py::handle stream) {
+    if (isDeviceArray(o) || isDeviceArray(d)) return occludedDevice(o, d, tmin, tmax, out, streamArgument(stream));
     std::vector<py::ssize_t> batch;
-    const std::vector<Ray> rays = makeRays(o, d, tmin, tmax, batch);
+    const RayBatch rays = makeRays(o, d, tmin, tmax, batch);
     py::array result = resultArray(out, py::dtype::of<bool>(), batch);
     std::vector<uint8_t> flags;
     {
       py::gil_scoped_release release;
-      flags = runtime_->anyHits(rays);
+      flags = runtime_->anyHits(rays, &lastPass_);
     }
     return boolArray(flags, result);
   }
   std::string deviceName() const { return runtime_->device().name; }
   cuda::GpuRuntime& runtime() { return *runtime_; }
+  py::dict lastUpdate() const {
+    return py::dict("interpolate_ms"_a = lastUpdate_.interpolateMs, "refit_ms"_a = lastUpdate_.refitMs,
+                    "woop_ms"_a = lastUpdate_.woopMs, "total_ms"_a = lastUpdate_.totalMs());
+  }
+  py::dict lastRayPass() const { return rayPassDict(lastPass_); }
 
  private:
+  int device() const { return runtime_->config().device; }
+  void refitDevice(py::handle vertices, std::uintptr_t stream) {
+    DeviceArguments args(device(), stream);
+    const uint32_t v = runtime_->vertexCount();
+    const float* positions = pointerOf<const float>(args.add(vertices, "positions", {"<f4"}, {py::ssize_t(v), 3}));
+    args.waitForProducers();
+    py::gil_scoped_release release;
+    runtime_->updateFromDevice(positions, v, reinterpret_cast<void*>(stream));
+  }
+  py::object traceDevice(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out,
+                         std::uintptr_t stream) {
+    DeviceArguments args(device(), stream);
+    std::vector<py::ssize_t> batch;
+    const cuda::GpuRuntime::DeviceRays rays = deviceRays(args, o, d, tmin, tmax, batch);
+    static const char* const kFields[] = {"t", "u", "v", "triangle"};
+    py::dict results;
+    if (out.is_none()) {
+      for (const char* field : kFields)
+        results[field] = newDeviceArray(batch, field == std::string("triangle") ? "<i4" : "<f4", device(), stream);
+    } else if (py::isinstance<py::dict>(out)) {
+      results = py::reinterpret_borrow<py::dict>(out);
+      for (auto item : results) {
+        const std::string key = py::str(item.first);
+        if (std::find(std::begin(kFields), std::end(kFields), key) == std::end(kFields))
+          throw tsah::ConfigError("out: unknown field '" + key + "' (t, u, v, triangle)");
+      }
+    } else {
+      throw ArgumentTypeError("out: expected a dict of device arrays (t, u, v, triangle) for device rays, got " +
+                              std::string(py::str(out.get_type().attr("__name__"))));
+    }
+    cuda::GpuRuntime::DeviceHits hits;
+    float** floats[] = {&hits.t, &hits.u, &hits.v};
+    for (int f = 0; f < 3; ++f)
+      if (results.contains(kFields[f]))
+        *floats[f] = pointerOf<float>(args.add(results[kFields[f]], std::string("out['") + kFields[f] + "']", {"<f4"}, batch, true));
+    if (results.contains("triangle"))
+      hits.triangle = pointerOf<uint32_t>(args.add(results["triangle"], "out['triangle']", {"<i4", "<u4"}, batch, true));
+    args.waitForProducers();
+    {
+      py::gil_scoped_release release;
+      runtime_->closestHitsOnDevice(rays, hits, reinterpret_cast<void*>(stream));
+    }
+    return results;
+  }
+  py::object occludedDevice(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out,
+                            std::uintptr_t stream) {
+    DeviceArguments args(device(), stream);
+    std::vector<py::ssize_t> batch;
+    const cuda::GpuRuntime::DeviceRays rays = deviceRays(args, o, d, tmin, tmax, batch);
+    const py::object result = out.is_none() ? newDeviceArray(batch, "|b1", device(), stream)
+                                            : py::reinterpret_borrow<py::object>(out);
+    auto* flags = pointerOf<uint8_t>(args.add(result, "out", {"|b1", "|u1"}, batch, true));
+    args.waitForProducers();
+    {
+      py::gil_scoped_release release;
+      runtime_->anyHitsOnDevice(rays, flags, reinterpret_cast<void*>(stream));
+    }
+    return result;
+  }
+
   std::unique_ptr<cuda::GpuRuntime> runtime_;
+  cuda::UpdateTimings lastUpdate_;
+  RayPassStats lastPass_;
 };
 #endif
 
@@ -302,6 +444,19 @@ shape to write into (returned). The GIL is released while tracing.
 constexpr const char* kOccludedDoc =
     "True for each ray that hits anything within (tmin, tmax) (shadow / ambient-occlusion queries); a bool "
     "array of the batch shape, or written into out= (bool, C-contiguous).";
+constexpr const char* kDeviceDoc = R"doc(
+Device arrays (objects with __cuda_array_interface__ or a CUDA __dlpack__, e.g. torch or CuPy
+arrays on the runtime's device; float32, C-contiguous) are used in place: refit(positions) checks
+them on the device; trace returns a dict of tsah.DeviceArray t, u, v (float32) and triangle
+(int32) of the batch shape, occluded a bool tsah.DeviceArray, or they write into out= (a dict of
+device arrays for trace, any of its four fields; a bool or uint8 device array for occluded). The
+work is ordered after what the caller queued on `stream` (None: the legacy default stream; an int
+cudaStream_t, or an object with __cuda_stream__ or cuda_stream) and before what it queues there
+next; device traces do not wait for the device (synchronize the stream before reading on the host).
+)doc";
+constexpr const char* kLastRayPassDoc =
+    "The last host-array trace or occluded call: {'rays': count, 'ms': time of the library's batch alone (GPU: the "
+    "traversal kernel's device time; CPU: the C++ batch call's wall time)}.";
 
 }  // namespace
 
@@ -325,7 +480,8 @@ trace`), "bvh2", "bvh4" or "bvh8"; a wide layout is the tree collapsed with its 
       .def("occluded", &CpuTracer::occluded, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf,
            "out"_a = py::none(), kOccludedDoc)
       .def_property_readonly("bounds", &CpuTracer::bounds, "Bounds of the current frame, float32 (2, 3).")
-      .def_property_readonly("layout", &CpuTracer::layout, "The layout traced: bvh2, bvh4 or bvh8.");
+      .def_property_readonly("layout", &CpuTracer::layout, "The layout traced: bvh2, bvh4 or bvh8.")
+      .def_property_readonly("last_ray_pass", &CpuTracer::lastRayPass, kLastRayPassDoc);
 
 #if defined(TSAH_HAVE_CUDA)
   m.attr("cuda_built") = true;
@@ -338,13 +494,19 @@ uploaded once; refit and traversal run on the GPU). Raises tsah.Failure when no 
              return std::make_unique<GpuTracer>(tree, animation, checkedInteger<int>(device, "device", 0));
            }),
            "tree"_a, "animation"_a, "device"_a = 0)
-      .def("refit", &GpuTracer::refit, "time"_a, kRefitDoc)
-      .def("refit_positions", &GpuTracer::refitPositions, "positions"_a, "The same as refit(positions) (vertex positions only).")
+      .def("refit", &GpuTracer::refit, "time"_a, py::kw_only(), "stream"_a = py::none(),
+           (std::string(kRefitDoc) + kDeviceDoc).c_str())
+      .def("refit_positions", &GpuTracer::refitPositions, "positions"_a, py::kw_only(), "stream"_a = py::none(),
+           "The same as refit(positions) (vertex positions only).")
       .def("trace", &GpuTracer::trace, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf,
-           "out"_a = py::none(), kTraceDoc)
+           "out"_a = py::none(), py::kw_only(), "stream"_a = py::none(), (std::string(kTraceDoc) + kDeviceDoc).c_str())
       .def("occluded", &GpuTracer::occluded, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf,
-           "out"_a = py::none(), kOccludedDoc)
-      .def_property_readonly("device_name", &GpuTracer::deviceName, "The name of the GPU the runtime uses.");
+           "out"_a = py::none(), py::kw_only(), "stream"_a = py::none(), (std::string(kOccludedDoc) + kDeviceDoc).c_str())
+      .def_property_readonly("device_name", &GpuTracer::deviceName, "The name of the GPU the runtime uses.")
+      .def_property_readonly("last_ray_pass", &GpuTracer::lastRayPass, kLastRayPassDoc)
+      .def_property_readonly("last_update", &GpuTracer::lastUpdate,
+                             "Device time of the last refit from a time or host positions (ms): interpolate_ms (the "
+                             "upload for positions), refit_ms, woop_ms, total_ms.");
 #else
   m.attr("cuda_built") = false;
   m.def("cuda_available", [] { return false; }, "True when the CUDA runtime was built and a GPU is present.");

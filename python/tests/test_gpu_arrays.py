@@ -1,6 +1,9 @@
 """Runtimes fed from the caller's arrays: refit from vertex positions (checked like an imported
 animation), batch dimensions (..., 3) -> (...), out= arrays, on the CPU everywhere and on the GPU
-when one is present."""
+when one is present; CUDA device arrays (__cuda_array_interface__, DLPack): the protocol checks
+everywhere, the GPU runtime's device path against its host path with a device and torch or CuPy."""
+import ctypes
+
 import numpy as np
 import pytest
 
@@ -130,6 +133,24 @@ def test_out_arrays(kind, wave):
         runtime.occluded(o, d, out=frozen)
 
 
+@pytest.mark.parametrize("kind", RUNTIMES)
+def test_large_batches_their_first_bad_ray_and_the_batch_time(kind, wave):
+    """Batches above 65536 rays are converted on several threads: the same hits as small batches,
+    the first bad ray named, and last_ray_pass timing the library's batch alone."""
+    animation, _ = wave
+    runtime = make_runtime(kind, wave)
+    o, d = rays(animation, 0.0, (300000,))
+    hits = runtime.trace(o, d)
+    assert runtime.last_ray_pass["rays"] == 300000 and runtime.last_ray_pass["ms"] > 0
+    np.testing.assert_array_equal(hits[::1000], runtime.trace(o[::1000], d[::1000]))
+    np.testing.assert_array_equal(runtime.occluded(o, d)[::1000], runtime.occluded(o[::1000], d[::1000]))
+    assert runtime.last_ray_pass["rays"] == 300
+    d[200000] = 0.0
+    d[290000, 1] = np.nan
+    with pytest.raises(tsah.ConfigError, match="rays: ray 200000: direction is zero"):
+        runtime.trace(o, d)
+
+
 def test_cpu_runtime_shares_the_animation(wave):
     """The runtime keeps the caller's Animation alive instead of copying it."""
     import gc
@@ -148,10 +169,17 @@ def test_cpu_runtime_shares_the_animation(wave):
 
 class FakeCudaArray:
     """Exposes __cuda_array_interface__ over a host buffer: what a CUDA array looks like to the module."""
-    def __init__(self, array):
+    def __init__(self, array, **fields):
         self.array = array
         self.__cuda_array_interface__ = {"shape": array.shape, "typestr": array.dtype.str, "strides": None,
                                          "data": (array.ctypes.data, False), "version": 3, "stream": None}
+        self.__cuda_array_interface__.update(fields)
+
+
+class FakeTensor(FakeCudaArray):
+    """Like torch and CuPy arrays also a number to Python's C API (float(a) works for one element)."""
+    def __float__(self):
+        raise TypeError("only one element tensors can be converted to Python scalars")
 
 
 class FakeDlpackDevice:
@@ -159,19 +187,335 @@ class FakeDlpackDevice:
     def __dlpack_device__(self):
         return (2, 0)
 
+    def __dlpack__(self, stream=None):
+        raise AssertionError("a CPU runtime must refuse before taking the capsule")
 
-@pytest.mark.parametrize("kind", RUNTIMES)
-def test_device_arrays_are_refused_with_a_clear_error(kind, wave):
+
+def test_cpu_runtime_refuses_device_arrays_with_a_clear_error(wave):
     animation, _ = wave
-    runtime = make_runtime(kind, wave)
+    runtime = make_runtime("cpu", wave)
     positions = animation.positions_at(1.0).astype(np.float32)
     o, d = rays(animation, 1.0, (10,))
     cuda = "a CUDA device array \\(__cuda_array_interface__\\); this call takes host arrays \\(numpy\\)"
     with pytest.raises(tsah.ConfigError, match="positions: " + cuda):
         runtime.refit(FakeCudaArray(positions))
+    with pytest.raises(tsah.ConfigError, match="positions: " + cuda):
+        runtime.refit(FakeTensor(positions))  # positions, not a time
     with pytest.raises(tsah.ConfigError, match="origins: " + cuda):
         runtime.trace(FakeCudaArray(o), d)
     with pytest.raises(tsah.ConfigError, match="directions: " + cuda):
         runtime.occluded(o, FakeCudaArray(d))
     with pytest.raises(tsah.ConfigError, match=r"positions: a device array \(DLPack device type 2\); this call takes host"):
         runtime.refit(FakeDlpackDevice())
+
+
+# The protocol checks, everywhere (no device touched): tsah._tsah._checked_device_array is the
+# function every GpuRuntime argument goes through.
+check = tsah._tsah._checked_device_array
+
+
+def test_cuda_array_interface_is_read_as_the_protocol_says():
+    a = np.zeros((5, 3), np.float32)
+    got = check(FakeCudaArray(a, stream=7), "positions", ["<f4"])
+    assert got == {"data": a.ctypes.data, "shape": (5, 3), "typestr": "<f4", "device": None, "stream": 7}
+    # Explicit C-contiguous strides are accepted, as are any strides of an extent-1 dimension.
+    assert check(FakeCudaArray(a, strides=(12, 4)), "positions", ["<f4"])["shape"] == (5, 3)
+    assert check(FakeCudaArray(a[:1], strides=(999, 4)), "positions", ["<f4"])["shape"] == (1, 3)
+    assert check(FakeCudaArray(a, version=2, stream=None), "positions", ["<f4"])["stream"] is None
+
+
+@pytest.mark.parametrize("fields, error, message", [
+    ({"typestr": "<f8"}, tsah.ArgumentTypeError, "positions: expected a device array of typestr '<f4', got '<f8'"),
+    ({"strides": (4, 20)}, tsah.ConfigError, "positions: must be C-contiguous"),
+    ({"strides": (24, 4)}, tsah.ConfigError, "positions: must be C-contiguous"),
+    ({"shape": (5, -3)}, tsah.ConfigError, "positions: __cuda_array_interface__ has a negative extent"),
+    ({"version": 1}, tsah.ConfigError, r"positions: __cuda_array_interface__ version 1 is not supported \(2 or 3\)"),
+    ({"stream": 0}, tsah.ConfigError, "positions: __cuda_array_interface__ stream 0 is not allowed"),
+    ({"mask": object()}, tsah.ConfigError, "positions: __cuda_array_interface__ has a mask"),
+    ({"data": "0x10"}, tsah.ConfigError, "positions: __cuda_array_interface__ has a field of the wrong type"),
+    ({"stream": -3}, tsah.ConfigError, "positions: __cuda_array_interface__ stream is not a stream address"),
+])
+def test_bad_cuda_array_interfaces_get_one_clear_line(fields, error, message):
+    with pytest.raises(error, match=message):
+        check(FakeCudaArray(np.zeros((5, 3), np.float32), **fields), "positions", ["<f4"])
+
+
+def test_cuda_array_interface_missing_fields_and_read_only_outputs():
+    fake = FakeCudaArray(np.zeros(4, np.bool_))
+    del fake.__cuda_array_interface__["data"]
+    with pytest.raises(tsah.ConfigError, match="out: __cuda_array_interface__ has no 'data'"):
+        check(fake, "out", ["|b1"])
+    frozen = FakeCudaArray(np.zeros(4, np.bool_), data=(16, True))
+    assert check(frozen, "out", ["|b1"])["data"] == 16  # read-only inputs are fine
+    with pytest.raises(tsah.ConfigError, match="out: __cuda_array_interface__ is read-only"):
+        check(frozen, "out", ["|b1"], writable=True)
+    with pytest.raises(tsah.ArgumentTypeError, match="out: expected a CUDA device array .* got ndarray"):
+        check(np.zeros(4, np.bool_), "out", ["|b1"])
+
+
+class DLDevice(ctypes.Structure):
+    _fields_ = [("device_type", ctypes.c_int32), ("device_id", ctypes.c_int32)]
+
+
+class DLDataType(ctypes.Structure):
+    _fields_ = [("code", ctypes.c_uint8), ("bits", ctypes.c_uint8), ("lanes", ctypes.c_uint16)]
+
+
+class DLTensor(ctypes.Structure):
+    _fields_ = [("data", ctypes.c_void_p), ("device", DLDevice), ("ndim", ctypes.c_int32), ("dtype", DLDataType),
+                ("shape", ctypes.POINTER(ctypes.c_int64)), ("strides", ctypes.POINTER(ctypes.c_int64)),
+                ("byte_offset", ctypes.c_uint64)]
+
+
+class DLManagedTensor(ctypes.Structure):
+    pass
+
+
+DELETER = ctypes.CFUNCTYPE(None, ctypes.POINTER(DLManagedTensor))
+DLManagedTensor._fields_ = [("dl_tensor", DLTensor), ("manager_ctx", ctypes.c_void_p), ("deleter", DELETER)]
+
+
+class FakeDlpack:
+    """A DLPack producer on CUDA device `device` whose capsule points at a fake address: the checks must
+    refuse or accept it from the tensor's fields alone. Records the stream asked for and the deleter calls."""
+    def __init__(self, shape, code=2, bits=32, strides=None, device=0, offset=0):
+        self.deleted, self.streams, self.device = 0, [], device
+        self.shape = (ctypes.c_int64 * len(shape))(*shape)
+        self.strides = (ctypes.c_int64 * len(shape))(*strides) if strides else None
+        self.deleter = DELETER(self._delete)
+        self.managed = DLManagedTensor(
+            DLTensor(0x7000, DLDevice(2, device), len(shape), DLDataType(code, bits, 1), self.shape,
+                     self.strides if self.strides is not None else None, offset), None, self.deleter)
+
+    def _delete(self, _):
+        self.deleted += 1
+
+    def __dlpack_device__(self):
+        return (2, self.device)
+
+    def __dlpack__(self, stream=None):
+        self.streams.append(stream)
+        new = ctypes.pythonapi.PyCapsule_New
+        new.restype, new.argtypes = ctypes.py_object, [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_void_p]
+        self.capsule = new(ctypes.addressof(self.managed), b"dltensor", None)
+        return self.capsule
+
+
+def capsule_name(capsule):
+    name = ctypes.pythonapi.PyCapsule_GetName
+    name.restype, name.argtypes = ctypes.c_char_p, [ctypes.py_object]
+    return name(capsule)
+
+
+def test_dlpack_is_consumed_as_the_protocol_says():
+    fake = FakeDlpack((4, 3), offset=16)
+    got = check(fake, "origins", ["<f4"])
+    assert got == {"data": 0x7000 + 16, "shape": (4, 3), "typestr": "<f4", "device": 0, "stream": None}
+    assert fake.streams == [1]  # the legacy default stream, numbered 1 by the protocol
+    assert capsule_name(fake.capsule) == b"used_dltensor"  # consumed: the capsule no longer deletes it
+    assert fake.deleted == 1  # the consumer called the deleter once, when done
+    check(fake, "origins", ["<f4"], stream=12345)
+    assert fake.streams[-1] == 12345
+    contiguous = FakeDlpack((4, 3), strides=(3, 1))
+    assert check(contiguous, "origins", ["<f4"])["shape"] == (4, 3)
+
+
+@pytest.mark.parametrize("fake, error, message", [
+    (lambda: FakeDlpack((4, 3), bits=64), tsah.ArgumentTypeError,
+     "origins: expected a device array of typestr '<f4', got '<f8'"),
+    (lambda: FakeDlpack((4, 3), strides=(1, 4)), tsah.ConfigError, "origins: must be C-contiguous"),
+    (lambda: FakeDlpack((4, 3), device=1), tsah.ConfigError, "origins: on CUDA device 1; the runtime uses device 0"),
+    (lambda: FakeDlpack((4, 3), code=5), tsah.ArgumentTypeError, "origins: a DLPack dtype numpy has no name for"),
+])
+def test_bad_dlpack_tensors_get_one_clear_line_and_are_deleted(fake, error, message):
+    producer = fake()
+    with pytest.raises(error, match=message):
+        check(producer, "origins", ["<f4"])
+    assert producer.deleted == (0 if "device 1" in message else 1)  # a consumed capsule is always deleted
+
+
+def test_stream_arguments():
+    fake = FakeDlpack((2, 3))
+
+    class TorchLike:
+        cuda_stream = 99
+
+    class CudaCoreLike:
+        def __cuda_stream__(self):
+            return (0, 77)
+
+    for stream, expected in [(None, 1), (0, 1), (2, 2), (5000, 5000), (TorchLike(), 99), (CudaCoreLike(), 77)]:
+        check(fake, "origins", ["<f4"], stream=stream)
+        assert fake.streams[-1] == expected
+    with pytest.raises(tsah.ArgumentTypeError, match="stream: expected an int .* got str"):
+        check(fake, "origins", ["<f4"], stream="default")
+    with pytest.raises(tsah.ConfigError, match="stream: must be in 0"):
+        check(fake, "origins", ["<f4"], stream=-5)
+
+
+# With a device and torch or CuPy: device arrays against the host path.
+def device_library():
+    if not tsah.cuda_available():
+        return None
+    for name in ("torch", "cupy"):
+        try:
+            return __import__(name)
+        except ImportError:
+            continue
+    return None
+
+
+LIB = device_library()
+needs_device_arrays = pytest.mark.skipif(LIB is None, reason="no CUDA device, or neither torch nor CuPy")
+
+
+def to_device(a):
+    return LIB.from_numpy(np.ascontiguousarray(a)).cuda() if LIB.__name__ == "torch" else LIB.asarray(a)
+
+
+def to_host(a):
+    if isinstance(a, tsah.DeviceArray):
+        a = LIB.from_dlpack(a) if LIB.__name__ == "torch" else LIB.asarray(a)
+    return a.cpu().numpy() if LIB.__name__ == "torch" else LIB.asnumpy(a)
+
+
+def synchronize():
+    (LIB.cuda.synchronize if LIB.__name__ == "torch" else LIB.cuda.Device().synchronize)()
+
+
+def new_stream():
+    return LIB.cuda.Stream() if LIB.__name__ == "torch" else LIB.cuda.Stream(non_blocking=True)
+
+
+def stream_address(stream):
+    return stream.cuda_stream if LIB.__name__ == "torch" else stream.ptr
+
+
+class DlpackOnly:
+    """A device array offering DLPack only (torch and CuPy offer both protocols)."""
+    def __init__(self, a):
+        self.a = a
+
+    def __dlpack__(self, stream=None):
+        return self.a.__dlpack__(stream=stream)
+
+    def __dlpack_device__(self):
+        return self.a.__dlpack_device__()
+
+
+PROTOCOLS = ["cuda_array_interface", "dlpack"]
+
+
+def device_input(a, protocol):
+    d = to_device(a)
+    return d if protocol == "cuda_array_interface" else DlpackOnly(d)
+
+
+@needs_device_arrays
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+def test_device_refit_and_trace_equal_the_host_path(wave, protocol):
+    animation, _ = wave
+    host, device = make_runtime("gpu", wave), make_runtime("gpu", wave)
+    positions = animation.positions_at(2.5)
+    host.refit(positions)
+    device.refit(device_input(positions, protocol))
+    o, d = rays(animation, 2.5, (20, 25))
+    expected = host.trace(o, d)
+    assert (expected["triangle"] >= 0).sum() > 100
+    np.testing.assert_array_equal(device.trace(o, d), expected)  # the refit itself
+    assert host.last_update["total_ms"] > 0 and host.last_ray_pass["rays"] == 500
+    hits = device.trace(device_input(o, protocol), device_input(d, protocol))
+    synchronize()
+    assert set(hits) == {"t", "u", "v", "triangle"} and hits["t"].shape == (20, 25)
+    assert hits["triangle"].typestr == "<i4"
+    for field in ("t", "u", "v", "triangle"):
+        np.testing.assert_array_equal(to_host(hits[field]), expected[field])
+    flags = device.occluded(device_input(o, protocol), device_input(d, protocol))
+    synchronize()
+    np.testing.assert_array_equal(to_host(flags), host.occluded(o, d))
+
+
+@needs_device_arrays
+def test_device_limits_out_arrays_and_results_as_torch_or_cupy(wave):
+    animation, _ = wave
+    runtime = make_runtime("gpu", wave)
+    o, d = rays(animation, 0.0, (8, 25))
+    tmax = np.full((8, 25), 1e9, np.float32)
+    tmax[0] = 0.5
+    expected = runtime.trace(o, d, tmin=0.01, tmax=tmax)
+    out = {"t": to_device(np.zeros((8, 25), np.float32)), "triangle": to_device(np.zeros((8, 25), np.int32))}
+    assert runtime.trace(to_device(o), to_device(d), 0.01, to_device(tmax), out=out) is out
+    synchronize()
+    np.testing.assert_array_equal(to_host(out["t"]), expected["t"])
+    np.testing.assert_array_equal(to_host(out["triangle"]), expected["triangle"])
+    flags = tsah.DeviceArray((8, 25), "|b1")
+    assert runtime.occluded(to_device(o), to_device(d), tmax=1e9, out=flags) is flags
+    synchronize()
+    np.testing.assert_array_equal(to_host(flags), runtime.occluded(o, d, tmax=1e9))
+    hits = runtime.trace(to_device(o), to_device(d))
+    synchronize()
+    via_interface = LIB.as_tensor(hits["t"], device="cuda") if LIB.__name__ == "torch" else LIB.asarray(hits["t"])
+    assert via_interface.data_ptr() == hits["t"].__cuda_array_interface__["data"][0] if LIB.__name__ == "torch" \
+        else via_interface.data.ptr == hits["t"].__cuda_array_interface__["data"][0]  # no copy
+    np.testing.assert_array_equal(to_host(hits["t"]), runtime.trace(o, d)["t"])
+
+
+@needs_device_arrays
+def test_device_work_follows_the_callers_stream(wave):
+    animation, _ = wave
+    runtime = make_runtime("gpu", wave)
+    reference = make_runtime("gpu", wave)
+    o, d = rays(animation, 4.0, (3000,))
+    stream = new_stream()
+    positions = to_device(np.full((animation.vertex_count, 3), np.nan, np.float32))
+    synchronize()
+    with (LIB.cuda.stream(stream) if LIB.__name__ == "torch" else stream):
+        # Queued on `stream`: the refit must wait for this copy (before it, the positions are NaN).
+        positions.copy_(to_device(animation.positions_at(4.0)), non_blocking=True) if LIB.__name__ == "torch" \
+            else positions.set(animation.positions_at(4.0).astype(np.float32), stream=stream)
+        # torch's Stream gives its address as cuda_stream; CuPy's as ptr (passed as an int).
+        given = stream if LIB.__name__ == "torch" else stream.ptr
+        runtime.refit(positions, stream=given)
+        hits = runtime.trace(to_device(o), to_device(d), stream=given)
+    stream.synchronize()
+    reference.refit(4.0)
+    np.testing.assert_array_equal(to_host(hits["triangle"]), reference.trace(o, d)["triangle"])
+    assert hits["t"].__cuda_array_interface__["stream"] == stream_address(stream)
+
+
+@needs_device_arrays
+def test_device_argument_errors(wave):
+    animation, _ = wave
+    runtime = make_runtime("gpu", wave)
+    v = animation.vertex_count
+    positions = animation.positions_at(1.0).copy()
+    o, d = rays(animation, 1.0, (10,))
+    with pytest.raises(tsah.ArgumentTypeError, match="positions: expected a device array of typestr '<f4', got '<f8'"):
+        runtime.refit(to_device(positions.astype(np.float64)))
+    with pytest.raises(tsah.ConfigError, match=rf"positions: expected shape \({v}, 3\), got \({v}, 2\)"):
+        runtime.refit(to_device(positions[:, :2]))
+    transposed = to_device(np.ascontiguousarray(positions.T)).T
+    with pytest.raises(tsah.ConfigError, match="positions: must be C-contiguous"):
+        runtime.refit(transposed)
+    with pytest.raises(tsah.ConfigError, match="GPU runtime: positions: host memory, not device memory"):
+        runtime.refit(FakeCudaArray(positions.astype(np.float32)))
+    with pytest.raises(tsah.ConfigError, match="origins: expected shape \\(\\.\\.\\., 3\\), got \\(10,\\)"):
+        runtime.trace(to_device(o[:, 0]), to_device(d[:, 0]))
+    with pytest.raises(tsah.ArgumentTypeError, match="directions: expected a CUDA device array .* got ndarray"):
+        runtime.trace(to_device(o), d)
+    with pytest.raises(tsah.ArgumentTypeError, match="tmax: expected a number or a float32 device array like origins"):
+        runtime.trace(to_device(o), to_device(d), tmax=np.ones(10, np.float32))
+    with pytest.raises(tsah.ConfigError, match="out: unknown field 'w'"):
+        runtime.trace(to_device(o), to_device(d), out={"w": to_device(np.zeros(10, np.float32))})
+    with pytest.raises(tsah.ConfigError, match=r"out\['t'\]: expected shape \(10,\), got \(9,\)"):
+        runtime.trace(to_device(o), to_device(d), out={"t": to_device(np.zeros(9, np.float32))})
+    with pytest.raises(tsah.ConfigError, match="GPU runtime: tmin must be finite and >= 0"):
+        runtime.occluded(to_device(o), to_device(d), tmin=-1.0)
+    for value, message in [(np.nan, "positions: vertex 4 has a NaN or infinite coordinate"),
+                           (1e30, r"positions: vertex 4 has coordinate 1e\+30, beyond the supported magnitude")]:
+        bad = positions.astype(np.float32)
+        bad[4, 1] = value
+        with pytest.raises(tsah.DataError, match=message):
+            runtime.refit(to_device(bad))
+    with pytest.raises(tsah.ConfigError, match="positions: a CUDA device array"):  # the CPU runtime keeps refusing
+        make_runtime("cpu", wave).refit(to_device(positions.astype(np.float32)))

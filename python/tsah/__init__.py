@@ -67,10 +67,10 @@ from ._tsah import (  # noqa: F401  (the public API)
 )
 
 if cuda_built:
-    from ._tsah import GpuRuntime  # noqa: F401
+    from ._tsah import DeviceArray, GpuRuntime  # noqa: F401
 
 __all__ = [
     "Animation", "ArgumentTypeError", "ConfigError", "CpuRuntime", "DataError", "Error", "Failure", "FileError",
     "Tree", "TreeSet", "__version__", "cuda_available", "cuda_built",
     "evaluate", "generate", "load", "optimize", "read_tree", "tree_from_bytes",
-] + (["GpuRuntime"] if cuda_built else [])
+] + (["DeviceArray", "GpuRuntime"] if cuda_built else [])

@@ -201,23 +201,61 @@ class CpuRuntime:
     @property
     def layout(self) -> str:
         """The layout traced: bvh2, bvh4 or bvh8."""
+    @property
+    def last_ray_pass(self) -> dict[str, Any]:
+        """The last trace/occluded: rays and the wall time (ms) of the C++ batch call alone."""
+
+
+class DeviceArray:
+    """C-contiguous memory on a CUDA device owned by the module (only when cuda_built): a GPU
+    runtime's results for device rays, or an out= array. Exported without a copy through
+    __cuda_array_interface__ (version 3) and DLPack (torch.from_dlpack, cupy.asarray)."""
+
+    def __init__(self, shape: Sequence[_Integer], typestr: str = "<f4", device: _Integer = 0) -> None:
+        """An uninitialised array; typestr: '<f4', '<i4', '<u4', '|b1' or '|u1'."""
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """The shape, a tuple."""
+    @property
+    def typestr(self) -> str:
+        """numpy's typestr of the elements, e.g. '<f4'."""
+    @property
+    def device(self) -> int:
+        """The CUDA device the memory is on."""
+    @property
+    def __cuda_array_interface__(self) -> dict[str, Any]:
+        """The CUDA array interface, version 3 (strides None; stream: the one its contents follow)."""
+    def __dlpack__(self, *, stream: int | None = None, max_version: tuple[int, int] | None = None,
+                   dl_device: tuple[int, int] | None = None, copy: bool | None = None) -> Any:
+        """An unversioned DLPack capsule of the array (no copy) after `stream` waits for its contents."""
+    def __dlpack_device__(self) -> tuple[int, int]:
+        """(2, device): kDLCUDA and the device."""
+
+
+_DeviceHits = dict[str, DeviceArray]  # t, u, v (float32) and triangle (int32) of the batch shape
+_Stream = Any  # None, an int cudaStream_t, or an object with __cuda_stream__ or cuda_stream
 
 
 class GpuRuntime:
-    """The same as CpuRuntime on a CUDA device (only when cuda_built)."""
+    """The same as CpuRuntime on a CUDA device (only when cuda_built). Also takes CUDA device arrays
+    (__cuda_array_interface__ or DLPack: torch, CuPy) in place, on the caller's stream."""
 
     def __init__(self, tree: Tree, animation: Animation, device: _Integer = 0) -> None:
         """device: the CUDA device index. Raises tsah.Failure when no device is usable."""
-    def refit(self, time: _Number | _ArrayLike) -> None:
-        """Refits on the device to the animation at this time, or to vertex positions (V, 3)."""
-    def refit_positions(self, positions: _ArrayLike) -> None:
+    def refit(self, time: _Number | _ArrayLike | Any, *, stream: _Stream = None) -> None:
+        """Refits on the device to the animation at this time, or to vertex positions (V, 3): host
+        arrays, or a float32 device array used in place (checked on the device)."""
+    def refit_positions(self, positions: _ArrayLike | Any, *, stream: _Stream = None) -> None:
         """Refits to given vertex positions (V, 3)."""
-    def trace(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
-              tmax: _ArrayLike = float("inf"), out: Any = None) -> np.recarray[Any, Any]:
-        """Closest hits, as CpuRuntime.trace."""
-    def occluded(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
-                 tmax: _ArrayLike = float("inf"), out: Any = None) -> npt.NDArray[np.bool_]:
-        """True for each ray that hits anything within (tmin, tmax)."""
+    def trace(self, origins: _ArrayLike | Any, directions: _ArrayLike | Any, tmin: _ArrayLike | Any = 0.0,
+              tmax: _ArrayLike | Any = float("inf"), out: Any = None, *,
+              stream: _Stream = None) -> np.recarray[Any, Any] | _DeviceHits:
+        """Closest hits, as CpuRuntime.trace; for device rays a dict of device arrays t, u, v, triangle
+        (or out=, a dict of any of them), not waited for."""
+    def occluded(self, origins: _ArrayLike | Any, directions: _ArrayLike | Any, tmin: _ArrayLike | Any = 0.0,
+                 tmax: _ArrayLike | Any = float("inf"), out: Any = None, *,
+                 stream: _Stream = None) -> npt.NDArray[np.bool_] | DeviceArray:
+        """True for each ray that hits anything within (tmin, tmax); a bool device array for device rays."""
     def closest_points(self, points: _ArrayLike, radius: _ArrayLike = float("inf")) -> np.recarray[Any, Any]:
         """For each point (N, 3), the closest point on the current frame's triangles within radius: a record
         array (N,) with distance (inf when none), triangle (-1 then), u, v and point."""
@@ -227,6 +265,13 @@ class GpuRuntime:
     @property
     def device_name(self) -> str:
         """The name of the CUDA device."""
+    @property
+    def last_ray_pass(self) -> dict[str, Any]:
+        """The last host-array trace/occluded: rays and the traversal kernel's device time (ms)."""
+    @property
+    def last_update(self) -> dict[str, float]:
+        """Device time (ms) of the last refit from a time or host positions: interpolate_ms, refit_ms,
+        woop_ms, total_ms."""
 
 
 def cuda_available() -> bool:

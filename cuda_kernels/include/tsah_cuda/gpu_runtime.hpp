@@ -14,7 +14,9 @@
 //                 each pixel's shutter time, as the CPU renderer.
 // Every phase is timed with CUDA events. Positions, boxes and Woop triangles of updateAt are
 // bit-identical to the CPU runtime's; hits agree up to ties between triangles at equal distance.
+#include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <span>
 #include <string_view>
@@ -181,6 +183,53 @@ class GpuRuntime {
   // counts differ.
   std::vector<Hit> closestHits(std::span<const Ray> rays, std::span<const float> times, RayPassStats* stats = nullptr);
   std::vector<uint8_t> anyHits(std::span<const Ray> rays, std::span<const float> times, RayPassStats* stats = nullptr);
+
+  // Device arrays (docs/cuda-runtime.md#device-arrays): the caller's CUDA memory used in place,
+  // with no copy through the host. Work runs on the runtime's own stream, ordered after the work the
+  // caller put on `stream` before the call and before the work it puts there after it (events, no
+  // host wait), so a caller that syncs its stream sees the results. A CUDA stream (cudaStream_t) as
+  // an opaque handle, so that this header needs no cuda_runtime.h; nullptr is the legacy default
+  // stream, (void*)2 the per-thread default stream.
+  using StreamHandle = void*;
+  // Refits the current tree (selectTreeAt) to the vertex positions at devicePositions (vertexCount
+  // * 3 floats x y z in device memory of the runtime's device), as update(positions): the
+  // positions are first checked on the device (finite, |x| <= tsah::kMaxCoordinate) and the 4-byte
+  // answer read back, the call's only wait for the device; then copied into the runtime and the
+  // refit and Woop pass queued. Throws tsah::DataError for a wrong vertex count or a bad coordinate
+  // ("positions: vertex N has a NaN or infinite coordinate", the wording of the host check; the
+  // frame is left as it was), tsah::ConfigError for a pointer that is not device memory of the
+  // runtime's device.
+  void updateFromDevice(const float* devicePositions, std::size_t vertexCount, StreamHandle stream = nullptr);
+  // Rays in the caller's device memory as separate arrays (Python's (n, 3) float32 arrays): ray i
+  // starts at origins[3i..3i+2] with direction directions[3i..3i+2]; tmin/tmax per ray, or, when
+  // null, tminValue/tmaxValue for every ray. The traversal reads these arrays directly (no packed
+  // Ray buffer). Device rays are not checked as tsah::checkRays checks host rays (that would need a
+  // wait); the scalar limits are (tsah::ConfigError).
+  struct DeviceRays {
+    const float* origins = nullptr;
+    const float* directions = nullptr;
+    const float* tmin = nullptr;
+    const float* tmax = nullptr;
+    float tminValue = 0.0f;
+    float tmaxValue = std::numeric_limits<float>::infinity();
+    std::size_t count = 0;
+  };
+  // Closest hits of device rays, one value per ray in each non-null array (device memory): t, u, v
+  // (float) and triangle (uint32, the animation's triangle id). A miss writes t = +inf, u = v = 0,
+  // triangle = tsah::kNoHit (0xffffffff), as the Python module reports misses.
+  struct DeviceHits {
+    float* t = nullptr;
+    float* u = nullptr;
+    float* v = nullptr;
+    uint32_t* triangle = nullptr;
+  };
+  // Trace device rays against the traced tree (as closestHits / anyHits(rays): a blurred frame's
+  // last key), one thread per ray; nothing waits for the device. occluded: one byte per ray, 1 when
+  // something is hit within (tmin, tmax). Throws tsah::ConfigError when nothing is traceable yet,
+  // for a null ray array, more than 2^32 - 1 rays, or a pointer that is not device memory of the
+  // runtime's device.
+  void closestHitsOnDevice(const DeviceRays& rays, const DeviceHits& hits, StreamHandle stream = nullptr);
+  void anyHitsOnDevice(const DeviceRays& rays, uint8_t* occluded, StreamHandle stream = nullptr);
 
   struct Impl;
 

@@ -1,0 +1,107 @@
+// The kernels behind GpuRuntime's device-array entry points. The traversal reads the caller's
+// (n, 3) arrays directly instead of packing them into Ray records first: 24 bytes per ray read
+// (plus 4 for each per-ray limit), where a packing kernel would read them, write a 32-byte Ray and
+// the traversal read that again (88 bytes per ray, and a 32-byte-per-ray scratch buffer: 320 MB for
+// 10M rays). A warp's three loads of 12-byte rows cover 384 contiguous bytes.
+#include <cmath>
+
+#include "bvh2_traversal.cuh"
+#include "cwbvh_kernels.hpp"
+#include "device_arrays.hpp"
+#include "launch.hpp"
+#include "tsah/base/coordinates.hpp"
+#include "tsah/layout/cwbvh_layout.hpp"
+
+namespace tsah::cuda::detail {
+
+namespace {
+
+__global__ void firstBadVertexKernel(const float* __restrict__ positions, std::size_t coordinates,
+                                     uint32_t* __restrict__ firstBad) {
+  const std::size_t stride = std::size_t(gridDim.x) * blockDim.x;
+  for (std::size_t i = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x; i < coordinates; i += stride)
+    if (!(fabsf(__ldg(positions + i)) <= kMaxCoordinate)) atomicMin(firstBad, uint32_t(i / 3));  // NaN fails too
+}
+
+__device__ __forceinline__ Ray loadArrayRay(const ArrayRays& r, uint32_t i) {
+  const float* o = r.origins + 3 * std::size_t(i);
+  const float* d = r.directions + 3 * std::size_t(i);
+  Ray ray;
+  ray.org = {__ldg(o), __ldg(o + 1), __ldg(o + 2)};
+  ray.dir = {__ldg(d), __ldg(d + 1), __ldg(d + 2)};
+  ray.tmin = r.tmin ? __ldg(r.tmin + i) : r.tminValue;
+  ray.tmax = r.tmax ? __ldg(r.tmax + i) : r.tmaxValue;
+  return ray;
+}
+
+__device__ __forceinline__ void storeHit(const ArrayHits& out, uint32_t i, Hit h) {
+  if (!h.valid()) h = Hit{INFINITY, 0.0f, 0.0f, kNoHit};
+  if (out.t) out.t[i] = h.t;
+  if (out.u) out.u[i] = h.u;
+  if (out.v) out.v[i] = h.v;
+  if (out.triangle) out.triangle[i] = h.tri;
+}
+
+// Wide: the compressed 8-wide layout (scene.cwbvhNodes), else the binary one; the traversals are
+// the runtime's own (bvh2_traversal.cuh, tsah/layout/cwbvh_layout.hpp).
+template <bool AnyHit, bool Wide>
+__global__ void __launch_bounds__(128) arrayTraceKernel(TraceScene scene, CwbvhView view, ArrayRays rays,
+                                                        ArrayHits hits, uint8_t* __restrict__ occluded) {
+  const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= rays.count) return;
+  const Ray ray = loadArrayRay(rays, i);
+  Hit h;
+  if constexpr (Wide) {
+    view.rootBox = scene.root->box;
+    if constexpr (AnyHit)
+      h.tri = cwbvhAnyHit(view, ray) ? 0u : kNoHit;
+    else
+      h = cwbvhClosestHit(view, ray);
+  } else {
+    const RootInfo root = *scene.root;
+    if constexpr (AnyHit)
+      h.tri = bvh2AnyHit(scene, root, ray) ? 0u : kNoHit;
+    else
+      h = bvh2ClosestHit(scene, root, ray);
+  }
+  if constexpr (AnyHit)
+    occluded[i] = h.valid() ? 1 : 0;
+  else
+    storeHit(hits, i, h);
+}
+
+template <bool AnyHit, bool Wide>
+void launchArrayTyped(const TraceScene& scene, const ArrayRays& rays, const ArrayHits& hits, uint8_t* occluded,
+                      cudaStream_t stream) {
+  const unsigned block = 128;  // fixed by __launch_bounds__
+  arrayTraceKernel<AnyHit, Wide><<<gridFor(rays.count, block), block, 0, stream>>>(
+      scene, Wide ? cwbvhView(scene) : CwbvhView{}, rays, hits, occluded);
+  CUDA_CHECK_LAUNCH(AnyHit ? "arrayTraceKernel<any hit>" : "arrayTraceKernel<closest hit>");
+}
+
+}  // namespace
+
+void launchFirstBadVertex(const float* positions, uint32_t vertexCount, uint32_t* firstBad, cudaStream_t stream) {
+  if (vertexCount == 0) return;
+  const std::size_t coordinates = std::size_t(vertexCount) * 3;
+  const unsigned block = 256;
+  const unsigned grid = std::min(gridFor(coordinates, block), 4096u);  // grid-stride beyond ~1M coordinates
+  firstBadVertexKernel<<<grid, block, 0, stream>>>(positions, coordinates, firstBad);
+  CUDA_CHECK_LAUNCH("firstBadVertexKernel");
+}
+
+void launchArrayTrace(const TraceScene& scene, const ArrayRays& rays, const ArrayHits& hits, uint8_t* occluded,
+                      cudaStream_t stream) {
+  if (rays.count == 0) return;
+  const bool wide = scene.cwbvhNodes != nullptr;
+  if (occluded && wide)
+    launchArrayTyped<true, true>(scene, rays, hits, occluded, stream);
+  else if (occluded)
+    launchArrayTyped<true, false>(scene, rays, hits, occluded, stream);
+  else if (wide)
+    launchArrayTyped<false, true>(scene, rays, hits, occluded, stream);
+  else
+    launchArrayTyped<false, false>(scene, rays, hits, occluded, stream);
+}
+
+}  // namespace tsah::cuda::detail

@@ -1,0 +1,42 @@
+#pragma once
+// Launchers of the kernels behind GpuRuntime's device-array entry points (device_arrays.cu):
+// the coordinate check of a caller's position buffer and the traversal of rays given as separate
+// (n, 3) arrays. Each checks its launch and throws CudaError; none synchronizes.
+#include <cuda_runtime_api.h>
+
+#include <cstddef>
+#include <cstdint>
+
+#include "device_types.hpp"
+
+namespace tsah::cuda::detail {
+
+// Rays as the caller's arrays hold them (GpuRuntime::DeviceRays with a 32-bit count).
+struct ArrayRays {
+  const float* origins = nullptr;     // 3 floats per ray
+  const float* directions = nullptr;  // 3 floats per ray
+  const float* tmin = nullptr;        // 1 float per ray, or null: tminValue
+  const float* tmax = nullptr;        // 1 float per ray, or null: tmaxValue
+  float tminValue = 0.0f, tmaxValue = 0.0f;
+  uint32_t count = 0;
+};
+
+// Closest-hit results, one value per ray in each non-null array.
+struct ArrayHits {
+  float* t = nullptr;
+  float* u = nullptr;
+  float* v = nullptr;
+  uint32_t* triangle = nullptr;
+};
+
+// *firstBad = min(*firstBad, the lowest vertex with a coordinate that is NaN, infinite or beyond
+// tsah::kMaxCoordinate) over `vertexCount` vertices of 3 floats (tsah::firstBadCoordinate / 3);
+// set *firstBad to 0xffffffff first.
+void launchFirstBadVertex(const float* positions, uint32_t vertexCount, uint32_t* firstBad, cudaStream_t stream);
+
+// Closest hits (hits) or occlusion flags (occluded != nullptr: 1 = something hit) of the rays against
+// the scene (either layout), one thread per ray. A miss writes t = +inf, u = v = 0, triangle = kNoHit.
+void launchArrayTrace(const TraceScene& scene, const ArrayRays& rays, const ArrayHits& hits, uint8_t* occluded,
+                      cudaStream_t stream);
+
+}  // namespace tsah::cuda::detail

@@ -1,0 +1,142 @@
+#!/usr/bin/env python3
+"""The Python module's overhead over the library's own work, printed as JSON (docs/python.md#device-arrays):
+
+  trace: rays given as torch tensors (GpuRuntime.trace on device arrays, out= preallocated, timed
+         with CUDA events on the stream) against the traversal kernel's device time of the same rays
+         given as numpy arrays (GpuRuntime.last_ray_pass); target: rate ratio >= 0.9.
+  refit: GpuRuntime.refit(tensor of vertices) (the check, its 4-byte read back, the copy, refit and
+         Woop, timed with CUDA events) against the runtime's own update from the animation
+         (refit(time): GpuRuntime.last_update total_ms); target: time ratio <= 1.2.
+  cpu:   CpuRuntime(layout="bvh8").trace from Python (wall time, numpy in and out) against the C++
+         batch call alone (CpuRuntime.last_ray_pass) on the same rays; target: rate ratio >= 0.9.
+
+Each figure is the median of --runs runs after one warm-up. The hits of the paths are compared
+(trace: equal triangle ids; refit: equal hits after both refits).
+
+usage: PYTHONPATH=<module dir> python3 python/bench/gpu_arrays.py [--animation FILE] [--triangles 400000]
+           [--rays 10000000] [--cpu-rays 2000000] [--runs 5]
+"""
+import argparse
+import json
+import statistics
+import time
+
+import numpy as np
+
+import tsah
+
+
+def random_rays(animation, time_, count, seed=1):
+    """Rays from around the frame's box toward random points inside it (about half hit)."""
+    rng = np.random.default_rng(seed)
+    p = animation.positions_at(time_)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    targets = lo + rng.random((count, 3), dtype=np.float32) * (hi - lo)
+    origins = targets + rng.normal(size=(count, 3)).astype(np.float32) * float((hi - lo).max())
+    return origins.astype(np.float32), (targets - origins).astype(np.float32)
+
+
+def median_ms(call, runs):
+    call()  # warm-up
+    times = []
+    for _ in range(runs):
+        times.append(call())
+    return statistics.median(times)
+
+
+def event_ms(torch, work):
+    """Device milliseconds of work() on torch's current stream (its CUDA events around it)."""
+    start, end = torch.cuda.Event(enable_timing=True), torch.cuda.Event(enable_timing=True)
+    start.record()
+    work()
+    end.record()
+    end.synchronize()
+    return start.elapsed_time(end)
+
+
+def bench_trace(torch, gpu, animation, count, runs):
+    o, d = random_rays(animation, 0.0, count)
+    expected = gpu.trace(o, d)  # the host batch: its kernel time is the library's own rate
+    kernel_ms = median_ms(lambda: (gpu.trace(o, d), gpu.last_ray_pass["ms"])[1], runs)
+    o_t, d_t = torch.from_numpy(o).cuda(), torch.from_numpy(d).cuda()
+    out = {"t": torch.empty(count, device="cuda"), "u": torch.empty(count, device="cuda"),
+           "v": torch.empty(count, device="cuda"), "triangle": torch.empty(count, dtype=torch.int32, device="cuda")}
+    stream = torch.cuda.current_stream().cuda_stream
+    tensor_ms = median_ms(lambda: event_ms(torch, lambda: gpu.trace(o_t, d_t, out=out, stream=stream)), runs)
+    same = bool(np.array_equal(out["triangle"].cpu().numpy(), expected["triangle"]))
+    return {"rays": count, "kernel_ms": kernel_ms, "tensor_ms": tensor_ms,
+            "kernel_mrays_s": count / kernel_ms / 1e3, "tensor_mrays_s": count / tensor_ms / 1e3,
+            "rate_ratio": kernel_ms / tensor_ms, "target": ">= 0.9", "met": kernel_ms / tensor_ms >= 0.9,
+            "same_hits": same, "hits": int((expected["triangle"] >= 0).sum())}
+
+
+def bench_refit(torch, gpu, animation, runs):
+    t = 0.5 * (animation.start_time + animation.end_time)
+    positions = torch.from_numpy(animation.positions_at(t).astype(np.float32)).cuda()
+    update_ms = median_ms(lambda: (gpu.refit(t), gpu.last_update["total_ms"])[1], runs)
+    stream = torch.cuda.current_stream().cuda_stream
+    tensor_ms = median_ms(lambda: event_ms(torch, lambda: gpu.refit(positions, stream=stream)), runs)
+    wall_ms = median_ms(lambda: _wall_ms(torch, lambda: gpu.refit(positions, stream=stream)), runs)
+    o, d = random_rays(animation, t, 100000, seed=3)
+    after_tensor = gpu.trace(o, d)
+    gpu.refit(t)
+    same = bool(np.array_equal(after_tensor, gpu.trace(o, d)))
+    return {"vertices": animation.vertex_count, "update_ms": update_ms, "tensor_ms": tensor_ms,
+            "tensor_wall_ms": wall_ms, "time_ratio": tensor_ms / update_ms, "target": "<= 1.2",
+            "met": tensor_ms / update_ms <= 1.2, "same_hits": same}
+
+
+def _wall_ms(torch, work):
+    torch.cuda.synchronize()
+    start = time.perf_counter()
+    work()
+    torch.cuda.synchronize()
+    return (time.perf_counter() - start) * 1e3
+
+
+def bench_cpu(tree, animation, count, runs):
+    cpu = tsah.CpuRuntime(tree, animation, layout="bvh8")
+    o, d = random_rays(animation, 0.0, count, seed=2)
+    out = np.empty(count, cpu.trace(o[:1], d[:1]).dtype)
+    timings = []
+    cpu.trace(o, d, out=out)
+    for _ in range(runs):
+        start = time.perf_counter()
+        cpu.trace(o, d, out=out)
+        python_ms = (time.perf_counter() - start) * 1e3
+        timings.append((python_ms, cpu.last_ray_pass["ms"]))
+    python_ms = statistics.median(t[0] for t in timings)
+    cxx_ms = statistics.median(t[1] for t in timings)
+    return {"rays": count, "layout": cpu.layout, "python_ms": python_ms, "cxx_batch_ms": cxx_ms,
+            "python_mrays_s": count / python_ms / 1e3, "cxx_mrays_s": count / cxx_ms / 1e3,
+            "rate_ratio": cxx_ms / python_ms, "target": ">= 0.9", "met": cxx_ms / python_ms >= 0.9}
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--animation", help="an animation file tsah.load reads (default: a generated wave)")
+    parser.add_argument("--triangles", type=int, default=400000)
+    parser.add_argument("--rays", type=int, default=10_000_000)
+    parser.add_argument("--cpu-rays", type=int, default=2_000_000)
+    parser.add_argument("--runs", type=int, default=5)
+    args = parser.parse_args()
+    animation = tsah.load(args.animation) if args.animation else tsah.generate("wave", triangles=args.triangles,
+                                                                               frames=10, seed=1)
+    start = time.perf_counter()
+    tree = tsah.optimize(animation, method="sah0")
+    result = {"animation": args.animation or f"generated wave, {args.triangles} triangles",
+              "triangles": animation.triangle_count, "tree_seconds": time.perf_counter() - start}
+    if tsah.cuda_available():
+        import torch
+        gpu = tsah.GpuRuntime(tree, animation)
+        result["device"] = gpu.device_name
+        result["trace"] = bench_trace(torch, gpu, animation, args.rays, args.runs)
+        result["refit"] = bench_refit(torch, gpu, animation, args.runs)
+    else:
+        result["device"] = None
+    result["cpu"] = bench_cpu(tree, animation, args.cpu_rays, args.runs)
+    print(json.dumps(result, indent=2))
+
+
+if __name__ == "__main__":
+    main()
