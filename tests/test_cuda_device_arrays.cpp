@@ -181,7 +181,9 @@ TEST_P(DeviceArrays, RaysInDeviceArraysGetTheHostBatchsHits) {
       ASSERT_EQ(gotV[i], 0.0f);
     }
   }
-  EXPECT_GT(hits, n / 5);
+  // The comparison saw hits and misses (the exploding scene at 0.4 of its time leaves about one ray
+  // in nine on a triangle).
+  EXPECT_GT(hits, n / 20);
   EXPECT_LT(hits, n);
 
   // Scalar limits for every ray, and only the arrays asked for.

@@ -21,10 +21,12 @@ def bound_classes():
 
 def methods_and_properties(cls):
     """Names of the class's own C++ methods and properties (not __init__/__new__/__setstate__, which
-    construct, or object's)."""
+    construct, object's, or those pybind11 adds to every class)."""
     names = []
     for name, value in vars(cls).items():
         if name in ("__init__", "__new__", "__setstate__", "__doc__", "__module__", "__dict__", "__weakref__"):
+            continue
+        if name.startswith("_pybind11_"):  # pybind11 3's own (the cross-module conduit), not ours
             continue
         if isinstance(value, property) or type(value).__name__ in ("instancemethod", "builtin_function_or_method"):
             names.append(name)
