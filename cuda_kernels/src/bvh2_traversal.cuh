@@ -38,7 +38,7 @@ __device__ __forceinline__ bool bvh2Slab(const RayPrep& r, float loX, float hiX,
 }
 
 // What the loop reads of a frame, for the instant frame (TraceScene: packed nodes, Woop triangles)
-// and a blurred one (Bvh2MotionFrame): a node's two child boxes as the packed rows n0xy, n1xy, nz
+// and a blurred one (tsah::MotionFrame): a node's two child boxes as the packed rows n0xy, n1xy, nz
 // (gpu_layout.hpp) with its references, a slot's triangle test, a slot's triangle id.
 __device__ __forceinline__ void loadBvh2Node(const TraceScene& scene, int32_t ref, float4& n0xy, float4& n1xy,
                                              float4& nz, int4& refs) {
@@ -65,36 +65,11 @@ __device__ __forceinline__ uint32_t slotTriangle(const TraceScene& scene, uint32
   return __ldg(scene.triIndex + s);
 }
 
-// A blurred frame at one ray's time: the two keys of its segment, lerped as tsah::MotionFrame
-// (traversal.hpp) lerps them on the CPU (motion::lerpBox per child box, motion::lerpVertex per
-// vertex, the watertight test), so hits are the CPU runtime's; only the loop is the one above.
-struct Bvh2MotionFrame {
-  const GpuBvhNode* nodes0;
-  const GpuBvhNode* nodes1;
-  const float* positions0;
-  const float* positions1;
-  const uint32_t* triIndex;
-  const uint32_t* indices;
-  float f;
-  RootInfo root;
-
-  __device__ __forceinline__ Bvh2MotionFrame(const MotionBvhView& m, float time) {
-    const motion::Segment seg = motion::segmentAt(m.keyTimes, int(m.keyCount), time);
-    const uint32_t k0 = uint32_t(seg.index), k1 = m.keyCount > 1 ? k0 + 1 : k0;
-    nodes0 = m.keyNodes + std::size_t(k0) * m.nodeCount;
-    nodes1 = m.keyNodes + std::size_t(k1) * m.nodeCount;
-    positions0 = m.keyPositions + std::size_t(k0) * m.vertexCount * 3;
-    positions1 = m.keyPositions + std::size_t(k1) * m.vertexCount * 3;
-    triIndex = m.triIndex;
-    indices = m.indices;
-    f = seg.f;
-    root.box = motion::lerpBox(m.keyRootBoxes[k0], m.keyRootBoxes[k1], f);
-    root.ref = m.rootRef;
-    root.count = m.rootCount;
-  }
-};
-
-__device__ __forceinline__ void loadBvh2Node(const Bvh2MotionFrame& m, int32_t ref, float4& n0xy, float4& n1xy,
+// A blurred frame at one ray's time: tsah::MotionFrame (traversal.hpp), the two keys of its
+// segment, read here with vector loads and lerped as the CPU runtime lerps them (motion::lerpBox
+// per child box, motion::lerpVertex per vertex, the watertight test), so hits are the CPU
+// runtime's; only the loop is the one below.
+__device__ __forceinline__ void loadBvh2Node(const MotionFrame& m, int32_t ref, float4& n0xy, float4& n1xy,
                                              float4& nz, int4& refs) {
   const float4* a = reinterpret_cast<const float4*>(m.nodes0 + ref);
   const float4* b = reinterpret_cast<const float4*>(m.nodes1 + ref);
@@ -108,20 +83,21 @@ __device__ __forceinline__ void loadBvh2Node(const Bvh2MotionFrame& m, int32_t r
   nz = make_float4(c0.lo.z, c0.hi.z, c1.lo.z, c1.hi.z);
 }
 
-__device__ __forceinline__ Vec3 lerpedVertex(const Bvh2MotionFrame& m, uint32_t i) {
+// MotionFrame::vertex through the read-only data cache.
+__device__ __forceinline__ Vec3 lerpedVertex(const MotionFrame& m, uint32_t i) {
   const Vec3 a{__ldg(m.positions0 + 3 * i), __ldg(m.positions0 + 3 * i + 1), __ldg(m.positions0 + 3 * i + 2)};
   const Vec3 b{__ldg(m.positions1 + 3 * i), __ldg(m.positions1 + 3 * i + 1), __ldg(m.positions1 + 3 * i + 2)};
   return motion::lerpVertex(a, b, m.f);
 }
 
-__device__ __forceinline__ bool intersectBvh2Slot(const Bvh2MotionFrame& m, const Ray& ray, const RayPrep& prep,
+__device__ __forceinline__ bool intersectBvh2Slot(const MotionFrame& m, const Ray& ray, const RayPrep& prep,
                                                   uint32_t s, float tmax, float& t, float& u, float& v) {
   const uint32_t* tri = m.indices + 3 * std::size_t(__ldg(m.triIndex + s));
   const uint32_t a = __ldg(tri), b = __ldg(tri + 1), c = __ldg(tri + 2);
   return intersectWatertight(prep, lerpedVertex(m, a), lerpedVertex(m, b), lerpedVertex(m, c), ray.tmin, tmax, t, u, v);
 }
 
-__device__ __forceinline__ uint32_t slotTriangle(const Bvh2MotionFrame& m, uint32_t s) {
+__device__ __forceinline__ uint32_t slotTriangle(const MotionFrame& m, uint32_t s) {
   return __ldg(m.triIndex + s);
 }
 
@@ -268,20 +244,28 @@ __device__ __forceinline__ bool bvh2AnyHit(const TraceScene& scene, const RootIn
 
 // One ray of a blurred frame at its shutter fraction `time` (the blurred batch kernel, the render's
 // blurred passes).
+__device__ __forceinline__ RootInfo motionRoot(const MotionFrame& frame) {
+  RootInfo root;
+  root.box = frame.rootBox;
+  root.ref = frame.rootRef;
+  root.count = frame.rootCount;
+  return root;
+}
+
 __device__ __forceinline__ Hit bvh2BlurredClosestHit(const MotionBvhView& view, const Ray& ray, float time) {
-  const Bvh2MotionFrame frame(view, time);
+  const MotionFrame frame(view, time);
   Bvh2Stack stack;
   Bvh2Traversal<false> walk;
-  walk.start(frame.root, ray, stack);
+  walk.start(motionRoot(frame), ray, stack);
   walk.run<false>(frame, stack);
   return walk.closestHit(frame);
 }
 
 __device__ __forceinline__ bool bvh2BlurredAnyHit(const MotionBvhView& view, const Ray& ray, float time) {
-  const Bvh2MotionFrame frame(view, time);
+  const MotionFrame frame(view, time);
   Bvh2Stack stack;
   Bvh2Traversal<true> walk;
-  walk.start(frame.root, ray, stack);
+  walk.start(motionRoot(frame), ray, stack);
   walk.run<false>(frame, stack);
   return walk.occluded();
 }
