@@ -2,14 +2,16 @@
 //   tsah_two_level_gpu_bench SCENE.json [--tree TREE.tbvh | --save-tree TREE.tbvh [--build-only]]
 //                            [--frames 50] [--width 1024] [--height 768]
 //                            [--ao 4] [--k 2] [--build-frames 5] [--no-rebuild-reference]
-//                            [--global-refits]
+//                            [--global-refits] [--flat-tree FLAT.tbvh]
 // Builds the two-level structure (or loads a version 3 .tbvh built for the scene), then for each of
 // --frames times spread over the scene's time range: updateAt (upload of the instance transforms,
 // BLAS refits, TLAS refit: CUDA events), then primary rays (a camera fitted to the instances' boxes,
 // one ray per pixel: closest hit) and --ao occlusion rays per primary hit (cosine-distributed
 // around the reversed primary ray, from the hit point, 10% of the scene's diagonal long: any hit).
 // The TLAS rebuild reference is tsah::rebuildTlas on the host over the frame's instance boxes
-// (wall clock). Prints one JSON object (per-frame values and medians).
+// (wall clock). --flat-tree: a flat tree of the same scene (tsah optimize --structure flat), whose
+// GPU runtime (binary layout, the baked scene) updates at the same times and traces the same rays
+// (the trace-rate comparison). Prints one JSON object (per-frame values and medians).
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
@@ -17,19 +19,24 @@
 #include <chrono>
 #include <cmath>
 #include <iostream>
+#include <memory>
 #include <random>
 
 #include "anim/load_options.hpp"
+#include "anim/scene.hpp"
 #include "tsah/base/error.hpp"
 #include "tsah/render/camera.hpp"
 #include "tsah/render/sampling.hpp"
+#include "tsah/io/bvh_file.hpp"
+#include "tsah/layout/flat_bvh.hpp"
 #include "tsah/scene/two_level.hpp"
+#include "tsah_cuda/gpu_runtime.hpp"
 #include "tsah_cuda/gpu_two_level.hpp"
 
 namespace {
 
 struct Options {
-  std::string scene, tree, saveTree;
+  std::string scene, tree, saveTree, flatTree;
   uint32_t frames = 50, width = 1024, height = 768, ao = 4, buildFrames = 5;
   int k = 2;
   bool rebuildReference = true;
@@ -86,6 +93,13 @@ int run(const Options& opt) {
   tsah::cuda::GpuTwoLevelRuntime::Config config;
   config.blockRefits = opt.blockRefits;
   tsah::cuda::GpuTwoLevelRuntime gpu(scene, config);
+  // The flat reference: the baked scene and its tree on the GPU runtime.
+  std::unique_ptr<anim::Animation> baked;
+  std::unique_ptr<tsah::cuda::GpuRuntime> flat;
+  if (!opt.flatTree.empty()) {
+    baked = std::make_unique<anim::Animation>(anim::loadScene(opt.scene, {}));
+    flat = std::make_unique<tsah::cuda::GpuRuntime>(tsah::flattenBvh(tsah::loadBvhFile(opt.flatTree).bvh), *baked);
+  }
   const double start = scene.frameTimes.empty() ? scene.scene.start : scene.frameTimes.front();
   const double end = scene.frameTimes.empty() ? start : scene.frameTimes.back();
   tsah::Aabb all;
@@ -95,7 +109,8 @@ int run(const Options& opt) {
   const tsah::Vec3 e = all.extent();
   const float aoLength = 0.1f * std::sqrt(e.x * e.x + e.y * e.y + e.z * e.z);
 
-  std::vector<double> upload, blas, tlas, update, primaryMs, aoMs, rebuildMs, refits;
+  std::vector<double> upload, blas, tlas, update, primaryMs, aoMs, rebuildMs, refits, flatUpdate, flatPrimary, flatAo;
+  uint64_t hitCount = 0, flatHitCount = 0;
   nlohmann::json frames = nlohmann::json::array();
   for (uint32_t f = 0; f < opt.frames; ++f) {
     const double t = opt.frames > 1 ? start + (end - start) * double(f) / double(opt.frames - 1) : start;
@@ -104,6 +119,15 @@ int run(const Options& opt) {
     const std::vector<tsah::TwoLevelHit> hits = gpu.closestHits(primary, &ps);
     const std::vector<tsah::Ray> ao = occlusionRays(primary, hits, opt.ao, aoLength, f + 1);
     gpu.anyHits(ao, &as);
+    for (const tsah::TwoLevelHit& h : hits) hitCount += h.valid() ? 1 : 0;
+    if (flat) {
+      tsah::RayPassStats fp, fa;
+      flatUpdate.push_back(flat->updateAt(t).totalMs());
+      for (const tsah::Hit& h : flat->closestHits(primary, &fp)) flatHitCount += h.valid() ? 1 : 0;
+      flat->anyHits(ao, &fa);
+      flatPrimary.push_back(fp.ms);
+      flatAo.push_back(fa.ms);
+    }
     double rebuild = 0.0;
     if (opt.rebuildReference) {
       const std::vector<tsah::Aabb> boxes = gpu.downloadInstanceBoxes();
@@ -139,6 +163,15 @@ int run(const Options& opt) {
   j["median"] = {{"upload_ms", median(upload)}, {"blas_refit_ms", median(blas)}, {"tlas_update_ms", median(tlas)},
                  {"update_ms", median(update)}, {"primary_ms", median(primaryMs)}, {"ao_ms", median(aoMs)},
                  {"tlas_rebuild_cpu_ms", median(rebuildMs)}, {"blas_refits", median(refits)}};
+  if (flat) {
+    const double flatTrace = median(flatPrimary) + median(flatAo), twoLevelTrace = median(primaryMs) + median(aoMs);
+    j["flat"] = {{"tree", opt.flatTree},
+                 {"layout", "bvh2"},
+                 {"median", {{"update_ms", median(flatUpdate)}, {"primary_ms", median(flatPrimary)}, {"ao_ms", median(flatAo)}}},
+                 {"primary_hits", flatHitCount},
+                 {"two_level_primary_hits", hitCount},
+                 {"trace_rate_two_level_over_flat", twoLevelTrace > 0.0 ? flatTrace / twoLevelTrace : 0.0}};
+  }
   j["frames"] = frames;
   std::cout << j.dump(2) << "\n";
   return 0;
@@ -163,6 +196,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1u, 1000u));
   app.add_flag("--build-only", opt.buildOnly, "Only build the structure (and save it with --save-tree): no device needed");
   app.add_flag("--no-rebuild-reference", noRebuild, "Skip the per-frame host TLAS rebuild reference");
+  app.add_option("--flat-tree", opt.flatTree,
+                 "A flat tree of the scene (tsah optimize --structure flat): traced on the same rays for comparison");
   app.add_flag("--global-refits", globalRefits,
                "Refit every tree by the global-memory walk, not in one block's shared memory (the reference)");
   CLI11_PARSE(app, argc, argv);
