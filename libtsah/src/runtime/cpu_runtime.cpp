@@ -211,13 +211,17 @@ void CpuRuntime::setTree(FlatBvh tree) {
       subtreeTasks_, topNodes_);
 }
 
-void CpuRuntime::setPositions(std::span<const float> positions) {
+void CpuRuntime::checkPositions(std::span<const float> positions) const {
   if (positions.size() != std::size_t(vertexCount_) * 3)
     throw tsah::DataError("runtime: got " + std::to_string(positions.size()) + " coordinates, expected " +
                           std::to_string(std::size_t(vertexCount_) * 3));
   // The limit every imported animation obeys: a NaN or huge coordinate would make every box infinite.
   if (const std::size_t bad = firstBadCoordinate(positions); bad < positions.size())
     throw tsah::DataError("runtime: vertex " + std::to_string(bad / 3) + " " + describeBadCoordinate(positions[bad]));
+}
+
+void CpuRuntime::setPositions(std::span<const float> positions) {
+  checkPositions(positions);
   positions_.assign(positions.begin(), positions.end());
 }
 

@@ -1,11 +1,12 @@
 // CpuRuntime's motion blur (docs/motion-blur.md): the current tree refitted at every key of a
-// shutter by the instant refit, one node set, root box and position set kept per key.
+// shutter, one node set, root box and position set (and in the wide layouts one vertex packet set)
+// kept per key; keys the previous shutter already had are reused.
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <string>
 
 #include "tsah/base/error.hpp"
-#include "tsah/layout/motion_blur.hpp"
 #include "tsah/base/memory.hpp"
 #include "tsah/layout/motion_blur.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
@@ -19,33 +20,76 @@ void CpuRuntime::clearShutter() {
   keyPositions_.clear();
   keyWide4_.clear();
   keyWide8_.clear();
+  keyVertices4_.clear();
+  keyVertices8_.clear();
   motionView_ = MotionBvhView{};
-}
-
-template <uint32_t N>
-void CpuRuntime::keepWideKey(const WideTree<N>& tree, std::vector<WideSoaNode<N>>& keyNodes, std::size_t key) {
-  const auto nodes = tree.nodes();
-  keyNodes.resize((key + 1) * nodes.size());
-  std::copy(nodes.begin(), nodes.end(), keyNodes.begin() + std::ptrdiff_t(key * nodes.size()));
 }
 
 // The view of key s with the lerped root box, and key s + 1 with f, for one ray's time.
 template <uint32_t N>
 std::pair<WideView<N>, WideMotionFrame<N>> CpuRuntime::motionFrame(const WideView<N>& view,
                                                                    const std::vector<WideSoaNode<N>>& keyNodes,
+                                                                   const std::vector<KeyVertexPacket<N>>& keyVertices,
                                                                    float time) const {
   const motion::Segment seg = motion::segmentAt(keyTimes_.data(), int(keyTimes_.size()), time);
   const std::size_t k0 = std::size_t(seg.index), k1 = k0 + 1;
-  const std::size_t nodes = keyNodes.size() / keyTimes_.size(), floats = std::size_t(vertexCount_) * 3;
+  const std::size_t keys = keyTimes_.size(), nodes = keyNodes.size() / keys, packets = keyVertices.size() / keys;
   WideView<N> v = view;
   v.nodes = keyNodes.data() + k0 * nodes;
-  v.positions = keyPositions_.data() + k0 * floats;
+  v.positions = keyPositions_.data() + k0 * std::size_t(vertexCount_) * 3;
   v.rootBox = motion::lerpBox(keyRootBoxes_[k0], keyRootBoxes_[k1], seg.f);
   WideMotionFrame<N> m;
   m.nodes1 = keyNodes.data() + k1 * nodes;
-  m.positions1 = keyPositions_.data() + k1 * floats;
+  m.vertices0 = keyVertices.data() + k0 * packets;
+  m.vertices1 = keyVertices.data() + k1 * packets;
   m.f = seg.f;
   return {v, m};
+}
+
+namespace {
+
+bool sameBits(std::span<const float> a, std::span<const float> b) {
+  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size_bytes()) == 0;
+}
+
+// One key's block of a per-key array (keys of `size` elements each).
+template <class T>
+std::span<T> keyBlock(std::vector<T>& sets, std::size_t key, std::size_t size) {
+  return std::span<T>(sets).subspan(key * size, size);
+}
+
+}  // namespace
+
+// The refit of the current tree at one key into the key's blocks. `instant`: the runtime's own
+// state (positions, Woop triangles, tree) becomes this key's, as update() leaves it; otherwise a
+// wide layout refits only its boxes and the key's vertex packets and keeps its Woop packets.
+void CpuRuntime::refitShutterKey(std::span<const float> positions, bool instant, ShutterKeys& out, std::size_t key) {
+  const auto parallel = [this](std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) {
+    parallelFor(n, 1, body);
+  };
+  const auto wideKey = [&](auto& tree, auto& nodes, auto& vertices, auto& view) {
+    const std::size_t nodeCount = tree.nodes().size(), packetCount = tree.packets().size();
+    tree.refitKey(positions.data(), keyBlock(vertices, key, packetCount).data(), instant, parallel);
+    if (instant) view = tree.view(indices_.data(), positions_.data());
+    std::copy(tree.nodes().begin(), tree.nodes().end(), keyBlock(nodes, key, nodeCount).begin());
+    out.rootBoxes[key] = tree.bounds();
+  };
+  if (instant || !(wide4_ || wide8_)) {  // the binary refit reads the runtime's positions
+    setPositions(positions);
+    positions = positions_;
+  } else {
+    checkPositions(positions);
+  }
+  if (wide4_) {
+    wideKey(*wide4_, out.wide4, out.vertices4, view4_);
+  } else if (wide8_) {
+    wideKey(*wide8_, out.wide8, out.vertices8, view8_);
+  } else {
+    refitAndWoop();
+    std::copy_n(tree_.nodes.begin(), tree_.interiorCount, keyBlock(out.nodes, key, tree_.interiorCount).begin());
+    out.rootBoxes[key] = bounds();
+  }
+  std::copy(positions.begin(), positions.end(), keyBlock(out.positions, key, positions.size()).begin());
 }
 
 void CpuRuntime::updateShutter(std::span<const float> keyTimes,
@@ -61,41 +105,63 @@ void CpuRuntime::updateShutter(std::span<const float> keyTimes,
     if (keyPositions[k].size() != floats)
       throw tsah::DataError("runtime: key " + std::to_string(k) + " has " + std::to_string(keyPositions[k].size()) +
                             " coordinates, expected " + std::to_string(floats));
-  const std::size_t nodes = wide4_   ? wide4_->nodes().size() * sizeof(WideSoaNode<4>)
-                            : wide8_ ? wide8_->nodes().size() * sizeof(WideSoaNode<8>)
-                                     : tree_.interiorCount * sizeof(GpuBvhNode);
-  checkFitsInMemory(keys * (nodes + floats * sizeof(float) + sizeof(Aabb)), "runtime",
+  const std::size_t nodeBytes = wide4_   ? wide4_->nodes().size() * sizeof(WideSoaNode<4>)
+                                : wide8_ ? wide8_->nodes().size() * sizeof(WideSoaNode<8>)
+                                         : tree_.interiorCount * sizeof(GpuBvhNode);
+  const std::size_t vertexBytes = wide4_   ? wide4_->packets().size() * sizeof(KeyVertexPacket<4>)
+                                  : wide8_ ? wide8_->packets().size() * sizeof(KeyVertexPacket<8>)
+                                           : 0;
+  checkFitsInMemory(keys * (nodeBytes + vertexBytes + floats * sizeof(float) + sizeof(Aabb)), "runtime",
                     "a shutter of " + std::to_string(keys) + " keys");
-  clearShutter();
-  // The instant refit at each key; the layout traced keeps its node set per key (the wide layouts
-  // do not refit the binary tree).
-  const bool wide = wide4_ || wide8_;
-  const std::size_t nodeCount = wide ? 0 : tree_.interiorCount;
-  std::vector<GpuBvhNode> nodeSets(keys * nodeCount);
-  std::vector<Aabb> rootBoxes(keys);
-  std::vector<float> positionSets(keys * floats);
+  // A key whose positions equal, bit for bit, a key of the previous shutter keeps that key's refit
+  // (consecutive frames share the keyframes between them): the refit is a function of the tree
+  // and the positions, and the tree has not changed since (a tree change clears the shutter).
+  const std::size_t oldKeys = keyTimes_.size();
+  std::vector<std::size_t> reused(keys, oldKeys);
+  for (std::size_t k = 0; k < keys; ++k)
+    for (std::size_t j = 0; j < oldKeys; ++j)
+      if (sameBits(keyPositions[k], std::span<const float>(keyPositions_).subspan(j * floats, floats))) {
+        reused[k] = j;
+        break;
+      }
+  ShutterKeys next;
+  const std::size_t last = keys - 1;
+  next.nodes.resize(wide4_ || wide8_ ? 0 : keys * tree_.interiorCount);
+  if (wide4_) next.wide4.resize(keys * wide4_->nodes().size()), next.vertices4.resize(keys * wide4_->packets().size());
+  if (wide8_) next.wide8.resize(keys * wide8_->nodes().size()), next.vertices8.resize(keys * wide8_->packets().size());
+  next.rootBoxes.resize(keys);
+  next.positions.resize(keys * floats);
+  // The keys before the last, refitted or reused; then the last, which also leaves the runtime's
+  // own state (positions(), the Woop triangles, the tree) at its positions, as update() would.
+  // The last key is reused only when that state is already its: nothing else was refitted and the
+  // runtime's positions are the key's.
+  bool refitted = false;
   for (std::size_t k = 0; k < keys; ++k) {
-    setPositions(keyPositions[k]);
-    refitAndWoop();
-    if (wide4_) keepWideKey(*wide4_, keyWide4_, k);
-    if (wide8_) keepWideKey(*wide8_, keyWide8_, k);
-    if (!wide) std::copy_n(tree_.nodes.begin(), nodeCount, nodeSets.begin() + std::ptrdiff_t(k * nodeCount));
-    rootBoxes[k] = bounds();
-    std::copy(positions_.begin(), positions_.end(), positionSets.begin() + std::ptrdiff_t(k * floats));
+    if (reused[k] < oldKeys && (k < last || (!refitted && sameBits(positions_, keyPositions[k])))) {
+      copyShutterKey(reused[k], next, k);
+      continue;
+    }
+    refitShutterKey(keyPositions[k], k == last, next, k);
+    refitted = true;
   }
   keyTimes_.assign(keyTimes.begin(), keyTimes.end());
-  keyNodes_ = std::move(nodeSets);
-  keyRootBoxes_ = std::move(rootBoxes);
-  keyPositions_ = std::move(positionSets);
+  keyNodes_ = std::move(next.nodes);
+  keyRootBoxes_ = std::move(next.rootBoxes);
+  keyPositions_ = std::move(next.positions);
+  keyWide4_ = std::move(next.wide4);
+  keyWide8_ = std::move(next.wide8);
+  keyVertices4_ = std::move(next.vertices4);
+  keyVertices8_ = std::move(next.vertices8);
   // The key positions, times and triangles in every layout (the renderer's blurred surfaces read
   // them); the binary key nodes in bvh2 only.
+  const bool wide = wide4_ || wide8_;
   MotionBvhView& v = motionView_;
   v.keyNodes = wide ? nullptr : keyNodes_.data();
   v.keyRootBoxes = keyRootBoxes_.data();
   v.keyPositions = keyPositions_.data();
   v.keyTimes = keyTimes_.data();
   v.keyCount = uint32_t(keys);
-  v.nodeCount = uint32_t(nodeCount);
+  v.nodeCount = wide ? 0u : tree_.interiorCount;
   v.vertexCount = vertexCount_;
   v.triIndex = tree_.triIndex.data();
   v.indices = indices_.data();
@@ -103,14 +169,31 @@ void CpuRuntime::updateShutter(std::span<const float> keyTimes,
   v.rootCount = tree_.rootCount;
 }
 
+// Key `from` of the current shutter into key `to` of the next.
+void CpuRuntime::copyShutterKey(std::size_t from, ShutterKeys& next, std::size_t to) const {
+  const std::size_t keys = keyTimes_.size();
+  const auto copy = [&](const auto& sets, auto& into) {
+    if (sets.empty()) return;
+    const std::size_t size = sets.size() / keys;
+    std::copy_n(sets.begin() + std::ptrdiff_t(from * size), size, into.begin() + std::ptrdiff_t(to * size));
+  };
+  copy(keyNodes_, next.nodes);
+  copy(keyWide4_, next.wide4);
+  copy(keyWide8_, next.wide8);
+  copy(keyVertices4_, next.vertices4);
+  copy(keyVertices8_, next.vertices8);
+  copy(keyPositions_, next.positions);
+  next.rootBoxes[to] = keyRootBoxes_[from];
+}
+
 Hit CpuRuntime::closestHit(const Ray& ray, float time) const {
   if (!blurred()) return closestHit(ray);
   if (wide8_) {
-    const auto [v, m] = motionFrame(view8_, keyWide8_, time);
+    const auto [v, m] = motionFrame(view8_, keyWide8_, keyVertices8_, time);
     return kernels_->closestMotion8(v, m, ray);
   }
   if (wide4_) {
-    const auto [v, m] = motionFrame(view4_, keyWide4_, time);
+    const auto [v, m] = motionFrame(view4_, keyWide4_, keyVertices4_, time);
     return kernels_->closestMotion4(v, m, ray);
   }
   return tsah::closestHit(motionView_, ray, time);
@@ -119,11 +202,11 @@ Hit CpuRuntime::closestHit(const Ray& ray, float time) const {
 bool CpuRuntime::anyHit(const Ray& ray, float time, AnyHitOrder order) const {
   if (!blurred()) return anyHit(ray, order);
   if (wide8_) {
-    const auto [v, m] = motionFrame(view8_, keyWide8_, time);
+    const auto [v, m] = motionFrame(view8_, keyWide8_, keyVertices8_, time);
     return kernels_->anyMotion8(v, m, ray, order);
   }
   if (wide4_) {
-    const auto [v, m] = motionFrame(view4_, keyWide4_, time);
+    const auto [v, m] = motionFrame(view4_, keyWide4_, keyVertices4_, time);
     return kernels_->anyMotion4(v, m, ray, order);
   }
   return tsah::anyHit(motionView_, ray, time);

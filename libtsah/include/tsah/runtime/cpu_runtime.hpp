@@ -125,6 +125,10 @@ class CpuRuntime {
   // nodes, one per key (empty when not blurred or in another layout).
   std::span<const WideSoaNode<4>> keyWideNodes4() const { return keyWide4_; }
   std::span<const WideSoaNode<8>> keyWideNodes8() const { return keyWide8_; }
+  // The wide layouts' triangles per key: keyTimes().size() blocks of one KeyVertexPacket per Woop
+  // packet (empty when not blurred or in another layout).
+  std::span<const KeyVertexPacket<4>> keyVertexPackets4() const { return keyVertices4_; }
+  std::span<const KeyVertexPacket<8>> keyVertexPackets8() const { return keyVertices8_; }
 
   const LayoutInfo& layoutInfo() const { return info_; }
   // The binary tree and its view: bvh2 only (the wide layouts do not refit the binary tree; both
@@ -150,6 +154,7 @@ class CpuRuntime {
   FlatBvh topologyOf(const FlatBvh& tree) const;  // frame 0's block, validated against this runtime
   void setWideTree(const Bvh& binary, bool reportCosts);
   BvhView binaryView() const;
+  void checkPositions(std::span<const float> positions) const;  // count and coordinates (update's errors)
   void setPositions(std::span<const float> positions);
   void refitAndWoop();
   void clearShutter();
@@ -191,11 +196,24 @@ class CpuRuntime {
   MotionBvhView motionView_;
   std::vector<WideSoaNode<4>> keyWide4_;  // wide layouts: one node set per key
   std::vector<WideSoaNode<8>> keyWide8_;
-  template <uint32_t N>
-  void keepWideKey(const WideTree<N>& tree, std::vector<WideSoaNode<N>>& keyNodes, std::size_t key);
+  std::vector<KeyVertexPacket<4>> keyVertices4_;  // wide layouts: one vertex packet set per key
+  std::vector<KeyVertexPacket<8>> keyVertices8_;
+  // The per-key sets of a shutter being assembled (the members above, key by key).
+  struct ShutterKeys {
+    std::vector<GpuBvhNode> nodes;
+    std::vector<WideSoaNode<4>> wide4;
+    std::vector<WideSoaNode<8>> wide8;
+    std::vector<KeyVertexPacket<4>> vertices4;
+    std::vector<KeyVertexPacket<8>> vertices8;
+    std::vector<Aabb> rootBoxes;
+    std::vector<float> positions;
+  };
+  void refitShutterKey(std::span<const float> positions, bool instant, ShutterKeys& out, std::size_t key);
+  void copyShutterKey(std::size_t from, ShutterKeys& next, std::size_t to) const;
   template <uint32_t N>
   std::pair<WideView<N>, WideMotionFrame<N>> motionFrame(const WideView<N>& view,
                                                           const std::vector<WideSoaNode<N>>& keyNodes,
+                                                          const std::vector<KeyVertexPacket<N>>& keyVertices,
                                                           float time) const;
 };
 
