@@ -291,6 +291,162 @@ TEST(MotionBlurRuntime, RejectsBadKeys) {
   EXPECT_THROW(tsah::anyHits(*rt, rays, times), tsah::ConfigError);
 }
 
+// The wide layouts' vertex packets: packet p, lane l at key k holds the three vertices of the
+// lane's triangle (the packet's slot) at that key; padding lanes repeat the packet's lane 0.
+template <uint32_t N>
+void expectKeyVertexPackets(const CpuRuntime& rt, const tsah::WideTree<N>& tree,
+                            std::span<const tsah::KeyVertexPacket<N>> keyVertices) {
+  const std::size_t keys = rt.keyTimes().size(), packets = tree.packets().size(), floats = 3 * rt.vertexCount();
+  ASSERT_EQ(keyVertices.size(), keys * packets);
+  const float* keyPositions = rt.motionView().keyPositions;
+  for (std::size_t k = 0; k < keys; ++k)
+    for (std::size_t p = 0; p < packets; ++p)
+      for (uint32_t lane = 0; lane < N; ++lane) {
+        // A padding lane holds the leaf's first slot, at or before lane 0's.
+        const uint32_t* slots = tree.packets()[p].slot;
+        const uint32_t tri = tree.triIndex()[slots[lane] < slots[0] ? slots[0] : slots[lane]];
+        for (uint32_t j = 0; j < 3; ++j) {
+          const float* want = keyPositions + k * floats + 3 * std::size_t(rt.indices()[3 * tri + j]);
+          const Vec3 got = keyVertices[k * packets + p].get(j, lane);
+          ASSERT_TRUE(got.x == want[0] && got.y == want[1] && got.z == want[2])
+              << "key " << k << " packet " << p << " lane " << lane << " vertex " << j;
+        }
+      }
+}
+
+TEST(MotionBlurRuntime, WideKeyVertexPacketsHoldEverySlotsTriangleAtEachKey) {
+  for (const Case& c : cases()) {
+    if (c.layout == tsah::Layout::Bvh2) continue;
+    SCOPED_TRACE(describe(c));
+    Blurred b(c);
+    ASSERT_EQ(b.rt->keyTimes().size(), 4u);
+    if (c.layout == tsah::Layout::Bvh4)
+      expectKeyVertexPackets<4>(*b.rt, *b.rt->wide4(), b.rt->keyVertexPackets4());
+    else
+      expectKeyVertexPackets<8>(*b.rt, *b.rt->wide8(), b.rt->keyVertexPackets8());
+  }
+}
+
+// A flat grid of unit squares (two triangles each) at z = 0, and the same grid moved by (1, 0.5, 0)
+// at the second key: at time 0.5 every vertex lies at a multiple of 1/4, so rays straight down
+// through the vertices and the edge midpoints meet edges exactly (U, V or W zero in float: the
+// wide leaf's scalar lanes). Every such ray inside the grid hits (watertight), and every layout
+// returns the binary layout's hit bit for bit, or a tie at the same t.
+TEST(MotionBlurRuntime, RaysThroughSharedEdgesHitInEveryLayout) {
+  constexpr uint32_t G = 12;
+  std::vector<uint32_t> indices;
+  std::vector<float> key0, key1;
+  for (uint32_t j = 0; j <= G; ++j)
+    for (uint32_t i = 0; i <= G; ++i) {
+      key0.insert(key0.end(), {float(i), float(j), 0.0f});
+      key1.insert(key1.end(), {float(i) + 1.0f, float(j) + 0.5f, 0.0f});
+    }
+  for (uint32_t j = 0; j < G; ++j)
+    for (uint32_t i = 0; i < G; ++i) {
+      const uint32_t a = j * (G + 1) + i, b = a + 1, c = a + G + 1, d = c + 1;
+      indices.insert(indices.end(), {a, b, d, a, d, c});
+    }
+  std::vector<Aabb> boxes(indices.size() / 3);
+  for (std::size_t t = 0; t < boxes.size(); ++t)
+    for (int k = 0; k < 3; ++k) boxes[t].extend(Vec3{key0[3 * indices[3 * t + k]], key0[3 * indices[3 * t + k] + 1], 0.0f});
+  const tsah::FlatBvh tree = tsah::flattenBvh(tsah::BinnedSahBuilder().build(boxes));
+  const std::vector<float> times{0.0f, 1.0f};
+  const std::vector<std::span<const float>> keys{key0, key1};
+  std::vector<Ray> rays;
+  for (uint32_t j = 2; j <= 4 * G; ++j)  // x, y in [1.5, 12] at time 0.5: inside the moved grid
+    for (uint32_t i = 4; i <= 4 * G; ++i) {
+      Ray ray;
+      ray.org = {0.25f * float(i), 0.25f * float(j), 5.0f};
+      ray.dir = {0.0f, 0.0f, -1.0f};
+      ray.tmin = 0.0f;
+      ray.tmax = 100.0f;
+      rays.push_back(ray);
+    }
+  std::vector<Hit> reference;
+  for (const Case& c : cases()) {
+    SCOPED_TRACE(describe(c));
+    CpuRuntime::Config config(2);
+    config.layout = c.layout;
+    if (c.layout != tsah::Layout::Bvh2) config.isa = c.isa;
+    CpuRuntime rt(tree, indices, (G + 1) * (G + 1), config);
+    rt.updateShutter(times, keys);
+    for (std::size_t r = 0; r < rays.size(); ++r) {
+      const Hit hit = rt.closestHit(rays[r], 0.5f);
+      ASSERT_TRUE(hit.valid()) << "ray " << r << " leaks";
+      ASSERT_EQ(hit.t, 5.0f);
+      ASSERT_TRUE(rt.anyHit(rays[r], 0.5f));
+      if (c.layout == tsah::Layout::Bvh2) {
+        reference.push_back(hit);
+      } else if (hit.tri == reference[r].tri) {
+        ASSERT_TRUE(sameBits(hit, reference[r])) << "ray " << r;
+      }
+    }
+  }
+}
+
+// Every key set of a runtime, and its own frame (the last key's), bit for bit.
+void expectSameShutter(const CpuRuntime& a, const CpuRuntime& b) {
+  const auto same = [](const auto& x, const auto& y) {
+    const std::span sx(x), sy(y);
+    return sx.size() == sy.size() && (sx.empty() || std::memcmp(sx.data(), sy.data(), sx.size_bytes()) == 0);
+  };
+  ASSERT_TRUE(same(a.keyTimes(), b.keyTimes()));
+  const std::size_t keys = a.keyTimes().size(), floats = 3 * std::size_t(a.vertexCount());
+  const tsah::MotionBvhView &va = a.motionView(), &vb = b.motionView();
+  EXPECT_TRUE(same(std::span(va.keyPositions, keys * floats), std::span(vb.keyPositions, keys * floats)));
+  EXPECT_TRUE(same(std::span(va.keyRootBoxes, keys), std::span(vb.keyRootBoxes, keys)));
+  EXPECT_TRUE(same(a.positions(), b.positions()));
+  if (a.wide4()) {
+    EXPECT_TRUE(same(a.keyWideNodes4(), b.keyWideNodes4()));
+    EXPECT_TRUE(same(a.keyVertexPackets4(), b.keyVertexPackets4()));
+    EXPECT_TRUE(same(a.wide4()->nodes(), b.wide4()->nodes()));
+    EXPECT_TRUE(same(a.wide4()->packets(), b.wide4()->packets()));
+  } else if (a.wide8()) {
+    EXPECT_TRUE(same(a.keyWideNodes8(), b.keyWideNodes8()));
+    EXPECT_TRUE(same(a.keyVertexPackets8(), b.keyVertexPackets8()));
+    EXPECT_TRUE(same(a.wide8()->nodes(), b.wide8()->nodes()));
+    EXPECT_TRUE(same(a.wide8()->packets(), b.wide8()->packets()));
+  } else {
+    EXPECT_TRUE(same(std::span(va.keyNodes, keys * va.nodeCount), std::span(vb.keyNodes, keys * vb.nodeCount)));
+    EXPECT_TRUE(same(a.tree().nodes, b.tree().nodes));
+    EXPECT_TRUE(same(a.woop(), b.woop()));
+  }
+}
+
+// Consecutive shutters that meet share their key: it is reused, not refitted, and every key set
+// equals a fresh runtime's bit for bit. Going backward the shared key is the last one, which is
+// refitted (it also sets the runtime's own frame); the same shutter again refits nothing.
+TEST(MotionBlurRuntime, ConsecutiveShuttersReuseTheSharedKey) {
+  const Scene s = makeScene(anim::GeneratorKind::Swap, 1500);
+  const double t1 = keyframeTime(s.animation, 1), t2 = keyframeTime(s.animation, 2);
+  const double a = 0.5 * (t1 + t2), b = t2, c = 0.25 * keyframeTime(s.animation, 3) + 0.75 * t2;
+  for (const Case& cs : cases()) {
+    SCOPED_TRACE(describe(cs));
+    auto rt = makeRuntime(s, cs);
+    const auto expectFresh = [&](double open, double close) {
+      auto fresh = makeRuntime(s, cs);
+      tsah::updateShutter(*fresh, s.animation, open, close);
+      EXPECT_EQ(fresh->keysRefitted(), 2u);
+      expectSameShutter(*rt, *fresh);
+    };
+    tsah::updateShutter(*rt, s.animation, a, b);
+    EXPECT_EQ(rt->keysRefitted(), 2u);
+    tsah::updateShutter(*rt, s.animation, b, c);  // forward: b reused
+    EXPECT_EQ(rt->keysRefitted(), 1u);
+    expectFresh(b, c);
+    tsah::updateShutter(*rt, s.animation, a, b);  // backward: b is the last key now
+    EXPECT_EQ(rt->keysRefitted(), 2u);
+    expectFresh(a, b);
+    tsah::updateShutter(*rt, s.animation, a, b);  // the same shutter again
+    EXPECT_EQ(rt->keysRefitted(), 0u);
+    expectFresh(a, b);
+    rt->update(s.animation.positionsAt(a));  // back to the instant: nothing is kept
+    EXPECT_EQ(rt->keysRefitted(), 0u);
+    tsah::updateShutter(*rt, s.animation, a, b);
+    EXPECT_EQ(rt->keysRefitted(), 2u);
+  }
+}
+
 TEST(MotionBlurPipeline, ShutterIntervalCenteredOpenAndClamped) {
   const Scene s = makeScene(anim::GeneratorKind::Swap, 300);
   const anim::Animation& a = s.animation;

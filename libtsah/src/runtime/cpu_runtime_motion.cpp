@@ -14,6 +14,7 @@
 namespace tsah {
 
 void CpuRuntime::clearShutter() {
+  keysRefitted_ = 0;
   keyTimes_.clear();
   keyNodes_.clear();
   keyRootBoxes_.clear();
@@ -135,15 +136,16 @@ void CpuRuntime::updateShutter(std::span<const float> keyTimes,
   // own state (positions(), the Woop triangles, the tree) at its positions, as update() would.
   // The last key is reused only when that state is already its: nothing else was refitted and the
   // runtime's positions are the key's.
-  bool refitted = false;
+  uint32_t refitted = 0;
   for (std::size_t k = 0; k < keys; ++k) {
-    if (reused[k] < oldKeys && (k < last || (!refitted && sameBits(positions_, keyPositions[k])))) {
+    if (reused[k] < oldKeys && (k < last || (refitted == 0 && sameBits(positions_, keyPositions[k])))) {
       copyShutterKey(reused[k], next, k);
       continue;
     }
     refitShutterKey(keyPositions[k], k == last, next, k);
-    refitted = true;
+    ++refitted;
   }
+  keysRefitted_ = refitted;
   keyTimes_.assign(keyTimes.begin(), keyTimes.end());
   keyNodes_ = std::move(next.nodes);
   keyRootBoxes_ = std::move(next.rootBoxes);

@@ -108,10 +108,15 @@ class CpuRuntime {
   // 0, last 1, increasing). One key is update(keyPositions[0]). Throws tsah::ConfigError for bad key
   // times or a key count that differs from the position sets, tsah::DataError for a position set of
   // the wrong size, tsah::Failure when the key sets do not fit in memory. update(), rebuild() and
-  // selectTreeAt() return to the instant state.
+  // selectTreeAt() return to the instant state. The runtime's own frame (positions(), closestHit(ray))
+  // is the last key's, as update() would leave it. A key whose positions equal, bit for bit, a key
+  // of the previous updateShutter keeps that key's refit (frames whose shutters meet share the key
+  // between them), so a frame costs one refit per new key; the key sets equal a fresh update's.
   void updateShutter(std::span<const float> keyTimes, std::span<const std::span<const float>> keyPositions);
   // True after updateShutter with two keys or more (until update()).
   bool blurred() const { return !keyTimes_.empty(); }
+  // How many keys the last updateShutter refitted (the others were reused); 0 when not blurred.
+  uint32_t keysRefitted() const { return keysRefitted_; }
   std::span<const float> keyTimes() const { return keyTimes_; }
   // Nearest hit / any hit at the ray's time, a shutter fraction in [0, 1] (outside: the nearer end).
   // Not blurred: closestHit(ray) / anyHit(ray, order).
@@ -190,6 +195,7 @@ class CpuRuntime {
   // Motion blur: the key times and, per key, the refitted nodes, root box and positions (empty
   // when not blurred).
   std::vector<float> keyTimes_;
+  uint32_t keysRefitted_ = 0;
   std::vector<GpuBvhNode> keyNodes_;
   std::vector<Aabb> keyRootBoxes_;
   std::vector<float> keyPositions_;
