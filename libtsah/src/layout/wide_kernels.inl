@@ -37,11 +37,14 @@ struct RayLanes {
   V org[3], dir[3], inv[3];
   uint32_t nearPlane[3], farPlane[3];  // rows of WideSoaNode::box holding each axis's near/far plane
   V nearPadSign[3];                    // blurred boxes: -1 where the near plane is lo, else +1 (slabRows)
+  V f, g;                              // blurred: the ray's place between the keys, and 1 - f
 };
 
 template <class V>
-inline RayLanes<V> rayLanes(const Ray& ray, const RayPrep& prep) {
+inline RayLanes<V> rayLanes(const Ray& ray, const RayPrep& prep, float f) {
   RayLanes<V> r;
+  r.f = V::set1(f);
+  r.g = V::set1(1.0f) - r.f;
   for (int a = 0; a < 3; ++a) {
     r.org[a] = V::set1(ray.org[a]);
     r.dir[a] = V::set1(ray.dir[a]);
@@ -154,10 +157,11 @@ inline bool intersectLeaf(const WideView<V::N>& bvh, const Ray& ray, LazyPrep& p
 // nearest hit so far, returns.
 template <class V, bool AnyHit>
 inline bool intersectMotionLeaf(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, const Ray& ray,
-                                LazyPrep& lazy, uint32_t first, uint32_t count, float& tmax, Hit& hit) {
+                                LazyPrep& lazy, const RayLanes<V>& r, uint32_t first, uint32_t count, float& tmax,
+                                Hit& hit) {
   constexpr uint32_t N = V::N;
   const RayPrep& prep = lazy.watertight(ray);
-  const V f = V::set1(m.f), g = V::set1(1.0f) - f, zero = V::set1(0.0f);
+  const V zero = V::set1(0.0f);
   const V sx = V::set1(prep.sx), sy = V::set1(prep.sy), sz = V::set1(prep.sz);
   const int axis[3] = {prep.kx, prep.ky, prep.kz};
   V org[3];
@@ -175,7 +179,7 @@ inline bool intersectMotionLeaf(const WideView<V::N>& bvh, const WideMotionFrame
       V rel[3];
       for (int i = 0; i < 3; ++i) {
         const int row = 3 * k + axis[i];
-        rel[i] = motion::lerpOf(V::load(k0.vertex[row]), V::load(k1.vertex[row]), f, g) - org[i];
+        rel[i] = motion::lerpOf(V::load(k0.vertex[row]), V::load(k1.vertex[row]), r.f, r.g) - org[i];
       }
       x[k] = rel[0] - sx * rel[2];
       y[k] = rel[1] - sy * rel[2];
@@ -245,15 +249,14 @@ inline void slabRows(const WideSoaNode<V::N>& node, const WideMotionFrame<V::N>&
     }
   } else {
     const WideSoaNode<V::N>& node1 = m.nodes1[ref];
-    const V f = V::set1(m.f), g = V::set1(1.0f) - f;
     for (int a = 0; a < 3; ++a) {
       const V near0 = V::load(node.box[r.nearPlane[a]]), far0 = V::load(node.box[r.farPlane[a]]);
       const V near1 = V::load(node1.box[r.nearPlane[a]]), far1 = V::load(node1.box[r.farPlane[a]]);
       const V mag = V::max(V::max(V::abs(near0), V::abs(far0)), V::max(V::abs(near1), V::abs(far1)));
       const V pad = motion::padOf(mag, V::set1(motion::kPadPerMagnitude), V::set1(motion::kPadFloor));
       const V signedPad = pad * r.nearPadSign[a];
-      nearRow[a] = motion::lerpOf(near0, near1, f, g) + signedPad;
-      farRow[a] = motion::lerpOf(far0, far1, f, g) - signedPad;
+      nearRow[a] = motion::lerpOf(near0, near1, r.f, r.g) + signedPad;
+      farRow[a] = motion::lerpOf(far0, far1, r.f, r.g) - signedPad;
     }
   }
 }
@@ -271,12 +274,12 @@ inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, c
   if (bvh.rootCount == 0 && isLeafRef(bvh.rootRef)) return hit;  // empty tree
   LazyPrep prep(ray);
   float tmax = ray.tmax;
-  const RayLanes<V> r = rayLanes<V>(ray, prep.prep);
+  const RayLanes<V> r = rayLanes<V>(ray, prep.prep, Blurred ? m.f : 0.0f);
   if (isLeafRef(bvh.rootRef)) {
     float tEntry;
     if (!intersectBox(prep.prep, bvh.rootBox, ray.tmin, tmax, tEntry)) return hit;
     if constexpr (Blurred)
-      intersectMotionLeaf<V, AnyHit>(bvh, m, ray, prep, leafFirstSlot(bvh.rootRef), bvh.rootCount, tmax, hit);
+      intersectMotionLeaf<V, AnyHit>(bvh, m, ray, prep, r, leafFirstSlot(bvh.rootRef), bvh.rootCount, tmax, hit);
     else
       intersectLeaf<V, AnyHit>(bvh, ray, prep, r, leafFirstSlot(bvh.rootRef), bvh.rootCount, tmax, hit);
     return hit;
@@ -367,7 +370,7 @@ inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, c
     } else {
       bool found;
       if constexpr (Blurred)
-        found = intersectMotionLeaf<V, AnyHit>(bvh, m, ray, prep, leafFirstSlot(ref), count, tmax, hit);
+        found = intersectMotionLeaf<V, AnyHit>(bvh, m, ray, prep, r, leafFirstSlot(ref), count, tmax, hit);
       else
         found = intersectLeaf<V, AnyHit>(bvh, ray, prep, r, leafFirstSlot(ref), count, tmax, hit);
       if (found && AnyHit) return hit;

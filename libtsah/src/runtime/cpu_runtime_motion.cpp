@@ -28,13 +28,13 @@ void CpuRuntime::clearShutter() {
 
 // The view of key s with the lerped root box, and key s + 1 with f, for one ray's time.
 template <uint32_t N>
-std::pair<WideView<N>, WideMotionFrame<N>> CpuRuntime::motionFrame(const WideView<N>& view,
+std::pair<WideView<N>, WideMotionFrame<N>> CpuRuntime::motionFrame(const WideTree<N>& tree, const WideView<N>& view,
                                                                    const std::vector<WideSoaNode<N>>& keyNodes,
                                                                    const std::vector<KeyVertexPacket<N>>& keyVertices,
                                                                    float time) const {
   const motion::Segment seg = motion::segmentAt(keyTimes_.data(), int(keyTimes_.size()), time);
   const std::size_t k0 = std::size_t(seg.index), k1 = k0 + 1;
-  const std::size_t keys = keyTimes_.size(), nodes = keyNodes.size() / keys, packets = keyVertices.size() / keys;
+  const std::size_t nodes = tree.nodes().size(), packets = tree.packets().size();
   WideView<N> v = view;
   v.nodes = keyNodes.data() + k0 * nodes;
   v.positions = keyPositions_.data() + k0 * std::size_t(vertexCount_) * 3;
@@ -191,11 +191,11 @@ void CpuRuntime::copyShutterKey(std::size_t from, ShutterKeys& next, std::size_t
 Hit CpuRuntime::closestHit(const Ray& ray, float time) const {
   if (!blurred()) return closestHit(ray);
   if (wide8_) {
-    const auto [v, m] = motionFrame(view8_, keyWide8_, keyVertices8_, time);
+    const auto [v, m] = motionFrame(*wide8_, view8_, keyWide8_, keyVertices8_, time);
     return kernels_->closestMotion8(v, m, ray);
   }
   if (wide4_) {
-    const auto [v, m] = motionFrame(view4_, keyWide4_, keyVertices4_, time);
+    const auto [v, m] = motionFrame(*wide4_, view4_, keyWide4_, keyVertices4_, time);
     return kernels_->closestMotion4(v, m, ray);
   }
   return tsah::closestHit(motionView_, ray, time);
@@ -204,11 +204,11 @@ Hit CpuRuntime::closestHit(const Ray& ray, float time) const {
 bool CpuRuntime::anyHit(const Ray& ray, float time, AnyHitOrder order) const {
   if (!blurred()) return anyHit(ray, order);
   if (wide8_) {
-    const auto [v, m] = motionFrame(view8_, keyWide8_, keyVertices8_, time);
+    const auto [v, m] = motionFrame(*wide8_, view8_, keyWide8_, keyVertices8_, time);
     return kernels_->anyMotion8(v, m, ray, order);
   }
   if (wide4_) {
-    const auto [v, m] = motionFrame(view4_, keyWide4_, keyVertices4_, time);
+    const auto [v, m] = motionFrame(*wide4_, view4_, keyWide4_, keyVertices4_, time);
     return kernels_->anyMotion4(v, m, ray, order);
   }
   return tsah::anyHit(motionView_, ray, time);

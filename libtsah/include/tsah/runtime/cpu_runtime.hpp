@@ -217,7 +217,7 @@ class CpuRuntime {
   void refitShutterKey(std::span<const float> positions, bool instant, ShutterKeys& out, std::size_t key);
   void copyShutterKey(std::size_t from, ShutterKeys& next, std::size_t to) const;
   template <uint32_t N>
-  std::pair<WideView<N>, WideMotionFrame<N>> motionFrame(const WideView<N>& view,
+  std::pair<WideView<N>, WideMotionFrame<N>> motionFrame(const WideTree<N>& tree, const WideView<N>& view,
                                                           const std::vector<WideSoaNode<N>>& keyNodes,
                                                           const std::vector<KeyVertexPacket<N>>& keyVertices,
                                                           float time) const;
