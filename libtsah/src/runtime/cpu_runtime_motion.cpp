@@ -26,7 +26,8 @@ void CpuRuntime::clearShutter() {
   motionView_ = MotionBvhView{};
 }
 
-// The view of key s with the lerped root box, and key s + 1 with f, for one ray's time.
+// The view of key s with the lerped root box (of a leaf root), and key s + 1 with f, for one ray's
+// time.
 template <uint32_t N>
 std::pair<WideView<N>, WideMotionFrame<N>> CpuRuntime::motionFrame(const WideTree<N>& tree, const WideView<N>& view,
                                                                    const std::vector<WideSoaNode<N>>& keyNodes,
@@ -38,7 +39,8 @@ std::pair<WideView<N>, WideMotionFrame<N>> CpuRuntime::motionFrame(const WideTre
   WideView<N> v = view;
   v.nodes = keyNodes.data() + k0 * nodes;
   v.positions = keyPositions_.data() + k0 * std::size_t(vertexCount_) * 3;
-  v.rootBox = motion::lerpBox(keyRootBoxes_[k0], keyRootBoxes_[k1], seg.f);
+  // The kernels test the root box of a leaf root only (an interior root's children are tested).
+  if (isLeafRef(v.rootRef)) v.rootBox = motion::lerpBox(keyRootBoxes_[k0], keyRootBoxes_[k1], seg.f);
   WideMotionFrame<N> m;
   m.nodes1 = keyNodes.data() + k1 * nodes;
   m.vertices0 = keyVertices.data() + k0 * packets;

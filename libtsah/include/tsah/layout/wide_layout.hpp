@@ -124,8 +124,9 @@ struct WideView {
 
 // What a blurred frame (docs/motion-blur.md) adds to the WideView of key s for one ray: the nodes
 // of key s + 1, the triangles' vertices at both keys (one KeyVertexPacket per Woop packet) and the
-// ray's place f between them. The view's nodes, positions and root box are then key s's (the root
-// box already lerped); the Woop packets are not read, only their slots.
+// ray's place f between them. The view's nodes and positions are then key s's, and its root box
+// lerped at f when the root is a leaf (an interior root's box is not read); the Woop packets are
+// not read, only their slots.
 template <uint32_t N>
 struct WideMotionFrame {
   const WideSoaNode<N>* nodes1 = nullptr;
