@@ -447,6 +447,33 @@ TEST(MotionBlurRuntime, ConsecutiveShuttersReuseTheSharedKey) {
   }
 }
 
+// A bad coordinate in a later key is refused before any key is refitted: the runtime keeps its
+// shutter and its own frame (the instant hits), in every layout.
+TEST(MotionBlurRuntime, ABadKeyLeavesTheRuntimeAsItWas) {
+  const Scene s = makeScene(anim::GeneratorKind::Swap, 1500);
+  const double t1 = keyframeTime(s.animation, 1), t2 = keyframeTime(s.animation, 2), t3 = keyframeTime(s.animation, 3);
+  const std::vector<float> p1 = s.animation.positionsAt(t1), p2 = s.animation.positionsAt(t2);
+  const std::vector<float> p3 = s.animation.positionsAt(t3);
+  std::vector<float> bad = p3;
+  bad[7] = std::nanf("");
+  const std::vector<float> times{0.0f, 0.5f, 1.0f};
+  const std::vector<std::span<const float>> good{p1, p2, p1}, badKeys{p3, bad, p1};  // p3 new, before the bad key
+  for (const Case& c : cases()) {
+    SCOPED_TRACE(describe(c));
+    auto rt = makeRuntime(s, c);
+    rt->updateShutter(times, good);
+    const std::vector<Ray> rays = raysFor(*rt, 400, 51);
+    std::vector<Hit> instant, blurred;
+    for (const Ray& ray : rays) instant.push_back(rt->closestHit(ray)), blurred.push_back(rt->closestHit(ray, 0.25f));
+    EXPECT_THROW(rt->updateShutter(times, badKeys), tsah::DataError);
+    ASSERT_EQ(rt->keyTimes().size(), 3u);
+    for (std::size_t r = 0; r < rays.size(); ++r) {
+      ASSERT_TRUE(sameBits(rt->closestHit(rays[r]), instant[r])) << "ray " << r;
+      ASSERT_TRUE(sameBits(rt->closestHit(rays[r], 0.25f), blurred[r])) << "ray " << r;
+    }
+  }
+}
+
 TEST(MotionBlurPipeline, ShutterIntervalCenteredOpenAndClamped) {
   const Scene s = makeScene(anim::GeneratorKind::Swap, 300);
   const anim::Animation& a = s.animation;

@@ -63,9 +63,10 @@ std::span<T> keyBlock(std::vector<T>& sets, std::size_t key, std::size_t size) {
 
 }  // namespace
 
-// The refit of the current tree at one key into the key's blocks. `instant`: the runtime's own
-// state (positions, Woop triangles, tree) becomes this key's, as update() leaves it; otherwise a
-// wide layout refits only its boxes and the key's vertex packets and keeps its Woop packets.
+// The refit of the current tree at one key (its positions already checked) into the key's blocks.
+// `instant`: the runtime's own state (positions, Woop triangles, tree) becomes this key's, as
+// update() leaves it; otherwise a wide layout refits only its boxes and the key's vertex packets
+// and keeps its Woop packets (the last key's refit then makes the tree whole again).
 void CpuRuntime::refitShutterKey(std::span<const float> positions, bool instant, ShutterKeys& out, std::size_t key) {
   const auto parallel = [this](std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) {
     parallelFor(n, 1, body);
@@ -78,10 +79,8 @@ void CpuRuntime::refitShutterKey(std::span<const float> positions, bool instant,
     out.rootBoxes[key] = tree.bounds();
   };
   if (instant || !(wide4_ || wide8_)) {  // the binary refit reads the runtime's positions
-    setPositions(positions);
+    positions_.assign(positions.begin(), positions.end());
     positions = positions_;
-  } else {
-    checkPositions(positions);
   }
   if (wide4_) {
     wideKey(*wide4_, out.wide4, out.vertices4, view4_);
@@ -127,6 +126,9 @@ void CpuRuntime::updateShutter(std::span<const float> keyTimes,
         reused[k] = j;
         break;
       }
+  // Every key to refit is checked first, so that an error leaves the runtime as it was.
+  for (std::size_t k = 0; k < keys; ++k)
+    if (reused[k] == oldKeys) checkPositions(keyPositions[k]);
   ShutterKeys next;
   const std::size_t last = keys - 1;
   next.nodes.resize(wide4_ || wide8_ ? 0 : keys * tree_.interiorCount);

@@ -107,7 +107,8 @@ class CpuRuntime {
   // keyPositions[k] = vertexCount*3 floats at key k, keyTimes[k] the key's shutter fraction (first
   // 0, last 1, increasing). One key is update(keyPositions[0]). Throws tsah::ConfigError for bad key
   // times or a key count that differs from the position sets, tsah::DataError for a position set of
-  // the wrong size, tsah::Failure when the key sets do not fit in memory. update(), rebuild() and
+  // the wrong size or a bad coordinate (as update()), tsah::Failure when the key sets do not fit in
+  // memory; an error leaves the runtime as it was. update(), rebuild() and
   // selectTreeAt() return to the instant state. The runtime's own frame (positions(), closestHit(ray))
   // is the last key's, as update() would leave it. A key whose positions equal, bit for bit, a key
   // of the previous updateShutter keeps that key's refit (frames whose shutters meet share the key
