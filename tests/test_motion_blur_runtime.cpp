@@ -293,13 +293,13 @@ TEST(MotionBlurRuntime, RejectsBadKeys) {
 
 // The wide layouts' vertex packets: packet p, lane l at key k holds the three vertices of the
 // lane's triangle (the packet's slot) at that key; padding lanes repeat the packet's lane 0.
-template <uint32_t N>
-void expectKeyVertexPackets(const CpuRuntime& rt, const tsah::WideTree<N>& tree,
-                            std::span<const tsah::KeyVertexPacket<N>> keyVertices) {
+template <uint32_t N, class VerticesOf>
+void expectKeyVertexPackets(const CpuRuntime& rt, const tsah::WideTree<N>& tree, VerticesOf verticesOf) {
   const std::size_t keys = rt.keyTimes().size(), packets = tree.packets().size(), floats = 3 * rt.vertexCount();
-  ASSERT_EQ(keyVertices.size(), keys * packets);
   const float* keyPositions = rt.motionView().keyPositions;
-  for (std::size_t k = 0; k < keys; ++k)
+  for (std::size_t k = 0; k < keys; ++k) {
+    const std::span<const tsah::KeyVertexPacket<N>> keyVertices = verticesOf(k);
+    ASSERT_EQ(keyVertices.size(), packets);
     for (std::size_t p = 0; p < packets; ++p)
       for (uint32_t lane = 0; lane < N; ++lane) {
         // A padding lane holds the leaf's first slot, at or before lane 0's.
@@ -307,11 +307,12 @@ void expectKeyVertexPackets(const CpuRuntime& rt, const tsah::WideTree<N>& tree,
         const uint32_t tri = tree.triIndex()[slots[lane] < slots[0] ? slots[0] : slots[lane]];
         for (uint32_t j = 0; j < 3; ++j) {
           const float* want = keyPositions + k * floats + 3 * std::size_t(rt.indices()[3 * tri + j]);
-          const Vec3 got = keyVertices[k * packets + p].get(j, lane);
+          const Vec3 got = keyVertices[p].get(j, lane);
           ASSERT_TRUE(got.x == want[0] && got.y == want[1] && got.z == want[2])
               << "key " << k << " packet " << p << " lane " << lane << " vertex " << j;
         }
       }
+  }
 }
 
 TEST(MotionBlurRuntime, WideKeyVertexPacketsHoldEverySlotsTriangleAtEachKey) {
@@ -321,9 +322,9 @@ TEST(MotionBlurRuntime, WideKeyVertexPacketsHoldEverySlotsTriangleAtEachKey) {
     Blurred b(c);
     ASSERT_EQ(b.rt->keyTimes().size(), 4u);
     if (c.layout == tsah::Layout::Bvh4)
-      expectKeyVertexPackets<4>(*b.rt, *b.rt->wide4(), b.rt->keyVertexPackets4());
+      expectKeyVertexPackets<4>(*b.rt, *b.rt->wide4(), [&](std::size_t k) { return b.rt->keyVertexPackets4(k); });
     else
-      expectKeyVertexPackets<8>(*b.rt, *b.rt->wide8(), b.rt->keyVertexPackets8());
+      expectKeyVertexPackets<8>(*b.rt, *b.rt->wide8(), [&](std::size_t k) { return b.rt->keyVertexPackets8(k); });
   }
 }
 
@@ -384,7 +385,7 @@ TEST(MotionBlurRuntime, RaysThroughSharedEdgesHitInEveryLayout) {
   }
 }
 
-// Every key set of a runtime, and its own frame (the last key's), bit for bit.
+// Every key set of a blurred runtime, its positions and bounds (the last key's), bit for bit.
 void expectSameShutter(const CpuRuntime& a, const CpuRuntime& b) {
   const auto same = [](const auto& x, const auto& y) {
     const std::span sx(x), sy(y);
@@ -395,27 +396,24 @@ void expectSameShutter(const CpuRuntime& a, const CpuRuntime& b) {
   const tsah::MotionBvhView &va = a.motionView(), &vb = b.motionView();
   EXPECT_TRUE(same(std::span(va.keyPositions, keys * floats), std::span(vb.keyPositions, keys * floats)));
   EXPECT_TRUE(same(std::span(va.keyRootBoxes, keys), std::span(vb.keyRootBoxes, keys)));
-  EXPECT_TRUE(same(a.positions(), b.positions()));
-  if (a.wide4()) {
-    EXPECT_TRUE(same(a.keyWideNodes4(), b.keyWideNodes4()));
-    EXPECT_TRUE(same(a.keyVertexPackets4(), b.keyVertexPackets4()));
-    EXPECT_TRUE(same(a.wide4()->nodes(), b.wide4()->nodes()));
-    EXPECT_TRUE(same(a.wide4()->packets(), b.wide4()->packets()));
-  } else if (a.wide8()) {
-    EXPECT_TRUE(same(a.keyWideNodes8(), b.keyWideNodes8()));
-    EXPECT_TRUE(same(a.keyVertexPackets8(), b.keyVertexPackets8()));
-    EXPECT_TRUE(same(a.wide8()->nodes(), b.wide8()->nodes()));
-    EXPECT_TRUE(same(a.wide8()->packets(), b.wide8()->packets()));
-  } else {
-    EXPECT_TRUE(same(std::span(va.keyNodes, keys * va.nodeCount), std::span(vb.keyNodes, keys * vb.nodeCount)));
-    EXPECT_TRUE(same(a.tree().nodes, b.tree().nodes));
-    EXPECT_TRUE(same(a.woop(), b.woop()));
+  EXPECT_TRUE(same(std::span(va.keyNodes, keys * va.nodeCount), std::span(vb.keyNodes, keys * vb.nodeCount)));
+  for (std::size_t k = 0; k < keys; ++k) {
+    SCOPED_TRACE("key " + std::to_string(k));
+    EXPECT_TRUE(same(a.keyWideNodes4(k), b.keyWideNodes4(k)));
+    EXPECT_TRUE(same(a.keyVertexPackets4(k), b.keyVertexPackets4(k)));
+    EXPECT_TRUE(same(a.keyWideNodes8(k), b.keyWideNodes8(k)));
+    EXPECT_TRUE(same(a.keyVertexPackets8(k), b.keyVertexPackets8(k)));
   }
+  if (a.wide4()) EXPECT_FALSE(a.keyVertexPackets4(keys - 1).empty());
+  if (a.wide8()) EXPECT_FALSE(a.keyVertexPackets8(keys - 1).empty());
+  EXPECT_TRUE(same(a.positions(), b.positions()));
+  const Aabb ba = a.bounds(), bb = b.bounds();
+  EXPECT_EQ(std::memcmp(&ba, &bb, sizeof(Aabb)), 0);
 }
 
-// Consecutive shutters that meet share their key: it is reused, not refitted, and every key set
-// equals a fresh runtime's bit for bit. Going backward the shared key is the last one, which is
-// refitted (it also sets the runtime's own frame); the same shutter again refits nothing.
+// Consecutive shutters that meet share their key: it is reused, not refitted, forward and
+// backward, and every key set equals a fresh runtime's bit for bit; the same shutter again refits
+// nothing.
 TEST(MotionBlurRuntime, ConsecutiveShuttersReuseTheSharedKey) {
   const Scene s = makeScene(anim::GeneratorKind::Swap, 1500);
   const double t1 = keyframeTime(s.animation, 1), t2 = keyframeTime(s.animation, 2);
@@ -434,8 +432,8 @@ TEST(MotionBlurRuntime, ConsecutiveShuttersReuseTheSharedKey) {
     tsah::updateShutter(*rt, s.animation, b, c);  // forward: b reused
     EXPECT_EQ(rt->keysRefitted(), 1u);
     expectFresh(b, c);
-    tsah::updateShutter(*rt, s.animation, a, b);  // backward: b is the last key now
-    EXPECT_EQ(rt->keysRefitted(), 2u);
+    tsah::updateShutter(*rt, s.animation, a, b);  // backward: b reused as the last key
+    EXPECT_EQ(rt->keysRefitted(), 1u);
     expectFresh(a, b);
     tsah::updateShutter(*rt, s.animation, a, b);  // the same shutter again
     EXPECT_EQ(rt->keysRefitted(), 0u);
@@ -444,6 +442,26 @@ TEST(MotionBlurRuntime, ConsecutiveShuttersReuseTheSharedKey) {
     EXPECT_EQ(rt->keysRefitted(), 0u);
     tsah::updateShutter(*rt, s.animation, a, b);
     EXPECT_EQ(rt->keysRefitted(), 2u);
+  }
+}
+
+// Two keys of a shutter with the same positions both reuse the one key of the previous shutter
+// that has them; the key sets equal a fresh runtime's.
+TEST(MotionBlurRuntime, KeysWithTheSamePositionsReuseOneKey) {
+  const Scene s = makeScene(anim::GeneratorKind::Swap, 1500);
+  const std::vector<float> p1 = s.animation.positionsAt(keyframeTime(s.animation, 1));
+  const std::vector<float> p2 = s.animation.positionsAt(keyframeTime(s.animation, 2));
+  const std::vector<float> times{0.0f, 0.5f, 1.0f};
+  const std::vector<std::span<const float>> first{p1, p2, p1}, second{p1, p1, p2};
+  for (const Case& c : cases()) {
+    SCOPED_TRACE(describe(c));
+    auto rt = makeRuntime(s, c), fresh = makeRuntime(s, c);
+    rt->updateShutter(times, first);
+    EXPECT_EQ(rt->keysRefitted(), 3u);
+    rt->updateShutter(times, second);
+    EXPECT_EQ(rt->keysRefitted(), 0u);
+    fresh->updateShutter(times, second);
+    expectSameShutter(*rt, *fresh);
   }
 }
 

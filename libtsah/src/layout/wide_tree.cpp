@@ -140,9 +140,8 @@ void WideTree<N>::refit(const float* positions, const ParallelFor& parallelFor) 
 }
 
 template <uint32_t N>
-void WideTree<N>::refitKey(const float* positions, KeyVertexPacket<N>* keyVertices, bool woop,
-                           const ParallelFor& parallelFor) {
-  refitTo({positions, woop, keyVertices}, parallelFor);
+void WideTree<N>::refitKey(const float* positions, KeyVertexPacket<N>* keyVertices, const ParallelFor& parallelFor) {
+  refitTo({positions, false, keyVertices}, parallelFor);
 }
 
 template <uint32_t N>

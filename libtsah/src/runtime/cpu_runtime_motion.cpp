@@ -21,30 +21,26 @@ void CpuRuntime::clearShutter() {
   keyPositions_.clear();
   keyWide4_.clear();
   keyWide8_.clear();
-  keyVertices4_.clear();
-  keyVertices8_.clear();
   motionView_ = MotionBvhView{};
 }
 
 // The view of key s with the lerped root box (of a leaf root), and key s + 1 with f, for one ray's
 // time.
 template <uint32_t N>
-std::pair<WideView<N>, WideMotionFrame<N>> CpuRuntime::motionFrame(const WideTree<N>& tree, const WideView<N>& view,
-                                                                   const std::vector<WideSoaNode<N>>& keyNodes,
-                                                                   const std::vector<KeyVertexPacket<N>>& keyVertices,
+std::pair<WideView<N>, WideMotionFrame<N>> CpuRuntime::motionFrame(const WideView<N>& view,
+                                                                   const std::vector<WideKey<N>>& keys,
                                                                    float time) const {
   const motion::Segment seg = motion::segmentAt(keyTimes_.data(), int(keyTimes_.size()), time);
   const std::size_t k0 = std::size_t(seg.index), k1 = k0 + 1;
-  const std::size_t nodes = tree.nodes().size(), packets = tree.packets().size();
   WideView<N> v = view;
-  v.nodes = keyNodes.data() + k0 * nodes;
+  v.nodes = keys[k0].nodes.data();
   v.positions = keyPositions_.data() + k0 * std::size_t(vertexCount_) * 3;
   // The kernels test the root box of a leaf root only (an interior root's children are tested).
   if (isLeafRef(v.rootRef)) v.rootBox = motion::lerpBox(keyRootBoxes_[k0], keyRootBoxes_[k1], seg.f);
   WideMotionFrame<N> m;
-  m.nodes1 = keyNodes.data() + k1 * nodes;
-  m.vertices0 = keyVertices.data() + k0 * packets;
-  m.vertices1 = keyVertices.data() + k1 * packets;
+  m.nodes1 = keys[k1].nodes.data();
+  m.vertices0 = keys[k0].vertices.data();
+  m.vertices1 = keys[k1].vertices.data();
   m.f = seg.f;
   return {v, m};
 }
@@ -61,35 +57,57 @@ std::span<T> keyBlock(std::vector<T>& sets, std::size_t key, std::size_t size) {
   return std::span<T>(sets).subspan(key * size, size);
 }
 
+// The wide sets of the next shutter's keys (reused[k]: the old key that new key k reuses, or
+// old.size() when it is refitted): a reused key's set is moved (copied when two new keys reuse it),
+// and the old sets no key reuses go to the keys to refit as their buffers.
+template <class WideKey>
+std::vector<WideKey> passOnWideKeys(std::vector<WideKey>& old, const std::vector<std::size_t>& reused) {
+  std::vector<WideKey> next(reused.size());
+  std::vector<std::size_t> movedTo(old.size(), reused.size());
+  for (std::size_t k = 0; k < reused.size(); ++k) {
+    const std::size_t j = reused[k];
+    if (j == old.size()) continue;
+    if (movedTo[j] < reused.size()) {
+      next[k] = next[movedTo[j]];
+    } else {
+      next[k] = std::move(old[j]);
+      movedTo[j] = k;
+    }
+  }
+  std::size_t spare = 0;
+  for (std::size_t k = 0; k < reused.size(); ++k) {
+    if (reused[k] != old.size()) continue;
+    while (spare < old.size() && movedTo[spare] < reused.size()) ++spare;
+    if (spare == old.size()) break;
+    next[k] = std::move(old[spare++]);
+  }
+  return next;
+}
+
 }  // namespace
 
-// The refit of the current tree at one key (its positions already checked) into the key's blocks.
-// `instant`: the runtime's own state (positions, Woop triangles, tree) becomes this key's, as
-// update() leaves it; otherwise a wide layout refits only its boxes and the key's vertex packets
-// and keeps its Woop packets (the last key's refit then makes the tree whole again).
-void CpuRuntime::refitShutterKey(std::span<const float> positions, bool instant, ShutterKeys& out, std::size_t key) {
+// The refit of the current tree at one key (its positions already checked) into the key's blocks:
+// the boxes, and in a wide layout the key's vertex packets (no Woop rows: a blurred frame reads
+// none); the binary layout's refit runs on the runtime's own positions.
+void CpuRuntime::refitShutterKey(std::span<const float> positions, ShutterKeys& out, std::size_t key) {
   const auto parallel = [this](std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) {
     parallelFor(n, 1, body);
   };
-  const auto wideKey = [&](auto& tree, auto& nodes, auto& vertices, auto& view) {
-    const std::size_t nodeCount = tree.nodes().size(), packetCount = tree.packets().size();
-    tree.refitKey(positions.data(), keyBlock(vertices, key, packetCount).data(), instant, parallel);
-    if (instant) view = tree.view(indices_.data(), positions_.data());
-    std::copy(tree.nodes().begin(), tree.nodes().end(), keyBlock(nodes, key, nodeCount).begin());
+  const auto wideKey = [&](auto& tree, auto& set) {
+    set.vertices.resize(tree.packets().size());  // a dropped key's buffers keep their size
+    tree.refitKey(positions.data(), set.vertices.data(), parallel);
+    set.nodes.assign(tree.nodes().begin(), tree.nodes().end());
     out.rootBoxes[key] = tree.bounds();
   };
-  if (instant || !(wide4_ || wide8_)) {  // the binary refit reads the runtime's positions
-    positions_.assign(positions.begin(), positions.end());
-    positions = positions_;
-  }
   if (wide4_) {
-    wideKey(*wide4_, out.wide4, out.vertices4, view4_);
+    wideKey(*wide4_, out.wide4[key]);
   } else if (wide8_) {
-    wideKey(*wide8_, out.wide8, out.vertices8, view8_);
+    wideKey(*wide8_, out.wide8[key]);
   } else {
+    positions_.assign(positions.begin(), positions.end());
     refitAndWoop();
     std::copy_n(tree_.nodes.begin(), tree_.interiorCount, keyBlock(out.nodes, key, tree_.interiorCount).begin());
-    out.rootBoxes[key] = bounds();
+    out.rootBoxes[key] = tree_.rootBoxes[0];
   }
   std::copy(positions.begin(), positions.end(), keyBlock(out.positions, key, positions.size()).begin());
 }
@@ -116,8 +134,9 @@ void CpuRuntime::updateShutter(std::span<const float> keyTimes,
   checkFitsInMemory(keys * (nodeBytes + vertexBytes + floats * sizeof(float) + sizeof(Aabb)), "runtime",
                     "a shutter of " + std::to_string(keys) + " keys");
   // A key whose positions equal, bit for bit, a key of the previous shutter keeps that key's refit
-  // (consecutive frames share the keyframes between them): the refit is a function of the tree
-  // and the positions, and the tree has not changed since (a tree change clears the shutter).
+  // (consecutive frames whose shutters meet share the key between them): the refit is a function
+  // of the tree and the positions, and the tree has not changed since (a tree change clears the
+  // shutter).
   const std::size_t oldKeys = keyTimes_.size();
   std::vector<std::size_t> reused(keys, oldKeys);
   for (std::size_t k = 0; k < keys; ++k)
@@ -130,25 +149,27 @@ void CpuRuntime::updateShutter(std::span<const float> keyTimes,
   for (std::size_t k = 0; k < keys; ++k)
     if (reused[k] == oldKeys) checkPositions(keyPositions[k]);
   ShutterKeys next;
-  const std::size_t last = keys - 1;
   next.nodes.resize(wide4_ || wide8_ ? 0 : keys * tree_.interiorCount);
-  if (wide4_) next.wide4.resize(keys * wide4_->nodes().size()), next.vertices4.resize(keys * wide4_->packets().size());
-  if (wide8_) next.wide8.resize(keys * wide8_->nodes().size()), next.vertices8.resize(keys * wide8_->packets().size());
   next.rootBoxes.resize(keys);
   next.positions.resize(keys * floats);
-  // The keys before the last, refitted or reused; then the last, which also leaves the runtime's
-  // own state (positions(), the Woop triangles, the tree) at its positions, as update() would.
-  // The last key is reused only when that state is already its: nothing else was refitted and the
-  // runtime's positions are the key's.
+  if (wide4_) next.wide4 = passOnWideKeys(keyWide4_, reused);
+  if (wide8_) next.wide8 = passOnWideKeys(keyWide8_, reused);
   uint32_t refitted = 0;
   for (std::size_t k = 0; k < keys; ++k) {
-    if (reused[k] < oldKeys && (k < last || (refitted == 0 && sameBits(positions_, keyPositions[k])))) {
+    if (reused[k] < oldKeys) {
       copyShutterKey(reused[k], next, k);
-      continue;
+    } else {
+      refitShutterKey(keyPositions[k], next, k);
+      ++refitted;
     }
-    refitShutterKey(keyPositions[k], k == last, next, k);
-    ++refitted;
   }
+  // The runtime's positions are the last key's (the renderer's smooth normals read them).
+  if (const std::span<const float> last = keyPositions[keys - 1]; !sameBits(positions_, last))
+    positions_.assign(last.begin(), last.end());
+  // The wide view's tree fields (root, packets' slots, triangle ids) for motionFrame, also when no
+  // update() came before.
+  if (wide4_) view4_ = wide4_->view(indices_.data(), positions_.data());
+  if (wide8_) view8_ = wide8_->view(indices_.data(), positions_.data());
   keysRefitted_ = refitted;
   keyTimes_.assign(keyTimes.begin(), keyTimes.end());
   keyNodes_ = std::move(next.nodes);
@@ -156,8 +177,6 @@ void CpuRuntime::updateShutter(std::span<const float> keyTimes,
   keyPositions_ = std::move(next.positions);
   keyWide4_ = std::move(next.wide4);
   keyWide8_ = std::move(next.wide8);
-  keyVertices4_ = std::move(next.vertices4);
-  keyVertices8_ = std::move(next.vertices8);
   // The key positions, times and triangles in every layout (the renderer's blurred surfaces read
   // them); the binary key nodes in bvh2 only.
   const bool wide = wide4_ || wide8_;
@@ -175,7 +194,8 @@ void CpuRuntime::updateShutter(std::span<const float> keyTimes,
   v.rootCount = tree_.rootCount;
 }
 
-// Key `from` of the current shutter into key `to` of the next.
+// Key `from` of the current shutter into key `to` of the next: its positions, root box and
+// binary nodes (the wide sets are passed on by passOnWideKeys).
 void CpuRuntime::copyShutterKey(std::size_t from, ShutterKeys& next, std::size_t to) const {
   const std::size_t keys = keyTimes_.size();
   const auto copy = [&](const auto& sets, auto& into) {
@@ -184,10 +204,6 @@ void CpuRuntime::copyShutterKey(std::size_t from, ShutterKeys& next, std::size_t
     std::copy_n(sets.begin() + std::ptrdiff_t(from * size), size, into.begin() + std::ptrdiff_t(to * size));
   };
   copy(keyNodes_, next.nodes);
-  copy(keyWide4_, next.wide4);
-  copy(keyWide8_, next.wide8);
-  copy(keyVertices4_, next.vertices4);
-  copy(keyVertices8_, next.vertices8);
   copy(keyPositions_, next.positions);
   next.rootBoxes[to] = keyRootBoxes_[from];
 }
@@ -195,11 +211,11 @@ void CpuRuntime::copyShutterKey(std::size_t from, ShutterKeys& next, std::size_t
 Hit CpuRuntime::closestHit(const Ray& ray, float time) const {
   if (!blurred()) return closestHit(ray);
   if (wide8_) {
-    const auto [v, m] = motionFrame(*wide8_, view8_, keyWide8_, keyVertices8_, time);
+    const auto [v, m] = motionFrame(view8_, keyWide8_, time);
     return kernels_->closestMotion8(v, m, ray);
   }
   if (wide4_) {
-    const auto [v, m] = motionFrame(*wide4_, view4_, keyWide4_, keyVertices4_, time);
+    const auto [v, m] = motionFrame(view4_, keyWide4_, time);
     return kernels_->closestMotion4(v, m, ray);
   }
   return tsah::closestHit(motionView_, ray, time);
@@ -208,11 +224,11 @@ Hit CpuRuntime::closestHit(const Ray& ray, float time) const {
 bool CpuRuntime::anyHit(const Ray& ray, float time, AnyHitOrder order) const {
   if (!blurred()) return anyHit(ray, order);
   if (wide8_) {
-    const auto [v, m] = motionFrame(*wide8_, view8_, keyWide8_, keyVertices8_, time);
+    const auto [v, m] = motionFrame(view8_, keyWide8_, time);
     return kernels_->anyMotion8(v, m, ray, order);
   }
   if (wide4_) {
-    const auto [v, m] = motionFrame(*wide4_, view4_, keyWide4_, keyVertices4_, time);
+    const auto [v, m] = motionFrame(view4_, keyWide4_, time);
     return kernels_->anyMotion4(v, m, ray, order);
   }
   return tsah::anyHit(motionView_, ray, time);

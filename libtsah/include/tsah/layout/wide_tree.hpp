@@ -34,10 +34,9 @@ class WideTree {
   // This frame's vertices (xyz per vertex; every vertex index of the triangles must be in range).
   void refit(const float* positions, const ParallelFor& parallelFor);
   // The blurred refit at one key (docs/motion-blur.md): every box as refit() computes it, and in
-  // keyVertices[p] (one per packet) the vertices of packet p's triangles. The Woop packets are
-  // recomputed only when `woop` (else they keep the last refit's rows, which a blurred frame does
-  // not read).
-  void refitKey(const float* positions, KeyVertexPacket<N>* keyVertices, bool woop, const ParallelFor& parallelFor);
+  // keyVertices[p] (one per packet) the vertices of packet p's triangles. The Woop packets keep the
+  // last refit()'s rows (a blurred frame does not read them).
+  void refitKey(const float* positions, KeyVertexPacket<N>* keyVertices, const ParallelFor& parallelFor);
 
   WideView<N> view(const uint32_t* indices, const float* positions) const;
   Aabb bounds() const { return rootBox_; }
@@ -49,7 +48,7 @@ class WideTree {
   uint32_t rootCount() const { return rootCount_; }
 
  private:
-  // What a refit writes besides the boxes: the Woop packets, the key's vertex packets, or both.
+  // What a refit writes besides the boxes: the Woop packets, or a key's vertex packets.
   struct Target {
     const float* positions;
     bool woop;

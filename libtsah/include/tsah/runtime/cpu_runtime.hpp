@@ -96,7 +96,8 @@ class CpuRuntime {
   uint32_t treeCount() const { return setTrees_.empty() ? 1u : static_cast<uint32_t>(setTrees_.size()); }
   uint32_t currentTree() const { return current_; }
 
-  // Nearest hit / any hit in (ray.tmin, ray.tmax) in the current frame, in the runtime's layout.
+  // Nearest hit / any hit in (ray.tmin, ray.tmax) in the current frame, in the runtime's layout
+  // (blurred: at time 1, below).
   // `order` picks the wide layouts' any-hit child order (the answer is the same; bvh2 ignores it):
   // the default for long rays such as shadow rays, AnyHitOrder::TreeOrder for short ones (ambient
   // occlusion).
@@ -109,10 +110,12 @@ class CpuRuntime {
   // times or a key count that differs from the position sets, tsah::DataError for a position set of
   // the wrong size or a bad coordinate (as update()), tsah::Failure when the key sets do not fit in
   // memory; an error leaves the runtime as it was. update(), rebuild() and
-  // selectTreeAt() return to the instant state. The runtime's own frame (positions(), closestHit(ray))
-  // is the last key's, as update() would leave it. A key whose positions equal, bit for bit, a key
-  // of the previous updateShutter keeps that key's refit (frames whose shutters meet share the key
+  // selectTreeAt() return to the instant state. A key whose positions equal, bit for bit, a key of
+  // the previous updateShutter keeps that key's refit (frames whose shutters meet share the key
   // between them), so a frame costs one refit per new key; the key sets equal a fresh update's.
+  // While blurred, positions() and bounds() are the last key's, closestHit(ray) / anyHit(ray)
+  // trace at time 1 (the last key), and the instant triangles (woop(), the wide trees' packet
+  // rows) and binary tree (tree(), view()) are not kept up to date (a blurred frame reads none).
   void updateShutter(std::span<const float> keyTimes, std::span<const std::span<const float>> keyPositions);
   // True after updateShutter with two keys or more (until update()).
   bool blurred() const { return !keyTimes_.empty(); }
@@ -127,14 +130,17 @@ class CpuRuntime {
   // every layout; the binary key nodes (keyNodes) in bvh2 only, null in the wide layouts, which keep
   // their own node set per key and trace through closestHit / anyHit(ray, time).
   const MotionBvhView& motionView() const { return motionView_; }
-  // The wide layouts' blurred node sets: keyTimes().size() blocks of wide4()/wide8()->nodes().size()
-  // nodes, one per key (empty when not blurred or in another layout).
-  std::span<const WideSoaNode<4>> keyWideNodes4() const { return keyWide4_; }
-  std::span<const WideSoaNode<8>> keyWideNodes8() const { return keyWide8_; }
-  // The wide layouts' triangles per key: keyTimes().size() blocks of one KeyVertexPacket per Woop
-  // packet (empty when not blurred or in another layout).
-  std::span<const KeyVertexPacket<4>> keyVertexPackets4() const { return keyVertices4_; }
-  std::span<const KeyVertexPacket<8>> keyVertexPackets8() const { return keyVertices8_; }
+  // The wide layouts' blurred sets of key k < keyTimes().size(): its nodes (in wide4()/wide8()->nodes()'s
+  // order) and its triangles, one KeyVertexPacket per Woop packet (empty when not blurred, k is
+  // past the keys, or in another layout).
+  std::span<const WideSoaNode<4>> keyWideNodes4(std::size_t k) const { return wideKeyPart(keyWide4_, k, &WideKey<4>::nodes); }
+  std::span<const WideSoaNode<8>> keyWideNodes8(std::size_t k) const { return wideKeyPart(keyWide8_, k, &WideKey<8>::nodes); }
+  std::span<const KeyVertexPacket<4>> keyVertexPackets4(std::size_t k) const {
+    return wideKeyPart(keyWide4_, k, &WideKey<4>::vertices);
+  }
+  std::span<const KeyVertexPacket<8>> keyVertexPackets8(std::size_t k) const {
+    return wideKeyPart(keyWide8_, k, &WideKey<8>::vertices);
+  }
 
   const LayoutInfo& layoutInfo() const { return info_; }
   // The binary tree and its view: bvh2 only (the wide layouts do not refit the binary tree; both
@@ -201,26 +207,32 @@ class CpuRuntime {
   std::vector<Aabb> keyRootBoxes_;
   std::vector<float> keyPositions_;
   MotionBvhView motionView_;
-  std::vector<WideSoaNode<4>> keyWide4_;  // wide layouts: one node set per key
-  std::vector<WideSoaNode<8>> keyWide8_;
-  std::vector<KeyVertexPacket<4>> keyVertices4_;  // wide layouts: one vertex packet set per key
-  std::vector<KeyVertexPacket<8>> keyVertices8_;
+  // Wide layouts: per key its own node set and vertex packets, so that a key reused by the next
+  // shutter moves instead of being copied, and a new key refits into a dropped key's buffers.
+  template <uint32_t N>
+  struct WideKey {
+    std::vector<WideSoaNode<N>> nodes;
+    std::vector<KeyVertexPacket<N>> vertices;
+  };
+  std::vector<WideKey<4>> keyWide4_;
+  std::vector<WideKey<8>> keyWide8_;
+  template <uint32_t N, class T>
+  static std::span<const T> wideKeyPart(const std::vector<WideKey<N>>& keys, std::size_t k,
+                                        std::vector<T> WideKey<N>::*part) {
+    return k < keys.size() ? std::span<const T>(keys[k].*part) : std::span<const T>();
+  }
   // The per-key sets of a shutter being assembled (the members above, key by key).
   struct ShutterKeys {
     std::vector<GpuBvhNode> nodes;
-    std::vector<WideSoaNode<4>> wide4;
-    std::vector<WideSoaNode<8>> wide8;
-    std::vector<KeyVertexPacket<4>> vertices4;
-    std::vector<KeyVertexPacket<8>> vertices8;
+    std::vector<WideKey<4>> wide4;
+    std::vector<WideKey<8>> wide8;
     std::vector<Aabb> rootBoxes;
     std::vector<float> positions;
   };
-  void refitShutterKey(std::span<const float> positions, bool instant, ShutterKeys& out, std::size_t key);
+  void refitShutterKey(std::span<const float> positions, ShutterKeys& out, std::size_t key);
   void copyShutterKey(std::size_t from, ShutterKeys& next, std::size_t to) const;
   template <uint32_t N>
-  std::pair<WideView<N>, WideMotionFrame<N>> motionFrame(const WideTree<N>& tree, const WideView<N>& view,
-                                                          const std::vector<WideSoaNode<N>>& keyNodes,
-                                                          const std::vector<KeyVertexPacket<N>>& keyVertices,
+  std::pair<WideView<N>, WideMotionFrame<N>> motionFrame(const WideView<N>& view, const std::vector<WideKey<N>>& keys,
                                                           float time) const;
 };
 
