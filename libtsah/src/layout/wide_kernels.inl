@@ -36,7 +36,7 @@ template <class V>
 struct RayLanes {
   V org[3], dir[3], inv[3];
   uint32_t nearPlane[3], farPlane[3];  // rows of WideSoaNode::box holding each axis's near/far plane
-  V nearPadSign[3];                    // blurred boxes: -1 where the near plane is lo, else +1 (slabRows)
+  V nearPadSign[3];                    // blurred boxes: -1 where the near plane is lo, else +1 (slabDistances)
   V f, g;                              // blurred: the ray's place between the keys, and 1 - f
 };
 
@@ -232,32 +232,34 @@ inline bool intersectMotionLeaf(const WideView<V::N>& bvh, const WideMotionFrame
   return found;
 }
 
-// A node's near and far plane rows on each axis, as the ray's sign picks them (RayLanes): loaded,
-// or (blurred) lerped between the two keys and padded outward, motion::lerpBox's operations lane by
-// lane in its order. The rows are loaded by the ray's plane index straight from the nodes, so the
-// lerped values stay in registers (a six-row array indexed by plane would live on the stack). The
-// pad is subtracted from a lo plane and added to a hi plane: the ray's signed pad
-// (RayLanes::nearPadSign, -1 where the near plane is lo) is added to the near plane and subtracted
-// from the far plane, which rounds exactly as lerpBox's lo - pad and hi + pad (negation is exact).
+// A node's entry and exit distances on each axis, (plane - org) * inv for the near and the far
+// plane as the ray's sign picks them (RayLanes): the planes loaded, or (blurred) lerped between the
+// two keys and padded outward, motion::lerpBox's operations lane by lane in its order. The planes
+// are loaded by the ray's plane index straight from the nodes and used axis by axis, so the lerped
+// values stay in registers (a six-row array indexed by plane would live on the stack). The pad is
+// subtracted from a lo plane and added to a hi plane: the ray's signed pad (RayLanes::nearPadSign,
+// -1 where the near plane is lo) is added to the near plane and subtracted from the far plane,
+// which rounds exactly as lerpBox's lo - pad and hi + pad (negation is exact).
 template <class V, bool Blurred>
-inline void slabRows(const WideSoaNode<V::N>& node, const WideMotionFrame<V::N>& m, int32_t ref,
-                     const RayLanes<V>& r, V nearRow[3], V farRow[3]) {
-  if constexpr (!Blurred) {
-    for (int a = 0; a < 3; ++a) {
-      nearRow[a] = V::load(node.box[r.nearPlane[a]]);
-      farRow[a] = V::load(node.box[r.farPlane[a]]);
-    }
-  } else {
-    const WideSoaNode<V::N>& node1 = m.nodes1[ref];
-    for (int a = 0; a < 3; ++a) {
+inline void slabDistances(const WideSoaNode<V::N>& node, const WideMotionFrame<V::N>& m, int32_t ref,
+                          const RayLanes<V>& r, V tNear[3], V tFar[3]) {
+  for (int a = 0; a < 3; ++a) {
+    V nearPlane, farPlane;
+    if constexpr (!Blurred) {
+      nearPlane = V::load(node.box[r.nearPlane[a]]);
+      farPlane = V::load(node.box[r.farPlane[a]]);
+    } else {
+      const WideSoaNode<V::N>& node1 = m.nodes1[ref];
       const V near0 = V::load(node.box[r.nearPlane[a]]), far0 = V::load(node.box[r.farPlane[a]]);
       const V near1 = V::load(node1.box[r.nearPlane[a]]), far1 = V::load(node1.box[r.farPlane[a]]);
       const V mag = V::max(V::max(V::abs(near0), V::abs(far0)), V::max(V::abs(near1), V::abs(far1)));
       const V pad = motion::padOf(mag, V::set1(motion::kPadPerMagnitude), V::set1(motion::kPadFloor));
       const V signedPad = pad * r.nearPadSign[a];
-      nearRow[a] = motion::lerpOf(near0, near1, r.f, r.g) + signedPad;
-      farRow[a] = motion::lerpOf(far0, far1, r.f, r.g) - signedPad;
+      nearPlane = motion::lerpOf(near0, near1, r.f, r.g) + signedPad;
+      farPlane = motion::lerpOf(far0, far1, r.f, r.g) - signedPad;
     }
+    tNear[a] = (nearPlane - r.org[a]) * r.inv[a];
+    tFar[a] = (farPlane - r.org[a]) * r.inv[a];
   }
 }
 
@@ -301,16 +303,10 @@ inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, c
   for (;;) {
     if (!isLeafRef(ref)) {
       const WideSoaNode<N>& node = bvh.nodes[ref];
-      V nearRow[3], farRow[3];
-      slabRows<V, Blurred>(node, m, ref, r, nearRow, farRow);
-      const V tnx = (nearRow[0] - r.org[0]) * r.inv[0];
-      const V tny = (nearRow[1] - r.org[1]) * r.inv[1];
-      const V tnz = (nearRow[2] - r.org[2]) * r.inv[2];
-      const V tfx = (farRow[0] - r.org[0]) * r.inv[0];
-      const V tfy = (farRow[1] - r.org[1]) * r.inv[1];
-      const V tfz = (farRow[2] - r.org[2]) * r.inv[2];
-      const V tn = V::max(V::max(tnx, tny), V::max(tnz, vtmin));
-      const V tf = V::min(V::min(tfx, tfy), V::min(tfz, V::set1(tmax))) * farScale;
+      V tNear[3], tFar[3];
+      slabDistances<V, Blurred>(node, m, ref, r, tNear, tFar);
+      const V tn = V::max(V::max(tNear[0], tNear[1]), V::max(tNear[2], vtmin));
+      const V tf = V::min(V::min(tFar[0], tFar[1]), V::min(tFar[2], V::set1(tmax))) * farScale;
       uint32_t mask = V::bits(V::le(tn, tf));
       if (mask) {
         const uint32_t c0 = uint32_t(__builtin_ctz(mask));
