@@ -465,6 +465,28 @@ TEST(MotionBlurRuntime, KeysWithTheSamePositionsReuseOneKey) {
   }
 }
 
+// While blurred the untimed queries trace at time 1 (the instant triangles are not kept), and
+// positions() and bounds() are the last key's.
+TEST(MotionBlurRuntime, UntimedQueriesTraceTheLastKeyWhileBlurred) {
+  for (const Case& c : cases()) {
+    SCOPED_TRACE(describe(c));
+    Blurred b(c);
+    const std::size_t keys = b.rt->keyTimes().size(), floats = 3 * std::size_t(b.rt->vertexCount());
+    const tsah::MotionBvhView& view = b.rt->motionView();
+    EXPECT_EQ(std::memcmp(b.rt->positions().data(), view.keyPositions + (keys - 1) * floats, floats * sizeof(float)), 0);
+    const Aabb bounds = b.rt->bounds();
+    EXPECT_EQ(std::memcmp(&bounds, &view.keyRootBoxes[keys - 1], sizeof(Aabb)), 0);
+    uint32_t hits = 0;
+    for (const Ray& ray : raysFor(*b.rt, 600, 61)) {
+      const Hit atClose = b.rt->closestHit(ray, 1.0f);
+      ASSERT_TRUE(sameBits(b.rt->closestHit(ray), atClose));
+      ASSERT_EQ(b.rt->anyHit(ray), atClose.valid());
+      hits += atClose.valid() ? 1 : 0;
+    }
+    EXPECT_GT(hits, 0u);
+  }
+}
+
 // A bad coordinate in a later key is refused before any key is refitted: the runtime keeps its
 // shutter and its own frame (the instant hits), in every layout.
 TEST(MotionBlurRuntime, ABadKeyLeavesTheRuntimeAsItWas) {
