@@ -336,11 +336,19 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
       const tsah::MotionBvhView& m = rt.motionView();
       const std::size_t keys = rt.keyTimes().size();
       std::string nodeType;
+      // The wide layouts' key node sets, one after the other.
+      const auto allKeys = [keys](auto nodesOf) {
+        std::vector<typename decltype(nodesOf(0))::value_type> all;
+        for (std::size_t k = 0; k < keys; ++k) all.insert(all.end(), nodesOf(k).begin(), nodesOf(k).end());
+        return all;
+      };
       if (rt.wide8()) {
-        write("key_nodes.bin", bytesOf(rt.keyWideNodes8()));
+        const auto all = allKeys([&](std::size_t k) { return rt.keyWideNodes8(k); });
+        write("key_nodes.bin", bytesOf(std::span(all)));
         nodeType = "TsahBvh8Node";
       } else if (rt.wide4()) {
-        write("key_nodes.bin", bytesOf(rt.keyWideNodes4()));
+        const auto all = allKeys([&](std::size_t k) { return rt.keyWideNodes4(k); });
+        write("key_nodes.bin", bytesOf(std::span(all)));
         nodeType = "TsahBvh4Node";
       } else {
         write("key_nodes.bin", bytesOf(std::span<const tsah::GpuBvhNode>(m.keyNodes, keys * m.nodeCount)));

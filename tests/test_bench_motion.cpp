@@ -206,6 +206,20 @@ TEST(BenchMotionBlur, ThePartReportsEveryFieldAndEmbreeAgreesWithTheToolkit) {
   EXPECT_GT(j["ratios"]["toolkit_total_over_embree_rebuild_total"].get<double>(), 0.0);
 }
 
+// With a shutter of 1 each frame's shutter opens where the one before closed: the toolkit reuses
+// that key and refits the others (keys_refitted_per_frame).
+TEST(BenchMotionBlur, AShutterOfOneReusesTheKeyBetweenFrames) {
+  const anim::Animation a = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 1500, 6, 5);
+  const tsah::Bvh tree = tsah::BinnedSahBuilder().build(tsah::test::keyframeBoxes(a, 0));
+  const nlohmann::json j = tsah::bench::runMotionBlurComparison(a, tree, "toolkit", smallSetup(a, a.uniformTimes(5)),
+                                                                {1.0, tsah::Shutter::Mode::Centered});
+  const nlohmann::json &keys = j["keys_per_frame"], &refitted = j["keys_refitted_per_frame"];
+  ASSERT_EQ(keys.size(), 5u);
+  ASSERT_EQ(refitted.size(), 5u);
+  EXPECT_EQ(refitted[0], keys[0]);
+  for (std::size_t f = 1; f < 5; ++f) EXPECT_EQ(refitted[f].get<int>(), keys[f].get<int>() - 1) << "frame " << f;
+}
+
 TEST(BenchMotionBlur, OneFrameOrNoShutterIsRefused) {
   const anim::Animation a = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 200, 3, 5);
   const tsah::Bvh tree = tsah::BinnedSahBuilder().build(tsah::test::keyframeBoxes(a, 0));

@@ -39,6 +39,22 @@ TEST(MotionBlurKeys, ClosedShutterIsOneKey) {
   EXPECT_EQ(m::keyFractions(std::vector<double>{1.0}), (std::vector<float>{0.0f}));
 }
 
+// A shutter that closes within double rounding of a keyframe: the keyframe's float fraction would
+// equal the close's 1, so it is not a key of its own, and the runtime accepts the keys (strictly
+// increasing fractions). Near the open the fraction is a tiny float above 0: the keyframe stays.
+TEST(MotionBlurKeys, KeyframesWithinFloatRoundingOfAnotherKeyAreLeftOut) {
+  const double justAfter = std::nextafter(2.0, 3.0), justBefore = std::nextafter(1.0, 0.0);
+  EXPECT_EQ(m::shutterKeys(kKeyframes, 1.5, justAfter), (std::vector<double>{1.5, justAfter}));
+  EXPECT_EQ(m::shutterKeys(kKeyframes, justBefore, 1.5), (std::vector<double>{justBefore, 1.0, 1.5}));
+  EXPECT_EQ(m::shutterKeys(kKeyframes, 0.5, 2.0 + 1e-9), (std::vector<double>{0.5, 1.0, 2.0 + 1e-9}));
+  EXPECT_EQ(m::shutterKeys(kKeyframes, 0.5, 2.0 + 1e-6), (std::vector<double>{0.5, 1.0, 2.0, 2.0 + 1e-6}));
+  for (const auto& [open, close] : {std::pair{1.5, justAfter}, std::pair{justBefore, 1.5}, std::pair{0.5, 2.0 + 1e-9}}) {
+    const std::vector<double> keys = m::shutterKeys(kKeyframes, open, close);
+    const std::vector<float> f = m::keyFractions(keys);
+    EXPECT_NO_THROW(m::checkKeyTimes(f, keys.size(), "test: "));
+  }
+}
+
 TEST(MotionBlurKeys, FractionsRunFromZeroToOne) {
   const std::vector<float> f = m::keyFractions(m::shutterKeys(kKeyframes, 0.5, 2.5));
   EXPECT_EQ(f, (std::vector<float>{0.0f, 0.25f, 0.75f, 1.0f}));

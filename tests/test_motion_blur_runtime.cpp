@@ -291,6 +291,229 @@ TEST(MotionBlurRuntime, RejectsBadKeys) {
   EXPECT_THROW(tsah::anyHits(*rt, rays, times), tsah::ConfigError);
 }
 
+// The wide layouts' vertex packets: packet p, lane l at key k holds the three vertices of the
+// lane's triangle (the packet's slot) at that key; padding lanes repeat the packet's lane 0.
+template <uint32_t N, class VerticesOf>
+void expectKeyVertexPackets(const CpuRuntime& rt, const tsah::WideTree<N>& tree, VerticesOf verticesOf) {
+  const std::size_t keys = rt.keyTimes().size(), packets = tree.packets().size(), floats = 3 * rt.vertexCount();
+  const float* keyPositions = rt.motionView().keyPositions;
+  for (std::size_t k = 0; k < keys; ++k) {
+    const std::span<const tsah::KeyVertexPacket<N>> keyVertices = verticesOf(k);
+    ASSERT_EQ(keyVertices.size(), packets);
+    for (std::size_t p = 0; p < packets; ++p)
+      for (uint32_t lane = 0; lane < N; ++lane) {
+        // A padding lane holds the leaf's first slot, at or before lane 0's.
+        const uint32_t* slots = tree.packets()[p].slot;
+        const uint32_t tri = tree.triIndex()[slots[lane] < slots[0] ? slots[0] : slots[lane]];
+        for (uint32_t j = 0; j < 3; ++j) {
+          const float* want = keyPositions + k * floats + 3 * std::size_t(rt.indices()[3 * tri + j]);
+          const Vec3 got = keyVertices[p].get(j, lane);
+          ASSERT_TRUE(got.x == want[0] && got.y == want[1] && got.z == want[2])
+              << "key " << k << " packet " << p << " lane " << lane << " vertex " << j;
+        }
+      }
+  }
+}
+
+TEST(MotionBlurRuntime, WideKeyVertexPacketsHoldEverySlotsTriangleAtEachKey) {
+  for (const Case& c : cases()) {
+    if (c.layout == tsah::Layout::Bvh2) continue;
+    SCOPED_TRACE(describe(c));
+    Blurred b(c);
+    ASSERT_EQ(b.rt->keyTimes().size(), 4u);
+    if (c.layout == tsah::Layout::Bvh4)
+      expectKeyVertexPackets<4>(*b.rt, *b.rt->wide4(), [&](std::size_t k) { return b.rt->keyVertexPackets4(k); });
+    else
+      expectKeyVertexPackets<8>(*b.rt, *b.rt->wide8(), [&](std::size_t k) { return b.rt->keyVertexPackets8(k); });
+  }
+}
+
+// A flat grid of unit squares (two triangles each) at z = 0, and the same grid moved by (1, 0.5, 0)
+// at the second key: at time 0.5 every vertex lies at a multiple of 1/4, so rays straight down
+// through the vertices and the edge midpoints meet edges exactly (U, V or W zero in float: the
+// wide leaf's scalar lanes). Every such ray inside the grid hits (watertight), and every layout
+// returns the binary layout's hit bit for bit, or a tie at the same t.
+TEST(MotionBlurRuntime, RaysThroughSharedEdgesHitInEveryLayout) {
+  constexpr uint32_t G = 12;
+  std::vector<uint32_t> indices;
+  std::vector<float> key0, key1;
+  for (uint32_t j = 0; j <= G; ++j)
+    for (uint32_t i = 0; i <= G; ++i) {
+      key0.insert(key0.end(), {float(i), float(j), 0.0f});
+      key1.insert(key1.end(), {float(i) + 1.0f, float(j) + 0.5f, 0.0f});
+    }
+  for (uint32_t j = 0; j < G; ++j)
+    for (uint32_t i = 0; i < G; ++i) {
+      const uint32_t a = j * (G + 1) + i, b = a + 1, c = a + G + 1, d = c + 1;
+      indices.insert(indices.end(), {a, b, d, a, d, c});
+    }
+  std::vector<Aabb> boxes(indices.size() / 3);
+  for (std::size_t t = 0; t < boxes.size(); ++t)
+    for (int k = 0; k < 3; ++k) boxes[t].extend(Vec3{key0[3 * indices[3 * t + k]], key0[3 * indices[3 * t + k] + 1], 0.0f});
+  const tsah::FlatBvh tree = tsah::flattenBvh(tsah::BinnedSahBuilder().build(boxes));
+  const std::vector<float> times{0.0f, 1.0f};
+  const std::vector<std::span<const float>> keys{key0, key1};
+  std::vector<Ray> rays;
+  for (uint32_t j = 2; j <= 4 * G; ++j)  // x, y in [1.5, 12] at time 0.5: inside the moved grid
+    for (uint32_t i = 4; i <= 4 * G; ++i) {
+      Ray ray;
+      ray.org = {0.25f * float(i), 0.25f * float(j), 5.0f};
+      ray.dir = {0.0f, 0.0f, -1.0f};
+      ray.tmin = 0.0f;
+      ray.tmax = 100.0f;
+      rays.push_back(ray);
+    }
+  std::vector<Hit> reference;
+  for (const Case& c : cases()) {
+    SCOPED_TRACE(describe(c));
+    CpuRuntime::Config config(2);
+    config.layout = c.layout;
+    if (c.layout != tsah::Layout::Bvh2) config.isa = c.isa;
+    CpuRuntime rt(tree, indices, (G + 1) * (G + 1), config);
+    rt.updateShutter(times, keys);
+    for (std::size_t r = 0; r < rays.size(); ++r) {
+      const Hit hit = rt.closestHit(rays[r], 0.5f);
+      ASSERT_TRUE(hit.valid()) << "ray " << r << " leaks";
+      ASSERT_EQ(hit.t, 5.0f);
+      ASSERT_TRUE(rt.anyHit(rays[r], 0.5f));
+      if (c.layout == tsah::Layout::Bvh2) {
+        reference.push_back(hit);
+      } else if (hit.tri == reference[r].tri) {
+        ASSERT_TRUE(sameBits(hit, reference[r])) << "ray " << r;
+      }
+    }
+  }
+}
+
+// Every key set of a blurred runtime, its positions and bounds (the last key's), bit for bit.
+void expectSameShutter(const CpuRuntime& a, const CpuRuntime& b) {
+  const auto same = [](const auto& x, const auto& y) {
+    const std::span sx(x), sy(y);
+    return sx.size() == sy.size() && (sx.empty() || std::memcmp(sx.data(), sy.data(), sx.size_bytes()) == 0);
+  };
+  ASSERT_TRUE(same(a.keyTimes(), b.keyTimes()));
+  const std::size_t keys = a.keyTimes().size(), floats = 3 * std::size_t(a.vertexCount());
+  const tsah::MotionBvhView &va = a.motionView(), &vb = b.motionView();
+  EXPECT_TRUE(same(std::span(va.keyPositions, keys * floats), std::span(vb.keyPositions, keys * floats)));
+  EXPECT_TRUE(same(std::span(va.keyRootBoxes, keys), std::span(vb.keyRootBoxes, keys)));
+  EXPECT_TRUE(same(std::span(va.keyNodes, keys * va.nodeCount), std::span(vb.keyNodes, keys * vb.nodeCount)));
+  for (std::size_t k = 0; k < keys; ++k) {
+    SCOPED_TRACE("key " + std::to_string(k));
+    EXPECT_TRUE(same(a.keyWideNodes4(k), b.keyWideNodes4(k)));
+    EXPECT_TRUE(same(a.keyVertexPackets4(k), b.keyVertexPackets4(k)));
+    EXPECT_TRUE(same(a.keyWideNodes8(k), b.keyWideNodes8(k)));
+    EXPECT_TRUE(same(a.keyVertexPackets8(k), b.keyVertexPackets8(k)));
+  }
+  if (a.wide4()) EXPECT_FALSE(a.keyVertexPackets4(keys - 1).empty());
+  if (a.wide8()) EXPECT_FALSE(a.keyVertexPackets8(keys - 1).empty());
+  EXPECT_TRUE(same(a.positions(), b.positions()));
+  const Aabb ba = a.bounds(), bb = b.bounds();
+  EXPECT_EQ(std::memcmp(&ba, &bb, sizeof(Aabb)), 0);
+}
+
+// Consecutive shutters that meet share their key: it is reused, not refitted, forward and
+// backward, and every key set equals a fresh runtime's bit for bit; the same shutter again refits
+// nothing.
+TEST(MotionBlurRuntime, ConsecutiveShuttersReuseTheSharedKey) {
+  const Scene s = makeScene(anim::GeneratorKind::Swap, 1500);
+  const double t1 = keyframeTime(s.animation, 1), t2 = keyframeTime(s.animation, 2);
+  const double a = 0.5 * (t1 + t2), b = t2, c = 0.25 * keyframeTime(s.animation, 3) + 0.75 * t2;
+  for (const Case& cs : cases()) {
+    SCOPED_TRACE(describe(cs));
+    auto rt = makeRuntime(s, cs);
+    const auto expectFresh = [&](double open, double close) {
+      auto fresh = makeRuntime(s, cs);
+      tsah::updateShutter(*fresh, s.animation, open, close);
+      EXPECT_EQ(fresh->keysRefitted(), 2u);
+      expectSameShutter(*rt, *fresh);
+    };
+    tsah::updateShutter(*rt, s.animation, a, b);
+    EXPECT_EQ(rt->keysRefitted(), 2u);
+    tsah::updateShutter(*rt, s.animation, b, c);  // forward: b reused
+    EXPECT_EQ(rt->keysRefitted(), 1u);
+    expectFresh(b, c);
+    tsah::updateShutter(*rt, s.animation, a, b);  // backward: b reused as the last key
+    EXPECT_EQ(rt->keysRefitted(), 1u);
+    expectFresh(a, b);
+    tsah::updateShutter(*rt, s.animation, a, b);  // the same shutter again
+    EXPECT_EQ(rt->keysRefitted(), 0u);
+    expectFresh(a, b);
+    rt->update(s.animation.positionsAt(a));  // back to the instant: nothing is kept
+    EXPECT_EQ(rt->keysRefitted(), 0u);
+    tsah::updateShutter(*rt, s.animation, a, b);
+    EXPECT_EQ(rt->keysRefitted(), 2u);
+  }
+}
+
+// Two keys of a shutter with the same positions both reuse the one key of the previous shutter
+// that has them; the key sets equal a fresh runtime's.
+TEST(MotionBlurRuntime, KeysWithTheSamePositionsReuseOneKey) {
+  const Scene s = makeScene(anim::GeneratorKind::Swap, 1500);
+  const std::vector<float> p1 = s.animation.positionsAt(keyframeTime(s.animation, 1));
+  const std::vector<float> p2 = s.animation.positionsAt(keyframeTime(s.animation, 2));
+  const std::vector<float> times{0.0f, 0.5f, 1.0f};
+  const std::vector<std::span<const float>> first{p1, p2, p1}, second{p1, p1, p2};
+  for (const Case& c : cases()) {
+    SCOPED_TRACE(describe(c));
+    auto rt = makeRuntime(s, c), fresh = makeRuntime(s, c);
+    rt->updateShutter(times, first);
+    EXPECT_EQ(rt->keysRefitted(), 3u);
+    rt->updateShutter(times, second);
+    EXPECT_EQ(rt->keysRefitted(), 0u);
+    fresh->updateShutter(times, second);
+    expectSameShutter(*rt, *fresh);
+  }
+}
+
+// While blurred the untimed queries trace at time 1 (the instant triangles are not kept), and
+// positions() and bounds() are the last key's.
+TEST(MotionBlurRuntime, UntimedQueriesTraceTheLastKeyWhileBlurred) {
+  for (const Case& c : cases()) {
+    SCOPED_TRACE(describe(c));
+    Blurred b(c);
+    const std::size_t keys = b.rt->keyTimes().size(), floats = 3 * std::size_t(b.rt->vertexCount());
+    const tsah::MotionBvhView& view = b.rt->motionView();
+    EXPECT_EQ(std::memcmp(b.rt->positions().data(), view.keyPositions + (keys - 1) * floats, floats * sizeof(float)), 0);
+    const Aabb bounds = b.rt->bounds();
+    EXPECT_EQ(std::memcmp(&bounds, &view.keyRootBoxes[keys - 1], sizeof(Aabb)), 0);
+    uint32_t hits = 0;
+    for (const Ray& ray : raysFor(*b.rt, 600, 61)) {
+      const Hit atClose = b.rt->closestHit(ray, 1.0f);
+      ASSERT_TRUE(sameBits(b.rt->closestHit(ray), atClose));
+      ASSERT_EQ(b.rt->anyHit(ray), atClose.valid());
+      hits += atClose.valid() ? 1 : 0;
+    }
+    EXPECT_GT(hits, 0u);
+  }
+}
+
+// A bad coordinate in a later key is refused before any key is refitted: the runtime keeps its
+// shutter and its own frame (the instant hits), in every layout.
+TEST(MotionBlurRuntime, ABadKeyLeavesTheRuntimeAsItWas) {
+  const Scene s = makeScene(anim::GeneratorKind::Swap, 1500);
+  const double t1 = keyframeTime(s.animation, 1), t2 = keyframeTime(s.animation, 2), t3 = keyframeTime(s.animation, 3);
+  const std::vector<float> p1 = s.animation.positionsAt(t1), p2 = s.animation.positionsAt(t2);
+  const std::vector<float> p3 = s.animation.positionsAt(t3);
+  std::vector<float> bad = p3;
+  bad[7] = std::nanf("");
+  const std::vector<float> times{0.0f, 0.5f, 1.0f};
+  const std::vector<std::span<const float>> good{p1, p2, p1}, badKeys{p3, bad, p1};  // p3 new, before the bad key
+  for (const Case& c : cases()) {
+    SCOPED_TRACE(describe(c));
+    auto rt = makeRuntime(s, c);
+    rt->updateShutter(times, good);
+    const std::vector<Ray> rays = raysFor(*rt, 400, 51);
+    std::vector<Hit> instant, blurred;
+    for (const Ray& ray : rays) instant.push_back(rt->closestHit(ray)), blurred.push_back(rt->closestHit(ray, 0.25f));
+    EXPECT_THROW(rt->updateShutter(times, badKeys), tsah::DataError);
+    ASSERT_EQ(rt->keyTimes().size(), 3u);
+    for (std::size_t r = 0; r < rays.size(); ++r) {
+      ASSERT_TRUE(sameBits(rt->closestHit(rays[r]), instant[r])) << "ray " << r;
+      ASSERT_TRUE(sameBits(rt->closestHit(rays[r], 0.25f), blurred[r])) << "ray " << r;
+    }
+  }
+}
+
 TEST(MotionBlurPipeline, ShutterIntervalCenteredOpenAndClamped) {
   const Scene s = makeScene(anim::GeneratorKind::Swap, 300);
   const anim::Animation& a = s.animation;

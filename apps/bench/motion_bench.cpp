@@ -107,7 +107,7 @@ nlohmann::json runMotionBlurComparison(const anim::Animation& a, const Bvh& tree
   j["embree_status"] = embreeStatus();
   std::vector<RuntimeMethod> methods;
   methods.push_back({"tsah0-mb", label + ", " + name(layout), "refit at the shutter's keys", {}, nlohmann::json::object()});
-  nlohmann::json keys = nlohmann::json::array();
+  nlohmann::json keys = nlohmann::json::array(), refitted = nlohmann::json::array();
 
 #if TSAH_HAVE_EMBREE
   // Embree's time of a shutter fraction: the animation's time, mapped onto the keyframes' evenly
@@ -139,6 +139,7 @@ nlohmann::json runMotionBlurComparison(const anim::Animation& a, const Bvh& tree
     const double updateMs = msSince(began);
     const std::vector<double> shutterKeys = motion::shutterKeys(a.times(), open, close);
     keys.push_back(shutterKeys.size());
+    refitted.push_back(rt->blurred() ? rt->keysRefitted() : 1u);  // the others reused from the frame before
     // Made from the toolkit's blurred frame (untimed); an instant shutter (open == close) is time 0.
     RayBatch batch = makeRayBatch(*rt, setup.camera(t), setup.lighting, settings);
     if (batch.times.empty())
@@ -171,6 +172,7 @@ nlohmann::json runMotionBlurComparison(const anim::Animation& a, const Bvh& tree
 #endif
   }
   j["keys_per_frame"] = keys;
+  j["keys_refitted_per_frame"] = refitted;
   j["methods"] = nlohmann::json::array();
 #if TSAH_HAVE_EMBREE
   methods[1].extra["agreement"] = toJson(agreement[0]);

@@ -25,10 +25,11 @@ const json* methodNamed(const json& blur, const std::string& name) {
 
 double rate(const json& method) { return number(method["average"]["mrays_per_s"], "total"); }
 
-double averageKeys(const json& blur) {
+// The mean of a per-frame count (keys_per_frame, keys_refitted_per_frame); 0 when absent.
+double averageKeys(const json& blur, const char* field = "keys_per_frame") {
   double sum = 0.0;
-  for (const json& k : blur.value("keys_per_frame", json::array())) sum += k.get<double>();
-  const std::size_t n = blur.value("keys_per_frame", json::array()).size();
+  for (const json& k : blur.value(field, json::array())) sum += k.get<double>();
+  const std::size_t n = blur.value(field, json::array()).size();
   return n ? sum / double(n) : 0.0;
 }
 
@@ -62,7 +63,11 @@ std::string motionBlurSection(const json& scene) {
      << formatSignificant(number(blur, "frame_interval")) << "; " << number(blur, "frames")
      << " frames, the same rays at the same times for every tracer — each pixel's rays at its time; the toolkit's "
      << blur.value("layout", "") << " refit at the shutter's keys (" << formatFixed(averageKeys(blur), 1)
-     << " keys per frame on average); Embree " << blur.value("embree_status", "")
+     << " keys per frame on average";
+  if (blur.contains("keys_refitted_per_frame"))
+    md << ", " << formatFixed(averageKeys(blur, "keys_refitted_per_frame"), 1)
+       << " refitted, the others reused from the frame before";
+  md << "); Embree " << blur.value("embree_status", "")
      << " motion-blur BVH built once over the keyframes";
   if (blur.contains("embree_mb_build"))
     md << " (" << number(blur["embree_mb_build"], "time_steps") << " time steps, "

@@ -36,17 +36,22 @@ template <class V>
 struct RayLanes {
   V org[3], dir[3], inv[3];
   uint32_t nearPlane[3], farPlane[3];  // rows of WideSoaNode::box holding each axis's near/far plane
+  V nearPadSign[3];                    // blurred boxes: -1 where the near plane is lo, else +1 (slabDistances)
+  V f, g;                              // blurred: the ray's place between the keys, and 1 - f
 };
 
 template <class V>
-inline RayLanes<V> rayLanes(const Ray& ray, const RayPrep& prep) {
+inline RayLanes<V> rayLanes(const Ray& ray, const RayPrep& prep, float f) {
   RayLanes<V> r;
+  r.f = V::set1(f);
+  r.g = V::set1(1.0f) - r.f;
   for (int a = 0; a < 3; ++a) {
     r.org[a] = V::set1(ray.org[a]);
     r.dir[a] = V::set1(ray.dir[a]);
     r.inv[a] = V::set1(prep.invDir[a]);
     r.nearPlane[a] = prep.invDir[a] >= 0.0f ? uint32_t(a) : uint32_t(a + 3);
     r.farPlane[a] = prep.invDir[a] >= 0.0f ? uint32_t(a + 3) : uint32_t(a);
+    r.nearPadSign[a] = V::set1(prep.invDir[a] >= 0.0f ? -1.0f : 1.0f);
   }
   return r;
 }
@@ -144,49 +149,117 @@ inline bool intersectLeaf(const WideView<V::N>& bvh, const Ray& ray, LazyPrep& p
   return found;
 }
 
-// A blurred leaf: the watertight test on each slot's triangle lerped at f (motion_blur.hpp).
+// A blurred leaf: each slot's triangle lerped at f between the two keys' vertex packets
+// (motion::lerpVertex's operations lane by lane) and tested with intersectWatertight's operations
+// lane by lane. A lane whose U, V or W is not clearly nonzero in float takes the scalar test (its
+// edge decision in double) on the same lerped vertices. Of the lanes that hit, the nearest wins
+// and the first lane among equal distances: what testing the slots one by one, each against the
+// nearest hit so far, returns.
 template <class V, bool AnyHit>
 inline bool intersectMotionLeaf(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, const Ray& ray,
-                                LazyPrep& prep, uint32_t first, uint32_t count, float& tmax, Hit& hit) {
+                                LazyPrep& lazy, const RayLanes<V>& r, uint32_t first, uint32_t count, float& tmax,
+                                Hit& hit) {
   constexpr uint32_t N = V::N;
-  const auto vertex = [&](uint32_t i) {
-    const Vec3 a{bvh.positions[3 * i], bvh.positions[3 * i + 1], bvh.positions[3 * i + 2]};
-    const Vec3 b{m.positions1[3 * i], m.positions1[3 * i + 1], m.positions1[3 * i + 2]};
-    return motion::lerpVertex(a, b, m.f);
-  };
+  const RayPrep& prep = lazy.watertight(ray);
+  const V zero = V::set1(0.0f);
+  const V sx = V::set1(prep.sx), sy = V::set1(prep.sy), sz = V::set1(prep.sz);
+  const int axis[3] = {prep.kx, prep.ky, prep.kz};
+  V org[3];
+  for (int i = 0; i < 3; ++i) org[i] = V::set1(prep.org[axis[i]]);
+  const auto nonzero = [&](V x) { return V::lt(x, zero) | V::gt(x, zero); };
   bool found = false;
-  for (uint32_t i = 0; i < count; ++i) {
-    const uint32_t slot = bvh.packets[first + i / N].slot[i % N];
-    const uint32_t* tri = bvh.indices + 3 * std::size_t(bvh.triIndex[slot]);
-    float t, u, v;
-    if (intersectWatertight(prep.watertight(ray), vertex(tri[0]), vertex(tri[1]), vertex(tri[2]), ray.tmin, tmax, t,
-                            u, v)) {
-      tmax = t;
-      hit = {t, u, v, bvh.triIndex[slot]};
-      found = true;
-      if (AnyHit) return true;
+  for (uint32_t p = 0; p < packetCount<N>(count); ++p) {
+    const KeyVertexPacket<N>& k0 = m.vertices0[first + p];
+    const KeyVertexPacket<N>& k1 = m.vertices1[first + p];
+    const uint32_t lanes = count - p * N < N ? count - p * N : N;
+    const uint32_t used = (1u << lanes) - 1u;
+    // Vertex k relative to the origin in the ray's axes, then sheared (x, y) and scaled (z).
+    V x[3], y[3], z[3];
+    for (int k = 0; k < 3; ++k) {
+      V rel[3];
+      for (int i = 0; i < 3; ++i) {
+        const int row = 3 * k + axis[i];
+        rel[i] = motion::lerpOf(V::load(k0.vertex[row]), V::load(k1.vertex[row]), r.f, r.g) - org[i];
+      }
+      x[k] = rel[0] - sx * rel[2];
+      y[k] = rel[1] - sy * rel[2];
+      z[k] = sz * rel[2];
     }
+    const V U = x[2] * y[1] - y[2] * x[1];
+    const V Vb = x[0] * y[2] - y[0] * x[2];
+    const V W = x[1] * y[0] - y[1] * x[0];
+    const uint32_t fallback = ~V::bits(nonzero(U) & nonzero(Vb) & nonzero(W)) & used;
+    const auto negative = V::lt(U, zero) | V::lt(Vb, zero) | V::lt(W, zero);
+    const auto positive = V::gt(U, zero) | V::gt(Vb, zero) | V::gt(W, zero);
+    const V det = U + Vb + W;
+    const V T = U * z[0] + Vb * z[1] + W * z[2];
+    const V rcp = V::set1(1.0f) / det;
+    const V tt = T * rcp;
+    const auto inRange = V::gt(tt, V::set1(ray.tmin)) & V::lt(tt, V::set1(tmax));
+    uint32_t hits = V::bits(V::andNot(negative & positive, nonzero(det) & inRange)) & used & ~fallback;
+    if (!(hits | fallback)) continue;
+    if (AnyHit && hits) {
+      hit.t = 0.0f;
+      hit.tri = bvh.triIndex[bvh.packets[first + p].slot[__builtin_ctz(hits)]];
+      return true;
+    }
+    alignas(32) float t[N], u[N], v[N];
+    V::store(t, tt);
+    V::store(u, Vb * rcp);
+    V::store(v, W * rcp);
+    for (uint32_t rest = fallback; rest; rest &= rest - 1) {
+      const uint32_t lane = uint32_t(__builtin_ctz(rest));
+      const auto vertex = [&](uint32_t k) { return motion::lerpVertex(k0.get(k, lane), k1.get(k, lane), m.f); };
+      if (intersectWatertight(prep, vertex(0), vertex(1), vertex(2), ray.tmin, tmax, t[lane], u[lane], v[lane])) {
+        if (AnyHit) {
+          hit.t = 0.0f;
+          hit.tri = bvh.triIndex[bvh.packets[first + p].slot[lane]];
+          return true;
+        }
+        hits |= 1u << lane;
+      }
+    }
+    if (!hits) continue;
+    uint32_t best = uint32_t(__builtin_ctz(hits));
+    for (uint32_t rest = hits & (hits - 1); rest; rest &= rest - 1) {
+      const uint32_t lane = uint32_t(__builtin_ctz(rest));
+      if (t[lane] < t[best]) best = lane;
+    }
+    tmax = t[best];
+    hit = {t[best], u[best], v[best], bvh.triIndex[bvh.packets[first + p].slot[best]]};
+    found = true;
   }
   return found;
 }
 
-// The six box rows of a node: loaded, or (blurred) lerped between the two keys and padded outward
-// (motion::lerpBox, lane by lane, operation for operation).
+// A node's entry and exit distances on each axis, (plane - org) * inv for the near and the far
+// plane as the ray's sign picks them (RayLanes): the planes loaded, or (blurred) lerped between the
+// two keys and padded outward, motion::lerpBox's operations lane by lane in its order. The planes
+// are loaded by the ray's plane index straight from the nodes and used axis by axis, so the lerped
+// values stay in registers (a six-row array indexed by plane would live on the stack). The pad is
+// subtracted from a lo plane and added to a hi plane: the ray's signed pad (RayLanes::nearPadSign,
+// -1 where the near plane is lo) is added to the near plane and subtracted from the far plane,
+// which rounds exactly as lerpBox's lo - pad and hi + pad (negation is exact).
 template <class V, bool Blurred>
-inline void nodeRows(const WideSoaNode<V::N>& node, const WideMotionFrame<V::N>& m, int32_t ref, V rows[6]) {
-  if constexpr (!Blurred) {
-    for (int i = 0; i < 6; ++i) rows[i] = V::load(node.box[i]);
-  } else {
-    const WideSoaNode<V::N>& node1 = m.nodes1[ref];
-    const V f = V::set1(m.f), g = V::set1(1.0f) - f;
-    for (int a = 0; a < 3; ++a) {
-      const V lo0 = V::load(node.box[a]), hi0 = V::load(node.box[a + 3]);
-      const V lo1 = V::load(node1.box[a]), hi1 = V::load(node1.box[a + 3]);
-      const V mag = V::max(V::max(V::abs(lo0), V::abs(hi0)), V::max(V::abs(lo1), V::abs(hi1)));
+inline void slabDistances(const WideSoaNode<V::N>& node, const WideMotionFrame<V::N>& m, int32_t ref,
+                          const RayLanes<V>& r, V tNear[3], V tFar[3]) {
+  for (int a = 0; a < 3; ++a) {
+    V nearPlane, farPlane;
+    if constexpr (!Blurred) {
+      nearPlane = V::load(node.box[r.nearPlane[a]]);
+      farPlane = V::load(node.box[r.farPlane[a]]);
+    } else {
+      const WideSoaNode<V::N>& node1 = m.nodes1[ref];
+      const V near0 = V::load(node.box[r.nearPlane[a]]), far0 = V::load(node.box[r.farPlane[a]]);
+      const V near1 = V::load(node1.box[r.nearPlane[a]]), far1 = V::load(node1.box[r.farPlane[a]]);
+      const V mag = V::max(V::max(V::abs(near0), V::abs(far0)), V::max(V::abs(near1), V::abs(far1)));
       const V pad = motion::padOf(mag, V::set1(motion::kPadPerMagnitude), V::set1(motion::kPadFloor));
-      rows[a] = motion::lerpOf(lo0, lo1, f, g) - pad;
-      rows[a + 3] = motion::lerpOf(hi0, hi1, f, g) + pad;
+      const V signedPad = pad * r.nearPadSign[a];
+      nearPlane = motion::lerpOf(near0, near1, r.f, r.g) + signedPad;
+      farPlane = motion::lerpOf(far0, far1, r.f, r.g) - signedPad;
     }
+    tNear[a] = (nearPlane - r.org[a]) * r.inv[a];
+    tFar[a] = (farPlane - r.org[a]) * r.inv[a];
   }
 }
 
@@ -203,12 +276,12 @@ inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, c
   if (bvh.rootCount == 0 && isLeafRef(bvh.rootRef)) return hit;  // empty tree
   LazyPrep prep(ray);
   float tmax = ray.tmax;
-  const RayLanes<V> r = rayLanes<V>(ray, prep.prep);
+  const RayLanes<V> r = rayLanes<V>(ray, prep.prep, Blurred ? m.f : 0.0f);
   if (isLeafRef(bvh.rootRef)) {
     float tEntry;
     if (!intersectBox(prep.prep, bvh.rootBox, ray.tmin, tmax, tEntry)) return hit;
     if constexpr (Blurred)
-      intersectMotionLeaf<V, AnyHit>(bvh, m, ray, prep, leafFirstSlot(bvh.rootRef), bvh.rootCount, tmax, hit);
+      intersectMotionLeaf<V, AnyHit>(bvh, m, ray, prep, r, leafFirstSlot(bvh.rootRef), bvh.rootCount, tmax, hit);
     else
       intersectLeaf<V, AnyHit>(bvh, ray, prep, r, leafFirstSlot(bvh.rootRef), bvh.rootCount, tmax, hit);
     return hit;
@@ -230,16 +303,10 @@ inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, c
   for (;;) {
     if (!isLeafRef(ref)) {
       const WideSoaNode<N>& node = bvh.nodes[ref];
-      V rows[6];
-      nodeRows<V, Blurred>(node, m, ref, rows);
-      const V tnx = (rows[r.nearPlane[0]] - r.org[0]) * r.inv[0];
-      const V tny = (rows[r.nearPlane[1]] - r.org[1]) * r.inv[1];
-      const V tnz = (rows[r.nearPlane[2]] - r.org[2]) * r.inv[2];
-      const V tfx = (rows[r.farPlane[0]] - r.org[0]) * r.inv[0];
-      const V tfy = (rows[r.farPlane[1]] - r.org[1]) * r.inv[1];
-      const V tfz = (rows[r.farPlane[2]] - r.org[2]) * r.inv[2];
-      const V tn = V::max(V::max(tnx, tny), V::max(tnz, vtmin));
-      const V tf = V::min(V::min(tfx, tfy), V::min(tfz, V::set1(tmax))) * farScale;
+      V tNear[3], tFar[3];
+      slabDistances<V, Blurred>(node, m, ref, r, tNear, tFar);
+      const V tn = V::max(V::max(tNear[0], tNear[1]), V::max(tNear[2], vtmin));
+      const V tf = V::min(V::min(tFar[0], tFar[1]), V::min(tFar[2], V::set1(tmax))) * farScale;
       uint32_t mask = V::bits(V::le(tn, tf));
       if (mask) {
         const uint32_t c0 = uint32_t(__builtin_ctz(mask));
@@ -299,7 +366,7 @@ inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, c
     } else {
       bool found;
       if constexpr (Blurred)
-        found = intersectMotionLeaf<V, AnyHit>(bvh, m, ray, prep, leafFirstSlot(ref), count, tmax, hit);
+        found = intersectMotionLeaf<V, AnyHit>(bvh, m, ray, prep, r, leafFirstSlot(ref), count, tmax, hit);
       else
         found = intersectLeaf<V, AnyHit>(bvh, ray, prep, r, leafFirstSlot(ref), count, tmax, hit);
       if (found && AnyHit) return hit;
@@ -334,35 +401,25 @@ inline void coordinateLanes(F& out, const float* positions, const uint32_t (*ver
 }
 
 
-template <uint32_t N, class D, class F, class I>
-TSAH_KERNEL void woopRowsKernel(const float* positions, const uint32_t* vertices, uint32_t lanes, WoopPacket<N>& pk,
-                                Aabb& bounds) {
-  uint32_t vertex[N][3];  // padding lanes repeat lane 0's triangle: finite values, masked out below
+// The nine coordinate vectors of a packet's lanes (f[3 * k + a]: coordinate a of vertex k); lanes
+// from `lanes` on repeat lane 0's triangle (finite values, masked out by the callers).
+template <uint32_t N, class F>
+inline void gatherPacket(const float* positions, const uint32_t* vertices, uint32_t lanes, F f[9]) {
+  uint32_t vertex[N][3];
   for (uint32_t lane = 0; lane < N; ++lane)
     for (int k = 0; k < 3; ++k) vertex[lane][k] = vertices[3 * (lane < lanes ? lane : 0) + k];
-  F f[9];
-  D v[3][3];
 #pragma GCC unroll 9
   for (int k = 0; k < 3; ++k)
 #pragma GCC unroll 3
-    for (int a = 0; a < 3; ++a) {
-      coordinateLanes(f[3 * k + a], positions, vertex, k, a, std::make_index_sequence<N>{});
-      v[k][a] = __builtin_convertvector(f[3 * k + a], D);
-    }
-  D rows[12], nn;
-  woopRowsDouble(v[0], v[1], v[2], rows, nn);
-  I keep;  // all ones for the lanes that get their rows, zero for padding and degenerate triangles
-  for (uint32_t lane = 0; lane < N; ++lane) keep[lane] = lane < lanes && woopNondegenerate(nn[lane]) ? -1 : 0;
-  for (int r = 0; r < 12; ++r) {
-    const F row = __builtin_convertvector(rows[r], F);
-    I bits;
-    std::memcpy(&bits, &row, sizeof bits);
-    bits &= keep;
-    std::memcpy(pk.row[r], &bits, sizeof bits);
-  }
-  // The box of the used lanes' vertices (padding lanes repeat lane 0): lane-wise over the three
-  // vertices (x < lo ? x : lo from the empty box, as the scalar refit compared, so a NaN
-  // coordinate is skipped), then across the lanes by halving rotations.
+    for (int a = 0; a < 3; ++a) coordinateLanes(f[3 * k + a], positions, vertex, k, a, std::make_index_sequence<N>{});
+}
+
+// The box of a gathered packet's triangles (padding lanes repeat lane 0): lane-wise over the three
+// vertices (x < lo ? x : lo from the empty box, as the scalar refit compared, so a NaN coordinate
+// is skipped), then across the lanes by halving rotations.
+template <uint32_t N, class F, class I>
+inline Aabb packetBounds(const F f[9]) {
+  Aabb bounds;
 #pragma GCC unroll 3
   for (int a = 0; a < 3; ++a) {
     F lo = F{} + 3.402823466e38f, hi = F{} - 3.402823466e38f;
@@ -392,6 +449,42 @@ TSAH_KERNEL void woopRowsKernel(const float* positions, const uint32_t* vertices
     bounds.lo[a] = lo[0];
     bounds.hi[a] = hi[0];
   }
+  return bounds;
+}
+
+template <uint32_t N, class D, class F, class I>
+TSAH_KERNEL void woopRowsKernel(const float* positions, const uint32_t* vertices, uint32_t lanes, WoopPacket<N>& pk,
+                                Aabb& bounds) {
+  F f[9];
+  gatherPacket<N>(positions, vertices, lanes, f);
+  D v[3][3];
+#pragma GCC unroll 9
+  for (int k = 0; k < 3; ++k)
+#pragma GCC unroll 3
+    for (int a = 0; a < 3; ++a) v[k][a] = __builtin_convertvector(f[3 * k + a], D);
+  D rows[12], nn;
+  woopRowsDouble(v[0], v[1], v[2], rows, nn);
+  I keep;  // all ones for the lanes that get their rows, zero for padding and degenerate triangles
+  for (uint32_t lane = 0; lane < N; ++lane) keep[lane] = lane < lanes && woopNondegenerate(nn[lane]) ? -1 : 0;
+  for (int r = 0; r < 12; ++r) {
+    const F row = __builtin_convertvector(rows[r], F);
+    I bits;
+    std::memcpy(&bits, &row, sizeof bits);
+    bits &= keep;
+    std::memcpy(pk.row[r], &bits, sizeof bits);
+  }
+  bounds = packetBounds<N, F, I>(f);
+}
+
+// The blurred refit's step at one key: the packet's vertices (KeyVertexPacket) and their box, no
+// Woop rows.
+template <uint32_t N, class F, class I>
+TSAH_KERNEL void keyVerticesKernel(const float* positions, const uint32_t* vertices, uint32_t lanes,
+                                   KeyVertexPacket<N>& out, Aabb& bounds) {
+  F f[9];
+  gatherPacket<N>(positions, vertices, lanes, f);
+  for (int r = 0; r < 9; ++r) std::memcpy(out.vertex[r], &f[r], sizeof f[r]);
+  bounds = packetBounds<N, F, I>(f);
 }
 
 template <class V>
@@ -432,6 +525,8 @@ WideKernels kernelTable(SimdIsa isa) {
   }
   k.woopRows4 = &woopRowsKernel<4, DoubleLanes4, FloatLanes4, IntLanes4>;
   k.woopRows8 = &woopRowsKernel<8, DoubleLanes8, FloatLanes8, IntLanes8>;
+  k.keyVertices4 = &keyVerticesKernel<4, FloatLanes4, IntLanes4>;
+  k.keyVertices8 = &keyVerticesKernel<8, FloatLanes8, IntLanes8>;
   return k;
 }
 

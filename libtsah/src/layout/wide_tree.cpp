@@ -29,10 +29,13 @@ bool usedSlot(const WideSoaNode<N>& node, uint32_t c) {
 
 template <uint32_t N>
 WideTree<N>::WideTree(const WideBvh& w, std::span<const uint32_t> indices, uint32_t threads, SimdIsa isa) {
-  if constexpr (N == 4)
+  if constexpr (N == 4) {
     woopRows_ = wideKernels(isa).woopRows4;
-  else
+    keyVertexRows_ = wideKernels(isa).keyVertices4;
+  } else {
     woopRows_ = wideKernels(isa).woopRows8;
+    keyVertexRows_ = wideKernels(isa).keyVertices8;
+  }
   if (w.width > N)
     throw tsah::DataError("wide tree: a " + std::to_string(w.width) + "-wide topology does not fit " +
                           std::to_string(N) + "-wide nodes");
@@ -80,14 +83,15 @@ WideTree<N>::WideTree(const WideBvh& w, std::span<const uint32_t> indices, uint3
 }
 
 template <uint32_t N>
-Aabb WideTree<N>::refitLeaf(uint32_t firstPacket, uint32_t count, const float* positions) {
+Aabb WideTree<N>::refitLeaf(uint32_t firstPacket, uint32_t count, const Target& target) {
   Aabb box;
   for (uint32_t first = 0; first < count; first += N) {
     const uint32_t packet = firstPacket + first / N;
     const uint32_t lanes = count - first < N ? count - first : N;
-    Aabb packetBox;  // rows and box of all lanes at once, in SIMD
-    woopRows_(positions, slotVertices_.data() + 3 * std::size_t(packetSlots_[packet]), lanes, packets_[packet],
-              packetBox);
+    const uint32_t* vertices = slotVertices_.data() + 3 * std::size_t(packetSlots_[packet]);
+    Aabb packetBox;  // rows and box of all lanes at once, in SIMD (both kernels give the same box)
+    if (target.woop) woopRows_(target.positions, vertices, lanes, packets_[packet], packetBox);
+    if (target.keyVertices) keyVertexRows_(target.positions, vertices, lanes, target.keyVertices[packet], packetBox);
     box.extend(packetBox);
   }
   return box;
@@ -117,10 +121,10 @@ Aabb nodeBounds(const WideSoaNode<N>& node) {
 }  // namespace
 
 template <uint32_t N>
-void WideTree<N>::refitLeaves(uint32_t i, const float* positions) {
+void WideTree<N>::refitLeaves(uint32_t i, const Target& target) {
   WideSoaNode<N>& node = nodes_[i];
   for (uint32_t c = 0; c < N && usedSlot(node, c); ++c)
-    if (isLeafRef(node.ref[c])) node.setChildBox(c, refitLeaf(leafFirstSlot(node.ref[c]), node.count[c], positions));
+    if (isLeafRef(node.ref[c])) node.setChildBox(c, refitLeaf(leafFirstSlot(node.ref[c]), node.count[c], target));
 }
 
 template <uint32_t N>
@@ -132,18 +136,28 @@ void WideTree<N>::refitInterior(uint32_t i) {
 
 template <uint32_t N>
 void WideTree<N>::refit(const float* positions, const ParallelFor& parallelFor) {
+  refitTo({positions, true, nullptr}, parallelFor);
+}
+
+template <uint32_t N>
+void WideTree<N>::refitKey(const float* positions, KeyVertexPacket<N>* keyVertices, const ParallelFor& parallelFor) {
+  refitTo({positions, false, keyVertices}, parallelFor);
+}
+
+template <uint32_t N>
+void WideTree<N>::refitTo(const Target& target, const ParallelFor& parallelFor) {
   if (isLeafRef(rootRef_)) {
-    rootBox_ = refitLeaf(leafFirstSlot(rootRef_), rootCount_, positions);
+    rootBox_ = refitLeaf(leafFirstSlot(rootRef_), rootCount_, target);
     return;
   }
   parallelFor(subtreeTasks_.size(), [&](std::size_t begin, std::size_t end) {
     for (std::size_t t = begin; t < end; ++t) {
       const auto [root, stop] = subtreeTasks_[t];
-      for (uint32_t i = root; i < stop; ++i) refitLeaves(i, positions);  // packets in memory order
+      for (uint32_t i = root; i < stop; ++i) refitLeaves(i, target);  // packets in memory order
       for (uint32_t i = stop; i-- > root;) refitInterior(i);  // children (larger indices) first
     }
   });
-  for (uint32_t i : topNodes_) refitLeaves(i, positions), refitInterior(i);
+  for (uint32_t i : topNodes_) refitLeaves(i, target), refitInterior(i);
   rootBox_ = nodeBounds(nodes_[0]);
 }
 

@@ -211,13 +211,17 @@ void CpuRuntime::setTree(FlatBvh tree) {
       subtreeTasks_, topNodes_);
 }
 
-void CpuRuntime::setPositions(std::span<const float> positions) {
+void CpuRuntime::checkPositions(std::span<const float> positions) const {
   if (positions.size() != std::size_t(vertexCount_) * 3)
     throw tsah::DataError("runtime: got " + std::to_string(positions.size()) + " coordinates, expected " +
                           std::to_string(std::size_t(vertexCount_) * 3));
   // The limit every imported animation obeys: a NaN or huge coordinate would make every box infinite.
   if (const std::size_t bad = firstBadCoordinate(positions); bad < positions.size())
     throw tsah::DataError("runtime: vertex " + std::to_string(bad / 3) + " " + describeBadCoordinate(positions[bad]));
+}
+
+void CpuRuntime::setPositions(std::span<const float> positions) {
+  checkPositions(positions);
   positions_.assign(positions.begin(), positions.end());
 }
 
@@ -322,12 +326,14 @@ CpuRuntime::RebuildTimings CpuRuntime::rebuild(std::span<const float> positions,
 }
 
 Hit CpuRuntime::closestHit(const Ray& ray) const {
+  if (blurred()) return closestHit(ray, 1.0f);  // the instant triangles are not kept while blurred
   if (wide8_) return kernels_->closest8(view8_, ray);
   if (wide4_) return kernels_->closest4(view4_, ray);
   return tsah::closestHit(binaryView(), ray);
 }
 
 bool CpuRuntime::anyHit(const Ray& ray, AnyHitOrder order) const {
+  if (blurred()) return anyHit(ray, 1.0f, order);
   if (wide8_) return kernels_->any8(view8_, ray, order);
   if (wide4_) return kernels_->any4(view4_, ray, order);
   return tsah::anyHit(binaryView(), ray);
@@ -357,6 +363,7 @@ BvhView CpuRuntime::binaryView() const {
 }
 
 Aabb CpuRuntime::bounds() const {
+  if (blurred()) return keyRootBoxes_.back();
   if (wide4_) return wide4_->bounds();
   if (wide8_) return wide8_->bounds();
   return tree_.rootBoxes[0];

@@ -1,11 +1,12 @@
 // CpuRuntime's motion blur (docs/motion-blur.md): the current tree refitted at every key of a
-// shutter by the instant refit, one node set, root box and position set kept per key.
+// shutter, one node set, root box and position set (and in the wide layouts one vertex packet set)
+// kept per key; keys the previous shutter already had are reused.
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <string>
 
 #include "tsah/base/error.hpp"
-#include "tsah/layout/motion_blur.hpp"
 #include "tsah/base/memory.hpp"
 #include "tsah/layout/motion_blur.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
@@ -13,6 +14,7 @@
 namespace tsah {
 
 void CpuRuntime::clearShutter() {
+  keysRefitted_ = 0;
   keyTimes_.clear();
   keyNodes_.clear();
   keyRootBoxes_.clear();
@@ -22,30 +24,92 @@ void CpuRuntime::clearShutter() {
   motionView_ = MotionBvhView{};
 }
 
-template <uint32_t N>
-void CpuRuntime::keepWideKey(const WideTree<N>& tree, std::vector<WideSoaNode<N>>& keyNodes, std::size_t key) {
-  const auto nodes = tree.nodes();
-  keyNodes.resize((key + 1) * nodes.size());
-  std::copy(nodes.begin(), nodes.end(), keyNodes.begin() + std::ptrdiff_t(key * nodes.size()));
-}
-
-// The view of key s with the lerped root box, and key s + 1 with f, for one ray's time.
+// The view of key s with the lerped root box (of a leaf root), and key s + 1 with f, for one ray's
+// time.
 template <uint32_t N>
 std::pair<WideView<N>, WideMotionFrame<N>> CpuRuntime::motionFrame(const WideView<N>& view,
-                                                                   const std::vector<WideSoaNode<N>>& keyNodes,
+                                                                   const std::vector<WideKey<N>>& keys,
                                                                    float time) const {
   const motion::Segment seg = motion::segmentAt(keyTimes_.data(), int(keyTimes_.size()), time);
   const std::size_t k0 = std::size_t(seg.index), k1 = k0 + 1;
-  const std::size_t nodes = keyNodes.size() / keyTimes_.size(), floats = std::size_t(vertexCount_) * 3;
   WideView<N> v = view;
-  v.nodes = keyNodes.data() + k0 * nodes;
-  v.positions = keyPositions_.data() + k0 * floats;
-  v.rootBox = motion::lerpBox(keyRootBoxes_[k0], keyRootBoxes_[k1], seg.f);
+  v.nodes = keys[k0].nodes.data();
+  v.positions = keyPositions_.data() + k0 * std::size_t(vertexCount_) * 3;
+  // The kernels test the root box of a leaf root only (an interior root's children are tested).
+  if (isLeafRef(v.rootRef)) v.rootBox = motion::lerpBox(keyRootBoxes_[k0], keyRootBoxes_[k1], seg.f);
   WideMotionFrame<N> m;
-  m.nodes1 = keyNodes.data() + k1 * nodes;
-  m.positions1 = keyPositions_.data() + k1 * floats;
+  m.nodes1 = keys[k1].nodes.data();
+  m.vertices0 = keys[k0].vertices.data();
+  m.vertices1 = keys[k1].vertices.data();
   m.f = seg.f;
   return {v, m};
+}
+
+namespace {
+
+bool sameBits(std::span<const float> a, std::span<const float> b) {
+  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size_bytes()) == 0;
+}
+
+// One key's block of a per-key array (keys of `size` elements each).
+template <class T>
+std::span<T> keyBlock(std::vector<T>& sets, std::size_t key, std::size_t size) {
+  return std::span<T>(sets).subspan(key * size, size);
+}
+
+// The wide sets of the next shutter's keys (reused[k]: the old key that new key k reuses, or
+// old.size() when it is refitted): a reused key's set is moved (copied when two new keys reuse it),
+// and the old sets no key reuses go to the keys to refit as their buffers.
+template <class WideKey>
+std::vector<WideKey> passOnWideKeys(std::vector<WideKey>& old, const std::vector<std::size_t>& reused) {
+  std::vector<WideKey> next(reused.size());
+  std::vector<std::size_t> movedTo(old.size(), reused.size());
+  for (std::size_t k = 0; k < reused.size(); ++k) {
+    const std::size_t j = reused[k];
+    if (j == old.size()) continue;
+    if (movedTo[j] < reused.size()) {
+      next[k] = next[movedTo[j]];
+    } else {
+      next[k] = std::move(old[j]);
+      movedTo[j] = k;
+    }
+  }
+  std::size_t spare = 0;
+  for (std::size_t k = 0; k < reused.size(); ++k) {
+    if (reused[k] != old.size()) continue;
+    while (spare < old.size() && movedTo[spare] < reused.size()) ++spare;
+    if (spare == old.size()) break;
+    next[k] = std::move(old[spare++]);
+  }
+  return next;
+}
+
+}  // namespace
+
+// The refit of the current tree at one key (its positions already checked) into the key's blocks:
+// the boxes, and in a wide layout the key's vertex packets (no Woop rows: a blurred frame reads
+// none); the binary layout's refit runs on the runtime's own positions.
+void CpuRuntime::refitShutterKey(std::span<const float> positions, ShutterKeys& out, std::size_t key) {
+  const auto parallel = [this](std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) {
+    parallelFor(n, 1, body);
+  };
+  const auto wideKey = [&](auto& tree, auto& set) {
+    set.vertices.resize(tree.packets().size());  // a dropped key's buffers keep their size
+    tree.refitKey(positions.data(), set.vertices.data(), parallel);
+    set.nodes.assign(tree.nodes().begin(), tree.nodes().end());
+    out.rootBoxes[key] = tree.bounds();
+  };
+  if (wide4_) {
+    wideKey(*wide4_, out.wide4[key]);
+  } else if (wide8_) {
+    wideKey(*wide8_, out.wide8[key]);
+  } else {
+    positions_.assign(positions.begin(), positions.end());
+    refitAndWoop();
+    std::copy_n(tree_.nodes.begin(), tree_.interiorCount, keyBlock(out.nodes, key, tree_.interiorCount).begin());
+    out.rootBoxes[key] = tree_.rootBoxes[0];
+  }
+  std::copy(positions.begin(), positions.end(), keyBlock(out.positions, key, positions.size()).begin());
 }
 
 void CpuRuntime::updateShutter(std::span<const float> keyTimes,
@@ -61,46 +125,87 @@ void CpuRuntime::updateShutter(std::span<const float> keyTimes,
     if (keyPositions[k].size() != floats)
       throw tsah::DataError("runtime: key " + std::to_string(k) + " has " + std::to_string(keyPositions[k].size()) +
                             " coordinates, expected " + std::to_string(floats));
-  const std::size_t nodes = wide4_   ? wide4_->nodes().size() * sizeof(WideSoaNode<4>)
-                            : wide8_ ? wide8_->nodes().size() * sizeof(WideSoaNode<8>)
-                                     : tree_.interiorCount * sizeof(GpuBvhNode);
-  checkFitsInMemory(keys * (nodes + floats * sizeof(float) + sizeof(Aabb)), "runtime",
+  const std::size_t nodeBytes = wide4_   ? wide4_->nodes().size() * sizeof(WideSoaNode<4>)
+                                : wide8_ ? wide8_->nodes().size() * sizeof(WideSoaNode<8>)
+                                         : tree_.interiorCount * sizeof(GpuBvhNode);
+  const std::size_t vertexBytes = wide4_   ? wide4_->packets().size() * sizeof(KeyVertexPacket<4>)
+                                  : wide8_ ? wide8_->packets().size() * sizeof(KeyVertexPacket<8>)
+                                           : 0;
+  checkFitsInMemory(keys * (nodeBytes + vertexBytes + floats * sizeof(float) + sizeof(Aabb)), "runtime",
                     "a shutter of " + std::to_string(keys) + " keys");
-  clearShutter();
-  // The instant refit at each key; the layout traced keeps its node set per key (the wide layouts
-  // do not refit the binary tree).
-  const bool wide = wide4_ || wide8_;
-  const std::size_t nodeCount = wide ? 0 : tree_.interiorCount;
-  std::vector<GpuBvhNode> nodeSets(keys * nodeCount);
-  std::vector<Aabb> rootBoxes(keys);
-  std::vector<float> positionSets(keys * floats);
+  // A key whose positions equal, bit for bit, a key of the previous shutter keeps that key's refit
+  // (consecutive frames whose shutters meet share the key between them): the refit is a function
+  // of the tree and the positions, and the tree has not changed since (a tree change clears the
+  // shutter).
+  const std::size_t oldKeys = keyTimes_.size();
+  std::vector<std::size_t> reused(keys, oldKeys);
+  for (std::size_t k = 0; k < keys; ++k)
+    for (std::size_t j = 0; j < oldKeys; ++j)
+      if (sameBits(keyPositions[k], std::span<const float>(keyPositions_).subspan(j * floats, floats))) {
+        reused[k] = j;
+        break;
+      }
+  // Every key to refit is checked first, so that an error leaves the runtime as it was.
+  for (std::size_t k = 0; k < keys; ++k)
+    if (reused[k] == oldKeys) checkPositions(keyPositions[k]);
+  ShutterKeys next;
+  next.nodes.resize(wide4_ || wide8_ ? 0 : keys * tree_.interiorCount);
+  next.rootBoxes.resize(keys);
+  next.positions.resize(keys * floats);
+  if (wide4_) next.wide4 = passOnWideKeys(keyWide4_, reused);
+  if (wide8_) next.wide8 = passOnWideKeys(keyWide8_, reused);
+  uint32_t refitted = 0;
   for (std::size_t k = 0; k < keys; ++k) {
-    setPositions(keyPositions[k]);
-    refitAndWoop();
-    if (wide4_) keepWideKey(*wide4_, keyWide4_, k);
-    if (wide8_) keepWideKey(*wide8_, keyWide8_, k);
-    if (!wide) std::copy_n(tree_.nodes.begin(), nodeCount, nodeSets.begin() + std::ptrdiff_t(k * nodeCount));
-    rootBoxes[k] = bounds();
-    std::copy(positions_.begin(), positions_.end(), positionSets.begin() + std::ptrdiff_t(k * floats));
+    if (reused[k] < oldKeys) {
+      copyShutterKey(reused[k], next, k);
+    } else {
+      refitShutterKey(keyPositions[k], next, k);
+      ++refitted;
+    }
   }
+  // The runtime's positions are the last key's (the renderer's smooth normals read them).
+  if (const std::span<const float> last = keyPositions[keys - 1]; !sameBits(positions_, last))
+    positions_.assign(last.begin(), last.end());
+  // The wide view's tree fields (root, packets' slots, triangle ids) for motionFrame, also when no
+  // update() came before.
+  if (wide4_) view4_ = wide4_->view(indices_.data(), positions_.data());
+  if (wide8_) view8_ = wide8_->view(indices_.data(), positions_.data());
+  keysRefitted_ = refitted;
   keyTimes_.assign(keyTimes.begin(), keyTimes.end());
-  keyNodes_ = std::move(nodeSets);
-  keyRootBoxes_ = std::move(rootBoxes);
-  keyPositions_ = std::move(positionSets);
+  keyNodes_ = std::move(next.nodes);
+  keyRootBoxes_ = std::move(next.rootBoxes);
+  keyPositions_ = std::move(next.positions);
+  keyWide4_ = std::move(next.wide4);
+  keyWide8_ = std::move(next.wide8);
   // The key positions, times and triangles in every layout (the renderer's blurred surfaces read
   // them); the binary key nodes in bvh2 only.
+  const bool wide = wide4_ || wide8_;
   MotionBvhView& v = motionView_;
   v.keyNodes = wide ? nullptr : keyNodes_.data();
   v.keyRootBoxes = keyRootBoxes_.data();
   v.keyPositions = keyPositions_.data();
   v.keyTimes = keyTimes_.data();
   v.keyCount = uint32_t(keys);
-  v.nodeCount = uint32_t(nodeCount);
+  v.nodeCount = wide ? 0u : tree_.interiorCount;
   v.vertexCount = vertexCount_;
   v.triIndex = tree_.triIndex.data();
   v.indices = indices_.data();
   v.rootRef = tree_.rootRef;
   v.rootCount = tree_.rootCount;
+}
+
+// Key `from` of the current shutter into key `to` of the next: its positions, root box and
+// binary nodes (the wide sets are passed on by passOnWideKeys).
+void CpuRuntime::copyShutterKey(std::size_t from, ShutterKeys& next, std::size_t to) const {
+  const std::size_t keys = keyTimes_.size();
+  const auto copy = [&](const auto& sets, auto& into) {
+    if (sets.empty()) return;
+    const std::size_t size = sets.size() / keys;
+    std::copy_n(sets.begin() + std::ptrdiff_t(from * size), size, into.begin() + std::ptrdiff_t(to * size));
+  };
+  copy(keyNodes_, next.nodes);
+  copy(keyPositions_, next.positions);
+  next.rootBoxes[to] = keyRootBoxes_[from];
 }
 
 Hit CpuRuntime::closestHit(const Ray& ray, float time) const {

@@ -24,12 +24,22 @@ void checkKeyTimes(std::span<const float> keyTimes, std::size_t positionSets, co
 // The key times of the shutter [open, close]: open, every keyframe time strictly inside, close
 // (one key when open == close). Between two consecutive keys every vertex moves linearly, because
 // the animation interpolates linearly between its keyframes. keyframeTimes: increasing.
+// A keyframe whose shutter fraction (keyFractions) rounds to the previous key's or to 1 in float
+// is left out: the runtimes take strictly increasing float fractions, and such a keyframe lies
+// within a float rounding of the shutter of that key (e.g. a shutter ending an ulp after it).
 inline std::vector<double> shutterKeys(std::span<const double> keyframeTimes, double open,
                                        double close) {
   std::vector<double> keys{open};
   if (close <= open) return keys;
-  for (double t : keyframeTimes)
-    if (t > open && t < close) keys.push_back(t);
+  float previous = 0.0f;
+  for (double t : keyframeTimes) {
+    if (!(t > open && t < close)) continue;
+    const float fraction = static_cast<float>((t - open) / (close - open));  // keyFractions' value
+    if (fraction > previous && fraction < 1.0f) {
+      keys.push_back(t);
+      previous = fraction;
+    }
+  }
   keys.push_back(close);
   return keys;
 }

@@ -79,10 +79,25 @@ struct alignas(N >= 8 ? 32 : 16) WoopPacket {
   }
 };
 
+// A blurred frame's triangles at one key, one record per Woop packet (the same lanes):
+// vertex[3 * k + a][lane] is coordinate a (x, y, z) of vertex k (0..2) of the lane's triangle at the
+// key. Padding lanes repeat lane 0's triangle. The blurred leaf test lerps two keys' records lane
+// by lane instead of gathering each vertex through the index array.
+template <uint32_t N>
+struct alignas(N >= 8 ? 32 : 16) KeyVertexPacket {
+  static_assert(N == 4 || N == 8, "wide layouts are 4 or 8 wide");
+  float vertex[9][N];
+
+  TSAH_HD Vec3 get(uint32_t k, uint32_t lane) const {
+    return {vertex[3 * k][lane], vertex[3 * k + 1][lane], vertex[3 * k + 2][lane]};
+  }
+};
+
 static_assert(sizeof(WideSoaNode<4>) == 128 && alignof(WideSoaNode<4>) == 16);
 static_assert(sizeof(WideSoaNode<8>) == 256 && alignof(WideSoaNode<8>) == 32);
 static_assert(sizeof(WoopPacket<4>) == 208 && alignof(WoopPacket<4>) == 16);
 static_assert(sizeof(WoopPacket<8>) == 416 && alignof(WoopPacket<8>) == 32);
+static_assert(sizeof(KeyVertexPacket<4>) == 144 && sizeof(KeyVertexPacket<8>) == 288);
 static_assert(std::is_trivially_copyable_v<WideSoaNode<8>> && std::is_standard_layout_v<WideSoaNode<8>>);
 static_assert(std::is_trivially_copyable_v<WoopPacket<8>> && std::is_standard_layout_v<WoopPacket<8>>);
 
@@ -108,13 +123,15 @@ struct WideView {
 };
 
 // What a blurred frame (docs/motion-blur.md) adds to the WideView of key s for one ray: the nodes
-// and positions of key s + 1 and the ray's place f between them. The view's nodes, positions and
-// root box are then key s's (the root box already lerped); the Woop packets are not read, only
-// their slots.
+// of key s + 1, the triangles' vertices at both keys (one KeyVertexPacket per Woop packet) and the
+// ray's place f between them. The view's nodes and positions are then key s's, and its root box
+// lerped at f when the root is a leaf (an interior root's box is not read); the Woop packets are
+// not read, only their slots.
 template <uint32_t N>
 struct WideMotionFrame {
   const WideSoaNode<N>* nodes1 = nullptr;
-  const float* positions1 = nullptr;
+  const KeyVertexPacket<N>* vertices0 = nullptr;
+  const KeyVertexPacket<N>* vertices1 = nullptr;
   float f = 0.0f;
 };
 

@@ -66,6 +66,12 @@ struct WideKernels {
                     Aabb& bounds) = nullptr;
   void (*woopRows8)(const float* positions, const uint32_t* vertices, uint32_t lanes, WoopPacket<8>& packet,
                     Aabb& bounds) = nullptr;
+  // The blurred refit's step (WideTree::refitKey), in every table: as woopRows, but the lanes'
+  // vertices into a KeyVertexPacket (padding lanes repeat lane 0's) instead of Woop rows.
+  void (*keyVertices4)(const float* positions, const uint32_t* vertices, uint32_t lanes, KeyVertexPacket<4>& out,
+                       Aabb& bounds) = nullptr;
+  void (*keyVertices8)(const float* positions, const uint32_t* vertices, uint32_t lanes, KeyVertexPacket<8>& out,
+                       Aabb& bounds) = nullptr;
 };
 
 // The kernels of isa; throws tsah::ConfigError when it is not supported (isaSupported).

@@ -33,6 +33,10 @@ class WideTree {
 
   // This frame's vertices (xyz per vertex; every vertex index of the triangles must be in range).
   void refit(const float* positions, const ParallelFor& parallelFor);
+  // The blurred refit at one key (docs/motion-blur.md): every box as refit() computes it, and in
+  // keyVertices[p] (one per packet) the vertices of packet p's triangles. The Woop packets keep the
+  // last refit()'s rows (a blurred frame does not read them).
+  void refitKey(const float* positions, KeyVertexPacket<N>* keyVertices, const ParallelFor& parallelFor);
 
   WideView<N> view(const uint32_t* indices, const float* positions) const;
   Aabb bounds() const { return rootBox_; }
@@ -44,14 +48,23 @@ class WideTree {
   uint32_t rootCount() const { return rootCount_; }
 
  private:
-  Aabb refitLeaf(uint32_t firstPacket, uint32_t count, const float* positions);
+  // What a refit writes besides the boxes: the Woop packets, or a key's vertex packets.
+  struct Target {
+    const float* positions;
+    bool woop;
+    KeyVertexPacket<N>* keyVertices;
+  };
+  void refitTo(const Target& target, const ParallelFor& parallelFor);
+  Aabb refitLeaf(uint32_t firstPacket, uint32_t count, const Target& target);
   // A refit task computes its nodes' leaf children first, in increasing packet order (so the
   // packet stores stream forward through memory), then their interior children, bottom-up.
-  void refitLeaves(uint32_t node, const float* positions);
+  void refitLeaves(uint32_t node, const Target& target);
   void refitInterior(uint32_t node);
 
   void (*woopRows_)(const float* positions, const uint32_t* vertices, uint32_t lanes, WoopPacket<N>& packet,
                     Aabb& bounds) = nullptr;
+  void (*keyVertexRows_)(const float* positions, const uint32_t* vertices, uint32_t lanes, KeyVertexPacket<N>& out,
+                         Aabb& bounds) = nullptr;
   std::vector<WideSoaNode<N>> nodes_;
   std::vector<WoopPacket<N>> packets_;
   // The slot of each packet's lane 0 (its lanes hold consecutive slots): the refit reads this

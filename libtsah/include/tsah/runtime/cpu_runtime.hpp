@@ -96,7 +96,8 @@ class CpuRuntime {
   uint32_t treeCount() const { return setTrees_.empty() ? 1u : static_cast<uint32_t>(setTrees_.size()); }
   uint32_t currentTree() const { return current_; }
 
-  // Nearest hit / any hit in (ray.tmin, ray.tmax) in the current frame, in the runtime's layout.
+  // Nearest hit / any hit in (ray.tmin, ray.tmax) in the current frame, in the runtime's layout
+  // (blurred: at time 1, below).
   // `order` picks the wide layouts' any-hit child order (the answer is the same; bvh2 ignores it):
   // the default for long rays such as shadow rays, AnyHitOrder::TreeOrder for short ones (ambient
   // occlusion).
@@ -107,11 +108,19 @@ class CpuRuntime {
   // keyPositions[k] = vertexCount*3 floats at key k, keyTimes[k] the key's shutter fraction (first
   // 0, last 1, increasing). One key is update(keyPositions[0]). Throws tsah::ConfigError for bad key
   // times or a key count that differs from the position sets, tsah::DataError for a position set of
-  // the wrong size, tsah::Failure when the key sets do not fit in memory. update(), rebuild() and
-  // selectTreeAt() return to the instant state.
+  // the wrong size or a bad coordinate (as update()), tsah::Failure when the key sets do not fit in
+  // memory; an error leaves the runtime as it was. update(), rebuild() and
+  // selectTreeAt() return to the instant state. A key whose positions equal, bit for bit, a key of
+  // the previous updateShutter keeps that key's refit (frames whose shutters meet share the key
+  // between them), so a frame costs one refit per new key; the key sets equal a fresh update's.
+  // While blurred, positions() and bounds() are the last key's, closestHit(ray) / anyHit(ray)
+  // trace at time 1 (the last key), and the instant triangles (woop(), the wide trees' packet
+  // rows) and binary tree (tree(), view()) are not kept up to date (a blurred frame reads none).
   void updateShutter(std::span<const float> keyTimes, std::span<const std::span<const float>> keyPositions);
   // True after updateShutter with two keys or more (until update()).
   bool blurred() const { return !keyTimes_.empty(); }
+  // How many keys the last updateShutter refitted (the others were reused); 0 when not blurred.
+  uint32_t keysRefitted() const { return keysRefitted_; }
   std::span<const float> keyTimes() const { return keyTimes_; }
   // Nearest hit / any hit at the ray's time, a shutter fraction in [0, 1] (outside: the nearer end).
   // Not blurred: closestHit(ray) / anyHit(ray, order).
@@ -121,10 +130,17 @@ class CpuRuntime {
   // every layout; the binary key nodes (keyNodes) in bvh2 only, null in the wide layouts, which keep
   // their own node set per key and trace through closestHit / anyHit(ray, time).
   const MotionBvhView& motionView() const { return motionView_; }
-  // The wide layouts' blurred node sets: keyTimes().size() blocks of wide4()/wide8()->nodes().size()
-  // nodes, one per key (empty when not blurred or in another layout).
-  std::span<const WideSoaNode<4>> keyWideNodes4() const { return keyWide4_; }
-  std::span<const WideSoaNode<8>> keyWideNodes8() const { return keyWide8_; }
+  // The wide layouts' blurred sets of key k < keyTimes().size(): its nodes (in wide4()/wide8()->nodes()'s
+  // order) and its triangles, one KeyVertexPacket per Woop packet (empty when not blurred, k is
+  // past the keys, or in another layout).
+  std::span<const WideSoaNode<4>> keyWideNodes4(std::size_t k) const { return wideKeyPart(keyWide4_, k, &WideKey<4>::nodes); }
+  std::span<const WideSoaNode<8>> keyWideNodes8(std::size_t k) const { return wideKeyPart(keyWide8_, k, &WideKey<8>::nodes); }
+  std::span<const KeyVertexPacket<4>> keyVertexPackets4(std::size_t k) const {
+    return wideKeyPart(keyWide4_, k, &WideKey<4>::vertices);
+  }
+  std::span<const KeyVertexPacket<8>> keyVertexPackets8(std::size_t k) const {
+    return wideKeyPart(keyWide8_, k, &WideKey<8>::vertices);
+  }
 
   const LayoutInfo& layoutInfo() const { return info_; }
   // The binary tree and its view: bvh2 only (the wide layouts do not refit the binary tree; both
@@ -150,6 +166,7 @@ class CpuRuntime {
   FlatBvh topologyOf(const FlatBvh& tree) const;  // frame 0's block, validated against this runtime
   void setWideTree(const Bvh& binary, bool reportCosts);
   BvhView binaryView() const;
+  void checkPositions(std::span<const float> positions) const;  // count and coordinates (update's errors)
   void setPositions(std::span<const float> positions);
   void refitAndWoop();
   void clearShutter();
@@ -185,17 +202,37 @@ class CpuRuntime {
   // Motion blur: the key times and, per key, the refitted nodes, root box and positions (empty
   // when not blurred).
   std::vector<float> keyTimes_;
+  uint32_t keysRefitted_ = 0;
   std::vector<GpuBvhNode> keyNodes_;
   std::vector<Aabb> keyRootBoxes_;
   std::vector<float> keyPositions_;
   MotionBvhView motionView_;
-  std::vector<WideSoaNode<4>> keyWide4_;  // wide layouts: one node set per key
-  std::vector<WideSoaNode<8>> keyWide8_;
+  // Wide layouts: per key its own node set and vertex packets, so that a key reused by the next
+  // shutter moves instead of being copied, and a new key refits into a dropped key's buffers.
   template <uint32_t N>
-  void keepWideKey(const WideTree<N>& tree, std::vector<WideSoaNode<N>>& keyNodes, std::size_t key);
+  struct WideKey {
+    std::vector<WideSoaNode<N>> nodes;
+    std::vector<KeyVertexPacket<N>> vertices;
+  };
+  std::vector<WideKey<4>> keyWide4_;
+  std::vector<WideKey<8>> keyWide8_;
+  template <uint32_t N, class T>
+  static std::span<const T> wideKeyPart(const std::vector<WideKey<N>>& keys, std::size_t k,
+                                        std::vector<T> WideKey<N>::*part) {
+    return k < keys.size() ? std::span<const T>(keys[k].*part) : std::span<const T>();
+  }
+  // The per-key sets of a shutter being assembled (the members above, key by key).
+  struct ShutterKeys {
+    std::vector<GpuBvhNode> nodes;
+    std::vector<WideKey<4>> wide4;
+    std::vector<WideKey<8>> wide8;
+    std::vector<Aabb> rootBoxes;
+    std::vector<float> positions;
+  };
+  void refitShutterKey(std::span<const float> positions, ShutterKeys& out, std::size_t key);
+  void copyShutterKey(std::size_t from, ShutterKeys& next, std::size_t to) const;
   template <uint32_t N>
-  std::pair<WideView<N>, WideMotionFrame<N>> motionFrame(const WideView<N>& view,
-                                                          const std::vector<WideSoaNode<N>>& keyNodes,
+  std::pair<WideView<N>, WideMotionFrame<N>> motionFrame(const WideView<N>& view, const std::vector<WideKey<N>>& keys,
                                                           float time) const;
 };
 
