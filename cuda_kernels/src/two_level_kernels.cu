@@ -1,6 +1,8 @@
 // The two-level runtime's kernels: instance world boxes, the TLAS refit over them, and the trace
-// through instances with the CPU's traversal loop (tsah/layout/traversal.hpp) at both levels.
+// through instances: the TLAS by the CPU's traversal loop (tsah/layout/traversal.hpp), each BLAS by
+// the binary layout's device loop (bvh2_traversal.cuh).
 // Compiled with -fmad=false (see CMakeLists.txt): boxes and hits round as on the CPU.
+#include "bvh2_traversal.cuh"
 #include "launch.hpp"
 #include "refit_walk.cuh"
 #include "triangle_boxes.cuh"
@@ -102,26 +104,26 @@ struct TlasFrame {
     const InstanceState& inst = scene.instances[triIndex[s]];
     if (!inst.visible) return false;
     const BlasView& view = scene.views[inst.view];
-    BvhView blas;
+    // The BLAS through the binary layout's device loop (bvh2_traversal.cuh): the flat runtime's.
+    TraceScene blas;
     blas.nodes = view.nodes;
     blas.woop = view.woop;
     blas.triIndex = view.triIndex;
     blas.indices = view.indices;
     blas.positions = view.positions;
-    blas.rootRef = view.root->ref;
-    blas.rootCount = view.root->count;
-    blas.rootBox = view.root->box;
+    blas.root = view.root;
+    const RootInfo root = *view.root;
     Ray local = ray;
     local.org = transformPoint(inst.toInstance, ray.org);
     local.dir = transformVector(inst.toInstance, ray.dir);
     local.tmax = tmax;
     if (AnyHit) {
-      if (!anyHit(blas, local)) return false;
+      if (!bvh2AnyHit(blas, root, local)) return false;
       t = tmax;
       u = v = 0.0f;
       return true;
     }
-    const Hit h = closestHit(blas, local);
+    const Hit h = bvh2ClosestHit(blas, root, local);
     if (!h.valid() || !(h.t < tmax)) return false;
     t = h.t;
     u = h.u;
