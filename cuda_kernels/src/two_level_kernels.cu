@@ -6,7 +6,7 @@
 #include "launch.hpp"
 #include "refit_walk.cuh"
 #include "triangle_boxes.cuh"
-#include "tsah/core/box_transform.hpp"
+#include "tsah/core/instance_transform.hpp"
 #include "tsah/layout/traversal.hpp"
 #include "two_level_kernels.hpp"
 
@@ -77,15 +77,6 @@ __global__ void __launch_bounds__(kTlasBlockThreads)
   blockRefit(nodes, nodeParent, leaves, leafCount, interiorCount, leafBoxOf, root, shared);
 }
 
-__device__ Vec3 transformPoint(const float* m, const Vec3& p) {
-  return {m[0] * p.x + m[1] * p.y + m[2] * p.z + m[3], m[4] * p.x + m[5] * p.y + m[6] * p.z + m[7],
-          m[8] * p.x + m[9] * p.y + m[10] * p.z + m[11]};
-}
-__device__ Vec3 transformVector(const float* m, const Vec3& d) {
-  return {m[0] * d.x + m[1] * d.y + m[2] * d.z, m[4] * d.x + m[5] * d.y + m[6] * d.z,
-          m[8] * d.x + m[9] * d.y + m[10] * d.z};
-}
-
 // What the shared traversal loop reads of the TLAS (the CPU's TlasFrame in two_level_runtime.cpp):
 // a slot's "triangle" is its instance's BLAS, traced by the same loop with the ray in instance space.
 template <bool AnyHit>
@@ -113,10 +104,7 @@ struct TlasFrame {
     blas.positions = view.positions;
     blas.root = view.root;
     const RootInfo root = *view.root;
-    Ray local = ray;
-    local.org = transformPoint(inst.toInstance, ray.org);
-    local.dir = transformVector(inst.toInstance, ray.dir);
-    local.tmax = tmax;
+    const Ray local = rayInInstance(inst.toInstance, ray, tmax);
     if (AnyHit) {
       if (!bvh2AnyHit(blas, root, local)) return false;
       t = tmax;

@@ -8,6 +8,7 @@
 
 #include "device_types.hpp"
 #include "tsah/core/aabb.hpp"
+#include "tsah/core/instance_transform.hpp"
 #include "tsah/core/ray.hpp"
 #include "tsah/layout/gpu_layout.hpp"
 #include "tsah/layout/woop.hpp"
@@ -27,11 +28,11 @@ struct BlasView {
 };
 
 // Per instance, written by the host each frame: world(t) in double (its box is transformed exactly
-// as tsah::transformBox does), world -> instance in float (tsah::Affine3x4's rows), the BLAS view
-// it traces and whether world(t) is invertible (a singular instance is never hit).
+// as tsah::transformBox does), world -> instance in float (the CPU runtime's Affine3x4), the BLAS
+// view it traces and whether world(t) is invertible (a singular instance is never hit).
 struct InstanceState {
   double world[12];
-  float toInstance[12];
+  Affine3x4 toInstance;
   uint32_t view;
   uint32_t visible;
 };

@@ -377,13 +377,10 @@ TwoLevelUpdateTimings GpuTwoLevelRuntime::updateAt(double sceneTime) {
     detail::InstanceState& s = m.hostInstances[i];
     const uint32_t p = scene.instancePose[i];
     s.view = p == kInvalidIndex ? m.staticView[src.instances[i].source] : m.firstPoseView + p;
-    const double det = anim::linearDeterminant(world);
-    s.visible = std::isfinite(det) && det != 0.0 ? 1u : 0u;
-    const anim::Matrix4 inverse = s.visible ? inverseAffine(world) : anim::identityMatrix();
-    for (int k = 0; k < 12; ++k) {
-      s.world[k] = world[k];
-      s.toInstance[k] = float(inverse[k]);
-    }
+    const std::optional<Affine3x4> space = instanceSpace(world);
+    s.visible = space ? 1u : 0u;
+    s.toInstance = space.value_or(Affine3x4{});
+    std::copy_n(world.begin(), 12, s.world);
   }
   Impl::Graph& g = posesMove ? m.fullGraph : m.rigidGraph;
   if (!g.exec) g = m.capture(posesMove);

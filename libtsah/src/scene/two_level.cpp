@@ -8,7 +8,7 @@
 #include "tsah/base/error.hpp"
 #include "tsah/base/memory.hpp"
 #include "tsah/build/sah_builder.hpp"
-#include "tsah/core/box_transform.hpp"
+#include "tsah/core/instance_transform.hpp"
 #include "tsah/core/cost.hpp"
 #include "scene/two_level_parts.hpp"
 

@@ -37,11 +37,7 @@ struct TlasFrame {
   bool intersectSlot(const Ray& ray, const RayPrep&, uint32_t s, float tmax, float& t, float& u, float& v) const {
     const uint32_t instance = triIndex[s];
     if (!visible[instance]) return false;
-    const Affine3x4& m = toInstance[instance];
-    Ray local = ray;
-    local.org = m.point(ray.org);
-    local.dir = m.vector(ray.dir);
-    local.tmax = tmax;
+    const Ray local = rayInInstance(toInstance[instance], ray, tmax);
     if (AnyHit) {  // the loop stops at the first accepted slot: no distance needed
       if (!blas[instance]->anyHit(local)) return false;
       t = tmax;
@@ -57,12 +53,6 @@ struct TlasFrame {
     return true;
   }
 };
-
-Affine3x4 toFloat(const anim::Matrix4& m) {
-  Affine3x4 a;
-  for (int i = 0; i < 12; ++i) a.m[i] = float(m[i]);
-  return a;
-}
 
 }  // namespace
 
@@ -85,6 +75,15 @@ anim::Matrix4 inverseAffine(const anim::Matrix4& m) {
   for (int row = 0; row < 3; ++row)
     inv[4 * row + 3] = -(inv[4 * row] * m[3] + inv[4 * row + 1] * m[7] + inv[4 * row + 2] * m[11]);
   return inv;
+}
+
+std::optional<Affine3x4> instanceSpace(const anim::Matrix4& world) {
+  const double det = anim::linearDeterminant(world);
+  if (!(std::isfinite(det) && det != 0.0)) return std::nullopt;
+  const anim::Matrix4 inverse = inverseAffine(world);
+  Affine3x4 a;
+  for (int i = 0; i < 12; ++i) a.m[i] = float(inverse[i]);
+  return a;
 }
 
 struct TwoLevelRuntime::Pool {
@@ -178,11 +177,9 @@ void TwoLevelRuntime::update(double sceneTime) {
   for (uint32_t i = 0; i < scene_.instanceCount(); ++i) {
     const anim::Matrix4 world = sources.instances[i].worldAt(sceneTime);
     blas_[i] = &runtimeOf(i);
-    // A path that interpolates a scale through 0 flattens the instance for an instant: it has no
-    // area then (the flat scene's triangles are degenerate and never hit), so it is skipped.
-    const double det = anim::linearDeterminant(world);
-    visible_[i] = std::isfinite(det) && det != 0.0;
-    toInstance_[i] = visible_[i] ? toFloat(inverseAffine(world)) : Affine3x4{};
+    const std::optional<Affine3x4> space = instanceSpace(world);
+    visible_[i] = space.has_value();
+    toInstance_[i] = space.value_or(Affine3x4{});
     instanceBoxes_[i] = transformBox(blas_[i]->bounds(), world);  // flat while singular, still a box
   }
   if (config_.tlas == TlasUpdate::Rebuild)

@@ -12,9 +12,11 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <span>
 #include <vector>
 
+#include "tsah/core/instance_transform.hpp"
 #include "tsah/core/ray.hpp"
 #include "tsah/layout/flat_bvh.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
@@ -30,21 +32,12 @@ struct TwoLevelHit {
   bool valid() const { return instance != kNoHit; }
 };
 
-// Row-major 3x4 affine transform in float (the last row 0 0 0 1 implied).
-struct Affine3x4 {
-  float m[12] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
-  Vec3 point(const Vec3& p) const {
-    return {m[0] * p.x + m[1] * p.y + m[2] * p.z + m[3], m[4] * p.x + m[5] * p.y + m[6] * p.z + m[7],
-            m[8] * p.x + m[9] * p.y + m[10] * p.z + m[11]};
-  }
-  Vec3 vector(const Vec3& d) const {
-    return {m[0] * d.x + m[1] * d.y + m[2] * d.z, m[4] * d.x + m[5] * d.y + m[6] * d.z,
-            m[8] * d.x + m[9] * d.y + m[10] * d.z};
-  }
-};
-
 // The inverse of an affine (invertible) transform, in double.
 anim::Matrix4 inverseAffine(const anim::Matrix4& m);
+// World -> instance space of an instance placed by `world` (the inverse, rounded to float), or none
+// when world's linear part is singular or not finite: a path that scales through 0 flattens the
+// instance for an instant, and its triangles are then never hit (as the flat scene's degenerate ones).
+std::optional<Affine3x4> instanceSpace(const anim::Matrix4& world);
 
 class TwoLevelRuntime {
  public:

@@ -1,0 +1,54 @@
+#pragma once
+// The two-level runtimes' instance transforms, on the CPU and on the GPU alike (the CPU's and the
+// device's boxes and hits must be equal bit for bit): a ray moved into instance space, and the box
+// of an affine image of a box.
+#include <cmath>
+
+#include "tsah/core/aabb.hpp"
+#include "tsah/core/ray.hpp"
+
+namespace tsah {
+
+// A 3x4 affine map in float, row-major (world -> instance space at TLAS leaves).
+struct Affine3x4 {
+  float m[12] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
+  TSAH_HD Vec3 point(const Vec3& p) const {
+    return {m[0] * p.x + m[1] * p.y + m[2] * p.z + m[3], m[4] * p.x + m[5] * p.y + m[6] * p.z + m[7],
+            m[8] * p.x + m[9] * p.y + m[10] * p.z + m[11]};
+  }
+  TSAH_HD Vec3 vector(const Vec3& d) const {
+    return {m[0] * d.x + m[1] * d.y + m[2] * d.z, m[4] * d.x + m[5] * d.y + m[6] * d.z,
+            m[8] * d.x + m[9] * d.y + m[10] * d.z};
+  }
+};
+
+// The ray in instance space: origin by the map, direction by its linear part (not normalized, so
+// distances along it stay the world ray's), up to tmax.
+TSAH_HD Ray rayInInstance(const Affine3x4& toInstance, const Ray& ray, float tmax) {
+  Ray local = ray;
+  local.org = toInstance.point(ray.org);
+  local.dir = toInstance.vector(ray.dir);
+  local.tmax = tmax;
+  return local;
+}
+
+// rows: the 3x4 affine map, row-major (x' = rows[0..3] . (x, y, z, 1), and so on). Each of the box's
+// 8 corners is transformed in double and rounded to float, then widened by one ulp outward: the
+// float box contains the float points that rays transformed into instance space are tested against.
+// An empty box stays empty.
+TSAH_HD Aabb transformBoxRows(const Aabb& box, const double* rows) {
+  if (box.empty()) return box;
+  Aabb out;
+  for (int corner = 0; corner < 8; ++corner) {
+    const double p[3] = {(corner & 1) ? box.hi.x : box.lo.x, (corner & 2) ? box.hi.y : box.lo.y,
+                         (corner & 4) ? box.hi.z : box.lo.z};
+    float q[3];
+    for (int r = 0; r < 3; ++r)
+      q[r] = float(rows[4 * r] * p[0] + rows[4 * r + 1] * p[1] + rows[4 * r + 2] * p[2] + rows[4 * r + 3]);
+    out.extend(Vec3{nextafterf(q[0], -3.4e38f), nextafterf(q[1], -3.4e38f), nextafterf(q[2], -3.4e38f)});
+    out.extend(Vec3{nextafterf(q[0], 3.4e38f), nextafterf(q[1], 3.4e38f), nextafterf(q[2], 3.4e38f)});
+  }
+  return out;
+}
+
+}  // namespace tsah
