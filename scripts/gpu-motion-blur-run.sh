@@ -19,14 +19,7 @@ set -u
 steps=${1:-tests trace bench}
 shutter=${SHUTTER:-0.5}
 frames=${FRAMES:-50}
-out=${OUT:-/tmp/tsah-gpu-out}
-mkdir -p "$out"
-cd .gpu || exit 1
-export LD_LIBRARY_PATH=$PWD/lib
-nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader
-if [ -f data.tar.xz ] && [ ! -d data ]; then
-  python3 -c "import tarfile; tarfile.open('data.tar.xz').extractall('.')" || exit 1
-fi
+. "$(dirname "$0")/gpu-bundle-env.sh"
 scenes=${SCENES:-$(for f in data/*.tanim; do basename "$f" .tanim; done)}
 has() { [[ " $steps " == *" $1 "* ]]; }
 tree() { [ -f "data/$1-tsah.tbvh" ] && echo "--tree tsah=data/$1-tsah.tbvh"; }

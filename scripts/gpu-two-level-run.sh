@@ -17,14 +17,7 @@
 set -u
 steps=${1:-tests bench}
 frames=${FRAMES:-50}
-out=${OUT:-/tmp/tsah-gpu-out}
-mkdir -p "$out"
-cd .gpu || exit 1
-export LD_LIBRARY_PATH=$PWD/lib
-nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader
-if [ -f data.tar.xz ] && [ ! -d data ]; then
-  python3 -c "import tarfile; tarfile.open('data.tar.xz').extractall('.')" || exit 1
-fi
+. "$(dirname "$0")/gpu-bundle-env.sh"
 export TSAH_DATA_DIR=$PWD/data
 has() { [[ " $steps " == *" $1 "* ]]; }
 

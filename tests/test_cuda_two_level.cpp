@@ -52,20 +52,6 @@ tsah::Aabb unionOf(std::span<const tsah::Aabb> boxes) {
   return all;
 }
 
-// The TLAS box holding each instance (its leaf's box in the parent node, or the root box).
-std::vector<tsah::Aabb> tlasLeafBoxes(const tsah::FlatBvh& tlas) {
-  std::vector<tsah::Aabb> out(tlas.triangleCount());
-  auto assign = [&](int32_t ref, uint32_t count, const tsah::Aabb& box) {
-    for (uint32_t s = tsah::leafFirstSlot(ref); s < tsah::leafFirstSlot(ref) + count; ++s) out[tlas.triIndex[s]] = box;
-  };
-  if (tlas.interiorCount == 0) assign(tlas.rootRef, tlas.rootCount, tlas.rootBoxes[0]);
-  for (uint32_t n = 0; n < tlas.interiorCount; ++n)
-    for (int c = 0; c < 2; ++c)
-      if (tsah::isLeafRef(tlas.nodes[n].childRef(c)))
-        assign(tlas.nodes[n].childRef(c), tlas.nodes[n].childCount(c), tlas.nodes[n].childBox(c));
-  return out;
-}
-
 class CudaTwoLevel : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -110,7 +96,7 @@ TEST_F(CudaTwoLevel, TlasBoxesContainEveryInstanceAfterEachUpdate) {
     gpu.updateAt(t);
     const std::vector<tsah::Aabb> boxes = gpu.downloadInstanceBoxes();
     const tsah::FlatBvh tlas = gpu.downloadTlas();
-    const std::vector<tsah::Aabb> leafBoxes = tlasLeafBoxes(tlas);
+    const std::vector<tsah::Aabb> leafBoxes = tsah::test::tlasLeafBoxes(tlas);
     ASSERT_EQ(boxes.size(), scene->instanceCount());
     for (uint32_t i = 0; i < scene->instanceCount(); ++i) {
       // The device's world box is the CPU's (the same transform and rounding) and inside its leaf.

@@ -61,19 +61,6 @@ bool containsPoint(const tsah::Aabb& b, const tsah::Vec3& p) {
   return p.x >= b.lo.x && p.x <= b.hi.x && p.y >= b.lo.y && p.y <= b.hi.y && p.z >= b.lo.z && p.z <= b.hi.z;
 }
 
-// The TLAS box holding each instance (its leaf's box in the parent node, or the root box).
-std::vector<tsah::Aabb> tlasLeafBoxes(const tsah::FlatBvh& tlas) {
-  std::vector<tsah::Aabb> out(tlas.triangleCount());
-  auto assign = [&](int32_t ref, uint32_t count, const tsah::Aabb& box) {
-    for (uint32_t s = tsah::leafFirstSlot(ref); s < tsah::leafFirstSlot(ref) + count; ++s) out[tlas.triIndex[s]] = box;
-  };
-  if (tlas.interiorCount == 0) assign(tlas.rootRef, tlas.rootCount, tlas.rootBoxes[0]);
-  for (uint32_t n = 0; n < tlas.interiorCount; ++n)
-    for (int c = 0; c < 2; ++c)
-      if (tsah::isLeafRef(tlas.nodes[n].childRef(c))) assign(tlas.nodes[n].childRef(c), tlas.nodes[n].childCount(c), tlas.nodes[n].childBox(c));
-  return out;
-}
-
 class TwoLevel : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -201,7 +188,7 @@ TEST_F(TwoLevel, TlasBoxesContainEveryInstanceAtEveryFrameAfterRefit) {
   for (const double t : scene->frameTimes) {
     runtime.update(t);
     const std::vector<float> world = baked.animation.positionsAt(t);
-    const std::vector<tsah::Aabb> leafBoxes = tlasLeafBoxes(runtime.tlas());
+    const std::vector<tsah::Aabb> leafBoxes = tsah::test::tlasLeafBoxes(runtime.tlas());
     for (uint32_t i = 0; i < scene->instanceCount(); ++i) {
       EXPECT_TRUE(leafBoxes[i].contains(runtime.instanceBoxes()[i])) << "t " << t << " instance " << i;
       const uint32_t count = scene->scene.sourceOf(scene->scene.instances[i]).vertexCount();

@@ -1,11 +1,13 @@
 #pragma once
 // The two-level test scene shared by the CPU and GPU two-level tests: two sources (a static ground
 // and an animated cloth) placed with rotations, non-uniform scales, a mirrored placement, keyed
-// paths and time offsets, and the small tree options they build it with.
+// paths and time offsets, the small tree options they build it with, and the TLAS box holding each
+// instance.
 #include <filesystem>
 #include <vector>
 
 #include "anim/tanim.hpp"
+#include "tsah/layout/flat_bvh.hpp"
 #include "tsah/pipeline.hpp"
 #include "test_support.hpp"
 
@@ -44,6 +46,20 @@ inline tsah::TreeOptions smallTwoLevelOptions() {
   options.objective.maxLeafSize = 4;
   options.threads = 2;
   return options;
+}
+
+// The TLAS box holding each instance (its leaf's box in the parent node, or the root box).
+inline std::vector<tsah::Aabb> tlasLeafBoxes(const tsah::FlatBvh& tlas) {
+  std::vector<tsah::Aabb> out(tlas.triangleCount());
+  auto assign = [&](int32_t ref, uint32_t count, const tsah::Aabb& box) {
+    for (uint32_t s = tsah::leafFirstSlot(ref); s < tsah::leafFirstSlot(ref) + count; ++s) out[tlas.triIndex[s]] = box;
+  };
+  if (tlas.interiorCount == 0) assign(tlas.rootRef, tlas.rootCount, tlas.rootBoxes[0]);
+  for (uint32_t n = 0; n < tlas.interiorCount; ++n)
+    for (int c = 0; c < 2; ++c)
+      if (tsah::isLeafRef(tlas.nodes[n].childRef(c)))
+        assign(tlas.nodes[n].childRef(c), tlas.nodes[n].childCount(c), tlas.nodes[n].childBox(c));
+  return out;
 }
 
 }  // namespace tsah::test
