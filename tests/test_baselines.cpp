@@ -9,6 +9,7 @@
 #include "tsah/base/error.hpp"
 #include "tsah/optimize/baselines.hpp"
 #include "tsah/core/cost.hpp"
+#include "tsah/build/binned_sah_builder.hpp"
 #include "tsah/build/sah_builder.hpp"
 
 namespace {
@@ -182,3 +183,33 @@ TEST(Baselines, TableOneOrderingOnASwapAnimation) {
 }
 
 }  // namespace
+
+// binnedInitialTree: every method starts from the binned SAH builder's tree instead of the sweep's
+// (SAH0 is that tree, collapsed; with leaves of one primitive nothing collapses).
+TEST(Baselines, BinnedInitialTreeStartsFromTheBinnedBuilder) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> unit(0.0f, 100.0f);
+  std::vector<tsah::Aabb> frame(500);
+  for (tsah::Aabb& b : frame) {
+    const tsah::Vec3 p{unit(rng), unit(rng), unit(rng)};
+    b.lo = p;
+    b.hi = p + tsah::Vec3{1.0f, 2.0f, 0.5f};
+  }
+  tsah::PrimitiveBoxes rep;
+  rep.frameCount = 1;
+  rep.primCount = uint32_t(frame.size());
+  rep.boxes = frame;
+  tsah::BaselineConfig config;
+  config.objective.maxLeafSize = 1;
+  tsah::BinnedSahBuilder::Config binned;
+  binned.cost = config.objective.cost;
+  binned.maxLeafSize = 1;
+  const Bvh expected = tsah::BinnedSahBuilder(binned).build(frame);
+  const Bvh sweep = tsah::buildSah0(rep, config);
+  ASSERT_NE(sweep.primIds, expected.primIds) << "the input must tell the two builders apart";
+  config.binnedInitialTree = true;
+  const Bvh got = tsah::buildSah0(rep, config);
+  EXPECT_EQ(got.primIds, expected.primIds);
+  EXPECT_EQ(got.nodeCount(), expected.nodeCount());
+  EXPECT_DOUBLE_EQ(tsah::temporalCost(tsah::frameCosts(got), 0), tsah::temporalCost(tsah::frameCosts(expected), 0));
+}
