@@ -3,18 +3,9 @@
 # Installs the build tree into WORK_DIR/prefix, builds the consumer example against it (its own
 # CMake project, find_package(tsah) only) and runs it on INPUT; fails unless every step succeeds
 # and the program prints the tree and at least one ray hit.
-foreach(var BUILD_DIR WORK_DIR CONSUMER_DIR INPUT)
-  if(NOT ${var})
-    message(FATAL_ERROR "install-consumer.cmake: ${var} is not set")
-  endif()
-endforeach()
-
-file(REMOVE_RECURSE ${WORK_DIR})
-file(MAKE_DIRECTORY ${WORK_DIR})
-set(prefix ${WORK_DIR}/prefix)
-
-execute_process(COMMAND ${CMAKE_COMMAND} --install ${BUILD_DIR} --prefix ${prefix}
-                OUTPUT_QUIET COMMAND_ERROR_IS_FATAL ANY)
+include(${CMAKE_CURRENT_LIST_DIR}/../cmake/ScratchInstall.cmake)
+tsah_require_script_variables(install-consumer.cmake BUILD_DIR WORK_DIR CONSUMER_DIR INPUT)
+tsah_install_into_scratch(${BUILD_DIR} ${WORK_DIR} prefix)
 foreach(installed bin/tsah include/tsah/pipeline.hpp include/anim/animation.hpp lib/cmake/tsah/tsahConfig.cmake
                   lib/cmake/tsah/tsahConfigVersion.cmake lib/cmake/tsah/tsahTargets.cmake)
   if(NOT EXISTS ${prefix}/${installed})
@@ -53,12 +44,7 @@ set(no-toolkit_args -DCMAKE_BUILD_TYPE=Release -DCMAKE_DISABLE_FIND_PACKAGE_CUDA
 set(full_args -DCMAKE_BUILD_TYPE=Release)
 foreach(variant IN LISTS variants)
   set(configure_args -S ${CONSUMER_DIR} -B ${WORK_DIR}/build-${variant} -DCMAKE_PREFIX_PATH=${prefix} ${${variant}_args})
-  if(CXX_COMPILER)
-    list(APPEND configure_args -DCMAKE_CXX_COMPILER=${CXX_COMPILER})
-  endif()
-  if(CXX_LAUNCHER)
-    list(APPEND configure_args -DCMAKE_CXX_COMPILER_LAUNCHER=${CXX_LAUNCHER})
-  endif()
+  tsah_append_compiler_args(configure_args)
   execute_process(COMMAND ${CMAKE_COMMAND} ${configure_args} OUTPUT_VARIABLE configure_output
                   ERROR_VARIABLE configure_output RESULT_VARIABLE configure_result)
   if(NOT configure_result EQUAL 0)

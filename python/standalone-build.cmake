@@ -3,25 +3,12 @@
 # Installs the build tree into WORK_DIR/prefix, configures python/ as its own project against that
 # prefix (find_package(tsah), pybind11 from the interpreter's machine), builds the module and imports
 # it with PYTHON: what a user with their own Python does. Fails unless every step succeeds.
-foreach(var BUILD_DIR WORK_DIR PYTHON_DIR PYTHON)
-  if(NOT ${var})
-    message(FATAL_ERROR "standalone-build.cmake: ${var} is not set")
-  endif()
-endforeach()
-
-file(REMOVE_RECURSE ${WORK_DIR})
-file(MAKE_DIRECTORY ${WORK_DIR})
-set(prefix ${WORK_DIR}/prefix)
-execute_process(COMMAND ${CMAKE_COMMAND} --install ${BUILD_DIR} --prefix ${prefix}
-                OUTPUT_QUIET COMMAND_ERROR_IS_FATAL ANY)
+include(${CMAKE_CURRENT_LIST_DIR}/../cmake/ScratchInstall.cmake)
+tsah_require_script_variables(standalone-build.cmake BUILD_DIR WORK_DIR PYTHON_DIR PYTHON)
+tsah_install_into_scratch(${BUILD_DIR} ${WORK_DIR} prefix)
 
 set(configure_args -S ${PYTHON_DIR} -B ${WORK_DIR}/build -DCMAKE_PREFIX_PATH=${prefix} -DPython3_EXECUTABLE=${PYTHON})
-if(CXX_COMPILER)
-  list(APPEND configure_args -DCMAKE_CXX_COMPILER=${CXX_COMPILER})
-endif()
-if(CXX_LAUNCHER)
-  list(APPEND configure_args -DCMAKE_CXX_COMPILER_LAUNCHER=${CXX_LAUNCHER})
-endif()
+tsah_append_compiler_args(configure_args)
 execute_process(COMMAND ${CMAKE_COMMAND} ${configure_args} OUTPUT_VARIABLE output ERROR_VARIABLE output
                 RESULT_VARIABLE result)
 if(NOT result EQUAL 0)

@@ -17,6 +17,7 @@
 #include "tsah/render/camera.hpp"
 #include "tsah/render/renderer.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
+#include "bench_setup.hpp"
 #include "test_support.hpp"
 
 TEST(EmbreeStepTime, MapsUnevenKeysPieceByPiece) {
@@ -146,18 +147,7 @@ namespace {
 // The bench's setup on a small frame: 64x48, 4 AO and 2 shadow rays per pixel, frames at the
 // given times, the camera fitted to the whole animation.
 tsah::bench::RuntimeSetup smallSetup(const anim::Animation& a, std::vector<double> times) {
-  tsah::bench::RuntimeSetup setup;
-  setup.times = std::move(times);
-  const tsah::Aabb bounds = tsah::test::boxOf(a.bounds());
-  const tsah::Camera camera = tsah::fitCamera(bounds, {0, 1, 0}, 45.0f, 64.0f / 48.0f);
-  setup.camera = [camera](double) { return camera; };
-  setup.lighting = tsah::fitLighting(bounds, camera, {0, 1, 0}, 0.1f, false);
-  setup.settings.width = 64;
-  setup.settings.height = 48;
-  setup.settings.aoSamples = 4;
-  setup.settings.shadowSamples = 2;
-  setup.threads = 2;
-  return setup;
+  return tsah::test::smallBenchSetup(a, std::move(times), 64, 48, 4);
 }
 
 }  // namespace

@@ -10,6 +10,7 @@
 #include "bench/runtime_bench.hpp"
 #include "tsah/optimize/baselines.hpp"
 #include "tsah/layout/flat_bvh.hpp"
+#include "bench_setup.hpp"
 #include "test_support.hpp"
 
 namespace {
@@ -18,18 +19,7 @@ using tsah::test::generatedAnimation;
 
 // 48x36 pixels, 3 AO and 2 shadow rays per pixel, `frames` frames, a fixed fitted camera.
 tsah::bench::RuntimeSetup smallSetup(const anim::Animation& a, uint32_t frames) {
-  tsah::bench::RuntimeSetup setup;
-  setup.times = a.uniformTimes(frames);
-  const tsah::Aabb bounds = tsah::test::boxOf(a.bounds());
-  const tsah::Camera camera = tsah::fitCamera(bounds, {0, 1, 0}, 45.0f, 48.0f / 36.0f);
-  setup.camera = [camera](double) { return camera; };
-  setup.lighting = tsah::fitLighting(bounds, camera, {0, 1, 0}, 0.1f, false);
-  setup.settings.width = 48;
-  setup.settings.height = 36;
-  setup.settings.aoSamples = 3;
-  setup.settings.shadowSamples = 2;
-  setup.threads = 2;
-  return setup;
+  return tsah::test::smallBenchSetup(a, a.uniformTimes(frames), 48, 36, 3);
 }
 
 // A method of the Embree comparison that finds exactly what the toolkit finds: its hits_minus_toolkit
