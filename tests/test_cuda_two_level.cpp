@@ -108,35 +108,40 @@ TEST_F(CudaTwoLevel, TlasBoxesContainEveryInstanceAfterEachUpdate) {
   }
 }
 
-// The block refits (shared memory, one block per pose and one for the TLAS) against the global walk:
-// the same boxes, so the same TLAS bit for bit and the same hits exactly.
+// The block refits (one block per pose and one for the TLAS; child boxes in shared memory, or in
+// the nodes as larger trees keep them) against the global walk: the same boxes, so the same TLAS
+// bit for bit and the same hits exactly.
 TEST_F(CudaTwoLevel, BlockRefitsEqualTheGlobalWalk) {
-  tsah::cuda::GpuTwoLevelRuntime block(*scene);
-  tsah::cuda::GpuTwoLevelRuntime::Config reference;
+  tsah::cuda::GpuTwoLevelRuntime::Config reference, nodeBoxes;
   reference.blockRefits = false;
+  nodeBoxes.sharedBoxes = false;
   tsah::cuda::GpuTwoLevelRuntime global(*scene, reference);
-  for (const double t : {0.0, 2.0, 3.25, 7.5, 12.0}) {
-    block.updateAt(t);
-    global.updateAt(t);
-    const tsah::FlatBvh a = block.downloadTlas(), b = global.downloadTlas();
-    ASSERT_EQ(a.nodes.size(), b.nodes.size());
-    EXPECT_EQ(std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(a.nodes[0])), 0) << "t " << t;
-    EXPECT_EQ(std::memcmp(&a.rootBoxes[0], &b.rootBoxes[0], sizeof(tsah::Aabb)), 0) << "t " << t;
-    const std::vector<tsah::Aabb> boxesA = block.downloadInstanceBoxes(), boxesB = global.downloadInstanceBoxes();
-    EXPECT_EQ(std::memcmp(boxesA.data(), boxesB.data(), boxesA.size() * sizeof(tsah::Aabb)), 0) << "t " << t;
-    const std::vector<tsah::Ray> rays = randomRays(unionOf(boxesA), 2000, uint32_t(t * 8) + 3);
-    const std::vector<tsah::TwoLevelHit> hitsA = block.closestHits(rays), hitsB = global.closestHits(rays);
-    uint32_t hits = 0;
-    for (std::size_t r = 0; r < rays.size(); ++r) {
-      ASSERT_EQ(hitsA[r].valid(), hitsB[r].valid()) << "t " << t << " ray " << r;
-      if (!hitsA[r].valid()) continue;
-      ++hits;
-      EXPECT_EQ(hitsA[r].instance, hitsB[r].instance) << "t " << t << " ray " << r;
-      EXPECT_EQ(hitsA[r].prim, hitsB[r].prim) << "t " << t << " ray " << r;
-      EXPECT_EQ(hitsA[r].t, hitsB[r].t) << "t " << t << " ray " << r;
-      EXPECT_EQ(hitsA[r].u, hitsB[r].u) << "t " << t << " ray " << r;
+  for (const tsah::cuda::GpuTwoLevelRuntime::Config& config : {tsah::cuda::GpuTwoLevelRuntime::Config{}, nodeBoxes}) {
+    tsah::cuda::GpuTwoLevelRuntime block(*scene, config);
+    SCOPED_TRACE(config.sharedBoxes ? "boxes in shared memory" : "boxes in the nodes");
+    for (const double t : {0.0, 2.0, 3.25, 7.5, 12.0}) {
+      block.updateAt(t);
+      global.updateAt(t);
+      const tsah::FlatBvh a = block.downloadTlas(), b = global.downloadTlas();
+      ASSERT_EQ(a.nodes.size(), b.nodes.size());
+      EXPECT_EQ(std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(a.nodes[0])), 0) << "t " << t;
+      EXPECT_EQ(std::memcmp(&a.rootBoxes[0], &b.rootBoxes[0], sizeof(tsah::Aabb)), 0) << "t " << t;
+      const std::vector<tsah::Aabb> boxesA = block.downloadInstanceBoxes(), boxesB = global.downloadInstanceBoxes();
+      EXPECT_EQ(std::memcmp(boxesA.data(), boxesB.data(), boxesA.size() * sizeof(tsah::Aabb)), 0) << "t " << t;
+      const std::vector<tsah::Ray> rays = randomRays(unionOf(boxesA), 2000, uint32_t(t * 8) + 3);
+      const std::vector<tsah::TwoLevelHit> hitsA = block.closestHits(rays), hitsB = global.closestHits(rays);
+      uint32_t hits = 0;
+      for (std::size_t r = 0; r < rays.size(); ++r) {
+        ASSERT_EQ(hitsA[r].valid(), hitsB[r].valid()) << "t " << t << " ray " << r;
+        if (!hitsA[r].valid()) continue;
+        ++hits;
+        EXPECT_EQ(hitsA[r].instance, hitsB[r].instance) << "t " << t << " ray " << r;
+        EXPECT_EQ(hitsA[r].prim, hitsB[r].prim) << "t " << t << " ray " << r;
+        EXPECT_EQ(hitsA[r].t, hitsB[r].t) << "t " << t << " ray " << r;
+        EXPECT_EQ(hitsA[r].u, hitsB[r].u) << "t " << t << " ray " << r;
+      }
+      EXPECT_GT(hits, rays.size() / 4) << "t " << t;
     }
-    EXPECT_GT(hits, rays.size() / 4) << "t " << t;
   }
 }
 

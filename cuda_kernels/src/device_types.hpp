@@ -66,8 +66,10 @@ struct BatchStrides {
 };
 
 // Shared-memory bytes of a block refit (refit_walk.cuh's blockRefit) of a tree with interiorCount
-// interior nodes: an arrival counter and the two child boxes (12 floats) per node.
-constexpr uint64_t blockRefitBytes(uint32_t interiorCount) { return uint64_t(interiorCount) * 13u * 4u; }
+// interior nodes: an arrival counter per node, and with boxesInShared its two child boxes (12 floats).
+constexpr uint64_t blockRefitBytes(uint32_t interiorCount, bool boxesInShared) {
+  return uint64_t(interiorCount) * (boxesInShared ? 13u : 1u) * 4u;
+}
 
 struct TraceLaunch {
   bool persistent = true;   // Aila-Laine persistent warps fetching rays from a global counter

@@ -3,7 +3,7 @@
 // runtime's refits (pose BLAS, TLAS over instance boxes): a leaf's thread writes its box into the
 // parent's child slot; the second thread to arrive at a node has both child boxes and carries on
 // upwards. refitUpwards walks through global memory (any tree size, one thread per leaf of a grid);
-// blockRefit keeps a small tree's walk in one block's shared memory.
+// blockRefit keeps a tree's walk in one block, its arrivals in shared memory.
 #include <cuda/atomic>
 
 #include "device_types.hpp"
@@ -49,12 +49,16 @@ __device__ __forceinline__ void refitUpwards(GpuBvhNode* __restrict__ nodes, con
   root->box = box;
 }
 
-// One block refits one whole tree (a small one: a character's BLAS, a TLAS over some thousand
-// instances). Arrivals are counted and child boxes kept in shared memory, written to the nodes at
-// the end, so a level of the walk costs shared-memory latency instead of refitUpwards' round trips
-// to L2. leafBoxOf(leaf) gives a leaf's box; the boxes equal refitUpwards' (the same extends in the
-// same order). shared: blockRefitBytes(interiorCount) bytes (device_types.hpp).
-template <class LeafBoxOf>
+// One block refits one whole tree (a character's BLAS, a TLAS over some thousand instances).
+// Arrivals are counted in shared memory, so a level of the walk costs a shared-memory atomic instead
+// of refitUpwards' device-scope atomic in L2. Where the child boxes wait for their sibling:
+// - BoxesInShared (12 floats per interior node beside the counter: a small tree): in shared memory,
+//   written to the nodes at the end;
+// - otherwise (a counter per node only: trees up to about 58,000 interior nodes on an H100): in the
+//   nodes themselves, as refitUpwards keeps them, read back through L2.
+// leafBoxOf(leaf) gives a leaf's box; the boxes equal refitUpwards' (the same extends in the same
+// order). shared: blockRefitBytes(interiorCount, BoxesInShared) bytes (device_types.hpp).
+template <bool BoxesInShared, class LeafBoxOf>
 __device__ void blockRefit(GpuBvhNode* __restrict__ nodes, const uint32_t* __restrict__ nodeParent,
                            const LeafRecord* __restrict__ leaves, uint32_t leafCount, uint32_t interiorCount,
                            LeafBoxOf leafBoxOf, RootInfo* __restrict__ root, uint32_t* shared) {
@@ -70,25 +74,35 @@ __device__ void blockRefit(GpuBvhNode* __restrict__ nodes, const uint32_t* __res
     while (slot != kNoParent) {
       const uint32_t node = slot >> 1;
       const int side = int(slot & 1);
-      volatile float* mine = boxes + 12 * std::size_t(node) + 6 * side;
-      mine[0] = box.lo.x, mine[1] = box.lo.y, mine[2] = box.lo.z;
-      mine[3] = box.hi.x, mine[4] = box.hi.y, mine[5] = box.hi.z;
+      if constexpr (BoxesInShared) {
+        volatile float* mine = boxes + 12 * std::size_t(node) + 6 * side;
+        mine[0] = box.lo.x, mine[1] = box.lo.y, mine[2] = box.lo.z;
+        mine[3] = box.hi.x, mine[4] = box.hi.y, mine[5] = box.hi.z;
+      } else {
+        writeChildBox(nodes + node, side, box);
+      }
       __threadfence_block();  // the box before the arrival: the sibling reads it after its own
       if (atomicAdd(counters + node, 1u) == 0) {
         reachedRoot = false;  // the sibling finishes the node
         break;
       }
       __threadfence_block();
-      volatile const float* other = boxes + 12 * std::size_t(node) + 6 * (1 - side);
-      box.extend(Aabb{{other[0], other[1], other[2]}, {other[3], other[4], other[5]}});
+      if constexpr (BoxesInShared) {
+        volatile const float* other = boxes + 12 * std::size_t(node) + 6 * (1 - side);
+        box.extend(Aabb{{other[0], other[1], other[2]}, {other[3], other[4], other[5]}});
+      } else {
+        box.extend(readChildBox(nodes + node, 1 - side));
+      }
       slot = nodeParent[node];
     }
     if (reachedRoot) root->box = box;
   }
-  __syncthreads();
-  for (uint32_t k = threadIdx.x; k < 2 * interiorCount; k += blockDim.x) {
-    volatile const float* b = boxes + 6 * std::size_t(k);
-    writeChildBox(nodes + k / 2, int(k & 1), Aabb{{b[0], b[1], b[2]}, {b[3], b[4], b[5]}});
+  if constexpr (BoxesInShared) {
+    __syncthreads();
+    for (uint32_t k = threadIdx.x; k < 2 * interiorCount; k += blockDim.x) {
+      volatile const float* b = boxes + 6 * std::size_t(k);
+      writeChildBox(nodes + k / 2, int(k & 1), Aabb{{b[0], b[1], b[2]}, {b[3], b[4], b[5]}});
+    }
   }
 }
 

@@ -1,13 +1,11 @@
 // The two-level runtime's kernels: instance world boxes, the TLAS refit over them, and the trace
-// through instances: the TLAS by the CPU's traversal loop (tsah/layout/traversal.hpp), each BLAS by
-// the binary layout's device loop (bvh2_traversal.cuh).
+// through instances: the TLAS and each BLAS by the binary layout's device loop (bvh2_traversal.cuh).
 // Compiled with -fmad=false (see CMakeLists.txt): boxes and hits round as on the CPU.
 #include "bvh2_traversal.cuh"
 #include "launch.hpp"
 #include "refit_walk.cuh"
 #include "triangle_boxes.cuh"
 #include "tsah/core/instance_transform.hpp"
-#include "tsah/layout/traversal.hpp"
 #include "two_level_kernels.hpp"
 
 namespace tsah::cuda::detail {
@@ -35,13 +33,16 @@ __global__ void tlasRefitKernel(GpuBvhNode* __restrict__ nodes, const uint32_t* 
   refitUpwards(nodes, nodeParent, leaf.parentSlot, box, counters, root);
 }
 
-// Block refits: threads per pose's tree, and for the TLAS (one block for the whole frame's instances).
-constexpr uint32_t kBlockThreads = 512;
+// Block refits: threads per pose's tree (more for a tree whose boxes wait in the nodes: a larger
+// one), and for the TLAS (one block for the whole frame's instances).
+template <bool BoxesInShared>
+constexpr uint32_t kPoseBlockThreads = BoxesInShared ? 512 : 1024;
 constexpr uint32_t kTlasBlockThreads = 1024;
 
 // One block per pose of a group (blockIdx.x): its Woop triangles and its refit, both from the
 // positions the batched interpolation wrote before this launch.
-__global__ void __launch_bounds__(kBlockThreads)
+template <bool BoxesInShared>
+__global__ void __launch_bounds__(kPoseBlockThreads<BoxesInShared>)
     poseBlasBlockKernel(GpuBvhNode* __restrict__ nodes, const uint32_t* __restrict__ nodeParent,
                         const LeafRecord* __restrict__ leaves, uint32_t leafCount, uint32_t interiorCount,
                         const uint32_t* __restrict__ slotVertices, uint32_t slots, const float* __restrict__ positions,
@@ -56,10 +57,12 @@ __global__ void __launch_bounds__(kBlockThreads)
                                   loadVertex(own, __ldg(tri + 2)));
   }
   const auto leafBoxOf = [&](const LeafRecord& leaf) { return leafBox(leaf.first, leaf.count, slotVertices, own); };
-  blockRefit(nodes + b * batch.nodes, nodeParent, leaves, leafCount, interiorCount, leafBoxOf, roots + b, shared);
+  blockRefit<BoxesInShared>(nodes + b * batch.nodes, nodeParent, leaves, leafCount, interiorCount, leafBoxOf,
+                            roots + b, shared);
 }
 
 // One block: every instance's world box, then the TLAS refit over them.
+template <bool BoxesInShared>
 __global__ void __launch_bounds__(kTlasBlockThreads)
     tlasBlockKernel(const InstanceState* __restrict__ instances, const BlasView* __restrict__ views, uint32_t count,
                     Aabb* instanceBoxes, GpuBvhNode* __restrict__ nodes, const uint32_t* __restrict__ nodeParent,
@@ -74,52 +77,63 @@ __global__ void __launch_bounds__(kTlasBlockThreads)
     for (uint32_t s = leaf.first; s < leaf.first + leaf.count; ++s) box.extend(instanceBoxes[triIndex[s]]);
     return box;
   };
-  blockRefit(nodes, nodeParent, leaves, leafCount, interiorCount, leafBoxOf, root, shared);
+  blockRefit<BoxesInShared>(nodes, nodeParent, leaves, leafCount, interiorCount, leafBoxOf, root, shared);
 }
 
-// What the shared traversal loop reads of the TLAS (the CPU's TlasFrame in two_level_runtime.cpp):
-// a slot's "triangle" is its instance's BLAS, traced by the same loop with the ray in instance space.
+// What the binary layout's device loop (bvh2_traversal.cuh) reads of the TLAS: its nodes as a
+// flat tree's, and a slot's "triangle" is its instance's BLAS, traced by the same loop with the ray
+// in instance space. prim: the BLAS triangle of the last hit the loop accepted (the loop accepts
+// every hit a slot test reports: it is nearer than the ray's current end).
 template <bool AnyHit>
-struct TlasFrame {
+struct TlasLoopFrame {
   TlasScene scene;
-  int32_t rootRef = 0;
-  uint32_t rootCount = 0;
-  Aabb rootBox;
-  const uint32_t* triIndex = nullptr;
-  mutable uint32_t hitPrim = kNoHit;
+  mutable uint32_t prim = kNoHit;
+};
 
-  __device__ const Aabb& root() const { return rootBox; }
-  __device__ const GpuBvhNode& node(int32_t ref) const { return scene.nodes[ref]; }
-  __device__ bool intersectSlot(const Ray& ray, const RayPrep&, uint32_t s, float tmax, float& t, float& u,
-                                float& v) const {
-    const InstanceState& inst = scene.instances[triIndex[s]];
-    if (!inst.visible) return false;
-    const BlasView& view = scene.views[inst.view];
-    // The BLAS through the binary layout's device loop (bvh2_traversal.cuh): the flat runtime's.
-    TraceScene blas;
-    blas.nodes = view.nodes;
-    blas.woop = view.woop;
-    blas.triIndex = view.triIndex;
-    blas.indices = view.indices;
-    blas.positions = view.positions;
-    blas.root = view.root;
-    const RootInfo root = *view.root;
-    const Ray local = rayInInstance(inst.toInstance, ray, tmax);
-    if (AnyHit) {
-      if (!bvh2AnyHit(blas, root, local)) return false;
-      t = tmax;
-      u = v = 0.0f;
-      return true;
-    }
+template <bool AnyHit>
+__device__ __forceinline__ void loadBvh2Node(const TlasLoopFrame<AnyHit>& f, int32_t ref, float4& n0xy, float4& n1xy,
+                                             float4& nz, int4& refs) {
+  const float4* n = reinterpret_cast<const float4*>(f.scene.nodes + ref);
+  n0xy = __ldg(n), n1xy = __ldg(n + 1), nz = __ldg(n + 2);
+  refs = __ldg(reinterpret_cast<const int4*>(n + 3));
+}
+
+template <bool AnyHit>
+__device__ __forceinline__ uint32_t slotTriangle(const TlasLoopFrame<AnyHit>& f, uint32_t s) {
+  return __ldg(f.scene.triIndex + s);
+}
+
+// Slot s's instance: its BLAS (AnyHit: whether anything is hit before tmax).
+template <bool AnyHit>
+__device__ __forceinline__ bool intersectBvh2Slot(const TlasLoopFrame<AnyHit>& f, const Ray& ray, const RayPrep&,
+                                                  uint32_t s, float tmax, float& t, float& u, float& v) {
+  const InstanceState& inst = f.scene.instances[slotTriangle(f, s)];
+  if (!inst.visible) return false;
+  const BlasView& view = f.scene.views[inst.view];
+  TraceScene blas;
+  blas.nodes = view.nodes;
+  blas.woop = view.woop;
+  blas.triIndex = view.triIndex;
+  blas.indices = view.indices;
+  blas.positions = view.positions;
+  blas.root = view.root;
+  const RootInfo root = *view.root;
+  const Ray local = rayInInstance(inst.toInstance, ray, tmax);
+  if constexpr (AnyHit) {
+    if (!bvh2AnyHit(blas, root, local)) return false;
+    t = tmax;
+    u = v = 0.0f;
+    return true;
+  } else {
     const Hit h = bvh2ClosestHit(blas, root, local);
     if (!h.valid() || !(h.t < tmax)) return false;
     t = h.t;
     u = h.u;
     v = h.v;
-    hitPrim = h.tri;
+    f.prim = h.tri;
     return true;
   }
-};
+}
 
 template <bool AnyHit>
 __global__ void __launch_bounds__(128) twoLevelTraceKernel(TlasScene scene, const Ray* __restrict__ rays,
@@ -127,17 +141,17 @@ __global__ void __launch_bounds__(128) twoLevelTraceKernel(TlasScene scene, cons
                                                            uint8_t* __restrict__ occluded) {
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= count) return;
-  TlasFrame<AnyHit> frame;
+  TlasLoopFrame<AnyHit> frame;
   frame.scene = scene;
-  frame.rootRef = scene.root->ref;
-  frame.rootCount = scene.root->count;
-  frame.rootBox = scene.root->box;
-  frame.triIndex = scene.triIndex;
-  const Hit h = tsah::detail::traverse<AnyHit>(frame, rays[i]);
+  Bvh2Stack stack;
+  Bvh2Traversal<AnyHit> walk;
+  walk.start(*scene.root, rays[i], stack);
+  walk.template run<false>(frame, stack);
   if constexpr (AnyHit) {
-    occluded[i] = h.valid() ? 1 : 0;
+    occluded[i] = walk.occluded() ? 1 : 0;
   } else {
-    hits[i] = h.valid() ? InstanceHit{h.t, h.u, h.v, h.tri, frame.hitPrim} : InstanceHit{0.0f, 0.0f, 0.0f, kNoHit, kNoHit};
+    const Hit h = walk.closestHit(frame);
+    hits[i] = h.valid() ? InstanceHit{h.t, h.u, h.v, h.tri, frame.prim} : InstanceHit{0.0f, 0.0f, 0.0f, kNoHit, kNoHit};
   }
 }
 
@@ -165,27 +179,42 @@ uint64_t prepareBlockRefits() {
   int device = 0, optIn = 0;
   CUDA_CHECK(cudaGetDevice(&device));
   CUDA_CHECK(cudaDeviceGetAttribute(&optIn, cudaDevAttrMaxSharedMemoryPerBlockOptin, device));
-  CUDA_CHECK(cudaFuncSetAttribute(poseBlasBlockKernel, cudaFuncAttributeMaxDynamicSharedMemorySize, optIn));
-  CUDA_CHECK(cudaFuncSetAttribute(tlasBlockKernel, cudaFuncAttributeMaxDynamicSharedMemorySize, optIn));
+  CUDA_CHECK(cudaFuncSetAttribute(poseBlasBlockKernel<true>, cudaFuncAttributeMaxDynamicSharedMemorySize, optIn));
+  CUDA_CHECK(cudaFuncSetAttribute(poseBlasBlockKernel<false>, cudaFuncAttributeMaxDynamicSharedMemorySize, optIn));
+  CUDA_CHECK(cudaFuncSetAttribute(tlasBlockKernel<true>, cudaFuncAttributeMaxDynamicSharedMemorySize, optIn));
+  CUDA_CHECK(cudaFuncSetAttribute(tlasBlockKernel<false>, cudaFuncAttributeMaxDynamicSharedMemorySize, optIn));
   return uint64_t(optIn);
 }
 
 void launchPoseBlasBlocks(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
-                          uint32_t interiorCount, const uint32_t* slotVertices, uint32_t slots, const float* positions,
-                          WoopTriangle* woop, RootInfo* roots, uint32_t poseCount, const BatchStrides& batch,
-                          cudaStream_t stream) {
+                          uint32_t interiorCount, bool boxesInShared, const uint32_t* slotVertices, uint32_t slots,
+                          const float* positions, WoopTriangle* woop, RootInfo* roots, uint32_t poseCount,
+                          const BatchStrides& batch, cudaStream_t stream) {
   if (poseCount == 0) return;
-  poseBlasBlockKernel<<<poseCount, kBlockThreads, blockRefitBytes(interiorCount), stream>>>(
-      nodes, nodeParent, leaves, leafCount, interiorCount, slotVertices, slots, positions, woop, roots, batch);
+  const uint64_t bytes = blockRefitBytes(interiorCount, boxesInShared);
+  if (boxesInShared)
+    poseBlasBlockKernel<true><<<poseCount, kPoseBlockThreads<true>, bytes, stream>>>(
+        nodes, nodeParent, leaves, leafCount, interiorCount, slotVertices, slots, positions, woop, roots, batch);
+  else
+    poseBlasBlockKernel<false><<<poseCount, kPoseBlockThreads<false>, bytes, stream>>>(
+        nodes, nodeParent, leaves, leafCount, interiorCount, slotVertices, slots, positions, woop, roots, batch);
   CUDA_CHECK_LAUNCH("poseBlasBlockKernel");
 }
 
 void launchTlasBlock(const InstanceState* instances, const BlasView* views, uint32_t count, Aabb* instanceBoxes,
                      GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
-                     uint32_t interiorCount, const uint32_t* triIndex, RootInfo* root, cudaStream_t stream) {
+                     uint32_t interiorCount, bool boxesInShared, const uint32_t* triIndex, RootInfo* root,
+                     cudaStream_t stream) {
   if (count == 0) return;
-  tlasBlockKernel<<<1, kTlasBlockThreads, blockRefitBytes(interiorCount), stream>>>(
-      instances, views, count, instanceBoxes, nodes, nodeParent, leaves, leafCount, interiorCount, triIndex, root);
+  const uint64_t bytes = blockRefitBytes(interiorCount, boxesInShared);
+  if (boxesInShared)
+    tlasBlockKernel<true><<<1, kTlasBlockThreads, bytes, stream>>>(instances, views, count, instanceBoxes, nodes,
+                                                                   nodeParent, leaves, leafCount, interiorCount,
+                                                                   triIndex, root);
+  else
+    tlasBlockKernel<false><<<1, kTlasBlockThreads, bytes, stream>>>(instances, views, count, instanceBoxes, nodes,
+                                                                    nodeParent, leaves, leafCount, interiorCount,
+                                                                    triIndex, root);
   CUDA_CHECK_LAUNCH("tlasBlockKernel");
 }
 

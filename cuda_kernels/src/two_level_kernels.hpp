@@ -61,19 +61,20 @@ void launchInstanceBoxes(const InstanceState* instances, const BlasView* views, 
 void launchTlasRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
                      const uint32_t* triIndex, const Aabb* instanceBoxes, uint32_t* counters, RootInfo* root,
                      cudaStream_t stream);
-// Small trees refitted by one block each, in shared memory (refit_walk.cuh's blockRefit): usable
-// when blockRefitBytes(interiorCount) <= the bytes prepareBlockRefits returns (the device's opt-in
-// shared memory per block; it lets the kernels use that much, on the current device).
+// Trees refitted by one block each (refit_walk.cuh's blockRefit): usable when
+// blockRefitBytes(interiorCount, boxesInShared) <= the bytes prepareBlockRefits returns (the device's
+// opt-in shared memory per block; it lets the kernels use that much, on the current device).
 uint64_t prepareBlockRefits();
 // Block b of poseCount (BatchStrides): pose b's Woop triangles and refit from its positions.
 void launchPoseBlasBlocks(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
-                          uint32_t interiorCount, const uint32_t* slotVertices, uint32_t slots, const float* positions,
-                          WoopTriangle* woop, RootInfo* roots, uint32_t poseCount, const BatchStrides& batch,
-                          cudaStream_t stream);
+                          uint32_t interiorCount, bool boxesInShared, const uint32_t* slotVertices, uint32_t slots,
+                          const float* positions, WoopTriangle* woop, RootInfo* roots, uint32_t poseCount,
+                          const BatchStrides& batch, cudaStream_t stream);
 // launchInstanceBoxes and launchTlasRefit in one block (no counters to clear).
 void launchTlasBlock(const InstanceState* instances, const BlasView* views, uint32_t count, Aabb* instanceBoxes,
                      GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
-                     uint32_t interiorCount, const uint32_t* triIndex, RootInfo* root, cudaStream_t stream);
+                     uint32_t interiorCount, bool boxesInShared, const uint32_t* triIndex, RootInfo* root,
+                     cudaStream_t stream);
 // One thread per ray: closest hits into hits, or (occluded non-null) any hits into occluded.
 void launchTwoLevelTrace(const TlasScene& scene, const Ray* rays, uint32_t count, InstanceHit* hits,
                          uint8_t* occluded, cudaStream_t stream);

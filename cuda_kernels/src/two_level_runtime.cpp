@@ -87,7 +87,8 @@ struct GpuTwoLevelRuntime::Impl {
     std::vector<uint32_t> poses;  // the scene's pose ids, in batch order
     uint32_t firstFrame = 0;      // its poses' frames in poseFrames / devicePoseFrames
     detail::BatchStrides strides;
-    bool blockRefit = false;  // its BLAS fits one block's shared memory (launchPoseBlasBlocks)
+    bool blockRefit = false;     // its BLAS is refitted by one block per pose (launchPoseBlasBlocks)
+    bool boxesInShared = false;  // ... with the child boxes in shared memory (a small BLAS)
     DeviceBuffer<GpuBvhNode> nodes;
     DeviceBuffer<float> positions;
     DeviceBuffer<WoopTriangle> woop;
@@ -132,7 +133,7 @@ struct GpuTwoLevelRuntime::Impl {
   DeviceBuffer<detail::LeafRecord> tlasLeaves;
   DeviceBuffer<detail::RootInfo> tlasRoot;
   uint64_t blockRefitLimit = 0;  // shared bytes a block refit may use (prepareBlockRefits)
-  bool tlasBlockRefit = false;
+  bool tlasBlockRefit = false, tlasBoxesInShared = false;
   Graph fullGraph, rigidGraph;  // with and without the poses' BLAS refits
   double time = 0.0;
   uint64_t refits = 0;
@@ -214,7 +215,9 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
     g.strides.nodes = d.topology.nodes.size();
     g.strides.woop = d.topology.triangleCount();
     g.strides.counters = d.topology.interiorCount;
-    g.blockRefit = config.blockRefits && detail::blockRefitBytes(d.topology.interiorCount) <= blockRefitLimit;
+    const uint32_t interior = d.topology.interiorCount;
+    g.boxesInShared = config.sharedBoxes && detail::blockRefitBytes(interior, true) <= blockRefitLimit;
+    g.blockRefit = config.blockRefits && detail::blockRefitBytes(interior, g.boxesInShared) <= blockRefitLimit;
     g.firstFrame = frameCount;
     std::vector<float> positions;
     positions.reserve(start.size() * members);
@@ -257,7 +260,9 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
   tlasLeafCount = uint32_t(r.leaves.size());
   tlasNodes = toDevice(tlasTopology.nodes, stream);
   tlasParent = toDevice(r.parent, stream);
-  tlasBlockRefit = config.blockRefits && detail::blockRefitBytes(tlasTopology.interiorCount) <= blockRefitLimit;
+  const uint32_t tlasInterior = tlasTopology.interiorCount;
+  tlasBoxesInShared = config.sharedBoxes && detail::blockRefitBytes(tlasInterior, true) <= blockRefitLimit;
+  tlasBlockRefit = config.blockRefits && detail::blockRefitBytes(tlasInterior, tlasBoxesInShared) <= blockRefitLimit;
   if (!tlasBlockRefit) tlasCounters.resize(tlasTopology.interiorCount);
   tlasTriIndex = toDevice(tlasTopology.triIndex, stream);
   tlasLeaves = toDevice(r.leaves, stream);
@@ -296,7 +301,8 @@ void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
                                      members, g.strides.positions, stream);
       if (g.blockRefit) {
         detail::launchPoseBlasBlocks(g.nodes.data(), d.nodeParent.data(), d.leaves.data(), d.leafCount,
-                                     d.topology.interiorCount, d.slotVertices.data(), d.topology.triangleCount(),
+                                     d.topology.interiorCount, g.boxesInShared, d.slotVertices.data(),
+                                     d.topology.triangleCount(),
                                      g.positions.data(), g.woop.data(), g.roots.data(), members, g.strides, stream);
         continue;
       }
@@ -311,7 +317,7 @@ void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
   if (tlasBlockRefit) {
     detail::launchTlasBlock(instances.data(), views.data(), count, instanceBoxes.data(), tlasNodes.data(),
                             tlasParent.data(), tlasLeaves.data(), tlasLeafCount, tlasTopology.interiorCount,
-                            tlasTriIndex.data(), tlasRoot.data(), stream);
+                            tlasBoxesInShared, tlasTriIndex.data(), tlasRoot.data(), stream);
   } else {
     detail::launchInstanceBoxes(instances.data(), views.data(), count, instanceBoxes.data(), stream);
     if (tlasCounters.size())
