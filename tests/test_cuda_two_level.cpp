@@ -10,6 +10,7 @@
 #include <random>
 
 #include "anim/tanim.hpp"
+#include "tsah/base/error.hpp"
 #include "tsah/layout/flat_bvh.hpp"
 #include "tsah/scene/two_level.hpp"
 #include "tsah/scene/two_level_runtime.hpp"
@@ -108,17 +109,17 @@ TEST_F(CudaTwoLevel, TlasBoxesContainEveryInstanceAfterEachUpdate) {
   }
 }
 
-// The block refits (one block per pose and one for the TLAS; child boxes in shared memory, or in
-// the nodes as larger trees keep them) against the global walk: the same boxes, so the same TLAS
-// bit for bit and the same hits exactly.
+// The block refits (one block per pose and one for the TLAS; and a pose's BLAS cut into treelets of
+// at most 8 interior nodes, the nodes above them left to the global walk) against the global walk:
+// the same boxes, so the same TLAS bit for bit and the same hits exactly.
 TEST_F(CudaTwoLevel, BlockRefitsEqualTheGlobalWalk) {
-  tsah::cuda::GpuTwoLevelRuntime::Config reference, nodeBoxes;
+  tsah::cuda::GpuTwoLevelRuntime::Config reference, treelets;
   reference.blockRefits = false;
-  nodeBoxes.sharedBoxes = false;
+  treelets.treeletNodes = 8;
   tsah::cuda::GpuTwoLevelRuntime global(*scene, reference);
-  for (const tsah::cuda::GpuTwoLevelRuntime::Config& config : {tsah::cuda::GpuTwoLevelRuntime::Config{}, nodeBoxes}) {
+  for (const tsah::cuda::GpuTwoLevelRuntime::Config& config : {tsah::cuda::GpuTwoLevelRuntime::Config{}, treelets}) {
     tsah::cuda::GpuTwoLevelRuntime block(*scene, config);
-    SCOPED_TRACE(config.sharedBoxes ? "boxes in shared memory" : "boxes in the nodes");
+    SCOPED_TRACE("treelets of at most " + std::to_string(config.treeletNodes) + " interior nodes");
     for (const double t : {0.0, 2.0, 3.25, 7.5, 12.0}) {
       block.updateAt(t);
       global.updateAt(t);
@@ -143,6 +144,12 @@ TEST_F(CudaTwoLevel, BlockRefitsEqualTheGlobalWalk) {
       EXPECT_GT(hits, rays.size() / 4) << "t " << t;
     }
   }
+}
+
+TEST_F(CudaTwoLevel, TreeletsOfNoNodeAreRefused) {
+  tsah::cuda::GpuTwoLevelRuntime::Config config;
+  config.treeletNodes = 0;
+  EXPECT_THROW(tsah::cuda::GpuTwoLevelRuntime(*scene, config), tsah::ConfigError);
 }
 
 TEST_F(CudaTwoLevel, AFrameWithOnlyRigidMotionRefitsNoBlas) {

@@ -2,7 +2,7 @@
 //   tsah_two_level_gpu_bench SCENE.json [--tree TREE.tbvh | --save-tree TREE.tbvh [--build-only]]
 //                            [--frames 50] [--width 1024] [--height 768]
 //                            [--ao 4] [--k 2] [--build-frames 5] [--no-rebuild-reference]
-//                            [--global-refits | --node-boxes] [--flat-tree FLAT.tbvh]
+//                            [--global-refits | --treelet-nodes N] [--flat-tree FLAT.tbvh]
 // Builds the two-level structure (or loads a version 3 .tbvh built for the scene), then for each of
 // --frames times spread over the scene's time range: updateAt (upload of the instance transforms,
 // BLAS refits, TLAS refit: CUDA events), then primary rays (a camera fitted to the instances' boxes,
@@ -42,7 +42,7 @@ struct Options {
   bool rebuildReference = true;
   bool buildOnly = false;  // build and save (--save-tree), no device needed
   bool blockRefits = true;  // GpuTwoLevelRuntime::Config::blockRefits
-  bool sharedBoxes = true;  // GpuTwoLevelRuntime::Config::sharedBoxes
+  uint32_t treeletNodes = tsah::cuda::GpuTwoLevelRuntime::Config{}.treeletNodes;
 };
 
 double median(std::vector<double> v) {
@@ -93,7 +93,7 @@ int run(const Options& opt) {
   if (opt.buildOnly) return 0;
   tsah::cuda::GpuTwoLevelRuntime::Config config;
   config.blockRefits = opt.blockRefits;
-  config.sharedBoxes = opt.sharedBoxes;
+  config.treeletNodes = opt.treeletNodes;
   tsah::cuda::GpuTwoLevelRuntime gpu(scene, config);
   // The flat reference: the baked scene and its tree on the GPU runtime.
   std::unique_ptr<anim::Animation> baked;
@@ -162,7 +162,7 @@ int run(const Options& opt) {
   j["image"] = {opt.width, opt.height};
   j["ao_per_hit"] = opt.ao;
   j["block_refits"] = opt.blockRefits;
-  j["shared_boxes"] = opt.sharedBoxes;
+  j["treelet_nodes"] = opt.treeletNodes;
   j["median"] = {{"upload_ms", median(upload)}, {"blas_refit_ms", median(blas)}, {"tlas_update_ms", median(tlas)},
                  {"update_ms", median(update)}, {"primary_ms", median(primaryMs)}, {"ao_ms", median(aoMs)},
                  {"tlas_rebuild_cpu_ms", median(rebuildMs)}, {"blas_refits", median(refits)}};
@@ -185,7 +185,7 @@ int run(const Options& opt) {
 int main(int argc, char** argv) {
   CLI::App app{"The GPU two-level runtime per frame: update (BLAS and TLAS refits) and trace times, JSON"};
   Options opt;
-  bool noRebuild = false, globalRefits = false, nodeBoxes = false;
+  bool noRebuild = false, globalRefits = false;
   app.add_option("scene", opt.scene, "Scene file (JSON)")->required();
   app.add_option("--tree", opt.tree, "A version 3 .tbvh built for the scene (default: build it)");
   app.add_option("--frames", opt.frames, "Frames timed, spread over the scene's time range (default 50)")
@@ -203,12 +203,12 @@ int main(int argc, char** argv) {
                  "A flat tree of the scene (tsah optimize --structure flat): traced on the same rays for comparison");
   app.add_flag("--global-refits", globalRefits,
                "Refit every tree by the global-memory walk, not by one block (the reference)");
-  app.add_flag("--node-boxes", nodeBoxes, "Block refits keep their child boxes in the nodes, never in shared memory")
-      ->excludes("--global-refits");
+  app.add_option("--treelet-nodes", opt.treeletNodes,
+                 "Interior nodes of a BLAS treelet refitted by one block (GpuTwoLevelRuntime::Config::treeletNodes)")
+      ->check(CLI::Range(1u, 1u << 20));
   CLI11_PARSE(app, argc, argv);
   opt.rebuildReference = !noRebuild;
   opt.blockRefits = !globalRefits;
-  opt.sharedBoxes = !nodeBoxes;
   try {
     return run(opt);
   } catch (const tsah::ConfigError& e) {

@@ -39,13 +39,12 @@ class GpuTwoLevelRuntime {
  public:
   struct Config {
     int device = 0;
-    // Refit each pose's BLAS and the TLAS by one block when its arrival counters fit the device's
-    // opt-in shared memory per block (4 bytes per interior node); false: the global-memory walk for
-    // every tree (the reference; the boxes are the same bit for bit).
+    // Refit each pose's BLAS by blocks of treelets (subtrees of at most treeletNodes interior
+    // nodes, within the device's opt-in shared memory per block at 13 * 4 bytes per node; the nodes
+    // above them by the global walk), and the TLAS by one block when it fits; false: the
+    // global-memory walk for every tree (the reference; the boxes are the same bit for bit).
     bool blockRefits = true;
-    // A block refit keeps the child boxes in shared memory too where they fit (13 * 4 bytes per
-    // interior node), else in the nodes; false: always in the nodes (the same boxes bit for bit).
-    bool sharedBoxes = true;
+    uint32_t treeletNodes = 1024;  // at least 1 (tsah::ConfigError otherwise)
   };
 
   // Keeps a reference to `scene` (it must outlive the runtime) and runs updateAt(first frame time).
