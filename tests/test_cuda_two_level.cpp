@@ -10,7 +10,6 @@
 #include <random>
 
 #include "anim/tanim.hpp"
-#include "tsah/base/error.hpp"
 #include "tsah/layout/flat_bvh.hpp"
 #include "tsah/scene/two_level.hpp"
 #include "tsah/scene/two_level_runtime.hpp"
@@ -109,47 +108,36 @@ TEST_F(CudaTwoLevel, TlasBoxesContainEveryInstanceAfterEachUpdate) {
   }
 }
 
-// The block refits (one block per pose and one for the TLAS; and a pose's BLAS cut into treelets of
-// at most 8 interior nodes, the nodes above them left to the global walk) against the global walk:
+// The block refits (shared memory, one block per pose and one for the TLAS) against the global walk:
 // the same boxes, so the same TLAS bit for bit and the same hits exactly.
 TEST_F(CudaTwoLevel, BlockRefitsEqualTheGlobalWalk) {
-  tsah::cuda::GpuTwoLevelRuntime::Config reference, treelets;
+  tsah::cuda::GpuTwoLevelRuntime block(*scene);
+  tsah::cuda::GpuTwoLevelRuntime::Config reference;
   reference.blockRefits = false;
-  treelets.treeletNodes = 8;
   tsah::cuda::GpuTwoLevelRuntime global(*scene, reference);
-  for (const tsah::cuda::GpuTwoLevelRuntime::Config& config : {tsah::cuda::GpuTwoLevelRuntime::Config{}, treelets}) {
-    tsah::cuda::GpuTwoLevelRuntime block(*scene, config);
-    SCOPED_TRACE("treelets of at most " + std::to_string(config.treeletNodes) + " interior nodes");
-    for (const double t : {0.0, 2.0, 3.25, 7.5, 12.0}) {
-      block.updateAt(t);
-      global.updateAt(t);
-      const tsah::FlatBvh a = block.downloadTlas(), b = global.downloadTlas();
-      ASSERT_EQ(a.nodes.size(), b.nodes.size());
-      EXPECT_EQ(std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(a.nodes[0])), 0) << "t " << t;
-      EXPECT_EQ(std::memcmp(&a.rootBoxes[0], &b.rootBoxes[0], sizeof(tsah::Aabb)), 0) << "t " << t;
-      const std::vector<tsah::Aabb> boxesA = block.downloadInstanceBoxes(), boxesB = global.downloadInstanceBoxes();
-      EXPECT_EQ(std::memcmp(boxesA.data(), boxesB.data(), boxesA.size() * sizeof(tsah::Aabb)), 0) << "t " << t;
-      const std::vector<tsah::Ray> rays = randomRays(unionOf(boxesA), 2000, uint32_t(t * 8) + 3);
-      const std::vector<tsah::TwoLevelHit> hitsA = block.closestHits(rays), hitsB = global.closestHits(rays);
-      uint32_t hits = 0;
-      for (std::size_t r = 0; r < rays.size(); ++r) {
-        ASSERT_EQ(hitsA[r].valid(), hitsB[r].valid()) << "t " << t << " ray " << r;
-        if (!hitsA[r].valid()) continue;
-        ++hits;
-        EXPECT_EQ(hitsA[r].instance, hitsB[r].instance) << "t " << t << " ray " << r;
-        EXPECT_EQ(hitsA[r].prim, hitsB[r].prim) << "t " << t << " ray " << r;
-        EXPECT_EQ(hitsA[r].t, hitsB[r].t) << "t " << t << " ray " << r;
-        EXPECT_EQ(hitsA[r].u, hitsB[r].u) << "t " << t << " ray " << r;
-      }
-      EXPECT_GT(hits, rays.size() / 4) << "t " << t;
+  for (const double t : {0.0, 2.0, 3.25, 7.5, 12.0}) {
+    block.updateAt(t);
+    global.updateAt(t);
+    const tsah::FlatBvh a = block.downloadTlas(), b = global.downloadTlas();
+    ASSERT_EQ(a.nodes.size(), b.nodes.size());
+    EXPECT_EQ(std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(a.nodes[0])), 0) << "t " << t;
+    EXPECT_EQ(std::memcmp(&a.rootBoxes[0], &b.rootBoxes[0], sizeof(tsah::Aabb)), 0) << "t " << t;
+    const std::vector<tsah::Aabb> boxesA = block.downloadInstanceBoxes(), boxesB = global.downloadInstanceBoxes();
+    EXPECT_EQ(std::memcmp(boxesA.data(), boxesB.data(), boxesA.size() * sizeof(tsah::Aabb)), 0) << "t " << t;
+    const std::vector<tsah::Ray> rays = randomRays(unionOf(boxesA), 2000, uint32_t(t * 8) + 3);
+    const std::vector<tsah::TwoLevelHit> hitsA = block.closestHits(rays), hitsB = global.closestHits(rays);
+    uint32_t hits = 0;
+    for (std::size_t r = 0; r < rays.size(); ++r) {
+      ASSERT_EQ(hitsA[r].valid(), hitsB[r].valid()) << "t " << t << " ray " << r;
+      if (!hitsA[r].valid()) continue;
+      ++hits;
+      EXPECT_EQ(hitsA[r].instance, hitsB[r].instance) << "t " << t << " ray " << r;
+      EXPECT_EQ(hitsA[r].prim, hitsB[r].prim) << "t " << t << " ray " << r;
+      EXPECT_EQ(hitsA[r].t, hitsB[r].t) << "t " << t << " ray " << r;
+      EXPECT_EQ(hitsA[r].u, hitsB[r].u) << "t " << t << " ray " << r;
     }
+    EXPECT_GT(hits, rays.size() / 4) << "t " << t;
   }
-}
-
-TEST_F(CudaTwoLevel, TreeletsOfNoNodeAreRefused) {
-  tsah::cuda::GpuTwoLevelRuntime::Config config;
-  config.treeletNodes = 0;
-  EXPECT_THROW(tsah::cuda::GpuTwoLevelRuntime(*scene, config), tsah::ConfigError);
 }
 
 TEST_F(CudaTwoLevel, AFrameWithOnlyRigidMotionRefitsNoBlas) {

@@ -2,7 +2,7 @@
 //   tsah_two_level_gpu_bench SCENE.json [--tree TREE.tbvh | --save-tree TREE.tbvh [--build-only]]
 //                            [--frames 50] [--width 1024] [--height 768]
 //                            [--ao 4] [--k 2] [--build-frames 5] [--no-rebuild-reference]
-//                            [--global-refits | --treelet-nodes N] [--flat-tree FLAT.tbvh]
+//                            [--global-refits] [--flat-tree FLAT.tbvh]
 // Builds the two-level structure (or loads a version 3 .tbvh built for the scene), then for each of
 // --frames times spread over the scene's time range: updateAt (upload of the instance transforms,
 // BLAS refits, TLAS refit: CUDA events), then primary rays (a camera fitted to the instances' boxes,
@@ -42,7 +42,6 @@ struct Options {
   bool rebuildReference = true;
   bool buildOnly = false;  // build and save (--save-tree), no device needed
   bool blockRefits = true;  // GpuTwoLevelRuntime::Config::blockRefits
-  uint32_t treeletNodes = tsah::cuda::GpuTwoLevelRuntime::Config{}.treeletNodes;
 };
 
 double median(std::vector<double> v) {
@@ -93,7 +92,6 @@ int run(const Options& opt) {
   if (opt.buildOnly) return 0;
   tsah::cuda::GpuTwoLevelRuntime::Config config;
   config.blockRefits = opt.blockRefits;
-  config.treeletNodes = opt.treeletNodes;
   tsah::cuda::GpuTwoLevelRuntime gpu(scene, config);
   // The flat reference: the baked scene and its tree on the GPU runtime.
   std::unique_ptr<anim::Animation> baked;
@@ -162,7 +160,6 @@ int run(const Options& opt) {
   j["image"] = {opt.width, opt.height};
   j["ao_per_hit"] = opt.ao;
   j["block_refits"] = opt.blockRefits;
-  j["treelet_nodes"] = opt.treeletNodes;
   j["median"] = {{"upload_ms", median(upload)}, {"blas_refit_ms", median(blas)}, {"tlas_update_ms", median(tlas)},
                  {"update_ms", median(update)}, {"primary_ms", median(primaryMs)}, {"ao_ms", median(aoMs)},
                  {"tlas_rebuild_cpu_ms", median(rebuildMs)}, {"blas_refits", median(refits)}};
@@ -202,10 +199,7 @@ int main(int argc, char** argv) {
   app.add_option("--flat-tree", opt.flatTree,
                  "A flat tree of the scene (tsah optimize --structure flat): traced on the same rays for comparison");
   app.add_flag("--global-refits", globalRefits,
-               "Refit every tree by the global-memory walk, not by one block (the reference)");
-  app.add_option("--treelet-nodes", opt.treeletNodes,
-                 "Interior nodes of a BLAS treelet refitted by one block (GpuTwoLevelRuntime::Config::treeletNodes)")
-      ->check(CLI::Range(1u, 1u << 20));
+               "Refit every tree by the global-memory walk, not in one block's shared memory (the reference)");
   CLI11_PARSE(app, argc, argv);
   opt.rebuildReference = !noRebuild;
   opt.blockRefits = !globalRefits;

@@ -65,17 +65,8 @@ struct BatchStrides {
   uint64_t positions = 0, nodes = 0, woop = 0, counters = 0;
 };
 
-// A part of a tree that one block refits (refit_walk.cuh's blockRefit): the interior nodes
-// [nodeBegin, nodeEnd), a whole subtree (canonical order: a subtree's nodes are consecutive), and
-// the leaf records [leafBegin, leafEnd) it walks up from: the subtree's leaves, and leaves whose
-// parent lies above every treelet (their walk goes straight to the global walk).
-struct Treelet {
-  uint32_t nodeBegin = 0, nodeEnd = 0;
-  uint32_t leafBegin = 0, leafEnd = 0;
-};
-
-// Shared-memory bytes of a block refit of a treelet with interiorCount interior nodes: an arrival
-// counter and the two child boxes (12 floats) per node.
+// Shared-memory bytes of a block refit (refit_walk.cuh's blockRefit) of a tree with interiorCount
+// interior nodes: an arrival counter and the two child boxes (12 floats) per node.
 constexpr uint64_t blockRefitBytes(uint32_t interiorCount) { return uint64_t(interiorCount) * 13u * 4u; }
 
 struct TraceLaunch {

@@ -33,34 +33,28 @@ __global__ void tlasRefitKernel(GpuBvhNode* __restrict__ nodes, const uint32_t* 
   refitUpwards(nodes, nodeParent, leaf.parentSlot, box, counters, root);
 }
 
-// Block refits: threads per treelet of a pose's tree, and for the TLAS (one block for the whole
-// frame's instances).
+// Block refits: threads per pose's tree, and for the TLAS (one block for the whole frame's instances).
 constexpr uint32_t kBlockThreads = 512;
 constexpr uint32_t kTlasBlockThreads = 1024;
 
-// Block (treelet, pose) = (blockIdx.x, blockIdx.y): the Woop triangles of the treelet's leaves and
-// their refit, both from the positions the batched interpolation wrote before this launch.
+// One block per pose of a group (blockIdx.x): its Woop triangles and its refit, both from the
+// positions the batched interpolation wrote before this launch.
 __global__ void __launch_bounds__(kBlockThreads)
     poseBlasBlockKernel(GpuBvhNode* __restrict__ nodes, const uint32_t* __restrict__ nodeParent,
-                        const LeafRecord* __restrict__ leaves, const Treelet* __restrict__ treelets,
-                        const uint32_t* __restrict__ slotVertices, const float* __restrict__ positions,
-                        WoopTriangle* __restrict__ woop, uint32_t* __restrict__ counters, RootInfo* __restrict__ roots,
-                        BatchStrides batch) {
+                        const LeafRecord* __restrict__ leaves, uint32_t leafCount, uint32_t interiorCount,
+                        const uint32_t* __restrict__ slotVertices, uint32_t slots, const float* __restrict__ positions,
+                        WoopTriangle* __restrict__ woop, RootInfo* __restrict__ roots, BatchStrides batch) {
   extern __shared__ uint32_t shared[];
-  const uint32_t b = blockIdx.y;
+  const uint32_t b = blockIdx.x;
   const float* own = positions + b * batch.positions;
   WoopTriangle* ownWoop = woop + b * batch.woop;
-  // A leaf's Woop triangles beside its box: every slot belongs to exactly one leaf.
-  const auto leafBoxOf = [&](const LeafRecord& leaf) {
-    for (uint32_t s = leaf.first; s < leaf.first + leaf.count; ++s) {
-      const uint32_t* tri = slotVertices + 3 * std::size_t(s);
-      ownWoop[s] = makeWoopTriangle(loadVertex(own, __ldg(tri)), loadVertex(own, __ldg(tri + 1)),
-                                    loadVertex(own, __ldg(tri + 2)));
-    }
-    return leafBox(leaf.first, leaf.count, slotVertices, own);
-  };
-  blockRefit(nodes + b * batch.nodes, nodeParent, leaves, treelets[blockIdx.x], leafBoxOf,
-             counters ? counters + b * batch.counters : nullptr, roots + b, shared);
+  for (uint32_t s = threadIdx.x; s < slots; s += blockDim.x) {
+    const uint32_t* tri = slotVertices + 3 * std::size_t(s);
+    ownWoop[s] = makeWoopTriangle(loadVertex(own, __ldg(tri)), loadVertex(own, __ldg(tri + 1)),
+                                  loadVertex(own, __ldg(tri + 2)));
+  }
+  const auto leafBoxOf = [&](const LeafRecord& leaf) { return leafBox(leaf.first, leaf.count, slotVertices, own); };
+  blockRefit(nodes + b * batch.nodes, nodeParent, leaves, leafCount, interiorCount, leafBoxOf, roots + b, shared);
 }
 
 // One block: every instance's world box, then the TLAS refit over them.
@@ -78,8 +72,7 @@ __global__ void __launch_bounds__(kTlasBlockThreads)
     for (uint32_t s = leaf.first; s < leaf.first + leaf.count; ++s) box.extend(instanceBoxes[triIndex[s]]);
     return box;
   };
-  const Treelet whole{0, interiorCount, 0, leafCount};
-  blockRefit(nodes, nodeParent, leaves, whole, leafBoxOf, nullptr, root, shared);
+  blockRefit(nodes, nodeParent, leaves, leafCount, interiorCount, leafBoxOf, root, shared);
 }
 
 // What the binary layout's device loop (bvh2_traversal.cuh) reads of the TLAS: its nodes as a
@@ -186,13 +179,13 @@ uint64_t prepareBlockRefits() {
   return uint64_t(optIn);
 }
 
-void launchPoseBlasBlocks(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves,
-                          const Treelet* treelets, uint32_t treeletCount, uint32_t largestTreelet,
-                          const uint32_t* slotVertices, const float* positions, WoopTriangle* woop, uint32_t* counters,
-                          RootInfo* roots, uint32_t poseCount, const BatchStrides& batch, cudaStream_t stream) {
-  if (poseCount == 0 || treeletCount == 0) return;
-  poseBlasBlockKernel<<<dim3(treeletCount, poseCount), kBlockThreads, blockRefitBytes(largestTreelet), stream>>>(
-      nodes, nodeParent, leaves, treelets, slotVertices, positions, woop, counters, roots, batch);
+void launchPoseBlasBlocks(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
+                          uint32_t interiorCount, const uint32_t* slotVertices, uint32_t slots, const float* positions,
+                          WoopTriangle* woop, RootInfo* roots, uint32_t poseCount, const BatchStrides& batch,
+                          cudaStream_t stream) {
+  if (poseCount == 0) return;
+  poseBlasBlockKernel<<<poseCount, kBlockThreads, blockRefitBytes(interiorCount), stream>>>(
+      nodes, nodeParent, leaves, leafCount, interiorCount, slotVertices, slots, positions, woop, roots, batch);
   CUDA_CHECK_LAUNCH("poseBlasBlockKernel");
 }
 

@@ -61,17 +61,15 @@ void launchInstanceBoxes(const InstanceState* instances, const BlasView* views, 
 void launchTlasRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
                      const uint32_t* triIndex, const Aabb* instanceBoxes, uint32_t* counters, RootInfo* root,
                      cudaStream_t stream);
-// Trees refitted by blocks (refit_walk.cuh's blockRefit): usable for a treelet of n interior nodes
-// when blockRefitBytes(n) <= the bytes prepareBlockRefits returns (the device's opt-in shared memory
-// per block; it lets the kernels use that much, on the current device).
+// Small trees refitted by one block each, in shared memory (refit_walk.cuh's blockRefit): usable
+// when blockRefitBytes(interiorCount) <= the bytes prepareBlockRefits returns (the device's opt-in
+// shared memory per block; it lets the kernels use that much, on the current device).
 uint64_t prepareBlockRefits();
-// Block (t, b) of treeletCount x poseCount (BatchStrides): treelet t of pose b, its Woop triangles
-// and its refit from the pose's positions. counters: the walk above the treelets (zero before the
-// launch; null when one treelet is the whole tree).
-void launchPoseBlasBlocks(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves,
-                          const Treelet* treelets, uint32_t treeletCount, uint32_t largestTreelet,
-                          const uint32_t* slotVertices, const float* positions, WoopTriangle* woop, uint32_t* counters,
-                          RootInfo* roots, uint32_t poseCount, const BatchStrides& batch, cudaStream_t stream);
+// Block b of poseCount (BatchStrides): pose b's Woop triangles and refit from its positions.
+void launchPoseBlasBlocks(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
+                          uint32_t interiorCount, const uint32_t* slotVertices, uint32_t slots, const float* positions,
+                          WoopTriangle* woop, RootInfo* roots, uint32_t poseCount, const BatchStrides& batch,
+                          cudaStream_t stream);
 // launchInstanceBoxes and launchTlasRefit in one block (no counters to clear).
 void launchTlasBlock(const InstanceState* instances, const BlasView* views, uint32_t count, Aabb* instanceBoxes,
                      GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,

@@ -46,39 +46,6 @@ RefitTopology refitTopology(const FlatBvh& tree) {
   return r;
 }
 
-// The treelets one block each refits (detail::Treelet): the largest subtrees of at most maxNodes
-// interior nodes, found from the root down; the nodes above them are left to the global walk. The
-// leaf records (refitTopology: in the order of their parents) are cut at each treelet's first
-// leaf, so a leaf whose parent lies above every treelet goes with the treelet before it.
-std::vector<detail::Treelet> treeletsOf(const FlatBvh& tree, const std::vector<detail::LeafRecord>& leaves,
-                                        uint32_t maxNodes) {
-  const auto leafCount = uint32_t(leaves.size());
-  if (tree.interiorCount <= maxNodes) return {{0, tree.interiorCount, 0, leafCount}};
-  const std::vector<uint32_t> ends = subtreeEnds(tree);
-  std::vector<uint32_t> roots, stack{0};
-  while (!stack.empty()) {
-    const uint32_t n = stack.back();
-    stack.pop_back();
-    if (ends[n] - n <= maxNodes) {
-      roots.push_back(n);
-      continue;
-    }
-    for (int c = 0; c < 2; ++c)
-      if (!isLeafRef(tree.nodes[n].childRef(c))) stack.push_back(uint32_t(tree.nodes[n].childRef(c)));
-  }
-  std::sort(roots.begin(), roots.end());
-  std::vector<detail::Treelet> treelets;
-  for (std::size_t k = 0; k < roots.size(); ++k) {
-    const auto firstLeaf = std::partition_point(leaves.begin(), leaves.end(), [&](const detail::LeafRecord& l) {
-      return (l.parentSlot >> 1) < roots[k];
-    });
-    const uint32_t leafBegin = k == 0 ? 0 : uint32_t(firstLeaf - leaves.begin());
-    if (!treelets.empty()) treelets.back().leafEnd = leafBegin;
-    treelets.push_back({roots[k], ends[roots[k]], leafBegin, leafCount});
-  }
-  return treelets;
-}
-
 detail::RootInfo rootOf(const FlatBvh& tree) {
   detail::RootInfo root;
   root.ref = tree.rootRef;
@@ -101,7 +68,6 @@ struct GpuTwoLevelRuntime::Impl {
     uint32_t leafCount = 0;
     DeviceBuffer<uint32_t> indices, triIndex, slotVertices, nodeParent, movingIds;
     DeviceBuffer<detail::LeafRecord> leaves;
-    std::vector<detail::LeafRecord> hostLeaves;
     DeviceBuffer<float> keyframes;  // every keyframe of the moving vertices (animated sources)
     uint32_t movingCount = 0;
   };
@@ -121,11 +87,7 @@ struct GpuTwoLevelRuntime::Impl {
     std::vector<uint32_t> poses;  // the scene's pose ids, in batch order
     uint32_t firstFrame = 0;      // its poses' frames in poseFrames / devicePoseFrames
     detail::BatchStrides strides;
-    // Refitted by blocks (launchPoseBlasBlocks): per pose one block per treelet of its BLAS.
-    bool blockRefit = false;
-    std::vector<detail::Treelet> hostTreelets;
-    DeviceBuffer<detail::Treelet> treelets;
-    uint32_t largestTreelet = 0;  // interior nodes
+    bool blockRefit = false;  // its BLAS fits one block's shared memory (launchPoseBlasBlocks)
     DeviceBuffer<GpuBvhNode> nodes;
     DeviceBuffer<float> positions;
     DeviceBuffer<WoopTriangle> woop;
@@ -170,7 +132,6 @@ struct GpuTwoLevelRuntime::Impl {
   DeviceBuffer<detail::LeafRecord> tlasLeaves;
   DeviceBuffer<detail::RootInfo> tlasRoot;
   uint64_t blockRefitLimit = 0;  // shared bytes a block refit may use (prepareBlockRefits)
-  uint32_t treeletLimit = 0;     // interior nodes of a BLAS treelet: config.treeletNodes within that
   bool tlasBlockRefit = false;
   Graph fullGraph, rigidGraph;  // with and without the poses' BLAS refits
   double time = 0.0;
@@ -184,9 +145,7 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
   device = describeDevice(config.device);
   CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
   events.create(4);
-  if (config.treeletNodes == 0) throw ConfigError("GPU two-level runtime: treeletNodes must be at least 1");
   blockRefitLimit = config.blockRefits ? detail::prepareBlockRefits() : 0;
-  treeletLimit = uint32_t(std::min<uint64_t>(config.treeletNodes, blockRefitLimit / detail::blockRefitBytes(1)));
   const anim::SceneSources& src = scene.scene;
   for (const Blas& blas : scene.blases) {
     const anim::Animation& a = *src.sources[blas.source];
@@ -200,7 +159,6 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
     d.slotVertices = toDevice(slotVertexIndices(d.topology.triIndex, a.indices(), "GPU two-level runtime"), stream);
     d.nodeParent = toDevice(r.parent, stream);
     d.leaves = toDevice(r.leaves, stream);
-    d.hostLeaves = r.leaves;
     if (blas.animated) {
       d.keyframes = DeviceBuffer<float>(a.motion(), stream);
       d.movingIds = DeviceBuffer<uint32_t>(a.movingVertices(), stream);
@@ -256,15 +214,7 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
     g.strides.nodes = d.topology.nodes.size();
     g.strides.woop = d.topology.triangleCount();
     g.strides.counters = d.topology.interiorCount;
-    g.blockRefit = config.blockRefits;
-    if (g.blockRefit) {
-      g.hostTreelets = treeletsOf(d.topology, d.hostLeaves, treeletLimit);
-      g.treelets = toDevice(g.hostTreelets, stream);
-      for (const detail::Treelet& t : g.hostTreelets)
-        g.largestTreelet = std::max(g.largestTreelet, t.nodeEnd - t.nodeBegin);
-    }
-    // The walk above the treelets, or the global walk, counts its arrivals in device memory.
-    const bool deviceCounters = !g.blockRefit || g.hostTreelets.size() > 1;
+    g.blockRefit = config.blockRefits && detail::blockRefitBytes(d.topology.interiorCount) <= blockRefitLimit;
     g.firstFrame = frameCount;
     std::vector<float> positions;
     positions.reserve(start.size() * members);
@@ -277,7 +227,7 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
     g.positions = toDevice(positions, stream);
     g.nodes = toDevice(nodes, stream);
     g.woop.resize(g.strides.woop * members);
-    if (deviceCounters) g.counters.resize(g.strides.counters * members);
+    if (!g.blockRefit) g.counters.resize(g.strides.counters * members);
     g.roots = toDevice(std::vector<detail::RootInfo>(members, rootOf(d.topology)), stream);
     for (uint32_t i = 0; i < members; ++i) {
       const uint32_t p = g.poses[i];
@@ -344,14 +294,13 @@ void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
       detail::launchBatchInterpolate(d.keyframes.data(), d.movingIds.size() ? d.movingIds.data() : nullptr,
                                      devicePoseFrames.data() + g.firstFrame, g.positions.data(), d.movingCount,
                                      members, g.strides.positions, stream);
-      if (g.counters.size()) CUDA_CHECK(cudaMemsetAsync(g.counters.data(), 0, g.counters.bytes(), stream));
       if (g.blockRefit) {
-        detail::launchPoseBlasBlocks(g.nodes.data(), d.nodeParent.data(), d.leaves.data(), g.treelets.data(),
-                                     uint32_t(g.hostTreelets.size()), g.largestTreelet, d.slotVertices.data(),
-                                     g.positions.data(), g.woop.data(), g.counters.size() ? g.counters.data() : nullptr,
-                                     g.roots.data(), members, g.strides, stream);
+        detail::launchPoseBlasBlocks(g.nodes.data(), d.nodeParent.data(), d.leaves.data(), d.leafCount,
+                                     d.topology.interiorCount, d.slotVertices.data(), d.topology.triangleCount(),
+                                     g.positions.data(), g.woop.data(), g.roots.data(), members, g.strides, stream);
         continue;
       }
+      if (g.counters.size()) CUDA_CHECK(cudaMemsetAsync(g.counters.data(), 0, g.counters.bytes(), stream));
       detail::launchBatchRefit(g.nodes.data(), d.nodeParent.data(), d.leaves.data(), d.leafCount,
                                d.slotVertices.data(), g.positions.data(), g.counters.data(), g.roots.data(), members,
                                g.strides, stream);

@@ -39,12 +39,10 @@ class GpuTwoLevelRuntime {
  public:
   struct Config {
     int device = 0;
-    // Refit each pose's BLAS by blocks of treelets (subtrees of at most treeletNodes interior
-    // nodes, within the device's opt-in shared memory per block at 13 * 4 bytes per node; the nodes
-    // above them by the global walk), and the TLAS by one block when it fits; false: the
-    // global-memory walk for every tree (the reference; the boxes are the same bit for bit).
+    // Refit each pose's BLAS and the TLAS in one block's shared memory when they fit (the device's
+    // opt-in shared memory per block: 13 * 4 bytes per interior node); false: the global-memory
+    // walk for every tree (the reference; the boxes are the same bit for bit).
     bool blockRefits = true;
-    uint32_t treeletNodes = 1024;  // at least 1 (tsah::ConfigError otherwise)
   };
 
   // Keeps a reference to `scene` (it must outlive the runtime) and runs updateAt(first frame time).
