@@ -275,6 +275,9 @@ std::unique_ptr<FrameRuntime> makeFrameRuntime(const TreeSet& trees, const anim:
   config.layout = options.layout == Layout::Auto ? fastestLayout(options.isa) : options.layout;
   config.isa = options.isa;
   config.collapse = wideCollapseConfig(options.objective);
+  // The frames come from the animation, whose static vertices stay at rest: refit what moves.
+  if (!animation.allMoving())
+    config.movingVertices.emplace(animation.movingVertices().begin(), animation.movingVertices().end());
   return std::make_unique<CpuFrameRuntime>(trees, animation, config, cpuRebuilder(options.rebuild, options.objective),
                                            options.shutter, options.frameInterval);
 }

@@ -2,6 +2,7 @@
 // Private to libtsah: how the CPU refits (binary and wide) split a tree in depth-first pre-order
 // (the subtree of interior node i is [i, ends[i])) for a parallel bottom-up pass.
 #include <algorithm>
+#include <cstddef>
 #include <cstdint>
 #include <functional>
 #include <utility>
@@ -34,6 +35,28 @@ void planParallelRefit(const std::vector<uint32_t>& ends, uint32_t threads, cons
     interiorChildren(i, [&](uint32_t c) { stack.push_back(c); });
   }
   std::sort(top.begin(), top.end(), std::greater<>());
+}
+
+// The part of a plan above that must run when only some subtrees move (nodeMoves[i] != 0: node i's
+// subtree holds a moving triangle): per planned subtree that moves, its moving nodes in ascending
+// order (taskNodes[taskStart[t]] up to taskNodes[taskStart[t + 1]]), and the moving nodes above
+// the subtrees, in the plan's descending order. A node that does not move keeps its boxes.
+struct MovingRefitPlan {
+  std::vector<uint32_t> taskNodes, taskStart{0}, top;
+  std::size_t taskCount() const { return taskStart.size() - 1; }
+};
+
+inline MovingRefitPlan planMovingRefit(const std::vector<std::pair<uint32_t, uint32_t>>& subtrees,
+                                       const std::vector<uint32_t>& top, const std::vector<uint8_t>& nodeMoves) {
+  MovingRefitPlan plan;
+  for (const auto& [root, end] : subtrees) {
+    for (uint32_t i = root; i < end; ++i)
+      if (nodeMoves[i]) plan.taskNodes.push_back(i);
+    if (plan.taskNodes.size() > plan.taskStart.back()) plan.taskStart.push_back(uint32_t(plan.taskNodes.size()));
+  }
+  for (uint32_t i : top)
+    if (nodeMoves[i]) plan.top.push_back(i);
+  return plan;
 }
 
 }  // namespace tsah::detail

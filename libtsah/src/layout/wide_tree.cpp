@@ -162,6 +162,48 @@ void WideTree<N>::refitTo(const Target& target, const ParallelFor& parallelFor) 
 }
 
 template <uint32_t N>
+void WideTree<N>::setMovingVertices(std::span<const uint8_t> vertexMoves) {
+  for (uint32_t v : slotVertices_)
+    if (v >= vertexMoves.size()) throw tsah::DataError("wide tree: a triangle's vertex has no moving flag");
+  const auto leafMoves = [&](int32_t ref, uint32_t count) {
+    const uint32_t firstPacket = leafFirstSlot(ref);
+    for (uint32_t k = 0; k < count; ++k) {
+      const uint32_t* tri = slotVertices_.data() + 3 * std::size_t(packetSlots_[firstPacket + k / N] + k % N);
+      if (vertexMoves[tri[0]] | vertexMoves[tri[1]] | vertexMoves[tri[2]]) return true;
+    }
+    return false;
+  };
+  // Pre-order: every child after its parent, so one descending pass sees the children first.
+  std::vector<uint8_t> nodeMoves(nodes_.size(), 0);
+  for (uint32_t i = uint32_t(nodes_.size()); i-- > 0;) {
+    const WideSoaNode<N>& node = nodes_[i];
+    for (uint32_t c = 0; c < N && usedSlot(node, c) && !nodeMoves[i]; ++c)
+      nodeMoves[i] = isLeafRef(node.ref[c]) ? leafMoves(node.ref[c], node.count[c])
+                                            : nodeMoves[static_cast<uint32_t>(node.ref[c])];
+  }
+  moving_ = std::make_shared<const detail::MovingRefitPlan>(detail::planMovingRefit(subtreeTasks_, topNodes_, nodeMoves));
+}
+
+template <uint32_t N>
+void WideTree<N>::refitMoving(const float* positions, const ParallelFor& parallelFor) {
+  if (!moving_ || isLeafRef(rootRef_)) {
+    refit(positions, parallelFor);
+    return;
+  }
+  const Target target{positions, true, nullptr};
+  const detail::MovingRefitPlan& plan = *moving_;
+  parallelFor(plan.taskCount(), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t t = begin; t < end; ++t) {
+      const uint32_t first = plan.taskStart[t], stop = plan.taskStart[t + 1];
+      for (uint32_t k = first; k < stop; ++k) refitLeaves(plan.taskNodes[k], target);
+      for (uint32_t k = stop; k-- > first;) refitInterior(plan.taskNodes[k]);  // children first
+    }
+  });
+  for (uint32_t i : plan.top) refitLeaves(i, target), refitInterior(i);
+  rootBox_ = nodeBounds(nodes_[0]);
+}
+
+template <uint32_t N>
 WideView<N> WideTree<N>::view(const uint32_t* indices, const float* positions) const {
   WideView<N> v;
   v.nodes = nodes_.data();

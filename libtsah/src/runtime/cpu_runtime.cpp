@@ -12,6 +12,7 @@
 #include "tsah/base/coordinates.hpp"
 #include "tsah/base/error.hpp"
 #include "tsah/core/cost.hpp"
+#include "tsah/layout/moving_parts.hpp"
 #include "layout/refit_plan.hpp"
 
 namespace tsah {
@@ -66,6 +67,16 @@ CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint3
   if (indices_.size() % 3 != 0) throw tsah::DataError("runtime: the index array is not a multiple of 3");
   for (uint32_t v : indices_)
     if (v >= vertexCount_) throw tsah::DataError("runtime: a triangle refers to a vertex out of range");
+  if (config.movingVertices) {
+    movingVertices_ = *config.movingVertices;
+    vertexMoves_.assign(vertexCount_, 0);
+    for (std::size_t k = 0; k < movingVertices_.size(); ++k) {
+      if (movingVertices_[k] >= vertexCount_ || (k > 0 && movingVertices_[k] <= movingVertices_[k - 1]))
+        throw tsah::ConfigError("runtime: the moving vertices must be ascending ids below the vertex count " +
+                                std::to_string(vertexCount_));
+      vertexMoves_[movingVertices_[k]] = 1;
+    }
+  }
   setTree(topologyOf(tree));
   positions_.assign(std::size_t(vertexCount_) * 3, 0.0f);
   info_.layout = config.layout;
@@ -97,10 +108,14 @@ void CpuRuntime::setWideTree(const Bvh& binary, bool reportCosts) {
   info_.interiorNodes = w.nodeCount();
   info_.leaves = w.leafCount();
   info_.depth = w.depth();
-  if (info_.layout == Layout::Bvh4)
+  if (info_.layout == Layout::Bvh4) {
     wide4_ = std::make_shared<WideTree<4>>(w, indices_, threads_->count, info_.isa);
-  else
+    if (!vertexMoves_.empty()) wide4_->setMovingVertices(vertexMoves_);
+  } else {
     wide8_ = std::make_shared<WideTree<8>>(w, indices_, threads_->count, info_.isa);
+    if (!vertexMoves_.empty()) wide8_->setMovingVertices(vertexMoves_);
+  }
+  staticRefitted_ = false;
 }
 
 namespace {
@@ -196,6 +211,7 @@ void CpuRuntime::setTree(FlatBvh tree) {
                           std::to_string(kTraversalStackSize));
   tree_ = std::move(tree);
   woop_.resize(tree_.triangleCount());
+  staticRefitted_ = false;
 
   if (tree_.interiorCount == 0) {
     subtreeTasks_.clear();
@@ -209,6 +225,9 @@ void CpuRuntime::setTree(FlatBvh tree) {
           if (!isLeafRef(ref)) push(static_cast<uint32_t>(ref));
       },
       subtreeTasks_, topNodes_);
+  if (!vertexMoves_.empty())
+    movingPlan_ = std::make_shared<const detail::MovingRefitPlan>(detail::planMovingRefit(
+        subtreeTasks_, topNodes_, findMovingParts(tree_, indices_, movingVertices_, vertexCount_).nodeMoves));
 }
 
 void CpuRuntime::checkPositions(std::span<const float> positions) const {
@@ -274,9 +293,51 @@ void CpuRuntime::refitAndWoop() {
 }
 
 void CpuRuntime::update(std::span<const float> positions) {
-  clearShutter();
-  setPositions(positions);
-  refitAndWoop();
+  // The moving parts only when the last full refit is this tree's, instant (not a blurred frame's keys).
+  lastUpdateMovingOnly_ = staticRefitted_ && !blurred() && !vertexMoves_.empty();
+  if (!lastUpdateMovingOnly_) {
+    checkPositions(positions);
+    clearShutter();
+    positions_.assign(positions.begin(), positions.end());
+    refitAndWoop();
+    staticRefitted_ = !vertexMoves_.empty();
+    return;
+  }
+  if (positions.size() != positions_.size()) checkPositions(positions);  // the count's error
+  for (uint32_t v : movingVertices_)
+    if (const std::size_t bad = firstBadCoordinate(positions.subspan(3 * std::size_t(v), 3)); bad < 3)
+      throw tsah::DataError("runtime: vertex " + std::to_string(v) + " " +
+                            describeBadCoordinate(positions[3 * std::size_t(v) + bad]));
+  for (uint32_t v : movingVertices_)
+    std::copy_n(positions.begin() + 3 * std::ptrdiff_t(v), 3, positions_.begin() + 3 * std::ptrdiff_t(v));
+  refitMovingAndWoop();
+}
+
+void CpuRuntime::refitMovingAndWoop() {
+  const auto parallel = [this](std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) {
+    parallelFor(n, 1, body);
+  };
+  if (wide4_) {
+    wide4_->refitMoving(positions_.data(), parallel);
+    view4_ = wide4_->view(indices_.data(), positions_.data());
+    return;
+  }
+  if (wide8_) {
+    wide8_->refitMoving(positions_.data(), parallel);
+    view8_ = wide8_->view(indices_.data(), positions_.data());
+    return;
+  }
+  if (tree_.interiorCount == 0) {
+    tree_.rootBoxes[0] = refitLeaf(0, tree_.rootCount);
+    return;
+  }
+  const detail::MovingRefitPlan& plan = *movingPlan_;
+  parallelFor(plan.taskCount(), 1, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t t = begin; t < end; ++t)
+      for (uint32_t k = plan.taskStart[t + 1]; k-- > plan.taskStart[t];) refitNode(plan.taskNodes[k]);
+  });
+  for (uint32_t i : plan.top) refitNode(i);
+  tree_.rootBoxes[0] = tree_.nodes[0].bounds();
 }
 
 CpuRuntime::RebuildTimings CpuRuntime::rebuild(std::span<const float> positions, const TreeBuilder& builder) {

@@ -121,6 +121,7 @@ void CpuRuntime::updateShutter(std::span<const float> keyTimes,
   }
   const std::size_t keys = keyTimes.size();
   const std::size_t floats = std::size_t(vertexCount_) * 3;
+  staticRefitted_ = false;  // the keys' refits may leave the instant boxes (the next update refits all)
   for (std::size_t k = 0; k < keys; ++k)
     if (keyPositions[k].size() != floats)
       throw tsah::DataError("runtime: key " + std::to_string(k) + " has " + std::to_string(keyPositions[k].size()) +

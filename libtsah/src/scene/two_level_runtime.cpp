@@ -112,6 +112,9 @@ TwoLevelRuntime::TwoLevelRuntime(const TwoLevelScene& scene, Config config) : sc
     Objective objective = scene.objective;
     objective.k = blas.animated ? objective.k : 0;  // the objective the BLAS was built with
     own.collapse = wideCollapseConfig(objective);
+    // A pose is refitted from its source's frames, whose static vertices stay at rest.
+    if (!source.allMoving())
+      own.movingVertices.emplace(source.movingVertices().begin(), source.movingVertices().end());
     return std::make_unique<CpuRuntime>(
         blas.flat, std::vector<uint32_t>(source.indices().begin(), source.indices().end()), source.vertexCount(), own);
   };

@@ -5,6 +5,7 @@
 // subtrees (then the few nodes above them), as CpuRuntime does for the binary tree.
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <span>
 #include <utility>
 #include <vector>
@@ -14,6 +15,10 @@
 #include "tsah/layout/wide_traversal.hpp"
 
 namespace tsah {
+
+namespace detail {
+struct MovingRefitPlan;
+}
 
 template <uint32_t N>
 class WideTree {
@@ -37,6 +42,15 @@ class WideTree {
   // keyVertices[p] (one per packet) the vertices of packet p's triangles. The Woop packets keep the
   // last refit()'s rows (a blurred frame does not read them).
   void refitKey(const float* positions, KeyVertexPacket<N>* keyVertices, const ParallelFor& parallelFor);
+
+  // Declares which vertices may move (vertexMoves[v] != 0, one entry per vertex the triangles
+  // use); refitMoving() then refits only the nodes whose subtree holds a triangle with such a vertex.
+  // Throws tsah::DataError when a triangle's vertex has no entry.
+  void setMovingVertices(std::span<const uint8_t> vertexMoves);
+  // This frame's vertices when, since the last refit(), only the declared moving vertices changed:
+  // the boxes and Woop packets of every node that moves; the others keep the last refit's, so the
+  // tree equals refit()'s bit for bit. Without setMovingVertices: refit().
+  void refitMoving(const float* positions, const ParallelFor& parallelFor);
 
   WideView<N> view(const uint32_t* indices, const float* positions) const;
   Aabb bounds() const { return rootBox_; }
@@ -80,6 +94,7 @@ class WideTree {
   Aabb rootBox_;
   std::vector<std::pair<uint32_t, uint32_t>> subtreeTasks_;
   std::vector<uint32_t> topNodes_;
+  std::shared_ptr<const detail::MovingRefitPlan> moving_;  // set by setMovingVertices
 };
 
 extern template class WideTree<4>;

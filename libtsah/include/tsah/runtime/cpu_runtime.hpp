@@ -53,6 +53,13 @@ class CpuRuntime {
     Layout layout = Layout::Bvh2;
     std::optional<SimdIsa> isa;  // wide layouts: the kernels to use (default: the best supported)
     WideCollapser::Config collapse;  // wide layouts: cost constants, k, leaf size (width, leafPacket: the layout's)
+    // The vertices that may move between updates (ascending ids below the vertex count; an
+    // animation's anim::Animation::movingVertices()). When set, an update() that follows another
+    // (not a blurred frame, a rebuild or a switch to another tree of a set) reads only these
+    // vertices' coordinates and refits only the subtrees whose triangles use them: the others keep
+    // their boxes and Woop triangles, and the other vertices the positions of the last full update
+    // (the tree equals a full refit's bit for bit when they did not change). Unset: all may move.
+    std::optional<std::vector<uint32_t>> movingVertices;
   };
 
   // Builds a tree over one frame of triangle boxes (indexed by triangle id); used by rebuild().
@@ -83,9 +90,12 @@ class CpuRuntime {
   CpuRuntime& operator=(const CpuRuntime&) = delete;
 
   // Takes this frame's vertex positions (vertexCount * 3 floats), refits every box and recomputes
-  // the Woop triangles. Throws tsah::DataError ("runtime: ...") for a wrong count or a coordinate
-  // that is NaN, infinite or beyond tsah::kMaxCoordinate (the limit imported animations obey).
+  // the Woop triangles (with Config::movingVertices: only the moving parts, see there). Throws
+  // tsah::DataError ("runtime: ...") for a wrong count or a coordinate that is NaN, infinite or
+  // beyond tsah::kMaxCoordinate (the limit imported animations obey); then nothing changed.
   void update(std::span<const float> positions);
+  // Whether the last update() refitted only the moving parts.
+  bool lastUpdateMovingOnly() const { return lastUpdateMovingOnly_; }
   // Takes this frame's positions and replaces the tree by builder(triangle boxes), then refits as
   // update() does (which also computes the Woop triangles).
   RebuildTimings rebuild(std::span<const float> positions, const TreeBuilder& builder);
@@ -169,6 +179,8 @@ class CpuRuntime {
   void checkPositions(std::span<const float> positions) const;  // count and coordinates (update's errors)
   void setPositions(std::span<const float> positions);
   void refitAndWoop();
+  void refitMovingAndWoop();
+  void planMovingRefit();  // movingPlan_ for tree_ (with movingVertices_)
   void clearShutter();
   void refitNode(uint32_t node);
   Aabb refitLeaf(uint32_t firstSlot, uint32_t count);
@@ -184,6 +196,14 @@ class CpuRuntime {
   // them (descending index, children before parents) on one thread.
   std::vector<std::pair<uint32_t, uint32_t>> subtreeTasks_;
   std::vector<uint32_t> topNodes_;
+  // Config::movingVertices (ids, and a flag per vertex; empty when unset), the binary tree's moving
+  // nodes (the wide trees keep their own), and whether the last full refit is the current tree's
+  // and instant (then an update may refit the moving parts only).
+  std::vector<uint32_t> movingVertices_;
+  std::vector<uint8_t> vertexMoves_;
+  std::shared_ptr<const detail::MovingRefitPlan> movingPlan_;
+  bool staticRefitted_ = false;
+  bool lastUpdateMovingOnly_ = false;
   // Wide layouts.
   LayoutInfo info_;
   const WideKernels* kernels_ = nullptr;
