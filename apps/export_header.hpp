@@ -1,8 +1,10 @@
 #pragma once
-// The C type definitions of `tsah export`'s header (tsah_scene.h), shared by the flat export
-// (cmd_export.cpp) and the two-level export (two_level_export.cpp): the binary node and the Woop
-// triangle, the wide layouts' node and packet, each with a size check that compiles as C11 and C++.
+// What `tsah export`'s two writers share (cmd_export.cpp for flat trees, two_level_export.cpp for
+// two-level scenes): the C type definitions of the header (tsah_scene.h), the binary node and the
+// Woop triangle, the wide layouts' node and packet, each with a size check that compiles as C11
+// and C++; the Woop test's description; the output folder.
 #include <cstdint>
+#include <span>
 #include <string>
 
 namespace tsah::cli {
@@ -18,12 +20,6 @@ std::string woopTestComment();
 
 // A float as a C literal that reads back to the same float ("1.5f").
 std::string cFloatLiteral(float v);
-
-}  // namespace tsah::cli
-
-#include <span>
-
-namespace tsah::cli {
 
 template <typename T>
 std::span<const uint8_t> bytesOf(std::span<const T> values) {

@@ -237,12 +237,24 @@ void exportTwoLevel(const TwoLevelExport& request) {
     if (shownBy[viewOf[i]] == kInvalidIndex) shownBy[viewOf[i]] = i;
   }
 
-  std::vector<uint8_t> nodes, woop;
-  std::vector<float> vertices;
+  // Per BLAS, in BLAS order: its slots and triangles, shared by its views (their layouts are
+  // collapsed alike), from the runtime of an instance of its source.
   std::vector<uint32_t> triIndex, indices;
   std::vector<ExportBlas> blases(scene.blases.size());
+  std::vector<uint32_t> instanceOf(scene.blases.size(), kInvalidIndex);
+  for (uint32_t i = instances; i-- > 0;) instanceOf[scene.scene.instances[i].source] = i;
+  for (std::size_t b = 0; b < scene.blases.size(); ++b) {
+    const CpuRuntime& r = rt.blasOf(instanceOf[b]);
+    const std::span<const uint32_t> slots = layoutTree(r).triIndex;
+    blases[b] = {u32(r.triangleCount(), "triangles"), r.vertexCount(), u32(triIndex.size(), "triangles"),
+                 scene.blases[b].animated ? 1u : 0u};
+    triIndex.insert(triIndex.end(), slots.begin(), slots.end());
+    indices.insert(indices.end(), r.indices().begin(), r.indices().end());
+  }
+
+  std::vector<uint8_t> nodes, woop;
+  std::vector<float> vertices;
   std::vector<ExportView> views(viewCount);
-  std::vector<uint8_t> blasDone(scene.blases.size(), 0);
   std::size_t nodeCount = 0, woopCount = 0;
   uint32_t maxDepth = 0;
   for (std::size_t v = 0; v < viewCount; ++v) {
@@ -250,13 +262,6 @@ void exportTwoLevel(const TwoLevelExport& request) {
     const uint32_t blas = scene.scene.instances[instance].source;
     const CpuRuntime& r = rt.blasOf(instance);
     const LayoutTree tree = layoutTree(r);
-    if (!blasDone[blas]) {  // the BLAS's slots and triangles, shared by its views
-      blasDone[blas] = 1;
-      blases[blas] = {u32(r.triangleCount(), "triangles"), r.vertexCount(), u32(triIndex.size(), "triangles"),
-                      scene.blases[blas].animated ? 1u : 0u};
-      triIndex.insert(triIndex.end(), tree.triIndex.begin(), tree.triIndex.end());
-      indices.insert(indices.end(), r.indices().begin(), r.indices().end());
-    }
     const uint32_t pose = scene.instancePose[instance];
     const anim::Animation& source = *scene.scene.sources[blas];
     const Aabb box = r.bounds();

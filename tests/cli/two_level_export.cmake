@@ -66,3 +66,24 @@ tle_error(blocked 1 "tle_blocked/instances.bin: is a folder; expected a file nam
 add_test(NAME cli.two_level.export.error.blocked.nothing_written COMMAND sh -c "ls -A ${W}/tle_blocked")
 set_tests_properties(cli.two_level.export.error.blocked.nothing_written PROPERTIES
   DEPENDS cli.two_level.export.error.blocked PASS_REGULAR_EXPRESSION "^instances.bin\n$")
+
+# An instance flattened by its path (its x scale passes through 0 at t = 1) is exported invisible,
+# with a zero inverse, next to an animated object, and the hits still agree. The animated source is
+# BLAS 0 and its pose's view comes after the static view: the BLAS table stays in BLAS order.
+set(TLE_FLAT ${W}/tle_flat_scene)
+file(MAKE_DIRECTORY ${TLE_FLAT})
+file(WRITE ${TLE_FLAT}/tri.obj "v 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\n")
+file(WRITE ${TLE_FLAT}/scene.json "{\"fps\": 2, \"time\": [0, 2], \"objects\": [
+  {\"file\": \"${CMAKE_SOURCE_DIR}/samples/explode/explode_%04d.obj\", \"transform\": {\"translate\": [0, 0, -3]}},
+  {\"file\": \"tri.obj\", \"path\": [{\"time\": 0}, {\"time\": 2, \"scale\": [-1, 1, 1]}]}]}\n")
+add_test(NAME cli.two_level.export.flat.optimize
+         COMMAND tsah optimize ${TLE_FLAT}/scene.json -o ${TLE_FLAT}/scene.tbvh --structure two-level --frames 2)
+set_tests_properties(cli.two_level.export.flat.optimize PROPERTIES FIXTURES_SETUP tle_flat_tree)
+add_test(NAME cli.two_level.export.flat COMMAND tsah export ${TLE_FLAT}/scene.tbvh ${TLE_FLAT}/scene.json --frame 2
+                                                -o ${TLE_FLAT}/out)
+set_tests_properties(cli.two_level.export.flat PROPERTIES FIXTURES_REQUIRED tle_flat_tree FIXTURES_SETUP tle_flat_out
+  PASS_REGULAR_EXPRESSION "two-level scene at time 1, 2 BLAS in 2 views")
+add_test(NAME cli.two_level.export.check.flattened
+         COMMAND check_two_level_export ${TLE_FLAT}/scene.json ${TLE_FLAT}/scene.tbvh ${TLE_FLAT}/out 1)
+set_tests_properties(cli.two_level.export.check.flattened PROPERTIES FIXTURES_REQUIRED "tle_flat_tree;tle_flat_out"
+  PASS_REGULAR_EXPRESSION "2 instances\\): 4000 rays, [0-9]+ hits, [0-9]+ differ: ok")
