@@ -1,5 +1,5 @@
 // tsah export BVH.tbvh ANIMATION [--frame F | --time T] [--layout bvh2|bvh4|bvh8] -o OUT: renderer-ready
-// buffers of one frame.
+// buffers of one frame. A two-level tree (version 3) with its scene: two_level_export.hpp.
 //
 // OUT (a folder) receives raw little-endian arrays a renderer can upload as they are, and a C header
 // (tsah_scene.h) that defines their element types and sizes:
@@ -25,24 +25,21 @@
 #include "tsah/base/files.hpp"
 #include "tsah/base/error.hpp"
 #include "box_export.hpp"
+#include "export_header.hpp"
 #include "bvh_info.hpp"
 #include "cli.hpp"
 #include "two_level_cli.hpp"
+#include "two_level_export.hpp"
 #include "tsah/pipeline.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
 
 namespace {
 
-template <typename T>
-std::span<const uint8_t> bytesOf(std::span<const T> values) {
-  return {reinterpret_cast<const uint8_t*>(values.data()), values.size_bytes()};
-}
-
-std::string cFloatLiteral(float v) {
-  char buf[48];
-  std::snprintf(buf, sizeof buf, "%.9gf", double(v));
-  return buf;
-}
+using tsah::cli::binaryExportTypes;
+using tsah::cli::bytesOf;
+using tsah::cli::cFloatLiteral;
+using tsah::cli::wideExportTypes;
+using tsah::cli::woopTestComment;
 
 std::string cHeader(const tsah::CpuRuntime& rt, const tsah::BvhBuildInfo& info, double time, int frame,
                     const std::string& bvhPath, const std::string& animPath) {
@@ -59,38 +56,16 @@ std::string cHeader(const tsah::CpuRuntime& rt, const tsah::BvhBuildInfo& info, 
  * TSAH_ROOT_COUNT for the root). Slot s has woop.bin[s] and triangle id tri_index.bin[s]; the
  * triangle's vertices are vertices.bin[indices.bin[3 * id + k]], k = 0..2.
  *
- * Woop test (rows r0, r1, r2 of a WoopTriangle; o = ray origin, d = direction):
- *   t  = (r0.w - dot(o, r0.xyz)) / dot(d, r0.xyz)
- *   b0 = r1.w + dot(o, r1.xyz) + t * dot(d, r1.xyz)   (weight of vertex 0)
- *   b1 = r2.w + dot(o, r2.xyz) + t * dot(d, r2.xyz)   (weight of vertex 1)
- *   hit when tmin < t < tmax, b0 >= 0, b1 >= 0, b0 + b1 <= 1. Degenerate triangles have zero rows.
- *   For watertight results near edges, test the vertices (Woop, Benthin, Wald 2013) there instead.
- * See docs/tbvh-format.md and docs/runtime.md of the tsah project.
+)";
+  h += woopTestComment();
+  h += R"( * See docs/tbvh-format.md and docs/runtime.md of the tsah project.
  */
 #ifndef TSAH_SCENE_H
 #define TSAH_SCENE_H
 #include <stdint.h>
 
-typedef struct TsahBvhNode {
-  float c0loX, c0hiX, c0loY, c0hiY; /* child 0 box, x and y */
-  float c1loX, c1hiX, c1loY, c1hiY; /* child 1 box, x and y */
-  float c0loZ, c0hiZ, c1loZ, c1hiZ; /* both boxes, z */
-  int32_t ref0, ref1;               /* child references */
-  uint32_t count0, count1;          /* leaf triangle counts, 0 for interior children */
-} TsahBvhNode;                      /* 64 bytes; align to 16 for vector loads */
-
-typedef struct TsahFloat4 { float x, y, z, w; } TsahFloat4;
-typedef struct TsahWoopTriangle { TsahFloat4 r0, r1, r2; } TsahWoopTriangle; /* 48 bytes */
-
-#if defined(__STDC_VERSION__) && __STDC_VERSION__ >= 201112L
-_Static_assert(sizeof(TsahBvhNode) == 64, "TsahBvhNode must be 64 bytes");
-_Static_assert(sizeof(TsahWoopTriangle) == 48, "TsahWoopTriangle must be 48 bytes");
-#elif defined(__cplusplus)
-static_assert(sizeof(TsahBvhNode) == 64, "TsahBvhNode must be 64 bytes");
-static_assert(sizeof(TsahWoopTriangle) == 48, "TsahWoopTriangle must be 48 bytes");
-#endif
-
 )";
+  h += binaryExportTypes();
   h += "#define TSAH_NODE_COUNT " + std::to_string(t.interiorCount) + "u     /* nodes.bin */\n";
   h += "#define TSAH_TRIANGLE_COUNT " + std::to_string(t.triangleCount()) + "u /* woop.bin, tri_index.bin */\n";
   h += "#define TSAH_VERTEX_COUNT " + std::to_string(rt.vertexCount()) + "u   /* vertices.bin holds 3 floats each */\n";
@@ -136,24 +111,7 @@ std::string cHeaderWide(const tsah::CpuRuntime& rt, const tsah::WideTree<N>& w, 
 #include <stdint.h>
 
 )";
-  h += "#define TSAH_WIDTH " + n + "u\n";
-  h += "typedef struct TsahBvh" + n + "Node {\n  float box[6][" + n + "];   /* lo.x, lo.y, lo.z, hi.x, hi.y, hi.z of each child */\n";
-  h += "  int32_t ref[" + n + "];     /* child references */\n  uint32_t count[" + n +
-       "];  /* leaf triangle counts, 0 for interior children and unused slots */\n";
-  h += "} TsahBvh" + n + "Node;      /* " + std::to_string(sizeof(tsah::WideSoaNode<N>)) + " bytes; align to " +
-       std::to_string(alignof(tsah::WideSoaNode<N>)) + " */\n\n";
-  h += "typedef struct TsahWoopPacket" + n + " {\n  float row[12][" + n + "];  /* r0.x r0.y r0.z r0.w r1.x ... r2.w per lane */\n";
-  h += "  uint32_t slot[" + n + "];   /* triangle slot of each lane */\n";
-  h += "} TsahWoopPacket" + n + ";    /* " + std::to_string(sizeof(tsah::WoopPacket<N>)) + " bytes */\n\n";
-  const std::string nodeSize = std::to_string(sizeof(tsah::WideSoaNode<N>));
-  const std::string packetSize = std::to_string(sizeof(tsah::WoopPacket<N>));
-  for (const char* how : {"#if defined(__STDC_VERSION__) && __STDC_VERSION__ >= 201112L\n_Static_assert",
-                          "#elif defined(__cplusplus)\nstatic_assert"}) {
-    h += std::string(how) + "(sizeof(TsahBvh" + n + "Node) == " + nodeSize + ", \"node size\");\n";
-    h += std::string(how).substr(std::string(how).find('\n') + 1) + "(sizeof(TsahWoopPacket" + n + ") == " + packetSize +
-         ", \"packet size\");\n";
-  }
-  h += "#endif\n\n";
+  h += wideExportTypes(N);
   h += "#define TSAH_NODE_COUNT " + std::to_string(w.nodes().size()) + "u     /* nodes.bin */\n";
   h += "#define TSAH_PACKET_COUNT " + std::to_string(w.packets().size()) + "u   /* woop.bin */\n";
   h += "#define TSAH_TRIANGLE_COUNT " + std::to_string(rt.triangleCount()) + "u /* tri_index.bin */\n";
@@ -220,10 +178,11 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
     double frameInterval = std::nan("");
   };
   auto opt = std::make_shared<Options>();
-  sub->add_option("BVH", opt->bvh, "Tree or tree set from `tsah optimize` (.tbvh; a set exports the tree of the frame's part)")
+  sub->add_option("BVH", opt->bvh, "Tree or tree set from `tsah optimize` (.tbvh; a set exports the tree of the frame's part; a two-level "
+                  "scene, version 3, exports its BLAS, TLAS and instance table)")
       ->required();
-  sub->add_option("ANIMATION", opt->input, "The animation the tree was built for")->required();
-  auto* frameOpt = sub->add_option("--frame", opt->frame, "Keyframe index of the animation (default 0)")
+  sub->add_option("ANIMATION", opt->input, "The animation the tree was built for (a two-level tree: its scene file)")->required();
+  auto* frameOpt = sub->add_option("--frame", opt->frame, "Keyframe index of the animation (a two-level tree: the scene's frame; default 0)")
                        ->check(CLI::NonNegativeNumber);
   sub->add_option("--time", opt->time, "Animation time instead of a keyframe (interpolated)")->excludes(frameOpt);
   sub->add_option("-o,--out", opt->out, "Output folder (created if missing); with --boxes a .ply or .obj file")
@@ -250,9 +209,16 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
     if (!(opt->frameInterval > 0.0) && !std::isnan(opt->frameInterval))
       throw tsah::cli::UsageError("--frame-interval must be a positive time");
     // A tree set exports the tree of the frame's part (tsah::treeIndexAt), as the runtimes use it.
-    if (tsah::cli::isTwoLevelTreeFile(opt->bvh))
-      throw tsah::cli::UsageError(opt->bvh + " holds a two-level scene (.tbvh version 3): tsah export writes flat "
-                                  "trees; optimize the scene with --structure flat to export it");
+    if (tsah::cli::isTwoLevelTreeFile(opt->bvh)) {  // a two-level scene: two_level_export.cpp
+      if (boxes->enabled || frameShutter.fraction > 0.0)
+        throw tsah::cli::UsageError(opt->bvh + " holds a two-level scene (.tbvh version 3): its export writes renderer "
+                                    "buffers of one instant; " + std::string(boxes->enabled ? "--boxes" : "--shutter") +
+                                    " applies to flat trees only");
+      return tsah::cli::exportTwoLevel({opt->bvh, opt->input, opt->out, opt->frame, opt->time, opt->layout, opt->threads});
+    }
+    if (tsah::cli::isTwoLevelTreeFile(opt->input))
+      throw tsah::cli::UsageError(opt->input + " holds a two-level scene (.tbvh version 3): give the tree first, then "
+                                  "its scene (tsah export TREE SCENE -o OUT)");
     const tsah::TreeSet set = tsah::decodeTreeSetFile(tsah::readFile(opt->bvh), opt->bvh);
     const anim::Animation a = tsah::cli::loadInput(opt->input);
     tsah::cli::checkTreeMatchesAnimation(set.builds.front(), opt->bvh, a, opt->input);
@@ -290,11 +256,7 @@ TSAH_REGISTER_COMMAND(60, [](CLI::App& app) {
     tsah::CpuRuntime rt(set.trees[part], {a.indices().begin(), a.indices().end()}, a.vertexCount(), config);
     rt.update(positions);
 
-    std::error_code ec;
-    if (fs::exists(opt->out, ec) && !fs::is_directory(opt->out, ec))
-      throw tsah::cli::UsageError(opt->out + " exists and is not a folder");
-    fs::create_directories(opt->out, ec);
-    if (ec) throw tsah::Failure(opt->out + ": cannot create the folder: " + ec.message());
+    tsah::cli::makeExportFolder(opt->out);
     const fs::path out(opt->out);
     // The buffers and the header describe one tree: all appear or none (tsah::AtomicFileSet).
     tsah::AtomicFileSet files;

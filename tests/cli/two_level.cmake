@@ -56,8 +56,6 @@ tl_error(cli.two_level.error.wrong_scene 1 "[^\n]*tl_auto.tbvh was not built for
          trace ${W}/tl_other_scene.json ${W}/tl_auto.tbvh --frames 1 --no-images)
 tl_error(cli.two_level.error.info_without_scene 2 "[^\n]*tl_auto.tbvh holds a two-level scene \\(.tbvh version 3\\): give its scene too"
          info ${W}/tl_auto.tbvh)
-tl_error(cli.two_level.error.export 2 "[^\n]*tl_auto.tbvh holds a two-level scene \\(.tbvh version 3\\): tsah export writes flat trees"
-         export ${W}/tl_auto.tbvh ${SCENE} -o ${W}/tl_export)
 tl_error(cli.two_level.error.tlas_flat 2 "--tlas goes with a two-level tree[^\n]*tl_flat.tbvh is a flat tree"
          trace ${SCENE} ${W}/tl_flat.tbvh --tlas rebuild --frames 1 --no-images)
 tl_error(cli.two_level.error.trace_rebuild 2 "[^\n]*tl_auto.tbvh holds a two-level scene: it is traced on the CPU, without"
