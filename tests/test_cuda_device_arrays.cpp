@@ -232,16 +232,19 @@ TEST_P(DeviceArrays, DeferredRefitEqualsTheHostRefitOnTheCallersStream) {
     tc::GpuRuntime host(tree(), a, tsah::test::gpuConfig(GetParam(), graphs));
     tc::GpuRuntime device(tree(), a, tsah::test::gpuConfig(GetParam(), graphs));
     Stream stream;
-    tc::DeviceBuffer<float> positions(std::size_t(a.vertexCount()) * 3);
+    // Two buffers in turn: the captured graph must read the one given (the other holds NaNs).
+    tc::DeviceBuffer<float> buffers[2] = {tc::DeviceBuffer<float>(std::size_t(a.vertexCount()) * 3),
+                                          tc::DeviceBuffer<float>(std::size_t(a.vertexCount()) * 3)};
     float* pinned = nullptr;
-    CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&pinned), positions.bytes()));
+    CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&pinned), buffers[0].bytes()));
     // The first frame follows no refit (it waits for its check), the others are queued without a wait.
-    for (double t : a.uniformTimes(5)) {
+    int frame = 0;
+    for (double t : a.uniformTimes(6)) {
       SCOPED_TRACE(t);
       const std::vector<float> p = a.positionsAt(t);
       host.update(p);
-      std::memcpy(pinned, p.data(), positions.bytes());
-      refitThroughCallersStream(device, positions, pinned, stream, tc::GpuRuntime::DeviceCheck::Deferred);
+      std::memcpy(pinned, p.data(), buffers[0].bytes());
+      refitThroughCallersStream(device, buffers[frame++ / 2 % 2], pinned, stream, tc::GpuRuntime::DeviceCheck::Deferred);
       stream.sync();
       EXPECT_NO_THROW(device.checkDeviceUpdate());
       EXPECT_EQ(device.downloadPositions(), p);

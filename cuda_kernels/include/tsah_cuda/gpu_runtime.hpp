@@ -193,7 +193,7 @@ class GpuRuntime {
   using StreamHandle = void*;
   // When updateFromDevice reports a bad coordinate (docs/cuda-runtime.md#device-arrays).
   enum class DeviceCheck {
-    Wait,      // the call waits for the device's answer and throws at once
+    Wait,      // the call waits for the update (and its check's answer) and throws at once
     Deferred,  // no host wait: a refused frame is thrown by a later call (see updateFromDevice)
   };
   // Refits the current tree (selectTreeAt) to the vertex positions at devicePositions (vertexCount
@@ -204,7 +204,7 @@ class GpuRuntime {
   // tsah::DataError for a wrong vertex count or a bad coordinate ("positions: vertex N has a NaN or
   // infinite coordinate", the wording of the host check), tsah::ConfigError for a pointer that is
   // not device memory of the runtime's device.
-  // check Wait: the call waits for the check's answer (the refit stays queued). check Deferred: no
+  // check Wait: the call waits for the check's answer (with the update's end). check Deferred: no
   // host wait while the traced frame is a refit of the current tree (an update, updateAt or an
   // earlier updateFromDevice of it; otherwise the call waits as Wait does); a refused frame is
   // thrown by the next updateFromDevice, update, updateAt, rebuild, rebuildAt or
