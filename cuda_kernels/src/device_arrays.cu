@@ -25,14 +25,14 @@ __global__ void firstBadVertexKernel(const float* __restrict__ positions, std::s
 }
 
 // report[0]: the first bad vertex (launchFirstBadVertex) or kNoBadVertex. Good: target = source;
-// bad: target untouched, report[1..3] = the bad vertex's coordinates (for the message, read
-// later when the caller's buffer may have changed).
+// bad: target untouched, report[1..3] = the bits of the bad vertex's coordinates (for the message,
+// read later when the caller's buffer may have changed).
 __global__ void copyIfValidKernel(const float* __restrict__ source, float* __restrict__ target,
                                   std::size_t coordinates, uint32_t* __restrict__ report) {
   const uint32_t bad = *report;
   const std::size_t first = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (bad != kNoBadVertex) {
-    if (first < 3) reinterpret_cast<float*>(report)[1 + first] = source[3 * std::size_t(bad) + first];
+    if (first < 3) report[1 + first] = __float_as_uint(source[3 * std::size_t(bad) + first]);
     return;
   }
   const std::size_t stride = std::size_t(gridDim.x) * blockDim.x;
