@@ -224,6 +224,31 @@ def test_cuda_array_interface_is_read_as_the_protocol_says():
     assert check(FakeCudaArray(a, version=2, stream=None), "positions", ["<f4"])["stream"] is None
 
 
+class CountedInterface:
+    """Builds its __cuda_array_interface__ at each access, as torch does (in Python), and counts them;
+    raises AttributeError while on the host, as a CPU torch tensor does."""
+    def __init__(self, array, on_device=True):
+        self.inner, self.on_device, self.reads = FakeCudaArray(array), on_device, 0
+
+    @property
+    def __cuda_array_interface__(self):
+        self.reads += 1
+        if not self.on_device:
+            raise AttributeError("Can't get __cuda_array_interface__ on non-CUDA tensor")
+        return self.inner.__cuda_array_interface__
+
+
+def test_cuda_array_interface_is_read_once_per_check():
+    a = np.zeros((5, 3), np.float32)
+    counted = CountedInterface(a)
+    assert check(counted, "positions", ["<f4"])["data"] == a.ctypes.data
+    assert counted.reads == 1
+    host = CountedInterface(a, on_device=False)
+    with pytest.raises(tsah.ArgumentTypeError, match="positions: expected a CUDA device array .* got CountedInterface"):
+        check(host, "positions", ["<f4"])
+    assert host.reads == 1
+
+
 @pytest.mark.parametrize("fields, error, message", [
     ({"typestr": "<f8"}, tsah.ArgumentTypeError, "positions: expected a device array of typestr '<f4', got '<f8'"),
     ({"strides": (4, 20)}, tsah.ConfigError, "positions: must be C-contiguous"),
