@@ -33,7 +33,8 @@ struct DeviceArrayState {
   };
   std::vector<Graph> graphs;  // per tree, captured at its first update from device positions
   DeviceArrayState(std::size_t trees, cudaStream_t stream) : graphs(trees) {
-    CUDA_CHECK(cudaMemsetAsync(report.data(), 0xff, sizeof(uint32_t), stream));
+    // All four words: the answer's copy reads them even when no coordinate was bad.
+    CUDA_CHECK(cudaMemsetAsync(report.data(), 0xff, report.bytes(), stream));
     CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&answer), report.bytes()));
   }
   ~DeviceArrayState() {
