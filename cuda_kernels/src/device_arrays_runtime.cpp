@@ -105,7 +105,9 @@ detail::ArrayRays arrayRays(const GpuRuntime::DeviceRays& r, int device) {
 
 // The check of `source` and its copy into the runtime's positions when every coordinate is good,
 // then the report to the host and its reset; beside: on the side stream (beside the refit queued
-// next), else on the runtime's stream.
+// next), else on the runtime's stream. The copy is needed: tracing and rendering read the frame's
+// positions after the caller may have reused its buffer. (A kernel that checked and copied at once
+// would copy into a staging buffer that a guarded copy then moves: the same reads, one more write.)
 void enqueueCheckedCopy(GpuRuntime::Impl& m, DeviceArrayState& s, const float* source, bool beside) {
   detail::launchFirstBadVertex(source, m.vertices, s.report.data(), m.stream);
   detail::launchCopyIfValid(source, m.positions.data(), m.vertices, s.report.data(), m.stream);
