@@ -8,10 +8,14 @@
 
 #include <cuda_runtime_api.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "anim/generators.hpp"
@@ -114,6 +118,17 @@ std::vector<uint8_t> frameBits(const tc::GpuRuntime& gpu) {
   return bits;
 }
 
+// The message of tsah::DataError thrown by `call`.
+template <class Call>
+std::string dataErrorOf(Call&& call) {
+  try {
+    call();
+  } catch (const tsah::DataError& e) {
+    return e.what();
+  }
+  return "(no tsah::DataError)";
+}
+
 class DeviceArrays : public ::testing::TestWithParam<Layout> {};
 
 TEST_P(DeviceArrays, RefitFromDevicePositionsEqualsTheHostRefit) {
@@ -199,19 +214,147 @@ TEST_P(DeviceArrays, RaysInDeviceArraysGetTheHostBatchsHits) {
   for (uint32_t i = 0; i < n; ++i) ASSERT_EQ(gotScalar[i], wantScalar[i].tri) << "ray " << i;
 }
 
+// The caller's buffer gets frame t's positions by an asynchronous copy on `stream` (which the
+// refit must wait for); right after the call the caller overwrites it with NaNs on the same stream
+// (which must wait for the refit's reads).
+void refitThroughCallersStream(tc::GpuRuntime& gpu, tc::DeviceBuffer<float>& buffer, const float* pinned,
+                               const Stream& stream, tc::GpuRuntime::DeviceCheck check) {
+  CUDA_CHECK(cudaMemcpyAsync(buffer.data(), pinned, buffer.bytes(), cudaMemcpyHostToDevice, stream.get()));
+  gpu.updateFromDevice(buffer.data(), buffer.size() / 3, stream.get(), check);
+  CUDA_CHECK(cudaMemsetAsync(buffer.data(), 0xff, buffer.bytes(), stream.get()));
+}
+
+TEST_P(DeviceArrays, DeferredRefitEqualsTheHostRefitOnTheCallersStream) {
+  REQUIRE_GPU();
+  const anim::Animation& a = animation();
+  for (bool graphs : {true, false}) {
+    SCOPED_TRACE(graphs ? "graphs" : "separate launches");
+    tc::GpuRuntime host(tree(), a, tsah::test::gpuConfig(GetParam(), graphs));
+    tc::GpuRuntime device(tree(), a, tsah::test::gpuConfig(GetParam(), graphs));
+    Stream stream;
+    // Two buffers in turn: the captured graph must read the one given (the other holds NaNs).
+    tc::DeviceBuffer<float> buffers[2] = {tc::DeviceBuffer<float>(std::size_t(a.vertexCount()) * 3),
+                                          tc::DeviceBuffer<float>(std::size_t(a.vertexCount()) * 3)};
+    float* pinned = nullptr;
+    CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&pinned), buffers[0].bytes()));
+    // The first frame follows no refit (it waits for its check), the others are queued without a wait.
+    int frame = 0;
+    for (double t : a.uniformTimes(6)) {
+      SCOPED_TRACE(t);
+      const std::vector<float> p = a.positionsAt(t);
+      host.update(p);
+      std::memcpy(pinned, p.data(), buffers[0].bytes());
+      refitThroughCallersStream(device, buffers[frame++ / 2 % 2], pinned, stream, tc::GpuRuntime::DeviceCheck::Deferred);
+      stream.sync();
+      EXPECT_NO_THROW(device.checkDeviceUpdate());
+      EXPECT_EQ(device.downloadPositions(), p);
+      EXPECT_TRUE(frameBits(device) == frameBits(host));
+    }
+    CUDA_CHECK(cudaFreeHost(pinned));
+  }
+}
+
+// A device buffer holding frame t's positions, or with a NaN at vertex 4 and 1e30 at vertex 9.
+struct Frames {
+  const anim::Animation& a;
+  tc::DeviceBuffer<float> buffer;
+  explicit Frames(const anim::Animation& anim) : a(anim), buffer(std::size_t(anim.vertexCount()) * 3) {}
+  const float* good(double t) {
+    buffer.upload(std::span<const float>(a.positionsAt(t)));
+    CUDA_CHECK(cudaDeviceSynchronize());
+    return buffer.data();
+  }
+  const float* bad(double t) {
+    std::vector<float> p = a.positionsAt(t);
+    p[3 * 4 + 1] = NAN;
+    p[3 * 9 + 2] = 1e30f;
+    buffer.upload(std::span<const float>(p));
+    CUDA_CHECK(cudaDeviceSynchronize());
+    return buffer.data();
+  }
+};
+
+constexpr const char* kVertex4 = "positions: vertex 4 has a NaN or infinite coordinate";
+
+TEST_P(DeviceArrays, RefusedFramesChangeNothingAndAreReportedOnce) {
+  REQUIRE_GPU();
+  using Check = tc::GpuRuntime::DeviceCheck;
+  const anim::Animation& a = animation();
+  tc::GpuRuntime gpu(tree(), a, tsah::test::gpuConfig(GetParam()));
+  tc::GpuRuntime host(tree(), a, tsah::test::gpuConfig(GetParam()));
+  Frames frames(a);
+  const uint32_t n = a.vertexCount();
+  const double end = a.endTime();
+  gpu.updateAt(0.0);
+  const auto goodFrame = [&](double t, Check check) {
+    gpu.updateFromDevice(frames.good(t), n, nullptr, check);
+    host.update(a.positionsAt(t));
+    CUDA_CHECK(cudaDeviceSynchronize());
+    EXPECT_TRUE(frameBits(gpu) == frameBits(host)) << "good frame at " << t;
+  };
+  for (int round = 0; round < 3; ++round) {  // good, bad, good, ... in both modes
+    SCOPED_TRACE(round);
+    goodFrame(0.2 * end + 0.1 * round, Check::Wait);
+    const std::vector<uint8_t> before = frameBits(gpu);
+    const std::vector<float> positionsBefore = gpu.downloadPositions();
+    EXPECT_EQ(dataErrorOf([&] { gpu.updateFromDevice(frames.bad(0.9 * end), n, nullptr, Check::Wait); }), kVertex4);
+    EXPECT_TRUE(frameBits(gpu) == before);
+    EXPECT_EQ(gpu.downloadPositions(), positionsBefore);
+    goodFrame(0.3 * end + 0.1 * round, Check::Deferred);
+    const std::vector<uint8_t> deferredBefore = frameBits(gpu);
+    // A Deferred refusal: the call returns, the frame stays, checkDeviceUpdate reports it once.
+    EXPECT_EQ(dataErrorOf([&] { gpu.updateFromDevice(frames.bad(0.9 * end), n, nullptr, Check::Deferred); }),
+              "(no tsah::DataError)");
+    CUDA_CHECK(cudaDeviceSynchronize());
+    EXPECT_TRUE(frameBits(gpu) == deferredBefore);
+    EXPECT_EQ(gpu.downloadPositions(), a.positionsAt(0.3 * end + 0.1 * round));
+    EXPECT_EQ(dataErrorOf([&] { gpu.checkDeviceUpdate(); }), kVertex4);
+    EXPECT_EQ(dataErrorOf([&] { gpu.checkDeviceUpdate(); }), "(no tsah::DataError)");
+    // ... or the next updateFromDevice does, and queues nothing: its good positions are not used.
+    gpu.updateFromDevice(frames.bad(0.9 * end), n, nullptr, Check::Deferred);
+    EXPECT_EQ(dataErrorOf([&] { gpu.updateFromDevice(frames.good(0.8 * end), n, nullptr, Check::Deferred); }),
+              kVertex4);
+    CUDA_CHECK(cudaDeviceSynchronize());
+    EXPECT_TRUE(frameBits(gpu) == deferredBefore);
+    // ... or updateAt, which then refits nothing either.
+    gpu.updateFromDevice(frames.bad(0.9 * end), n, nullptr, Check::Deferred);
+    EXPECT_EQ(dataErrorOf([&] { gpu.updateAt(0.7 * end); }), kVertex4);
+    EXPECT_TRUE(frameBits(gpu) == deferredBefore);
+    goodFrame(0.4 * end + 0.1 * round, Check::Deferred);
+    EXPECT_NO_THROW(gpu.checkDeviceUpdate());
+  }
+}
+
+TEST_P(DeviceArrays, ARefusedFrameAfterARebuildKeepsTheRebuiltTree) {
+  REQUIRE_GPU();
+  const anim::Animation& a = animation();
+  tc::GpuRuntime gpu(tree(), a, tsah::test::gpuConfig(GetParam()));
+  Frames frames(a);
+  gpu.updateAt(0.0);
+  gpu.rebuildAt(0.5 * a.endTime());
+  const std::vector<Hit> hitsBefore = gpu.closestHits(randomRays(gpu.bounds(), 2000, 5));
+  const std::vector<tsah::WoopTriangle> woopBefore = gpu.downloadWoop();
+  // Refitting the uploaded tree again would replace the rebuilt frame: this refusal is thrown at once.
+  EXPECT_EQ(dataErrorOf([&] {
+              gpu.updateFromDevice(frames.bad(0.9 * a.endTime()), a.vertexCount(), nullptr,
+                                   tc::GpuRuntime::DeviceCheck::Deferred);
+            }),
+            kVertex4);
+  EXPECT_TRUE(gpu.tracingRebuiltTree());
+  const std::vector<tsah::WoopTriangle> woopAfter = gpu.downloadWoop();
+  EXPECT_EQ(std::memcmp(woopAfter.data(), woopBefore.data(), woopBefore.size() * sizeof woopBefore[0]), 0);
+  const std::vector<Hit> hitsAfter = gpu.closestHits(randomRays(gpu.bounds(), 2000, 5));
+  ASSERT_EQ(hitsAfter.size(), hitsBefore.size());
+  for (std::size_t i = 0; i < hitsBefore.size(); ++i) ASSERT_EQ(hitsAfter[i].tri, hitsBefore[i].tri) << "ray " << i;
+  // A good frame then refits the uploaded tree as usual.
+  gpu.updateFromDevice(frames.good(0.6 * a.endTime()), a.vertexCount(), nullptr, tc::GpuRuntime::DeviceCheck::Deferred);
+  EXPECT_NO_THROW(gpu.checkDeviceUpdate());
+  EXPECT_FALSE(gpu.tracingRebuiltTree());
+  EXPECT_EQ(gpu.downloadPositions(), a.positionsAt(0.6 * a.endTime()));
+}
+
 INSTANTIATE_TEST_SUITE_P(Layouts, DeviceArrays, ::testing::Values(Layout::Bvh2, Layout::Cwbvh),
                          [](const auto& info) { return std::string(tsah::name(info.param)); });
-
-// The message of tsah::DataError thrown by `call`.
-template <class Call>
-std::string dataErrorOf(Call&& call) {
-  try {
-    call();
-  } catch (const tsah::DataError& e) {
-    return e.what();
-  }
-  return "(no tsah::DataError)";
-}
 
 TEST(DeviceArrayErrors, BadCoordinatesAreRefusedAndLeaveTheFrame) {
   REQUIRE_GPU();
@@ -270,6 +413,64 @@ TEST(DeviceArrayErrors, HostPointersAndBadLimitsAreRefused) {
             "GPU runtime: tmin must be finite and >= 0");
   EXPECT_EQ(configMessage([&] { gpu.anyHitsOnDevice(arrays.view(10), nullptr); }),
             "GPU runtime: occluded: a null pointer");
+}
+
+
+// The device time of a refit from device positions beside updateAt's (the runtime's own update,
+// its captured graph): CUDA events on the caller's stream around the call, the median of several
+// calls, printed for each check mode (docs/cuda-runtime.md#device-arrays). TSAH_DEVICE_REFIT_TRIANGLES
+// sets the wave's size (default 400000; the short runs 20000). The refits must equal update(positions).
+TEST(DeviceRefitTiming, PrintsTheTimesBesideUpdateAt) {
+  REQUIRE_GPU();
+  const char* size = std::getenv("TSAH_DEVICE_REFIT_TRIANGLES");
+  const uint32_t triangles = size ? uint32_t(std::stoul(size)) : tsah::test::shortCudaRun() ? 20000u : 400000u;
+  const anim::Animation a = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, triangles, 10, 1);
+  const tsah::FlatBvh t = tsah::flattenBvh(tsah::BinnedSahBuilder().build(tsah::test::keyframeBoxes(a, 0)));
+  tc::GpuRuntime gpu(t, a);
+  const double time = 0.5 * (a.startTime() + a.endTime());
+  const std::vector<float> p = a.positionsAt(time);
+  const tc::DeviceBuffer<float> positions{std::span<const float>(p)};
+  CUDA_CHECK(cudaDeviceSynchronize());  // the upload ran on the legacy stream
+  Stream stream;
+  cudaEvent_t start = nullptr, stop = nullptr;
+  CUDA_CHECK(cudaEventCreate(&start));
+  CUDA_CHECK(cudaEventCreate(&stop));
+  const int runs = 21;
+  const auto median = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+  };
+  std::vector<double> update;
+  gpu.updateAt(time);  // captures its graph
+  for (int r = 0; r < runs; ++r) update.push_back(gpu.updateAt(time).totalMs());
+  const auto timeCalls = [&](tc::GpuRuntime::DeviceCheck check) {
+    std::vector<double> ms;
+    for (int r = 0; r <= runs; ++r) {  // the first call captures the graph
+      CUDA_CHECK(cudaEventRecord(start, stream.get()));
+      gpu.updateFromDevice(positions.data(), a.vertexCount(), stream.get(), check);
+      CUDA_CHECK(cudaEventRecord(stop, stream.get()));
+      CUDA_CHECK(cudaEventSynchronize(stop));
+      float v = 0.0f;
+      CUDA_CHECK(cudaEventElapsedTime(&v, start, stop));
+      if (r > 0) ms.push_back(v);
+    }
+    gpu.checkDeviceUpdate();
+    return median(ms);
+  };
+  const double wait = timeCalls(tc::GpuRuntime::DeviceCheck::Wait);
+  const double deferred = timeCalls(tc::GpuRuntime::DeviceCheck::Deferred);
+  const std::vector<uint8_t> fromDevice = frameBits(gpu);
+  gpu.update(p);
+  EXPECT_TRUE(frameBits(gpu) == fromDevice);
+  const double own = median(update);
+  std::printf("device refit, %u triangles, %u vertices: updateAt %.4f ms; updateFromDevice Wait %.4f ms (%.2fx), "
+              "Deferred %.4f ms (%.2fx; target <= 1.2x)\n",
+              a.triangleCount(), a.vertexCount(), own, wait, wait / own, deferred, deferred / own);
+  RecordProperty("update_ms", std::to_string(own));
+  RecordProperty("wait_ms", std::to_string(wait));
+  RecordProperty("deferred_ms", std::to_string(deferred));
+  CUDA_CHECK(cudaEventDestroy(start));
+  CUDA_CHECK(cudaEventDestroy(stop));
 }
 
 }  // namespace

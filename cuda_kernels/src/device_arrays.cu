@@ -4,6 +4,7 @@
 // the traversal read that again (88 bytes per ray, and a 32-byte-per-ray scratch buffer: 320 MB for
 // 10M rays). A warp's three loads of 12-byte rows cover 384 contiguous bytes.
 #include <cmath>
+#include <vector>
 
 #include "bvh2_traversal.cuh"
 #include "cwbvh_kernels.hpp"
@@ -21,6 +22,21 @@ __global__ void firstBadVertexKernel(const float* __restrict__ positions, std::s
   const std::size_t stride = std::size_t(gridDim.x) * blockDim.x;
   for (std::size_t i = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x; i < coordinates; i += stride)
     if (!(fabsf(__ldg(positions + i)) <= kMaxCoordinate)) atomicMin(firstBad, uint32_t(i / 3));  // NaN fails too
+}
+
+// report[0]: the first bad vertex (launchFirstBadVertex) or kNoBadVertex. Good: target = source;
+// bad: target untouched, report[1..3] = the bits of the bad vertex's coordinates (for the message,
+// read later when the caller's buffer may have changed).
+__global__ void copyIfValidKernel(const float* __restrict__ source, float* __restrict__ target,
+                                  std::size_t coordinates, uint32_t* __restrict__ report) {
+  const uint32_t bad = *report;
+  const std::size_t first = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (bad != kNoBadVertex) {
+    if (first < 3) report[1 + first] = __float_as_uint(source[3 * std::size_t(bad) + first]);
+    return;
+  }
+  const std::size_t stride = std::size_t(gridDim.x) * blockDim.x;
+  for (std::size_t i = first; i < coordinates; i += stride) target[i] = __ldg(source + i);
 }
 
 __device__ __forceinline__ Ray loadArrayRay(const ArrayRays& r, uint32_t i) {
@@ -88,6 +104,46 @@ void launchFirstBadVertex(const float* positions, uint32_t vertexCount, uint32_t
   const unsigned grid = std::min(gridFor(coordinates, block), 4096u);  // grid-stride beyond ~1M coordinates
   firstBadVertexKernel<<<grid, block, 0, stream>>>(positions, coordinates, firstBad);
   CUDA_CHECK_LAUNCH("firstBadVertexKernel");
+}
+
+void launchCopyIfValid(const float* source, float* target, uint32_t vertexCount, uint32_t* report,
+                       cudaStream_t stream) {
+  if (vertexCount == 0) return;
+  const std::size_t coordinates = std::size_t(vertexCount) * 3;
+  const unsigned block = 256;
+  const unsigned grid = std::min(gridFor(coordinates, block), 4096u);
+  copyIfValidKernel<<<grid, block, 0, stream>>>(source, target, coordinates, report);
+  CUDA_CHECK_LAUNCH("copyIfValidKernel");
+}
+
+SourceNodes findSourceNodes(cudaGraph_t graph) {
+  std::size_t count = 0;
+  CUDA_CHECK(cudaGraphGetNodes(graph, nullptr, &count));
+  std::vector<cudaGraphNode_t> nodes(count);
+  CUDA_CHECK(cudaGraphGetNodes(graph, nodes.data(), &count));
+  SourceNodes found;
+  for (cudaGraphNode_t node : nodes) {
+    cudaGraphNodeType type;
+    CUDA_CHECK(cudaGraphNodeGetType(node, &type));
+    if (type != cudaGraphNodeTypeKernel) continue;
+    SourceNodes::Node n{node, {}};
+    CUDA_CHECK(cudaGraphKernelNodeGetParams(node, &n.launch));
+    if (n.launch.func == reinterpret_cast<void*>(&firstBadVertexKernel)) found.check = n;
+    if (n.launch.func == reinterpret_cast<void*>(&copyIfValidKernel)) found.copy = n;
+  }
+  return found;
+}
+
+void setSource(cudaGraphExec_t exec, const SourceNodes& nodes, const float* source) {
+  // Argument 0 of both kernels is the source; the others keep their captured values.
+  for (const SourceNodes::Node* n : {&nodes.check, &nodes.copy}) {
+    if (!n->node) continue;
+    cudaKernelNodeParams p = n->launch;
+    void* args[4] = {&source, p.kernelParams[1], p.kernelParams[2], n == &nodes.copy ? p.kernelParams[3] : nullptr};
+    p.kernelParams = args;
+    p.extra = nullptr;
+    CUDA_CHECK(cudaGraphExecKernelNodeSetParams(exec, n->node, &p));
+  }
 }
 
 void launchArrayTrace(const TraceScene& scene, const ArrayRays& rays, const ArrayHits& hits, uint8_t* occluded,

@@ -34,6 +34,28 @@ struct ArrayHits {
 // set *firstBad to 0xffffffff first.
 void launchFirstBadVertex(const float* positions, uint32_t vertexCount, uint32_t* firstBad, cudaStream_t stream);
 
+// The answer of launchFirstBadVertex when every vertex is good.
+inline constexpr uint32_t kNoBadVertex = 0xffffffffu;
+
+// After launchFirstBadVertex(source, vertexCount, report): copies source into target (vertexCount
+// * 3 floats) when report[0] is kNoBadVertex; otherwise leaves target and stores the first bad
+// vertex's three coordinates in report[1..3] (as floats). report: 4 device words.
+void launchCopyIfValid(const float* source, float* target, uint32_t vertexCount, uint32_t* report,
+                       cudaStream_t stream);
+
+// The two kernel nodes of a graph captured around launchFirstBadVertex and launchCopyIfValid, and
+// the change of their source (the caller's positions) before a launch of its executable. A node
+// is null when the graph lacks it (no vertices). The arguments' storage lives as long as the graph.
+struct SourceNodes {
+  struct Node {
+    cudaGraphNode_t node = nullptr;
+    cudaKernelNodeParams launch{};
+  };
+  Node check, copy;
+};
+SourceNodes findSourceNodes(cudaGraph_t graph);
+void setSource(cudaGraphExec_t exec, const SourceNodes& nodes, const float* source);
+
 // Closest hits (hits) or occlusion flags (occluded != nullptr: 1 = something hit) of the rays against
 // the scene (either layout), one thread per ray. A miss writes t = +inf, u = v = 0, triangle = kNoHit.
 void launchArrayTrace(const TraceScene& scene, const ArrayRays& rays, const ArrayHits& hits, uint8_t* occluded,

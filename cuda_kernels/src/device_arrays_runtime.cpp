@@ -1,10 +1,12 @@
 // GpuRuntime's device-array entry points: refit from positions in the caller's device memory and
 // trace rays given as device arrays, ordered with the caller's stream by events (no host wait but
-// the coordinate check's 4-byte answer). docs/cuda-runtime.md#device-arrays.
+// a Wait check of device positions). docs/cuda-runtime.md#device-arrays.
 #include <cmath>
+#include <cstring>
 #include <memory>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "cwbvh_kernels.hpp"
 #include "device_arrays.hpp"
@@ -14,24 +16,39 @@
 
 namespace tsah::cuda {
 
-// The events that order the runtime's stream with a caller's, and the coordinate check's answer
-// (one device word, read back into pinned host memory).
+// The events that order the runtime's stream with a caller's, the coordinate check's report and
+// its answer in pinned host memory, and per tree the captured device update.
 struct DeviceArrayState {
-  detail::EventTimer fences{2};  // 0: the caller's stream reached the call; 1: the call's work is queued
-  DeviceBuffer<uint32_t> firstBad{1};
-  uint32_t* answer = nullptr;  // pinned
-  DeviceArrayState() { CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&answer), sizeof *answer)); }
-  ~DeviceArrayState() { cudaFreeHost(answer); }
+  // 0: the caller's stream reached the call; 1: the call's work is queued; 2: the answer's copy
+  // forks beside the refit; 3: the answer is in `answer`.
+  detail::EventTimer fences{4};
+  // The first bad vertex (detail::kNoBadVertex between calls) and its coordinates.
+  DeviceBuffer<uint32_t> report{4};
+  uint32_t* answer = nullptr;  // pinned: the report of the last checked frame
+  bool pending = false;        // `answer` of a queued check, not yet looked at
+  struct Graph {
+    GpuRuntime::Impl::CapturedGraph graph;
+    detail::SourceNodes sourceNodes;
+    const float* source = nullptr;  // the caller's buffer its nodes read (a caller mostly reuses one)
+  };
+  std::vector<Graph> graphs;  // per tree, captured at its first update from device positions
+  DeviceArrayState(std::size_t trees, cudaStream_t stream) : graphs(trees) {
+    // All four words: the answer's copy reads them even when no coordinate was bad.
+    CUDA_CHECK(cudaMemsetAsync(report.data(), 0xff, report.bytes(), stream));
+    CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&answer), report.bytes()));
+  }
+  ~DeviceArrayState() {
+    for (Graph& g : graphs) GpuRuntime::Impl::destroy(g.graph);
+    cudaFreeHost(answer);
+  }
   DeviceArrayState(const DeviceArrayState&) = delete;
   DeviceArrayState& operator=(const DeviceArrayState&) = delete;
 };
 
 namespace {
 
-constexpr uint32_t kNoBadVertex = 0xffffffffu;
-
 DeviceArrayState& stateOf(GpuRuntime::Impl& m) {
-  if (!m.deviceArrays) m.deviceArrays = std::make_shared<DeviceArrayState>();
+  if (!m.deviceArrays) m.deviceArrays = std::make_shared<DeviceArrayState>(m.trees.size(), m.stream);
   return *m.deviceArrays;
 }
 
@@ -86,38 +103,98 @@ detail::ArrayRays arrayRays(const GpuRuntime::DeviceRays& r, int device) {
   return a;
 }
 
+// The check of `source` and its copy into the runtime's positions when every coordinate is good,
+// then the report to the host and its reset; beside: on the side stream (beside the refit queued
+// next), else on the runtime's stream. The copy is needed: tracing and rendering read the frame's
+// positions after the caller may have reused its buffer. (A kernel that checked and copied at once
+// would copy into a staging buffer that a guarded copy then moves: the same reads, one more write.)
+void enqueueCheckedCopy(GpuRuntime::Impl& m, DeviceArrayState& s, const float* source, bool beside) {
+  detail::launchFirstBadVertex(source, m.vertices, s.report.data(), m.stream);
+  detail::launchCopyIfValid(source, m.positions.data(), m.vertices, s.report.data(), m.stream);
+  cudaStream_t answer = m.stream;
+  if (beside) {
+    s.fences.mark(2, m.stream);
+    s.fences.streamWait(2, m.sideStream);
+    answer = m.sideStream;
+  }
+  CUDA_CHECK(cudaMemcpyAsync(s.answer, s.report.data(), s.report.bytes(), cudaMemcpyDeviceToHost, answer));
+  CUDA_CHECK(cudaMemsetAsync(s.report.data(), 0xff, sizeof(uint32_t), answer));
+}
+
+// The whole update of a frame that is a refit of the current tree: a refused frame refits the
+// unchanged positions again, which gives the same frame bit for bit. One captured graph per tree
+// (the source set before each launch).
+void enqueueGuardedUpdate(GpuRuntime::Impl& m, DeviceArrayState& s, const float* source) {
+  const auto enqueue = [&] {
+    enqueueCheckedCopy(m, s, source, true);
+    m.enqueueRefitAndWoop();
+  };
+  if (!m.config.useGraphs) return enqueue();
+  DeviceArrayState::Graph& g = s.graphs.at(m.current);
+  if (!g.graph.exec) {
+    g.graph = m.capture(enqueue);
+    g.sourceNodes = detail::findSourceNodes(g.graph.graph);
+    g.source = source;
+  }
+  if (g.source != source) {  // saves the two node updates' host time when the buffer is the last one
+    detail::setSource(g.graph.exec, g.sourceNodes, source);
+    g.source = source;
+  }
+  m.launch(g.graph);
+}
+
+tsah::DataError badVertexError(const uint32_t* answer) {
+  float xyz[3];
+  std::memcpy(xyz, answer + 1, sizeof xyz);
+  const std::size_t c = firstBadCoordinate(xyz);
+  return tsah::DataError("positions: vertex " + std::to_string(answer[0]) + " " + describeBadCoordinate(xyz[c < 3 ? c : 0]));
+}
+
 }  // namespace
 
-void GpuRuntime::updateFromDevice(const float* devicePositions, std::size_t vertexCount, StreamHandle stream) {
+void GpuRuntime::Impl::throwRefusedDeviceUpdate() {
+  if (!deviceArrays || !deviceArrays->pending) return;
+  DeviceArrayState& s = *deviceArrays;
+  s.fences.wait(3);
+  s.pending = false;
+  if (s.answer[0] != detail::kNoBadVertex) throw badVertexError(s.answer);
+}
+
+void GpuRuntime::checkDeviceUpdate() { impl_->throwRefusedDeviceUpdate(); }
+
+void GpuRuntime::updateFromDevice(const float* devicePositions, std::size_t vertexCount, StreamHandle stream,
+                                  DeviceCheck check) {
   Impl& m = *impl_;
   if (vertexCount != m.vertices)
     throw tsah::DataError("GPU runtime: got " + std::to_string(vertexCount) + " vertices, expected " +
                           std::to_string(m.vertices));
   requireDeviceMemory(devicePositions, m.config.device, "positions");
+  m.throwRefusedDeviceUpdate();
   DeviceArrayState& s = stateOf(m);
   const auto caller = static_cast<cudaStream_t>(stream);
   followCaller(m, s, caller);
-  CUDA_CHECK(cudaMemsetAsync(s.firstBad.data(), 0xff, sizeof(uint32_t), m.stream));
-  detail::launchFirstBadVertex(devicePositions, m.vertices, s.firstBad.data(), m.stream);
-  CUDA_CHECK(cudaMemcpyAsync(s.answer, s.firstBad.data(), sizeof(uint32_t), cudaMemcpyDeviceToHost, m.stream));
-  CUDA_CHECK(cudaStreamSynchronize(m.stream));  // the call's one wait
-  if (const uint32_t bad = *s.answer; bad != kNoBadVertex) {
-    float xyz[3];
-    CUDA_CHECK(cudaMemcpy(xyz, devicePositions + 3 * std::size_t(bad), sizeof xyz, cudaMemcpyDeviceToHost));
-    const std::size_t c = firstBadCoordinate(xyz);
-    throw tsah::DataError("positions: vertex " + std::to_string(bad) + " " + describeBadCoordinate(xyz[c < 3 ? c : 0]));
+  // Refitting the current tree again leaves another traced frame (a rebuilt tree, a blurred
+  // frame, another tree's) changed: such a frame waits for the check before the refit is queued.
+  const bool guarded = m.tracingRefitOfCurrentTree();
+  if (guarded) {
+    enqueueGuardedUpdate(m, s, devicePositions);
+  } else {
+    enqueueCheckedCopy(m, s, devicePositions, false);
+    s.fences.mark(3, m.stream);
+    s.pending = true;
+    m.throwRefusedDeviceUpdate();
+    m.enqueueRefitAndWoop();
   }
-  m.events.record(0, m.stream);  // timed as update(positions)'s upload
-  CUDA_CHECK(cudaMemcpyAsync(m.positions.data(), devicePositions, m.positions.bytes(), cudaMemcpyDeviceToDevice,
-                             m.stream));
-  m.restInPlace = false;
-  m.events.record(1, m.stream);
-  m.enqueueRefitAndWoop();
+  s.fences.mark(3, m.stream);
+  s.pending = true;
+  handBack(m, s, caller);
+  if (check == DeviceCheck::Wait) m.throwRefusedDeviceUpdate();
   // As update(positions): the static vertices may have moved, the next updateAt refits everything.
+  // (After a refused Deferred frame these are only conservative: the positions are unchanged.)
+  m.restInPlace = false;
   m.tree().staticBoxesValid = false;
   m.woopTree = -1;
   m.markUpdated();
-  handBack(m, s, caller);
 }
 
 void GpuRuntime::closestHitsOnDevice(const DeviceRays& rays, const DeviceHits& hits, StreamHandle stream) {

@@ -178,30 +178,6 @@ void GpuRuntime::Impl::releaseDevice() noexcept {
   if (sideStream) cudaStreamDestroy(std::exchange(sideStream, nullptr));
 }
 
-template <typename Enqueue>
-GpuRuntime::Impl::CapturedGraph GpuRuntime::Impl::capture(Enqueue&& enqueue) {
-  CUDA_CHECK(cudaStreamBeginCapture(stream, cudaStreamCaptureModeThreadLocal));
-  try {
-    enqueue();
-  } catch (...) {
-    cudaGraph_t broken = nullptr;
-    cudaStreamEndCapture(stream, &broken);
-    if (broken) cudaGraphDestroy(broken);
-    throw;
-  }
-  CapturedGraph g;
-  CUDA_CHECK(cudaStreamEndCapture(stream, &g.graph));
-  // The graph stays alive with its executable: the interpolation node is updated through it.
-  try {
-    g.interpolation = detail::findInterpolationNode(g.graph);
-    CUDA_CHECK(cudaGraphInstantiate(&g.exec, g.graph, 0));
-  } catch (...) {
-    destroy(g);
-    throw;
-  }
-  return g;
-}
-
 void GpuRuntime::Impl::launch(const CapturedGraph& g) {
   if (g.interpolation.node) detail::setInterpolationParams(g.exec, g.interpolation, frame);
   CUDA_CHECK(cudaGraphLaunch(g.exec, stream));
@@ -361,6 +337,7 @@ UpdateTimings GpuRuntime::Impl::finishUpdate(uint32_t slotsUpdated) {
 
 void GpuRuntime::Impl::markUpdated() {
   tracingRebuilt = false;
+  frameTree = int(current);
   woopValid = true;
   shutterKeys = 0;  // an update ends a blurred frame (updateShutter sets its keys after its updates)
 }
@@ -395,6 +372,7 @@ uint32_t GpuRuntime::currentTree() const { return impl_->current; }
 
 UpdateTimings GpuRuntime::updateAt(double time) {
   Impl& m = *impl_;
+  m.throwRefusedDeviceUpdate();
   m.current = treeIndexAt(m.ranges, time);
   return m.refitAt(time);
 }
@@ -435,6 +413,7 @@ void GpuRuntime::Impl::uploadPositions(std::span<const float> given) {
 
 UpdateTimings GpuRuntime::update(std::span<const float> positions) {
   Impl& m = *impl_;
+  m.throwRefusedDeviceUpdate();
   m.uploadPositions(positions);
   m.enqueueRefitAndWoop();
   // The caller's positions may move the static vertices too: the next updateAt refits everything.
@@ -455,6 +434,7 @@ bool sameOptions(const RebuildOptions& a, const RebuildOptions& b) {
 
 RebuildTimings GpuRuntime::rebuildAt(double time, const RebuildOptions& options) {
   Impl& m = *impl_;
+  m.throwRefusedDeviceUpdate();
   if (options.maxLeafSize == 0) throw tsah::ConfigError("GPU rebuild: maxLeafSize must be at least 1");
   if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles, m.config.layout);
   m.setFrame(time);
@@ -486,6 +466,7 @@ RebuildTimings GpuRuntime::rebuildAt(double time, const RebuildOptions& options)
 
 RebuildTimings GpuRuntime::rebuild(std::span<const float> positions, const RebuildOptions& options) {
   Impl& m = *impl_;
+  m.throwRefusedDeviceUpdate();
   m.uploadPositions(positions);
   if (!m.rebuilder) m.rebuilder = std::make_unique<detail::GpuRebuilder>(m.triangles, m.config.layout);
   m.woopValid = false;

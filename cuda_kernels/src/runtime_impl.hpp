@@ -43,6 +43,15 @@ struct GpuRuntime::Impl {
   // What finishUpdate records of a queued update without waiting for it: the frame is traceable,
   // the refitted tree is traced, a blurred frame ends.
   void markUpdated();
+  // True when the traced frame is a refit of the current tree (an update, updateAt or
+  // updateFromDevice of it since the last selectTreeAt, rebuild or blurred frame): refitting it
+  // again from the same positions gives the same frame bit for bit.
+  bool tracingRefitOfCurrentTree() const {
+    return woopValid && !tracingRebuilt && shutterKeys == 0 && frameTree == int(current);
+  }
+  // Throws the tsah::DataError of a Deferred updateFromDevice that refused its frame, once
+  // (device_arrays_runtime.cpp); waits for its check when the answer is not in yet.
+  void throwRefusedDeviceUpdate();
   // The triangles of every vertex in increasing order (once, at the first render).
   void buildVertexTriangles();
   // Puts the interpolation of time t on the stream (events 0 and 1 around it): setFrame chooses the
@@ -136,6 +145,7 @@ struct GpuRuntime::Impl {
   std::vector<DeviceTree> trees;
   std::vector<TimeRange> ranges;         // one per tree
   uint32_t current = 0;                  // the tree that update/updateAt refit and tracing reads
+  int frameTree = -1;                    // the tree the last update refitted (markUpdated)
 
 
   DeviceBuffer<WoopTriangle> woop;       // per slot of the traced tree
@@ -197,6 +207,31 @@ struct GpuRuntime::Impl {
   // The device-array entry points' events and flag word (device_arrays_runtime.cpp), made at first use.
   std::shared_ptr<DeviceArrayState> deviceArrays;
 };
+
+// The graph's capture: everything `enqueue` puts on `stream` (and the streams it forks).
+template <typename Enqueue>
+inline GpuRuntime::Impl::CapturedGraph GpuRuntime::Impl::capture(Enqueue&& enqueue) {
+  CUDA_CHECK(cudaStreamBeginCapture(stream, cudaStreamCaptureModeThreadLocal));
+  try {
+    enqueue();
+  } catch (...) {
+    cudaGraph_t broken = nullptr;
+    cudaStreamEndCapture(stream, &broken);
+    if (broken) cudaGraphDestroy(broken);
+    throw;
+  }
+  CapturedGraph g;
+  CUDA_CHECK(cudaStreamEndCapture(stream, &g.graph));
+  // The graph stays alive with its executable: the interpolation node is updated through it.
+  try {
+    g.interpolation = detail::findInterpolationNode(g.graph);
+    CUDA_CHECK(cudaGraphInstantiate(&g.exec, g.graph, 0));
+  } catch (...) {
+    destroy(g);
+    throw;
+  }
+  return g;
+}
 
 // Traces host rays: uploads them, runs prepare(count) (more uploads), then launch(count, hits,
 // occluded) between events 0 and 1 on the runtime's stream, and downloads the closest hits (Result

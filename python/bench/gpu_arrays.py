@@ -4,9 +4,12 @@
   trace: rays given as torch tensors (GpuRuntime.trace on device arrays, out= preallocated, timed
          with CUDA events on the stream) against the traversal kernel's device time of the same rays
          given as numpy arrays (GpuRuntime.last_ray_pass); target: rate ratio >= 0.9.
-  refit: GpuRuntime.refit(tensor of vertices) (the check, its 4-byte read back, the copy, refit and
-         Woop, timed with CUDA events) against the runtime's own update from the animation
-         (refit(time): GpuRuntime.last_update total_ms); target: time ratio <= 1.2.
+  refit: GpuRuntime.refit(tensor of vertices) (the check, the guarded copy, refit and Woop: one
+         captured graph; timed with CUDA events on the caller's stream around the call) against the
+         runtime's own update from the animation (refit(time): GpuRuntime.last_update total_ms),
+         both check modes: wait=False (no host wait; a refused frame is raised by the next refit or
+         check()) is the one held to the target, time ratio <= 1.2; wait=True (the default: the call
+         waits for the check's answer) is reported beside it.
   cpu:   CpuRuntime(layout="bvh8").trace from Python (wall time, numpy in and out) against the C++
          batch call alone (CpuRuntime.last_ray_pass) on the same rays; target: rate ratio >= 0.9.
 
@@ -75,15 +78,20 @@ def bench_refit(torch, gpu, animation, runs):
     positions = torch.from_numpy(animation.positions_at(t).astype(np.float32)).cuda()
     update_ms = median_ms(lambda: (gpu.refit(t), gpu.last_update["total_ms"])[1], runs)
     stream = torch.cuda.current_stream().cuda_stream
-    tensor_ms = median_ms(lambda: event_ms(torch, lambda: gpu.refit(positions, stream=stream)), runs)
-    wall_ms = median_ms(lambda: _wall_ms(torch, lambda: gpu.refit(positions, stream=stream)), runs)
+    result = {"vertices": animation.vertex_count, "update_ms": update_ms}
+    for mode, wait in (("no_wait", False), ("wait", True)):
+        tensor_ms = median_ms(lambda: event_ms(torch, lambda: gpu.refit(positions, stream=stream, wait=wait)), runs)
+        wall_ms = median_ms(lambda: _wall_ms(torch, lambda: gpu.refit(positions, stream=stream, wait=wait)), runs)
+        gpu.check()
+        result[mode] = {"call": f"refit(tensor, wait={wait})", "tensor_ms": tensor_ms, "tensor_wall_ms": wall_ms,
+                        "time_ratio": tensor_ms / update_ms}
     o, d = random_rays(animation, t, 100000, seed=3)
     after_tensor = gpu.trace(o, d)
     gpu.refit(t)
-    same = bool(np.array_equal(after_tensor, gpu.trace(o, d)))
-    return {"vertices": animation.vertex_count, "update_ms": update_ms, "tensor_ms": tensor_ms,
-            "tensor_wall_ms": wall_ms, "time_ratio": tensor_ms / update_ms, "target": "<= 1.2",
-            "met": tensor_ms / update_ms <= 1.2, "same_hits": same}
+    result["same_hits"] = bool(np.array_equal(after_tensor, gpu.trace(o, d)))
+    ratio = result["no_wait"]["time_ratio"]
+    result.update({"target": "refit(tensor, wait=False) <= 1.2 x refit(time)", "met": ratio <= 1.2})
+    return result
 
 
 def _wall_ms(torch, work):

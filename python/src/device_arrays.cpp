@@ -54,8 +54,20 @@ void checkTypestr(const std::string& got, const std::string& name, const std::ve
   throw ArgumentTypeError(name + ": expected a device array of typestr " + wanted + ", got '" + got + "'");
 }
 
-DeviceArrayArg fromCudaArrayInterface(py::handle obj, const std::string& name, bool writable) {
-  const py::object cai = obj.attr("__cuda_array_interface__");
+// obj.__cuda_array_interface__, or a null object when obj has none (reading it failed: torch raises
+// AttributeError for a CPU tensor; hasattr's answer). Read once per call: torch builds the dict
+// anew, in Python, at every access.
+py::object cudaArrayInterfaceOf(py::handle obj) {
+  if (py::isinstance<py::array>(obj)) return {};
+  PyObject* value = PyObject_GetAttrString(obj.ptr(), "__cuda_array_interface__");
+  if (!value) {
+    PyErr_Clear();
+    return {};
+  }
+  return py::reinterpret_steal<py::object>(value);
+}
+
+DeviceArrayArg fromCudaArrayInterface(const py::object& cai, const std::string& name, bool writable) {
   const auto bad = [&](const std::string& what) {
     return tsah::ConfigError(name + ": __cuda_array_interface__ " + what);
   };
@@ -145,6 +157,14 @@ DeviceArrayArg fromDlpack(py::handle obj, const std::string& name, bool writable
   return a;
 }
 
+// A DLPack array on a device (not the host's memory, pinned or not).
+bool isDlpackDeviceArray(py::handle obj) {
+  if (py::isinstance<py::array>(obj)) return false;
+  if (!py::hasattr(obj, "__dlpack_device__") || !py::hasattr(obj, "__dlpack__")) return false;
+  const int type = dlpackDevice(obj, "array").first;
+  return type != kCPU && type != kCUDAHost;
+}
+
 }  // namespace
 
 std::size_t DeviceArrayArg::size() const {
@@ -153,21 +173,16 @@ std::size_t DeviceArrayArg::size() const {
   return n;
 }
 
-bool isDeviceArray(py::handle obj) {
-  if (py::isinstance<py::array>(obj)) return false;
-  if (py::hasattr(obj, "__cuda_array_interface__")) return true;
-  if (!py::hasattr(obj, "__dlpack_device__") || !py::hasattr(obj, "__dlpack__")) return false;
-  const int type = dlpackDevice(obj, "array").first;
-  return type != kCPU && type != kCUDAHost;
-}
+bool isDeviceArray(py::handle obj) { return cudaArrayInterfaceOf(obj) || isDlpackDeviceArray(obj); }
 
 DeviceArrayArg checkedDeviceArray(py::handle obj, const std::string& name, const std::vector<std::string>& typestrs,
                                   bool writable, int device, std::uintptr_t consumerStream) {
-  if (!isDeviceArray(obj))
+  const py::object cai = cudaArrayInterfaceOf(obj);
+  if (!cai && !isDlpackDeviceArray(obj))
     throw ArgumentTypeError(name + ": expected a CUDA device array (__cuda_array_interface__ or DLPack), got " +
                             typeName(obj));
-  DeviceArrayArg a = py::hasattr(obj, "__cuda_array_interface__") ? fromCudaArrayInterface(obj, name, writable)
-                                                                  : fromDlpack(obj, name, writable, device, consumerStream);
+  DeviceArrayArg a = cai ? fromCudaArrayInterface(cai, name, writable)
+                         : fromDlpack(obj, name, writable, device, consumerStream);
   checkTypestr(a.typestr, name, typestrs);
   return a;
 }

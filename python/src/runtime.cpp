@@ -312,8 +312,8 @@ class GpuTracer {
     runtime_ = std::make_unique<cuda::GpuRuntime>(flattenBvh(tree.file.bvh), animation, config);
     refitTime(animation.startTime());
   }
-  void refit(py::handle timeOrPositions, py::handle stream) {
-    if (!isTime(timeOrPositions)) return refitPositions(timeOrPositions, stream);
+  void refit(py::handle timeOrPositions, py::handle stream, bool wait) {
+    if (!isTime(timeOrPositions)) return refitPositions(timeOrPositions, stream, wait);
     refitTime(timeOrPositions.cast<double>());
   }
   void refitTime(double time) {
@@ -321,8 +321,8 @@ class GpuTracer {
     py::gil_scoped_release release;
     lastUpdate_ = runtime_->updateAt(time);
   }
-  void refitPositions(py::handle vertices, py::handle stream) {
-    if (isDeviceArray(vertices)) return refitDevice(vertices, streamArgument(stream));
+  void refitPositions(py::handle vertices, py::handle stream, bool wait) {
+    if (isDeviceArray(vertices)) return refitDevice(vertices, streamArgument(stream), wait);
     const Array<float> positions = checkedPositions(vertices, runtime_->vertexCount());
     py::gil_scoped_release release;
     lastUpdate_ = runtime_->update(std::span<const float>(positions.data(), std::size_t(positions.size())));
@@ -351,6 +351,10 @@ class GpuTracer {
     }
     return boolArray(flags, result);
   }
+  void check() {
+    py::gil_scoped_release release;
+    runtime_->checkDeviceUpdate();
+  }
   std::string deviceName() const { return runtime_->device().name; }
   cuda::GpuRuntime& runtime() { return *runtime_; }
   py::dict lastUpdate() const {
@@ -361,13 +365,14 @@ class GpuTracer {
 
  private:
   int device() const { return runtime_->config().device; }
-  void refitDevice(py::handle vertices, std::uintptr_t stream) {
+  void refitDevice(py::handle vertices, std::uintptr_t stream, bool wait) {
     DeviceArguments args(device(), stream);
     const uint32_t v = runtime_->vertexCount();
     const float* positions = pointerOf<const float>(args.add(vertices, "positions", {"<f4"}, {py::ssize_t(v), 3}));
     args.waitForProducers();
     py::gil_scoped_release release;
-    runtime_->updateFromDevice(positions, v, reinterpret_cast<void*>(stream));
+    runtime_->updateFromDevice(positions, v, reinterpret_cast<void*>(stream),
+                               wait ? cuda::GpuRuntime::DeviceCheck::Wait : cuda::GpuRuntime::DeviceCheck::Deferred);
   }
   py::object traceDevice(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out,
                          std::uintptr_t stream) {
@@ -453,6 +458,9 @@ device arrays for trace, any of its four fields; a bool or uint8 device array fo
 work is ordered after what the caller queued on `stream` (None: the legacy default stream; an int
 cudaStream_t, or an object with __cuda_stream__ or cuda_stream) and before what it queues there
 next; device traces do not wait for the device (synchronize the stream before reading on the host).
+refit(positions, wait=False) does not wait for the device either: a device array with a bad
+coordinate is refused on the device (the frame stays as it was) and the DataError is raised by the
+next refit (of any kind) or check() call; see docs/python.md#device-arrays.
 )doc";
 constexpr const char* kLastRayPassDoc =
     "The last host-array trace or occluded call: {'rays': count, 'ms': time of the library's batch alone (GPU: the "
@@ -494,10 +502,13 @@ uploaded once; refit and traversal run on the GPU). Raises tsah.Failure when no 
              return std::make_unique<GpuTracer>(tree, animation, checkedInteger<int>(device, "device", 0));
            }),
            "tree"_a, "animation"_a, "device"_a = 0)
-      .def("refit", &GpuTracer::refit, "time"_a, py::kw_only(), "stream"_a = py::none(),
+      .def("refit", &GpuTracer::refit, "time"_a, py::kw_only(), "stream"_a = py::none(), "wait"_a = true,
            (std::string(kRefitDoc) + kDeviceDoc).c_str())
       .def("refit_positions", &GpuTracer::refitPositions, "positions"_a, py::kw_only(), "stream"_a = py::none(),
-           "The same as refit(positions) (vertex positions only).")
+           "wait"_a = true, "The same as refit(positions) (vertex positions only).")
+      .def("check", &GpuTracer::check,
+           "Waits for the check of the last refit(device positions, wait=False) if it is still running and raises "
+           "its tsah.DataError when it refused the frame (each refusal is raised once).")
       .def("trace", &GpuTracer::trace, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf,
            "out"_a = py::none(), py::kw_only(), "stream"_a = py::none(), (std::string(kTraceDoc) + kDeviceDoc).c_str())
       .def("occluded", &GpuTracer::occluded, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf,

@@ -224,6 +224,31 @@ def test_cuda_array_interface_is_read_as_the_protocol_says():
     assert check(FakeCudaArray(a, version=2, stream=None), "positions", ["<f4"])["stream"] is None
 
 
+class CountedInterface:
+    """Builds its __cuda_array_interface__ at each access, as torch does (in Python), and counts them;
+    raises AttributeError while on the host, as a CPU torch tensor does."""
+    def __init__(self, array, on_device=True):
+        self.inner, self.on_device, self.reads = FakeCudaArray(array), on_device, 0
+
+    @property
+    def __cuda_array_interface__(self):
+        self.reads += 1
+        if not self.on_device:
+            raise AttributeError("Can't get __cuda_array_interface__ on non-CUDA tensor")
+        return self.inner.__cuda_array_interface__
+
+
+def test_cuda_array_interface_is_read_once_per_check():
+    a = np.zeros((5, 3), np.float32)
+    counted = CountedInterface(a)
+    assert check(counted, "positions", ["<f4"])["data"] == a.ctypes.data
+    assert counted.reads == 1
+    host = CountedInterface(a, on_device=False)
+    with pytest.raises(tsah.ArgumentTypeError, match="positions: expected a CUDA device array .* got CountedInterface"):
+        check(host, "positions", ["<f4"])
+    assert host.reads == 1
+
+
 @pytest.mark.parametrize("fields, error, message", [
     ({"typestr": "<f8"}, tsah.ArgumentTypeError, "positions: expected a device array of typestr '<f4', got '<f8'"),
     ({"strides": (4, 20)}, tsah.ConfigError, "positions: must be C-contiguous"),
@@ -461,7 +486,8 @@ def test_device_limits_out_arrays_and_results_as_torch_or_cupy(wave):
 
 
 @needs_device_arrays
-def test_device_work_follows_the_callers_stream(wave):
+@pytest.mark.parametrize("wait", [True, False])
+def test_device_work_follows_the_callers_stream(wave, wait):
     animation, _ = wave
     runtime = make_runtime("gpu", wave)
     reference = make_runtime("gpu", wave)
@@ -475,12 +501,50 @@ def test_device_work_follows_the_callers_stream(wave):
             else positions.set(animation.positions_at(4.0).astype(np.float32), stream=stream)
         # torch's Stream gives its address as cuda_stream; CuPy's as ptr (passed as an int).
         given = stream if LIB.__name__ == "torch" else stream.ptr
-        runtime.refit(positions, stream=given)
+        runtime.refit(positions, stream=given, wait=wait)
         hits = runtime.trace(to_device(o), to_device(d), stream=given)
     stream.synchronize()
+    runtime.check()
     reference.refit(4.0)
     np.testing.assert_array_equal(to_host(hits["triangle"]), reference.trace(o, d)["triangle"])
     assert hits["t"].__cuda_array_interface__["stream"] == stream_address(stream)
+
+
+@needs_device_arrays
+def test_device_refit_without_waiting_reports_a_refused_frame_later(wave):
+    animation, _ = wave
+    host, device = make_runtime("gpu", wave), make_runtime("gpu", wave)
+    o, d = rays(animation, 2.5, (500,))
+    for time in (1.0, 2.5, 4.0):  # good frames, none waited for
+        device.refit(to_device(animation.positions_at(time)), wait=False)
+        host.refit(animation.positions_at(time))
+        synchronize()
+        np.testing.assert_array_equal(device.trace(o, d), host.trace(o, d))
+    device.check()  # nothing was refused
+    expected = host.trace(o, d)  # the frame at 4.0
+    bad = animation.positions_at(1.0).copy()
+    bad[4, 1] = np.nan
+    bad[9, 2] = 1e30
+    message = "positions: vertex 4 has a NaN or infinite coordinate"
+    device.refit(to_device(bad), wait=False)  # returns: refused on the device
+    synchronize()
+    np.testing.assert_array_equal(device.trace(o, d), expected)  # the frame is unchanged
+    with pytest.raises(tsah.DataError, match=message):
+        device.check()
+    device.check()  # raised once
+    device.refit(to_device(bad), wait=False)
+    with pytest.raises(tsah.DataError, match=message):  # the earlier frame's error; these positions are not used
+        device.refit(to_device(animation.positions_at(2.0)), wait=False)
+    synchronize()
+    np.testing.assert_array_equal(device.trace(o, d), expected)
+    device.refit(to_device(bad), wait=False)
+    with pytest.raises(tsah.DataError, match=message):  # a refit from a time raises it too, and does nothing
+        device.refit(2.0)
+    np.testing.assert_array_equal(device.trace(o, d), expected)
+    device.refit(to_device(animation.positions_at(2.0)), wait=False)  # good again
+    host.refit(animation.positions_at(2.0))
+    device.check()
+    np.testing.assert_array_equal(device.trace(o, d), host.trace(o, d))
 
 
 @needs_device_arrays

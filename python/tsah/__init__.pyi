@@ -242,11 +242,14 @@ class GpuRuntime:
 
     def __init__(self, tree: Tree, animation: Animation, device: _Integer = 0) -> None:
         """device: the CUDA device index. Raises tsah.Failure when no device is usable."""
-    def refit(self, time: _Number | _ArrayLike | Any, *, stream: _Stream = None) -> None:
+    def refit(self, time: _Number | _ArrayLike | Any, *, stream: _Stream = None, wait: bool = True) -> None:
         """Refits on the device to the animation at this time, or to vertex positions (V, 3): host
-        arrays, or a float32 device array used in place (checked on the device)."""
-    def refit_positions(self, positions: _ArrayLike | Any, *, stream: _Stream = None) -> None:
+        arrays, or a float32 device array used in place (checked on the device; wait=False: the
+        DataError of a refused frame is raised by the next refit or check())."""
+    def refit_positions(self, positions: _ArrayLike | Any, *, stream: _Stream = None, wait: bool = True) -> None:
         """Refits to given vertex positions (V, 3)."""
+    def check(self) -> None:
+        """Raises the DataError of the last refit(device positions, wait=False) if it refused its frame."""
     def trace(self, origins: _ArrayLike | Any, directions: _ArrayLike | Any, tmin: _ArrayLike | Any = 0.0,
               tmax: _ArrayLike | Any = float("inf"), out: Any = None, *,
               stream: _Stream = None) -> np.recarray[Any, Any] | _DeviceHits:

@@ -33,7 +33,7 @@ if has test; then
   timeout 300 "$bundle/bin/test_cuda_device_arrays" > "$out/test_cuda_device_arrays.log" 2>&1
   rc=$?; status=$((status | rc))
   echo "test_cuda_device_arrays: rc=$rc in $((SECONDS - start)) s"
-  grep -E "^\[  (PASSED|FAILED|SKIPPED) |tests ran|Failure|Expected|Which is" "$out/test_cuda_device_arrays.log" | head -30
+  grep -E "^\[  (PASSED|FAILED|SKIPPED) |^device refit|tests ran|Failure|Expected|Which is" "$out/test_cuda_device_arrays.log" | head -30
 fi
 
 if has pytest; then

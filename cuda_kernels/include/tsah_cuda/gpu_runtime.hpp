@@ -191,15 +191,30 @@ class GpuRuntime {
   // an opaque handle, so that this header needs no cuda_runtime.h; nullptr is the legacy default
   // stream, (void*)2 the per-thread default stream.
   using StreamHandle = void*;
+  // When updateFromDevice reports a bad coordinate (docs/cuda-runtime.md#device-arrays).
+  enum class DeviceCheck {
+    Wait,      // the call waits for the update (and its check's answer) and throws at once
+    Deferred,  // no host wait: a refused frame is thrown by a later call (see updateFromDevice)
+  };
   // Refits the current tree (selectTreeAt) to the vertex positions at devicePositions (vertexCount
-  // * 3 floats x y z in device memory of the runtime's device), as update(positions): the
-  // positions are first checked on the device (finite, |x| <= tsah::kMaxCoordinate) and the 4-byte
-  // answer read back, the call's only wait for the device; then copied into the runtime and the
-  // refit and Woop pass queued. Throws tsah::DataError for a wrong vertex count or a bad coordinate
-  // ("positions: vertex N has a NaN or infinite coordinate", the wording of the host check; the
-  // frame is left as it was), tsah::ConfigError for a pointer that is not device memory of the
-  // runtime's device.
-  void updateFromDevice(const float* devicePositions, std::size_t vertexCount, StreamHandle stream = nullptr);
+  // * 3 floats x y z in device memory of the runtime's device), as update(positions): one kernel
+  // checks every coordinate (finite, |x| <= tsah::kMaxCoordinate), the next copies the positions
+  // into the runtime only when all are good, then the refit and Woop pass run (a captured graph).
+  // A refused frame changes nothing the trace reads (nodes, Woop triangles, positions). Throws
+  // tsah::DataError for a wrong vertex count or a bad coordinate ("positions: vertex N has a NaN or
+  // infinite coordinate", the wording of the host check), tsah::ConfigError for a pointer that is
+  // not device memory of the runtime's device.
+  // check Wait: the call waits for the check's answer (with the update's end). check Deferred: no
+  // host wait while the traced frame is a refit of the current tree (an update, updateAt or an
+  // earlier updateFromDevice of it; otherwise the call waits as Wait does); a refused frame is
+  // thrown by the next updateFromDevice, update, updateAt, rebuild, rebuildAt or
+  // checkDeviceUpdate, which then does nothing else; work queued in between (traces, renders)
+  // sees the frame before the refused one.
+  void updateFromDevice(const float* devicePositions, std::size_t vertexCount, StreamHandle stream = nullptr,
+                        DeviceCheck check = DeviceCheck::Wait);
+  // Waits for the check of the last Deferred updateFromDevice (if not reported yet) and throws its
+  // tsah::DataError when it refused the frame; each refusal is thrown once.
+  void checkDeviceUpdate();
   // Rays in the caller's device memory as separate arrays (Python's (n, 3) float32 arrays): ray i
   // starts at origins[3i..3i+2] with direction directions[3i..3i+2]; tmin/tmax per ray, or, when
   // null, tminValue/tmaxValue for every ray. The traversal reads these arrays directly (no packed
