@@ -62,8 +62,9 @@ void expectLayoutOfTheKeys(const tc::GpuRuntime& gpu, const anim::Animation& a, 
   }
 }
 
-// Shutters of two keys in a row (the graph replayed with each frame's keys), then of more keys
-// (captured again), then two keys again; with and without graphs, leaves of 1 and 8 triangles.
+// Shutters of two keys in a row (the graph replayed with each frame's keys), then of five keys
+// (captured, the key arrays grown), two keys again (captured again for the grown arrays), five keys
+// again (that graph replayed); with and without graphs, leaves of 1 and 8 triangles.
 TEST(CudaMotionBlurLayout, RecordsEqualTheKeyArraysTheyAreBuiltFrom) {
   REQUIRE_GPU();
   const auto a = tsah::test::generatedAnimation(anim::GeneratorKind::Explode, 2500, 6, 3);
@@ -73,7 +74,7 @@ TEST(CudaMotionBlurLayout, RecordsEqualTheKeyArraysTheyAreBuiltFrom) {
     for (bool graphs : {true, false}) {
       tc::GpuRuntime gpu(tree, a, tsah::test::gpuConfig(tsah::Layout::Bvh2, graphs));
       for (auto [open, close] : {std::pair{0.02, 0.06}, std::pair{0.04, 0.09}, std::pair{0.25, 0.95},
-                                 std::pair{0.41, 0.43}}) {
+                                 std::pair{0.41, 0.43}, std::pair{0.3, 0.9}}) {
         const std::string what = "leaf " + std::to_string(maxLeaf) + ", graphs " + std::to_string(graphs) +
                                  ", shutter [" + std::to_string(open) + ", " + std::to_string(close) + "]";
         gpu.updateShutterAt(t0 + open * span, t0 + close * span);

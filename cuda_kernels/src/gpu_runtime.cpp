@@ -174,7 +174,7 @@ void GpuRuntime::Impl::releaseDevice() noexcept {
     destroy(t.partialUpdateGraph);
   }
   for (auto& g : rebuildGraphs) destroy(g.graph);
-  destroy(shutterGraph);
+  for (auto& g : shutterGraphs) destroy(g.graph);
   if (sideStream) cudaStreamSynchronize(sideStream);
   if (stream) cudaStreamDestroy(std::exchange(stream, nullptr));
   if (sideStream) cudaStreamDestroy(std::exchange(sideStream, nullptr));

@@ -154,19 +154,23 @@ UpdateTimings GpuRuntime::Impl::refitAnimationKeys(std::span<const double> keyTi
   keySlotsReady = std::max(keySlotsReady, keys);
   keySlotsTree = int(current);
   if (config.useGraphs) {
-    // The graph holds the key count, the tree's sizes and every buffer's address: captured again
-    // when one changes (a new key count, another tree, a buffer grown).
+    // A graph holds the key count, the tree's sizes and every buffer's address: one per key count
+    // and tree (a shutter that sometimes spans a keyframe alternates two), captured again when a
+    // buffer has grown.
     const Impl::ShutterGraphArgs args{keys,
                                       current,
                                       {keyNodes.data(), keyRootBoxes.data(), keyPositions.data(), keyCounters.data(),
-                                       keyRoots.data(), keyFrames.data(), keyFractions.data(), blurNodes.data(),
-                                       blurTriangles.data()}};
-    if (!shutterGraph.exec || !(args == shutterGraphArgs)) {
-      destroy(shutterGraph);
-      shutterGraph = captureCalls([&] { enqueueShutterRefit(keys); });
-      shutterGraphArgs = args;
+                                       keyRoots.data(), keyFrames.data(), blurNodes.data(), blurTriangles.data()}};
+    auto it = std::find_if(shutterGraphs.begin(), shutterGraphs.end(), [&](const Impl::ShutterGraph& g) {
+      return g.args.keys == keys && g.args.tree == current;
+    });
+    if (it == shutterGraphs.end()) it = shutterGraphs.insert(shutterGraphs.end(), Impl::ShutterGraph{});
+    if (!it->graph.exec || !(it->args == args)) {
+      destroy(it->graph);
+      it->graph = captureCalls([&] { enqueueShutterRefit(keys); });
+      it->args = args;
     }
-    launch(shutterGraph);
+    launch(it->graph);
   } else {
     enqueueShutterRefit(keys);
   }

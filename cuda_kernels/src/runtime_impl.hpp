@@ -182,15 +182,18 @@ struct GpuRuntime::Impl {
   void enqueueBlurredLayout(uint32_t keys, bool withInstantState);
   // refitAnimationKeys' steps after the keys' uploads (events 0..3, as an update's).
   void enqueueShutterRefit(uint32_t keys);
-  // Its graph (config.useGraphs), captured for shutterGraphArgs: the key count, the tree and the key
-  // arrays' addresses; captured again when one of them changes.
+  // Its graphs (config.useGraphs), one per key count and tree, each captured for its arguments (the
+  // key count, the tree and the key arrays' addresses) and captured again when they change.
   struct ShutterGraphArgs {
     uint32_t keys = 0, tree = 0;
-    const void* buffers[9] = {};
+    const void* buffers[8] = {};
     bool operator==(const ShutterGraphArgs&) const = default;
   };
-  CapturedGraph shutterGraph;
-  ShutterGraphArgs shutterGraphArgs;
+  struct ShutterGraph {
+    ShutterGraphArgs args;
+    CapturedGraph graph;
+  };
+  std::vector<ShutterGraph> shutterGraphs;
   // Key slots [0, keySlotsReady) hold tree keySlotsTree's child references and the rest positions
   // of the static vertices (refitAnimationKeys copies them into new slots only).
   uint32_t keySlotsReady = 0;
