@@ -6,7 +6,7 @@
 #   build:  (without Embree and MPI, whose libraries would not fit the bundle's size limit)
 #           cmake --preset gpu-hopper -B build/gpu-mb -DCMAKE_DISABLE_FIND_PACKAGE_embree=ON -DTSAH_WITH_MPI=OFF
 #           cmake --build build/gpu-mb -j2 --target tsah tsah_gpu_bench test_cuda_motion_blur
-#             test_cuda_motion_blur_render   (test_cuda_runtime and test_cuda_cwbvh too when they fit:
+#             test_cuda_motion_blur_render test_cuda_motion_blur_layout   (test_cuda_runtime and test_cuda_cwbvh too when they fit:
 #             their CudaRender tests then run as well)
 #   data:   tsah resample SCENE -o data/NAME.tanim [--frames 50]; optionally
 #           tsah optimize data/NAME.tanim -o data/NAME-tsah.tbvh (else the bench builds SAH0);
@@ -26,7 +26,7 @@ tree() { [ -f "data/$1-tsah.tbvh" ] && echo "--tree tsah=data/$1-tsah.tbvh"; }
 
 if has tests; then
   : > "$out/tests.log"
-  for t in "test_cuda_motion_blur_render" "test_cuda_motion_blur" "test_cuda_runtime --gtest_filter=CudaRender.*" \
+  for t in "test_cuda_motion_blur_render" "test_cuda_motion_blur" "test_cuda_motion_blur_layout" "test_cuda_runtime --gtest_filter=CudaRender.*" \
            "test_cuda_cwbvh --gtest_filter=CudaRender.*"; do
     [ -x "./bin/${t%% *}" ] || continue  # not in this bundle
     timeout 300 ./bin/$t >> "$out/tests.log" 2>&1

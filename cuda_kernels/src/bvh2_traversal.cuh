@@ -8,6 +8,7 @@
 //
 // The box test and the triangle test are the CPU runtime's own (ray.hpp, woop.hpp: the same
 // arithmetic and the watertight fallback near edges), so hits agree with the CPU path.
+#include "blurred_trace.hpp"
 #include "device_types.hpp"
 #include "tsah/layout/motion_blur.hpp"
 #include "tsah/layout/traversal.hpp"
@@ -38,7 +39,7 @@ __device__ __forceinline__ bool bvh2Slab(const RayPrep& r, float loX, float hiX,
 }
 
 // What the loop reads of a frame, for the instant frame (TraceScene: packed nodes, Woop triangles)
-// and a blurred one (tsah::MotionFrame): a node's two child boxes as the packed rows n0xy, n1xy, nz
+// and a blurred one (BlurredFrame): a node's two child boxes as the packed rows n0xy, n1xy, nz
 // (gpu_layout.hpp) with its references, a slot's triangle test, a slot's triangle id.
 __device__ __forceinline__ void loadBvh2Node(const TraceScene& scene, int32_t ref, float4& n0xy, float4& n1xy,
                                              float4& nz, int4& refs) {
@@ -65,39 +66,65 @@ __device__ __forceinline__ uint32_t slotTriangle(const TraceScene& scene, uint32
   return __ldg(scene.triIndex + s);
 }
 
-// A blurred frame at one ray's time: tsah::MotionFrame (traversal.hpp), the two keys of its
-// segment, read here with vector loads and lerped as the CPU runtime lerps them (motion::lerpBox
-// per child box, motion::lerpVertex per vertex, the watertight test), so hits are the CPU
-// runtime's; only the loop is the one below.
-__device__ __forceinline__ void loadBvh2Node(const MotionFrame& m, int32_t ref, float4& n0xy, float4& n1xy,
-                                             float4& nz, int4& refs) {
-  const float4* a = reinterpret_cast<const float4*>(m.nodes0 + ref);
-  const float4* b = reinterpret_cast<const float4*>(m.nodes1 + ref);
-  const float4 a0 = __ldg(a), a1 = __ldg(a + 1), az = __ldg(a + 2);
-  const float4 b0 = __ldg(b), b1 = __ldg(b + 1), bz = __ldg(b + 2);
-  refs = __ldg(reinterpret_cast<const int4*>(a + 3));
-  const Aabb c0 = motion::lerpBox(Aabb{{a0.x, a0.z, az.x}, {a0.y, a0.w, az.y}}, Aabb{{b0.x, b0.z, bz.x}, {b0.y, b0.w, bz.y}}, m.f);
-  const Aabb c1 = motion::lerpBox(Aabb{{a1.x, a1.z, az.z}, {a1.y, a1.w, az.w}}, Aabb{{b1.x, b1.z, bz.z}, {b1.y, b1.w, bz.w}}, m.f);
+// A blurred frame at one ray's time: the two keys of its segment in the blurred layout
+// (blurred_trace.hpp), each node's and each slot's pair of keys one contiguous run of vector loads,
+// lerped as the CPU runtime's tsah::MotionFrame lerps them (motion::lerpBox per child box,
+// motion::lerpVertex per vertex, the watertight test), so hits are the CPU runtime's; only the loop
+// is the one below. keyCount >= 2.
+struct BlurredFrame {
+  const float4* nodes;      // key s of node 0; node n at nodes + n * nodeStride, key s + 1 right after
+  const float4* triangles;  // key s of slot 0; slot t at triangles + t * triangleStride
+  uint32_t nodeStride, triangleStride;  // in float4: 4 and 3 per key
+  const uint32_t* triIndex;
+  float f;
+  RootInfo root;
+
+  __device__ __forceinline__ BlurredFrame(const BlurredLayout& l, float time) {
+    const motion::Segment seg = motion::segmentAt(l.keyTimes, int(l.keyCount), time);
+    const uint32_t k = uint32_t(seg.index);
+    nodes = reinterpret_cast<const float4*>(l.nodes + k);
+    triangles = reinterpret_cast<const float4*>(l.triangles + k);
+    nodeStride = 4 * l.keyCount;
+    triangleStride = 3 * l.keyCount;
+    triIndex = l.triIndex;
+    f = seg.f;
+    root.box = motion::lerpBox(l.keyRootBoxes[k], l.keyRootBoxes[k + 1], f);
+    root.ref = l.rootRef;
+    root.count = l.rootCount;
+  }
+};
+
+// Both child boxes of a node lerped between its rows at key s (a*) and key s + 1 (b*), as packed rows.
+__device__ __forceinline__ void lerpChildBoxes(float4 a0, float4 a1, float4 az, float4 b0, float4 b1, float4 bz,
+                                               float f, float4& n0xy, float4& n1xy, float4& nz) {
+  const Aabb c0 = motion::lerpBox(Aabb{{a0.x, a0.z, az.x}, {a0.y, a0.w, az.y}}, Aabb{{b0.x, b0.z, bz.x}, {b0.y, b0.w, bz.y}}, f);
+  const Aabb c1 = motion::lerpBox(Aabb{{a1.x, a1.z, az.z}, {a1.y, a1.w, az.w}}, Aabb{{b1.x, b1.z, bz.z}, {b1.y, b1.w, bz.w}}, f);
   n0xy = make_float4(c0.lo.x, c0.hi.x, c0.lo.y, c0.hi.y);
   n1xy = make_float4(c1.lo.x, c1.hi.x, c1.lo.y, c1.hi.y);
   nz = make_float4(c0.lo.z, c0.hi.z, c1.lo.z, c1.hi.z);
 }
 
-// MotionFrame::vertex through the read-only data cache.
-__device__ __forceinline__ Vec3 lerpedVertex(const MotionFrame& m, uint32_t i) {
-  const Vec3 a{__ldg(m.positions0 + 3 * i), __ldg(m.positions0 + 3 * i + 1), __ldg(m.positions0 + 3 * i + 2)};
-  const Vec3 b{__ldg(m.positions1 + 3 * i), __ldg(m.positions1 + 3 * i + 1), __ldg(m.positions1 + 3 * i + 2)};
-  return motion::lerpVertex(a, b, m.f);
+__device__ __forceinline__ void loadBvh2Node(const BlurredFrame& m, int32_t ref, float4& n0xy, float4& n1xy,
+                                             float4& nz, int4& refs) {
+  const float4* p = m.nodes + std::size_t(ref) * m.nodeStride;  // key s: rows 0..3, key s + 1: rows 4..7
+  const float4 a0 = __ldg(p), a1 = __ldg(p + 1), az = __ldg(p + 2);
+  refs = __ldg(reinterpret_cast<const int4*>(p + 3));
+  const float4 b0 = __ldg(p + 4), b1 = __ldg(p + 5), bz = __ldg(p + 6);
+  lerpChildBoxes(a0, a1, az, b0, b1, bz, m.f, n0xy, n1xy, nz);
 }
 
-__device__ __forceinline__ bool intersectBvh2Slot(const MotionFrame& m, const Ray& ray, const RayPrep& prep,
+__device__ __forceinline__ bool intersectBvh2Slot(const BlurredFrame& m, const Ray& ray, const RayPrep& prep,
                                                   uint32_t s, float tmax, float& t, float& u, float& v) {
-  const uint32_t* tri = m.indices + 3 * std::size_t(__ldg(m.triIndex + s));
-  const uint32_t a = __ldg(tri), b = __ldg(tri + 1), c = __ldg(tri + 2);
-  return intersectWatertight(prep, lerpedVertex(m, a), lerpedVertex(m, b), lerpedVertex(m, c), ray.tmin, tmax, t, u, v);
+  const float4* p = m.triangles + std::size_t(s) * m.triangleStride;  // key s: rows 0..2, key s + 1: rows 3..5
+  const float4 a0 = __ldg(p), a1 = __ldg(p + 1), a2 = __ldg(p + 2);
+  const float4 b0 = __ldg(p + 3), b1 = __ldg(p + 4), b2 = __ldg(p + 5);
+  const Vec3 v0 = motion::lerpVertex({a0.x, a0.y, a0.z}, {b0.x, b0.y, b0.z}, m.f);
+  const Vec3 v1 = motion::lerpVertex({a0.w, a1.x, a1.y}, {b0.w, b1.x, b1.y}, m.f);
+  const Vec3 v2 = motion::lerpVertex({a1.z, a1.w, a2.x}, {b1.z, b1.w, b2.x}, m.f);
+  return intersectWatertight(prep, v0, v1, v2, ray.tmin, tmax, t, u, v);
 }
 
-__device__ __forceinline__ uint32_t slotTriangle(const MotionFrame& m, uint32_t s) {
+__device__ __forceinline__ uint32_t slotTriangle(const BlurredFrame& m, uint32_t s) {
   return __ldg(m.triIndex + s);
 }
 
@@ -244,28 +271,20 @@ __device__ __forceinline__ bool bvh2AnyHit(const TraceScene& scene, const RootIn
 
 // One ray of a blurred frame at its shutter fraction `time` (the blurred batch kernel, the render's
 // blurred passes).
-__device__ __forceinline__ RootInfo motionRoot(const MotionFrame& frame) {
-  RootInfo root;
-  root.box = frame.rootBox;
-  root.ref = frame.rootRef;
-  root.count = frame.rootCount;
-  return root;
-}
-
-__device__ __forceinline__ Hit bvh2BlurredClosestHit(const MotionBvhView& view, const Ray& ray, float time) {
-  const MotionFrame frame(view, time);
+__device__ __forceinline__ Hit bvh2BlurredClosestHit(const BlurredLayout& layout, const Ray& ray, float time) {
+  const BlurredFrame frame(layout, time);
   Bvh2Stack stack;
   Bvh2Traversal<false> walk;
-  walk.start(motionRoot(frame), ray, stack);
+  walk.start(frame.root, ray, stack);
   walk.run<false>(frame, stack);
   return walk.closestHit(frame);
 }
 
-__device__ __forceinline__ bool bvh2BlurredAnyHit(const MotionBvhView& view, const Ray& ray, float time) {
-  const MotionFrame frame(view, time);
+__device__ __forceinline__ bool bvh2BlurredAnyHit(const BlurredLayout& layout, const Ray& ray, float time) {
+  const BlurredFrame frame(layout, time);
   Bvh2Stack stack;
   Bvh2Traversal<true> walk;
-  walk.start(motionRoot(frame), ray, stack);
+  walk.start(frame.root, ray, stack);
   walk.run<false>(frame, stack);
   return walk.occluded();
 }

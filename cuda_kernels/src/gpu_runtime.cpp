@@ -1,6 +1,7 @@
 #include "tsah_cuda/gpu_runtime.hpp"
 
 #include <algorithm>
+#include <functional>
 #include <new>
 #include <string>
 
@@ -173,6 +174,7 @@ void GpuRuntime::Impl::releaseDevice() noexcept {
     destroy(t.partialUpdateGraph);
   }
   for (auto& g : rebuildGraphs) destroy(g.graph);
+  for (auto& g : shutterGraphs) destroy(g.graph);
   if (sideStream) cudaStreamSynchronize(sideStream);
   if (stream) cudaStreamDestroy(std::exchange(stream, nullptr));
   if (sideStream) cudaStreamDestroy(std::exchange(sideStream, nullptr));

@@ -2,6 +2,7 @@
 // one copy of the traced tree's nodes, root and positions per key (docs/cuda-runtime.md).
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <string>
 #include <vector>
 
@@ -58,13 +59,36 @@ UpdateTimings GpuRuntime::Impl::refitKeys(std::span<const float> keyTimes, Refit
     events.wait(15);
     total.refitMs += events.ms(14, 15);
   }
-  CUDA_CHECK(cudaStreamSynchronize(stream));
+  enqueueBlurredLayout(keys, false);
   shutterKeys = keys;
   shutterKeyTimes.assign(keyTimes.begin(), keyTimes.end());
   keyFractions.reserve(keys);
   keyFractions.upload(keyTimes, stream);
   CUDA_CHECK(cudaStreamSynchronize(stream));
   return total;
+}
+
+void GpuRuntime::Impl::enqueueBlurredLayout(uint32_t keys, bool withInstantState) {
+  DeviceTree& t = tree();
+  const uint32_t interior = t.topology.interiorCount;
+  blurNodes.reserve(std::size_t(keys) * interior);
+  blurTriangles.reserve(std::size_t(keys) * triangles);
+  detail::BlurredLayoutSources from;
+  from.keyNodes = keyNodes.data();
+  from.nodeCount = interior;
+  from.keyPositions = keyPositions.data();
+  from.keyStride = uint64_t(vertices) * 3;
+  from.slotVertices = t.slotVertices.data();
+  from.slots = triangles;
+  from.keyCount = keys;
+  if (withInstantState) {
+    from.keyRoots = keyRoots.data();
+    from.keyRootBoxes = keyRootBoxes.data();
+    from.lastNodes = t.nodes.data();
+    from.lastRoot = t.root.data();
+    from.lastPositions = positions.data();
+  }
+  detail::launchBuildBlurredLayout(from, blurNodes.data(), blurTriangles.data(), stream);
 }
 
 UpdateTimings GpuRuntime::updateShutter(std::span<const float> keyTimes,
@@ -94,12 +118,11 @@ UpdateTimings GpuRuntime::updateShutterAt(double open, double close) {
 }
 
 UpdateTimings GpuRuntime::Impl::refitAnimationKeys(std::span<const double> keyTimes, std::span<const float> fractions) {
-  // The instant state first (tracing without times sees the last key); it also puts the rest
-  // positions of the static vertices in `positions`, which every key slot starts from.
-  UpdateTimings total = refitAt(keyTimes.back());
   const auto keys = static_cast<uint32_t>(keyTimes.size());
   DeviceTree& t = tree();
   const std::size_t interior = t.topology.interiorCount, coords = std::size_t(vertices) * 3;
+  // Every key slot starts from the rest positions of the static vertices (the batch moves the others).
+  restoreStaticPositions();
   if (keyNodes.size() < std::size_t(keys) * interior || keyPositions.size() < std::size_t(keys) * coords ||
       keySlotsTree != int(current))
     keySlotsReady = 0;  // reallocated, or another tree's references
@@ -109,17 +132,16 @@ UpdateTimings GpuRuntime::Impl::refitAnimationKeys(std::span<const double> keyTi
   keyCounters.reserve(std::size_t(keys) * interior);
   keyRoots.reserve(keys);
   keyFrames.reserve(keys);
+  keyFractions.reserve(keys);
+  blurNodes.reserve(std::size_t(keys) * interior);
+  blurTriangles.reserve(std::size_t(keys) * triangles);
   std::vector<detail::FrameParams> blends(keys);
   for (uint32_t k = 0; k < keys; ++k) {
-    setFrame(keyTimes[k]);
+    setFrame(keyTimes[k]);  // leaves the last key's blend in `frame`, as updateAt(last) would
     blends[k] = frame;
   }
   keyFrames.upload(blends, stream);
-  detail::BatchStrides strides;
-  strides.positions = coords;
-  strides.nodes = interior;
-  strides.counters = interior;
-  events.record(0, stream);
+  keyFractions.upload(fractions, stream);
   // A slot starts as the instant state once: the static vertices' rest positions (the batch moves
   // the others) and the nodes' child references (the batch rewrites the boxes).
   for (uint32_t k = keySlotsReady; k < keys; ++k) {
@@ -131,6 +153,51 @@ UpdateTimings GpuRuntime::Impl::refitAnimationKeys(std::span<const double> keyTi
   }
   keySlotsReady = std::max(keySlotsReady, keys);
   keySlotsTree = int(current);
+  if (config.useGraphs) {
+    // A graph holds the key count, the tree's sizes and every buffer's address: one per key count
+    // and tree (a shutter that sometimes spans a keyframe alternates two), captured again when a
+    // buffer has grown.
+    const Impl::ShutterGraphArgs args{keys,
+                                      current,
+                                      {keyNodes.data(), keyRootBoxes.data(), keyPositions.data(), keyCounters.data(),
+                                       keyRoots.data(), keyFrames.data(), blurNodes.data(), blurTriangles.data()}};
+    auto it = std::find_if(shutterGraphs.begin(), shutterGraphs.end(), [&](const Impl::ShutterGraph& g) {
+      return g.args.keys == keys && g.args.tree == current;
+    });
+    if (it == shutterGraphs.end()) it = shutterGraphs.insert(shutterGraphs.end(), Impl::ShutterGraph{});
+    if (!it->graph.exec || !(it->args == args)) {
+      destroy(it->graph);
+      it->graph = capture([&] { enqueueShutterRefit(keys); });
+      it->args = args;
+    }
+    launch(it->graph);
+  } else {
+    enqueueShutterRefit(keys);
+  }
+  events.wait(3);
+  UpdateTimings timings;
+  timings.interpolateMs = events.ms(0, 1);
+  timings.refitMs = events.ms(1, 2);
+  timings.woopMs = events.ms(2, 3);
+  timings.slotsUpdated = triangles;
+  markUpdated();
+  // The instant state is a full update at the last key: static subtrees and every Woop triangle in
+  // place, the static vertices at rest (the key slots hold them so).
+  t.staticBoxesValid = true;
+  woopTree = int(current);
+  shutterKeys = keys;
+  shutterKeyTimes.assign(fractions.begin(), fractions.end());
+  return timings;
+}
+
+void GpuRuntime::Impl::enqueueShutterRefit(uint32_t keys) {
+  DeviceTree& t = tree();
+  const std::size_t interior = t.topology.interiorCount, coords = std::size_t(vertices) * 3;
+  detail::BatchStrides strides;
+  strides.positions = coords;
+  strides.nodes = interior;
+  strides.counters = interior;
+  events.record(0, stream);
   detail::launchBatchInterpolate(keyframes.data(), movingIds.size() ? movingIds.data() : nullptr, keyFrames.data(),
                                  keyPositions.data(), movingVertices, keys, coords, stream);
   events.record(1, stream);
@@ -138,18 +205,18 @@ UpdateTimings GpuRuntime::Impl::refitAnimationKeys(std::span<const double> keyTi
   detail::launchBatchRefit(keyNodes.data(), t.nodeParent.data(), t.leaves.data(), uint32_t(t.leaves.size()),
                            t.slotVertices.data(), keyPositions.data(), keyCounters.data(), keyRoots.data(), keys,
                            strides, stream);
-  CUDA_CHECK(cudaMemcpy2DAsync(keyRootBoxes.data(), sizeof(Aabb), &keyRoots.data()->box, sizeof(detail::RootInfo),
-                               sizeof(Aabb), keys, cudaMemcpyDeviceToDevice, stream));
   events.record(2, stream);
-  events.wait(2);
-  total.interpolateMs += events.ms(0, 1);
-  total.refitMs += events.ms(1, 2);
-  shutterKeys = keys;
-  shutterKeyTimes.assign(fractions.begin(), fractions.end());
-  keyFractions.reserve(keys);
-  keyFractions.upload(fractions, stream);
-  CUDA_CHECK(cudaStreamSynchronize(stream));
-  return total;
+  // The blurred layout, and the instant state from the last key (refitted once, in the batch): its
+  // nodes, root box and positions in the same launch, its Woop triangles beside it on the side
+  // stream (events 12 and 13).
+  const uint32_t last = keys - 1;
+  events.mark(12, stream);
+  events.streamWait(12, sideStream);
+  detail::launchSlotWoop(t.slotVertices.data(), triangles, keyPositions.data() + last * coords, woop.data(), sideStream);
+  events.mark(13, sideStream);
+  enqueueBlurredLayout(keys, true);
+  events.streamWait(13, stream);
+  events.record(3, stream);
 }
 
 bool GpuRuntime::blurred() const { return impl_->shutterKeys >= 2; }
@@ -199,6 +266,33 @@ MotionBvhView GpuRuntime::Impl::motionView() const {
   return view;
 }
 
+detail::BlurredLayout GpuRuntime::Impl::blurredLayout() const {
+  const FlatBvh& topology = tree().topology;
+  detail::BlurredLayout l;
+  l.nodes = blurNodes.data();
+  l.triangles = blurTriangles.data();
+  l.keyRootBoxes = keyRootBoxes.data();
+  l.keyTimes = keyFractions.data();
+  l.triIndex = tree().triIndex.data();
+  l.keyCount = shutterKeys;
+  l.rootRef = topology.rootRef;
+  l.rootCount = topology.rootCount;
+  return l;
+}
+
+GpuRuntime::BlurredLayoutCopy GpuRuntime::downloadBlurredLayout() const {
+  const Impl& m = *impl_;
+  m.requireKey(0);
+  BlurredLayoutCopy copy;
+  copy.keys = m.shutterKeys;
+  copy.nodes = m.blurNodes.download(m.stream, std::size_t(copy.keys) * m.tree().topology.interiorCount);
+  const std::vector<detail::KeyTriangle> records =
+      m.blurTriangles.download(m.stream, std::size_t(copy.keys) * m.triangles);
+  copy.triangles.resize(records.size() * 12);
+  std::memcpy(copy.triangles.data(), records.data(), copy.triangles.size() * sizeof(float));
+  return copy;
+}
+
 GpuRuntime::FrameBytes GpuRuntime::frameBytes() const {
   const Impl& m = *impl_;
   const FlatBvh& topology = m.tree().topology;
@@ -207,7 +301,10 @@ GpuRuntime::FrameBytes GpuRuntime::frameBytes() const {
   FrameBytes b;
   b.instant = nodes + sizeof(detail::RootInfo) + positions + std::size_t(m.triangles) * sizeof(WoopTriangle);
   const std::size_t keys = m.shutterKeys;
-  if (keys >= 2) b.blurred = keys * (nodes + sizeof(Aabb) + positions + sizeof(float));
+  // The key arrays and the blurred layout built from them.
+  if (keys >= 2)
+    b.blurred = keys * (nodes + sizeof(Aabb) + positions + sizeof(float)) +
+                keys * (nodes + std::size_t(m.triangles) * sizeof(detail::KeyTriangle));
   return b;
 }
 
@@ -216,7 +313,7 @@ namespace {
 template <typename Result>
 std::vector<Result> traceBlurred(GpuRuntime::Impl& m, std::span<const Ray> rays, std::span<const float> times,
                                  RayPassStats* stats) {
-  const MotionBvhView frame = m.motionView();
+  const detail::BlurredLayout frame = m.blurredLayout();
   return traceHostRays<Result>(
       m, rays, stats,
       [&](uint32_t count) {

@@ -4,8 +4,8 @@
 //
 // A blurred frame (GpuRuntime::updateShutter) is rendered as the CPU renderer renders one: every
 // ray of a pixel at the pixel's shutter time (pixelShutterTime), traced by the binary traversal
-// over the keys of its segment (bvh2BlurredClosestHit / AnyHit, as the blurred batch queries,
-// blurred_traversal.cu), the primary surface on the hit triangle lerped at that time
+// over the keys of its segment in the blurred layout (bvh2BlurredClosestHit / AnyHit, as the
+// blurred batch queries, blurred_traversal.cu), the primary surface on the hit triangle lerped at that time
 // (blurredPrimarySurface).
 //
 // Compiled with -fmad=false, so that math rounds exactly as on the CPU (see shading.hpp); only
@@ -219,14 +219,16 @@ struct CwbvhTracer {
 };
 
 // A blurred frame: the traversal of the blurred batch queries at the ray's time.
+// The surface of a primary hit lerps the hit triangle through the key arrays (view).
 struct BlurredTracer {
   static constexpr bool kTimed = true;
+  detail::BlurredLayout layout;
   MotionBvhView view;
   __device__ __forceinline__ Hit closestHit(const Ray& ray, float time) const {
-    return detail::bvh2BlurredClosestHit(view, ray, time);
+    return detail::bvh2BlurredClosestHit(layout, ray, time);
   }
   __device__ __forceinline__ bool anyHit(const Ray& ray, float time) const {
-    return detail::bvh2BlurredAnyHit(view, ray, time);
+    return detail::bvh2BlurredAnyHit(layout, ray, time);
   }
 };
 
@@ -433,6 +435,7 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   // A blurred frame traces its key arrays (keyCount 0: the instant frame).
   const bool blurred = runtime.blurred();
   const MotionBvhView blur = blurred ? m.motionView() : MotionBvhView{};
+  const detail::BlurredLayout blurLayout = blurred ? m.blurredLayout() : detail::BlurredLayout{};
   float* times = nullptr;  // separate passes of a blurred frame: each ray's shutter time
   if (blurred && !fused) {
     m.rayTimes.reserve(std::max({padded, aoRays, shadowRays}));
@@ -441,7 +444,7 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   // The separate passes' trace: the instant frame's kernel, or the blurred traversal at each ray's time.
   auto trace = [&](const Ray* rays, uint32_t count, Hit* hits, uint8_t* occluded, uint32_t* counter) {
     if (blurred)
-      detail::launchBlurredTrace(blur, rays, times, count, hits, occluded, m.stream);
+      detail::launchBlurredTrace(blurLayout, rays, times, count, hits, occluded, m.stream);
     else
       detail::launchTrace(scene, rays, count, hits, occluded, counter, m.traceLaunch(), m.stream);
   };
@@ -467,7 +470,7 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   ev.record(0, stream);
   if (fused) {
     if (blurred)
-      enqueueFusedPasses(m, f, BlurredTracer{blur}, aoRays, shadowRays, shadowTraced);
+      enqueueFusedPasses(m, f, BlurredTracer{blurLayout, blur}, aoRays, shadowRays, shadowTraced);
     else if (scene.cwbvhNodes)
       enqueueFusedPasses(m, f, CwbvhTracer{detail::cwbvhView(scene), scene.root}, aoRays, shadowRays, shadowTraced);
     else

@@ -3,10 +3,12 @@
 #include <span>
 #include <cuda_runtime_api.h>
 
+#include <functional>
 #include <memory>
 #include <type_traits>
 #include <vector>
 
+#include "blurred_trace.hpp"
 #include "device_types.hpp"
 #include "event_timer.hpp"
 #include "kernels.hpp"
@@ -175,11 +177,32 @@ struct GpuRuntime::Impl {
   UpdateTimings refitKeys(std::span<const float> keyTimes, RefitKey&& refitKey);
   // updateShutterAt's keys from the animation: the current tree refitted at every key time in one
   // batch (one launch per step for all keys, detail::BatchStrides) straight into the key arrays,
-  // and the instant state updated at the last key (what tracing without times sees).
+  // each key once; the instant state (what tracing without times sees) is the last key's, copied
+  // from the batch, with its Woop triangles; then the blurred layout.
   UpdateTimings refitAnimationKeys(std::span<const double> keyTimes, std::span<const float> fractions);
   DeviceBuffer<detail::FrameParams> keyFrames;  // per key: its keyframe blend
   DeviceBuffer<uint32_t> keyCounters;           // per key: the refit's arrival counters
   DeviceBuffer<detail::RootInfo> keyRoots;      // per key: the refit's root
+  // The blurred layout (blurred_trace.hpp), built from the key arrays by every blurred update;
+  // withInstantState: also the key root boxes and the last key's nodes, root box and positions as
+  // the instant state, from the batch refit's roots (keyRoots).
+  DeviceBuffer<GpuBvhNode> blurNodes;
+  DeviceBuffer<detail::KeyTriangle> blurTriangles;
+  void enqueueBlurredLayout(uint32_t keys, bool withInstantState);
+  // refitAnimationKeys' steps after the keys' uploads (events 0..3, as an update's).
+  void enqueueShutterRefit(uint32_t keys);
+  // Its graphs (config.useGraphs), one per key count and tree, each captured for its arguments (the
+  // key count, the tree and the key arrays' addresses) and captured again when they change.
+  struct ShutterGraphArgs {
+    uint32_t keys = 0, tree = 0;
+    const void* buffers[8] = {};
+    bool operator==(const ShutterGraphArgs&) const = default;
+  };
+  struct ShutterGraph {
+    ShutterGraphArgs args;
+    CapturedGraph graph;
+  };
+  std::vector<ShutterGraph> shutterGraphs;
   // Key slots [0, keySlotsReady) hold tree keySlotsTree's child references and the rest positions
   // of the static vertices (refitAnimationKeys copies them into new slots only).
   uint32_t keySlotsReady = 0;
@@ -191,6 +214,7 @@ struct GpuRuntime::Impl {
   // The blurred frame's device arrays as the traversal reads them (the batch queries and the
   // renderer); only while blurred.
   MotionBvhView motionView() const;
+  detail::BlurredLayout blurredLayout() const;
 
   // Scratch of the ray queries and the renderer, grown on demand.
   DeviceBuffer<uint32_t> words;          // ray counters, ray counts

@@ -127,8 +127,10 @@ class GpuRuntime {
   UpdateTimings updateShutter(std::span<const float> keyTimes, std::span<const std::span<const float>> keyPositions);
   // The same from the uploaded keyframes for the shutter [open, close] (animation times): the keys are
   // open, every keyframe strictly inside and close; each key is interpolated and refitted on the
-  // device by the captured update graph. The tree of a set is the one of the shutter's middle.
-  // open == close is updateAt(open). Throws tsah::ConfigError for open > close.
+  // device in one batch, once per key (the instant state, what tracing without times sees, is the
+  // last key's, taken from the batch), captured in a graph replayed while the key count and the tree
+  // stay. The tree of a set is the one of the shutter's middle. open == close is updateAt(open).
+  // Throws tsah::ConfigError for open > close.
   UpdateTimings updateShutterAt(double open, double close);
   // true after updateShutter(At) with two keys or more, until the next update, updateAt or rebuild.
   bool blurred() const;
@@ -137,10 +139,21 @@ class GpuRuntime {
   // of range): the refitted tree as downloadTree gives it, and the positions.
   FlatBvh downloadKeyTree(uint32_t key) const;
   std::vector<float> downloadKeyPositions(uint32_t key) const;
+  // Host copy of the layout a blurred frame is traced from (docs/motion-blur.md#memory), derived
+  // from the key arrays: nodes[n * keys + k] is node n of key k's tree; triangles holds 12 floats
+  // per slot and key, at (s * keys + k) * 12: the key-k positions of slot s's three vertices (v0 xyz,
+  // v1 xyz, v2 xyz) and three zeros. Throws tsah::ConfigError when not blurred.
+  struct BlurredLayoutCopy {
+    uint32_t keys = 0;
+    std::vector<GpuBvhNode> nodes;
+    std::vector<float> triangles;
+  };
+  BlurredLayoutCopy downloadBlurredLayout() const;
   // Device bytes of the geometry a frame's tracing reads, the triangle indices and slot order
   // (which both read) left out. instant: the current tree's nodes and root, the positions and the
   // Woop triangles; blurred (0 unless blurred): per key one node set, root box, position set and
-  // shutter fraction.
+  // shutter fraction, and the blurred layout (per key one more node set and a 48-byte triangle
+  // per slot).
   struct FrameBytes {
     std::size_t instant = 0, blurred = 0;
   };
