@@ -9,6 +9,7 @@
 #include <ctime>
 #include <filesystem>
 #include <fstream>
+#include <cstdlib>
 #include <memory>
 #include <nlohmann/json.hpp>
 
@@ -188,6 +189,9 @@ void run(Options opt, CLI::App* sub) {
   if (b.embreeOnly && (opt.noEmbree || b.device != tsah::Device::Cpu))
     throw UsageError("--embree-only runs the CPU comparison with Embree: not with --no-embree or --device cuda");
   if (b.embreeOnly && !embreeAvailable()) throw UsageError("--embree-only: " + embreeStatus());
+  if (b.twoLevelOnly && (b.embreeOnly || b.motionBlurOnly || b.device != tsah::Device::Cpu))
+    throw UsageError("--two-level-only runs the two-level part alone, on the CPU: not with --embree-only, "
+                     "--motion-blur-only or --device cuda");
   tsah::cli::checkLayoutForDevice(b.layout, b.device);
   b.convergence = !opt.noConvergence;
   const anim::LoadOptions& load = tsah::cli::commandLineLoadOptions();
@@ -255,7 +259,7 @@ void run(Options opt, CLI::App* sub) {
       log(std::string("no real scenes: ") + e.what(), false);
     }
     scenes = scan.scenes;
-  } else if (opt.scenes.empty()) {
+  } else if (opt.scenes.empty() && !(b.twoLevelOnly && !opt.sceneDir.empty())) {
     scanData();
     scenes = scan.scenes;
     if (scenes.empty() && opt.sceneDir.empty() && !opt.scaling) throw UsageError(dataFolder.string() + ": no animations found");
@@ -266,12 +270,19 @@ void run(Options opt, CLI::App* sub) {
     for (const auto& e : fs::directory_iterator(opt.sceneDir, ec))
       if (e.path().extension() == ".json" && anim::isSceneFile(e.path().string())) files.push_back(e.path().string());
     if (ec) throw UsageError(opt.sceneDir + ": cannot read the scene folder (" + ec.message() + ")");
+    if (files.empty())
+      throw UsageError(opt.sceneDir + ": no scene files (*.json with \"objects\", docs/scenes.md) in the scene folder");
     std::sort(files.begin(), files.end());
     for (const std::string& f : files) {
       SceneSource s = explicitScene(f);
       s.kind = "scene";
       scenes.push_back(s);
     }
+  }
+  if (b.twoLevelOnly) {  // the two-level part is the scene files' alone
+    std::erase_if(scenes, [](const SceneSource& s) { return !anim::isSceneFile(s.input); });
+    if (scenes.empty())
+      throw UsageError("--two-level-only benches scene files (docs/scenes.md): give --scene-dir DIR or scene files");
   }
   if (opt.list) {
     for (const SceneSource& s : scenes) std::printf("%-16s %-9s %s\n", s.name.c_str(), s.kind.c_str(), s.input.c_str());
@@ -283,6 +294,13 @@ void run(Options opt, CLI::App* sub) {
   fs::create_directories(out, ec);
   if (ec || !fs::is_directory(out)) throw tsah::Failure(out.string() + ": cannot create the output folder");
   if (opt.scaling) return runScalingMode(opt, sub, scenes, log);
+  // The two-level part optimizes each scene file with `tsah optimize` children of this program,
+  // which resolve the scenes' data: paths from the same data folder and cache.
+  std::error_code exeError;
+  b.program = fs::read_symlink("/proc/self/exe", exeError).string();
+  if (exeError) throw tsah::Failure("cannot find the tsah program (/proc/self/exe): " + exeError.message());
+  if (!opt.data.empty()) ::setenv("TSAH_DATA_DIR", fs::absolute(opt.data).c_str(), 1);
+  ::setenv("TSAH_CACHE_DIR", fs::absolute(cache).c_str(), 1);
   json results;
   results["tool"] = "tsah bench";
   results["command"] = commandLine();
@@ -415,6 +433,9 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
   sub->add_flag("--motion-blur-only", b.motionBlurOnly,
                 "Only the T-SAH tree and the motion-blur part (with --shutter): no Tables 1 and 2, convergence runs, "
                 "segments or instant Embree comparison");
+  sub->add_flag("--two-level-only", b.twoLevelOnly,
+                "Only the two-level part of every scene file (--scene-dir or scene files given): flat tree, "
+                "two-level structure and Embree instancing on the same rays; no Tables 1 and 2, segments or Embree peer");
   sub->add_flag("--no-convergence", opt->noConvergence, "Skip the random and batch-sort optimizations of the convergence plot");
   sub->add_option("--note", opt->notes,
                   "A note for results.md (repeatable), e.g. what else ran on the machine; with --report-only it is "

@@ -12,12 +12,14 @@
 #include "tsah/base/error.hpp"
 #include "tsah/base/work_dealer.hpp"
 #include "anim/load.hpp"
+#include "anim/scene.hpp"
 #include "bench/embree_peer.hpp"
 #include "bench/motion_bench.hpp"
 #include "bench/runtime_bench.hpp"
 #include "frame_runtime.hpp"
 #include "animation_frames.hpp"
 #include "bench/segments.hpp"
+#include "bench/two_level_bench.hpp"
 #include "tsah/optimize/baselines.hpp"
 #include "tsah/render/camera.hpp"
 #include "tsah/render/camera_path.hpp"
@@ -116,6 +118,32 @@ std::string methodLabel(const std::string& id) {
   return id;
 }
 
+RuntimeSetup runtimeSetupFor(const anim::Animation& a, std::vector<double> times, const BenchOptions& o,
+                             std::function<void(const std::string&)> progress) {
+  RuntimeSetup setup;
+  setup.times = std::move(times);
+  const anim::Bounds ab = a.bounds();
+  Aabb bounds;
+  bounds.extend(Vec3{ab.min[0], ab.min[1], ab.min[2]});
+  bounds.extend(Vec3{ab.max[0], ab.max[1], ab.max[2]});
+  const Vec3 up{0, 1, 0};
+  std::vector<anim::CameraKey> path(a.cameraPath().begin(), a.cameraPath().end());
+  const Camera fitted = fitCamera(bounds, up, 45.0f, float(o.width) / float(o.height));
+  setup.camera = [path, fitted](double t) { return path.empty() ? fitted : cameraAt(path, t); };
+  setup.lighting = fitLighting(bounds, setup.camera(setup.times.front()), up, 0.1f, o.ground);
+  setup.settings.width = o.width;
+  setup.settings.height = o.height;
+  setup.settings.aoSamples = o.aoRays;
+  setup.settings.shadowSamples = o.shadowRays;
+  setup.settings.seed = static_cast<uint32_t>(o.seed);
+  setup.threads = o.threads;
+  setup.layout = o.layout == Layout::Auto || o.device == Device::Cuda ? fastestLayout() : o.layout;
+  setup.collapse.cost = o.objective.cost;
+  setup.collapse.maxLeafSize = o.objective.maxLeafSize;
+  setup.progress = std::move(progress);
+  return setup;
+}
+
 nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const fs::path& outDir,
                           const BenchProgress& progress) {
   auto say = [&](const std::string& m) { progress(scene.name + ": " + m, false); };
@@ -145,6 +173,24 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   j["time_start"] = a.startTime();
   j["time_end"] = a.endTime();
   say(std::to_string(a.triangleCount()) + " triangles, " + std::to_string(a.keyframeCount()) + " keyframes");
+  // The two-level part of a scene file (CPU); --two-level-only: that part alone.
+  const bool sceneFile = anim::isSceneFile(scene.input);
+  auto twoLevelPart = [&] {
+    if (!sceneFile) return;
+    if (o.device != Device::Cpu) {
+      j["two_level"] = {{"skipped", "the two-level part runs on the CPU (the GPU's: tsah_two_level_gpu_bench)"}};
+      return;
+    }
+    say("two-level part: flat tree, two-level structure and Embree instancing on the same rays");
+    start = std::chrono::steady_clock::now();
+    j["two_level"] = runTwoLevelComparison(scene, a, o, outDir, progress);
+    j["two_level"]["wall_s"] = secondsSince(start);
+  };
+  if (o.twoLevelOnly) {
+    twoLevelPart();
+    say("done");
+    return j;
+  }
 
   const anim::Animation rep = a.resample(o.frames);
   const PrimitiveBoxes repBoxes = triangleBoxes(rep.indices(), rep.allPositions(), o.frames);
@@ -228,27 +274,9 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
   }
 
   // --- Runtime ----------------------------------------------------------------------------------
-  RuntimeSetup setup;
-  setup.times = a.uniformTimes(o.traceFrames);
-  const anim::Bounds ab = a.bounds();
-  Aabb bounds;
-  bounds.extend(Vec3{ab.min[0], ab.min[1], ab.min[2]});
-  bounds.extend(Vec3{ab.max[0], ab.max[1], ab.max[2]});
-  const Vec3 up{0, 1, 0};
+  RuntimeSetup setup = runtimeSetupFor(a, a.uniformTimes(o.traceFrames), o,
+                                       [&](const std::string& m) { progress(scene.name + ": " + m, true); });
   std::vector<anim::CameraKey> path(a.cameraPath().begin(), a.cameraPath().end());
-  const Camera fitted = fitCamera(bounds, up, 45.0f, float(o.width) / float(o.height));
-  setup.camera = [path, fitted](double t) { return path.empty() ? fitted : cameraAt(path, t); };
-  setup.lighting = fitLighting(bounds, setup.camera(setup.times.front()), up, 0.1f, o.ground);
-  setup.settings.width = o.width;
-  setup.settings.height = o.height;
-  setup.settings.aoSamples = o.aoRays;
-  setup.settings.shadowSamples = o.shadowRays;
-  setup.settings.seed = static_cast<uint32_t>(o.seed);
-  setup.threads = o.threads;
-  setup.layout = o.layout == Layout::Auto || o.device == Device::Cuda ? fastestLayout() : o.layout;
-  setup.collapse.cost = config.objective.cost;
-  setup.collapse.maxLeafSize = config.objective.maxLeafSize;
-  setup.progress = [&](const std::string& m) { progress(scene.name + ": " + m, true); };
 
   const bool gpu = o.device == Device::Cuda;
   RefitTrees sah0{"sah0", "SAH0 refit", {&sah0Tree}, {}};
@@ -378,6 +406,7 @@ nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& o, const
     blur["wall_s"] = secondsSince(start);
     j["motion_blur"] = blur;
   }
+  if (!comparisonOnly) twoLevelPart();  // --embree-only and --motion-blur-only: their comparison alone
   say("done");
   return j;
 }
@@ -430,7 +459,7 @@ nlohmann::json optionsJson(const BenchOptions& o) {
           {"optimizer", o.optimizer},
           {"layout", name(o.layout)},     {"embree_only", o.embreeOnly},
           {"shutter", o.shutter.fraction}, {"shutter_mode", o.shutter.mode == Shutter::Mode::Open ? "open" : "centered"},
-          {"motion_blur_only", o.motionBlurOnly}};
+          {"motion_blur_only", o.motionBlurOnly}, {"two_level_only", o.twoLevelOnly}};
 }
 
 }  // namespace tsah::bench

@@ -15,6 +15,8 @@
 //   embree       CPU only: the toolkit's T-SAH refit against Embree rebuilds and refit on the same rays
 //   motion_blur  CPU only, with a shutter: the toolkit's blurred frames against Embree's motion-blur
 //                BVH (built once, and rebuilt every frame) on the same rays at the same times
+//   two_level    CPU only, scene files: the flat tree against the two-level structure and Embree
+//                instancing on the same rays (two_level_bench.hpp)
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -23,6 +25,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/data_scan.hpp"
+#include "bench/runtime_bench.hpp"
 #include "tsah/core/kinds.hpp"
 #include "tsah/core/objective.hpp"
 #include "tsah/base/error.hpp"
@@ -56,6 +59,8 @@ struct BenchOptions {
   double fps = 0.0;             // import: sampling rate of continuous animations (0: the file's own)
   std::string clip;             // import: the animation clip of a multi-clip model (empty: the first)
   std::function<std::string(const std::string&)> resolveDataPath;  // import: scenes' "data:" paths
+  bool twoLevelOnly = false;    // scene files: only the two-level part (no Tables 1/2, Embree peer, segments)
+  std::string program;          // the tsah executable the two-level part's optimizations run as
 };
 
 // Progress: `detail` messages are frequent (optimizer batches) and may be thinned out by the caller.
@@ -72,6 +77,12 @@ class NotAnAnimation : public tsah::DataError {
 // NotAnAnimation (a tsah::DataError) for a static one.
 nlohmann::json benchScene(const SceneSource& scene, const BenchOptions& options, const std::filesystem::path& outDir,
                           const BenchProgress& progress);
+
+// What a runtime part traces of animation `a` at `times`: the camera (its camera path, else fitted
+// to its bounds over all frames), the light, the image size and rays per pixel, threads, layout
+// (Auto: the device's fastest) and the wide layouts' collapse, from the options.
+RuntimeSetup runtimeSetupFor(const anim::Animation& a, std::vector<double> times, const BenchOptions& options,
+                             std::function<void(const std::string&)> progress);
 
 // The machine (CPU model, cores, memory, OS; the GPU when withGpu), the versions (tsah, compiler,
 // Embree, CUDA) and the options, for results.json.

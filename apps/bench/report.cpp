@@ -378,6 +378,7 @@ std::string renderMarkdown(const json& results) {
     segmentsSection(md, s);
     embreeSection(md, s);
     md << motionBlurSection(s);
+    md << twoLevelSection(s);
     plotsSection(md, results, s);
   }
 
@@ -425,6 +426,7 @@ std::string renderMarkdown(const json& results) {
     md << "\n";
   }
   md << motionBlurSummary(scenes);
+  md << twoLevelSummary(scenes);
   md << "## Source of the paper's figures\n\n" << str(results, "paper_source") << ".\n";
   return md.str();
 }

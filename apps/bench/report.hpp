@@ -21,6 +21,11 @@ std::string renderMarkdown(const nlohmann::json& results);
 std::string motionBlurSection(const nlohmann::json& scene);
 std::string motionBlurSummary(const nlohmann::json& scenes);
 
+// The two-level part (results.json's scene.two_level) as Markdown: one scene file's table with the
+// optimization, agreement and ratios, and one table across scenes (empty when no scene has it).
+std::string twoLevelSection(const nlohmann::json& scene);
+std::string twoLevelSummary(const nlohmann::json& scenes);
+
 struct PlotOutcome {
   bool made = false;
   std::string status;               // "gnuplot 5.4 patchlevel 4" or why plots were skipped

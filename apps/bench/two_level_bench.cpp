@@ -1,0 +1,258 @@
+// The two-level part of the bench (two_level_bench.hpp): flat tree, two-level structure and Embree
+// instancing of one scene file on the same rays.
+#include "bench/two_level_bench.hpp"
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <memory>
+
+#include "anim/scene.hpp"
+#include "bench/embree_instanced.hpp"
+#include "bench/embree_peer.hpp"
+#include "bench/motion_bench.hpp"
+#include "bench/process.hpp"
+#include "bench/runtime_bench.hpp"
+#include "tsah/base/error.hpp"
+#include "tsah/io/bvh_file.hpp"
+#include "tsah/scene/two_level_runtime.hpp"
+
+namespace tsah::bench {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+double msSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+// One `tsah optimize SCENE --structure STRUCTURE --json` child: wall time, its build time, peak
+// resident memory (the child's VmHWM when it reports one, else its ru_maxrss).
+json optimizeChild(const SceneSource& scene, const std::string& structure, const fs::path& tree, const BenchOptions& o) {
+  const bool gpu = o.optimizer == "cuda";
+  const std::vector<std::string> argv = {o.program, "optimize", scene.input, "-o", tree.string(), "--structure",
+                                         structure, "--optimizer", gpu ? "parallel" : o.optimizer, "--device",
+                                         gpu ? "cuda" : "cpu", "--threads", std::to_string(o.threads), "--frames",
+                                         std::to_string(o.frames), "--seed", std::to_string(o.seed), "--max-leaf",
+                                         std::to_string(o.objective.maxLeafSize), "--ct",
+                                         std::to_string(o.objective.cost.ct), "--ci",
+                                         std::to_string(o.objective.cost.ci), "--json"};
+  const fs::path report = fs::path(tree).replace_extension(".json");
+  const auto start = std::chrono::steady_clock::now();
+  const ProcessResult r = runProcess(argv, report.string());
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (!r.ok())
+    throw tsah::Failure(scene.input + ": tsah optimize --structure " + structure + " failed" +
+                        (r.output.empty() ? "" : ": " + r.output.substr(0, r.output.find('\n'))));
+  std::ifstream in(report);
+  const json j = json::parse(in, nullptr, false);
+  if (j.is_discarded() || !j.contains("build_s"))
+    throw tsah::Failure(scene.input + ": unreadable tsah optimize --structure " + structure + " report");
+  const bool ownPeak = j.value("peak_rss_bytes", 0.0) > 0.0;
+  return {{"tree", tree.string()},
+          {"wall_s", wall},
+          {"build_s", j["build_s"]},
+          {"cpu_s", r.cpuSeconds},
+          {"peak_rss_bytes", ownPeak ? j["peak_rss_bytes"].get<double>() : double(r.maxRssKb) * 1024.0},
+          {"peak_source", ownPeak ? "VmHWM of tsah optimize" : "ru_maxrss of the tsah optimize process"}};
+}
+
+// traceFrames scene frames spread evenly over the scene's frames (all of them when fewer).
+std::vector<double> tracedFrames(const std::vector<double>& frames, uint32_t traceFrames) {
+  const std::size_t n = frames.size(), count = std::min<std::size_t>(traceFrames, n);
+  if (count <= 1) return {frames.front()};
+  std::vector<double> times;
+  for (std::size_t i = 0; i < count; ++i) times.push_back(frames[(i * (n - 1) + (count - 1) / 2) / (count - 1)]);
+  return times;
+}
+
+// The two-level runtime as a batch tracer; hits as baked triangle ids (the instance's first + prim).
+BatchTracer twoLevelTracer(const TwoLevelRuntime& rt, const std::vector<uint32_t>& firstTriangle) {
+  BatchTracer tracer;
+  tracer.closest = [&rt, &firstTriangle](const Ray* rays, const float*, std::size_t count, Hit* hits) {
+    for (std::size_t i = 0; i < count; ++i) {
+      const TwoLevelHit h = rt.closestHit(rays[i]);
+      hits[i] = h.valid() ? Hit{h.t, h.u, h.v, firstTriangle[h.instance] + h.prim} : Hit{};
+    }
+  };
+  tracer.occluded = [&rt](const Ray* rays, const float*, std::size_t count, AnyHitOrder, uint8_t* occluded) {
+    for (std::size_t i = 0; i < count; ++i) occluded[i] = rt.anyHit(rays[i]) ? 1 : 0;
+  };
+  return tracer;
+}
+
+FrameTiming frameOf(double time, double updateMs, const BatchTrace& trace) {
+  FrameTiming ft;
+  ft.time = time;
+  ft.updateMs = updateMs;
+  ft.rays = {trace.primary, trace.ao, trace.shadow, 0.0};
+  ft.traceMs = trace.total().ms;
+  ft.totalMs = updateMs + ft.traceMs;
+  return ft;
+}
+
+double averageTotalMs(const RuntimeMethod& m) {
+  double sum = 0.0;
+  for (const FrameTiming& f : m.frames) sum += f.totalMs;
+  return m.frames.empty() ? 0.0 : sum / double(m.frames.size());
+}
+
+double traceRate(const RuntimeMethod& m) {
+  double rays = 0.0, ms = 0.0;
+  for (const FrameTiming& f : m.frames) {
+    rays += double(f.rays.total().rays);
+    ms += f.rays.total().ms;
+  }
+  return ms > 0.0 ? rays / (ms * 1e3) : 0.0;
+}
+
+double ratio(double a, double b) { return a / std::max(b, 1e-12); }
+
+}  // namespace
+
+json runTwoLevelComparison(const SceneSource& scene, const anim::Animation& baked, const BenchOptions& o,
+                           const fs::path& outDir, const BenchProgress& progress) {
+  if (o.program.empty()) throw tsah::ConfigError("two-level part: the tsah program that optimizes is not set");
+  auto say = [&](const std::string& m) { progress(scene.name + ": " + m, false); };
+  json j;
+  j["scene_file"] = scene.input;
+
+  // --- Optimization: the flat tree and the two-level structure, each one `tsah optimize` -------
+  std::error_code ec;
+  const fs::path trees = outDir / "trees";
+  fs::create_directories(trees, ec);
+  if (ec) throw tsah::Failure(trees.string() + ": cannot create the tree folder (" + ec.message() + ")");
+  say("tsah optimize --structure flat");
+  const json flatOptimize = optimizeChild(scene, "flat", trees / (scene.name + "-flat.tbvh"), o);
+  say("tsah optimize --structure two-level");
+  const json twoOptimize = optimizeChild(scene, "two-level", trees / (scene.name + "-two-level.tbvh"), o);
+  j["optimize"] = {{"flat", flatOptimize}, {"two_level", twoOptimize}};
+
+  anim::LoadOptions load;
+  load.fps = o.fps;
+  load.clip = o.clip;
+  load.resolveDataPath = o.resolveDataPath;
+  const Bvh flatTree = loadBvhFile(flatOptimize["tree"].get<std::string>()).bvh;
+  const TwoLevelScene twoLevel =
+      loadTwoLevelSceneFile(twoOptimize["tree"].get<std::string>(), anim::loadSceneSources(scene.input, load));
+  // Baked triangle ids: instance i's triangles follow those of instances 0..i-1 (bake order).
+  std::vector<uint32_t> firstTriangle;
+  uint64_t triangles = 0;
+  for (const anim::SceneSourceInstance& instance : twoLevel.scene.instances) {
+    firstTriangle.push_back(uint32_t(triangles));
+    triangles += twoLevel.scene.sourceOf(instance).triangleCount();
+  }
+  if (triangles != baked.triangleCount())
+    throw tsah::Failure(scene.input + ": the instances hold " + std::to_string(triangles) +
+                        " triangles, the baked scene " + std::to_string(baked.triangleCount()));
+  uint32_t staticBlas = 0;
+  for (const Blas& b : twoLevel.blases) staticBlas += b.animated ? 0 : 1;
+  j["instances"] = twoLevel.instanceCount();
+  j["sources"] = twoLevel.blases.size();
+  j["static_sources"] = staticBlas;
+  j["poses"] = twoLevel.poses.size();
+  j["triangles"] = baked.triangleCount();
+  j["structure_bytes"] = twoLevel.memoryBytes();
+
+  // --- Per frame: every tracer on the same rays ---------------------------------------------------
+  RuntimeSetup setup = runtimeSetupFor(baked, tracedFrames(twoLevel.frameTimes, o.traceFrames), o,
+                                       [&](const std::string& m) { progress(scene.name + ": " + m, true); });
+  const std::unique_ptr<CpuRuntime> flat = makeRuntime(baked, flatTree, setup, setup.layout);
+  TwoLevelRuntime two(twoLevel, {o.threads, TwoLevelRuntime::TlasUpdate::Refit, setup.layout});
+  j["frames"] = setup.times.size();
+  j["frame_times"] = setup.times;
+  j["width"] = o.width;
+  j["height"] = o.height;
+  j["ao_rays"] = o.aoRays;
+  j["shadow_rays"] = o.shadowRays;
+  j["layout"] = name(setup.layout);
+  j["threads"] = flat->threadCount();
+  j["embree_status"] = embreeStatus();
+  j["two_level_runtime_bytes"] = two.memoryBytes();
+  std::vector<RuntimeMethod> methods;
+  methods.push_back({"flat", "flat tree (T-SAH), " + std::string(name(setup.layout)), "refit", {}, json::object()});
+  methods.push_back({"two-level", "two-level (TLAS refit), BLAS " + std::string(name(setup.layout)),
+                     "pose refits, transforms, TLAS refit", {}, json::object()});
+  std::array<Agreement, 3> agreement;  // two-level vs flat, Embree vs flat, Embree vs two-level
+  json tlasRebuildMs = json::array(), blasRefits = json::array(), embreeRefits = json::array();
+#if TSAH_HAVE_EMBREE
+  auto parallelFor = [&flat](std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) {
+    flat->parallelFor(n, 1, body);
+  };
+  EmbreeInstancedPeer embree(twoLevel, firstTriangle, flat->threadCount(), parallelFor);
+  startWorkers(*flat);
+  const double embreeBuildMs = embree.build(setup.times.front());
+  j["embree_build"] = {{"ms", embreeBuildMs}, {"object_scenes", embree.objectScenes()}};
+  methods.push_back({"embree-instanced", "Embree instancing (pose refits, top level committed)",
+                     "pose refits, transforms, top-level commit", {}, json::object()});
+#endif
+
+  std::vector<float> positions = baked.positionsAt(baked.startTime());  // static vertices once
+  RenderSettings settings = setup.settings;
+  for (std::size_t f = 0; f < setup.times.size(); ++f) {
+    reportFrame(setup, "flat, two-level, Embree instancing", f);
+    const double t = setup.times[f];
+    settings.frame = static_cast<uint32_t>(f);
+    startWorkers(*flat);
+    auto start = std::chrono::steady_clock::now();
+    baked.movingPositionsAt(t, positions);
+    flat->update(positions);
+    const double flatUpdateMs = msSince(start);
+    const RayBatch batch = makeRayBatch(*flat, setup.camera(t), setup.lighting, settings);  // untimed
+    std::array<BatchTrace, 3> traces;
+    // The methods in an order rotated every frame: none always runs first or last.
+    for (std::size_t k = 0; k < methods.size(); ++k) {
+      const std::size_t m = (k + f) % methods.size();
+      startWorkers(*flat);
+      double updateMs = flatUpdateMs;
+      if (m == 0) {
+        traces[m] = traceBatch(*flat, batch, toolkitTracer(*flat));
+      } else if (m == 1) {
+        start = std::chrono::steady_clock::now();
+        two.update(t);
+        updateMs = msSince(start);
+        traces[m] = traceBatch(*flat, batch, twoLevelTracer(two, firstTriangle));
+      } else {
+#if TSAH_HAVE_EMBREE
+        updateMs = embree.update(t);
+        traces[m] = traceBatch(*flat, batch, embree.tracer());
+#endif
+      }
+      methods[m].frames.push_back(frameOf(t, updateMs, traces[m]));
+    }
+    agreement[0].add(traces[0], traces[1]);
+    blasRefits.push_back(two.lastUpdateBlasRefits());
+#if TSAH_HAVE_EMBREE
+    agreement[1].add(traces[0], traces[2]);
+    agreement[2].add(traces[1], traces[2]);
+    embreeRefits.push_back(embree.lastUpdateRefits());
+#endif
+    // The per-frame reference of the TLAS refit: a sweep-SAH TLAS over this frame's instance boxes.
+    start = std::chrono::steady_clock::now();
+    const Bvh rebuilt = rebuildTlas(two.instanceBoxes(), twoLevel.objective);
+    tlasRebuildMs.push_back(msSince(start));
+    (void)rebuilt;
+  }
+  methods[1].extra = {{"agreement_with_flat", toJson(agreement[0])},
+                      {"blas_refits_per_frame", blasRefits},
+                      {"tlas_rebuild_ms_per_frame", tlasRebuildMs}};
+  json ratios = {{"two_level_rate_over_flat_rate", ratio(traceRate(methods[1]), traceRate(methods[0]))},
+                 {"two_level_total_over_flat_total", ratio(averageTotalMs(methods[1]), averageTotalMs(methods[0]))}};
+#if TSAH_HAVE_EMBREE
+  methods[2].extra = {{"agreement_with_flat", toJson(agreement[1])},
+                      {"agreement_with_two_level", toJson(agreement[2])},
+                      {"pose_refits_per_frame", embreeRefits}};
+  ratios["two_level_total_over_embree_total"] = ratio(averageTotalMs(methods[1]), averageTotalMs(methods[2]));
+  ratios["two_level_rate_over_embree_rate"] = ratio(traceRate(methods[1]), traceRate(methods[2]));
+#endif
+  j["ratios"] = ratios;
+  j["methods"] = json::array();
+  for (const RuntimeMethod& m : methods) j["methods"].push_back(toJson(m));
+  return j;
+}
+
+}  // namespace tsah::bench
