@@ -1,0 +1,167 @@
+// The two-level part of the bench (bench/two_level_bench.hpp): Embree instancing (one scene per
+// static source and per pose, instances committed in a top level every frame) finds what the
+// toolkit's two-level runtime finds, refits only the poses whose local time changed, and skips an
+// instance whose path flattens it; the report renders the part.
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "bench/embree_instanced.hpp"
+#include "bench/embree_peer.hpp"
+#include "bench/report.hpp"
+#include "tsah/scene/two_level_runtime.hpp"
+#include "test_support.hpp"
+#include "two_level_scene.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+#if TSAH_HAVE_EMBREE
+std::vector<uint32_t> firstTriangles(const tsah::TwoLevelScene& s) {
+  std::vector<uint32_t> first;
+  uint32_t t = 0;
+  for (const auto& i : s.scene.instances) {
+    first.push_back(t);
+    t += s.scene.sourceOf(i).triangleCount();
+  }
+  return first;
+}
+
+// Runs body on the calling thread (the peer's poses one after another).
+void serial(std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) { body(0, n); }
+
+tsah::Hit embreeHit(const tsah::bench::BatchTracer& tracer, const tsah::Ray& ray) {
+  tsah::Hit hit;
+  tracer.closest(&ray, nullptr, 1, &hit);
+  return hit;
+}
+
+TEST(BenchEmbreeInstanced, FindsWhatTheTwoLevelRuntimeFindsAtEveryTime) {
+  const fs::path dir = tsah::test::scratchDir();
+  const tsah::TwoLevelScene s =
+      tsah::loadTwoLevelScene(tsah::test::writeTwoLevelScene(dir).string(), {}, tsah::test::smallTwoLevelOptions());
+  const std::vector<uint32_t> first = firstTriangles(s);
+  tsah::TwoLevelRuntime runtime(s, {2, tsah::TwoLevelRuntime::TlasUpdate::Refit, tsah::Layout::Bvh2});
+  tsah::bench::EmbreeInstancedPeer embree(s, first, 2, serial);
+  embree.build(s.frameTimes.front());
+  EXPECT_EQ(embree.objectScenes(), 1u + s.poses.size());  // the static ground, and every pose
+  const tsah::bench::BatchTracer tracer = embree.tracer();
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> around(-12.0f, 12.0f);
+  uint64_t rays = 0, same = 0, hits = 0;
+  for (std::size_t f = 0; f < s.frameTimes.size(); f += 3) {
+    const double t = s.frameTimes[f];
+    runtime.update(t);
+    embree.update(t);
+    const auto boxes = runtime.instanceBoxes();
+    for (int r = 0; r < 300; ++r) {
+      // From a random point around the scene to the centre of a random instance's box.
+      const tsah::Aabb& box = boxes[std::size_t(rng() % boxes.size())];
+      tsah::Ray ray;
+      ray.org = {around(rng), around(rng), around(rng)};
+      ray.dir = (box.lo + box.hi) * 0.5f - ray.org;
+      ray.tmin = 0.0f;
+      ray.tmax = 1e30f;
+      const tsah::TwoLevelHit own = runtime.closestHit(ray);
+      const tsah::Hit other = embreeHit(tracer, ray);
+      uint8_t occluded = 0;
+      tracer.occluded(&ray, nullptr, 1, tsah::AnyHitOrder::TreeOrder, &occluded);
+      ++rays;
+      hits += own.valid() ? 1 : 0;
+      EXPECT_EQ(own.valid(), bool(occluded)) << "t " << t;
+      if (own.valid() != other.valid()) continue;
+      if (!own.valid() || (first[own.instance] + own.prim == other.tri &&
+                           std::abs(own.t - other.t) <= 1e-4f * std::max(own.t, other.t)))
+        ++same;
+    }
+  }
+  EXPECT_GT(hits, rays / 4);  // the rays meet the scene
+  // Two watertight tests round differently on rays grazing an edge: a few may differ.
+  EXPECT_GE(double(same), 0.995 * double(rays)) << same << " of " << rays;
+}
+
+TEST(BenchEmbreeInstanced, RefitsOnlyThePosesWhoseLocalTimeChanged) {
+  const fs::path dir = tsah::test::scratchDir();
+  const anim::Animation wave = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 200, 5, 2);
+  anim::saveTanim(wave, (dir / "wave.tanim").string());
+  tsah::test::writeText(dir / "s.json", R"({"fps": 4, "objects": [{"file": "wave.tanim", "instances": [
+    {"path": [{"time": 0}, {"time": 8, "translate": [5, 0, 0], "rotate": [0, 180, 0]}]},
+    {"offset": 1, "transform": {"scale": [-1, 1, 1]}}]}]})");
+  const tsah::TwoLevelScene s = tsah::loadTwoLevelScene((dir / "s.json").string(), {}, tsah::test::smallTwoLevelOptions());
+  tsah::bench::EmbreeInstancedPeer embree(s, firstTriangles(s), 2, serial);
+  embree.build(0.0);
+  embree.update(3.0);
+  EXPECT_EQ(embree.lastUpdateRefits(), 2u);
+  embree.update(5.0);  // both poses reach their last frame (local time 4)
+  EXPECT_EQ(embree.lastUpdateRefits(), 2u);
+  for (const double t : {6.0, 7.0, 8.0}) {  // and hold it while the path moves on
+    embree.update(t);
+    EXPECT_EQ(embree.lastUpdateRefits(), 0u) << "t " << t;
+  }
+}
+
+TEST(BenchEmbreeInstanced, AnInstanceFlattenedByItsPathIsNotHitThenAndIsAfter) {
+  const fs::path dir = tsah::test::scratchDir();
+  tsah::test::writeText(dir / "tri.obj", "v 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\n");
+  // The scale goes from 1 to -1 in x: at t = 1 the instance is flat (a singular world transform).
+  tsah::test::writeText(dir / "s.json", R"({"fps": 2, "objects": [{"file": "tri.obj",
+    "path": [{"time": 0}, {"time": 2, "scale": [-1, 1, 1]}]}]})");
+  const tsah::TwoLevelScene s = tsah::loadTwoLevelScene((dir / "s.json").string(), {}, tsah::test::smallTwoLevelOptions());
+  tsah::bench::EmbreeInstancedPeer embree(s, firstTriangles(s), 2, serial);
+  embree.build(0.0);
+  tsah::Ray across;  // along x through (x, 1/3, 1/3)
+  across.org = {-2.0f, 1.0f / 3.0f, 1.0f / 3.0f};
+  across.dir = {1.0f, 0.0f, 0.0f};
+  across.tmin = 0.0f;
+  across.tmax = 10.0f;
+  embree.update(1.0);
+  EXPECT_FALSE(embreeHit(embree.tracer(), across).valid());
+  embree.update(2.0);  // mirrored: (-1,0,0) (0,1,0) (0,0,1), crossed at x = -1/3
+  const tsah::Hit hit = embreeHit(embree.tracer(), across);
+  ASSERT_TRUE(hit.valid());
+  EXPECT_NEAR(hit.t, 2.0f - 1.0f / 3.0f, 1e-5f);
+}
+#else
+TEST(BenchEmbreeInstanced, StatusSaysEmbreeIsMissing) { EXPECT_FALSE(tsah::bench::embreeAvailable()); }
+#endif
+
+TEST(BenchTwoLevelReport, TablesOfThePartAndASkippedPart) {
+  using nlohmann::json;
+  const json agreement = {{"rays", 100}, {"same", 99}, {"fraction", 0.99},
+                          {"differing", {{"tie", 1}, {"one_misses", 0}, {"other_depth", 0}, {"occlusion", 0}}}};
+  auto method = [](const char* name, const char* label, double total) {
+    return json{{"name", name},
+                {"label", label},
+                {"average", {{"update_ms", 1.0}, {"trace_ms", total - 1.0}, {"total_ms", total},
+                             {"mrays_per_s", {{"primary", 2.0}, {"ao", 3.0}, {"shadow", 4.0}, {"total", 3.0}}}}}};
+  };
+  json two = method("two-level", "two-level (TLAS refit)", 8.0);
+  two["extra"] = {{"agreement_with_flat", agreement}};
+  const json part = {{"instances", 7}, {"sources", 3}, {"static_sources", 2}, {"poses", 2}, {"frames", 5},
+                     {"width", 64}, {"height", 48}, {"ao_rays", 8}, {"shadow_rays", 2}, {"layout", "bvh8"},
+                     {"threads", 2}, {"embree_status", "3.13.5"},
+                     {"optimize", {{"flat", {{"wall_s", 2.0}, {"peak_rss_bytes", 3.0 * 1048576}}},
+                                   {"two_level", {{"wall_s", 1.0}, {"peak_rss_bytes", 2.0 * 1048576}}}}},
+                     {"methods", json::array({method("flat", "flat tree", 10.0), two,
+                                              method("embree-instanced", "Embree instancing", 16.0)})},
+                     {"ratios", {{"two_level_rate_over_flat_rate", 1.0}, {"two_level_total_over_flat_total", 0.8},
+                                 {"two_level_total_over_embree_total", 0.5}}}};
+  const json scene = {{"name", "town"}, {"two_level", part}};
+  const std::string section = tsah::bench::twoLevelSection(scene);
+  EXPECT_NE(section.find("**Two-level part** (7 instances of 3 sources (2 static), 2 poses"), std::string::npos) << section;
+  EXPECT_NE(section.find("flat 2.00 s, 3.00 MiB; two-level 1.00 s, 2.00 MiB"), std::string::npos) << section;
+  EXPECT_NE(section.find("| two-level (TLAS refit) | 1.00 | 3.00 | 8.00 | 2.00 / 3.00 / 4.00 | 99.000% (1 of 100"),
+            std::string::npos)
+      << section;
+  EXPECT_NE(section.find("two-level frame total / Embree instancing's: 0.50"), std::string::npos) << section;
+  const std::string summary = tsah::bench::twoLevelSummary(json::array({scene}));
+  EXPECT_NE(summary.find("| town | 7 | 2.00 s, 3.00 MiB | 1.00 s, 2.00 MiB | 10.0 | 1.00 | 8.00 | 1.00 | 16.0 | 1.00 | 0.50 |"),
+            std::string::npos)
+      << summary;
+  const json skipped = {{"name", "town"}, {"two_level", {{"skipped", "runs on the CPU"}}}};
+  EXPECT_EQ(tsah::bench::twoLevelSection(skipped), "**Two-level part:** skipped (runs on the CPU).\n\n");
+  EXPECT_EQ(tsah::bench::twoLevelSummary(json::array({skipped})), "");
+}
+
+}  // namespace
