@@ -222,6 +222,23 @@ void run(Options opt, CLI::App* sub) {
   const fs::path out = opt.out;
   const fs::path cache = opt.cache.empty() ? out / "cache" : fs::path(opt.cache);
 
+  // The scene files of --scene-dir, read (and refused when there are none) before any data scan.
+  std::vector<SceneSource> sceneFiles;
+  if (!opt.sceneDir.empty()) {
+    std::vector<std::string> files;
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(opt.sceneDir, ec))
+      if (e.path().extension() == ".json" && anim::isSceneFile(e.path().string())) files.push_back(e.path().string());
+    if (ec) throw UsageError(opt.sceneDir + ": cannot read the scene folder (" + ec.message() + ")");
+    if (files.empty())
+      throw UsageError(opt.sceneDir + ": no scene files (*.json with \"objects\", docs/scenes.md) in the scene folder");
+    std::sort(files.begin(), files.end());
+    for (const std::string& f : files) {
+      SceneSource s = explicitScene(f);
+      s.kind = "scene";
+      sceneFiles.push_back(s);
+    }
+  }
   // Scenes: paths given, names of the data folder's scenes, or every scene found there.
   std::vector<SceneSource> scenes;
   DataScan scan;
@@ -264,21 +281,7 @@ void run(Options opt, CLI::App* sub) {
     scenes = scan.scenes;
     if (scenes.empty() && opt.sceneDir.empty() && !opt.scaling) throw UsageError(dataFolder.string() + ": no animations found");
   }
-  if (!opt.sceneDir.empty()) {
-    std::vector<std::string> files;
-    std::error_code ec;
-    for (const auto& e : fs::directory_iterator(opt.sceneDir, ec))
-      if (e.path().extension() == ".json" && anim::isSceneFile(e.path().string())) files.push_back(e.path().string());
-    if (ec) throw UsageError(opt.sceneDir + ": cannot read the scene folder (" + ec.message() + ")");
-    if (files.empty())
-      throw UsageError(opt.sceneDir + ": no scene files (*.json with \"objects\", docs/scenes.md) in the scene folder");
-    std::sort(files.begin(), files.end());
-    for (const std::string& f : files) {
-      SceneSource s = explicitScene(f);
-      s.kind = "scene";
-      scenes.push_back(s);
-    }
-  }
+  scenes.insert(scenes.end(), sceneFiles.begin(), sceneFiles.end());
   if (b.twoLevelOnly) {  // the two-level part is the scene files' alone
     std::erase_if(scenes, [](const SceneSource& s) { return !anim::isSceneFile(s.input); });
     if (scenes.empty())
