@@ -1,7 +1,8 @@
 // tsah bench [SCENES...] [--data DIR] [--device cpu|cuda] [--out DIR] [--quick] [--seed S]
-//   [--frames N] [--eval-frames M] [--trace-frames T] ...
+//   [--frames N] [--eval-frames M] [--trace-frames T] [--scene-dir DIR] [--two-level-only] ...
 // The paper's evaluation (Tables 1 and 2, Figures 3-6), the segmenting experiment and the Embree
-// peer on every real animation of the data folder (or the scenes named), into OUT/results.json,
+// peer on every real animation of the data folder (or the scenes named), and the two-level part of
+// every scene file (--scene-dir: flat tree, two-level runtime, Embree instancing), into OUT/results.json,
 // OUT/results.md and OUT/plots/*.png. The work is in apps/bench/; this file is the command line.
 #include <algorithm>
 #include <chrono>
