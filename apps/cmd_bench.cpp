@@ -50,6 +50,7 @@ struct Options {
   std::string devices;  // --devices all|0,2,...
   bool list = false, reportOnly = false, noEmbree = false, noConvergence = false;
   tsah::cli::ShutterOptions shutter;  // --shutter, --shutter-mode: the motion-blur part
+  bool twoLevelGpu = false;  // --two-level-gpu: the two-level part's GPU figures (tsah_two_level_gpu_bench)
   bool scaling = false;  // --scaling: the optimizers' scaling mode (bench/scaling.hpp) instead
   tsah::bench::ScalingOptions scalingOptions;
 };
@@ -218,6 +219,14 @@ void run(Options opt, CLI::App* sub) {
     b.devices = tsah::cli::parseDevices(opt.devices);
   }
   if (b.device == tsah::Device::Cuda) requireGpu("--device cuda");
+  if (opt.twoLevelGpu) {  // the GPU figures of the two-level part, by the GPU two-level bench beside tsah
+    requireGpu("--two-level-gpu");
+    std::error_code exe;
+    const fs::path program = fs::read_symlink("/proc/self/exe", exe).parent_path() / "tsah_two_level_gpu_bench";
+    if (exe || !fs::exists(program))
+      throw UsageError("--two-level-gpu: " + program.string() + " is missing (build the tsah_two_level_gpu_bench target)");
+    b.gpuTwoLevelProgram = program.string();
+  }
   if (b.optimizer == "cuda") requireGpu("--optimizer cuda");
   ProgressLog log;
   const fs::path out = opt.out;
@@ -440,6 +449,9 @@ TSAH_REGISTER_COMMAND(80, [](CLI::App& app) {
   sub->add_flag("--two-level-only", b.twoLevelOnly,
                 "Only the two-level part of every scene file (--scene-dir or scene files given): flat tree, "
                 "two-level structure and Embree instancing on the same rays; no Tables 1 and 2, segments or Embree peer");
+  sub->add_flag("--two-level-gpu", opt->twoLevelGpu,
+                "The two-level part also runs tsah_two_level_gpu_bench (next to tsah; CUDA build and a device) on "
+                "its two trees: GpuTwoLevelRuntime against GpuRuntime over the flat tree, per-frame update and trace");
   sub->add_flag("--no-convergence", opt->noConvergence, "Skip the random and batch-sort optimizations of the convergence plot");
   sub->add_option("--note", opt->notes,
                   "A note for results.md (repeatable), e.g. what else ran on the machine; with --report-only it is "

@@ -147,6 +147,18 @@ TEST(BenchTwoLevelReport, TablesOfThePartAndASkippedPart) {
                                               method("embree-instanced", "Embree instancing", 16.0)})},
                      {"ratios", {{"two_level_rate_over_flat_rate", 1.0}, {"two_level_total_over_flat_total", 0.8},
                                  {"two_level_total_over_embree_total", 0.5}}}};
+  json withGpu = part;
+  withGpu["gpu"] = {{"device", "NVIDIA H100"}, {"ao_per_hit", 8},
+                    {"median", {{"update_ms", 0.5}, {"blas_refit_ms", 0.3}, {"tlas_update_ms", 0.1}, {"primary_ms", 1.0},
+                                {"ao_ms", 2.0}, {"tlas_rebuild_cpu_ms", 4.0}}},
+                    {"flat", {{"median", {{"update_ms", 6.0}, {"primary_ms", 1.5}, {"ao_ms", 2.5}}},
+                              {"trace_rate_two_level_over_flat", 1.25}}}};
+  const std::string gpu = tsah::bench::twoLevelSection({{"name", "town"}, {"two_level", withGpu}});
+  EXPECT_NE(gpu.find("GPU (NVIDIA H100, tsah_two_level_gpu_bench: its own rays, one primary per pixel and 8 AO per hit; "
+                     "medians): two-level update 0.500 ms (BLAS refits 0.300, TLAS 0.100), primary + AO 3.00 ms; flat "
+                     "update 6.00 ms, primary + AO 4.00 ms; trace rate two-level / flat 1.25; host TLAS rebuild 4.00 ms"),
+            std::string::npos)
+      << gpu;
   const json scene = {{"name", "town"}, {"two_level", part}};
   const std::string section = tsah::bench::twoLevelSection(scene);
   EXPECT_NE(section.find("**Two-level part** (7 instances of 3 sources (2 static), 2 poses"), std::string::npos) << section;

@@ -61,6 +61,7 @@ struct BenchOptions {
   std::function<std::string(const std::string&)> resolveDataPath;  // import: scenes' "data:" paths
   bool twoLevelOnly = false;    // scene files: only the two-level part (no Tables 1/2, Embree peer, segments)
   std::string program;          // the tsah executable the two-level part's optimizations run as
+  std::string gpuTwoLevelProgram;  // set: the two-level part also runs this tsah_two_level_gpu_bench
 };
 
 // Progress: `detail` messages are frequent (optimizer batches) and may be thinned out by the caller.

@@ -41,6 +41,23 @@ std::string optimizeText(const json& o) {
   return formatSignificant(number(o, "wall_s")) + " s, " + mib(number(o, "peak_rss_bytes")) + " MiB";
 }
 
+// The GPU figures (tsah_two_level_gpu_bench's medians) in one paragraph.
+std::string gpuText(const json& g) {
+  const json& m = g["median"];
+  const json& f = g["flat"]["median"];
+  std::ostringstream md;
+  md << "GPU (" << g.value("device", "") << ", tsah_two_level_gpu_bench: its own rays, one primary per pixel and "
+     << number(g, "ao_per_hit") << " AO per hit; medians): two-level update " << formatSignificant(number(m, "update_ms"))
+     << " ms (BLAS refits " << formatSignificant(number(m, "blas_refit_ms")) << ", TLAS "
+     << formatSignificant(number(m, "tlas_update_ms")) << "), primary + AO "
+     << formatSignificant(number(m, "primary_ms") + number(m, "ao_ms")) << " ms; flat update "
+     << formatSignificant(number(f, "update_ms")) << " ms, primary + AO "
+     << formatSignificant(number(f, "primary_ms") + number(f, "ao_ms")) << " ms; trace rate two-level / flat "
+     << formatFixed(number(g["flat"], "trace_rate_two_level_over_flat"), 2) << "; host TLAS rebuild "
+     << formatSignificant(number(m, "tlas_rebuild_cpu_ms")) << " ms per frame.\n\n";
+  return md.str();
+}
+
 }  // namespace
 
 std::string twoLevelSection(const json& scene) {
@@ -86,6 +103,7 @@ std::string twoLevelSection(const json& scene) {
        << formatFixed(number(q, "two_level_total_over_embree_total"), 2);
   md << ". The per-frame TLAS rebuild (host sweep SAH over the instance boxes, the reference of the refit) is in "
         "`two_level.methods[1].extra.tlas_rebuild_ms_per_frame`.\n\n";
+  if (p.contains("gpu")) md << gpuText(p["gpu"]);
   return md.str();
 }
 

@@ -112,6 +112,27 @@ double traceRate(const RuntimeMethod& m) {
 
 double ratio(double a, double b) { return a / std::max(b, 1e-12); }
 
+// The GPU figures: tsah_two_level_gpu_bench (GpuTwoLevelRuntime against GpuRuntime over the flat
+// tree, the host TLAS rebuild as the reference) on the two trees just optimized; its JSON as it is.
+json gpuFigures(const SceneSource& scene, const json& optimize, std::size_t frames, const BenchOptions& o) {
+  const fs::path report = fs::path(optimize["two_level"]["tree"].get<std::string>()).replace_extension(".gpu.json");
+  const std::vector<std::string> argv = {o.gpuTwoLevelProgram, scene.input, "--tree",
+                                         optimize["two_level"]["tree"].get<std::string>(), "--flat-tree",
+                                         optimize["flat"]["tree"].get<std::string>(), "--frames",
+                                         std::to_string(frames), "--width", std::to_string(o.width), "--height",
+                                         std::to_string(o.height), "--ao", std::to_string(o.aoRays)};
+  const ProcessResult r = runProcess(argv, report.string());
+  if (!r.ok())
+    throw tsah::Failure(scene.input + ": " + o.gpuTwoLevelProgram + " failed" +
+                        (r.output.empty() ? "" : ": " + r.output.substr(0, r.output.find('\n'))));
+  std::ifstream in(report);
+  json j = json::parse(in, nullptr, false);
+  if (j.is_discarded() || !j.contains("median") || !j.contains("flat"))
+    throw tsah::Failure(scene.input + ": unreadable " + o.gpuTwoLevelProgram + " report " + report.string());
+  j["command"] = argv;
+  return j;
+}
+
 }  // namespace
 
 json runTwoLevelComparison(const SceneSource& scene, const anim::Animation& baked, const BenchOptions& o,
@@ -252,6 +273,10 @@ json runTwoLevelComparison(const SceneSource& scene, const anim::Animation& bake
   j["ratios"] = ratios;
   j["methods"] = json::array();
   for (const RuntimeMethod& m : methods) j["methods"].push_back(toJson(m));
+  if (!o.gpuTwoLevelProgram.empty()) {
+    say("GPU: " + fs::path(o.gpuTwoLevelProgram).filename().string());
+    j["gpu"] = gpuFigures(scene, j["optimize"], setup.times.size(), o);
+  }
   return j;
 }
 

@@ -140,3 +140,8 @@ tl_bench_error(cli.bench.two_level_only_no_scene_files
 tl_bench_error(cli.bench.two_level_only_cuda
   "^tsah: --two-level-only runs the two-level part alone, on the CPU: not with --embree-only, --motion-blur-only or --device cuda\n$"
   bench --scene-dir ${W}/tl_bench_scenes --two-level-only --device cuda --out ${W}/tl_bench_none)
+# --two-level-gpu: the GPU two-level bench needs a CUDA build and a device (checked before any scene).
+tl_bench_error(cli.bench.two_level_gpu_no_gpu
+  "^tsah: --two-level-gpu: (this tsah was built without the CUDA runtime|no CUDA device is available on this machine)\n$"
+  bench --scene-dir ${W}/tl_bench_scenes --two-level-only --two-level-gpu --out ${W}/tl_bench_none)
+set_tests_properties(cli.bench.two_level_gpu_no_gpu PROPERTIES ENVIRONMENT "CUDA_VISIBLE_DEVICES=-1")
