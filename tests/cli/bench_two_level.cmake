@@ -145,3 +145,22 @@ tl_bench_error(cli.bench.two_level_gpu_no_gpu
   "^tsah: --two-level-gpu: (this tsah was built without the CUDA runtime|no CUDA device is available on this machine)\n$"
   bench --scene-dir ${W}/tl_bench_scenes --two-level-only --two-level-gpu --out ${W}/tl_bench_none)
 set_tests_properties(cli.bench.two_level_gpu_no_gpu PROPERTIES ENVIRONMENT "CUDA_VISIBLE_DEVICES=-1")
+
+# Without --two-level-only a scene file gets the rest of the bench and the two-level part.
+add_test(NAME cli.bench.two_level_with_the_rest
+         COMMAND tsah bench ${CMAKE_SOURCE_DIR}/samples/scenes/demo.json --quick --width 32 --height 24 --eval-frames 4
+                 --trace-frames 2 --threads 2 --no-convergence --segments 1 --budget 0 --out ${W}/tl_bench_all)
+set_tests_properties(cli.bench.two_level_with_the_rest PROPERTIES FIXTURES_SETUP tl_bench_all
+  PASS_REGULAR_EXPRESSION "tl_bench_all/results.md\n")
+file(WRITE ${W}/tl_bench_all_check.cmake [=[
+file(READ ${OUT}/results.json json)
+foreach(key table1 runtime embree "two_level;methods;1;average;total_ms")
+  string(JSON value ERROR_VARIABLE error GET "${json}" scenes 0 ${key})
+  if(error)
+    message(FATAL_ERROR "results.json: scenes 0 ${key}: ${error}")
+  endif()
+endforeach()
+]=])
+add_test(NAME cli.bench.two_level_with_the_rest_files
+         COMMAND ${CMAKE_COMMAND} -DOUT=${W}/tl_bench_all -P ${W}/tl_bench_all_check.cmake)
+set_tests_properties(cli.bench.two_level_with_the_rest_files PROPERTIES FIXTURES_REQUIRED tl_bench_all)
