@@ -6,6 +6,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <memory>
 
@@ -30,17 +31,26 @@ double msSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
+// A number as an argument that reads back as the same double.
+std::string exactText(double value) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.17g", value);
+  return text;
+}
+
 // One `tsah optimize SCENE --structure STRUCTURE --json` child: wall time, its build time, peak
 // resident memory (the child's VmHWM when it reports one, else its ru_maxrss).
 json optimizeChild(const SceneSource& scene, const std::string& structure, const fs::path& tree, const BenchOptions& o) {
   const bool gpu = o.optimizer == "cuda";
-  const std::vector<std::string> argv = {o.program, "optimize", scene.input, "-o", tree.string(), "--structure",
-                                         structure, "--optimizer", gpu ? "parallel" : o.optimizer, "--device",
-                                         gpu ? "cuda" : "cpu", "--threads", std::to_string(o.threads), "--frames",
-                                         std::to_string(o.frames), "--seed", std::to_string(o.seed), "--max-leaf",
-                                         std::to_string(o.objective.maxLeafSize), "--ct",
-                                         std::to_string(o.objective.cost.ct), "--ci",
-                                         std::to_string(o.objective.cost.ci), "--json"};
+  std::vector<std::string> argv = {o.program, "optimize", scene.input, "-o", tree.string(), "--structure", structure,
+                                   "--optimizer", gpu ? "parallel" : o.optimizer, "--device", gpu ? "cuda" : "cpu",
+                                   "--threads", std::to_string(o.threads), "--frames", std::to_string(o.frames),
+                                   "--seed", std::to_string(o.seed), "--max-leaf",
+                                   std::to_string(o.objective.maxLeafSize), "--ct", exactText(o.objective.cost.ct),
+                                   "--ci", exactText(o.objective.cost.ci), "--json"};
+  // The import options of the run, so that the trees are built for the scene this process bakes.
+  if (o.fps > 0.0) argv.insert(argv.end(), {"--fps", exactText(o.fps)});
+  if (!o.clip.empty()) argv.insert(argv.end(), {"--clip", o.clip});
   const fs::path report = fs::path(tree).replace_extension(".json");
   const auto start = std::chrono::steady_clock::now();
   const ProcessResult r = runProcess(argv, report.string());
