@@ -140,15 +140,7 @@ void Progress::message(const std::string& text) {
 
 std::function<std::string(const std::string&)> dataPathResolver(const std::string& dataFolder,
                                                                 const std::string& cache) {
-  const std::filesystem::path data = tsah::bench::defaultDataFolder(dataFolder, TSAH_SOURCE_DIR);
-  std::filesystem::path unpacked = cache;
-  if (unpacked.empty()) {
-    if (const char* c = std::getenv("TSAH_CACHE_DIR"); c && *c) unpacked = c;
-    else if (const char* x = std::getenv("XDG_CACHE_HOME"); x && *x) unpacked = std::filesystem::path(x) / "tsah";
-    else if (const char* h = std::getenv("HOME"); h && *h) unpacked = std::filesystem::path(h) / ".cache" / "tsah";
-    else unpacked = std::filesystem::temp_directory_path() / "tsah-cache";
-  }
-  return [data, unpacked](const std::string& rel) { return tsah::bench::resolveDataPath(data, unpacked, rel); };
+  return tsah::bench::dataPathResolver(dataFolder, cache, TSAH_SOURCE_DIR);
 }
 
 anim::LoadOptions& commandLineLoadOptions() {

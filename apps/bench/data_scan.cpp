@@ -370,4 +370,17 @@ fs::path defaultDataFolder(const std::string& given, const std::string& sourceDi
   return fs::path("..") / "shared" / "data";
 }
 
+std::function<std::string(const std::string&)> dataPathResolver(const std::string& dataFolder, const std::string& cache,
+                                                                const std::string& sourceDir) {
+  const fs::path data = defaultDataFolder(dataFolder, sourceDir);
+  fs::path unpacked = cache;
+  if (unpacked.empty()) {
+    if (const char* c = std::getenv("TSAH_CACHE_DIR"); c && *c) unpacked = c;
+    else if (const char* x = std::getenv("XDG_CACHE_HOME"); x && *x) unpacked = fs::path(x) / "tsah";
+    else if (const char* h = std::getenv("HOME"); h && *h) unpacked = fs::path(h) / ".cache" / "tsah";
+    else unpacked = fs::temp_directory_path() / "tsah-cache";
+  }
+  return [data, unpacked](const std::string& rel) { return resolveDataPath(data, unpacked, rel); };
+}
+
 }  // namespace tsah::bench

@@ -75,4 +75,11 @@ SceneSource explicitScene(const std::filesystem::path& input);
 // the source checkout the program was built from, else ../shared/data relative to the working folder.
 std::filesystem::path defaultDataFolder(const std::string& given, const std::string& sourceDir);
 
+// Resolves scenes' "data:" paths (resolveDataPath) against defaultDataFolder(dataFolder, sourceDir),
+// unpacking archives into `cache` (given, else $TSAH_CACHE_DIR, else $XDG_CACHE_HOME/tsah, else
+// ~/.cache/tsah, else the temporary folder's tsah-cache): what `tsah` and the GPU two-level bench
+// give anim::LoadOptions::resolveDataPath.
+std::function<std::string(const std::string&)> dataPathResolver(const std::string& dataFolder, const std::string& cache,
+                                                                const std::string& sourceDir);
+
 }  // namespace tsah::bench

@@ -9,7 +9,8 @@
 // one ray per pixel: closest hit) and --ao occlusion rays per primary hit (cosine-distributed
 // around the reversed primary ray, from the hit point, 10% of the scene's diagonal long: any hit).
 // The TLAS rebuild reference is tsah::rebuildTlas on the host over the frame's instance boxes
-// (wall clock). --flat-tree: a flat tree of the same scene (tsah optimize --structure flat), whose
+// (wall clock). The scene's data: paths resolve as `tsah` resolves them ($TSAH_DATA_DIR, archives
+// and .xz files unpacked into the cache). --flat-tree: a flat tree of the same scene (tsah optimize --structure flat), whose
 // GPU runtime (binary layout, the baked scene) updates at the same times and traces the same rays
 // (the trace-rate comparison). Prints one JSON object (per-frame values and medians).
 #include <CLI/CLI.hpp>
@@ -24,6 +25,7 @@
 
 #include "anim/load_options.hpp"
 #include "anim/scene.hpp"
+#include "bench/data_scan.hpp"
 #include "tsah/base/error.hpp"
 #include "tsah/render/camera.hpp"
 #include "tsah/render/sampling.hpp"
@@ -82,12 +84,16 @@ std::vector<tsah::Ray> occlusionRays(std::span<const tsah::Ray> primary, std::sp
 }
 
 int run(const Options& opt) {
+  // Scenes' data: paths as `tsah` resolves them ($TSAH_DATA_DIR, archives and .xz files unpacked
+  // into $TSAH_CACHE_DIR or the user's cache).
+  anim::LoadOptions load;
+  load.resolveDataPath = tsah::bench::dataPathResolver({}, {}, {});
   tsah::TreeOptions build;
   build.objective.k = opt.k;
   build.frames = opt.buildFrames;
   const tsah::TwoLevelScene scene =
-      opt.tree.empty() ? tsah::loadTwoLevelScene(opt.scene, {}, build)
-                       : tsah::loadTwoLevelSceneFile(opt.tree, anim::loadSceneSources(opt.scene, {}));
+      opt.tree.empty() ? tsah::loadTwoLevelScene(opt.scene, load, build)
+                       : tsah::loadTwoLevelSceneFile(opt.tree, anim::loadSceneSources(opt.scene, load));
   if (!opt.saveTree.empty()) tsah::saveTwoLevelScene(opt.saveTree, scene);
   if (opt.buildOnly) return 0;
   tsah::cuda::GpuTwoLevelRuntime::Config config;
@@ -97,7 +103,7 @@ int run(const Options& opt) {
   std::unique_ptr<anim::Animation> baked;
   std::unique_ptr<tsah::cuda::GpuRuntime> flat;
   if (!opt.flatTree.empty()) {
-    baked = std::make_unique<anim::Animation>(anim::loadScene(opt.scene, {}));
+    baked = std::make_unique<anim::Animation>(anim::loadScene(opt.scene, load));
     flat = std::make_unique<tsah::cuda::GpuRuntime>(tsah::flattenBvh(tsah::loadBvhFile(opt.flatTree).bvh), *baked);
   }
   const double start = scene.frameTimes.empty() ? scene.scene.start : scene.frameTimes.front();
