@@ -17,17 +17,20 @@ double msSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
-CpuRuntime::Config runtimeConfig(const RuntimeSetup& setup, Layout layout) {
+// The bench's frames come from the animation, whose static vertices stay at rest: the runtime
+// refits what moves (CpuRuntime::Config::movingVertices).
+CpuRuntime::Config runtimeConfig(const anim::Animation& a, const RuntimeSetup& setup, Layout layout) {
   CpuRuntime::Config c(setup.threads);
   c.layout = layout;
   c.collapse = setup.collapse;
+  if (!a.allMoving()) c.movingVertices.emplace(a.movingVertices().begin(), a.movingVertices().end());
   return c;
 }
 
 // A tree set's runtime (each frame selects the tree of its part).
 std::unique_ptr<CpuRuntime> makeSetRuntime(const anim::Animation& a, const RefitTrees& trees, const RuntimeSetup& setup) {
   return std::make_unique<CpuRuntime>(treeSetOf(trees, a), std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
-                                      a.vertexCount(), runtimeConfig(setup, setup.layout));
+                                      a.vertexCount(), runtimeConfig(a, setup, setup.layout));
 }
 
 // "LABEL, bvh8, avx512": the layout and, for a wide one, its kernels.
@@ -65,7 +68,7 @@ void startWorkers(const CpuRuntime& rt) {
 std::unique_ptr<CpuRuntime> makeRuntime(const anim::Animation& a, const Bvh& tree, const RuntimeSetup& setup,
                                         Layout layout) {
   return std::make_unique<CpuRuntime>(flattenBvh(tree), std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
-                                      a.vertexCount(), runtimeConfig(setup, layout));
+                                      a.vertexCount(), runtimeConfig(a, setup, layout));
 }
 
 std::vector<RuntimeMethod> runCpuMethods(const anim::Animation& a, const std::vector<CpuMethodSpec>& specs,
