@@ -46,11 +46,11 @@ def bench_cpu(tree, animation, count, runs, layout="bvh8", threads=0):
         return (time.perf_counter() - start) * 1e3, cpu.last_ray_pass["ms"]
 
     python_call()  # warm-up
-    cpu._ray_struct_batch_ms(o, d)
+    cpu._ray_struct_batch(o, d)[1]
     timings = []
     for _ in range(runs):
         python_ms, arrays_ms = python_call()
-        timings.append((python_ms, arrays_ms, cpu._ray_struct_batch_ms(o, d)))
+        timings.append((python_ms, arrays_ms, cpu._ray_struct_batch(o, d)[1]))
     python_ms, arrays_ms, struct_ms = (statistics.median(t[k] for t in timings) for k in range(3))
     cxx_ms = min(arrays_ms, struct_ms)
     return {"rays": count, "layout": cpu.layout, "threads": threads, "python_ms": python_ms,

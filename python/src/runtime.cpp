@@ -175,7 +175,6 @@ py::array resultArray(py::handle out, const py::dtype& dtype, const std::vector<
   return a;
 }
 
-#if defined(TSAH_HAVE_CUDA)
 // tsah::Hit as a numpy record: t, u, v (float32) and triangle (int32, -1 when nothing was hit: the
 // bits of tsah::kNoHit). A miss has t = inf (as in Embree and Warp) and u = v = 0.
 py::array hitArray(const std::vector<Hit>& hits, py::array out) {
@@ -194,8 +193,6 @@ py::array boolArray(const std::vector<uint8_t>& flags, py::array out) {
   });
   return out;
 }
-
-#endif
 
 // Vertex positions for a refit, a float32 array (V, 3) used in place (C-contiguous numpy; other
 // float dtypes are converted). Coordinates that are NaN, infinite or beyond tsah::kMaxCoordinate
@@ -298,15 +295,27 @@ class CpuTracer {
     }
     return result;
   }
-  // Wall time (ms) of tsah::closestHits on a batch of Ray structs made from the arrays beforehand:
-  // the batch a C++ caller holding its own Ray array calls, the reference of python/bench/cpu_batch.py.
-  double rayStructBatchMs(py::handle o, py::handle d, py::handle tmin, py::handle tmax) const {
+  // tsah::closestHits (occluded: anyHits) on a batch of Ray structs made from the arrays beforehand
+  // (the batch a C++ caller holding its own Ray array calls), its results as trace / occluded gives
+  // them and the call's wall time (ms): the reference of python/bench/cpu_batch.py and the tests.
+  py::tuple rayStructBatch(py::handle o, py::handle d, py::handle tmin, py::handle tmax, bool occluded) const {
     std::vector<py::ssize_t> batch;
     const RayBatch rays = makeRays(o, d, tmin, tmax, batch);
-    py::gil_scoped_release release;
-    const auto start = std::chrono::steady_clock::now();
-    const std::vector<Hit> hits = closestHits(*runtime_, rays);
-    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    std::vector<Hit> hits;
+    std::vector<uint8_t> flags;
+    std::chrono::steady_clock::duration took{};
+    {
+      py::gil_scoped_release release;
+      const auto start = std::chrono::steady_clock::now();
+      if (occluded)
+        flags = anyHits(*runtime_, rays);
+      else
+        hits = closestHits(*runtime_, rays);
+      took = std::chrono::steady_clock::now() - start;
+    }
+    const double ms = std::chrono::duration<double, std::milli>(took).count();
+    if (occluded) return py::make_tuple(boolArray(flags, py::array(py::dtype::of<bool>(), batch)), ms);
+    return py::make_tuple(hitArray(hits, py::array(hitDtype(), batch)), ms);
   }
   std::string layout() const { return name(runtime_->layoutInfo().layout); }
   py::dict lastRayPass() const { return rayPassDict(lastPass_); }
@@ -510,10 +519,10 @@ trace`), "bvh2", "bvh4" or "bvh8"; a wide layout is the tree collapsed with its 
       .def_property_readonly("bounds", &CpuTracer::bounds, "Bounds of the current frame, float32 (2, 3).")
       .def_property_readonly("layout", &CpuTracer::layout, "The layout traced: bvh2, bvh4 or bvh8.")
       .def_property_readonly("last_ray_pass", &CpuTracer::lastRayPass, kLastRayPassDoc)
-      .def("_ray_struct_batch_ms", &CpuTracer::rayStructBatchMs, "origins"_a, "directions"_a, "tmin"_a = 0.0f,
-           "tmax"_a = inf,
-           "Wall time (ms) of the C++ batch tsah::closestHits(runtime, rays) on Ray structs made from the arrays "
-           "beforehand (the reference of python/bench/cpu_batch.py).");
+      .def("_ray_struct_batch", &CpuTracer::rayStructBatch, "origins"_a, "directions"_a, "tmin"_a = 0.0f,
+           "tmax"_a = inf, "occluded"_a = false,
+           "(results, ms): tsah::closestHits (occluded: anyHits) of the C++ API on Ray structs made from the "
+           "arrays beforehand, and its wall time (the reference of python/bench/cpu_batch.py).");
 
 #if defined(TSAH_HAVE_CUDA)
   m.attr("cuda_built") = true;
