@@ -120,8 +120,9 @@ std::unique_ptr<HostRays> hostRays(py::handle origins, py::handle directions, py
   return rays;
 }
 
-// A host batch's rays as Ray structs (GpuTracer's upload, the reference batch of CpuTracer), left uninitialised until makeRays
-// fills them in parallel (so that the first touch of their pages is parallel too).
+// A host batch's rays as Ray structs (GpuTracer's upload, CpuTracer's reference batch), left
+// uninitialised until makeRays fills them in parallel (so that the first touch of their pages is
+// parallel too).
 struct RayBatch {
   std::unique_ptr<Ray[]> rays;
   std::size_t count = 0;
