@@ -1,9 +1,12 @@
 #include "tsah/pipeline.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
+#include <utility>
 
 #include "tsah/base/error.hpp"
 #include "tsah/base/memory.hpp"
@@ -31,18 +34,27 @@ void checkEvalFrames(uint32_t evalFrames) {
                       std::to_string(evalFrames));
 }
 
-void checkRays(std::span<const Ray> rays) {
+const char* rayProblem(const Ray& r) {
   const auto finite = [](const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); };
-  for (std::size_t i = 0; i < rays.size(); ++i) {
-    const Ray& r = rays[i];
-    const char* problem = !finite(r.org)                                        ? "origin is not finite"
-                          : !finite(r.dir)                                      ? "direction is not finite"
-                          : r.dir.x == 0.0f && r.dir.y == 0.0f && r.dir.z == 0.0f ? "direction is zero"
-                          : !std::isfinite(r.tmin) || r.tmin < 0.0f             ? "tmin must be finite and >= 0"
-                          : std::isnan(r.tmax)                                  ? "tmax is NaN"
-                                                                                : nullptr;
-    if (problem) throw ConfigError("rays: ray " + std::to_string(i) + ": " + problem);
-  }
+  return !finite(r.org)                                        ? "origin is not finite"
+         : !finite(r.dir)                                      ? "direction is not finite"
+         : r.dir.x == 0.0f && r.dir.y == 0.0f && r.dir.z == 0.0f ? "direction is zero"
+         : !std::isfinite(r.tmin) || r.tmin < 0.0f             ? "tmin must be finite and >= 0"
+         : std::isnan(r.tmax)                                  ? "tmax is NaN"
+                                                               : nullptr;
+}
+
+namespace {
+
+[[noreturn]] void refuseRay(std::size_t index, const char* problem) {
+  throw ConfigError("rays: ray " + std::to_string(index) + ": " + problem);
+}
+
+}  // namespace
+
+void checkRays(std::span<const Ray> rays) {
+  for (std::size_t i = 0; i < rays.size(); ++i)
+    if (const char* problem = rayProblem(rays[i])) refuseRay(i, problem);
 }
 
 BaselineConfig TreeOptions::baselineConfig() const {
@@ -305,10 +317,16 @@ void checkTimes(std::span<const Ray> rays, std::span<const float> times) {
 
 }  // namespace
 
+namespace {
+
+constexpr std::size_t kRayGrain = 1024;  // rays per task of a batch: a chunk's rays and hits stay in cache
+
+}  // namespace
+
 std::vector<Hit> closestHits(const CpuRuntime& runtime, std::span<const Ray> rays, std::span<const float> times) {
   checkTimes(rays, times);
   std::vector<Hit> hits(rays.size());
-  runtime.parallelFor(rays.size(), 1024, [&](std::size_t begin, std::size_t end) {
+  runtime.parallelFor(rays.size(), kRayGrain, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i)
       hits[i] = times.empty() ? runtime.closestHit(rays[i]) : runtime.closestHit(rays[i], times[i]);
   });
@@ -318,11 +336,63 @@ std::vector<Hit> closestHits(const CpuRuntime& runtime, std::span<const Ray> ray
 std::vector<uint8_t> anyHits(const CpuRuntime& runtime, std::span<const Ray> rays, std::span<const float> times) {
   checkTimes(rays, times);
   std::vector<uint8_t> occluded(rays.size());
-  runtime.parallelFor(rays.size(), 1024, [&](std::size_t begin, std::size_t end) {
+  runtime.parallelFor(rays.size(), kRayGrain, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i)
       occluded[i] = (times.empty() ? runtime.anyHit(rays[i]) : runtime.anyHit(rays[i], times[i])) ? 1 : 0;
   });
   return occluded;
+}
+
+namespace {
+
+void checkRayArrays(const RayArrays& rays, std::size_t results, const char* resultsName) {
+  const std::size_t n = rays.size();
+  auto fail = [](const std::string& what) { throw ConfigError("rays: " + what); };
+  if (rays.origins.size() % 3 != 0)
+    fail(std::to_string(rays.origins.size()) + " origin coordinates (3 per ray)");
+  if (rays.directions.size() != rays.origins.size())
+    fail(std::to_string(rays.directions.size()) + " direction coordinates for " + std::to_string(n) + " rays");
+  for (const auto& [limit, name] : {std::pair{rays.tmin, "tmin"}, std::pair{rays.tmax, "tmax"}})
+    if (limit.size() != n && limit.size() != 1)
+      fail(std::to_string(limit.size()) + " " + name + " values for " + std::to_string(n) + " rays (1 or one per ray)");
+  if (results != n) fail(std::to_string(results) + " " + resultsName + " for " + std::to_string(n) + " rays");
+}
+
+// trace(i, ray) for every ray of the arrays on the runtime's threads, each ray made and checked in
+// the task that traces it. After a bad ray no task starts; the first bad ray is named.
+template <class Trace>
+void traceArrays(const CpuRuntime& runtime, const RayArrays& rays, const Trace& trace) {
+  std::atomic<bool> bad{false};
+  runtime.parallelFor(rays.size(), kRayGrain, [&](std::size_t begin, std::size_t end) {
+    if (bad.load(std::memory_order_relaxed)) return;
+    for (std::size_t i = begin; i < end; ++i) {
+      const Ray ray = rays.at(i);
+      if (rayProblem(ray)) {
+        bad.store(true, std::memory_order_relaxed);
+        return;
+      }
+      trace(i, ray);
+    }
+  });
+  if (!bad.load()) return;
+  for (std::size_t i = 0; i < rays.size(); ++i)
+    if (const char* problem = rayProblem(rays.at(i))) refuseRay(i, problem);
+}
+
+}  // namespace
+
+void closestHits(const CpuRuntime& runtime, const RayArrays& rays, std::span<Hit> hits) {
+  checkRayArrays(rays, hits.size(), "hits");
+  constexpr Hit kMiss{std::numeric_limits<float>::infinity(), 0.0f, 0.0f, kNoHit};
+  traceArrays(runtime, rays, [&](std::size_t i, const Ray& ray) {
+    const Hit hit = runtime.closestHit(ray);
+    hits[i] = hit.valid() ? hit : kMiss;
+  });
+}
+
+void anyHits(const CpuRuntime& runtime, const RayArrays& rays, std::span<uint8_t> occluded) {
+  checkRayArrays(rays, occluded.size(), "occlusion flags");
+  traceArrays(runtime, rays, [&](std::size_t i, const Ray& ray) { occluded[i] = runtime.anyHit(ray) ? 1 : 0; });
 }
 
 std::pair<double, double> shutterInterval(const anim::Animation& animation, double time, double interval,

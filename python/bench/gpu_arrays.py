@@ -10,14 +10,15 @@
          both check modes: wait=False (no host wait; a refused frame is raised by the next refit or
          check()) is the one held to the target, time ratio <= 1.2; wait=True (the default: the call
          waits for the check's answer) is reported beside it.
-  cpu:   CpuRuntime(layout="bvh8").trace from Python (wall time, numpy in and out) against the C++
-         batch call alone (CpuRuntime.last_ray_pass) on the same rays; target: rate ratio >= 0.9.
+  cpu:   CpuRuntime(layout="bvh8").trace from Python (wall time, numpy in and out) against the best
+         C++ batch on the same rays (python/bench/cpu_batch.py); target: rate ratio >= 0.9.
+         --cpu-only: this part alone (no GPU needed).
 
 Each figure is the median of --runs runs after one warm-up. The hits of the paths are compared
 (trace: equal triangle ids; refit: equal hits after both refits).
 
 usage: PYTHONPATH=<module dir> python3 python/bench/gpu_arrays.py [--animation FILE] [--triangles 400000]
-           [--rays 10000000] [--cpu-rays 2000000] [--runs 5]
+           [--rays 10000000] [--cpu-rays 2000000] [--runs 5] [--cpu-only]
 """
 import argparse
 import json
@@ -27,16 +28,7 @@ import time
 import numpy as np
 
 import tsah
-
-
-def random_rays(animation, time_, count, seed=1):
-    """Rays from around the frame's box toward random points inside it (about half hit)."""
-    rng = np.random.default_rng(seed)
-    p = animation.positions_at(time_)
-    lo, hi = p.min(axis=0), p.max(axis=0)
-    targets = lo + rng.random((count, 3), dtype=np.float32) * (hi - lo)
-    origins = targets + rng.normal(size=(count, 3)).astype(np.float32) * float((hi - lo).max())
-    return origins.astype(np.float32), (targets - origins).astype(np.float32)
+from cpu_batch import bench_cpu, random_rays
 
 
 def median_ms(call, runs):
@@ -102,24 +94,6 @@ def _wall_ms(torch, work):
     return (time.perf_counter() - start) * 1e3
 
 
-def bench_cpu(tree, animation, count, runs):
-    cpu = tsah.CpuRuntime(tree, animation, layout="bvh8")
-    o, d = random_rays(animation, 0.0, count, seed=2)
-    out = np.empty(count, cpu.trace(o[:1], d[:1]).dtype)
-    timings = []
-    cpu.trace(o, d, out=out)
-    for _ in range(runs):
-        start = time.perf_counter()
-        cpu.trace(o, d, out=out)
-        python_ms = (time.perf_counter() - start) * 1e3
-        timings.append((python_ms, cpu.last_ray_pass["ms"]))
-    python_ms = statistics.median(t[0] for t in timings)
-    cxx_ms = statistics.median(t[1] for t in timings)
-    return {"rays": count, "layout": cpu.layout, "python_ms": python_ms, "cxx_batch_ms": cxx_ms,
-            "python_mrays_s": count / python_ms / 1e3, "cxx_mrays_s": count / cxx_ms / 1e3,
-            "rate_ratio": cxx_ms / python_ms, "target": ">= 0.9", "met": cxx_ms / python_ms >= 0.9}
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--animation", help="an animation file tsah.load reads (default: a generated wave)")
@@ -127,6 +101,7 @@ def main():
     parser.add_argument("--rays", type=int, default=10_000_000)
     parser.add_argument("--cpu-rays", type=int, default=2_000_000)
     parser.add_argument("--runs", type=int, default=5)
+    parser.add_argument("--cpu-only", action="store_true", help="only the CPU part (no GPU needed)")
     args = parser.parse_args()
     animation = tsah.load(args.animation) if args.animation else tsah.generate("wave", triangles=args.triangles,
                                                                                frames=10, seed=1)
@@ -134,7 +109,7 @@ def main():
     tree = tsah.optimize(animation, method="sah0")
     result = {"animation": args.animation or f"generated wave, {args.triangles} triangles",
               "triangles": animation.triangle_count, "tree_seconds": time.perf_counter() - start}
-    if tsah.cuda_available():
+    if tsah.cuda_available() and not args.cpu_only:
         import torch
         gpu = tsah.GpuRuntime(tree, animation)
         result["device"] = gpu.device_name

@@ -74,58 +74,73 @@ Points checkedPoints(py::handle obj, const std::string& name) {
   return {checkedArray<float>(obj, name, Kind::Float, {-1, 3}), {}};  // refused there: not an array
 }
 
-// A host batch's rays, left uninitialised until makeRays fills them in parallel (so that the first
-// touch of their pages is parallel too).
+// Rays given as numpy arrays: origins (..., 3), directions of the same shape, tmin and tmax each a
+// number or an array of the batch shape (...), viewed as tsah::RayArrays (float32, used in place
+// when the caller's arrays are float32 and C-contiguous; converted copies are kept here).
+struct HostRays {
+  Array<float> origins, directions;
+  std::optional<Array<float>> tmin, tmax;  // none: the number below
+  float tminValue = 0.0f, tmaxValue = 0.0f;
+  std::vector<py::ssize_t> batch;  // the leading dimensions: the shape of the results
+  RayArrays arrays;
+};
+
+std::unique_ptr<HostRays> hostRays(py::handle origins, py::handle directions, py::handle tmin, py::handle tmax) {
+  auto rays = std::make_unique<HostRays>();
+  Points org = checkedPoints(origins, "origins");
+  Points dir = checkedPoints(directions, "directions");
+  if (dir.batch != org.batch)
+    throw tsah::ConfigError("directions: expected the shape of origins " + shapeText(py::reinterpret_borrow<py::array>(origins)) + ", got " +
+                            shapeText(py::reinterpret_borrow<py::array>(directions)));
+  rays->batch = std::move(org.batch);
+  rays->origins = std::move(org.rows);
+  rays->directions = std::move(dir.rows);
+  const std::size_t n = std::size_t(rays->origins.shape(0));
+  auto limit = [&](py::handle value, const char* name, std::optional<Array<float>>& array, float& number) {
+    if (py::isinstance<py::float_>(value) || py::isinstance<py::int_>(value)) {
+      number = value.cast<float>();
+      return std::span<const float>(&number, 1);
+    }
+    py::object flat;  // holds a reshaped view while `value` refers to it
+    if (py::isinstance<py::array>(value)) {
+      const auto a = py::reinterpret_borrow<py::array>(value);
+      if (std::vector<py::ssize_t>(a.shape(), a.shape() + a.ndim()) != rays->batch)
+        throw tsah::ConfigError(std::string(name) + ": expected shape " + shapeText(rays->batch) + ", got " +
+                                shapeText(a));
+      flat = a.attr("reshape")(-1);
+      value = flat;
+    }
+    array = checkedArray<float>(value, name, Kind::Number, {py::ssize_t(n)});
+    return std::span<const float>(array->data(), n);
+  };
+  rays->arrays.tmin = limit(tmin, "tmin", rays->tmin, rays->tminValue);
+  rays->arrays.tmax = limit(tmax, "tmax", rays->tmax, rays->tmaxValue);
+  rays->arrays.origins = {rays->origins.data(), 3 * n};
+  rays->arrays.directions = {rays->directions.data(), 3 * n};
+  return rays;
+}
+
+// A host batch's rays as Ray structs (GpuTracer's upload, CpuTracer's reference batch), left
+// uninitialised until makeRays fills them in parallel (so that the first touch of their pages is
+// parallel too).
 struct RayBatch {
   std::unique_ptr<Ray[]> rays;
   std::size_t count = 0;
   operator std::span<const Ray>() const { return {rays.get(), count}; }
 };
 
-// origins (..., 3), directions of the same shape, tmin and tmax each a number or an array of the
-// batch shape (...). Returns the rays and the batch shape.
+// The rays of hostRays as Ray structs, checked (checkRays). Returns the rays and the batch shape.
 RayBatch makeRays(py::handle origins, py::handle directions, py::handle tmin, py::handle tmax,
                   std::vector<py::ssize_t>& batch) {
-  Points org = checkedPoints(origins, "origins");
-  const Points dir = checkedPoints(directions, "directions");
-  if (dir.batch != org.batch)
-    throw tsah::ConfigError("directions: expected the shape of origins " + shapeText(py::reinterpret_borrow<py::array>(origins)) + ", got " +
-                            shapeText(py::reinterpret_borrow<py::array>(directions)));
-  batch = org.batch;
-  const std::size_t n = std::size_t(org.rows.shape(0));
-  // A number for every ray, or a float32 array of n (kept alive here).
-  struct Limit {
-    std::optional<Array<float>> array;
-    float value = 0.0f;
-    float at(std::size_t i) const { return array ? array->data()[i] : value; }
-  };
-  auto limits = [&](py::handle value, const char* name) {
-    Limit out;
-    if (py::isinstance<py::float_>(value) || py::isinstance<py::int_>(value)) {
-      out.value = value.cast<float>();
-      return out;
-    }
-    py::object flat;  // holds a reshaped view while `value` refers to it
-    if (py::isinstance<py::array>(value)) {
-      const auto a = py::reinterpret_borrow<py::array>(value);
-      if (std::vector<py::ssize_t>(a.shape(), a.shape() + a.ndim()) != batch)
-        throw tsah::ConfigError(std::string(name) + ": expected shape " + shapeText(batch) + ", got " +
-                                shapeText(a));
-      flat = a.attr("reshape")(-1);
-      value = flat;
-    }
-    out.array = checkedArray<float>(value, name, Kind::Number, {py::ssize_t(n)});
-    return out;
-  };
-  const Limit lo = limits(tmin, "tmin"), hi = limits(tmax, "tmax");
+  const std::unique_ptr<HostRays> host = hostRays(origins, directions, tmin, tmax);
+  batch = host->batch;
+  const RayArrays& arrays = host->arrays;
+  const std::size_t n = arrays.size();
   RayBatch result{std::make_unique_for_overwrite<Ray[]>(n), n};
   Ray* rays = result.rays.get();
-  const float* o = org.rows.data();
-  const float* d = dir.rows.data();
   std::atomic<bool> bad{false};
   inParallel(n, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i)
-      rays[i] = {{o[3 * i], o[3 * i + 1], o[3 * i + 2]}, lo.at(i), {d[3 * i], d[3 * i + 1], d[3 * i + 2]}, hi.at(i)};
+    for (std::size_t i = begin; i < end; ++i) rays[i] = arrays.at(i);
     try {
       checkRays(std::span<const Ray>(rays + begin, end - begin));
     } catch (const tsah::ConfigError&) {
@@ -256,29 +271,52 @@ class CpuTracer {
     py::gil_scoped_release release;
     runtime_->update(std::span<const float>(positions.data(), std::size_t(positions.size())));
   }
+  // Each ray is made from the arrays, checked and traced in one task, its hit written straight into
+  // the result (closestHits / anyHits of RayArrays): no batch of Ray structs or hits in between.
   py::array trace(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out) const {
-    std::vector<py::ssize_t> batch;
-    const RayBatch rays = makeRays(o, d, tmin, tmax, batch);
-    py::array result = resultArray(out, hitDtype(), batch);
-    std::vector<Hit> hits;
+    const std::unique_ptr<HostRays> rays = hostRays(o, d, tmin, tmax);
+    py::array result = resultArray(out, hitDtype(), rays->batch);
+    const std::span<Hit> hits(static_cast<Hit*>(result.mutable_data()), rays->arrays.size());
     {
       py::gil_scoped_release release;
-      const PassClock clock(lastPass_, rays.count);
-      hits = closestHits(*runtime_, rays);
+      const PassClock clock(lastPass_, hits.size());
+      closestHits(*runtime_, rays->arrays, hits);
     }
-    return hitArray(hits, result);
+    return result;
   }
   py::array occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out) const {
-    std::vector<py::ssize_t> batch;
-    const RayBatch rays = makeRays(o, d, tmin, tmax, batch);
-    py::array result = resultArray(out, py::dtype::of<bool>(), batch);
-    std::vector<uint8_t> flags;
+    const std::unique_ptr<HostRays> rays = hostRays(o, d, tmin, tmax);
+    py::array result = resultArray(out, py::dtype::of<bool>(), rays->batch);
+    static_assert(sizeof(bool) == 1);  // numpy's bool: one byte, 0 or 1
+    const std::span<uint8_t> flags(static_cast<uint8_t*>(result.mutable_data()), rays->arrays.size());
     {
       py::gil_scoped_release release;
-      const PassClock clock(lastPass_, rays.count);
-      flags = anyHits(*runtime_, rays);
+      const PassClock clock(lastPass_, flags.size());
+      anyHits(*runtime_, rays->arrays, flags);
     }
-    return boolArray(flags, result);
+    return result;
+  }
+  // tsah::closestHits (occluded: anyHits) on a batch of Ray structs made from the arrays beforehand
+  // (the batch a C++ caller holding its own Ray array calls), its results as trace / occluded gives
+  // them and the call's wall time (ms): the reference of python/bench/cpu_batch.py and the tests.
+  py::tuple rayStructBatch(py::handle o, py::handle d, py::handle tmin, py::handle tmax, bool occluded) const {
+    std::vector<py::ssize_t> batch;
+    const RayBatch rays = makeRays(o, d, tmin, tmax, batch);
+    std::vector<Hit> hits;
+    std::vector<uint8_t> flags;
+    std::chrono::steady_clock::duration took{};
+    {
+      py::gil_scoped_release release;
+      const auto start = std::chrono::steady_clock::now();
+      if (occluded)
+        flags = anyHits(*runtime_, rays);
+      else
+        hits = closestHits(*runtime_, rays);
+      took = std::chrono::steady_clock::now() - start;
+    }
+    const double ms = std::chrono::duration<double, std::milli>(took).count();
+    if (occluded) return py::make_tuple(boolArray(flags, py::array(py::dtype::of<bool>(), batch)), ms);
+    return py::make_tuple(hitArray(hits, py::array(hitDtype(), batch)), ms);
   }
   std::string layout() const { return name(runtime_->layoutInfo().layout); }
   py::dict lastRayPass() const { return rayPassDict(lastPass_); }
@@ -489,7 +527,11 @@ trace`), "bvh2", "bvh4" or "bvh8"; a wide layout is the tree collapsed with its 
            "out"_a = py::none(), kOccludedDoc)
       .def_property_readonly("bounds", &CpuTracer::bounds, "Bounds of the current frame, float32 (2, 3).")
       .def_property_readonly("layout", &CpuTracer::layout, "The layout traced: bvh2, bvh4 or bvh8.")
-      .def_property_readonly("last_ray_pass", &CpuTracer::lastRayPass, kLastRayPassDoc);
+      .def_property_readonly("last_ray_pass", &CpuTracer::lastRayPass, kLastRayPassDoc)
+      .def("_ray_struct_batch", &CpuTracer::rayStructBatch, "origins"_a, "directions"_a, "tmin"_a = 0.0f,
+           "tmax"_a = inf, "occluded"_a = false,
+           "(results, ms): tsah::closestHits (occluded: anyHits) of the C++ API on Ray structs made from the "
+           "arrays beforehand, and its wall time (the reference of python/bench/cpu_batch.py).");
 
 #if defined(TSAH_HAVE_CUDA)
   m.attr("cuda_built") = true;

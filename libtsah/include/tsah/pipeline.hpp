@@ -6,6 +6,7 @@
 //
 // This is the one place where libtsah meets an Animation; the builders themselves (baselines.hpp)
 // still take primitive boxes. Public API: see docs/api.md.
+#include <cstddef>
 #include <cstdint>
 #include <functional>
 #include <span>
@@ -77,6 +78,8 @@ void checkEvalFrames(uint32_t evalFrames);
 // direction is not finite, a direction is zero, tmin is not finite or negative, or tmax is NaN
 // (a NaN ray makes traversal visit every node).
 void checkRays(std::span<const Ray> rays);
+// What checkRays says of one ray ("direction is zero"), or null when it can be traced.
+const char* rayProblem(const Ray& ray);
 
 // Frames of `animation` at each of `times` as a lazily filled FrameSource (triangle boxes). The
 // animation must outlive the source.
@@ -175,6 +178,28 @@ std::vector<Hit> closestHits(const CpuRuntime& runtime, std::span<const Ray> ray
                              std::span<const float> times = {});
 std::vector<uint8_t> anyHits(const CpuRuntime& runtime, std::span<const Ray> rays,
                              std::span<const float> times = {});
+
+// A batch of rays as flat arrays (numpy's layout): ray i has origin origins[3i..3i+2], direction
+// directions[3i..3i+2], tmin[i] and tmax[i]; a tmin or tmax of one value holds for every ray.
+struct RayArrays {
+  std::span<const float> origins, directions;  // 3 floats per ray each
+  std::span<const float> tmin, tmax;          // one per ray, or one for all
+  std::size_t size() const { return origins.size() / 3; }
+  Ray at(std::size_t i) const {
+    return {{origins[3 * i], origins[3 * i + 1], origins[3 * i + 2]}, tmin.size() == 1 ? tmin[0] : tmin[i],
+            {directions[3 * i], directions[3 * i + 1], directions[3 * i + 2]}, tmax.size() == 1 ? tmax[0] : tmax[i]};
+  }
+};
+
+// closestHits / anyHits of rays given as arrays, written into hits / occluded (one per ray, the
+// caller's memory: nothing is allocated). Each ray is made, checked (checkRays) and traced in the
+// same task, so the batch costs what a batch of Ray structs costs. A ray that hits nothing gets
+// t = inf, u = v = 0, tri = kNoHit; occluded[i] is 1 or 0. Throws tsah::ConfigError when the array
+// sizes disagree (origins and directions of 3 floats per ray, hits the ray count, tmin and tmax 1
+// or the ray count) or, naming the first one, when a ray cannot be traced (checkRays); after a bad
+// ray the contents of hits / occluded are unspecified.
+void closestHits(const CpuRuntime& runtime, const RayArrays& rays, std::span<Hit> hits);
+void anyHits(const CpuRuntime& runtime, const RayArrays& rays, std::span<uint8_t> occluded);
 
 // Motion blur (docs/motion-blur.md): the shutter of a traced frame as a fraction of the frame
 // interval, centered on the frame's time or opening at it.
