@@ -89,8 +89,8 @@ BatchTracer twoLevelTracer(const TwoLevelRuntime& rt, const std::vector<uint32_t
       hits[i] = h.valid() ? Hit{h.t, h.u, h.v, firstTriangle[h.instance] + h.prim} : Hit{};
     }
   };
-  tracer.occluded = [&rt](const Ray* rays, const float*, std::size_t count, AnyHitOrder, uint8_t* occluded) {
-    for (std::size_t i = 0; i < count; ++i) occluded[i] = rt.anyHit(rays[i]) ? 1 : 0;
+  tracer.occluded = [&rt](const Ray* rays, const float*, std::size_t count, AnyHitOrder order, uint8_t* occluded) {
+    for (std::size_t i = 0; i < count; ++i) occluded[i] = rt.anyHit(rays[i], order) ? 1 : 0;
   };
   return tracer;
 }

@@ -100,10 +100,13 @@ __device__ __forceinline__ uint32_t slotTriangle(const TlasLoopFrame<AnyHit>& f,
 
 // Slot s's instance: its BLAS (AnyHit: whether anything is hit before tmax).
 template <bool AnyHit>
-__device__ __forceinline__ bool intersectBvh2Slot(const TlasLoopFrame<AnyHit>& f, const Ray& ray, const RayPrep&,
+__device__ __forceinline__ bool intersectBvh2Slot(const TlasLoopFrame<AnyHit>& f, const Ray& ray, const RayPrep& prep,
                                                   uint32_t s, float tmax, float& t, float& u, float& v) {
-  const InstanceState& inst = f.scene.instances[slotTriangle(f, s)];
-  if (!inst.visible) return false;
+  const uint32_t instance = slotTriangle(f, s);
+  const InstanceState& inst = f.scene.instances[instance];
+  // The instance's own box before its transform and BLAS (as the CPU runtime's TLAS frame).
+  float entry;
+  if (!inst.visible || !intersectBox(prep, f.scene.instanceBoxes[instance], ray.tmin, tmax, entry)) return false;
   const BlasView& view = f.scene.views[inst.view];
   TraceScene blas;
   blas.nodes = view.nodes;

@@ -51,6 +51,7 @@ struct TlasScene {
   const RootInfo* root = nullptr;
   const InstanceState* instances = nullptr;
   const BlasView* views = nullptr;
+  const Aabb* instanceBoxes = nullptr;  // per instance: its world box this frame
 };
 
 // Per instance, its world box: its BLAS root box transformed by world(t), rounded outward

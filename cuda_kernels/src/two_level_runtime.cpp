@@ -339,7 +339,7 @@ GpuTwoLevelRuntime::Impl::Graph GpuTwoLevelRuntime::Impl::capture(bool refitPose
 }
 
 detail::TlasScene GpuTwoLevelRuntime::Impl::tlasScene() const {
-  return {tlasNodes.data(), tlasTriIndex.data(), tlasRoot.data(), instances.data(), views.data()};
+  return {tlasNodes.data(), tlasTriIndex.data(), tlasRoot.data(), instances.data(), views.data(), instanceBoxes.data()};
 }
 
 GpuTwoLevelRuntime::GpuTwoLevelRuntime(const TwoLevelScene& scene, Config config)

@@ -50,7 +50,7 @@ Hit TwoLevelRenderView::closestHit(const Ray& ray) const {
   return {hit.t, hit.u, hit.v, firstTriangle_[hit.instance] + hit.prim};
 }
 
-bool TwoLevelRenderView::anyHit(const Ray& ray, AnyHitOrder) const { return runtime_.anyHit(ray); }
+bool TwoLevelRenderView::anyHit(const Ray& ray, AnyHitOrder order) const { return runtime_.anyHit(ray, order); }
 
 RenderStats renderFrame(const TwoLevelRenderView& view, const Camera& camera, const SceneLighting& lighting,
                         const RenderSettings& settings, Image& image) {

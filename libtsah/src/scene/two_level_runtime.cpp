@@ -25,21 +25,26 @@ struct TlasFrame {
   const GpuBvhNode* nodes = nullptr;
   const uint32_t* triIndex = nullptr;  // slot -> instance id
   const Affine3x4* toInstance = nullptr;
+  const Aabb* instanceBoxes = nullptr;      // per instance: its world box this frame
   const uint8_t* visible = nullptr;         // per instance: 0 while its world transform is singular
   const CpuRuntime* const* blas = nullptr;  // per instance, traced in its own layout
   int32_t rootRef = makeLeafRef(0);
   uint32_t rootCount = 0;
   Aabb rootBox;
+  AnyHitOrder order = AnyHitOrder::FarthestFirst;  // any hit: the BLAS traversals' child order
   mutable uint32_t hitPrim = kNoHit;
 
   const Aabb& root() const { return rootBox; }
   const GpuBvhNode& node(int32_t ref) const { return nodes[ref]; }
-  bool intersectSlot(const Ray& ray, const RayPrep&, uint32_t s, float tmax, float& t, float& u, float& v) const {
+  bool intersectSlot(const Ray& ray, const RayPrep& prep, uint32_t s, float tmax, float& t, float& u, float& v) const {
     const uint32_t instance = triIndex[s];
-    if (!visible[instance]) return false;
+    // The instance's own box before its transform and BLAS: a leaf of several instances is entered
+    // by rays that miss most of them (the test is the TLAS nodes' own, on a box inside theirs).
+    float entry;
+    if (!visible[instance] || !intersectBox(prep, instanceBoxes[instance], ray.tmin, tmax, entry)) return false;
     const Ray local = rayInInstance(toInstance[instance], ray, tmax);
     if (AnyHit) {  // the loop stops at the first accepted slot: no distance needed
-      if (!blas[instance]->anyHit(local)) return false;
+      if (!blas[instance]->anyHit(local, order)) return false;
       t = tmax;
       u = v = 0.0f;
       return true;
@@ -201,11 +206,13 @@ void TwoLevelRuntime::refitTlas() {
 
 template <bool AnyHit>
 static TlasFrame<AnyHit> tlasFrame(const FlatBvh& tlas, const std::vector<Affine3x4>& toInstance,
-                                   const std::vector<uint8_t>& visible, const std::vector<const CpuRuntime*>& blas) {
+                                   const std::vector<Aabb>& instanceBoxes, const std::vector<uint8_t>& visible,
+                                   const std::vector<const CpuRuntime*>& blas) {
   TlasFrame<AnyHit> f;
   f.nodes = tlas.nodes.data();
   f.triIndex = tlas.triIndex.data();
   f.toInstance = toInstance.data();
+  f.instanceBoxes = instanceBoxes.data();
   f.blas = blas.data();
   f.visible = visible.data();
   f.rootRef = tlas.rootRef;
@@ -215,7 +222,7 @@ static TlasFrame<AnyHit> tlasFrame(const FlatBvh& tlas, const std::vector<Affine
 }
 
 TwoLevelHit TwoLevelRuntime::closestHit(const Ray& ray) const {
-  const TlasFrame<false> frame = tlasFrame<false>(tlas_, toInstance_, visible_, blas_);
+  const TlasFrame<false> frame = tlasFrame<false>(tlas_, toInstance_, instanceBoxes_, visible_, blas_);
   const Hit h = detail::traverse<false>(frame, ray);
   TwoLevelHit hit;
   if (!h.valid()) return hit;
@@ -227,8 +234,10 @@ TwoLevelHit TwoLevelRuntime::closestHit(const Ray& ray) const {
   return hit;
 }
 
-bool TwoLevelRuntime::anyHit(const Ray& ray) const {
-  return detail::traverse<true>(tlasFrame<true>(tlas_, toInstance_, visible_, blas_), ray).valid();
+bool TwoLevelRuntime::anyHit(const Ray& ray, AnyHitOrder order) const {
+  TlasFrame<true> frame = tlasFrame<true>(tlas_, toInstance_, instanceBoxes_, visible_, blas_);
+  frame.order = order;
+  return detail::traverse<true>(frame, ray).valid();
 }
 
 uint64_t TwoLevelRuntime::memoryBytes() const {

@@ -63,7 +63,8 @@ class TwoLevelRuntime {
   void update(double sceneTime);
 
   TwoLevelHit closestHit(const Ray& ray) const;
-  bool anyHit(const Ray& ray) const;
+  // order: the BLAS traversals' child order (CpuRuntime::anyHit; the answer is the same).
+  bool anyHit(const Ray& ray, AnyHitOrder order = AnyHitOrder::FarthestFirst) const;
 
   // BLAS refits: by the last update(), and in all (construction's static refits included).
   uint32_t lastUpdateBlasRefits() const { return lastRefits_; }
