@@ -30,31 +30,6 @@ void countSame(const std::vector<uint8_t>& own, const std::vector<uint8_t>& othe
   for (std::size_t i = 0; i < own.size() && i < other.size(); ++i) a.occlusionSame += own[i] == other[i] ? 1u : 0u;
 }
 
-FrameTiming frameOf(double time, double updateMs, const BatchTrace& trace) {
-  FrameTiming ft;
-  ft.time = time;
-  ft.updateMs = updateMs;
-  ft.rays = {trace.primary, trace.ao, trace.shadow, 0.0};
-  ft.traceMs = trace.total().ms;
-  ft.totalMs = updateMs + ft.traceMs;
-  return ft;
-}
-
-double averageTotalMs(const RuntimeMethod& m) {
-  double sum = 0.0;
-  for (const FrameTiming& f : m.frames) sum += f.totalMs;
-  return m.frames.empty() ? 0.0 : sum / double(m.frames.size());
-}
-
-double traceRate(const RuntimeMethod& m) {
-  double rays = 0.0, ms = 0.0;
-  for (const FrameTiming& f : m.frames) {
-    rays += double(f.rays.total().rays);
-    ms += f.rays.total().ms;
-  }
-  return ms > 0.0 ? rays / (ms * 1e3) : 0.0;
-}
-
 }  // namespace
 
 void Agreement::add(const BatchTrace& own, const BatchTrace& other) {

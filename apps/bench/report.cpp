@@ -33,6 +33,28 @@ std::string formatSignificant(double value) {
   return formatFixed(value, 4);
 }
 
+double numberField(const json& j, const char* key) {
+  return j.contains(key) && j[key].is_number() ? j[key].get<double>() : 0.0;
+}
+
+const json* methodNamed(const json& part, const std::string& name) {
+  for (const json& m : part["methods"])
+    if (m.value("name", "") == name) return &m;
+  return nullptr;
+}
+
+double averageRate(const json& method) { return numberField(method["average"]["mrays_per_s"], "total"); }
+
+std::string agreementText(const json& agreement, bool details) {
+  std::string s = formatFixed(100.0 * numberField(agreement, "fraction"), 3) + "%";
+  if (!details) return s;
+  const json& d = agreement["differing"];
+  const auto count = [](const json& j, const char* key) { return std::to_string(uint64_t(numberField(j, key))); };
+  return s + " (" + std::to_string(uint64_t(numberField(agreement, "rays")) - uint64_t(numberField(agreement, "same"))) +
+         " of " + count(agreement, "rays") + " rays differ: " + count(d, "tie") + " ties, " + count(d, "one_misses") +
+         " one misses, " + count(d, "other_depth") + " other depth, " + count(d, "occlusion") + " occlusion)";
+}
+
 namespace {
 
 std::string withThousands(uint64_t n) {

@@ -11,19 +11,9 @@ using nlohmann::json;
 
 namespace {
 
-double number(const json& j, const char* key) { return j.contains(key) && j[key].is_number() ? j[key].get<double>() : 0.0; }
-
 bool hasMotionBlur(const json& scene) {
   return scene.is_object() && scene.contains("motion_blur") && scene["motion_blur"].contains("methods");
 }
-
-const json* methodNamed(const json& blur, const std::string& name) {
-  for (const json& m : blur["methods"])
-    if (m.value("name", "") == name) return &m;
-  return nullptr;
-}
-
-double rate(const json& method) { return number(method["average"]["mrays_per_s"], "total"); }
 
 // The mean of a per-frame count (keys_per_frame, keys_refitted_per_frame); 0 when absent.
 double averageKeys(const json& blur, const char* field = "keys_per_frame") {
@@ -33,23 +23,11 @@ double averageKeys(const json& blur, const char* field = "keys_per_frame") {
   return n ? sum / double(n) : 0.0;
 }
 
-// "99.98% (of 1,234,567 rays; differing: 3 ties, 10 one misses, 2 other depth, 40 occlusion)"
-std::string agreementText(const json& agreement, bool details) {
-  std::string s = formatFixed(100.0 * number(agreement, "fraction"), 3) + "%";
-  if (!details) return s;
-  const json& d = agreement["differing"];
-  return s + " (" + std::to_string(uint64_t(number(agreement, "rays")) - uint64_t(number(agreement, "same"))) +
-         " of " + std::to_string(uint64_t(number(agreement, "rays"))) + " rays differ: " +
-         std::to_string(uint64_t(number(d, "tie"))) + " ties, " + std::to_string(uint64_t(number(d, "one_misses"))) +
-         " one misses, " + std::to_string(uint64_t(number(d, "other_depth"))) + " other depth, " +
-         std::to_string(uint64_t(number(d, "occlusion"))) + " occlusion)";
-}
-
 // "0.5 centered", as the option was given.
 std::string shutterText(const json& blur) {
   const json& s = blur["shutter"];
   char fraction[32];
-  std::snprintf(fraction, sizeof fraction, "%g", number(s, "fraction"));
+  std::snprintf(fraction, sizeof fraction, "%g", numberField(s, "fraction"));
   return fraction + (" " + s.value("mode", "centered"));
 }
 
@@ -60,7 +38,7 @@ std::string motionBlurSection(const json& scene) {
   const json& blur = scene["motion_blur"];
   std::ostringstream md;
   md << "**Motion blur** (shutter " << shutterText(blur) << " of the time between traced frames, "
-     << formatSignificant(number(blur, "frame_interval")) << "; " << number(blur, "frames")
+     << formatSignificant(numberField(blur, "frame_interval")) << "; " << numberField(blur, "frames")
      << " frames, the same rays at the same times for every tracer — each pixel's rays at its time; the toolkit's "
      << blur.value("layout", "") << " refit at the shutter's keys (" << formatFixed(averageKeys(blur), 1)
      << " keys per frame on average";
@@ -70,27 +48,27 @@ std::string motionBlurSection(const json& scene) {
   md << "); Embree " << blur.value("embree_status", "")
      << " motion-blur BVH built once over the keyframes";
   if (blur.contains("embree_mb_build"))
-    md << " (" << number(blur["embree_mb_build"], "time_steps") << " time steps, "
-       << formatSignificant(number(blur["embree_mb_build"], "ms")) << " ms, not in the frame times)";
+    md << " (" << numberField(blur["embree_mb_build"], "time_steps") << " time steps, "
+       << formatSignificant(numberField(blur["embree_mb_build"], "ms")) << " ms, not in the frame times)";
   md << " and rebuilt every frame over the shutter's keys)\n\n"
      << "| method | update [ms] | trace [MRays/s] | total [ms] | primary / AO / shadow [MRays/s] | same result as the toolkit |\n"
      << "|---|--:|--:|--:|--:|---|\n";
   for (const json& m : blur["methods"]) {
     const json& a = m["average"];
     const json& r = a["mrays_per_s"];
-    md << "| " << m.value("label", "") << " | " << formatSignificant(number(a, "update_ms")) << " | "
-       << formatSignificant(rate(m)) << " | " << formatSignificant(number(a, "total_ms")) << " | "
-       << formatSignificant(number(r, "primary")) << " / " << formatSignificant(number(r, "ao")) << " / "
-       << formatSignificant(number(r, "shadow")) << " | ";
+    md << "| " << m.value("label", "") << " | " << formatSignificant(numberField(a, "update_ms")) << " | "
+       << formatSignificant(averageRate(m)) << " | " << formatSignificant(numberField(a, "total_ms")) << " | "
+       << formatSignificant(numberField(r, "primary")) << " / " << formatSignificant(numberField(r, "ao")) << " / "
+       << formatSignificant(numberField(r, "shadow")) << " | ";
     md << (m.contains("extra") && m["extra"].contains("agreement") ? agreementText(m["extra"]["agreement"], true) : "—")
        << " |\n";
   }
   if (blur.contains("ratios")) {
     const json& q = blur["ratios"];
     md << "\nToolkit trace rate / Embree motion-blur BVH's: "
-       << formatFixed(number(q, "toolkit_rate_over_embree_mb_rate"), 2)
+       << formatFixed(numberField(q, "toolkit_rate_over_embree_mb_rate"), 2)
        << "; toolkit frame total / Embree per-frame rebuild's: "
-       << formatFixed(number(q, "toolkit_total_over_embree_rebuild_total"), 2)
+       << formatFixed(numberField(q, "toolkit_total_over_embree_rebuild_total"), 2)
        << ". Differing rays: a tie is another triangle at the same t within 1e-4 relative (the traversal order "
           "decides); one misses and other depth are rays grazing an edge, where the two watertight tests round "
           "differently; occlusion counts AO and shadow rays one finds blocked and the other not.\n";
@@ -117,16 +95,16 @@ std::string motionBlurSummary(const json& scenes) {
     const json* rebuild = methodNamed(blur, "embree-mb-rebuild");
     md << "| " << s.value("name", "") << " | " << shutterText(blur) << " | " << formatFixed(averageKeys(blur), 1) << " | ";
     if (own)
-      md << formatSignificant(number((*own)["average"], "update_ms")) << " | " << formatSignificant(rate(*own)) << " | "
-         << formatSignificant(number((*own)["average"], "total_ms")) << " | ";
+      md << formatSignificant(numberField((*own)["average"], "update_ms")) << " | " << formatSignificant(averageRate(*own)) << " | "
+         << formatSignificant(numberField((*own)["average"], "total_ms")) << " | ";
     else
       md << " | | | ";
-    md << (once ? formatSignificant(rate(*once)) : "") << " | "
-       << (blur.contains("embree_mb_build") ? formatSignificant(number(blur["embree_mb_build"], "ms")) : "") << " | "
-       << (rebuild ? formatSignificant(number((*rebuild)["average"], "total_ms")) : "") << " | ";
+    md << (once ? formatSignificant(averageRate(*once)) : "") << " | "
+       << (blur.contains("embree_mb_build") ? formatSignificant(numberField(blur["embree_mb_build"], "ms")) : "") << " | "
+       << (rebuild ? formatSignificant(numberField((*rebuild)["average"], "total_ms")) : "") << " | ";
     if (blur.contains("ratios"))
-      md << formatFixed(number(blur["ratios"], "toolkit_rate_over_embree_mb_rate"), 2) << " | "
-         << formatFixed(number(blur["ratios"], "toolkit_total_over_embree_rebuild_total"), 2) << " | ";
+      md << formatFixed(numberField(blur["ratios"], "toolkit_rate_over_embree_mb_rate"), 2) << " | "
+         << formatFixed(numberField(blur["ratios"], "toolkit_total_over_embree_rebuild_total"), 2) << " | ";
     else
       md << " | | ";
     md << (once ? agreementText((*once)["extra"]["agreement"], false) : "") << " / "

@@ -28,6 +28,8 @@ class FrameRuntime;
 
 namespace tsah::bench {
 
+struct BatchTrace;
+
 // What every runtime method traces: the frames, the view and the ray workload.
 struct RuntimeSetup {
   std::vector<double> times;                     // animation time of each traced frame
@@ -125,6 +127,12 @@ RuntimeMethod runGpuRefit(const anim::Animation& animation, const RefitTrees& tr
 RuntimeMethod runGpuRebuild(const anim::Animation& animation, const Bvh& initialTree, const std::string& method,
                             const CostModel& cost, uint32_t maxLeaf, const RuntimeSetup& setup,
                             const std::string& layout = {});
+// A frame of batch-traced rays (ray_batch.hpp): its update and the batch's passes.
+FrameTiming frameOf(double time, double updateMs, const BatchTrace& trace);
+// Over a method's frames: the mean frame total, and the trace rate of all its rays (MRays/s).
+double averageTotalMs(const RuntimeMethod& m);
+double traceRate(const RuntimeMethod& m);
+
 // One frame of a method after its update (updateMs): the ray passes timed (rays, traceMs) and the
 // whole frame (totalMs = updateMs + the driver's frame time); with `image`, the frame is rendered
 // once more, untimed, into it (the GPU downloads the picture only then).

@@ -1,6 +1,7 @@
 // What the CPU and GPU halves of the runtime benchmark share: the trees as a set, one timed frame,
 // progress, and a method's JSON.
 #include "bench/runtime_bench.hpp"
+#include "bench/ray_batch.hpp"
 #include "frame_runtime.hpp"
 #include "tsah/layout/flat_bvh.hpp"
 
@@ -82,6 +83,31 @@ nlohmann::json toJson(const RuntimeMethod& m) {
                     {"mrays_per_s", rates}};
   if (!m.extra.empty()) j["extra"] = m.extra;
   return j;
+}
+
+FrameTiming frameOf(double time, double updateMs, const BatchTrace& trace) {
+  FrameTiming ft;
+  ft.time = time;
+  ft.updateMs = updateMs;
+  ft.rays = {trace.primary, trace.ao, trace.shadow, 0.0};
+  ft.traceMs = trace.total().ms;
+  ft.totalMs = updateMs + ft.traceMs;
+  return ft;
+}
+
+double averageTotalMs(const RuntimeMethod& m) {
+  double sum = 0.0;
+  for (const FrameTiming& f : m.frames) sum += f.totalMs;
+  return m.frames.empty() ? 0.0 : sum / double(m.frames.size());
+}
+
+double traceRate(const RuntimeMethod& m) {
+  double rays = 0.0, ms = 0.0;
+  for (const FrameTiming& f : m.frames) {
+    rays += double(f.rays.total().rays);
+    ms += f.rays.total().ms;
+  }
+  return ms > 0.0 ? rays / (ms * 1e3) : 0.0;
 }
 
 }  // namespace tsah::bench

@@ -95,31 +95,6 @@ BatchTracer twoLevelTracer(const TwoLevelRuntime& rt, const std::vector<uint32_t
   return tracer;
 }
 
-FrameTiming frameOf(double time, double updateMs, const BatchTrace& trace) {
-  FrameTiming ft;
-  ft.time = time;
-  ft.updateMs = updateMs;
-  ft.rays = {trace.primary, trace.ao, trace.shadow, 0.0};
-  ft.traceMs = trace.total().ms;
-  ft.totalMs = updateMs + ft.traceMs;
-  return ft;
-}
-
-double averageTotalMs(const RuntimeMethod& m) {
-  double sum = 0.0;
-  for (const FrameTiming& f : m.frames) sum += f.totalMs;
-  return m.frames.empty() ? 0.0 : sum / double(m.frames.size());
-}
-
-double traceRate(const RuntimeMethod& m) {
-  double rays = 0.0, ms = 0.0;
-  for (const FrameTiming& f : m.frames) {
-    rays += double(f.rays.total().rays);
-    ms += f.rays.total().ms;
-  }
-  return ms > 0.0 ? rays / (ms * 1e3) : 0.0;
-}
-
 double ratio(double a, double b) { return a / std::max(b, 1e-12); }
 
 // The GPU figures: tsah_two_level_gpu_bench (GpuTwoLevelRuntime against GpuRuntime over the flat

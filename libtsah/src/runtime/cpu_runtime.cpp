@@ -264,17 +264,17 @@ void CpuRuntime::refitNode(uint32_t i) {
   refitFlatNode(tree_.frameNodes(0), i, [this](uint32_t first, uint32_t count) { return refitLeaf(first, count); });
 }
 
-void CpuRuntime::refitAndWoop() {
+void CpuRuntime::refitAndWoop(bool movingOnly) {
   const auto parallel = [this](std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) {
     parallelFor(n, 1, body);
   };
   if (wide4_) {
-    wide4_->refit(positions_.data(), parallel);
+    movingOnly ? wide4_->refitMoving(positions_.data(), parallel) : wide4_->refit(positions_.data(), parallel);
     view4_ = wide4_->view(indices_.data(), positions_.data());
     return;
   }
   if (wide8_) {
-    wide8_->refit(positions_.data(), parallel);
+    movingOnly ? wide8_->refitMoving(positions_.data(), parallel) : wide8_->refit(positions_.data(), parallel);
     view8_ = wide8_->view(indices_.data(), positions_.data());
     return;
   }
@@ -282,13 +282,22 @@ void CpuRuntime::refitAndWoop() {
     tree_.rootBoxes[0] = refitLeaf(0, tree_.rootCount);
     return;
   }
-  parallelFor(subtreeTasks_.size(), 1, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t t = begin; t < end; ++t) {
-      const auto [root, stop] = subtreeTasks_[t];
-      for (uint32_t i = stop; i-- > root;) refitNode(i);  // children (larger indices) first
-    }
-  });
-  for (uint32_t i : topNodes_) refitNode(i);
+  if (movingOnly) {
+    const detail::MovingRefitPlan& plan = *movingPlan_;
+    parallelFor(plan.taskCount(), 1, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t t = begin; t < end; ++t)
+        for (uint32_t k = plan.taskStart[t + 1]; k-- > plan.taskStart[t];) refitNode(plan.taskNodes[k]);
+    });
+    for (uint32_t i : plan.top) refitNode(i);
+  } else {
+    parallelFor(subtreeTasks_.size(), 1, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t t = begin; t < end; ++t) {
+        const auto [root, stop] = subtreeTasks_[t];
+        for (uint32_t i = stop; i-- > root;) refitNode(i);  // children (larger indices) first
+      }
+    });
+    for (uint32_t i : topNodes_) refitNode(i);
+  }
   tree_.rootBoxes[0] = tree_.nodes[0].bounds();
 }
 
@@ -310,34 +319,7 @@ void CpuRuntime::update(std::span<const float> positions) {
                             describeBadCoordinate(positions[3 * std::size_t(v) + bad]));
   for (uint32_t v : movingVertices_)
     std::copy_n(positions.begin() + 3 * std::ptrdiff_t(v), 3, positions_.begin() + 3 * std::ptrdiff_t(v));
-  refitMovingAndWoop();
-}
-
-void CpuRuntime::refitMovingAndWoop() {
-  const auto parallel = [this](std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) {
-    parallelFor(n, 1, body);
-  };
-  if (wide4_) {
-    wide4_->refitMoving(positions_.data(), parallel);
-    view4_ = wide4_->view(indices_.data(), positions_.data());
-    return;
-  }
-  if (wide8_) {
-    wide8_->refitMoving(positions_.data(), parallel);
-    view8_ = wide8_->view(indices_.data(), positions_.data());
-    return;
-  }
-  if (tree_.interiorCount == 0) {
-    tree_.rootBoxes[0] = refitLeaf(0, tree_.rootCount);
-    return;
-  }
-  const detail::MovingRefitPlan& plan = *movingPlan_;
-  parallelFor(plan.taskCount(), 1, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t t = begin; t < end; ++t)
-      for (uint32_t k = plan.taskStart[t + 1]; k-- > plan.taskStart[t];) refitNode(plan.taskNodes[k]);
-  });
-  for (uint32_t i : plan.top) refitNode(i);
-  tree_.rootBoxes[0] = tree_.nodes[0].bounds();
+  refitAndWoop(true);
 }
 
 CpuRuntime::RebuildTimings CpuRuntime::rebuild(std::span<const float> positions, const TreeBuilder& builder) {

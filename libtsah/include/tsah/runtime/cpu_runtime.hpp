@@ -178,8 +178,8 @@ class CpuRuntime {
   BvhView binaryView() const;
   void checkPositions(std::span<const float> positions) const;  // count and coordinates (update's errors)
   void setPositions(std::span<const float> positions);
-  void refitAndWoop();
-  void refitMovingAndWoop();
+  // movingOnly: the nodes of the moving plan only (Config::movingVertices, after a full refit).
+  void refitAndWoop(bool movingOnly = false);
   void planMovingRefit();  // movingPlan_ for tree_ (with movingVertices_)
   void clearShutter();
   void refitNode(uint32_t node);
