@@ -54,17 +54,23 @@ void checkTypestr(const std::string& got, const std::string& name, const std::ve
   throw ArgumentTypeError(name + ": expected a device array of typestr " + wanted + ", got '" + got + "'");
 }
 
+// The interfaces read in the current InterfaceReadScope (null outside one): per object, its
+// interface or a null object when it has none. The objects are the call's arguments, alive for it.
+thread_local std::vector<std::pair<PyObject*, py::object>>* interfaceReads = nullptr;
+
 // obj.__cuda_array_interface__, or a null object when obj has none (reading it failed: torch raises
 // AttributeError for a CPU tensor; hasattr's answer). Read once per call: torch builds the dict
 // anew, in Python, at every access.
 py::object cudaArrayInterfaceOf(py::handle obj) {
   if (py::isinstance<py::array>(obj)) return {};
+  if (interfaceReads)
+    for (const auto& [read, value] : *interfaceReads)
+      if (read == obj.ptr()) return value;
   PyObject* value = PyObject_GetAttrString(obj.ptr(), "__cuda_array_interface__");
-  if (!value) {
-    PyErr_Clear();
-    return {};
-  }
-  return py::reinterpret_steal<py::object>(value);
+  if (!value) PyErr_Clear();
+  py::object result = value ? py::reinterpret_steal<py::object>(value) : py::object();
+  if (interfaceReads) interfaceReads->emplace_back(obj.ptr(), result);
+  return result;
 }
 
 DeviceArrayArg fromCudaArrayInterface(const py::object& cai, const std::string& name, bool writable) {
@@ -174,6 +180,16 @@ std::size_t DeviceArrayArg::size() const {
 }
 
 bool isDeviceArray(py::handle obj) { return cudaArrayInterfaceOf(obj) || isDlpackDeviceArray(obj); }
+
+InterfaceReadScope::InterfaceReadScope() : outermost_(interfaceReads == nullptr) {
+  if (outermost_) interfaceReads = new std::vector<std::pair<PyObject*, py::object>>();
+}
+
+InterfaceReadScope::~InterfaceReadScope() {
+  if (!outermost_) return;
+  delete interfaceReads;  // with the GIL held: the scope lives in a binding's body, outside any release
+  interfaceReads = nullptr;
+}
 
 DeviceArrayArg checkedDeviceArray(py::handle obj, const std::string& name, const std::vector<std::string>& typestrs,
                                   bool writable, int device, std::uintptr_t consumerStream) {

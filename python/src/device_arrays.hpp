@@ -50,6 +50,20 @@ inline constexpr uint8_t kInt = 0, kUInt = 1, kFloat = 2, kBool = 6;
 // CUDA device (kDLCUDA, kDLCUDAManaged). Host arrays (numpy, kDLCPU, kDLCUDAHost) are not.
 bool isDeviceArray(py::handle obj);
 
+// Within its scope (one call of the module, on one thread), each argument's
+// __cuda_array_interface__ is read once and kept: torch builds it anew, in Python, at every access,
+// and a call asks for it to tell device arrays apart and again to read them.
+class InterfaceReadScope {
+ public:
+  InterfaceReadScope();
+  ~InterfaceReadScope();
+  InterfaceReadScope(const InterfaceReadScope&) = delete;
+  InterfaceReadScope& operator=(const InterfaceReadScope&) = delete;
+
+ private:
+  bool outermost_ = false;
+};
+
 // A caller's device array, never copied: its pointer, C-contiguous shape and numpy typestr.
 struct DeviceArrayArg {
   std::uintptr_t data = 0;

@@ -209,10 +209,14 @@ Array<float> checkedPositions(py::handle positions, uint32_t vertices) {
 // refit's argument: a time (a Python or numpy scalar number) or vertex positions (an array). torch
 // and CuPy arrays implement the number protocol too (float(tensor)): they are positions.
 bool isTime(py::handle value) {
-  if (py::isinstance<py::array>(value) || py::isinstance<py::bool_>(value)) return false;
+  if (py::isinstance<py::bool_>(value)) return false;
+  if (PyFloat_Check(value.ptr()) || PyLong_Check(value.ptr())) return true;  // without attribute lookups
+  if (py::isinstance<py::array>(value)) return false;
   if (py::isinstance(value, py::module_::import("numpy").attr("number"))) return true;
-  return PyNumber_Check(value.ptr()) != 0 && !py::hasattr(value, "__cuda_array_interface__") &&
-         !py::hasattr(value, "__dlpack__");
+  // The protocols looked up on the class: reading torch's interface on the tensor builds it.
+  const py::handle type = reinterpret_cast<PyObject*>(Py_TYPE(value.ptr()));
+  return PyNumber_Check(value.ptr()) != 0 && !py::hasattr(type, "__cuda_array_interface__") &&
+         !py::hasattr(type, "__dlpack__") && !py::hasattr(value, "__cuda_array_interface__");
 }
 
 // Wall time of the C++ batch call in its scope (the CPU runtime's RayPassStats: the batch call
@@ -351,6 +355,7 @@ class GpuTracer {
     refitTime(animation.startTime());
   }
   void refit(py::handle timeOrPositions, py::handle stream, bool wait) {
+    const InterfaceReadScope reads;
     if (!isTime(timeOrPositions)) return refitPositions(timeOrPositions, stream, wait);
     refitTime(timeOrPositions.cast<double>());
   }
@@ -366,6 +371,7 @@ class GpuTracer {
     lastUpdate_ = runtime_->update(std::span<const float>(positions.data(), std::size_t(positions.size())));
   }
   py::object trace(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out, py::handle stream) {
+    const InterfaceReadScope reads;
     if (isDeviceArray(o) || isDeviceArray(d)) return traceDevice(o, d, tmin, tmax, out, streamArgument(stream));
     std::vector<py::ssize_t> batch;
     const RayBatch rays = makeRays(o, d, tmin, tmax, batch);
@@ -378,6 +384,7 @@ class GpuTracer {
     return hitArray(hits, result);
   }
   py::object occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out, py::handle stream) {
+    const InterfaceReadScope reads;
     if (isDeviceArray(o) || isDeviceArray(d)) return occludedDevice(o, d, tmin, tmax, out, streamArgument(stream));
     std::vector<py::ssize_t> batch;
     const RayBatch rays = makeRays(o, d, tmin, tmax, batch);

@@ -436,6 +436,31 @@ def device_input(a, protocol):
     return d if protocol == "cuda_array_interface" else DlpackOnly(d)
 
 
+class CountedDeviceArray:
+    """A device array whose __cuda_array_interface__ is built at each access (as torch's) and counted."""
+    def __init__(self, a):
+        self.a, self.reads = a, 0
+
+    @property
+    def __cuda_array_interface__(self):
+        self.reads += 1
+        return self.a.__cuda_array_interface__
+
+
+@needs_device_arrays
+def test_a_call_reads_each_device_arrays_interface_once(wave):
+    animation, tree = wave
+    gpu = tsah.GpuRuntime(tree, animation)
+    positions = CountedDeviceArray(to_device(animation.positions_at(0.5).astype(np.float32)))
+    gpu.refit(positions)  # told apart from a time, checked, read: one access
+    assert positions.reads == 1
+    o, d = rays(animation, 0.5, (100,))
+    o, d = CountedDeviceArray(to_device(o)), CountedDeviceArray(to_device(d))
+    gpu.trace(o, d)
+    gpu.occluded(o, d)
+    assert (o.reads, d.reads) == (2, 2)
+
+
 @needs_device_arrays
 @pytest.mark.parametrize("protocol", PROTOCOLS)
 def test_device_refit_and_trace_equal_the_host_path(wave, protocol):
