@@ -10,24 +10,25 @@
 
 namespace tsah::detail {
 
-// About 8 disjoint subtrees per thread (each a contiguous index range, refitted in parallel,
-// larger indices first; none split below minGrain nodes) and the nodes above them, in descending
-// order (refitted afterwards on one thread, children before parents). interiorChildren(i, push)
-// calls push(c) for every interior child c of node i. minGrain: 64 for a binary tree; a wide
-// node holds several binary nodes' work, so wide trees pass less.
-template <class InteriorChildren>
-void planParallelRefit(const std::vector<uint32_t>& ends, uint32_t threads, const InteriorChildren& interiorChildren,
+// About 8 disjoint subtrees per thread, balanced by weight(i) (the work in node i's subtree; each
+// a contiguous index range, refitted in parallel, larger indices first; none split below minGrain)
+// out of `total`, and the nodes above them, in descending order (refitted afterwards on one thread,
+// children before parents). interiorChildren(i, push) calls push(c) for every interior child c of
+// node i.
+template <class InteriorChildren, class Weight>
+void planWeightedRefit(const std::vector<uint32_t>& ends, uint64_t total, uint32_t threads,
+                       const InteriorChildren& interiorChildren, const Weight& weight,
                        std::vector<std::pair<uint32_t, uint32_t>>& subtrees, std::vector<uint32_t>& top,
-                       uint32_t minGrain = 64) {
+                       uint32_t minGrain) {
   subtrees.clear();
   top.clear();
   if (ends.empty()) return;
-  const uint32_t grain = std::max<uint32_t>(minGrain, uint32_t(ends.size()) / (8 * std::max(1u, threads)));
+  const uint64_t grain = std::max<uint64_t>(minGrain, total / (8 * std::max(1u, threads)));
   std::vector<uint32_t> stack{0};
   while (!stack.empty()) {
     const uint32_t i = stack.back();
     stack.pop_back();
-    if (ends[i] - i <= grain) {
+    if (weight(i) <= grain) {
       subtrees.push_back({i, ends[i]});
       continue;
     }
@@ -37,17 +38,38 @@ void planParallelRefit(const std::vector<uint32_t>& ends, uint32_t threads, cons
   std::sort(top.begin(), top.end(), std::greater<>());
 }
 
-// The part of a plan above that must run when only some subtrees move (nodeMoves[i] != 0: node i's
-// subtree holds a moving triangle): per planned subtree that moves, its moving nodes in ascending
-// order (taskNodes[taskStart[t]] up to taskNodes[taskStart[t + 1]]), and the moving nodes above
-// the subtrees, in the plan's descending order. A node that does not move keeps its boxes.
+// The full refit's plan: weighted by subtree size (minGrain: 64 for a binary tree; a wide node holds
+// several binary nodes' work, so wide trees pass less).
+template <class InteriorChildren>
+void planParallelRefit(const std::vector<uint32_t>& ends, uint32_t threads, const InteriorChildren& interiorChildren,
+                       std::vector<std::pair<uint32_t, uint32_t>>& subtrees, std::vector<uint32_t>& top,
+                       uint32_t minGrain = 64) {
+  planWeightedRefit(
+      ends, ends.size(), threads, interiorChildren, [&](uint32_t i) { return uint64_t(ends[i] - i); }, subtrees, top,
+      minGrain);
+}
+
+// The refit of the moving nodes only (nodeMoves[i] != 0: node i's subtree holds a moving
+// triangle), planned by their count, so that moving parts gathered in one region of the tree still
+// spread over the threads: per planned subtree that moves, its moving nodes in ascending order
+// (taskNodes[taskStart[t]] up to taskNodes[taskStart[t + 1]]), and the moving nodes above the
+// subtrees, in descending order. A node that does not move keeps its boxes.
 struct MovingRefitPlan {
   std::vector<uint32_t> taskNodes, taskStart{0}, top;
   std::size_t taskCount() const { return taskStart.size() - 1; }
 };
 
-inline MovingRefitPlan planMovingRefit(const std::vector<std::pair<uint32_t, uint32_t>>& subtrees,
-                                       const std::vector<uint32_t>& top, const std::vector<uint8_t>& nodeMoves) {
+template <class InteriorChildren>
+MovingRefitPlan planMovingRefit(const std::vector<uint32_t>& ends, uint32_t threads,
+                                const InteriorChildren& interiorChildren, const std::vector<uint8_t>& nodeMoves,
+                                uint32_t minGrain) {
+  std::vector<uint32_t> movingBefore(nodeMoves.size() + 1, 0);  // moving nodes below index i
+  for (std::size_t i = 0; i < nodeMoves.size(); ++i) movingBefore[i + 1] = movingBefore[i] + (nodeMoves[i] ? 1 : 0);
+  std::vector<std::pair<uint32_t, uint32_t>> subtrees;
+  std::vector<uint32_t> top;
+  planWeightedRefit(
+      ends, movingBefore.back(), threads, interiorChildren,
+      [&](uint32_t i) { return uint64_t(movingBefore[ends[i]] - movingBefore[i]); }, subtrees, top, minGrain);
   MovingRefitPlan plan;
   for (const auto& [root, end] : subtrees) {
     for (uint32_t i = root; i < end; ++i)

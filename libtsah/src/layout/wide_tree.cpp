@@ -25,6 +25,15 @@ bool usedSlot(const WideSoaNode<N>& node, uint32_t c) {
   return node.ref[c] != 0 || node.count[c] != 0;
 }
 
+// The refit planners' view of the tree: push(c) for every interior child c of node i.
+template <uint32_t N>
+auto interiorChildrenOf(const std::vector<WideSoaNode<N>>& nodes) {
+  return [&nodes](uint32_t i, auto push) {
+    for (uint32_t c = 0; c < N; ++c)
+      if (usedSlot(nodes[i], c) && !isLeafRef(nodes[i].ref[c])) push(static_cast<uint32_t>(nodes[i].ref[c]));
+  };
+}
+
 }  // namespace
 
 template <uint32_t N>
@@ -73,13 +82,10 @@ WideTree<N>::WideTree(const WideBvh& w, std::span<const uint32_t> indices, uint3
       node.count[c] = child.isLeaf() ? child.count : 0;
     }
   }
-  detail::planParallelRefit(
-      wideSubtreeEnds(w), threads,
-      [&](uint32_t i, auto push) {
-        for (uint32_t c = 0; c < N; ++c)
-          if (usedSlot(nodes_[i], c) && !isLeafRef(nodes_[i].ref[c])) push(static_cast<uint32_t>(nodes_[i].ref[c]));
-      },
-      subtreeTasks_, topNodes_, 64 / N);  // a wide node: about N / 2 binary nodes' triangles and boxes
+  threads_ = threads;
+  subtreeEnds_ = wideSubtreeEnds(w);
+  detail::planParallelRefit(subtreeEnds_, threads, interiorChildrenOf(nodes_), subtreeTasks_, topNodes_,
+                            64 / N);  // a wide node: about N / 2 binary nodes' triangles and boxes
 }
 
 template <uint32_t N>
@@ -181,7 +187,8 @@ void WideTree<N>::setMovingVertices(std::span<const uint8_t> vertexMoves) {
       nodeMoves[i] = isLeafRef(node.ref[c]) ? leafMoves(node.ref[c], node.count[c])
                                             : nodeMoves[static_cast<uint32_t>(node.ref[c])];
   }
-  moving_ = std::make_shared<const detail::MovingRefitPlan>(detail::planMovingRefit(subtreeTasks_, topNodes_, nodeMoves));
+  moving_ = std::make_shared<const detail::MovingRefitPlan>(
+      detail::planMovingRefit(subtreeEnds_, threads_, interiorChildrenOf(nodes_), nodeMoves, 16 / N));
 }
 
 template <uint32_t N>

@@ -19,6 +19,9 @@ namespace tsah {
 
 namespace {
 
+// The smallest task of a moving-only refit, in moving nodes.
+constexpr uint32_t kMovingGrain = 16;
+
 double msSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
@@ -218,16 +221,16 @@ void CpuRuntime::setTree(FlatBvh tree) {
     topNodes_.clear();
     return;
   }
-  detail::planParallelRefit(
-      subtreeEnds(tree_), threads_->count,
-      [&](uint32_t i, auto push) {
-        for (int32_t ref : {tree_.nodes[i].ref0, tree_.nodes[i].ref1})
-          if (!isLeafRef(ref)) push(static_cast<uint32_t>(ref));
-      },
-      subtreeTasks_, topNodes_);
+  const std::vector<uint32_t> ends = subtreeEnds(tree_);
+  const auto interiorChildren = [&](uint32_t i, auto push) {
+    for (int32_t ref : {tree_.nodes[i].ref0, tree_.nodes[i].ref1})
+      if (!isLeafRef(ref)) push(static_cast<uint32_t>(ref));
+  };
+  detail::planParallelRefit(ends, threads_->count, interiorChildren, subtreeTasks_, topNodes_);
   if (!vertexMoves_.empty())
     movingPlan_ = std::make_shared<const detail::MovingRefitPlan>(detail::planMovingRefit(
-        subtreeTasks_, topNodes_, findMovingParts(tree_, indices_, movingVertices_, vertexCount_).nodeMoves));
+        ends, threads_->count, interiorChildren,
+        findMovingParts(tree_, indices_, movingVertices_, vertexCount_).nodeMoves, kMovingGrain));
 }
 
 void CpuRuntime::checkPositions(std::span<const float> positions) const {

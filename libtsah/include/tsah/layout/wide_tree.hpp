@@ -94,6 +94,8 @@ class WideTree {
   Aabb rootBox_;
   std::vector<std::pair<uint32_t, uint32_t>> subtreeTasks_;
   std::vector<uint32_t> topNodes_;
+  std::vector<uint32_t> subtreeEnds_;  // per node, one past its subtree's last node (pre-order)
+  uint32_t threads_ = 1;               // the workers the refit plans are for
   std::shared_ptr<const detail::MovingRefitPlan> moving_;  // set by setMovingVertices
 };
 
