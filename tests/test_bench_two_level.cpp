@@ -83,12 +83,8 @@ TEST(BenchEmbreeInstanced, FindsWhatTheTwoLevelRuntimeFindsAtEveryTime) {
 
 TEST(BenchEmbreeInstanced, RefitsOnlyThePosesWhoseLocalTimeChanged) {
   const fs::path dir = tsah::test::scratchDir();
-  const anim::Animation wave = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 200, 5, 2);
-  anim::saveTanim(wave, (dir / "wave.tanim").string());
-  tsah::test::writeText(dir / "s.json", R"({"fps": 4, "objects": [{"file": "wave.tanim", "instances": [
-    {"path": [{"time": 0}, {"time": 8, "translate": [5, 0, 0], "rotate": [0, 180, 0]}]},
-    {"offset": 1, "transform": {"scale": [-1, 1, 1]}}]}]})");
-  const tsah::TwoLevelScene s = tsah::loadTwoLevelScene((dir / "s.json").string(), {}, tsah::test::smallTwoLevelOptions());
+  const tsah::TwoLevelScene s =
+      tsah::loadTwoLevelScene(tsah::test::writeRigidPathScene(dir).string(), {}, tsah::test::smallTwoLevelOptions());
   tsah::bench::EmbreeInstancedPeer embree(s, firstTriangles(s), 2, serial);
   embree.build(0.0);
   embree.update(3.0);
@@ -103,11 +99,9 @@ TEST(BenchEmbreeInstanced, RefitsOnlyThePosesWhoseLocalTimeChanged) {
 
 TEST(BenchEmbreeInstanced, AnInstanceFlattenedByItsPathIsNotHitThenAndIsAfter) {
   const fs::path dir = tsah::test::scratchDir();
-  tsah::test::writeText(dir / "tri.obj", "v 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\n");
-  // The scale goes from 1 to -1 in x: at t = 1 the instance is flat (a singular world transform).
-  tsah::test::writeText(dir / "s.json", R"({"fps": 2, "objects": [{"file": "tri.obj",
-    "path": [{"time": 0}, {"time": 2, "scale": [-1, 1, 1]}]}]})");
-  const tsah::TwoLevelScene s = tsah::loadTwoLevelScene((dir / "s.json").string(), {}, tsah::test::smallTwoLevelOptions());
+  // At t = 1 the instance is flat (a singular world transform).
+  const tsah::TwoLevelScene s =
+      tsah::loadTwoLevelScene(tsah::test::writeFlattenedTriangleScene(dir).string(), {}, tsah::test::smallTwoLevelOptions());
   tsah::bench::EmbreeInstancedPeer embree(s, firstTriangles(s), 2, serial);
   embree.build(0.0);
   tsah::Ray across;  // along x through (x, 1/3, 1/3)

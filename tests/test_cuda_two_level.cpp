@@ -155,12 +155,8 @@ TEST_F(CudaTwoLevel, AFrameWithOnlyRigidMotionRefitsNoBlas) {
 TEST(CudaTwoLevelRigid, OnlyPathsAndHeldPosesRefitNothing) {
   REQUIRE_GPU();
   const fs::path dir = tsah::test::scratchDir();
-  const anim::Animation wave = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 200, 5, 2);
-  anim::saveTanim(wave, (dir / "wave.tanim").string());
-  tsah::test::writeText(dir / "s.json", R"({"fps": 4, "objects": [{"file": "wave.tanim", "instances": [
-    {"path": [{"time": 0}, {"time": 8, "translate": [5, 0, 0], "rotate": [0, 180, 0]}]},
-    {"offset": 1, "transform": {"scale": [-1, 1, 1]}}]}]})");
-  const tsah::TwoLevelScene s = tsah::loadTwoLevelScene((dir / "s.json").string(), {}, tsah::test::smallTwoLevelOptions());
+  const tsah::TwoLevelScene s =
+      tsah::loadTwoLevelScene(tsah::test::writeRigidPathScene(dir).string(), {}, tsah::test::smallTwoLevelOptions());
   tsah::TwoLevelRuntime cpu(s);
   tsah::cuda::GpuTwoLevelRuntime gpu(s);
   EXPECT_EQ(gpu.updateAt(3.0).blasRefits, 2u);

@@ -48,6 +48,27 @@ inline tsah::TreeOptions smallTwoLevelOptions() {
   return options;
 }
 
+// Rigid motion only, after the animation ends: two instances of a generated wave (keyframes 0..4,
+// 4 fps), one moved along a keyed path to t = 8 (translated and turned), one offset by 1 and
+// mirrored; both poses reach their last frame by t = 5 and hold it while the path moves on.
+inline std::filesystem::path writeRigidPathScene(const std::filesystem::path& dir) {
+  const anim::Animation wave = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 200, 5, 2);
+  anim::saveTanim(wave, (dir / "wave.tanim").string());
+  tsah::test::writeText(dir / "s.json", R"({"fps": 4, "objects": [{"file": "wave.tanim", "instances": [
+    {"path": [{"time": 0}, {"time": 8, "translate": [5, 0, 0], "rotate": [0, 180, 0]}]},
+    {"offset": 1, "transform": {"scale": [-1, 1, 1]}}]}]})");
+  return dir / "s.json";
+}
+
+// One triangle, (1,0,0) (0,1,0) (0,0,1), whose path scales x from 1 to -1 over t = 0..2 (2 fps): at
+// t = 1 the instance is flat (a singular world transform), at t = 2 mirrored.
+inline std::filesystem::path writeFlattenedTriangleScene(const std::filesystem::path& dir) {
+  tsah::test::writeText(dir / "tri.obj", "v 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\n");
+  tsah::test::writeText(dir / "s.json", R"({"fps": 2, "objects": [{"file": "tri.obj",
+    "path": [{"time": 0}, {"time": 2, "scale": [-1, 1, 1]}]}]})");
+  return dir / "s.json";
+}
+
 // The TLAS box holding each instance (its leaf's box in the parent node, or the root box).
 inline std::vector<tsah::Aabb> tlasLeafBoxes(const tsah::FlatBvh& tlas) {
   std::vector<tsah::Aabb> out(tlas.triangleCount());
