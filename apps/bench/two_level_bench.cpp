@@ -198,6 +198,9 @@ json runTwoLevelComparison(const SceneSource& scene, const anim::Animation& bake
 #endif
 
   std::vector<float> positions = baked.positionsAt(baked.startTime());  // static vertices once
+  // The flat tree's first, full refit, untimed as the two-level structure and Embree's scenes are
+  // built before the frames: each frame then refits what moves (CpuRuntime::Config::movingVertices).
+  flat->update(positions);
   RenderSettings settings = setup.settings;
   for (std::size_t f = 0; f < setup.times.size(); ++f) {
     reportFrame(setup, "flat, two-level, Embree instancing", f);
