@@ -168,9 +168,14 @@ void WideTree<N>::refitTo(const Target& target, const ParallelFor& parallelFor) 
 }
 
 template <uint32_t N>
-void WideTree<N>::setMovingVertices(std::span<const uint8_t> vertexMoves) {
+void WideTree<N>::setMovingVertices(std::span<const uint32_t> movingVertices, uint32_t vertexCount) {
+  std::vector<uint8_t> vertexMoves(vertexCount, 0);
+  for (uint32_t v : movingVertices) {
+    if (v >= vertexCount) throw tsah::DataError("wide tree: a moving vertex id is out of range");
+    vertexMoves[v] = 1;
+  }
   for (uint32_t v : slotVertices_)
-    if (v >= vertexMoves.size()) throw tsah::DataError("wide tree: a triangle's vertex has no moving flag");
+    if (v >= vertexCount) throw tsah::DataError("wide tree: a triangle refers to a vertex out of range");
   const auto leafMoves = [&](int32_t ref, uint32_t count) {
     const uint32_t firstPacket = leafFirstSlot(ref);
     for (uint32_t k = 0; k < count; ++k) {

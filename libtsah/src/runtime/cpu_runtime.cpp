@@ -71,14 +71,12 @@ CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint3
   for (uint32_t v : indices_)
     if (v >= vertexCount_) throw tsah::DataError("runtime: a triangle refers to a vertex out of range");
   if (config.movingVertices) {
-    movingVertices_ = *config.movingVertices;
-    vertexMoves_.assign(vertexCount_, 0);
-    for (std::size_t k = 0; k < movingVertices_.size(); ++k) {
-      if (movingVertices_[k] >= vertexCount_ || (k > 0 && movingVertices_[k] <= movingVertices_[k - 1]))
+    const std::vector<uint32_t>& ids = *config.movingVertices;
+    for (std::size_t k = 0; k < ids.size(); ++k)
+      if (ids[k] >= vertexCount_ || (k > 0 && ids[k] <= ids[k - 1]))
         throw tsah::ConfigError("runtime: the moving vertices must be ascending ids below the vertex count " +
                                 std::to_string(vertexCount_));
-      vertexMoves_[movingVertices_[k]] = 1;
-    }
+    movingVertices_ = ids;
   }
   setTree(topologyOf(tree));
   positions_.assign(std::size_t(vertexCount_) * 3, 0.0f);
@@ -113,10 +111,10 @@ void CpuRuntime::setWideTree(const Bvh& binary, bool reportCosts) {
   info_.depth = w.depth();
   if (info_.layout == Layout::Bvh4) {
     wide4_ = std::make_shared<WideTree<4>>(w, indices_, threads_->count, info_.isa);
-    if (!vertexMoves_.empty()) wide4_->setMovingVertices(vertexMoves_);
+    if (movingVertices_) wide4_->setMovingVertices(*movingVertices_, vertexCount_);
   } else {
     wide8_ = std::make_shared<WideTree<8>>(w, indices_, threads_->count, info_.isa);
-    if (!vertexMoves_.empty()) wide8_->setMovingVertices(vertexMoves_);
+    if (movingVertices_) wide8_->setMovingVertices(*movingVertices_, vertexCount_);
   }
   staticRefitted_ = false;
 }
@@ -227,10 +225,10 @@ void CpuRuntime::setTree(FlatBvh tree) {
       if (!isLeafRef(ref)) push(static_cast<uint32_t>(ref));
   };
   detail::planParallelRefit(ends, threads_->count, interiorChildren, subtreeTasks_, topNodes_);
-  if (!vertexMoves_.empty())
+  if (movingVertices_)
     movingPlan_ = std::make_shared<const detail::MovingRefitPlan>(detail::planMovingRefit(
         ends, threads_->count, interiorChildren,
-        findMovingParts(tree_, indices_, movingVertices_, vertexCount_).nodeMoves, kMovingGrain));
+        findMovingParts(tree_, indices_, *movingVertices_, vertexCount_).nodeMoves, kMovingGrain));
 }
 
 void CpuRuntime::checkPositions(std::span<const float> positions) const {
@@ -306,21 +304,21 @@ void CpuRuntime::refitAndWoop(bool movingOnly) {
 
 void CpuRuntime::update(std::span<const float> positions) {
   // The moving parts only when the last full refit is this tree's, instant (not a blurred frame's keys).
-  lastUpdateMovingOnly_ = staticRefitted_ && !blurred() && !vertexMoves_.empty();
+  lastUpdateMovingOnly_ = staticRefitted_ && !blurred() && movingVertices_.has_value();
   if (!lastUpdateMovingOnly_) {
     checkPositions(positions);
     clearShutter();
     positions_.assign(positions.begin(), positions.end());
     refitAndWoop();
-    staticRefitted_ = !vertexMoves_.empty();
+    staticRefitted_ = movingVertices_.has_value();
     return;
   }
   if (positions.size() != positions_.size()) checkPositions(positions);  // the count's error
-  for (uint32_t v : movingVertices_)
+  for (uint32_t v : *movingVertices_)
     if (const std::size_t bad = firstBadCoordinate(positions.subspan(3 * std::size_t(v), 3)); bad < 3)
       throw tsah::DataError("runtime: vertex " + std::to_string(v) + " " +
                             describeBadCoordinate(positions[3 * std::size_t(v) + bad]));
-  for (uint32_t v : movingVertices_)
+  for (uint32_t v : *movingVertices_)
     std::copy_n(positions.begin() + 3 * std::ptrdiff_t(v), 3, positions_.begin() + 3 * std::ptrdiff_t(v));
   refitAndWoop(true);
 }

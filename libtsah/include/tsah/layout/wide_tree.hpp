@@ -43,10 +43,10 @@ class WideTree {
   // last refit()'s rows (a blurred frame does not read them).
   void refitKey(const float* positions, KeyVertexPacket<N>* keyVertices, const ParallelFor& parallelFor);
 
-  // Declares which vertices may move (vertexMoves[v] != 0, one entry per vertex the triangles
-  // use); refitMoving() then refits only the nodes whose subtree holds a triangle with such a vertex.
-  // Throws tsah::DataError when a triangle's vertex has no entry.
-  void setMovingVertices(std::span<const uint8_t> vertexMoves);
+  // Declares which vertices may move (ascending ids below vertexCount, as tsah::findMovingParts
+  // takes them); refitMoving() then refits only the nodes whose subtree holds a triangle with such a
+  // vertex. Throws tsah::DataError when an id or a triangle's vertex is at or past vertexCount.
+  void setMovingVertices(std::span<const uint32_t> movingVertices, uint32_t vertexCount);
   // This frame's vertices when, since the last refit(), only the declared moving vertices changed:
   // the boxes and Woop packets of every node that moves; the others keep the last refit's, so the
   // tree equals refit()'s bit for bit. Without setMovingVertices: refit().

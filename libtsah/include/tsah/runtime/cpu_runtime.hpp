@@ -180,7 +180,6 @@ class CpuRuntime {
   void setPositions(std::span<const float> positions);
   // movingOnly: the nodes of the moving plan only (Config::movingVertices, after a full refit).
   void refitAndWoop(bool movingOnly = false);
-  void planMovingRefit();  // movingPlan_ for tree_ (with movingVertices_)
   void clearShutter();
   void refitNode(uint32_t node);
   Aabb refitLeaf(uint32_t firstSlot, uint32_t count);
@@ -196,11 +195,10 @@ class CpuRuntime {
   // them (descending index, children before parents) on one thread.
   std::vector<std::pair<uint32_t, uint32_t>> subtreeTasks_;
   std::vector<uint32_t> topNodes_;
-  // Config::movingVertices (ids, and a flag per vertex; empty when unset), the binary tree's moving
-  // nodes (the wide trees keep their own), and whether the last full refit is the current tree's
-  // and instant (then an update may refit the moving parts only).
-  std::vector<uint32_t> movingVertices_;
-  std::vector<uint8_t> vertexMoves_;
+  // Config::movingVertices (checked), the binary tree's moving nodes (the wide trees keep their
+  // own), and whether the last full refit is the current tree's and instant (then an update may
+  // refit the moving parts only).
+  std::optional<std::vector<uint32_t>> movingVertices_;
   std::shared_ptr<const detail::MovingRefitPlan> movingPlan_;
   bool staticRefitted_ = false;
   bool lastUpdateMovingOnly_ = false;
