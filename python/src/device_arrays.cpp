@@ -6,6 +6,7 @@
 #include <pybind11/stl.h>
 
 #include <algorithm>
+#include <optional>
 
 namespace tsah::python {
 
@@ -163,6 +164,65 @@ DeviceArrayArg fromDlpack(py::handle obj, const std::string& name, bool writable
   return a;
 }
 
+// torch's objects that the direct read of a tensor compares with, once the caller has imported
+// torch (the module never imports it); kept for the process.
+struct TorchObjects {
+  py::handle tensor;   // torch.Tensor
+  py::handle strided;  // torch.strided
+  std::vector<std::pair<py::handle, const char*>> dtypes;  // torch.float32 -> "<f4", ...
+};
+
+const TorchObjects* torchObjects() {
+  static const TorchObjects* objects = nullptr;
+  if (objects) return objects;
+  static PyObject* const name = PyUnicode_InternFromString("torch");
+  PyObject* torch = PyImport_GetModule(name);  // a new reference; null when torch is not imported
+  if (!torch) {
+    PyErr_Clear();
+    return nullptr;
+  }
+  const py::object module = py::reinterpret_steal<py::object>(torch);
+  try {
+    auto* found = new TorchObjects;
+    found->tensor = py::object(module.attr("Tensor")).release();
+    found->strided = py::object(module.attr("strided")).release();
+    for (const auto& [dtype, typestr] : {std::pair{"float32", "<f4"}, {"int32", "<i4"}, {"uint8", "|u1"}, {"bool", "|b1"}})
+      found->dtypes.emplace_back(py::object(module.attr(dtype)).release(), typestr);
+    objects = found;
+  } catch (const py::error_already_set&) {  // torch still importing: the protocols serve this call
+    return nullptr;
+  }
+  return objects;
+}
+
+// Whether obj is exactly a torch.Tensor (subclasses may change what the protocols say).
+bool isPlainTorchTensor(py::handle obj, const TorchObjects*& torch) {
+  torch = torchObjects();
+  return torch && Py_TYPE(obj.ptr()) == reinterpret_cast<PyTypeObject*>(torch->tensor.ptr());
+}
+
+// A CUDA torch.Tensor read through the tensor's own attributes instead of its
+// __cuda_array_interface__, a Python property that builds a new dict at every read (most of a
+// short call's host time). Only the plain case: strided, C-contiguous, no autograd, a dtype of the
+// table; anything else (nullopt) takes the protocols, with their checks and errors. The fields are
+// the interface's: version 2, no stream, address 0 for an empty tensor.
+std::optional<DeviceArrayArg> plainCudaTensor(py::handle obj) {
+  const TorchObjects* torch = nullptr;
+  if (!isPlainTorchTensor(obj, torch)) return std::nullopt;
+  if (!obj.attr("is_cuda").cast<bool>() || obj.attr("requires_grad").cast<bool>() ||
+      !py::object(obj.attr("layout")).is(torch->strided) || !obj.attr("is_contiguous")().cast<bool>())
+    return std::nullopt;
+  const py::object dtype = obj.attr("dtype");
+  const auto known = std::find_if(torch->dtypes.begin(), torch->dtypes.end(),
+                                  [&](const auto& entry) { return dtype.is(entry.first); });
+  if (known == torch->dtypes.end()) return std::nullopt;
+  DeviceArrayArg a;
+  a.typestr = known->second;
+  a.shape = obj.attr("shape").cast<std::vector<py::ssize_t>>();
+  a.data = a.size() ? obj.attr("data_ptr")().cast<std::uintptr_t>() : 0;
+  return a;
+}
+
 // A DLPack array on a device (not the host's memory, pinned or not).
 bool isDlpackDeviceArray(py::handle obj) {
   if (py::isinstance<py::array>(obj)) return false;
@@ -179,7 +239,11 @@ std::size_t DeviceArrayArg::size() const {
   return n;
 }
 
-bool isDeviceArray(py::handle obj) { return cudaArrayInterfaceOf(obj) || isDlpackDeviceArray(obj); }
+bool isDeviceArray(py::handle obj) {
+  const TorchObjects* torch = nullptr;
+  if (isPlainTorchTensor(obj, torch)) return obj.attr("is_cuda").cast<bool>();
+  return cudaArrayInterfaceOf(obj) || isDlpackDeviceArray(obj);
+}
 
 InterfaceReadScope::InterfaceReadScope() : outermost_(interfaceReads == nullptr) {
   if (outermost_) interfaceReads = new std::vector<std::pair<PyObject*, py::object>>();
@@ -193,6 +257,10 @@ InterfaceReadScope::~InterfaceReadScope() {
 
 DeviceArrayArg checkedDeviceArray(py::handle obj, const std::string& name, const std::vector<std::string>& typestrs,
                                   bool writable, int device, std::uintptr_t consumerStream) {
+  if (std::optional<DeviceArrayArg> tensor = plainCudaTensor(obj)) {
+    checkTypestr(tensor->typestr, name, typestrs);
+    return std::move(*tensor);
+  }
   const py::object cai = cudaArrayInterfaceOf(obj);
   if (!cai && !isDlpackDeviceArray(obj))
     throw ArgumentTypeError(name + ": expected a CUDA device array (__cuda_array_interface__ or DLPack), got " +
@@ -206,6 +274,7 @@ DeviceArrayArg checkedDeviceArray(py::handle obj, const std::string& name, const
 std::uintptr_t streamArgument(py::handle stream) {
   py::object value = py::reinterpret_borrow<py::object>(stream);
   if (stream.is_none()) return 0;
+  if (PyLong_CheckExact(stream.ptr())) return checkedInteger<std::uintptr_t>(value, "stream");
   if (py::hasattr(stream, "__cuda_stream__")) {
     value = stream.attr("__cuda_stream__")();
     if (!py::isinstance<py::tuple>(value) || py::len(value) != 2)

@@ -212,7 +212,8 @@ bool isTime(py::handle value) {
   if (py::isinstance<py::bool_>(value)) return false;
   if (PyFloat_Check(value.ptr()) || PyLong_Check(value.ptr())) return true;  // without attribute lookups
   if (py::isinstance<py::array>(value)) return false;
-  if (py::isinstance(value, py::module_::import("numpy").attr("number"))) return true;
+  static const py::handle numpyNumber = py::object(py::module_::import("numpy").attr("number")).release();  // kept: numpy stays loaded
+  if (py::isinstance(value, numpyNumber)) return true;
   // The protocols looked up on the class: reading torch's interface on the tensor builds it.
   const py::handle type = reinterpret_cast<PyObject*>(Py_TYPE(value.ptr()));
   return PyNumber_Check(value.ptr()) != 0 && !py::hasattr(type, "__cuda_array_interface__") &&

@@ -461,6 +461,37 @@ def test_a_call_reads_each_device_arrays_interface_once(wave):
     assert (o.reads, d.reads) == (2, 2)
 
 
+class InterfaceOnly:
+    """The same device array offering only its __cuda_array_interface__ (the protocol's read)."""
+    def __init__(self, a):
+        self.__cuda_array_interface__ = a.__cuda_array_interface__
+
+
+@pytest.mark.skipif(LIB is None or LIB.__name__ != "torch", reason="no CUDA device, or no torch")
+def test_plain_torch_tensors_are_read_as_their_interface_says():
+    """A plain CUDA tensor is read through its own attributes, not its interface (a Python property):
+    the fields must be the interface's, and every other tensor must still take the protocols."""
+    torch = LIB
+    for dtype, typestr in [(torch.float32, "<f4"), (torch.int32, "<i4"), (torch.uint8, "|u1"), (torch.bool, "|b1")]:
+        for shape in [(7, 3), (0, 3), (2, 4, 3)]:
+            tensor = torch.zeros(shape, dtype=dtype, device="cuda")
+            assert check(tensor, "a", [typestr]) == check(InterfaceOnly(tensor), "a", [typestr])
+    plain = torch.zeros((7, 3), device="cuda")
+    counted = CountedDeviceArray(plain)
+    check(counted, "a", ["<f4"])
+    assert counted.reads == 1  # a wrapper is not a plain tensor: its interface is read
+    with pytest.raises(tsah.ConfigError, match="a: must be C-contiguous"):
+        check(plain.t(), "a", ["<f4"])
+    with pytest.raises(tsah.ArgumentTypeError, match="a: expected a device array of typestr '<f4', got '<f8'"):
+        check(plain.double(), "a", ["<f4"])
+
+    class Sub(torch.Tensor):
+        pass
+    assert check(plain.as_subclass(Sub), "a", ["<f4"])["data"] == plain.data_ptr()
+    with pytest.raises(tsah.ArgumentTypeError, match="a: expected a CUDA device array"):
+        check(plain.cpu(), "a", ["<f4"])
+
+
 @needs_device_arrays
 @pytest.mark.parametrize("protocol", PROTOCOLS)
 def test_device_refit_and_trace_equal_the_host_path(wave, protocol):
