@@ -108,17 +108,12 @@ TEST_F(CudaTwoLevel, TlasBoxesContainEveryInstanceAfterEachUpdate) {
   }
 }
 
-// The block refits (shared memory, one block per pose and one for the TLAS) and the clustered walk
-// against the level-by-level global walk: the same boxes, so the same TLAS bit for bit and the same
-// hits exactly.
-class CudaTwoLevelRefits : public CudaTwoLevel, public ::testing::WithParamInterface<bool> {};
-
-TEST_P(CudaTwoLevelRefits, EqualTheGlobalWalk) {
-  tsah::cuda::GpuTwoLevelRuntime::Config tested, reference;
-  tested.blockRefits = GetParam();  // false: every pose by the clustered walk
+// The block refits (shared memory, one block per pose and one for the TLAS) against the global walk:
+// the same boxes, so the same TLAS bit for bit and the same hits exactly.
+TEST_F(CudaTwoLevel, BlockRefitsEqualTheGlobalWalk) {
+  tsah::cuda::GpuTwoLevelRuntime block(*scene);
+  tsah::cuda::GpuTwoLevelRuntime::Config reference;
   reference.blockRefits = false;
-  reference.clusterRefits = false;
-  tsah::cuda::GpuTwoLevelRuntime block(*scene, tested);
   tsah::cuda::GpuTwoLevelRuntime global(*scene, reference);
   for (const double t : {0.0, 2.0, 3.25, 7.5, 12.0}) {
     block.updateAt(t);
@@ -144,9 +139,6 @@ TEST_P(CudaTwoLevelRefits, EqualTheGlobalWalk) {
     EXPECT_GT(hits, rays.size() / 4) << "t " << t;
   }
 }
-
-INSTANTIATE_TEST_SUITE_P(BlockOrClustered, CudaTwoLevelRefits, ::testing::Bool(),
-                         [](const ::testing::TestParamInfo<bool>& p) { return p.param ? "Block" : "Clustered"; });
 
 TEST_F(CudaTwoLevel, AFrameWithOnlyRigidMotionRefitsNoBlas) {
   tsah::cuda::GpuTwoLevelRuntime gpu(*scene);

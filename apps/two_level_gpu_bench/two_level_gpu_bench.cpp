@@ -44,7 +44,6 @@ struct Options {
   bool rebuildReference = true;
   bool buildOnly = false;  // build and save (--save-tree), no device needed
   bool blockRefits = true;  // GpuTwoLevelRuntime::Config::blockRefits
-  bool clusterRefits = true;  // GpuTwoLevelRuntime::Config::clusterRefits
 };
 
 double median(std::vector<double> v) {
@@ -99,7 +98,6 @@ int run(const Options& opt) {
   if (opt.buildOnly) return 0;
   tsah::cuda::GpuTwoLevelRuntime::Config config;
   config.blockRefits = opt.blockRefits;
-  config.clusterRefits = opt.clusterRefits;
   tsah::cuda::GpuTwoLevelRuntime gpu(scene, config);
   // The flat reference: the baked scene and its tree on the GPU runtime.
   std::unique_ptr<anim::Animation> baked;
@@ -168,7 +166,6 @@ int run(const Options& opt) {
   j["image"] = {opt.width, opt.height};
   j["ao_per_hit"] = opt.ao;
   j["block_refits"] = opt.blockRefits;
-  j["cluster_refits"] = opt.clusterRefits;
   j["median"] = {{"upload_ms", median(upload)}, {"blas_refit_ms", median(blas)}, {"tlas_update_ms", median(tlas)},
                  {"update_ms", median(update)}, {"primary_ms", median(primaryMs)}, {"ao_ms", median(aoMs)},
                  {"tlas_rebuild_cpu_ms", median(rebuildMs)}, {"blas_refits", median(refits)}};
@@ -191,7 +188,7 @@ int run(const Options& opt) {
 int main(int argc, char** argv) {
   CLI::App app{"The GPU two-level runtime per frame: update (BLAS and TLAS refits) and trace times, JSON"};
   Options opt;
-  bool noRebuild = false, globalRefits = false, levelRefits = false;
+  bool noRebuild = false, globalRefits = false;
   app.add_option("scene", opt.scene, "Scene file (JSON)")->required();
   app.add_option("--tree", opt.tree, "A version 3 .tbvh built for the scene (default: build it)");
   app.add_option("--frames", opt.frames, "Frames timed, spread over the scene's time range (default 50)")
@@ -209,12 +206,9 @@ int main(int argc, char** argv) {
                  "A flat tree of the scene (tsah optimize --structure flat): traced on the same rays for comparison");
   app.add_flag("--global-refits", globalRefits,
                "Refit every tree by the global-memory walk, not in one block's shared memory (the reference)");
-  app.add_flag("--level-refits", levelRefits,
-               "Walk the global-memory refits level by level, not by clusters of three levels (the reference)");
   CLI11_PARSE(app, argc, argv);
   opt.rebuildReference = !noRebuild;
   opt.blockRefits = !globalRefits;
-  opt.clusterRefits = !levelRefits;
   try {
     return run(opt);
   } catch (const tsah::ConfigError& e) {

@@ -48,27 +48,6 @@ struct LeafRecord {
   uint32_t count;
 };
 
-// A cluster of the clustered refit walk (refit_clusters.hpp): its interior nodes are
-// nodes[firstNode, firstNode + nodeCount), children before parents, its root last; `arrivals`
-// children come from outside (leaves, roots of the clusters below); the root's box goes to
-// parentSlot (kNoParent: the tree's root) in parentCluster.
-struct RefitCluster {
-  uint32_t firstNode = 0, nodeCount = 0, arrivals = 0, parentSlot = kNoParent, parentCluster = kNoParent;
-};
-inline constexpr uint8_t kExternalChild = 0xff;
-// An interior node of a cluster: for each side, the cluster-local index of the child (an interior
-// node of the same cluster, computed before it) or kExternalChild (its box is in the node's slot).
-struct RefitClusterNode {
-  uint32_t node;
-  uint8_t local[2];
-};
-// A tree's clusters on the device (a kernel argument).
-struct RefitClusterView {
-  const RefitCluster* clusters = nullptr;
-  const RefitClusterNode* nodes = nullptr;
-  const uint32_t* leafCluster = nullptr;
-};
-
 // Which keyframes the interpolation blends: a kernel argument, which the runtime sets in its
 // captured graphs before each launch (setInterpolationParams), so one graph serves every frame.
 // Offsets are in floats.

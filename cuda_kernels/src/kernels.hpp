@@ -44,12 +44,6 @@ void launchBatchInterpolate(const float* keyframes, const uint32_t* movingIds, c
 void launchBatchRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
                       const uint32_t* slotVertices, const float* positions, uint32_t* counters, RootInfo* roots,
                       uint32_t batchCount, const BatchStrides& batch, cudaStream_t stream);
-// launchBatchRefit by clusters (refit_clusters.hpp: about a third of the walk's round trips to L2);
-// the same boxes. Counters (one per cluster) zero on entry; the walk leaves them zero.
-void launchBatchClusterRefit(GpuBvhNode* nodes, const RefitClusterView& clusters, const LeafRecord* leaves,
-                             uint32_t leafCount, const uint32_t* slotVertices, const float* positions,
-                             uint32_t* counters, RootInfo* roots, uint32_t batchCount, const BatchStrides& batch,
-                             cudaStream_t stream);
 void launchBatchSlotWoop(const uint32_t* slotVertices, uint32_t slots, const float* positions, WoopTriangle* woop,
                          uint32_t batchCount, const BatchStrides& batch, cudaStream_t stream);
 

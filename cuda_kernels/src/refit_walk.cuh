@@ -49,46 +49,6 @@ __device__ __forceinline__ void refitUpwards(GpuBvhNode* __restrict__ nodes, con
   root->box = box;
 }
 
-// refitUpwards by clusters (refit_clusters.hpp): the leaf's box goes into its parent's child slot;
-// the last of a cluster's outside children to arrive computes the cluster's nodes (their inner
-// child boxes from registers, written to the nodes) and carries the cluster root's box on to the
-// cluster above. The boxes equal refitUpwards' (each node's box is the union of its two children).
-// counters: one per cluster, zero on entry and zero again on exit (the last arrival resets it).
-__device__ __forceinline__ void refitClustersUpwards(GpuBvhNode* __restrict__ nodes,
-                                                     const RefitCluster* __restrict__ clusters,
-                                                     const RefitClusterNode* __restrict__ clusterNodes,
-                                                     uint32_t slot, uint32_t cluster, Aabb box,
-                                                     uint32_t* __restrict__ counters, RootInfo* __restrict__ root) {
-  while (slot != kNoParent) {
-    writeChildBox(nodes + (slot >> 1), int(slot & 1), box);
-    const RefitCluster c = clusters[cluster];
-    ::cuda::atomic_ref<uint32_t, ::cuda::thread_scope_device> arrivals(counters[cluster]);
-    if (arrivals.fetch_add(1, ::cuda::memory_order_acq_rel) != c.arrivals - 1) return;
-    counters[cluster] = 0;  // every arrival is in: ready for the next refit
-    Aabb inner[7];
-    for (uint32_t k = 0; k < c.nodeCount; ++k) {
-      const RefitClusterNode n = clusterNodes[c.firstNode + k];
-      GpuBvhNode* node = nodes + n.node;
-      Aabb sides[2];
-#pragma unroll
-      for (int side = 0; side < 2; ++side) {
-        if (n.local[side] == kExternalChild) {
-          sides[side] = readChildBox(node, side);
-        } else {
-          sides[side] = inner[n.local[side]];
-          writeChildBox(node, side, sides[side]);
-        }
-      }
-      sides[0].extend(sides[1]);
-      inner[k] = sides[0];
-    }
-    box = inner[c.nodeCount - 1];
-    slot = c.parentSlot;
-    cluster = c.parentCluster;
-  }
-  root->box = box;
-}
-
 // One block refits one whole tree (a small one: a character's BLAS, a TLAS over some thousand
 // instances). Arrivals are counted and child boxes kept in shared memory, written to the nodes at
 // the end, so a level of the walk costs shared-memory latency instead of refitUpwards' round trips

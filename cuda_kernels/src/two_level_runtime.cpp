@@ -12,7 +12,6 @@
 #include "tsah_cuda/cuda_check.hpp"
 #include "tsah_cuda/device_buffer.hpp"
 #include "tsah_cuda/gpu_two_level.hpp"
-#include "refit_clusters.hpp"
 #include "two_level_kernels.hpp"
 
 namespace tsah::cuda {
@@ -71,11 +70,6 @@ struct GpuTwoLevelRuntime::Impl {
     DeviceBuffer<detail::LeafRecord> leaves;
     DeviceBuffer<float> keyframes;  // every keyframe of the moving vertices (animated sources)
     uint32_t movingCount = 0;
-    // The clustered refit walk's clusters (animated sources refitted by it).
-    DeviceBuffer<detail::RefitCluster> clusters;
-    DeviceBuffer<detail::RefitClusterNode> clusterNodes;
-    DeviceBuffer<uint32_t> leafCluster;
-    detail::RefitClusterView clusterView() const { return {clusters.data(), clusterNodes.data(), leafCluster.data()}; }
   };
   // A static source's BLAS: its boxes, positions and Woop triangles, refitted once.
   struct StaticBlas {
@@ -166,10 +160,6 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
     d.nodeParent = toDevice(r.parent, stream);
     d.leaves = toDevice(r.leaves, stream);
     if (blas.animated) {
-      const detail::RefitClusterSet clusters = detail::buildRefitClusters(r.parent, r.leaves);
-      d.clusters = toDevice(clusters.clusters, stream);
-      d.clusterNodes = toDevice(clusters.nodes, stream);
-      d.leafCluster = toDevice(clusters.leafCluster, stream);
       d.keyframes = DeviceBuffer<float>(a.motion(), stream);
       d.movingIds = DeviceBuffer<uint32_t>(a.movingVertices(), stream);
       d.movingCount = a.movingVertexCount();
@@ -310,16 +300,10 @@ void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
                                      g.positions.data(), g.woop.data(), g.roots.data(), members, g.strides, stream);
         continue;
       }
-      if (config.clusterRefits && d.clusters.size()) {  // its counters stay zero between refits
-        detail::launchBatchClusterRefit(g.nodes.data(), d.clusterView(), d.leaves.data(), d.leafCount,
-                                        d.slotVertices.data(), g.positions.data(), g.counters.data(), g.roots.data(),
-                                        members, g.strides, stream);
-      } else {
-        if (g.counters.size()) CUDA_CHECK(cudaMemsetAsync(g.counters.data(), 0, g.counters.bytes(), stream));
-        detail::launchBatchRefit(g.nodes.data(), d.nodeParent.data(), d.leaves.data(), d.leafCount,
-                                 d.slotVertices.data(), g.positions.data(), g.counters.data(), g.roots.data(), members,
-                                 g.strides, stream);
-      }
+      if (g.counters.size()) CUDA_CHECK(cudaMemsetAsync(g.counters.data(), 0, g.counters.bytes(), stream));
+      detail::launchBatchRefit(g.nodes.data(), d.nodeParent.data(), d.leaves.data(), d.leafCount,
+                               d.slotVertices.data(), g.positions.data(), g.counters.data(), g.roots.data(), members,
+                               g.strides, stream);
       detail::launchBatchSlotWoop(d.slotVertices.data(), d.topology.triangleCount(), g.positions.data(),
                                   g.woop.data(), members, g.strides, stream);
     }

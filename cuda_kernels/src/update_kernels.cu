@@ -60,21 +60,6 @@ __global__ void refitKernel(GpuBvhNode* __restrict__ nodes, const uint32_t* __re
   refitUpwards(nodes + b * batch.nodes, nodeParent, leaf.parentSlot, box, counters + b * batch.counters, root + b);
 }
 
-// refitKernel by clusters (refitClustersUpwards).
-__global__ void clusterRefitKernel(GpuBvhNode* __restrict__ nodes, RefitClusterView clusters,
-                                   const LeafRecord* __restrict__ leaves, uint32_t leafCount,
-                                   const uint32_t* __restrict__ slotVertices, const float* __restrict__ positions,
-                                   uint32_t* __restrict__ counters, RootInfo* __restrict__ root, BatchStrides batch) {
-  const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
-  if (i >= leafCount) return;
-  const uint32_t b = blockIdx.y;
-  const LeafRecord leaf = leaves[i];
-  const Aabb box = leafBox(leaf.first, leaf.count, slotVertices, positions + b * batch.positions);
-  refitClustersUpwards(nodes + b * batch.nodes, clusters.clusters, clusters.nodes, leaf.parentSlot,
-                       leaf.parentSlot == kNoParent ? 0u : __ldg(clusters.leafCluster + i), box,
-                       counters + b * batch.counters, root + b);
-}
-
 // Where the Woop pass finds the vertex ids of slot s: in slot order (the refits' slotVertices,
 // streamed) or through the slot's triangle id (the rebuilds, whose slot order changes every frame).
 struct SlotOrderedIds {
@@ -193,21 +178,6 @@ void launchBatchRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafR
                                             positions + first * batch.positions, counters + first * batch.counters,
                                             roots + first, batch);
     CUDA_CHECK_LAUNCH("refitKernel");
-  });
-}
-
-void launchBatchClusterRefit(GpuBvhNode* nodes, const RefitClusterView& clusters, const LeafRecord* leaves,
-                             uint32_t leafCount, const uint32_t* slotVertices, const float* positions,
-                             uint32_t* counters, RootInfo* roots, uint32_t batchCount, const BatchStrides& batch,
-                             cudaStream_t stream) {
-  if (leafCount == 0) return;
-  const uint32_t block = 128;
-  forEachBatchChunk(batchCount, [&](uint32_t first, uint32_t count) {
-    const dim3 grid(gridFor(leafCount, block), count);
-    clusterRefitKernel<<<grid, block, 0, stream>>>(nodes + first * batch.nodes, clusters, leaves, leafCount,
-                                                   slotVertices, positions + first * batch.positions,
-                                                   counters + first * batch.counters, roots + first, batch);
-    CUDA_CHECK_LAUNCH("clusterRefitKernel");
   });
 }
 

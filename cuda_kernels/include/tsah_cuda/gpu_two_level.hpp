@@ -43,10 +43,6 @@ class GpuTwoLevelRuntime {
     // opt-in shared memory per block: 13 * 4 bytes per interior node); false: the global-memory
     // walk for every tree (the reference; the boxes are the same bit for bit).
     bool blockRefits = true;
-    // A pose's BLAS refitted by the global walk (too large for a block, or blockRefits false) walks
-    // by clusters of three levels (refit_clusters.hpp: a third of the round trips to L2); false:
-    // level by level. The boxes are the same bit for bit.
-    bool clusterRefits = true;
   };
 
   // Keeps a reference to `scene` (it must outlive the runtime) and runs updateAt(first frame time).
