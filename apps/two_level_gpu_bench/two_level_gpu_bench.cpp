@@ -229,7 +229,7 @@ int run(const Options& opt) {
                  {"update_ms", median(update)}, {"primary_ms", median(primaryMs)}, {"ao_ms", median(aoMs)},
                  {"tlas_rebuild_cpu_ms", median(rebuildMs)}, {"blas_refits", median(refits)}};
   // The TLAS updates compared, the refit first: medians over the frames (frame_ms: update + primary
-  // + AO of each frame), the last frame's TLAS size, and the hits that differ from the refit's.
+  // + AO of each frame), the TLAS size at the first frame, and the hits that differ from the refit's.
   nlohmann::json tlasRuns = nlohmann::json::array();
   for (TlasRun& r : runs)
     tlasRuns.push_back({{"update", tsah::cuda::tlasUpdateName(r.update)},
