@@ -54,7 +54,7 @@ class GpuTwoLevelRuntime {
     // opt-in shared memory per block: 13 * 4 bytes per interior node); false: the global-memory
     // walk for every tree (the reference; the boxes are the same bit for bit).
     bool blockRefits = true;
-    TlasUpdate tlas = TlasUpdate::Refit;
+    TlasUpdate tlas = TlasUpdate::Refit;  // how each update brings the TLAS to the frame (above)
   };
 
   // Keeps a reference to `scene` (it must outlive the runtime) and runs updateAt(first frame time).
