@@ -153,6 +153,22 @@ TEST(BenchTwoLevelReport, TablesOfThePartAndASkippedPart) {
                      "update 6.00 ms, primary + AO 4.00 ms; trace rate two-level / flat 1.25; host TLAS rebuild 4.00 ms"),
             std::string::npos)
       << gpu;
+  // Without a TLAS rebuild compared the paragraph ends there; with them, one sentence of frame totals.
+  EXPECT_EQ(gpu.find("GPU frame total"), std::string::npos) << gpu;
+  auto tlasRun = [](const char* update, double tlasMs, double frameMs, int unlike) {
+    return json{{"update", update},
+                {"median", {{"tlas_update_ms", tlasMs}, {"primary_ms", 1.0}, {"ao_ms", 2.0}, {"frame_ms", frameMs}}},
+                {"primary_hits_unlike_refit", unlike}};
+  };
+  withGpu["gpu"]["tlas"] = json::array({tlasRun("refit", 0.01, 3.51, 0), tlasRun("lbvh", 0.05, 3.6, 0),
+                                        tlasRun("hlbvh-sah", 0.07, 3.64, 2)});
+  const std::string rebuilt = tsah::bench::twoLevelSection({{"name", "town"}, {"two_level", withGpu}});
+  EXPECT_NE(rebuilt.find("host TLAS rebuild 4.00 ms per frame. GPU frame total (update + primary + AO, medians) with "
+                         "the TLAS refitted 3.51 ms (TLAS 0.0100 ms, trace 3.00 ms), rebuilt by lbvh 3.60 ms (TLAS "
+                         "0.0500 ms, trace 3.00 ms, primary hits unlike the refit's 0), rebuilt by hlbvh-sah 3.64 ms "
+                         "(TLAS 0.0700 ms, trace 3.00 ms, primary hits unlike the refit's 2).\n\n"),
+            std::string::npos)
+      << rebuilt;
   const json scene = {{"name", "town"}, {"two_level", part}};
   const std::string section = tsah::bench::twoLevelSection(scene);
   EXPECT_NE(section.find("**Two-level part** (7 instances of 3 sources (2 static), 2 poses"), std::string::npos) << section;

@@ -1,6 +1,7 @@
 // The GPU two-level runtime (tsah_cuda/gpu_two_level.hpp) against the CPU one (TwoLevelRuntime):
 // the same hits (instance, triangle, t), TLAS boxes holding every instance, no BLAS refit on a
-// frame of rigid motion only. Every test skips without a GPU.
+// frame of rigid motion only; the TLAS rebuilt every frame (LBVH, HLBVH-SAH) against the refitted
+// one. Every test skips without a GPU.
 #include <gtest/gtest.h>
 
 #if TSAH_HAVE_CUDA
@@ -8,8 +9,10 @@
 #include <algorithm>
 #include <cstring>
 #include <random>
+#include <sstream>
 
 #include "anim/tanim.hpp"
+#include "tsah/base/error.hpp"
 #include "tsah/layout/flat_bvh.hpp"
 #include "tsah/scene/two_level.hpp"
 #include "tsah/scene/two_level_runtime.hpp"
@@ -50,6 +53,80 @@ tsah::Aabb unionOf(std::span<const tsah::Aabb> boxes) {
   tsah::Aabb all;
   for (const tsah::Aabb& b : boxes) all.extend(b);
   return all;
+}
+
+// A crowd beside the small scene's sources (writeTwoLevelScene's wave.tanim and ground.tanim in
+// `dir`): 48 waves, each with its own time offset (a pose each), every third walking a path, and 16
+// static grounds, on a grid.
+fs::path writeCrowdScene(const fs::path& dir) {
+  std::ostringstream cloth, ground;
+  for (uint32_t i = 0; i < 48; ++i) {
+    const float x = 3.0f * float(i % 8), z = 3.0f * float(i / 8);
+    cloth << (i ? ",\n" : "") << R"({"offset": )" << 0.25 * i << R"(, "transform": {"translate": [)" << x << ", 0, " << z
+          << "]}";
+    if (i % 3 == 0) cloth << R"(, "path": [{"time": 0}, {"time": 12, "translate": [)" << (i % 2 ? 6 : -6) << ", 0, 4]}]";
+    cloth << "}";
+  }
+  for (uint32_t i = 0; i < 16; ++i)
+    ground << (i ? ",\n" : "") << R"({"transform": {"translate": [)" << 6.0f * float(i % 4) << ", -1, "
+           << 6.0f * float(i / 4) << "]}}";
+  tsah::test::writeText(dir / "crowd.json", R"({"fps": 2, "objects": [
+    {"name": "ground", "file": "ground.tanim", "instances": [)" + ground.str() + R"(]},
+    {"name": "cloth", "file": "wave.tanim", "instances": [)" + cloth.str() + "]}]}");
+  return dir / "crowd.json";
+}
+
+// The TLAS rebuilt at every update (LBVH and HLBVH-SAH) against the refitted T-SAH TLAS of the same
+// scene, at `times` (a time twice in a row: the second update moves no pose): the same instance
+// boxes, a valid rebuilt TLAS (leaves of at most the objective's leaf size, each leaf box holding
+// its instances) and the same hits on the same rays.
+void expectRebuiltTlasTracesLikeTheRefit(const tsah::TwoLevelScene& scene, std::span<const double> times,
+                                         uint32_t seed) {
+  tsah::cuda::GpuTwoLevelRuntime refit(scene);
+  for (const auto update : {tsah::cuda::TlasUpdate::Lbvh, tsah::cuda::TlasUpdate::HlbvhSah}) {
+    SCOPED_TRACE(tsah::cuda::tlasUpdateName(update));
+    tsah::cuda::GpuTwoLevelRuntime::Config config;
+    config.tlas = update;
+    tsah::cuda::GpuTwoLevelRuntime rebuilt(scene, config);
+    uint32_t hits = 0, total = 0;
+    for (const double t : times) {
+      refit.updateAt(t);
+      const tsah::cuda::TwoLevelUpdateTimings u = rebuilt.updateAt(t);
+      EXPECT_GT(u.tlasRebuildMs, 0.0) << "t " << t;
+      EXPECT_LE(u.tlasRebuildMs, u.tlasMs + 1e-3) << "t " << t;
+      const std::vector<tsah::Aabb> boxes = rebuilt.downloadInstanceBoxes(), refitBoxes = refit.downloadInstanceBoxes();
+      ASSERT_EQ(boxes.size(), scene.instanceCount());
+      EXPECT_EQ(std::memcmp(boxes.data(), refitBoxes.data(), boxes.size() * sizeof(tsah::Aabb)), 0) << "t " << t;
+
+      const tsah::FlatBvh tlas = rebuilt.downloadTlas();
+      ASSERT_EQ(tsah::validateFlatBvh(tlas), std::nullopt) << "t " << t;
+      EXPECT_EQ(tlas.triangleCount(), scene.instanceCount());
+      EXPECT_EQ(tlas.interiorCount, u.tlasNodes) << "t " << t;
+      uint32_t largestLeaf = tlas.interiorCount == 0 ? tlas.rootCount : 0;
+      for (const tsah::GpuBvhNode& n : tlas.nodes)
+        for (int c = 0; c < 2; ++c) largestLeaf = std::max(largestLeaf, n.childCount(c));
+      EXPECT_LE(largestLeaf, scene.objective.maxLeafSize) << "t " << t;
+      const std::vector<tsah::Aabb> leafBoxes = tsah::test::tlasLeafBoxes(tlas);
+      for (uint32_t i = 0; i < scene.instanceCount(); ++i) {
+        EXPECT_TRUE(leafBoxes[i].contains(boxes[i])) << "t " << t << " instance " << i;
+        EXPECT_TRUE(tlas.rootBoxes[0].contains(boxes[i])) << "t " << t << " instance " << i;
+      }
+
+      const std::vector<tsah::Ray> rays = randomRays(unionOf(boxes), 2000, seed++);
+      const std::vector<tsah::TwoLevelHit> got = rebuilt.closestHits(rays), expected = refit.closestHits(rays);
+      const std::vector<uint8_t> occluded = rebuilt.anyHits(rays), expectedOccluded = refit.anyHits(rays);
+      for (std::size_t r = 0; r < rays.size(); ++r, ++total) {
+        ASSERT_EQ(got[r].valid(), expected[r].valid()) << "t " << t << " ray " << r;
+        EXPECT_EQ(occluded[r], expectedOccluded[r]) << "t " << t << " ray " << r;
+        if (!expected[r].valid()) continue;
+        ++hits;
+        EXPECT_EQ(got[r].instance, expected[r].instance) << "t " << t << " ray " << r;
+        EXPECT_EQ(got[r].prim, expected[r].prim) << "t " << t << " ray " << r;
+        EXPECT_NEAR(got[r].t, expected[r].t, kRelativeT * std::max(1.0f, expected[r].t)) << "t " << t << " ray " << r;
+      }
+    }
+    EXPECT_GT(hits, total / 4);  // the comparison saw real hits
+  }
 }
 
 class CudaTwoLevel : public ::testing::Test {
@@ -147,9 +224,30 @@ TEST_F(CudaTwoLevel, AFrameWithOnlyRigidMotionRefitsNoBlas) {
   EXPECT_EQ(moving.blasRefits, 3u);
   EXPECT_EQ(moving.instances, scene->instanceCount());
   EXPECT_EQ(moving.tlasNodes, tsah::flattenBvh(scene->tlas).interiorCount);
+  EXPECT_EQ(moving.tlasRebuildMs, 0.0);  // the refit rebuilds nothing
   const tsah::cuda::TwoLevelUpdateTimings same = gpu.updateAt(2.0);
   EXPECT_EQ(same.blasRefits, 0u);
   EXPECT_EQ(gpu.blasRefits(), 1u + 3u + 3u);
+}
+
+TEST_F(CudaTwoLevel, RebuiltTlasTracesLikeTheRefit) {
+  const double times[] = {0.0, 2.0, 2.0, 3.25, 7.5, 12.0};
+  expectRebuiltTlasTracesLikeTheRefit(*scene, times, 11);
+}
+
+TEST_F(CudaTwoLevel, RebuiltTlasOfACrowdTracesLikeTheRefit) {
+  const tsah::TwoLevelScene crowd =
+      tsah::loadTwoLevelScene(writeCrowdScene(dir).string(), {}, tsah::test::smallTwoLevelOptions());
+  ASSERT_EQ(crowd.instanceCount(), 64u);
+  const double times[] = {0.0, 1.5, 1.5, 6.0, 9.75, 12.0};
+  expectRebuiltTlasTracesLikeTheRefit(crowd, times, 101);
+}
+
+TEST(CudaTwoLevelNames, TlasUpdateNamesRoundTrip) {
+  for (const auto u : {tsah::cuda::TlasUpdate::Refit, tsah::cuda::TlasUpdate::Lbvh, tsah::cuda::TlasUpdate::HlbvhSah})
+    EXPECT_EQ(tsah::cuda::parseTlasUpdate(tsah::cuda::tlasUpdateName(u)), u);
+  EXPECT_STREQ(tsah::cuda::tlasUpdateName(tsah::cuda::TlasUpdate::HlbvhSah), "hlbvh-sah");
+  EXPECT_THROW(tsah::cuda::parseTlasUpdate("sah"), tsah::ConfigError);
 }
 
 TEST(CudaTwoLevelRigid, OnlyPathsAndHeldPosesRefitNothing) {

@@ -20,6 +20,28 @@ std::string optimizeText(const json& o) {
   return formatSignificant(numberField(o, "wall_s")) + " s, " + mib(numberField(o, "peak_rss_bytes")) + " MiB";
 }
 
+// The GPU TLAS updates compared on the same rays (tsah_two_level_gpu_bench's "tlas": the refit of the
+// T-SAH TLAS first, then the per-frame rebuilds), as one sentence; empty without a rebuild.
+std::string gpuTlasText(const json& g) {
+  if (!g.contains("tlas") || !g["tlas"].is_array() || g["tlas"].size() < 2) return {};
+  std::ostringstream md;
+  md << " GPU frame total (update + primary + AO, medians) with the TLAS";
+  const char* separator = " ";
+  for (const json& r : g["tlas"]) {
+    const std::string update = r.value("update", "");
+    const json& m = r["median"];
+    md << separator << (update == "refit" ? "refitted" : "rebuilt by " + update) << " "
+       << formatSignificant(numberField(m, "frame_ms")) << " ms (TLAS " << formatSignificant(numberField(m, "tlas_update_ms"))
+       << " ms, trace " << formatSignificant(numberField(m, "primary_ms") + numberField(m, "ao_ms")) << " ms";
+    if (update != "refit")
+      md << ", primary hits unlike the refit's " << uint64_t(numberField(r, "primary_hits_unlike_refit"));
+    md << ")";
+    separator = ", ";
+  }
+  md << ".";
+  return md.str();
+}
+
 // The GPU figures (tsah_two_level_gpu_bench's medians) in one paragraph.
 std::string gpuText(const json& g) {
   const json& m = g["median"];
@@ -33,7 +55,8 @@ std::string gpuText(const json& g) {
      << formatSignificant(numberField(f, "update_ms")) << " ms, primary + AO "
      << formatSignificant(numberField(f, "primary_ms") + numberField(f, "ao_ms")) << " ms; trace rate two-level / flat "
      << formatFixed(numberField(g["flat"], "trace_rate_two_level_over_flat"), 2) << "; host TLAS rebuild "
-     << formatSignificant(numberField(m, "tlas_rebuild_cpu_ms")) << " ms per frame.\n\n";
+     << formatSignificant(numberField(m, "tlas_rebuild_cpu_ms")) << " ms per frame.";
+  md << gpuTlasText(g) << "\n\n";
   return md.str();
 }
 

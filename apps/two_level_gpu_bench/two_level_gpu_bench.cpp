@@ -2,14 +2,18 @@
 //   tsah_two_level_gpu_bench SCENE.json [--tree TREE.tbvh | --save-tree TREE.tbvh [--build-only]]
 //                            [--frames 50] [--width 1024] [--height 768]
 //                            [--ao 4] [--k 2] [--build-frames 5] [--no-rebuild-reference]
-//                            [--global-refits] [--flat-tree FLAT.tbvh]
+//                            [--global-refits] [--flat-tree FLAT.tbvh] [--tlas refit|lbvh|hlbvh-sah|all]
 // Builds the two-level structure (or loads a version 3 .tbvh built for the scene), then for each of
 // --frames times spread over the scene's time range: updateAt (upload of the instance transforms,
 // BLAS refits, TLAS refit: CUDA events), then primary rays (a camera fitted to the instances' boxes,
 // one ray per pixel: closest hit) and --ao occlusion rays per primary hit (cosine-distributed
 // around the reversed primary ray, from the hit point, 10% of the scene's diagonal long: any hit).
 // The TLAS rebuild reference is tsah::rebuildTlas on the host over the frame's instance boxes
-// (wall clock). The scene's data: paths resolve as `tsah` resolves them ($TSAH_DATA_DIR, archives
+// (wall clock). --tlas (default all): the GPU TLAS updates compared on the same rays, each on its
+// own runtime (GpuTwoLevelRuntime::Config::tlas): the T-SAH TLAS refitted (always run; the
+// top-level fields are its) and the TLAS rebuilt every frame over the instance boxes by LBVH and/or
+// HLBVH-SAH; per update its TLAS time, update, primary and AO times and the frame total, and the
+// hits that differ from the refit's. The scene's data: paths resolve as `tsah` resolves them ($TSAH_DATA_DIR, archives
 // and .xz files unpacked into the cache). --flat-tree: a flat tree of the same scene (tsah optimize --structure flat), whose
 // GPU runtime (binary layout, the baked scene) updates at the same times and traces the same rays
 // (the trace-rate comparison). Prints one JSON object (per-frame values and medians).
@@ -44,7 +48,29 @@ struct Options {
   bool rebuildReference = true;
   bool buildOnly = false;  // build and save (--save-tree), no device needed
   bool blockRefits = true;  // GpuTwoLevelRuntime::Config::blockRefits
+  std::string tlas = "all";  // refit, lbvh, hlbvh-sah or all
 };
+
+// One TLAS update compared (--tlas): its runtime and per-frame figures.
+struct TlasRun {
+  tsah::cuda::TlasUpdate update = tsah::cuda::TlasUpdate::Refit;
+  std::unique_ptr<tsah::cuda::GpuTwoLevelRuntime> gpu;
+  std::vector<double> tlasMs, rebuildMs, updateMs, primaryMs, aoMs, frameMs;
+  uint64_t primaryHits = 0, primaryMismatches = 0, aoMismatches = 0;
+};
+
+// The updates --tlas names: the refit always first (the reference of the others).
+std::vector<tsah::cuda::TlasUpdate> tlasUpdates(const std::string& name) {
+  using tsah::cuda::TlasUpdate;
+  if (name == "all") return {TlasUpdate::Refit, TlasUpdate::Lbvh, TlasUpdate::HlbvhSah};
+  const TlasUpdate u = tsah::cuda::parseTlasUpdate(name);
+  if (u == TlasUpdate::Refit) return {u};
+  return {TlasUpdate::Refit, u};
+}
+
+bool sameHit(const tsah::TwoLevelHit& a, const tsah::TwoLevelHit& b) {
+  return a.valid() == b.valid() && (!a.valid() || (a.instance == b.instance && a.prim == b.prim));
+}
 
 double median(std::vector<double> v) {
   if (v.empty()) return 0.0;
@@ -96,9 +122,16 @@ int run(const Options& opt) {
                        : tsah::loadTwoLevelSceneFile(opt.tree, anim::loadSceneSources(opt.scene, load));
   if (!opt.saveTree.empty()) tsah::saveTwoLevelScene(opt.saveTree, scene);
   if (opt.buildOnly) return 0;
-  tsah::cuda::GpuTwoLevelRuntime::Config config;
-  config.blockRefits = opt.blockRefits;
-  tsah::cuda::GpuTwoLevelRuntime gpu(scene, config);
+  std::vector<TlasRun> runs;
+  for (tsah::cuda::TlasUpdate update : tlasUpdates(opt.tlas)) {
+    tsah::cuda::GpuTwoLevelRuntime::Config config;
+    config.blockRefits = opt.blockRefits;
+    config.tlas = update;
+    TlasRun& r = runs.emplace_back();
+    r.update = update;
+    r.gpu = std::make_unique<tsah::cuda::GpuTwoLevelRuntime>(scene, config);
+  }
+  tsah::cuda::GpuTwoLevelRuntime& gpu = *runs.front().gpu;  // the refit: the top-level fields
   // The flat reference: the baked scene and its tree on the GPU runtime.
   std::unique_ptr<anim::Animation> baked;
   std::unique_ptr<tsah::cuda::GpuRuntime> flat;
@@ -124,8 +157,34 @@ int run(const Options& opt) {
     tsah::RayPassStats ps, as;
     const std::vector<tsah::TwoLevelHit> hits = gpu.closestHits(primary, &ps);
     const std::vector<tsah::Ray> ao = occlusionRays(primary, hits, opt.ao, aoLength, f + 1);
-    gpu.anyHits(ao, &as);
+    const std::vector<uint8_t> occluded = gpu.anyHits(ao, &as);
     for (const tsah::TwoLevelHit& h : hits) hitCount += h.valid() ? 1 : 0;
+    // Every TLAS update on the refit's rays (the refit's own figures are the ones above).
+    nlohmann::json perUpdate = nlohmann::json::object();
+    for (TlasRun& r : runs) {
+      tsah::cuda::TwoLevelUpdateTimings ru = u;
+      tsah::RayPassStats rp = ps, ra = as;
+      if (r.gpu.get() != &gpu) {
+        ru = r.gpu->updateAt(t);
+        const std::vector<tsah::TwoLevelHit> rh = r.gpu->closestHits(primary, &rp);
+        const std::vector<uint8_t> ro = r.gpu->anyHits(ao, &ra);
+        for (std::size_t i = 0; i < rh.size(); ++i) r.primaryMismatches += sameHit(rh[i], hits[i]) ? 0 : 1;
+        for (std::size_t i = 0; i < ro.size(); ++i) r.aoMismatches += (ro[i] != 0) == (occluded[i] != 0) ? 0 : 1;
+        for (const tsah::TwoLevelHit& h : rh) r.primaryHits += h.valid() ? 1 : 0;
+      } else {
+        for (const tsah::TwoLevelHit& h : hits) r.primaryHits += h.valid() ? 1 : 0;
+      }
+      const double frameMs = ru.totalMs() + rp.ms + ra.ms;
+      r.tlasMs.push_back(ru.tlasMs);
+      r.rebuildMs.push_back(ru.tlasRebuildMs);
+      r.updateMs.push_back(ru.totalMs());
+      r.primaryMs.push_back(rp.ms);
+      r.aoMs.push_back(ra.ms);
+      r.frameMs.push_back(frameMs);
+      perUpdate[tsah::cuda::tlasUpdateName(r.update)] = {{"tlas_update_ms", ru.tlasMs}, {"tlas_rebuild_ms", ru.tlasRebuildMs},
+                                                         {"update_ms", ru.totalMs()}, {"primary_ms", rp.ms},
+                                                         {"ao_ms", ra.ms}, {"frame_ms", frameMs}};
+    }
     if (flat) {
       tsah::RayPassStats fp, fa;
       flatUpdate.push_back(flat->updateAt(t).totalMs());
@@ -153,7 +212,7 @@ int run(const Options& opt) {
     frames.push_back({{"time", t}, {"upload_ms", u.uploadMs}, {"blas_refit_ms", u.blasMs}, {"tlas_update_ms", u.tlasMs},
                       {"update_ms", u.totalMs()}, {"blas_refits", u.blasRefits}, {"primary_rays", ps.rays},
                       {"primary_ms", ps.ms}, {"ao_rays", as.rays}, {"ao_ms", as.ms},
-                      {"tlas_rebuild_cpu_ms", rebuild}});
+                      {"tlas_rebuild_cpu_ms", rebuild}, {"tlas", perUpdate}});
   }
   nlohmann::json j;
   j["scene"] = opt.scene;
@@ -169,6 +228,19 @@ int run(const Options& opt) {
   j["median"] = {{"upload_ms", median(upload)}, {"blas_refit_ms", median(blas)}, {"tlas_update_ms", median(tlas)},
                  {"update_ms", median(update)}, {"primary_ms", median(primaryMs)}, {"ao_ms", median(aoMs)},
                  {"tlas_rebuild_cpu_ms", median(rebuildMs)}, {"blas_refits", median(refits)}};
+  // The TLAS updates compared, the refit first: medians over the frames (frame_ms: update + primary
+  // + AO of each frame), the TLAS size at the first frame, and the hits that differ from the refit's.
+  nlohmann::json tlasRuns = nlohmann::json::array();
+  for (TlasRun& r : runs)
+    tlasRuns.push_back({{"update", tsah::cuda::tlasUpdateName(r.update)},
+                        {"median", {{"tlas_update_ms", median(r.tlasMs)}, {"tlas_rebuild_ms", median(r.rebuildMs)},
+                                    {"update_ms", median(r.updateMs)}, {"primary_ms", median(r.primaryMs)},
+                                    {"ao_ms", median(r.aoMs)}, {"frame_ms", median(r.frameMs)}}},
+                        {"tlas_interior_nodes", r.gpu->updateAt(start).tlasNodes},
+                        {"primary_hits", r.primaryHits},
+                        {"primary_hits_unlike_refit", r.primaryMismatches},
+                        {"ao_results_unlike_refit", r.aoMismatches}});
+  j["tlas"] = tlasRuns;
   if (flat) {
     const double flatTrace = median(flatPrimary) + median(flatAo), twoLevelTrace = median(primaryMs) + median(aoMs);
     j["flat"] = {{"tree", opt.flatTree},
@@ -186,7 +258,7 @@ int run(const Options& opt) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"The GPU two-level runtime per frame: update (BLAS and TLAS refits) and trace times, JSON"};
+  CLI::App app{"The GPU two-level runtime per frame: update (BLAS refits, TLAS refit or rebuild) and trace times, JSON"};
   Options opt;
   bool noRebuild = false, globalRefits = false;
   app.add_option("scene", opt.scene, "Scene file (JSON)")->required();
@@ -204,6 +276,10 @@ int main(int argc, char** argv) {
   app.add_flag("--no-rebuild-reference", noRebuild, "Skip the per-frame host TLAS rebuild reference");
   app.add_option("--flat-tree", opt.flatTree,
                  "A flat tree of the scene (tsah optimize --structure flat): traced on the same rays for comparison");
+  app.add_option("--tlas", opt.tlas,
+                 "TLAS updates compared on the same rays: refit, lbvh, hlbvh-sah (each with the refit) or all "
+                 "(default)")
+      ->check(CLI::IsMember({"refit", "lbvh", "hlbvh-sah", "all"}));
   app.add_flag("--global-refits", globalRefits,
                "Refit every tree by the global-memory walk, not in one block's shared memory (the reference)");
   CLI11_PARSE(app, argc, argv);

@@ -11,9 +11,9 @@
 
 namespace tsah::cuda::detail {
 
-GpuRebuilder::GpuRebuilder(uint32_t triangles, Layout layout) : n_(triangles), events_(8) {  // see collect
-  if (n_ == 0) throw tsah::DataError("GPU rebuild: no triangles");
-  if (n_ > kMaxGpuTriangles) throw tsah::DataError("GPU rebuild: too many triangles");
+GpuRebuilder::GpuRebuilder(uint32_t primitives, Layout layout) : n_(primitives), events_(8) {  // see collect
+  if (n_ == 0) throw tsah::DataError("GPU rebuild: no primitives");
+  if (n_ > kMaxGpuTriangles) throw tsah::DataError("GPU rebuild: too many primitives");
   const std::size_t n = n_;
   const std::size_t clusterCap = std::min<std::size_t>(n, kMaxClusters);
   const std::size_t nodeCap = std::max<std::size_t>(1, (n - 1) + (clusterCap - 1));
@@ -60,23 +60,42 @@ GpuRebuilder::GpuRebuilder(uint32_t triangles, Layout layout) : n_(triangles), e
 
 GpuRebuilder::~GpuRebuilder() = default;
 
-void GpuRebuilder::enqueue(const uint32_t* indices, const float* positions, const RebuildOptions& options,
-                           WoopTriangle* woop, cudaStream_t stream) {
+void GpuRebuilder::checkOptions(const RebuildOptions& options) const {
   if (options.maxLeafSize == 0) throw tsah::ConfigError("GPU rebuild: maxLeafSize must be at least 1");
-  const bool wide = wide_ != nullptr;
-  if (wide && options.collapse && options.maxLeafSize > kCwbvhMaxLeafTriangles)
+  if (wide_ && options.collapse && options.maxLeafSize > kCwbvhMaxLeafTriangles)
     throw tsah::ConfigError("GPU rebuild: the cwbvh layout takes leaves of at most " +
                             std::to_string(kCwbvhMaxLeafTriangles) + " triangles (maxLeafSize is " +
                             std::to_string(options.maxLeafSize) + ")");
+}
+
+void GpuRebuilder::enqueue(const uint32_t* indices, const float* positions, const RebuildOptions& options,
+                           WoopTriangle* woop, cudaStream_t stream) {
+  checkOptions(options);
+  built_ = false;
+  events_.record(0, stream);
+  // The triangles' boxes (kept for the later steps) and the Morton codes over their centroid bounds.
+  centroidBounds_.fillBytes(0x7f, stream);
+  launchMortonCodes(indices, positions, n_, unsigned(boxBlocks_), triBox_.data(), centroidBounds_.data(),
+                    mortonIn_.data(), idsIn_.data(), stream);
+  enqueueHierarchy(triBox_.data(), options, stream);
+  if (options.woop) launchWoop(wide_ ? wide_->triIndex() : slotTri_.data(), n_, indices, positions, woop, stream);
+  events_.record(7, stream);
+}
+
+void GpuRebuilder::enqueueBoxes(const Aabb* boxes, const RebuildOptions& options, cudaStream_t stream) {
+  checkOptions(options);
+  built_ = false;
+  events_.record(0, stream);
+  centroidBounds_.fillBytes(0x7f, stream);
+  launchMortonCodes(boxes, n_, unsigned(boxBlocks_), centroidBounds_.data(), mortonIn_.data(), idsIn_.data(), stream);
+  enqueueHierarchy(boxes, options, stream);
+  events_.record(7, stream);
+}
+
+void GpuRebuilder::enqueueHierarchy(const Aabb* boxes, const RebuildOptions& options, cudaStream_t stream) {
+  const bool wide = wide_ != nullptr;
   const bool hlbvh = options.method == RebuildMethod::HlbvhSah;
   const uint32_t n = n_;
-  built_ = false;
-
-  events_.record(0, stream);
-  // Morton codes over the centroid bounds.
-  centroidBounds_.fillBytes(0x7f, stream);
-  launchMortonCodes(indices, positions, n, unsigned(boxBlocks_), triBox_.data(), centroidBounds_.data(),
-                    mortonIn_.data(), idsIn_.data(), stream);
   events_.record(1, stream);
 
   std::size_t tempBytes = cubTemp_.size();
@@ -99,13 +118,13 @@ void GpuRebuilder::enqueue(const uint32_t* indices, const float* positions, cons
     KarrasOutput out{children_.data(), nodeParent_.data(), hlbvh ? leafParentRadix_.data() : leafParent_.data(),
                      hlbvh ? nodeRange_.data() : nullptr, clusterOf_.data(), clusterRoot_.data()};
     launchRadixTree(keys, n, out, stream);
-  } else {  // one triangle: no interior node; 0xff bytes are kNoParent
+  } else {  // one primitive: no interior node; 0xff bytes are kNoParent
     CUDA_CHECK(cudaMemsetAsync(hlbvh ? leafParentRadix_.data() : leafParent_.data(), 0xff, sizeof(uint32_t), stream));
   }
   events_.record(3, stream);
 
   if (hlbvh) {
-    launchClusterBoxes(sortedIds_.data(), triBox_.data(), clusterBegin_.data(), clusterEnd_.data(), queueWords_.data(),
+    launchClusterBoxes(sortedIds_.data(), boxes, clusterBegin_.data(), clusterEnd_.data(), queueWords_.data(),
                        clusterBox_.data(), n, stream);
     TopParams top{clusterBegin_.data(), clusterEnd_.data(), clusterCell_.data(), clusterBox_.data(),
                   clusterRoot_.data(), orderA_.data(), orderB_.data(), finalOrder_.data(), clusterParent_.data(),
@@ -130,7 +149,7 @@ void GpuRebuilder::enqueue(const uint32_t* indices, const float* positions, cons
   BottomUpParams bu{n,
                     slotTri_.data(),
                     leafParent_.data(),
-                    triBox_.data(),
+                    boxes,
                     children_.data(),
                     nodeParent_.data(),
                     counters_.data(),
@@ -143,14 +162,12 @@ void GpuRebuilder::enqueue(const uint32_t* indices, const float* positions, cons
   launchBottomUp(bu, options.collapse, stream);
   events_.record(5, stream);
 
-  // The wide layout: the binary nodes' array (unreferenced nodes are never read), then the Woop
-  // triangles of the wide layout's slots.
+  // The wide layout: the binary nodes' array (unreferenced nodes are never read); the triangle
+  // build then writes the Woop triangles of the wide layout's slots.
   if (wide)
     wide_->enqueue(nodes_.data(), uint32_t(nodes_.size()), slotTri_.data(), root_.data(), options.wideMergeTriangles,
                    stream);
   events_.record(6, stream);
-  if (options.woop) launchWoop(wide ? wide_->triIndex() : slotTri_.data(), n, indices, positions, woop, stream);
-  events_.record(7, stream);
 }
 
 RebuildTimings GpuRebuilder::collect(const RebuildOptions& options) {

@@ -10,8 +10,11 @@
 //             2011), built by persistent blocks taking nodes from a queue; the triangles are then
 //             reordered so that every subtree of the final tree covers a contiguous slot range, and
 //             the same bottom-up pass collapses and writes the nodes.
-// Nodes are indexed by the radix tree (0 .. n-2) and, for HLBVH-SAH, the cluster tree after them;
-// nodes collapsed into leaves or replaced by the cluster tree stay in the array unreferenced.
+// Both also build over given boxes (a TLAS over instance boxes): the same steps, the boxes read
+// where the triangle build computes them (the triangle build is its triangles' boxes, then the box
+// build). Nodes are indexed by the radix tree (0 .. n-2) and, for HLBVH-SAH, the cluster tree
+// after them; nodes collapsed into leaves or replaced by the cluster tree stay in the array
+// unreferenced.
 // Layout cwbvh: the binary tree is then converted into the compressed 8-wide layout on the device
 // (cwbvh_rebuild.hpp), and the Woop triangles are those of the wide layout's slots.
 #include <cuda_runtime_api.h>
@@ -31,8 +34,9 @@ namespace tsah::cuda::detail {
 
 class GpuRebuilder {
  public:
-  // layout cwbvh: every build is followed by its conversion into the compressed 8-wide layout.
-  GpuRebuilder(uint32_t triangles, Layout layout);
+  // `primitives`: the triangles, or the boxes, of every build. layout cwbvh: every build is
+  // followed by its conversion into the compressed 8-wide layout.
+  GpuRebuilder(uint32_t primitives, Layout layout);
   ~GpuRebuilder();
   GpuRebuilder(const GpuRebuilder&) = delete;
   GpuRebuilder& operator=(const GpuRebuilder&) = delete;
@@ -47,6 +51,10 @@ class GpuRebuilder {
   // timings and the size of the tree.
   void enqueue(const uint32_t* indices, const float* positions, const RebuildOptions& options, WoopTriangle* woop,
                cudaStream_t stream);
+  // enqueue() over given device boxes (one per primitive, by id; a leaf slot's triIndex() is a
+  // primitive id): leaves of at most options.maxLeafSize primitives, no Woop triangles
+  // (options.woop is not read). The boxes must stay as they are until the build has run.
+  void enqueueBoxes(const Aabb* boxes, const RebuildOptions& options, cudaStream_t stream);
   RebuildTimings collect(const RebuildOptions& options);
 
   const GpuBvhNode* nodes() const { return nodes_.data(); }
@@ -62,11 +70,15 @@ class GpuRebuilder {
   FlatBvh downloadArrays(cudaStream_t stream) const;
 
  private:
+  void checkOptions(const RebuildOptions& options) const;
+  // Every step after the box pass (events 1 .. 6), over `boxes` (by primitive id).
+  void enqueueHierarchy(const Aabb* boxes, const RebuildOptions& options, cudaStream_t stream);
+
   uint32_t n_;
   bool built_ = false;
   std::unique_ptr<GpuCwbvhConverter> wide_;  // layout cwbvh only
   EventTimer events_;
-  // Per triangle (by id) and per slot.
+  // Per primitive (by id) and per slot; triBox_: the triangle build's boxes.
   DeviceBuffer<Aabb> triBox_;
   DeviceBuffer<uint32_t> mortonIn_, mortonOut_, idsIn_, sortedIds_, slotTri_, leafParent_;
   DeviceBuffer<int32_t> centroidBounds_;  // 6 order-preserving ints: min xyz, min -xyz

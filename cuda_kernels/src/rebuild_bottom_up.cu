@@ -48,7 +48,7 @@ __device__ __forceinline__ SubtreeInfo childInfo(const BottomUpParams& p, int32_
   if (!isLeafRef(ref)) return loadInfo(p.info, uint32_t(ref));
   SubtreeInfo s;  // a single triangle
   s.first = leafFirstSlot(ref);
-  s.box = loadBox(p.triBox, __ldg(p.slotTri + s.first));
+  s.box = loadBox(p.primBox, __ldg(p.slotTri + s.first));
   s.count = 1;
   s.cost = p.ci * s.box.area();
   s.ref = ref;

@@ -54,8 +54,8 @@ __global__ void clusterSetupKernel(const uint32_t* __restrict__ keys, uint32_t n
   }
 }
 
-// One warp per cluster: the union of its triangle boxes.
-__global__ void clusterBoxKernel(const uint32_t* __restrict__ sortedIds, const Aabb* __restrict__ triBox,
+// One warp per cluster: the union of its primitives' boxes.
+__global__ void clusterBoxKernel(const uint32_t* __restrict__ sortedIds, const Aabb* __restrict__ primBox,
                                  const uint32_t* __restrict__ clusterBegin, const uint32_t* __restrict__ clusterEnd,
                                  const uint32_t* __restrict__ words, Aabb* __restrict__ clusterBox) {
   const uint32_t clusters = words[kClusterCount];
@@ -65,7 +65,7 @@ __global__ void clusterBoxKernel(const uint32_t* __restrict__ sortedIds, const A
     const uint32_t end = clusterEnd[c];
     float m[6] = {3.0e38f, 3.0e38f, 3.0e38f, 3.0e38f, 3.0e38f, 3.0e38f};
     for (uint32_t s = clusterBegin[c] + lane; s < end; s += 32) {
-      const Aabb b = loadBox(triBox, __ldg(sortedIds + s));
+      const Aabb b = loadBox(primBox, __ldg(sortedIds + s));
       m[0] = fminf(m[0], b.lo.x), m[1] = fminf(m[1], b.lo.y), m[2] = fminf(m[2], b.lo.z);
       m[3] = fminf(m[3], -b.hi.x), m[4] = fminf(m[4], -b.hi.y), m[5] = fminf(m[5], -b.hi.z);
     }
@@ -386,11 +386,11 @@ void launchClusterSetup(const uint32_t* keys, uint32_t n, const uint32_t* cluste
   CUDA_CHECK_LAUNCH("clusterSetupKernel");
 }
 
-void launchClusterBoxes(const uint32_t* sortedIds, const Aabb* triBox, const uint32_t* clusterBegin,
+void launchClusterBoxes(const uint32_t* sortedIds, const Aabb* primBox, const uint32_t* clusterBegin,
                         const uint32_t* clusterEnd, const uint32_t* words, Aabb* clusterBox, uint32_t n,
                         cudaStream_t stream) {
   clusterBoxKernel<<<gridFor(std::min<std::size_t>(n, kMaxClusters) * 32, kRebuildBlock), kRebuildBlock, 0, stream>>>(
-      sortedIds, triBox, clusterBegin, clusterEnd, words, clusterBox);
+      sortedIds, primBox, clusterBegin, clusterEnd, words, clusterBox);
   CUDA_CHECK_LAUNCH("clusterBoxKernel");
 }
 

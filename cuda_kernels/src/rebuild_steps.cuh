@@ -71,6 +71,9 @@ __device__ __forceinline__ uint32_t clusterKey(uint32_t code) { return code >> k
 // blocks, then every triangle's 30-bit Morton code over those bounds (codes) and its id (ids).
 void launchMortonCodes(const uint32_t* indices, const float* positions, uint32_t n, unsigned maxBoxBlocks,
                        Aabb* triBox, int32_t* centroidBounds, uint32_t* codes, uint32_t* ids, cudaStream_t stream);
+// The same over given boxes (n, by primitive id): the same kernels, the boxes read instead of computed.
+void launchMortonCodes(const Aabb* boxes, uint32_t n, unsigned maxBoxBlocks, int32_t* centroidBounds, uint32_t* codes,
+                       uint32_t* ids, cudaStream_t stream);
 
 // CUB's radix sort of n codes (their low kMortonBits bits) with their ids. temp == nullptr: only
 // sets tempBytes to the scratch the sort needs.
@@ -136,8 +139,8 @@ void scanClusterHeads(void* temp, std::size_t& tempBytes, const uint32_t* heads,
 // (out.taskReady zero on entry).
 void launchClusterSetup(const uint32_t* keys, uint32_t n, const uint32_t* clusterOf, const ClusterSetup& out,
                         cudaStream_t stream);
-// The union of every cluster's triangle boxes (n triangles).
-void launchClusterBoxes(const uint32_t* sortedIds, const Aabb* triBox, const uint32_t* clusterBegin,
+// The union of every cluster's primitive boxes (n primitives; primBox by primitive id).
+void launchClusterBoxes(const uint32_t* sortedIds, const Aabb* primBox, const uint32_t* clusterBegin,
                         const uint32_t* clusterEnd, const uint32_t* words, Aabb* clusterBox, uint32_t n,
                         cudaStream_t stream);
 // The blocks of the cluster-tree builder on the current device (resident together).
@@ -164,7 +167,7 @@ struct BottomUpParams {
   uint32_t n;
   const uint32_t* slotTri;
   const uint32_t* leafParent;
-  const Aabb* triBox;
+  const Aabb* primBox;  // by primitive id: the triangles' boxes, or the given boxes
   const int2* children;
   const uint32_t* nodeParent;
   uint32_t* counters;

@@ -4,9 +4,11 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <string>
 
 #include "event_timer.hpp"
 #include "kernels.hpp"
+#include "rebuild.hpp"
 #include "tsah/base/error.hpp"
 #include "tsah/layout/traversal.hpp"
 #include "tsah_cuda/cuda_check.hpp"
@@ -133,6 +135,9 @@ struct GpuTwoLevelRuntime::Impl {
   DeviceBuffer<detail::RootInfo> tlasRoot;
   uint64_t blockRefitLimit = 0;  // shared bytes a block refit may use (prepareBlockRefits)
   bool tlasBlockRefit = false;
+  // Config::tlas a rebuild: the per-frame TLAS over instanceBoxes (its triIndex: slot -> instance).
+  std::unique_ptr<detail::GpuRebuilder> tlasRebuilder;
+  RebuildOptions tlasRebuild;
   Graph fullGraph, rigidGraph;  // with and without the poses' BLAS refits
   double time = 0.0;
   uint64_t refits = 0;
@@ -263,6 +268,13 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
   tlasLeaves = toDevice(r.leaves, stream);
   const detail::RootInfo root = rootOf(tlasTopology);
   tlasRoot = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&root, 1), stream);
+  if (config.tlas != TlasUpdate::Refit) {
+    tlasRebuild.method = config.tlas == TlasUpdate::Lbvh ? RebuildMethod::Lbvh : RebuildMethod::HlbvhSah;
+    tlasRebuild.maxLeafSize = scene.objective.maxLeafSize;
+    tlasRebuild.cost = scene.objective.cost;
+    tlasRebuild.woop = false;
+    tlasRebuilder = std::make_unique<detail::GpuRebuilder>(count, Layout::Bvh2);
+  }
   CUDA_CHECK(cudaStreamSynchronize(stream));
 }
 
@@ -308,7 +320,10 @@ void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
                                   g.woop.data(), members, g.strides, stream);
     }
   events.record(2, stream);
-  if (tlasBlockRefit) {
+  if (tlasRebuilder) {
+    detail::launchInstanceBoxes(instances.data(), views.data(), count, instanceBoxes.data(), stream);
+    tlasRebuilder->enqueueBoxes(instanceBoxes.data(), tlasRebuild, stream);
+  } else if (tlasBlockRefit) {
     detail::launchTlasBlock(instances.data(), views.data(), count, instanceBoxes.data(), tlasNodes.data(),
                             tlasParent.data(), tlasLeaves.data(), tlasLeafCount, tlasTopology.interiorCount,
                             tlasTriIndex.data(), tlasRoot.data(), stream);
@@ -339,7 +354,25 @@ GpuTwoLevelRuntime::Impl::Graph GpuTwoLevelRuntime::Impl::capture(bool refitPose
 }
 
 detail::TlasScene GpuTwoLevelRuntime::Impl::tlasScene() const {
+  if (tlasRebuilder)
+    return {tlasRebuilder->nodes(), tlasRebuilder->triIndex(), tlasRebuilder->root(), instances.data(), views.data(),
+            instanceBoxes.data()};
   return {tlasNodes.data(), tlasTriIndex.data(), tlasRoot.data(), instances.data(), views.data(), instanceBoxes.data()};
+}
+
+const char* tlasUpdateName(TlasUpdate update) {
+  switch (update) {
+    case TlasUpdate::Refit: return "refit";
+    case TlasUpdate::Lbvh: return "lbvh";
+    case TlasUpdate::HlbvhSah: return "hlbvh-sah";
+  }
+  return "?";
+}
+
+TlasUpdate parseTlasUpdate(std::string_view name) {
+  for (TlasUpdate u : {TlasUpdate::Refit, TlasUpdate::Lbvh, TlasUpdate::HlbvhSah})
+    if (name == tlasUpdateName(u)) return u;
+  throw ConfigError("unknown TLAS update '" + std::string(name) + "' (refit, lbvh or hlbvh-sah)");
 }
 
 GpuTwoLevelRuntime::GpuTwoLevelRuntime(const TwoLevelScene& scene, Config config)
@@ -393,6 +426,11 @@ TwoLevelUpdateTimings GpuTwoLevelRuntime::updateAt(double sceneTime) {
   t.blasRefits = posesMove ? uint32_t(scene.poses.size()) : 0u;
   t.instances = scene.instanceCount();
   t.tlasNodes = m.tlasTopology.interiorCount;
+  if (m.tlasRebuilder) {  // its own events, in the same graph; throws for a tree deeper than the stack
+    const RebuildTimings rebuilt = m.tlasRebuilder->collect(m.tlasRebuild);
+    t.tlasRebuildMs = rebuilt.buildMs();
+    t.tlasNodes = rebuilt.interiorNodes;
+  }
   m.refits += t.blasRefits;
   m.poseLocalTime = local;
   return t;
@@ -453,6 +491,7 @@ std::vector<Aabb> GpuTwoLevelRuntime::downloadInstanceBoxes() const {
 }
 
 FlatBvh GpuTwoLevelRuntime::downloadTlas() const {
+  if (impl_->tlasRebuilder) return flattenBvh(impl_->tlasRebuilder->download(impl_->stream));
   FlatBvh tree = impl_->tlasTopology;
   if (!tree.nodes.empty())
     CUDA_CHECK(cudaMemcpy(tree.nodes.data(), impl_->tlasNodes.data(), tree.nodes.size() * sizeof(GpuBvhNode),

@@ -6,13 +6,15 @@
 // per pose, and the TLAS topology. updateAt(t) runs one CUDA graph (captured at its first use,
 // replayed after): the instances' transforms (computed on the host, 3x4 each) uploaded, each pose's
 // positions at its local time (the flat runtime's interpolation kernel) and its BLAS refit and Woop
-// pass, the instances' world boxes from their BLAS root boxes, and the TLAS refit. A frame whose
-// poses all keep their local time replays a second graph without the BLAS work. Rays traverse the
-// TLAS with the CPU's traversal loop (tsah::detail::traverse); at a TLAS leaf the ray is moved into
+// pass, the instances' world boxes from their BLAS root boxes, and the TLAS refit (or, with
+// Config::tlas a rebuild, a new TLAS built over those boxes). A frame whose poses all keep their
+// local time replays a second graph without the BLAS work. Rays traverse the TLAS with the binary
+// layout's device loop (Bvh2Traversal, bvh2_traversal.cuh); at a TLAS leaf the ray is moved into
 // the instance's space and traced by the same loop through the instance's BLAS, as the CPU does.
 #include <cstdint>
 #include <memory>
 #include <span>
+#include <string_view>
 #include <vector>
 
 #include "tsah/core/aabb.hpp"
@@ -24,14 +26,23 @@
 
 namespace tsah::cuda {
 
+// How each updateAt brings the TLAS to the frame: the uploaded tree (the T-SAH TLAS) refitted
+// over the instances' world boxes, or a new tree built over those boxes by a per-frame GPU
+// rebuild (rebuild_types.hpp's LBVH or HLBVH-SAH, leaves of at most the objective's maxLeafSize
+// instances, its cT and cI for the collapse).
+enum class TlasUpdate { Refit, Lbvh, HlbvhSah };
+const char* tlasUpdateName(TlasUpdate update);       // "refit", "lbvh", "hlbvh-sah"
+TlasUpdate parseTlasUpdate(std::string_view name);   // throws tsah::ConfigError for anything else
+
 // Device time of one updateAt (CUDA events, milliseconds) and what it did.
 struct TwoLevelUpdateTimings {
   double uploadMs = 0.0;  // the instance transforms and pose frames, host to device
   double blasMs = 0.0;    // every pose's interpolation, refit and Woop pass
-  double tlasMs = 0.0;    // instance world boxes and the TLAS refit
+  double tlasMs = 0.0;    // instance world boxes and the TLAS refit or rebuild
+  double tlasRebuildMs = 0.0;  // the rebuild's part of tlasMs (its steps' events; 0 with a refit)
   uint32_t blasRefits = 0;  // poses refitted (0 when no pose's local time changed)
   uint32_t instances = 0;
-  uint32_t tlasNodes = 0;   // interior nodes of the TLAS
+  uint32_t tlasNodes = 0;   // interior nodes of the TLAS (a rebuilt one: those reachable)
   double totalMs() const { return uploadMs + blasMs + tlasMs; }
 };
 
@@ -43,10 +54,12 @@ class GpuTwoLevelRuntime {
     // opt-in shared memory per block: 13 * 4 bytes per interior node); false: the global-memory
     // walk for every tree (the reference; the boxes are the same bit for bit).
     bool blockRefits = true;
+    TlasUpdate tlas = TlasUpdate::Refit;  // how each update brings the TLAS to the frame (above)
   };
 
   // Keeps a reference to `scene` (it must outlive the runtime) and runs updateAt(first frame time).
-  // Throws tsah::DataError for a tree deeper than the traversal stack or a source without keyframes.
+  // Throws tsah::DataError for a tree deeper than the traversal stack or a source without keyframes;
+  // updateAt throws tsah::Failure when a rebuilt TLAS is deeper than the traversal stack.
   GpuTwoLevelRuntime(const TwoLevelScene& scene, Config config);
   explicit GpuTwoLevelRuntime(const TwoLevelScene& scene) : GpuTwoLevelRuntime(scene, Config{}) {}
   ~GpuTwoLevelRuntime();
@@ -62,8 +75,9 @@ class GpuTwoLevelRuntime {
   std::vector<TwoLevelHit> closestHits(std::span<const Ray> rays, RayPassStats* stats = nullptr);
   std::vector<uint8_t> anyHits(std::span<const Ray> rays, RayPassStats* stats = nullptr);
 
-  // Host copies of the current state: the instances' world boxes, and the TLAS in canonical form
-  // with this frame's node boxes (frameCount 1).
+  // Host copies of the current state: the instances' world boxes, and the TLAS traced now (the
+  // refitted one or this frame's rebuilt one) in canonical form with this frame's node boxes
+  // (frameCount 1; triIndex: slot -> instance).
   std::vector<Aabb> downloadInstanceBoxes() const;
   FlatBvh downloadTlas() const;
   const DeviceInfo& device() const;

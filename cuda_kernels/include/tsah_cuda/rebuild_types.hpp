@@ -32,7 +32,7 @@ struct RebuildOptions {
 // Device time of one rebuild, in milliseconds (CUDA events), and what was built.
 struct RebuildTimings {
   double interpolateMs = 0.0;  // rebuildAt: positions of the frame (rebuild(positions): upload)
-  double mortonMs = 0.0;       // triangle boxes, centroid bounds, Morton codes
+  double mortonMs = 0.0;       // triangle boxes (a build over boxes: read), centroid bounds, Morton codes
   double sortMs = 0.0;         // CUB radix sort of the 30-bit codes
   double hierarchyMs = 0.0;    // Karras radix tree (HLBVH-SAH: and the 15-bit clusters)
   double topMs = 0.0;          // HLBVH-SAH: SAH tree over the clusters, reordering of the triangles
