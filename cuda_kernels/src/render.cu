@@ -29,8 +29,6 @@ namespace tsah::cuda {
 
 namespace {
 
-using detail::RootInfo;
-
 using namespace detail;  // the shared passes (render_passes.cuh)
 
 // A blurred frame: the view of its keys (keyCount >= 2); an instant frame has keyCount 0.
