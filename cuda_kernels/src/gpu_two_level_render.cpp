@@ -9,6 +9,7 @@
 #include "anim/scene.hpp"
 #include "tsah/base/error.hpp"
 #include "tsah_cuda/device_buffer.hpp"
+#include "kernels.hpp"
 #include "two_level_render.hpp"
 
 namespace tsah::cuda {
@@ -62,14 +63,10 @@ GpuTwoLevelRenderer::Impl::Impl(GpuTwoLevelRuntime& r) : runtime(r) {
     const std::span<const uint32_t> indices = source->indices();
     if (tris.size() + indices.size() >= kNoHit)
       throw DataError(scene.description.file + ": more than 2^32 triangle corners in the scene's sources");
-    std::vector<uint32_t> count(std::size_t(source->vertexCount()) + 1, 0);
-    for (uint32_t v : indices) ++count[v + 1];
-    for (uint32_t v = 0; v < source->vertexCount(); ++v) count[v + 1] += count[v];
-    std::vector<uint32_t> fill(count.begin(), count.end() - 1);
+    const detail::VertexTriangles lists = detail::vertexTriangles(indices, source->vertexCount());
     const auto base = uint32_t(tris.size());
-    tris.resize(tris.size() + indices.size());
-    for (std::size_t i = 0; i < indices.size(); ++i) tris[base + fill[indices[i]]++] = uint32_t(i / 3);
-    for (uint32_t c : count) offsets.push_back(base + c);
+    tris.insert(tris.end(), lists.triangles.begin(), lists.triangles.end());
+    for (uint32_t c : lists.offsets) offsets.push_back(base + c);
   }
   for (const anim::SceneSourceInstance& instance : scene.instances) sourceFirst.push_back(sourceOffset[instance.source]);
   firstTriangle = DeviceBuffer<uint32_t>(std::span<const uint32_t>(first));
