@@ -36,8 +36,8 @@ namespace fs = std::filesystem;
 constexpr float kRelative = 1e-4f;
 // A pixel may name another triangle on a tie: two triangles at the same distance along its ray
 // (a ray through a shared edge or vertex, coincident surfaces); the GPU's loop visits them in its
-// own order and keeps the first it accepts. At most 0.5% of the pixels may differ so.
-constexpr double kTieFraction = 0.005;
+// own order and keeps the first it accepts. At most 1% of the mesh pixels may differ so.
+constexpr double kTieFraction = 0.01;
 
 bool near(float a, float b) { return std::fabs(a - b) <= kRelative * (1.0f + std::fabs(a)); }
 bool near(const tsah::Vec3& a, const tsah::Vec3& b) { return near(a.x, b.x) && near(a.y, b.y) && near(a.z, b.z); }
@@ -48,17 +48,21 @@ struct Frame {
   tsah::RenderSettings settings;
 };
 
-// A camera fitted to the instances' boxes at t (so it does not depend on the runtime under test).
+// A camera above and in front of the instances' boxes at the CPU runtime's time (the cloth and the
+// ground are sheets: seen from above they cover 1,500 to 1,700 pixels of the frame, every instance
+// in view, on the CPU renderer).
 Frame frameFor(const tsah::TwoLevelRuntime& cpu, uint32_t index) {
   tsah::Aabb bounds;
   for (const tsah::Aabb& b : cpu.instanceBoxes()) bounds.extend(b);
   Frame f;
-  f.settings.width = 96;
-  f.settings.height = 72;
+  f.settings.width = 160;
+  f.settings.height = 120;
   f.settings.aoSamples = 4;
   f.settings.shadowSamples = 2;
   f.settings.frame = index;
-  f.camera = tsah::fitCamera(bounds, {0, 1, 0}, 45.0f, 96.0f / 72.0f);
+  const tsah::Vec3 center = (bounds.lo + bounds.hi) * 0.5f, extent = bounds.hi - bounds.lo;
+  const float radius = 0.5f * std::sqrt(tsah::dot(extent, extent));
+  f.camera = {center + tsah::normalize(tsah::Vec3{0.4f, 1.0f, 0.7f}) * (2.4f * radius), center, {0, 1, 0}, 45.0f};
   f.lighting = tsah::fitLighting(bounds, f.camera);
   return f;
 }
@@ -93,10 +97,13 @@ std::set<uint32_t> expectSameFrame(tsah::TwoLevelRuntime& cpu, tsah::TwoLevelRen
   EXPECT_EQ(have.size(), want.size()) << what;
   if (have.size() != want.size()) return {};
   std::set<uint32_t> triangles;
-  std::size_t ties = 0;
+  std::size_t ties = 0, mesh = 0;
   for (std::size_t i = 0; i < want.size(); ++i) {
     const tsah::Surface &a = want[i], &b = have[i];
-    if (a.kind == tsah::SurfaceKind::Mesh) triangles.insert(a.tri);
+    if (a.kind == tsah::SurfaceKind::Mesh) {
+      triangles.insert(a.tri);
+      ++mesh;
+    }
     if (a.kind != b.kind || (a.kind == tsah::SurfaceKind::Mesh && a.tri != b.tri)) {
       ++ties;
       continue;
@@ -106,7 +113,8 @@ std::set<uint32_t> expectSameFrame(tsah::TwoLevelRuntime& cpu, tsah::TwoLevelRen
         << what << ", pixel " << i << ": position " << a.position.x << " " << a.position.y << " " << a.position.z
         << " against " << b.position.x << " " << b.position.y << " " << b.position.z;
   }
-  EXPECT_LE(double(ties), kTieFraction * double(want.size())) << what << ": pixels naming another surface";
+  EXPECT_LE(double(ties), kTieFraction * double(mesh)) << what << ": pixels naming another surface, of " << mesh
+                                                      << " mesh pixels";
   tsah::test::expectRayCountsClose(got, expect);
   tsah::test::expectImagesClose(cpuImage, gpuImage, what);
   return triangles;
@@ -133,7 +141,7 @@ class CudaTwoLevelRender : public ::testing::Test {
 };
 
 // Between frames and at frames, poses moving, paths moving, the loop wrapped: the GPU's frame is
-// the CPU renderer's, and most instances are seen.
+// the CPU renderer's, and every instance is seen.
 TEST_F(CudaTwoLevelRender, SurfacesAndImageEqualTheCpuRenderersFrames) {
   const tsah::TwoLevelScene scene = load(tsah::test::writeTwoLevelScene(dir));
   tsah::TwoLevelRuntime cpu(scene, {2, tsah::TwoLevelRuntime::TlasUpdate::Refit, tsah::Layout::Bvh2});
@@ -146,10 +154,10 @@ TEST_F(CudaTwoLevelRender, SurfacesAndImageEqualTheCpuRenderersFrames) {
   uint32_t index = 0;
   for (const double t : {0.0, 3.25, 7.5, 12.0}) {
     const std::set<uint32_t> triangles = expectSameFrame(cpu, view, gpu, renderer, t, index++);
-    EXPECT_GT(triangles.size(), 50u) << "scene time " << t << ": too few triangles in view";
+    EXPECT_GT(triangles.size(), 500u) << "scene time " << t << ": too few triangles in view";
     for (uint32_t tri : triangles) seen.insert(instanceOf.at(tri));
   }
-  EXPECT_GE(seen.size(), 5u) << "instances seen in the frames";
+  EXPECT_EQ(seen.size(), scene.instanceCount()) << "instances seen in the frames";
 }
 
 // An instance flattened by its path (t = 1: singular world matrix) renders no mesh pixel; before
