@@ -89,6 +89,23 @@ void checkDeviceAndLayout(const TraceOptions& opt) {
 #endif
 }
 
+// What a two-level tree (.tbvh version 3) is not traced with: a per-frame rebuild of the whole
+// scene (--rebuild; the TLAS's is --tlas rebuild), motion blur, several GPUs or the CPU's SIMD
+// kernels of flat trees; on the GPU, the compressed layout and the rebuilt TLAS.
+void checkTwoLevelOptions(const TraceOptions& opt, const tsah::cli::FrameRuntimeOptions& runtimeOptions) {
+  if (runtimeOptions.rebuild != tsah::cli::Rebuild::None || runtimeOptions.shutter.fraction > 0.0 ||
+      !opt.devices.empty() || runtimeOptions.isa)
+    throw UsageError(opt.bvh + " holds a two-level scene: it is traced without --devices, --rebuild (see --tlas "
+                     "rebuild), --shutter or --isa");
+  if (opt.device != tsah::Device::Cuda) return;
+  if (opt.layout == tsah::Layout::Cwbvh)
+    throw UsageError(opt.bvh + " holds a two-level scene: the GPU traces its BLAS and TLAS in the bvh2 layout "
+                     "(--layout bvh2 or auto), not cwbvh");
+  if (opt.tlas == "rebuild")
+    throw UsageError("--tlas rebuild rebuilds the TLAS on the CPU: with --device cuda the TLAS is refitted "
+                     "(--tlas refit), or trace with --device cpu");
+}
+
 double secondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
@@ -110,6 +127,10 @@ void runTrace(const TraceOptions& opt) {
   const std::vector<int> devices = !opt.devices.empty() ? tsah::cli::parseDevices(opt.devices)
                                    : std::vector<int>{opt.device == tsah::Device::Cuda ? tsah::cli::rankDevice() : 0};
   runtimeOptions.shutter = parseShutter(opt);
+  // A two-level tree (version 3) is refused the options it cannot serve before the device is looked
+  // for, so the message is the same on every machine.
+  const bool twoLevel = tsah::cli::isTwoLevelTreeFile(opt.bvh);
+  if (twoLevel) checkTwoLevelOptions(opt, runtimeOptions);
   checkDeviceAndLayout(opt);
   if (opt.eye.empty() != opt.lookAt.empty()) throw UsageError("--eye and --look-at go together");
   if (!opt.camera.empty() && !opt.eye.empty()) throw UsageError("give either --camera or --eye/--look-at");
@@ -122,14 +143,9 @@ void runTrace(const TraceOptions& opt) {
   // Inputs: the tree (or tree set: each frame refits the tree of its part) is validated completely
   // by the reader; then it must match the animation. A two-level tree (version 3) is read with its
   // scene, which checks that it was built for it.
-  const bool twoLevel = tsah::cli::isTwoLevelTreeFile(opt.bvh);
   std::shared_ptr<const tsah::TwoLevelScene> twoLevelScene;
   tsah::TreeSet trees;
   if (twoLevel) {
-    if (opt.device == tsah::Device::Cuda || runtimeOptions.rebuild != tsah::cli::Rebuild::None ||
-        runtimeOptions.shutter.fraction > 0.0 || !opt.devices.empty() || runtimeOptions.isa)
-      throw UsageError(opt.bvh + " holds a two-level scene: it is traced on the CPU, without --device cuda, "
-                       "--devices, --rebuild (see --tlas rebuild), --shutter or --isa");
     if (!anim::isSceneFile(opt.input))
       throw UsageError(opt.bvh + " holds a two-level scene: trace it with its scene file, not " + opt.input);
     twoLevelScene = std::make_shared<const tsah::TwoLevelScene>(
@@ -157,11 +173,15 @@ void runTrace(const TraceOptions& opt) {
   std::vector<std::unique_ptr<tsah::cli::FrameRuntime>> runtimes;
   for (int gpu : devices) {
     runtimeOptions.gpu = gpu;
-    runtimes.push_back(twoLevel ? tsah::cli::makeTwoLevelFrameRuntime(
-                                      twoLevelScene, runtimeOptions.layout, runtimeOptions.threads,
-                                      opt.tlas == "rebuild" ? tsah::TwoLevelRuntime::TlasUpdate::Rebuild
-                                                            : tsah::TwoLevelRuntime::TlasUpdate::Refit)
-                                : tsah::cli::makeFrameRuntime(trees, a, runtimeOptions));
+    if (!twoLevel)
+      runtimes.push_back(tsah::cli::makeFrameRuntime(trees, a, runtimeOptions));
+    else if (opt.device == tsah::Device::Cuda)
+      runtimes.push_back(tsah::cli::makeGpuTwoLevelFrameRuntime(twoLevelScene, gpu));
+    else
+      runtimes.push_back(tsah::cli::makeTwoLevelFrameRuntime(twoLevelScene, runtimeOptions.layout, runtimeOptions.threads,
+                                                             opt.tlas == "rebuild"
+                                                                 ? tsah::TwoLevelRuntime::TlasUpdate::Rebuild
+                                                                 : tsah::TwoLevelRuntime::TlasUpdate::Refit));
   }
   const tsah::cli::FrameRuntime& rt = *runtimes.front();
 

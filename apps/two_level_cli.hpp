@@ -1,6 +1,7 @@
 #pragma once
 // Two-level scenes on the command line (docs/two-level.md): `tsah optimize --structure`, `tsah info`
-// of a version 3 .tbvh file with its scene, and the frame runtime `tsah trace` uses for one.
+// of a version 3 .tbvh file with its scene, and the frame runtimes `tsah trace` uses for one (CPU
+// and GPU).
 #include <memory>
 #include <string>
 
@@ -43,5 +44,10 @@ void describeTwoLevelFile(const std::string& treePath, const std::string& sceneP
 // it). Owns the scene.
 std::unique_ptr<FrameRuntime> makeTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, Layout layout,
                                                        unsigned threads, TwoLevelRuntime::TlasUpdate tlas);
+
+// The frame runtime of a two-level scene on GPU `gpu` (GpuTwoLevelRuntime + GpuTwoLevelRenderer,
+// two_level_gpu_frame.cpp): BLAS and TLAS in bvh2, the TLAS refitted. Owns the scene. Throws
+// tsah::ConfigError in a build without CUDA, tsah::Failure on a machine without a GPU.
+std::unique_ptr<FrameRuntime> makeGpuTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, int gpu);
 
 }  // namespace tsah::cli

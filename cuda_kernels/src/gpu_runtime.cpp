@@ -212,15 +212,21 @@ void GpuRuntime::Impl::restoreStaticPositions() {
   restInPlace = true;
 }
 
+detail::VertexTriangles detail::vertexTriangles(std::span<const uint32_t> indices, uint32_t vertexCount) {
+  VertexTriangles lists;
+  lists.offsets.assign(std::size_t(vertexCount) + 1, 0);
+  for (uint32_t v : indices) ++lists.offsets[v + 1];
+  for (uint32_t v = 0; v < vertexCount; ++v) lists.offsets[v + 1] += lists.offsets[v];
+  lists.triangles.resize(indices.size());
+  std::vector<uint32_t> fill(lists.offsets.begin(), lists.offsets.end() - 1);
+  for (std::size_t i = 0; i < indices.size(); ++i) lists.triangles[fill[indices[i]]++] = uint32_t(i / 3);
+  return lists;
+}
+
 void GpuRuntime::Impl::buildVertexTriangles() {
-  std::vector<uint32_t> offsets(std::size_t(vertices) + 1, 0);
-  for (uint32_t v : hostIndices) ++offsets[v + 1];
-  for (uint32_t v = 0; v < vertices; ++v) offsets[v + 1] += offsets[v];
-  std::vector<uint32_t> tris(hostIndices.size());
-  std::vector<uint32_t> fill(offsets.begin(), offsets.end() - 1);
-  for (std::size_t i = 0; i < hostIndices.size(); ++i) tris[fill[hostIndices[i]]++] = uint32_t(i / 3);
-  vertexTriOffsets = DeviceBuffer<uint32_t>(std::span<const uint32_t>(offsets), stream);
-  vertexTris = DeviceBuffer<uint32_t>(std::span<const uint32_t>(tris), stream);
+  const detail::VertexTriangles lists = detail::vertexTriangles(hostIndices, vertices);
+  vertexTriOffsets = DeviceBuffer<uint32_t>(std::span<const uint32_t>(lists.offsets), stream);
+  vertexTris = DeviceBuffer<uint32_t>(std::span<const uint32_t>(lists.triangles), stream);
   normals.resize(std::size_t(vertices) * 3);
 }
 

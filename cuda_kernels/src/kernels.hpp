@@ -5,11 +5,20 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "device_types.hpp"
 
 namespace tsah::cuda::detail {
+
+// The triangles of each vertex of a mesh (3 vertex ids per triangle), in increasing order: the order
+// the renderers sum face normals in. CSR: vertex v's triangles are triangles[offsets[v] ..
+// offsets[v + 1]) (a triangle naming v twice is listed twice). Host code (gpu_runtime.cpp).
+struct VertexTriangles {
+  std::vector<uint32_t> offsets, triangles;
+};
+VertexTriangles vertexTriangles(std::span<const uint32_t> indices, uint32_t vertexCount);
 
 // The moving vertices of the frame: for m < movingCount and c < 3, with i = 3m + c,
 // out[3 * v + c] = (1 - alpha) * a[i] + alpha * b[i], a = keyframes + params.a, b = keyframes + params.b,

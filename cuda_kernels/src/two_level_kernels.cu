@@ -1,10 +1,10 @@
 // The two-level runtime's kernels: instance world boxes, the TLAS refit over them, and the trace
-// through instances: the TLAS and each BLAS by the binary layout's device loop (bvh2_traversal.cuh).
+// of ray arrays through instances (two_level_traversal.cuh).
 // Compiled with -fmad=false (see CMakeLists.txt): boxes and hits round as on the CPU.
-#include "bvh2_traversal.cuh"
 #include "launch.hpp"
 #include "refit_walk.cuh"
 #include "triangle_boxes.cuh"
+#include "two_level_traversal.cuh"
 #include "tsah/core/instance_transform.hpp"
 #include "two_level_kernels.hpp"
 
@@ -75,82 +75,16 @@ __global__ void __launch_bounds__(kTlasBlockThreads)
   blockRefit(nodes, nodeParent, leaves, leafCount, interiorCount, leafBoxOf, root, shared);
 }
 
-// What the binary layout's device loop (bvh2_traversal.cuh) reads of the TLAS: its nodes as a
-// flat tree's, and a slot's "triangle" is its instance's BLAS, traced by the same loop with the ray
-// in instance space. prim: the BLAS triangle of the last hit the loop accepted (the loop accepts
-// every hit a slot test reports: it is nearer than the ray's current end).
-template <bool AnyHit>
-struct TlasLoopFrame {
-  TlasScene scene;
-  mutable uint32_t prim = kNoHit;
-};
-
-template <bool AnyHit>
-__device__ __forceinline__ void loadBvh2Node(const TlasLoopFrame<AnyHit>& f, int32_t ref, float4& n0xy, float4& n1xy,
-                                             float4& nz, int4& refs) {
-  const float4* n = reinterpret_cast<const float4*>(f.scene.nodes + ref);
-  n0xy = __ldg(n), n1xy = __ldg(n + 1), nz = __ldg(n + 2);
-  refs = __ldg(reinterpret_cast<const int4*>(n + 3));
-}
-
-template <bool AnyHit>
-__device__ __forceinline__ uint32_t slotTriangle(const TlasLoopFrame<AnyHit>& f, uint32_t s) {
-  return __ldg(f.scene.triIndex + s);
-}
-
-// Slot s's instance: its BLAS (AnyHit: whether anything is hit before tmax).
-template <bool AnyHit>
-__device__ __forceinline__ bool intersectBvh2Slot(const TlasLoopFrame<AnyHit>& f, const Ray& ray, const RayPrep& prep,
-                                                  uint32_t s, float tmax, float& t, float& u, float& v) {
-  const uint32_t instance = slotTriangle(f, s);
-  const InstanceState& inst = f.scene.instances[instance];
-  // The instance's own box before its transform and BLAS (as the CPU runtime's TLAS frame).
-  float entry;
-  if (!inst.visible || !intersectBox(prep, f.scene.instanceBoxes[instance], ray.tmin, tmax, entry)) return false;
-  const BlasView& view = f.scene.views[inst.view];
-  TraceScene blas;
-  blas.nodes = view.nodes;
-  blas.woop = view.woop;
-  blas.triIndex = view.triIndex;
-  blas.indices = view.indices;
-  blas.positions = view.positions;
-  blas.root = view.root;
-  const RootInfo root = *view.root;
-  const Ray local = rayInInstance(inst.toInstance, ray, tmax);
-  if constexpr (AnyHit) {
-    if (!bvh2AnyHit(blas, root, local)) return false;
-    t = tmax;
-    u = v = 0.0f;
-    return true;
-  } else {
-    const Hit h = bvh2ClosestHit(blas, root, local);
-    if (!h.valid() || !(h.t < tmax)) return false;
-    t = h.t;
-    u = h.u;
-    v = h.v;
-    f.prim = h.tri;
-    return true;
-  }
-}
-
 template <bool AnyHit>
 __global__ void __launch_bounds__(128) twoLevelTraceKernel(TlasScene scene, const Ray* __restrict__ rays,
                                                            uint32_t count, InstanceHit* __restrict__ hits,
                                                            uint8_t* __restrict__ occluded) {
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= count) return;
-  TlasLoopFrame<AnyHit> frame;
-  frame.scene = scene;
-  Bvh2Stack stack;
-  Bvh2Traversal<AnyHit> walk;
-  walk.start(*scene.root, rays[i], stack);
-  walk.template run<false>(frame, stack);
-  if constexpr (AnyHit) {
-    occluded[i] = walk.occluded() ? 1 : 0;
-  } else {
-    const Hit h = walk.closestHit(frame);
-    hits[i] = h.valid() ? InstanceHit{h.t, h.u, h.v, h.tri, frame.prim} : InstanceHit{0.0f, 0.0f, 0.0f, kNoHit, kNoHit};
-  }
+  if constexpr (AnyHit)
+    occluded[i] = twoLevelAnyHit(scene, rays[i]) ? 1 : 0;
+  else
+    hits[i] = twoLevelClosestHit(scene, rays[i]);
 }
 
 }  // namespace

@@ -54,6 +54,13 @@ struct TlasScene {
   const Aabb* instanceBoxes = nullptr;  // per instance: its world box this frame
 };
 
+// What the two-level renderer (two_level_render.cu) reads of a GpuTwoLevelRuntime: the trace scene
+// of its current frame and the stream its updates run on.
+struct TwoLevelTraceAccess {
+  TlasScene scene;
+  cudaStream_t stream = nullptr;
+};
+
 // Per instance, its world box: its BLAS root box transformed by world(t), rounded outward
 // (tsah::transformBox).
 void launchInstanceBoxes(const InstanceState* instances, const BlasView* views, uint32_t count, Aabb* boxes,

@@ -505,5 +505,7 @@ FlatBvh GpuTwoLevelRuntime::downloadTlas() const {
 double GpuTwoLevelRuntime::time() const { return impl_->time; }
 uint64_t GpuTwoLevelRuntime::blasRefits() const { return impl_->refits; }
 const DeviceInfo& GpuTwoLevelRuntime::device() const { return impl_->device; }
+const TwoLevelScene& GpuTwoLevelRuntime::scene() const { return impl_->scene; }
+detail::TwoLevelTraceAccess GpuTwoLevelRuntime::traceAccess() const { return {impl_->tlasScene(), impl_->stream}; }
 
 }  // namespace tsah::cuda

@@ -58,9 +58,26 @@ tl_error(cli.two_level.error.info_without_scene 2 "[^\n]*tl_auto.tbvh holds a tw
          info ${W}/tl_auto.tbvh)
 tl_error(cli.two_level.error.tlas_flat 2 "--tlas goes with a two-level tree[^\n]*tl_flat.tbvh is a flat tree"
          trace ${SCENE} ${W}/tl_flat.tbvh --tlas rebuild --frames 1 --no-images)
-tl_error(cli.two_level.error.trace_rebuild 2 "[^\n]*tl_auto.tbvh holds a two-level scene: it is traced on the CPU, without"
+tl_error(cli.two_level.error.trace_rebuild 2 "[^\n]*tl_auto.tbvh holds a two-level scene: it is traced without --devices, --rebuild"
          trace ${SCENE} ${W}/tl_auto.tbvh --rebuild sweep --frames 1 --no-images)
 tl_error(cli.two_level.error.not_a_scene 2 "--structure two-level needs a scene file[^\n]*explode is one animation"
          optimize ${CMAKE_SOURCE_DIR}/samples/explode -o ${W}/tl_bad.tbvh --structure two-level)
 tl_error(cli.two_level.error.segments 2 "--structure two-level builds one T-SAH tree per source and the top level: it does not go with --segments"
          optimize ${SCENE} -o ${W}/tl_bad.tbvh --structure two-level --segments 2)
+
+# --device cuda: the GPU two-level runtime and renderer (docs/two-level.md). What it does not serve
+# is refused before the device is looked for, so the message is the same on every machine: the
+# TLAS rebuilt every frame (a CPU reference) and the compressed layout.
+tl_error(cli.two_level.error.cuda_tlas_rebuild 2 "--tlas rebuild rebuilds the TLAS on the CPU: with --device cuda the TLAS is refitted"
+         trace ${SCENE} ${W}/tl_auto.tbvh --device cuda --tlas rebuild --frames 1 --no-images)
+tl_error(cli.two_level.error.cuda_cwbvh 2 "[^\n]*tl_auto.tbvh holds a two-level scene: the GPU traces its BLAS and TLAS in the bvh2 layout"
+         trace ${SCENE} ${W}/tl_auto.tbvh --device cuda --layout cwbvh --frames 1 --no-images)
+tl_error(cli.two_level.error.shutter 2 "[^\n]*tl_auto.tbvh holds a two-level scene: it is traced without [^\n]*--shutter"
+         trace ${SCENE} ${W}/tl_auto.tbvh --device cuda --shutter 0.5 --frames 2 --no-images)
+# End to end on the GPU: demo.json's frames traced and rendered on the device (skipped on a machine
+# without a GPU or a tsah without the GPU runtime).
+add_test(NAME cli.two_level.trace.cuda
+         COMMAND tsah trace ${SCENE} ${W}/tl_auto.tbvh ${TL_TRACE} --device cuda --out ${W}/tl_img_cuda --json)
+set_tests_properties(cli.two_level.trace.cuda PROPERTIES FIXTURES_REQUIRED tl_tree
+  PASS_REGULAR_EXPRESSION "\"structure\":\"two-level\".*\"timer\":\"CUDA events.*\"tlas_update\":\"refit\""
+  SKIP_REGULAR_EXPRESSION "no CUDA device found|GPU runtime is not built")

@@ -34,6 +34,10 @@ enum class TlasUpdate { Refit, Lbvh, HlbvhSah };
 const char* tlasUpdateName(TlasUpdate update);       // "refit", "lbvh", "hlbvh-sah"
 TlasUpdate parseTlasUpdate(std::string_view name);   // throws tsah::ConfigError for anything else
 
+namespace detail {
+struct TwoLevelTraceAccess;
+}
+
 // Device time of one updateAt (CUDA events, milliseconds) and what it did.
 struct TwoLevelUpdateTimings {
   double uploadMs = 0.0;  // the instance transforms and pose frames, host to device
@@ -81,10 +85,13 @@ class GpuTwoLevelRuntime {
   std::vector<Aabb> downloadInstanceBoxes() const;
   FlatBvh downloadTlas() const;
   const DeviceInfo& device() const;
+  const TwoLevelScene& scene() const;
 
   struct Impl;
 
  private:
+  friend class GpuTwoLevelRenderer;  // gpu_two_level_render.hpp: traces the current frame's device state
+  detail::TwoLevelTraceAccess traceAccess() const;
   std::unique_ptr<Impl> impl_;
 };
 

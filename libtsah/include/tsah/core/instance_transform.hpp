@@ -32,6 +32,16 @@ TSAH_HD Ray rayInInstance(const Affine3x4& toInstance, const Ray& ray, float tma
   return local;
 }
 
+// A point moved by rows (the 3x4 affine map, row-major, in double) and rounded to float: what
+// anim::transformPoints computes for the baked scene's vertices.
+TSAH_HD Vec3 transformPointRows(const double* rows, const Vec3& point) {
+  const double p[3] = {point.x, point.y, point.z};
+  float q[3];
+  for (int r = 0; r < 3; ++r)
+    q[r] = float(rows[4 * r] * p[0] + rows[4 * r + 1] * p[1] + rows[4 * r + 2] * p[2] + rows[4 * r + 3]);
+  return {q[0], q[1], q[2]};
+}
+
 // rows: the 3x4 affine map, row-major (x' = rows[0..3] . (x, y, z, 1), and so on). Each of the box's
 // 8 corners is transformed in double and rounded to float, then widened by one ulp outward: the
 // float box contains the float points that rays transformed into instance space are tested against.
@@ -40,13 +50,10 @@ TSAH_HD Aabb transformBoxRows(const Aabb& box, const double* rows) {
   if (box.empty()) return box;
   Aabb out;
   for (int corner = 0; corner < 8; ++corner) {
-    const double p[3] = {(corner & 1) ? box.hi.x : box.lo.x, (corner & 2) ? box.hi.y : box.lo.y,
-                         (corner & 4) ? box.hi.z : box.lo.z};
-    float q[3];
-    for (int r = 0; r < 3; ++r)
-      q[r] = float(rows[4 * r] * p[0] + rows[4 * r + 1] * p[1] + rows[4 * r + 2] * p[2] + rows[4 * r + 3]);
-    out.extend(Vec3{nextafterf(q[0], -3.4e38f), nextafterf(q[1], -3.4e38f), nextafterf(q[2], -3.4e38f)});
-    out.extend(Vec3{nextafterf(q[0], 3.4e38f), nextafterf(q[1], 3.4e38f), nextafterf(q[2], 3.4e38f)});
+    const Vec3 q = transformPointRows(rows, {(corner & 1) ? box.hi.x : box.lo.x, (corner & 2) ? box.hi.y : box.lo.y,
+                                             (corner & 4) ? box.hi.z : box.lo.z});
+    out.extend(Vec3{nextafterf(q.x, -3.4e38f), nextafterf(q.y, -3.4e38f), nextafterf(q.z, -3.4e38f)});
+    out.extend(Vec3{nextafterf(q.x, 3.4e38f), nextafterf(q.y, 3.4e38f), nextafterf(q.z, 3.4e38f)});
   }
   return out;
 }
