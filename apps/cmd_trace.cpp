@@ -61,7 +61,7 @@ struct TraceOptions {
   std::string stats;    // file for the JSON statistics (--stats)
   std::string devices;  // --devices all|0,2,...
   tsah::cli::ShutterOptions shutter;  // motion blur: --shutter, --shutter-mode
-  std::string tlas;                      // two-level trees: refit (default) | rebuild
+  std::string tlas;  // two-level trees: refit (default) | rebuild (CPU) | lbvh | hlbvh-sah (GPU)
 };
 
 // --shutter: the shutter of each frame; usage errors for values and combinations it cannot serve
@@ -91,19 +91,25 @@ void checkDeviceAndLayout(const TraceOptions& opt) {
 
 // What a two-level tree (.tbvh version 3) is not traced with: a per-frame rebuild of the whole
 // scene (--rebuild; the TLAS's is --tlas rebuild), motion blur, several GPUs or the CPU's SIMD
-// kernels of flat trees; on the GPU, the compressed layout and the rebuilt TLAS.
+// kernels of flat trees; on the GPU, the compressed layout. The TLAS rebuilds of one device only.
 void checkTwoLevelOptions(const TraceOptions& opt, const tsah::cli::FrameRuntimeOptions& runtimeOptions) {
   if (runtimeOptions.rebuild != tsah::cli::Rebuild::None || runtimeOptions.shutter.fraction > 0.0 ||
       !opt.devices.empty() || runtimeOptions.isa)
     throw UsageError(opt.bvh + " holds a two-level scene: it is traced without --devices, --rebuild (see --tlas "
                      "rebuild), --shutter or --isa");
-  if (opt.device != tsah::Device::Cuda) return;
+  const bool gpuRebuild = opt.tlas == "lbvh" || opt.tlas == "hlbvh-sah";
+  if (opt.device != tsah::Device::Cuda) {
+    if (gpuRebuild)
+      throw UsageError("--tlas " + opt.tlas + " rebuilds the TLAS on the GPU: use it with --device cuda (on the CPU: "
+                       "--tlas rebuild)");
+    return;
+  }
   if (opt.layout == tsah::Layout::Cwbvh)
     throw UsageError(opt.bvh + " holds a two-level scene: the GPU traces its BLAS and TLAS in the bvh2 layout "
                      "(--layout bvh2 or auto), not cwbvh");
   if (opt.tlas == "rebuild")
-    throw UsageError("--tlas rebuild rebuilds the TLAS on the CPU: with --device cuda the TLAS is refitted "
-                     "(--tlas refit), or trace with --device cpu");
+    throw UsageError("--tlas rebuild builds a sweep-SAH TLAS on the CPU: with --device cuda use --tlas lbvh or "
+                     "hlbvh-sah (or trace with --device cpu)");
 }
 
 double secondsSince(std::chrono::steady_clock::time_point start) {
@@ -176,7 +182,7 @@ void runTrace(const TraceOptions& opt) {
     if (!twoLevel)
       runtimes.push_back(tsah::cli::makeFrameRuntime(trees, a, runtimeOptions));
     else if (opt.device == tsah::Device::Cuda)
-      runtimes.push_back(tsah::cli::makeGpuTwoLevelFrameRuntime(twoLevelScene, gpu));
+      runtimes.push_back(tsah::cli::makeGpuTwoLevelFrameRuntime(twoLevelScene, gpu, opt.tlas.empty() ? "refit" : opt.tlas));
     else
       runtimes.push_back(tsah::cli::makeTwoLevelFrameRuntime(twoLevelScene, runtimeOptions.layout, runtimeOptions.threads,
                                                              opt.tlas == "rebuild"
@@ -236,7 +242,11 @@ void runTrace(const TraceOptions& opt) {
   if (runtimeOptions.shutter.fraction > 0.0)
     std::snprintf(blur, sizeof blur, ", shutter %g %s", opt.shutter.fraction, opt.shutter.mode.c_str());
   const std::string mode =
-      twoLevel ? "two-level, TLAS " + std::string(opt.tlas == "rebuild" ? "rebuilt (sweep SAH)" : "refitted") +
+      twoLevel ? "two-level, TLAS " +
+                     std::string(opt.tlas == "rebuild"     ? "rebuilt (sweep SAH)"
+                                 : opt.tlas == "lbvh"      ? "rebuilt (LBVH, GPU)"
+                                 : opt.tlas == "hlbvh-sah" ? "rebuilt (HLBVH-SAH, GPU)"
+                                                           : "refitted") +
                      " every frame"
       : rebuilds ? "rebuild " + opt.rebuild + (tsah::cli::isGpuRebuild(runtimeOptions.rebuild) ? " (GPU)" : " (CPU)")
                : trees.size() > 1 ? "refit of the tree of each frame's part (" + std::to_string(trees.size()) + " trees)"
@@ -359,8 +369,9 @@ TSAH_REGISTER_COMMAND(70, [](CLI::App& app) {
       ->check(CLI::IsMember({"none", "sweep", "binned", "lbvh", "hlbvh-sah"}));
   sub->add_option("--tlas", opt->tlas,
                   "A two-level tree (.tbvh version 3): refit (default: the top-level tree optimized over the "
-                  "scene's frames, refitted) or rebuild (a sweep-SAH top-level tree built every frame, the reference)")
-      ->check(CLI::IsMember({"refit", "rebuild"}));
+                  "scene's frames, refitted) or a top-level tree built every frame, the reference: rebuild (sweep "
+                  "SAH, --device cpu), lbvh or hlbvh-sah (--device cuda)")
+      ->check(CLI::IsMember({"refit", "rebuild", "lbvh", "hlbvh-sah"}));
   sub->add_option("--camera", opt->camera, "Camera JSON file: {eye, look_at, up, fov} or {keys: [{time, ...}]}");
   sub->add_option("--eye", opt->eye, "Camera position x,y,z (with --look-at)");
   sub->add_option("--look-at", opt->lookAt, "Point the camera looks at x,y,z");

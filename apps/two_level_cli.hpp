@@ -48,6 +48,8 @@ std::unique_ptr<FrameRuntime> makeTwoLevelFrameRuntime(std::shared_ptr<const Two
 // The frame runtime of a two-level scene on GPU `gpu` (GpuTwoLevelRuntime + GpuTwoLevelRenderer,
 // two_level_gpu_frame.cpp): BLAS and TLAS in bvh2, the TLAS refitted. Owns the scene. Throws
 // tsah::ConfigError in a build without CUDA, tsah::Failure on a machine without a GPU.
-std::unique_ptr<FrameRuntime> makeGpuTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, int gpu);
+// tlas: "refit" (the T-SAH TLAS refitted), "lbvh" or "hlbvh-sah" (a TLAS built every frame on the GPU).
+std::unique_ptr<FrameRuntime> makeGpuTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, int gpu,
+                                                          const std::string& tlas);
 
 }  // namespace tsah::cli

@@ -18,17 +18,18 @@ namespace tsah::cli {
 namespace {
 
 // The scene's runtime on GPU `gpu` (made current first: the runtime allocates on the current device).
-cuda::GpuTwoLevelRuntime::Config onDevice(int gpu) {
+cuda::GpuTwoLevelRuntime::Config onDevice(int gpu, cuda::TlasUpdate tlas) {
   cuda::useDevice(gpu);
   cuda::GpuTwoLevelRuntime::Config config;
   config.device = gpu;
+  config.tlas = tlas;
   return config;
 }
 
 class GpuTwoLevelFrameRuntime final : public FrameRuntime {
  public:
-  GpuTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, int gpu)
-      : scene_(std::move(scene)), gpu_(gpu), runtime_(*scene_, onDevice(gpu)), renderer_(runtime_) {}
+  GpuTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, int gpu, cuda::TlasUpdate tlas)
+      : scene_(std::move(scene)), gpu_(gpu), tlas_(tlas), runtime_(*scene_, onDevice(gpu, tlas)), renderer_(runtime_) {}
 
   // The runtime's GPU current while it is released.
   ~GpuTwoLevelFrameRuntime() override { cuda::useDevice(gpu_); }
@@ -45,13 +46,14 @@ class GpuTwoLevelFrameRuntime final : public FrameRuntime {
   }
 
   // The update's device time: the upload of the instance table and pose blends, the poses'
-  // interpolation, refit and Woop pass, the instance boxes and the TLAS refit (refitMs: the last
-  // two parts, updateMs: all three).
+  // interpolation, refit and Woop pass, the instance boxes and the TLAS refit or rebuild (refitMs:
+  // the last two parts, updateMs: all three; buildMs: the TLAS rebuild alone).
   FrameUpdate update(double time) override {
     cuda::useDevice(gpu_);
     const cuda::TwoLevelUpdateTimings t = runtime_.updateAt(time);
     FrameUpdate u;
     u.refitMs = t.blasMs + t.tlasMs;
+    u.buildMs = t.tlasRebuildMs;
     u.updateMs = t.totalMs();
     return u;
   }
@@ -70,7 +72,9 @@ class GpuTwoLevelFrameRuntime final : public FrameRuntime {
 
   std::string summary() const override {
     return "GPU " + runtime_.device().name + ", two-level: " + std::to_string(scene_->blases.size()) +
-           " BLAS in bvh2, " + std::to_string(scene_->instanceCount()) + " instances, TLAS refitted per frame";
+           " BLAS in bvh2, " + std::to_string(scene_->instanceCount()) + " instances, TLAS " +
+           (tlas_ == cuda::TlasUpdate::Refit ? std::string("refitted") : std::string("rebuilt (") + cuda::tlasUpdateName(tlas_) + ")") +
+           " per frame";
   }
 
   void describe(nlohmann::json& out) const override {
@@ -80,27 +84,31 @@ class GpuTwoLevelFrameRuntime final : public FrameRuntime {
     out["layout"] = "bvh2";
     out["two_level"] = describeTwoLevel(*scene_);
     out["two_level"].erase("blases");
-    out["two_level"]["tlas_update"] = "refit";
+    out["two_level"]["tlas_update"] = cuda::tlasUpdateName(tlas_);
     out["two_level"]["blas_refits"] = runtime_.blasRefits();
   }
 
  private:
   std::shared_ptr<const TwoLevelScene> scene_;
   int gpu_;
+  cuda::TlasUpdate tlas_;
   cuda::GpuTwoLevelRuntime runtime_;
   cuda::GpuTwoLevelRenderer renderer_;
 };
 
 }  // namespace
 
-std::unique_ptr<FrameRuntime> makeGpuTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, int gpu) {
+std::unique_ptr<FrameRuntime> makeGpuTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, int gpu,
+                                                          const std::string& tlas) {
+  const cuda::TlasUpdate update = cuda::parseTlasUpdate(tlas);
   if (!cuda::deviceAvailable())
     throw Failure("no CUDA device found (no GPU, no NVIDIA driver, or CUDA_VISIBLE_DEVICES hides them); "
                   "use --device cpu");
-  return std::make_unique<GpuTwoLevelFrameRuntime>(std::move(scene), gpu);
+  return std::make_unique<GpuTwoLevelFrameRuntime>(std::move(scene), gpu, update);
 }
 #else
-std::unique_ptr<FrameRuntime> makeGpuTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene>, int) {
+std::unique_ptr<FrameRuntime> makeGpuTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene>, int,
+                                                          const std::string&) {
   throw ConfigError("the GPU runtime is not built in this version of tsah (configure with a CUDA compiler to "
                     "build it); use --device cpu");
 }

@@ -6,7 +6,7 @@
 # in .gpu (as scripts/gpu-two-level-run.sh; docs/cuda-runtime.md):
 #   build:  cmake --preset gpu-hopper -B build/gpu-tlr -DCMAKE_DISABLE_FIND_PACKAGE_embree=ON -DTSAH_WITH_MPI=OFF
 #           cmake --build build/gpu-tlr -j2 --target tsah test_cuda_two_level_render test_cuda_two_level \
-#             test_cuda_render test_cuda_motion_blur_render
+#             test_cuda_runtime test_cuda_motion_blur_render
 #   pack:   ../shared/tools/gpu-bundle build/gpu-tlr .gpu samples
 #   run:    device tool, carry [".gpu"], command: bash scripts/gpu-two-level-render-run.sh [STEPS]
 # STEPS (default "tests trace"). Results go to $OUT: tests-NAME.log, trace-cpu.json, trace-gpu.json,
@@ -18,7 +18,7 @@ steps=${1:-tests trace}
 has() { [[ " $steps " == *" $1 "* ]]; }
 
 if has tests; then
-  for t in test_cuda_two_level_render test_cuda_two_level test_cuda_render test_cuda_motion_blur_render; do
+  for t in test_cuda_two_level_render test_cuda_two_level test_cuda_runtime test_cuda_motion_blur_render; do
     timeout 300 "./bin/$t" > "$out/tests-$t.log" 2>&1
     echo "$t: rc=$?"
     grep -E "^\[  (PASSED|FAILED|SKIPPED) |Failure|Expected|Which is|Value of" "$out/tests-$t.log" | head -20

@@ -68,7 +68,7 @@ tl_error(cli.two_level.error.segments 2 "--structure two-level builds one T-SAH 
 # --device cuda: the GPU two-level runtime and renderer (docs/two-level.md). What it does not serve
 # is refused before the device is looked for, so the message is the same on every machine: the
 # TLAS rebuilt every frame (a CPU reference) and the compressed layout.
-tl_error(cli.two_level.error.cuda_tlas_rebuild 2 "--tlas rebuild rebuilds the TLAS on the CPU: with --device cuda the TLAS is refitted"
+tl_error(cli.two_level.error.cuda_tlas_rebuild 2 "--tlas rebuild builds a sweep-SAH TLAS on the CPU: with --device cuda use --tlas lbvh or hlbvh-sah"
          trace ${SCENE} ${W}/tl_auto.tbvh --device cuda --tlas rebuild --frames 1 --no-images)
 tl_error(cli.two_level.error.cuda_cwbvh 2 "[^\n]*tl_auto.tbvh holds a two-level scene: the GPU traces its BLAS and TLAS in the bvh2 layout"
          trace ${SCENE} ${W}/tl_auto.tbvh --device cuda --layout cwbvh --frames 1 --no-images)
@@ -81,3 +81,11 @@ add_test(NAME cli.two_level.trace.cuda
 set_tests_properties(cli.two_level.trace.cuda PROPERTIES FIXTURES_REQUIRED tl_tree
   PASS_REGULAR_EXPRESSION "\"structure\":\"two-level\".*\"timer\":\"CUDA events.*\"tlas_update\":\"refit\""
   SKIP_REGULAR_EXPRESSION "no CUDA device found|GPU runtime is not built")
+# The TLAS built every frame on the GPU (LBVH), traced and rendered on the device; refused on the CPU.
+add_test(NAME cli.two_level.trace.cuda_tlas_lbvh
+         COMMAND tsah trace ${SCENE} ${W}/tl_auto.tbvh ${TL_TRACE} --device cuda --tlas lbvh --no-images --json)
+set_tests_properties(cli.two_level.trace.cuda_tlas_lbvh PROPERTIES FIXTURES_REQUIRED tl_tree
+  PASS_REGULAR_EXPRESSION "\"structure\":\"two-level\".*\"tlas_update\":\"lbvh\""
+  SKIP_REGULAR_EXPRESSION "no CUDA device found|GPU runtime is not built")
+tl_error(cli.two_level.error.cpu_tlas_lbvh 2 "--tlas lbvh rebuilds the TLAS on the GPU: use it with --device cuda"
+         trace ${SCENE} ${W}/tl_auto.tbvh --tlas lbvh --frames 1 --no-images)
