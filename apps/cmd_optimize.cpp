@@ -361,8 +361,8 @@ TSAH_REGISTER_COMMAND(40, [](CLI::App& app) {
   sub->add_option("--structure", opt->structure,
                   "flat: one tree over the baked scene; two-level: one tree per source and a top-level tree over "
                   "the instances (scene files, .tbvh version 3); auto (the default for scene files): per object, "
-                  "flattened into the parent level when its estimated cost is 10% lower so (or it is one instance "
-                  "without a path), else kept as instances; every object flattened: flat")
+                  "flattened into the parent level when that makes its estimated cost 10% lower (or it is one "
+                  "instance without a path), else kept as instances; every object flattened: flat")
       ->check(CLI::IsMember({"flat", "two-level", "auto"}));
   sub->add_flag("--json", opt->json, "Print one JSON object");
   sub->add_flag("--reproducible", opt->reproducible,

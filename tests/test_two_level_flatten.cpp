@@ -87,6 +87,9 @@ TEST(FlattenObjects, OneMergedSourceShownByOneInstanceMappedBackToTheBake) {
   }
   EXPECT_EQ(flat.bakedTriangle(1, 5), whole.bakedTriangle(1, 5));
   EXPECT_EQ(flat.runOf(3, 0).originalInstance, 3u);  // the crowd's first instance
+  EXPECT_EQ(flat.runOf(3, 0).object, 1u);
+  EXPECT_EQ(flat.runOf(3, merged.triangleCount() - 1).originalInstance, 15u);  // the statue
+  EXPECT_EQ(flat.runOf(3, merged.triangleCount() - 1).object, 2u);
   // Only static objects flattened: one keyframe.
   EXPECT_EQ(anim::flattenObjects(whole, {0, 2}).sources.back()->keyframeCount(), 1u);
   EXPECT_THROW(anim::flattenObjects(whole, {2, 1}), tsah::ConfigError);

@@ -158,7 +158,6 @@ std::vector<double> bakeTimes(double start, double end, double fps) {
   return times;
 }
 
-
 // The scene's instance ids 0 .. n - 1.
 std::vector<uint32_t> allInstances(const SceneSources& loaded) {
   std::vector<uint32_t> all(loaded.instances.size());
@@ -233,6 +232,7 @@ Animation bakeInstances(const SceneSources& loaded, const std::vector<uint32_t>&
   return Animation::withStaticVertices(std::move(indices), std::move(rest), std::move(moving), std::move(motion),
                                        std::vector<double>(times), name);
 }
+
 }  // namespace
 
 std::vector<double> SceneSources::frameTimes() const { return bakeTimes(start, end, fps); }
@@ -251,7 +251,8 @@ SceneSources loadSceneSources(const std::string& path, const LoadOptions& option
   uint64_t baked = 0;
   for (uint32_t i = 0; i < loaded.instances.size(); ++i) {
     const uint32_t count = loaded.sourceOf(loaded.instances[i]).triangleCount();
-    loaded.triangleRuns.push_back({i, 0, count, i, uint32_t(std::min<uint64_t>(baked, 0xffffffffu))});
+    const uint32_t first = uint32_t(std::min<uint64_t>(baked, 0xffffffffu));  // a bake past 2^32 is refused
+    loaded.triangleRuns.push_back({i, 0, count, loaded.instances[i].object, i, first});
     baked += count;
   }
   std::tie(loaded.start, loaded.end) = timeRange(loaded);
@@ -354,8 +355,10 @@ SceneSources flattenObjects(SceneSources scene, const std::vector<uint32_t>& obj
   const BakeCounts counts = bakeCounts(scene, merged);
   const bool moves = counts.moving > 0;
   const uint64_t keyframes = moves ? scene.frameCount : 1;
-  std::string names;
-  for (uint32_t o : objects) names += (names.empty() ? "" : ", ") + tsah::printable(description.objects[o].name);
+  std::string names;  // the first few, for messages and the source's name
+  for (std::size_t k = 0; k < std::min<std::size_t>(objects.size(), 4); ++k)
+    names += (k ? ", " : "") + tsah::printable(description.objects[objects[k]].name);
+  if (objects.size() > 4) names += " and " + std::to_string(objects.size() - 4) + " more";
   const std::string what = "flattening object(s) " + names + " (" + std::to_string(merged.size()) + " instances, " +
                            std::to_string(counts.triangles) + " triangles x " + std::to_string(keyframes) + " keyframes)";
   if (counts.triangles > 0xffffffffull || counts.vertices > 0xffffffffull)
@@ -398,7 +401,7 @@ SceneSources flattenObjects(SceneSources scene, const std::vector<uint32_t>& obj
     SceneSourceInstance instance = scene.instances[i];
     instance.source = newSource[instance.source];
     const SceneTriangleRun& run = scene.triangleRuns[i];
-    out.triangleRuns.push_back({uint32_t(out.instances.size()), 0, run.count, run.originalInstance, run.bakedFirst});
+    out.triangleRuns.push_back({uint32_t(out.instances.size()), 0, run.count, run.object, run.originalInstance, run.bakedFirst});
     out.instances.push_back(std::move(instance));
   }
   // The merged instance: its source is already in world space and at scene time (local = t).
@@ -409,7 +412,7 @@ SceneSources flattenObjects(SceneSources scene, const std::vector<uint32_t>& obj
   uint32_t first = 0;
   for (uint32_t i : merged) {
     const SceneTriangleRun& run = scene.triangleRuns[i];
-    out.triangleRuns.push_back({uint32_t(out.instances.size()), first, run.count, run.originalInstance, run.bakedFirst});
+    out.triangleRuns.push_back({uint32_t(out.instances.size()), first, run.count, run.object, run.originalInstance, run.bakedFirst});
     first += run.count;
   }
   out.instances.push_back(std::move(showing));

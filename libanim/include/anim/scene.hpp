@@ -142,10 +142,11 @@ struct SceneSourceInstance {
 
 // A run of an instance's source triangles and where the scene file's bake puts them: triangles
 // sourceFirst .. sourceFirst + count - 1 of instance `instance` are triangles 0 .. count - 1 of the
-// scene file's instance `originalInstance` (bake order), baked triangles bakedFirst ...
+// scene file's instance `originalInstance` (bake order) of object `object`, baked triangles
+// bakedFirst ...
 struct SceneTriangleRun {
   uint32_t instance = 0, sourceFirst = 0, count = 0;
-  uint32_t originalInstance = 0, bakedFirst = 0;
+  uint32_t object = 0, originalInstance = 0, bakedFirst = 0;
 };
 
 struct SceneSources {
