@@ -130,9 +130,11 @@ StructureChoice chooseObjectStructure(const anim::SceneSources& scene, const Str
     out.objects.push_back(std::move(c));
   }
 
-  for (ObjectStructureChoice& c : out.objects) {
+  // Both estimates of one object (left at -1 for one instance without a path, no instances, or an
+  // object past the memory bound: decided without them).
+  const auto estimate = [&](ObjectStructureChoice& c) {
     const std::vector<uint32_t>& mine = instancesOf[c.object];
-    if (c.single() || mine.empty() || double(c.flattenedTriangles) > memoryBudget) continue;  // decided below
+    if (c.single() || mine.empty() || double(c.flattenedTriangles) > memoryBudget) return;
     // Instanced: a tree over the instances' world boxes (the TLAS's share) and each instance's
     // BLAS over its transformed box.
     c.instancedCost = 0.0;
@@ -172,7 +174,7 @@ StructureChoice chooseObjectStructure(const anim::SceneSources& scene, const Str
       }
       c.flattenedCost += area / sceneArea[f] / frames;
     }
-  }
+  };
 
   // The decision: moving objects, then (when none of them is flattened) static ones; among the
   // objects the cost favours, the largest savings first while the memory bound allows.
@@ -183,6 +185,7 @@ StructureChoice chooseObjectStructure(const anim::SceneSources& scene, const Str
     bool any = false;
     for (ObjectStructureChoice& c : out.objects) {
       if (c.moves != moving) continue;
+      estimate(c);
       if (c.single()) {
         c.flatten = any = true;
         c.reason = "flattened: one instance without a keyed path (nothing is copied)";

@@ -42,7 +42,8 @@ struct ObjectStructureChoice {
   // cost of a tree over its instances' world boxes (cT per interior node, instanceCost per instance box)
   // plus each instance's BLAS cost (a binned SAH tree over its source at its local time) over its
   // transformed box; and the SAH cost of a binned SAH tree over its world triangles built at each
-  // frame. Negative when not estimated (one instance without a path, or the memory bound).
+  // frame. Negative when not estimated (one instance without a path, the memory bound, or a
+  // static object when a moving one is flattened: it stays instanced whatever its costs).
   double instancedCost = -1.0, flattenedCost = -1.0;
   bool flatten = false;
   std::string reason;
