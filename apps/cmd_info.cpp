@@ -92,7 +92,7 @@ TSAH_REGISTER_COMMAND(10, [](CLI::App& app) {
   struct Options {
     std::string input, animation;
     uint32_t frames = 0;
-    bool json = false;
+    bool json = false, structure = false;
   };
   auto opt = std::make_shared<Options>();
   sub->add_option("INPUT", opt->input,
@@ -105,7 +105,21 @@ TSAH_REGISTER_COMMAND(10, [](CLI::App& app) {
   sub->add_option("--frames", opt->frames, "With ANIMATION: this many uniformly spaced frames (default: every keyframe)")
       ->check(CLI::Range(1u, 1000000u));
   sub->add_flag("--json", opt->json, "Print one JSON object");
+  sub->add_flag("--structure", opt->structure,
+                "With a scene file: what `tsah optimize --structure auto` chooses per object, with the default "
+                "tree options (loads the sources, bakes nothing)");
   sub->callback([opt] {
+    if (opt->structure) {
+      if (!opt->animation.empty() || opt->frames || !anim::isSceneFile(opt->input))
+        throw tsah::cli::UsageError("--structure goes with a scene file alone: tsah info SCENE --structure");
+      const nlohmann::json j = tsah::cli::describeStructureChoice(
+          tsah::cli::chooseStructure(tsah::cli::loadSceneSourcesForCli(opt->input), tsah::TreeOptions{}));
+      if (opt->json)
+        std::printf("%s\n", j.dump().c_str());
+      else
+        tsah::cli::printStructureChoice(j);
+      return;
+    }
     if (tsah::cli::isTwoLevelTreeFile(opt->input)) {  // version 3: read only with its scene
       if (opt->animation.empty())
         throw tsah::cli::UsageError(opt->input + " holds a two-level scene (.tbvh version 3): give its scene too: "

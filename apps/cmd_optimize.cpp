@@ -204,8 +204,8 @@ void runSegments(const Options& opt, const tsah::TreeOptions& treeOpt, const ani
 // --structure: true when the scene is to be kept as two levels (then written here). Two-level is
 // refused for inputs that are not scene files and with the options only a flat tree reads; auto
 // (the default for scene files) applies tsah::cli::chooseStructure unless such options ask for a
-// flat tree.
-bool runTwoLevel(const Options& opt) {
+// flat tree; when it flattens every object, flatChoice receives its decision and the flat tree is built.
+bool runTwoLevel(const Options& opt, nlohmann::json& flatChoice) {
   using tsah::cli::UsageError;
   const bool scene = anim::isSceneFile(opt.input);
   const std::string structure = opt.structure.empty() ? (scene ? "auto" : "flat") : opt.structure;
@@ -220,11 +220,18 @@ bool runTwoLevel(const Options& opt) {
                      "with --segments, --devices or --method other than tsah");
   if (!scene || flatOnly) return false;
   anim::SceneSources sources = tsah::cli::loadSceneSourcesForCli(opt.input);
-  const tsah::cli::StructureChoice choice = tsah::cli::chooseStructure(sources);
-  if (!asked && !choice.twoLevel) return false;
-  if (!tsah::cli::job::leader()) return true;
-  tsah::cli::optimizeTwoLevel(std::move(sources), opt.input, opt.output, opt.tree, asked ? "" : choice.reason,
-                              opt.json);
+  if (asked) {
+    if (tsah::cli::job::leader())
+      tsah::cli::optimizeTwoLevel(std::move(sources), opt.input, opt.output, opt.tree, nullptr, opt.json);
+    return true;
+  }
+  const tsah::StructureChoice choice = tsah::cli::chooseStructure(sources, opt.tree);
+  if (choice.allFlattened()) {
+    flatChoice = tsah::cli::describeStructureChoice(choice);
+    return false;
+  }
+  if (tsah::cli::job::leader())
+    tsah::cli::optimizeTwoLevel(std::move(sources), opt.input, opt.output, opt.tree, &choice, opt.json);
   return true;
 }
 
@@ -234,7 +241,8 @@ void run(const Options& opt) {
   tsah::cli::checkTreeDevice(treeOpt);
   if (!opt.devices.empty() && treeOpt.device != tsah::Device::Cuda)
     throw tsah::cli::UsageError("--devices chooses GPUs: use it with --device cuda");
-  if (runTwoLevel(opt)) return;
+  nlohmann::json structureChoice;  // auto's decision when it chose a flat tree
+  if (runTwoLevel(opt, structureChoice)) return;
   const anim::Animation a = tsah::cli::loadInput(opt.input);
   if (a.triangleCount() == 0) throw tsah::cli::UsageError(opt.input + ": no triangles to build a tree over");
   // A static input has one frame: resampling it would only repeat that frame.
@@ -297,11 +305,13 @@ void run(const Options& opt) {
     j["optimization"] = optimizationJson(details);
   }
   j["peak_rss_bytes"] = peakResidentBytes();
+  if (!structureChoice.is_null()) j["structure_choice"] = structureChoice;
   progress.message("done");
   if (opt.json) {
     std::printf("%s\n", j.dump().c_str());
     return;
   }
+  if (!structureChoice.is_null()) tsah::cli::printStructureChoice(structureChoice);
   std::printf("%s: %s tree, %u triangles, %u nodes, %u leaves, depth %u\n", opt.output.c_str(),
               method.name().c_str(), a.triangleCount(), bvh.nodeCount(), bvh.leafCount(), bvh.depth());
   if (method.method == tsah::Method::TSah)
@@ -350,9 +360,9 @@ TSAH_REGISTER_COMMAND(40, [](CLI::App& app) {
       ->capture_default_str();
   sub->add_option("--structure", opt->structure,
                   "flat: one tree over the baked scene; two-level: one tree per source and a top-level tree over "
-                  "the instances (scene files, .tbvh version 3); auto (the default for scene files): two-level "
-                  "when a source has several instances, an instance moves along a path, or animated and static "
-                  "sources meet, else flat")
+                  "the instances (scene files, .tbvh version 3); auto (the default for scene files): per object, "
+                  "flattened into the parent level when that makes its estimated cost 10% lower (or it is one "
+                  "instance without a path), else kept as instances; every object flattened: flat")
       ->check(CLI::IsMember({"flat", "two-level", "auto"}));
   sub->add_flag("--json", opt->json, "Print one JSON object");
   sub->add_flag("--reproducible", opt->reproducible,

@@ -30,19 +30,38 @@ anim::SceneSources loadSceneSourcesForCli(const std::string& scenePath) {
   return anim::loadSceneSources(scenePath, load);
 }
 
-StructureChoice chooseStructure(const anim::SceneSources& scene) {
-  const auto objectName = [&](const anim::SceneSourceInstance& i) {
-    return "'" + scene.description.objects[i.object].name + "'";
-  };
-  std::vector<uint32_t> instancesOf(scene.sources.size(), 0);
-  for (const anim::SceneSourceInstance& i : scene.instances)
-    if (++instancesOf[i.source] == 2) return {true, "object " + objectName(i) + " has more than one instance"};
-  for (const anim::SceneSourceInstance& i : scene.instances)
-    if (i.keyed()) return {true, "object " + objectName(i) + " moves along a keyed path"};
-  bool animated = false, still = false;
-  for (const auto& source : scene.sources) (source->keyframeCount() > 1 ? animated : still) = true;
-  if (animated && still) return {true, "animated objects move among static ones"};
-  return {false, "every object is one instance without a path, all of them animated or all static"};
+StructureChoice chooseStructure(const anim::SceneSources& scene, const TreeOptions& options) {
+  StructureChoiceOptions choice;
+  choice.cost = options.objective.cost;
+  choice.maxLeafSize = options.objective.maxLeafSize;
+  return chooseObjectStructure(scene, choice);
+}
+
+nlohmann::json describeStructureChoice(const StructureChoice& choice) {
+  nlohmann::json objects = nlohmann::json::array();
+  for (const ObjectStructureChoice& c : choice.objects) {
+    nlohmann::json o = {{"object", c.object},          {"name", c.name},       {"instances", c.instances},
+                        {"moves", c.moves},            {"flatten", c.flatten}, {"flattened_triangles", c.flattenedTriangles},
+                        {"reason", c.reason}};
+    if (c.instancedCost >= 0.0) o["cost"] = {{"instanced", c.instancedCost}, {"flattened", c.flattenedCost}};
+    objects.push_back(std::move(o));
+  }
+  const bool flat = choice.allFlattened();
+  return {{"structure", flat ? "flat" : "two-level"},
+          {"flattened_objects", choice.flattenedObjects},
+          {"representative_frames", choice.frames},
+          {"seconds", choice.seconds},
+          {"objects", objects}};
+}
+
+void printStructureChoice(const nlohmann::json& j) {
+  std::printf("auto        %s: %zu of %zu objects flattened (cost estimate over %u frames, %.2f s)\n",
+              j["structure"].get<std::string>().c_str(), j["flattened_objects"].size(), j["objects"].size(),
+              j["representative_frames"].get<unsigned>(), j["seconds"].get<double>());
+  for (const auto& o : j["objects"])
+    std::printf("object %-4u %-12s %u instance(s), %s: %s\n", o["object"].get<unsigned>(),
+                ("'" + printable(o["name"].get<std::string>()) + "'").c_str(), o["instances"].get<unsigned>(),
+                o["moves"].get<bool>() ? "moving" : "static", o["reason"].get<std::string>().c_str());
 }
 
 nlohmann::json describeTwoLevel(const TwoLevelScene& s) {
@@ -65,7 +84,10 @@ nlohmann::json describeTwoLevel(const TwoLevelScene& s) {
     average += c / double(s.tlasFrameCosts.size());
     maximum = std::max(maximum, c);
   }
+  nlohmann::json flattened = nlohmann::json::array();
+  for (uint32_t o : s.scene.flattenedObjects) flattened.push_back(s.scene.description.objects[o].name);
   return {{"structure", "two-level"},
+          {"flattened_objects", flattened},
           {"blas", {{"count", s.blases.size()}, {"static", s.blases.size() - animated}, {"animated", animated}}},
           {"instances", s.instanceCount()},
           {"poses", s.poses.size()},
@@ -87,6 +109,11 @@ void printTwoLevel(const nlohmann::json& j) {
   std::printf("structure   two-level: %u BLAS (%u static, %u animated), %u instances, %u poses\n",
               b["count"].get<unsigned>(), b["static"].get<unsigned>(), b["animated"].get<unsigned>(),
               j["instances"].get<unsigned>(), j["poses"].get<unsigned>());
+  if (!j["flattened_objects"].empty()) {
+    std::string names;
+    for (const auto& n : j["flattened_objects"]) names += (names.empty() ? "'" : ", '") + printable(n.get<std::string>()) + "'";
+    std::printf("flattened   objects %s: one source, shown by one instance\n", names.c_str());
+  }
   const auto& t = j["tlas"];
   std::printf("TLAS        %u nodes; T-SAH cost (k=%d) %.3f over %u scene frames (per frame: average %.3f, maximum %.3f)\n",
               t["nodes"].get<unsigned>(), j["k"].get<int>(), t["cost"].get<double>(), j["scene_frames"].get<unsigned>(),
@@ -104,21 +131,26 @@ void printTwoLevel(const nlohmann::json& j) {
 }  // namespace
 
 void optimizeTwoLevel(anim::SceneSources scene, const std::string& input, const std::string& output,
-                      const TreeOptions& options, const std::string& reason, bool json) {
+                      const TreeOptions& options, const StructureChoice* choice, bool json) {
   const auto start = std::chrono::steady_clock::now();
+  if (choice) scene = anim::flattenObjects(std::move(scene), choice->flattenedObjects);
   const TwoLevelScene twoLevel = buildTwoLevelScene(std::move(scene), options);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   saveTwoLevelScene(output, twoLevel);
   nlohmann::json j = describeTwoLevel(twoLevel);
   j["input"] = input;
   j["output"] = output;
-  j["structure_rule"] = reason.empty() ? "asked for (--structure two-level)" : "auto: " + reason;
+  j["structure_rule"] = choice ? "auto: " + std::to_string(choice->flattenedObjects.size()) + " of " +
+                                     std::to_string(choice->objects.size()) + " objects flattened by the cost estimate"
+                              : "asked for (--structure two-level)";
+  if (choice) j["structure_choice"] = describeStructureChoice(*choice);
   j["build_s"] = seconds;
   if (json) {
     std::printf("%s\n", j.dump().c_str());
     return;
   }
   std::printf("%s: two-level scene (%s)\n", output.c_str(), j["structure_rule"].get<std::string>().c_str());
+  if (choice) printStructureChoice(j["structure_choice"]);
   printTwoLevel(j);
   std::printf("build       %.2f s\n", seconds);
 }

@@ -10,6 +10,7 @@
 #include "anim/scene.hpp"
 #include "frame_runtime.hpp"
 #include "tsah/pipeline.hpp"
+#include "tsah/scene/structure_choice.hpp"
 #include "tsah/scene/two_level.hpp"
 #include "tsah/scene/two_level_runtime.hpp"
 
@@ -21,17 +22,18 @@ bool isTwoLevelTreeFile(const std::string& path);
 // The scene's sources and instances with the command line's load options (fps, clip, data folder).
 anim::SceneSources loadSceneSourcesForCli(const std::string& scenePath);
 
-// --structure auto: "two-level" or "flat", and the rule's reason in words (docs/two-level.md).
-struct StructureChoice {
-  bool twoLevel = false;
-  std::string reason;
-};
-StructureChoice chooseStructure(const anim::SceneSources& scene);
+// --structure auto (docs/two-level.md): tsah::chooseObjectStructure with the command's cost model
+// and leaf size. Every object flattened: a flat tree; else two levels, the chosen objects flattened.
+StructureChoice chooseStructure(const anim::SceneSources& scene, const TreeOptions& options);
+// The decision as JSON (per object: instances, moves, costs, flatten, reason) and as text lines.
+nlohmann::json describeStructureChoice(const StructureChoice& choice);
+void printStructureChoice(const nlohmann::json& j);
 
-// `tsah optimize SCENE --structure two-level`: builds and writes the version 3 file and prints the
-// structure (text, or one JSON object), with `reason` the rule that chose it ("" when asked for).
+// `tsah optimize SCENE --structure two-level|auto`: flattens the objects `choice` chose (none when
+// asked for two levels: choice null), builds and writes the version 3 file and prints the structure
+// (text, or one JSON object) with the decision.
 void optimizeTwoLevel(anim::SceneSources scene, const std::string& input, const std::string& output,
-                      const TreeOptions& options, const std::string& reason, bool json);
+                      const TreeOptions& options, const StructureChoice* choice, bool json);
 
 // The structure as JSON: BLAS (static / animated, each one's cost and bytes), instances, poses, the
 // TLAS cost over the scene frames, the bytes of each level.

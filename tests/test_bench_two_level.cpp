@@ -18,16 +18,6 @@ namespace fs = std::filesystem;
 namespace {
 
 #if TSAH_HAVE_EMBREE
-std::vector<uint32_t> firstTriangles(const tsah::TwoLevelScene& s) {
-  std::vector<uint32_t> first;
-  uint32_t t = 0;
-  for (const auto& i : s.scene.instances) {
-    first.push_back(t);
-    t += s.scene.sourceOf(i).triangleCount();
-  }
-  return first;
-}
-
 // Runs body on the calling thread (the peer's poses one after another).
 void serial(std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) { body(0, n); }
 
@@ -41,9 +31,8 @@ TEST(BenchEmbreeInstanced, FindsWhatTheTwoLevelRuntimeFindsAtEveryTime) {
   const fs::path dir = tsah::test::scratchDir();
   const tsah::TwoLevelScene s =
       tsah::loadTwoLevelScene(tsah::test::writeTwoLevelScene(dir).string(), {}, tsah::test::smallTwoLevelOptions());
-  const std::vector<uint32_t> first = firstTriangles(s);
   tsah::TwoLevelRuntime runtime(s, {2, tsah::TwoLevelRuntime::TlasUpdate::Refit, tsah::Layout::Bvh2});
-  tsah::bench::EmbreeInstancedPeer embree(s, first, 2, serial);
+  tsah::bench::EmbreeInstancedPeer embree(s, 2, serial);
   embree.build(s.frameTimes.front());
   EXPECT_EQ(embree.objectScenes(), 1u + s.poses.size());  // the static ground, and every pose
   const tsah::bench::BatchTracer tracer = embree.tracer();
@@ -71,7 +60,7 @@ TEST(BenchEmbreeInstanced, FindsWhatTheTwoLevelRuntimeFindsAtEveryTime) {
       hits += own.valid() ? 1 : 0;
       EXPECT_EQ(own.valid(), bool(occluded)) << "t " << t;
       if (own.valid() != other.valid()) continue;
-      if (!own.valid() || (first[own.instance] + own.prim == other.tri &&
+      if (!own.valid() || (s.scene.bakedTriangle(own.instance, own.prim) == other.tri &&
                            std::abs(own.t - other.t) <= 1e-4f * std::max(own.t, other.t)))
         ++same;
     }
@@ -85,7 +74,7 @@ TEST(BenchEmbreeInstanced, RefitsOnlyThePosesWhoseLocalTimeChanged) {
   const fs::path dir = tsah::test::scratchDir();
   const tsah::TwoLevelScene s =
       tsah::loadTwoLevelScene(tsah::test::writeRigidPathScene(dir).string(), {}, tsah::test::smallTwoLevelOptions());
-  tsah::bench::EmbreeInstancedPeer embree(s, firstTriangles(s), 2, serial);
+  tsah::bench::EmbreeInstancedPeer embree(s, 2, serial);
   embree.build(0.0);
   embree.update(3.0);
   EXPECT_EQ(embree.lastUpdateRefits(), 2u);
@@ -102,7 +91,7 @@ TEST(BenchEmbreeInstanced, AnInstanceFlattenedByItsPathIsNotHitThenAndIsAfter) {
   // At t = 1 the instance is flat (a singular world transform).
   const tsah::TwoLevelScene s =
       tsah::loadTwoLevelScene(tsah::test::writeFlattenedTriangleScene(dir).string(), {}, tsah::test::smallTwoLevelOptions());
-  tsah::bench::EmbreeInstancedPeer embree(s, firstTriangles(s), 2, serial);
+  tsah::bench::EmbreeInstancedPeer embree(s, 2, serial);
   embree.build(0.0);
   tsah::Ray across;  // along x through (x, 1/3, 1/3)
   across.org = {-2.0f, 1.0f / 3.0f, 1.0f / 3.0f};

@@ -140,9 +140,11 @@ class CudaTwoLevel : public ::testing::Test {
   std::unique_ptr<tsah::TwoLevelScene> scene;
 };
 
-TEST_F(CudaTwoLevel, HitsEqualTheCpuRuntimeAtSeveralTimes) {
-  tsah::TwoLevelRuntime cpu(*scene, {2, tsah::TwoLevelRuntime::TlasUpdate::Refit, tsah::Layout::Bvh2});
-  tsah::cuda::GpuTwoLevelRuntime gpu(*scene);
+// Closest hits (instance, triangle, t) and any hits of the GPU runtime equal the CPU runtime's at
+// several scene times.
+void expectCpuHits(const tsah::TwoLevelScene& twoLevel) {
+  tsah::TwoLevelRuntime cpu(twoLevel, {2, tsah::TwoLevelRuntime::TlasUpdate::Refit, tsah::Layout::Bvh2});
+  tsah::cuda::GpuTwoLevelRuntime gpu(twoLevel);
   uint32_t hits = 0, total = 0;
   for (const double t : {0.0, 2.0, 3.25, 7.5, 10.0, 12.0}) {
     cpu.update(t);
@@ -163,6 +165,17 @@ TEST_F(CudaTwoLevel, HitsEqualTheCpuRuntimeAtSeveralTimes) {
     }
   }
   EXPECT_GT(hits, total / 4);  // the comparison saw real hits
+}
+
+TEST_F(CudaTwoLevel, HitsEqualTheCpuRuntimeAtSeveralTimes) { expectCpuHits(*scene); }
+
+// The cloth's four instances (offsets, a loop, a keyed path) flattened into one source of
+// world-space keyframes (anim::flattenObjects): one more pose, traced as any other.
+TEST_F(CudaTwoLevel, AFlattenedSceneHitsAsTheCpuRuntime) {
+  const tsah::TwoLevelScene flattened = tsah::buildTwoLevelScene(
+      anim::flattenObjects(anim::loadSceneSources((dir / "scene.json").string()), {1}), tsah::test::smallTwoLevelOptions());
+  ASSERT_EQ(flattened.instanceCount(), 4u);  // the ground's three instances and the merged one
+  expectCpuHits(flattened);
 }
 
 TEST_F(CudaTwoLevel, TlasBoxesContainEveryInstanceAfterEachUpdate) {

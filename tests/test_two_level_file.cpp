@@ -136,7 +136,8 @@ TEST_F(TwoLevelFile, CorruptFilesAreRefusedWithOneLine) {
            {16, 3, "BLAS 0 starts at byte"},
            {20, 0, "instance count 0"},
            {24, 100, "pose count 100 exceeds"},
-           {28, 1, "reserved header words"},
+           {28, 0x80000000u, "flattened object count 2147483648 exceeds"},
+           {28, 100000, "too small"},
            {60, 1, "reserved header words"},
            {64, 7, "instance 0 names BLAS 7 of 2"},
            {64 + 4, 0, "instance 0's pose belongs to another BLAS"},
@@ -215,6 +216,70 @@ TEST_F(TwoLevelFile, AFileReadWithAnotherSceneIsRefused) {
   text.replace(text.find("[0, 4, 0]"), 9, "[0, 400, 0]");
   writeText(dir / "moved.json", text);
   refused(dir / "moved.json", "TLAS boxes");
+}
+
+// Objects flattened into one source: the file records them, and reading it with its scene
+// flattens the same objects before matching; their table is checked like the others.
+TEST_F(TwoLevelFile, FlattenedObjectsRoundTripAndAreChecked) {
+  const auto flattenedBuild = [&](const std::vector<uint32_t>& objects) {
+    return tsah::buildTwoLevelScene(anim::flattenObjects(anim::loadSceneSources(scenePath.string()), objects), options());
+  };
+  const tsah::TwoLevelScene mixed = flattenedBuild({1});
+  const fs::path tree = dir / "flattened.tbvh";
+  tsah::saveTwoLevelScene(tree.string(), mixed);
+  const tsah::TwoLevelScene read = tsah::loadTwoLevelSceneFile(tree.string(), anim::loadSceneSources(scenePath.string()));
+  EXPECT_EQ(read.scene.flattenedObjects, (std::vector<uint32_t>{1}));
+  ASSERT_EQ(read.instanceCount(), 3u);  // the static source's two instances and the merged one
+  EXPECT_TRUE(read.blases[1].animated);
+  EXPECT_EQ(tsah::encodeTwoLevelScene(read), tsah::readFile(tree.string()));
+  tsah::TwoLevelRuntime a(mixed), b(read);
+  a.update(1.5);
+  b.update(1.5);
+  for (int i = 0; i < 64; ++i) {
+    tsah::Ray ray;
+    ray.org = {0.1f * float(i % 8) - 0.3f, 8.0f, 0.1f * float(i / 8) - 0.3f};
+    ray.dir = {0.05f, -1.0f, 0.02f};
+    ray.tmin = 0.0f;
+    ray.tmax = 100.0f;
+    const tsah::TwoLevelHit ha = a.closestHit(ray), hb = b.closestHit(ray);
+    EXPECT_EQ(ha.instance, hb.instance);
+    EXPECT_EQ(ha.prim, hb.prim);
+    EXPECT_EQ(ha.t, hb.t);
+  }
+  // A file without the record (version 3 as before) is read with nothing flattened.
+  EXPECT_TRUE(tsah::decodeTwoLevelFile(bytes, "x.tbvh").flattenedObjects.empty());
+
+  // Both objects flattened: the table holds 0, 1 after the pose table (one pose: the merged source).
+  const std::vector<uint8_t> both = tsah::encodeTwoLevelScene(flattenedBuild({0, 1}));
+  const std::size_t table = 64 + 8 * 1 + 24 * 1;
+  const auto withIds = [&](uint32_t first, uint32_t second) {
+    std::vector<uint8_t> bad = both;
+    put(bad, table, first);
+    put(bad, table + 4, second);
+    return withCrc(bad);
+  };
+  EXPECT_EQ(decodeError(withIds(0, 1)), "");
+  EXPECT_NE(decodeError(withIds(1, 1)).find("flattened object 1 follows 1 (the ids must be increasing, without duplicates)"),
+            std::string::npos);
+  EXPECT_NE(decodeError(withIds(1, 0)).find("flattened object 0 follows 1"), std::string::npos);
+  // An id the scene does not have: refused against the scene, naming both files.
+  tsah::writeFileAtomically(tree.string(), withIds(0, 5));
+  try {
+    tsah::loadTwoLevelSceneFile(tree.string(), anim::loadSceneSources(scenePath.string()));
+    ADD_FAILURE() << "object 5 accepted";
+  } catch (const tsah::DataError& e) {
+    EXPECT_NE(std::string(e.what()).find(tree.string() + " was not built for " + scenePath.string() +
+                                         ": it flattens object 5, the scene has 2 objects"),
+              std::string::npos)
+        << e.what();
+  }
+  // The encoder refuses what the reader would.
+  std::vector<tsah::Bvh> trees{mixed.blases[0].bvh, mixed.blases[1].bvh};
+  std::vector<tsah::BvhBuildInfo> builds{mixed.blases[0].info, mixed.blases[1].info};
+  EXPECT_THROW(tsah::encodeTwoLevelFile(trees, builds, mixed.tlas, mixed.tlasInfo, std::vector<uint32_t>{0, 0, 1},
+                                        std::vector<uint32_t>{tsah::kTbvhNoPose, tsah::kTbvhNoPose, 0},
+                                        std::vector<tsah::TwoLevelPoseRecord>{{1, 0, 0.0, 1.0}}, std::vector<uint32_t>{1, 1}),
+               tsah::DataError);
 }
 
 }  // namespace

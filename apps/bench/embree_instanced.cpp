@@ -35,7 +35,6 @@ struct EmbreeInstancedPeer::Impl {
     double localTime = std::numeric_limits<double>::quiet_NaN();  // of the last vertex update
   };
   const TwoLevelScene& scene;
-  std::vector<uint32_t> firstTriangle;
   ParallelFor parallelFor;
   std::unique_ptr<EmbreeDevice> device;
   std::vector<Object> objects;
@@ -45,8 +44,7 @@ struct EmbreeInstancedPeer::Impl {
   RTCScene top = nullptr;
   uint32_t lastRefits = 0;
 
-  Impl(const TwoLevelScene& s, std::vector<uint32_t> first, ParallelFor p)
-      : scene(s), firstTriangle(std::move(first)), parallelFor(std::move(p)) {}
+  Impl(const TwoLevelScene& s, ParallelFor p) : scene(s), parallelFor(std::move(p)) {}
   ~Impl() {
     for (RTCGeometry g : instances) rtcReleaseGeometry(g);
     for (Object& o : objects) {
@@ -112,11 +110,8 @@ struct EmbreeInstancedPeer::Impl {
   }
 };
 
-EmbreeInstancedPeer::EmbreeInstancedPeer(const TwoLevelScene& scene, std::vector<uint32_t> firstTriangle,
-                                         unsigned threads, ParallelFor parallelFor)
-    : impl_(std::make_unique<Impl>(scene, std::move(firstTriangle), std::move(parallelFor))) {
-  if (impl_->firstTriangle.size() != scene.instanceCount())
-    throw tsah::ConfigError("Embree instancing: one first triangle per instance expected");
+EmbreeInstancedPeer::EmbreeInstancedPeer(const TwoLevelScene& scene, unsigned threads, ParallelFor parallelFor)
+    : impl_(std::make_unique<Impl>(scene, std::move(parallelFor))) {
   impl_->device = std::make_unique<EmbreeDevice>(threads);
 }
 
@@ -191,9 +186,9 @@ uint32_t EmbreeInstancedPeer::objectScenes() const { return uint32_t(impl_->obje
 
 BatchTracer EmbreeInstancedPeer::tracer() const {
   const RTCScene top = impl_->top;
-  const std::vector<uint32_t>* first = &impl_->firstTriangle;
+  const anim::SceneSources* sources = &impl_->scene.scene;
   BatchTracer tracer;
-  tracer.closest = [top, first](const Ray* rays, const float*, std::size_t count, Hit* hits) {
+  tracer.closest = [top, sources](const Ray* rays, const float*, std::size_t count, Hit* hits) {
     for (std::size_t i = 0; i < count; ++i) {
       RTCIntersectContext context;
       rtcInitIntersectContext(&context);
@@ -205,7 +200,7 @@ BatchTracer EmbreeInstancedPeer::tracer() const {
       rtcIntersect1(top, &context, &rh);
       Hit hit;
       if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) {
-        hit.tri = (*first)[rh.hit.instID[0]] + rh.hit.primID;
+        hit.tri = sources->bakedTriangle(rh.hit.instID[0], rh.hit.primID);
         hit.t = rh.ray.tfar;
         hit.u = rh.hit.u;
         hit.v = rh.hit.v;

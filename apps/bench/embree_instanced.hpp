@@ -23,12 +23,11 @@ class EmbreeInstancedPeer {
   // Runs body over [0, n) in chunks on the caller's worker threads (the poses' updates side by side).
   using ParallelFor = std::function<void(std::size_t n, const std::function<void(std::size_t, std::size_t)>& body)>;
 
-  // firstTriangle: per instance the id of its first triangle in the baked scene (hits are reported
-  // as baked triangle ids: the instance's first plus Embree's primID). Keeps a reference to
+  // Hits are reported as baked triangle ids (SceneSources::bakedTriangle of the instance and
+  // Embree's primID). Keeps a reference to
   // `scene`. threads: Embree's worker threads (0: all cores). Throws tsah::Failure when Embree
   // reports an error.
-  EmbreeInstancedPeer(const TwoLevelScene& scene, std::vector<uint32_t> firstTriangle, unsigned threads,
-                      ParallelFor parallelFor);
+  EmbreeInstancedPeer(const TwoLevelScene& scene, unsigned threads, ParallelFor parallelFor);
   ~EmbreeInstancedPeer();
   EmbreeInstancedPeer(const EmbreeInstancedPeer&) = delete;
   EmbreeInstancedPeer& operator=(const EmbreeInstancedPeer&) = delete;

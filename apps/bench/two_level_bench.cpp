@@ -64,6 +64,7 @@ json optimizeChild(const SceneSource& scene, const std::string& structure, const
     throw tsah::Failure(scene.input + ": unreadable tsah optimize --structure " + structure + " report");
   const bool ownPeak = j.value("peak_rss_bytes", 0.0) > 0.0;
   return {{"tree", tree.string()},
+          {"structure", j.value("structure", std::string("flat"))},
           {"wall_s", wall},
           {"build_s", j["build_s"]},
           {"cpu_s", r.cpuSeconds},
@@ -80,13 +81,15 @@ std::vector<double> tracedFrames(const std::vector<double>& frames, uint32_t tra
   return times;
 }
 
-// The two-level runtime as a batch tracer; hits as baked triangle ids (the instance's first + prim).
-BatchTracer twoLevelTracer(const TwoLevelRuntime& rt, const std::vector<uint32_t>& firstTriangle) {
+// The two-level runtime as a batch tracer; hits as baked triangle ids (SceneSources::bakedTriangle:
+// flattened objects' triangles map back to their own instances).
+BatchTracer twoLevelTracer(const TwoLevelRuntime& rt) {
   BatchTracer tracer;
-  tracer.closest = [&rt, &firstTriangle](const Ray* rays, const float*, std::size_t count, Hit* hits) {
+  const anim::SceneSources* sources = &rt.scene().scene;
+  tracer.closest = [&rt, sources](const Ray* rays, const float*, std::size_t count, Hit* hits) {
     for (std::size_t i = 0; i < count; ++i) {
       const TwoLevelHit h = rt.closestHit(rays[i]);
-      hits[i] = h.valid() ? Hit{h.t, h.u, h.v, firstTriangle[h.instance] + h.prim} : Hit{};
+      hits[i] = h.valid() ? Hit{h.t, h.u, h.v, sources->bakedTriangle(h.instance, h.prim)} : Hit{};
     }
   };
   tracer.occluded = [&rt](const Ray* rays, const float*, std::size_t count, AnyHitOrder order, uint8_t* occluded) {
@@ -134,8 +137,15 @@ json runTwoLevelComparison(const SceneSource& scene, const anim::Animation& bake
   if (ec) throw tsah::Failure(trees.string() + ": cannot create the tree folder (" + ec.message() + ")");
   say("tsah optimize --structure flat");
   const json flatOptimize = optimizeChild(scene, "flat", trees / (scene.name + "-flat.tbvh"), o);
-  say("tsah optimize --structure two-level");
-  const json twoOptimize = optimizeChild(scene, "two-level", trees / (scene.name + "-two-level.tbvh"), o);
+  // The two-level structure auto chooses (objects flattened by cost); when it flattens every
+  // object (a flat tree), every object kept as instances instead, so that there are two levels.
+  say("tsah optimize --structure auto");
+  json twoOptimize = optimizeChild(scene, "auto", trees / (scene.name + "-two-level.tbvh"), o);
+  if (twoOptimize["structure"] != "two-level") {
+    say("tsah optimize --structure two-level (auto chose a flat tree)");
+    twoOptimize = optimizeChild(scene, "two-level", trees / (scene.name + "-two-level.tbvh"), o);
+    twoOptimize["auto_chose"] = "flat";
+  }
   j["optimize"] = {{"flat", flatOptimize}, {"two_level", twoOptimize}};
 
   anim::LoadOptions load;
@@ -145,13 +155,9 @@ json runTwoLevelComparison(const SceneSource& scene, const anim::Animation& bake
   const Bvh flatTree = loadBvhFile(flatOptimize["tree"].get<std::string>()).bvh;
   const TwoLevelScene twoLevel =
       loadTwoLevelSceneFile(twoOptimize["tree"].get<std::string>(), anim::loadSceneSources(scene.input, load));
-  // Baked triangle ids: instance i's triangles follow those of instances 0..i-1 (bake order).
-  std::vector<uint32_t> firstTriangle;
   uint64_t triangles = 0;
-  for (const anim::SceneSourceInstance& instance : twoLevel.scene.instances) {
-    firstTriangle.push_back(uint32_t(triangles));
+  for (const anim::SceneSourceInstance& instance : twoLevel.scene.instances)
     triangles += twoLevel.scene.sourceOf(instance).triangleCount();
-  }
   if (triangles != baked.triangleCount())
     throw tsah::Failure(scene.input + ": the instances hold " + std::to_string(triangles) +
                         " triangles, the baked scene " + std::to_string(baked.triangleCount()));
@@ -189,7 +195,7 @@ json runTwoLevelComparison(const SceneSource& scene, const anim::Animation& bake
   auto parallelFor = [&flat](std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) {
     flat->parallelFor(n, 1, body);
   };
-  EmbreeInstancedPeer embree(twoLevel, firstTriangle, flat->threadCount(), parallelFor);
+  EmbreeInstancedPeer embree(twoLevel, flat->threadCount(), parallelFor);
   startWorkers(*flat);
   const double embreeBuildMs = embree.build(setup.times.front());
   j["embree_build"] = {{"ms", embreeBuildMs}, {"object_scenes", embree.objectScenes()}};
@@ -224,7 +230,7 @@ json runTwoLevelComparison(const SceneSource& scene, const anim::Animation& bake
         start = std::chrono::steady_clock::now();
         two.update(t);
         updateMs = msSince(start);
-        traces[m] = traceBatch(*flat, batch, twoLevelTracer(two, firstTriangle));
+        traces[m] = traceBatch(*flat, batch, twoLevelTracer(two));
       } else {
 #if TSAH_HAVE_EMBREE
         updateMs = embree.update(t);

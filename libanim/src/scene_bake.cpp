@@ -158,6 +158,81 @@ std::vector<double> bakeTimes(double start, double end, double fps) {
   return times;
 }
 
+// The scene's instance ids 0 .. n - 1.
+std::vector<uint32_t> allInstances(const SceneSources& loaded) {
+  std::vector<uint32_t> all(loaded.instances.size());
+  for (uint32_t i = 0; i < all.size(); ++i) all[i] = i;
+  return all;
+}
+
+// Triangles, vertices and moving vertices of the instances `which` baked together.
+struct BakeCounts {
+  uint64_t triangles = 0, vertices = 0, moving = 0;
+};
+BakeCounts bakeCounts(const SceneSources& loaded, const std::vector<uint32_t>& which) {
+  BakeCounts c;
+  for (uint32_t i : which) {
+    const Animation& a = loaded.sourceOf(loaded.instances[i]);
+    c.triangles += a.triangleCount();
+    c.vertices += a.vertexCount();
+    c.moving += movingOf(loaded.instances[i], a);
+  }
+  return c;
+}
+
+// The bake of the instances `which` (in that order) at `times`: rest positions and triangles of
+// every instance, then the moving vertices keyframe by keyframe. Each source keeps one scratch
+// frame whose static entries stay at rest. The counts must fit 32 bits (checked by the callers).
+Animation bakeInstances(const SceneSources& loaded, const std::vector<uint32_t>& which, const std::vector<double>& times,
+                        const std::string& name) {
+  const BakeCounts counts = bakeCounts(loaded, which);
+  std::vector<uint32_t> indices;
+  std::vector<float> rest;
+  std::vector<uint32_t> moving;
+  std::vector<float> motion;
+  indices.reserve(std::size_t(counts.triangles) * 3);
+  rest.resize(std::size_t(counts.vertices) * 3);
+  moving.reserve(std::size_t(counts.moving));
+  motion.resize(std::size_t(counts.moving) * 3 * times.size());
+  std::map<const Animation*, std::vector<float>> scratchFrames;
+  uint32_t base = 0;
+  std::size_t movingBase = 0;
+  const std::size_t movingPerFrame = std::size_t(counts.moving) * 3;
+  for (uint32_t id : which) {
+    const SceneSourceInstance& instance = loaded.instances[id];
+    const Animation& a = loaded.sourceOf(instance);
+    std::vector<float>& frame = scratchFrames[&a];
+    if (frame.empty()) frame = a.positionsAt(a.startTime());
+    for (uint32_t v : a.indices()) indices.push_back(base + v);
+    auto local = [&](double t) { return instance.localTime(t, a); };
+    a.positionsAt(local(times.front()), frame);
+    std::copy(frame.begin(), frame.end(), rest.begin() + std::ptrdiff_t(base) * 3);
+    transformPoints(instance.worldAt(times.front()), rest.data() + std::size_t(base) * 3, a.vertexCount());
+    const uint64_t movingCount = movingOf(instance, a);
+    if (movingCount > 0) {
+      const bool all = movingCount == a.vertexCount();
+      for (uint32_t m = 0; m < movingCount; ++m) moving.push_back(base + (all ? m : a.movingVertices()[m]));
+      for (std::size_t k = 0; k < times.size(); ++k) {
+        float* out = motion.data() + k * movingPerFrame + movingBase * 3;
+        if (all) {
+          a.positionsAt(local(times[k]), frame);
+          std::copy(frame.begin(), frame.end(), out);
+        } else {
+          a.movingPositionsAt(local(times[k]), frame);
+          for (uint32_t m = 0; m < movingCount; ++m)
+            std::copy_n(frame.data() + 3 * std::size_t(a.movingVertices()[m]), 3, out + 3 * std::size_t(m));
+        }
+        transformPoints(instance.worldAt(times[k]), out, movingCount);
+      }
+      a.positionsAt(a.startTime(), frame);  // static entries back at rest for the next instance
+    }
+    base += a.vertexCount();
+    movingBase += movingCount;
+  }
+  return Animation::withStaticVertices(std::move(indices), std::move(rest), std::move(moving), std::move(motion),
+                                       std::vector<double>(times), name);
+}
+
 }  // namespace
 
 std::vector<double> SceneSources::frameTimes() const { return bakeTimes(start, end, fps); }
@@ -173,6 +248,13 @@ SceneSources loadSceneSources(const std::string& path, const LoadOptions& option
   for (std::size_t o = 0; o < scene.objects.size(); ++o)
     for (const SceneInstance& i : scene.objects[o].instances)
       loaded.instances.push_back({uint32_t(o), loaded.objectSource[o], i.placement, i.path, i.time});
+  uint64_t baked = 0;
+  for (uint32_t i = 0; i < loaded.instances.size(); ++i) {
+    const uint32_t count = loaded.sourceOf(loaded.instances[i]).triangleCount();
+    const uint32_t first = uint32_t(std::min<uint64_t>(baked, 0xffffffffu));  // a bake past 2^32 is refused
+    loaded.triangleRuns.push_back({i, 0, count, loaded.instances[i].object, i, first});
+    baked += count;
+  }
   std::tie(loaded.start, loaded.end) = timeRange(loaded);
   loaded.fps = options.fps > 0.0 ? options.fps : scene.fps;
   const double keyframes = bakeKeyframeCount(loaded.start, loaded.end, loaded.fps);
@@ -229,59 +311,112 @@ BakedScene bakeScene(const std::string& path, const LoadOptions& options) {
     baked.objects.push_back(std::move(r));
   }
 
-  const std::vector<double> times = loaded.frameTimes();
-
-  // The bake: rest positions and triangles of every instance, then the moving vertices keyframe
-  // by keyframe. Each source keeps one scratch frame whose static entries stay at rest.
-  std::vector<uint32_t> indices;
-  std::vector<float> rest;
-  std::vector<uint32_t> moving;
-  std::vector<float> motion;
-  indices.reserve(std::size_t(st.triangles) * 3);
-  rest.resize(std::size_t(st.vertices) * 3);
-  moving.reserve(std::size_t(st.movingVertices));
-  motion.resize(std::size_t(st.movingVertices) * 3 * times.size());
-  std::map<const Animation*, std::vector<float>> scratchFrames;
-  uint32_t base = 0;
-  std::size_t movingBase = 0;
-  const std::size_t movingPerFrame = std::size_t(st.movingVertices) * 3;
-  for (const SceneSourceInstance& instance : loaded.instances) {
-    const Animation& a = loaded.sourceOf(instance);
-    std::vector<float>& frame = scratchFrames[&a];
-    if (frame.empty()) frame = a.positionsAt(a.startTime());
-    for (uint32_t v : a.indices()) indices.push_back(base + v);
-    auto local = [&](double t) { return instance.localTime(t, a); };
-    a.positionsAt(local(times.front()), frame);
-    std::copy(frame.begin(), frame.end(), rest.begin() + std::ptrdiff_t(base) * 3);
-    transformPoints(instance.worldAt(times.front()), rest.data() + std::size_t(base) * 3, a.vertexCount());
-    const uint64_t movingCount = movingOf(instance, a);
-    if (movingCount > 0) {
-      const bool all = movingCount == a.vertexCount();
-      for (uint32_t m = 0; m < movingCount; ++m) moving.push_back(base + (all ? m : a.movingVertices()[m]));
-      for (std::size_t k = 0; k < times.size(); ++k) {
-        float* out = motion.data() + k * movingPerFrame + movingBase * 3;
-        if (all) {
-          a.positionsAt(local(times[k]), frame);
-          std::copy(frame.begin(), frame.end(), out);
-        } else {
-          a.movingPositionsAt(local(times[k]), frame);
-          for (uint32_t m = 0; m < movingCount; ++m)
-            std::copy_n(frame.data() + 3 * std::size_t(a.movingVertices()[m]), 3, out + 3 * std::size_t(m));
-        }
-        transformPoints(instance.worldAt(times[k]), out, movingCount);
-      }
-      a.positionsAt(a.startTime(), frame);  // static entries back at rest for the next instance
-    }
-    base += a.vertexCount();
-    movingBase += movingCount;
-  }
   try {
-    baked.animation = Animation::withStaticVertices(std::move(indices), std::move(rest), std::move(moving),
-                                                    std::move(motion), std::vector<double>(times), scene.name);
+    baked.animation = bakeInstances(loaded, allInstances(loaded), loaded.frameTimes(), scene.name);
   } catch (const tsah::FileError& e) {
     throw tsah::FileError(scene.file, std::string("invalid baked scene: ") + e.what());
   }
   return baked;
+}
+
+const SceneTriangleRun& SceneSources::runOf(uint32_t instance, uint32_t prim) const {
+  // The last run starting at or before (instance, prim).
+  const auto after = std::upper_bound(triangleRuns.begin(), triangleRuns.end(), std::make_pair(instance, prim),
+                                      [](const std::pair<uint32_t, uint32_t>& key, const SceneTriangleRun& run) {
+                                        return key < std::make_pair(run.instance, run.sourceFirst);
+                                      });
+  if (after == triangleRuns.begin() || std::prev(after)->instance != instance ||
+      prim - std::prev(after)->sourceFirst >= std::prev(after)->count)
+    throw tsah::ConfigError("triangle " + std::to_string(prim) + " of instance " + std::to_string(instance) +
+                            " is not in the scene");
+  return *std::prev(after);
+}
+
+uint32_t SceneSources::bakedTriangle(uint32_t instance, uint32_t prim) const {
+  const SceneTriangleRun& run = runOf(instance, prim);
+  return run.bakedFirst + (prim - run.sourceFirst);
+}
+
+SceneSources flattenObjects(SceneSources scene, const std::vector<uint32_t>& objects) {
+  if (objects.empty()) return scene;
+  const SceneDescription& description = scene.description;
+  if (!scene.flattenedObjects.empty()) throw tsah::ConfigError("flattenObjects: the scene is flattened already");
+  std::vector<uint8_t> flattened(description.objects.size(), 0);
+  for (std::size_t k = 0; k < objects.size(); ++k) {
+    if (objects[k] >= description.objects.size() || (k > 0 && objects[k] <= objects[k - 1]))
+      throw tsah::ConfigError("flattenObjects: object ids must be increasing and below " +
+                              std::to_string(description.objects.size()) + " (got " + std::to_string(objects[k]) + ")");
+    flattened[objects[k]] = 1;
+  }
+  std::vector<uint32_t> kept, merged;  // instance ids
+  for (uint32_t i = 0; i < scene.instances.size(); ++i) (flattened[scene.instances[i].object] ? merged : kept).push_back(i);
+
+  // The memory statement of the merged source before it is baked.
+  const BakeCounts counts = bakeCounts(scene, merged);
+  const bool moves = counts.moving > 0;
+  const uint64_t keyframes = moves ? scene.frameCount : 1;
+  std::string names;  // the first few, for messages and the source's name
+  for (std::size_t k = 0; k < std::min<std::size_t>(objects.size(), 4); ++k)
+    names += (k ? ", " : "") + tsah::printable(description.objects[objects[k]].name);
+  if (objects.size() > 4) names += " and " + std::to_string(objects.size() - 4) + " more";
+  const std::string what = "flattening object(s) " + names + " (" + std::to_string(merged.size()) + " instances, " +
+                           std::to_string(counts.triangles) + " triangles x " + std::to_string(keyframes) + " keyframes)";
+  if (counts.triangles > 0xffffffffull || counts.vertices > 0xffffffffull)
+    throw tsah::DataError(description.file + ": " + what + " would make more than 2^32 triangles or vertices");
+  const uint64_t need = Animation::memoryBytesFor(counts.triangles, counts.vertices, counts.moving, keyframes);
+  if (need > tsah::availableMemoryBytes())
+    throw tsah::DataError(description.file + ": " + what + " would need " + mib(need) + ", more than the " +
+                          mib(tsah::availableMemoryBytes()) + " of memory available");
+  const std::vector<double> times = moves ? scene.frameTimes() : std::vector<double>{scene.start};
+  Animation baked;
+  try {
+    baked = bakeInstances(scene, merged, times, "flattened: " + names);
+  } catch (const tsah::FileError& e) {
+    throw tsah::FileError(description.file, what + ": " + e.what());
+  }
+
+  SceneSources out;
+  out.description = scene.description;
+  out.start = scene.start;
+  out.end = scene.end;
+  out.fps = scene.fps;
+  out.frameCount = scene.frameCount;
+  out.flattenedObjects = objects;
+  // The sources kept instances show, in their order, then the merged one.
+  std::vector<uint8_t> stillShown(scene.sources.size(), 0);
+  for (uint32_t i : kept) stillShown[scene.instances[i].source] = 1;
+  std::vector<uint32_t> newSource(scene.sources.size(), UINT32_MAX);
+  for (uint32_t s = 0; s < scene.sources.size(); ++s)
+    if (stillShown[s]) {
+      newSource[s] = uint32_t(out.sources.size());
+      out.sources.push_back(scene.sources[s]);
+      out.sourceBytes += scene.sources[s]->memoryBytes();
+    }
+  const uint32_t mergedSource = uint32_t(out.sources.size());
+  out.sourceBytes += baked.memoryBytes();
+  out.sources.push_back(std::make_shared<const Animation>(std::move(baked)));
+  for (uint32_t o = 0; o < description.objects.size(); ++o)
+    out.objectSource.push_back(flattened[o] ? mergedSource : newSource[scene.objectSource[o]]);
+  for (uint32_t i : kept) {
+    SceneSourceInstance instance = scene.instances[i];
+    instance.source = newSource[instance.source];
+    const SceneTriangleRun& run = scene.triangleRuns[i];
+    out.triangleRuns.push_back({uint32_t(out.instances.size()), 0, run.count, run.object, run.originalInstance, run.bakedFirst});
+    out.instances.push_back(std::move(instance));
+  }
+  // The merged instance: its source is already in world space and at scene time (local = t).
+  SceneSourceInstance showing;
+  showing.object = objects.front();
+  showing.source = mergedSource;
+  showing.time.offset = scene.start;
+  uint32_t first = 0;
+  for (uint32_t i : merged) {
+    const SceneTriangleRun& run = scene.triangleRuns[i];
+    out.triangleRuns.push_back({uint32_t(out.instances.size()), first, run.count, run.object, run.originalInstance, run.bakedFirst});
+    first += run.count;
+  }
+  out.instances.push_back(std::move(showing));
+  return out;
 }
 
 Animation loadScene(const std::string& path, const LoadOptions& options) {

@@ -56,6 +56,11 @@ foreach(s 0 1)
     endforeach()
     string(JSON peak GET "${json}" scenes ${s} two_level optimize ${structure} peak_rss_bytes)
     string(JSON tree GET "${json}" scenes ${s} two_level optimize ${structure} tree)
+    string(JSON kind GET "${json}" scenes ${s} two_level optimize ${structure} structure)
+    string(REPLACE "_" "-" expected_kind "${structure}")
+    if(NOT kind STREQUAL expected_kind)
+      message(FATAL_ERROR "scene ${s}: optimize ${structure} built a ${kind} structure")
+    endif()
     if(NOT peak GREATER 1000000 OR NOT EXISTS "${tree}")
       message(FATAL_ERROR "scene ${s}: optimize ${structure}: peak ${peak} bytes, tree ${tree}")
     endif()
@@ -110,8 +115,10 @@ if(NOT only)
   message(FATAL_ERROR "results.json: options.two_level_only is ${only}")
 endif()
 file(READ ${OUT}/results.md md)
-foreach(text "## demo" "## paths" "**Two-level part** (7 instances of 3 sources (2 static), 2 poses"
-             "## Two-level scenes: flat, two-level and Embree instancing" "| paths | 5 |")
+# auto's structure (docs/two-level.md): demo's two bursts and paths' three bursts (two of them
+# overlapping) are flattened into one source each.
+foreach(text "## demo" "## paths" "**Two-level part** (6 instances of 3 sources (2 static), 1 poses"
+             "## Two-level scenes: flat, two-level and Embree instancing" "| paths | 3 |")
   string(FIND "${md}" "${text}" at)
   if(at EQUAL -1)
     message(FATAL_ERROR "results.md lacks '${text}'")
@@ -120,6 +127,20 @@ endforeach()
 ]=])
 add_test(NAME cli.bench.two_level_files COMMAND ${CMAKE_COMMAND} -DOUT=${W}/tl_bench_out -P ${W}/tl_bench_check.cmake)
 set_tests_properties(cli.bench.two_level_files PROPERTIES FIXTURES_REQUIRED tl_bench_results)
+
+# A scene whose objects auto all flattens (two animated objects shown once, without paths: a flat
+# tree): the two-level part keeps every object instanced instead, and says so.
+file(MAKE_DIRECTORY ${W}/tl_bench_single)
+file(WRITE ${W}/tl_bench_single/single.json "{\"fps\": 5, \"time\": [0, 1], \"objects\": [
+ {\"name\": \"burst\", \"file\": \"${EXPLODE}/explode_%04d.obj\"},
+ {\"name\": \"echo\", \"file\": \"${EXPLODE}/explode_%04d.obj\", \"offset\": 0.5, \"transform\": {\"translate\": [0, -4, 0]}}]}\n")
+add_test(NAME cli.bench.two_level_auto_flat
+         COMMAND tsah bench ${W}/tl_bench_single/single.json --two-level-only --quick --width 32 --height 24
+                 --trace-frames 1 --ao 1 --threads 2 --out ${W}/tl_bench_single_out)
+set_tests_properties(cli.bench.two_level_auto_flat PROPERTIES FIXTURES_SETUP tl_bench_single)
+add_test(NAME cli.bench.two_level_auto_flat_files COMMAND ${CMAKE_COMMAND} -E cat ${W}/tl_bench_single_out/results.json)
+set_tests_properties(cli.bench.two_level_auto_flat_files PROPERTIES FIXTURES_REQUIRED tl_bench_single
+  PASS_REGULAR_EXPRESSION "\"auto_chose\": *\"flat\"")
 
 # Bad --scene-dir and option mixes: one line naming the folder or the options, usage error (exit 2);
 # tests/support/expect_error.cmake checks the exit status and the single line.

@@ -5,13 +5,29 @@ set(W ${TSAH_CLI_WORK})
 set(SCENE ${CMAKE_SOURCE_DIR}/samples/scenes/demo.json)
 set(TL_TRACE --frames 21 --width 64 --height 48 --ao 2 --shadow 1)
 
-# auto (the default for scene files) keeps demo.json as two levels: the pillars have four instances.
+# auto (the default for scene files) decides per object by cost (docs/two-level.md): demo.json's
+# two bursts cross each other on their paths and are flattened into one animated source; the
+# ground and the four pillars stay instanced (static objects are not merged into a moving source).
 add_test(NAME cli.two_level.optimize.auto COMMAND tsah optimize ${SCENE} -o ${W}/tl_auto.tbvh --frames 3)
 set_tests_properties(cli.two_level.optimize.auto PROPERTIES FIXTURES_SETUP tl_tree PASS_REGULAR_EXPRESSION
-  "two-level scene \\(auto: object 'pillars' has more than one instance\\).*3 BLAS \\(2 static, 1 animated\\), 7 instances, 2 poses.*TLAS .*T-SAH cost.*memory .*BLAS .*MiB.*build ")
+  "two-level scene \\(auto: 1 of 3 objects flattened by the cost estimate\\).*object 0 +'ground' +1 instance\\(s\\), static: instanced: moving objects are flattened.*object 2 +'burst' +2 instance\\(s\\), moving: flattened: flattened cost [0-9.]+ against [0-9.]+ instanced.*3 BLAS \\(2 static, 1 animated\\), 6 instances, 1 poses\nflattened +objects 'burst': one source, shown by one instance.*TLAS .*T-SAH cost.*memory .*BLAS .*MiB.*build ")
+add_test(NAME cli.two_level.optimize.auto_json COMMAND tsah optimize ${SCENE} -o ${W}/tl_auto_json.tbvh --frames 3 --json)
+set_tests_properties(cli.two_level.optimize.auto_json PROPERTIES PASS_REGULAR_EXPRESSION
+  "\"flattened_objects\":\\[\"burst\"\\].*\"structure_choice\":\\{\"flattened_objects\":\\[2\\],\"objects\":\\[.*\"cost\":\\{\"flattened\":[0-9.]+,\"instanced\":[0-9.]+\\},\"flatten\":true,.*\"structure\":\"two-level\"")
+# The decision alone (nothing built), and auto choosing a flat tree: every object of a scene of
+# static one-instance objects is flattened, and the flat tree's printout states the decision.
+add_test(NAME cli.two_level.info.structure COMMAND tsah info ${SCENE} --structure)
+set_tests_properties(cli.two_level.info.structure PROPERTIES PASS_REGULAR_EXPRESSION
+  "^auto +two-level: 1 of 3 objects flattened \\(cost estimate over 4 frames, [0-9.]+ s\\)\nobject 0 +'ground'.*object 1 +'pillars' +4 instance\\(s\\), static: instanced.*object 2 +'burst' +2 instance\\(s\\), moving: flattened")
+file(WRITE ${W}/tl_single.json "{\"fps\": 10, \"time\": [0, 1], \"objects\": [
+  {\"name\": \"ground\", \"file\": \"${CMAKE_SOURCE_DIR}/samples/explode/explode_0001.obj\"},
+  {\"name\": \"block\", \"file\": \"${CMAKE_SOURCE_DIR}/samples/explode/explode_0001.obj\", \"transform\": {\"translate\": [0, 3, 0]}}]}")
+add_test(NAME cli.two_level.optimize.auto_flat COMMAND tsah optimize ${W}/tl_single.json -o ${W}/tl_single.tbvh --frames 3)
+set_tests_properties(cli.two_level.optimize.auto_flat PROPERTIES PASS_REGULAR_EXPRESSION
+  "auto +flat: 2 of 2 objects flattened.*object 0 +'ground' +1 instance\\(s\\), static: flattened: one instance without a keyed path.*tl_single.tbvh: tsah[0-9]* tree, [0-9]+ triangles")
 add_test(NAME cli.two_level.optimize.json
          COMMAND tsah optimize ${SCENE} -o ${W}/tl_asked.tbvh --frames 3 --structure two-level --json)
-set_tests_properties(cli.two_level.optimize.json PROPERTIES PASS_REGULAR_EXPRESSION
+set_tests_properties(cli.two_level.optimize.json PROPERTIES FIXTURES_SETUP tl_asked PASS_REGULAR_EXPRESSION
   "\"blas\":\\{\"animated\":1,\"count\":3,\"static\":2\\}.*\"instances\":7,.*\"poses\":2,.*\"structure_rule\":\"asked for")
 add_test(NAME cli.two_level.optimize.flat COMMAND tsah optimize ${SCENE} -o ${W}/tl_flat.tbvh --frames 3 --structure flat)
 set_tests_properties(cli.two_level.optimize.flat PROPERTIES FIXTURES_SETUP tl_flat
@@ -19,7 +35,7 @@ set_tests_properties(cli.two_level.optimize.flat PROPERTIES FIXTURES_SETUP tl_fl
 
 add_test(NAME cli.two_level.info COMMAND tsah info ${W}/tl_auto.tbvh ${SCENE})
 set_tests_properties(cli.two_level.info PROPERTIES FIXTURES_REQUIRED tl_tree PASS_REGULAR_EXPRESSION
-  "\\.tbvh version 3.*3 BLAS \\(2 static, 1 animated\\), 7 instances, 2 poses.*TLAS .*over 21 scene frames.*BLAS 2 +animated.*memory ")
+  "\\.tbvh version 3.*3 BLAS \\(2 static, 1 animated\\), 6 instances, 1 poses\nflattened +objects 'burst': one source, shown by one instance.*TLAS .*over 21 scene frames.*BLAS 2 +animated.*memory ")
 add_test(NAME cli.two_level.info.json COMMAND tsah info ${W}/tl_auto.tbvh ${SCENE} --json)
 set_tests_properties(cli.two_level.info.json PROPERTIES FIXTURES_REQUIRED tl_tree PASS_REGULAR_EXPRESSION
   "\"bytes\":\\{\"blas\":[1-9][0-9]*,\"tlas\":[1-9][0-9]*,\"total\".*\"scene_frames\":21,.*\"version\":3")
@@ -62,6 +78,8 @@ tl_error(cli.two_level.error.trace_rebuild 2 "[^\n]*tl_auto.tbvh holds a two-lev
          trace ${SCENE} ${W}/tl_auto.tbvh --rebuild sweep --frames 1 --no-images)
 tl_error(cli.two_level.error.not_a_scene 2 "--structure two-level needs a scene file[^\n]*explode is one animation"
          optimize ${CMAKE_SOURCE_DIR}/samples/explode -o ${W}/tl_bad.tbvh --structure two-level)
+tl_error(cli.two_level.error.info_structure 2 "--structure goes with a scene file alone: tsah info SCENE --structure"
+         info ${CMAKE_SOURCE_DIR}/samples/explode --structure)
 tl_error(cli.two_level.error.segments 2 "--structure two-level builds one T-SAH tree per source and the top level: it does not go with --segments"
          optimize ${SCENE} -o ${W}/tl_bad.tbvh --structure two-level --segments 2)
 

@@ -2,7 +2,9 @@
 # traced as a renderer would (tests/support/check_two_level_export.cpp) give TwoLevelRuntime's
 # closest hits at the export time, in every layout; fed one file of an export at another time (the
 # instance table, the TLAS, the poses' BLAS views) the same check fails; the header compiles as
-# C11; bad inputs give one line. Uses two_level.cmake's tree of demo.json (fixture tl_tree).
+# C11; bad inputs give one line. Uses two_level.cmake's trees of demo.json: every object instanced
+# (--structure two-level, fixture tl_asked: the bursts' paths move their instances) and auto's
+# (fixture tl_tree: the bursts flattened into one source).
 set(W ${TSAH_CLI_WORK})
 set(SCENE ${CMAKE_SOURCE_DIR}/samples/scenes/demo.json)
 
@@ -10,17 +12,21 @@ add_executable(check_two_level_export ${PROJECT_SOURCE_DIR}/tests/support/check_
 target_link_libraries(check_two_level_export PRIVATE anim::anim tsah::core)
 tsah_warnings(check_two_level_export)
 
-# tle_export(NAME DIR TIME ARG...): exports tl_auto.tbvh to ${W}/DIR (fixture tle_DIR).
+# tle_export(NAME DIR TIME ARG...): exports ${W}/${TLE_FILE} (made by fixture TLE_FIXTURE) to
+# ${W}/DIR (fixture tle_DIR); its summary line matches TLE_SUMMARY.
+set(TLE_FILE tl_asked.tbvh)
+set(TLE_FIXTURE tl_asked)
+set(TLE_SUMMARY "3 BLAS in 4 views .*7 instances")
 function(tle_export name dir)
-  add_test(NAME cli.two_level.export.${name} COMMAND tsah export ${W}/tl_auto.tbvh ${SCENE} -o ${W}/${dir} ${ARGN})
-  set_tests_properties(cli.two_level.export.${name} PROPERTIES FIXTURES_REQUIRED tl_tree FIXTURES_SETUP tle_${dir}
-    PASS_REGULAR_EXPRESSION "wrote [^\n]*${dir}: two-level scene at time [0-9.]+, 3 BLAS in 4 views .*7 instances, TLAS [0-9]+ nodes")
+  add_test(NAME cli.two_level.export.${name} COMMAND tsah export ${W}/${TLE_FILE} ${SCENE} -o ${W}/${dir} ${ARGN})
+  set_tests_properties(cli.two_level.export.${name} PROPERTIES FIXTURES_REQUIRED ${TLE_FIXTURE} FIXTURES_SETUP tle_${dir}
+    PASS_REGULAR_EXPRESSION "wrote [^\n]*${dir}: two-level scene at time [0-9.]+, ${TLE_SUMMARY}, TLAS [0-9]+ nodes")
 endfunction()
 # tle_check(NAME DIR TIME REGEX [FILE=OTHER_DIR ...]): the checker on ${W}/DIR at TIME.
 function(tle_check name dir time regex)
   add_test(NAME cli.two_level.export.check.${name}
-           COMMAND check_two_level_export ${SCENE} ${W}/tl_auto.tbvh ${W}/${dir} ${time} ${ARGN})
-  set_tests_properties(cli.two_level.export.check.${name} PROPERTIES FIXTURES_REQUIRED "tl_tree;tle_${dir}"
+           COMMAND check_two_level_export ${SCENE} ${W}/${TLE_FILE} ${W}/${dir} ${time} ${ARGN})
+  set_tests_properties(cli.two_level.export.check.${name} PROPERTIES FIXTURES_REQUIRED "${TLE_FIXTURE};tle_${dir}"
     PASS_REGULAR_EXPRESSION "${regex}")
 endfunction()
 
@@ -41,8 +47,14 @@ foreach(part "instances;instances.bin" "tlas;tlas_nodes.bin" "poses;blas_nodes.b
   list(TRANSFORM part APPEND "=${W}/tle_frame17")
   tle_check(other_time.${name} tle_bvh2 0.37 "rays hit otherwise than the runtime" ${part})
   set_tests_properties(cli.two_level.export.check.other_time.${name} PROPERTIES
-    FIXTURES_REQUIRED "tl_tree;tle_tle_bvh2;tle_tle_frame17")
+    FIXTURES_REQUIRED "tl_asked;tle_tle_bvh2;tle_tle_frame17")
 endforeach()
+# auto's tree: the bursts' merged source is one pose whose view holds world-space triangles.
+set(TLE_FILE tl_auto.tbvh)
+set(TLE_FIXTURE tl_tree)
+set(TLE_SUMMARY "3 BLAS in 3 views .*6 instances")
+tle_export(auto tle_auto --time 0.37)
+tle_check(auto tle_auto 0.37 "rays, [0-9]+ hits, [0-9]+ differ: ok")
 
 # Bad inputs: one line naming the file or option (tsah_expect_error: tests/cli/hardening.cmake).
 function(tle_error name code regex)

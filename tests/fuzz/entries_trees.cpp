@@ -87,7 +87,8 @@ void twolevel(std::span<const uint8_t> data) {
   // Bit 1: repair each tree's own CRC as the tree table places it; bit 0: then the file's CRC.
   if ((data[0] & 2) && bytes.size() >= kTbvhTwoLevelHeaderBytes && readU32(bytes, 8) == kTbvhTwoLevelVersion) {
     const uint64_t trees = uint64_t(readU32(bytes, 16)) + 1;
-    const uint64_t table = kTbvhTwoLevelHeaderBytes + 8 * uint64_t(readU32(bytes, 20)) + 24 * uint64_t(readU32(bytes, 24));
+    const uint64_t table = kTbvhTwoLevelHeaderBytes + 8 * uint64_t(readU32(bytes, 20)) + 24 * uint64_t(readU32(bytes, 24)) +
+                           4 * uint64_t(readU32(bytes, 28));
     for (uint64_t s = 0; s < trees && table + (s + 1) * 16 <= bytes.size(); ++s)
       repairCrc(bytes, readU64(bytes, table + s * 16), readU64(bytes, table + s * 16 + 8));
   }
@@ -96,6 +97,9 @@ void twolevel(std::span<const uint8_t> data) {
     const TwoLevelFile file = decodeTwoLevelFile(bytes, "fuzz.tbvh");
     if (const auto problem = validateTwoLevelTables(uint32_t(file.blases.size()), file.instanceBlas, file.instancePose, file.poses))
       throw std::logic_error("twolevel: accepted tables: " + *problem);
+    for (std::size_t k = 1; k < file.flattenedObjects.size(); ++k)
+      if (file.flattenedObjects[k] <= file.flattenedObjects[k - 1])
+        throw std::logic_error("twolevel: accepted flattened objects out of order");
     std::vector<Bvh> blases;
     for (const FlatBvh& tree : file.blases) {
       if (const auto problem = validateFlatBvh(tree)) throw std::logic_error("twolevel: accepted a broken BLAS: " + *problem);
@@ -104,7 +108,7 @@ void twolevel(std::span<const uint8_t> data) {
     if (const auto problem = validateFlatBvh(file.tlas)) throw std::logic_error("twolevel: accepted a broken TLAS: " + *problem);
     // An accepted file is canonical: the encoder writes the same bytes.
     if (encodeTwoLevelFile(blases, file.blasBuilds, unflattenBvh(file.tlas), file.tlasBuild, file.instanceBlas,
-                           file.instancePose, file.poses) != bytes)
+                           file.instancePose, file.poses, file.flattenedObjects) != bytes)
       throw std::logic_error("twolevel: accepted file does not re-encode");
   });
 }

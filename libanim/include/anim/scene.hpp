@@ -140,6 +140,15 @@ struct SceneSourceInstance {
   }
 };
 
+// A run of an instance's source triangles and where the scene file's bake puts them: triangles
+// sourceFirst .. sourceFirst + count - 1 of instance `instance` are triangles 0 .. count - 1 of the
+// scene file's instance `originalInstance` (bake order) of object `object`, baked triangles
+// bakedFirst ...
+struct SceneTriangleRun {
+  uint32_t instance = 0, sourceFirst = 0, count = 0;
+  uint32_t object = 0, originalInstance = 0, bakedFirst = 0;
+};
+
 struct SceneSources {
   SceneDescription description;
   std::vector<std::shared_ptr<const Animation>> sources;  // distinct (file, fps, clip, subdivision)
@@ -150,15 +159,35 @@ struct SceneSources {
   uint64_t sourceBytes = 0;  // the loaded (and subdivided) sources
   double start = 0.0, end = 0.0, fps = 30.0;  // the scene's time range and frame rate
   uint64_t frameCount = 1;                    // keyframes of the bake (< 2^32)
+  // Objects flattened into one source (flattenObjects), increasing; empty when none.
+  std::vector<uint32_t> flattenedObjects;
+  // Every instance's triangles mapped back to the scene file's instances and bake, sorted by
+  // (instance, sourceFirst): one run per instance, several for the instance flattenObjects made.
+  std::vector<SceneTriangleRun> triangleRuns;
 
   const Animation& sourceOf(const SceneSourceInstance& instance) const { return *sources[instance.source]; }
   // The bake's keyframe times: start, every 1/fps after it below end, and end.
   std::vector<double> frameTimes() const;
+  // The run holding triangle `prim` of instance `instance`'s source; bakedTriangle: that
+  // triangle's id in bakeScene's animation of the scene file, whatever was flattened.
+  const SceneTriangleRun& runOf(uint32_t instance, uint32_t prim) const;
+  uint32_t bakedTriangle(uint32_t instance, uint32_t prim) const;
 };
 
 // Parses the scene and loads every distinct source once (the checks and errors of bakeScene's
 // loading: missing files, cycles, subdivision limits, more than 2^32 keyframes).
 SceneSources loadSceneSources(const std::string& path, const LoadOptions& options = {});
+
+// The objects `objects` (increasing ids of description.objects) flattened into their parent level:
+// every instance of them baked together, as bakeScene bakes them (world-space triangles, keyframes
+// at the scene's frames; one keyframe when none of them moves), into one source appended after the
+// sources still shown, and shown by one instance appended after the others (identity placement, no
+// path, the identity time map; its object the first flattened one). Sources no other instance
+// shows are dropped; triangleRuns map the new instance's triangles back to the flattened ones.
+// Nothing is flattened for an empty list. Throws tsah::ConfigError for ids out of range, not
+// increasing, or a scene flattened already; tsah::DataError naming the scene file when the baked
+// source would pass 2^32 triangles or vertices or not fit in the available memory.
+SceneSources flattenObjects(SceneSources scene, const std::vector<uint32_t>& objects);
 
 // Loads every object once (loadSceneSources), states the memory, refuses (tsah::FileError naming the scene and the object
 // that crosses the line) a scene that would not fit, then bakes keyframes at the scene's rate (or

@@ -15,14 +15,24 @@ namespace {
 constexpr uint32_t kInstanceEntryBytes = 8;   // u32 blas, u32 pose
 constexpr uint32_t kPoseEntryBytes = 24;      // u32 blas, u32 outside, f64 offset, f64 speed
 constexpr uint32_t kTreeEntryBytes = 16;      // u64 offset, u64 size
+constexpr uint32_t kFlattenedEntryBytes = 4;  // u32 object id
 // The smallest valid version 1 file: header, no interior node, one root box, one slot, checksum.
 constexpr uint64_t kMinTreeBytes = kTbvhHeaderBytes + sizeof(Aabb) + 4 + 4;
 
 uint64_t align16(uint64_t x) { return (x + 15) & ~uint64_t(15); }
 
-uint64_t tablesEnd(uint64_t blasCount, uint64_t instances, uint64_t poses) {
+uint64_t tablesEnd(uint64_t blasCount, uint64_t instances, uint64_t poses, uint64_t flattened) {
   return kTbvhTwoLevelHeaderBytes + kInstanceEntryBytes * instances + kPoseEntryBytes * poses +
-         kTreeEntryBytes * (blasCount + 1);
+         kFlattenedEntryBytes * flattened + kTreeEntryBytes * (blasCount + 1);
+}
+
+// Flattened object ids: strictly increasing (no duplicates).
+std::optional<std::string> validateFlattenedObjects(std::span<const uint32_t> objects) {
+  for (std::size_t k = 1; k < objects.size(); ++k)
+    if (objects[k] <= objects[k - 1])
+      return "flattened object " + std::to_string(objects[k]) + " follows " + std::to_string(objects[k - 1]) +
+             " (the ids must be increasing, without duplicates)";
+  return std::nullopt;
 }
 
 }  // namespace
@@ -62,12 +72,16 @@ std::optional<std::string> validateTwoLevelTables(uint32_t blasCount, std::span<
 std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh> blases, std::span<const BvhBuildInfo> blasBuilds,
                                         const Bvh& tlas, const BvhBuildInfo& tlasBuild,
                                         std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
-                                        std::span<const TwoLevelPoseRecord> poses) {
+                                        std::span<const TwoLevelPoseRecord> poses,
+                                        std::span<const uint32_t> flattenedObjects) {
   if (blases.size() != blasBuilds.size() || blases.size() > kTbvhTwoLevelMaxBlas)
     throw DataError(".tbvh two-level: " + std::to_string(blases.size()) + " BLAS and " +
                     std::to_string(blasBuilds.size()) + " build records");
   if (auto problem = validateTwoLevelTables(uint32_t(blases.size()), instanceBlas, instancePose, poses))
     throw DataError(".tbvh two-level: " + *problem);
+  if (auto problem = validateFlattenedObjects(flattenedObjects)) throw DataError(".tbvh two-level: " + *problem);
+  if (flattenedObjects.size() > kTbvhTwoLevelMaxFlattened)
+    throw DataError(".tbvh two-level: " + std::to_string(flattenedObjects.size()) + " flattened objects");
   if (tlas.primCount() != instanceBlas.size())
     throw DataError(".tbvh two-level: the TLAS holds " + std::to_string(tlas.primCount()) + " instances, the table " +
                     std::to_string(instanceBlas.size()));
@@ -82,7 +96,7 @@ std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh> blases, std::span<c
   w.write(uint32_t(blases.size()));
   w.write(uint32_t(instanceBlas.size()));
   w.write(uint32_t(poses.size()));
-  w.write(uint32_t{0});
+  w.write(uint32_t(flattenedObjects.size()));
   w.write(tlasBuild.timeStart);
   w.write(tlasBuild.timeEnd);
   for (int i = 0; i < 4; ++i) w.write(uint32_t{0});
@@ -97,7 +111,8 @@ std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh> blases, std::span<c
     w.write(p.offset);
     w.write(p.speed);
   }
-  uint64_t offset = align16(tablesEnd(blases.size(), instanceBlas.size(), poses.size()));
+  for (uint32_t o : flattenedObjects) w.write(o);
+  uint64_t offset = align16(tablesEnd(blases.size(), instanceBlas.size(), poses.size(), flattenedObjects.size()));
   for (const std::vector<uint8_t>& image : images) {
     w.write(offset);
     w.write(uint64_t(image.size()));
@@ -122,7 +137,8 @@ TwoLevelFile decodeTwoLevelFile(std::span<const uint8_t> bytes, const std::strin
   const auto blasCount = r.read<uint32_t>("BLAS count");
   const auto instanceCount = r.read<uint32_t>("instance count");
   const auto poseCount = r.read<uint32_t>("pose count");
-  bool reservedZero = r.read<uint32_t>("reserved") == 0;
+  const auto flattenedCount = r.read<uint32_t>("flattened object count");
+  bool reservedZero = true;
   const auto timeStart = r.read<double>("time start");
   const auto timeEnd = r.read<double>("time end");
   for (int i = 0; i < 4; ++i) reservedZero = r.read<uint32_t>("reserved") == 0 && reservedZero;
@@ -135,10 +151,14 @@ TwoLevelFile decodeTwoLevelFile(std::span<const uint8_t> bytes, const std::strin
     r.fail("instance count " + std::to_string(instanceCount) + " is not in 1.." + std::to_string(kMaxGpuTriangles));
   if (poseCount > instanceCount)
     r.fail("pose count " + std::to_string(poseCount) + " exceeds the instance count " + std::to_string(instanceCount));
-  const uint64_t tables = tablesEnd(blasCount, instanceCount, poseCount);
+  if (flattenedCount > kTbvhTwoLevelMaxFlattened)
+    r.fail("flattened object count " + std::to_string(flattenedCount) + " exceeds " +
+           std::to_string(kTbvhTwoLevelMaxFlattened));
+  const uint64_t tables = tablesEnd(blasCount, instanceCount, poseCount, flattenedCount);
   if (bytes.size() < tables + (uint64_t(blasCount) + 1) * kMinTreeBytes + 4)
     r.fail("file size " + std::to_string(bytes.size()) + " is too small for " + std::to_string(blasCount) +
-           " BLAS, " + std::to_string(instanceCount) + " instances and " + std::to_string(poseCount) + " poses");
+           " BLAS, " + std::to_string(instanceCount) + " instances, " + std::to_string(poseCount) + " poses and " +
+           std::to_string(flattenedCount) + " flattened objects");
   const std::size_t crcOffset = bytes.size() - 4;
   uint32_t storedCrc;
   std::memcpy(&storedCrc, bytes.data() + crcOffset, 4);
@@ -161,6 +181,9 @@ TwoLevelFile decodeTwoLevelFile(std::span<const uint8_t> bytes, const std::strin
     p.speed = r.read<double>("pose speed");
   }
   if (auto problem = validateTwoLevelTables(blasCount, out.instanceBlas, out.instancePose, out.poses)) r.fail(*problem);
+  out.flattenedObjects.resize(flattenedCount);
+  for (uint32_t& o : out.flattenedObjects) o = r.read<uint32_t>("flattened object");
+  if (auto problem = validateFlattenedObjects(out.flattenedObjects)) r.fail(*problem);
 
   const uint32_t trees = blasCount + 1;
   std::vector<std::pair<uint64_t, uint64_t>> entries(trees);

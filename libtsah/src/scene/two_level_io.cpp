@@ -44,7 +44,7 @@ std::vector<uint8_t> encodeTwoLevelScene(const TwoLevelScene& twoLevel) {
     builds.push_back(b.info);
   }
   return encodeTwoLevelFile(trees, builds, twoLevel.tlas, twoLevel.tlasInfo, instanceBlas(twoLevel.scene),
-                            instancePoses(twoLevel), poseRecords(twoLevel));
+                            instancePoses(twoLevel), poseRecords(twoLevel), twoLevel.scene.flattenedObjects);
 }
 
 void saveTwoLevelScene(const std::string& path, const TwoLevelScene& twoLevel) {
@@ -57,6 +57,14 @@ TwoLevelScene loadTwoLevelSceneFile(const std::string& treePath, anim::SceneSour
   const auto fail = [&](const std::string& what) {
     throw DataError(treePath + " was not built for " + scenePath + ": " + what);
   };
+  // The objects the file flattened, flattened here the same way before anything is matched.
+  const std::size_t objects = scene.description.objects.size();
+  for (uint32_t o : file.flattenedObjects)
+    if (o >= objects)
+      fail("it flattens object " + std::to_string(o) + ", the scene has " + std::to_string(objects) + " objects");
+  if (!scene.flattenedObjects.empty() && scene.flattenedObjects != file.flattenedObjects)
+    fail("the scene given is flattened otherwise than the file");
+  if (scene.flattenedObjects.empty()) scene = anim::flattenObjects(std::move(scene), file.flattenedObjects);
   if (file.blases.size() != scene.sources.size())
     fail("the file holds " + std::to_string(file.blases.size()) + " BLAS, the scene has " +
          std::to_string(scene.sources.size()) + " sources");

@@ -1,7 +1,7 @@
 #pragma once
 // The two-level .tbvh file (version 3, docs/tbvh-format.md): every BLAS and the TLAS of a
 // two-level scene as complete version 1 images, the instance table (each instance's BLAS and pose)
-// and the pose table. The placements, paths and sources themselves stay in the scene file; the
+// and the pose table, and the scene objects flattened into one source. The placements, paths and sources themselves stay in the scene file; the
 // scene room (tsah/scene/two_level.hpp) checks a file against its scene.
 #include <cstdint>
 #include <optional>
@@ -19,6 +19,7 @@ inline constexpr uint32_t kTbvhTwoLevelVersion = 3;
 inline constexpr uint32_t kTbvhTwoLevelHeaderBytes = 64;
 inline constexpr uint32_t kTbvhTwoLevelMaxBlas = 1u << 20;
 inline constexpr uint32_t kTbvhNoPose = 0xffffffffu;
+inline constexpr uint32_t kTbvhTwoLevelMaxFlattened = 0x7fffffffu;
 
 // A pose as stored: the BLAS and the time mapping (offset, speed >= 0, outside 0 = hold, 1 = loop).
 struct TwoLevelPoseRecord {
@@ -36,6 +37,8 @@ struct TwoLevelFile {
   std::vector<uint32_t> instanceBlas;     // per instance
   std::vector<uint32_t> instancePose;     // per instance: a pose, or kTbvhNoPose (static BLAS)
   std::vector<TwoLevelPoseRecord> poses;
+  // Scene objects flattened into one source (anim::flattenObjects), increasing; empty: none.
+  std::vector<uint32_t> flattenedObjects;
 };
 
 // Checks the tables' rules (docs/tbvh-format.md, version 3): at least one BLAS and one instance,
@@ -47,11 +50,13 @@ std::optional<std::string> validateTwoLevelTables(uint32_t blasCount, std::span<
                                                   std::span<const TwoLevelPoseRecord> poses);
 
 // Writes the version 3 file. Throws tsah::DataError when the tables break the rules above, the
-// TLAS does not hold one primitive per instance, or a tree cannot be encoded (encodeBvhFile).
+// flattened object ids are not increasing, the TLAS does not hold one primitive per instance, or a
+// tree cannot be encoded (encodeBvhFile).
 std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh> blases, std::span<const BvhBuildInfo> blasBuilds,
                                         const Bvh& tlas, const BvhBuildInfo& tlasBuild,
                                         std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
-                                        std::span<const TwoLevelPoseRecord> poses);
+                                        std::span<const TwoLevelPoseRecord> poses,
+                                        std::span<const uint32_t> flattenedObjects = {});
 // Reads a version 3 file, validating everything before use (every tree as a version 1 file);
 // throws tsah::FileError naming `file`. Allocates only after the counts have been checked against
 // the byte count.

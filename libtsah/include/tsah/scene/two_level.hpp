@@ -83,7 +83,8 @@ TwoLevelScene loadTwoLevelScene(const std::string& path, const anim::LoadOptions
 std::vector<uint8_t> encodeTwoLevelScene(const TwoLevelScene& twoLevel);
 void saveTwoLevelScene(const std::string& path, const TwoLevelScene& twoLevel);
 // Reads a version 3 file (decodeTwoLevelFile: tsah::FileError for a corrupt file) and checks it
-// against the scene it was built for: one BLAS per source with the source's triangles, vertices
+// against the scene it was built for (the objects the file records as flattened are flattened
+// first, anim::flattenObjects, unless `scene` is flattened so already): one BLAS per source with the source's triangles, vertices
 // and topology hash, the instance table and poses the scene gives, the TLAS over the scene's
 // frames with boxes that contain every instance's world box there; tsah::DataError ("TREE was not
 // built for SCENE: ...") otherwise. The objective is the TLAS header's; costs are recomputed from
