@@ -21,6 +21,24 @@ namespace fs = std::filesystem;
 
 namespace {
 
+// The two structures' runtimes at scene time t give the same closest hits on a grid of rays from above.
+void expectSameHits(const tsah::TwoLevelScene& built, const tsah::TwoLevelScene& read, double t) {
+  tsah::TwoLevelRuntime a(built), b(read);
+  a.update(t);
+  b.update(t);
+  for (int i = 0; i < 64; ++i) {
+    tsah::Ray ray;
+    ray.org = {0.1f * float(i % 8) - 0.3f, 8.0f, 0.1f * float(i / 8) - 0.3f};
+    ray.dir = {0.05f, -1.0f, 0.02f};
+    ray.tmin = 0.0f;
+    ray.tmax = 100.0f;
+    const tsah::TwoLevelHit ha = a.closestHit(ray), hb = b.closestHit(ray);
+    EXPECT_EQ(ha.instance, hb.instance);
+    EXPECT_EQ(ha.prim, hb.prim);
+    EXPECT_EQ(ha.t, hb.t);
+  }
+}
+
 using tsah::test::writeText;
 
 // A static source twice (one mirrored), an animated one with two offsets and a keyed path.
@@ -99,20 +117,7 @@ TEST_F(TwoLevelFile, RoundTripKeepsEveryTreeAndTracesTheSame) {
   EXPECT_EQ(read.poses.size(), 2u);
   // The same bytes again, and the same hits.
   EXPECT_EQ(tsah::encodeTwoLevelScene(read), tsah::readFile(tree.string()));
-  tsah::TwoLevelRuntime a(*built), b(read);
-  a.update(2.5);
-  b.update(2.5);
-  for (int i = 0; i < 64; ++i) {
-    tsah::Ray ray;
-    ray.org = {0.1f * float(i % 8) - 0.3f, 8.0f, 0.1f * float(i / 8) - 0.3f};
-    ray.dir = {0.05f, -1.0f, 0.02f};
-    ray.tmin = 0.0f;
-    ray.tmax = 100.0f;
-    const tsah::TwoLevelHit ha = a.closestHit(ray), hb = b.closestHit(ray);
-    EXPECT_EQ(ha.instance, hb.instance);
-    EXPECT_EQ(ha.prim, hb.prim);
-    EXPECT_EQ(ha.t, hb.t);
-  }
+  expectSameHits(*built, read, 2.5);
 }
 
 TEST_F(TwoLevelFile, CorruptFilesAreRefusedWithOneLine) {
@@ -232,20 +237,7 @@ TEST_F(TwoLevelFile, FlattenedObjectsRoundTripAndAreChecked) {
   ASSERT_EQ(read.instanceCount(), 3u);  // the static source's two instances and the merged one
   EXPECT_TRUE(read.blases[1].animated);
   EXPECT_EQ(tsah::encodeTwoLevelScene(read), tsah::readFile(tree.string()));
-  tsah::TwoLevelRuntime a(mixed), b(read);
-  a.update(1.5);
-  b.update(1.5);
-  for (int i = 0; i < 64; ++i) {
-    tsah::Ray ray;
-    ray.org = {0.1f * float(i % 8) - 0.3f, 8.0f, 0.1f * float(i / 8) - 0.3f};
-    ray.dir = {0.05f, -1.0f, 0.02f};
-    ray.tmin = 0.0f;
-    ray.tmax = 100.0f;
-    const tsah::TwoLevelHit ha = a.closestHit(ray), hb = b.closestHit(ray);
-    EXPECT_EQ(ha.instance, hb.instance);
-    EXPECT_EQ(ha.prim, hb.prim);
-    EXPECT_EQ(ha.t, hb.t);
-  }
+  expectSameHits(mixed, read, 1.5);
   // A file without the record (version 3 as before) is read with nothing flattened.
   EXPECT_TRUE(tsah::decodeTwoLevelFile(bytes, "x.tbvh").flattenedObjects.empty());
 
