@@ -240,9 +240,18 @@ void CpuRuntime::checkPositions(std::span<const float> positions) const {
     throw tsah::DataError("runtime: vertex " + std::to_string(bad / 3) + " " + describeBadCoordinate(positions[bad]));
 }
 
+void CpuRuntime::checkMovingPositions(std::span<const float> positions) const {
+  if (positions.size() != positions_.size()) checkPositions(positions);  // the count's error
+  for (uint32_t v : *movingVertices_)
+    if (const std::size_t bad = firstBadCoordinate(positions.subspan(3 * std::size_t(v), 3)); bad < 3)
+      throw tsah::DataError("runtime: vertex " + std::to_string(v) + " " +
+                            describeBadCoordinate(positions[3 * std::size_t(v) + bad]));
+}
+
 void CpuRuntime::setPositions(std::span<const float> positions) {
   checkPositions(positions);
   positions_.assign(positions.begin(), positions.end());
+  staticPositionsRead_ = true;
 }
 
 Aabb CpuRuntime::refitLeaf(uint32_t firstSlot, uint32_t count) {
@@ -309,15 +318,12 @@ void CpuRuntime::update(std::span<const float> positions) {
     checkPositions(positions);
     clearShutter();
     positions_.assign(positions.begin(), positions.end());
+    staticPositionsRead_ = true;
     refitAndWoop();
     staticRefitted_ = movingVertices_.has_value();
     return;
   }
-  if (positions.size() != positions_.size()) checkPositions(positions);  // the count's error
-  for (uint32_t v : *movingVertices_)
-    if (const std::size_t bad = firstBadCoordinate(positions.subspan(3 * std::size_t(v), 3)); bad < 3)
-      throw tsah::DataError("runtime: vertex " + std::to_string(v) + " " +
-                            describeBadCoordinate(positions[3 * std::size_t(v) + bad]));
+  checkMovingPositions(positions);
   for (uint32_t v : *movingVertices_)
     std::copy_n(positions.begin() + 3 * std::ptrdiff_t(v), 3, positions_.begin() + 3 * std::ptrdiff_t(v));
   refitAndWoop(true);

@@ -15,6 +15,7 @@ namespace tsah {
 
 void CpuRuntime::clearShutter() {
   keysRefitted_ = 0;
+  keysRefittedMovingOnly_ = 0;
   keyTimes_.clear();
   keyNodes_.clear();
   keyRootBoxes_.clear();
@@ -87,29 +88,47 @@ std::vector<WideKey> passOnWideKeys(std::vector<WideKey>& old, const std::vector
 }  // namespace
 
 // The refit of the current tree at one key (its positions already checked) into the key's blocks:
-// the boxes, and in a wide layout the key's vertex packets (no Woop rows: a blurred frame reads
-// none); the binary layout's refit runs on the runtime's own positions.
-void CpuRuntime::refitShutterKey(std::span<const float> positions, ShutterKeys& out, std::size_t key) {
+// its positions, the boxes, and in a wide layout the key's vertex packets (no Woop rows: a blurred
+// frame reads none). With Config::movingVertices a key set that holds a refit of this tree (bvh2:
+// the runtime's own tree, whose refit each key runs on) refits only the moving nodes: the static
+// vertices are the same at every key.
+void CpuRuntime::refitShutterKey(std::span<const float> positions, bool readMovingOnly, ShutterKeys& out,
+                                 std::size_t key) {
+  const std::span<float> block = keyBlock(out.positions, key, positions.size());
+  if (readMovingOnly) {
+    std::copy(positions_.begin(), positions_.end(), block.begin());
+    for (uint32_t v : *movingVertices_)
+      std::copy_n(positions.begin() + 3 * std::ptrdiff_t(v), 3, block.begin() + 3 * std::ptrdiff_t(v));
+  } else {
+    std::copy(positions.begin(), positions.end(), block.begin());
+  }
   const auto parallel = [this](std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) {
     parallelFor(n, 1, body);
   };
   const auto wideKey = [&](auto& tree, auto& set) {
-    set.vertices.resize(tree.packets().size());  // a dropped key's buffers keep their size
-    tree.refitKey(positions.data(), set.vertices.data(), parallel);
-    set.nodes.assign(tree.nodes().begin(), tree.nodes().end());
-    out.rootBoxes[key] = tree.bounds();
+    const bool movingOnly = set.refitted && movingVertices_.has_value();
+    if (!set.refitted) {  // a new key set, or a dropped one of another size: the tree's refs and counts
+      set.nodes.assign(tree.nodes().begin(), tree.nodes().end());
+      set.vertices.resize(tree.packets().size());
+    }
+    out.rootBoxes[key] = tree.refitKey(block.data(), set.nodes.data(), set.vertices.data(), movingOnly, parallel);
+    set.refitted = true;
+    return movingOnly;
   };
+  bool movingOnly = false;
   if (wide4_) {
-    wideKey(*wide4_, out.wide4[key]);
+    movingOnly = wideKey(*wide4_, out.wide4[key]);
   } else if (wide8_) {
-    wideKey(*wide8_, out.wide8[key]);
+    movingOnly = wideKey(*wide8_, out.wide8[key]);
   } else {
-    positions_.assign(positions.begin(), positions.end());
-    refitAndWoop();
+    movingOnly = staticRefitted_;  // the tree's last full refit is this tree's
+    positions_.assign(block.begin(), block.end());
+    refitAndWoop(movingOnly);
+    staticRefitted_ = movingVertices_.has_value();
     std::copy_n(tree_.nodes.begin(), tree_.interiorCount, keyBlock(out.nodes, key, tree_.interiorCount).begin());
     out.rootBoxes[key] = tree_.rootBoxes[0];
   }
-  std::copy(positions.begin(), positions.end(), keyBlock(out.positions, key, positions.size()).begin());
+  keysRefittedMovingOnly_ += movingOnly ? 1 : 0;
 }
 
 void CpuRuntime::updateShutter(std::span<const float> keyTimes,
@@ -121,7 +140,6 @@ void CpuRuntime::updateShutter(std::span<const float> keyTimes,
   }
   const std::size_t keys = keyTimes.size();
   const std::size_t floats = std::size_t(vertexCount_) * 3;
-  staticRefitted_ = false;  // the keys' refits may leave the instant boxes (the next update refits all)
   for (std::size_t k = 0; k < keys; ++k)
     if (keyPositions[k].size() != floats)
       throw tsah::DataError("runtime: key " + std::to_string(k) + " has " + std::to_string(keyPositions[k].size()) +
@@ -138,17 +156,28 @@ void CpuRuntime::updateShutter(std::span<const float> keyTimes,
   // (consecutive frames whose shutters meet share the key between them): the refit is a function
   // of the tree and the positions, and the tree has not changed since (a tree change clears the
   // shutter).
+  // With Config::movingVertices, once positions were read in full, the keys' static vertices are
+  // those positions: only the moving ones are read, compared and checked.
+  const bool readMovingOnly = movingVertices_.has_value() && staticPositionsRead_;
+  const auto sameKey = [&](std::span<const float> given, std::size_t old) {
+    const std::span<const float> kept = std::span<const float>(keyPositions_).subspan(old * floats, floats);
+    if (!readMovingOnly) return sameBits(given, kept);
+    for (uint32_t v : *movingVertices_)
+      if (std::memcmp(given.data() + 3 * std::size_t(v), kept.data() + 3 * std::size_t(v), 3 * sizeof(float)) != 0)
+        return false;
+    return true;
+  };
   const std::size_t oldKeys = keyTimes_.size();
   std::vector<std::size_t> reused(keys, oldKeys);
   for (std::size_t k = 0; k < keys; ++k)
     for (std::size_t j = 0; j < oldKeys; ++j)
-      if (sameBits(keyPositions[k], std::span<const float>(keyPositions_).subspan(j * floats, floats))) {
+      if (sameKey(keyPositions[k], j)) {
         reused[k] = j;
         break;
       }
   // Every key to refit is checked first, so that an error leaves the runtime as it was.
   for (std::size_t k = 0; k < keys; ++k)
-    if (reused[k] == oldKeys) checkPositions(keyPositions[k]);
+    if (reused[k] == oldKeys) readMovingOnly ? checkMovingPositions(keyPositions[k]) : checkPositions(keyPositions[k]);
   ShutterKeys next;
   next.nodes.resize(wide4_ || wide8_ ? 0 : keys * tree_.interiorCount);
   next.rootBoxes.resize(keys);
@@ -156,17 +185,19 @@ void CpuRuntime::updateShutter(std::span<const float> keyTimes,
   if (wide4_) next.wide4 = passOnWideKeys(keyWide4_, reused);
   if (wide8_) next.wide8 = passOnWideKeys(keyWide8_, reused);
   uint32_t refitted = 0;
+  keysRefittedMovingOnly_ = 0;
   for (std::size_t k = 0; k < keys; ++k) {
     if (reused[k] < oldKeys) {
       copyShutterKey(reused[k], next, k);
     } else {
-      refitShutterKey(keyPositions[k], next, k);
+      refitShutterKey(keyPositions[k], readMovingOnly, next, k);
       ++refitted;
     }
   }
   // The runtime's positions are the last key's (the renderer's smooth normals read them).
-  if (const std::span<const float> last = keyPositions[keys - 1]; !sameBits(positions_, last))
+  if (const std::span<const float> last = keyBlock(next.positions, keys - 1, floats); !sameBits(positions_, last))
     positions_.assign(last.begin(), last.end());
+  staticPositionsRead_ = true;
   // The wide view's tree fields (root, packets' slots, triangle ids) for motionFrame, also when no
   // update() came before.
   if (wide4_) view4_ = wide4_->view(indices_.data(), positions_.data());
