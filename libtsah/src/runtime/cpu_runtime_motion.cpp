@@ -22,28 +22,37 @@ void CpuRuntime::clearShutter() {
   keyPositions_.clear();
   keyWide4_.clear();
   keyWide8_.clear();
+  segments4_.clear();
+  segments8_.clear();
   motionView_ = MotionBvhView{};
 }
 
-// The view of key s with the lerped root box (of a leaf root), and key s + 1 with f, for one ray's
-// time.
 template <uint32_t N>
-std::pair<WideView<N>, WideMotionFrame<N>> CpuRuntime::motionFrame(const WideView<N>& view,
-                                                                   const std::vector<WideKey<N>>& keys,
-                                                                   float time) const {
+void CpuRuntime::setSegments(const WideView<N>& view, const std::vector<WideKey<N>>& keys,
+                             std::vector<WideSegment<N>>& out) {
+  out.resize(keys.size() - 1);
+  for (std::size_t s = 0; s + 1 < keys.size(); ++s) {
+    WideSegment<N>& seg = out[s];
+    seg.view = view;
+    seg.view.nodes = keys[s].nodes.data();
+    seg.view.positions = keyPositions_.data() + s * std::size_t(vertexCount_) * 3;
+    seg.motion.nodes1 = keys[s + 1].nodes.data();
+    seg.motion.vertices0 = keys[s].vertices.data();
+    seg.motion.vertices1 = keys[s + 1].vertices.data();
+  }
+}
+
+template <uint32_t N, class Trace>
+auto CpuRuntime::traceSegment(const std::vector<WideSegment<N>>& segments, float time, const Trace& trace) const {
   const motion::Segment seg = motion::segmentAt(keyTimes_.data(), int(keyTimes_.size()), time);
-  const std::size_t k0 = std::size_t(seg.index), k1 = k0 + 1;
-  WideView<N> v = view;
-  v.nodes = keys[k0].nodes.data();
-  v.positions = keyPositions_.data() + k0 * std::size_t(vertexCount_) * 3;
-  // The kernels test the root box of a leaf root only (an interior root's children are tested).
-  if (isLeafRef(v.rootRef)) v.rootBox = motion::lerpBox(keyRootBoxes_[k0], keyRootBoxes_[k1], seg.f);
-  WideMotionFrame<N> m;
-  m.nodes1 = keys[k1].nodes.data();
-  m.vertices0 = keys[k0].vertices.data();
-  m.vertices1 = keys[k1].vertices.data();
+  const WideSegment<N>& frame = segments[std::size_t(seg.index)];
+  WideMotionFrame<N> m = frame.motion;
   m.f = seg.f;
-  return {v, m};
+  if (!isLeafRef(frame.view.rootRef)) return trace(frame.view, m);
+  // The kernels test the root box of a leaf root only (an interior root's children are tested).
+  WideView<N> v = frame.view;
+  v.rootBox = motion::lerpBox(keyRootBoxes_[std::size_t(seg.index)], keyRootBoxes_[std::size_t(seg.index) + 1], seg.f);
+  return trace(v, m);
 }
 
 namespace {
@@ -198,10 +207,6 @@ void CpuRuntime::updateShutter(std::span<const float> keyTimes,
   if (const std::span<const float> last = keyBlock(next.positions, keys - 1, floats); !sameBits(positions_, last))
     positions_.assign(last.begin(), last.end());
   staticPositionsRead_ = true;
-  // The wide view's tree fields (root, packets' slots, triangle ids) for motionFrame, also when no
-  // update() came before.
-  if (wide4_) view4_ = wide4_->view(indices_.data(), positions_.data());
-  if (wide8_) view8_ = wide8_->view(indices_.data(), positions_.data());
   keysRefitted_ = refitted;
   keyTimes_.assign(keyTimes.begin(), keyTimes.end());
   keyNodes_ = std::move(next.nodes);
@@ -209,6 +214,16 @@ void CpuRuntime::updateShutter(std::span<const float> keyTimes,
   keyPositions_ = std::move(next.positions);
   keyWide4_ = std::move(next.wide4);
   keyWide8_ = std::move(next.wide8);
+  // The wide view's tree fields (root, packets' slots, triangle ids) for the segments, also when no
+  // update() came before.
+  if (wide4_) {
+    view4_ = wide4_->view(indices_.data(), positions_.data());
+    setSegments(view4_, keyWide4_, segments4_);
+  }
+  if (wide8_) {
+    view8_ = wide8_->view(indices_.data(), positions_.data());
+    setSegments(view8_, keyWide8_, segments8_);
+  }
   // The key positions, times and triangles in every layout (the renderer's blurred surfaces read
   // them); the binary key nodes in bvh2 only.
   const bool wide = wide4_ || wide8_;
@@ -242,27 +257,19 @@ void CpuRuntime::copyShutterKey(std::size_t from, ShutterKeys& next, std::size_t
 
 Hit CpuRuntime::closestHit(const Ray& ray, float time) const {
   if (!blurred()) return closestHit(ray);
-  if (wide8_) {
-    const auto [v, m] = motionFrame(view8_, keyWide8_, time);
-    return kernels_->closestMotion8(v, m, ray);
-  }
-  if (wide4_) {
-    const auto [v, m] = motionFrame(view4_, keyWide4_, time);
-    return kernels_->closestMotion4(v, m, ray);
-  }
+  if (wide8_)
+    return traceSegment(segments8_, time, [&](const auto& v, const auto& m) { return kernels_->closestMotion8(v, m, ray); });
+  if (wide4_)
+    return traceSegment(segments4_, time, [&](const auto& v, const auto& m) { return kernels_->closestMotion4(v, m, ray); });
   return tsah::closestHit(motionView_, ray, time);
 }
 
 bool CpuRuntime::anyHit(const Ray& ray, float time, AnyHitOrder order) const {
   if (!blurred()) return anyHit(ray, order);
-  if (wide8_) {
-    const auto [v, m] = motionFrame(view8_, keyWide8_, time);
-    return kernels_->anyMotion8(v, m, ray, order);
-  }
-  if (wide4_) {
-    const auto [v, m] = motionFrame(view4_, keyWide4_, time);
-    return kernels_->anyMotion4(v, m, ray, order);
-  }
+  if (wide8_)
+    return traceSegment(segments8_, time, [&](const auto& v, const auto& m) { return kernels_->anyMotion8(v, m, ray, order); });
+  if (wide4_)
+    return traceSegment(segments4_, time, [&](const auto& v, const auto& m) { return kernels_->anyMotion4(v, m, ray, order); });
   return tsah::anyHit(motionView_, ray, time);
 }
 

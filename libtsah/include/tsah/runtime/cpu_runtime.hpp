@@ -262,9 +262,20 @@ class CpuRuntime {
   // readMovingOnly: the key's positions are positions_ with the moving vertices of `positions`.
   void refitShutterKey(std::span<const float> positions, bool readMovingOnly, ShutterKeys& out, std::size_t key);
   void copyShutterKey(std::size_t from, ShutterKeys& next, std::size_t to) const;
+  // Per segment s of the blurred frame (keys s and s + 1), the wide kernels' frame but for the
+  // ray's f: made once per updateShutter, so that a ray only looks up its segment.
   template <uint32_t N>
-  std::pair<WideView<N>, WideMotionFrame<N>> motionFrame(const WideView<N>& view, const std::vector<WideKey<N>>& keys,
-                                                          float time) const;
+  struct WideSegment {
+    WideView<N> view;            // key s: nodes, positions (rootBox: see traceSegment)
+    WideMotionFrame<N> motion;   // key s + 1's nodes, both keys' vertex packets
+  };
+  std::vector<WideSegment<4>> segments4_;
+  std::vector<WideSegment<8>> segments8_;
+  template <uint32_t N>
+  void setSegments(const WideView<N>& view, const std::vector<WideKey<N>>& keys, std::vector<WideSegment<N>>& out);
+  // trace(view, motion) on the segment of the ray's time.
+  template <uint32_t N, class Trace>
+  auto traceSegment(const std::vector<WideSegment<N>>& segments, float time, const Trace& trace) const;
 };
 
 }  // namespace tsah
