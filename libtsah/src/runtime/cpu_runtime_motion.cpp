@@ -39,6 +39,7 @@ void CpuRuntime::setSegments(const WideView<N>& view, const std::vector<WideKey<
     seg.motion.nodes1 = keys[s + 1].nodes.data();
     seg.motion.vertices0 = keys[s].vertices.data();
     seg.motion.vertices1 = keys[s + 1].vertices.data();
+    seg.motion.rootBounds = motion::segmentBounds(keyRootBoxes_[s], keyRootBoxes_[s + 1]);
   }
 }
 
