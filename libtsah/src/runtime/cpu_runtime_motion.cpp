@@ -191,6 +191,8 @@ void CpuRuntime::updateShutter(std::span<const float> keyTimes,
   ShutterKeys next;
   next.nodes.resize(wide4_ || wide8_ ? 0 : keys * tree_.interiorCount);
   next.rootBoxes.resize(keys);
+  // Into the buffer of the shutter before last (a fresh one would be zeroed and faulted in, per frame).
+  next.positions = std::move(spareKeyPositions_);
   next.positions.resize(keys * floats);
   if (wide4_) next.wide4 = passOnWideKeys(keyWide4_, reused);
   if (wide8_) next.wide8 = passOnWideKeys(keyWide8_, reused);
@@ -212,6 +214,7 @@ void CpuRuntime::updateShutter(std::span<const float> keyTimes,
   keyTimes_.assign(keyTimes.begin(), keyTimes.end());
   keyNodes_ = std::move(next.nodes);
   keyRootBoxes_ = std::move(next.rootBoxes);
+  spareKeyPositions_ = std::move(keyPositions_);
   keyPositions_ = std::move(next.positions);
   keyWide4_ = std::move(next.wide4);
   keyWide8_ = std::move(next.wide8);

@@ -235,6 +235,7 @@ class CpuRuntime {
   std::vector<GpuBvhNode> keyNodes_;
   std::vector<Aabb> keyRootBoxes_;
   std::vector<float> keyPositions_;
+  std::vector<float> spareKeyPositions_;  // the shutter before last's, kept as the next one's buffer
   MotionBvhView motionView_;
   // Wide layouts: per key its own node set and vertex packets, so that a key reused by the next
   // shutter moves instead of being copied, and a new key refits into a dropped key's buffers.
