@@ -135,7 +135,8 @@ struct WideMotionFrame {
   float f = 0.0f;
   // An interior root: a box holding every child box of the root at every time of the segment
   // (motion::segmentBounds of the keys' root boxes). A ray that misses it finds nothing, so the
-  // kernels test it first, once, in scalar: most rays of a frame where the scene is small miss it.
+  // closest-hit kernels test it first, once, in scalar: most camera rays of a frame where the
+  // scene is small miss it.
   Aabb rootBounds;
 };
 
