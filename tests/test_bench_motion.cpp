@@ -210,6 +210,22 @@ TEST(BenchMotionBlur, AShutterOfOneReusesTheKeyBetweenFrames) {
   for (std::size_t f = 1; f < 5; ++f) EXPECT_EQ(refitted[f].get<int>(), keys[f].get<int>() - 1) << "frame " << f;
 }
 
+// A mostly static animation: after the first frame, whose keys read every vertex, the bench's
+// runtime refits its keys' moving parts only (keys_refitted_moving_only_per_frame).
+TEST(BenchMotionBlur, KeysOfAMostlyStaticSceneRefitOnlyWhatMoves) {
+  const anim::Animation a = tsah::test::mostlyStaticAnimation(3000, 500);
+  const tsah::Bvh tree = tsah::BinnedSahBuilder().build(tsah::test::keyframeBoxes(a, 0));
+  const nlohmann::json j = tsah::bench::runMotionBlurComparison(a, tree, "toolkit", smallSetup(a, a.uniformTimes(4)),
+                                                                {0.5, tsah::Shutter::Mode::Centered});
+  const nlohmann::json &refitted = j["keys_refitted_per_frame"], &movingOnly = j["keys_refitted_moving_only_per_frame"];
+  ASSERT_EQ(movingOnly.size(), 4u);
+  EXPECT_LT(movingOnly[0].get<int>(), refitted[0].get<int>());
+  for (std::size_t f = 1; f < 4; ++f) {
+    EXPECT_GE(movingOnly[f].get<int>(), 1) << "frame " << f;
+    EXPECT_LE(movingOnly[f].get<int>(), refitted[f].get<int>()) << "frame " << f;
+  }
+}
+
 TEST(BenchMotionBlur, OneFrameOrNoShutterIsRefused) {
   const anim::Animation a = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 200, 3, 5);
   const tsah::Bvh tree = tsah::BinnedSahBuilder().build(tsah::test::keyframeBoxes(a, 0));

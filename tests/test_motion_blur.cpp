@@ -182,6 +182,64 @@ TEST(MotionBlurLerp, EndsAreTheKeyBoxesPadded) {
   }
 }
 
+// Random boxes of a node at two keys and random child boxes inside them (every third trial the
+// node's own boxes, the worst case): segmentBounds holds every child's lerped box at random f.
+void checkSegmentBounds(float magnitude, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> coord(-magnitude, magnitude);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  const auto boxOf = [&] {
+    Aabb b;
+    b.extend(Vec3{coord(rng), coord(rng), coord(rng)});
+    b.extend(Vec3{coord(rng), coord(rng), coord(rng)});
+    return b;
+  };
+  const auto inside = [&](const Aabb& b) {
+    Aabb c;
+    for (int k = 0; k < 2; ++k) {
+      Vec3 p;
+      for (int a = 0; a < 3; ++a) p[a] = b.lo[a] + unit(rng) * (b.hi[a] - b.lo[a]);
+      c.extend(p);
+    }
+    return c;
+  };
+  for (int trial = 0; trial < 20000; ++trial) {
+    const Aabb b0 = boxOf(), b1 = boxOf();
+    const bool own = trial % 3 == 0;
+    const Aabb c0 = own ? b0 : inside(b0), c1 = own ? b1 : inside(b1);
+    ASSERT_TRUE(b0.contains(c0) && b1.contains(c1));
+    float f = unit(rng);
+    if (trial % 4 == 1) f = 1.0f - f * 1e-6f;
+    if (trial % 4 == 2) f = f * 1e-6f;
+    const Aabb bound = m::segmentBounds(b0, b1), child = m::lerpBox(c0, c1, f);
+    for (int a = 0; a < 3; ++a) {
+      ASSERT_LE(bound.lo[a], child.lo[a]) << "axis " << a << " f " << f;
+      ASSERT_GE(bound.hi[a], child.hi[a]) << "axis " << a << " f " << f;
+    }
+  }
+}
+
+// The box the wide kernels test once per ray before the root's children (WideMotionFrame::rootBounds).
+TEST(MotionBlurLerp, SegmentBoundsHoldEveryChildsLerpedBox) {
+  checkSegmentBounds(1.0f, 11);
+  checkSegmentBounds(1e4f, 12);
+  checkSegmentBounds(1e-30f, 13);
+  checkSegmentBounds(1e30f, 14);
+}
+
+// The keys' union alone would not do: a lerped, padded box reaches past it.
+TEST(MotionBlurLerp, TheKeysUnionAloneIsNotEnough) {
+  Aabb b0, b1;
+  b0.extend(Vec3{0.0f, 1.0f, 2.0f});
+  b0.extend(Vec3{1.0f, 2.0f, 3.0f});
+  b1.extend(Vec3{4.0f, 5.0f, 6.0f});
+  b1.extend(Vec3{5.0f, 6.0f, 7.0f});
+  const Aabb bound = m::segmentBounds(b0, b1), child = m::lerpBox(b0, b1, 0.0f);
+  EXPECT_LT(child.lo.x, b0.lo.x);
+  EXPECT_LE(bound.lo.x, child.lo.x);
+  EXPECT_GE(bound.hi.z, m::lerpBox(b0, b1, 1.0f).hi.z);
+}
+
 TEST(MotionBlurLerp, EmptyBoxStaysEmpty) {
   EXPECT_TRUE(m::lerpBox(Aabb{}, Aabb{}, 0.5f).empty());
 }

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "anim/generators.hpp"
+#include "shutter_checks.hpp"
 #include "test_support.hpp"
 #include "tsah/base/error.hpp"
 #include "tsah/build/binned_sah_builder.hpp"
@@ -25,6 +26,7 @@ using tsah::Hit;
 using tsah::MotionFrame;
 using tsah::Ray;
 using tsah::Vec3;
+using tsah::test::expectSameShutter;
 
 struct Scene {
   anim::Animation animation;
@@ -383,32 +385,6 @@ TEST(MotionBlurRuntime, RaysThroughSharedEdgesHitInEveryLayout) {
       }
     }
   }
-}
-
-// Every key set of a blurred runtime, its positions and bounds (the last key's), bit for bit.
-void expectSameShutter(const CpuRuntime& a, const CpuRuntime& b) {
-  const auto same = [](const auto& x, const auto& y) {
-    const std::span sx(x), sy(y);
-    return sx.size() == sy.size() && (sx.empty() || std::memcmp(sx.data(), sy.data(), sx.size_bytes()) == 0);
-  };
-  ASSERT_TRUE(same(a.keyTimes(), b.keyTimes()));
-  const std::size_t keys = a.keyTimes().size(), floats = 3 * std::size_t(a.vertexCount());
-  const tsah::MotionBvhView &va = a.motionView(), &vb = b.motionView();
-  EXPECT_TRUE(same(std::span(va.keyPositions, keys * floats), std::span(vb.keyPositions, keys * floats)));
-  EXPECT_TRUE(same(std::span(va.keyRootBoxes, keys), std::span(vb.keyRootBoxes, keys)));
-  EXPECT_TRUE(same(std::span(va.keyNodes, keys * va.nodeCount), std::span(vb.keyNodes, keys * vb.nodeCount)));
-  for (std::size_t k = 0; k < keys; ++k) {
-    SCOPED_TRACE("key " + std::to_string(k));
-    EXPECT_TRUE(same(a.keyWideNodes4(k), b.keyWideNodes4(k)));
-    EXPECT_TRUE(same(a.keyVertexPackets4(k), b.keyVertexPackets4(k)));
-    EXPECT_TRUE(same(a.keyWideNodes8(k), b.keyWideNodes8(k)));
-    EXPECT_TRUE(same(a.keyVertexPackets8(k), b.keyVertexPackets8(k)));
-  }
-  if (a.wide4()) EXPECT_FALSE(a.keyVertexPackets4(keys - 1).empty());
-  if (a.wide8()) EXPECT_FALSE(a.keyVertexPackets8(keys - 1).empty());
-  EXPECT_TRUE(same(a.positions(), b.positions()));
-  const Aabb ba = a.bounds(), bb = b.bounds();
-  EXPECT_EQ(std::memcmp(&ba, &bb, sizeof(Aabb)), 0);
 }
 
 // Consecutive shutters that meet share their key: it is reused, not refitted, forward and

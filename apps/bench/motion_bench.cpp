@@ -82,7 +82,8 @@ nlohmann::json runMotionBlurComparison(const anim::Animation& a, const Bvh& tree
   j["embree_status"] = embreeStatus();
   std::vector<RuntimeMethod> methods;
   methods.push_back({"tsah0-mb", label + ", " + name(layout), "refit at the shutter's keys", {}, nlohmann::json::object()});
-  nlohmann::json keys = nlohmann::json::array(), refitted = nlohmann::json::array();
+  nlohmann::json keys = nlohmann::json::array(), refitted = nlohmann::json::array(),
+                 refittedMovingOnly = nlohmann::json::array();
 
 #if TSAH_HAVE_EMBREE
   // Embree's time of a shutter fraction: the animation's time, mapped onto the keyframes' evenly
@@ -115,6 +116,7 @@ nlohmann::json runMotionBlurComparison(const anim::Animation& a, const Bvh& tree
     const std::vector<double> shutterKeys = motion::shutterKeys(a.times(), open, close);
     keys.push_back(shutterKeys.size());
     refitted.push_back(rt->blurred() ? rt->keysRefitted() : 1u);  // the others reused from the frame before
+    refittedMovingOnly.push_back(rt->blurred() ? rt->keysRefittedMovingOnly() : 0u);
     // Made from the toolkit's blurred frame (untimed); an instant shutter (open == close) is time 0.
     RayBatch batch = makeRayBatch(*rt, setup.camera(t), setup.lighting, settings);
     if (batch.times.empty())
@@ -148,6 +150,7 @@ nlohmann::json runMotionBlurComparison(const anim::Animation& a, const Bvh& tree
   }
   j["keys_per_frame"] = keys;
   j["keys_refitted_per_frame"] = refitted;
+  j["keys_refitted_moving_only_per_frame"] = refittedMovingOnly;
   j["methods"] = nlohmann::json::array();
 #if TSAH_HAVE_EMBREE
   methods[1].extra["agreement"] = toJson(agreement[0]);

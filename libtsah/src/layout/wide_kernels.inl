@@ -276,6 +276,15 @@ inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, c
   if (bvh.rootCount == 0 && isLeafRef(bvh.rootRef)) return hit;  // empty tree
   LazyPrep prep(ray);
   float tmax = ray.tmax;
+  if constexpr (Blurred && Q == Query::Closest) {
+    // Before the ray's lanes are set up: a ray missing the root's box over the whole segment
+    // misses every child box the loop below would test (the slab test is monotone in the planes).
+    // Closest hit only: the camera's rays, many of which miss a small scene; an any-hit ray (a
+    // shadow or ambient-occlusion ray) leaves a surface inside that box, so the test would only
+    // cost it time.
+    float tEntry;
+    if (!isLeafRef(bvh.rootRef) && !intersectBox(prep.prep, m.rootBounds, ray.tmin, tmax, tEntry)) return hit;
+  }
   const RayLanes<V> r = rayLanes<V>(ray, prep.prep, Blurred ? m.f : 0.0f);
   if (isLeafRef(bvh.rootRef)) {
     float tEntry;

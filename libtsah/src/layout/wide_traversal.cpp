@@ -18,15 +18,17 @@ struct KernelTables {
     table[0] = detail::sseKernels();
     supported[0] = true;  // SSE2 is part of x86-64
 #endif
+    // A table is made only where the processor runs its set: making it runs that set's code
+    // (compiled with its flags, the constants may use its instructions).
 #if TSAH_HAVE_AVX2_KERNELS
-    table[1] = detail::avx2Kernels();
     __builtin_cpu_init();
     supported[1] = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+    if (supported[1]) table[1] = detail::avx2Kernels();
 #endif
 #if TSAH_HAVE_AVX512_KERNELS
-    table[2] = detail::avx512Kernels();
     supported[2] = __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
                    __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512bw") && supported[1];
+    if (supported[2]) table[2] = detail::avx512Kernels();
 #endif
   }
 };

@@ -128,43 +128,58 @@ Aabb nodeBounds(const WideSoaNode<N>& node) {
 
 template <uint32_t N>
 void WideTree<N>::refitLeaves(uint32_t i, const Target& target) {
-  WideSoaNode<N>& node = nodes_[i];
+  WideSoaNode<N>& node = target.nodes[i];
   for (uint32_t c = 0; c < N && usedSlot(node, c); ++c)
     if (isLeafRef(node.ref[c])) node.setChildBox(c, refitLeaf(leafFirstSlot(node.ref[c]), node.count[c], target));
 }
 
 template <uint32_t N>
-void WideTree<N>::refitInterior(uint32_t i) {
-  WideSoaNode<N>& node = nodes_[i];
+void WideTree<N>::refitInterior(uint32_t i, WideSoaNode<N>* nodes) {
+  WideSoaNode<N>& node = nodes[i];
   for (uint32_t c = 0; c < N && usedSlot(node, c); ++c)
-    if (!isLeafRef(node.ref[c])) node.setChildBox(c, nodeBounds(nodes_[static_cast<uint32_t>(node.ref[c])]));
+    if (!isLeafRef(node.ref[c])) node.setChildBox(c, nodeBounds(nodes[static_cast<uint32_t>(node.ref[c])]));
 }
 
 template <uint32_t N>
 void WideTree<N>::refit(const float* positions, const ParallelFor& parallelFor) {
-  refitTo({positions, true, nullptr}, parallelFor);
+  rootBox_ = refitTo({positions, nodes_.data(), true, nullptr}, false, parallelFor);
 }
 
 template <uint32_t N>
-void WideTree<N>::refitKey(const float* positions, KeyVertexPacket<N>* keyVertices, const ParallelFor& parallelFor) {
-  refitTo({positions, false, keyVertices}, parallelFor);
+void WideTree<N>::refitMoving(const float* positions, const ParallelFor& parallelFor) {
+  rootBox_ = refitTo({positions, nodes_.data(), true, nullptr}, true, parallelFor);
 }
 
 template <uint32_t N>
-void WideTree<N>::refitTo(const Target& target, const ParallelFor& parallelFor) {
-  if (isLeafRef(rootRef_)) {
-    rootBox_ = refitLeaf(leafFirstSlot(rootRef_), rootCount_, target);
-    return;
+Aabb WideTree<N>::refitKey(const float* positions, WideSoaNode<N>* keyNodes, KeyVertexPacket<N>* keyVertices,
+                           bool movingOnly, const ParallelFor& parallelFor) {
+  return refitTo({positions, keyNodes, false, keyVertices}, movingOnly, parallelFor);
+}
+
+template <uint32_t N>
+Aabb WideTree<N>::refitTo(const Target& target, bool movingOnly, const ParallelFor& parallelFor) {
+  if (isLeafRef(rootRef_)) return refitLeaf(leafFirstSlot(rootRef_), rootCount_, target);
+  if (movingOnly && moving_) {
+    const detail::MovingRefitPlan& plan = *moving_;
+    parallelFor(plan.taskCount(), [&](std::size_t begin, std::size_t end) {
+      for (std::size_t t = begin; t < end; ++t) {
+        const uint32_t first = plan.taskStart[t], stop = plan.taskStart[t + 1];
+        for (uint32_t k = first; k < stop; ++k) refitLeaves(plan.taskNodes[k], target);
+        for (uint32_t k = stop; k-- > first;) refitInterior(plan.taskNodes[k], target.nodes);  // children first
+      }
+    });
+    for (uint32_t i : plan.top) refitLeaves(i, target), refitInterior(i, target.nodes);
+  } else {
+    parallelFor(subtreeTasks_.size(), [&](std::size_t begin, std::size_t end) {
+      for (std::size_t t = begin; t < end; ++t) {
+        const auto [root, stop] = subtreeTasks_[t];
+        for (uint32_t i = root; i < stop; ++i) refitLeaves(i, target);        // packets in memory order
+        for (uint32_t i = stop; i-- > root;) refitInterior(i, target.nodes);  // children (larger indices) first
+      }
+    });
+    for (uint32_t i : topNodes_) refitLeaves(i, target), refitInterior(i, target.nodes);
   }
-  parallelFor(subtreeTasks_.size(), [&](std::size_t begin, std::size_t end) {
-    for (std::size_t t = begin; t < end; ++t) {
-      const auto [root, stop] = subtreeTasks_[t];
-      for (uint32_t i = root; i < stop; ++i) refitLeaves(i, target);  // packets in memory order
-      for (uint32_t i = stop; i-- > root;) refitInterior(i);  // children (larger indices) first
-    }
-  });
-  for (uint32_t i : topNodes_) refitLeaves(i, target), refitInterior(i);
-  rootBox_ = nodeBounds(nodes_[0]);
+  return nodeBounds(target.nodes[0]);
 }
 
 template <uint32_t N>
@@ -194,25 +209,6 @@ void WideTree<N>::setMovingVertices(std::span<const uint32_t> movingVertices, ui
   }
   moving_ = std::make_shared<const detail::MovingRefitPlan>(
       detail::planMovingRefit(subtreeEnds_, threads_, interiorChildrenOf(nodes_), nodeMoves, 16 / N));
-}
-
-template <uint32_t N>
-void WideTree<N>::refitMoving(const float* positions, const ParallelFor& parallelFor) {
-  if (!moving_ || isLeafRef(rootRef_)) {
-    refit(positions, parallelFor);
-    return;
-  }
-  const Target target{positions, true, nullptr};
-  const detail::MovingRefitPlan& plan = *moving_;
-  parallelFor(plan.taskCount(), [&](std::size_t begin, std::size_t end) {
-    for (std::size_t t = begin; t < end; ++t) {
-      const uint32_t first = plan.taskStart[t], stop = plan.taskStart[t + 1];
-      for (uint32_t k = first; k < stop; ++k) refitLeaves(plan.taskNodes[k], target);
-      for (uint32_t k = stop; k-- > first;) refitInterior(plan.taskNodes[k]);  // children first
-    }
-  });
-  for (uint32_t i : plan.top) refitLeaves(i, target), refitInterior(i);
-  rootBox_ = nodeBounds(nodes_[0]);
 }
 
 template <uint32_t N>

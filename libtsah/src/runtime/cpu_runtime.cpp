@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <thread>
 
 #include "tsah/base/coordinates.hpp"
@@ -240,9 +241,22 @@ void CpuRuntime::checkPositions(std::span<const float> positions) const {
     throw tsah::DataError("runtime: vertex " + std::to_string(bad / 3) + " " + describeBadCoordinate(positions[bad]));
 }
 
+void CpuRuntime::checkMovingPositions(std::span<const float> positions) const {
+  if (positions.size() != positions_.size()) checkPositions(positions);  // the count's error
+  // firstBadCoordinate's test, inline: a call per vertex would cost more than the test.
+  const auto good = [](float x) { return std::fabs(x) <= kMaxCoordinate; };  // NaN fails it too
+  for (uint32_t v : *movingVertices_) {
+    const float* p = positions.data() + 3 * std::size_t(v);
+    if (good(p[0]) && good(p[1]) && good(p[2])) continue;
+    const std::size_t bad = firstBadCoordinate(std::span<const float>(p, 3));
+    throw tsah::DataError("runtime: vertex " + std::to_string(v) + " " + describeBadCoordinate(p[bad]));
+  }
+}
+
 void CpuRuntime::setPositions(std::span<const float> positions) {
   checkPositions(positions);
   positions_.assign(positions.begin(), positions.end());
+  staticPositionsRead_ = true;
 }
 
 Aabb CpuRuntime::refitLeaf(uint32_t firstSlot, uint32_t count) {
@@ -309,15 +323,12 @@ void CpuRuntime::update(std::span<const float> positions) {
     checkPositions(positions);
     clearShutter();
     positions_.assign(positions.begin(), positions.end());
+    staticPositionsRead_ = true;
     refitAndWoop();
     staticRefitted_ = movingVertices_.has_value();
     return;
   }
-  if (positions.size() != positions_.size()) checkPositions(positions);  // the count's error
-  for (uint32_t v : *movingVertices_)
-    if (const std::size_t bad = firstBadCoordinate(positions.subspan(3 * std::size_t(v), 3)); bad < 3)
-      throw tsah::DataError("runtime: vertex " + std::to_string(v) + " " +
-                            describeBadCoordinate(positions[3 * std::size_t(v) + bad]));
+  checkMovingPositions(positions);
   for (uint32_t v : *movingVertices_)
     std::copy_n(positions.begin() + 3 * std::ptrdiff_t(v), 3, positions_.begin() + 3 * std::ptrdiff_t(v));
   refitAndWoop(true);

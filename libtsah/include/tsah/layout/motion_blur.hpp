@@ -128,4 +128,21 @@ TSAH_HD Aabb lerpBox(const Aabb& b0, const Aabb& b1, float f) {
   return out;
 }
 
+// A box holding lerpBox(c0, c1, f) for every f in [0, 1] and every pair of boxes c0 inside b0 and c1
+// inside b1 (a node's children at keys s and s + 1, inside the node's boxes there), under float
+// rounding: the two keys' union widened on each side by twice lerpBox's pad of b0 and b1. A child's
+// pad is at most that pad (its coordinates are at most as large), and its lerp lies below the
+// lower of its two keys by at most about 5u*m (m: the pad's magnitude, u = 2^-24), far less than
+// the second pad of 32u*m; docs/motion-blur.md. A ray that misses this box misses every such
+// child at every time of the segment.
+TSAH_HD Aabb segmentBounds(const Aabb& b0, const Aabb& b1) {
+  Aabb out;
+  for (int a = 0; a < 3; ++a) {
+    const float widen = 2.0f * lerpPad(maxMagnitude(b0.lo[a], b0.hi[a], b1.lo[a], b1.hi[a]));
+    out.lo[a] = (b0.lo[a] < b1.lo[a] ? b0.lo[a] : b1.lo[a]) - widen;
+    out.hi[a] = (b0.hi[a] > b1.hi[a] ? b0.hi[a] : b1.hi[a]) + widen;
+  }
+  return out;
+}
+
 }  // namespace tsah::motion

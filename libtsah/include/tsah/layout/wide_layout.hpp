@@ -133,6 +133,11 @@ struct WideMotionFrame {
   const KeyVertexPacket<N>* vertices0 = nullptr;
   const KeyVertexPacket<N>* vertices1 = nullptr;
   float f = 0.0f;
+  // An interior root: a box holding every child box of the root at every time of the segment
+  // (motion::segmentBounds of the keys' root boxes). A ray that misses it finds nothing, so the
+  // closest-hit kernels test it first, once, in scalar: most camera rays of a frame where the
+  // scene is small miss it.
+  Aabb rootBounds;
 };
 
 // Traversal stack entries a wide tree of this depth needs at most (one level pushes up to N - 1).

@@ -38,10 +38,14 @@ class WideTree {
 
   // This frame's vertices (xyz per vertex; every vertex index of the triangles must be in range).
   void refit(const float* positions, const ParallelFor& parallelFor);
-  // The blurred refit at one key (docs/motion-blur.md): every box as refit() computes it, and in
-  // keyVertices[p] (one per packet) the vertices of packet p's triangles. The Woop packets keep the
-  // last refit()'s rows (a blurred frame does not read them).
-  void refitKey(const float* positions, KeyVertexPacket<N>* keyVertices, const ParallelFor& parallelFor);
+  // The blurred refit at one key (docs/motion-blur.md) into the key's own sets: in keyNodes (a copy
+  // of nodes(): its refs and counts) every box as refit() computes it, in keyVertices[p] (one per
+  // packet) the vertices of packet p's triangles; returns the root box. The tree's own nodes, Woop
+  // packets and bounds() stay as they are. movingOnly: as refitMoving(), only the moving nodes, when
+  // keyNodes and keyVertices hold this tree's refit at positions that differ from these only in the
+  // declared moving vertices (the sets then equal a full refit's bit for bit).
+  Aabb refitKey(const float* positions, WideSoaNode<N>* keyNodes, KeyVertexPacket<N>* keyVertices, bool movingOnly,
+                const ParallelFor& parallelFor);
 
   // Declares which vertices may move (ascending ids below vertexCount, as tsah::findMovingParts
   // takes them); refitMoving() then refits only the nodes whose subtree holds a triangle with such a
@@ -62,18 +66,21 @@ class WideTree {
   uint32_t rootCount() const { return rootCount_; }
 
  private:
-  // What a refit writes besides the boxes: the Woop packets, or a key's vertex packets.
+  // Where a refit writes: the boxes into `nodes` (the tree's own, or a key's), and the Woop packets
+  // or a key's vertex packets.
   struct Target {
     const float* positions;
+    WideSoaNode<N>* nodes;
     bool woop;
     KeyVertexPacket<N>* keyVertices;
   };
-  void refitTo(const Target& target, const ParallelFor& parallelFor);
+  // movingOnly (after setMovingVertices): the moving plan's nodes only. Returns the root box.
+  Aabb refitTo(const Target& target, bool movingOnly, const ParallelFor& parallelFor);
   Aabb refitLeaf(uint32_t firstPacket, uint32_t count, const Target& target);
   // A refit task computes its nodes' leaf children first, in increasing packet order (so the
   // packet stores stream forward through memory), then their interior children, bottom-up.
   void refitLeaves(uint32_t node, const Target& target);
-  void refitInterior(uint32_t node);
+  void refitInterior(uint32_t node, WideSoaNode<N>* nodes);
 
   void (*woopRows_)(const float* positions, const uint32_t* vertices, uint32_t lanes, WoopPacket<N>& packet,
                     Aabb& bounds) = nullptr;

@@ -58,7 +58,8 @@ class CpuRuntime {
     // (not a blurred frame, a rebuild or a switch to another tree of a set) reads only these
     // vertices' coordinates and refits only the subtrees whose triangles use them: the others keep
     // their boxes and Woop triangles, and the other vertices the positions of the last full update
-    // (the tree equals a full refit's bit for bit when they did not change). Unset: all may move.
+    // (the tree equals a full refit's bit for bit when they did not change). Likewise the keys of
+    // a blurred frame (updateShutter) once positions were read in full. Unset: all may move.
     std::optional<std::vector<uint32_t>> movingVertices;
   };
 
@@ -123,6 +124,9 @@ class CpuRuntime {
   // selectTreeAt() return to the instant state. A key whose positions equal, bit for bit, a key of
   // the previous updateShutter keeps that key's refit (frames whose shutters meet share the key
   // between them), so a frame costs one refit per new key; the key sets equal a fresh update's.
+  // With Config::movingVertices, once positions were read in full (an update() or a key before), a
+  // key reads only the moving vertices' coordinates (the others keep the positions read before), and
+  // a key set that already holds a refit of this tree refits only the moving nodes.
   // While blurred, positions() and bounds() are the last key's, closestHit(ray) / anyHit(ray)
   // trace at time 1 (the last key), and the instant triangles (woop(), the wide trees' packet
   // rows) and binary tree (tree(), view()) are not kept up to date (a blurred frame reads none).
@@ -131,6 +135,8 @@ class CpuRuntime {
   bool blurred() const { return !keyTimes_.empty(); }
   // How many keys the last updateShutter refitted (the others were reused); 0 when not blurred.
   uint32_t keysRefitted() const { return keysRefitted_; }
+  // How many of those refitted only the moving nodes (Config::movingVertices).
+  uint32_t keysRefittedMovingOnly() const { return keysRefittedMovingOnly_; }
   std::span<const float> keyTimes() const { return keyTimes_; }
   // Nearest hit / any hit at the ray's time, a shutter fraction in [0, 1] (outside: the nearer end).
   // Not blurred: closestHit(ray) / anyHit(ray, order).
@@ -177,6 +183,7 @@ class CpuRuntime {
   void setWideTree(const Bvh& binary, bool reportCosts);
   BvhView binaryView() const;
   void checkPositions(std::span<const float> positions) const;  // count and coordinates (update's errors)
+  void checkMovingPositions(std::span<const float> positions) const;  // count and the moving vertices' coordinates
   void setPositions(std::span<const float> positions);
   // movingOnly: the nodes of the moving plan only (Config::movingVertices, after a full refit).
   void refitAndWoop(bool movingOnly = false);
@@ -202,6 +209,9 @@ class CpuRuntime {
   std::shared_ptr<const detail::MovingRefitPlan> movingPlan_;
   bool staticRefitted_ = false;
   bool lastUpdateMovingOnly_ = false;
+  // Whether positions_ holds every vertex's coordinates as read (an update, a rebuild or a
+  // blurred frame's key read them in full): the static vertices' then stay valid.
+  bool staticPositionsRead_ = false;
   // Wide layouts.
   LayoutInfo info_;
   const WideKernels* kernels_ = nullptr;
@@ -221,9 +231,11 @@ class CpuRuntime {
   // when not blurred).
   std::vector<float> keyTimes_;
   uint32_t keysRefitted_ = 0;
+  uint32_t keysRefittedMovingOnly_ = 0;
   std::vector<GpuBvhNode> keyNodes_;
   std::vector<Aabb> keyRootBoxes_;
   std::vector<float> keyPositions_;
+  std::vector<float> spareKeyPositions_;  // the shutter before last's, kept as the next one's buffer
   MotionBvhView motionView_;
   // Wide layouts: per key its own node set and vertex packets, so that a key reused by the next
   // shutter moves instead of being copied, and a new key refits into a dropped key's buffers.
@@ -231,6 +243,7 @@ class CpuRuntime {
   struct WideKey {
     std::vector<WideSoaNode<N>> nodes;
     std::vector<KeyVertexPacket<N>> vertices;
+    bool refitted = false;  // the sets hold a refit of the current tree (a moving-only refit may follow)
   };
   std::vector<WideKey<4>> keyWide4_;
   std::vector<WideKey<8>> keyWide8_;
@@ -247,11 +260,23 @@ class CpuRuntime {
     std::vector<Aabb> rootBoxes;
     std::vector<float> positions;
   };
-  void refitShutterKey(std::span<const float> positions, ShutterKeys& out, std::size_t key);
+  // readMovingOnly: the key's positions are positions_ with the moving vertices of `positions`.
+  void refitShutterKey(std::span<const float> positions, bool readMovingOnly, ShutterKeys& out, std::size_t key);
   void copyShutterKey(std::size_t from, ShutterKeys& next, std::size_t to) const;
+  // Per segment s of the blurred frame (keys s and s + 1), the wide kernels' frame but for the
+  // ray's f: made once per updateShutter, so that a ray only looks up its segment.
   template <uint32_t N>
-  std::pair<WideView<N>, WideMotionFrame<N>> motionFrame(const WideView<N>& view, const std::vector<WideKey<N>>& keys,
-                                                          float time) const;
+  struct WideSegment {
+    WideView<N> view;            // key s: nodes, positions (rootBox: see traceSegment)
+    WideMotionFrame<N> motion;   // key s + 1's nodes, both keys' vertex packets
+  };
+  std::vector<WideSegment<4>> segments4_;
+  std::vector<WideSegment<8>> segments8_;
+  template <uint32_t N>
+  void setSegments(const WideView<N>& view, const std::vector<WideKey<N>>& keys, std::vector<WideSegment<N>>& out);
+  // trace(view, motion) on the segment of the ray's time.
+  template <uint32_t N, class Trace>
+  auto traceSegment(const std::vector<WideSegment<N>>& segments, float time, const Trace& trace) const;
 };
 
 }  // namespace tsah
