@@ -215,9 +215,6 @@ class GpuFrameRuntime final : public FrameRuntime {
 
 std::unique_ptr<FrameRuntime> makeGpuFrameRuntime(const TreeSet& trees, const anim::Animation& animation,
                                                   const FrameRuntimeOptions& options) {
-  if (!cuda::deviceAvailable())
-    throw Failure("no CUDA device found (no GPU, no NVIDIA driver, or CUDA_VISIBLE_DEVICES hides them); "
-                  "use --device cpu");
   cuda::GpuRuntime::Config config;
   config.device = options.gpu;
   config.layout = gpuLayout(options.layout);
@@ -264,11 +261,9 @@ std::unique_ptr<FrameRuntime> makeFrameRuntime(const TreeSet& trees, const anim:
                                                const FrameRuntimeOptions& options) {
   checkRebuildForDevice(options.rebuild, options.device);
   if (options.device == Device::Cuda) {
+    requireGpuRuntime();
 #if TSAH_HAVE_CUDA
     return makeGpuFrameRuntime(trees, animation, options);
-#else
-    throw ConfigError("the GPU runtime is not built in this version of tsah (configure with a CUDA compiler to "
-                      "build it); use --device cpu");
 #endif
   }
   CpuRuntime::Config config(options.threads);
@@ -285,6 +280,12 @@ std::unique_ptr<FrameRuntime> makeFrameRuntime(const TreeSet& trees, const anim:
 #if TSAH_HAVE_CUDA
 bool gpuAvailable() { return cuda::deviceAvailable(); }
 
+void requireGpuRuntime() {
+  if (!cuda::deviceAvailable())
+    throw Failure("no CUDA device found (no GPU, no NVIDIA driver, or CUDA_VISIBLE_DEVICES hides them); "
+                  "use --device cpu");
+}
+
 nlohmann::json deviceJson(int index) {
   if (!cuda::deviceAvailable()) return nullptr;
   const cuda::DeviceInfo d = cuda::describeDevice(index);
@@ -297,6 +298,11 @@ nlohmann::json deviceJson(int index) {
 }
 #else
 bool gpuAvailable() { return false; }
+
+void requireGpuRuntime() {
+  throw ConfigError("the GPU runtime is not built in this version of tsah (configure with a CUDA compiler to "
+                    "build it); use --device cpu");
+}
 nlohmann::json deviceJson(int) { return nullptr; }
 #endif
 

@@ -95,5 +95,8 @@ std::unique_ptr<FrameRuntime> makeFrameRuntime(const TreeSet& trees, const anim:
 // memory_mib, driver_version, runtime_version; null without CUDA or without a device.
 nlohmann::json deviceJson(int index = 0);
 bool gpuAvailable();
+// Before a GPU runtime is made: throws tsah::ConfigError in a build without CUDA, tsah::Failure on a
+// machine without a usable GPU.
+void requireGpuRuntime();
 
 }  // namespace tsah::cli

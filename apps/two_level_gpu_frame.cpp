@@ -98,20 +98,17 @@ class GpuTwoLevelFrameRuntime final : public FrameRuntime {
 
 }  // namespace
 
+#endif
+
 std::unique_ptr<FrameRuntime> makeGpuTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, int gpu,
                                                           const std::string& tlas) {
-  const cuda::TlasUpdate update = cuda::parseTlasUpdate(tlas);
-  if (!cuda::deviceAvailable())
-    throw Failure("no CUDA device found (no GPU, no NVIDIA driver, or CUDA_VISIBLE_DEVICES hides them); "
-                  "use --device cpu");
-  return std::make_unique<GpuTwoLevelFrameRuntime>(std::move(scene), gpu, update);
-}
+  requireGpuRuntime();
+#if TSAH_HAVE_CUDA
+  return std::make_unique<GpuTwoLevelFrameRuntime>(std::move(scene), gpu, cuda::parseTlasUpdate(tlas));
 #else
-std::unique_ptr<FrameRuntime> makeGpuTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene>, int,
-                                                          const std::string&) {
-  throw ConfigError("the GPU runtime is not built in this version of tsah (configure with a CUDA compiler to "
-                    "build it); use --device cpu");
-}
+  (void)scene, (void)gpu, (void)tlas;
+  return nullptr;  // requireGpuRuntime threw
 #endif
+}
 
 }  // namespace tsah::cli
