@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <random>
+#include <utility>
 #include <vector>
 
 #include "tsah/core/directed_rounding.hpp"
@@ -163,12 +164,18 @@ TEST(MotionBlurLerp, UnpaddedLerpWouldMissVertices) {
   EXPECT_GT(misses, 0);
 }
 
-TEST(MotionBlurLerp, EndsAreTheKeyBoxesPadded) {
+// A node's boxes at two keys, apart: [0,1]x[1,2]x[2,3] and [4,5]x[5,6]x[6,7].
+std::pair<Aabb, Aabb> twoKeyBoxes() {
   Aabb b0, b1;
   b0.extend(Vec3{0.0f, 1.0f, 2.0f});
   b0.extend(Vec3{1.0f, 2.0f, 3.0f});
   b1.extend(Vec3{4.0f, 5.0f, 6.0f});
   b1.extend(Vec3{5.0f, 6.0f, 7.0f});
+  return {b0, b1};
+}
+
+TEST(MotionBlurLerp, EndsAreTheKeyBoxesPadded) {
+  const auto [b0, b1] = twoKeyBoxes();
   const Aabb at0 = m::lerpBox(b0, b1, 0.0f), at1 = m::lerpBox(b0, b1, 1.0f);
   EXPECT_TRUE(at0.contains(b0));
   EXPECT_TRUE(at1.contains(b1));
@@ -229,11 +236,7 @@ TEST(MotionBlurLerp, SegmentBoundsHoldEveryChildsLerpedBox) {
 
 // The keys' union alone would not do: a lerped, padded box reaches past it.
 TEST(MotionBlurLerp, TheKeysUnionAloneIsNotEnough) {
-  Aabb b0, b1;
-  b0.extend(Vec3{0.0f, 1.0f, 2.0f});
-  b0.extend(Vec3{1.0f, 2.0f, 3.0f});
-  b1.extend(Vec3{4.0f, 5.0f, 6.0f});
-  b1.extend(Vec3{5.0f, 6.0f, 7.0f});
+  const auto [b0, b1] = twoKeyBoxes();
   const Aabb bound = m::segmentBounds(b0, b1), child = m::lerpBox(b0, b1, 0.0f);
   EXPECT_LT(child.lo.x, b0.lo.x);
   EXPECT_LE(bound.lo.x, child.lo.x);
