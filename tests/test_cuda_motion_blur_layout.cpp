@@ -8,6 +8,7 @@
 
 #if TSAH_HAVE_CUDA
 
+#include <cstdio>
 #include <cstring>
 #include <random>
 #include <string>
@@ -34,22 +35,62 @@ tsah::FlatBvh sahTree(const anim::Animation& a, uint32_t maxLeaf) {
   return tsah::flattenBvh(maxLeaf > 1 ? tsah::LeafCollapser(c).collapse(bvh) : bvh);
 }
 
+// What node n's record of key k holds: the key-k node with its child boxes pre-padded over every
+// key (motion::prepadBox of the largest magnitude per axis), and count0's kKeysAlikeBit set when
+// the child boxes are the same bits at every key.
+tsah::GpuBvhNode expectedRecord(const std::vector<tsah::FlatBvh>& keyTrees, uint32_t n, uint32_t k) {
+  tsah::GpuBvhNode record = keyTrees[k].nodes[n];
+  bool alike = true;
+  for (int c = 0; c < 2; ++c) {
+    tsah::Vec3 m{0.0f, 0.0f, 0.0f};
+    for (const tsah::FlatBvh& tree : keyTrees) {
+      m = tsah::motion::foldMagnitudes(tree.nodes[n].childBox(c), m);
+      alike &= std::memcmp(&tree.nodes[n], &keyTrees[0].nodes[n], 12 * sizeof(float)) == 0;
+    }
+    record.setChildBox(c, tsah::motion::prepadBox(record.childBox(c), m));
+  }
+  if (alike) record.count0 |= 0x80000000u;
+  return record;
+}
+
 // The layout against the key arrays of the same frame, record by record, bit for bit.
-void expectLayoutOfTheKeys(const tc::GpuRuntime& gpu, const anim::Animation& a, const std::string& what) {
+// alike (when given) gets how many nodes and slots are alike at every key.
+void expectLayoutOfTheKeys(const tc::GpuRuntime& gpu, const anim::Animation& a, const std::string& what,
+                           std::pair<uint32_t, uint32_t>* alike = nullptr) {
   const tc::GpuRuntime::BlurredLayoutCopy layout = gpu.downloadBlurredLayout();
   const uint32_t keys = gpu.shutterKeyCount();
   ASSERT_GE(keys, 2u) << what;
   ASSERT_EQ(layout.keys, keys) << what;
   const auto idx = a.indices();
+  std::vector<tsah::FlatBvh> keyTrees;
+  std::vector<std::vector<float>> keyPositions;
   for (uint32_t k = 0; k < keys; ++k) {
-    const tsah::FlatBvh tree = gpu.downloadKeyTree(k);
-    const std::vector<float> p = gpu.downloadKeyPositions(k);
+    keyTrees.push_back(gpu.downloadKeyTree(k));
+    keyPositions.push_back(gpu.downloadKeyPositions(k));
+  }
+  const uint32_t slots = a.triangleCount();
+  // Per slot: whether its three vertices are the same bits at every key.
+  std::vector<uint8_t> slotAlike(slots, 1);
+  for (uint32_t s = 0; s < slots; ++s) {
+    const uint32_t* tri = idx.data() + 3 * std::size_t(keyTrees[0].triIndex[s]);
+    for (uint32_t k = 1; k < keys; ++k)
+      for (int c = 0; c < 3; ++c)
+        if (std::memcmp(keyPositions[k].data() + 3 * std::size_t(tri[c]), keyPositions[0].data() + 3 * std::size_t(tri[c]),
+                        3 * sizeof(float)) != 0)
+          slotAlike[s] = 0;
+  }
+  uint32_t alikeNodes = 0, alikeSlots = 0;
+  for (uint32_t k = 0; k < keys; ++k) {
+    const tsah::FlatBvh& tree = keyTrees[k];
+    const std::vector<float>& p = keyPositions[k];
     const std::string at = what + ", key " + std::to_string(k);
     ASSERT_EQ(layout.nodes.size(), std::size_t(keys) * tree.interiorCount) << at;
-    for (uint32_t n = 0; n < tree.interiorCount; ++n)
-      ASSERT_EQ(0, std::memcmp(&layout.nodes[std::size_t(n) * keys + k], &tree.nodes[n], sizeof(tsah::GpuBvhNode)))
+    for (uint32_t n = 0; n < tree.interiorCount; ++n) {
+      const tsah::GpuBvhNode expect = expectedRecord(keyTrees, n, k);
+      ASSERT_EQ(0, std::memcmp(&layout.nodes[std::size_t(n) * keys + k], &expect, sizeof(tsah::GpuBvhNode)))
           << "node " << n << ", " << at;
-    const uint32_t slots = a.triangleCount();
+      alikeNodes += k == 0 && (expect.count0 & 0x80000000u) ? 1 : 0;
+    }
     ASSERT_EQ(layout.triangles.size(), std::size_t(keys) * slots * 12) << at;
     for (uint32_t s = 0; s < slots; ++s) {
       const float* record = layout.triangles.data() + (std::size_t(s) * keys + k) * 12;
@@ -57,9 +98,14 @@ void expectLayoutOfTheKeys(const tc::GpuRuntime& gpu, const anim::Animation& a, 
       for (int c = 0; c < 3; ++c)
         ASSERT_EQ(0, std::memcmp(record + 3 * c, p.data() + 3 * std::size_t(tri[c]), 3 * sizeof(float)))
             << "slot " << s << ", vertex " << c << ", " << at;
-      for (int pad = 9; pad < 12; ++pad) ASSERT_EQ(record[pad], 0.0f) << "slot " << s << ", " << at;
+      ASSERT_EQ(record[9], slotAlike[s] ? 1.0f : 0.0f) << "slot " << s << ", " << at;
+      for (int pad = 10; pad < 12; ++pad) ASSERT_EQ(record[pad], 0.0f) << "slot " << s << ", " << at;
+      alikeSlots += k == 0 ? slotAlike[s] : 0;
     }
   }
+  std::printf("[ layout   ] %s: %u of %u nodes and %u of %u slots alike at every key\n", what.c_str(), alikeNodes,
+              keyTrees[0].interiorCount, alikeSlots, slots);
+  if (alike) *alike = {alikeNodes, alikeSlots};
 }
 
 // Shutters of two keys in a row (the graph replayed with each frame's keys), then of five keys
@@ -89,6 +135,24 @@ TEST(CudaMotionBlurLayout, RecordsEqualTheKeyArraysTheyAreBuiltFrom) {
       gpu.updateShutter(tsah::motion::keyFractions(times), spans);
       expectLayoutOfTheKeys(gpu, a, "host positions, leaf " + std::to_string(maxLeaf));
     }
+  }
+}
+
+// A still part beside a moving one: its nodes and slots are marked alike at every key (and the
+// moving part's are not), through shutters of two and of several keys.
+TEST(CudaMotionBlurLayout, StillPartsAreMarkedAlikeAtEveryKey) {
+  REQUIRE_GPU();
+  const anim::Animation a = tsah::test::mostlyStaticAnimation(3000, 600);
+  const double t0 = a.startTime(), span = a.endTime() - a.startTime();
+  tc::GpuRuntime gpu(sahTree(a, 4), a);
+  for (auto [open, close] : {std::pair{0.1, 0.15}, std::pair{0.1, 0.9}}) {
+    gpu.updateShutterAt(t0 + open * span, t0 + close * span);
+    std::pair<uint32_t, uint32_t> alike;
+    expectLayoutOfTheKeys(gpu, a, "mostly static, shutter [" + std::to_string(open) + ", " + std::to_string(close) + "]",
+                          &alike);
+    EXPECT_GT(alike.first, 0u);
+    EXPECT_GE(alike.second, 3000u);  // every still triangle
+    EXPECT_LT(alike.second, a.triangleCount());
   }
 }
 

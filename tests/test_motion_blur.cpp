@@ -107,9 +107,17 @@ Bounds lerpBounds(float a, float b, float f) {
   return {r::addDown(pl, r::mulDown(f, b)), r::addUp(ph, r::mulUp(f, b))};
 }
 
+// The lerped box a traversal tests: lerpBox of the two keys, or (prepadded) the GPU layout's
+// lerpPrepadded of the keys pre-padded over both (the smallest pad a frame of those keys gets).
+Aabb lerpedBox(const Aabb& b0, const Aabb& b1, float f, bool prepadded) {
+  if (!prepadded) return m::lerpBox(b0, b1, f);
+  const Vec3 mag = m::foldMagnitudes(b1, m::foldMagnitudes(b0, Vec3{0.0f, 0.0f, 0.0f}));
+  return m::lerpPrepadded(m::prepadBox(b0, mag), m::prepadBox(b1, mag), f);
+}
+
 // Boxes at two keys around random vertices of the given magnitude, then random f: the lerped box
 // contains the vertex lerped with f (round-to-nearest) and every directed rounding of it.
-void checkContainment(float magnitude, uint32_t seed, bool tightBoxes) {
+void checkContainment(float magnitude, uint32_t seed, bool tightBoxes, bool prepadded = false) {
   std::mt19937 rng(seed);
   std::uniform_real_distribution<float> coord(-magnitude, magnitude);
   std::uniform_real_distribution<float> unit(0.0f, 1.0f);
@@ -127,7 +135,7 @@ void checkContainment(float magnitude, uint32_t seed, bool tightBoxes) {
     float f = unit(rng);
     if (trial % 4 == 1) f = 1.0f - f * 1e-6f;
     if (trial % 4 == 2) f = f * 1e-6f;
-    const Aabb box = m::lerpBox(b0, b1, f);
+    const Aabb box = lerpedBox(b0, b1, f, prepadded);
     const Vec3 v = m::lerpVertex(v0, v1, f);
     for (int a = 0; a < 3; ++a) {
       ASSERT_LE(box.lo[a], v[a]) << "axis " << a << " f " << f;
@@ -149,6 +157,15 @@ TEST(MotionBlurLerp, BoxContainsLerpedVertexUnderRounding) {
   checkContainment(1e-30f, 3, true);
   checkContainment(1e30f, 4, true);
   checkContainment(100.0f, 5, false);
+}
+
+// The GPU blurred layout's boxes: pre-padded once per key, lerped with no pad at the ray's time.
+TEST(MotionBlurLerp, PrepaddedBoxContainsLerpedVertexUnderRounding) {
+  checkContainment(1.0f, 11, true, true);
+  checkContainment(1e4f, 12, true, true);
+  checkContainment(1e-30f, 13, true, true);
+  checkContainment(1e30f, 14, true, true);
+  checkContainment(100.0f, 15, false, true);
 }
 
 // Without the pad the lerped box misses some lerped vertices: the pad is needed, not decoration.
@@ -187,6 +204,22 @@ TEST(MotionBlurLerp, EndsAreTheKeyBoxesPadded) {
     EXPECT_EQ(m::lerpVertex(a, b, 0.0f)[i], a[i]);
     EXPECT_EQ(m::lerpVertex(a, b, 1.0f)[i], b[i]);
   }
+}
+
+// Pre-padding widens each side outward by the pad of its axis's largest magnitude over the keys;
+// an empty box stays empty through the pad and the lerp.
+TEST(MotionBlurLerp, PrepaddedBoxesWidenOutwardAndEmptyBoxesStayEmpty) {
+  const auto [b0, b1] = twoKeyBoxes();
+  const Vec3 mag = m::foldMagnitudes(b1, m::foldMagnitudes(b0, Vec3{0.0f, 0.0f, 0.0f}));
+  EXPECT_EQ(mag.x, 5.0f);
+  EXPECT_EQ(mag.z, 7.0f);
+  const Aabb padded = m::prepadBox(b0, mag);
+  EXPECT_TRUE(padded.contains(b0));
+  EXPECT_LT(padded.lo.x, b0.lo.x);
+  EXPECT_GT(padded.hi.z, b0.hi.z);
+  const Aabb empty;
+  const Aabb emptyPadded = m::prepadBox(empty, m::foldMagnitudes(empty, Vec3{0.0f, 0.0f, 0.0f}));
+  EXPECT_TRUE(m::lerpPrepadded(emptyPadded, emptyPadded, 0.37f).empty());
 }
 
 // Random boxes of a node at two keys and random child boxes inside them (every third trial the

@@ -11,17 +11,22 @@
 
 namespace tsah::cuda::detail {
 
-// One slot's triangle at one key: its three vertices' positions at that key (v0 xyz, v1 xyz, v2 xyz)
-// and three zeros, 48 bytes, so that a 16-byte aligned record is three vector loads.
+// One slot's triangle at one key: its three vertices' positions at that key (v0 xyz, v1 xyz, v2 xyz),
+// v[9] = 1 when they are the same at every key of the frame (else 0; a ray then reads one key) and
+// two zeros, 48 bytes, so that a 16-byte aligned record is three vector loads.
 struct alignas(16) KeyTriangle {
   float v[12];
 };
 static_assert(sizeof(KeyTriangle) == 48);
 
+inline constexpr uint32_t kKeysAlikeBit = 0x80000000u;  // in a blurred node record's count0
+
 // The layout a blurred frame is traced from (docs/motion-blur.md#memory), key-adjacent so that a
 // ray's segment (keys s and s + 1) is one contiguous read per node and per slot:
 // - nodes[n * keyCount + k]: node n of the key-k refit (child boxes and references), so a node's
-//   two keys are 128 contiguous bytes;
+//   two keys are 128 contiguous bytes. Its child boxes are pre-padded (motion::prepadBox over all
+//   keys), so that a ray lerps them with no pad (motion::lerpPrepadded); count0 has kKeysAlikeBit
+//   set when the node's child boxes are the same at every key (a ray then reads one key, no lerp);
 // - triangles[s * keyCount + k]: slot s's triangle at key k (the key-k positions of its vertices,
 //   in slot order), so a leaf slot's two keys are 96 contiguous bytes and no index is read.
 // keyCount >= 2 (a blurred frame).
@@ -55,8 +60,8 @@ struct BlurredLayoutSources {
   float* lastPositions = nullptr;
 };
 
-// Builds the layout (nodes: keyCount * nodeCount records, triangles: keyCount * slots) in one launch;
-// plain copies, no arithmetic.
+// Builds the layout (nodes: keyCount * nodeCount records, triangles: keyCount * slots) in one launch:
+// one thread per node (all its keys) and per slot (all its keys), then the copies.
 void launchBuildBlurredLayout(const BlurredLayoutSources& from, GpuBvhNode* nodes, KeyTriangle* triangles,
                               cudaStream_t stream);
 

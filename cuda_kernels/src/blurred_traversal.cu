@@ -10,37 +10,86 @@ namespace tsah::cuda::detail {
 
 namespace {
 
-// Items, in a grid-stride loop: i < nodeCount * keyCount copies node n = i / keyCount of key
-// k = i % keyCount (consecutive threads write consecutive records; the last key's node also to the
-// instant nodes); then slot s's triangle at key k the same way; then, with keyRoots, the last key's
-// positions one float each and the keys' root boxes. Each record is whole 16-byte rows.
+__device__ __forceinline__ bool sameBits(float4 a, float4 b) {
+  return __float_as_uint(a.x) == __float_as_uint(b.x) && __float_as_uint(a.y) == __float_as_uint(b.y) &&
+         __float_as_uint(a.z) == __float_as_uint(b.z) && __float_as_uint(a.w) == __float_as_uint(b.w);
+}
+
+__device__ __forceinline__ GpuBvhNode loadNodeRecord(const GpuBvhNode* at) {
+  GpuBvhNode node;
+  const float4* src = reinterpret_cast<const float4*>(at);
+  float4* to = reinterpret_cast<float4*>(&node);
+  to[0] = __ldg(src), to[1] = __ldg(src + 1), to[2] = __ldg(src + 2), to[3] = __ldg(src + 3);
+  return node;
+}
+
+__device__ __forceinline__ void storeNodeRecord(GpuBvhNode* at, const GpuBvhNode& node) {
+  const float4* from = reinterpret_cast<const float4*>(&node);
+  float4* to = reinterpret_cast<float4*>(at);
+  to[0] = from[0], to[1] = from[1], to[2] = from[2], to[3] = from[3];
+}
+
+// Whether two records' child boxes (rows 0..2) are the same bits.
+__device__ __forceinline__ bool sameBoxes(const GpuBvhNode& a, const GpuBvhNode& b) {
+  const float4* x = reinterpret_cast<const float4*>(&a);
+  const float4* y = reinterpret_cast<const float4*>(&b);
+  return sameBits(x[0], y[0]) && sameBits(x[1], y[1]) && sameBits(x[2], y[2]);
+}
+
+// Items, in a grid-stride loop: i < nodeCount writes node n = i's records of every key, its child
+// boxes pre-padded over all keys (motion::prepadBox) and kKeysAlikeBit set when they are the same
+// at every key (the last key's record, unpadded, also to the instant nodes); then slot s's
+// triangle at every key, v[9] = 1 when its vertices are the same at every key; then, with
+// keyRoots, the last key's positions one float each and the keys' root boxes. Each record is whole
+// 16-byte rows.
 __global__ void buildBlurredLayoutKernel(BlurredLayoutSources from, GpuBvhNode* __restrict__ nodes,
                                          KeyTriangle* __restrict__ triangles) {
   const uint32_t keys = from.keyCount, last = keys - 1;
-  const uint64_t nodeItems = uint64_t(from.nodeCount) * keys, slotItems = uint64_t(from.slots) * keys;
+  const uint64_t nodeItems = from.nodeCount, slotItems = from.slots;
   const uint64_t copyItems = from.keyRoots ? from.keyStride + keys : 0;
   const uint64_t items = nodeItems + slotItems + copyItems;
   const uint64_t stride = uint64_t(gridDim.x) * blockDim.x;
   for (uint64_t i = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x; i < items; i += stride) {
     if (i < nodeItems) {
-      const uint64_t n = i / keys, k = i % keys;
-      const float4* src = reinterpret_cast<const float4*>(from.keyNodes + k * from.nodeCount + n);
-      const float4 r0 = __ldg(src), r1 = __ldg(src + 1), r2 = __ldg(src + 2), r3 = __ldg(src + 3);
-      float4* to = reinterpret_cast<float4*>(nodes + i);
-      to[0] = r0, to[1] = r1, to[2] = r2, to[3] = r3;
-      if (from.keyRoots && k == last) {
-        float4* instant = reinterpret_cast<float4*>(from.lastNodes + n);
-        instant[0] = r0, instant[1] = r1, instant[2] = r2, instant[3] = r3;
+      const GpuBvhNode* key0 = from.keyNodes + i;  // key k at key0 + k * nodeCount
+      const GpuBvhNode first = loadNodeRecord(key0);
+      Vec3 m0{0.0f, 0.0f, 0.0f}, m1{0.0f, 0.0f, 0.0f};
+      bool alike = true;
+      for (uint32_t k = 0; k < keys; ++k) {
+        const GpuBvhNode node = loadNodeRecord(key0 + uint64_t(k) * from.nodeCount);
+        m0 = motion::foldMagnitudes(node.childBox(0), m0);
+        m1 = motion::foldMagnitudes(node.childBox(1), m1);
+        alike &= sameBoxes(first, node);
+      }
+      for (uint32_t k = 0; k < keys; ++k) {
+        GpuBvhNode node = loadNodeRecord(key0 + uint64_t(k) * from.nodeCount);
+        if (from.keyRoots && k == last) storeNodeRecord(from.lastNodes + i, node);
+        node.setChildBox(0, motion::prepadBox(node.childBox(0), m0));
+        node.setChildBox(1, motion::prepadBox(node.childBox(1), m1));
+        if (alike) node.count0 |= kKeysAlikeBit;
+        storeNodeRecord(nodes + i * keys + k, node);
       }
     } else if (i < nodeItems + slotItems) {
-      const uint64_t j = i - nodeItems, s = j / keys, k = j % keys;
-      const float* p = from.keyPositions + k * from.keyStride;
+      const uint64_t s = i - nodeItems;
       const uint32_t* ids = from.slotVertices + 3 * s;
       const uint64_t a = 3 * uint64_t(__ldg(ids)), b = 3 * uint64_t(__ldg(ids + 1)), c = 3 * uint64_t(__ldg(ids + 2));
-      float4* to = reinterpret_cast<float4*>(triangles + j);
-      to[0] = make_float4(__ldg(p + a), __ldg(p + a + 1), __ldg(p + a + 2), __ldg(p + b));
-      to[1] = make_float4(__ldg(p + b + 1), __ldg(p + b + 2), __ldg(p + c), __ldg(p + c + 1));
-      to[2] = make_float4(__ldg(p + c + 2), 0.0f, 0.0f, 0.0f);
+      float4 first[3];
+      bool alike = true;
+      for (uint32_t k = 0; k < keys; ++k) {
+        const float* p = from.keyPositions + k * from.keyStride;
+        const float4 r0 = make_float4(__ldg(p + a), __ldg(p + a + 1), __ldg(p + a + 2), __ldg(p + b));
+        const float4 r1 = make_float4(__ldg(p + b + 1), __ldg(p + b + 2), __ldg(p + c), __ldg(p + c + 1));
+        const float4 r2 = make_float4(__ldg(p + c + 2), 0.0f, 0.0f, 0.0f);
+        if (k == 0) {
+          first[0] = r0, first[1] = r1, first[2] = r2;
+        } else {
+          alike &= sameBits(r0, first[0]) && sameBits(r1, first[1]) && sameBits(r2, first[2]);
+        }
+        float4* to = reinterpret_cast<float4*>(triangles + s * keys + k);
+        to[0] = r0, to[1] = r1, to[2] = r2;
+      }
+      if (alike)
+        for (uint32_t k = 0; k < keys; ++k) triangles[s * keys + k].v[9] = 1.0f;
     } else if (const uint64_t c = i - nodeItems - slotItems; c < from.keyStride) {
       from.lastPositions[c] = __ldg(from.keyPositions + last * from.keyStride + c);
     } else {
@@ -68,8 +117,8 @@ __global__ void __launch_bounds__(128) blurredTraceKernel(BlurredLayout frame, c
 
 void launchBuildBlurredLayout(const BlurredLayoutSources& from, GpuBvhNode* nodes, KeyTriangle* triangles,
                               cudaStream_t stream) {
-  const uint64_t items = (uint64_t(from.nodeCount) + from.slots) * from.keyCount +
-                         (from.keyRoots ? from.keyStride + from.keyCount : 0);
+  const uint64_t items =
+      uint64_t(from.nodeCount) + from.slots + (from.keyRoots ? from.keyStride + from.keyCount : 0);
   if (items == 0) return;
   const unsigned block = 256;
   buildBlurredLayoutKernel<<<gridFor(items, block), block, 0, stream>>>(from, nodes, triangles);

@@ -67,9 +67,10 @@ __device__ __forceinline__ uint32_t slotTriangle(const TraceScene& scene, uint32
 }
 
 // A blurred frame at one ray's time: the two keys of its segment in the blurred layout
-// (blurred_trace.hpp), each node's and each slot's pair of keys one contiguous run of vector loads,
-// lerped as the CPU runtime's tsah::MotionFrame lerps them (motion::lerpBox per child box,
-// motion::lerpVertex per vertex, the watertight test), so hits are the CPU runtime's; only the loop
+// (blurred_trace.hpp), each node's and each slot's pair of keys one contiguous run of vector loads.
+// Vertices are lerped as the CPU runtime's tsah::MotionFrame lerps them (motion::lerpVertex, the
+// watertight test), so hits are the CPU runtime's; child boxes are the layout's pre-padded keys
+// lerped with no pad (motion::lerpPrepadded), which contain the same lerped triangles; only the loop
 // is the one below. keyCount >= 2.
 struct BlurredFrame {
   const float4* nodes;      // key s of node 0; node n at nodes + n * nodeStride, key s + 1 right after
@@ -94,30 +95,37 @@ struct BlurredFrame {
   }
 };
 
-// Both child boxes of a node lerped between its rows at key s (a*) and key s + 1 (b*), as packed rows.
-__device__ __forceinline__ void lerpChildBoxes(float4 a0, float4 a1, float4 az, float4 b0, float4 b1, float4 bz,
-                                               float f, float4& n0xy, float4& n1xy, float4& nz) {
-  const Aabb c0 = motion::lerpBox(Aabb{{a0.x, a0.z, az.x}, {a0.y, a0.w, az.y}}, Aabb{{b0.x, b0.z, bz.x}, {b0.y, b0.w, bz.y}}, f);
-  const Aabb c1 = motion::lerpBox(Aabb{{a1.x, a1.z, az.z}, {a1.y, a1.w, az.w}}, Aabb{{b1.x, b1.z, bz.z}, {b1.y, b1.w, bz.w}}, f);
-  n0xy = make_float4(c0.lo.x, c0.hi.x, c0.lo.y, c0.hi.y);
-  n1xy = make_float4(c1.lo.x, c1.hi.x, c1.lo.y, c1.hi.y);
-  nz = make_float4(c0.lo.z, c0.hi.z, c1.lo.z, c1.hi.z);
+__device__ __forceinline__ float4 lerpRow(float4 a, float4 b, float f) {
+  return make_float4(motion::lerp(a.x, b.x, f), motion::lerp(a.y, b.y, f), motion::lerp(a.z, b.z, f),
+                     motion::lerp(a.w, b.w, f));
 }
 
+// A node's two child boxes at the ray's f: its rows at key s, or (unless kKeysAlikeBit says every
+// key holds the same boxes) those rows lerped with its rows at key s + 1. The boxes are pre-padded,
+// so each side is motion::lerpPrepadded's lerp with no pad.
 __device__ __forceinline__ void loadBvh2Node(const BlurredFrame& m, int32_t ref, float4& n0xy, float4& n1xy,
                                              float4& nz, int4& refs) {
   const float4* p = m.nodes + std::size_t(ref) * m.nodeStride;  // key s: rows 0..3, key s + 1: rows 4..7
-  const float4 a0 = __ldg(p), a1 = __ldg(p + 1), az = __ldg(p + 2);
+  n0xy = __ldg(p), n1xy = __ldg(p + 1), nz = __ldg(p + 2);
   refs = __ldg(reinterpret_cast<const int4*>(p + 3));
-  const float4 b0 = __ldg(p + 4), b1 = __ldg(p + 5), bz = __ldg(p + 6);
-  lerpChildBoxes(a0, a1, az, b0, b1, bz, m.f, n0xy, n1xy, nz);
+  if (uint32_t(refs.z) & kKeysAlikeBit) {
+    refs.z = int32_t(uint32_t(refs.z) & ~kKeysAlikeBit);
+    return;
+  }
+  n0xy = lerpRow(n0xy, __ldg(p + 4), m.f);
+  n1xy = lerpRow(n1xy, __ldg(p + 5), m.f);
+  nz = lerpRow(nz, __ldg(p + 6), m.f);
 }
 
+// A slot's triangle at the ray's f: its vertices lerped between keys s and s + 1 (key s alone when
+// the record says every key holds the same vertices: the lerp of a vertex with itself, as the CPU
+// runtime computes it), then the watertight test.
 __device__ __forceinline__ bool intersectBvh2Slot(const BlurredFrame& m, const Ray& ray, const RayPrep& prep,
                                                   uint32_t s, float tmax, float& t, float& u, float& v) {
   const float4* p = m.triangles + std::size_t(s) * m.triangleStride;  // key s: rows 0..2, key s + 1: rows 3..5
   const float4 a0 = __ldg(p), a1 = __ldg(p + 1), a2 = __ldg(p + 2);
-  const float4 b0 = __ldg(p + 3), b1 = __ldg(p + 4), b2 = __ldg(p + 5);
+  float4 b0 = a0, b1 = a1, b2 = a2;
+  if (a2.y == 0.0f) b0 = __ldg(p + 3), b1 = __ldg(p + 4), b2 = __ldg(p + 5);
   const Vec3 v0 = motion::lerpVertex({a0.x, a0.y, a0.z}, {b0.x, b0.y, b0.z}, m.f);
   const Vec3 v1 = motion::lerpVertex({a0.w, a1.x, a1.y}, {b0.w, b1.x, b1.y}, m.f);
   const Vec3 v2 = motion::lerpVertex({a1.z, a1.w, a2.x}, {b1.z, b1.w, b2.x}, m.f);

@@ -140,9 +140,11 @@ class GpuRuntime {
   FlatBvh downloadKeyTree(uint32_t key) const;
   std::vector<float> downloadKeyPositions(uint32_t key) const;
   // Host copy of the layout a blurred frame is traced from (docs/motion-blur.md#memory), derived
-  // from the key arrays: nodes[n * keys + k] is node n of key k's tree; triangles holds 12 floats
-  // per slot and key, at (s * keys + k) * 12: the key-k positions of slot s's three vertices (v0 xyz,
-  // v1 xyz, v2 xyz) and three zeros. Throws tsah::ConfigError when not blurred.
+  // from the key arrays: nodes[n * keys + k] is node n of key k's tree, its child boxes pre-padded
+  // over all keys (motion::prepadBox) and count0's bit 31 set when they are the same at every key;
+  // triangles holds 12 floats per slot and key, at (s * keys + k) * 12: the key-k positions of slot
+  // s's three vertices (v0 xyz, v1 xyz, v2 xyz), 1 when they are the same at every key (else 0), and
+  // two zeros. Throws tsah::ConfigError when not blurred.
   struct BlurredLayoutCopy {
     uint32_t keys = 0;
     std::vector<GpuBvhNode> nodes;

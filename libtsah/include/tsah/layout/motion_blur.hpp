@@ -128,6 +128,28 @@ TSAH_HD Aabb lerpBox(const Aabb& b0, const Aabb& b1, float f) {
   return out;
 }
 
+// Pre-padded key boxes (the GPU blurred layout; docs/motion-blur.md#pre-padded-key-boxes): each
+// key's box is widened once, when the layout is built, by lerpPad of the largest magnitude its axis
+// reaches over all the frame's keys (foldMagnitudes folds one key's box into m), so that a ray's
+// lerp of two such boxes (lerpPrepadded) needs no pad. Whatever the segment, that pad is at least
+// lerpBox's, and the widening's own rounding (at most u*m) is far inside its margin.
+TSAH_HD Vec3 foldMagnitudes(const Aabb& b, Vec3 m) {
+  for (int a = 0; a < 3; ++a) m[a] = maxMagnitude(b.lo[a], b.hi[a], m[a], 0.0f);
+  return m;
+}
+TSAH_HD Aabb prepadBox(const Aabb& b, const Vec3& m) {
+  Aabb out;
+  for (int a = 0; a < 3; ++a) {
+    const float pad = lerpPad(m[a]);
+    out.lo[a] = b.lo[a] - pad;
+    out.hi[a] = b.hi[a] + pad;
+  }
+  return out;
+}
+TSAH_HD Aabb lerpPrepadded(const Aabb& a, const Aabb& b, float f) {
+  return {lerpVertex(a.lo, b.lo, f), lerpVertex(a.hi, b.hi, f)};
+}
+
 // A box holding lerpBox(c0, c1, f) for every f in [0, 1] and every pair of boxes c0 inside b0 and c1
 // inside b1 (a node's children at keys s and s + 1, inside the node's boxes there), under float
 // rounding: the two keys' union widened on each side by twice lerpBox's pad of b0 and b1. A child's
