@@ -76,6 +76,21 @@ def bench_refit(torch, gpu, animation, runs):
     # plain tensor's own attributes instead).
     interface_ms = median_ms(lambda: _host_ms(torch, lambda: positions.__cuda_array_interface__), runs)
     result = {"vertices": animation.vertex_count, "update_ms": update_ms, "interface_read_ms": interface_ms}
+    # Where a call's host time goes: a call that does nothing on the device (check()), the argument
+    # read alone (the module's protocol checks, no device work), and the refit call.
+    result["host_breakdown_ms"] = {
+        "check_call": median_ms(lambda: _host_ms(torch, gpu.check), runs),
+        "argument_read": median_ms(lambda: _host_ms(torch, lambda: tsah._tsah._checked_device_array(
+            positions, "positions", ["<f4"], False, 0, stream)), runs),
+        "refit_time_call": median_ms(lambda: _host_ms(torch, lambda: gpu.refit(t)), runs),
+    }
+    # Refits queued back to back (one event pair around 50): the device's cost per refit once the
+    # host time of a call overlaps the device's work.
+    queued_ms = median_ms(lambda: event_ms(torch, lambda: [gpu.refit(positions, stream=stream, wait=False)
+                                                            for _ in range(50)]), runs) / 50
+    gpu.check()
+    result["queued_refit_ms"] = queued_ms
+    result["queued_ratio"] = queued_ms / update_ms
     for mode, wait in (("no_wait", False), ("wait", True)):
         tensor_ms = median_ms(lambda: event_ms(torch, lambda: gpu.refit(positions, stream=stream, wait=wait)), runs)
         wall_ms = median_ms(lambda: _wall_ms(torch, lambda: gpu.refit(positions, stream=stream, wait=wait)), runs)
