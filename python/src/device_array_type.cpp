@@ -6,6 +6,7 @@
 #include <pybind11/stl.h>
 
 #include <memory>
+#include <type_traits>
 
 #include "device_arrays.hpp"
 #include "tsah_cuda/cuda_check.hpp"
@@ -17,13 +18,17 @@ namespace {
 using namespace pybind11::literals;
 
 // What a capsule's tensor owns: its shape, and a reference to the DeviceArray holding the memory.
+// The capsule carries `managed` (unversioned) or `versioned` (DLPack 1.0), as the consumer asked.
 struct Export {
   dlpack::ManagedTensor managed{};
+  dlpack::ManagedTensorVersioned versioned{};
   std::vector<int64_t> shape;
   PyObject* owner = nullptr;
 };
 
-void deleteExport(dlpack::ManagedTensor* t) {
+// The deleter of either kind of tensor.
+template <class Managed>
+void deleteExport(Managed* t) {
   auto* e = static_cast<Export*>(t->managerCtx);
   const PyGILState_STATE gil = PyGILState_Ensure();  // consumers may delete from any thread
   Py_XDECREF(e->owner);
@@ -31,11 +36,37 @@ void deleteExport(dlpack::ManagedTensor* t) {
   delete e;
 }
 
-// The capsule's destructor: a tensor nobody consumed (the name is still "dltensor") is deleted here.
+template <class Managed>
+constexpr const char* capsuleName() {
+  return std::is_same_v<Managed, dlpack::ManagedTensor> ? dlpack::kCapsule : dlpack::kVersionedCapsule;
+}
+
+// The capsule's destructor: a tensor nobody consumed (the capsule still has its first name) is
+// deleted here.
+template <class Managed>
 void deleteUnusedCapsule(PyObject* capsule) {
-  if (!PyCapsule_IsValid(capsule, "dltensor")) return;
-  auto* t = static_cast<dlpack::ManagedTensor*>(PyCapsule_GetPointer(capsule, "dltensor"));
+  if (!PyCapsule_IsValid(capsule, capsuleName<Managed>())) return;
+  auto* t = static_cast<Managed*>(PyCapsule_GetPointer(capsule, capsuleName<Managed>()));
   if (t && t->deleter) t->deleter(t);
+}
+
+template <class Managed>
+py::capsule newCapsule(Managed* managed) {
+  PyObject* capsule = PyCapsule_New(managed, capsuleName<Managed>(), deleteUnusedCapsule<Managed>);
+  if (!capsule) {
+    managed->deleter(managed);
+    throw py::error_already_set();
+  }
+  return py::reinterpret_steal<py::capsule>(capsule);
+}
+
+// max_version's major version: the protocol's (major, minor), a tuple of ints.
+long long maxVersionMajor(py::handle maxVersion) {
+  try {
+    return maxVersion.cast<std::pair<long long, long long>>().first;
+  } catch (const py::cast_error&) {
+    throw ArgumentTypeError("max_version: expected (major, minor), a tuple of two ints, or None");
+  }
 }
 
 // `consumer` waits for the work queued on `producer` so far (cudaStream_t values).
@@ -89,24 +120,29 @@ class DeviceArray {
   }
   py::tuple dlpackDevice() const { return py::make_tuple(dlpack::kCUDA, device_); }
   // The protocol's __dlpack__: the consumer's stream waits for this array's (none when it is -1 or
-  // the same); max_version and copy are accepted (always the unversioned capsule, never a copy).
-  py::capsule dlpack(py::handle self, py::handle stream, py::handle dlDevice, py::handle copy) const {
+  // the same); a DLPack 1.0 capsule ("dltensor_versioned", version 1.0, no flags) when the consumer
+  // reads one (max_version's major >= 1), else the unversioned "dltensor"; never a copy.
+  py::capsule dlpack(py::handle self, py::handle stream, py::handle maxVersion, py::handle dlDevice,
+                     py::handle copy) const {
     if (!copy.is_none() && copy.cast<bool>()) throw py::buffer_error("tsah.DeviceArray: __dlpack__ makes no copies");
     if (!dlDevice.is_none() && dlDevice.cast<std::pair<int, int>>() != std::pair<int, int>(dlpack::kCUDA, device_))
       throw py::buffer_error("tsah.DeviceArray: lives on CUDA device " + std::to_string(device_));
+    const bool versioned = !maxVersion.is_none() && maxVersionMajor(maxVersion) >= dlpack::kVersion.major;
     const long long consumer = stream.is_none() ? 1 : stream.cast<long long>();  // None: the legacy default
     if (consumer != -1 && std::uintptr_t(consumer) != protocolStream(stream_)) streamWaits(std::uintptr_t(consumer), stream_);
     auto* e = new Export;
     e->shape.assign(shape_.begin(), shape_.end());
     e->owner = self.inc_ref().ptr();
-    dlpack::ManagedTensor& m = e->managed;
     const char kind = typestr_[1];
     const uint8_t code = kind == 'f' ? dlpack::kFloat : kind == 'i' ? dlpack::kInt : kind == 'b' ? dlpack::kBool : dlpack::kUInt;
-    m.tensor = {memory_.get(), {dlpack::kCUDA, device_}, int32_t(shape_.size()),
-                {code, uint8_t(typestr_[2] == '4' ? 32 : 8), 1}, e->shape.data(), nullptr, 0};
-    m.managerCtx = e;
-    m.deleter = deleteExport;
-    return py::reinterpret_steal<py::capsule>(PyCapsule_New(&m, "dltensor", deleteUnusedCapsule));
+    const dlpack::Tensor tensor = {memory_.get(), {dlpack::kCUDA, device_}, int32_t(shape_.size()),
+                                   {code, uint8_t(typestr_[2] == '4' ? 32 : 8), 1}, e->shape.data(), nullptr, 0};
+    if (versioned) {
+      e->versioned = {dlpack::kVersion, e, deleteExport<dlpack::ManagedTensorVersioned>, 0, tensor};
+      return newCapsule(&e->versioned);
+    }
+    e->managed = {tensor, e, deleteExport<dlpack::ManagedTensor>};
+    return newCapsule(&e->managed);
   }
 
  private:
@@ -147,11 +183,12 @@ torch.from_dlpack(a), cupy.asarray(a) and numba take it. typestr: '<f4', '<i4', 
       .def(
           "__dlpack__",
           [](py::handle self, py::handle stream, py::handle maxVersion, py::handle dlDevice, py::handle copy) {
-            (void)maxVersion;  // the unversioned capsule is what every consumer takes
-            return self.cast<const DeviceArray&>().dlpack(self, stream, dlDevice, copy);
+            return self.cast<const DeviceArray&>().dlpack(self, stream, maxVersion, dlDevice, copy);
           },
           py::kw_only(), "stream"_a = py::none(), "max_version"_a = py::none(), "dl_device"_a = py::none(),
-          "copy"_a = py::none(), "A DLPack capsule of the array (no copy), after the consumer's stream waits for it.");
+          "copy"_a = py::none(),
+          "A DLPack capsule of the array (no copy), after the consumer's stream waits for it: DLPack 1.0's\n"
+          "'dltensor_versioned' when max_version's major is 1 or more, else the unversioned 'dltensor'.");
 }
 
 }  // namespace tsah::python

@@ -128,6 +128,55 @@ std::pair<int, int> dlpackDevice(py::handle obj, const std::string& name) {
   }
 }
 
+// obj.__dlpack__(stream=S, max_version=(1, 0)); producers older than DLPack 1.0 take no
+// max_version and raise TypeError: they are asked again without it.
+py::object dlpackCapsule(py::handle obj, std::uintptr_t consumerStream) {
+  const py::int_ stream(protocolStream(consumerStream));
+  try {
+    return obj.attr("__dlpack__")("stream"_a = stream, "max_version"_a = py::make_tuple(kVersion.major, kVersion.minor));
+  } catch (py::error_already_set& e) {
+    if (!e.matches(PyExc_TypeError)) throw;
+  }
+  return obj.attr("__dlpack__")("stream"_a = stream);
+}
+
+// A capsule's tensor, taken from it: the capsule renamed "used_...", so that it no longer deletes the
+// tensor; `hold` calls the tensor's deleter when its last copy goes.
+struct TakenTensor {
+  const Tensor* tensor = nullptr;
+  uint64_t flags = 0;  // versioned capsules only
+  std::shared_ptr<void> hold;
+};
+
+template <class Managed>
+Managed* takeCapsule(const py::object& capsule, const char* name, const char* usedName, TakenTensor& taken) {
+  auto* managed = static_cast<Managed*>(PyCapsule_GetPointer(capsule.ptr(), name));
+  if (!managed || PyCapsule_SetName(capsule.ptr(), usedName) != 0) throw py::error_already_set();
+  taken.hold = std::shared_ptr<void>(managed, [](void* p) {
+    auto* m = static_cast<Managed*>(p);
+    if (m->deleter) m->deleter(m);
+  });
+  return managed;
+}
+
+TakenTensor takeDlpackTensor(const py::object& capsule, const std::string& name) {
+  TakenTensor taken;
+  if (PyCapsule_IsValid(capsule.ptr(), kVersionedCapsule)) {
+    auto* managed = takeCapsule<ManagedTensorVersioned>(capsule, kVersionedCapsule, kUsedVersionedCapsule, taken);
+    // Another major version has another layout: only the version and the deleter may be read.
+    if (managed->version.major != kVersion.major)
+      throw tsah::ConfigError(name + ": DLPack version " + std::to_string(managed->version.major) + "." +
+                              std::to_string(managed->version.minor) + " is not supported (major version 1)");
+    taken.flags = managed->flags;
+    taken.tensor = &managed->tensor;
+  } else if (PyCapsule_IsValid(capsule.ptr(), kCapsule)) {
+    taken.tensor = &takeCapsule<ManagedTensor>(capsule, kCapsule, kUsedCapsule, taken)->tensor;
+  } else {
+    throw tsah::ConfigError(name + ": __dlpack__ did not return a DLPack capsule (or it was used already)");
+  }
+  return taken;
+}
+
 DeviceArrayArg fromDlpack(py::handle obj, const std::string& name, bool writable, int device,
                           std::uintptr_t consumerStream) {
   const auto where = dlpackDevice(obj, name);
@@ -137,20 +186,17 @@ DeviceArrayArg fromDlpack(py::handle obj, const std::string& name, bool writable
   if (where.second != device)
     throw tsah::ConfigError(name + ": on CUDA device " + std::to_string(where.second) + "; the runtime uses device " +
                             std::to_string(device));
-  const py::object capsule = obj.attr("__dlpack__")("stream"_a = protocolStream(consumerStream));
-  if (!PyCapsule_IsValid(capsule.ptr(), "dltensor"))
-    throw tsah::ConfigError(name + ": __dlpack__ did not return a DLPack capsule (or it was used already)");
-  auto* managed = static_cast<ManagedTensor*>(PyCapsule_GetPointer(capsule.ptr(), "dltensor"));
-  // Consumed: the capsule no longer deletes the tensor, we do (when the last DeviceArrayArg goes).
-  if (PyCapsule_SetName(capsule.ptr(), "used_dltensor") != 0) throw py::error_already_set();
+  const TakenTensor taken = takeDlpackTensor(dlpackCapsule(obj, consumerStream), name);
   DeviceArrayArg a;
-  a.hold = std::shared_ptr<void>(managed, [](void* p) {
-    auto* t = static_cast<ManagedTensor*>(p);
-    if (t->deleter) t->deleter(t);
-  });
-  const Tensor& t = managed->tensor;
+  a.hold = taken.hold;  // deleted when the result goes, or now when a check below refuses it
+  const Tensor& t = *taken.tensor;
   if (t.device.type != where.first || t.device.id != where.second)
     throw tsah::ConfigError(name + ": the DLPack tensor's device differs from __dlpack_device__'s");
+  // The module writes into `writable` arrays: not into memory the producer marked read-only, nor
+  // into a copy the producer made (the caller's array would never see the results).
+  if (writable && (taken.flags & kFlagReadOnly)) throw tsah::ConfigError(name + ": the DLPack tensor is read-only");
+  if (writable && (taken.flags & kFlagIsCopied))
+    throw tsah::ConfigError(name + ": the DLPack tensor is a copy (results written into it would be lost)");
   a.shape.assign(t.shape, t.shape + t.ndim);
   a.typestr = typestrOf(t.dtype);
   a.device = t.device.id;
@@ -160,7 +206,6 @@ DeviceArrayArg fromDlpack(py::handle obj, const std::string& name, bool writable
   if (a.typestr.empty())
     throw ArgumentTypeError(name + ": a DLPack dtype numpy has no name for (code " + std::to_string(t.dtype.code) +
                             ", " + std::to_string(t.dtype.bits) + " bits, " + std::to_string(t.dtype.lanes) + " lanes)");
-  (void)writable;  // DLPack (unversioned) has no read-only flag
   return a;
 }
 

@@ -16,8 +16,10 @@
 
 namespace tsah::python {
 
-// DLPack's ABI (dlpack.h v0.8 and later): the unversioned DLManagedTensor that travels in a capsule
-// named "dltensor" (renamed "used_dltensor" by the consumer that takes it).
+// DLPack's ABI (dlpack.h v0.8 and later; Debian's libdlpack-dev is 0.6, without the versioned
+// tensor): the unversioned DLManagedTensor that travels in a capsule named "dltensor" (renamed
+// "used_dltensor" by the consumer that takes it), and DLPack 1.0's ManagedTensorVersioned in one
+// named "dltensor_versioned" ("used_dltensor_versioned").
 namespace dlpack {
 struct Device {
   int32_t type;
@@ -42,6 +44,25 @@ struct ManagedTensor {
   void* managerCtx;
   void (*deleter)(ManagedTensor*);
 };
+// DLPack 1.0: a major version of another ABI leaves only `version` and `deleter` safe to read
+// (the consumer must still call the deleter); a minor version adds codes, not fields.
+struct Version {
+  uint32_t major;
+  uint32_t minor;
+};
+struct ManagedTensorVersioned {
+  Version version;
+  void* managerCtx;
+  void (*deleter)(ManagedTensorVersioned*);
+  uint64_t flags;
+  Tensor tensor;
+};
+inline constexpr Version kVersion = {1, 0};  // the highest this module reads and writes
+inline constexpr uint64_t kFlagReadOnly = 1, kFlagIsCopied = 2;
+inline constexpr const char* kCapsule = "dltensor";
+inline constexpr const char* kUsedCapsule = "used_dltensor";
+inline constexpr const char* kVersionedCapsule = "dltensor_versioned";
+inline constexpr const char* kUsedVersionedCapsule = "used_dltensor_versioned";
 inline constexpr int32_t kCPU = 1, kCUDA = 2, kCUDAHost = 3, kCUDAManaged = 13;
 inline constexpr uint8_t kInt = 0, kUInt = 1, kFloat = 2, kBool = 6;
 }  // namespace dlpack
@@ -78,8 +99,10 @@ struct DeviceArrayArg {
 // Reads obj's protocol and checks it before anything touches the device: typestr one of
 // `typestrs` (ArgumentTypeError), C-contiguous, writable when `writable`, DLPack on device
 // `device` (tsah::ConfigError); every message names `name`. DLPack: calls obj.__dlpack__(stream=
-// consumerStream) (the protocol's numbering: 1 the legacy default stream, 2 the per-thread one)
-// and consumes the capsule (renamed "used_dltensor"; its deleter runs when the result goes).
+// consumerStream, max_version=(1, 0)) (the protocol's numbering: 1 the legacy default stream, 2 the
+// per-thread one; again without max_version when that raises TypeError, as producers older than
+// DLPack 1.0 do) and consumes the capsule, versioned (major version 1; read-only or copied refused
+// when `writable`) or not: renamed "used_..."; its deleter runs when the result goes.
 DeviceArrayArg checkedDeviceArray(py::handle obj, const std::string& name, const std::vector<std::string>& typestrs,
                                   bool writable, int device, std::uintptr_t consumerStream);
 

@@ -2,12 +2,14 @@
 animation), batch dimensions (..., 3) -> (...), out= arrays, on the CPU everywhere and on the GPU
 when one is present; CUDA device arrays (__cuda_array_interface__, DLPack): the protocol checks
 everywhere, the GPU runtime's device path against its host path with a device and torch or CuPy."""
-import ctypes
+import gc
+import sys
 
 import numpy as np
 import pytest
 
 import tsah
+from dlpack_abi import DLManagedTensorVersioned, FakeDlpack, capsule_name, capsule_struct
 
 RUNTIMES = ["cpu", pytest.param("gpu", marks=pytest.mark.skipif(
     not tsah.cuda_available(), reason="no CUDA device (or the CUDA runtime was not built)"))]
@@ -278,87 +280,6 @@ def test_cuda_array_interface_missing_fields_and_read_only_outputs():
         check(np.zeros(4, np.bool_), "out", ["|b1"])
 
 
-class DLDevice(ctypes.Structure):
-    _fields_ = [("device_type", ctypes.c_int32), ("device_id", ctypes.c_int32)]
-
-
-class DLDataType(ctypes.Structure):
-    _fields_ = [("code", ctypes.c_uint8), ("bits", ctypes.c_uint8), ("lanes", ctypes.c_uint16)]
-
-
-class DLTensor(ctypes.Structure):
-    _fields_ = [("data", ctypes.c_void_p), ("device", DLDevice), ("ndim", ctypes.c_int32), ("dtype", DLDataType),
-                ("shape", ctypes.POINTER(ctypes.c_int64)), ("strides", ctypes.POINTER(ctypes.c_int64)),
-                ("byte_offset", ctypes.c_uint64)]
-
-
-class DLManagedTensor(ctypes.Structure):
-    pass
-
-
-DELETER = ctypes.CFUNCTYPE(None, ctypes.POINTER(DLManagedTensor))
-DLManagedTensor._fields_ = [("dl_tensor", DLTensor), ("manager_ctx", ctypes.c_void_p), ("deleter", DELETER)]
-
-
-class FakeDlpack:
-    """A DLPack producer on CUDA device `device` whose capsule points at a fake address: the checks must
-    refuse or accept it from the tensor's fields alone. Records the stream asked for and the deleter calls."""
-    def __init__(self, shape, code=2, bits=32, strides=None, device=0, offset=0):
-        self.deleted, self.streams, self.device = 0, [], device
-        self.shape = (ctypes.c_int64 * len(shape))(*shape)
-        self.strides = (ctypes.c_int64 * len(shape))(*strides) if strides else None
-        self.deleter = DELETER(self._delete)
-        self.managed = DLManagedTensor(
-            DLTensor(0x7000, DLDevice(2, device), len(shape), DLDataType(code, bits, 1), self.shape,
-                     self.strides if self.strides is not None else None, offset), None, self.deleter)
-
-    def _delete(self, _):
-        self.deleted += 1
-
-    def __dlpack_device__(self):
-        return (2, self.device)
-
-    def __dlpack__(self, stream=None):
-        self.streams.append(stream)
-        new = ctypes.pythonapi.PyCapsule_New
-        new.restype, new.argtypes = ctypes.py_object, [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_void_p]
-        self.capsule = new(ctypes.addressof(self.managed), b"dltensor", None)
-        return self.capsule
-
-
-def capsule_name(capsule):
-    name = ctypes.pythonapi.PyCapsule_GetName
-    name.restype, name.argtypes = ctypes.c_char_p, [ctypes.py_object]
-    return name(capsule)
-
-
-def test_dlpack_is_consumed_as_the_protocol_says():
-    fake = FakeDlpack((4, 3), offset=16)
-    got = check(fake, "origins", ["<f4"])
-    assert got == {"data": 0x7000 + 16, "shape": (4, 3), "typestr": "<f4", "device": 0, "stream": None}
-    assert fake.streams == [1]  # the legacy default stream, numbered 1 by the protocol
-    assert capsule_name(fake.capsule) == b"used_dltensor"  # consumed: the capsule no longer deletes it
-    assert fake.deleted == 1  # the consumer called the deleter once, when done
-    check(fake, "origins", ["<f4"], stream=12345)
-    assert fake.streams[-1] == 12345
-    contiguous = FakeDlpack((4, 3), strides=(3, 1))
-    assert check(contiguous, "origins", ["<f4"])["shape"] == (4, 3)
-
-
-@pytest.mark.parametrize("fake, error, message", [
-    (lambda: FakeDlpack((4, 3), bits=64), tsah.ArgumentTypeError,
-     "origins: expected a device array of typestr '<f4', got '<f8'"),
-    (lambda: FakeDlpack((4, 3), strides=(1, 4)), tsah.ConfigError, "origins: must be C-contiguous"),
-    (lambda: FakeDlpack((4, 3), device=1), tsah.ConfigError, "origins: on CUDA device 1; the runtime uses device 0"),
-    (lambda: FakeDlpack((4, 3), code=5), tsah.ArgumentTypeError, "origins: a DLPack dtype numpy has no name for"),
-])
-def test_bad_dlpack_tensors_get_one_clear_line_and_are_deleted(fake, error, message):
-    producer = fake()
-    with pytest.raises(error, match=message):
-        check(producer, "origins", ["<f4"])
-    assert producer.deleted == (0 if "device 1" in message else 1)  # a consumed capsule is always deleted
-
-
 def test_stream_arguments():
     fake = FakeDlpack((2, 3))
 
@@ -417,12 +338,15 @@ def stream_address(stream):
 
 
 class DlpackOnly:
-    """A device array offering DLPack only (torch and CuPy offer both protocols)."""
+    """A device array offering DLPack only (torch and CuPy offer both protocols); keeps the keywords of
+    each __dlpack__ call and the last capsule."""
     def __init__(self, a):
-        self.a = a
+        self.a, self.asked = a, []
 
-    def __dlpack__(self, stream=None):
-        return self.a.__dlpack__(stream=stream)
+    def __dlpack__(self, **keywords):
+        self.asked.append(keywords)
+        self.capsule = self.a.__dlpack__(**keywords)
+        return self.capsule
 
     def __dlpack_device__(self):
         return self.a.__dlpack_device__()
@@ -511,6 +435,11 @@ def test_device_refit_and_trace_equal_the_host_path(wave, protocol):
     assert hits["triangle"].typestr == "<i4"
     for field in ("t", "u", "v", "triangle"):
         np.testing.assert_array_equal(to_host(hits[field]), expected[field])
+    if protocol == "dlpack":  # DLPack 1.0 asked for first; the library's answer consumed
+        positions = device_input(positions, protocol)
+        device.refit(positions)
+        assert positions.asked[0]["max_version"] == (1, 0)
+        assert capsule_name(positions.capsule) == (b"used_dltensor_versioned" if exports_versioned() else b"used_dltensor")
     flags = device.occluded(device_input(o, protocol), device_input(d, protocol))
     synchronize()
     np.testing.assert_array_equal(to_host(flags), host.occluded(o, d))
@@ -639,3 +568,73 @@ def test_device_argument_errors(wave):
             runtime.refit(to_device(bad))
     with pytest.raises(tsah.ConfigError, match="positions: a CUDA device array"):  # the CPU runtime keeps refusing
         make_runtime("cpu", wave).refit(to_device(positions.astype(np.float32)))
+
+
+def exports_versioned():
+    """Whether the library's arrays answer max_version=(1, 0) with a DLPack 1.0 capsule (torch 2.4+,
+    CuPy 13+); older ones take no max_version."""
+    try:
+        return capsule_name(to_device(np.zeros(1, np.float32)).__dlpack__(max_version=(1, 0))) == b"dltensor_versioned"
+    except TypeError:
+        return False
+
+
+needs_device = pytest.mark.skipif(not tsah.cuda_available(), reason="no CUDA device (or the CUDA runtime was not built)")
+
+
+@needs_device
+def test_device_arrays_export_a_versioned_dlpack_capsule_when_asked():
+    a = tsah.DeviceArray((4, 3), "<i4")
+    refs = sys.getrefcount(a)
+    capsule = a.__dlpack__(max_version=(1, 2))
+    assert capsule_name(capsule) == b"dltensor_versioned"
+    managed = capsule_struct(capsule, DLManagedTensorVersioned)
+    assert (managed.version.major, managed.version.minor, managed.flags) == (1, 0, 0)
+    t = managed.dl_tensor
+    assert (t.data, t.byte_offset) == (a.__cuda_array_interface__["data"][0], 0)
+    assert (t.device.device_type, t.device.device_id) == (2, 0)  # kDLCUDA, device 0
+    assert (t.ndim, t.shape[0], t.shape[1]) == (2, 4, 3) and not t.strides  # strides NULL: C-contiguous
+    assert (t.dtype.code, t.dtype.bits, t.dtype.lanes) == (0, 32, 1)  # kDLInt, 32 bits
+    assert sys.getrefcount(a) == refs + 1  # the tensor holds the array
+    del managed, t, capsule
+    assert sys.getrefcount(a) == refs  # never consumed: the capsule's destructor deleted the tensor
+    for max_version in (None, (0, 8)):  # consumers older than DLPack 1.0: the unversioned capsule
+        assert capsule_name(a.__dlpack__(max_version=max_version)) == b"dltensor"
+    assert sys.getrefcount(a) == refs
+    # The module consumes its own versioned capsule.
+    exported = DlpackOnly(a)
+    assert check(exported, "a", ["<i4"])["shape"] == (4, 3)
+    assert exported.asked == [{"stream": 1, "max_version": (1, 0)}]
+    assert capsule_name(exported.capsule) == b"used_dltensor_versioned"
+    del exported
+    assert sys.getrefcount(a) == refs  # the consumer called the deleter
+    with pytest.raises(TypeError, match=r"max_version: expected \(major, minor\)"):
+        a.__dlpack__(max_version="1.0")
+    with pytest.raises(BufferError, match="no copies"):
+        a.__dlpack__(max_version=(1, 0), copy=True)
+
+
+@needs_device_arrays
+def test_device_arrays_travel_as_versioned_dlpack_both_ways(wave):
+    animation, _ = wave
+    runtime = make_runtime("gpu", wave)
+    o, d = rays(animation, 0.0, (300,))
+    expected = runtime.trace(o, d)["t"]
+    origins = DlpackOnly(to_device(o))
+    hits = runtime.trace(origins, to_device(d))  # the library's capsule, consumed by trace
+    assert origins.asked[0] == {"stream": 1, "max_version": (1, 0)}
+    assert capsule_name(origins.capsule) == (b"used_dltensor_versioned" if exports_versioned() else b"used_dltensor")
+    # The module's capsule, consumed by the library's from_dlpack: versioned when it asks for DLPack 1.0.
+    a = hits["t"]
+    exported = DlpackOnly(a)
+    refs = sys.getrefcount(a)
+    taken = LIB.from_dlpack(exported)
+    asked = exported.asked[-1].get("max_version")
+    assert capsule_name(exported.capsule) == (b"used_dltensor_versioned" if asked and asked[0] >= 1 else b"used_dltensor")
+    address = taken.data_ptr() if LIB.__name__ == "torch" else taken.data.ptr
+    assert address == a.__cuda_array_interface__["data"][0]  # no copy
+    np.testing.assert_array_equal(to_host(taken), expected)
+    assert sys.getrefcount(a) == refs + 1
+    del taken
+    gc.collect()
+    assert sys.getrefcount(a) == refs  # the library called the deleter

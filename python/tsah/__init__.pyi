@@ -227,7 +227,8 @@ class DeviceArray:
         """The CUDA array interface, version 3 (strides None; stream: the one its contents follow)."""
     def __dlpack__(self, *, stream: int | None = None, max_version: tuple[int, int] | None = None,
                    dl_device: tuple[int, int] | None = None, copy: bool | None = None) -> Any:
-        """An unversioned DLPack capsule of the array (no copy) after `stream` waits for its contents."""
+        """A DLPack capsule of the array (no copy) after `stream` waits for its contents: DLPack 1.0's
+        "dltensor_versioned" (version 1.0) when max_version's major is 1 or more, else "dltensor"."""
     def __dlpack_device__(self) -> tuple[int, int]:
         """(2, device): kDLCUDA and the device."""
 

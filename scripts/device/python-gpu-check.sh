@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # On the GPU machine (Python 3.12 with numpy, pybind11, torch and/or CuPy, g++, CMake, nvcc; none of
 # the Debian packages tsah uses): builds python/ standalone against the bundled install, then runs
-# the C++ device-array test, the pytest file of the GPU arrays and their benchmark.
+# the C++ device-array test, the pytest files of the GPU arrays (and DLPack) and their benchmark.
 #   bundle:  bash scripts/device/python-gpu-bundle.sh .gpu-python      (on the build machine)
 #   run:     bash scripts/device/python-gpu-check.sh [BUNDLE=.gpu-python] [STEPS]   (repository root)
 # STEPS (default "build test pytest bench"). Logs and bench JSON go to $OUT (default /tmp/tsah-py-out):
@@ -39,7 +39,7 @@ fi
 if has pytest; then
   start=$SECONDS
   PYTHONPATH=$module timeout 400 "$python" -m pytest -q -p no:cacheprovider python/tests/test_gpu_arrays.py \
-    python/tests/test_stubs.py python/tests/test_construction.py python/tests/test_cpu_batch.py > "$out/pytest.log" 2>&1
+    python/tests/test_dlpack.py python/tests/test_stubs.py python/tests/test_construction.py python/tests/test_cpu_batch.py > "$out/pytest.log" 2>&1
   rc=$?; status=$((status | rc))
   echo "pytest: rc=$rc in $((SECONDS - start)) s"; tail -15 "$out/pytest.log"
 fi
