@@ -12,6 +12,9 @@
          wait=True (the default: the call waits for the check's answer) and wait=False on a stream
          of the caller's own are reported beside it, with the call's host time and what reading the
          tensor's __cuda_array_interface__ costs (the module reads a plain tensor without it).
+         Also: 50 refits queued between two events (the device's cost per refit once calls
+         overlap), and the event harness itself: an empty call's window (the events' own host
+         time, device idle) and refit(time) against refit(tensor) both timed by it.
   cpu:   CpuRuntime(layout="bvh8").trace from Python (wall time, numpy in and out) against the best
          C++ batch on the same rays (python/bench/cpu_batch.py); target: rate ratio >= 0.9.
          --cpu-only: this part alone (no GPU needed).
@@ -91,6 +94,17 @@ def bench_refit(torch, gpu, animation, runs):
     gpu.check()
     result["queued_refit_ms"] = queued_ms
     result["queued_ratio"] = queued_ms / update_ms
+    # One call between two torch events holds the events' own host time as device idle (an empty
+    # call's window): refit(time) and refit(tensor) in that same harness.
+    result["event_harness_ms"] = {
+        "empty_call": median_ms(lambda: event_ms(torch, lambda: None), runs),
+        "refit_time": median_ms(lambda: event_ms(torch, lambda: gpu.refit(t)), runs),
+        "refit_tensor": median_ms(lambda: event_ms(torch, lambda: gpu.refit(positions, stream=stream, wait=False)),
+                                  runs),
+    }
+    gpu.check()
+    harness = result["event_harness_ms"]
+    harness["tensor_over_time"] = harness["refit_tensor"] / harness["refit_time"]
     for mode, wait in (("no_wait", False), ("wait", True)):
         tensor_ms = median_ms(lambda: event_ms(torch, lambda: gpu.refit(positions, stream=stream, wait=wait)), runs)
         wall_ms = median_ms(lambda: _wall_ms(torch, lambda: gpu.refit(positions, stream=stream, wait=wait)), runs)
