@@ -240,7 +240,23 @@ TEST_F(TwoLevelMotion, ClosestHitsEqualTheWorldTrianglesAtTheRaysTime) {
   for (const tsah::Layout layout : cpuLayouts()) {
     expectBruteForceHits(*scene, layout, 2.1, 2.4, 2, 250);
     expectBruteForceHits(*scene, layout, 6.2, 6.9, 3, 250);
+    expectBruteForceHits(*scene, layout, 9.2, 9.9, 3, 150);  // two poses past their clip's end
   }
+}
+
+// Only what moves is blurred: static BLAS never, a pose holding its clip's last frame neither
+// (refitted once, instant), a moving pose with the frame's key fractions.
+TEST_F(TwoLevelMotion, OnlyMovingPosesAreBlurred) {
+  tsah::TwoLevelRuntime runtime(*scene);
+  runtime.updateShutter(9.2, 9.9);  // after the wave's last frame (8): offsets 0 hold, 1.5 until 9.5, the loop moves
+  ASSERT_TRUE(runtime.blurred());
+  EXPECT_FALSE(runtime.blasOf(0).blurred());  // the static ground
+  EXPECT_FALSE(runtime.blasOf(3).blurred());  // offset 0: local time 8 at every key
+  EXPECT_TRUE(runtime.blasOf(4).blurred());   // offset 1.5: 7.7 .. 8
+  EXPECT_TRUE(runtime.blasOf(5).blurred());   // looping
+  for (const uint32_t i : {4u, 5u})
+    EXPECT_TRUE(std::equal(runtime.keyTimes().begin(), runtime.keyTimes().end(), runtime.blasOf(i).keyTimes().begin(),
+                           runtime.blasOf(i).keyTimes().end()));
 }
 
 TEST(TwoLevelMotionTurn, TheBoxOfEachKeysOwnBlasBoxWouldMissTheTurningSlide) {
