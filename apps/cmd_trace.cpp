@@ -90,13 +90,15 @@ void checkDeviceAndLayout(const TraceOptions& opt) {
 }
 
 // What a two-level tree (.tbvh version 3) is not traced with: a per-frame rebuild of the whole
-// scene (--rebuild; the TLAS's is --tlas rebuild), motion blur, several GPUs or the CPU's SIMD
-// kernels of flat trees; on the GPU, the compressed layout. The TLAS rebuilds of one device only.
+// scene (--rebuild; the TLAS's is --tlas rebuild), several GPUs or the CPU's SIMD kernels of flat
+// trees; on the GPU, motion blur and the compressed layout. The TLAS rebuilds of one device only.
 void checkTwoLevelOptions(const TraceOptions& opt, const tsah::cli::FrameRuntimeOptions& runtimeOptions) {
-  if (runtimeOptions.rebuild != tsah::cli::Rebuild::None || runtimeOptions.shutter.fraction > 0.0 ||
-      !opt.devices.empty() || runtimeOptions.isa)
+  if (runtimeOptions.rebuild != tsah::cli::Rebuild::None || !opt.devices.empty() || runtimeOptions.isa)
     throw UsageError(opt.bvh + " holds a two-level scene: it is traced without --devices, --rebuild (see --tlas "
-                     "rebuild), --shutter or --isa");
+                     "rebuild) or --isa");
+  if (runtimeOptions.shutter.fraction > 0.0 && opt.device == tsah::Device::Cuda)
+    throw UsageError(opt.bvh + " holds a two-level scene: its motion blur (--shutter) is traced on the CPU (--device "
+                     "cpu), not with --device cuda");
   const bool gpuRebuild = opt.tlas == "lbvh" || opt.tlas == "hlbvh-sah";
   if (opt.device != tsah::Device::Cuda) {
     if (gpuRebuild)
@@ -187,7 +189,8 @@ void runTrace(const TraceOptions& opt) {
       runtimes.push_back(tsah::cli::makeTwoLevelFrameRuntime(twoLevelScene, runtimeOptions.layout, runtimeOptions.threads,
                                                              opt.tlas == "rebuild"
                                                                  ? tsah::TwoLevelRuntime::TlasUpdate::Rebuild
-                                                                 : tsah::TwoLevelRuntime::TlasUpdate::Refit));
+                                                                 : tsah::TwoLevelRuntime::TlasUpdate::Refit,
+                                                             runtimeOptions.shutter, runtimeOptions.frameInterval));
   }
   const tsah::cli::FrameRuntime& rt = *runtimes.front();
 
@@ -247,7 +250,7 @@ void runTrace(const TraceOptions& opt) {
                                  : opt.tlas == "lbvh"      ? "rebuilt (LBVH, GPU)"
                                  : opt.tlas == "hlbvh-sah" ? "rebuilt (HLBVH-SAH, GPU)"
                                                            : "refitted") +
-                     " every frame"
+                     " every frame" + blur
       : rebuilds ? "rebuild " + opt.rebuild + (tsah::cli::isGpuRebuild(runtimeOptions.rebuild) ? " (GPU)" : " (CPU)")
                : trees.size() > 1 ? "refit of the tree of each frame's part (" + std::to_string(trees.size()) + " trees)"
                                   : std::string("refit") + blur;

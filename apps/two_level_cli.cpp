@@ -178,8 +178,15 @@ double msSince(std::chrono::steady_clock::time_point start) {
 
 class TwoLevelFrameRuntime final : public FrameRuntime {
  public:
-  TwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, TwoLevelRuntime::Config config)
-      : scene_(std::move(scene)), runtime_(*scene_, config), view_(runtime_), layout_(config.layout), tlas_(config.tlas) {}
+  TwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, TwoLevelRuntime::Config config, Shutter shutter,
+                       double frameInterval)
+      : scene_(std::move(scene)),
+        runtime_(*scene_, config),
+        view_(runtime_),
+        layout_(config.layout),
+        tlas_(config.tlas),
+        shutter_(shutter),
+        frameInterval_(frameInterval) {}
 
   void warmUp(double, const std::function<Camera(double)>&, const SceneLighting&, const RenderSettings&) override {
     runtime_.parallelFor(64, 1, [](std::size_t, std::size_t) {});
@@ -190,7 +197,13 @@ class TwoLevelFrameRuntime final : public FrameRuntime {
   FrameUpdate update(double time) override {
     FrameUpdate u;
     const auto start = std::chrono::steady_clock::now();
-    runtime_.update(time);
+    if (shutter_.fraction > 0.0) {
+      const auto [open, close] = shutterInterval(scene_->scene.start, scene_->scene.end, time, frameInterval_, shutter_);
+      runtime_.updateShutter(open, close);
+      u.keys = std::max<uint32_t>(1, uint32_t(runtime_.keyTimes().size()));
+    } else {
+      runtime_.update(time);
+    }
     u.refitMs = msSince(start);
     u.updateMs = u.refitMs;
     meshMs_ = view_.updateMesh();
@@ -231,6 +244,8 @@ class TwoLevelFrameRuntime final : public FrameRuntime {
   TwoLevelRenderView view_;
   Layout layout_;
   TwoLevelRuntime::TlasUpdate tlas_;
+  Shutter shutter_;
+  double frameInterval_ = 0.0;
   Image scratch_;
   double meshMs_ = 0.0;  // the last updateMesh
 };
@@ -238,12 +253,13 @@ class TwoLevelFrameRuntime final : public FrameRuntime {
 }  // namespace
 
 std::unique_ptr<FrameRuntime> makeTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, Layout layout,
-                                                       unsigned threads, TwoLevelRuntime::TlasUpdate tlas) {
+                                                       unsigned threads, TwoLevelRuntime::TlasUpdate tlas,
+                                                       Shutter shutter, double frameInterval) {
   TwoLevelRuntime::Config config;
   config.threads = threads;
   config.tlas = tlas;
   config.layout = layout == Layout::Auto ? fastestLayout() : layout;
-  return std::make_unique<TwoLevelFrameRuntime>(std::move(scene), config);
+  return std::make_unique<TwoLevelFrameRuntime>(std::move(scene), config, shutter, frameInterval);
 }
 
 }  // namespace tsah::cli

@@ -43,9 +43,11 @@ nlohmann::json describeTwoLevel(const TwoLevelScene& scene);
 void describeTwoLevelFile(const std::string& treePath, const std::string& scenePath, bool json);
 
 // The frame runtime of a two-level scene on the CPU (TwoLevelRuntime + the renderer's loop through
-// it). Owns the scene.
+// it). Owns the scene. A shutter fraction above 0 blurs every frame: TwoLevelRuntime::updateShutter
+// over shutterInterval of the scene's time range with frameInterval, the time between traced frames.
 std::unique_ptr<FrameRuntime> makeTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, Layout layout,
-                                                       unsigned threads, TwoLevelRuntime::TlasUpdate tlas);
+                                                       unsigned threads, TwoLevelRuntime::TlasUpdate tlas,
+                                                       Shutter shutter = {}, double frameInterval = 0.0);
 
 // The frame runtime of a two-level scene on GPU `gpu` (GpuTwoLevelRuntime + GpuTwoLevelRenderer,
 // two_level_gpu_frame.cpp): BLAS and TLAS in bvh2, the TLAS refitted. Owns the scene. Throws

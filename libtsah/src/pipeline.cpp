@@ -397,6 +397,11 @@ void anyHits(const CpuRuntime& runtime, const RayArrays& rays, std::span<uint8_t
 
 std::pair<double, double> shutterInterval(const anim::Animation& animation, double time, double interval,
                                           const Shutter& shutter) {
+  return shutterInterval(animation.startTime(), animation.endTime(), time, interval, shutter);
+}
+
+std::pair<double, double> shutterInterval(double start, double end, double time, double interval,
+                                          const Shutter& shutter) {
   if (!(shutter.fraction >= 0.0 && shutter.fraction <= 1.0))
     throw tsah::ConfigError("shutter: the fraction must lie in [0, 1], got " + std::to_string(shutter.fraction));
   if (!(interval >= 0.0))
@@ -404,8 +409,8 @@ std::pair<double, double> shutterInterval(const anim::Animation& animation, doub
   const double length = shutter.fraction * interval;
   double open = shutter.mode == Shutter::Mode::Centered ? time - length / 2 : time;
   double close = open + length;
-  open = std::clamp(open, animation.startTime(), animation.endTime());
-  close = std::clamp(close, animation.startTime(), animation.endTime());
+  open = std::clamp(open, start, end);
+  close = std::clamp(close, start, end);
   return {open, close};
 }
 

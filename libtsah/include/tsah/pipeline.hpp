@@ -211,6 +211,9 @@ struct Shutter {
 // time range. Throws tsah::ConfigError for a fraction outside [0, 1] or a negative interval.
 std::pair<double, double> shutterInterval(const anim::Animation& animation, double time, double interval,
                                           const Shutter& shutter);
+// The same clamped to [start, end] (a scene's time range: SceneSources::start, end).
+std::pair<double, double> shutterInterval(double start, double end, double time, double interval,
+                                          const Shutter& shutter);
 // Refits the runtime over [open, close] of the animation: the positions at every key of
 // motion::shutterKeys (update() when open == close).
 void updateShutter(CpuRuntime& runtime, const anim::Animation& animation, double open, double close);

@@ -5,6 +5,7 @@
 
 #include "anim/scene.hpp"
 #include "tsah/base/error.hpp"
+#include "tsah/layout/motion_blur.hpp"
 #include "tsah/render/render_loop.hpp"
 
 namespace tsah {
@@ -51,6 +52,44 @@ Hit TwoLevelRenderView::closestHit(const Ray& ray) const {
 }
 
 bool TwoLevelRenderView::anyHit(const Ray& ray, AnyHitOrder order) const { return runtime_.anyHit(ray, order); }
+
+Hit TwoLevelRenderView::closestHit(const Ray& ray, float time) const {
+  const TwoLevelHit hit = runtime_.closestHit(ray, time);
+  if (!hit.valid()) return {};
+  return {hit.t, hit.u, hit.v, firstTriangle_[hit.instance] + hit.prim};
+}
+
+bool TwoLevelRenderView::anyHit(const Ray& ray, float time, AnyHitOrder order) const {
+  return runtime_.anyHit(ray, time, order);
+}
+
+Surface TwoLevelRenderView::blurredSurface(const Ray& ray, const Hit& hit, float time, const SceneLighting& lighting) const {
+  if (!hit.valid()) return primarySurface(ray, hit, nullptr, nullptr, lighting);
+  const uint32_t instance = uint32_t(std::upper_bound(firstTriangle_.begin(), firstTriangle_.end(), hit.tri) - firstTriangle_.begin()) - 1;
+  const uint32_t prim = hit.tri - firstTriangle_[instance];
+  const CpuRuntime& blas = runtime_.blasOf(instance);
+  const Affine3x4 toWorld = runtime_.toWorldAt(instance, time);
+  // The BLAS's vertices at the time: its key positions lerped when it is blurred, else its positions.
+  const float* p0 = blas.positions().data();
+  const float* p1 = p0;
+  float f = 0.0f;
+  if (blas.blurred()) {
+    const MotionBvhView& view = blas.motionView();
+    const motion::Segment seg = motion::segmentAt(view.keyTimes, int(view.keyCount), time);
+    p0 = view.keyPositions + std::size_t(seg.index) * view.vertexCount * 3;
+    p1 = p0 + std::size_t(view.vertexCount) * 3;
+    f = seg.f;
+  }
+  float triangle[9];
+  for (int k = 0; k < 3; ++k) {
+    const uint32_t vertex = blas.indices()[3 * std::size_t(prim) + k];
+    const Vec3 v = toWorld.point(motion::lerpVertex(loadVec3(p0, vertex), loadVec3(p1, vertex), f));
+    triangle[3 * k] = v.x;
+    triangle[3 * k + 1] = v.y;
+    triangle[3 * k + 2] = v.z;
+  }
+  return primarySurfaceOnTriangle(ray, hit, triangle, lighting);
+}
 
 RenderStats renderFrame(const TwoLevelRenderView& view, const Camera& camera, const SceneLighting& lighting,
                         const RenderSettings& settings, Image& image) {

@@ -11,55 +11,9 @@
 
 #include "tsah/base/error.hpp"
 #include "tsah/layout/traversal.hpp"
+#include "two_level_frame.hpp"
 
 namespace tsah {
-
-namespace {
-
-// What the shared traversal loop (detail::traverse) reads of the TLAS: its nodes, and as the
-// "triangle" of a slot the instance's BLAS, traced with the ray moved into instance space. The
-// frame lives for one ray: hitPrim holds the BLAS triangle of the last accepted slot test, which
-// is the final hit (every accepted test shortens tmax, so the last one is the nearest).
-template <bool AnyHit>
-struct TlasFrame {
-  const GpuBvhNode* nodes = nullptr;
-  const uint32_t* triIndex = nullptr;  // slot -> instance id
-  const Affine3x4* toInstance = nullptr;
-  const Aabb* instanceBoxes = nullptr;      // per instance: its world box this frame
-  const uint8_t* visible = nullptr;         // per instance: 0 while its world transform is singular
-  const CpuRuntime* const* blas = nullptr;  // per instance, traced in its own layout
-  int32_t rootRef = makeLeafRef(0);
-  uint32_t rootCount = 0;
-  Aabb rootBox;
-  AnyHitOrder order = AnyHitOrder::FarthestFirst;  // any hit: the BLAS traversals' child order
-  mutable uint32_t hitPrim = kNoHit;
-
-  const Aabb& root() const { return rootBox; }
-  const GpuBvhNode& node(int32_t ref) const { return nodes[ref]; }
-  bool intersectSlot(const Ray& ray, const RayPrep& prep, uint32_t s, float tmax, float& t, float& u, float& v) const {
-    const uint32_t instance = triIndex[s];
-    // The instance's own box before its transform and BLAS: a leaf of several instances is entered
-    // by rays that miss most of them (the test is the TLAS nodes' own, on a box inside theirs).
-    float entry;
-    if (!visible[instance] || !intersectBox(prep, instanceBoxes[instance], ray.tmin, tmax, entry)) return false;
-    const Ray local = rayInInstance(toInstance[instance], ray, tmax);
-    if (AnyHit) {  // the loop stops at the first accepted slot: no distance needed
-      if (!blas[instance]->anyHit(local, order)) return false;
-      t = tmax;
-      u = v = 0.0f;
-      return true;
-    }
-    const Hit h = blas[instance]->closestHit(local);
-    if (!h.valid() || !(h.t < tmax)) return false;
-    t = h.t;
-    u = h.u;
-    v = h.v;
-    hitPrim = h.tri;
-    return true;
-  }
-};
-
-}  // namespace
 
 anim::Matrix4 inverseAffine(const anim::Matrix4& m) {
   // Inverse of the linear part by cofactors, then -L^-1 * translation.
@@ -157,16 +111,22 @@ const CpuRuntime& TwoLevelRuntime::runtimeOf(uint32_t instance) const {
 
 const CpuRuntime& TwoLevelRuntime::blasOf(uint32_t instance) const { return runtimeOf(instance); }
 
-void TwoLevelRuntime::update(double sceneTime) {
-  time_ = sceneTime;
+std::vector<std::vector<double>> TwoLevelRuntime::poseLocalTimes(std::span<const double> times) const {
+  // The local time of the first instance showing each pose (all of them show the same).
   const anim::SceneSources& sources = scene_.scene;
-  // Poses: the local time of the first instance showing each (all of them show the same).
-  std::vector<double> local(poses_.size());
-  std::vector<uint32_t> stale;
+  std::vector<std::vector<double>> local(poses_.size(), std::vector<double>(times.size()));
   for (uint32_t i = 0; i < scene_.instanceCount(); ++i) {
     const uint32_t p = scene_.instancePose[i];
-    if (p != kInvalidIndex) local[p] = sources.instances[i].localTime(sceneTime, *sources.sources[scene_.poses[p].blas]);
+    if (p == kInvalidIndex) continue;
+    for (std::size_t k = 0; k < times.size(); ++k)
+      local[p][k] = sources.instances[i].localTime(times[k], *sources.sources[scene_.poses[p].blas]);
   }
+  return local;
+}
+
+void TwoLevelRuntime::refitPoses(const std::vector<double>& local) {
+  const anim::SceneSources& sources = scene_.scene;
+  std::vector<uint32_t> stale;
   for (uint32_t p = 0; p < poses_.size(); ++p)
     if (!(local[p] == poseLocalTime_[p])) stale.push_back(p);
   pool_->arena.execute([&] {
@@ -181,6 +141,16 @@ void TwoLevelRuntime::update(double sceneTime) {
   });
   lastRefits_ = uint32_t(stale.size());
   totalRefits_ += stale.size();
+}
+
+void TwoLevelRuntime::update(double sceneTime) {
+  clearShutter();
+  time_ = sceneTime;
+  const anim::SceneSources& sources = scene_.scene;
+  const std::vector<std::vector<double>> local = poseLocalTimes(std::span<const double>(&sceneTime, 1));
+  std::vector<double> now(poses_.size());
+  for (uint32_t p = 0; p < poses_.size(); ++p) now[p] = local[p][0];
+  refitPoses(now);
 
   for (uint32_t i = 0; i < scene_.instanceCount(); ++i) {
     const anim::Matrix4 world = sources.instances[i].worldAt(sceneTime);
@@ -204,38 +174,13 @@ void TwoLevelRuntime::refitTlas() {
   });
 }
 
-template <bool AnyHit>
-static TlasFrame<AnyHit> tlasFrame(const FlatBvh& tlas, const std::vector<Affine3x4>& toInstance,
-                                   const std::vector<Aabb>& instanceBoxes, const std::vector<uint8_t>& visible,
-                                   const std::vector<const CpuRuntime*>& blas) {
-  TlasFrame<AnyHit> f;
-  f.nodes = tlas.nodes.data();
-  f.triIndex = tlas.triIndex.data();
-  f.toInstance = toInstance.data();
-  f.instanceBoxes = instanceBoxes.data();
-  f.blas = blas.data();
-  f.visible = visible.data();
-  f.rootRef = tlas.rootRef;
-  f.rootCount = tlas.rootCount;
-  f.rootBox = tlas.rootBoxes[0];
-  return f;
-}
-
 TwoLevelHit TwoLevelRuntime::closestHit(const Ray& ray) const {
-  const TlasFrame<false> frame = tlasFrame<false>(tlas_, toInstance_, instanceBoxes_, visible_, blas_);
-  const Hit h = detail::traverse<false>(frame, ray);
-  TwoLevelHit hit;
-  if (!h.valid()) return hit;
-  hit.t = h.t;
-  hit.u = h.u;
-  hit.v = h.v;
-  hit.instance = h.tri;
-  hit.prim = frame.hitPrim;
-  return hit;
+  const auto frame = detail::tlasFrame<false, false>(tlas_, toInstance_, instanceBoxes_, visible_, blas_);
+  return detail::twoLevelHit(detail::traverse<false>(frame, ray), frame);
 }
 
 bool TwoLevelRuntime::anyHit(const Ray& ray, AnyHitOrder order) const {
-  TlasFrame<true> frame = tlasFrame<true>(tlas_, toInstance_, instanceBoxes_, visible_, blas_);
+  auto frame = detail::tlasFrame<true, false>(tlas_, toInstance_, instanceBoxes_, visible_, blas_);
   frame.order = order;
   return detail::traverse<true>(frame, ray).valid();
 }
@@ -251,7 +196,12 @@ uint64_t TwoLevelRuntime::memoryBytes() const {
     else
       tree = uint64_t(r.tree().nodes.size()) * sizeof(GpuBvhNode) + r.tree().triIndex.size() * sizeof(uint32_t) +
              r.woop().size() * sizeof(WoopTriangle);
-    return tree + r.positions().size() * sizeof(float) + r.indices().size() * sizeof(uint32_t);
+    uint64_t keys = 0;  // a blurred pose's key sets
+    for (std::size_t k = 0; k < r.keyTimes().size(); ++k)
+      keys += r.keyWideNodes4(k).size_bytes() + r.keyVertexPackets4(k).size_bytes() + r.keyWideNodes8(k).size_bytes() +
+              r.keyVertexPackets8(k).size_bytes() + uint64_t(r.motionView().nodeCount) * sizeof(GpuBvhNode) +
+              r.positions().size() * sizeof(float);
+    return tree + keys + r.positions().size() * sizeof(float) + r.indices().size() * sizeof(uint32_t);
   };
   for (const auto& r : staticBlas_)
     if (r) bytes += runtimeBytes(*r);
@@ -259,6 +209,8 @@ uint64_t TwoLevelRuntime::memoryBytes() const {
   for (const auto& s : poseScratch_) bytes += s.size() * sizeof(float);
   bytes += tlas_.nodes.size() * sizeof(GpuBvhNode) + tlas_.triIndex.size() * sizeof(uint32_t);
   bytes += toInstance_.size() * sizeof(Affine3x4) + instanceBoxes_.size() * sizeof(Aabb) + blas_.size() * sizeof(const CpuRuntime*);
+  bytes += keyToWorld_.size() * sizeof(Affine3x4) + keyInstanceBoxes_.size() * sizeof(Aabb) +
+           keyTlasNodes_.size() * sizeof(GpuBvhNode) + keyTlasRootBoxes_.size() * sizeof(Aabb) + moving_.size();
   return bytes;
 }
 

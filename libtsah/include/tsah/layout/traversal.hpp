@@ -63,6 +63,14 @@ struct MotionBvhView {
   uint32_t rootCount = 0;
 };
 
+// A binary node at f between its refits at keys s (n0) and s + 1 (n1): each child box lerped and
+// padded (motion::lerpBox), the references n0's.
+TSAH_HD GpuBvhNode lerpNode(const GpuBvhNode& n0, const GpuBvhNode& n1, float f) {
+  GpuBvhNode n = n0;
+  for (int c = 0; c < 2; ++c) n.setChildBox(c, motion::lerpBox(n0.childBox(c), n1.childBox(c), f));
+  return n;
+}
+
 // One ray's view of a blurred frame: boxes and triangles lerped between the two keys of its time's
 // segment (the same loop as the instant frame; only what it reads differs).
 struct MotionFrame {
@@ -93,12 +101,7 @@ struct MotionFrame {
   }
 
   TSAH_HD const Aabb& root() const { return rootBox; }
-  TSAH_HD GpuBvhNode node(int32_t ref) const {
-    GpuBvhNode n = nodes0[ref];
-    const GpuBvhNode& n1 = nodes1[ref];
-    for (int c = 0; c < 2; ++c) n.setChildBox(c, motion::lerpBox(n.childBox(c), n1.childBox(c), f));
-    return n;
-  }
+  TSAH_HD GpuBvhNode node(int32_t ref) const { return lerpNode(nodes0[ref], nodes1[ref], f); }
   TSAH_HD Vec3 vertex(uint32_t i) const {
     const Vec3 a{positions0[3 * i], positions0[3 * i + 1], positions0[3 * i + 2]};
     const Vec3 b{positions1[3 * i], positions1[3 * i + 1], positions1[3 * i + 2]};

@@ -3,8 +3,9 @@
 // (one tree, renderFrame) and a two-level scene (tsah/scene/two_level_render.hpp). A Scene gives
 // closestHit(ray) -> Hit (tri: the triangle's id in indices()), anyHit(ray, order) -> bool,
 // parallelFor(n, grain, body), and the frame's mesh for shading: indices(), positions(),
-// triangleCount(), vertexCount(). Scenes with motionView() also trace blurred frames (blurred(),
-// closestHit(ray, time), anyHit(ray, time, order)).
+// triangleCount(), vertexCount(). Scenes with blurred() also trace blurred frames (closestHit(ray,
+// time), anyHit(ray, time, order)), and give the surface of a blurred hit through motionView() (a
+// CpuRuntime: blurredPrimarySurface) or blurredSurface(ray, hit, time, lighting) (a two-level view).
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -74,9 +75,18 @@ RayPassStats surfacePass(const Scene& runtime, uint32_t width, const std::vector
 // at the instant otherwise.
 template <class Scene>
 bool anyHitAt(const Scene& runtime, bool blurred, const Ray& ray, float time, AnyHitOrder order) {
-  if constexpr (requires(const Scene& s) { s.motionView(); })
+  if constexpr (requires(const Scene& s) { s.blurred(); })
     if (blurred) return runtime.anyHit(ray, time, order);
   return runtime.anyHit(ray, order);
+}
+
+// The surface a blurred frame's primary hit at `time` finds: the hit triangle where it is then.
+template <class Scene>
+Surface blurredSurfaceOf(const Scene& runtime, const Ray& ray, const Hit& hit, float time, const SceneLighting& l) {
+  if constexpr (requires(const Scene& s) { s.motionView(); })
+    return blurredPrimarySurface(ray, hit, runtime.motionView(), time, l);
+  else
+    return runtime.blurredSurface(ray, hit, time, l);
 }
 }  // namespace detail
 
@@ -99,7 +109,7 @@ RenderStats renderFrameOf(const Scene& runtime, const Camera& camera, const Scen
   RenderStats stats;
   const SampleKey base{settings.seed, settings.frame, 0};
   // A blurred frame: every ray of a pixel at the pixel's shutter time; otherwise the instant.
-  constexpr bool canBlur = requires(const Scene& s) { s.motionView(); };
+  constexpr bool canBlur = requires(const Scene& s) { s.blurred(); };
   bool blurred = false;
   if constexpr (canBlur) blurred = runtime.blurred();
   auto pixelTime = [&](std::size_t pixel) {
@@ -119,7 +129,7 @@ RenderStats renderFrameOf(const Scene& runtime, const Camera& camera, const Scen
         if constexpr (canBlur) {
           if (blurred) {
             const float time = pixelTime(i);
-            surfaces[i] = blurredPrimarySurface(ray, runtime.closestHit(ray, time), runtime.motionView(), time, lighting);
+            surfaces[i] = detail::blurredSurfaceOf(runtime, ray, runtime.closestHit(ray, time), time, lighting);
             continue;
           }
         }

@@ -90,6 +90,17 @@ TSAH_HD Surface primarySurface(const Ray& ray, const Hit& hit, const uint32_t* i
   return s;
 }
 
+// primarySurface on one triangle given by its three vertices (9 floats: where a blurred frame has
+// it at the ray's time); s.tri is hit.tri.
+TSAH_HD Surface primarySurfaceOnTriangle(const Ray& ray, const Hit& hit, const float* triangle, const SceneLighting& l) {
+  const uint32_t oneTriangle[3] = {0, 1, 2};
+  Hit local = hit;
+  local.tri = 0;
+  Surface s = primarySurface(ray, local, oneTriangle, triangle, l);
+  if (s.kind == SurfaceKind::Mesh) s.tri = hit.tri;
+  return s;
+}
+
 // The surface a primary ray at shutter fraction `time` finds in a blurred frame (hit: the closest
 // hit at that time): the hit triangle's vertices lerped at that time, as the traversal lerps them,
 // then primarySurface on that one triangle; s.tri is the hit's triangle id.
@@ -107,12 +118,7 @@ TSAH_HD Surface blurredPrimarySurface(const Ray& ray, const Hit& hit, const Moti
     triangle[3 * k + 1] = v.y;
     triangle[3 * k + 2] = v.z;
   }
-  const uint32_t oneTriangle[3] = {0, 1, 2};
-  Hit local = hit;
-  local.tri = 0;
-  Surface s = primarySurface(ray, local, oneTriangle, triangle, l);
-  if (s.kind == SurfaceKind::Mesh) s.tri = hit.tri;
-  return s;
+  return primarySurfaceOnTriangle(ray, hit, triangle, l);
 }
 
 // Ambient-occlusion ray k of a surface (kind != None): cosine hemisphere, any hit within aoDistance.

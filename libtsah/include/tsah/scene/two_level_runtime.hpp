@@ -9,6 +9,9 @@
 // normalized, so t is the world ray's parameter) and traced by the instance's BLAS runtime
 // (CpuRuntime::closestHit / anyHit: the same traversal and watertight triangle test as a single
 // tree); the TLAS itself is traced by the binary traversal loop (detail::traverse).
+// Motion blur (updateShutter, docs/motion-blur.md "Two-level scenes"): the instances' world matrices
+// and the poses' BLAS at every key of a shutter, the TLAS refitted at every key, and rays traced at
+// their own time (two_level_motion.cpp).
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -24,6 +27,10 @@
 
 namespace tsah {
 
+namespace detail {
+struct TlasKeys;  // two_level_frame.hpp: the blurred TLAS at one ray's time
+}
+
 // A hit of a two-level scene: the instance and the triangle of its source.
 struct TwoLevelHit {
   float t = 0.0f, u = 0.0f, v = 0.0f;
@@ -38,6 +45,13 @@ anim::Matrix4 inverseAffine(const anim::Matrix4& m);
 // when world's linear part is singular or not finite: a path that scales through 0 flattens the
 // instance for an instant, and its triangles are then never hit (as the flat scene's degenerate ones).
 std::optional<Affine3x4> instanceSpace(const anim::Matrix4& world);
+
+// An instance's box at one key of a blurred frame: the key's instance -> world map applied to the 8
+// corners of `local` (the union of the instance's BLAS root boxes over every key of the shutter),
+// rounded outward, each side widened by motion::lerpPad of its row's magnitude bound, so that the
+// lerp of two keys' boxes (motion::lerpBox) holds the lerped map times the lerped vertex in float
+// (docs/motion-blur.md, "Two-level scenes"). An empty box stays empty.
+Aabb instanceKeyBox(const Aabb& local, const Affine3x4& toWorld);
 
 class TwoLevelRuntime {
  public:
@@ -59,8 +73,36 @@ class TwoLevelRuntime {
   TwoLevelRuntime(const TwoLevelRuntime&) = delete;
   TwoLevelRuntime& operator=(const TwoLevelRuntime&) = delete;
 
-  // The scene at time t: poses whose local time changed refitted, world transforms, TLAS.
+  // The scene at time t: poses whose local time changed refitted, world transforms, TLAS. Ends a
+  // blurred frame.
   void update(double sceneTime);
+
+  // Motion blur over the shutter [open, close] (scene times; docs/motion-blur.md, "Two-level
+  // scenes"). Keys: open, every scene frame strictly inside, close (motion::shutterKeys); per key
+  // the instances' world matrices (rounded to float) and every pose's positions at its local time
+  // (the pose's CpuRuntime::updateShutter with the same key fractions; a pose whose local time is
+  // the same at every key is refitted once, instant); per key the instances' boxes (each key's
+  // matrix applied to the union of the BLAS's root boxes over all keys, widened for rounding) and
+  // the TLAS refitted from them (TlasUpdate::Rebuild: rebuilt from the open's boxes first). One key
+  // (open == close), or a shutter in which no instance's matrix and no pose's local time changes,
+  // is update(open): not blurred. Throws tsah::ConfigError for an open or close that is not finite
+  // or open > close; CpuRuntime::updateShutter's errors otherwise. time() is then close, and
+  // instanceBoxes() and tlas() hold the last key's boxes.
+  void updateShutter(double openTime, double closeTime);
+  // True after an updateShutter that blurred (until update()).
+  bool blurred() const { return !keyTimes_.empty(); }
+  // The keys' shutter fractions (first 0, last 1) and scene times; empty when not blurred.
+  std::span<const float> keyTimes() const { return keyTimes_; }
+  std::span<const double> keySceneTimes() const { return keySceneTimes_; }
+  // Instance `instance`'s box at key k < keyTimes().size() (what the TLAS at key k was refitted from).
+  std::span<const Aabb> keyInstanceBoxes(std::size_t key) const;
+  // Instance -> world at shutter fraction `time` as the blurred trace uses it: the key matrices (in
+  // float) lerped entry by entry (motion::lerp) in the time's segment. Not blurred: world(time()) in float.
+  Affine3x4 toWorldAt(uint32_t instance, float time) const;
+  // Nearest hit / any hit at the ray's time, a shutter fraction in [0, 1] (outside: the nearer
+  // end); not blurred: closestHit(ray) / anyHit(ray, order).
+  TwoLevelHit closestHit(const Ray& ray, float time) const;
+  bool anyHit(const Ray& ray, float time, AnyHitOrder order = AnyHitOrder::FarthestFirst) const;
 
   TwoLevelHit closestHit(const Ray& ray) const;
   // order: the BLAS traversals' child order (CpuRuntime::anyHit; the answer is the same).
@@ -88,6 +130,12 @@ class TwoLevelRuntime {
  private:
   void refitTlas();
   const CpuRuntime& runtimeOf(uint32_t instance) const;
+  void clearShutter();
+  detail::TlasKeys keysAt(float time) const;  // the blurred frame's keys of the time's segment
+  // The poses' positions at `local` (one local time per pose) refitted, only where it changed.
+  void refitPoses(const std::vector<double>& local);
+  // Per pose, its local time at each scene time of `times`.
+  std::vector<std::vector<double>> poseLocalTimes(std::span<const double> times) const;
 
   const TwoLevelScene& scene_;
   Config config_;
@@ -103,6 +151,16 @@ class TwoLevelRuntime {
   std::vector<const CpuRuntime*> blas_;                  // per instance: the BLAS runtime it traces
   FlatBvh tlas_;
   double time_ = 0.0;
+  // Motion blur (empty when not blurred): key fractions and scene times; per key, the instances'
+  // world matrices in float and boxes, and the TLAS's interior nodes and root box; per instance
+  // whether its matrix differs between keys (a still one traces with toInstance_).
+  std::vector<float> keyTimes_;
+  std::vector<double> keySceneTimes_;
+  std::vector<Affine3x4> keyToWorld_;
+  std::vector<Aabb> keyInstanceBoxes_;
+  std::vector<GpuBvhNode> keyTlasNodes_;
+  std::vector<Aabb> keyTlasRootBoxes_;
+  std::vector<uint8_t> moving_;
   uint32_t lastRefits_ = 0;
   uint64_t totalRefits_ = 0;
 };
