@@ -1,7 +1,8 @@
 // The CUDA runtime's blurred layout (docs/motion-blur.md#memory): every node record and every slot
-// triangle equals the key arrays it is built from (node n of key k at n * keys + k, slot s's
-// vertices at key k at s * keys + k), through shutters of the same key count (the blurred update's
-// graph replayed) and of another (captured again), from the animation and from host positions. And
+// triangle equals the key arrays it is built from (node n's record of segment s at
+// n * (keys - 1) + s, slot s's vertices at key k at s * keys + k), through shutters of the same key
+// count (the blurred update's graph replayed) and of another (captured again), from the animation
+// and from host positions. And
 // the instant state that updateShutterAt leaves (the last key's, taken from the batch) equals an
 // update at the shutter's close. Every test skips without a GPU.
 #include <gtest/gtest.h>
@@ -17,6 +18,7 @@
 #include "anim/generators.hpp"
 #include "tsah/base/error.hpp"
 #include "tsah/build/sah_builder.hpp"
+#include "tsah/layout/blurred_node.hpp"
 #include "tsah/layout/motion_blur.hpp"
 #include "tsah/optimize/leaf_collapser.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
@@ -35,22 +37,25 @@ tsah::FlatBvh sahTree(const anim::Animation& a, uint32_t maxLeaf) {
   return tsah::flattenBvh(maxLeaf > 1 ? tsah::LeafCollapser(c).collapse(bvh) : bvh);
 }
 
-// What node n's record of key k holds: the key-k node with its child boxes pre-padded over every
-// key (motion::prepadBox of the largest magnitude per axis), and count0's kKeysAlikeBit set when
-// the child boxes are the same bits at every key.
-tsah::GpuBvhNode expectedRecord(const std::vector<tsah::FlatBvh>& keyTrees, uint32_t n, uint32_t k) {
-  tsah::GpuBvhNode record = keyTrees[k].nodes[n];
-  bool alike = true;
+// Node n at key k as the layout's records hold it: its child boxes pre-padded over every key
+// (motion::prepadBox of the largest magnitude per axis).
+tsah::GpuBvhNode prepaddedNode(const std::vector<tsah::FlatBvh>& keyTrees, uint32_t n, uint32_t k) {
+  tsah::GpuBvhNode node = keyTrees[k].nodes[n];
   for (int c = 0; c < 2; ++c) {
     tsah::Vec3 m{0.0f, 0.0f, 0.0f};
-    for (const tsah::FlatBvh& tree : keyTrees) {
-      m = tsah::motion::foldMagnitudes(tree.nodes[n].childBox(c), m);
-      alike &= std::memcmp(&tree.nodes[n], &keyTrees[0].nodes[n], 12 * sizeof(float)) == 0;
-    }
-    record.setChildBox(c, tsah::motion::prepadBox(record.childBox(c), m));
+    for (const tsah::FlatBvh& tree : keyTrees) m = tsah::motion::foldMagnitudes(tree.nodes[n].childBox(c), m);
+    node.setChildBox(c, tsah::motion::prepadBox(node.childBox(c), m));
   }
-  if (alike) record.count0 |= 0x80000000u;
-  return record;
+  return node;
+}
+
+// What node n's record of segment s holds: motion::encodeNodeSegment of its pre-padded nodes at
+// keys s and s + 1, alike when its child boxes are the same bits at every key.
+tsah::motion::BlurredNodeSegment expectedRecord(const std::vector<tsah::FlatBvh>& keyTrees, uint32_t n, uint32_t s) {
+  bool alike = true;
+  for (const tsah::FlatBvh& tree : keyTrees)
+    alike &= std::memcmp(&tree.nodes[n], &keyTrees[0].nodes[n], 12 * sizeof(float)) == 0;
+  return tsah::motion::encodeNodeSegment(prepaddedNode(keyTrees, n, s), prepaddedNode(keyTrees, n, s + 1), alike);
 }
 
 // The layout against the key arrays of the same frame, record by record, bit for bit.
@@ -80,17 +85,19 @@ void expectLayoutOfTheKeys(const tc::GpuRuntime& gpu, const anim::Animation& a, 
           slotAlike[s] = 0;
   }
   uint32_t alikeNodes = 0, alikeSlots = 0;
+  const uint32_t interior = keyTrees[0].interiorCount;
+  ASSERT_EQ(layout.nodes.size(), std::size_t(keys - 1) * interior) << what;
+  for (uint32_t seg = 0; seg + 1 < keys; ++seg)
+    for (uint32_t n = 0; n < interior; ++n) {
+      const tsah::motion::BlurredNodeSegment expect = expectedRecord(keyTrees, n, seg);
+      ASSERT_EQ(0, std::memcmp(&layout.nodes[std::size_t(n) * (keys - 1) + seg], &expect, sizeof expect))
+          << "node " << n << ", " << what << ", segment " << seg;
+      alikeNodes += seg == 0 && (expect.node.count0 & tsah::motion::kKeysAlikeBit) ? 1 : 0;
+    }
   for (uint32_t k = 0; k < keys; ++k) {
     const tsah::FlatBvh& tree = keyTrees[k];
     const std::vector<float>& p = keyPositions[k];
     const std::string at = what + ", key " + std::to_string(k);
-    ASSERT_EQ(layout.nodes.size(), std::size_t(keys) * tree.interiorCount) << at;
-    for (uint32_t n = 0; n < tree.interiorCount; ++n) {
-      const tsah::GpuBvhNode expect = expectedRecord(keyTrees, n, k);
-      ASSERT_EQ(0, std::memcmp(&layout.nodes[std::size_t(n) * keys + k], &expect, sizeof(tsah::GpuBvhNode)))
-          << "node " << n << ", " << at;
-      alikeNodes += k == 0 && (expect.count0 & 0x80000000u) ? 1 : 0;
-    }
     ASSERT_EQ(layout.triangles.size(), std::size_t(keys) * slots * 12) << at;
     for (uint32_t s = 0; s < slots; ++s) {
       const float* record = layout.triangles.data() + (std::size_t(s) * keys + k) * 12;

@@ -107,12 +107,14 @@ Bounds lerpBounds(float a, float b, float f) {
   return {r::addDown(pl, r::mulDown(f, b)), r::addUp(ph, r::mulUp(f, b))};
 }
 
-// The lerped box a traversal tests: lerpBox of the two keys, or (prepadded) the GPU layout's
-// lerpPrepadded of the keys pre-padded over both (the smallest pad a frame of those keys gets).
+// The lerped box a traversal tests: lerpBox of the two keys, or (prepadded) the plain lerp of the
+// keys pre-padded over both (the smallest pad a frame of those keys gets; the GPU layout moves such
+// boxes, test_blurred_node.cpp).
 Aabb lerpedBox(const Aabb& b0, const Aabb& b1, float f, bool prepadded) {
   if (!prepadded) return m::lerpBox(b0, b1, f);
   const Vec3 mag = m::foldMagnitudes(b1, m::foldMagnitudes(b0, Vec3{0.0f, 0.0f, 0.0f}));
-  return m::lerpPrepadded(m::prepadBox(b0, mag), m::prepadBox(b1, mag), f);
+  const Aabb a = m::prepadBox(b0, mag), b = m::prepadBox(b1, mag);
+  return {m::lerpVertex(a.lo, b.lo, f), m::lerpVertex(a.hi, b.hi, f)};
 }
 
 // Boxes at two keys around random vertices of the given magnitude, then random f: the lerped box
@@ -218,8 +220,8 @@ TEST(MotionBlurLerp, PrepaddedBoxesWidenOutwardAndEmptyBoxesStayEmpty) {
   EXPECT_LT(padded.lo.x, b0.lo.x);
   EXPECT_GT(padded.hi.z, b0.hi.z);
   const Aabb empty;
-  const Aabb emptyPadded = m::prepadBox(empty, m::foldMagnitudes(empty, Vec3{0.0f, 0.0f, 0.0f}));
-  EXPECT_TRUE(m::lerpPrepadded(emptyPadded, emptyPadded, 0.37f).empty());
+  EXPECT_TRUE(m::prepadBox(empty, m::foldMagnitudes(empty, Vec3{0.0f, 0.0f, 0.0f})).empty());
+  EXPECT_TRUE(lerpedBox(empty, empty, 0.37f, true).empty());
 }
 
 // Random boxes of a node at two keys and random child boxes inside them (every third trial the

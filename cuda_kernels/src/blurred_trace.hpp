@@ -6,6 +6,7 @@
 #include <cuda_runtime_api.h>
 
 #include "device_types.hpp"
+#include "tsah/layout/blurred_node.hpp"
 #include "tsah/core/ray.hpp"
 #include "tsah/layout/traversal.hpp"
 
@@ -19,19 +20,17 @@ struct alignas(16) KeyTriangle {
 };
 static_assert(sizeof(KeyTriangle) == 48);
 
-inline constexpr uint32_t kKeysAlikeBit = 0x80000000u;  // in a blurred node record's count0
-
 // The layout a blurred frame is traced from (docs/motion-blur.md#memory), key-adjacent so that a
 // ray's segment (keys s and s + 1) is one contiguous read per node and per slot:
-// - nodes[n * keyCount + k]: node n of the key-k refit (child boxes and references), so a node's
-//   two keys are 128 contiguous bytes. Its child boxes are pre-padded (motion::prepadBox over all
-//   keys), so that a ray lerps them with no pad (motion::lerpPrepadded); count0 has kKeysAlikeBit
-//   set when the node's child boxes are the same at every key (a ray then reads one key, no lerp);
+// - nodes[n * (keyCount - 1) + s]: node n's record for segment s (motion::BlurredNodeSegment, 96
+//   bytes: its key-s refit with pre-padded child boxes and its references, and the changes to key
+//   s + 1 in binary16 rounded outward; count0's motion::kKeysAlikeBit set when the node's child
+//   boxes are the same at every key: a ray then reads the key-s rows alone);
 // - triangles[s * keyCount + k]: slot s's triangle at key k (the key-k positions of its vertices,
 //   in slot order), so a leaf slot's two keys are 96 contiguous bytes and no index is read.
 // keyCount >= 2 (a blurred frame).
 struct BlurredLayout {
-  const GpuBvhNode* nodes = nullptr;
+  const motion::BlurredNodeSegment* nodes = nullptr;
   const KeyTriangle* triangles = nullptr;
   const Aabb* keyRootBoxes = nullptr;  // per key
   const float* keyTimes = nullptr;     // shutter fractions: first 0, last 1, increasing
@@ -60,9 +59,9 @@ struct BlurredLayoutSources {
   float* lastPositions = nullptr;
 };
 
-// Builds the layout (nodes: keyCount * nodeCount records, triangles: keyCount * slots) in one launch:
+// Builds the layout (nodes: (keyCount - 1) * nodeCount records, triangles: keyCount * slots) in one launch:
 // one thread per node (all its keys) and per slot (all its keys), then the copies.
-void launchBuildBlurredLayout(const BlurredLayoutSources& from, GpuBvhNode* nodes, KeyTriangle* triangles,
+void launchBuildBlurredLayout(const BlurredLayoutSources& from, motion::BlurredNodeSegment* nodes, KeyTriangle* triangles,
                               cudaStream_t stream);
 
 // Traces rays[i] at shutter fraction times[i]: closest hits into `hits`, or (occluded non-null)

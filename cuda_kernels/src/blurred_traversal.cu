@@ -36,13 +36,13 @@ __device__ __forceinline__ bool sameBoxes(const GpuBvhNode& a, const GpuBvhNode&
   return sameBits(x[0], y[0]) && sameBits(x[1], y[1]) && sameBits(x[2], y[2]);
 }
 
-// Items, in a grid-stride loop: i < nodeCount writes node n = i's records of every key, its child
-// boxes pre-padded over all keys (motion::prepadBox) and kKeysAlikeBit set when they are the same
-// at every key (the last key's record, unpadded, also to the instant nodes); then slot s's
-// triangle at every key, v[9] = 1 when its vertices are the same at every key; then, with
-// keyRoots, the last key's positions one float each and the keys' root boxes. Each record is whole
-// 16-byte rows.
-__global__ void buildBlurredLayoutKernel(BlurredLayoutSources from, GpuBvhNode* __restrict__ nodes,
+// Items, in a grid-stride loop: i < nodeCount writes node n = i's record of every segment
+// (motion::encodeNodeSegment of its key records, child boxes pre-padded over all keys by
+// motion::prepadBox, alike when they are the same at every key; the last key's record, unpadded,
+// also to the instant nodes); then slot s's triangle at every key, v[9] = 1 when its vertices are
+// the same at every key; then, with keyRoots, the last key's positions one float each and the keys'
+// root boxes. Each record is whole 16-byte rows.
+__global__ void buildBlurredLayoutKernel(BlurredLayoutSources from, motion::BlurredNodeSegment* __restrict__ nodes,
                                          KeyTriangle* __restrict__ triangles) {
   const uint32_t keys = from.keyCount, last = keys - 1;
   const uint64_t nodeItems = from.nodeCount, slotItems = from.slots;
@@ -61,14 +61,22 @@ __global__ void buildBlurredLayoutKernel(BlurredLayoutSources from, GpuBvhNode* 
         m1 = motion::foldMagnitudes(node.childBox(1), m1);
         alike &= sameBoxes(first, node);
       }
-      for (uint32_t k = 0; k < keys; ++k) {
+      const auto prepadded = [&](uint32_t k) {
         GpuBvhNode node = loadNodeRecord(key0 + uint64_t(k) * from.nodeCount);
-        if (from.keyRoots && k == last) storeNodeRecord(from.lastNodes + i, node);
         node.setChildBox(0, motion::prepadBox(node.childBox(0), m0));
         node.setChildBox(1, motion::prepadBox(node.childBox(1), m1));
-        if (alike) node.count0 |= kKeysAlikeBit;
-        storeNodeRecord(nodes + i * keys + k, node);
+        return node;
+      };
+      GpuBvhNode atS = prepadded(0);
+      for (uint32_t k = 0; k + 1 < keys; ++k) {
+        const GpuBvhNode atNext = prepadded(k + 1);
+        const motion::BlurredNodeSegment record = motion::encodeNodeSegment(atS, atNext, alike);
+        const float4* row = reinterpret_cast<const float4*>(&record);
+        float4* to = reinterpret_cast<float4*>(nodes + i * (keys - 1) + k);
+        for (int r = 0; r < 6; ++r) to[r] = row[r];
+        atS = atNext;
       }
+      if (from.keyRoots) storeNodeRecord(from.lastNodes + i, loadNodeRecord(key0 + uint64_t(last) * from.nodeCount));
     } else if (i < nodeItems + slotItems) {
       const uint64_t s = i - nodeItems;
       const uint32_t* ids = from.slotVertices + 3 * s;
@@ -115,7 +123,7 @@ __global__ void __launch_bounds__(128) blurredTraceKernel(BlurredLayout frame, c
 
 }  // namespace
 
-void launchBuildBlurredLayout(const BlurredLayoutSources& from, GpuBvhNode* nodes, KeyTriangle* triangles,
+void launchBuildBlurredLayout(const BlurredLayoutSources& from, motion::BlurredNodeSegment* nodes, KeyTriangle* triangles,
                               cudaStream_t stream) {
   const uint64_t items =
       uint64_t(from.nodeCount) + from.slots + (from.keyRoots ? from.keyStride + from.keyCount : 0);

@@ -69,13 +69,13 @@ __device__ __forceinline__ uint32_t slotTriangle(const TraceScene& scene, uint32
 // A blurred frame at one ray's time: the two keys of its segment in the blurred layout
 // (blurred_trace.hpp), each node's and each slot's pair of keys one contiguous run of vector loads.
 // Vertices are lerped as the CPU runtime's tsah::MotionFrame lerps them (motion::lerpVertex, the
-// watertight test), so hits are the CPU runtime's; child boxes are the layout's pre-padded keys
-// lerped with no pad (motion::lerpPrepadded), which contain the same lerped triangles; only the loop
-// is the one below. keyCount >= 2.
+// watertight test), so hits are the CPU runtime's; child boxes are the layout's pre-padded key-s
+// boxes moved towards key s + 1 by their outward-rounded changes (blurred_node.hpp), which contain
+// the same lerped triangles; only the loop is the one below. keyCount >= 2.
 struct BlurredFrame {
-  const float4* nodes;      // key s of node 0; node n at nodes + n * nodeStride, key s + 1 right after
+  const float4* nodes;      // node 0's record of segment s; node n's at nodes + n * nodeStride
   const float4* triangles;  // key s of slot 0; slot t at triangles + t * triangleStride
-  uint32_t nodeStride, triangleStride;  // in float4: 4 and 3 per key
+  uint32_t nodeStride, triangleStride;  // in float4: 6 per segment, 3 per key
   const uint32_t* triIndex;
   float f;
   RootInfo root;
@@ -85,7 +85,7 @@ struct BlurredFrame {
     const uint32_t k = uint32_t(seg.index);
     nodes = reinterpret_cast<const float4*>(l.nodes + k);
     triangles = reinterpret_cast<const float4*>(l.triangles + k);
-    nodeStride = 4 * l.keyCount;
+    nodeStride = 6 * (l.keyCount - 1);
     triangleStride = 3 * l.keyCount;
     triIndex = l.triIndex;
     f = seg.f;
@@ -95,26 +95,33 @@ struct BlurredFrame {
   }
 };
 
-__device__ __forceinline__ float4 lerpRow(float4 a, float4 b, float f) {
-  return make_float4(motion::lerp(a.x, b.x, f), motion::lerp(a.y, b.y, f), motion::lerp(a.z, b.z, f),
-                     motion::lerp(a.w, b.w, f));
+// A node's two child boxes at the ray's f from its record of the ray's segment
+// (motion::BlurredNodeSegment, rows 0..5): key s's pre-padded rows, and (unless kKeysAlikeBit says
+// every key holds the same boxes) each float moved by (f * scale) * delta, its binary16 change to
+// key s + 1, in one fused multiply-add: 96 bytes read where two whole key records took 112.
+__device__ __forceinline__ float moved(float a, float fs, uint32_t halves, bool high) {
+  return fmaf(fs, motion::halfValue(uint16_t(high ? halves >> 16 : halves & 0xffffu)), a);
+}
+__device__ __forceinline__ float4 movedRow(float4 a, float fs, uint32_t lowHalves, uint32_t highHalves) {
+  return make_float4(moved(a.x, fs, lowHalves, false), moved(a.y, fs, lowHalves, true), moved(a.z, fs, highHalves, false),
+                     moved(a.w, fs, highHalves, true));
 }
 
-// A node's two child boxes at the ray's f: its rows at key s, or (unless kKeysAlikeBit says every
-// key holds the same boxes) those rows lerped with its rows at key s + 1. The boxes are pre-padded,
-// so each side is motion::lerpPrepadded's lerp with no pad.
 __device__ __forceinline__ void loadBvh2Node(const BlurredFrame& m, int32_t ref, float4& n0xy, float4& n1xy,
                                              float4& nz, int4& refs) {
-  const float4* p = m.nodes + std::size_t(ref) * m.nodeStride;  // key s: rows 0..3, key s + 1: rows 4..7
+  const float4* p = m.nodes + std::size_t(ref) * m.nodeStride;
   n0xy = __ldg(p), n1xy = __ldg(p + 1), nz = __ldg(p + 2);
   refs = __ldg(reinterpret_cast<const int4*>(p + 3));
-  if (uint32_t(refs.z) & kKeysAlikeBit) {
-    refs.z = int32_t(uint32_t(refs.z) & ~kKeysAlikeBit);
+  if (uint32_t(refs.z) & motion::kKeysAlikeBit) {
+    refs.z = int32_t(uint32_t(refs.z) & ~motion::kKeysAlikeBit);
     return;
   }
-  n0xy = lerpRow(n0xy, __ldg(p + 4), m.f);
-  n1xy = lerpRow(n1xy, __ldg(p + 5), m.f);
-  nz = lerpRow(nz, __ldg(p + 6), m.f);
+  const uint4 d = __ldg(reinterpret_cast<const uint4*>(p + 4));  // the changes of rows 0 and 1
+  const uint4 tail = __ldg(reinterpret_cast<const uint4*>(p + 5));  // row 2's changes, the scale
+  const float fs = m.f * __uint_as_float(tail.z);
+  n0xy = movedRow(n0xy, fs, d.x, d.y);
+  n1xy = movedRow(n1xy, fs, d.z, d.w);
+  nz = movedRow(nz, fs, tail.x, tail.y);
 }
 
 // A slot's triangle at the ray's f: its vertices lerped between keys s and s + 1 (key s alone when

@@ -71,7 +71,7 @@ UpdateTimings GpuRuntime::Impl::refitKeys(std::span<const float> keyTimes, Refit
 void GpuRuntime::Impl::enqueueBlurredLayout(uint32_t keys, bool withInstantState) {
   DeviceTree& t = tree();
   const uint32_t interior = t.topology.interiorCount;
-  blurNodes.reserve(std::size_t(keys) * interior);
+  blurNodes.reserve(std::size_t(keys - 1) * interior);
   blurTriangles.reserve(std::size_t(keys) * triangles);
   detail::BlurredLayoutSources from;
   from.keyNodes = keyNodes.data();
@@ -133,7 +133,7 @@ UpdateTimings GpuRuntime::Impl::refitAnimationKeys(std::span<const double> keyTi
   keyRoots.reserve(keys);
   keyFrames.reserve(keys);
   keyFractions.reserve(keys);
-  blurNodes.reserve(std::size_t(keys) * interior);
+  blurNodes.reserve(std::size_t(keys - 1) * interior);
   blurTriangles.reserve(std::size_t(keys) * triangles);
   std::vector<detail::FrameParams> blends(keys);
   for (uint32_t k = 0; k < keys; ++k) {
@@ -285,7 +285,7 @@ GpuRuntime::BlurredLayoutCopy GpuRuntime::downloadBlurredLayout() const {
   m.requireKey(0);
   BlurredLayoutCopy copy;
   copy.keys = m.shutterKeys;
-  copy.nodes = m.blurNodes.download(m.stream, std::size_t(copy.keys) * m.tree().topology.interiorCount);
+  copy.nodes = m.blurNodes.download(m.stream, std::size_t(copy.keys - 1) * m.tree().topology.interiorCount);
   const std::vector<detail::KeyTriangle> records =
       m.blurTriangles.download(m.stream, std::size_t(copy.keys) * m.triangles);
   copy.triangles.resize(records.size() * 12);
@@ -304,7 +304,8 @@ GpuRuntime::FrameBytes GpuRuntime::frameBytes() const {
   // The key arrays and the blurred layout built from them.
   if (keys >= 2)
     b.blurred = keys * (nodes + sizeof(Aabb) + positions + sizeof(float)) +
-                keys * (nodes + std::size_t(m.triangles) * sizeof(detail::KeyTriangle));
+                (keys - 1) * std::size_t(topology.interiorCount) * sizeof(motion::BlurredNodeSegment) +
+                keys * std::size_t(m.triangles) * sizeof(detail::KeyTriangle);
   return b;
 }
 

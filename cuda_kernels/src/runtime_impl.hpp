@@ -186,7 +186,7 @@ struct GpuRuntime::Impl {
   // The blurred layout (blurred_trace.hpp), built from the key arrays by every blurred update;
   // withInstantState: also the key root boxes and the last key's nodes, root box and positions as
   // the instant state, from the batch refit's roots (keyRoots).
-  DeviceBuffer<GpuBvhNode> blurNodes;
+  DeviceBuffer<motion::BlurredNodeSegment> blurNodes;  // (keys - 1) records per node
   DeviceBuffer<detail::KeyTriangle> blurTriangles;
   void enqueueBlurredLayout(uint32_t keys, bool withInstantState);
   // refitAnimationKeys' steps after the keys' uploads (events 0..3, as an update's).

@@ -26,6 +26,7 @@
 #include "tsah/core/bvh.hpp"
 #include "tsah/core/cost.hpp"
 #include "tsah/core/objective.hpp"
+#include "tsah/layout/blurred_node.hpp"
 #include "tsah/layout/cwbvh_build.hpp"
 #include "tsah/layout/cwbvh_layout.hpp"
 #include "tsah/layout/flat_bvh.hpp"
@@ -140,22 +141,23 @@ class GpuRuntime {
   FlatBvh downloadKeyTree(uint32_t key) const;
   std::vector<float> downloadKeyPositions(uint32_t key) const;
   // Host copy of the layout a blurred frame is traced from (docs/motion-blur.md#memory), derived
-  // from the key arrays: nodes[n * keys + k] is node n of key k's tree, its child boxes pre-padded
-  // over all keys (motion::prepadBox) and count0's bit 31 set when they are the same at every key;
-  // triangles holds 12 floats per slot and key, at (s * keys + k) * 12: the key-k positions of slot
-  // s's three vertices (v0 xyz, v1 xyz, v2 xyz), 1 when they are the same at every key (else 0), and
-  // two zeros. Throws tsah::ConfigError when not blurred.
+  // from the key arrays: nodes[n * (keys - 1) + s] is node n's record of segment s
+  // (motion::encodeNodeSegment of key s's and key s + 1's nodes, child boxes pre-padded over all
+  // keys by motion::prepadBox, alike when they are the same at every key); triangles holds 12 floats
+  // per slot and key, at (s * keys + k) * 12: the key-k positions of slot s's three vertices (v0 xyz,
+  // v1 xyz, v2 xyz), 1 when they are the same at every key (else 0), and two zeros. Throws
+  // tsah::ConfigError when not blurred.
   struct BlurredLayoutCopy {
     uint32_t keys = 0;
-    std::vector<GpuBvhNode> nodes;
+    std::vector<motion::BlurredNodeSegment> nodes;
     std::vector<float> triangles;
   };
   BlurredLayoutCopy downloadBlurredLayout() const;
   // Device bytes of the geometry a frame's tracing reads, the triangle indices and slot order
   // (which both read) left out. instant: the current tree's nodes and root, the positions and the
   // Woop triangles; blurred (0 unless blurred): per key one node set, root box, position set and
-  // shutter fraction, and the blurred layout (per key one more node set and a 48-byte triangle
-  // per slot).
+  // shutter fraction, and the blurred layout (per segment a 96-byte record per node, per key a
+  // 48-byte triangle per slot).
   struct FrameBytes {
     std::size_t instant = 0, blurred = 0;
   };

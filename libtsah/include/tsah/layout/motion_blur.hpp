@@ -131,8 +131,8 @@ TSAH_HD Aabb lerpBox(const Aabb& b0, const Aabb& b1, float f) {
 // Pre-padded key boxes (the GPU blurred layout; docs/motion-blur.md#pre-padded-key-boxes): each
 // key's box is widened once, when the layout is built, by lerpPad of the largest magnitude its axis
 // reaches over all the frame's keys (foldMagnitudes folds one key's box into m), so that a ray's
-// lerp of two such boxes (lerpPrepadded) needs no pad. Whatever the segment, that pad is at least
-// lerpBox's, and the widening's own rounding (at most u*m) is far inside its margin.
+// lerp of two such boxes needs no pad (blurred_node.hpp moves them). Whatever the segment, that pad
+// is at least lerpBox's, and the widening's own rounding (at most u*m) is far inside its margin.
 TSAH_HD Vec3 foldMagnitudes(const Aabb& b, Vec3 m) {
   for (int a = 0; a < 3; ++a) m[a] = maxMagnitude(b.lo[a], b.hi[a], m[a], 0.0f);
   return m;
@@ -145,9 +145,6 @@ TSAH_HD Aabb prepadBox(const Aabb& b, const Vec3& m) {
     out.hi[a] = b.hi[a] + pad;
   }
   return out;
-}
-TSAH_HD Aabb lerpPrepadded(const Aabb& a, const Aabb& b, float f) {
-  return {lerpVertex(a.lo, b.lo, f), lerpVertex(a.hi, b.hi, f)};
 }
 
 // A box holding lerpBox(c0, c1, f) for every f in [0, 1] and every pair of boxes c0 inside b0 and c1
