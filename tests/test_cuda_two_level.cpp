@@ -1,7 +1,8 @@
 // The GPU two-level runtime (tsah_cuda/gpu_two_level.hpp) against the CPU one (TwoLevelRuntime):
 // the same hits (instance, triangle, t), TLAS boxes holding every instance, no BLAS refit on a
 // frame of rigid motion only; the TLAS rebuilt every frame (LBVH, HLBVH-SAH) against the refitted
-// one. Every test skips without a GPU.
+// one; a T-SAH TLAS that misses an instance refused by every TLAS update. Every test skips without
+// a GPU.
 #include <gtest/gtest.h>
 
 #if TSAH_HAVE_CUDA
@@ -254,6 +255,29 @@ TEST_F(CudaTwoLevel, RebuiltTlasOfACrowdTracesLikeTheRefit) {
   ASSERT_EQ(crowd.instanceCount(), 64u);
   const double times[] = {0.0, 1.5, 1.5, 6.0, 9.75, 12.0};
   expectRebuiltTlasTracesLikeTheRefit(crowd, times, 101);
+}
+
+// Only the refit uploads the T-SAH TLAS, but every update checks it against the instances: a TLAS
+// over one instance too few is refused (tsah::DataError naming the TLAS) whatever Config::tlas is.
+TEST_F(CudaTwoLevel, EveryTlasUpdateRefusesATlasMissingAnInstance) {
+  tsah::TwoLevelScene broken = *scene;
+  std::vector<tsah::Aabb> boxes;
+  for (uint32_t i = 0; i + 1 < broken.instanceCount(); ++i)
+    boxes.push_back(tsah::instanceWorldBox(broken.scene, i, broken.frameTimes.front()));
+  ASSERT_FALSE(boxes.empty());
+  broken.tlas = tsah::rebuildTlas(boxes, broken.objective);
+  using tsah::cuda::TlasUpdate;
+  for (const TlasUpdate update : {TlasUpdate::Refit, TlasUpdate::Lbvh, TlasUpdate::HlbvhSah}) {
+    SCOPED_TRACE(tsah::cuda::tlasUpdateName(update));
+    tsah::cuda::GpuTwoLevelRuntime::Config config;
+    config.tlas = update;
+    try {
+      tsah::cuda::GpuTwoLevelRuntime gpu(broken, config);
+      ADD_FAILURE() << "a TLAS of " << boxes.size() << " instances accepted for " << broken.instanceCount();
+    } catch (const tsah::DataError& e) {
+      EXPECT_NE(std::string(e.what()).find("GPU two-level runtime: TLAS:"), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST(CudaTwoLevelNames, TlasUpdateNamesRoundTrip) {

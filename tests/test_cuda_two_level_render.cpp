@@ -3,7 +3,8 @@
 // primary surface at every pixel (kind, triangle in bake order, position, normal) and the same
 // image, at scene times between frames and at frames, with rotations, non-uniform scales, mirrored
 // placements, paths, time offsets and a looping pose; an instance flattened by its path is not
-// rendered, and rendered mirrored afterwards. Every test skips without a GPU.
+// rendered, and rendered mirrored afterwards; a TLAS rebuilt every frame renders the same frames.
+// Every test skips without a GPU.
 #include <gtest/gtest.h>
 
 #if TSAH_HAVE_CUDA
@@ -158,6 +159,24 @@ TEST_F(CudaTwoLevelRender, SurfacesAndImageEqualTheCpuRenderersFrames) {
     for (uint32_t tri : triangles) seen.insert(instanceOf.at(tri));
   }
   EXPECT_EQ(seen.size(), scene.instanceCount()) << "instances seen in the frames";
+}
+
+// A runtime that rebuilds its TLAS every frame (LBVH, HLBVH-SAH: the T-SAH TLAS never uploaded)
+// renders the CPU renderer's frames too: the renderer traces the frame's rebuilt tree.
+TEST_F(CudaTwoLevelRender, ARebuiltTlasRendersTheCpuRenderersFrames) {
+  const tsah::TwoLevelScene scene = load(tsah::test::writeTwoLevelScene(dir));
+  tsah::TwoLevelRuntime cpu(scene, {2, tsah::TwoLevelRuntime::TlasUpdate::Refit, tsah::Layout::Bvh2});
+  tsah::TwoLevelRenderView view(cpu);
+  for (const auto update : {tsah::cuda::TlasUpdate::Lbvh, tsah::cuda::TlasUpdate::HlbvhSah}) {
+    SCOPED_TRACE(tsah::cuda::tlasUpdateName(update));
+    tsah::cuda::GpuTwoLevelRuntime::Config config;
+    config.tlas = update;
+    tsah::cuda::GpuTwoLevelRuntime gpu(scene, config);
+    tsah::cuda::GpuTwoLevelRenderer renderer(gpu);
+    uint32_t index = 0;
+    for (const double t : {0.0, 7.5, 12.0})
+      EXPECT_GT(expectSameFrame(cpu, view, gpu, renderer, t, index++).size(), 500u) << "scene time " << t;
+  }
 }
 
 // An instance flattened by its path (t = 1: singular world matrix) renders no mesh pixel; before

@@ -2,7 +2,6 @@
 // the frame's buffers; the passes are two_level_render.cu's.
 #include "tsah_cuda/gpu_two_level_render.hpp"
 
-#include <algorithm>
 #include <span>
 #include <string>
 
@@ -15,7 +14,6 @@
 namespace tsah::cuda {
 
 using detail::kRenderEvents;
-using detail::kRenderWords;
 
 struct GpuTwoLevelRenderer::Impl {
   explicit Impl(GpuTwoLevelRuntime& r);
@@ -38,9 +36,7 @@ struct GpuTwoLevelRenderer::Impl {
   cudaStream_t side = nullptr;  // the shadow pass, beside the AO pass on the runtime's stream
   detail::EventTimer events;
   DeviceBuffer<uint32_t> firstTriangle, sourceOffsets, vertexTriOffsets, vertexTris;
-  DeviceBuffer<uint32_t> words, activePixels;
-  DeviceBuffer<float4> surfaces;
-  DeviceBuffer<uint8_t> occluded, shadowOccluded, image;
+  detail::PassBufferSet passes;
   detail::Frame last{};  // the last rendered frame (downloadSurfaces)
   bool rendered = false;
 };
@@ -88,26 +84,7 @@ RenderStats GpuTwoLevelRenderer::render(const Camera& camera, const SceneLightin
   uint64_t aoRays = 0, shadowRays = 0;
   const detail::Frame f = detail::makeFrame(camera, lighting, settings, aoRays, shadowRays);
   const detail::TwoLevelTraceAccess access = m.runtime.traceAccess();
-  m.surfaces.reserve(3 * uint64_t(f.padded));
-  m.activePixels.reserve(f.padded);
-  m.occluded.reserve(std::max<uint64_t>(aoRays, 1));
-  m.shadowOccluded.reserve(std::max<uint64_t>(2 * shadowRays, 2));  // results, then "traced" flags
-  m.image.reserve(std::size_t(f.width) * f.height * 3);
-  m.words.reserve(kRenderWords);
-  cudaStream_t stream = access.stream;
-  m.words.fillBytes(0, stream);
-  m.events.record(0, stream);
-  detail::PassBuffers b;
-  b.stream = stream;
-  b.side = m.side;
-  b.events = &m.events;
-  b.surfaces = m.surfaces.data();
-  b.activePixels = m.activePixels.data();
-  b.words = m.words.data();
-  b.occluded = m.occluded.data();
-  b.shadowOccluded = m.shadowOccluded.data();
-  b.shadowTraced = m.shadowOccluded.data() + shadowRays;
-  b.image = m.image.data();
+  const detail::PassBuffers b = m.passes.startFrame(f, aoRays, shadowRays, true, access.stream, m.side, m.events);
   m.last = f;
   m.rendered = true;
   return detail::renderTwoLevelFrame(b, f, m.tables(access.scene), aoRays, shadowRays, image, timings);
@@ -119,7 +96,7 @@ std::vector<Surface> GpuTwoLevelRenderer::downloadSurfaces() const {
   const detail::Frame& f = m.last;
   DeviceBuffer<Surface> out(std::size_t(f.width) * f.height);
   cudaStream_t stream = m.runtime.traceAccess().stream;
-  detail::launchUnpackSurfaces(f, m.surfaces.data(), out.data(), stream);
+  detail::launchUnpackSurfaces(f, m.passes.surfaces(), out.data(), stream);
   return out.download(stream);
 }
 

@@ -198,13 +198,6 @@ void enqueueVertexNormals(GpuRuntime::Impl& m, cudaStream_t s) {
   CUDA_CHECK_LAUNCH("vertexNormalsKernel");
 }
 
-// Where the frame's passes run and write.
-PassBuffers passBuffers(GpuRuntime::Impl& m, uint8_t* shadowTraced) {
-  return {m.stream,           m.sideStream,        &m.events,           m.surfaces.data(),
-          m.activePixels.data(), m.words.data(),   m.occluded.data(),   m.shadowOccluded.data(),
-          shadowTraced,        m.image.data()};
-}
-
 }  // namespace
 
 RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const SceneLighting& lighting,
@@ -237,23 +230,14 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   if (!fused) {
     m.rays.reserve(std::max<uint64_t>(padded, aoRays));
     m.hits.reserve(padded);
+    m.shadowRays.reserve(std::max<uint64_t>(shadowRays, 1));
   }
-  m.surfaces.reserve(3 * padded);
-  if (fused) m.activePixels.reserve(padded);
-  m.occluded.reserve(std::max<uint64_t>(aoRays, 1));
-  if (!fused) m.shadowRays.reserve(std::max<uint64_t>(shadowRays, 1));
-  m.shadowOccluded.reserve(std::max<uint64_t>(2 * shadowRays, 2));  // results, then "traced" flags
-  m.image.reserve(std::size_t(f.width) * f.height * 3);
-  uint8_t* shadowTraced = m.shadowOccluded.data() + shadowRays;
 
   const unsigned block = 256;
   cudaStream_t stream = m.stream;
   auto& ev = m.events;
-
-  m.words.reserve(kRenderWords);
-  m.words.fillBytes(0, stream);
-  ev.record(0, stream);
-  const PassBuffers buffers = passBuffers(m, shadowTraced);
+  // Where the frame's passes write (the fused passes list the pixels that found a surface).
+  const PassBuffers buffers = m.passes.startFrame(f, aoRays, shadowRays, fused, stream, m.sideStream, ev);
   if (fused) {
     // The vertex normals beside the AO pass, after the shadow pass.
     const auto normals = [&](cudaStream_t side) { enqueueVertexNormals(m, side); };
@@ -270,27 +254,27 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
     primaryRaysKernel<<<detail::gridFor(padded, block), block, 0, stream>>>(f, m.rays.data(), times);
     CUDA_CHECK_LAUNCH("primaryRaysKernel");
     ev.record(1, stream);
-    trace(m.rays.data(), f.padded, m.hits.data(), nullptr, m.words.data() + kPrimaryCounter);
+    trace(m.rays.data(), f.padded, m.hits.data(), nullptr, buffers.words + kPrimaryCounter);
     ev.record(2, stream);
     surfaceKernel<<<detail::gridFor(padded, block), block, 0, stream>>>(f, m.hits.data(), m.indices.data(),
-                                                                        m.positions.data(), blur, m.surfaces.data());
+                                                                        m.positions.data(), blur, buffers.surfaces);
     CUDA_CHECK_LAUNCH("surfaceKernel");
     if (aoRays > 0) {
-      aoRaysKernel<<<detail::gridFor(aoRays, block), block, 0, stream>>>(f, m.surfaces.data(), m.rays.data(), times,
-                                                                         m.words.data());
+      aoRaysKernel<<<detail::gridFor(aoRays, block), block, 0, stream>>>(f, buffers.surfaces, m.rays.data(), times,
+                                                                         buffers.words);
       CUDA_CHECK_LAUNCH("aoRaysKernel");
     }
     ev.record(3, stream);
-    trace(m.rays.data(), uint32_t(aoRays), nullptr, m.occluded.data(), m.words.data() + kAoCounter);
+    trace(m.rays.data(), uint32_t(aoRays), nullptr, buffers.occluded, buffers.words + kAoCounter);
     ev.record(4, stream);
     if (shadowRays > 0) {
-      shadowRaysKernel<<<detail::gridFor(shadowRays, block), block, 0, stream>>>(f, m.surfaces.data(),
+      shadowRaysKernel<<<detail::gridFor(shadowRays, block), block, 0, stream>>>(f, buffers.surfaces,
                                                                                  m.shadowRays.data(), times,
-                                                                                 shadowTraced, m.words.data());
+                                                                                 buffers.shadowTraced, buffers.words);
       CUDA_CHECK_LAUNCH("shadowRaysKernel");
     }
     ev.record(5, stream);
-    trace(m.shadowRays.data(), uint32_t(shadowRays), nullptr, m.shadowOccluded.data(), m.words.data() + kShadowCounter);
+    trace(m.shadowRays.data(), uint32_t(shadowRays), nullptr, buffers.shadowOccluded, buffers.words + kShadowCounter);
     ev.record(6, stream);
     ev.record(11, stream);
     enqueueVertexNormals(m, stream);

@@ -32,6 +32,7 @@
 #include "tsah/render/renderer.hpp"
 #include "tsah/render/shading.hpp"
 #include "tsah_cuda/cuda_check.hpp"
+#include "tsah_cuda/device_buffer.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 
 namespace tsah::cuda::detail {
@@ -256,6 +257,45 @@ struct PassBuffers {
   uint8_t* shadowOccluded = nullptr;
   uint8_t* shadowTraced = nullptr;
   uint8_t* image = nullptr;  // 3 bytes per pixel
+};
+
+// The device buffers behind a frame's PassBuffers, for every renderer (render.cu's flat frames,
+// gpu_two_level_render.cpp's two-level ones); each grows when a frame needs more.
+class PassBufferSet {
+ public:
+  // Grows the buffers for frame f (aoRays, shadowRays: makeFrame's; listPixels: with the fused
+  // passes' list of the pixels that found a surface), zeroes the ray counters on `stream` and
+  // records event 0 (the frame's start) there. The passes run on `stream` and `side`.
+  PassBuffers startFrame(const Frame& f, uint64_t aoRays, uint64_t shadowRays, bool listPixels, cudaStream_t stream,
+                         cudaStream_t side, EventTimer& events) {
+    surfaces_.reserve(3 * uint64_t(f.padded));
+    if (listPixels) activePixels_.reserve(f.padded);
+    occluded_.reserve(std::max<uint64_t>(aoRays, 1));
+    shadowOccluded_.reserve(std::max<uint64_t>(2 * shadowRays, 2));  // results, then "traced" flags
+    image_.reserve(std::size_t(f.width) * f.height * 3);
+    words_.reserve(kRenderWords);
+    words_.fillBytes(0, stream);
+    events.record(0, stream);
+    PassBuffers b;
+    b.stream = stream;
+    b.side = side;
+    b.events = &events;
+    b.surfaces = surfaces_.data();
+    b.activePixels = activePixels_.data();
+    b.words = words_.data();
+    b.occluded = occluded_.data();
+    b.shadowOccluded = shadowOccluded_.data();
+    b.shadowTraced = shadowOccluded_.data() + shadowRays;
+    b.image = image_.data();
+    return b;
+  }
+  // The last frame's surfaces (3 float4 per padded pixel).
+  const float4* surfaces() const { return surfaces_.data(); }
+
+ private:
+  DeviceBuffer<uint32_t> words_, activePixels_;
+  DeviceBuffer<float4> surfaces_;  // 3 per pixel: position + kind, normal + triangle, u v
+  DeviceBuffer<uint8_t> occluded_, shadowOccluded_, image_;
 };
 
 #if defined(__CUDACC__)

@@ -13,6 +13,7 @@
 #include "event_timer.hpp"
 #include "kernels.hpp"
 #include "rebuild.hpp"
+#include "render_passes.cuh"
 #include "tsah/layout/cwbvh_build.hpp"
 #include "tsah/base/error.hpp"
 #include "tsah_cuda/cuda_check.hpp"
@@ -216,17 +217,16 @@ struct GpuRuntime::Impl {
   MotionBvhView motionView() const;
   detail::BlurredLayout blurredLayout() const;
 
-  // Scratch of the ray queries and the renderer, grown on demand.
-  DeviceBuffer<uint32_t> words;          // ray counters, ray counts
+  // Scratch of the ray queries (rays and hits also the renderer's separate passes), grown on demand.
+  DeviceBuffer<uint32_t> words;          // the queries' ray counter
   DeviceBuffer<Ray> rays;
   DeviceBuffer<Hit> hits;
-  DeviceBuffer<uint8_t> occluded, shadowOccluded;
+  DeviceBuffer<uint8_t> occluded;
+  // The renderer's: the separate passes' shadow rays, what every frame's passes write, the normals.
   DeviceBuffer<Ray> shadowRays;
-  DeviceBuffer<float4> surfaces;         // 3 per pixel: position + kind, normal + triangle, u v
-  DeviceBuffer<uint32_t> activePixels;   // fused wide passes: the pixels whose primary ray found a surface
+  detail::PassBufferSet passes;
   DeviceBuffer<uint32_t> vertexTriOffsets, vertexTris;  // triangles of each vertex (CSR), for normals
   DeviceBuffer<float> normals;           // smooth shading normals of the current frame
-  DeviceBuffer<uint8_t> image;
 
   // The device-array entry points' events and flag word (device_arrays_runtime.cpp), made at first use.
   std::shared_ptr<DeviceArrayState> deviceArrays;

@@ -26,8 +26,8 @@ struct TwoLevelShadingTables {
 };
 
 // One frame: the fused passes (the shadow pass on b.side), the shading and the download of the
-// image (when not null), on b.stream; waits for it and returns its stats (b.words zeroed and event 0
-// recorded by the caller).
+// image (when not null), on b.stream; waits for it and returns its stats (b from
+// PassBufferSet::startFrame: the counters zeroed and event 0 recorded).
 RenderStats renderTwoLevelFrame(const PassBuffers& b, const Frame& f, const TwoLevelShadingTables& tables,
                                 uint64_t aoRays, uint64_t shadowRays, Image* image, GpuRenderTimings* timings);
 

@@ -127,7 +127,9 @@ struct GpuTwoLevelRuntime::Impl {
   detail::InstanceState* hostInstances = nullptr;  // pinned: the graphs copy it to `instances`
   DeviceBuffer<detail::InstanceState> instances;
   DeviceBuffer<Aabb> instanceBoxes;
-  FlatBvh tlasTopology;
+  FlatBvh tlasTopology;  // the T-SAH TLAS, checked against the instances
+  // Config::tlas Refit: the T-SAH TLAS's nodes and refit data on the device (uploadRefitTlas).
+  void uploadRefitTlas();
   uint32_t tlasLeafCount = 0;
   DeviceBuffer<GpuBvhNode> tlasNodes;
   DeviceBuffer<uint32_t> tlasParent, tlasCounters, tlasTriIndex;
@@ -257,7 +259,21 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
                             std::max<std::size_t>(1, count) * sizeof(detail::InstanceState)));
   instances.resize(count);
   instanceBoxes.resize(count);
+  // The T-SAH TLAS is checked whatever the update; only its refit reads it on the device.
   tlasTopology = runtimeTopology(flattenBvh(scene.tlas), count, kTraversalStackSize, "GPU two-level runtime: TLAS");
+  if (config.tlas == TlasUpdate::Refit) {
+    uploadRefitTlas();
+  } else {
+    tlasRebuild.method = config.tlas == TlasUpdate::Lbvh ? RebuildMethod::Lbvh : RebuildMethod::HlbvhSah;
+    tlasRebuild.maxLeafSize = scene.objective.maxLeafSize;
+    tlasRebuild.cost = scene.objective.cost;
+    tlasRebuild.woop = false;
+    tlasRebuilder = std::make_unique<detail::GpuRebuilder>(count, Layout::Bvh2);
+  }
+  CUDA_CHECK(cudaStreamSynchronize(stream));
+}
+
+void GpuTwoLevelRuntime::Impl::uploadRefitTlas() {
   const RefitTopology r = refitTopology(tlasTopology);
   tlasLeafCount = uint32_t(r.leaves.size());
   tlasNodes = toDevice(tlasTopology.nodes, stream);
@@ -268,14 +284,6 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
   tlasLeaves = toDevice(r.leaves, stream);
   const detail::RootInfo root = rootOf(tlasTopology);
   tlasRoot = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&root, 1), stream);
-  if (config.tlas != TlasUpdate::Refit) {
-    tlasRebuild.method = config.tlas == TlasUpdate::Lbvh ? RebuildMethod::Lbvh : RebuildMethod::HlbvhSah;
-    tlasRebuild.maxLeafSize = scene.objective.maxLeafSize;
-    tlasRebuild.cost = scene.objective.cost;
-    tlasRebuild.woop = false;
-    tlasRebuilder = std::make_unique<detail::GpuRebuilder>(count, Layout::Bvh2);
-  }
-  CUDA_CHECK(cudaStreamSynchronize(stream));
 }
 
 GpuTwoLevelRuntime::Impl::~Impl() {

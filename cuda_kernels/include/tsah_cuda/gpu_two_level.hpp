@@ -3,14 +3,15 @@
 // tsah::TwoLevelRuntime. Uploaded once: every BLAS topology (triangle indices, slot vertex ids,
 // parents and leaves; instances of one source share them), each source's keyframes, the static
 // BLAS refitted once at their source's start time, one node/box array, positions and Woop triangles
-// per pose, and the TLAS topology. updateAt(t) runs one CUDA graph (captured at its first use,
-// replayed after): the instances' transforms (computed on the host, 3x4 each) uploaded, each pose's
-// positions at its local time (the flat runtime's interpolation kernel) and its BLAS refit and Woop
-// pass, the instances' world boxes from their BLAS root boxes, and the TLAS refit (or, with
-// Config::tlas a rebuild, a new TLAS built over those boxes). A frame whose poses all keep their
-// local time replays a second graph without the BLAS work. Rays traverse the TLAS with the binary
-// layout's device loop (Bvh2Traversal, bvh2_traversal.cuh); at a TLAS leaf the ray is moved into
-// the instance's space and traced by the same loop through the instance's BLAS, as the CPU does.
+// per pose, and (Config::tlas Refit) the T-SAH TLAS's nodes and topology. updateAt(t) runs one
+// CUDA graph (captured at its first use, replayed after): the instances' transforms (computed on
+// the host, 3x4 each) uploaded, each pose's positions at its local time (the flat runtime's
+// interpolation kernel) and its BLAS refit and Woop pass, the instances' world boxes from their
+// BLAS root boxes, and the TLAS refit (or, with Config::tlas a rebuild, a new TLAS built over those
+// boxes). A frame whose poses all keep their local time replays a second graph without the BLAS
+// work. Rays traverse the TLAS with the binary layout's device loop (Bvh2Traversal,
+// bvh2_traversal.cuh); at a TLAS leaf the ray is moved into the instance's space and traced by the
+// same loop through the instance's BLAS, as the CPU does.
 #include <cstdint>
 #include <memory>
 #include <span>
