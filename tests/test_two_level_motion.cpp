@@ -502,15 +502,27 @@ TEST(TwoLevelMotionRigid, InstanceFlattenedInsideTheShutterIsNotHitThen) {
 // the baked positions): the same triangle (through the bake order) at t within kRelativeT. The
 // shutters open and close at scene frames: between frames the bake interpolates its keyframes,
 // the two-level scene evaluates the path.
+// A rigid static scene as two levels and as its flat bake, with a CPU runtime of the bake's tree.
+struct RigidStaticScene {
+  tsah::TwoLevelScene scene;
+  anim::BakedScene baked;
+  tsah::CpuRuntime flat;
+
+  explicit RigidStaticScene(const fs::path& path)
+      : scene(loadScene(path)), baked(anim::bakeScene(path.string())), flat(flatRuntime(baked.animation)) {}
+
+  static tsah::CpuRuntime flatRuntime(const anim::Animation& a) {
+    const tsah::OptimizedTree tree = tsah::optimizeAnimation(a, tsah::test::smallTwoLevelOptions());
+    return tsah::CpuRuntime(tsah::flattenBvh(tree.bvh), std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
+                            a.vertexCount(), tsah::CpuRuntime::Config(2));
+  }
+};
+
 TEST(TwoLevelMotionRigid, RigidStaticScenesEqualTheFlatBlurredBake) {
-  const fs::path dir = tsah::test::scratchDir();
-  const fs::path path = writeRigidStaticScene(dir);
-  const tsah::TwoLevelScene scene = loadScene(path);
-  const anim::BakedScene baked = anim::bakeScene(path.string());
-  const anim::Animation& a = baked.animation;
-  const tsah::OptimizedTree tree = tsah::optimizeAnimation(a, tsah::test::smallTwoLevelOptions());
-  tsah::CpuRuntime flat(tsah::flattenBvh(tree.bvh), std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
-                        a.vertexCount(), tsah::CpuRuntime::Config(2));
+  RigidStaticScene rigid(writeRigidStaticScene(tsah::test::scratchDir()));
+  const tsah::TwoLevelScene& scene = rigid.scene;
+  const anim::Animation& a = rigid.baked.animation;
+  tsah::CpuRuntime& flat = rigid.flat;
   std::vector<uint32_t> firstTriangle;
   uint32_t triangles = 0;
   for (const auto& i : scene.scene.instances) {
@@ -561,14 +573,10 @@ TEST_F(TwoLevelMotion, BadShuttersAreRefusedAndLeaveTheFrame) {
 // rigid static scene (the same per-pixel times, the same geometry up to rounding): the same picture
 // but for a few pixels near edges; and a blurred frame is not the instant one.
 TEST(TwoLevelMotionRender, BlurredFramesLookLikeTheFlatBakesBlurredFrames) {
-  const fs::path dir = tsah::test::scratchDir();
-  const fs::path path = writeRigidStaticScene(dir);
-  const tsah::TwoLevelScene scene = loadScene(path);
-  const anim::BakedScene baked = anim::bakeScene(path.string());
-  const anim::Animation& a = baked.animation;
-  const tsah::OptimizedTree tree = tsah::optimizeAnimation(a, tsah::test::smallTwoLevelOptions());
-  tsah::CpuRuntime flat(tsah::flattenBvh(tree.bvh), std::vector<uint32_t>(a.indices().begin(), a.indices().end()),
-                        a.vertexCount(), tsah::CpuRuntime::Config(2));
+  RigidStaticScene rigid(writeRigidStaticScene(tsah::test::scratchDir()));
+  const tsah::TwoLevelScene& scene = rigid.scene;
+  const anim::Animation& a = rigid.baked.animation;
+  tsah::CpuRuntime& flat = rigid.flat;
   tsah::TwoLevelRuntime runtime(scene);
   tsah::TwoLevelRenderView view(runtime);
   runtime.updateShutter(1.0, 2.0);
