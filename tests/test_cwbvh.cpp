@@ -83,7 +83,7 @@ TEST(CwbvhQuantize, SteppedPlanesEqualTheSearch) {
   using namespace tsah::detail;
   auto referenceExponent = [](float p, float hi) {
     const float d = (hi - p) * (1.0f / 255.0f);
-    uint32_t e = (floatBits(d) >> 23) & 0xffu;
+    uint32_t e = (tsah::floatBits(d) >> 23) & 0xffu;
     if (!(d > 0.0f)) e = 1;
     e = std::clamp<uint32_t>(e, 1, 254);
     while (e < 254 && !(tsah::rounding::addDown(p, 255.0f * tsah::cwbvhStep(e)) >= hi)) ++e;

@@ -11,12 +11,12 @@
 // the tests rebuild every record bit for bit.
 #include <cmath>
 #include <cstdint>
-#include <cstring>
 #if defined(__CUDACC__)
 #include <cuda_fp16.h>
 #endif
 
 #include "tsah/core/directed_rounding.hpp"
+#include "tsah/core/float_bits.hpp"
 #include "tsah/core/hd.hpp"
 #include "tsah/layout/gpu_layout.hpp"
 
@@ -31,25 +31,6 @@ struct alignas(16) BlurredNodeSegment {
   uint32_t unused = 0;
 };
 static_assert(sizeof(BlurredNodeSegment) == 96 && alignof(BlurredNodeSegment) == 16);
-
-TSAH_HD uint32_t floatBits(float x) {
-#if defined(__CUDA_ARCH__)
-  return __float_as_uint(x);
-#else
-  uint32_t bits;
-  std::memcpy(&bits, &x, sizeof bits);
-  return bits;
-#endif
-}
-TSAH_HD float bitsFloat(uint32_t bits) {
-#if defined(__CUDA_ARCH__)
-  return __uint_as_float(bits);
-#else
-  float x;
-  std::memcpy(&x, &bits, sizeof x);
-  return x;
-#endif
-}
 
 // x (finite) as binary16 bits, rounded toward -infinity (down) or +infinity (up); magnitudes past
 // the largest finite binary16 (65504) become it or infinity by the same rule.

@@ -63,7 +63,7 @@ TSAH_HD void cwbvhAddCentreOffsets(const Aabb* boxes, uint32_t n, Vec3* offset) 
 // A float's order as an unsigned integer (-0 taken as +0, which compares equal to it).
 TSAH_HD uint32_t cwbvhOrderedBits(float f) {
   if (f == 0.0f) f = 0.0f;
-  const uint32_t u = detail::floatBits(f);
+  const uint32_t u = floatBits(f);
   return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
 }
 

@@ -217,18 +217,18 @@ TSAH_HD float cwbvhBitsMax3(float a, float b, float c) {
 #if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 900
   return __int_as_float(__vimax3_s32(__float_as_int(a), __float_as_int(b), __float_as_int(c)));
 #else
-  const int32_t m = std::max(std::max(int32_t(detail::floatBits(a)), int32_t(detail::floatBits(b))),
-                             int32_t(detail::floatBits(c)));
-  return detail::bitsFloat(uint32_t(m));
+  const int32_t m = std::max(std::max(int32_t(floatBits(a)), int32_t(floatBits(b))),
+                             int32_t(floatBits(c)));
+  return bitsFloat(uint32_t(m));
 #endif
 }
 TSAH_HD float cwbvhBitsMin3(float a, float b, float c) {
 #if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 900
   return __int_as_float(__vimin3_s32(__float_as_int(a), __float_as_int(b), __float_as_int(c)));
 #else
-  const int32_t m = std::min(std::min(int32_t(detail::floatBits(a)), int32_t(detail::floatBits(b))),
-                             int32_t(detail::floatBits(c)));
-  return detail::bitsFloat(uint32_t(m));
+  const int32_t m = std::min(std::min(int32_t(floatBits(a)), int32_t(floatBits(b))),
+                             int32_t(floatBits(c)));
+  return bitsFloat(uint32_t(m));
 #endif
 }
 TSAH_HD float cwbvhSlabEntry(float a, float b, float c, float tmin) {

@@ -8,31 +8,12 @@
 #include "tsah/core/aabb.hpp"
 #include "tsah/layout/cwbvh_node.hpp"
 #include "tsah/core/directed_rounding.hpp"
+#include "tsah/core/float_bits.hpp"
 #include "tsah/core/hd.hpp"
 
 namespace tsah {
 
 namespace detail {
-
-TSAH_HD uint32_t floatBits(float f) {
-#if defined(__CUDA_ARCH__)
-  return uint32_t(__float_as_int(f));
-#else
-  uint32_t u;
-  std::memcpy(&u, &f, sizeof u);
-  return u;
-#endif
-}
-
-TSAH_HD float bitsFloat(uint32_t u) {
-#if defined(__CUDA_ARCH__)
-  return __uint_as_float(u);
-#else
-  float f;
-  std::memcpy(&f, &u, sizeof f);
-  return f;
-#endif
-}
 
 // Whether 255 steps of exponent e from p reach hi in float (the real p + 255 step >= hi); always
 // true for the largest exponent, 254.
