@@ -149,16 +149,17 @@ TwoLevelHit shown(const TwoLevelHit& hit) {
   return hit.valid() ? hit : TwoLevelHit{std::numeric_limits<float>::infinity(), 0.0f, 0.0f, kNoHit, kNoHit};
 }
 
-// times=: None, a number (every ray) or a float array of the batch shape, each finite: the rays'
+// times=: None, a number (every ray) or a float array (or sequence) of the batch shape, each finite: the rays'
 // shutter fractions (as float32, flattened).
 std::optional<Array<float>> rayTimes(py::handle times, const std::vector<py::ssize_t>& batch, std::size_t n) {
   if (times.is_none()) return std::nullopt;
   py::object value = py::reinterpret_borrow<py::object>(times);
-  if (py::isinstance<py::float_>(times) || py::isinstance<py::int_>(times)) {
+  const py::module_ numpy = py::module_::import("numpy");
+  if (py::isinstance<py::float_>(times) || py::isinstance<py::int_>(times) || py::isinstance(times, numpy.attr("number"))) {
     if (py::isinstance<py::bool_>(times)) throw ArgumentTypeError("times: expected a number or a float array, got bool");
-    value = py::module_::import("numpy").attr("full")(py::int_(n), times, "float32");
-  } else if (py::isinstance<py::array>(times)) {
-    const auto a = py::reinterpret_borrow<py::array>(times);
+    value = numpy.attr("full")(py::int_(n), times, "float32");
+  } else if (value = arrayArgument(times, "times", Kind::Float); py::isinstance<py::array>(value)) {
+    const auto a = py::reinterpret_borrow<py::array>(value);
     if (std::vector<py::ssize_t>(a.shape(), a.shape() + a.ndim()) != batch)
       throw tsah::ConfigError("times: expected shape " + shapeText(batch) + ", got " + shapeText(a));
     value = a.attr("reshape")(-1);

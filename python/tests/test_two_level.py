@@ -186,6 +186,8 @@ def test_blurred_frame_traces_each_ray_at_its_time(scene, baked):
         expected = still.trace(origins, directions)
         hits = runtime.trace(origins, directions, times=np.full(len(origins), fraction, np.float32))
         assert np.array_equal(hits, runtime.trace(origins, directions, times=fraction))
+        assert np.array_equal(hits, runtime.trace(origins, directions, times=[fraction] * len(origins)))
+        assert np.array_equal(hits, runtime.trace(origins, directions, times=np.float32(fraction)))
         found = np.isfinite(expected["t"])
         assert found.mean() > 0.9 and (np.isfinite(hits["t"]) == found).mean() > 0.99
         same = (hits["instance"] == expected["instance"]) & (hits["triangle"] == expected["triangle"])
