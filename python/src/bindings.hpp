@@ -22,6 +22,7 @@
 #include "tsah/io/tree_set.hpp"
 #include "tsah/optimize/insertion_optimizer.hpp"
 #include "tsah/optimize/segmentation.hpp"
+#include "tsah/pipeline.hpp"
 
 namespace anim {
 class Animation;
@@ -62,6 +63,9 @@ struct TreeSetObject {
 class CpuTracer;  // tsah.CpuRuntime (runtime.cpp)
 class GpuTracer;  // tsah.GpuRuntime (runtime.cpp, CUDA builds)
 class DeviceArray;  // tsah.DeviceArray (device_array_type.cpp, CUDA builds)
+struct TwoLevelSceneObject;  // tsah.TwoLevelScene (two_level.cpp)
+class TwoLevelTracer;  // tsah.TwoLevelRuntime (two_level.cpp)
+class GpuTwoLevelTracer;  // tsah.GpuTwoLevelRuntime (two_level.cpp, CUDA builds)
 // The C++ runtime of a tsah.CpuRuntime / tsah.GpuRuntime object (checked as every bound argument).
 const CpuRuntime& cpuRuntimeOf(py::handle self);
 #if defined(TSAH_HAVE_CUDA)
@@ -75,7 +79,9 @@ template <class T>
 struct IsBoundClass
     : std::bool_constant<std::is_same_v<T, anim::Animation> || std::is_same_v<T, Tree> ||
                          std::is_same_v<T, TreeSetObject> || std::is_same_v<T, CpuTracer> ||
-                         std::is_same_v<T, GpuTracer> || std::is_same_v<T, DeviceArray>> {};
+                         std::is_same_v<T, GpuTracer> || std::is_same_v<T, DeviceArray> ||
+                         std::is_same_v<T, TwoLevelSceneObject> || std::is_same_v<T, TwoLevelTracer> ||
+                         std::is_same_v<T, GpuTwoLevelTracer>> {};
 
 // Throws tsah::ConfigError when `obj` is an instance of the Python class bound to `type` whose C++
 // object was never constructed (Class.__new__(Class) without __init__). pybind11 itself would hand
@@ -141,6 +147,15 @@ class LongCall {
 // naming `name` otherwise (bytes paths included).
 std::string pathArgument(py::handle path, const char* name);
 
+// The command line's tree options as keyword arguments, checked as the command line checks them
+// (trees.cpp: tsah.optimize's arguments of the same names).
+TreeOptions treeOptions(const std::string& method, py::handle k, py::handle frames, const std::string& selection,
+                        py::handle seed, float ct, float ci, py::handle maxLeaf, double timeLimit,
+                        double minImprovement, py::handle threads, const std::string& optimizer);
+// Hooks `call` into the options: its cancel check, and (with a callback) progress messages or, with
+// `batches`, the optimizer's batch records.
+void connect(TreeOptions& options, LongCall& call, bool batches);
+
 // Creates tsah.Error, ConfigError, DataError, FileError, Failure and ArgumentTypeError in `m` and
 // translates the C++ exceptions to them (tsah::Cancelled to KeyboardInterrupt).
 void bindErrors(py::module_& m);
@@ -149,6 +164,7 @@ void bindTrees(py::module_& m);
 void bindRuntimes(py::module_& m);
 void bindQueries(py::module_& m);  // after bindRuntimes: adds methods to its classes (queries.cpp)
 void bindTreeSets(py::module_& m);  // tsah.TreeSet (tree_sets.cpp), called by bindTrees
+void bindTwoLevel(py::module_& m);  // two-level scenes and their runtimes (two_level.cpp)
 
 // A tree set for Python from a set file's bytes and their decoded set (read_tree, tree_from_bytes),
 // or from a set built in this process (optimize with segments).

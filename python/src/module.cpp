@@ -279,5 +279,6 @@ PYBIND11_MODULE(_tsah, m) {
   tsah::python::bindTrees(m);
   tsah::python::bindRuntimes(m);
   tsah::python::bindQueries(m);
+  tsah::python::bindTwoLevel(m);
   tsah::python::bindDeviceArrays(m);
 }

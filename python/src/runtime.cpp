@@ -19,6 +19,7 @@
 #include "anim/animation.hpp"
 #include "bindings.hpp"
 #include "device_arrays.hpp"
+#include "host_rays.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
 #include "tsah/layout/flat_bvh.hpp"
 #include "tsah/layout/wide_bvh.hpp"
@@ -74,16 +75,7 @@ Points checkedPoints(py::handle obj, const std::string& name) {
   return {checkedArray<float>(obj, name, Kind::Float, {-1, 3}), {}};  // refused there: not an array
 }
 
-// Rays given as numpy arrays: origins (..., 3), directions of the same shape, tmin and tmax each a
-// number or an array of the batch shape (...), viewed as tsah::RayArrays (float32, used in place
-// when the caller's arrays are float32 and C-contiguous; converted copies are kept here).
-struct HostRays {
-  Array<float> origins, directions;
-  std::optional<Array<float>> tmin, tmax;  // none: the number below
-  float tminValue = 0.0f, tmaxValue = 0.0f;
-  std::vector<py::ssize_t> batch;  // the leading dimensions: the shape of the results
-  RayArrays arrays;
-};
+}  // namespace
 
 std::unique_ptr<HostRays> hostRays(py::handle origins, py::handle directions, py::handle tmin, py::handle tmax) {
   auto rays = std::make_unique<HostRays>();
@@ -120,15 +112,6 @@ std::unique_ptr<HostRays> hostRays(py::handle origins, py::handle directions, py
   return rays;
 }
 
-// A host batch's rays as Ray structs (GpuTracer's upload, CpuTracer's reference batch), left
-// uninitialised until makeRays fills them in parallel (so that the first touch of their pages is
-// parallel too).
-struct RayBatch {
-  std::unique_ptr<Ray[]> rays;
-  std::size_t count = 0;
-  operator std::span<const Ray>() const { return {rays.get(), count}; }
-};
-
 // The rays of hostRays as Ray structs, checked (checkRays). Returns the rays and the batch shape.
 RayBatch makeRays(py::handle origins, py::handle directions, py::handle tmin, py::handle tmax,
                   std::vector<py::ssize_t>& batch) {
@@ -151,6 +134,8 @@ RayBatch makeRays(py::handle origins, py::handle directions, py::handle tmin, py
   return result;
 }
 
+namespace {
+
 // The numpy record dtype of tsah::Hit.
 py::dtype hitDtype() {
   static_assert(sizeof(Hit) == 16 && offsetof(Hit, tri) == 12);
@@ -159,6 +144,8 @@ py::dtype hitDtype() {
                 "itemsize"_a = 16);
   return py::dtype::from_args(spec);
 }
+
+}  // namespace
 
 // The array results go to: the caller's `out` (checked: a writeable C-contiguous numpy array of
 // `dtype` and the batch shape) or a new one.
@@ -176,6 +163,8 @@ py::array resultArray(py::handle out, const py::dtype& dtype, const std::vector<
   return a;
 }
 
+namespace {
+
 // tsah::Hit as a numpy record: t, u, v (float32) and triangle (int32, -1 when nothing was hit: the
 // bits of tsah::kNoHit). A miss has t = inf (as in Embree and Warp) and u = v = 0.
 py::array hitArray(const std::vector<Hit>& hits, py::array out) {
@@ -187,6 +176,8 @@ py::array hitArray(const std::vector<Hit>& hits, py::array out) {
   return out;
 }
 
+}  // namespace
+
 py::array boolArray(const std::vector<uint8_t>& flags, py::array out) {
   bool* p = static_cast<bool*>(out.mutable_data());
   inParallel(flags.size(), [&](std::size_t begin, std::size_t end) {
@@ -194,6 +185,8 @@ py::array boolArray(const std::vector<uint8_t>& flags, py::array out) {
   });
   return out;
 }
+
+namespace {
 
 // Vertex positions for a refit, a float32 array (V, 3) used in place (C-contiguous numpy; other
 // float dtypes are converted). Coordinates that are NaN, infinite or beyond tsah::kMaxCoordinate

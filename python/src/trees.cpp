@@ -30,6 +30,8 @@ namespace {
 
 using namespace pybind11::literals;
 
+}  // namespace
+
 // The command line's options, with its defaults, as keyword arguments, checked as the command
 // line checks them (TreeOptions::validate: the limits live there). optimizer 'gpu' is the command
 // line's --device cuda (parallel reinsertion on the GPU).
@@ -68,6 +70,8 @@ TreeOptions treeOptions(const std::string& method, py::handle k, py::handle fram
   return o;
 }
 
+namespace {
+
 // The progress events handed to Python's callback: a dict with "message" (text), and for an
 // optimizer batch its record.
 py::dict messageEvent(const std::string& message) { return py::dict("message"_a = message); }
@@ -81,6 +85,8 @@ py::dict batchEvent(const InsertionOptimizer::BatchRecord& r) {
   return event;
 }
 
+}  // namespace
+
 // Hooks `call` into the options: its cancel check, and (with a callback) progress of the given kind.
 void connect(TreeOptions& options, LongCall& call, bool batches) {
   options.cancelled = call.cancelled();
@@ -90,6 +96,8 @@ void connect(TreeOptions& options, LongCall& call, bool batches) {
   else
     options.progress = [&call](const std::string& m) { call.report([m] { return messageEvent(m); }); };
 }
+
+namespace {
 
 py::dict infoDict(const BvhBuildInfo& info) {
   return py::dict("method"_a = info.method, "selection"_a = info.selection, "k"_a = info.objective.k,

@@ -47,13 +47,16 @@ def bare(cls):
 
 
 @pytest.fixture(scope="module")
-def made(sample):
+def made(sample, sample_path):
     """A real instance of each class (for the methods that take a bare object as an argument)."""
     tree = tsah.optimize(sample, method="sah0")
     objects = {"Animation": sample, "Tree": tree, "CpuRuntime": tsah.CpuRuntime(tree, sample),
                "TreeSet": tsah.optimize(sample, method="sah0", segments=2, eval_frames=4)}
+    scene = tsah.build_two_level(sample_path + "/../scenes/demo.json", structure="two-level")
+    objects.update(TwoLevelScene=scene, TwoLevelRuntime=tsah.TwoLevelRuntime(scene))
     if tsah.cuda_built and tsah.cuda_available():
         objects["GpuRuntime"] = tsah.GpuRuntime(tree, sample)
+        objects["GpuTwoLevelRuntime"] = tsah.GpuTwoLevelRuntime(scene)
     return objects
 
 

@@ -11,7 +11,7 @@ import tsah
 from tsah import _tsah
 
 STUB = pathlib.Path(__file__).resolve().parents[1] / "tsah" / "__init__.pyi"
-CUDA_ONLY = {"DeviceArray", "GpuRuntime"}  # stubbed always; in the module only when cuda_built
+CUDA_ONLY = {"DeviceArray", "GpuRuntime", "GpuTwoLevelRuntime"}  # stubbed always; in the module only when cuda_built
 
 
 @pytest.fixture(scope="module")

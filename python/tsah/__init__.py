@@ -12,6 +12,8 @@ as the ``tsah`` command line:
 >>> runtime = tsah.CpuRuntime(tree, animation)
 >>> runtime.refit(animation.end_time)
 >>> hits = runtime.trace(origins, directions)            # numpy (N, 3) arrays -> record array
+>>> scene = tsah.build_two_level("scene.json")           # a two-level scene, as `tsah optimize SCENE`
+>>> tracer = tsah.TwoLevelRuntime(scene)                 # traced through its instances
 
 Errors carry the command line's one-line messages. All are tsah.Error (a RuntimeError):
 tsah.ConfigError (also a ValueError) for a bad option or argument, tsah.DataError (also a
@@ -55,22 +57,26 @@ from ._tsah import (  # noqa: F401  (the public API)
     FileError,
     Tree,
     TreeSet,
+    TwoLevelRuntime,
+    TwoLevelScene,
     __version__,
     cuda_available,
     cuda_built,
     evaluate,
     generate,
+    build_two_level,
     load,
+    load_two_level,
     optimize,
     read_tree,
     tree_from_bytes,
 )
 
 if cuda_built:
-    from ._tsah import DeviceArray, GpuRuntime  # noqa: F401
+    from ._tsah import DeviceArray, GpuRuntime, GpuTwoLevelRuntime  # noqa: F401
 
 __all__ = [
     "Animation", "ArgumentTypeError", "ConfigError", "CpuRuntime", "DataError", "Error", "Failure", "FileError",
-    "Tree", "TreeSet", "__version__", "cuda_available", "cuda_built",
-    "evaluate", "generate", "load", "optimize", "read_tree", "tree_from_bytes",
-] + (["DeviceArray", "GpuRuntime"] if cuda_built else [])
+    "Tree", "TreeSet", "TwoLevelRuntime", "TwoLevelScene", "__version__", "cuda_available", "cuda_built",
+    "build_two_level", "evaluate", "generate", "load", "load_two_level", "optimize", "read_tree", "tree_from_bytes",
+] + (["DeviceArray", "GpuRuntime", "GpuTwoLevelRuntime"] if cuda_built else [])

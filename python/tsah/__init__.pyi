@@ -278,6 +278,95 @@ class GpuRuntime:
         woop_ms, total_ms."""
 
 
+class TwoLevelScene:
+    """A scene file kept as two levels: one tree (BLAS) per distinct source, one T-SAH tree (TLAS)
+    over the instances (tsah.build_two_level, tsah.load_two_level)."""
+
+    def save(self, path: _PathLike) -> None:
+        """Writes the two-level .tbvh file (version 3), what `tsah optimize SCENE` writes."""
+    def baked_triangles(self, instances: _ArrayLike, triangles: _ArrayLike) -> npt.NDArray[np.int32]:
+        """Per (instance, triangle of its source) pair, the triangle's id in tsah.load(scene_path)."""
+    @property
+    def instance_count(self) -> int:
+        """Number of instances (a flattened object's triangles are one instance)."""
+    @property
+    def blas_count(self) -> int:
+        """Number of bottom-level trees: one per distinct source."""
+    @property
+    def flattened_objects(self) -> list[str]:
+        """Names of the scene file's objects flattened into one source."""
+    @property
+    def start_time(self) -> float:
+        """Time of the scene's first frame."""
+    @property
+    def end_time(self) -> float:
+        """Time of the scene's last frame."""
+    @property
+    def frame_times(self) -> npt.NDArray[np.float64]:
+        """The scene's frame times, float64 array."""
+    @property
+    def info(self) -> dict[str, Any]:
+        """The structure as `tsah info TREE SCENE --json` describes it (and auto's structure_choice)."""
+
+
+class TwoLevelRuntime:
+    """A two-level scene traced on the CPU (BLAS refits per pose, instance transforms, TLAS refit)."""
+
+    def __init__(self, scene: TwoLevelScene, threads: _Integer = 0, layout: str = "auto",
+                 tlas: str = "refit") -> None:
+        """layout: the BLAS layout ('auto', 'bvh2', 'bvh4', 'bvh8'); tlas: 'refit' or 'rebuild'."""
+    def update(self, time: _Number) -> None:
+        """The scene at this time; ends a blurred frame."""
+    def update_shutter(self, open: _Number, close: _Number) -> None:
+        """A blurred frame over the shutter [open, close]: rays then take their times (times=)."""
+    def trace(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
+              tmax: _ArrayLike = float("inf"), times: _ArrayLike | None = None,
+              out: Any = None) -> np.recarray[Any, Any]:
+        """Closest hits: a record array with t, u, v, instance and triangle (-1 and t = inf for a miss);
+        times: each ray's shutter fraction in a blurred frame."""
+    def occluded(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
+                 tmax: _ArrayLike = float("inf"), times: _ArrayLike | None = None,
+                 out: Any = None) -> npt.NDArray[np.bool_]:
+        """True for each ray that hits anything within (tmin, tmax)."""
+    @property
+    def time(self) -> float:
+        """The scene time of the last update (of a blurred frame: its close)."""
+    @property
+    def blurred(self) -> bool:
+        """True after an update_shutter that made a blurred frame (until update)."""
+    @property
+    def instance_boxes(self) -> npt.NDArray[np.float32]:
+        """The instances' world boxes at the current time, float32 (I, 2, 3)."""
+    @property
+    def memory_bytes(self) -> int:
+        """Bytes the runtime holds (trees, triangles, positions, instances)."""
+
+
+class GpuTwoLevelRuntime:
+    """A two-level scene traced on a CUDA device from host rays (only when cuda_built)."""
+
+    def __init__(self, scene: TwoLevelScene, device: _Integer = 0, tlas: str = "refit") -> None:
+        """tlas: 'refit', 'lbvh' or 'hlbvh-sah'. Raises tsah.Failure when no device is usable."""
+    def update(self, time: _Number) -> None:
+        """The scene at this time, on the device."""
+    def trace(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
+              tmax: _ArrayLike = float("inf"), out: Any = None) -> np.recarray[Any, Any]:
+        """Closest hits, as TwoLevelRuntime.trace."""
+    def occluded(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
+                 tmax: _ArrayLike = float("inf"), out: Any = None) -> npt.NDArray[np.bool_]:
+        """True for each ray that hits anything within (tmin, tmax)."""
+    @property
+    def time(self) -> float:
+        """The scene time of the last update."""
+    @property
+    def device_name(self) -> str:
+        """The name of the CUDA device."""
+    @property
+    def last_update(self) -> dict[str, Any]:
+        """Device time (ms) of the last update: upload_ms, blas_ms, tlas_ms, tlas_rebuild_ms, total_ms;
+        blas_refits, instances, tlas_nodes."""
+
+
 def cuda_available() -> bool:
     """True when the CUDA runtime was built and a GPU is present."""
 
@@ -332,3 +421,15 @@ def read_tree(path: _PathLike) -> Tree | TreeSet:
 
 def tree_from_bytes(data: bytes | bytearray | memoryview, name: str = "<bytes>") -> Tree | TreeSet:
     """A Tree or a TreeSet from the bytes of a .tbvh file; tsah.DataError when they are not one."""
+
+
+def load_two_level(tree_path: _PathLike, scene_path: _PathLike) -> TwoLevelScene:
+    """Reads a two-level .tbvh file (version 3) with the scene file it was built for (checked)."""
+
+
+def build_two_level(scene_path: _PathLike, structure: str = "auto", k: _Integer = 0, frames: _Integer = 5,
+                    selection: str = "mh", seed: _Integer = 1, ct: _Number = 3.0, ci: _Number = 2.0,
+                    max_leaf: _Integer = 8, time_limit: _Number = 0.0, min_improvement: _Number = 1e-05,
+                    threads: _Integer = 0, optimizer: str = "sequential",
+                    progress: _ProgressCallback | None = None) -> TwoLevelScene:
+    """The two-level structure of a scene file, as `tsah optimize SCENE --structure auto|two-level`."""
