@@ -31,10 +31,7 @@ anim::SceneSources loadSceneSourcesForCli(const std::string& scenePath) {
 }
 
 StructureChoice chooseStructure(const anim::SceneSources& scene, const TreeOptions& options) {
-  StructureChoiceOptions choice;
-  choice.cost = options.objective.cost;
-  choice.maxLeafSize = options.objective.maxLeafSize;
-  return chooseObjectStructure(scene, choice);
+  return chooseObjectStructure(scene, structureChoiceOptions(options.objective));
 }
 
 nlohmann::json describeStructureChoice(const StructureChoice& choice) {

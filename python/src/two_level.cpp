@@ -83,10 +83,7 @@ TwoLevelSceneObject buildTwoLevel(py::handle sceneArg, const std::string& struct
     anim::SceneSources sources = loadSources(path, warnings);
     std::optional<StructureChoice> choice;
     if (structure == "auto") {
-      StructureChoiceOptions choiceOptions;
-      choiceOptions.cost = options.objective.cost;
-      choiceOptions.maxLeafSize = options.objective.maxLeafSize;
-      choice = chooseObjectStructure(sources, choiceOptions);
+      choice = chooseObjectStructure(sources, structureChoiceOptions(options.objective));
       sources = anim::flattenObjects(std::move(sources), choice->flattenedObjects);
     }
     return TwoLevelSceneObject{buildTwoLevelScene(std::move(sources), options), std::move(choice)};

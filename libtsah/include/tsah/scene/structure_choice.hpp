@@ -27,6 +27,14 @@ struct StructureChoiceOptions {
   double memoryFactor = 16.0;
 };
 
+// The estimate's options for trees built with `objective`: its cT, cI and largest leaf.
+inline StructureChoiceOptions structureChoiceOptions(const Objective& objective) {
+  StructureChoiceOptions options;
+  options.cost = objective.cost;
+  options.maxLeafSize = objective.maxLeafSize;
+  return options;
+}
+
 struct ObjectStructureChoice {
   uint32_t object = 0;
   std::string name;
