@@ -269,23 +269,24 @@ enum class Query { Closest, AnyFarthestFirst, AnyTreeOrder };
 // Blurred: bvh holds key s (nodes, positions, the lerped root box) and m key s + 1 (see
 // WideMotionFrame); otherwise m is not read. leafTest(prep, lanes, first, count, tmax, hit) tests
 // a leaf's primitives and returns true when one was hit (closest hit: tmax shrunk to it); the
-// triangle kernels pass their leaf tests, the visitor kernels the caller's visitor.
+// triangle kernels pass their leaf tests, the visitor kernels the caller's visitor. rootFirst: a
+// box holding every child box of an interior root, tested before the ray's lanes are set up (a
+// ray missing it misses every child box the loop would test: the slab test is monotone in the
+// planes). For closest hit only: the camera's rays, many of which miss a small scene; an any-hit
+// ray (a shadow or ambient-occlusion ray) leaves a surface inside that box, so the test would only
+// cost it time.
 template <class V, Query Q, bool Blurred = false, class LeafTest>
-inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, const Ray& ray, LeafTest&& leafTest) {
+inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, const Ray& ray, LeafTest&& leafTest,
+                    const Aabb* rootFirst = nullptr) {
   constexpr uint32_t N = V::N;
   constexpr bool AnyHit = Q != Query::Closest;
   Hit hit;
   if (bvh.rootCount == 0 && isLeafRef(bvh.rootRef)) return hit;  // empty tree
   LazyPrep prep(ray);
   float tmax = ray.tmax;
-  if constexpr (Blurred && Q == Query::Closest) {
-    // Before the ray's lanes are set up: a ray missing the root's box over the whole segment
-    // misses every child box the loop below would test (the slab test is monotone in the planes).
-    // Closest hit only: the camera's rays, many of which miss a small scene; an any-hit ray (a
-    // shadow or ambient-occlusion ray) leaves a surface inside that box, so the test would only
-    // cost it time.
+  if (rootFirst != nullptr) {  // a constant once inlined: no branch where it is null
     float tEntry;
-    if (!isLeafRef(bvh.rootRef) && !intersectBox(prep.prep, m.rootBounds, ray.tmin, tmax, tEntry)) return hit;
+    if (!isLeafRef(bvh.rootRef) && !intersectBox(prep.prep, *rootFirst, ray.tmin, tmax, tEntry)) return hit;
   }
   const RayLanes<V> r = rayLanes<V>(ray, prep.prep, Blurred ? m.f : 0.0f);
   if (isLeafRef(bvh.rootRef)) {
@@ -501,7 +502,8 @@ inline Hit traverseTriangles(const WideView<V::N>& bvh, const WideMotionFrame<V:
                                      return intersectMotionLeaf<V, AnyHit>(bvh, m, ray, prep, r, first, count, tmax, hit);
                                    else
                                      return intersectLeaf<V, AnyHit>(bvh, ray, prep, r, first, count, tmax, hit);
-                                 });
+                                 },
+                                 Blurred && Q == Query::Closest ? &m.rootBounds : nullptr);  // the segment's root box
 }
 
 template <class V>
@@ -531,7 +533,8 @@ inline Hit traverseVisited(const WideView<V::N>& bvh, const Ray& ray, const Wide
   return traverse<V, Q>(bvh, {}, ray,
                         [&](LazyPrep&, const RayLanes<V>&, uint32_t item, uint32_t, float& tmax, Hit& hit) {
                           return visitor.visit(visitor.context, item, ray, tmax, hit);
-                        });
+                        },
+                        Q == Query::Closest ? &bvh.rootBox : nullptr);
 }
 template <class V>
 TSAH_KERNEL Hit closestVisitKernel(const WideView<V::N>& bvh, const Ray& ray, const WideLeafVisitor& visitor) {

@@ -23,7 +23,8 @@ struct WideLeafVisitor {
 };
 
 // The visitor kernels of one instruction set. The view's nodes, root reference, root box and root
-// count are read, nothing else. A width without kernels has null pointers (sse: no 8-wide).
+// count are read, nothing else; the root box also for an interior root (closest hit tests it first,
+// as the binary loop does: camera rays that miss the scene stop there). A width without kernels has null pointers (sse: no 8-wide).
 struct WideVisitKernels {
   Hit (*closest4)(const WideView<4>& bvh, const Ray& ray, const WideLeafVisitor& visitor) = nullptr;
   bool (*any4)(const WideView<4>& bvh, const Ray& ray, AnyHitOrder order, const WideLeafVisitor& visitor) = nullptr;
