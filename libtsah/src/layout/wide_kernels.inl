@@ -267,32 +267,32 @@ inline void slabDistances(const WideSoaNode<V::N>& node, const WideMotionFrame<V
 enum class Query { Closest, AnyFarthestFirst, AnyTreeOrder };
 
 // Blurred: bvh holds key s (nodes, positions, the lerped root box) and m key s + 1 (see
-// WideMotionFrame); otherwise m is not read.
-template <class V, Query Q, bool Blurred = false>
-inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, const Ray& ray) {
+// WideMotionFrame); otherwise m is not read. leafTest(prep, lanes, first, count, tmax, hit) tests
+// a leaf's primitives and returns true when one was hit (closest hit: tmax shrunk to it); the
+// triangle kernels pass their leaf tests, the visitor kernels the caller's visitor. rootFirst: a
+// box holding every child box of an interior root, tested before the ray's lanes are set up (a
+// ray missing it misses every child box the loop would test: the slab test is monotone in the
+// planes). For closest hit only: the camera's rays, many of which miss a small scene; an any-hit
+// ray (a shadow or ambient-occlusion ray) leaves a surface inside that box, so the test would only
+// cost it time.
+template <class V, Query Q, bool Blurred = false, class LeafTest>
+inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, const Ray& ray, LeafTest&& leafTest,
+                    const Aabb* rootFirst = nullptr) {
   constexpr uint32_t N = V::N;
   constexpr bool AnyHit = Q != Query::Closest;
   Hit hit;
   if (bvh.rootCount == 0 && isLeafRef(bvh.rootRef)) return hit;  // empty tree
   LazyPrep prep(ray);
   float tmax = ray.tmax;
-  if constexpr (Blurred && Q == Query::Closest) {
-    // Before the ray's lanes are set up: a ray missing the root's box over the whole segment
-    // misses every child box the loop below would test (the slab test is monotone in the planes).
-    // Closest hit only: the camera's rays, many of which miss a small scene; an any-hit ray (a
-    // shadow or ambient-occlusion ray) leaves a surface inside that box, so the test would only
-    // cost it time.
+  if (rootFirst != nullptr) {  // a constant once inlined: no branch where it is null
     float tEntry;
-    if (!isLeafRef(bvh.rootRef) && !intersectBox(prep.prep, m.rootBounds, ray.tmin, tmax, tEntry)) return hit;
+    if (!isLeafRef(bvh.rootRef) && !intersectBox(prep.prep, *rootFirst, ray.tmin, tmax, tEntry)) return hit;
   }
   const RayLanes<V> r = rayLanes<V>(ray, prep.prep, Blurred ? m.f : 0.0f);
   if (isLeafRef(bvh.rootRef)) {
     float tEntry;
     if (!intersectBox(prep.prep, bvh.rootBox, ray.tmin, tmax, tEntry)) return hit;
-    if constexpr (Blurred)
-      intersectMotionLeaf<V, AnyHit>(bvh, m, ray, prep, r, leafFirstSlot(bvh.rootRef), bvh.rootCount, tmax, hit);
-    else
-      intersectLeaf<V, AnyHit>(bvh, ray, prep, r, leafFirstSlot(bvh.rootRef), bvh.rootCount, tmax, hit);
+    leafTest(prep, r, leafFirstSlot(bvh.rootRef), bvh.rootCount, tmax, hit);
     return hit;
   }
   // An interior root's box is not tested: it is the union of its children's boxes, and the slab
@@ -373,12 +373,7 @@ inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, c
         continue;
       }
     } else {
-      bool found;
-      if constexpr (Blurred)
-        found = intersectMotionLeaf<V, AnyHit>(bvh, m, ray, prep, r, leafFirstSlot(ref), count, tmax, hit);
-      else
-        found = intersectLeaf<V, AnyHit>(bvh, ray, prep, r, leafFirstSlot(ref), count, tmax, hit);
-      if (found && AnyHit) return hit;
+      if (leafTest(prep, r, leafFirstSlot(ref), count, tmax, hit) && AnyHit) return hit;
     }
     do {
       if (sp == 0) return hit;
@@ -496,24 +491,60 @@ TSAH_KERNEL void keyVerticesKernel(const float* positions, const uint32_t* verti
   bounds = packetBounds<N, F, I>(f);
 }
 
+// The triangle traversals: the leaf tests of the instant frame or of a blurred one.
+template <class V, Query Q, bool Blurred>
+inline Hit traverseTriangles(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, const Ray& ray) {
+  constexpr bool AnyHit = Q != Query::Closest;
+  return traverse<V, Q, Blurred>(bvh, m, ray,
+                                 [&](LazyPrep& prep, const RayLanes<V>& r, uint32_t first, uint32_t count, float& tmax,
+                                     Hit& hit) {
+                                   if constexpr (Blurred)
+                                     return intersectMotionLeaf<V, AnyHit>(bvh, m, ray, prep, r, first, count, tmax, hit);
+                                   else
+                                     return intersectLeaf<V, AnyHit>(bvh, ray, prep, r, first, count, tmax, hit);
+                                 },
+                                 Blurred && Q == Query::Closest ? &m.rootBounds : nullptr);  // the segment's root box
+}
+
 template <class V>
 TSAH_KERNEL Hit closestKernel(const WideView<V::N>& bvh, const Ray& ray) {
-  return traverse<V, Query::Closest>(bvh, {}, ray);
+  return traverseTriangles<V, Query::Closest, false>(bvh, {}, ray);
 }
 template <class V>
 TSAH_KERNEL bool anyKernel(const WideView<V::N>& bvh, const Ray& ray, AnyHitOrder order) {
-  return order == AnyHitOrder::TreeOrder ? traverse<V, Query::AnyTreeOrder>(bvh, {}, ray).valid()
-                                         : traverse<V, Query::AnyFarthestFirst>(bvh, {}, ray).valid();
+  return order == AnyHitOrder::TreeOrder ? traverseTriangles<V, Query::AnyTreeOrder, false>(bvh, {}, ray).valid()
+                                         : traverseTriangles<V, Query::AnyFarthestFirst, false>(bvh, {}, ray).valid();
 }
 template <class V>
 TSAH_KERNEL Hit closestMotionKernel(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, const Ray& ray) {
-  return traverse<V, Query::Closest, true>(bvh, m, ray);
+  return traverseTriangles<V, Query::Closest, true>(bvh, m, ray);
 }
 template <class V>
 TSAH_KERNEL bool anyMotionKernel(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, const Ray& ray,
                                  AnyHitOrder order) {
-  return order == AnyHitOrder::TreeOrder ? traverse<V, Query::AnyTreeOrder, true>(bvh, m, ray).valid()
-                                         : traverse<V, Query::AnyFarthestFirst, true>(bvh, m, ray).valid();
+  return order == AnyHitOrder::TreeOrder ? traverseTriangles<V, Query::AnyTreeOrder, true>(bvh, m, ray).valid()
+                                         : traverseTriangles<V, Query::AnyFarthestFirst, true>(bvh, m, ray).valid();
+}
+
+// A tree of boxes whose leaf children each name one item (WideLeafVisitor): the node loop above,
+// and at each entered leaf the visitor (not inlined: an instance's own traversal).
+template <class V, Query Q>
+inline Hit traverseVisited(const WideView<V::N>& bvh, const Ray& ray, const WideLeafVisitor& visitor) {
+  return traverse<V, Q>(bvh, {}, ray,
+                        [&](LazyPrep&, const RayLanes<V>&, uint32_t item, uint32_t, float& tmax, Hit& hit) {
+                          return visitor.visit(visitor.context, item, ray, tmax, hit);
+                        },
+                        Q == Query::Closest ? &bvh.rootBox : nullptr);
+}
+template <class V>
+TSAH_KERNEL Hit closestVisitKernel(const WideView<V::N>& bvh, const Ray& ray, const WideLeafVisitor& visitor) {
+  return traverseVisited<V, Query::Closest>(bvh, ray, visitor);
+}
+template <class V>
+TSAH_KERNEL bool anyVisitKernel(const WideView<V::N>& bvh, const Ray& ray, AnyHitOrder order,
+                                const WideLeafVisitor& visitor) {
+  return order == AnyHitOrder::TreeOrder ? traverseVisited<V, Query::AnyTreeOrder>(bvh, ray, visitor).valid()
+                                         : traverseVisited<V, Query::AnyFarthestFirst>(bvh, ray, visitor).valid();
 }
 
 // This instruction set's kernels as the dispatch table: four-lane nodes always, eight-lane nodes
@@ -536,6 +567,19 @@ WideKernels kernelTable(SimdIsa isa) {
   k.woopRows8 = &woopRowsKernel<8, DoubleLanes8, FloatLanes8, IntLanes8>;
   k.keyVertices4 = &keyVerticesKernel<4, FloatLanes4, IntLanes4>;
   k.keyVertices8 = &keyVerticesKernel<8, FloatLanes8, IntLanes8>;
+  return k;
+}
+
+// This instruction set's visitor kernels (wide_visit.hpp), the widths of kernelTable.
+template <class V4, class V8>
+WideVisitKernels visitKernelTable() {
+  WideVisitKernels k;
+  k.closest4 = &closestVisitKernel<V4>;
+  k.any4 = &anyVisitKernel<V4>;
+  if constexpr (!std::is_void_v<V8>) {
+    k.closest8 = &closestVisitKernel<V8>;
+    k.any8 = &anyVisitKernel<V8>;
+  }
   return k;
 }
 

@@ -18,5 +18,6 @@ namespace tsah::isa_avx2 {
 namespace tsah::detail {
 
 WideKernels avx2Kernels() { return isa_avx2::kernelTable<isa_avx2::V4, isa_avx2::V8>(SimdIsa::Avx2); }
+WideVisitKernels avx2VisitKernels() { return isa_avx2::visitKernelTable<isa_avx2::V4, isa_avx2::V8>(); }
 
 }  // namespace tsah::detail

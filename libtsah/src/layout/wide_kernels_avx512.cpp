@@ -19,5 +19,6 @@ namespace tsah::isa_avx512 {
 namespace tsah::detail {
 
 WideKernels avx512Kernels() { return isa_avx512::kernelTable<isa_avx512::V4, isa_avx512::V8>(SimdIsa::Avx512); }
+WideVisitKernels avx512VisitKernels() { return isa_avx512::visitKernelTable<isa_avx512::V4, isa_avx512::V8>(); }
 
 }  // namespace tsah::detail

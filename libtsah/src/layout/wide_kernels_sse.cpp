@@ -16,5 +16,6 @@ namespace tsah::isa_sse {
 namespace tsah::detail {
 
 WideKernels sseKernels() { return isa_sse::kernelTable<isa_sse::V4, void>(SimdIsa::Sse); }
+WideVisitKernels sseVisitKernels() { return isa_sse::visitKernelTable<isa_sse::V4, void>(); }
 
 }  // namespace tsah::detail

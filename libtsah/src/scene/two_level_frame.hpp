@@ -1,14 +1,15 @@
 #pragma once
-// What the shared traversal loop (detail::traverse) reads of a two-level runtime's TLAS, for the
-// instant frame (two_level_runtime.cpp) and a blurred one at one ray's time (two_level_motion.cpp):
-// its nodes, and as the "triangle" of a slot the instance's BLAS, traced with the ray moved into
-// instance space.
+// What the shared traversal loop (detail::traverse) reads of a two-level runtime's binary TLAS, for
+// the instant frame (two_level_runtime.cpp) and a blurred one at one ray's time
+// (two_level_motion.cpp): its nodes, and as the "triangle" of a slot the instance's BLAS, traced with
+// the ray moved into instance space; and the same instance step as the wide TLAS's visitor.
 #include <optional>
 #include <type_traits>
 
 #include "tsah/core/instance_transform.hpp"
 #include "tsah/layout/motion_blur.hpp"
 #include "tsah/layout/traversal.hpp"
+#include "tsah/layout/wide_visit.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
 #include "tsah/scene/two_level_runtime.hpp"
 
@@ -28,6 +29,53 @@ inline std::optional<Affine3x4> instanceSpaceOf(const Affine3x4& toWorld) {
   for (int i = 0; i < 12; ++i) world[i] = double(toWorld.m[i]);
   return instanceSpace(world);
 }
+
+// An instance's BLAS traced with the ray moved into its space (`space`: world -> instance), in
+// (ray.tmin, tmax): true when hit; closest hit: t, u, v and the BLAS triangle `prim` of the hit,
+// nearer than tmax. Any hit: the BLAS's `order`. Blurred: at the ray's shutter fraction `time`.
+template <bool AnyHit, bool Blurred>
+inline bool traceInstance(const CpuRuntime& blas, const Affine3x4& space, const Ray& ray, float tmax, float time,
+                          AnyHitOrder order, float& t, float& u, float& v, uint32_t& prim) {
+  const Ray local = rayInInstance(space, ray, tmax);
+  if constexpr (AnyHit) {  // the caller stops at the first hit: no distance needed
+    return Blurred ? blas.anyHit(local, time, order) : blas.anyHit(local, order);
+  } else {
+    const Hit h = Blurred ? blas.closestHit(local, time) : blas.closestHit(local);
+    if (!h.valid() || !(h.t < tmax)) return false;
+    t = h.t;
+    u = h.u;
+    v = h.v;
+    prim = h.tri;
+    return true;
+  }
+}
+
+// The instant frame's instances as the wide TLAS's items (wide_visit.hpp, wide_tlas.hpp): the
+// instance's box was tested by the kernel's node test; a singular instance is skipped, the others
+// traced by traceInstance. hitPrim holds the BLAS triangle of the last accepted visit, the final
+// hit (every accepted visit shortens tmax). Lives for one ray.
+template <bool AnyHit>
+struct InstanceVisit {
+  const Affine3x4* toInstance = nullptr;
+  const uint8_t* visible = nullptr;
+  const CpuRuntime* const* blas = nullptr;
+  AnyHitOrder order = AnyHitOrder::FarthestFirst;
+  mutable uint32_t hitPrim = kNoHit;
+
+  static bool visit(const void* context, uint32_t instance, const Ray& ray, float& tmax, Hit& hit) {
+    const InstanceVisit& c = *static_cast<const InstanceVisit*>(context);
+    if (!c.visible[instance]) return false;
+    float t = tmax, u = 0.0f, v = 0.0f;
+    uint32_t prim = kNoHit;
+    if (!traceInstance<AnyHit, false>(*c.blas[instance], c.toInstance[instance], ray, tmax, 0.0f, c.order, t, u, v, prim))
+      return false;
+    tmax = t;
+    hit = {t, u, v, instance};
+    c.hitPrim = prim;
+    return true;
+  }
+  WideLeafVisitor visitor() const { return {this, &InstanceVisit::visit}; }
+};
 
 // The blurred TLAS at one ray's time: the keys s and s + 1 of its segment and f along it.
 struct TlasKeys {
@@ -91,21 +139,9 @@ struct TlasFrame {
       if (!visible[instance] || !intersectBox(prep, instanceBoxes[instance], ray.tmin, tmax, entry)) return false;
       space = toInstance[instance];
     }
-    const Ray local = rayInInstance(space, ray, tmax);
-    if (AnyHit) {  // the loop stops at the first accepted slot: no distance needed
-      const bool any = Blurred ? blas[instance]->anyHit(local, keys.time, order) : blas[instance]->anyHit(local, order);
-      if (!any) return false;
-      t = tmax;
-      u = v = 0.0f;
-      return true;
-    }
-    const Hit h = Blurred ? blas[instance]->closestHit(local, keys.time) : blas[instance]->closestHit(local);
-    if (!h.valid() || !(h.t < tmax)) return false;
-    t = h.t;
-    u = h.u;
-    v = h.v;
-    hitPrim = h.tri;
-    return true;
+    t = tmax;  // any hit: the loop stops at the first accepted slot, no distance needed
+    u = v = 0.0f;
+    return traceInstance<AnyHit, Blurred>(*blas[instance], space, ray, tmax, keys.time, order, t, u, v, hitPrim);
   }
 };
 

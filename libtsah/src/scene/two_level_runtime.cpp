@@ -12,6 +12,7 @@
 #include "tsah/base/error.hpp"
 #include "tsah/layout/traversal.hpp"
 #include "two_level_frame.hpp"
+#include "wide_tlas.hpp"
 
 namespace tsah {
 
@@ -44,6 +45,14 @@ std::optional<Affine3x4> instanceSpace(const anim::Matrix4& world) {
   for (int i = 0; i < 12; ++i) a.m[i] = float(inverse[i]);
   return a;
 }
+
+// The TLAS in the wide BLAS layout's width, with the visitor kernels of the BLAS runtimes'
+// instruction set.
+struct TwoLevelRuntime::WideTop {
+  const WideVisitKernels* kernels = nullptr;
+  std::optional<detail::WideTlas<4>> tlas4;
+  std::optional<detail::WideTlas<8>> tlas8;
+};
 
 struct TwoLevelRuntime::Pool {
   explicit Pool(uint32_t n) : arena(static_cast<int>(n)) {}
@@ -160,10 +169,27 @@ void TwoLevelRuntime::update(double sceneTime) {
     toInstance_[i] = space.value_or(Affine3x4{});
     instanceBoxes_[i] = transformBox(blas_[i]->bounds(), world);  // flat while singular, still a box
   }
-  if (config_.tlas == TlasUpdate::Rebuild)
+  const bool rebuilt = config_.tlas == TlasUpdate::Rebuild;
+  if (rebuilt)
     tlas_ = runtimeTopology(flattenBvh(rebuildTlas(instanceBoxes_, scene_.objective)), scene_.instanceCount(),
                             kTraversalStackSize, "two-level runtime: TLAS");
   refitTlas();
+  if (config_.layout != Layout::Bvh2 && (rebuilt || !wideTop_)) {  // a new topology: collapsed again
+    auto top = std::make_unique<WideTop>();
+    top->kernels = &wideVisitKernels(blas_.front()->layoutInfo().isa);
+    if (config_.layout == Layout::Bvh4)
+      top->tlas4.emplace(tlas_, instanceBoxes_);
+    else
+      top->tlas8.emplace(tlas_, instanceBoxes_);
+    wideTop_ = std::move(top);
+  }
+  refitWideTlas();
+}
+
+void TwoLevelRuntime::refitWideTlas() {
+  if (!wideTop_) return;
+  if (wideTop_->tlas4) wideTop_->tlas4->refit(instanceBoxes_);
+  if (wideTop_->tlas8) wideTop_->tlas8->refit(instanceBoxes_);
 }
 
 void TwoLevelRuntime::refitTlas() {
@@ -175,11 +201,22 @@ void TwoLevelRuntime::refitTlas() {
 }
 
 TwoLevelHit TwoLevelRuntime::closestHit(const Ray& ray) const {
+  if (wideTop_ && !blurred()) {  // blurred: the instant trace at the close takes the binary TLAS's keys
+    const detail::InstanceVisit<false> visit{toInstance_.data(), visible_.data(), blas_.data()};
+    const Hit h = wideTop_->tlas8 ? wideTop_->kernels->closest8(wideTop_->tlas8->view(), ray, visit.visitor())
+                                  : wideTop_->kernels->closest4(wideTop_->tlas4->view(), ray, visit.visitor());
+    return detail::twoLevelHit(h, visit);
+  }
   const auto frame = detail::tlasFrame<false, false>(tlas_, toInstance_, instanceBoxes_, visible_, blas_);
   return detail::twoLevelHit(detail::traverse<false>(frame, ray), frame);
 }
 
 bool TwoLevelRuntime::anyHit(const Ray& ray, AnyHitOrder order) const {
+  if (wideTop_ && !blurred()) {
+    const detail::InstanceVisit<true> visit{toInstance_.data(), visible_.data(), blas_.data(), order};
+    return wideTop_->tlas8 ? wideTop_->kernels->any8(wideTop_->tlas8->view(), ray, order, visit.visitor())
+                           : wideTop_->kernels->any4(wideTop_->tlas4->view(), ray, order, visit.visitor());
+  }
   auto frame = detail::tlasFrame<true, false>(tlas_, toInstance_, instanceBoxes_, visible_, blas_);
   frame.order = order;
   return detail::traverse<true>(frame, ray).valid();
@@ -208,6 +245,7 @@ uint64_t TwoLevelRuntime::memoryBytes() const {
   for (const auto& r : poses_) bytes += runtimeBytes(*r);
   for (const auto& s : poseScratch_) bytes += s.size() * sizeof(float);
   bytes += tlas_.nodes.size() * sizeof(GpuBvhNode) + tlas_.triIndex.size() * sizeof(uint32_t);
+  if (wideTop_) bytes += wideTop_->tlas4 ? wideTop_->tlas4->bytes() : wideTop_->tlas8->bytes();
   bytes += toInstance_.size() * sizeof(Affine3x4) + instanceBoxes_.size() * sizeof(Aabb) + blas_.size() * sizeof(const CpuRuntime*);
   bytes += keyToWorld_.size() * sizeof(Affine3x4) + keyInstanceBoxes_.size() * sizeof(Aabb) +
            keyTlasNodes_.size() * sizeof(GpuBvhNode) + keyTlasRootBoxes_.size() * sizeof(Aabb) + moving_.size();

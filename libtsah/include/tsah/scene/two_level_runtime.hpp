@@ -8,7 +8,8 @@
 // the instance's space (origin by the inverse affine transform, direction by its linear part, not
 // normalized, so t is the world ray's parameter) and traced by the instance's BLAS runtime
 // (CpuRuntime::closestHit / anyHit: the same traversal and watertight triangle test as a single
-// tree); the TLAS itself is traced by the binary traversal loop (detail::traverse).
+// tree); the TLAS itself is traced by the binary traversal loop (detail::traverse), or with bvh4 /
+// bvh8 BLAS by the wide kernels over the TLAS collapsed to that width (instances as leaf children).
 // Motion blur (updateShutter, docs/motion-blur.md "Two-level scenes"): the instances' world matrices
 // and the poses' BLAS at every key of a shutter, the TLAS refitted at every key, and rays traced at
 // their own time (two_level_motion.cpp).
@@ -60,7 +61,9 @@ class TwoLevelRuntime {
     uint32_t threads = 0;  // 0: one per hardware thread
     TlasUpdate tlas = TlasUpdate::Refit;
     // The BLAS layout: bvh2, or bvh4 / bvh8 collapsed once per BLAS runtime with the scene's
-    // objective (CpuRuntime's wide layouts and SIMD kernels). The TLAS is always binary.
+    // objective (CpuRuntime's wide layouts and SIMD kernels). The TLAS is binary (tlas()); with a
+    // wide BLAS layout the instant frame traces it collapsed to the same width, each instance a leaf
+    // child of its own, with the same SIMD node test (docs/two-level.md).
     Layout layout = Layout::Bvh2;
   };
 
@@ -129,6 +132,7 @@ class TwoLevelRuntime {
 
  private:
   void refitTlas();
+  void refitWideTlas();
   const CpuRuntime& runtimeOf(uint32_t instance) const;
   void clearShutter();
   detail::TlasKeys keysAt(float time) const;  // the blurred frame's keys of the time's segment
@@ -150,6 +154,9 @@ class TwoLevelRuntime {
   std::vector<Aabb> instanceBoxes_;
   std::vector<const CpuRuntime*> blas_;                  // per instance: the BLAS runtime it traces
   FlatBvh tlas_;
+  // Wide BLAS layouts: tlas_'s topology in the BLAS's width, the instant frame's trace (wide_tlas.hpp).
+  struct WideTop;
+  std::unique_ptr<WideTop> wideTop_;
   double time_ = 0.0;
   // Motion blur (empty when not blurred): key fractions and scene times; per key, the instances'
   // world matrices in float and boxes, and the TLAS's interior nodes and root box; per instance
