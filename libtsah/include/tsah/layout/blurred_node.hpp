@@ -58,11 +58,12 @@ TSAH_HD uint16_t halfDirected(float x, bool down) {
 TSAH_HD float halfValue(uint16_t h) {
 #if defined(__CUDA_ARCH__)
   return __half2float(__ushort_as_half(h));
-#endif
+#else
   const uint32_t sign = uint32_t(h & 0x8000u) << 16, exponent = (h >> 10) & 0x1fu, mantissa = h & 0x3ffu;
   if (exponent == 0) return bitsFloat(sign | floatBits(float(mantissa) * 0x1p-24f));
   const uint32_t biased = exponent == 31 ? 0xffu : exponent - 15 + 127;
   return bitsFloat(sign | (biased << 23) | (mantissa << 13));
+#endif
 }
 
 // The record of a node for the segment from key s (atS) to key s + 1 (atNext), both pre-padded.
