@@ -1,7 +1,9 @@
 #include <gtest/gtest.h>
 
 #include "tsah/base/error.hpp"
+#include "anim/generators.hpp"
 #include "anim/load.hpp"
+#include "anim/obj_writer.hpp"
 #include "anim/mesh_sequence.hpp"
 #include "test_support.hpp"
 
@@ -112,6 +114,41 @@ TEST_F(Sequence, ZeroPaddedPattern) {
   const auto a = anim::load((d / "f_%04d.obj").string());
   ASSERT_EQ(a.keyframeCount(), 3u);
   EXPECT_FLOAT_EQ(a.keyframe(2)[0], 10.0f);
+}
+
+TEST(FramePatterns, LiteralCharactersShortNumbersAndHugeNumbers) {
+  const auto d = tsah::test::scratchDir();
+  // Regex metacharacters and a literal percent in the name are plain text; a zero-padded pattern
+  // skips numbers with fewer digits; a number past 64 bits is not a frame (not a crash).
+  const std::pair<const char*, float> files[] = {{"a+b(1)%_001.obj", 1.0f},
+                                                  {"a+b(1)%_002.obj", 2.0f},
+                                                  {"a+b(1)%_3.obj", 3.0f},
+                                                  {"a+b(1)%_0x4.obj", 4.0f},
+                                                  {"a+b(1)%_123456789012345678901234567890.obj", 5.0f},
+                                                  {"a+b(1)%_005.obj.bak", 6.0f}};
+  for (const auto& [name, x] : files) writeText(d / name, quadObj(x));
+  const auto a = anim::load((d / "a+b(1)%%_%03d.obj").string());
+  ASSERT_EQ(a.keyframeCount(), 2u);
+  EXPECT_FLOAT_EQ(a.keyframe(1)[0], 2.0f);
+  EXPECT_TRUE(throwsFileError([&] { anim::load((d / "a%d_%d.obj").string()); }, {"exactly one"}));
+  EXPECT_TRUE(throwsFileError([&] { anim::load((d / "a%0100d.obj").string()); }, {"width"}));
+  EXPECT_TRUE(throwsFileError([&] { anim::load((d / "a_%%.obj").string()); }, {"no %d"}));
+}
+
+TEST(FramePatterns, WrittenSequenceReadsBack) {
+  // The writer formats the number itself (the pattern is never a printf format): "%%" is a
+  // percent, "%3d" pads with spaces as printf does; anything but one %d-style number is refused.
+  const auto d = tsah::test::scratchDir();
+  const anim::Animation wave = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 60, 3);
+  EXPECT_EQ(anim::saveObjSequence(wave, (d / "w%%_%03d.obj").string()), 3u);
+  EXPECT_TRUE(fs::exists(d / "w%_001.obj"));
+  const anim::Animation back = anim::load((d / "w%%_%03d.obj").string());
+  ASSERT_EQ(back.keyframeCount(), 3u);
+  EXPECT_FLOAT_EQ(back.keyframe(2)[5], wave.keyframe(2)[5]);
+  EXPECT_EQ(anim::saveObjSequence(wave, (d / "s_%3d.obj").string()), 3u);
+  EXPECT_TRUE(fs::exists(d / "s_  3.obj"));
+  for (const char* bad : {"x_%s.obj", "x_%d_%d.obj", "x.obj", "x_%n.obj"})
+    EXPECT_THROW(anim::saveObjSequence(wave, (d / bad).string()), tsah::ConfigError) << bad;
 }
 
 TEST_F(Sequence, ManifestWithTimes) {

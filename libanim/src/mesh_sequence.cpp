@@ -14,13 +14,13 @@
 #include <iostream>
 #include <mutex>
 #include <nlohmann/json.hpp>
-#include <regex>
 #include <sstream>
 #include <thread>
 
 #include "tsah/base/files.hpp"
 #include "tsah/base/error.hpp"
 #include "tsah/base/memory.hpp"
+#include "frame_pattern.hpp"
 #include "mesh_check.hpp"
 
 namespace anim {
@@ -172,40 +172,6 @@ bool isHiddenOrBackup(const fs::path& p) {
   return name.empty() || name[0] == '.' || name.back() == '~';
 }
 
-// printf pattern -> regex over file names, e.g. walk_%04d.obj -> walk_(\d{4,}).obj
-std::regex patternToRegex(const std::string& filePattern, const std::string& spec) {
-  std::string re;
-  bool sawNumber = false;
-  for (std::size_t i = 0; i < filePattern.size(); ++i) {
-    const char c = filePattern[i];
-    if (c == '%') {
-      if (i + 1 < filePattern.size() && filePattern[i + 1] == '%') {
-        re += "%";
-        ++i;
-        continue;
-      }
-      std::size_t j = i + 1;
-      bool zeroPad = false;
-      if (j < filePattern.size() && filePattern[j] == '0') zeroPad = true;
-      int width = 0;
-      while (j < filePattern.size() && std::isdigit(static_cast<unsigned char>(filePattern[j])))
-        width = width * 10 + (filePattern[j++] - '0');
-      if (j >= filePattern.size() || filePattern[j] != 'd' || sawNumber)
-        throw tsah::FileError(spec, "frame pattern must contain exactly one %d-style number (e.g. %04d)");
-      re += zeroPad && width > 0 ? "(\\d{" + std::to_string(width) + ",})" : "(\\d+)";
-      sawNumber = true;
-      i = j;
-    } else if (std::string("\\^$.|?*+()[]{}").find(c) != std::string::npos) {
-      re += '\\';
-      re += c;
-    } else {
-      re += c;
-    }
-  }
-  if (!sawNumber) throw tsah::FileError(spec, "frame pattern has no %d");
-  return std::regex(re);
-}
-
 }  // namespace
 
 bool isMeshFile(const std::string& path) {
@@ -252,13 +218,13 @@ FrameList listFrames(const std::string& spec) {
     const fs::path p(spec);
     const fs::path dir = p.has_parent_path() ? p.parent_path() : fs::path(".");
     if (!fs::is_directory(dir, ec)) throw tsah::FileError(spec, "folder " + dir.string() + " does not exist");
-    const std::regex re = patternToRegex(p.filename().string(), spec);
-    std::vector<std::pair<unsigned long long, std::string>> numbered;
+    const detail::FramePatternParse parsed = detail::parseFramePattern(p.filename().string());
+    if (!parsed.pattern) throw tsah::FileError(spec, parsed.error);
+    std::vector<std::pair<uint64_t, std::string>> numbered;
     for (const auto& entry : fs::directory_iterator(dir, ec)) {
-      std::smatch m;
-      const std::string name = entry.path().filename().string();
-      if (entry.is_regular_file() && std::regex_match(name, m, re))
-        numbered.emplace_back(std::stoull(m[1].str()), entry.path().string());
+      if (!entry.is_regular_file()) continue;
+      if (const auto number = parsed.pattern->match(entry.path().filename().string()))
+        numbered.emplace_back(*number, entry.path().string());
     }
     std::sort(numbered.begin(), numbered.end());
     for (auto& [n, file] : numbered) list.files.push_back(std::move(file));

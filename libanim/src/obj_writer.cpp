@@ -2,11 +2,11 @@
 
 #include <cstdio>
 #include <filesystem>
-#include <regex>
 #include <string>
 
 #include "tsah/base/files.hpp"
 #include "tsah/base/error.hpp"
+#include "frame_pattern.hpp"
 
 namespace anim {
 
@@ -49,10 +49,8 @@ std::string frameText(const Animation& a, uint32_t keyframe, const std::string& 
 }  // namespace
 
 std::size_t saveObjSequence(const Animation& a, const std::string& pattern) {
-  // Exactly one %d-style conversion (%d, %4d, %04d) and no other '%': the pattern becomes a printf
-  // format, so anything else (%s, %n) would be undefined behaviour.
-  static const std::regex valid("[^%]*%0?[0-9]{0,3}d[^%]*");
-  if (!std::regex_match(pattern, valid))
+  const detail::FramePatternParse parsed = detail::parseFramePattern(pattern);
+  if (!parsed.pattern)
     throw tsah::ConfigError(pattern + ": output pattern needs exactly one %d-style number, e.g. frames/f_%04d.obj");
   tsah::requireExtension(pattern, ".obj", "OBJ sequence");
   const std::string faces = faceLines(a);
@@ -60,8 +58,7 @@ std::size_t saveObjSequence(const Animation& a, const std::string& pattern) {
   // sequence behind that reads as a valid animation.
   tsah::AtomicFileSet files;
   for (uint32_t k = 0; k < a.keyframeCount(); ++k) {
-    char name[4096];
-    std::snprintf(name, sizeof name, pattern.c_str(), int(k + 1));
+    const std::string name = parsed.pattern->format(k + 1);
     if (k == 0) {
       const auto parent = std::filesystem::path(name).parent_path();
       std::error_code ec;
