@@ -7,6 +7,7 @@
 #include "tsah/core/aabb.hpp"
 #include "tsah/layout/cwbvh_layout.hpp"
 #include "tsah/layout/gpu_layout.hpp"
+#include "tsah/layout/refit_parts.hpp"
 #include "tsah/core/ray.hpp"
 #include "tsah/layout/woop.hpp"
 
@@ -65,9 +66,20 @@ struct BatchStrides {
   uint64_t positions = 0, nodes = 0, woop = 0, counters = 0;
 };
 
-// Shared-memory bytes of a block refit (refit_walk.cuh's blockRefit) of a tree with interiorCount
-// interior nodes: an arrival counter and the two child boxes (12 floats) per node.
-constexpr uint64_t blockRefitBytes(uint32_t interiorCount) { return uint64_t(interiorCount) * 13u * 4u; }
+// A tree split for block refits (tsah::RefitParts) on the device: parts[subtreeCount] is the top
+// when hasTop.
+struct RefitPartsView {
+  const RefitPart* parts = nullptr;
+  const uint32_t* parentSlot = nullptr;
+  const uint32_t* globalNode = nullptr;
+  const RefitPartItem* items = nullptr;
+  uint32_t subtreeCount = 0;
+  uint32_t hasTop = 0;
+};
+
+// Shared-memory bytes of a part's block refit (refit_walk.cuh's partRefit) of nodeCount local
+// nodes: an arrival counter, the parent's local slot and the two child boxes (12 floats) per node.
+constexpr uint64_t partRefitBytes(uint32_t nodeCount) { return uint64_t(nodeCount) * 14u * 4u; }
 
 struct TraceLaunch {
   bool persistent = true;   // Aila-Laine persistent warps fetching rays from a global counter

@@ -3,7 +3,7 @@
 // runtime's refits (pose BLAS, TLAS over instance boxes): a leaf's thread writes its box into the
 // parent's child slot; the second thread to arrive at a node has both child boxes and carries on
 // upwards. refitUpwards walks through global memory (any tree size, one thread per leaf of a grid);
-// blockRefit keeps a small tree's walk in one block's shared memory.
+// partRefit keeps the walk of a part of a tree (tsah::splitForBlockRefit) in one block's shared memory.
 #include <cuda/atomic>
 
 #include "device_types.hpp"
@@ -49,25 +49,31 @@ __device__ __forceinline__ void refitUpwards(GpuBvhNode* __restrict__ nodes, con
   root->box = box;
 }
 
-// One block refits one whole tree (a small one: a character's BLAS, a TLAS over some thousand
-// instances). Arrivals are counted and child boxes kept in shared memory, written to the nodes at
-// the end, so a level of the walk costs shared-memory latency instead of refitUpwards' round trips
-// to L2. leafBoxOf(leaf) gives a leaf's box; the boxes equal refitUpwards' (the same extends in the
-// same order). shared: blockRefitBytes(interiorCount) bytes (device_types.hpp).
-template <class LeafBoxOf>
-__device__ void blockRefit(GpuBvhNode* __restrict__ nodes, const uint32_t* __restrict__ nodeParent,
-                           const LeafRecord* __restrict__ leaves, uint32_t leafCount, uint32_t interiorCount,
-                           LeafBoxOf leafBoxOf, RootInfo* __restrict__ root, uint32_t* shared) {
+// One block refits one part of a tree split by tsah::splitForBlockRefit (a subtree, the top above
+// the subtrees, or a small tree whole): arrivals, parents and child boxes are kept in shared memory,
+// so a level of the walk costs shared-memory latency instead of refitUpwards' round trips to L2;
+// the child boxes are written to the nodes at the end. boxOf(item) gives an item's box (a leaf's, or
+// a subtree part's root box); the part's root box goes to *exitBox. The boxes equal refitUpwards'
+// (min and max are exact, so the order of the extends does not matter). shared:
+// partRefitBytes(part.nodeCount) bytes (device_types.hpp).
+template <class ItemBoxOf>
+__device__ void partRefit(GpuBvhNode* __restrict__ nodes, const RefitPartsView& view, uint32_t partIndex,
+                          ItemBoxOf boxOf, Aabb* exitBox, uint32_t* shared) {
+  const RefitPart part = view.parts[partIndex];
   uint32_t* counters = shared;
-  volatile float* boxes = reinterpret_cast<volatile float*>(shared + interiorCount);
-  for (uint32_t n = threadIdx.x; n < interiorCount; n += blockDim.x) counters[n] = 0;
+  uint32_t* parents = shared + part.nodeCount;
+  volatile float* boxes = reinterpret_cast<volatile float*>(shared + 2 * std::size_t(part.nodeCount));
+  for (uint32_t n = threadIdx.x; n < part.nodeCount; n += blockDim.x) {
+    counters[n] = 0;
+    parents[n] = __ldg(view.parentSlot + part.firstNode + n);
+  }
   __syncthreads();
-  for (uint32_t i = threadIdx.x; i < leafCount; i += blockDim.x) {
-    const LeafRecord leaf = leaves[i];
-    Aabb box = leafBoxOf(leaf);
-    uint32_t slot = leaf.parentSlot;
-    bool reachedRoot = true;
-    while (slot != kNoParent) {
+  for (uint32_t i = threadIdx.x; i < part.itemCount; i += blockDim.x) {
+    const RefitPartItem item = view.items[part.firstItem + i];
+    Aabb box = boxOf(item);
+    uint32_t slot = item.parentSlot;
+    bool reachedExit = true;
+    while (slot != kPartExitSlot) {
       const uint32_t node = slot >> 1;
       const int side = int(slot & 1);
       volatile float* mine = boxes + 12 * std::size_t(node) + 6 * side;
@@ -75,20 +81,21 @@ __device__ void blockRefit(GpuBvhNode* __restrict__ nodes, const uint32_t* __res
       mine[3] = box.hi.x, mine[4] = box.hi.y, mine[5] = box.hi.z;
       __threadfence_block();  // the box before the arrival: the sibling reads it after its own
       if (atomicAdd(counters + node, 1u) == 0) {
-        reachedRoot = false;  // the sibling finishes the node
+        reachedExit = false;  // the sibling finishes the node
         break;
       }
       __threadfence_block();
       volatile const float* other = boxes + 12 * std::size_t(node) + 6 * (1 - side);
       box.extend(Aabb{{other[0], other[1], other[2]}, {other[3], other[4], other[5]}});
-      slot = nodeParent[node];
+      slot = parents[node];
     }
-    if (reachedRoot) root->box = box;
+    if (reachedExit) *exitBox = box;
   }
   __syncthreads();
-  for (uint32_t k = threadIdx.x; k < 2 * interiorCount; k += blockDim.x) {
+  for (uint32_t k = threadIdx.x; k < 2 * part.nodeCount; k += blockDim.x) {
     volatile const float* b = boxes + 6 * std::size_t(k);
-    writeChildBox(nodes + k / 2, int(k & 1), Aabb{{b[0], b[1], b[2]}, {b[3], b[4], b[5]}});
+    writeChildBox(nodes + __ldg(view.globalNode + part.firstNode + k / 2), int(k & 1),
+                  Aabb{{b[0], b[1], b[2]}, {b[3], b[4], b[5]}});
   }
 }
 

@@ -33,46 +33,75 @@ __global__ void tlasRefitKernel(GpuBvhNode* __restrict__ nodes, const uint32_t* 
   refitUpwards(nodes, nodeParent, leaf.parentSlot, box, counters, root);
 }
 
-// Block refits: threads per pose's tree, and for the TLAS (one block for the whole frame's instances).
-constexpr uint32_t kBlockThreads = 512;
+// Block refits: threads per part of a pose's tree, and for the TLAS (one block for the whole
+// frame's instances).
+constexpr uint32_t kPartThreads = 256;
 constexpr uint32_t kTlasBlockThreads = 1024;
 
-// One block per pose of a group (blockIdx.x): its Woop triangles and its refit, both from the
-// positions the batched interpolation wrote before this launch.
-__global__ void __launch_bounds__(kBlockThreads)
-    poseBlasBlockKernel(GpuBvhNode* __restrict__ nodes, const uint32_t* __restrict__ nodeParent,
-                        const LeafRecord* __restrict__ leaves, uint32_t leafCount, uint32_t interiorCount,
-                        const uint32_t* __restrict__ slotVertices, uint32_t slots, const float* __restrict__ positions,
-                        WoopTriangle* __restrict__ woop, RootInfo* __restrict__ roots, BatchStrides batch) {
-  extern __shared__ uint32_t shared[];
-  const uint32_t b = blockIdx.x;
-  const float* own = positions + b * batch.positions;
-  WoopTriangle* ownWoop = woop + b * batch.woop;
-  for (uint32_t s = threadIdx.x; s < slots; s += blockDim.x) {
-    const uint32_t* tri = slotVertices + 3 * std::size_t(s);
-    ownWoop[s] = makeWoopTriangle(loadVertex(own, __ldg(tri)), loadVertex(own, __ldg(tri + 1)),
-                                  loadVertex(own, __ldg(tri + 2)));
+// The Woop triangles of a part's leaf items, from the positions the batched interpolation wrote.
+__device__ void partWoop(const RefitPartsView& view, uint32_t partIndex, const uint32_t* __restrict__ slotVertices,
+                         const float* __restrict__ positions, WoopTriangle* __restrict__ woop) {
+  const RefitPart part = view.parts[partIndex];
+  for (uint32_t i = threadIdx.x; i < part.itemCount; i += blockDim.x) {
+    const RefitPartItem item = view.items[part.firstItem + i];
+    if (item.count == kPartEntry) continue;
+    for (uint32_t s = item.first; s < item.first + item.count; ++s) {
+      const uint32_t* tri = slotVertices + 3 * std::size_t(s);
+      woop[s] = makeWoopTriangle(loadVertex(positions, __ldg(tri)), loadVertex(positions, __ldg(tri + 1)),
+                                 loadVertex(positions, __ldg(tri + 2)));
+    }
   }
-  const auto leafBoxOf = [&](const LeafRecord& leaf) { return leafBox(leaf.first, leaf.count, slotVertices, own); };
-  blockRefit(nodes + b * batch.nodes, nodeParent, leaves, leafCount, interiorCount, leafBoxOf, roots + b, shared);
 }
 
-// One block: every instance's world box, then the TLAS refit over them.
+// Block (pose b = blockIdx.x, subtree part blockIdx.y): the part's refit and Woop triangles. The
+// last of a pose's subtree blocks to finish (counted in tickets[b], cleared again for the next
+// frame) refits the top over the subtrees' root boxes (partBoxes) and its own leaves.
+__global__ void __launch_bounds__(kPartThreads)
+    posePartsKernel(GpuBvhNode* __restrict__ nodes, RefitPartsView view, const uint32_t* __restrict__ slotVertices,
+                    const float* __restrict__ positions, WoopTriangle* __restrict__ woop,
+                    RootInfo* __restrict__ roots, Aabb* partBoxes, uint32_t* tickets, BatchStrides batch) {
+  extern __shared__ uint32_t shared[];
+  __shared__ bool lastBlock;
+  const uint32_t b = blockIdx.x, part = blockIdx.y;
+  const float* own = positions + b * batch.positions;
+  GpuBvhNode* ownNodes = nodes + b * batch.nodes;
+  WoopTriangle* ownWoop = woop + b * batch.woop;
+  Aabb* ownPartBoxes = partBoxes + std::size_t(b) * view.subtreeCount;
+  const auto boxOf = [&](const RefitPartItem& item) {
+    if (item.count != kPartEntry) return leafBox(item.first, item.count, slotVertices, own);
+    // Written by another block of this launch: read through L2.
+    const float* f = reinterpret_cast<const float*>(ownPartBoxes + item.first);
+    return Aabb{{__ldcg(f), __ldcg(f + 1), __ldcg(f + 2)}, {__ldcg(f + 3), __ldcg(f + 4), __ldcg(f + 5)}};
+  };
+  partRefit(ownNodes, view, part, boxOf, view.hasTop ? ownPartBoxes + part : &roots[b].box, shared);
+  partWoop(view, part, slotVertices, own, ownWoop);
+  if (!view.hasTop) return;
+  __threadfence();  // this part's root box and nodes before the ticket
+  __syncthreads();
+  if (threadIdx.x == 0) lastBlock = atomicAdd(tickets + b, 1u) == view.subtreeCount - 1;
+  __syncthreads();
+  if (!lastBlock) return;
+  __threadfence();
+  partRefit(ownNodes, view, view.subtreeCount, boxOf, &roots[b].box, shared);
+  partWoop(view, view.subtreeCount, slotVertices, own, ownWoop);
+  if (threadIdx.x == 0) tickets[b] = 0;
+}
+
+// One block: every instance's world box, then the TLAS refit over them (the TLAS is one part).
 __global__ void __launch_bounds__(kTlasBlockThreads)
     tlasBlockKernel(const InstanceState* __restrict__ instances, const BlasView* __restrict__ views, uint32_t count,
-                    Aabb* instanceBoxes, GpuBvhNode* __restrict__ nodes, const uint32_t* __restrict__ nodeParent,
-                    const LeafRecord* __restrict__ leaves, uint32_t leafCount, uint32_t interiorCount,
+                    Aabb* instanceBoxes, GpuBvhNode* __restrict__ nodes, RefitPartsView tlasParts,
                     const uint32_t* __restrict__ triIndex, RootInfo* __restrict__ root) {
   extern __shared__ uint32_t shared[];
   for (uint32_t i = threadIdx.x; i < count; i += blockDim.x)
     instanceBoxes[i] = transformBoxRows(views[instances[i].view].root->box, instances[i].world);
   __syncthreads();  // the boxes of other threads, read below (plain loads: written in this launch)
-  const auto leafBoxOf = [&](const LeafRecord& leaf) {
+  const auto boxOf = [&](const RefitPartItem& item) {
     Aabb box;
-    for (uint32_t s = leaf.first; s < leaf.first + leaf.count; ++s) box.extend(instanceBoxes[triIndex[s]]);
+    for (uint32_t s = item.first; s < item.first + item.count; ++s) box.extend(instanceBoxes[triIndex[s]]);
     return box;
   };
-  blockRefit(nodes, nodeParent, leaves, leafCount, interiorCount, leafBoxOf, root, shared);
+  partRefit(nodes, tlasParts, 0, boxOf, &root->box, shared);
 }
 
 template <bool AnyHit>
@@ -111,27 +140,30 @@ uint64_t prepareBlockRefits() {
   int device = 0, optIn = 0;
   CUDA_CHECK(cudaGetDevice(&device));
   CUDA_CHECK(cudaDeviceGetAttribute(&optIn, cudaDevAttrMaxSharedMemoryPerBlockOptin, device));
-  CUDA_CHECK(cudaFuncSetAttribute(poseBlasBlockKernel, cudaFuncAttributeMaxDynamicSharedMemorySize, optIn));
-  CUDA_CHECK(cudaFuncSetAttribute(tlasBlockKernel, cudaFuncAttributeMaxDynamicSharedMemorySize, optIn));
-  return uint64_t(optIn);
+  // Each kernel's static shared memory counts against the same limit.
+  const int dynamicLimit = optIn - 64;
+  CUDA_CHECK(cudaFuncSetAttribute(posePartsKernel, cudaFuncAttributeMaxDynamicSharedMemorySize, dynamicLimit));
+  CUDA_CHECK(cudaFuncSetAttribute(tlasBlockKernel, cudaFuncAttributeMaxDynamicSharedMemorySize, dynamicLimit));
+  return uint64_t(dynamicLimit);
 }
 
-void launchPoseBlasBlocks(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
-                          uint32_t interiorCount, const uint32_t* slotVertices, uint32_t slots, const float* positions,
-                          WoopTriangle* woop, RootInfo* roots, uint32_t poseCount, const BatchStrides& batch,
-                          cudaStream_t stream) {
+void launchPoseBlasParts(GpuBvhNode* nodes, const RefitPartsView& parts, uint32_t maxPartNodes,
+                         const uint32_t* slotVertices, const float* positions, WoopTriangle* woop, RootInfo* roots,
+                         Aabb* partBoxes, uint32_t* tickets, uint32_t poseCount, const BatchStrides& batch,
+                         cudaStream_t stream) {
   if (poseCount == 0) return;
-  poseBlasBlockKernel<<<poseCount, kBlockThreads, blockRefitBytes(interiorCount), stream>>>(
-      nodes, nodeParent, leaves, leafCount, interiorCount, slotVertices, slots, positions, woop, roots, batch);
-  CUDA_CHECK_LAUNCH("poseBlasBlockKernel");
+  const dim3 grid(poseCount, parts.subtreeCount);
+  posePartsKernel<<<grid, kPartThreads, partRefitBytes(maxPartNodes), stream>>>(
+      nodes, parts, slotVertices, positions, woop, roots, partBoxes, tickets, batch);
+  CUDA_CHECK_LAUNCH("posePartsKernel");
 }
 
 void launchTlasBlock(const InstanceState* instances, const BlasView* views, uint32_t count, Aabb* instanceBoxes,
-                     GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
-                     uint32_t interiorCount, const uint32_t* triIndex, RootInfo* root, cudaStream_t stream) {
+                     GpuBvhNode* nodes, const RefitPartsView& tlasParts, uint32_t tlasNodeCount,
+                     const uint32_t* triIndex, RootInfo* root, cudaStream_t stream) {
   if (count == 0) return;
-  tlasBlockKernel<<<1, kTlasBlockThreads, blockRefitBytes(interiorCount), stream>>>(
-      instances, views, count, instanceBoxes, nodes, nodeParent, leaves, leafCount, interiorCount, triIndex, root);
+  tlasBlockKernel<<<1, kTlasBlockThreads, partRefitBytes(tlasNodeCount), stream>>>(
+      instances, views, count, instanceBoxes, nodes, tlasParts, triIndex, root);
   CUDA_CHECK_LAUNCH("tlasBlockKernel");
 }
 

@@ -69,19 +69,23 @@ void launchInstanceBoxes(const InstanceState* instances, const BlasView* views, 
 void launchTlasRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
                      const uint32_t* triIndex, const Aabb* instanceBoxes, uint32_t* counters, RootInfo* root,
                      cudaStream_t stream);
-// Small trees refitted by one block each, in shared memory (refit_walk.cuh's blockRefit): usable
-// when blockRefitBytes(interiorCount) <= the bytes prepareBlockRefits returns (the device's opt-in
-// shared memory per block; it lets the kernels use that much, on the current device).
+// Block refits (refit_walk.cuh's partRefit): usable when partRefitBytes(the most local nodes of a
+// part) <= the bytes prepareBlockRefits returns (the device's opt-in shared memory per block, less
+// the kernels' own; it lets the kernels use that much, on the current device).
 uint64_t prepareBlockRefits();
-// Block b of poseCount (BatchStrides): pose b's Woop triangles and refit from its positions.
-void launchPoseBlasBlocks(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
-                          uint32_t interiorCount, const uint32_t* slotVertices, uint32_t slots, const float* positions,
-                          WoopTriangle* woop, RootInfo* roots, uint32_t poseCount, const BatchStrides& batch,
-                          cudaStream_t stream);
-// launchInstanceBoxes and launchTlasRefit in one block (no counters to clear).
+// Every pose of a group (BatchStrides) refitted from its positions by the parts of its source's
+// tree (one block per pose and subtree part; the top by the last of them), with its Woop
+// triangles. partBoxes: subtreeCount boxes per pose; tickets: one per pose, zero on entry (and
+// left zero).
+void launchPoseBlasParts(GpuBvhNode* nodes, const RefitPartsView& parts, uint32_t maxPartNodes,
+                         const uint32_t* slotVertices, const float* positions, WoopTriangle* woop, RootInfo* roots,
+                         Aabb* partBoxes, uint32_t* tickets, uint32_t poseCount, const BatchStrides& batch,
+                         cudaStream_t stream);
+// launchInstanceBoxes and the TLAS refit in one block (tlasParts: the TLAS as one part of
+// tlasNodeCount nodes).
 void launchTlasBlock(const InstanceState* instances, const BlasView* views, uint32_t count, Aabb* instanceBoxes,
-                     GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
-                     uint32_t interiorCount, const uint32_t* triIndex, RootInfo* root, cudaStream_t stream);
+                     GpuBvhNode* nodes, const RefitPartsView& tlasParts, uint32_t tlasNodeCount,
+                     const uint32_t* triIndex, RootInfo* root, cudaStream_t stream);
 // One thread per ray: closest hits into hits, or (occluded non-null) any hits into occluded.
 void launchTwoLevelTrace(const TlasScene& scene, const Ray* rays, uint32_t count, InstanceHit* hits,
                          uint8_t* occluded, cudaStream_t stream);

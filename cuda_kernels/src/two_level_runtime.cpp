@@ -10,6 +10,7 @@
 #include "kernels.hpp"
 #include "rebuild.hpp"
 #include "tsah/base/error.hpp"
+#include "tsah/layout/refit_parts.hpp"
 #include "tsah/layout/traversal.hpp"
 #include "tsah_cuda/cuda_check.hpp"
 #include "tsah_cuda/device_buffer.hpp"
@@ -61,6 +62,28 @@ DeviceBuffer<T> toDevice(const std::vector<T>& host, cudaStream_t stream) {
   return DeviceBuffer<T>(std::span<const T>(host), stream);
 }
 
+// A tree split for block refits (tsah::splitForBlockRefit), on the device.
+struct DeviceRefitParts {
+  DeviceBuffer<RefitPart> parts;
+  DeviceBuffer<uint32_t> parentSlot, globalNode;
+  DeviceBuffer<RefitPartItem> items;
+  uint32_t subtreeCount = 0, maxNodeCount = 0;
+  bool hasTop = false;
+
+  DeviceRefitParts() = default;
+  DeviceRefitParts(const RefitParts& host, cudaStream_t stream)
+      : parts(toDevice(host.parts, stream)),
+        parentSlot(toDevice(host.parentSlot, stream)),
+        globalNode(toDevice(host.globalNode, stream)),
+        items(toDevice(host.items, stream)),
+        subtreeCount(host.subtreeCount()),
+        maxNodeCount(host.maxNodeCount()),
+        hasTop(host.hasTop) {}
+  detail::RefitPartsView view() const {
+    return {parts.data(), parentSlot.data(), globalNode.data(), items.data(), subtreeCount, hasTop ? 1u : 0u};
+  }
+};
+
 }  // namespace
 
 struct GpuTwoLevelRuntime::Impl {
@@ -72,6 +95,7 @@ struct GpuTwoLevelRuntime::Impl {
     DeviceBuffer<detail::LeafRecord> leaves;
     DeviceBuffer<float> keyframes;  // every keyframe of the moving vertices (animated sources)
     uint32_t movingCount = 0;
+    DeviceRefitParts parts;  // animated sources with Config::blockRefits: the poses' block refit
   };
   // A static source's BLAS: its boxes, positions and Woop triangles, refitted once.
   struct StaticBlas {
@@ -89,11 +113,13 @@ struct GpuTwoLevelRuntime::Impl {
     std::vector<uint32_t> poses;  // the scene's pose ids, in batch order
     uint32_t firstFrame = 0;      // its poses' frames in poseFrames / devicePoseFrames
     detail::BatchStrides strides;
-    bool blockRefit = false;  // its BLAS fits one block's shared memory (launchPoseBlasBlocks)
+    bool blockRefit = false;  // its BLAS's parts fit one block's shared memory (launchPoseBlasParts)
     DeviceBuffer<GpuBvhNode> nodes;
     DeviceBuffer<float> positions;
     DeviceBuffer<WoopTriangle> woop;
-    DeviceBuffer<uint32_t> counters;
+    DeviceBuffer<uint32_t> counters;  // the global walk's
+    DeviceBuffer<Aabb> partBoxes;     // the block refit's: the subtree parts' root boxes per pose
+    DeviceBuffer<uint32_t> tickets;   // the block refit's: finished subtree blocks per pose
     DeviceBuffer<detail::RootInfo> roots;
   };
   struct Graph {
@@ -133,6 +159,7 @@ struct GpuTwoLevelRuntime::Impl {
   uint32_t tlasLeafCount = 0;
   DeviceBuffer<GpuBvhNode> tlasNodes;
   DeviceBuffer<uint32_t> tlasParent, tlasCounters, tlasTriIndex;
+  DeviceRefitParts tlasParts;  // the TLAS as one part, for its block refit
   DeviceBuffer<detail::LeafRecord> tlasLeaves;
   DeviceBuffer<detail::RootInfo> tlasRoot;
   uint64_t blockRefitLimit = 0;  // shared bytes a block refit may use (prepareBlockRefits)
@@ -170,6 +197,7 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
       d.keyframes = DeviceBuffer<float>(a.motion(), stream);
       d.movingIds = DeviceBuffer<uint32_t>(a.movingVertices(), stream);
       d.movingCount = a.movingVertexCount();
+      if (config.blockRefits) d.parts = DeviceRefitParts(splitForBlockRefit(d.topology, config.refitPartLeaves), stream);
     }
   }
   // A BLAS starts from its source's positions at its start time (the rest positions of the static
@@ -221,7 +249,9 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
     g.strides.nodes = d.topology.nodes.size();
     g.strides.woop = d.topology.triangleCount();
     g.strides.counters = d.topology.interiorCount;
-    g.blockRefit = config.blockRefits && detail::blockRefitBytes(d.topology.interiorCount) <= blockRefitLimit;
+    // Blocks per pose: one per subtree part (a grid's y dimension).
+    g.blockRefit = config.blockRefits && detail::partRefitBytes(d.parts.maxNodeCount) <= blockRefitLimit &&
+                   d.parts.subtreeCount <= 65535;
     g.firstFrame = frameCount;
     std::vector<float> positions;
     positions.reserve(start.size() * members);
@@ -234,7 +264,12 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
     g.positions = toDevice(positions, stream);
     g.nodes = toDevice(nodes, stream);
     g.woop.resize(g.strides.woop * members);
-    if (!g.blockRefit) g.counters.resize(g.strides.counters * members);
+    if (g.blockRefit) {
+      g.partBoxes.resize(std::size_t(d.parts.subtreeCount) * members);
+      g.tickets = toDevice(std::vector<uint32_t>(members, 0u), stream);
+    } else {
+      g.counters.resize(g.strides.counters * members);
+    }
     g.roots = toDevice(std::vector<detail::RootInfo>(members, rootOf(d.topology)), stream);
     for (uint32_t i = 0; i < members; ++i) {
       const uint32_t p = g.poses[i];
@@ -278,8 +313,12 @@ void GpuTwoLevelRuntime::Impl::uploadRefitTlas() {
   tlasLeafCount = uint32_t(r.leaves.size());
   tlasNodes = toDevice(tlasTopology.nodes, stream);
   tlasParent = toDevice(r.parent, stream);
-  tlasBlockRefit = config.blockRefits && detail::blockRefitBytes(tlasTopology.interiorCount) <= blockRefitLimit;
-  if (!tlasBlockRefit) tlasCounters.resize(tlasTopology.interiorCount);
+  tlasBlockRefit =
+      config.blockRefits && detail::partRefitBytes(tlasTopology.interiorCount) <= blockRefitLimit;
+  if (tlasBlockRefit)
+    tlasParts = DeviceRefitParts(splitForBlockRefit(tlasTopology, std::numeric_limits<uint32_t>::max()), stream);
+  else
+    tlasCounters.resize(tlasTopology.interiorCount);
   tlasTriIndex = toDevice(tlasTopology.triIndex, stream);
   tlasLeaves = toDevice(r.leaves, stream);
   const detail::RootInfo root = rootOf(tlasTopology);
@@ -315,9 +354,9 @@ void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
                                      devicePoseFrames.data() + g.firstFrame, g.positions.data(), d.movingCount,
                                      members, g.strides.positions, stream);
       if (g.blockRefit) {
-        detail::launchPoseBlasBlocks(g.nodes.data(), d.nodeParent.data(), d.leaves.data(), d.leafCount,
-                                     d.topology.interiorCount, d.slotVertices.data(), d.topology.triangleCount(),
-                                     g.positions.data(), g.woop.data(), g.roots.data(), members, g.strides, stream);
+        detail::launchPoseBlasParts(g.nodes.data(), d.parts.view(), d.parts.maxNodeCount, d.slotVertices.data(),
+                                    g.positions.data(), g.woop.data(), g.roots.data(), g.partBoxes.data(),
+                                    g.tickets.data(), members, g.strides, stream);
         continue;
       }
       if (g.counters.size()) CUDA_CHECK(cudaMemsetAsync(g.counters.data(), 0, g.counters.bytes(), stream));
@@ -333,8 +372,7 @@ void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
     tlasRebuilder->enqueueBoxes(instanceBoxes.data(), tlasRebuild, stream);
   } else if (tlasBlockRefit) {
     detail::launchTlasBlock(instances.data(), views.data(), count, instanceBoxes.data(), tlasNodes.data(),
-                            tlasParent.data(), tlasLeaves.data(), tlasLeafCount, tlasTopology.interiorCount,
-                            tlasTriIndex.data(), tlasRoot.data(), stream);
+                            tlasParts.view(), tlasParts.maxNodeCount, tlasTriIndex.data(), tlasRoot.data(), stream);
   } else {
     detail::launchInstanceBoxes(instances.data(), views.data(), count, instanceBoxes.data(), stream);
     if (tlasCounters.size())

@@ -55,10 +55,13 @@ class GpuTwoLevelRuntime {
  public:
   struct Config {
     int device = 0;
-    // Refit each pose's BLAS and the TLAS in one block's shared memory when they fit (the device's
-    // opt-in shared memory per block: 13 * 4 bytes per interior node); false: the global-memory
-    // walk for every tree (the reference; the boxes are the same bit for bit).
+    // Refit the poses' BLAS and the TLAS by blocks walking in shared memory: each pose's tree split
+    // into subtrees of at most refitPartLeaves leaves (one block each) and the top above them
+    // (tsah::splitForBlockRefit), the TLAS as one part when it fits the device's opt-in shared
+    // memory per block (14 * 4 bytes per interior node); false: the global-memory walk for every
+    // tree (the reference; the boxes are the same bit for bit).
     bool blockRefits = true;
+    uint32_t refitPartLeaves = 512;
     TlasUpdate tlas = TlasUpdate::Refit;  // how each update brings the TLAS to the frame (above)
   };
 
