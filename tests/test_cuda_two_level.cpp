@@ -199,14 +199,18 @@ TEST_F(CudaTwoLevel, TlasBoxesContainEveryInstanceAfterEachUpdate) {
   }
 }
 
-// The block refits (shared memory, one block per pose and one for the TLAS) against the global walk:
-// the same boxes, so the same TLAS bit for bit and the same hits exactly.
-TEST_F(CudaTwoLevel, BlockRefitsEqualTheGlobalWalk) {
-  tsah::cuda::GpuTwoLevelRuntime block(*scene);
+// The block refits (shared memory: blocks per part of each pose's tree, one for the TLAS) against
+// the global walk: the same boxes, so the same TLAS bit for bit and the same hits exactly. Parts of
+// at most 2, 5 and 16 leaves split each pose into many subtrees and a top; 512: one part.
+void expectBlockRefitsEqualTheGlobalWalk(const tsah::TwoLevelScene& twoLevel, uint32_t partLeaves) {
+  SCOPED_TRACE("refitPartLeaves " + std::to_string(partLeaves));
+  tsah::cuda::GpuTwoLevelRuntime::Config parts;
+  parts.refitPartLeaves = partLeaves;
+  tsah::cuda::GpuTwoLevelRuntime block(twoLevel, parts);
   tsah::cuda::GpuTwoLevelRuntime::Config reference;
   reference.blockRefits = false;
-  tsah::cuda::GpuTwoLevelRuntime global(*scene, reference);
-  for (const double t : {0.0, 2.0, 3.25, 7.5, 12.0}) {
+  tsah::cuda::GpuTwoLevelRuntime global(twoLevel, reference);
+  for (const double t : {0.0, 2.0, 3.25, 7.5, 12.0, 3.25}) {
     block.updateAt(t);
     global.updateAt(t);
     const tsah::FlatBvh a = block.downloadTlas(), b = global.downloadTlas();
@@ -229,6 +233,10 @@ TEST_F(CudaTwoLevel, BlockRefitsEqualTheGlobalWalk) {
     }
     EXPECT_GT(hits, rays.size() / 4) << "t " << t;
   }
+}
+
+TEST_F(CudaTwoLevel, BlockRefitsEqualTheGlobalWalk) {
+  for (const uint32_t partLeaves : {512u, 16u, 5u, 2u}) expectBlockRefitsEqualTheGlobalWalk(*scene, partLeaves);
 }
 
 TEST_F(CudaTwoLevel, AFrameWithOnlyRigidMotionRefitsNoBlas) {

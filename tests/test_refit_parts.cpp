@@ -133,18 +133,19 @@ void expectSplitRefitsLikeTheTree(const anim::Animation& a, uint32_t maxLeaves) 
 
 TEST(RefitParts, EverySplitRefitsLikeTheWholeTree) {
   const anim::Animation a = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 700, 2, 5);
-  for (const uint32_t maxLeaves : {1u, 2u, 3u, 16u, 100u, 699u, 700u, 100000u}) expectSplitRefitsLikeTheTree(a, maxLeaves);
+  for (const uint32_t maxLeaves : {2u, 3u, 16u, 100u, 699u, 700u, 100000u}) expectSplitRefitsLikeTheTree(a, maxLeaves);
 }
 
 TEST(RefitParts, ATreeThatIsOneLeafIsOnePart) {
   const anim::Animation a({0, 1, 2}, 3, {0, 0, 0, 1, 0, 0, 0, 1, 0}, {0.0}, "triangle");
-  expectSplitRefitsLikeTheTree(a, 1);
+  expectSplitRefitsLikeTheTree(a, 2);
 }
 
-TEST(RefitParts, ZeroLeavesPerPartIsRefused) {
+TEST(RefitParts, PartsOfFewerThanTwoLeavesAreRefused) {
   const anim::Animation a = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 50, 2, 5);
   const tsah::FlatBvh tree = tsah::flattenBvh(tsah::SweepSahBuilder().build(tsah::test::keyframeBoxes(a, 0)));
   EXPECT_THROW(tsah::splitForBlockRefit(tree, 0), tsah::ConfigError);
+  EXPECT_THROW(tsah::splitForBlockRefit(tree, 1), tsah::ConfigError);
 }
 
 }  // namespace

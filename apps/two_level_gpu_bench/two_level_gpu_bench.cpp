@@ -2,7 +2,7 @@
 //   tsah_two_level_gpu_bench SCENE.json [--tree TREE.tbvh | --save-tree TREE.tbvh [--build-only]]
 //                            [--frames 50] [--width 1024] [--height 768]
 //                            [--ao 4] [--k 2] [--build-frames 5] [--no-rebuild-reference]
-//                            [--global-refits] [--flat-tree FLAT.tbvh] [--tlas refit|lbvh|hlbvh-sah|all]
+//                            [--global-refits] [--refit-part-leaves 512] [--flat-tree FLAT.tbvh] [--tlas refit|lbvh|hlbvh-sah|all]
 // Builds the two-level structure (or loads a version 3 .tbvh built for the scene), then for each of
 // --frames times spread over the scene's time range: updateAt (upload of the instance transforms,
 // BLAS refits, TLAS refit: CUDA events), then primary rays (a camera fitted to the instances' boxes,
@@ -48,6 +48,7 @@ struct Options {
   bool rebuildReference = true;
   bool buildOnly = false;  // build and save (--save-tree), no device needed
   bool blockRefits = true;  // GpuTwoLevelRuntime::Config::blockRefits
+  uint32_t refitPartLeaves = tsah::cuda::GpuTwoLevelRuntime::Config{}.refitPartLeaves;
   std::string tlas = "all";  // refit, lbvh, hlbvh-sah or all
 };
 
@@ -127,6 +128,7 @@ int run(const Options& opt) {
   for (tsah::cuda::TlasUpdate update : tlasUpdates(opt.tlas)) {
     tsah::cuda::GpuTwoLevelRuntime::Config config;
     config.blockRefits = opt.blockRefits;
+    config.refitPartLeaves = opt.refitPartLeaves;
     config.tlas = update;
     TlasRun& r = runs.emplace_back();
     r.update = update;
@@ -227,6 +229,7 @@ int run(const Options& opt) {
   j["image"] = {opt.width, opt.height};
   j["ao_per_hit"] = opt.ao;
   j["block_refits"] = opt.blockRefits;
+  j["refit_part_leaves"] = opt.refitPartLeaves;
   j["median"] = {{"upload_ms", median(upload)}, {"blas_refit_ms", median(blas)}, {"tlas_update_ms", median(tlas)},
                  {"update_ms", median(update)}, {"primary_ms", median(primaryMs)}, {"ao_ms", median(aoMs)},
                  {"tlas_rebuild_cpu_ms", median(rebuildMs)}, {"blas_refits", median(refits)}};
@@ -284,7 +287,10 @@ int main(int argc, char** argv) {
                  "(default)")
       ->check(CLI::IsMember({"refit", "lbvh", "hlbvh-sah", "all"}));
   app.add_flag("--global-refits", globalRefits,
-               "Refit every tree by the global-memory walk, not in one block's shared memory (the reference)");
+               "Refit every tree by the global-memory walk, not by blocks in shared memory (the reference)");
+  app.add_option("--refit-part-leaves", opt.refitPartLeaves,
+                 "Block refits: each pose's tree split into subtrees of at most this many leaves (default 512)")
+      ->check(CLI::Range(2u, 1u << 30));
   CLI11_PARSE(app, argc, argv);
   opt.rebuildReference = !noRebuild;
   opt.blockRefits = !globalRefits;

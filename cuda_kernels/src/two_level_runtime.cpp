@@ -146,12 +146,18 @@ struct GpuTwoLevelRuntime::Impl {
   std::vector<uint32_t> staticView;  // per source: its view, or kInvalidIndex when animated
   uint32_t firstPoseView = 0;        // views: the static BLAS, then one per pose in the scene's order
   DeviceBuffer<detail::BlasView> views;
-  detail::FrameParams* poseFrames = nullptr;  // pinned, in the groups' batch order: the graphs copy it
+  // What the host writes each frame, in one pinned block that the graphs copy to one device block
+  // with one copy (a copy in a graph costs microseconds whatever its size): the poses' frames (in
+  // the groups' batch order), then the instances' states (the rigid graph copies only these).
+  uint8_t* hostUpload = nullptr;
+  DeviceBuffer<uint8_t> deviceUpload;
+  std::size_t instancesOffset = 0, uploadBytes = 0;
+  detail::FrameParams* poseFrames = nullptr;  // in hostUpload
+  detail::FrameParams* devicePoseFrames = nullptr;  // in deviceUpload
   std::vector<uint32_t> poseFrameIndex;       // per pose: its entry in poseFrames
-  DeviceBuffer<detail::FrameParams> devicePoseFrames;
   std::vector<double> poseLocalTime;
-  detail::InstanceState* hostInstances = nullptr;  // pinned: the graphs copy it to `instances`
-  DeviceBuffer<detail::InstanceState> instances;
+  detail::InstanceState* hostInstances = nullptr;  // in hostUpload
+  detail::InstanceState* instances = nullptr;      // in deviceUpload
   DeviceBuffer<Aabb> instanceBoxes;
   FlatBvh tlasTopology;  // the T-SAH TLAS, checked against the instances
   // Config::tlas Refit: the T-SAH TLAS's nodes and refit data on the device (uploadRefitTlas).
@@ -283,16 +289,18 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
     }
   }
   views = toDevice(hostViews, stream);
-  CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&poseFrames),
-                            std::max<std::size_t>(1, frameCount) * sizeof(detail::FrameParams)));
-  std::fill_n(poseFrames, std::max<uint32_t>(1, frameCount), detail::FrameParams{});
-  devicePoseFrames.resize(frameCount);
-  poseLocalTime.assign(scene.poses.size(), std::numeric_limits<double>::quiet_NaN());
-
   const uint32_t count = scene.instanceCount();
-  CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&hostInstances),
-                            std::max<std::size_t>(1, count) * sizeof(detail::InstanceState)));
-  instances.resize(count);
+  static_assert(alignof(detail::InstanceState) <= alignof(detail::FrameParams));
+  instancesOffset = std::size_t(frameCount) * sizeof(detail::FrameParams);
+  uploadBytes = instancesOffset + std::size_t(count) * sizeof(detail::InstanceState);
+  CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&hostUpload), std::max<std::size_t>(1, uploadBytes)));
+  deviceUpload.resize(std::max<std::size_t>(1, uploadBytes));
+  poseFrames = reinterpret_cast<detail::FrameParams*>(hostUpload);
+  std::fill_n(poseFrames, frameCount, detail::FrameParams{});
+  devicePoseFrames = reinterpret_cast<detail::FrameParams*>(deviceUpload.data());
+  hostInstances = reinterpret_cast<detail::InstanceState*>(hostUpload + instancesOffset);
+  instances = reinterpret_cast<detail::InstanceState*>(deviceUpload.data() + instancesOffset);
+  poseLocalTime.assign(scene.poses.size(), std::numeric_limits<double>::quiet_NaN());
   instanceBoxes.resize(count);
   // The T-SAH TLAS is checked whatever the update; only its refit reads it on the device.
   tlasTopology = runtimeTopology(flattenBvh(scene.tlas), count, kTraversalStackSize, "GPU two-level runtime: TLAS");
@@ -331,27 +339,24 @@ GpuTwoLevelRuntime::Impl::~Impl() {
     if (g->graph) cudaGraphDestroy(g->graph);
   }
   if (stream) cudaStreamSynchronize(stream);
-  if (hostInstances) cudaFreeHost(hostInstances);
-  if (poseFrames) cudaFreeHost(poseFrames);
+  if (hostUpload) cudaFreeHost(hostUpload);
   if (stream) cudaStreamDestroy(stream);
 }
 
 void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
   const uint32_t count = scene.instanceCount();
   events.record(0, stream);
-  if (count)
-    CUDA_CHECK(cudaMemcpyAsync(instances.data(), hostInstances, count * sizeof(detail::InstanceState),
+  const std::size_t first = refitPoses ? 0 : instancesOffset;
+  if (uploadBytes > first)
+    CUDA_CHECK(cudaMemcpyAsync(deviceUpload.data() + first, hostUpload + first, uploadBytes - first,
                                cudaMemcpyHostToDevice, stream));
-  if (refitPoses && devicePoseFrames.size())
-    CUDA_CHECK(cudaMemcpyAsync(devicePoseFrames.data(), poseFrames, devicePoseFrames.bytes(), cudaMemcpyHostToDevice,
-                               stream));
   events.record(1, stream);
   if (refitPoses)
     for (PoseGroup& g : groups) {
       const Source& d = sources[g.source];
       const auto members = uint32_t(g.poses.size());
       detail::launchBatchInterpolate(d.keyframes.data(), d.movingIds.size() ? d.movingIds.data() : nullptr,
-                                     devicePoseFrames.data() + g.firstFrame, g.positions.data(), d.movingCount,
+                                     devicePoseFrames + g.firstFrame, g.positions.data(), d.movingCount,
                                      members, g.strides.positions, stream);
       if (g.blockRefit) {
         detail::launchPoseBlasParts(g.nodes.data(), d.parts.view(), d.parts.maxNodeCount, d.slotVertices.data(),
@@ -368,13 +373,13 @@ void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
     }
   events.record(2, stream);
   if (tlasRebuilder) {
-    detail::launchInstanceBoxes(instances.data(), views.data(), count, instanceBoxes.data(), stream);
+    detail::launchInstanceBoxes(instances, views.data(), count, instanceBoxes.data(), stream);
     tlasRebuilder->enqueueBoxes(instanceBoxes.data(), tlasRebuild, stream);
   } else if (tlasBlockRefit) {
-    detail::launchTlasBlock(instances.data(), views.data(), count, instanceBoxes.data(), tlasNodes.data(),
+    detail::launchTlasBlock(instances, views.data(), count, instanceBoxes.data(), tlasNodes.data(),
                             tlasParts.view(), tlasParts.maxNodeCount, tlasTriIndex.data(), tlasRoot.data(), stream);
   } else {
-    detail::launchInstanceBoxes(instances.data(), views.data(), count, instanceBoxes.data(), stream);
+    detail::launchInstanceBoxes(instances, views.data(), count, instanceBoxes.data(), stream);
     if (tlasCounters.size())
       CUDA_CHECK(cudaMemsetAsync(tlasCounters.data(), 0, tlasCounters.size() * sizeof(uint32_t), stream));
     detail::launchTlasRefit(tlasNodes.data(), tlasParent.data(), tlasLeaves.data(), tlasLeafCount,
@@ -401,9 +406,9 @@ GpuTwoLevelRuntime::Impl::Graph GpuTwoLevelRuntime::Impl::capture(bool refitPose
 
 detail::TlasScene GpuTwoLevelRuntime::Impl::tlasScene() const {
   if (tlasRebuilder)
-    return {tlasRebuilder->nodes(), tlasRebuilder->triIndex(), tlasRebuilder->root(), instances.data(), views.data(),
+    return {tlasRebuilder->nodes(), tlasRebuilder->triIndex(), tlasRebuilder->root(), instances, views.data(),
             instanceBoxes.data()};
-  return {tlasNodes.data(), tlasTriIndex.data(), tlasRoot.data(), instances.data(), views.data(), instanceBoxes.data()};
+  return {tlasNodes.data(), tlasTriIndex.data(), tlasRoot.data(), instances, views.data(), instanceBoxes.data()};
 }
 
 const char* tlasUpdateName(TlasUpdate update) {

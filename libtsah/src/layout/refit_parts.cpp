@@ -52,7 +52,8 @@ void addPart(const FlatBvh& tree, const std::vector<uint32_t>& nodes, const std:
 }  // namespace
 
 RefitParts splitForBlockRefit(const FlatBvh& tree, uint32_t maxLeaves) {
-  if (maxLeaves == 0) throw ConfigError("splitForBlockRefit: maxLeaves must be at least 1");
+  // Every tree with interior nodes has one with two leaf children: at least one subtree part.
+  if (maxLeaves < 2) throw ConfigError("splitForBlockRefit: a part must be allowed at least 2 leaves");
   RefitParts out;
   const uint32_t n = tree.interiorCount;
   if (n == 0) {  // the tree is one leaf

@@ -44,8 +44,9 @@ struct RefitParts {
   uint32_t maxNodeCount() const;       // the most local nodes of one part (its shared memory)
 };
 
-// Splits `tree` (canonical, validated) into subtrees of at most maxLeaves leaves (maxLeaves >= 1)
-// and the top above them; a tree of at most maxLeaves leaves is one part.
+// Splits `tree` (canonical, validated) into subtrees of at most maxLeaves leaves and the top above
+// them (there is at least one subtree); a tree of at most maxLeaves leaves is one part. Throws
+// tsah::ConfigError for maxLeaves < 2.
 RefitParts splitForBlockRefit(const FlatBvh& tree, uint32_t maxLeaves);
 
 }  // namespace tsah
