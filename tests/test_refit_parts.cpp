@@ -103,7 +103,18 @@ void expectSplitRefitsLikeTheTree(const anim::Animation& a, uint32_t maxLeaves) 
     const tsah::RefitPart& part = parts.parts[p];
     EXPECT_LE(part.itemCount, maxLeaves);
     leafItems += part.itemCount;
+    // The items' slots are exactly the part's slot range, each once.
+    std::vector<int> covered(part.slotCount, 0);
+    for (uint32_t i = 0; i < part.itemCount; ++i) {
+      const tsah::RefitPartItem& item = parts.items[part.firstItem + i];
+      ASSERT_NE(item.count, tsah::kPartEntry);
+      ASSERT_GE(item.first, part.firstSlot);
+      ASSERT_LE(item.first + item.count, part.firstSlot + part.slotCount);
+      for (uint32_t s = item.first; s < item.first + item.count; ++s) ++covered[s - part.firstSlot];
+    }
+    for (uint32_t s = 0; s < part.slotCount; ++s) EXPECT_EQ(covered[s], 1) << "part " << p << " slot " << s;
   }
+  if (parts.hasTop) EXPECT_EQ(parts.parts.back().slotCount, 0u);
   if (parts.hasTop) {
     const tsah::RefitPart& top = parts.parts.back();
     uint32_t entries = 0;

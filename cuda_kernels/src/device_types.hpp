@@ -78,8 +78,12 @@ struct RefitPartsView {
 };
 
 // Shared-memory bytes of a part's block refit (refit_walk.cuh's partRefit) of nodeCount local
-// nodes: an arrival counter, the parent's local slot and the two child boxes (12 floats) per node.
-constexpr uint64_t partRefitBytes(uint32_t nodeCount) { return uint64_t(nodeCount) * 14u * 4u; }
+// nodes: an arrival counter, the parent's local slot and the node's 12 box floats per node; with
+// slots, 6 box floats per triangle slot of the part (the pose kernel's triangle boxes).
+TSAH_HD constexpr uint32_t partWalkWords(uint32_t nodeCount) { return 14u * nodeCount; }
+constexpr uint64_t partRefitBytes(uint32_t nodeCount, uint32_t slotCount = 0) {
+  return (uint64_t(partWalkWords(nodeCount)) + uint64_t(slotCount) * 6u) * 4u;
+}
 
 struct TraceLaunch {
   bool persistent = true;   // Aila-Laine persistent warps fetching rays from a global counter

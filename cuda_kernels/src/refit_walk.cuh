@@ -49,17 +49,31 @@ __device__ __forceinline__ void refitUpwards(GpuBvhNode* __restrict__ nodes, con
   root->box = box;
 }
 
+// A child box in a node's float layout (GpuBvhNode: child 0's x/y at floats 0..3, child 1's at
+// 4..7, z boxes at 8 / 10), in shared memory.
+__device__ __forceinline__ void storeSharedChildBox(volatile float* node, int side, const Aabb& b) {
+  const int xy = side == 0 ? 0 : 4, z = side == 0 ? 8 : 10;
+  node[xy + 0] = b.lo.x, node[xy + 1] = b.hi.x, node[xy + 2] = b.lo.y, node[xy + 3] = b.hi.y;
+  node[z + 0] = b.lo.z, node[z + 1] = b.hi.z;
+}
+__device__ __forceinline__ Aabb loadSharedChildBox(volatile const float* node, int side) {
+  const int xy = side == 0 ? 0 : 4, z = side == 0 ? 8 : 10;
+  return Aabb{{node[xy + 0], node[xy + 2], node[z + 0]}, {node[xy + 1], node[xy + 3], node[z + 1]}};
+}
+
 // One block refits one part of a tree split by tsah::splitForBlockRefit (a subtree, the top above
 // the subtrees, or a small tree whole): arrivals, parents and child boxes are kept in shared memory,
-// so a level of the walk costs shared-memory latency instead of refitUpwards' round trips to L2;
-// the child boxes are written to the nodes at the end. boxOf(item) gives an item's box (a leaf's, or
-// a subtree part's root box); the part's root box goes to *exitBox. The boxes equal refitUpwards'
-// (min and max are exact, so the order of the extends does not matter). shared:
-// partRefitBytes(part.nodeCount) bytes (device_types.hpp).
-template <class ItemBoxOf>
-__device__ void partRefit(GpuBvhNode* __restrict__ nodes, const RefitPartsView& view, uint32_t partIndex,
-                          ItemBoxOf boxOf, Aabb* exitBox, uint32_t* shared) {
-  const RefitPart part = view.parts[partIndex];
+// so a level of the walk costs shared-memory latency instead of refitUpwards' round trips to L2.
+// The nodes' boxes are written at the end, twelve floats per node by consecutive threads (a
+// subtree's nodes are consecutive in the tree: the stores coalesce). prologue() runs before the
+// walk, beside the shared memory's set-up, with a barrier after both (the pose kernel computes its
+// triangles there). boxOf(item) gives an item's box (a leaf's, or a subtree part's root box); the
+// part's root box goes to *exitBox. The boxes equal refitUpwards' (min and max are exact, so the
+// order of the extends does not matter). shared: partWalkWords(part.nodeCount) words (device_types.hpp)
+// and the caller's own after them.
+template <class Prologue, class ItemBoxOf>
+__device__ void partRefit(GpuBvhNode* __restrict__ nodes, const RefitPartsView& view, const RefitPart& part,
+                          Prologue prologue, ItemBoxOf boxOf, Aabb* exitBox, uint32_t* shared) {
   uint32_t* counters = shared;
   uint32_t* parents = shared + part.nodeCount;
   volatile float* boxes = reinterpret_cast<volatile float*>(shared + 2 * std::size_t(part.nodeCount));
@@ -67,6 +81,7 @@ __device__ void partRefit(GpuBvhNode* __restrict__ nodes, const RefitPartsView& 
     counters[n] = 0;
     parents[n] = __ldg(view.parentSlot + part.firstNode + n);
   }
+  prologue();
   __syncthreads();
   for (uint32_t i = threadIdx.x; i < part.itemCount; i += blockDim.x) {
     const RefitPartItem item = view.items[part.firstItem + i];
@@ -76,26 +91,22 @@ __device__ void partRefit(GpuBvhNode* __restrict__ nodes, const RefitPartsView& 
     while (slot != kPartExitSlot) {
       const uint32_t node = slot >> 1;
       const int side = int(slot & 1);
-      volatile float* mine = boxes + 12 * std::size_t(node) + 6 * side;
-      mine[0] = box.lo.x, mine[1] = box.lo.y, mine[2] = box.lo.z;
-      mine[3] = box.hi.x, mine[4] = box.hi.y, mine[5] = box.hi.z;
+      storeSharedChildBox(boxes + 12 * std::size_t(node), side, box);
       __threadfence_block();  // the box before the arrival: the sibling reads it after its own
       if (atomicAdd(counters + node, 1u) == 0) {
         reachedExit = false;  // the sibling finishes the node
         break;
       }
       __threadfence_block();
-      volatile const float* other = boxes + 12 * std::size_t(node) + 6 * (1 - side);
-      box.extend(Aabb{{other[0], other[1], other[2]}, {other[3], other[4], other[5]}});
+      box.extend(loadSharedChildBox(boxes + 12 * std::size_t(node), 1 - side));
       slot = parents[node];
     }
     if (reachedExit) *exitBox = box;
   }
   __syncthreads();
-  for (uint32_t k = threadIdx.x; k < 2 * part.nodeCount; k += blockDim.x) {
-    volatile const float* b = boxes + 6 * std::size_t(k);
-    writeChildBox(nodes + __ldg(view.globalNode + part.firstNode + k / 2), int(k & 1),
-                  Aabb{{b[0], b[1], b[2]}, {b[3], b[4], b[5]}});
+  for (uint32_t k = threadIdx.x; k < 12 * part.nodeCount; k += blockDim.x) {
+    const uint32_t node = __ldg(view.globalNode + part.firstNode + k / 12);
+    reinterpret_cast<float*>(nodes + node)[k % 12] = boxes[k];
   }
 }
 

@@ -38,10 +38,9 @@ __global__ void tlasRefitKernel(GpuBvhNode* __restrict__ nodes, const uint32_t* 
 constexpr uint32_t kPartThreads = 256;
 constexpr uint32_t kTlasBlockThreads = 1024;
 
-// The Woop triangles of a part's leaf items, from the positions the batched interpolation wrote.
-__device__ void partWoop(const RefitPartsView& view, uint32_t partIndex, const uint32_t* __restrict__ slotVertices,
-                         const float* __restrict__ positions, WoopTriangle* __restrict__ woop) {
-  const RefitPart part = view.parts[partIndex];
+// The Woop triangles of the top's leaf items (scattered slots: one thread per leaf).
+__device__ void topLeafWoop(const RefitPartsView& view, const RefitPart& part, const uint32_t* __restrict__ slotVertices,
+                            const float* __restrict__ positions, WoopTriangle* __restrict__ woop) {
   for (uint32_t i = threadIdx.x; i < part.itemCount; i += blockDim.x) {
     const RefitPartItem item = view.items[part.firstItem + i];
     if (item.count == kPartEntry) continue;
@@ -53,37 +52,69 @@ __device__ void partWoop(const RefitPartsView& view, uint32_t partIndex, const u
   }
 }
 
-// Block (pose b = blockIdx.x, subtree part blockIdx.y): the part's refit and Woop triangles. The
-// last of a pose's subtree blocks to finish (counted in tickets[b], cleared again for the next
-// frame) refits the top over the subtrees' root boxes (partBoxes) and its own leaves.
+// A subtree part's triangles, one thread per slot (consecutive threads, consecutive slots: the
+// loads of the vertex ids and the Woop stores coalesce): each slot's Woop triangle, and its box in
+// shared memory (triBoxes: 6 floats per slot of the part) for the leaves' boxes.
+__device__ void partTriangles(const RefitPart& part, const uint32_t* __restrict__ slotVertices,
+                              const float* __restrict__ positions, WoopTriangle* __restrict__ woop, float* triBoxes) {
+  for (uint32_t i = threadIdx.x; i < part.slotCount; i += blockDim.x) {
+    const uint32_t s = part.firstSlot + i;
+    const uint32_t* tri = slotVertices + 3 * std::size_t(s);
+    const Vec3 v0 = loadVertex(positions, __ldg(tri)), v1 = loadVertex(positions, __ldg(tri + 1)),
+               v2 = loadVertex(positions, __ldg(tri + 2));
+    woop[s] = makeWoopTriangle(v0, v1, v2);
+    Aabb box;
+    box.extend(v0);
+    box.extend(v1);
+    box.extend(v2);
+    float* b = triBoxes + 6 * std::size_t(i);
+    b[0] = box.lo.x, b[1] = box.lo.y, b[2] = box.lo.z, b[3] = box.hi.x, b[4] = box.hi.y, b[5] = box.hi.z;
+  }
+}
+
+// Block (pose b = blockIdx.x, subtree part blockIdx.y): the part's triangles and refit. The last of
+// a pose's subtree blocks to finish (counted in tickets[b], cleared again for the next frame)
+// refits the top over the subtrees' root boxes (partBoxes) and its own leaves.
 __global__ void __launch_bounds__(kPartThreads)
     posePartsKernel(GpuBvhNode* __restrict__ nodes, RefitPartsView view, const uint32_t* __restrict__ slotVertices,
                     const float* __restrict__ positions, WoopTriangle* __restrict__ woop,
                     RootInfo* __restrict__ roots, Aabb* partBoxes, uint32_t* tickets, BatchStrides batch) {
   extern __shared__ uint32_t shared[];
   __shared__ bool lastBlock;
-  const uint32_t b = blockIdx.x, part = blockIdx.y;
+  const uint32_t b = blockIdx.x;
   const float* own = positions + b * batch.positions;
   GpuBvhNode* ownNodes = nodes + b * batch.nodes;
   WoopTriangle* ownWoop = woop + b * batch.woop;
   Aabb* ownPartBoxes = partBoxes + std::size_t(b) * view.subtreeCount;
-  const auto boxOf = [&](const RefitPartItem& item) {
-    if (item.count != kPartEntry) return leafBox(item.first, item.count, slotVertices, own);
-    // Written by another block of this launch: read through L2.
-    const float* f = reinterpret_cast<const float*>(ownPartBoxes + item.first);
-    return Aabb{{__ldcg(f), __ldcg(f + 1), __ldcg(f + 2)}, {__ldcg(f + 3), __ldcg(f + 4), __ldcg(f + 5)}};
+  const RefitPart part = view.parts[blockIdx.y];
+  float* triBoxes = reinterpret_cast<float*>(shared + partWalkWords(part.nodeCount));
+  const auto triangles = [&] { partTriangles(part, slotVertices, own, ownWoop, triBoxes); };
+  const auto leafBoxOf = [&](const RefitPartItem& item) {
+    Aabb box;
+    for (uint32_t s = item.first - part.firstSlot; s < item.first - part.firstSlot + item.count; ++s) {
+      const float* t = triBoxes + 6 * std::size_t(s);
+      box.extend(Aabb{{t[0], t[1], t[2]}, {t[3], t[4], t[5]}});
+    }
+    return box;
   };
-  partRefit(ownNodes, view, part, boxOf, view.hasTop ? ownPartBoxes + part : &roots[b].box, shared);
-  partWoop(view, part, slotVertices, own, ownWoop);
+  partRefit(ownNodes, view, part, triangles, leafBoxOf, view.hasTop ? ownPartBoxes + blockIdx.y : &roots[b].box,
+            shared);
   if (!view.hasTop) return;
-  __threadfence();  // this part's root box and nodes before the ticket
+  __threadfence();  // this part's root box before the ticket
   __syncthreads();
   if (threadIdx.x == 0) lastBlock = atomicAdd(tickets + b, 1u) == view.subtreeCount - 1;
   __syncthreads();
   if (!lastBlock) return;
   __threadfence();
-  partRefit(ownNodes, view, view.subtreeCount, boxOf, &roots[b].box, shared);
-  partWoop(view, view.subtreeCount, slotVertices, own, ownWoop);
+  const RefitPart top = view.parts[view.subtreeCount];
+  const auto topBoxOf = [&](const RefitPartItem& item) {
+    if (item.count != kPartEntry) return leafBox(item.first, item.count, slotVertices, own);
+    // Written by other blocks of this launch: read through L2.
+    const float* f = reinterpret_cast<const float*>(ownPartBoxes + item.first);
+    return Aabb{{__ldcg(f), __ldcg(f + 1), __ldcg(f + 2)}, {__ldcg(f + 3), __ldcg(f + 4), __ldcg(f + 5)}};
+  };
+  partRefit(ownNodes, view, top, [] {}, topBoxOf, &roots[b].box, shared);
+  topLeafWoop(view, top, slotVertices, own, ownWoop);
   if (threadIdx.x == 0) tickets[b] = 0;
 }
 
@@ -101,7 +132,7 @@ __global__ void __launch_bounds__(kTlasBlockThreads)
     for (uint32_t s = item.first; s < item.first + item.count; ++s) box.extend(instanceBoxes[triIndex[s]]);
     return box;
   };
-  partRefit(nodes, tlasParts, 0, boxOf, &root->box, shared);
+  partRefit(nodes, tlasParts, tlasParts.parts[0], [] {}, boxOf, &root->box, shared);
 }
 
 template <bool AnyHit>
@@ -147,13 +178,13 @@ uint64_t prepareBlockRefits() {
   return uint64_t(dynamicLimit);
 }
 
-void launchPoseBlasParts(GpuBvhNode* nodes, const RefitPartsView& parts, uint32_t maxPartNodes,
+void launchPoseBlasParts(GpuBvhNode* nodes, const RefitPartsView& parts, uint64_t sharedBytes,
                          const uint32_t* slotVertices, const float* positions, WoopTriangle* woop, RootInfo* roots,
                          Aabb* partBoxes, uint32_t* tickets, uint32_t poseCount, const BatchStrides& batch,
                          cudaStream_t stream) {
   if (poseCount == 0) return;
   const dim3 grid(poseCount, parts.subtreeCount);
-  posePartsKernel<<<grid, kPartThreads, partRefitBytes(maxPartNodes), stream>>>(
+  posePartsKernel<<<grid, kPartThreads, sharedBytes, stream>>>(
       nodes, parts, slotVertices, positions, woop, roots, partBoxes, tickets, batch);
   CUDA_CHECK_LAUNCH("posePartsKernel");
 }

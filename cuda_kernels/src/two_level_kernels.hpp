@@ -69,15 +69,15 @@ void launchInstanceBoxes(const InstanceState* instances, const BlasView* views, 
 void launchTlasRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
                      const uint32_t* triIndex, const Aabb* instanceBoxes, uint32_t* counters, RootInfo* root,
                      cudaStream_t stream);
-// Block refits (refit_walk.cuh's partRefit): usable when partRefitBytes(the most local nodes of a
-// part) <= the bytes prepareBlockRefits returns (the device's opt-in shared memory per block, less
+// Block refits (refit_walk.cuh's partRefit): usable when a part's partRefitBytes <= the bytes
+// prepareBlockRefits returns (the device's opt-in shared memory per block, less
 // the kernels' own; it lets the kernels use that much, on the current device).
 uint64_t prepareBlockRefits();
 // Every pose of a group (BatchStrides) refitted from its positions by the parts of its source's
 // tree (one block per pose and subtree part; the top by the last of them), with its Woop
-// triangles. partBoxes: subtreeCount boxes per pose; tickets: one per pose, zero on entry (and
-// left zero).
-void launchPoseBlasParts(GpuBvhNode* nodes, const RefitPartsView& parts, uint32_t maxPartNodes,
+// triangles. sharedBytes: the most partRefitBytes(nodeCount, slotCount) of a part. partBoxes:
+// subtreeCount boxes per pose; tickets: one per pose, zero on entry (and left zero).
+void launchPoseBlasParts(GpuBvhNode* nodes, const RefitPartsView& parts, uint64_t sharedBytes,
                          const uint32_t* slotVertices, const float* positions, WoopTriangle* woop, RootInfo* roots,
                          Aabb* partBoxes, uint32_t* tickets, uint32_t poseCount, const BatchStrides& batch,
                          cudaStream_t stream);

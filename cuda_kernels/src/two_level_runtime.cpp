@@ -68,6 +68,7 @@ struct DeviceRefitParts {
   DeviceBuffer<uint32_t> parentSlot, globalNode;
   DeviceBuffer<RefitPartItem> items;
   uint32_t subtreeCount = 0, maxNodeCount = 0;
+  uint64_t poseSharedBytes = 0;  // the pose kernel's: the most partRefitBytes(nodes, slots) of a part
   bool hasTop = false;
 
   DeviceRefitParts() = default;
@@ -78,7 +79,10 @@ struct DeviceRefitParts {
         items(toDevice(host.items, stream)),
         subtreeCount(host.subtreeCount()),
         maxNodeCount(host.maxNodeCount()),
-        hasTop(host.hasTop) {}
+        hasTop(host.hasTop) {
+    for (const RefitPart& p : host.parts)
+      poseSharedBytes = std::max(poseSharedBytes, detail::partRefitBytes(p.nodeCount, p.slotCount));
+  }
   detail::RefitPartsView view() const {
     return {parts.data(), parentSlot.data(), globalNode.data(), items.data(), subtreeCount, hasTop ? 1u : 0u};
   }
@@ -256,7 +260,7 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
     g.strides.woop = d.topology.triangleCount();
     g.strides.counters = d.topology.interiorCount;
     // Blocks per pose: one per subtree part (a grid's y dimension).
-    g.blockRefit = config.blockRefits && detail::partRefitBytes(d.parts.maxNodeCount) <= blockRefitLimit &&
+    g.blockRefit = config.blockRefits && d.parts.poseSharedBytes <= blockRefitLimit &&
                    d.parts.subtreeCount <= 65535;
     g.firstFrame = frameCount;
     std::vector<float> positions;
@@ -359,7 +363,7 @@ void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
                                      devicePoseFrames + g.firstFrame, g.positions.data(), d.movingCount,
                                      members, g.strides.positions, stream);
       if (g.blockRefit) {
-        detail::launchPoseBlasParts(g.nodes.data(), d.parts.view(), d.parts.maxNodeCount, d.slotVertices.data(),
+        detail::launchPoseBlasParts(g.nodes.data(), d.parts.view(), d.parts.poseSharedBytes, d.slotVertices.data(),
                                     g.positions.data(), g.woop.data(), g.roots.data(), g.partBoxes.data(),
                                     g.tickets.data(), members, g.strides, stream);
         continue;

@@ -19,9 +19,11 @@ constexpr uint32_t kNotLocal = 0xffffffffu;
 
 // Adds one part over `nodes` (interior nodes, ascending): local ids in that order, each node's
 // parent as a local slot (kPartExitSlot for the part's root), and an item per child that is a leaf
-// or the root of a subtree part (partOfRoot[child] != kNotLocal).
+// or the root of a subtree part (partOfRoot[child] != kNotLocal). The top (hasEntries) has no slot
+// range.
 void addPart(const FlatBvh& tree, const std::vector<uint32_t>& nodes, const std::vector<uint32_t>& parentSlot,
-             const std::vector<uint32_t>& partOfRoot, std::vector<uint32_t>& localOf, RefitParts& out) {
+             const std::vector<uint32_t>& partOfRoot, bool hasEntries, std::vector<uint32_t>& localOf,
+             RefitParts& out) {
   RefitPart part;
   part.firstNode = uint32_t(out.globalNode.size());
   part.nodeCount = uint32_t(nodes.size());
@@ -46,6 +48,15 @@ void addPart(const FlatBvh& tree, const std::vector<uint32_t>& nodes, const std:
   }
   for (const uint32_t n : nodes) localOf[n] = kNotLocal;
   part.itemCount = uint32_t(out.items.size()) - part.firstItem;
+  if (!hasEntries) {  // a subtree: its leaves' slots are consecutive (canonical order)
+    uint32_t lo = UINT32_MAX, count = 0;
+    for (uint32_t i = part.firstItem; i < out.items.size(); ++i) {
+      lo = std::min(lo, out.items[i].first);
+      count += out.items[i].count;
+    }
+    part.firstSlot = part.itemCount ? lo : 0;
+    part.slotCount = count;
+  }
   out.parts.push_back(part);
 }
 
@@ -57,7 +68,7 @@ RefitParts splitForBlockRefit(const FlatBvh& tree, uint32_t maxLeaves) {
   RefitParts out;
   const uint32_t n = tree.interiorCount;
   if (n == 0) {  // the tree is one leaf
-    out.parts.push_back({0, 0, 0, 1});
+    out.parts.push_back({0, 0, 0, 1, 0, tree.rootCount});
     out.items.push_back({kPartExitSlot, 0, tree.rootCount});
     return out;
   }
@@ -100,11 +111,11 @@ RefitParts splitForBlockRefit(const FlatBvh& tree, uint32_t maxLeaves) {
       ++end;
     nodes.resize(end - r);
     for (uint32_t k = 0; k < nodes.size(); ++k) nodes[k] = r + k;
-    addPart(tree, nodes, parentSlot, noEntries, localOf, out);
+    addPart(tree, nodes, parentSlot, noEntries, false, localOf, out);
     partOfRoot[r] = p;
   }
   out.hasTop = !top.empty();
-  if (out.hasTop) addPart(tree, top, parentSlot, partOfRoot, localOf, out);
+  if (out.hasTop) addPart(tree, top, parentSlot, partOfRoot, true, localOf, out);
   return out;
 }
 

@@ -28,9 +28,12 @@ struct RefitPartItem {
 };
 
 // Local nodes [firstNode, firstNode + nodeCount) of RefitParts::parentSlot / globalNode, items
-// [firstItem, firstItem + itemCount) of RefitParts::items.
+// [firstItem, firstItem + itemCount) of RefitParts::items. A subtree part (or a tree that is one
+// part) owns the consecutive slots [firstSlot, firstSlot + slotCount) of its leaves; the top's
+// leaves are scattered (slotCount 0).
 struct RefitPart {
   uint32_t firstNode = 0, nodeCount = 0, firstItem = 0, itemCount = 0;
+  uint32_t firstSlot = 0, slotCount = 0;
 };
 
 struct RefitParts {
