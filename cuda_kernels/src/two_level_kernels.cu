@@ -75,7 +75,9 @@ __device__ void partTriangles(const RefitPart& part, const uint32_t* __restrict_
 // Block (pose b = blockIdx.x, subtree part blockIdx.y): the part's triangles and refit. The last of
 // a pose's subtree blocks to finish (counted in tickets[b], cleared again for the next frame)
 // refits the top over the subtrees' root boxes (partBoxes) and its own leaves.
-__global__ void __launch_bounds__(kPartThreads)
+// Four blocks per multiprocessor (at most 64 registers a thread): a frame's blocks of town's 24
+// horses (22 parts each) run in one wave.
+__global__ void __launch_bounds__(kPartThreads, 4)
     posePartsKernel(GpuBvhNode* __restrict__ nodes, RefitPartsView view, const uint32_t* __restrict__ slotVertices,
                     const float* __restrict__ positions, WoopTriangle* __restrict__ woop,
                     RootInfo* __restrict__ roots, Aabb* partBoxes, uint32_t* tickets, BatchStrides batch) {
