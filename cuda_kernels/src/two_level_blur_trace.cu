@@ -19,7 +19,11 @@ namespace {
 // BLAS triangle of the last hit the loop accepted (every accepted hit is nearer than the last).
 template <bool AnyHit>
 struct BlurredTlasFrame {
-  const BlurredTlasScene* scene;
+  const uint32_t* triIndex;  // the scene's (copied: no pointer to the kernel's parameter)
+  const InstanceState* instances;
+  const BlurredInstance* blurred;
+  const BlasView* views;
+  const BlurredLayout* layouts;
   const GpuBvhNode* nodes0;
   const GpuBvhNode* nodes1;
   const Aabb* boxes0;
@@ -30,7 +34,8 @@ struct BlurredTlasFrame {
   RootInfo root;
   mutable uint32_t prim = kNoHit;
 
-  __device__ __forceinline__ BlurredTlasFrame(const BlurredTlasScene& s, float t) : scene(&s), time(t) {
+  __device__ __forceinline__ BlurredTlasFrame(const BlurredTlasScene& s, float t)
+      : triIndex(s.triIndex), instances(s.instances), blurred(s.blurred), views(s.views), layouts(s.layouts), time(t) {
     const motion::Segment seg = motion::segmentAt(s.keyTimes, int(s.keyCount), t);
     const std::size_t k = std::size_t(seg.index);
     nodes0 = s.keyNodes + k * s.nodeCount;
@@ -57,7 +62,7 @@ __device__ __forceinline__ void loadBvh2Node(const BlurredTlasFrame<AnyHit>& m, 
 
 template <bool AnyHit>
 __device__ __forceinline__ uint32_t slotTriangle(const BlurredTlasFrame<AnyHit>& m, uint32_t s) {
-  return __ldg(m.scene->triIndex + s);
+  return __ldg(m.triIndex + s);
 }
 
 // Slot s's instance at the ray's time: its key boxes lerped first (as the CPU's blurred TLAS frame),
@@ -67,13 +72,12 @@ template <bool AnyHit>
 __device__ __forceinline__ bool intersectBvh2Slot(const BlurredTlasFrame<AnyHit>& m, const Ray& ray,
                                                   const RayPrep& prep, uint32_t s, float tmax, float& t, float& u,
                                                   float& v) {
-  const BlurredTlasScene& scene = *m.scene;
   const uint32_t instance = slotTriangle(m, s);
   const Aabb box = motion::lerpBox(m.boxes0[instance], m.boxes1[instance], m.f);
   float entry;
   if (!intersectBox(prep, box, ray.tmin, tmax, entry)) return false;
-  const InstanceState& inst = scene.instances[instance];
-  const BlurredInstance blurred = scene.blurred[instance];
+  const InstanceState& inst = m.instances[instance];
+  const BlurredInstance blurred = m.blurred[instance];
   Affine3x4 space;
   if (blurred.moving) {
     if (!instanceSpaceOfRows(motion::lerpAffine(m.toWorld0[instance], m.toWorld1[instance], m.f), space))
@@ -85,14 +89,14 @@ __device__ __forceinline__ bool intersectBvh2Slot(const BlurredTlasFrame<AnyHit>
   const Ray local = rayInInstance(space, ray, tmax);
   Hit h;
   if (blurred.layout != kInvalidIndex) {
-    const BlurredLayout& layout = scene.layouts[blurred.layout];
+    const BlurredLayout& layout = m.layouts[blurred.layout];
     if constexpr (AnyHit) {
       if (!bvh2BlurredAnyHit(layout, local, m.time)) return false;
     } else {
       h = bvh2BlurredClosestHit(layout, local, m.time);
     }
   } else {
-    const BlasView& view = scene.views[inst.view];
+    const BlasView& view = m.views[inst.view];
     TraceScene blas;
     blas.nodes = view.nodes;
     blas.woop = view.woop;
