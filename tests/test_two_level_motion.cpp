@@ -65,22 +65,12 @@ fs::path writeTurningSlideScene(const fs::path& dir) {
   return dir / "turn.json";
 }
 
-// Static only, nothing on a path: nothing moves in any shutter.
-fs::path writeStillScene(const fs::path& dir) {
-  const anim::Animation wave = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 100, 2, 4);
-  const std::vector<uint32_t> indices(wave.indices().begin(), wave.indices().end());
-  anim::saveTanim(anim::Animation(indices, wave.vertexCount(), wave.positionsAt(wave.startTime()), {0.0}, "ground"),
-                  (dir / "ground.tanim").string());
-  tsah::test::writeText(dir / "still.json", R"({"fps": 2, "time": [0, 2], "objects": [{"file": "ground.tanim", "instances": [
-    {"transform": {"rotate": [10, 20, 30], "scale": [3, 0.5, 2]}}, {"transform": {"scale": [-1, 1, 1], "translate": [0, 1, 0]}}]}]})");
-  return dir / "still.json";
-}
-
 using tsah::test::bruteForce;
 using tsah::test::rayAtCentroid;
 using tsah::test::Reference;
 using tsah::test::triangleT;
 using tsah::test::worldTriangles;
+using tsah::test::writeStillScene;
 using tsah::test::WorldAt;
 
 tsah::Aabb unionOf(std::span<const tsah::Aabb> boxes) {
