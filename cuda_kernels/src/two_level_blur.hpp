@@ -135,6 +135,8 @@ class TwoLevelBlur {
     DeviceBuffer<motion::BlurredNodeSegment> layoutNodes;
     DeviceBuffer<KeyTriangle> layoutTriangles;
   };
+  // The moving poses' keys and layouts: layouts gets one per moving pose, poseLayout[p] its index
+  // (kInvalidIndex for the others), poseUnion[p] the union of its key root boxes. Waits for them.
   void buildPoses(const TwoLevelBlurAccess& access, const ShutterMotion& motion, std::size_t keyCount,
                   std::vector<BlurredLayout>& layouts, std::vector<uint32_t>& poseLayout,
                   std::vector<Aabb>& poseUnion);
