@@ -11,7 +11,9 @@
 // boxes). A frame whose poses all keep their local time replays a second graph without the BLAS
 // work. Rays traverse the TLAS with the binary layout's device loop (Bvh2Traversal,
 // bvh2_traversal.cuh); at a TLAS leaf the ray is moved into the instance's space and traced by the
-// same loop through the instance's BLAS, as the CPU does.
+// same loop through the instance's BLAS, as the CPU does. updateShutter blurs a frame as
+// TwoLevelRuntime::updateShutter does, and the queries with per-ray times trace it
+// (two_level_blur.hpp).
 #include <cstdint>
 #include <memory>
 #include <span>
