@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
-# One device-machine run of the GPU two-level runtime: test_cuda_two_level, then
+# One device-machine run of the GPU two-level runtime: test_cuda_two_level and
+# test_cuda_two_level_motion, then
 # tsah_two_level_gpu_bench over the bench scenes (samples/scenes/bench). Run from the repository
 # root with the bundle in .gpu (as scripts/gpu-device-run.sh; docs/cuda-runtime.md):
 #   build:  cmake --preset gpu-hopper -B build/gpu-tl -DCMAKE_DISABLE_FIND_PACKAGE_embree=ON -DTSAH_WITH_MPI=OFF
-#           cmake --build build/gpu-tl -j2 --target test_cuda_two_level tsah_two_level_gpu_bench
+#           cmake --build build/gpu-tl -j2 --target test_cuda_two_level test_cuda_two_level_motion \
+#             tsah_two_level_gpu_bench
 #   data:   the scenes' objects under a folder `data` laid out as ../shared/data (md2/faerie.md2,
 #           md2/sydney.md2, static/sibenik.obj.xz, static/armadillo.off.xz, static/bunny00.off.xz,
 #           static/refined_elephant.off.xz, sequences/horse-gallop.tar.xz: about 7.5 MB) and the
@@ -22,8 +24,12 @@ export TSAH_DATA_DIR=$PWD/data
 has() { [[ " $steps " == *" $1 "* ]]; }
 
 if has tests; then
-  timeout 300 ./bin/test_cuda_two_level > "$out/tests.log" 2>&1
-  echo "test_cuda_two_level: rc=$?"
+  : > "$out/tests.log"
+  for t in test_cuda_two_level test_cuda_two_level_motion; do
+    [ -x "./bin/$t" ] || continue  # not in this bundle
+    timeout 300 ./bin/$t >> "$out/tests.log" 2>&1
+    echo "$t: rc=$?"
+  done
   grep -E "^\[  (PASSED|FAILED|SKIPPED) |Failure|Expected|Which is|Value of" "$out/tests.log" | head -40
 fi
 

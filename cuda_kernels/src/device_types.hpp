@@ -58,6 +58,17 @@ struct alignas(16) FrameParams {
   uint32_t pad[3] = {0, 0, 0};
 };
 
+// The frame blending keyframe k towards k + 1 by alpha (anim::keyframeBlend) of an animation with
+// movingVertices moving vertices (alpha 0 reads keyframe k alone).
+inline FrameParams blendFrame(uint32_t k, float alpha, uint32_t movingVertices) {
+  const uint64_t perFrame = uint64_t(movingVertices) * 3;
+  FrameParams frame;
+  frame.a = k * perFrame;
+  frame.b = (alpha == 0.0f ? k : k + 1) * perFrame;
+  frame.alpha = alpha;
+  return frame;
+}
+
 // Trees of one topology updated together by one launch per kernel (the two-level runtime's poses of
 // one source, each with its own positions, boxes and Woop triangles): member b of the batch reads and
 // writes its arrays at b times these strides (in elements); it has its own root (root + b) and, in

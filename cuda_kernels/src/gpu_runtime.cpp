@@ -193,10 +193,7 @@ void GpuRuntime::Impl::destroy(CapturedGraph& g) noexcept {
 
 void GpuRuntime::Impl::setFrame(double time) {
   const auto [k, alpha] = anim::keyframeBlend(times, time);
-  const uint64_t perFrame = uint64_t(movingVertices) * 3;
-  frame.a = k * perFrame;
-  frame.b = (alpha == 0.0f ? k : k + 1) * perFrame;
-  frame.alpha = alpha;
+  frame = detail::blendFrame(k, alpha, movingVertices);
 }
 
 void GpuRuntime::Impl::enqueueInterpolation() {

@@ -15,6 +15,7 @@
 #include "tsah_cuda/cuda_check.hpp"
 #include "tsah_cuda/device_buffer.hpp"
 #include "tsah_cuda/gpu_two_level.hpp"
+#include "two_level_blur.hpp"
 #include "two_level_kernels.hpp"
 
 namespace tsah::cuda {
@@ -439,6 +440,7 @@ GpuTwoLevelRuntime::~GpuTwoLevelRuntime() = default;
 
 TwoLevelUpdateTimings GpuTwoLevelRuntime::updateAt(double sceneTime) {
   Impl& m = *impl_;
+  if (blur_) blur_->end();
   const TwoLevelScene& scene = m.scene;
   const anim::SceneSources& src = scene.scene;
   m.time = sceneTime;
@@ -453,11 +455,7 @@ TwoLevelUpdateTimings GpuTwoLevelRuntime::updateAt(double sceneTime) {
     posesMove = posesMove || !(local[p] == m.poseLocalTime[p]);
     const anim::Animation& a = *src.sources[scene.poses[p].blas];
     const auto [k, alpha] = anim::keyframeBlend(a.times(), local[p]);
-    const uint64_t perFrame = uint64_t(a.movingVertexCount()) * 3;
-    detail::FrameParams& frame = m.poseFrames[m.poseFrameIndex[p]];
-    frame.a = k * perFrame;
-    frame.b = (alpha == 0.0f ? k : k + 1) * perFrame;
-    frame.alpha = alpha;
+    m.poseFrames[m.poseFrameIndex[p]] = detail::blendFrame(k, alpha, a.movingVertexCount());
   }
   // The instances' transforms (tsah::TwoLevelRuntime::update's): world(t), its inverse, the view.
   for (uint32_t i = 0; i < scene.instanceCount(); ++i) {
@@ -518,14 +516,7 @@ std::vector<Result> GpuTwoLevelRuntime::Impl::trace(std::span<const Ray> in, Ray
     CUDA_CHECK(cudaMemcpyAsync(found.data(), hits.data(), count * sizeof(detail::InstanceHit), cudaMemcpyDeviceToHost,
                                stream));
     CUDA_CHECK(cudaStreamSynchronize(stream));
-    for (uint32_t i = 0; i < count; ++i) {
-      if (found[i].instance == kNoHit) continue;
-      out[i].t = found[i].t;
-      out[i].u = found[i].u;
-      out[i].v = found[i].v;
-      out[i].instance = found[i].instance;
-      out[i].prim = found[i].prim;
-    }
+    out = detail::twoLevelHits(found);
   }
   return out;
 }
@@ -562,5 +553,27 @@ uint64_t GpuTwoLevelRuntime::blasRefits() const { return impl_->refits; }
 const DeviceInfo& GpuTwoLevelRuntime::device() const { return impl_->device; }
 const TwoLevelScene& GpuTwoLevelRuntime::scene() const { return impl_->scene; }
 detail::TwoLevelTraceAccess GpuTwoLevelRuntime::traceAccess() const { return {impl_->tlasScene(), impl_->stream}; }
+
+detail::TwoLevelBlurAccess GpuTwoLevelRuntime::blurAccess() {
+  Impl& m = *impl_;
+  // A blurred frame refits the T-SAH TLAS at every key; with a rebuilt TLAS its refit data is
+  // uploaded at the first shutter.
+  if (m.tlasLeaves.empty()) m.uploadRefitTlas();
+  detail::TwoLevelBlurAccess a;
+  a.scene = &m.scene;
+  a.stream = m.stream;
+  for (const Impl::Source& d : m.sources)
+    a.sources.push_back({&d.topology, d.keyframes.data(), d.movingIds.empty() ? nullptr : d.movingIds.data(),
+                         d.movingCount, d.nodeParent.data(), d.leaves.data(), d.leafCount, d.slotVertices.data(),
+                         d.triIndex.data()});
+  a.tlas = &m.tlasTopology;
+  a.tlasParent = m.tlasParent.data();
+  a.tlasLeaves = m.tlasLeaves.data();
+  a.tlasLeafCount = m.tlasLeafCount;
+  a.tlasTriIndex = m.tlasTriIndex.data();
+  a.instances = m.instances.data();
+  a.views = m.views.data();
+  return a;
+}
 
 }  // namespace tsah::cuda

@@ -281,29 +281,39 @@ class GpuTwoLevelTracer {
     py::gil_scoped_release release;
     lastUpdate_ = runtime_->updateAt(time);
   }
-  py::array trace(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out) {
+  void updateShutter(double open, double close) {
+    checkedTime(open, "open");
+    checkedTime(close, "close");
+    py::gil_scoped_release release;
+    runtime_->updateShutter(open, close);
+  }
+  py::array trace(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle times, py::handle out) {
     std::vector<py::ssize_t> batch;
     const RayBatch rays = makeRays(o, d, tmin, tmax, batch);
+    const std::optional<Array<float>> t = rayTimes(times, batch, rays.count);
     py::array result = resultArray(out, twoLevelHitDtype(), batch);
     auto* hits = static_cast<TwoLevelHit*>(result.mutable_data());
     {
       py::gil_scoped_release release;
-      const std::vector<TwoLevelHit> found = runtime_->closestHits(rays);
+      const std::vector<TwoLevelHit> found =
+          t ? runtime_->closestHits(rays, std::span<const float>(t->data(), rays.count)) : runtime_->closestHits(rays);
       for (std::size_t i = 0; i < found.size(); ++i) hits[i] = shown(found[i]);
     }
     return result;
   }
-  py::array occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle out) {
+  py::array occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle times, py::handle out) {
     std::vector<py::ssize_t> batch;
     const RayBatch rays = makeRays(o, d, tmin, tmax, batch);
+    const std::optional<Array<float>> t = rayTimes(times, batch, rays.count);
     py::array result = resultArray(out, py::dtype::of<bool>(), batch);
     std::vector<uint8_t> flags;
     {
       py::gil_scoped_release release;
-      flags = runtime_->anyHits(rays);
+      flags = t ? runtime_->anyHits(rays, std::span<const float>(t->data(), rays.count)) : runtime_->anyHits(rays);
     }
     return boolArray(flags, result);
   }
+  bool blurred() const { return runtime_->blurred(); }
   double time() const { return runtime_->time(); }
   std::string deviceName() const { return runtime_->device().name; }
   py::dict lastUpdate() const {
@@ -472,20 +482,26 @@ which nothing moves is update(open): not blurred.
   py::class_<GpuTwoLevelTracer>(m, "GpuTwoLevelRuntime", R"doc(
 GpuTwoLevelRuntime(scene, device=0, tlas="refit"): the same on a CUDA device
 (tsah::cuda::GpuTwoLevelRuntime), tracing host (numpy) rays. tlas: "refit" (the T-SAH TLAS
-refitted), "lbvh" or "hlbvh-sah" (rebuilt on the GPU every update). No motion blur. Raises
-tsah.Failure when no device is usable.
+refitted), "lbvh" or "hlbvh-sah" (rebuilt on the GPU every update). Motion blur as
+TwoLevelRuntime's (update_shutter, times=; the blurred frame refits the T-SAH TLAS at every key
+whatever tlas). Raises tsah.Failure when no device is usable.
 )doc")
       .def(py::init([](py::object scene, py::handle device, const std::string& tlas) {
              sceneArgument(scene);
              return std::make_unique<GpuTwoLevelTracer>(std::move(scene), checkedInteger<int>(device, "device", 0), tlas);
            }),
            "scene"_a, "device"_a = 0, "tlas"_a = "refit")
-      .def("update", &GpuTwoLevelTracer::update, "time"_a, "The scene at this time, on the device.")
+      .def("update", &GpuTwoLevelTracer::update, "time"_a, "The scene at this time, on the device; ends a blurred frame.")
+      .def("update_shutter", &GpuTwoLevelTracer::updateShutter, "open"_a, "close"_a,
+           "A blurred frame over the shutter [open, close] on the device, as TwoLevelRuntime.update_shutter.")
       .def("trace", &GpuTwoLevelTracer::trace, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf,
-           "out"_a = py::none(), kTraceDoc)
+           "times"_a = py::none(), "out"_a = py::none(), (std::string(kTraceDoc) + kTimesDoc).c_str())
       .def("occluded", &GpuTwoLevelTracer::occluded, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf,
-           "out"_a = py::none(), kOccludedDoc)
-      .def_property_readonly("time", &GpuTwoLevelTracer::time, "The scene time of the last update.")
+           "times"_a = py::none(), "out"_a = py::none(), (std::string(kOccludedDoc) + kTimesDoc).c_str())
+      .def_property_readonly("time", &GpuTwoLevelTracer::time,
+                             "The scene time of the last update (of a blurred frame: its close).")
+      .def_property_readonly("blurred", &GpuTwoLevelTracer::blurred,
+                             "True after an update_shutter that made a blurred frame (until update).")
       .def_property_readonly("device_name", &GpuTwoLevelTracer::deviceName, "The name of the GPU the runtime uses.")
       .def_property_readonly("last_update", &GpuTwoLevelTracer::lastUpdate,
                              "Device time of the last update (ms): upload_ms, blas_ms, tlas_ms, tlas_rebuild_ms, "

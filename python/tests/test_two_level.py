@@ -230,6 +230,26 @@ def test_gpu_two_level_runtime_matches_the_cpu(scene, baked, tlas):
         assert np.array_equal(gpu.occluded(origins, directions), cpu.occluded(origins, directions))
 
 
+@needs_gpu
+def test_gpu_blurred_frame_matches_the_cpu(scene, baked):
+    gpu = tsah.GpuTwoLevelRuntime(scene)
+    cpu = tsah.TwoLevelRuntime(scene, layout="bvh2")
+    gpu.update_shutter(0.5, 0.7)
+    cpu.update_shutter(0.5, 0.7)
+    assert gpu.blurred and gpu.time == 0.7
+    origins, directions = rays_to_triangles(baked, 0.6)
+    times = np.linspace(0.0, 1.0, len(origins), dtype=np.float32)
+    expected = cpu.trace(origins, directions, times=times)
+    hits = gpu.trace(origins, directions, times=times)
+    assert np.array_equal(np.isfinite(hits["t"]), np.isfinite(expected["t"]))
+    same = (hits["instance"] == expected["instance"]) & (hits["triangle"] == expected["triangle"])
+    assert same.mean() > 0.99
+    np.testing.assert_allclose(hits["t"][same], expected["t"][same], rtol=1e-5)
+    assert np.array_equal(gpu.occluded(origins, directions, times=times), cpu.occluded(origins, directions, times=times))
+    gpu.update(0.7)
+    assert not gpu.blurred
+
+
 @pytest.mark.skipif(not tsah.cuda_built, reason="a build without CUDA has no GpuTwoLevelRuntime")
 def test_gpu_two_level_runtime_refuses_an_unknown_tlas_update(scene):
     with pytest.raises(tsah.ConfigError, match="tlas: unknown TLAS update 'bvh' .refit, lbvh or hlbvh-sah."):

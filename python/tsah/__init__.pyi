@@ -348,16 +348,23 @@ class GpuTwoLevelRuntime:
     def __init__(self, scene: TwoLevelScene, device: _Integer = 0, tlas: str = "refit") -> None:
         """tlas: 'refit', 'lbvh' or 'hlbvh-sah'. Raises tsah.Failure when no device is usable."""
     def update(self, time: _Number) -> None:
-        """The scene at this time, on the device."""
+        """The scene at this time, on the device; ends a blurred frame."""
+    def update_shutter(self, open: _Number, close: _Number) -> None:
+        """A blurred frame over the shutter [open, close] on the device: rays then take their times (times=)."""
     def trace(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
-              tmax: _ArrayLike = float("inf"), out: Any = None) -> np.recarray[Any, Any]:
-        """Closest hits, as TwoLevelRuntime.trace."""
+              tmax: _ArrayLike = float("inf"), times: _ArrayLike | None = None,
+              out: Any = None) -> np.recarray[Any, Any]:
+        """Closest hits, as TwoLevelRuntime.trace; times: each ray's shutter fraction in a blurred frame."""
     def occluded(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
-                 tmax: _ArrayLike = float("inf"), out: Any = None) -> npt.NDArray[np.bool_]:
+                 tmax: _ArrayLike = float("inf"), times: _ArrayLike | None = None,
+                 out: Any = None) -> npt.NDArray[np.bool_]:
         """True for each ray that hits anything within (tmin, tmax)."""
     @property
     def time(self) -> float:
-        """The scene time of the last update."""
+        """The scene time of the last update (of a blurred frame: its close)."""
+    @property
+    def blurred(self) -> bool:
+        """True after an update_shutter that made a blurred frame (until update)."""
     @property
     def device_name(self) -> str:
         """The name of the CUDA device."""

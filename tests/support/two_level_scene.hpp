@@ -60,6 +60,17 @@ inline std::filesystem::path writeRigidPathScene(const std::filesystem::path& di
   return dir / "s.json";
 }
 
+// Static only, nothing on a path: nothing moves in any shutter.
+inline std::filesystem::path writeStillScene(const std::filesystem::path& dir) {
+  const anim::Animation wave = generatedAnimation(anim::GeneratorKind::Wave, 100, 2, 4);
+  const std::vector<uint32_t> indices(wave.indices().begin(), wave.indices().end());
+  anim::saveTanim(anim::Animation(indices, wave.vertexCount(), wave.positionsAt(wave.startTime()), {0.0}, "ground"),
+                  (dir / "ground.tanim").string());
+  writeText(dir / "still.json", R"({"fps": 2, "time": [0, 2], "objects": [{"file": "ground.tanim", "instances": [
+    {"transform": {"rotate": [10, 20, 30], "scale": [3, 0.5, 2]}}, {"transform": {"scale": [-1, 1, 1], "translate": [0, 1, 0]}}]}]})");
+  return dir / "still.json";
+}
+
 // One triangle, (1,0,0) (0,1,0) (0,0,1), whose path scales x from 1 to -1 over t = 0..2 (2 fps): at
 // t = 1 the instance is flat (a singular world transform), at t = 2 mirrored.
 inline std::filesystem::path writeFlattenedTriangleScene(const std::filesystem::path& dir) {

@@ -11,7 +11,9 @@
 // boxes). A frame whose poses all keep their local time replays a second graph without the BLAS
 // work. Rays traverse the TLAS with the binary layout's device loop (Bvh2Traversal,
 // bvh2_traversal.cuh); at a TLAS leaf the ray is moved into the instance's space and traced by the
-// same loop through the instance's BLAS, as the CPU does.
+// same loop through the instance's BLAS, as the CPU does. updateShutter blurs a frame as
+// TwoLevelRuntime::updateShutter does, and the queries with per-ray times trace it
+// (two_level_blur.hpp).
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -37,6 +39,8 @@ TlasUpdate parseTlasUpdate(std::string_view name);   // throws tsah::ConfigError
 
 namespace detail {
 struct TwoLevelTraceAccess;
+struct TwoLevelBlurAccess;
+class TwoLevelBlur;
 }
 
 // Device time of one updateAt (CUDA events, milliseconds) and what it did.
@@ -83,6 +87,28 @@ class GpuTwoLevelRuntime {
   std::vector<TwoLevelHit> closestHits(std::span<const Ray> rays, RayPassStats* stats = nullptr);
   std::vector<uint8_t> anyHits(std::span<const Ray> rays, RayPassStats* stats = nullptr);
 
+  // Motion blur (docs/motion-blur.md, "Two-level scenes"): TwoLevelRuntime::updateShutter's frame on
+  // the device, with its keys (open, every scene frame strictly inside, close), key matrices, key
+  // boxes and contract: one key, or a shutter in which no instance's float matrix and no pose's local
+  // time changes, is updateAt(open) (not blurred). Per key the moving poses' BLAS interpolated and
+  // refitted on the device and built into the flat blurred runtime's layout, the instances' key boxes
+  // (instanceKeyBox) and the T-SAH TLAS refitted from them (whatever Config::tlas: the instant frames'
+  // rebuilds are not used for a blurred one). The instant state is updateAt(close)'s: the queries
+  // without times and the renderer see the close. Throws tsah::ConfigError for an open or close that
+  // is not finite or open > close. updateAt ends a blurred frame.
+  void updateShutter(double openTime, double closeTime);
+  bool blurred() const;
+  std::span<const float> keyTimes() const;  // shutter fractions (first 0, last 1); empty when not blurred
+  // The instances' boxes at key k of a blurred frame (the TLAS at key k's leaves; tsah::ConfigError
+  // when not blurred or k is out of range).
+  std::vector<Aabb> keyInstanceBoxes(std::size_t key) const;
+  // The rays at shutter fractions times[i] (one per ray; outside [0, 1]: the nearer end), as
+  // TwoLevelRuntime::closestHit(ray, time) / anyHit(ray, time); not blurred: the instant queries.
+  // Throws tsah::ConfigError when the counts differ.
+  std::vector<TwoLevelHit> closestHits(std::span<const Ray> rays, std::span<const float> times,
+                                       RayPassStats* stats = nullptr);
+  std::vector<uint8_t> anyHits(std::span<const Ray> rays, std::span<const float> times, RayPassStats* stats = nullptr);
+
   // Host copies of the current state: the instances' world boxes, and the TLAS traced now (the
   // refitted one or this frame's rebuilt one) in canonical form with this frame's node boxes
   // (frameCount 1; triIndex: slot -> instance).
@@ -96,7 +122,9 @@ class GpuTwoLevelRuntime {
  private:
   friend class GpuTwoLevelRenderer;  // gpu_two_level_render.hpp: traces the current frame's device state
   detail::TwoLevelTraceAccess traceAccess() const;
+  detail::TwoLevelBlurAccess blurAccess();  // what updateShutter builds a blurred frame from
   std::unique_ptr<Impl> impl_;
+  std::unique_ptr<detail::TwoLevelBlur> blur_;  // the blurred frame (two_level_blur.cpp)
 };
 
 }  // namespace tsah::cuda

@@ -15,19 +15,12 @@
 
 namespace tsah::detail {
 
-// An affine map at f between its keys (row-major 3x4 floats), entry by entry with motion::lerp.
-inline Affine3x4 lerpAffine(const Affine3x4& a, const Affine3x4& b, float f) {
-  Affine3x4 out;
-  for (int i = 0; i < 12; ++i) out.m[i] = motion::lerp(a.m[i], b.m[i], f);
-  return out;
-}
-
-// World -> instance space of a float instance -> world map (instanceSpace: the inverse in double,
-// rounded to float; none when singular).
+// World -> instance space of a float instance -> world map (instanceSpaceOfRows: the inverse in
+// double, rounded to float, as the GPU runtime computes it; none when singular).
 inline std::optional<Affine3x4> instanceSpaceOf(const Affine3x4& toWorld) {
-  anim::Matrix4 world = anim::identityMatrix();
-  for (int i = 0; i < 12; ++i) world[i] = double(toWorld.m[i]);
-  return instanceSpace(world);
+  Affine3x4 space;
+  if (!instanceSpaceOfRows(toWorld, space)) return std::nullopt;
+  return space;
 }
 
 // An instance's BLAS traced with the ray moved into its space (`space`: world -> instance), in
@@ -128,7 +121,7 @@ struct TlasFrame {
       if (!intersectBox(prep, box, ray.tmin, tmax, entry)) return false;
       if (keys.moving[instance]) {
         const std::optional<Affine3x4> at =
-            instanceSpaceOf(lerpAffine(keys.toWorld0[instance], keys.toWorld1[instance], keys.f));
+            instanceSpaceOf(motion::lerpAffine(keys.toWorld0[instance], keys.toWorld1[instance], keys.f));
         if (!at) return false;  // flat at this time: never hit
         space = *at;
       } else {

@@ -54,6 +54,29 @@ Aabb instanceKeyBox(const Aabb& u, const Affine3x4& m) {
   return box;
 }
 
+// What moves: an instance whose float matrix differs between keys, a pose whose local time does.
+ShutterMotion shutterMotion(const TwoLevelScene& scene, std::span<const double> keys) {
+  const std::size_t keyCount = keys.size();
+  const uint32_t count = scene.instanceCount();
+  ShutterMotion m;
+  m.toWorld.resize(keyCount * count);
+  m.movingInstances.assign(count, 0);
+  for (uint32_t i = 0; i < count; ++i)
+    for (std::size_t k = 0; k < keyCount; ++k) {
+      m.toWorld[k * count + i] = floatRows(scene.scene.instances[i].worldAt(keys[k]));
+      if (k > 0 && std::memcmp(&m.toWorld[k * count + i], &m.toWorld[i], sizeof(Affine3x4)) != 0)
+        m.movingInstances[i] = 1;
+      m.anyMoves = m.anyMoves || m.movingInstances[i];
+    }
+  m.poseLocal = poseLocalTimes(scene, keys);
+  m.movingPoses.assign(scene.poses.size(), 0);
+  for (std::size_t p = 0; p < scene.poses.size(); ++p)
+    for (std::size_t k = 1; k < keyCount; ++k)
+      if (!(m.poseLocal[p][k] == m.poseLocal[p][0])) m.movingPoses[p] = 1;
+  for (uint8_t moves : m.movingPoses) m.anyMoves = m.anyMoves || moves;
+  return m;
+}
+
 void TwoLevelRuntime::clearShutter() {
   keyTimes_.clear();
   keySceneTimes_.clear();
@@ -77,28 +100,14 @@ void TwoLevelRuntime::updateShutter(double openTime, double closeTime) {
   const std::size_t keyCount = keys.size();
   const uint32_t count = scene_.instanceCount();
   const anim::SceneSources& sources = scene_.scene;
-
-  // What moves over the shutter: an instance whose float matrix differs between keys, a pose whose
-  // local time does.
-  std::vector<Affine3x4> toWorld(keyCount * count);
-  std::vector<uint8_t> moving(count, 0);
-  bool anyMoves = false;
-  for (uint32_t i = 0; i < count; ++i)
-    for (std::size_t k = 0; k < keyCount; ++k) {
-      toWorld[k * count + i] = floatRows(sources.instances[i].worldAt(keys[k]));
-      if (k > 0 && std::memcmp(&toWorld[k * count + i], &toWorld[i], sizeof(Affine3x4)) != 0) moving[i] = 1;
-      anyMoves = anyMoves || moving[i];
-    }
-  const std::vector<std::vector<double>> local = poseLocalTimes(keys);
-  std::vector<uint8_t> poseMoves(poses_.size(), 0);
-  for (uint32_t p = 0; p < poses_.size(); ++p)
-    for (std::size_t k = 1; k < keyCount; ++k)
-      if (!(local[p][k] == local[p][0])) poseMoves[p] = 1;
-  for (uint8_t m : poseMoves) anyMoves = anyMoves || m;
-  if (!anyMoves) {  // nothing moves: the instant at the open
+  ShutterMotion moves = shutterMotion(scene_, keys);
+  if (!moves.anyMoves) {  // nothing moves: the instant at the open
     update(openTime);
     return;
   }
+  std::vector<Affine3x4>& toWorld = moves.toWorld;
+  const std::vector<std::vector<double>>& local = moves.poseLocal;
+  const std::vector<uint8_t>& poseMoves = moves.movingPoses;
 
   clearShutter();
   time_ = closeTime;
@@ -162,7 +171,7 @@ void TwoLevelRuntime::updateShutter(double openTime, double closeTime) {
   keySceneTimes_ = keys;
   keyToWorld_ = std::move(toWorld);
   keyInstanceBoxes_ = std::move(keyBoxes);
-  moving_ = std::move(moving);
+  moving_ = std::move(moves.movingInstances);
 }
 
 std::span<const Aabb> TwoLevelRuntime::keyInstanceBoxes(std::size_t key) const {
@@ -195,7 +204,7 @@ Affine3x4 TwoLevelRuntime::toWorldAt(uint32_t instance, float time) const {
                       std::to_string(scene_.instanceCount()));
   if (!blurred()) return floatRows(scene_.scene.instances[instance].worldAt(time_));
   const detail::TlasKeys keys = keysAt(time);
-  return detail::lerpAffine(keys.toWorld0[instance], keys.toWorld1[instance], keys.f);
+  return motion::lerpAffine(keys.toWorld0[instance], keys.toWorld1[instance], keys.f);
 }
 
 TwoLevelHit TwoLevelRuntime::closestHit(const Ray& ray, float time) const {

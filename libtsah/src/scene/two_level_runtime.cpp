@@ -17,23 +17,9 @@
 namespace tsah {
 
 anim::Matrix4 inverseAffine(const anim::Matrix4& m) {
-  // Inverse of the linear part by cofactors, then -L^-1 * translation.
-  const double a = m[0], b = m[1], c = m[2], d = m[4], e = m[5], f = m[6], g = m[8], h = m[9], i = m[10];
-  const double det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g);
-  if (!(det != 0.0) || !std::isfinite(det)) throw DataError("two-level runtime: an instance transform is not invertible");
-  const double r = 1.0 / det;
   anim::Matrix4 inv = anim::identityMatrix();
-  inv[0] = (e * i - f * h) * r;
-  inv[1] = (c * h - b * i) * r;
-  inv[2] = (b * f - c * e) * r;
-  inv[4] = (f * g - d * i) * r;
-  inv[5] = (a * i - c * g) * r;
-  inv[6] = (c * d - a * f) * r;
-  inv[8] = (d * h - e * g) * r;
-  inv[9] = (b * g - a * h) * r;
-  inv[10] = (a * e - b * d) * r;
-  for (int row = 0; row < 3; ++row)
-    inv[4 * row + 3] = -(inv[4 * row] * m[3] + inv[4 * row + 1] * m[7] + inv[4 * row + 2] * m[11]);
+  if (!invertAffineRows(m.data(), inv.data()))
+    throw DataError("two-level runtime: an instance transform is not invertible");
   return inv;
 }
 
@@ -120,15 +106,15 @@ const CpuRuntime& TwoLevelRuntime::runtimeOf(uint32_t instance) const {
 
 const CpuRuntime& TwoLevelRuntime::blasOf(uint32_t instance) const { return runtimeOf(instance); }
 
-std::vector<std::vector<double>> TwoLevelRuntime::poseLocalTimes(std::span<const double> times) const {
+std::vector<std::vector<double>> poseLocalTimes(const TwoLevelScene& scene, std::span<const double> times) {
   // The local time of the first instance showing each pose (all of them show the same).
-  const anim::SceneSources& sources = scene_.scene;
-  std::vector<std::vector<double>> local(poses_.size(), std::vector<double>(times.size()));
-  for (uint32_t i = 0; i < scene_.instanceCount(); ++i) {
-    const uint32_t p = scene_.instancePose[i];
+  const anim::SceneSources& sources = scene.scene;
+  std::vector<std::vector<double>> local(scene.poses.size(), std::vector<double>(times.size()));
+  for (uint32_t i = 0; i < scene.instanceCount(); ++i) {
+    const uint32_t p = scene.instancePose[i];
     if (p == kInvalidIndex) continue;
     for (std::size_t k = 0; k < times.size(); ++k)
-      local[p][k] = sources.instances[i].localTime(times[k], *sources.sources[scene_.poses[p].blas]);
+      local[p][k] = sources.instances[i].localTime(times[k], *sources.sources[scene.poses[p].blas]);
   }
   return local;
 }
@@ -156,7 +142,7 @@ void TwoLevelRuntime::update(double sceneTime) {
   clearShutter();
   time_ = sceneTime;
   const anim::SceneSources& sources = scene_.scene;
-  const std::vector<std::vector<double>> local = poseLocalTimes(std::span<const double>(&sceneTime, 1));
+  const std::vector<std::vector<double>> local = poseLocalTimes(scene_, std::span<const double>(&sceneTime, 1));
   std::vector<double> now(poses_.size());
   for (uint32_t p = 0; p < poses_.size(); ++p) now[p] = local[p][0];
   refitPoses(now);

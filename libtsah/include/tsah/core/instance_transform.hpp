@@ -58,4 +58,37 @@ TSAH_HD Aabb transformBoxRows(const Aabb& box, const double* rows) {
   return out;
 }
 
+// The inverse of the affine map m (3x4 rows, row-major, in double) into inv (3x4 rows): the linear
+// part by cofactors, then -L^-1 * translation. False (inv untouched) when the linear part's
+// determinant is 0 or not finite. The CPU and the GPU two-level runtimes share it so that a blurred
+// instance's lerped map is inverted to the same bits on both (no fused multiply-adds on either side).
+TSAH_HD bool invertAffineRows(const double* m, double* inv) {
+  const double a = m[0], b = m[1], c = m[2], d = m[4], e = m[5], f = m[6], g = m[8], h = m[9], i = m[10];
+  const double det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g);
+  if (!(det != 0.0) || !(det - det == 0.0)) return false;  // 0, infinite or NaN
+  const double r = 1.0 / det;
+  inv[0] = (e * i - f * h) * r;
+  inv[1] = (c * h - b * i) * r;
+  inv[2] = (b * f - c * e) * r;
+  inv[4] = (f * g - d * i) * r;
+  inv[5] = (a * i - c * g) * r;
+  inv[6] = (c * d - a * f) * r;
+  inv[8] = (d * h - e * g) * r;
+  inv[9] = (b * g - a * h) * r;
+  inv[10] = (a * e - b * d) * r;
+  for (int row = 0; row < 3; ++row)
+    inv[4 * row + 3] = -(inv[4 * row] * m[3] + inv[4 * row + 1] * m[7] + inv[4 * row + 2] * m[11]);
+  return true;
+}
+
+// World -> instance space of a float instance -> world map: its entries exactly in double, inverted
+// (invertAffineRows), rounded to float. False when the map is singular: the instance is flat then.
+TSAH_HD bool instanceSpaceOfRows(const Affine3x4& toWorld, Affine3x4& space) {
+  double m[12], inv[12];
+  for (int i = 0; i < 12; ++i) m[i] = double(toWorld.m[i]);
+  if (!invertAffineRows(m, inv)) return false;
+  for (int i = 0; i < 12; ++i) space.m[i] = float(inv[i]);
+  return true;
+}
+
 }  // namespace tsah

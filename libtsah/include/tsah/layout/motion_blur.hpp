@@ -13,6 +13,7 @@
 
 #include "tsah/core/aabb.hpp"
 #include "tsah/core/hd.hpp"
+#include "tsah/core/instance_transform.hpp"
 
 namespace tsah::motion {
 
@@ -90,6 +91,14 @@ TSAH_HD float lerp(float a, float b, float f) { return lerpOf(a, b, f, 1.0f - f)
 
 TSAH_HD Vec3 lerpVertex(Vec3 a, Vec3 b, float f) {
   return {lerp(a.x, b.x, f), lerp(a.y, b.y, f), lerp(a.z, b.z, f)};
+}
+
+// An affine map at f between its keys (row-major 3x4 floats), entry by entry with lerp: a blurred
+// instance's instance -> world map on the CPU and the GPU.
+TSAH_HD Affine3x4 lerpAffine(const Affine3x4& a, const Affine3x4& b, float f) {
+  Affine3x4 out;
+  for (int i = 0; i < 12; ++i) out.m[i] = lerp(a.m[i], b.m[i], f);
+  return out;
 }
 
 // The outward pad of a lerped box side on an axis whose four box coordinates (lo and hi at both

@@ -54,6 +54,22 @@ std::optional<Affine3x4> instanceSpace(const anim::Matrix4& world);
 // (docs/motion-blur.md, "Two-level scenes"). An empty box stays empty.
 Aabb instanceKeyBox(const Aabb& local, const Affine3x4& toWorld);
 
+// Each pose's local time (scene.poses' order) at each of `times` (scene times): [pose][time].
+std::vector<std::vector<double>> poseLocalTimes(const TwoLevelScene& scene, std::span<const double> times);
+
+// What moves over a shutter's keys (scene times), where the CPU's and the GPU's updateShutter start:
+// per key k and instance i its world matrix rounded to float (toWorld[k * instances + i]), whether
+// an instance's float matrix differs between keys, each pose's local time at each key and whether
+// it differs between keys; anyMoves: an instance or a pose does.
+struct ShutterMotion {
+  std::vector<Affine3x4> toWorld;
+  std::vector<uint8_t> movingInstances;
+  std::vector<std::vector<double>> poseLocal;  // [pose][key]
+  std::vector<uint8_t> movingPoses;
+  bool anyMoves = false;
+};
+ShutterMotion shutterMotion(const TwoLevelScene& scene, std::span<const double> keys);
+
 class TwoLevelRuntime {
  public:
   enum class TlasUpdate { Refit, Rebuild };
@@ -138,8 +154,6 @@ class TwoLevelRuntime {
   detail::TlasKeys keysAt(float time) const;  // the blurred frame's keys of the time's segment
   // The poses' positions at `local` (one local time per pose) refitted, only where it changed.
   void refitPoses(const std::vector<double>& local);
-  // Per pose, its local time at each scene time of `times`.
-  std::vector<std::vector<double>> poseLocalTimes(std::span<const double> times) const;
 
   const TwoLevelScene& scene_;
   Config config_;
