@@ -571,7 +571,7 @@ detail::TwoLevelBlurAccess GpuTwoLevelRuntime::blurAccess() {
   a.tlasLeaves = m.tlasLeaves.data();
   a.tlasLeafCount = m.tlasLeafCount;
   a.tlasTriIndex = m.tlasTriIndex.data();
-  a.instances = m.instances.data();
+  a.instances = m.instances;
   a.views = m.views.data();
   return a;
 }
