@@ -97,13 +97,7 @@ __device__ __forceinline__ bool intersectBvh2Slot(const BlurredTlasFrame<AnyHit>
     }
   } else {
     const BlasView& view = m.views[inst.view];
-    TraceScene blas;
-    blas.nodes = view.nodes;
-    blas.woop = view.woop;
-    blas.triIndex = view.triIndex;
-    blas.indices = view.indices;
-    blas.positions = view.positions;
-    blas.root = view.root;
+    const TraceScene blas = blasTraceScene(view);
     const RootInfo root = *view.root;
     if constexpr (AnyHit) {
       if (!bvh2AnyHit(blas, root, local)) return false;

@@ -27,6 +27,18 @@ struct BlasView {
   const RootInfo* root = nullptr;
 };
 
+// A BLAS view as the binary traversal reads a tree.
+TSAH_HD TraceScene blasTraceScene(const BlasView& view) {
+  TraceScene blas;
+  blas.nodes = view.nodes;
+  blas.woop = view.woop;
+  blas.triIndex = view.triIndex;
+  blas.indices = view.indices;
+  blas.positions = view.positions;
+  blas.root = view.root;
+  return blas;
+}
+
 // Per instance, written by the host each frame: world(t) in double (its box is transformed exactly
 // as tsah::transformBox does), world -> instance in float (the CPU runtime's Affine3x4), the BLAS
 // view it traces and whether world(t) is invertible (a singular instance is never hit).

@@ -45,13 +45,7 @@ __device__ __forceinline__ bool intersectBvh2Slot(const TlasLoopFrame<AnyHit>& f
   float entry;
   if (!inst.visible || !intersectBox(prep, f.scene.instanceBoxes[instance], ray.tmin, tmax, entry)) return false;
   const BlasView& view = f.scene.views[inst.view];
-  TraceScene blas;
-  blas.nodes = view.nodes;
-  blas.woop = view.woop;
-  blas.triIndex = view.triIndex;
-  blas.indices = view.indices;
-  blas.positions = view.positions;
-  blas.root = view.root;
+  const TraceScene blas = blasTraceScene(view);
   const RootInfo root = *view.root;
   const Ray local = rayInInstance(inst.toInstance, ray, tmax);
   if constexpr (AnyHit) {
