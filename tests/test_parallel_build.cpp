@@ -63,7 +63,7 @@ TEST(ParallelBinnedBuild, SameTreeForEveryThreadCount) {
     b.extend(tsah::Vec3{c + 0.5f, c + float(i % 7) * 0.01f + 0.5f, c + 0.5f});
     clustered.push_back(b);
   }
-  for (const auto* boxes : {&scattered, &clustered}) {
+  for (const std::vector<tsah::Aabb>* boxes : std::vector<const std::vector<tsah::Aabb>*>{&scattered, &clustered}) {
     tsah::BinnedSahBuilder::Config c;
     c.maxLeafSize = 1;
     c.parallelThreshold = 256;

@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <mutex>
 #include <tuple>
 
 #include "tsah/base/error.hpp"
@@ -151,10 +152,28 @@ TwoLevelScene buildTwoLevelScene(anim::SceneSources scene, const TreeOptions& op
   TwoLevelScene out;
   out.objective = options.objective;
 
-  // One BLAS per source, in the source's own time. One after the other: each optimization uses
-  // every core, and the largest optimizer's memory stays the peak.
+  // One BLAS per source, in the source's own time. On the CPU the sources are built concurrently
+  // (each tree is the same however the threads are shared); the GPU optimizer takes one at a time.
   auto phase = std::chrono::steady_clock::now();
-  for (uint32_t s = 0; s < scene.sources.size(); ++s) out.blases.push_back(buildBlas(scene, s, options));
+  out.blases.resize(scene.sources.size());
+  if (options.device == Device::Cuda) {
+    for (uint32_t s = 0; s < scene.sources.size(); ++s) out.blases[s] = buildBlas(scene, s, options);
+  } else {
+    // The callbacks see one message at a time, as from one build.
+    TreeOptions shared = options;
+    std::mutex callbackMutex;
+    if (options.progress)
+      shared.progress = [&](const std::string& message) {
+        const std::lock_guard<std::mutex> lock(callbackMutex);
+        options.progress(message);
+      };
+    if (options.batchProgress)
+      shared.batchProgress = [&](const InsertionOptimizer::BatchRecord& record) {
+        const std::lock_guard<std::mutex> lock(callbackMutex);
+        options.batchProgress(record);
+      };
+    forEachConcurrently(scene.sources.size(), [&](std::size_t s) { out.blases[s] = buildBlas(scene, uint32_t(s), shared); });
+  }
   out.buildPhases.push_back({"blas", secondsSince(phase)});
 
   // Each BLAS checked against its source's boxes and flattened: independent, so concurrently.
