@@ -9,9 +9,13 @@
 // file (version 2) that `tsah trace`, `export`, `info` and `bench` switch through by themselves.
 // A scene file may instead be kept as two levels (--structure two-level, or auto's choice: one tree
 // per source and a top-level tree over the instances, docs/two-level.md), written as a version 3 file.
+#include <tbb/global_control.h>
+
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <memory>
+#include <optional>
 #include <nlohmann/json.hpp>
 
 #include "animation_frames.hpp"
@@ -219,10 +223,13 @@ bool runTwoLevel(const Options& opt, nlohmann::json& flatChoice) {
     throw UsageError("--structure two-level builds one T-SAH tree per source and the top level: it does not go "
                      "with --segments, --devices or --method other than tsah");
   if (!scene || flatOnly) return false;
+  const auto loadStart = std::chrono::steady_clock::now();
   anim::SceneSources sources = tsah::cli::loadSceneSourcesForCli(opt.input);
+  const double loadSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - loadStart).count();
   if (asked) {
     if (tsah::cli::job::leader())
-      tsah::cli::optimizeTwoLevel(std::move(sources), opt.input, opt.output, opt.tree, nullptr, opt.json);
+      tsah::cli::optimizeTwoLevel(std::move(sources), opt.input, opt.output, opt.tree, nullptr, opt.json, loadSeconds,
+                                  opt.reproducible);
     return true;
   }
   const tsah::StructureChoice choice = tsah::cli::chooseStructure(sources, opt.tree);
@@ -231,11 +238,15 @@ bool runTwoLevel(const Options& opt, nlohmann::json& flatChoice) {
     return false;
   }
   if (tsah::cli::job::leader())
-    tsah::cli::optimizeTwoLevel(std::move(sources), opt.input, opt.output, opt.tree, &choice, opt.json);
+    tsah::cli::optimizeTwoLevel(std::move(sources), opt.input, opt.output, opt.tree, &choice, opt.json, loadSeconds,
+                                opt.reproducible);
   return true;
 }
 
 void run(const Options& opt) {
+  // --threads holds every phase to that many threads: loading, builders, optimizers, writing.
+  std::optional<tbb::global_control> threadLimit;
+  if (opt.tree.threads > 0) threadLimit.emplace(tbb::global_control::max_allowed_parallelism, opt.tree.threads);
   tsah::TreeOptions treeOpt = opt.tree;
   const tsah::MethodSpec method = treeOpt.methodSpec();
   tsah::cli::checkTreeDevice(treeOpt);

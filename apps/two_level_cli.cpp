@@ -74,7 +74,8 @@ nlohmann::json describeTwoLevel(const TwoLevelScene& s) {
                       {"keyframes", source.keyframeCount()},
                       {"nodes", b.bvh.nodeCount()},
                       {"build_frames", b.frameCosts.size()},
-                      {"cost", b.cost}});
+                      {"cost", b.cost},
+                      {"build_s", b.info.buildSeconds}});
   }
   double average = 0.0, maximum = 0.0;
   for (double c : s.tlasFrameCosts) {
@@ -116,10 +117,11 @@ void printTwoLevel(const nlohmann::json& j) {
               t["nodes"].get<unsigned>(), j["k"].get<int>(), t["cost"].get<double>(), j["scene_frames"].get<unsigned>(),
               t["frame_cost"]["average"].get<double>(), t["frame_cost"]["maximum"].get<double>());
   for (const auto& blas : j["blases"])
-    std::printf("BLAS %-6u %-8s %u triangles, %u keyframes, %u nodes, cost %.3f over %u build frames  %s\n",
+    std::printf("BLAS %-6u %-8s %u triangles, %u keyframes, %u nodes, cost %.3f over %u build frames, built in %.2f s  %s\n",
                 blas["source"].get<unsigned>(), blas["animated"].get<bool>() ? "animated" : "static",
                 blas["triangles"].get<unsigned>(), blas["keyframes"].get<unsigned>(), blas["nodes"].get<unsigned>(),
-                blas["cost"].get<double>(), blas["build_frames"].get<unsigned>(), blas["name"].get<std::string>().c_str());
+                blas["cost"].get<double>(), blas["build_frames"].get<unsigned>(), blas["build_s"].get<double>(),
+                blas["name"].get<std::string>().c_str());
   const auto& m = j["bytes"];
   std::printf("memory      BLAS %.2f MiB, TLAS %.2f MiB, total with the instance table %.2f MiB\n",
               mib(m["blas"].get<uint64_t>()), mib(m["tlas"].get<uint64_t>()), mib(m["total"].get<uint64_t>()));
@@ -128,13 +130,20 @@ void printTwoLevel(const nlohmann::json& j) {
 }  // namespace
 
 void optimizeTwoLevel(anim::SceneSources scene, const std::string& input, const std::string& output,
-                      const TreeOptions& options, const StructureChoice* choice, bool json) {
+                      const TreeOptions& options, const StructureChoice* choice, bool json, double loadSeconds,
+                      bool reproducible) {
   const auto start = std::chrono::steady_clock::now();
   if (choice) scene = anim::flattenObjects(std::move(scene), choice->flattenedObjects);
-  const TwoLevelScene twoLevel = buildTwoLevelScene(std::move(scene), options);
+  TwoLevelScene twoLevel = buildTwoLevelScene(std::move(scene), options);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  nlohmann::json j = describeTwoLevel(twoLevel);  // with the build times, whatever the file holds
+  if (reproducible) {
+    for (Blas& blas : twoLevel.blases) blas.info.buildSeconds = 0.0;
+    twoLevel.tlasInfo.buildSeconds = 0.0;
+  }
+  const auto saveStart = std::chrono::steady_clock::now();
   saveTwoLevelScene(output, twoLevel);
-  nlohmann::json j = describeTwoLevel(twoLevel);
+  const double saveSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - saveStart).count();
   j["input"] = input;
   j["output"] = output;
   j["structure_rule"] = choice ? "auto: " + std::to_string(choice->flattenedObjects.size()) + " of " +
@@ -142,6 +151,12 @@ void optimizeTwoLevel(anim::SceneSources scene, const std::string& input, const 
                               : "asked for (--structure two-level)";
   if (choice) j["structure_choice"] = describeStructureChoice(*choice);
   j["build_s"] = seconds;
+  nlohmann::json phases = nlohmann::json::array();
+  phases.push_back({{"name", "load"}, {"seconds", loadSeconds}});
+  if (choice) phases.push_back({{"name", "structure choice"}, {"seconds", choice->seconds}});
+  for (const BuildPhase& p : twoLevel.buildPhases) phases.push_back({{"name", p.name}, {"seconds", p.seconds}});
+  phases.push_back({{"name", "save"}, {"seconds", saveSeconds}});
+  j["phases"] = phases;
   if (json) {
     std::printf("%s\n", j.dump().c_str());
     return;
@@ -150,6 +165,14 @@ void optimizeTwoLevel(anim::SceneSources scene, const std::string& input, const 
   if (choice) printStructureChoice(j["structure_choice"]);
   printTwoLevel(j);
   std::printf("build       %.2f s\n", seconds);
+  std::string line;
+  for (const auto& p : phases) {
+    char text[96];
+    std::snprintf(text, sizeof text, "%s%s %.2f s", line.empty() ? "" : ", ", p["name"].get<std::string>().c_str(),
+                  p["seconds"].get<double>());
+    line += text;
+  }
+  std::printf("phases      %s\n", line.c_str());
 }
 
 void describeTwoLevelFile(const std::string& treePath, const std::string& scenePath, bool json) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <exception>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -10,6 +11,7 @@
 
 #include "tsah/base/error.hpp"
 #include "tsah/base/memory.hpp"
+#include "tsah/base/parallel_each.hpp"
 #include "anim/load.hpp"
 #include "anim/scene.hpp"
 #include "anim/subdivide.hpp"
@@ -70,57 +72,114 @@ void checkNestedSceneSize(const SceneDescription& scene, const SceneObject& obje
                                   mib(tsah::availableMemoryBytes()) + " of memory available");
 }
 
+// One distinct (file, fps, clip, subdivision) of the scene: loaded once, shared by its objects.
+struct SourceJob {
+  std::size_t object = 0;  // the first object naming it
+  LoadOptions options;
+  Animation animation;
+  std::exception_ptr error;  // of its load or its subdivision
+};
+
+// Refuses a subdivision that is not possible or would not fit: `held` is the memory of everything
+// loaded and of the subdivisions that run beside this one.
+void checkSubdivision(const SceneDescription& scene, const SceneObject& object, const Animation& a, uint64_t& held) {
+  if (a.keyframeCount() != 1)
+    failObject(scene, object, "subdivision needs a static mesh (it has " + std::to_string(a.keyframeCount()) +
+                                  " keyframes)");
+  const MeshCounts after = loopSubdividedCounts(meshCounts(a), object.subdivide);
+  if (after.triangles > 0xffffffffull || after.vertices > 0xffffffffull)
+    failObject(scene, object, "subdivision level " + std::to_string(object.subdivide) + " would make " +
+                                  std::to_string(after.triangles) + " triangles, more than 2^32");
+  held += loopSubdivisionBytes(after);
+  if (held > tsah::availableMemoryBytes())
+    failObject(scene, object, "subdivision level " + std::to_string(object.subdivide) + " (" +
+                                  std::to_string(after.triangles) + " triangles) would need " + mib(held) +
+                                  ", more than the " + mib(tsah::availableMemoryBytes()) + " available");
+}
+
 // Loads (and subdivides) each object's file once; objects naming the same file with the same
-// options share it.
+// options share it. The distinct files are loaded concurrently, then subdivided concurrently; an
+// error is the one the first object in scene order meets, as if they were loaded one by one.
 void loadSources(const LoadOptions& options, SceneSources& out) {
   const SceneDescription& scene = out.description;
-  uint64_t& sourceBytes = out.sourceBytes;
+  std::vector<SourceJob> jobs;
   std::map<std::string, uint32_t> loaded;
-  for (const SceneObject& object : scene.objects) {
+  for (std::size_t o = 0; o < scene.objects.size(); ++o) {
+    const SceneObject& object = scene.objects[o];
     const std::string file = canonical(object.file);
-    for (const std::string& outer : sceneStack)
-      if (outer == file) failObject(scene, object, "scene files include each other (" + object.file + " is being baked already)");
     const double fps = object.fps > 0.0 ? object.fps : options.fps;
     const std::string key = file + "\n" + std::to_string(fps) + "\n" + object.clip + "\n" + std::to_string(object.subdivide);
-    const auto found = loaded.find(key);
-    if (found == loaded.end()) {
-      LoadOptions own = options;
-      own.fps = fps;
-      own.clip = object.clip;
-      own.progress = nullptr;
-      if (sceneStack.size() == 1) checkNestedSceneSize(scene, object, own);
-      Animation a;
-      try {
-        a = load(object.file, own);
-      } catch (const tsah::Error& e) {
-        failObject(scene, object, e.what());
-      }
-      if (object.subdivide > 0) {
-        if (a.keyframeCount() != 1)
-          failObject(scene, object, "subdivision needs a static mesh (it has " + std::to_string(a.keyframeCount()) +
-                                        " keyframes)");
-        const MeshCounts after = loopSubdividedCounts(meshCounts(a), object.subdivide);
-        const uint64_t need = sourceBytes + loopSubdivisionBytes(after);
-        if (after.triangles > 0xffffffffull || after.vertices > 0xffffffffull)
-          failObject(scene, object, "subdivision level " + std::to_string(object.subdivide) + " would make " +
-                                        std::to_string(after.triangles) + " triangles, more than 2^32");
-        if (need > tsah::availableMemoryBytes())
-          failObject(scene, object, "subdivision level " + std::to_string(object.subdivide) + " (" +
-                                        std::to_string(after.triangles) + " triangles) would need " + mib(need) +
-                                        ", more than the " + mib(tsah::availableMemoryBytes()) + " available");
-        try {
-          a = subdivideLoop(a, object.subdivide);
-        } catch (const tsah::Error& e) {
-          failObject(scene, object, e.what());
-        }
-      }
-      sourceBytes += a.memoryBytes();
-      loaded.emplace(key, uint32_t(out.sources.size()));
-      out.objectSource.push_back(uint32_t(out.sources.size()));
-      out.sources.push_back(std::make_shared<const Animation>(std::move(a)));
-    } else {
-      out.objectSource.push_back(found->second);
+    const auto [found, added] = loaded.try_emplace(key, uint32_t(jobs.size()));
+    out.objectSource.push_back(found->second);
+    if (!added) continue;
+    SourceJob& job = jobs.emplace_back();
+    job.object = o;
+    job.options = options;
+    job.options.fps = fps;
+    job.options.clip = object.clip;
+    job.options.progress = nullptr;
+    try {
+      for (const std::string& outer : sceneStack)
+        if (outer == file)
+          failObject(scene, object, "scene files include each other (" + object.file + " is being baked already)");
+      if (sceneStack.size() == 1) checkNestedSceneSize(scene, object, job.options);
+    } catch (...) {
+      job.error = std::current_exception();  // met when this object's turn comes
     }
+  }
+
+  // A nested scene file loaded on a worker thread sees the scene files being baked here.
+  const std::vector<std::string> outerScenes = sceneStack;
+  tsah::forEachConcurrently(jobs.size(), [&](std::size_t j) {
+    SourceJob& job = jobs[j];
+    if (job.error) return;
+    std::vector<std::string> own = outerScenes;
+    std::swap(own, sceneStack);
+    try {
+      job.animation = load(scene.objects[job.object].file, job.options);
+    } catch (const tsah::Error& e) {
+      job.error = std::make_exception_ptr(tsah::FileError(
+          scene.file, "object '" + tsah::printable(scene.objects[job.object].name) + "': " + e.what()));
+    } catch (...) {
+      job.error = std::current_exception();
+    }
+    std::swap(own, sceneStack);
+  });
+
+  // The subdivisions that can run: those before the first load or check that fails.
+  uint64_t held = 0;
+  for (const SourceJob& job : jobs) held += job.animation.memoryBytes();
+  std::size_t runnable = 0;
+  std::exception_ptr stop;
+  for (; runnable < jobs.size() && !stop; ++runnable) {
+    SourceJob& job = jobs[runnable];
+    const SceneObject& object = scene.objects[job.object];
+    if (job.error) {
+      stop = job.error;
+    } else if (object.subdivide > 0) {
+      try {
+        checkSubdivision(scene, object, job.animation, held);
+      } catch (...) {
+        stop = std::current_exception();
+      }
+    }
+    if (stop) break;
+  }
+  tsah::forEachConcurrently(runnable, [&](std::size_t j) {
+    SourceJob& job = jobs[j];
+    const SceneObject& object = scene.objects[job.object];
+    if (object.subdivide == 0) return;
+    try {
+      job.animation = subdivideLoop(job.animation, object.subdivide);
+    } catch (const tsah::Error& e) {
+      failObject(scene, object, e.what());
+    }
+  });
+  if (stop) std::rethrow_exception(stop);
+
+  for (SourceJob& job : jobs) {
+    out.sourceBytes += job.animation.memoryBytes();
+    out.sources.push_back(std::make_shared<const Animation>(std::move(job.animation)));
   }
 }
 

@@ -3,6 +3,7 @@
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 #include <OpenMesh/Tools/Subdivider/Uniform/LoopT.hh>
 #include <algorithm>
+#include <mutex>
 #include <span>
 #include <string>
 #include <tuple>
@@ -61,6 +62,32 @@ std::string firstTopologyProblem(std::span<const uint32_t> idx) {
   return problem;
 }
 
+// OpenMesh's error stream is one for the process: it stays off while any subdivision links faces
+// (subdivisions of a scene's sources run concurrently).
+class SilencedOpenMeshErrors {
+ public:
+  SilencedOpenMeshErrors() {
+    const std::lock_guard<std::mutex> lock(mutex());
+    if (users()++ == 0) omerr().disable();
+  }
+  ~SilencedOpenMeshErrors() {
+    const std::lock_guard<std::mutex> lock(mutex());
+    if (--users() == 0) omerr().enable();
+  }
+  SilencedOpenMeshErrors(const SilencedOpenMeshErrors&) = delete;
+  SilencedOpenMeshErrors& operator=(const SilencedOpenMeshErrors&) = delete;
+
+ private:
+  static std::mutex& mutex() {
+    static std::mutex m;
+    return m;
+  }
+  static int& users() {
+    static int n = 0;
+    return n;
+  }
+};
+
 }  // namespace
 
 void checkSubdivisionTopology(const Animation& mesh) {
@@ -111,21 +138,22 @@ Animation subdivideLoop(const Animation& source, uint32_t levels) {
   // With manifold, consistently oriented edges, OpenMesh can still fail to link a triangle in at a
   // non-manifold vertex (two fans touching at one point, met in an unlucky order). Such a triangle
   // gets its own copies of its vertices and subdivides on its own. OpenMesh reports each such
-  // face on its error stream; libraries never print, so that stream is off meanwhile.
+  // face on its error stream; libraries never print, so that stream is off meanwhile (SilencedOpenMeshErrors).
   std::size_t rejected = 0;
-  omerr().disable();
-  for (std::size_t t = 0; t < idx.size(); t += 3) {
-    if (mesh.add_face(vh[idx[t]], vh[idx[t + 1]], vh[idx[t + 2]]).is_valid()) continue;
-    Mesh::VertexHandle own[3];
-    for (int c = 0; c < 3; ++c) {
-      // A copy, not mesh.point()'s reference: add_vertex grows the point array, which would free
-      // the memory that reference points into before the new point is read from it.
-      const Mesh::Point corner = mesh.point(vh[idx[t + c]]);
-      own[c] = mesh.add_vertex(corner);
+  {
+    const SilencedOpenMeshErrors silenced;
+    for (std::size_t t = 0; t < idx.size(); t += 3) {
+      if (mesh.add_face(vh[idx[t]], vh[idx[t + 1]], vh[idx[t + 2]]).is_valid()) continue;
+      Mesh::VertexHandle own[3];
+      for (int c = 0; c < 3; ++c) {
+        // A copy, not mesh.point()'s reference: add_vertex grows the point array, which would free
+        // the memory that reference points into before the new point is read from it.
+        const Mesh::Point corner = mesh.point(vh[idx[t + c]]);
+        own[c] = mesh.add_vertex(corner);
+      }
+      if (!mesh.add_face(own[0], own[1], own[2]).is_valid()) ++rejected;
     }
-    if (!mesh.add_face(own[0], own[1], own[2]).is_valid()) ++rejected;
   }
-  omerr().enable();
   if (rejected > 0)
     throw tsah::Failure(who + ": cannot subdivide: OpenMesh could not link in " + std::to_string(rejected) +
                         " triangles");

@@ -1,5 +1,7 @@
 #include "tsah/pipeline.hpp"
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -108,10 +110,19 @@ PrimitiveBoxes representativeBoxes(const anim::Animation& animation, uint32_t fr
   tsah::checkFitsInMemory(std::size_t(n) * rep.primCount * sizeof(Aabb), animation.name(),
                           std::to_string(n) + " representative frames");
   rep.boxes.resize(std::size_t(n) * rep.primCount);
-  // One frame of positions at a time (the resampled animation is never held whole).
-  const FrameSource source = animationFrames(animation, animation.uniformTimes(n));
-  for (uint32_t f = 0; f < n; ++f)
-    source.fill(f, std::span<Aabb>(rep.boxes).subspan(std::size_t(f) * rep.primCount, rep.primCount));
+  // One frame of positions at a time (the resampled animation is never held whole); its triangle
+  // boxes in chunks on the arena's threads (each box depends on its triangle only).
+  const std::vector<double> times = animation.uniformTimes(n);
+  const std::span<const uint32_t> indices = animation.indices();
+  constexpr std::size_t kChunk = 1 << 16;
+  for (uint32_t f = 0; f < n; ++f) {
+    const std::vector<float> positions = animation.positionsAt(times[f]);
+    const std::span<Aabb> out = std::span<Aabb>(rep.boxes).subspan(std::size_t(f) * rep.primCount, rep.primCount);
+    tbb::parallel_for(std::size_t(0), out.size(), kChunk, [&](std::size_t first) {
+      const std::size_t count = std::min(kChunk, out.size() - first);
+      triangleBoxes(indices.subspan(3 * first, 3 * count), positions, out.subspan(first, count));
+    });
+  }
   return rep;
 }
 

@@ -29,6 +29,21 @@ add_test(NAME cli.two_level.optimize.json
          COMMAND tsah optimize ${SCENE} -o ${W}/tl_asked.tbvh --frames 3 --structure two-level --json)
 set_tests_properties(cli.two_level.optimize.json PROPERTIES FIXTURES_SETUP tl_asked PASS_REGULAR_EXPRESSION
   "\"blas\":\\{\"animated\":1,\"count\":3,\"static\":2\\}.*\"instances\":7,.*\"poses\":2,.*\"structure_rule\":\"asked for")
+# The wall time of every phase, and --reproducible: build times written as 0, so two builds give
+# the same bytes, on all cores and on one (--threads 1 holds every phase to one thread).
+add_test(NAME cli.two_level.optimize.phases
+         COMMAND tsah optimize ${SCENE} -o ${W}/tl_phases.tbvh --frames 3 --structure two-level --reproducible
+                 --optimizer parallel)
+set_tests_properties(cli.two_level.optimize.phases PROPERTIES FIXTURES_SETUP tl_phases PASS_REGULAR_EXPRESSION
+  "BLAS 0 .* built in [0-9.]+ s.*\nphases +load [0-9.]+ s, blas [0-9.]+ s, check [0-9.]+ s, instances [0-9.]+ s, tlas [0-9.]+ s, costs [0-9.]+ s, save [0-9.]+ s\n")
+add_test(NAME cli.two_level.optimize.phases_json
+         COMMAND tsah optimize ${SCENE} -o ${W}/tl_phases_2.tbvh --frames 3 --structure two-level --reproducible
+                 --optimizer parallel --threads 1 --json)
+set_tests_properties(cli.two_level.optimize.phases_json PROPERTIES FIXTURES_SETUP tl_phases PASS_REGULAR_EXPRESSION
+  "\"build_s\":[0-9.e-]+,.*\"phases\":\\[\\{\"name\":\"load\",\"seconds\":[0-9.e-]+\\},\\{\"name\":\"blas\",")
+add_test(NAME cli.two_level.optimize.reproducible
+         COMMAND ${CMAKE_COMMAND} -E compare_files ${W}/tl_phases.tbvh ${W}/tl_phases_2.tbvh)
+set_tests_properties(cli.two_level.optimize.reproducible PROPERTIES FIXTURES_REQUIRED tl_phases)
 add_test(NAME cli.two_level.optimize.flat COMMAND tsah optimize ${SCENE} -o ${W}/tl_flat.tbvh --frames 3 --structure flat)
 set_tests_properties(cli.two_level.optimize.flat PROPERTIES FIXTURES_SETUP tl_flat
   PASS_REGULAR_EXPRESSION "tl_flat.tbvh: tsah0 tree, 12240 triangles")

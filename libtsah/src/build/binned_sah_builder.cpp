@@ -57,7 +57,8 @@ class Build {
     bvh.nodes.reserve(2 * std::size_t(n) - 1);
     bvh.boxes.reserve(2 * std::size_t(n) - 1);
 
-    // Top of the tree: nodes above parallelThreshold, built here with parallel bounds and binning.
+    // Top of the tree: nodes above parallelThreshold, built here with parallel bounds, binning and
+    // (stable) partitioning.
     struct Task {
       uint32_t slot, begin, end;
       RangeBounds bounds;
@@ -95,7 +96,10 @@ class Build {
       stack.push_back({left, item.begin, mid});
     }
 
-    // Subtrees: one task each, into private arrays, then appended in task order.
+    std::vector<uint32_t>().swap(scratch_);
+
+    // Subtrees: one task each, into private arrays, then copied in task order: task t's nodes but
+    // its root go to [first[t], first[t + 1]), so the copies run concurrently.
     struct Local {
       std::vector<BvhNode> nodes;
       std::vector<Aabb> boxes;
@@ -104,27 +108,28 @@ class Build {
     tbb::parallel_for(std::size_t(0), tasks.size(), [&](std::size_t t) {
       buildSerial(tasks[t].begin, tasks[t].end, tasks[t].bounds, locals[t].nodes, locals[t].boxes);
     });
-    for (std::size_t t = 0; t < tasks.size(); ++t) {
-      const Local& local = locals[t];
-      const uint32_t slot = tasks[t].slot;
-      const auto base = static_cast<uint32_t>(bvh.nodes.size());
+    std::vector<uint32_t> first(tasks.size() + 1);
+    first[0] = static_cast<uint32_t>(bvh.nodes.size());
+    for (std::size_t t = 0; t < tasks.size(); ++t) first[t + 1] = first[t] + uint32_t(locals[t].nodes.size() - 1);
+    bvh.nodes.resize(first.back());
+    bvh.boxes.resize(first.back());
+    tbb::parallel_for(std::size_t(0), tasks.size(), [&](std::size_t t) {
+      Local& local = locals[t];
+      const uint32_t slot = tasks[t].slot, base = first[t];
       auto map = [&](uint32_t k) { return k == 0 ? slot : base + k - 1; };
+      const uint32_t rootParent = bvh.nodes[slot].parent;
       for (std::size_t k = 0; k < local.nodes.size(); ++k) {
         BvhNode node = local.nodes[k];
-        node.parent = k == 0 ? bvh.nodes[slot].parent : map(node.parent);
+        node.parent = k == 0 ? rootParent : map(node.parent);
         if (!node.isLeaf()) {
           node.left = map(node.left);
           node.right = map(node.right);
         }
-        if (k == 0) {
-          bvh.nodes[slot] = node;
-          bvh.boxes[slot] = local.boxes[0];
-        } else {
-          bvh.nodes.push_back(node);
-          bvh.boxes.push_back(local.boxes[k]);
-        }
+        bvh.nodes[map(uint32_t(k))] = node;
+        bvh.boxes[map(uint32_t(k))] = local.boxes[k];
       }
-    }
+      local = Local{};
+    });
     bvh.primIds = std::move(ids_);
     return bvh;
   }
@@ -187,6 +192,37 @@ class Build {
     RangeBounds r;
     for (const auto& p : parts) r.add(p);
     return r;
+  }
+
+  // Partitions ids_[begin, end) stably in kChunks chunks on the arena's threads: the ids that go
+  // left first, each side in its old order (the same result for any thread count). Returns the
+  // number that go left.
+  template <typename GoesLeft>
+  uint32_t stablePartition(uint32_t begin, uint32_t end, const GoesLeft& goesLeft) {
+    const uint32_t n = end - begin;
+    auto chunkBegin = [&](uint32_t c) { return begin + uint32_t(uint64_t(n) * c / kChunks); };
+    std::array<uint32_t, kChunks + 1> leftBefore{};
+    std::array<uint32_t, kChunks> leftIn{};
+    tbb::parallel_for(uint32_t(0), kChunks, [&](uint32_t c) {
+      uint32_t left = 0;
+      for (uint32_t i = chunkBegin(c); i < chunkBegin(c + 1); ++i) left += goesLeft(ids_[i]) ? 1 : 0;
+      leftIn[c] = left;
+    });
+    for (uint32_t c = 0; c < kChunks; ++c) leftBefore[c + 1] = leftBefore[c] + leftIn[c];
+    const uint32_t leftTotal = leftBefore[kChunks];
+    if (scratch_.size() < ids_.size()) scratch_.resize(ids_.size());
+    tbb::parallel_for(uint32_t(0), kChunks, [&](uint32_t c) {
+      uint32_t l = begin + leftBefore[c];
+      uint32_t r = begin + leftTotal + (chunkBegin(c) - begin - leftBefore[c]);
+      for (uint32_t i = chunkBegin(c); i < chunkBegin(c + 1); ++i) {
+        const uint32_t p = ids_[i];
+        scratch_[goesLeft(p) ? l++ : r++] = p;
+      }
+    });
+    tbb::parallel_for(uint32_t(0), kChunks, [&](uint32_t c) {
+      std::copy(scratch_.begin() + chunkBegin(c), scratch_.begin() + chunkBegin(c + 1), ids_.begin() + chunkBegin(c));
+    });
+    return leftTotal;
   }
 
   uint32_t binOf(float c, float lo, float scale) const {
@@ -268,10 +304,13 @@ class Build {
     const float splitCost = cfg_.cost.ct + cfg_.cost.ci * (area > 0.0f ? best.cost / area : float(count));
     if (count <= cfg_.maxLeafSize && leafCost <= splitCost) return false;
     const int axis = best.axis;
-    const auto it = std::partition(ids_.begin() + begin, ids_.begin() + end, [&](uint32_t p) {
-      return binOf(centers_[p][axis], lo[axis], scale[axis]) <= best.bin;
-    });
-    mid = static_cast<uint32_t>(it - ids_.begin());
+    const auto goesLeft = [&](uint32_t p) { return binOf(centers_[p][axis], lo[axis], scale[axis]) <= best.bin; };
+    if (parallel && count >= 2 * cfg_.parallelThreshold) {
+      mid = begin + stablePartition(begin, end, goesLeft);
+    } else {
+      const auto it = std::partition(ids_.begin() + begin, ids_.begin() + end, goesLeft);
+      mid = static_cast<uint32_t>(it - ids_.begin());
+    }
     if (mid == begin || mid == end) mid = begin + count / 2;  // unreachable: both sides counted non-empty
     return true;
   }
@@ -280,6 +319,7 @@ class Build {
   std::span<const Aabb> boxes_;
   std::vector<Vec3> centers_;
   std::vector<uint32_t> ids_;
+  std::vector<uint32_t> scratch_;  // the stable partition's copy of the ids
 };
 
 }  // namespace

@@ -6,6 +6,7 @@
 #include "tsah/base/assert.hpp"
 #include "tsah/base/binary_io.hpp"
 #include "tsah/base/error.hpp"
+#include "tsah/base/parallel_each.hpp"
 #include "io/tbvh_io.hpp"
 
 namespace tsah {
@@ -74,6 +75,17 @@ std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh> blases, std::span<c
                                         std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
                                         std::span<const TwoLevelPoseRecord> poses,
                                         std::span<const uint32_t> flattenedObjects) {
+  std::vector<const Bvh*> trees;
+  for (const Bvh& b : blases) trees.push_back(&b);
+  return encodeTwoLevelFile(std::span<const Bvh* const>(trees), blasBuilds, tlas, tlasBuild, instanceBlas, instancePose,
+                            poses, flattenedObjects);
+}
+
+std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh* const> blases, std::span<const BvhBuildInfo> blasBuilds,
+                                        const Bvh& tlas, const BvhBuildInfo& tlasBuild,
+                                        std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
+                                        std::span<const TwoLevelPoseRecord> poses,
+                                        std::span<const uint32_t> flattenedObjects) {
   if (blases.size() != blasBuilds.size() || blases.size() > kTbvhTwoLevelMaxBlas)
     throw DataError(".tbvh two-level: " + std::to_string(blases.size()) + " BLAS and " +
                     std::to_string(blasBuilds.size()) + " build records");
@@ -85,11 +97,15 @@ std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh> blases, std::span<c
   if (tlas.primCount() != instanceBlas.size())
     throw DataError(".tbvh two-level: the TLAS holds " + std::to_string(tlas.primCount()) + " instances, the table " +
                     std::to_string(instanceBlas.size()));
-  std::vector<std::vector<uint8_t>> images;
-  for (std::size_t b = 0; b < blases.size(); ++b) images.push_back(encodeBvhFile(blases[b], blasBuilds[b]));
-  images.push_back(encodeBvhFile(tlas, tlasBuild));
+  std::vector<std::vector<uint8_t>> images(blases.size() + 1);
+  forEachConcurrently(images.size(), [&](std::size_t b) {
+    images[b] = b < blases.size() ? encodeBvhFile(*blases[b], blasBuilds[b]) : encodeBvhFile(tlas, tlasBuild);
+  });
 
   ByteWriter w;
+  uint64_t fileBytes = align16(tablesEnd(blases.size(), instanceBlas.size(), poses.size(), flattenedObjects.size()));
+  for (const std::vector<uint8_t>& image : images) fileBytes = align16(fileBytes + image.size());
+  w.buffer().reserve(fileBytes + sizeof(uint32_t));  // the checksum
   w.write(detail::kTbvhMagic);
   w.write(kTbvhTwoLevelVersion);
   w.write(kTbvhTwoLevelHeaderBytes);

@@ -3,10 +3,12 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <mutex>
 #include <tuple>
 
 #include "tsah/base/error.hpp"
 #include "tsah/base/memory.hpp"
+#include "tsah/base/parallel_each.hpp"
 #include "tsah/build/sah_builder.hpp"
 #include "tsah/core/instance_transform.hpp"
 #include "tsah/core/cost.hpp"
@@ -120,6 +122,28 @@ Bvh rebuildTlas(std::span<const Aabb> instanceBoxes, const Objective& objective)
   return SweepSahBuilder(config).build(instanceBoxes);
 }
 
+namespace {
+
+double secondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// Source s's BLAS: its tree only (validated and flattened by the caller).
+Blas buildBlas(const anim::SceneSources& scene, uint32_t s, const TreeOptions& options) {
+  const anim::Animation& source = *scene.sources[s];
+  Blas blas;
+  blas.source = s;
+  blas.animated = source.keyframeCount() > 1;
+  TreeOptions own = treeOptionsWithK(options, blas.animated ? options.objective.k : 0);
+  own.binnedInitialTree = own.binnedInitialTree || !blas.animated;  // static: often millions of triangles
+  OptimizedTree tree = optimizeAnimation(source, own);
+  blas.info = tree.info;
+  blas.bvh = std::move(tree.bvh);
+  return blas;
+}
+
+}  // namespace
+
 TwoLevelScene buildTwoLevelScene(anim::SceneSources scene, const TreeOptions& options) {
   options.validate();
   if (options.method != Method::TSah)
@@ -128,42 +152,64 @@ TwoLevelScene buildTwoLevelScene(anim::SceneSources scene, const TreeOptions& op
   TwoLevelScene out;
   out.objective = options.objective;
 
-  // One BLAS per source, in the source's own time.
-  for (uint32_t s = 0; s < scene.sources.size(); ++s) {
-    const anim::Animation& source = *scene.sources[s];
-    Blas blas;
-    blas.source = s;
-    blas.animated = source.keyframeCount() > 1;
-    const int k = blas.animated ? options.objective.k : 0;
-    TreeOptions own = treeOptionsWithK(options, k);
-    own.binnedInitialTree = own.binnedInitialTree || !blas.animated;  // static: often millions of triangles
-    OptimizedTree tree = optimizeAnimation(source, own);
-    const std::string what = scene.description.file + ": source " + std::to_string(s) + " (" + source.name() + ")";
-    requireValid(tree.bvh, representativeBoxes(source, framesFor(source, options.frames)), what);
-    blas.info = tree.info;
-    blas.flat = flattenBvh(tree.bvh);
-    blas.bvh = std::move(tree.bvh);
-    out.blases.push_back(std::move(blas));
+  // One BLAS per source, in the source's own time. On the CPU the sources are built concurrently
+  // (each tree is the same however the threads are shared); the GPU optimizer takes one at a time.
+  auto phase = std::chrono::steady_clock::now();
+  out.blases.resize(scene.sources.size());
+  if (options.device == Device::Cuda) {
+    for (uint32_t s = 0; s < scene.sources.size(); ++s) out.blases[s] = buildBlas(scene, s, options);
+  } else {
+    // The callbacks see one message at a time, as from one build.
+    TreeOptions shared = options;
+    std::mutex callbackMutex;
+    if (options.progress)
+      shared.progress = [&](const std::string& message) {
+        const std::lock_guard<std::mutex> lock(callbackMutex);
+        options.progress(message);
+      };
+    if (options.batchProgress)
+      shared.batchProgress = [&](const InsertionOptimizer::BatchRecord& record) {
+        const std::lock_guard<std::mutex> lock(callbackMutex);
+        options.batchProgress(record);
+      };
+    forEachConcurrently(scene.sources.size(), [&](std::size_t s) { out.blases[s] = buildBlas(scene, uint32_t(s), shared); });
   }
+  out.buildPhases.push_back({"blas", secondsSince(phase)});
 
+  // Each BLAS checked against its source's boxes and flattened: independent, so concurrently.
+  phase = std::chrono::steady_clock::now();
+  forEachConcurrently(out.blases.size(), [&](std::size_t s) {
+    Blas& blas = out.blases[s];
+    const anim::Animation& source = *scene.sources[s];
+    const std::string what = scene.description.file + ": source " + std::to_string(s) + " (" + source.name() + ")";
+    requireValid(blas.bvh, representativeBoxes(source, framesFor(source, options.frames)), what);
+    blas.flat = flattenBvh(blas.bvh);
+  });
+  out.buildPhases.push_back({"check", secondsSince(phase)});
+
+  phase = std::chrono::steady_clock::now();
   assignPoses(scene, out);
   out.frameTimes = scene.frameTimes();
   out.instanceBoxes = instanceBoxesOverFrames(scene, out);
+  out.buildPhases.push_back({"instances", secondsSince(phase)});
   // The TLAS is optimized on the CPU whatever the device: it has one leaf per instance, and its
   // objective covers every scene frame (the GPU optimizer takes at most 16 representative frames).
   BaselineConfig config = options.baselineConfig();
   config.deviceOptimizer = nullptr;
-  const auto start = std::chrono::steady_clock::now();
+  phase = std::chrono::steady_clock::now();
   out.tlas = buildTSah(out.instanceBoxes, options.objective.k, config);
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const double seconds = secondsSince(phase);
   requireValid(out.tlas, out.instanceBoxes, scene.description.file + ": TLAS");
+  out.buildPhases.push_back({"tlas", secondsSince(phase)});
   // The TLAS's header: the options of the first source's, counts and hash of the instance table.
   out.tlasInfo = treeBuildInfo(options, *scene.sources[0], uint32_t(out.frameTimes.size()), seconds, scene.start, scene.end);
   out.tlasInfo.representativeFrames = uint32_t(out.frameTimes.size());
   out.tlasInfo.triangleCount = uint32_t(scene.instances.size());
   out.tlasInfo.vertexCount = 0;
   out.tlasInfo.topologyHash = instanceTableHash(scene);
+  phase = std::chrono::steady_clock::now();
   computeLevelCosts(out);
+  out.buildPhases.push_back({"costs", secondsSince(phase)});
   out.scene = std::move(scene);
   return out;
 }

@@ -37,13 +37,13 @@ std::vector<uint32_t> instancePoses(const TwoLevelScene& twoLevel) {
 }  // namespace
 
 std::vector<uint8_t> encodeTwoLevelScene(const TwoLevelScene& twoLevel) {
-  std::vector<Bvh> trees;
+  std::vector<const Bvh*> trees;
   std::vector<BvhBuildInfo> builds;
   for (const Blas& b : twoLevel.blases) {
-    trees.push_back(b.bvh);
+    trees.push_back(&b.bvh);
     builds.push_back(b.info);
   }
-  return encodeTwoLevelFile(trees, builds, twoLevel.tlas, twoLevel.tlasInfo, instanceBlas(twoLevel.scene),
+  return encodeTwoLevelFile(std::span<const Bvh* const>(trees), builds, twoLevel.tlas, twoLevel.tlasInfo, instanceBlas(twoLevel.scene),
                             instancePoses(twoLevel), poseRecords(twoLevel), twoLevel.scene.flattenedObjects);
 }
 

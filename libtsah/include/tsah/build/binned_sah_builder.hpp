@@ -3,9 +3,10 @@
 // the best of the bin boundaries is taken by the surface area heuristic. Fast enough to rebuild a
 // tree every frame: the per-frame rebuild baseline of the CPU runtime (`tsah trace --rebuild binned`).
 //
-// Multithreaded on the caller's TBB arena: the top of the tree is built with parallel binning,
-// every subtree below `parallelThreshold` primitives is a task of its own. The result does not
-// depend on the number of threads (subtrees are stitched in a fixed order).
+// Multithreaded on the caller's TBB arena: the top of the tree is built with parallel bounds,
+// binning and a stable partition (fixed chunks merged in order), every subtree below
+// `parallelThreshold` primitives is a task of its own, and the subtrees are copied into the tree
+// concurrently, each to its place in task order. The result does not depend on the number of threads.
 #include <cstdint>
 #include <span>
 

@@ -57,6 +57,12 @@ std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh> blases, std::span<c
                                         std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
                                         std::span<const TwoLevelPoseRecord> poses,
                                         std::span<const uint32_t> flattenedObjects = {});
+// The same over trees held elsewhere (no copy of them); the trees are encoded concurrently.
+std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh* const> blases, std::span<const BvhBuildInfo> blasBuilds,
+                                        const Bvh& tlas, const BvhBuildInfo& tlasBuild,
+                                        std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
+                                        std::span<const TwoLevelPoseRecord> poses,
+                                        std::span<const uint32_t> flattenedObjects = {});
 // Reads a version 3 file, validating everything before use (every tree as a version 1 file);
 // throws tsah::FileError naming `file`. Allocates only after the counts have been checked against
 // the byte count.

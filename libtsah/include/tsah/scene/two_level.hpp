@@ -35,6 +35,12 @@ struct Pose {
   anim::TimeMapping time;
 };
 
+// One step of buildTwoLevelScene and its wall time.
+struct BuildPhase {
+  std::string name;
+  double seconds = 0.0;
+};
+
 struct TwoLevelScene {
   anim::SceneSources scene;           // sources, instances (world(t) = path(t) * placement), frames
   Objective objective;                // k, cT, cI, largest TLAS leaf
@@ -49,6 +55,10 @@ struct TwoLevelScene {
   BvhBuildInfo tlasInfo;
   std::vector<double> tlasFrameCosts; // Eq. 1 of the TLAS at each scene frame
   double tlasCost = 0.0;              // C~^k over the scene frames
+  // Wall seconds of the build's steps in order: "blas" (every BLAS: initial tree and optimization;
+  // each one's own time is its info.buildSeconds), "check" (validation and flattening of the BLAS),
+  // "instances" (the instance boxes over the scene frames), "tlas", "costs".
+  std::vector<BuildPhase> buildPhases;
 
   uint32_t instanceCount() const { return static_cast<uint32_t>(scene.instances.size()); }
   const Blas& blasOf(uint32_t instance) const { return blases[scene.instances[instance].source]; }
