@@ -10,9 +10,10 @@
 
 namespace tsah::cuda::detail {
 
-__device__ __forceinline__ void writeChildBox(GpuBvhNode* node, int side, const Aabb& b) {
-  float* f = reinterpret_cast<float*>(node);
-  // Layout (gpu_layout.hpp): n0xy, n1xy, nz; child 1's x/y start at float 4, z boxes at 8 / 10.
+// A child box into a node's twelve box floats (gpu_layout.hpp: n0xy, n1xy, nz; child 1's x/y start
+// at float 4, z boxes at 8 / 10), in global memory or (volatile) in shared memory.
+template <class Float>
+__device__ __forceinline__ void storeChildBox(Float* f, int side, const Aabb& b) {
   const int xy = side == 0 ? 0 : 4, z = side == 0 ? 8 : 10;
   f[xy + 0] = b.lo.x;
   f[xy + 1] = b.hi.x;
@@ -20,6 +21,10 @@ __device__ __forceinline__ void writeChildBox(GpuBvhNode* node, int side, const 
   f[xy + 3] = b.hi.y;
   f[z + 0] = b.lo.z;
   f[z + 1] = b.hi.z;
+}
+
+__device__ __forceinline__ void writeChildBox(GpuBvhNode* node, int side, const Aabb& b) {
+  storeChildBox(reinterpret_cast<float*>(node), side, b);
 }
 
 __device__ __forceinline__ Aabb readChildBox(const GpuBvhNode* node, int side) {
@@ -49,13 +54,7 @@ __device__ __forceinline__ void refitUpwards(GpuBvhNode* __restrict__ nodes, con
   root->box = box;
 }
 
-// A child box in a node's float layout (GpuBvhNode: child 0's x/y at floats 0..3, child 1's at
-// 4..7, z boxes at 8 / 10), in shared memory.
-__device__ __forceinline__ void storeSharedChildBox(volatile float* node, int side, const Aabb& b) {
-  const int xy = side == 0 ? 0 : 4, z = side == 0 ? 8 : 10;
-  node[xy + 0] = b.lo.x, node[xy + 1] = b.hi.x, node[xy + 2] = b.lo.y, node[xy + 3] = b.hi.y;
-  node[z + 0] = b.lo.z, node[z + 1] = b.hi.z;
-}
+// storeChildBox's box read back from a node's floats in shared memory.
 __device__ __forceinline__ Aabb loadSharedChildBox(volatile const float* node, int side) {
   const int xy = side == 0 ? 0 : 4, z = side == 0 ? 8 : 10;
   return Aabb{{node[xy + 0], node[xy + 2], node[z + 0]}, {node[xy + 1], node[xy + 3], node[z + 1]}};
@@ -91,7 +90,7 @@ __device__ void partRefit(GpuBvhNode* __restrict__ nodes, const RefitPartsView& 
     while (slot != kPartExitSlot) {
       const uint32_t node = slot >> 1;
       const int side = int(slot & 1);
-      storeSharedChildBox(boxes + 12 * std::size_t(node), side, box);
+      storeChildBox(boxes + 12 * std::size_t(node), side, box);
       __threadfence_block();  // the box before the arrival: the sibling reads it after its own
       if (atomicAdd(counters + node, 1u) == 0) {
         reachedExit = false;  // the sibling finishes the node

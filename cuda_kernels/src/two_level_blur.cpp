@@ -219,32 +219,15 @@ std::span<const Aabb> TwoLevelBlur::keyInstanceBoxes(std::size_t key) const {
 
 template <bool AnyHit, typename Result>
 std::vector<Result> TwoLevelBlur::trace(std::span<const Ray> in, std::span<const float> times, RayPassStats* stats) {
-  std::vector<Result> out(in.size());
-  if (stats) *stats = {};
-  if (in.empty()) return out;
-  if (in.size() > 0xffffffffu) throw ConfigError("GPU two-level runtime: too many rays in one call");
-  const auto count = uint32_t(in.size());
-  rays_.reserve(count);
-  rays_.upload(in, stream_);
-  rayTimes_.reserve(count);
-  rayTimes_.upload(times, stream_);
-  if (AnyHit)
-    occluded_.reserve(count);
-  else
-    hits_.reserve(count);
-  events_.record(0, stream_);
-  launchBlurredTwoLevelTrace(scene_, rays_.data(), rayTimes_.data(), count, AnyHit ? nullptr : hits_.data(),
-                             AnyHit ? occluded_.data() : nullptr, stream_);
-  events_.record(1, stream_);
-  events_.wait(1);
-  if (stats) *stats = {count, events_.ms(0, 1)};
-  if constexpr (AnyHit) {
-    const std::vector<uint8_t> found = occluded_.download(stream_, count);
-    std::copy(found.begin(), found.end(), out.begin());
-  } else {
-    out = twoLevelHits(hits_.download(stream_, count));
+  if (!in.empty()) {
+    rayTimes_.reserve(times.size());
+    rayTimes_.upload(times, stream_);
   }
-  return out;
+  return query_.run<AnyHit, Result>(in, events_, stream_, stats,
+                                    [&](const Ray* rays, uint32_t count, InstanceHit* hits, uint8_t* occluded) {
+                                      launchBlurredTwoLevelTrace(scene_, rays, rayTimes_.data(), count, hits,
+                                                                 occluded, stream_);
+                                    });
 }
 
 }  // namespace detail

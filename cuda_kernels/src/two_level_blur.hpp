@@ -24,6 +24,7 @@
 #include "tsah/scene/two_level_runtime.hpp"
 #include "tsah_cuda/device_buffer.hpp"
 #include "two_level_kernels.hpp"
+#include "two_level_query.hpp"
 
 namespace tsah::cuda::detail {
 
@@ -92,20 +93,6 @@ void launchInstanceRootBoxes(const InstanceState* instances, const BlasView* vie
 void launchBlurredTwoLevelTrace(const BlurredTlasScene& scene, const Ray* rays, const float* times, uint32_t count,
                                 InstanceHit* hits, uint8_t* occluded, cudaStream_t stream);
 
-// The trace's hits as two-level hits (instance kNoHit: none).
-inline std::vector<TwoLevelHit> twoLevelHits(const std::vector<InstanceHit>& found) {
-  std::vector<TwoLevelHit> out(found.size());
-  for (std::size_t i = 0; i < found.size(); ++i) {
-    if (found[i].instance == kNoHit) continue;
-    out[i].t = found[i].t;
-    out[i].u = found[i].u;
-    out[i].v = found[i].v;
-    out[i].instance = found[i].instance;
-    out[i].prim = found[i].prim;
-  }
-  return out;
-}
-
 // The blurred frame's device state, rebuilt by each build() (buffers grow, never shrink).
 class TwoLevelBlur {
  public:
@@ -155,10 +142,8 @@ class TwoLevelBlur {
   DeviceBuffer<uint32_t> tlasCounters_;
   DeviceBuffer<RootInfo> tlasKeyRoots_;
   BlurredTlasScene scene_;
-  DeviceBuffer<Ray> rays_;
+  TwoLevelQuery query_;
   DeviceBuffer<float> rayTimes_;
-  DeviceBuffer<InstanceHit> hits_;
-  DeviceBuffer<uint8_t> occluded_;
 };
 
 }  // namespace tsah::cuda::detail

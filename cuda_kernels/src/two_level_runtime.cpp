@@ -181,9 +181,7 @@ struct GpuTwoLevelRuntime::Impl {
   Graph fullGraph, rigidGraph;  // with and without the poses' BLAS refits
   double time = 0.0;
   uint64_t refits = 0;
-  DeviceBuffer<Ray> rays;
-  DeviceBuffer<detail::InstanceHit> hits;
-  DeviceBuffer<uint8_t> occluded;
+  detail::TwoLevelQuery query;
 };
 
 GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), config(c) {
@@ -491,34 +489,10 @@ TwoLevelUpdateTimings GpuTwoLevelRuntime::updateAt(double sceneTime) {
 
 template <bool AnyHit, typename Result>
 std::vector<Result> GpuTwoLevelRuntime::Impl::trace(std::span<const Ray> in, RayPassStats* stats) {
-  std::vector<Result> out(in.size());
-  if (stats) *stats = {};
-  if (in.empty()) return out;
-  if (in.size() > 0xffffffffu) throw ConfigError("GPU two-level runtime: too many rays in one call");
-  const auto count = uint32_t(in.size());
-  rays.reserve(count);
-  rays.upload(in, stream);
-  if (AnyHit)
-    occluded.reserve(count);
-  else
-    hits.reserve(count);
-  events.record(0, stream);
-  detail::launchTwoLevelTrace(tlasScene(), rays.data(), count, AnyHit ? nullptr : hits.data(),
-                              AnyHit ? occluded.data() : nullptr, stream);
-  events.record(1, stream);
-  events.wait(1);
-  if (stats) *stats = {count, events.ms(0, 1)};
-  if constexpr (AnyHit) {
-    CUDA_CHECK(cudaMemcpyAsync(out.data(), occluded.data(), count, cudaMemcpyDeviceToHost, stream));
-    CUDA_CHECK(cudaStreamSynchronize(stream));
-  } else {
-    std::vector<detail::InstanceHit> found(count);
-    CUDA_CHECK(cudaMemcpyAsync(found.data(), hits.data(), count * sizeof(detail::InstanceHit), cudaMemcpyDeviceToHost,
-                               stream));
-    CUDA_CHECK(cudaStreamSynchronize(stream));
-    out = detail::twoLevelHits(found);
-  }
-  return out;
+  return query.run<AnyHit, Result>(in, events, stream, stats,
+                                   [&](const Ray* rays, uint32_t count, detail::InstanceHit* hits, uint8_t* occluded) {
+                                     detail::launchTwoLevelTrace(tlasScene(), rays, count, hits, occluded, stream);
+                                   });
 }
 
 std::vector<TwoLevelHit> GpuTwoLevelRuntime::closestHits(std::span<const Ray> rays, RayPassStats* stats) {
