@@ -30,32 +30,6 @@ namespace {
 // operations and run the same traversal; only the compilers' rounding of the transform may differ.
 constexpr float kRelativeT = 1e-5f;
 
-// Rays from random points around the scene's box to random points inside it (most hit something).
-std::vector<tsah::Ray> randomRays(const tsah::Aabb& bounds, uint32_t count, uint32_t seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
-  const tsah::Vec3 e = bounds.extent();
-  auto around = [&](float spread) {
-    return tsah::Vec3{bounds.lo.x + e.x * (spread * unit(rng) + 0.5f * (1 - spread)),
-                      bounds.lo.y + e.y * (spread * unit(rng) + 0.5f * (1 - spread)),
-                      bounds.lo.z + e.z * (spread * unit(rng) + 0.5f * (1 - spread))};
-  };
-  std::vector<tsah::Ray> rays(count);
-  for (tsah::Ray& ray : rays) {
-    ray.org = around(2.0f);
-    ray.dir = around(1.0f) - ray.org;  // unnormalized
-    ray.tmin = 0.0f;
-    ray.tmax = 1e30f;
-  }
-  return rays;
-}
-
-tsah::Aabb unionOf(std::span<const tsah::Aabb> boxes) {
-  tsah::Aabb all;
-  for (const tsah::Aabb& b : boxes) all.extend(b);
-  return all;
-}
-
 // A crowd beside the small scene's sources (writeTwoLevelScene's wave.tanim and ground.tanim in
 // `dir`): 48 waves, each with its own time offset (a pose each), every third walking a path, and 16
 // static grounds, on a grid.
@@ -113,7 +87,7 @@ void expectRebuiltTlasTracesLikeTheRefit(const tsah::TwoLevelScene& scene, std::
         EXPECT_TRUE(tlas.rootBoxes[0].contains(boxes[i])) << "t " << t << " instance " << i;
       }
 
-      const std::vector<tsah::Ray> rays = randomRays(unionOf(boxes), 2000, seed++);
+      const std::vector<tsah::Ray> rays = tsah::test::raysThroughBox(tsah::test::unionOf(boxes), 2000, seed++);
       const std::vector<tsah::TwoLevelHit> got = rebuilt.closestHits(rays), expected = refit.closestHits(rays);
       const std::vector<uint8_t> occluded = rebuilt.anyHits(rays), expectedOccluded = refit.anyHits(rays);
       for (std::size_t r = 0; r < rays.size(); ++r, ++total) {
@@ -150,7 +124,7 @@ void expectCpuHits(const tsah::TwoLevelScene& twoLevel) {
   for (const double t : {0.0, 2.0, 3.25, 7.5, 10.0, 12.0}) {
     cpu.update(t);
     gpu.updateAt(t);
-    const std::vector<tsah::Ray> rays = randomRays(unionOf(cpu.instanceBoxes()), 2000, uint32_t(t * 4) + 1);
+    const std::vector<tsah::Ray> rays = tsah::test::raysThroughBox(tsah::test::unionOf(cpu.instanceBoxes()), 2000, uint32_t(t * 4) + 1);
     const std::vector<tsah::TwoLevelHit> got = gpu.closestHits(rays);
     const std::vector<uint8_t> occluded = gpu.anyHits(rays);
     ASSERT_EQ(got.size(), rays.size());
@@ -219,7 +193,7 @@ void expectBlockRefitsEqualTheGlobalWalk(const tsah::TwoLevelScene& twoLevel, ui
     EXPECT_EQ(std::memcmp(&a.rootBoxes[0], &b.rootBoxes[0], sizeof(tsah::Aabb)), 0) << "t " << t;
     const std::vector<tsah::Aabb> boxesA = block.downloadInstanceBoxes(), boxesB = global.downloadInstanceBoxes();
     EXPECT_EQ(std::memcmp(boxesA.data(), boxesB.data(), boxesA.size() * sizeof(tsah::Aabb)), 0) << "t " << t;
-    const std::vector<tsah::Ray> rays = randomRays(unionOf(boxesA), 2000, uint32_t(t * 8) + 3);
+    const std::vector<tsah::Ray> rays = tsah::test::raysThroughBox(tsah::test::unionOf(boxesA), 2000, uint32_t(t * 8) + 3);
     const std::vector<tsah::TwoLevelHit> hitsA = block.closestHits(rays), hitsB = global.closestHits(rays);
     uint32_t hits = 0;
     for (std::size_t r = 0; r < rays.size(); ++r) {
@@ -308,7 +282,7 @@ TEST(CudaTwoLevelRigid, OnlyPathsAndHeldPosesRefitNothing) {
     EXPECT_EQ(gpu.updateAt(t).blasRefits, 0u) << "t " << t;
     cpu.update(t);
     // The rigid graph still moved the instances: the hits follow the path.
-    const std::vector<tsah::Ray> rays = randomRays(unionOf(cpu.instanceBoxes()), 500, 3);
+    const std::vector<tsah::Ray> rays = tsah::test::raysThroughBox(tsah::test::unionOf(cpu.instanceBoxes()), 500, 3);
     const std::vector<tsah::TwoLevelHit> got = gpu.closestHits(rays);
     for (std::size_t r = 0; r < rays.size(); ++r) {
       const tsah::TwoLevelHit expected = cpu.closestHit(rays[r]);

@@ -40,12 +40,6 @@ tsah::TwoLevelScene loadScene(const fs::path& path) {
   return tsah::loadTwoLevelScene(path.string(), {}, tsah::test::smallTwoLevelOptions());
 }
 
-tsah::Aabb unionOf(std::span<const tsah::Aabb> boxes) {
-  tsah::Aabb all;
-  for (const tsah::Aabb& b : boxes) all.extend(b);
-  return all;
-}
-
 // Rays at their shutter fractions: aimed at the centroid of a random triangle at the ray's time
 // (most hit), each followed by the same ray turned around (most miss); every eighth time a key's.
 struct TimedRays {
@@ -100,7 +94,7 @@ void expectCpuBlurredHits(const tsah::TwoLevelScene& scene, double open, double 
   }
 
   const std::vector<double> keys(cpu.keySceneTimes().begin(), cpu.keySceneTimes().end());
-  const TimedRays in = aimedRays(scene, keys, cpu.keyTimes(), unionOf(cpu.keyInstanceBoxes(0)), pairs, 17);
+  const TimedRays in = aimedRays(scene, keys, cpu.keyTimes(), tsah::test::unionOf(cpu.keyInstanceBoxes(0)), pairs, 17);
   const std::vector<tsah::TwoLevelHit> got = gpu.closestHits(in.rays, in.times);
   const std::vector<uint8_t> occluded = gpu.anyHits(in.rays, in.times);
   ASSERT_EQ(got.size(), in.rays.size());
@@ -181,7 +175,7 @@ TEST_F(CudaTwoLevelMotion, ARebuiltTlasConfigurationBlursTheSame) {
   refit.updateAt(7.0);
   EXPECT_FALSE(rebuilt.blurred());
   const TimedRays in = aimedRays(*scene, std::vector<double>{7.0}, std::vector<float>{0.0f},
-                                       unionOf(refit.downloadInstanceBoxes()), 300, 5);
+                                       tsah::test::unionOf(refit.downloadInstanceBoxes()), 300, 5);
   const std::vector<tsah::TwoLevelHit> got = rebuilt.closestHits(in.rays), expected = refit.closestHits(in.rays);
   for (std::size_t r = 0; r < in.rays.size(); ++r) EXPECT_TRUE(sameHit(got[r], expected[r])) << "ray " << r;
 }
@@ -196,7 +190,7 @@ TEST_F(CudaTwoLevelMotion, AShutterOfLengthZeroIsTheInstantBitForBit) {
   EXPECT_TRUE(blurred.keyTimes().empty());
   EXPECT_EQ(blurred.time(), 3.3);
   const TimedRays in = aimedRays(*scene, std::vector<double>{3.3}, std::vector<float>{0.0f},
-                                 unionOf(instant.downloadInstanceBoxes()), 500, 3);
+                                 tsah::test::unionOf(instant.downloadInstanceBoxes()), 500, 3);
   const std::vector<tsah::TwoLevelHit> got = blurred.closestHits(in.rays, in.times), expected = instant.closestHits(in.rays);
   const std::vector<uint8_t> occluded = blurred.anyHits(in.rays, in.times), expectedOccluded = instant.anyHits(in.rays);
   uint32_t hits = 0;
@@ -219,7 +213,7 @@ TEST(CudaTwoLevelMotionStill, AShutterInWhichNothingMovesIsTheInstantBitForBit) 
   instant.updateAt(0.2);
   EXPECT_FALSE(blurred.blurred());
   const TimedRays in = aimedRays(scene, std::vector<double>{0.2}, std::vector<float>{0.0f},
-                                 unionOf(instant.downloadInstanceBoxes()), 300, 9);
+                                 tsah::test::unionOf(instant.downloadInstanceBoxes()), 300, 9);
   const std::vector<tsah::TwoLevelHit> got = blurred.closestHits(in.rays, in.times), expected = instant.closestHits(in.rays);
   uint32_t hits = 0;
   for (std::size_t r = 0; r < in.rays.size(); ++r) {
@@ -237,7 +231,7 @@ TEST_F(CudaTwoLevelMotion, UpdateAfterABlurredFrameIsTheInstantAgain) {
   ASSERT_TRUE(gpu.blurred());
   atClose.updateAt(6.9);
   const TimedRays in = aimedRays(*scene, std::vector<double>{6.9}, std::vector<float>{0.0f},
-                                 unionOf(atClose.downloadInstanceBoxes()), 300, 4);
+                                 tsah::test::unionOf(atClose.downloadInstanceBoxes()), 300, 4);
   std::vector<tsah::TwoLevelHit> got = gpu.closestHits(in.rays), expected = atClose.closestHits(in.rays);
   for (std::size_t r = 0; r < in.rays.size(); ++r) EXPECT_TRUE(sameHit(got[r], expected[r])) << "close, ray " << r;
   gpu.updateAt(4.0);

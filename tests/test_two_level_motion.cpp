@@ -73,12 +73,6 @@ using tsah::test::worldTriangles;
 using tsah::test::writeStillScene;
 using tsah::test::WorldAt;
 
-tsah::Aabb unionOf(std::span<const tsah::Aabb> boxes) {
-  tsah::Aabb b;
-  for (const tsah::Aabb& x : boxes) b.extend(x);
-  return b;
-}
-
 // Every ray's closest hit (and any hit) at its time against the brute force over the world
 // triangles at that time: the same instance and triangle with t within kRelativeT, or a tie (the
 // reported triangle's own distance within kRelativeT of the nearest) for at most 2% of the hits.
@@ -98,7 +92,7 @@ void expectBruteForceHits(const tsah::TwoLevelScene& scene, tsah::Layout layout,
     // Mostly uniform times; every eighth ray at a key exactly.
     const float tau = r % 8 == 0 ? runtime.keyTimes()[r / 8 % keys.size()] : unit(rng);
     const WorldAt world = worldTriangles(scene, keys, tau);
-    const tsah::Ray ray = rayAtCentroid(scene, world, unionOf(runtime.keyInstanceBoxes(0)), rng);
+    const tsah::Ray ray = rayAtCentroid(scene, world, tsah::test::unionOf(runtime.keyInstanceBoxes(0)), rng);
     const Reference expected = bruteForce(scene, world, ray);
     const tsah::TwoLevelHit got = runtime.closestHit(ray, tau);
     ASSERT_EQ(got.valid(), expected.valid()) << "ray " << r << " tau " << tau;
@@ -315,7 +309,7 @@ TEST_F(TwoLevelMotion, AShutterOfLengthZeroIsTheInstantBitForBit) {
   std::mt19937 rng(5);
   const WorldAt world = worldTriangles(*scene, std::vector<double>{3.3}, 0.0f);
   for (int r = 0; r < 300; ++r) {
-    const tsah::Ray ray = rayAtCentroid(*scene, world, unionOf(instant.instanceBoxes()), rng);
+    const tsah::Ray ray = rayAtCentroid(*scene, world, tsah::test::unionOf(instant.instanceBoxes()), rng);
     const tsah::TwoLevelHit a = instant.closestHit(ray), b = blurred.closestHit(ray, 0.7f);
     ASSERT_EQ(std::memcmp(&a, &b, sizeof a), 0) << "ray " << r;
     EXPECT_EQ(instant.anyHit(ray), blurred.anyHit(ray, 0.7f));
@@ -332,7 +326,7 @@ TEST(TwoLevelMotionStill, AShutterInWhichNothingMovesIsTheInstantBitForBit) {
   std::mt19937 rng(6);
   const WorldAt world = worldTriangles(scene, std::vector<double>{0.2}, 0.0f);
   for (int r = 0; r < 300; ++r) {
-    const tsah::Ray ray = rayAtCentroid(scene, world, unionOf(instant.instanceBoxes()), rng);
+    const tsah::Ray ray = rayAtCentroid(scene, world, tsah::test::unionOf(instant.instanceBoxes()), rng);
     const tsah::TwoLevelHit a = instant.closestHit(ray), b = blurred.closestHit(ray, 0.3f);
     ASSERT_TRUE(a.valid());
     ASSERT_EQ(std::memcmp(&a, &b, sizeof a), 0) << "ray " << r;
@@ -352,7 +346,7 @@ TEST_F(TwoLevelMotion, UpdateAfterABlurredFrameIsTheInstantAgain) {
   std::mt19937 rng(8);
   const WorldAt world = worldTriangles(*scene, std::vector<double>{6.9}, 0.0f);
   for (int r = 0; r < 200; ++r) {
-    const tsah::Ray ray = rayAtCentroid(*scene, world, unionOf(fresh.instanceBoxes()), rng);
+    const tsah::Ray ray = rayAtCentroid(*scene, world, tsah::test::unionOf(fresh.instanceBoxes()), rng);
     const tsah::TwoLevelHit a = fresh.closestHit(ray), b = used.closestHit(ray);
     ASSERT_EQ(std::memcmp(&a, &b, sizeof a), 0) << "ray " << r;
   }
@@ -368,7 +362,7 @@ TEST_F(TwoLevelMotion, ARebuiltTlasTracesTheSameHits) {
   uint32_t hits = 0;
   for (int r = 0; r < 200; ++r) {
     const float tau = unit(rng);
-    const tsah::Ray ray = rayAtCentroid(*scene, worldTriangles(*scene, keys, tau), unionOf(refit.keyInstanceBoxes(0)), rng);
+    const tsah::Ray ray = rayAtCentroid(*scene, worldTriangles(*scene, keys, tau), tsah::test::unionOf(refit.keyInstanceBoxes(0)), rng);
     const tsah::TwoLevelHit a = refit.closestHit(ray, tau), b = rebuilt.closestHit(ray, tau);
     ASSERT_EQ(a.valid(), b.valid());
     if (!a.valid()) continue;

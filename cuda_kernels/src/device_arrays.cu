@@ -2,7 +2,7 @@
 // (n, 3) arrays directly instead of packing them into Ray records first: 24 bytes per ray read
 // (plus 4 for each per-ray limit), where a packing kernel would read them, write a 32-byte Ray and
 // the traversal read that again (88 bytes per ray, and a 32-byte-per-ray scratch buffer: 320 MB for
-// 10M rays). A warp's three loads of 12-byte rows cover 384 contiguous bytes.
+// 10M rays).
 #include <cmath>
 #include <vector>
 
@@ -10,6 +10,7 @@
 #include "cwbvh_kernels.hpp"
 #include "device_arrays.hpp"
 #include "launch.hpp"
+#include "ray_arrays.cuh"
 #include "tsah/base/coordinates.hpp"
 #include "tsah/layout/cwbvh_layout.hpp"
 
@@ -39,17 +40,6 @@ __global__ void copyIfValidKernel(const float* __restrict__ source, float* __res
   for (std::size_t i = first; i < coordinates; i += stride) target[i] = __ldg(source + i);
 }
 
-__device__ __forceinline__ Ray loadArrayRay(const ArrayRays& r, uint32_t i) {
-  const float* o = r.origins + 3 * std::size_t(i);
-  const float* d = r.directions + 3 * std::size_t(i);
-  Ray ray;
-  ray.org = {__ldg(o), __ldg(o + 1), __ldg(o + 2)};
-  ray.dir = {__ldg(d), __ldg(d + 1), __ldg(d + 2)};
-  ray.tmin = r.tmin ? __ldg(r.tmin + i) : r.tminValue;
-  ray.tmax = r.tmax ? __ldg(r.tmax + i) : r.tmaxValue;
-  return ray;
-}
-
 __device__ __forceinline__ void storeHit(const ArrayHits& out, uint32_t i, Hit h) {
   if (!h.valid()) h = Hit{INFINITY, 0.0f, 0.0f, kNoHit};
   if (out.t) out.t[i] = h.t;
@@ -65,7 +55,7 @@ __global__ void __launch_bounds__(128) arrayTraceKernel(TraceScene scene, CwbvhV
                                                         ArrayHits hits, uint8_t* __restrict__ occluded) {
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= rays.count) return;
-  const Ray ray = loadArrayRay(rays, i);
+  const Ray ray = loadRay(rays, i);
   Hit h;
   if constexpr (Wide) {
     view.rootBox = scene.root->box;

@@ -21,6 +21,12 @@ struct ArrayRays {
   uint32_t count = 0;
 };
 
+// Per-ray times (shutter fractions) as the caller's array holds them, or, when null, one value.
+struct ArrayTimes {
+  const float* times = nullptr;
+  float value = 0.0f;
+};
+
 // Closest-hit results, one value per ray in each non-null array.
 struct ArrayHits {
   float* t = nullptr;

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "cwbvh_kernels.hpp"
+#include "device_array_checks.hpp"
 #include "device_arrays.hpp"
 #include "runtime_impl.hpp"
 #include "tsah/base/coordinates.hpp"
@@ -47,60 +48,21 @@ struct DeviceArrayState {
 
 namespace {
 
+constexpr const char* kRuntime = "GPU runtime";
+
 DeviceArrayState& stateOf(GpuRuntime::Impl& m) {
   if (!m.deviceArrays) m.deviceArrays = std::make_shared<DeviceArrayState>(m.trees.size(), m.stream);
   return *m.deviceArrays;
 }
 
-// Throws tsah::ConfigError naming `name` unless p is device (or managed) memory that the runtime's
-// device reads: a host pointer or another device's memory would fault inside a kernel.
-void requireDeviceMemory(const void* p, int device, const char* name) {
-  const std::string prefix = std::string("GPU runtime: ") + name + ": ";
-  if (!p) throw tsah::ConfigError(prefix + "a null pointer");
-  cudaPointerAttributes a{};
-  if (cudaPointerGetAttributes(&a, p) != cudaSuccess) {
-    cudaGetLastError();  // clear the error this query leaves behind
-    throw tsah::ConfigError(prefix + "not a pointer that CUDA knows");
-  }
-  if (a.type == cudaMemoryTypeManaged) return;
-  if (a.type != cudaMemoryTypeDevice)
-    throw tsah::ConfigError(prefix + "host memory, not device memory");
-  if (a.device != device)
-    throw tsah::ConfigError(prefix + "memory of device " + std::to_string(a.device) + "; the runtime uses device " +
-                            std::to_string(device));
-}
-
 // The runtime's stream waits for the work the caller queued on `caller` before the call ...
 void followCaller(GpuRuntime::Impl& m, DeviceArrayState& s, cudaStream_t caller) {
-  s.fences.mark(0, caller);
-  s.fences.streamWait(0, m.stream);
+  detail::orderAfter(s.fences, 0, caller, m.stream);
 }
 
 // ... and the caller's stream for the work the call queued (its side-stream part joins m.stream).
 void handBack(GpuRuntime::Impl& m, DeviceArrayState& s, cudaStream_t caller) {
-  s.fences.mark(1, m.stream);
-  s.fences.streamWait(1, caller);
-}
-
-detail::ArrayRays arrayRays(const GpuRuntime::DeviceRays& r, int device) {
-  if (r.count > 0xffffffffu) throw tsah::ConfigError("GPU runtime: too many rays in one call");
-  if (!r.tmin && !(std::isfinite(r.tminValue) && r.tminValue >= 0.0f))
-    throw tsah::ConfigError("GPU runtime: tmin must be finite and >= 0");
-  if (!r.tmax && std::isnan(r.tmaxValue)) throw tsah::ConfigError("GPU runtime: tmax is NaN");
-  detail::ArrayRays a;
-  a.count = static_cast<uint32_t>(r.count);
-  if (a.count == 0) return a;
-  requireDeviceMemory(r.origins, device, "origins");
-  requireDeviceMemory(r.directions, device, "directions");
-  if (r.tmin) requireDeviceMemory(r.tmin, device, "tmin");
-  if (r.tmax) requireDeviceMemory(r.tmax, device, "tmax");
-  a.origins = r.origins;
-  a.directions = r.directions;
-  a.tmin = r.tmin;
-  a.tmax = r.tmax;
-  a.tminValue = r.tminValue;
-  a.tmaxValue = r.tmaxValue;
-  return a;
+  detail::orderAfter(s.fences, 1, m.stream, caller);
 }
 
 // The check of `source` and its copy into the runtime's positions when every coordinate is good,
@@ -168,7 +130,7 @@ void GpuRuntime::updateFromDevice(const float* devicePositions, std::size_t vert
   if (vertexCount != m.vertices)
     throw tsah::DataError("GPU runtime: got " + std::to_string(vertexCount) + " vertices, expected " +
                           std::to_string(m.vertices));
-  requireDeviceMemory(devicePositions, m.config.device, "positions");
+  detail::requireDeviceMemory(devicePositions, m.config.device, kRuntime, "positions");
   m.throwRefusedDeviceUpdate();
   DeviceArrayState& s = stateOf(m);
   const auto caller = static_cast<cudaStream_t>(stream);
@@ -200,12 +162,12 @@ void GpuRuntime::updateFromDevice(const float* devicePositions, std::size_t vert
 void GpuRuntime::closestHitsOnDevice(const DeviceRays& rays, const DeviceHits& hits, StreamHandle stream) {
   Impl& m = *impl_;
   m.requireTraceable();
-  const detail::ArrayRays a = arrayRays(rays, m.config.device);
+  const detail::ArrayRays a = detail::checkedArrayRays(rays, m.config.device, kRuntime);
   if (a.count == 0) return;
   const std::pair<const void*, const char*> outputs[] = {
       {hits.t, "t"}, {hits.u, "u"}, {hits.v, "v"}, {hits.triangle, "triangle"}};
   for (const auto& [p, name] : outputs)
-    if (p) requireDeviceMemory(p, m.config.device, name);
+    if (p) detail::requireDeviceMemory(p, m.config.device, kRuntime, name);
   DeviceArrayState& s = stateOf(m);
   const auto caller = static_cast<cudaStream_t>(stream);
   followCaller(m, s, caller);
@@ -216,14 +178,56 @@ void GpuRuntime::closestHitsOnDevice(const DeviceRays& rays, const DeviceHits& h
 void GpuRuntime::anyHitsOnDevice(const DeviceRays& rays, uint8_t* occluded, StreamHandle stream) {
   Impl& m = *impl_;
   m.requireTraceable();
-  const detail::ArrayRays a = arrayRays(rays, m.config.device);
+  const detail::ArrayRays a = detail::checkedArrayRays(rays, m.config.device, kRuntime);
   if (a.count == 0) return;
-  requireDeviceMemory(occluded, m.config.device, "occluded");
+  detail::requireDeviceMemory(occluded, m.config.device, kRuntime, "occluded");
   DeviceArrayState& s = stateOf(m);
   const auto caller = static_cast<cudaStream_t>(stream);
   followCaller(m, s, caller);
   detail::launchArrayTrace(m.scene(), a, {}, occluded, m.stream);
   handBack(m, s, caller);
 }
+
+namespace detail {
+
+void requireDeviceMemory(const void* p, int device, const char* runtime, const char* name) {
+  const std::string prefix = std::string(runtime) + ": " + name + ": ";
+  if (!p) throw tsah::ConfigError(prefix + "a null pointer");
+  cudaPointerAttributes a{};
+  if (cudaPointerGetAttributes(&a, p) != cudaSuccess) {
+    cudaGetLastError();  // clear the error this query leaves behind
+    throw tsah::ConfigError(prefix + "not a pointer that CUDA knows");
+  }
+  if (a.type == cudaMemoryTypeManaged) return;
+  if (a.type != cudaMemoryTypeDevice)
+    throw tsah::ConfigError(prefix + "host memory, not device memory");
+  if (a.device != device)
+    throw tsah::ConfigError(prefix + "memory of device " + std::to_string(a.device) + "; the runtime uses device " +
+                            std::to_string(device));
+}
+
+ArrayRays checkedArrayRays(const GpuRuntime::DeviceRays& r, int device, const char* runtime) {
+  const std::string prefix = std::string(runtime) + ": ";
+  if (r.count > 0xffffffffu) throw tsah::ConfigError(prefix + "too many rays in one call");
+  if (!r.tmin && !(std::isfinite(r.tminValue) && r.tminValue >= 0.0f))
+    throw tsah::ConfigError(prefix + "tmin must be finite and >= 0");
+  if (!r.tmax && std::isnan(r.tmaxValue)) throw tsah::ConfigError(prefix + "tmax is NaN");
+  ArrayRays a;
+  a.count = static_cast<uint32_t>(r.count);
+  if (a.count == 0) return a;
+  requireDeviceMemory(r.origins, device, runtime, "origins");
+  requireDeviceMemory(r.directions, device, runtime, "directions");
+  if (r.tmin) requireDeviceMemory(r.tmin, device, runtime, "tmin");
+  if (r.tmax) requireDeviceMemory(r.tmax, device, runtime, "tmax");
+  a.origins = r.origins;
+  a.directions = r.directions;
+  a.tmin = r.tmin;
+  a.tmax = r.tmax;
+  a.tminValue = r.tminValue;
+  a.tmaxValue = r.tmaxValue;
+  return a;
+}
+
+}  // namespace detail
 
 }  // namespace tsah::cuda

@@ -92,6 +92,9 @@ void launchInstanceRootBoxes(const InstanceState* instances, const BlasView* vie
 // any hits into occluded.
 void launchBlurredTwoLevelTrace(const BlurredTlasScene& scene, const Ray* rays, const float* times, uint32_t count,
                                 InstanceHit* hits, uint8_t* occluded, cudaStream_t stream);
+// The same for rays, times and results in the caller's arrays.
+void launchBlurredTwoLevelArrayTrace(const BlurredTlasScene& scene, const ArrayRays& rays, const ArrayTimes& times,
+                                     const ArrayInstanceHits& hits, uint8_t* occluded, cudaStream_t stream);
 
 // The blurred frame's device state, rebuilt by each build() (buffers grow, never shrink).
 class TwoLevelBlur {
@@ -108,6 +111,10 @@ class TwoLevelBlur {
   // The rays at their times (shutter fractions) on the stream the frame was built on.
   template <bool AnyHit, typename Result>
   std::vector<Result> trace(std::span<const Ray> rays, std::span<const float> times, RayPassStats* stats);
+  // The caller's arrays at their times on the frame's stream (no wait).
+  void traceArrays(const ArrayRays& rays, const ArrayTimes& times, const ArrayInstanceHits& hits, uint8_t* occluded) {
+    launchBlurredTwoLevelArrayTrace(scene_, rays, times, hits, occluded, stream_);
+  }
 
  private:
   // A source's moving poses, each refitted at every key in one batch (item j * keys + k: pose j at

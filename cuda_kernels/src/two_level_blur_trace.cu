@@ -6,6 +6,7 @@
 // the ray's move into instance space round as on the CPU.
 #include "bvh2_traversal.cuh"
 #include "launch.hpp"
+#include "ray_arrays.cuh"
 #include "tsah/core/instance_transform.hpp"
 #include "tsah/layout/motion_blur.hpp"
 #include "tsah/layout/traversal.hpp"
@@ -126,14 +127,16 @@ __global__ void instanceRootBoxesKernel(const InstanceState* __restrict__ instan
   boxes[i] = views[instances[i].view].root->box;
 }
 
-template <bool AnyHit>
-__global__ void __launch_bounds__(128)
-    blurredTwoLevelTraceKernel(BlurredTlasScene scene, const Ray* __restrict__ rays, const float* __restrict__ times,
-                               uint32_t count, InstanceHit* __restrict__ hits, uint8_t* __restrict__ occluded) {
+// Rays: const Ray* or ArrayRays; Times: const float* or ArrayTimes; Hits: InstanceHit* or
+// ArrayInstanceHits (ray_arrays.cuh).
+template <bool AnyHit, class Rays, class Times, class Hits>
+__global__ void __launch_bounds__(128) blurredTwoLevelTraceKernel(BlurredTlasScene scene, Rays rays, Times times,
+                                                                  uint32_t count, Hits hits,
+                                                                  uint8_t* __restrict__ occluded) {
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= count) return;
-  const Ray ray = rays[i];
-  BlurredTlasFrame<AnyHit> frame(scene, times[i]);
+  const Ray ray = loadRay(rays, i);
+  BlurredTlasFrame<AnyHit> frame(scene, loadTime(times, i));
   Bvh2Stack stack;
   Bvh2Traversal<AnyHit> walk;
   walk.start(frame.root, ray, stack);
@@ -142,8 +145,24 @@ __global__ void __launch_bounds__(128)
     occluded[i] = walk.occluded() ? 1 : 0;
   } else {
     const Hit h = walk.closestHit(frame);
-    hits[i] = h.valid() ? InstanceHit{h.t, h.u, h.v, h.tri, frame.prim} : InstanceHit{0.0f, 0.0f, 0.0f, kNoHit, kNoHit};
+    storeInstanceHit(hits, i,
+                     h.valid() ? InstanceHit{h.t, h.u, h.v, h.tri, frame.prim}
+                               : InstanceHit{0.0f, 0.0f, 0.0f, kNoHit, kNoHit});
   }
+}
+
+template <class Rays, class Times, class Hits>
+void launchBlurredTraceOf(const BlurredTlasScene& scene, const Rays& rays, const Times& times, uint32_t count,
+                          const Hits& hits, uint8_t* occluded, cudaStream_t stream) {
+  if (count == 0) return;
+  const unsigned block = 128;  // fixed by __launch_bounds__
+  if (occluded)
+    blurredTwoLevelTraceKernel<true, Rays, Times, Hits>
+        <<<gridFor(count, block), block, 0, stream>>>(scene, rays, times, count, hits, occluded);
+  else
+    blurredTwoLevelTraceKernel<false, Rays, Times, Hits>
+        <<<gridFor(count, block), block, 0, stream>>>(scene, rays, times, count, hits, occluded);
+  CUDA_CHECK_LAUNCH("blurredTwoLevelTraceKernel");
 }
 
 }  // namespace
@@ -158,15 +177,12 @@ void launchInstanceRootBoxes(const InstanceState* instances, const BlasView* vie
 
 void launchBlurredTwoLevelTrace(const BlurredTlasScene& scene, const Ray* rays, const float* times, uint32_t count,
                                 InstanceHit* hits, uint8_t* occluded, cudaStream_t stream) {
-  if (count == 0) return;
-  const unsigned block = 128;
-  if (occluded)
-    blurredTwoLevelTraceKernel<true>
-        <<<gridFor(count, block), block, 0, stream>>>(scene, rays, times, count, hits, occluded);
-  else
-    blurredTwoLevelTraceKernel<false>
-        <<<gridFor(count, block), block, 0, stream>>>(scene, rays, times, count, hits, occluded);
-  CUDA_CHECK_LAUNCH("blurredTwoLevelTraceKernel");
+  launchBlurredTraceOf(scene, rays, times, count, hits, occluded, stream);
+}
+
+void launchBlurredTwoLevelArrayTrace(const BlurredTlasScene& scene, const ArrayRays& rays, const ArrayTimes& times,
+                                     const ArrayInstanceHits& hits, uint8_t* occluded, cudaStream_t stream) {
+  launchBlurredTraceOf(scene, rays, times, rays.count, hits, occluded, stream);
 }
 
 }  // namespace tsah::cuda::detail

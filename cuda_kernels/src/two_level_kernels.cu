@@ -1,7 +1,8 @@
 // The two-level runtime's kernels: instance world boxes, the TLAS refit over them, and the trace
-// of ray arrays through instances (two_level_traversal.cuh).
+// of rays through instances (two_level_traversal.cuh), packed or in the caller's arrays.
 // Compiled with -fmad=false (see CMakeLists.txt): boxes and hits round as on the CPU.
 #include "launch.hpp"
+#include "ray_arrays.cuh"
 #include "refit_walk.cuh"
 #include "triangle_boxes.cuh"
 #include "two_level_traversal.cuh"
@@ -137,16 +138,29 @@ __global__ void __launch_bounds__(kTlasBlockThreads)
   partRefit(nodes, tlasParts, tlasParts.parts[0], [] {}, boxOf, &root->box, shared);
 }
 
-template <bool AnyHit>
-__global__ void __launch_bounds__(128) twoLevelTraceKernel(TlasScene scene, const Ray* __restrict__ rays,
-                                                           uint32_t count, InstanceHit* __restrict__ hits,
+// Rays: const Ray* or ArrayRays; Hits: InstanceHit* or ArrayInstanceHits (ray_arrays.cuh).
+template <bool AnyHit, class Rays, class Hits>
+__global__ void __launch_bounds__(128) twoLevelTraceKernel(TlasScene scene, Rays rays, uint32_t count, Hits hits,
                                                            uint8_t* __restrict__ occluded) {
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= count) return;
+  const Ray ray = loadRay(rays, i);
   if constexpr (AnyHit)
-    occluded[i] = twoLevelAnyHit(scene, rays[i]) ? 1 : 0;
+    occluded[i] = twoLevelAnyHit(scene, ray) ? 1 : 0;
   else
-    hits[i] = twoLevelClosestHit(scene, rays[i]);
+    storeInstanceHit(hits, i, twoLevelClosestHit(scene, ray));
+}
+
+template <class Rays, class Hits>
+void launchTraceOf(const TlasScene& scene, const Rays& rays, uint32_t count, const Hits& hits, uint8_t* occluded,
+                   cudaStream_t stream) {
+  if (count == 0) return;
+  const unsigned block = 128;  // fixed by __launch_bounds__
+  if (occluded)
+    twoLevelTraceKernel<true, Rays, Hits><<<gridFor(count, block), block, 0, stream>>>(scene, rays, count, hits, occluded);
+  else
+    twoLevelTraceKernel<false, Rays, Hits><<<gridFor(count, block), block, 0, stream>>>(scene, rays, count, hits, occluded);
+  CUDA_CHECK_LAUNCH("twoLevelTraceKernel");
 }
 
 }  // namespace
@@ -202,13 +216,12 @@ void launchTlasBlock(const InstanceState* instances, const BlasView* views, uint
 
 void launchTwoLevelTrace(const TlasScene& scene, const Ray* rays, uint32_t count, InstanceHit* hits, uint8_t* occluded,
                          cudaStream_t stream) {
-  if (count == 0) return;
-  const unsigned block = 128;
-  if (occluded)
-    twoLevelTraceKernel<true><<<gridFor(count, block), block, 0, stream>>>(scene, rays, count, hits, occluded);
-  else
-    twoLevelTraceKernel<false><<<gridFor(count, block), block, 0, stream>>>(scene, rays, count, hits, occluded);
-  CUDA_CHECK_LAUNCH("twoLevelTraceKernel");
+  launchTraceOf(scene, rays, count, hits, occluded, stream);
+}
+
+void launchTwoLevelArrayTrace(const TlasScene& scene, const ArrayRays& rays, const ArrayInstanceHits& hits,
+                              uint8_t* occluded, cudaStream_t stream) {
+  launchTraceOf(scene, rays, rays.count, hits, occluded, stream);
 }
 
 }  // namespace tsah::cuda::detail

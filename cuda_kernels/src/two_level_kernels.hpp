@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <type_traits>
 
+#include "device_arrays.hpp"
 #include "device_types.hpp"
 #include "tsah/core/aabb.hpp"
 #include "tsah/core/instance_transform.hpp"
@@ -56,6 +57,16 @@ struct InstanceHit {
   uint32_t instance, prim;
 };
 
+// Closest hits written into the caller's device arrays, one value per ray in each non-null array
+// (a miss: t = +inf, u = v = 0, instance = triangle = kNoHit).
+struct ArrayInstanceHits {
+  float* t = nullptr;
+  float* u = nullptr;
+  float* v = nullptr;
+  uint32_t* instance = nullptr;
+  uint32_t* triangle = nullptr;  // the triangle of the instance's source
+};
+
 // The TLAS as the trace reads it.
 struct TlasScene {
   const GpuBvhNode* nodes = nullptr;
@@ -101,5 +112,8 @@ void launchTlasBlock(const InstanceState* instances, const BlasView* views, uint
 // One thread per ray: closest hits into hits, or (occluded non-null) any hits into occluded.
 void launchTwoLevelTrace(const TlasScene& scene, const Ray* rays, uint32_t count, InstanceHit* hits,
                          uint8_t* occluded, cudaStream_t stream);
+// The same for rays and results in the caller's arrays (device_arrays.hpp's ArrayRays).
+void launchTwoLevelArrayTrace(const TlasScene& scene, const ArrayRays& rays, const ArrayInstanceHits& hits,
+                              uint8_t* occluded, cudaStream_t stream);
 
 }  // namespace tsah::cuda::detail

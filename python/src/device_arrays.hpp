@@ -154,6 +154,33 @@ T* pointerOf(const DeviceArrayArg& a) {
 cuda::GpuRuntime::DeviceRays deviceRays(DeviceArguments& args, py::handle origins, py::handle directions,
                                         py::handle tmin, py::handle tmax, std::vector<py::ssize_t>& batch);
 
+// One result array of a device batch's closest hits: its key in the result dict, the typestr of a new
+// one, the typestrs accepted from the caller (out=).
+struct DeviceHitField {
+  const char* name;
+  const char* typestr;
+  std::vector<std::string> accepted;
+};
+// The result arrays of a device batch: out None gives a new device array per field, a dict the
+// caller's arrays for some of the fields (unknown keys refused); each checked through args (the
+// batch shape, writable). Returns the dict; pointers[f] is field f's device pointer, null when absent.
+py::dict deviceHitArrays(DeviceArguments& args, py::handle out, const std::vector<DeviceHitField>& fields,
+                         const std::vector<py::ssize_t>& batch, int device, std::vector<void*>& pointers);
+
+// The result of a device batch's any-hit query: out (None: a new bool device array of the batch
+// shape; else the caller's, bool or uint8) checked through args; *flags its device pointer.
+py::object deviceFlagArray(DeviceArguments& args, py::handle out, const std::vector<py::ssize_t>& batch, int device,
+                           uint8_t** flags);
+
+// times= of a device batch: None (no times), a number for every ray, or a float32 device array of
+// the batch shape, checked through args.
+struct DeviceRayTimes {
+  bool given = false;
+  const float* times = nullptr;
+  float value = 0.0f;
+};
+DeviceRayTimes deviceRayTimes(DeviceArguments& args, py::handle times, const std::vector<py::ssize_t>& batch);
+
 // The CUDA interface (v3) asks its consumer to wait for the producer's stream before using the
 // data: makes `consumer` wait for a.stream (nothing when it names none or the same stream).
 void waitForProducer(const DeviceArrayArg& a, std::uintptr_t consumer);

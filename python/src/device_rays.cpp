@@ -1,6 +1,8 @@
 // The GPU runtime's device-array arguments (docs/python.md#device-arrays): each checked through
 // its protocol, the rays of a device batch assembled from them.
 #if defined(TSAH_HAVE_CUDA)
+#include <algorithm>
+
 #include "device_arrays.hpp"
 
 namespace tsah::python {
@@ -51,6 +53,55 @@ cuda::GpuRuntime::DeviceRays deviceRays(DeviceArguments& args, py::handle origin
   limit(tmin, "tmin", rays.tmin, rays.tminValue);
   limit(tmax, "tmax", rays.tmax, rays.tmaxValue);
   return rays;
+}
+
+py::dict deviceHitArrays(DeviceArguments& args, py::handle out, const std::vector<DeviceHitField>& fields,
+                         const std::vector<py::ssize_t>& batch, int device, std::vector<void*>& pointers) {
+  std::string names;
+  for (const DeviceHitField& f : fields) names += (names.empty() ? "" : ", ") + std::string(f.name);
+  py::dict results;
+  if (out.is_none()) {
+    for (const DeviceHitField& f : fields) results[f.name] = newDeviceArray(batch, f.typestr, device, args.stream());
+  } else if (py::isinstance<py::dict>(out)) {
+    results = py::reinterpret_borrow<py::dict>(out);
+    for (auto item : results) {
+      const std::string key = py::str(item.first);
+      if (std::none_of(fields.begin(), fields.end(), [&](const DeviceHitField& f) { return key == f.name; }))
+        throw tsah::ConfigError("out: unknown field '" + key + "' (" + names + ")");
+    }
+  } else {
+    throw ArgumentTypeError("out: expected a dict of device arrays (" + names + ") for device rays, got " +
+                            std::string(py::str(out.get_type().attr("__name__"))));
+  }
+  pointers.assign(fields.size(), nullptr);
+  for (std::size_t f = 0; f < fields.size(); ++f)
+    if (results.contains(fields[f].name))
+      pointers[f] = pointerOf<void>(
+          args.add(results[fields[f].name], std::string("out['") + fields[f].name + "']", fields[f].accepted, batch, true));
+  return results;
+}
+
+py::object deviceFlagArray(DeviceArguments& args, py::handle out, const std::vector<py::ssize_t>& batch, int device,
+                           uint8_t** flags) {
+  py::object result = out.is_none() ? newDeviceArray(batch, "|b1", device, args.stream())
+                                    : py::reinterpret_borrow<py::object>(out);
+  *flags = pointerOf<uint8_t>(args.add(result, "out", {"|b1", "|u1"}, batch, true));
+  return result;
+}
+
+DeviceRayTimes deviceRayTimes(DeviceArguments& args, py::handle times, const std::vector<py::ssize_t>& batch) {
+  DeviceRayTimes t;
+  if (times.is_none()) return t;
+  t.given = true;
+  if (py::isinstance<py::float_>(times) || py::isinstance<py::int_>(times)) {
+    t.value = times.cast<float>();
+    return t;
+  }
+  if (!isDeviceArray(times))
+    throw ArgumentTypeError("times: expected None, a number or a float32 device array like origins, got " +
+                            std::string(py::str(times.get_type().attr("__name__"))));
+  t.times = pointerOf<const float>(args.add(times, "times", {"<f4"}, batch));
+  return t;
 }
 
 }  // namespace tsah::python

@@ -418,29 +418,12 @@ class GpuTracer {
     DeviceArguments args(device(), stream);
     std::vector<py::ssize_t> batch;
     const cuda::GpuRuntime::DeviceRays rays = deviceRays(args, o, d, tmin, tmax, batch);
-    static const char* const kFields[] = {"t", "u", "v", "triangle"};
-    py::dict results;
-    if (out.is_none()) {
-      for (const char* field : kFields)
-        results[field] = newDeviceArray(batch, field == std::string("triangle") ? "<i4" : "<f4", device(), stream);
-    } else if (py::isinstance<py::dict>(out)) {
-      results = py::reinterpret_borrow<py::dict>(out);
-      for (auto item : results) {
-        const std::string key = py::str(item.first);
-        if (std::find(std::begin(kFields), std::end(kFields), key) == std::end(kFields))
-          throw tsah::ConfigError("out: unknown field '" + key + "' (t, u, v, triangle)");
-      }
-    } else {
-      throw ArgumentTypeError("out: expected a dict of device arrays (t, u, v, triangle) for device rays, got " +
-                              std::string(py::str(out.get_type().attr("__name__"))));
-    }
-    cuda::GpuRuntime::DeviceHits hits;
-    float** floats[] = {&hits.t, &hits.u, &hits.v};
-    for (int f = 0; f < 3; ++f)
-      if (results.contains(kFields[f]))
-        *floats[f] = pointerOf<float>(args.add(results[kFields[f]], std::string("out['") + kFields[f] + "']", {"<f4"}, batch, true));
-    if (results.contains("triangle"))
-      hits.triangle = pointerOf<uint32_t>(args.add(results["triangle"], "out['triangle']", {"<i4", "<u4"}, batch, true));
+    static const std::vector<DeviceHitField> kFields = {
+        {"t", "<f4", {"<f4"}}, {"u", "<f4", {"<f4"}}, {"v", "<f4", {"<f4"}}, {"triangle", "<i4", {"<i4", "<u4"}}};
+    std::vector<void*> p;
+    const py::dict results = deviceHitArrays(args, out, kFields, batch, device(), p);
+    const cuda::GpuRuntime::DeviceHits hits{static_cast<float*>(p[0]), static_cast<float*>(p[1]),
+                                            static_cast<float*>(p[2]), static_cast<uint32_t*>(p[3])};
     args.waitForProducers();
     {
       py::gil_scoped_release release;
@@ -453,9 +436,8 @@ class GpuTracer {
     DeviceArguments args(device(), stream);
     std::vector<py::ssize_t> batch;
     const cuda::GpuRuntime::DeviceRays rays = deviceRays(args, o, d, tmin, tmax, batch);
-    const py::object result = out.is_none() ? newDeviceArray(batch, "|b1", device(), stream)
-                                            : py::reinterpret_borrow<py::object>(out);
-    auto* flags = pointerOf<uint8_t>(args.add(result, "out", {"|b1", "|u1"}, batch, true));
+    uint8_t* flags = nullptr;
+    const py::object result = deviceFlagArray(args, out, batch, device(), &flags);
     args.waitForProducers();
     {
       py::gil_scoped_release release;

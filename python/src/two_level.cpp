@@ -22,6 +22,7 @@
 #include "tsah/scene/two_level.hpp"
 #include "tsah/scene/two_level_runtime.hpp"
 #if defined(TSAH_HAVE_CUDA)
+#include "device_arrays.hpp"
 #include "tsah_cuda/gpu_two_level.hpp"
 #endif
 
@@ -287,7 +288,10 @@ class GpuTwoLevelTracer {
     py::gil_scoped_release release;
     runtime_->updateShutter(open, close);
   }
-  py::array trace(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle times, py::handle out) {
+  py::object trace(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle times, py::handle out,
+                   py::handle stream) {
+    const InterfaceReadScope reads;
+    if (isDeviceArray(o) || isDeviceArray(d)) return traceDevice(o, d, tmin, tmax, times, out, streamArgument(stream));
     std::vector<py::ssize_t> batch;
     const RayBatch rays = makeRays(o, d, tmin, tmax, batch);
     const std::optional<Array<float>> t = rayTimes(times, batch, rays.count);
@@ -301,7 +305,10 @@ class GpuTwoLevelTracer {
     }
     return result;
   }
-  py::array occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle times, py::handle out) {
+  py::object occluded(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle times, py::handle out,
+                      py::handle stream) {
+    const InterfaceReadScope reads;
+    if (isDeviceArray(o) || isDeviceArray(d)) return occludedDevice(o, d, tmin, tmax, times, out, streamArgument(stream));
     std::vector<py::ssize_t> batch;
     const RayBatch rays = makeRays(o, d, tmin, tmax, batch);
     const std::optional<Array<float>> t = rayTimes(times, batch, rays.count);
@@ -324,6 +331,56 @@ class GpuTwoLevelTracer {
   }
 
  private:
+  int device() const { return runtime_->device().index; }
+  // Rays (and times) as device arrays: results into device arrays, on the runtime's stream ordered
+  // with `stream` (docs/python.md#device-arrays).
+  py::object traceDevice(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle times,
+                         py::handle out, std::uintptr_t stream) {
+    DeviceArguments args(device(), stream);
+    std::vector<py::ssize_t> batch;
+    const cuda::GpuRuntime::DeviceRays rays = deviceRays(args, o, d, tmin, tmax, batch);
+    const DeviceRayTimes t = deviceRayTimes(args, times, batch);
+    static const std::vector<DeviceHitField> kFields = {{"t", "<f4", {"<f4"}},
+                                                        {"u", "<f4", {"<f4"}},
+                                                        {"v", "<f4", {"<f4"}},
+                                                        {"instance", "<i4", {"<i4", "<u4"}},
+                                                        {"triangle", "<i4", {"<i4", "<u4"}}};
+    std::vector<void*> p;
+    const py::dict results = deviceHitArrays(args, out, kFields, batch, device(), p);
+    const cuda::GpuTwoLevelRuntime::DeviceHits hits{static_cast<float*>(p[0]), static_cast<float*>(p[1]),
+                                                    static_cast<float*>(p[2]), static_cast<uint32_t*>(p[3]),
+                                                    static_cast<uint32_t*>(p[4])};
+    args.waitForProducers();
+    {
+      py::gil_scoped_release release;
+      const auto handle = reinterpret_cast<cuda::GpuTwoLevelRuntime::StreamHandle>(stream);
+      if (t.given)
+        runtime_->closestHitsOnDevice(rays, {t.times, t.value}, hits, handle);
+      else
+        runtime_->closestHitsOnDevice(rays, hits, handle);
+    }
+    return results;
+  }
+  py::object occludedDevice(py::handle o, py::handle d, py::handle tmin, py::handle tmax, py::handle times,
+                            py::handle out, std::uintptr_t stream) {
+    DeviceArguments args(device(), stream);
+    std::vector<py::ssize_t> batch;
+    const cuda::GpuRuntime::DeviceRays rays = deviceRays(args, o, d, tmin, tmax, batch);
+    const DeviceRayTimes t = deviceRayTimes(args, times, batch);
+    uint8_t* flags = nullptr;
+    const py::object result = deviceFlagArray(args, out, batch, device(), &flags);
+    args.waitForProducers();
+    {
+      py::gil_scoped_release release;
+      const auto handle = reinterpret_cast<cuda::GpuTwoLevelRuntime::StreamHandle>(stream);
+      if (t.given)
+        runtime_->anyHitsOnDevice(rays, {t.times, t.value}, flags, handle);
+      else
+        runtime_->anyHitsOnDevice(rays, flags, handle);
+    }
+    return result;
+  }
+
   py::object owner_;  // the tsah.TwoLevelScene scene_ belongs to
   const TwoLevelScene& scene_;
   std::unique_ptr<cuda::GpuTwoLevelRuntime> runtime_;
@@ -345,6 +402,16 @@ constexpr const char* kTimesDoc = R"doc(
 times: None, or each ray's time in the blurred frame of the last update_shutter, a shutter fraction
 (0 the open, 1 the close; outside [0, 1] the nearer end), a number or a float array of the batch
 shape. Without a blurred frame (after update) the times change nothing.
+)doc";
+constexpr const char* kGpuDeviceArraysDoc = R"doc(
+Device arrays (docs/python.md#device-arrays): origins and directions given as CUDA arrays
+(__cuda_array_interface__ or DLPack: PyTorch, CuPy, JAX), with tmin, tmax and times numbers or
+float32 device arrays of the batch shape, are traced in place on the device, ordered after the
+work queued on `stream` (None: the legacy default stream; an int or a stream object) and before
+the work queued there later; nothing waits. trace then returns a dict of device arrays t, u, v
+(float32), instance and triangle (int32; -1 and t inf for a miss), or writes into out= (a dict of
+device arrays for some of those keys); occluded a bool device array of the batch shape, or out=
+(bool or uint8).
 )doc";
 constexpr const char* kOccludedDoc =
     "True for each ray that hits anything within (tmin, tmax): a bool array of the batch shape, or written into "
@@ -481,7 +548,7 @@ which nothing moves is update(open): not blurred.
 #if defined(TSAH_HAVE_CUDA)
   py::class_<GpuTwoLevelTracer>(m, "GpuTwoLevelRuntime", R"doc(
 GpuTwoLevelRuntime(scene, device=0, tlas="refit"): the same on a CUDA device
-(tsah::cuda::GpuTwoLevelRuntime), tracing host (numpy) rays. tlas: "refit" (the T-SAH TLAS
+(tsah::cuda::GpuTwoLevelRuntime), tracing host (numpy) rays or device arrays in place. tlas: "refit" (the T-SAH TLAS
 refitted), "lbvh" or "hlbvh-sah" (rebuilt on the GPU every update). Motion blur as
 TwoLevelRuntime's (update_shutter, times=; the blurred frame refits the T-SAH TLAS at every key
 whatever tlas). Raises tsah.Failure when no device is usable.
@@ -495,9 +562,11 @@ whatever tlas). Raises tsah.Failure when no device is usable.
       .def("update_shutter", &GpuTwoLevelTracer::updateShutter, "open"_a, "close"_a,
            "A blurred frame over the shutter [open, close] on the device, as TwoLevelRuntime.update_shutter.")
       .def("trace", &GpuTwoLevelTracer::trace, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf,
-           "times"_a = py::none(), "out"_a = py::none(), (std::string(kTraceDoc) + kTimesDoc).c_str())
+           "times"_a = py::none(), "out"_a = py::none(), py::kw_only(), "stream"_a = py::none(),
+           (std::string(kTraceDoc) + kTimesDoc + kGpuDeviceArraysDoc).c_str())
       .def("occluded", &GpuTwoLevelTracer::occluded, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf,
-           "times"_a = py::none(), "out"_a = py::none(), (std::string(kOccludedDoc) + kTimesDoc).c_str())
+           "times"_a = py::none(), "out"_a = py::none(), py::kw_only(), "stream"_a = py::none(),
+           (std::string(kOccludedDoc) + kTimesDoc + kGpuDeviceArraysDoc).c_str())
       .def_property_readonly("time", &GpuTwoLevelTracer::time,
                              "The scene time of the last update (of a blurred frame: its close).")
       .def_property_readonly("blurred", &GpuTwoLevelTracer::blurred,

@@ -10,6 +10,7 @@ import pytest
 
 import tsah
 from dlpack_abi import DLManagedTensorVersioned, FakeDlpack, capsule_name, capsule_struct
+from device_lib import LIB, needs_device_arrays, new_stream, stream_address, synchronize, to_device, to_host
 
 RUNTIMES = ["cpu", pytest.param("gpu", marks=pytest.mark.skipif(
     not tsah.cuda_available(), reason="no CUDA device (or the CUDA runtime was not built)"))]
@@ -300,43 +301,6 @@ def test_stream_arguments():
 
 
 # With a device and torch or CuPy: device arrays against the host path.
-def device_library():
-    if not tsah.cuda_available():
-        return None
-    for name in ("torch", "cupy"):
-        try:
-            return __import__(name)
-        except ImportError:
-            continue
-    return None
-
-
-LIB = device_library()
-needs_device_arrays = pytest.mark.skipif(LIB is None, reason="no CUDA device, or neither torch nor CuPy")
-
-
-def to_device(a):
-    return LIB.from_numpy(np.ascontiguousarray(a)).cuda() if LIB.__name__ == "torch" else LIB.asarray(a)
-
-
-def to_host(a):
-    if isinstance(a, tsah.DeviceArray):
-        a = LIB.from_dlpack(a) if LIB.__name__ == "torch" else LIB.asarray(a)
-    return a.cpu().numpy() if LIB.__name__ == "torch" else LIB.asnumpy(a)
-
-
-def synchronize():
-    (LIB.cuda.synchronize if LIB.__name__ == "torch" else LIB.cuda.Device().synchronize)()
-
-
-def new_stream():
-    return LIB.cuda.Stream() if LIB.__name__ == "torch" else LIB.cuda.Stream(non_blocking=True)
-
-
-def stream_address(stream):
-    return stream.cuda_stream if LIB.__name__ == "torch" else stream.ptr
-
-
 class DlpackOnly:
     """A device array offering DLPack only (torch and CuPy offer both protocols); keeps the keywords of
     each __dlpack__ call and the last capsule."""

@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 
 import tsah
+from device_lib import LIB, needs_device_arrays, new_stream, synchronize, to_device, to_host
+
 SOURCE_DIR = pathlib.Path(os.environ.get("TSAH_SOURCE_DIR", pathlib.Path(__file__).resolve().parents[2]))
 
 DEMO = SOURCE_DIR / "samples" / "scenes" / "demo.json"
@@ -248,6 +250,48 @@ def test_gpu_blurred_frame_matches_the_cpu(scene, baked):
     assert np.array_equal(gpu.occluded(origins, directions, times=times), cpu.occluded(origins, directions, times=times))
     gpu.update(0.7)
     assert not gpu.blurred
+
+
+@needs_device_arrays
+def test_gpu_device_arrays_equal_the_host_path(scene, baked):
+    gpu = tsah.GpuTwoLevelRuntime(scene)
+    gpu.update(0.75)
+    origins, directions = rays_to_triangles(baked, 0.75)
+    origins, directions = origins.reshape(20, 20, 3), directions.reshape(20, 20, 3)
+    tmax = np.full((20, 20), np.inf, np.float32)
+    tmax[0] = 1.0  # short rays: some miss
+    expected = gpu.trace(origins, directions, tmax=tmax)
+    stream = new_stream()
+    with (LIB.cuda.stream(stream) if LIB.__name__ == "torch" else stream):
+        given = stream if LIB.__name__ == "torch" else stream.ptr
+        hits = gpu.trace(to_device(origins), to_device(directions), tmax=to_device(tmax), stream=given)
+        flags = gpu.occluded(to_device(origins), to_device(directions), tmax=to_device(tmax), stream=given)
+    stream.synchronize()
+    assert sorted(hits) == ["instance", "t", "triangle", "u", "v"]
+    for field in ("t", "u", "v", "instance", "triangle"):
+        np.testing.assert_array_equal(to_host(hits[field]), expected[field])
+    assert 0 < (expected["instance"] >= 0).sum() < expected.size
+    np.testing.assert_array_equal(to_host(flags), gpu.occluded(origins, directions, tmax=tmax))
+
+    # A blurred frame: per-ray times as a device array or one number; results into the caller's arrays.
+    gpu.update_shutter(0.5, 0.7)
+    times = np.linspace(0.0, 1.0, 400, dtype=np.float32).reshape(20, 20)
+    expected = gpu.trace(origins, directions, times=times)
+    out = {"instance": to_device(np.zeros((20, 20), np.int32)), "t": to_device(np.zeros((20, 20), np.float32))}
+    assert gpu.trace(to_device(origins), to_device(directions), times=to_device(times), out=out) is out
+    flags = tsah.DeviceArray((20, 20), "|b1")
+    assert gpu.occluded(to_device(origins), to_device(directions), times=0.25, out=flags) is flags
+    synchronize()
+    np.testing.assert_array_equal(to_host(out["instance"]), expected["instance"])
+    np.testing.assert_array_equal(to_host(out["t"]), expected["t"])
+    np.testing.assert_array_equal(to_host(flags), gpu.occluded(origins, directions, times=np.full((20, 20), 0.25, np.float32)))
+
+    with pytest.raises(tsah.ConfigError, match="out: unknown field 'prim' .t, u, v, instance, triangle."):
+        gpu.trace(to_device(origins), to_device(directions), out={"prim": out["t"]})
+    with pytest.raises(tsah.ConfigError, match=r"times: expected shape \(20, 20\), got \(400,\)"):
+        gpu.trace(to_device(origins), to_device(directions), times=to_device(times.ravel()))
+    with pytest.raises(tsah.ArgumentTypeError, match="times: expected None, a number or a float32 device array"):
+        gpu.trace(to_device(origins), to_device(directions), times=times)
 
 
 @pytest.mark.skipif(not tsah.cuda_built, reason="a build without CUDA has no GpuTwoLevelRuntime")

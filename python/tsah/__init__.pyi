@@ -233,7 +233,7 @@ class DeviceArray:
         """(2, device): kDLCUDA and the device."""
 
 
-_DeviceHits = dict[str, DeviceArray]  # t, u, v (float32) and triangle (int32) of the batch shape
+_DeviceHits = dict[str, DeviceArray]  # t, u, v (float32), triangle (int32) and, two-level, instance (int32)
 _Stream = Any  # None, an int cudaStream_t, or an object with __cuda_stream__ or cuda_stream
 
 
@@ -343,7 +343,8 @@ class TwoLevelRuntime:
 
 
 class GpuTwoLevelRuntime:
-    """A two-level scene traced on a CUDA device from host rays (only when cuda_built)."""
+    """A two-level scene traced on a CUDA device from host rays or device arrays in place (only when
+    cuda_built)."""
 
     def __init__(self, scene: TwoLevelScene, device: _Integer = 0, tlas: str = "refit") -> None:
         """tlas: 'refit', 'lbvh' or 'hlbvh-sah'. Raises tsah.Failure when no device is usable."""
@@ -351,14 +352,16 @@ class GpuTwoLevelRuntime:
         """The scene at this time, on the device; ends a blurred frame."""
     def update_shutter(self, open: _Number, close: _Number) -> None:
         """A blurred frame over the shutter [open, close] on the device: rays then take their times (times=)."""
-    def trace(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
-              tmax: _ArrayLike = float("inf"), times: _ArrayLike | None = None,
-              out: Any = None) -> np.recarray[Any, Any]:
-        """Closest hits, as TwoLevelRuntime.trace; times: each ray's shutter fraction in a blurred frame."""
-    def occluded(self, origins: _ArrayLike, directions: _ArrayLike, tmin: _ArrayLike = 0.0,
-                 tmax: _ArrayLike = float("inf"), times: _ArrayLike | None = None,
-                 out: Any = None) -> npt.NDArray[np.bool_]:
-        """True for each ray that hits anything within (tmin, tmax)."""
+    def trace(self, origins: _ArrayLike | Any, directions: _ArrayLike | Any, tmin: _ArrayLike | Any = 0.0,
+              tmax: _ArrayLike | Any = float("inf"), times: _ArrayLike | Any | None = None,
+              out: Any = None, *, stream: _Stream = None) -> np.recarray[Any, Any] | _DeviceHits:
+        """Closest hits, as TwoLevelRuntime.trace; times: each ray's shutter fraction in a blurred frame.
+        For device rays a dict of device arrays t, u, v, instance, triangle (or out=, a dict of any of
+        them), not waited for."""
+    def occluded(self, origins: _ArrayLike | Any, directions: _ArrayLike | Any, tmin: _ArrayLike | Any = 0.0,
+                 tmax: _ArrayLike | Any = float("inf"), times: _ArrayLike | Any | None = None,
+                 out: Any = None, *, stream: _Stream = None) -> npt.NDArray[np.bool_] | DeviceArray:
+        """True for each ray that hits anything within (tmin, tmax); a bool device array for device rays."""
     @property
     def time(self) -> float:
         """The scene time of the last update (of a blurred frame: its close)."""

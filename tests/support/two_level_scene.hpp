@@ -4,6 +4,8 @@
 // paths and time offsets, the small tree options they build it with, and the TLAS box holding each
 // instance.
 #include <filesystem>
+#include <random>
+#include <span>
 #include <vector>
 
 #include "anim/tanim.hpp"
@@ -92,6 +94,32 @@ inline std::vector<tsah::Aabb> tlasLeafBoxes(const tsah::FlatBvh& tlas) {
       if (tsah::isLeafRef(tlas.nodes[n].childRef(c)))
         assign(tlas.nodes[n].childRef(c), tlas.nodes[n].childCount(c), tlas.nodes[n].childBox(c));
   return out;
+}
+
+// Rays from random points around the scene's box to random points inside it (most hit something).
+inline std::vector<tsah::Ray> raysThroughBox(const tsah::Aabb& bounds, uint32_t count, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  const tsah::Vec3 e = bounds.extent();
+  auto around = [&](float spread) {
+    return tsah::Vec3{bounds.lo.x + e.x * (spread * unit(rng) + 0.5f * (1 - spread)),
+                      bounds.lo.y + e.y * (spread * unit(rng) + 0.5f * (1 - spread)),
+                      bounds.lo.z + e.z * (spread * unit(rng) + 0.5f * (1 - spread))};
+  };
+  std::vector<tsah::Ray> rays(count);
+  for (tsah::Ray& ray : rays) {
+    ray.org = around(2.0f);
+    ray.dir = around(1.0f) - ray.org;  // unnormalized
+    ray.tmin = 0.0f;
+    ray.tmax = 1e30f;
+  }
+  return rays;
+}
+
+inline tsah::Aabb unionOf(std::span<const tsah::Aabb> boxes) {
+  tsah::Aabb all;
+  for (const tsah::Aabb& b : boxes) all.extend(b);
+  return all;
 }
 
 }  // namespace tsah::test

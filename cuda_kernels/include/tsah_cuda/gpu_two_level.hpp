@@ -26,6 +26,7 @@
 #include "tsah/scene/two_level.hpp"
 #include "tsah/scene/two_level_runtime.hpp"
 #include "tsah_cuda/device.hpp"
+#include "tsah_cuda/gpu_runtime.hpp"
 
 namespace tsah::cuda {
 
@@ -38,6 +39,7 @@ const char* tlasUpdateName(TlasUpdate update);       // "refit", "lbvh", "hlbvh-
 TlasUpdate parseTlasUpdate(std::string_view name);   // throws tsah::ConfigError for anything else
 
 namespace detail {
+class EventTimer;
 struct TwoLevelTraceAccess;
 struct TwoLevelBlurAccess;
 class TwoLevelBlur;
@@ -109,6 +111,36 @@ class GpuTwoLevelRuntime {
                                        RayPassStats* stats = nullptr);
   std::vector<uint8_t> anyHits(std::span<const Ray> rays, std::span<const float> times, RayPassStats* stats = nullptr);
 
+  // Device arrays (docs/cuda-runtime.md#device-arrays), as GpuRuntime's: rays in the caller's device
+  // memory (GpuRuntime::DeviceRays), results written into the caller's device arrays, on the
+  // runtime's stream ordered after the work queued on `stream` before the call and before the work
+  // queued there after it; nothing waits for the device. Closest hits: one value per ray in each
+  // non-null array, t, u, v (float), instance and triangle (uint32: the instance hit and the
+  // triangle of its source); a miss writes t = +inf, u = v = 0 and both ids tsah::kNoHit.
+  // occluded: one byte per ray, 1 when something is hit within (tmin, tmax). Times: each ray's
+  // shutter fraction in the caller's device memory (one float per ray) or, when null, `value` for
+  // every ray, as closestHits(rays, times); not blurred: the instant queries. Throws
+  // tsah::ConfigError for a null ray array, more than 2^32 - 1 rays, a bad scalar limit, or a pointer
+  // that is not device memory of the runtime's device.
+  using StreamHandle = GpuRuntime::StreamHandle;
+  struct DeviceHits {
+    float* t = nullptr;
+    float* u = nullptr;
+    float* v = nullptr;
+    uint32_t* instance = nullptr;
+    uint32_t* triangle = nullptr;
+  };
+  struct DeviceTimes {
+    const float* times = nullptr;
+    float value = 0.0f;
+  };
+  void closestHitsOnDevice(const GpuRuntime::DeviceRays& rays, const DeviceHits& hits, StreamHandle stream = nullptr);
+  void closestHitsOnDevice(const GpuRuntime::DeviceRays& rays, const DeviceTimes& times, const DeviceHits& hits,
+                           StreamHandle stream = nullptr);
+  void anyHitsOnDevice(const GpuRuntime::DeviceRays& rays, uint8_t* occluded, StreamHandle stream = nullptr);
+  void anyHitsOnDevice(const GpuRuntime::DeviceRays& rays, const DeviceTimes& times, uint8_t* occluded,
+                       StreamHandle stream = nullptr);
+
   // Host copies of the current state: the instances' world boxes, and the TLAS traced now (the
   // refitted one or this frame's rebuilt one) in canonical form with this frame's node boxes
   // (frameCount 1; triIndex: slot -> instance).
@@ -125,6 +157,11 @@ class GpuTwoLevelRuntime {
   detail::TwoLevelBlurAccess blurAccess();  // what updateShutter builds a blurred frame from
   std::unique_ptr<Impl> impl_;
   std::unique_ptr<detail::TwoLevelBlur> blur_;  // the blurred frame (two_level_blur.cpp)
+  // The device-array queries' ordering with the caller's stream (two_level_device_arrays.cpp).
+  std::unique_ptr<detail::EventTimer> callerFences_;
+  template <bool AnyHit>
+  void traceOnDevice(const GpuRuntime::DeviceRays& rays, const DeviceTimes* times, const DeviceHits& hits,
+                     uint8_t* occluded, StreamHandle stream);
 };
 
 }  // namespace tsah::cuda
