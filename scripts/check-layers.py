@@ -30,7 +30,7 @@ ANIM_SOURCE = 3    # libanim/src/*.cpp: may use the whole library
 
 # cuda_kernels: small shared types, the private kernels' headers, the front doors.
 CUDA_RANK = {"cuda_check.hpp": 0, "device.hpp": 0, "device_buffer.hpp": 0, "rebuild_types.hpp": 0,
-             "gpu_runtime.hpp": 2, "gpu_optimizer.hpp": 2, "runtime_impl.hpp": 2,
+             "gpu_runtime.hpp": 2, "gpu_optimizer.hpp": 2, "runtime_impl.hpp": 2, "device_array_checks.hpp": 2,
              "gpu_queries.hpp": 2, "gpu_two_level.hpp": 2,
              "gpu_two_level_render.hpp": 2, "render_passes.cuh": 2, "two_level_render.hpp": 2}
 CUDA_PRIVATE = 1   # cuda_kernels/src/*.hpp, *.cuh
