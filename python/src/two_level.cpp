@@ -6,10 +6,12 @@
 
 #include <cmath>
 #include <cstddef>
+#include <filesystem>
 #include <limits>
 #include <memory>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -33,6 +35,7 @@ namespace tsah::python {
 struct TwoLevelSceneObject {
   TwoLevelScene scene;
   std::optional<StructureChoice> choice;
+  std::string scenePath;  // the scene file, absolute: what an unpickled copy loads its sources from
 };
 
 namespace {
@@ -57,7 +60,7 @@ TwoLevelSceneObject loadTwoLevel(py::handle treeArg, py::handle sceneArg) {
   // The importers and the file check take no cancel check: Ctrl-C is raised when the load returns.
   TwoLevelScene loaded = LongCall().run([&] { return loadTwoLevelSceneFile(tree, loadSources(scene, warnings)); });
   warnAll(warnings);
-  return {std::move(loaded), std::nullopt};
+  return {std::move(loaded), std::nullopt, std::filesystem::absolute(scene).string()};
 }
 
 // What `tsah optimize SCENE --structure auto|two-level` builds (the command line's library steps):
@@ -87,7 +90,8 @@ TwoLevelSceneObject buildTwoLevel(py::handle sceneArg, const std::string& struct
       choice = chooseObjectStructure(sources, structureChoiceOptions(options.objective));
       sources = anim::flattenObjects(std::move(sources), choice->flattenedObjects);
     }
-    return TwoLevelSceneObject{buildTwoLevelScene(std::move(sources), options), std::move(choice)};
+    return TwoLevelSceneObject{buildTwoLevelScene(std::move(sources), options), std::move(choice),
+                               std::filesystem::absolute(path).string()};
   });
   warnAll(warnings);
   return built;
@@ -425,7 +429,9 @@ void bindTwoLevel(py::module_& m) {
 A scene file kept as two levels (docs/two-level.md): one tree (BLAS) per distinct source, one
 top-level tree (TLAS) over the instances, optimized with the T-SAH cost over the scene's frames.
 Made by tsah.build_two_level or tsah.load_two_level; traced by tsah.TwoLevelRuntime (and
-tsah.GpuTwoLevelRuntime).
+tsah.GpuTwoLevelRuntime). Pickled as the scene file's absolute path and the .tbvh bytes: unpickling
+loads the scene's sources from that path again (the same files must be there) and checks the tree
+against them as load_two_level does; auto's structure_choice is not kept.
 )doc")
       .def(
           "save",
@@ -482,6 +488,31 @@ structure="auto", structure_choice (per object: the estimate and the reason).
           "instances"_a, "triangles"_a,
           "Per (instance, triangle of its source) pair, integer arrays (N,): the triangle's id in tsah.load(scene_path) "
           "(the scene baked into one animation, whatever was flattened), int32 array (N,).")
+      // Pickled as the scene file's absolute path and the .tbvh bytes; unpickling loads the scene's
+      // sources from that path again and checks the tree against them (load_two_level's checks).
+      .def(py::pickle(
+          [](const TwoLevelSceneObject& s) {
+            std::vector<uint8_t> bytes;
+            {
+              py::gil_scoped_release release;
+              bytes = encodeTwoLevelScene(s.scene);
+            }
+            return py::make_tuple(s.scenePath, bytesObject(bytes));
+          },
+          [](const py::tuple& state) {
+            if (state.size() != 2 || !py::isinstance<py::str>(state[0]) || !py::isinstance<py::bytes>(state[1]))
+              throw tsah::DataError("<pickle>: expected a TwoLevelScene's state (scene path, tree bytes)");
+            const std::string path = state[0].cast<std::string>();
+            const std::string_view view = state[1].cast<py::bytes>();
+            const std::span<const uint8_t> bytes(reinterpret_cast<const uint8_t*>(view.data()), view.size());
+            std::vector<std::string> warnings;
+            TwoLevelScene scene = LongCall().run([&] {
+              anim::SceneSources sources = loadSources(path, warnings);  // a missing file stays a FileError
+              return inMemory([&] { return decodeTwoLevelScene(bytes, "<pickle>", std::move(sources)); });
+            });
+            warnAll(warnings);
+            return TwoLevelSceneObject{std::move(scene), std::nullopt, path};
+          }))
       .def("__repr__", [](const TwoLevelSceneObject& s) {
         return "<tsah.TwoLevelScene: " + std::to_string(s.scene.instanceCount()) + " instances, " +
                std::to_string(s.scene.blases.size()) + " BLAS, " + std::to_string(s.scene.frameTimes.size()) +

@@ -4,6 +4,7 @@ argument errors, blurred frames, and GpuTwoLevelRuntime against TwoLevelRuntime 
 import json
 import os
 import pathlib
+import pickle
 
 import numpy as np
 import pytest
@@ -71,6 +72,49 @@ def test_save_and_load_round_trip(scene, tmp_path):
     a.update(0.6)
     b.update(0.6)
     assert np.array_equal(a.trace(origins, directions), b.trace(origins, directions))
+
+
+def test_pickle_round_trip_loads_the_sources_again(scene, tmp_path, monkeypatch):
+    copy = pickle.loads(pickle.dumps(scene))
+    assert repr(copy) == repr(scene) and copy.flattened_objects == scene.flattened_objects
+    scene.save(tmp_path / "a.tbvh")
+    copy.save(tmp_path / "b.tbvh")
+    assert (tmp_path / "a.tbvh").read_bytes() == (tmp_path / "b.tbvh").read_bytes()
+    origins, directions = rays_to_triangles(tsah.load(DEMO), 1.3)
+    a, b = tsah.TwoLevelRuntime(scene), tsah.TwoLevelRuntime(copy)
+    a.update(1.3)
+    b.update(1.3)
+    assert np.array_equal(a.trace(origins, directions), b.trace(origins, directions))
+    # The scene's path is kept absolute: another working directory unpickles the same scene.
+    relative = tsah.build_two_level(os.path.relpath(DEMO), structure="auto")
+    data = pickle.dumps(relative)
+    monkeypatch.chdir(tmp_path)
+    moved = pickle.loads(data)
+    assert moved.flattened_objects == relative.flattened_objects and moved.instance_count == relative.instance_count
+
+
+def test_a_pickle_whose_scene_changed_or_went_is_refused(scene, tmp_path):
+    # A scene file of its own (absolute source paths), so that it can be changed and removed.
+    description = json.loads(DEMO.read_text())
+    for o in description["objects"]:
+        o["file"] = str((DEMO.parent / o["file"]).resolve())
+    own = tmp_path / "own.json"
+    own.write_text(json.dumps(description))
+    data = pickle.dumps(tsah.build_two_level(own, structure="two-level"))
+    description["objects"][1]["instances"].pop()  # one pillar less
+    own.write_text(json.dumps(description))
+    with pytest.raises(tsah.DataError, match="<pickle> was not built for .*own.json: "):
+        pickle.loads(data)
+    own.unlink()
+    with pytest.raises(tsah.FileError, match="own.json"):
+        pickle.loads(data)
+    state = scene.__getstate__()
+    broken = bytearray(state[1])
+    broken[100:108] = b"\xff" * 8
+    with pytest.raises(tsah.DataError, match="<pickle>: "):
+        tsah.TwoLevelScene.__new__(tsah.TwoLevelScene).__setstate__((state[0], bytes(broken)))
+    with pytest.raises(tsah.DataError, match="expected a TwoLevelScene's state"):
+        tsah.TwoLevelScene.__new__(tsah.TwoLevelScene).__setstate__(("x",))
 
 
 def test_the_command_lines_file_loads_and_traces_as_the_built_scene(cli, scene, tmp_path):

@@ -52,7 +52,12 @@ void saveTwoLevelScene(const std::string& path, const TwoLevelScene& twoLevel) {
 }
 
 TwoLevelScene loadTwoLevelSceneFile(const std::string& treePath, anim::SceneSources scene) {
-  TwoLevelFile file = decodeTwoLevelFile(readFile(treePath), treePath);
+  return decodeTwoLevelScene(readFile(treePath), treePath, std::move(scene));
+}
+
+TwoLevelScene decodeTwoLevelScene(std::span<const uint8_t> bytes, const std::string& treePath,
+                                  anim::SceneSources scene) {
+  TwoLevelFile file = decodeTwoLevelFile(bytes, treePath);
   const std::string& scenePath = scene.description.file;
   const auto fail = [&](const std::string& what) {
     throw DataError(treePath + " was not built for " + scenePath + ": " + what);

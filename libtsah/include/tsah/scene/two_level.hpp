@@ -100,6 +100,9 @@ void saveTwoLevelScene(const std::string& path, const TwoLevelScene& twoLevel);
 // built for SCENE: ...") otherwise. The objective is the TLAS header's; costs are recomputed from
 // the stored boxes.
 TwoLevelScene loadTwoLevelSceneFile(const std::string& treePath, anim::SceneSources scene);
+// The same for a file's bytes held in memory (encodeTwoLevelScene's), `treePath` naming them in
+// the errors.
+TwoLevelScene decodeTwoLevelScene(std::span<const uint8_t> bytes, const std::string& treePath, anim::SceneSources scene);
 
 // The per-frame reference: a sweep-SAH TLAS over one frame's instance boxes (leaves of at most
 // objective.maxLeafSize instances when that is not more expensive).
