@@ -91,14 +91,11 @@ void checkDeviceAndLayout(const TraceOptions& opt) {
 
 // What a two-level tree (.tbvh version 3) is not traced with: a per-frame rebuild of the whole
 // scene (--rebuild; the TLAS's is --tlas rebuild), several GPUs or the CPU's SIMD kernels of flat
-// trees; on the GPU, motion blur and the compressed layout. The TLAS rebuilds of one device only.
+// trees; on the GPU, the compressed layout. The TLAS rebuilds of one device only.
 void checkTwoLevelOptions(const TraceOptions& opt, const tsah::cli::FrameRuntimeOptions& runtimeOptions) {
   if (runtimeOptions.rebuild != tsah::cli::Rebuild::None || !opt.devices.empty() || runtimeOptions.isa)
     throw UsageError(opt.bvh + " holds a two-level scene: it is traced without --devices, --rebuild (see --tlas "
                      "rebuild) or --isa");
-  if (runtimeOptions.shutter.fraction > 0.0 && opt.device == tsah::Device::Cuda)
-    throw UsageError(opt.bvh + " holds a two-level scene: its motion blur (--shutter) is traced on the CPU (--device "
-                     "cpu), not with --device cuda");
   const bool gpuRebuild = opt.tlas == "lbvh" || opt.tlas == "hlbvh-sah";
   if (opt.device != tsah::Device::Cuda) {
     if (gpuRebuild)
@@ -184,7 +181,8 @@ void runTrace(const TraceOptions& opt) {
     if (!twoLevel)
       runtimes.push_back(tsah::cli::makeFrameRuntime(trees, a, runtimeOptions));
     else if (opt.device == tsah::Device::Cuda)
-      runtimes.push_back(tsah::cli::makeGpuTwoLevelFrameRuntime(twoLevelScene, gpu, opt.tlas.empty() ? "refit" : opt.tlas));
+      runtimes.push_back(tsah::cli::makeGpuTwoLevelFrameRuntime(twoLevelScene, gpu, opt.tlas.empty() ? "refit" : opt.tlas,
+                                                                runtimeOptions.shutter, runtimeOptions.frameInterval));
     else
       runtimes.push_back(tsah::cli::makeTwoLevelFrameRuntime(twoLevelScene, runtimeOptions.layout, runtimeOptions.threads,
                                                              opt.tlas == "rebuild"

@@ -1,6 +1,10 @@
 // The GPU frame runtime of a two-level scene (`tsah trace SCENE TREE-v3 --device cuda`): per frame
-// GpuTwoLevelRuntime::updateAt (the poses' BLAS refits and the TLAS refit in one CUDA graph) and
-// the device renderer through it (GpuTwoLevelRenderer), both timed with CUDA events.
+// GpuTwoLevelRuntime::updateAt (the poses' BLAS refits and the TLAS refit in one CUDA graph), or with
+// a shutter GpuTwoLevelRuntime::updateShutter, and the device renderer through it
+// (GpuTwoLevelRenderer), timed with CUDA events (a blurred frame's update: host wall time, as it
+// waits for the device between its steps).
+#include <algorithm>
+#include <chrono>
 #include <string>
 
 #include "tsah/base/error.hpp"
@@ -28,8 +32,15 @@ cuda::GpuTwoLevelRuntime::Config onDevice(int gpu, cuda::TlasUpdate tlas) {
 
 class GpuTwoLevelFrameRuntime final : public FrameRuntime {
  public:
-  GpuTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, int gpu, cuda::TlasUpdate tlas)
-      : scene_(std::move(scene)), gpu_(gpu), tlas_(tlas), runtime_(*scene_, onDevice(gpu, tlas)), renderer_(runtime_) {}
+  GpuTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, int gpu, cuda::TlasUpdate tlas, Shutter shutter,
+                          double frameInterval)
+      : scene_(std::move(scene)),
+        gpu_(gpu),
+        tlas_(tlas),
+        shutter_(shutter),
+        frameInterval_(frameInterval),
+        runtime_(*scene_, onDevice(gpu, tlas)),
+        renderer_(runtime_) {}
 
   // The runtime's GPU current while it is released.
   ~GpuTwoLevelFrameRuntime() override { cuda::useDevice(gpu_); }
@@ -50,8 +61,17 @@ class GpuTwoLevelFrameRuntime final : public FrameRuntime {
   // the last two parts, updateMs: all three; buildMs: the TLAS rebuild alone).
   FrameUpdate update(double time) override {
     cuda::useDevice(gpu_);
-    const cuda::TwoLevelUpdateTimings t = runtime_.updateAt(time);
     FrameUpdate u;
+    if (shutter_.fraction > 0.0) {
+      const auto [open, close] = shutterInterval(scene_->scene.start, scene_->scene.end, time, frameInterval_, shutter_);
+      const auto start = std::chrono::steady_clock::now();
+      runtime_.updateShutter(open, close);
+      u.refitMs = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+      u.updateMs = u.refitMs;
+      u.keys = std::max<uint32_t>(1, uint32_t(runtime_.keyTimes().size()));
+      return u;
+    }
+    const cuda::TwoLevelUpdateTimings t = runtime_.updateAt(time);
     u.refitMs = t.blasMs + t.tlasMs;
     u.buildMs = t.tlasRebuildMs;
     u.updateMs = t.totalMs();
@@ -80,7 +100,8 @@ class GpuTwoLevelFrameRuntime final : public FrameRuntime {
   void describe(nlohmann::json& out) const override {
     out["device"] = runtime_.device().name;
     out["gpu"] = deviceJson(gpu_);
-    out["timer"] = "CUDA events (device time)";
+    out["timer"] = shutter_.fraction > 0.0 ? "CUDA events (device time); updates: host wall time"
+                                           : "CUDA events (device time)";
     out["layout"] = "bvh2";
     out["two_level"] = describeTwoLevel(*scene_);
     out["two_level"].erase("blases");
@@ -92,6 +113,8 @@ class GpuTwoLevelFrameRuntime final : public FrameRuntime {
   std::shared_ptr<const TwoLevelScene> scene_;
   int gpu_;
   cuda::TlasUpdate tlas_;
+  Shutter shutter_;
+  double frameInterval_ = 0.0;
   cuda::GpuTwoLevelRuntime runtime_;
   cuda::GpuTwoLevelRenderer renderer_;
 };
@@ -101,12 +124,14 @@ class GpuTwoLevelFrameRuntime final : public FrameRuntime {
 #endif
 
 std::unique_ptr<FrameRuntime> makeGpuTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, int gpu,
-                                                          const std::string& tlas) {
+                                                          const std::string& tlas, Shutter shutter,
+                                                          double frameInterval) {
   requireGpuRuntime();
 #if TSAH_HAVE_CUDA
-  return std::make_unique<GpuTwoLevelFrameRuntime>(std::move(scene), gpu, cuda::parseTlasUpdate(tlas));
+  return std::make_unique<GpuTwoLevelFrameRuntime>(std::move(scene), gpu, cuda::parseTlasUpdate(tlas), shutter,
+                                                   frameInterval);
 #else
-  (void)scene, (void)gpu, (void)tlas;
+  (void)scene, (void)gpu, (void)tlas, (void)shutter, (void)frameInterval;
   return nullptr;  // requireGpuRuntime threw
 #endif
 }

@@ -2,8 +2,9 @@
 // CPU renderer's frames of the same scene (TwoLevelRuntime in bvh2 + TwoLevelRenderView): the same
 // primary surface at every pixel (kind, triangle in bake order, position, normal) and the same
 // image, at scene times between frames and at frames, with rotations, non-uniform scales, mirrored
-// placements, paths, time offsets and a looping pose; an instance flattened by its path is not
-// rendered, and rendered mirrored afterwards; a TLAS rebuilt every frame renders the same frames.
+// placements, paths, time offsets and a looping pose; blurred frames; an instance flattened by its
+// path is not rendered, and rendered mirrored afterwards; a TLAS rebuilt every frame renders the same
+// frames.
 // Every test skips without a GPU.
 #include <gtest/gtest.h>
 
@@ -12,11 +13,13 @@
 #include <cmath>
 #include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "tsah/base/error.hpp"
 #include "tsah/render/camera.hpp"
 #include "tsah/render/renderer.hpp"
+#include "tsah/render/sampling.hpp"
 #include "tsah/render/shading.hpp"
 #include "tsah/scene/two_level.hpp"
 #include "tsah/scene/two_level_render.hpp"
@@ -68,33 +71,35 @@ Frame frameFor(const tsah::TwoLevelRuntime& cpu, uint32_t index) {
   return f;
 }
 
-// The CPU renderer's primary surfaces (renderFrameOf's pass 1), row-major.
-std::vector<tsah::Surface> cpuSurfaces(const tsah::TwoLevelRenderView& view, const Frame& f) {
+// The CPU renderer's primary surfaces (renderFrameOf's pass 1), row-major; of a blurred frame at
+// each pixel's shutter time.
+std::vector<tsah::Surface> cpuSurfaces(const tsah::TwoLevelRuntime& cpu, const tsah::TwoLevelRenderView& view,
+                                       const Frame& f) {
   const tsah::CameraRays cam = tsah::cameraRays(f.camera, f.settings.width, f.settings.height);
   std::vector<tsah::Surface> out;
   for (uint32_t y = 0; y < f.settings.height; ++y)
     for (uint32_t x = 0; x < f.settings.width; ++x) {
       const tsah::Ray ray = cam.ray(float(x) + 0.5f, float(y) + 0.5f);
-      out.push_back(tsah::primarySurface(ray, view.closestHit(ray), view.indices().data(), view.positions().data(),
-                                         f.lighting));
+      if (cpu.blurred()) {
+        const float time = tsah::pixelShutterTime({f.settings.seed, f.settings.frame, y * f.settings.width + x});
+        out.push_back(view.blurredSurface(ray, view.closestHit(ray, time), time, f.lighting));
+      } else {
+        out.push_back(tsah::primarySurface(ray, view.closestHit(ray), view.indices().data(), view.positions().data(),
+                                           f.lighting));
+      }
     }
   return out;
 }
 
-// Renders the frame on both devices at scene time t and compares them; returns the bake-order
-// triangles of the mesh pixels (on the CPU).
-std::set<uint32_t> expectSameFrame(tsah::TwoLevelRuntime& cpu, tsah::TwoLevelRenderView& view,
-                                   tsah::cuda::GpuTwoLevelRuntime& gpu, tsah::cuda::GpuTwoLevelRenderer& renderer,
-                                   double t, uint32_t index) {
-  const std::string what = "scene time " + std::to_string(t);
-  cpu.update(t);
-  view.updateMesh();
-  gpu.updateAt(t);
+// Renders the runtimes' current frames (updated alike) on both devices and compares them; returns
+// the bake-order triangles of the mesh pixels (on the CPU).
+std::set<uint32_t> expectSameRender(const tsah::TwoLevelRuntime& cpu, const tsah::TwoLevelRenderView& view,
+                                    tsah::cuda::GpuTwoLevelRenderer& renderer, uint32_t index, const std::string& what) {
   const Frame f = frameFor(cpu, index);
   tsah::Image cpuImage, gpuImage;
   const tsah::RenderStats expect = tsah::renderFrame(view, f.camera, f.lighting, f.settings, cpuImage);
   const tsah::RenderStats got = renderer.render(f.camera, f.lighting, f.settings, &gpuImage);
-  const std::vector<tsah::Surface> want = cpuSurfaces(view, f), have = renderer.downloadSurfaces();
+  const std::vector<tsah::Surface> want = cpuSurfaces(cpu, view, f), have = renderer.downloadSurfaces();
   EXPECT_EQ(have.size(), want.size()) << what;
   if (have.size() != want.size()) return {};
   std::set<uint32_t> triangles;
@@ -119,6 +124,16 @@ std::set<uint32_t> expectSameFrame(tsah::TwoLevelRuntime& cpu, tsah::TwoLevelRen
   tsah::test::expectRayCountsClose(got, expect);
   tsah::test::expectImagesClose(cpuImage, gpuImage, what);
   return triangles;
+}
+
+// The instant frame at scene time t on both devices, rendered and compared (expectSameRender).
+std::set<uint32_t> expectSameFrame(tsah::TwoLevelRuntime& cpu, tsah::TwoLevelRenderView& view,
+                                   tsah::cuda::GpuTwoLevelRuntime& gpu, tsah::cuda::GpuTwoLevelRenderer& renderer,
+                                   double t, uint32_t index) {
+  cpu.update(t);
+  view.updateMesh();
+  gpu.updateAt(t);
+  return expectSameRender(cpu, view, renderer, index, "scene time " + std::to_string(t));
 }
 
 // The instance of each bake-order triangle.
@@ -176,6 +191,37 @@ TEST_F(CudaTwoLevelRender, ARebuiltTlasRendersTheCpuRenderersFrames) {
     uint32_t index = 0;
     for (const double t : {0.0, 7.5, 12.0})
       EXPECT_GT(expectSameFrame(cpu, view, gpu, renderer, t, index++).size(), 500u) << "scene time " << t;
+  }
+}
+
+// Blurred frames (shutters of 2 and 3 keys, one after two poses' clip ends, one over the whole
+// scene): every ray at its pixel's time, the primary surface on the hit triangle where it is then;
+// the GPU's surfaces and image are the CPU renderer's, and differ from the close's instant frame.
+TEST_F(CudaTwoLevelRender, BlurredFramesEqualTheCpuRenderersFrames) {
+  const tsah::TwoLevelScene scene = load(tsah::test::writeTwoLevelScene(dir));
+  tsah::TwoLevelRuntime cpu(scene, {2, tsah::TwoLevelRuntime::TlasUpdate::Refit, tsah::Layout::Bvh2});
+  tsah::TwoLevelRenderView view(cpu);
+  tsah::cuda::GpuTwoLevelRuntime gpu(scene);
+  tsah::cuda::GpuTwoLevelRenderer renderer(gpu);
+  uint32_t index = 0;
+  for (const auto& [open, close] : {std::pair{2.1, 2.4}, std::pair{6.2, 6.9}, std::pair{9.2, 9.9}, std::pair{0.0, 12.0}}) {
+    const std::string what = "shutter [" + std::to_string(open) + ", " + std::to_string(close) + "]";
+    cpu.updateShutter(open, close);
+    view.updateMesh();
+    gpu.updateShutter(open, close);
+    ASSERT_TRUE(cpu.blurred() && gpu.blurred()) << what;
+    const std::set<uint32_t> triangles = expectSameRender(cpu, view, renderer, index, what);
+    EXPECT_GT(triangles.size(), 500u) << what << ": too few triangles in view";
+    // The instant frame at the close renders otherwise (the blur is seen).
+    const Frame f = frameFor(cpu, index++);
+    const std::vector<tsah::Surface> blurred = renderer.downloadSurfaces();
+    gpu.updateAt(close);
+    renderer.render(f.camera, f.lighting, f.settings, nullptr);
+    const std::vector<tsah::Surface> instant = renderer.downloadSurfaces();
+    std::size_t moved = 0;
+    for (std::size_t i = 0; i < blurred.size(); ++i)
+      moved += blurred[i].kind != instant[i].kind || !near(blurred[i].position, instant[i].position) ? 1 : 0;
+    EXPECT_GT(moved, 50u) << what << ": blurred pixels";
   }
 }
 

@@ -87,7 +87,7 @@ RenderStats GpuTwoLevelRenderer::render(const Camera& camera, const SceneLightin
   const detail::PassBuffers b = m.passes.startFrame(f, aoRays, shadowRays, true, access.stream, m.side, m.events);
   m.last = f;
   m.rendered = true;
-  return detail::renderTwoLevelFrame(b, f, m.tables(access.scene), aoRays, shadowRays, image, timings);
+  return detail::renderTwoLevelFrame(b, f, m.tables(access.scene), access.blurred, aoRays, shadowRays, image, timings);
 }
 
 std::vector<Surface> GpuTwoLevelRenderer::downloadSurfaces() const {

@@ -54,7 +54,8 @@ RootInfo rootInfoOf(const FlatBvh& tree) {
 TwoLevelBlur::TwoLevelBlur() { events_.create(2); }
 
 void TwoLevelBlur::buildPoses(const TwoLevelBlurAccess& access, const ShutterMotion& motion, std::size_t keyCount,
-                              std::vector<BlurredLayout>& layouts, std::vector<uint32_t>& poseLayout,
+                              std::vector<BlurredLayout>& layouts, std::vector<BlurredPosePositions>& positions,
+                              std::vector<uint32_t>& poseLayout,
                               std::vector<Aabb>& poseUnion) {
   const TwoLevelScene& scene = *access.scene;
   const cudaStream_t stream = access.stream;
@@ -123,6 +124,7 @@ void TwoLevelBlur::buildPoses(const TwoLevelBlurAccess& access, const ShutterMot
       layout.rootCount = topology.rootCount;
       poseLayout[moving[j]] = uint32_t(layouts.size());
       layouts.push_back(layout);
+      positions.push_back({from.keyPositions, from.keyStride});
     }
   }
   // Each moving pose's root boxes over the keys, united (waits for the refits).
@@ -150,7 +152,8 @@ void TwoLevelBlur::build(const TwoLevelBlurAccess& access, std::span<const doubl
   std::vector<BlurredLayout> layouts;
   std::vector<uint32_t> poseLayout(scene.poses.size(), kInvalidIndex);
   std::vector<Aabb> poseUnion(scene.poses.size());
-  buildPoses(access, motion, keyCount, layouts, poseLayout, poseUnion);
+  std::vector<BlurredPosePositions> positions;
+  buildPoses(access, motion, keyCount, layouts, positions, poseLayout, poseUnion);
 
   // U, the union of an instance's BLAS root boxes over the keys (a still BLAS: its root box), and
   // its box at each key (instanceKeyBox: the CPU's, so the TLAS boxes are the CPU's).
@@ -173,6 +176,7 @@ void TwoLevelBlur::build(const TwoLevelBlurAccess& access, std::span<const doubl
   uploadGrown(keyToWorld_, motion.toWorld, stream);
   uploadGrown(instances_, instances, stream);
   uploadGrown(layouts_, layouts, stream);
+  uploadGrown(posePositions_, positions, stream);
 
   // The TLAS refitted at every key from that key's boxes (one node set and root per key).
   const FlatBvh& tlas = *access.tlas;
@@ -205,6 +209,7 @@ void TwoLevelBlur::build(const TwoLevelBlurAccess& access, std::span<const doubl
   scene_.instances = access.instances;
   scene_.views = access.views;
   scene_.layouts = layouts_.data();
+  scene_.posePositions = posePositions_.data();
   stream_ = stream;
   keyTimes_ = fractions;
 }

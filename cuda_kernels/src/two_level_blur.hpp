@@ -66,6 +66,13 @@ struct BlurredInstance {
   uint32_t layout = kInvalidIndex;
 };
 
+// A moving pose's vertex positions at the keys (keyCount blocks of keyStride floats, xyz per
+// vertex): what a blurred frame's rendered surfaces lerp at the ray's time.
+struct BlurredPosePositions {
+  const float* keys = nullptr;
+  uint64_t keyStride = 0;
+};
+
 // A blurred frame as the trace reads it; key k's arrays start at k times their count.
 struct BlurredTlasScene {
   const GpuBvhNode* keyNodes = nullptr;  // the TLAS's interior nodes refitted at each key
@@ -83,6 +90,7 @@ struct BlurredTlasScene {
   const InstanceState* instances = nullptr;  // the instant state at the close
   const BlasView* views = nullptr;
   const BlurredLayout* layouts = nullptr;    // the moving poses' blurred BLAS
+  const BlurredPosePositions* posePositions = nullptr;  // per layout: its pose's key positions
 };
 
 // Per instance, the box its instant BLAS view's root holds (the union over the keys of a still BLAS).
@@ -105,16 +113,13 @@ class TwoLevelBlur {
   void build(const TwoLevelBlurAccess& access, std::span<const double> keys, const ShutterMotion& motion);
   void end() { keyTimes_.clear(); }  // the frame is instant again
   bool blurred() const { return !keyTimes_.empty(); }
+  const BlurredTlasScene& scene() const { return scene_; }  // the frame's device state (the renderer's)
   std::span<const float> keyTimes() const { return keyTimes_; }
   // Instance boxes at key k (host copy; what the TLAS at key k was refitted from).
   std::span<const Aabb> keyInstanceBoxes(std::size_t key) const;
   // The rays at their times (shutter fractions) on the stream the frame was built on.
   template <bool AnyHit, typename Result>
   std::vector<Result> trace(std::span<const Ray> rays, std::span<const float> times, RayPassStats* stats);
-  // The caller's arrays at their times on the frame's stream (no wait).
-  void traceArrays(const ArrayRays& rays, const ArrayTimes& times, const ArrayInstanceHits& hits, uint8_t* occluded) {
-    launchBlurredTwoLevelArrayTrace(scene_, rays, times, hits, occluded, stream_);
-  }
 
  private:
   // A source's moving poses, each refitted at every key in one batch (item j * keys + k: pose j at
@@ -129,11 +134,12 @@ class TwoLevelBlur {
     DeviceBuffer<motion::BlurredNodeSegment> layoutNodes;
     DeviceBuffer<KeyTriangle> layoutTriangles;
   };
-  // The moving poses' keys and layouts: layouts gets one per moving pose, poseLayout[p] its index
-  // (kInvalidIndex for the others), poseUnion[p] the union of its key root boxes. Waits for them.
+  // The moving poses' keys and layouts: layouts (and positions) get one per moving pose,
+  // poseLayout[p] its index (kInvalidIndex for the others), poseUnion[p] the union of its key root
+  // boxes. Waits for them.
   void buildPoses(const TwoLevelBlurAccess& access, const ShutterMotion& motion, std::size_t keyCount,
-                  std::vector<BlurredLayout>& layouts, std::vector<uint32_t>& poseLayout,
-                  std::vector<Aabb>& poseUnion);
+                  std::vector<BlurredLayout>& layouts, std::vector<BlurredPosePositions>& positions,
+                  std::vector<uint32_t>& poseLayout, std::vector<Aabb>& poseUnion);
 
   EventTimer events_;
   cudaStream_t stream_ = nullptr;
@@ -142,6 +148,7 @@ class TwoLevelBlur {
   std::vector<PoseKeys> poseKeys_;  // per source (empty for a static one)
   DeviceBuffer<float> deviceKeyTimes_;
   DeviceBuffer<BlurredLayout> layouts_;
+  DeviceBuffer<BlurredPosePositions> posePositions_;
   DeviceBuffer<BlurredInstance> instances_;
   DeviceBuffer<Aabb> keyBoxes_, rootBoxes_, tlasKeyRootBoxes_;
   DeviceBuffer<Affine3x4> keyToWorld_;

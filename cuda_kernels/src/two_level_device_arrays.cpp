@@ -30,15 +30,16 @@ void GpuTwoLevelRuntime::traceOnDevice(const GpuRuntime::DeviceRays& rays, const
     for (const auto& [p, name] : outputs)
       if (p) detail::requireDeviceMemory(p, device, kRuntime, name);
   }
-  const bool timed = times && blurred();
+  const detail::TwoLevelTraceAccess access = traceAccess();
+  const bool timed = times && access.blurred;
   if (timed && times->times) detail::requireDeviceMemory(times->times, device, kRuntime, "times");
   if (!callerFences_) callerFences_ = std::make_unique<detail::EventTimer>(2);
-  const detail::TwoLevelTraceAccess access = traceAccess();
   const auto caller = static_cast<cudaStream_t>(stream);
   detail::orderAfter(*callerFences_, 0, caller, access.stream);
   const detail::ArrayInstanceHits out{hits.t, hits.u, hits.v, hits.instance, hits.triangle};
   if (timed)
-    blur_->traceArrays(a, {times->times, times->value}, out, occluded);
+    detail::launchBlurredTwoLevelArrayTrace(*access.blurred, a, {times->times, times->value}, out, occluded,
+                                            access.stream);
   else
     detail::launchTwoLevelArrayTrace(access.scene, a, out, occluded, access.stream);
   detail::orderAfter(*callerFences_, 1, access.stream, caller);

@@ -77,10 +77,15 @@ struct TlasScene {
   const Aabb* instanceBoxes = nullptr;  // per instance: its world box this frame
 };
 
-// What the two-level renderer (two_level_render.cu) reads of a GpuTwoLevelRuntime: the trace scene
-// of its current frame and the stream its updates run on.
+struct BlurredTlasScene;  // two_level_blur.hpp
+
+// What the two-level renderer (two_level_render.cu) and the device-array queries read of a
+// GpuTwoLevelRuntime: the trace scene of its current frame (of a blurred frame: the instant state at
+// the close), the blurred frame's state (null when the frame is instant) and the stream its updates
+// run on.
 struct TwoLevelTraceAccess {
   TlasScene scene;
+  const BlurredTlasScene* blurred = nullptr;
   cudaStream_t stream = nullptr;
 };
 

@@ -1,9 +1,11 @@
 // The two-level renderer's device side (two_level_render.hpp): the renderer's fused passes
-// (render_passes.cuh) with a tracer through the two-level scene (two_level_traversal.cuh), and the
-// surfaces and smooth normals of the hit instance's triangles moved into the world.
+// (render_passes.cuh) with a tracer through the two-level scene (two_level_traversal.cuh; a blurred
+// frame: two_level_blur_traversal.cuh at each pixel's shutter time), and the surfaces and smooth
+// normals of the hit instance's triangles moved into the world.
 // Compiled with -fmad=false (CMakeLists.txt): surfaces and colours round as on the CPU.
 #include "two_level_render.hpp"
 
+#include "two_level_blur_traversal.cuh"
 #include "two_level_traversal.cuh"
 
 namespace tsah::cuda::detail {
@@ -67,6 +69,50 @@ struct TwoLevelTracer {
   }
 };
 
+// A blurred frame: each ray at its pixel's shutter time through the blurred TLAS and BLAS. The
+// primary surface is on the hit triangle where it is at that time: its pose's key positions lerped
+// (a moving pose; else its instant positions) and moved into the world by the instance's key
+// matrices lerped, as tsah::TwoLevelRenderView::blurredSurface computes it.
+struct BlurredTwoLevelTracer {
+  static constexpr bool kTimed = true, kOwnSurface = true;
+  ShadingTables tables;
+  BlurredTlasScene blur;
+
+  __device__ __forceinline__ bool anyHit(const Ray& ray, float time) const {
+    return blurredTwoLevelAnyHit(blur, ray, time);
+  }
+
+  __device__ __forceinline__ Surface surface(const Ray& ray, float time, const SceneLighting& light) const {
+    const InstanceHit h = blurredTwoLevelClosestHit(blur, ray, time);
+    if (h.instance == kNoHit) return primarySurface(ray, Hit{}, nullptr, nullptr, light);
+    const motion::Segment seg = motion::segmentAt(blur.keyTimes, int(blur.keyCount), time);
+    const std::size_t key = std::size_t(seg.index) * blur.instanceCount + h.instance;
+    const Affine3x4 toWorld =
+        motion::lerpAffine(blur.keyToWorld[key], blur.keyToWorld[key + blur.instanceCount], seg.f);
+    const BlasView& view = blur.views[blur.instances[h.instance].view];
+    const float* p0 = view.positions;
+    const float* p1 = p0;
+    float f = 0.0f;
+    const uint32_t layout = blur.blurred[h.instance].layout;
+    if (layout != kInvalidIndex) {
+      const BlurredPosePositions keys = blur.posePositions[layout];
+      p0 = keys.keys + std::size_t(seg.index) * keys.keyStride;
+      p1 = p0 + keys.keyStride;
+      f = seg.f;
+    }
+    float triangle[9];
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t vertex = view.indices[3 * std::size_t(h.prim) + k];
+      const Vec3 v = toWorld.point(motion::lerpVertex(loadVec3(p0, vertex), loadVec3(p1, vertex), f));
+      triangle[3 * k] = v.x;
+      triangle[3 * k + 1] = v.y;
+      triangle[3 * k + 2] = v.z;
+    }
+    return primarySurfaceOnTriangle(ray, Hit{h.t, h.u, h.v, tables.firstTriangle[h.instance] + h.prim}, triangle,
+                                    light);
+  }
+};
+
 struct TwoLevelShading {
   ShadingTables tables;
 
@@ -117,9 +163,14 @@ __global__ void unpackSurfacesKernel(Frame f, const float4* __restrict__ surface
 }  // namespace
 
 RenderStats renderTwoLevelFrame(const PassBuffers& b, const Frame& f, const TwoLevelShadingTables& tables,
-                                uint64_t aoRays, uint64_t shadowRays, Image* image, GpuRenderTimings* timings) {
+                                const BlurredTlasScene* blurred, uint64_t aoRays, uint64_t shadowRays, Image* image,
+                                GpuRenderTimings* timings) {
   const ShadingTables t{tables};
-  enqueueFusedPasses(b, f, TwoLevelTracer{t}, nullptr, nullptr, aoRays, shadowRays, [](cudaStream_t) {});
+  if (blurred)
+    enqueueFusedPasses(b, f, BlurredTwoLevelTracer{t, *blurred}, nullptr, nullptr, aoRays, shadowRays,
+                       [](cudaStream_t) {});
+  else
+    enqueueFusedPasses(b, f, TwoLevelTracer{t}, nullptr, nullptr, aoRays, shadowRays, [](cudaStream_t) {});
   return shadeAndFinish(b, f, TwoLevelShading{t}, true, image, timings);
 }
 

@@ -27,9 +27,14 @@ struct TwoLevelShadingTables {
 
 // One frame: the fused passes (the shadow pass on b.side), the shading and the download of the
 // image (when not null), on b.stream; waits for it and returns its stats (b from
-// PassBufferSet::startFrame: the counters zeroed and event 0 recorded).
+// PassBufferSet::startFrame: the counters zeroed and event 0 recorded). blurred (not null: a blurred
+// frame, tables.scene its instant state at the close): every ray of a pixel traced at the pixel's
+// shutter time and the primary surface on the hit triangle where it is then, as the CPU renderer
+// renders a blurred two-level frame (TwoLevelRenderView::blurredSurface); the smooth normals of the
+// shading are the close's.
 RenderStats renderTwoLevelFrame(const PassBuffers& b, const Frame& f, const TwoLevelShadingTables& tables,
-                                uint64_t aoRays, uint64_t shadowRays, Image* image, GpuRenderTimings* timings);
+                                const BlurredTlasScene* blurred, uint64_t aoRays, uint64_t shadowRays, Image* image,
+                                GpuRenderTimings* timings);
 
 // The fused passes' surfaces (3 float4 per padded pixel) as one Surface per pixel, row-major.
 void launchUnpackSurfaces(const Frame& f, const float4* surfaces, Surface* out, cudaStream_t stream);

@@ -526,7 +526,9 @@ double GpuTwoLevelRuntime::time() const { return impl_->time; }
 uint64_t GpuTwoLevelRuntime::blasRefits() const { return impl_->refits; }
 const DeviceInfo& GpuTwoLevelRuntime::device() const { return impl_->device; }
 const TwoLevelScene& GpuTwoLevelRuntime::scene() const { return impl_->scene; }
-detail::TwoLevelTraceAccess GpuTwoLevelRuntime::traceAccess() const { return {impl_->tlasScene(), impl_->stream}; }
+detail::TwoLevelTraceAccess GpuTwoLevelRuntime::traceAccess() const {
+  return {impl_->tlasScene(), blurred() ? &blur_->scene() : nullptr, impl_->stream};
+}
 
 detail::TwoLevelBlurAccess GpuTwoLevelRuntime::blurAccess() {
   Impl& m = *impl_;

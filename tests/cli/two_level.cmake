@@ -126,14 +126,18 @@ tl_error(cli.two_level.error.cuda_tlas_rebuild 2 "--tlas rebuild builds a sweep-
          trace ${SCENE} ${W}/tl_auto.tbvh --device cuda --tlas rebuild --frames 1 --no-images)
 tl_error(cli.two_level.error.cuda_cwbvh 2 "[^\n]*tl_auto.tbvh holds a two-level scene: the GPU traces its BLAS and TLAS in the bvh2 layout"
          trace ${SCENE} ${W}/tl_auto.tbvh --device cuda --layout cwbvh --frames 1 --no-images)
-tl_error(cli.two_level.error.shutter 2 "[^\n]*tl_auto.tbvh holds a two-level scene: its motion blur \\(--shutter\\) is traced on the CPU \\(--device cpu\\), not with --device cuda"
-         trace ${SCENE} ${W}/tl_auto.tbvh --device cuda --shutter 0.5 --frames 2 --no-images)
 # End to end on the GPU: demo.json's frames traced and rendered on the device (skipped on a machine
 # without a GPU or a tsah without the GPU runtime).
 add_test(NAME cli.two_level.trace.cuda
          COMMAND tsah trace ${SCENE} ${W}/tl_auto.tbvh ${TL_TRACE} --device cuda --out ${W}/tl_img_cuda --json)
 set_tests_properties(cli.two_level.trace.cuda PROPERTIES FIXTURES_REQUIRED tl_tree
   PASS_REGULAR_EXPRESSION "\"structure\":\"two-level\".*\"timer\":\"CUDA events.*\"tlas_update\":\"refit\""
+  SKIP_REGULAR_EXPRESSION "no CUDA device found|GPU runtime is not built")
+# Motion blur on the GPU: blurred frames (keys per frame) rendered on the device.
+add_test(NAME cli.two_level.trace.cuda_shutter
+         COMMAND tsah trace ${SCENE} ${W}/tl_auto.tbvh ${TL_TRACE} --device cuda --shutter 0.5 --out ${W}/tl_img_cuda_shutter --json)
+set_tests_properties(cli.two_level.trace.cuda_shutter PROPERTIES FIXTURES_REQUIRED tl_tree
+  PASS_REGULAR_EXPRESSION "\"keys\":[2-9].*\"shutter\":\\{\"fraction\":0.5,\"mode\":\"centered\"\\}.*\"structure\":\"two-level\".*\"timer\":\"CUDA events \\(device time\\); updates: host wall time\""
   SKIP_REGULAR_EXPRESSION "no CUDA device found|GPU runtime is not built")
 # The TLAS built every frame on the GPU (LBVH), traced and rendered on the device; refused on the CPU.
 add_test(NAME cli.two_level.trace.cuda_tlas_lbvh

@@ -12,7 +12,10 @@
 // shading normal sums, per vertex of the hit triangle, the world-space face normals of the
 // vertex's triangles in the instance, in increasing triangle order, as the CPU renderer's world mesh
 // does. Surfaces name the triangle in bake order (the triangles of instance i after those of
-// instances 0..i-1), as the CPU renderer's do.
+// instances 0..i-1), as the CPU renderer's do. A blurred frame (GpuTwoLevelRuntime::updateShutter)
+// is rendered as the CPU renderer renders one: every ray at its pixel's shutter time, the primary
+// surface on the hit triangle at that time (the pose's key positions lerped, moved by the lerped key
+// matrices), the smooth normals of the close.
 #include <memory>
 #include <vector>
 
