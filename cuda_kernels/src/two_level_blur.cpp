@@ -3,6 +3,7 @@
 // the TLAS at every key, and the traces at each ray's time.
 #include <cuda_runtime_api.h>
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -26,6 +27,20 @@ std::vector<T> repeated(std::span<const T> one, std::size_t count) {
   out.reserve(one.size() * count);
   for (std::size_t i = 0; i < count; ++i) out.insert(out.end(), one.begin(), one.end());
   return out;
+}
+
+// dst[0, count * one.size()) = `count` copies of `one` (device memory), by copies on the device that
+// double the filled part: a blurred frame's items start from one state without a host copy of each.
+template <typename T>
+void broadcast(const DeviceBuffer<T>& one, T* dst, std::size_t count, cudaStream_t stream) {
+  const std::size_t n = one.size();
+  if (count == 0 || n == 0) return;
+  CUDA_CHECK(cudaMemcpyAsync(dst, one.data(), n * sizeof(T), cudaMemcpyDeviceToDevice, stream));
+  for (std::size_t filled = 1; filled < count;) {
+    const std::size_t more = std::min(filled, count - filled);
+    CUDA_CHECK(cudaMemcpyAsync(dst + filled * n, dst, more * n * sizeof(T), cudaMemcpyDeviceToDevice, stream));
+    filled += more;
+  }
 }
 
 template <typename T>
@@ -73,12 +88,18 @@ void TwoLevelBlur::buildPoses(const TwoLevelBlurAccess& access, const ShutterMot
     const auto members = uint32_t(moving.size());
     const uint32_t items = members * keys, interior = topology.interiorCount, slots = topology.triangleCount();
     // Every item starts as the BLAS's start state: the static vertices at rest (the interpolation
-    // rewrites the moving ones) and the nodes' child references (the refit rewrites the boxes).
-    const std::vector<float> start = a.positionsAt(a.startTime());
-    const uint64_t stride = start.size();
+    // rewrites the moving ones) and the nodes' child references (the refit rewrites the boxes),
+    // uploaded once per source.
     PoseKeys& g = poseKeys_[b];
-    uploadGrown(g.positions, repeated(std::span<const float>(start), items), stream);
-    uploadGrown(g.nodes, repeated(std::span<const GpuBvhNode>(topology.nodes), items), stream);
+    if (g.startPositions.size() == 0) {
+      g.startPositions = DeviceBuffer<float>(std::span<const float>(a.positionsAt(a.startTime())), stream);
+      g.startNodes = DeviceBuffer<GpuBvhNode>(std::span<const GpuBvhNode>(topology.nodes), stream);
+    }
+    const uint64_t stride = g.startPositions.size();
+    g.positions.reserve(std::size_t(items) * stride);
+    broadcast(g.startPositions, g.positions.data(), items, stream);
+    g.nodes.reserve(std::size_t(items) * interior);
+    broadcast(g.startNodes, g.nodes.data(), items, stream);
     g.counters.reserve(std::size_t(items) * interior);
     g.counters.fillBytes(0, stream);
     uploadGrown(g.roots, std::vector<RootInfo>(items, rootInfoOf(topology)), stream);

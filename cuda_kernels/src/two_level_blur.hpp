@@ -125,6 +125,8 @@ class TwoLevelBlur {
   // A source's moving poses, each refitted at every key in one batch (item j * keys + k: pose j at
   // key k), and their blurred layouts.
   struct PoseKeys {
+    DeviceBuffer<float> startPositions;    // the source at its start time (static vertices at rest)
+    DeviceBuffer<GpuBvhNode> startNodes;   // the topology's nodes (child references)
     DeviceBuffer<float> positions;
     DeviceBuffer<GpuBvhNode> nodes;
     DeviceBuffer<uint32_t> counters;
