@@ -84,18 +84,7 @@ struct RayArrays {
   }
 };
 
-class Stream {
- public:
-  Stream() { CUDA_CHECK(cudaStreamCreateWithFlags(&s_, cudaStreamNonBlocking)); }
-  ~Stream() { cudaStreamDestroy(s_); }
-  Stream(const Stream&) = delete;
-  Stream& operator=(const Stream&) = delete;
-  cudaStream_t get() const { return s_; }
-  void sync() const { CUDA_CHECK(cudaStreamSynchronize(s_)); }
-
- private:
-  cudaStream_t s_ = nullptr;
-};
+using Stream = tsah::test::CudaStream;
 
 // The traced tree of a runtime, bit for bit (binary: nodes and root box; cwbvh: compressed nodes),
 // and its Woop triangles.

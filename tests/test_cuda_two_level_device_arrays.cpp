@@ -30,18 +30,7 @@ namespace {
 namespace tc = tsah::cuda;
 using Runtime = tc::GpuTwoLevelRuntime;
 
-class Stream {
- public:
-  Stream() { CUDA_CHECK(cudaStreamCreateWithFlags(&s_, cudaStreamNonBlocking)); }
-  ~Stream() { cudaStreamDestroy(s_); }
-  Stream(const Stream&) = delete;
-  Stream& operator=(const Stream&) = delete;
-  cudaStream_t get() const { return s_; }
-  void sync() const { CUDA_CHECK(cudaStreamSynchronize(s_)); }
-
- private:
-  cudaStream_t s_ = nullptr;
-};
+using Stream = tsah::test::CudaStream;
 
 // Pinned host memory (what asynchronous copies need to be asynchronous).
 template <class T>

@@ -2,7 +2,8 @@
 //   tsah_two_level_gpu_bench SCENE.json [--tree TREE.tbvh | --save-tree TREE.tbvh [--build-only]]
 //                            [--frames 50] [--width 1024] [--height 768]
 //                            [--ao 4] [--k 2] [--build-frames 5] [--no-rebuild-reference]
-//                            [--global-refits] [--refit-part-leaves 512] [--flat-tree FLAT.tbvh] [--tlas refit|lbvh|hlbvh-sah|all]
+//                            [--global-refits] [--refit-part-leaves 512] [--no-phase-timings]
+//                            [--flat-tree FLAT.tbvh] [--tlas refit|lbvh|hlbvh-sah|all]
 // Builds the two-level structure (or loads a version 3 .tbvh built for the scene), then for each of
 // --frames times spread over the scene's time range: updateAt (upload of the instance transforms,
 // BLAS refits, TLAS refit: CUDA events), then primary rays (a camera fitted to the instances' boxes,
@@ -49,6 +50,7 @@ struct Options {
   bool buildOnly = false;  // build and save (--save-tree), no device needed
   bool blockRefits = true;  // GpuTwoLevelRuntime::Config::blockRefits
   uint32_t refitPartLeaves = tsah::cuda::GpuTwoLevelRuntime::Config{}.refitPartLeaves;
+  bool phaseTimings = true;  // GpuTwoLevelRuntime::Config::phaseTimings
   std::string tlas = "all";  // refit, lbvh, hlbvh-sah or all
 };
 
@@ -129,6 +131,7 @@ int run(const Options& opt) {
     tsah::cuda::GpuTwoLevelRuntime::Config config;
     config.blockRefits = opt.blockRefits;
     config.refitPartLeaves = opt.refitPartLeaves;
+    config.phaseTimings = opt.phaseTimings;
     config.tlas = update;
     TlasRun& r = runs.emplace_back();
     r.update = update;
@@ -230,6 +233,7 @@ int run(const Options& opt) {
   j["ao_per_hit"] = opt.ao;
   j["block_refits"] = opt.blockRefits;
   j["refit_part_leaves"] = opt.refitPartLeaves;
+  j["phase_timings"] = opt.phaseTimings;
   j["median"] = {{"upload_ms", median(upload)}, {"blas_refit_ms", median(blas)}, {"tlas_update_ms", median(tlas)},
                  {"update_ms", median(update)}, {"primary_ms", median(primaryMs)}, {"ao_ms", median(aoMs)},
                  {"tlas_rebuild_cpu_ms", median(rebuildMs)}, {"blas_refits", median(refits)}};
@@ -291,7 +295,12 @@ int main(int argc, char** argv) {
   app.add_option("--refit-part-leaves", opt.refitPartLeaves,
                  "Block refits: each pose's tree split into subtrees of at most this many leaves (default 512)")
       ->check(CLI::Range(2u, 1u << 30));
+  bool noPhaseTimings = false;
+  app.add_flag("--no-phase-timings", noPhaseTimings,
+               "Time the update by its start and end only (no event nodes between its phases in the graph: "
+               "upload_ms and tlas_update_ms 0, blas_refit_ms the whole update)");
   CLI11_PARSE(app, argc, argv);
+  opt.phaseTimings = !noPhaseTimings;
   opt.rebuildReference = !noRebuild;
   opt.blockRefits = !globalRefits;
   try {

@@ -353,7 +353,7 @@ void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
   if (uploadBytes > first)
     CUDA_CHECK(cudaMemcpyAsync(deviceUpload.data() + first, hostUpload + first, uploadBytes - first,
                                cudaMemcpyHostToDevice, stream));
-  events.record(1, stream);
+  if (config.phaseTimings) events.record(1, stream);
   if (refitPoses)
     for (PoseGroup& g : groups) {
       const Source& d = sources[g.source];
@@ -374,7 +374,7 @@ void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
       detail::launchBatchSlotWoop(d.slotVertices.data(), d.topology.triangleCount(), g.positions.data(),
                                   g.woop.data(), members, g.strides, stream);
     }
-  events.record(2, stream);
+  if (config.phaseTimings) events.record(2, stream);
   if (tlasRebuilder) {
     detail::launchInstanceBoxes(instances, views.data(), count, instanceBoxes.data(), stream);
     tlasRebuilder->enqueueBoxes(instanceBoxes.data(), tlasRebuild, stream);
@@ -471,9 +471,13 @@ TwoLevelUpdateTimings GpuTwoLevelRuntime::updateAt(double sceneTime) {
   CUDA_CHECK(cudaGraphLaunch(g.exec, m.stream));
   m.events.wait(3);
   TwoLevelUpdateTimings t;
-  t.uploadMs = m.events.ms(0, 1);
-  t.blasMs = m.events.ms(1, 2);
-  t.tlasMs = m.events.ms(2, 3);
+  if (m.config.phaseTimings) {
+    t.uploadMs = m.events.ms(0, 1);
+    t.blasMs = m.events.ms(1, 2);
+    t.tlasMs = m.events.ms(2, 3);
+  } else {
+    t.blasMs = m.events.ms(0, 3);
+  }
   t.blasRefits = posesMove ? uint32_t(scene.poses.size()) : 0u;
   t.instances = scene.instanceCount();
   t.tlasNodes = m.tlasTopology.interiorCount;

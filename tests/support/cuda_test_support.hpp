@@ -1,7 +1,8 @@
 #pragma once
 // What every CUDA test program needs (include only where TSAH_HAVE_CUDA): skipping without a
-// device, the short mode of the sanitizer runs, runtime configurations, and the comparison of the
+// device, the short mode of the sanitizer runs, a stream of the test's own, runtime configurations, and the comparison of the
 // compressed-layout GPU hits with the host reference and the binary layout.
+#include <cuda_runtime_api.h>
 #include <gtest/gtest.h>
 
 #include <cstdlib>
@@ -11,6 +12,7 @@
 #include <vector>
 
 #include "tsah/layout/cwbvh_build.hpp"
+#include "tsah_cuda/cuda_check.hpp"
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 #include "test_support.hpp"
@@ -27,6 +29,20 @@ inline bool shortCudaRun() {
   const char* value = std::getenv("TSAH_CUDA_TESTS");
   return value && std::string(value) == "short";
 }
+
+// A non-blocking CUDA stream of the test's own (a caller's stream for the device-array entry points).
+class CudaStream {
+ public:
+  CudaStream() { CUDA_CHECK(cudaStreamCreateWithFlags(&s_, cudaStreamNonBlocking)); }
+  ~CudaStream() { cudaStreamDestroy(s_); }
+  CudaStream(const CudaStream&) = delete;
+  CudaStream& operator=(const CudaStream&) = delete;
+  cudaStream_t get() const { return s_; }
+  void sync() const { CUDA_CHECK(cudaStreamSynchronize(s_)); }
+
+ private:
+  cudaStream_t s_ = nullptr;
+};
 
 inline cuda::GpuRuntime::Config gpuConfig(tsah::Layout layout, bool graphs = true) {
   cuda::GpuRuntime::Config c;

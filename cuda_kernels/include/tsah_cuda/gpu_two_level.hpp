@@ -69,6 +69,10 @@ class GpuTwoLevelRuntime {
     bool blockRefits = true;
     uint32_t refitPartLeaves = 512;
     TlasUpdate tlas = TlasUpdate::Refit;  // how each update brings the TLAS to the frame (above)
+    // Time the update's phases (TwoLevelUpdateTimings' upload, BLAS and TLAS parts) by events
+    // inside the frame's graph; false: only its start and end (two nodes fewer in the graph; the
+    // whole update is then blasMs, uploadMs and tlasMs 0).
+    bool phaseTimings = true;
   };
 
   // Keeps a reference to `scene` (it must outlive the runtime) and runs updateAt(first frame time).
