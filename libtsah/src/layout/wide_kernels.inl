@@ -137,7 +137,7 @@ inline bool intersectLeaf(const WideView<V::N>& bvh, const Ray& ray, LazyPrep& p
     }
     for (; fallback; fallback &= fallback - 1) {  // near an edge, or grazing: the watertight test decides
       const uint32_t slot = pk.slot[__builtin_ctz(fallback)];
-      const uint32_t* tri = bvh.indices + 3 * std::size_t(bvh.triIndex[slot]);
+      const uint32_t* tri = bvh.slotVertices + 3 * std::size_t(slot);  // no triIndex load before the vertices
       float t, u, v;
       if (intersectWatertight(prep.watertight(ray), bvh.vertex(tri[0]), bvh.vertex(tri[1]), bvh.vertex(tri[2]),
                               ray.tmin, tmax, t, u, v)) {
