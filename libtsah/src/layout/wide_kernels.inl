@@ -75,7 +75,9 @@ inline V absDotRow(const V p[3], const WoopPacket<N>& pk, int r) {
 }
 
 // The triangles of one leaf (packets [first, first + packetCount(count))). Returns true when one
-// was hit; for closest hit tmax shrinks to it.
+// was hit; for closest hit tmax shrinks to it. hit.tri is the hit's slot, not its triangle: any hit
+// only asks whether something was hit, and closest hit maps the final slot once (traverseTriangles).
+// Looking the triangle up at every hit was one more dependent load, a cache miss on large trees.
 template <class V, bool AnyHit>
 inline bool intersectLeaf(const WideView<V::N>& bvh, const Ray& ray, LazyPrep& prep, const RayLanes<V>& r,
                           uint32_t first, uint32_t count, float& tmax, Hit& hit) {
@@ -117,7 +119,7 @@ inline bool intersectLeaf(const WideView<V::N>& bvh, const Ray& ray, LazyPrep& p
       if (AnyHit) {
         const uint32_t lane = uint32_t(__builtin_ctz(hits));
         hit.t = 0.0f;
-        hit.tri = bvh.triIndex[pk.slot[lane]];
+        hit.tri = pk.slot[lane];
         return true;
       }
       alignas(32) float t[N], u[N], v[N];
@@ -130,17 +132,17 @@ inline bool intersectLeaf(const WideView<V::N>& bvh, const Ray& ray, LazyPrep& p
         if (t[lane] < t[best]) best = lane;
       }
       tmax = t[best];
-      hit = {t[best], u[best], v[best], bvh.triIndex[pk.slot[best]]};
+      hit = {t[best], u[best], v[best], pk.slot[best]};
       found = true;
     }
     for (; fallback; fallback &= fallback - 1) {  // near an edge, or grazing: the watertight test decides
       const uint32_t slot = pk.slot[__builtin_ctz(fallback)];
-      const uint32_t* tri = bvh.indices + 3 * std::size_t(bvh.triIndex[slot]);
+      const uint32_t* tri = bvh.slotVertices + 3 * std::size_t(slot);  // no triIndex load before the vertices
       float t, u, v;
       if (intersectWatertight(prep.watertight(ray), bvh.vertex(tri[0]), bvh.vertex(tri[1]), bvh.vertex(tri[2]),
                               ray.tmin, tmax, t, u, v)) {
         tmax = t;
-        hit = {t, u, v, bvh.triIndex[slot]};
+        hit = {t, u, v, slot};
         found = true;
         if (AnyHit) return true;
       }
@@ -154,7 +156,7 @@ inline bool intersectLeaf(const WideView<V::N>& bvh, const Ray& ray, LazyPrep& p
 // lane by lane. A lane whose U, V or W is not clearly nonzero in float takes the scalar test (its
 // edge decision in double) on the same lerped vertices. Of the lanes that hit, the nearest wins
 // and the first lane among equal distances: what testing the slots one by one, each against the
-// nearest hit so far, returns.
+// nearest hit so far, returns. hit.tri is the hit's slot, as in intersectLeaf.
 template <class V, bool AnyHit>
 inline bool intersectMotionLeaf(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, const Ray& ray,
                                 LazyPrep& lazy, const RayLanes<V>& r, uint32_t first, uint32_t count, float& tmax,
@@ -200,7 +202,7 @@ inline bool intersectMotionLeaf(const WideView<V::N>& bvh, const WideMotionFrame
     if (!(hits | fallback)) continue;
     if (AnyHit && hits) {
       hit.t = 0.0f;
-      hit.tri = bvh.triIndex[bvh.packets[first + p].slot[__builtin_ctz(hits)]];
+      hit.tri = bvh.packets[first + p].slot[__builtin_ctz(hits)];
       return true;
     }
     alignas(32) float t[N], u[N], v[N];
@@ -213,7 +215,7 @@ inline bool intersectMotionLeaf(const WideView<V::N>& bvh, const WideMotionFrame
       if (intersectWatertight(prep, vertex(0), vertex(1), vertex(2), ray.tmin, tmax, t[lane], u[lane], v[lane])) {
         if (AnyHit) {
           hit.t = 0.0f;
-          hit.tri = bvh.triIndex[bvh.packets[first + p].slot[lane]];
+          hit.tri = bvh.packets[first + p].slot[lane];
           return true;
         }
         hits |= 1u << lane;
@@ -226,7 +228,7 @@ inline bool intersectMotionLeaf(const WideView<V::N>& bvh, const WideMotionFrame
       if (t[lane] < t[best]) best = lane;
     }
     tmax = t[best];
-    hit = {t[best], u[best], v[best], bvh.triIndex[bvh.packets[first + p].slot[best]]};
+    hit = {t[best], u[best], v[best], bvh.packets[first + p].slot[best]};
     found = true;
   }
   return found;
@@ -491,11 +493,13 @@ TSAH_KERNEL void keyVerticesKernel(const float* positions, const uint32_t* verti
   bounds = packetBounds<N, F, I>(f);
 }
 
-// The triangle traversals: the leaf tests of the instant frame or of a blurred one.
+// The triangle traversals: the leaf tests of the instant frame or of a blurred one. The leaf tests
+// report slots; a closest hit's slot becomes its triangle here (an any hit's is only tested for
+// validity by the entry points).
 template <class V, Query Q, bool Blurred>
 inline Hit traverseTriangles(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, const Ray& ray) {
   constexpr bool AnyHit = Q != Query::Closest;
-  return traverse<V, Q, Blurred>(bvh, m, ray,
+  Hit found = traverse<V, Q, Blurred>(bvh, m, ray,
                                  [&](LazyPrep& prep, const RayLanes<V>& r, uint32_t first, uint32_t count, float& tmax,
                                      Hit& hit) {
                                    if constexpr (Blurred)
@@ -504,6 +508,8 @@ inline Hit traverseTriangles(const WideView<V::N>& bvh, const WideMotionFrame<V:
                                      return intersectLeaf<V, AnyHit>(bvh, ray, prep, r, first, count, tmax, hit);
                                  },
                                  Blurred && Q == Query::Closest ? &m.rootBounds : nullptr);  // the segment's root box
+  if (!AnyHit && found.valid()) found.tri = bvh.triIndex[found.tri];
+  return found;
 }
 
 template <class V>

@@ -218,6 +218,7 @@ WideView<N> WideTree<N>::view(const uint32_t* indices, const float* positions) c
   v.packets = packets_.data();
   v.triIndex = triIndex_.data();
   v.indices = indices;
+  v.slotVertices = slotVertices_.data();
   v.positions = positions;
   v.rootRef = rootRef_;
   v.rootCount = rootCount_;

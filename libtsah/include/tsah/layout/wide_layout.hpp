@@ -114,6 +114,8 @@ struct WideView {
   const WoopPacket<N>* packets = nullptr;
   const uint32_t* triIndex = nullptr;     // slot -> triangle id
   const uint32_t* indices = nullptr;      // 3 vertex indices per triangle id
+  const uint32_t* slotVertices = nullptr; // 3 vertex indices per slot (those of triIndex[slot]): the
+                                          // watertight fallback reads them without the triIndex load
   const float* positions = nullptr;       // xyz per vertex, this frame
   int32_t rootRef = makeLeafRef(0);
   uint32_t rootCount = 0;                 // triangles of a leaf root
