@@ -5,16 +5,19 @@
          with CUDA events on the stream) against the traversal kernel's device time of the same rays
          given as numpy arrays (GpuRuntime.last_ray_pass); target: rate ratio >= 0.9.
   refit: GpuRuntime.refit(tensor of vertices) (the check, the guarded copy, refit and Woop: one
-         captured graph; timed with CUDA events on the caller's stream around the call) against the
-         runtime's own update from the animation (refit(time): GpuRuntime.last_update total_ms),
-         both check modes: wait=False (no host wait; a refused frame is raised by the next refit or
-         check()) on torch's current stream is the one held to the target, time ratio <= 1.2;
-         wait=True (the default: the call waits for the check's answer) and wait=False on a stream
-         of the caller's own are reported beside it, with the call's host time and what reading the
-         tensor's __cuda_array_interface__ costs (the module reads a plain tensor without it).
-         Also: 50 refits queued between two events (the device's cost per refit once calls
-         overlap), and the event harness itself: an empty call's window (the events' own host
-         time, device idle) and refit(time) against refit(tensor) both timed by it.
+         captured graph) against the runtime's own update from the animation (refit(time)). Held to
+         the target (time ratio <= 1.2), each measure timed the same way for both calls:
+         - one call between two CUDA events on torch's current stream: refit(tensor, wait=False)
+           (no host wait; a refused frame is raised by the next refit or check()) against
+           refit(time) (event_harness_ms.tensor_over_time);
+         - the device's cost per call once calls overlap: 50 refit(tensor, wait=False) queued
+           between two events against refit(time)'s own device time (GpuRuntime.last_update
+           total_ms) (queued_ratio).
+         Reported beside them: the single call's window against refit(time)'s device time (no_wait,
+         wait and own-stream time_ratio), which also holds the events' own host time as device idle
+         (an empty call's window, event_harness_ms.empty_call), the calls' host times and what
+         reading the tensor's __cuda_array_interface__ costs (the module reads a plain tensor
+         without it).
   cpu:   CpuRuntime(layout="bvh8").trace from Python (wall time, numpy in and out) against the best
          C++ batch on the same rays (python/bench/cpu_batch.py); target: rate ratio >= 0.9.
          --cpu-only: this part alone (no GPU needed).
@@ -124,8 +127,9 @@ def bench_refit(torch, gpu, animation, runs):
     gpu.check()
     result["no_wait_own_stream"] = {"call": "refit(tensor, stream=own, wait=False)", "tensor_ms": tensor_ms,
                                     "time_ratio": tensor_ms / update_ms}
-    ratio = result["no_wait"]["time_ratio"]
-    result.update({"target": "refit(tensor, wait=False) <= 1.2 x refit(time)", "met": ratio <= 1.2})
+    held = {"one_call_same_events": harness["tensor_over_time"], "queued_device": result["queued_ratio"]}
+    result.update({"target": "refit(tensor, wait=False) <= 1.2 x refit(time), both timed alike", "held_ratios": held,
+                   "met": all(r <= 1.2 for r in held.values())})
     return result
 
 
