@@ -69,10 +69,9 @@ class CpuFrameRuntime final : public FrameRuntime {
     if (shutter_.fraction > 0.0) {
       // Interpolation and the refit at every key (tsah::updateShutter does both).
       const auto [open, close] = shutterInterval(animation_, time, frameInterval_, shutter_);
-      runtime_.selectTreeAt(time);
-      updateShutter(runtime_, animation_, open, close);
+      updateShutter(runtime_, animation_, open, close);  // a tree set: each ray's tree by its time
       u.refitMs = msSince(start);
-      u.keys = runtime_.blurred() ? uint32_t(runtime_.keyTimes().size()) : 1u;
+      u.keys = runtime_.blurred() ? runtime_.shutterKeyCount() : 1u;
     } else if (builder_) {
       interpolate(time, u);
       const CpuRuntime::RebuildTimings t = runtime_.rebuild(positions_, builder_);

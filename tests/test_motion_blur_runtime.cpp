@@ -39,26 +39,9 @@ Scene makeScene(anim::GeneratorKind kind, uint32_t triangles) {
   return s;
 }
 
-// A layout and, for the wide ones, the kernels' instruction set.
-struct Case {
-  tsah::Layout layout = tsah::Layout::Bvh2;
-  tsah::SimdIsa isa = tsah::SimdIsa::Sse;
-};
-
-// bvh2, and bvh4 / bvh8 with every instruction set this machine runs.
-std::vector<Case> cases() {
-  std::vector<Case> all{{tsah::Layout::Bvh2, tsah::SimdIsa::Sse}};
-  for (tsah::SimdIsa isa : {tsah::SimdIsa::Sse, tsah::SimdIsa::Avx2, tsah::SimdIsa::Avx512}) {
-    if (!tsah::isaSupported(isa)) continue;
-    all.push_back({tsah::Layout::Bvh4, isa});
-    if (isa != tsah::SimdIsa::Sse) all.push_back({tsah::Layout::Bvh8, isa});
-  }
-  return all;
-}
-
-std::string describe(const Case& c) {
-  return std::string(tsah::name(c.layout)) + (c.layout == tsah::Layout::Bvh2 ? "" : std::string(" ") + tsah::name(c.isa));
-}
+using Case = tsah::test::LayoutCase;
+using tsah::test::describe;
+std::vector<Case> cases() { return tsah::test::layoutCases(); }
 
 std::unique_ptr<CpuRuntime> makeRuntime(const Scene& s, Case c = {}) {
   CpuRuntime::Config config(2);
@@ -81,38 +64,15 @@ std::vector<Ray> raysFor(const CpuRuntime& rt, uint32_t count, uint32_t seed) {
 }
 
 // The triangles of a shutter at a time: the animation's positions at the shutter's keys, lerped.
-struct ShutterGeometry {
-  std::vector<float> fractions;
-  std::vector<std::vector<float>> positions;
+struct ShutterGeometry : tsah::test::KeyedGeometry {
   ShutterGeometry(const anim::Animation& a, double open, double close) {
     const std::vector<double> keys = tsah::motion::shutterKeys(a.times(), open, close);
     fractions = tsah::motion::keyFractions(keys);
     for (double t : keys) positions.push_back(a.positionsAt(t));
   }
-  Vec3 vertex(uint32_t i, float time) const {
-    const tsah::motion::Segment seg = tsah::motion::segmentAt(fractions.data(), int(fractions.size()), time);
-    const float* p0 = positions[seg.index].data() + 3 * std::size_t(i);
-    const float* p1 = positions[seg.index + 1].data() + 3 * std::size_t(i);
-    return tsah::motion::lerpVertex({p0[0], p0[1], p0[2]}, {p1[0], p1[1], p1[2]}, seg.f);
-  }
 };
 
-// The nearest hit of the triangles lerped at the ray's time (brute force).
-Hit bruteForce(const CpuRuntime& rt, const ShutterGeometry& g, float time, const Ray& ray) {
-  const tsah::RayPrep prep = tsah::prepareRay(ray);
-  Hit best;
-  float tmax = ray.tmax;
-  const auto idx = rt.indices();
-  for (uint32_t tri = 0; tri < rt.triangleCount(); ++tri) {
-    float t, u, v;
-    if (tsah::intersectWatertight(prep, g.vertex(idx[3 * tri], time), g.vertex(idx[3 * tri + 1], time),
-                                  g.vertex(idx[3 * tri + 2], time), ray.tmin, tmax, t, u, v)) {
-      best = Hit{t, u, v, tri};
-      tmax = t;
-    }
-  }
-  return best;
-}
+using tsah::test::bruteForce;
 
 // A blurred scene spanning several keyframes, with the shutter opening and closing between them.
 struct Blurred {

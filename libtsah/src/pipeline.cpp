@@ -425,14 +425,52 @@ std::pair<double, double> shutterInterval(double start, double end, double time,
   return {open, close};
 }
 
-void updateShutter(CpuRuntime& runtime, const anim::Animation& animation, double open, double close) {
-  const std::vector<double> keys = motion::shutterKeys(animation.times(), open, close);
+std::vector<ShutterStretch> shutterStretches(std::span<const double> keyframeTimes, double open, double close,
+                                             std::span<const TimeRange> ranges) {
+  const std::vector<double> keys = motion::shutterKeys(keyframeTimes, open, close);
   const std::vector<float> fractions = motion::keyFractions(keys);
+  const auto treeAt = [&](double t) { return ranges.size() > 1 ? treeIndexAt(ranges, t) : 0u; };
+  std::vector<ShutterStretch> out{{treeAt(open), {}, {}}};
+  std::size_t k = 0;
+  const auto takeKeysBelow = [&](float fraction) {
+    for (; k < keys.size() && fractions[k] < fraction; ++k) {
+      out.back().keys.push_back(keys[k]);
+      out.back().fractions.push_back(fractions[k]);
+    }
+  };
+  float previousCut = 0.0f;
+  for (uint32_t s = 0; keys.size() > 1 && s + 1 < ranges.size(); ++s) {
+    const double cut = switchTime(ranges, s);
+    if (!(cut > open && cut < close)) continue;
+    const auto fraction = static_cast<float>((cut - open) / (close - open));  // keyFractions' value
+    if (!(fraction > previousCut && fraction < 1.0f)) continue;
+    takeKeysBelow(fraction);
+    if (k < keys.size() && fractions[k] == fraction) ++k;  // a keyframe at the cut's fraction: the cut is the key
+    out.back().keys.push_back(cut);
+    out.back().fractions.push_back(fraction);
+    out.push_back({treeAt(cut), {cut}, {fraction}});
+    previousCut = fraction;
+  }
+  takeKeysBelow(std::numeric_limits<float>::infinity());
+  return out;
+}
+
+void updateShutter(CpuRuntime& runtime, const anim::Animation& animation, double open, double close) {
+  const std::vector<ShutterStretch> stretches = shutterStretches(animation.times(), open, close, runtime.treeRanges());
+  // The positions at every key, a cut's computed once: the key that ends a stretch starts the next.
   std::vector<std::vector<float>> positions;
-  positions.reserve(keys.size());
-  for (double t : keys) positions.push_back(animation.positionsAt(t));
-  const std::vector<std::span<const float>> spans(positions.begin(), positions.end());
-  runtime.updateShutter(fractions, spans);
+  std::vector<std::vector<std::span<const float>>> spans(stretches.size());
+  std::vector<CpuRuntime::ShutterPart> parts;
+  for (const ShutterStretch& stretch : stretches)
+    for (std::size_t k = &stretch == &stretches.front() ? 0 : 1; k < stretch.keys.size(); ++k)
+      positions.push_back(animation.positionsAt(stretch.keys[k]));
+  std::size_t next = 0;
+  for (std::size_t p = 0; p < stretches.size(); ++p) {
+    for (std::size_t k = 0; k < stretches[p].keys.size(); ++k)
+      spans[p].push_back(p > 0 && k == 0 ? spans[p - 1].back() : std::span<const float>(positions[next++]));
+    parts.push_back({stretches[p].tree, stretches[p].fractions, spans[p]});
+  }
+  runtime.updateShutter(parts);
 }
 
 }  // namespace tsah

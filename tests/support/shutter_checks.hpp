@@ -1,15 +1,69 @@
 #pragma once
-// The blurred-frame checks shared by the motion-blur and moving-refit tests: every key set of two
-// CPU runtimes compared bit for bit.
+// The blurred-frame checks shared by the motion-blur and moving-refit tests: the layouts to run
+// them in, the triangles of a blurred frame at a time and its brute-force hit, and every key set of
+// two CPU runtimes compared bit for bit.
 #include <gtest/gtest.h>
 
 #include <cstring>
 #include <span>
 #include <string>
+#include <vector>
 
+#include "tsah/layout/motion_blur.hpp"
+#include "tsah/layout/woop.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
 
 namespace tsah::test {
+
+// A layout and, for the wide ones, the kernels' instruction set.
+struct LayoutCase {
+  Layout layout = Layout::Bvh2;
+  SimdIsa isa = SimdIsa::Sse;
+};
+
+// bvh2, and bvh4 / bvh8 with every instruction set this machine runs.
+inline std::vector<LayoutCase> layoutCases() {
+  std::vector<LayoutCase> all{{Layout::Bvh2, SimdIsa::Sse}};
+  for (SimdIsa isa : {SimdIsa::Sse, SimdIsa::Avx2, SimdIsa::Avx512}) {
+    if (!isaSupported(isa)) continue;
+    all.push_back({Layout::Bvh4, isa});
+    if (isa != SimdIsa::Sse) all.push_back({Layout::Bvh8, isa});
+  }
+  return all;
+}
+
+inline std::string describe(const LayoutCase& c) {
+  return std::string(name(c.layout)) + (c.layout == Layout::Bvh2 ? "" : std::string(" ") + name(c.isa));
+}
+
+// The triangles of a blurred frame at a time: positions at its keys (shutter fractions), lerped.
+struct KeyedGeometry {
+  std::vector<float> fractions;
+  std::vector<std::vector<float>> positions;
+  Vec3 vertex(uint32_t i, float time) const {
+    const motion::Segment seg = motion::segmentAt(fractions.data(), int(fractions.size()), time);
+    const float* p0 = positions[seg.index].data() + 3 * std::size_t(i);
+    const float* p1 = positions[seg.index + 1].data() + 3 * std::size_t(i);
+    return motion::lerpVertex({p0[0], p0[1], p0[2]}, {p1[0], p1[1], p1[2]}, seg.f);
+  }
+};
+
+// The nearest hit of the runtime's triangles lerped at the ray's time (brute force).
+inline Hit bruteForce(const CpuRuntime& rt, const KeyedGeometry& g, float time, const Ray& ray) {
+  const RayPrep prep = prepareRay(ray);
+  Hit best;
+  float tmax = ray.tmax;
+  const auto idx = rt.indices();
+  for (uint32_t tri = 0; tri < rt.triangleCount(); ++tri) {
+    float t, u, v;
+    if (intersectWatertight(prep, g.vertex(idx[3 * tri], time), g.vertex(idx[3 * tri + 1], time),
+                            g.vertex(idx[3 * tri + 2], time), ray.tmin, tmax, t, u, v)) {
+      best = Hit{t, u, v, tri};
+      tmax = t;
+    }
+  }
+  return best;
+}
 
 // Every key set of a blurred runtime, its positions and bounds (the last key's), bit for bit.
 inline void expectSameShutter(const CpuRuntime& a, const CpuRuntime& b) {

@@ -214,8 +214,23 @@ std::pair<double, double> shutterInterval(const anim::Animation& animation, doub
 // The same clamped to [start, end] (a scene's time range: SceneSources::start, end).
 std::pair<double, double> shutterInterval(double start, double end, double time, double interval,
                                           const Shutter& shutter);
+// The shutter [open, close] cut where a tree set hands over (switchTime strictly inside it, with a
+// shutter fraction strictly between 0, the previous cut and 1 in float): per stretch its tree
+// (treeIndexAt of its start: rays in [open, switch) take the tree before the switch, from the
+// switch on the one after), its key times (the stretch's ends and motion::shutterKeys' keys inside
+// it; a keyframe whose fraction equals a cut's is left out: the cut is that key) and their
+// fractions of the whole shutter (CpuRuntime::ShutterPart's key times). ranges empty or one: one
+// stretch of tree 0. open == close: one key.
+struct ShutterStretch {
+  uint32_t tree = 0;
+  std::vector<double> keys;
+  std::vector<float> fractions;
+};
+std::vector<ShutterStretch> shutterStretches(std::span<const double> keyframeTimes, double open, double close,
+                                             std::span<const TimeRange> ranges);
 // Refits the runtime over [open, close] of the animation: the positions at every key of
-// motion::shutterKeys (update() when open == close).
+// motion::shutterKeys (update() when open == close); a tree set by the tree of each ray's time, one
+// part per shutterStretches' stretch.
 void updateShutter(CpuRuntime& runtime, const anim::Animation& animation, double open, double close);
 
 }  // namespace tsah

@@ -182,14 +182,19 @@ uint32_t CpuRuntime::selectTreeAt(double time) {
   const uint32_t index = treeIndexAt(setRanges_, time);
   if (index != current_) {
     clearShutter();
-    setTree(setTrees_[index]);
-    if (!setWide4_.empty()) {
-      wide4_ = setWide4_[index];
-      wide8_ = setWide8_[index];
-    }
-    current_ = index;
+    switchTree(index);
   }
   return index;
+}
+
+void CpuRuntime::switchTree(uint32_t index) {
+  if (index == current_ || setTrees_.empty()) return;
+  setTree(setTrees_[index]);
+  if (!setWide4_.empty()) {
+    wide4_ = setWide4_[index];
+    wide8_ = setWide8_[index];
+  }
+  current_ = index;
 }
 
 CpuRuntime::~CpuRuntime() = default;
@@ -418,7 +423,7 @@ BvhView CpuRuntime::binaryView() const {
 }
 
 Aabb CpuRuntime::bounds() const {
-  if (blurred()) return keyRootBoxes_.back();
+  if (blurred()) return parts_.back().keyRootBoxes.back();
   if (wide4_) return wide4_->bounds();
   if (wide8_) return wide8_->bounds();
   return tree_.rootBoxes[0];

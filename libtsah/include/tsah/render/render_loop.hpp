@@ -4,7 +4,7 @@
 // closestHit(ray) -> Hit (tri: the triangle's id in indices()), anyHit(ray, order) -> bool,
 // parallelFor(n, grain, body), and the frame's mesh for shading: indices(), positions(),
 // triangleCount(), vertexCount(). Scenes with blurred() also trace blurred frames (closestHit(ray,
-// time), anyHit(ray, time, order)), and give the surface of a blurred hit through motionView() (a
+// time), anyHit(ray, time, order)), and give the surface of a blurred hit through motionViewAt(time) (a
 // CpuRuntime: blurredPrimarySurface) or blurredSurface(ray, hit, time, lighting) (a two-level view).
 #include <atomic>
 #include <chrono>
@@ -83,8 +83,8 @@ bool anyHitAt(const Scene& runtime, bool blurred, const Ray& ray, float time, An
 // The surface a blurred frame's primary hit at `time` finds: the hit triangle where it is then.
 template <class Scene>
 Surface blurredSurfaceOf(const Scene& runtime, const Ray& ray, const Hit& hit, float time, const SceneLighting& l) {
-  if constexpr (requires(const Scene& s) { s.motionView(); })
-    return blurredPrimarySurface(ray, hit, runtime.motionView(), time, l);
+  if constexpr (requires(const Scene& s) { s.motionViewAt(0.0f); })
+    return blurredPrimarySurface(ray, hit, runtime.motionViewAt(time), time, l);
   else
     return runtime.blurredSurface(ray, hit, time, l);
 }

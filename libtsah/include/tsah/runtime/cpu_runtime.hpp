@@ -131,31 +131,62 @@ class CpuRuntime {
   // trace at time 1 (the last key), and the instant triangles (woop(), the wide trees' packet
   // rows) and binary tree (tree(), view()) are not kept up to date (a blurred frame reads none).
   void updateShutter(std::span<const float> keyTimes, std::span<const std::span<const float>> keyPositions);
+  // A tree set's blurred frame whose shutter crosses switch times (tsah::switchTime): one part per
+  // stretch of the shutter, each refitted with its own tree at its own keys, so that every ray is
+  // traced by the tree of its time. Key times are fractions of the whole shutter: the first part's
+  // first is 0, the last part's last 1, and each part starts at its predecessor's last key (the
+  // switch; both parts refit the positions there). A ray at time t takes the last part starting at
+  // or before t. keysRefitted(), the reuse of the previous frame's keys (per tree), the errors and
+  // the unchanged runtime on an error are as above; the last part's tree becomes the current one.
+  // Throws tsah::ConfigError for no parts, a part of fewer than two keys (when there are several),
+  // parts that do not meet, a tree index past the set or a tree repeated.
+  struct ShutterPart {
+    uint32_t tree = 0;
+    std::span<const float> keyTimes;
+    std::span<const std::span<const float>> keyPositions;
+  };
+  void updateShutter(std::span<const ShutterPart> parts);
   // True after updateShutter with two keys or more (until update()).
-  bool blurred() const { return !keyTimes_.empty(); }
+  bool blurred() const { return !parts_.empty(); }
+  // The parts of the blurred frame (1 unless a tree set's shutter crossed a switch; 0 when not
+  // blurred) and each one's tree; all parts' keys (a switch counted in both parts); the time
+  // ranges of a set's trees (empty for a single tree).
+  uint32_t shutterPartCount() const { return static_cast<uint32_t>(parts_.size()); }
+  uint32_t shutterPartTree(std::size_t part) const { return parts_.at(part).tree; }
+  uint32_t shutterKeyCount() const;
+  std::span<const TimeRange> treeRanges() const { return setRanges_; }
   // How many keys the last updateShutter refitted (the others were reused); 0 when not blurred.
   uint32_t keysRefitted() const { return keysRefitted_; }
   // How many of those refitted only the moving nodes (Config::movingVertices).
   uint32_t keysRefittedMovingOnly() const { return keysRefittedMovingOnly_; }
-  std::span<const float> keyTimes() const { return keyTimes_; }
+  // Key times of a part (shutter fractions; empty when not blurred or past the parts).
+  std::span<const float> keyTimes(std::size_t part = 0) const {
+    return part < parts_.size() ? std::span<const float>(parts_[part].keyTimes) : std::span<const float>();
+  }
   // Nearest hit / any hit at the ray's time, a shutter fraction in [0, 1] (outside: the nearer end).
   // Not blurred: closestHit(ray) / anyHit(ray, order).
   Hit closestHit(const Ray& ray, float time) const;
   bool anyHit(const Ray& ray, float time, AnyHitOrder order = AnyHitOrder::FarthestFirst) const;
-  // The blurred frame (valid while blurred()): key times, positions, root boxes and triangles in
-  // every layout; the binary key nodes (keyNodes) in bvh2 only, null in the wide layouts, which keep
-  // their own node set per key and trace through closestHit / anyHit(ray, time).
-  const MotionBvhView& motionView() const { return motionView_; }
-  // The wide layouts' blurred sets of key k < keyTimes().size(): its nodes (in wide4()/wide8()->nodes()'s
-  // order) and its triangles, one KeyVertexPacket per Woop packet (empty when not blurred, k is
-  // past the keys, or in another layout).
-  std::span<const WideSoaNode<4>> keyWideNodes4(std::size_t k) const { return wideKeyPart(keyWide4_, k, &WideKey<4>::nodes); }
-  std::span<const WideSoaNode<8>> keyWideNodes8(std::size_t k) const { return wideKeyPart(keyWide8_, k, &WideKey<8>::nodes); }
-  std::span<const KeyVertexPacket<4>> keyVertexPackets4(std::size_t k) const {
-    return wideKeyPart(keyWide4_, k, &WideKey<4>::vertices);
+  // A part of the blurred frame (valid while blurred(), part < shutterPartCount()): key times,
+  // positions, root boxes and triangles in every layout; the binary key nodes (keyNodes) in bvh2
+  // only, null in the wide layouts, which keep their own node set per key and trace through
+  // closestHit / anyHit(ray, time). motionViewAt: the part that traces a ray at time t.
+  const MotionBvhView& motionView(std::size_t part = 0) const;
+  const MotionBvhView& motionViewAt(float time) const { return motionView(partAt(time)); }
+  // The wide layouts' blurred sets of key k < keyTimes(part).size(): its nodes (in the part's
+  // tree's wide4()/wide8()->nodes() order) and its triangles, one KeyVertexPacket per Woop packet
+  // (empty when not blurred, k or part is past the keys, or in another layout).
+  std::span<const WideSoaNode<4>> keyWideNodes4(std::size_t k, std::size_t part = 0) const {
+    return wideKeyPart(&BlurredPart::wide4, part, k, &WideKey<4>::nodes);
   }
-  std::span<const KeyVertexPacket<8>> keyVertexPackets8(std::size_t k) const {
-    return wideKeyPart(keyWide8_, k, &WideKey<8>::vertices);
+  std::span<const WideSoaNode<8>> keyWideNodes8(std::size_t k, std::size_t part = 0) const {
+    return wideKeyPart(&BlurredPart::wide8, part, k, &WideKey<8>::nodes);
+  }
+  std::span<const KeyVertexPacket<4>> keyVertexPackets4(std::size_t k, std::size_t part = 0) const {
+    return wideKeyPart(&BlurredPart::wide4, part, k, &WideKey<4>::vertices);
+  }
+  std::span<const KeyVertexPacket<8>> keyVertexPackets8(std::size_t k, std::size_t part = 0) const {
+    return wideKeyPart(&BlurredPart::wide8, part, k, &WideKey<8>::vertices);
   }
 
   const LayoutInfo& layoutInfo() const { return info_; }
@@ -188,6 +219,7 @@ class CpuRuntime {
   // movingOnly: the nodes of the moving plan only (Config::movingVertices, after a full refit).
   void refitAndWoop(bool movingOnly = false);
   void clearShutter();
+  void switchTree(uint32_t index);  // the set's tree `index` becomes the current one (the shutter stays)
   void refitNode(uint32_t node);
   Aabb refitLeaf(uint32_t firstSlot, uint32_t count);
 
@@ -227,56 +259,61 @@ class CpuRuntime {
   uint32_t current_ = 0;
   std::vector<std::shared_ptr<WideTree<4>>> setWide4_;
   std::vector<std::shared_ptr<WideTree<8>>> setWide8_;
-  // Motion blur: the key times and, per key, the refitted nodes, root box and positions (empty
-  // when not blurred).
-  std::vector<float> keyTimes_;
-  uint32_t keysRefitted_ = 0;
-  uint32_t keysRefittedMovingOnly_ = 0;
-  std::vector<GpuBvhNode> keyNodes_;
-  std::vector<Aabb> keyRootBoxes_;
-  std::vector<float> keyPositions_;
-  std::vector<float> spareKeyPositions_;  // the shutter before last's, kept as the next one's buffer
-  MotionBvhView motionView_;
-  // Wide layouts: per key its own node set and vertex packets, so that a key reused by the next
-  // shutter moves instead of being copied, and a new key refits into a dropped key's buffers.
+  // Motion blur: the wide layouts keep per key their own node set and vertex packets, so that a key
+  // reused by the next shutter moves instead of being copied, and a new key refits into a dropped
+  // key's buffers.
   template <uint32_t N>
   struct WideKey {
     std::vector<WideSoaNode<N>> nodes;
     std::vector<KeyVertexPacket<N>> vertices;
-    bool refitted = false;  // the sets hold a refit of the current tree (a moving-only refit may follow)
+    bool refitted = false;  // the sets hold a refit of the part's tree (a moving-only refit may follow)
   };
-  std::vector<WideKey<4>> keyWide4_;
-  std::vector<WideKey<8>> keyWide8_;
-  template <uint32_t N, class T>
-  static std::span<const T> wideKeyPart(const std::vector<WideKey<N>>& keys, std::size_t k,
-                                        std::vector<T> WideKey<N>::*part) {
-    return k < keys.size() ? std::span<const T>(keys[k].*part) : std::span<const T>();
-  }
-  // The per-key sets of a shutter being assembled (the members above, key by key).
-  struct ShutterKeys {
-    std::vector<GpuBvhNode> nodes;
-    std::vector<WideKey<4>> wide4;
-    std::vector<WideKey<8>> wide8;
-    std::vector<Aabb> rootBoxes;
-    std::vector<float> positions;
-  };
-  // readMovingOnly: the key's positions are positions_ with the moving vertices of `positions`.
-  void refitShutterKey(std::span<const float> positions, bool readMovingOnly, ShutterKeys& out, std::size_t key);
-  void copyShutterKey(std::size_t from, ShutterKeys& next, std::size_t to) const;
-  // Per segment s of the blurred frame (keys s and s + 1), the wide kernels' frame but for the
-  // ray's f: made once per updateShutter, so that a ray only looks up its segment.
+  // Per segment s of a part (keys s and s + 1), the wide kernels' frame but for the ray's f: made
+  // once per updateShutter, so that a ray only looks up its part and segment.
   template <uint32_t N>
   struct WideSegment {
     WideView<N> view;            // key s: nodes, positions (rootBox: see traceSegment)
     WideMotionFrame<N> motion;   // key s + 1's nodes, both keys' vertex packets
   };
-  std::vector<WideSegment<4>> segments4_;
-  std::vector<WideSegment<8>> segments8_;
+  // One part of a blurred frame: its tree, its key times and per key the refitted nodes (bvh2) or
+  // wide sets, root box and positions; `view` points into them (no parts when not blurred).
+  struct BlurredPart {
+    uint32_t tree = 0;
+    std::vector<float> keyTimes;
+    std::vector<GpuBvhNode> keyNodes;
+    std::vector<Aabb> keyRootBoxes;
+    std::vector<float> keyPositions;
+    std::vector<WideKey<4>> wide4;
+    std::vector<WideKey<8>> wide8;
+    std::vector<WideSegment<4>> segments4;
+    std::vector<WideSegment<8>> segments8;
+    MotionBvhView view;
+  };
+  std::vector<BlurredPart> parts_;
+  uint32_t keysRefitted_ = 0;
+  uint32_t keysRefittedMovingOnly_ = 0;
+  std::vector<float> spareKeyPositions_;  // a dropped part's, kept as the next one's buffer
+  std::size_t partAt(float time) const;
+  template <uint32_t N, class T>
+  std::span<const T> wideKeyPart(std::vector<WideKey<N>> BlurredPart::*keys, std::size_t part, std::size_t k,
+                                 std::vector<T> WideKey<N>::*field) const {
+    if (part >= parts_.size()) return {};
+    const std::vector<WideKey<N>>& sets = parts_[part].*keys;
+    return k < sets.size() ? std::span<const T>(sets[k].*field) : std::span<const T>();
+  }
+  // The part of `tree` at `keyTimes`, made from `old` (the previous frame's part of this tree, or an
+  // empty one): keys equal to old ones (reused[k] < old's key count) are taken from it, the others
+  // refitted (readMovingOnly: positions_ with the key's moving vertices).
+  BlurredPart makePart(uint32_t tree, std::span<const float> keyTimes, std::span<const std::span<const float>> keyPositions,
+                       const std::vector<std::size_t>& reused, bool readMovingOnly, BlurredPart& old);
+  void refitShutterKey(std::span<const float> positions, bool readMovingOnly, BlurredPart& out, std::size_t key);
   template <uint32_t N>
-  void setSegments(const WideView<N>& view, const std::vector<WideKey<N>>& keys, std::vector<WideSegment<N>>& out);
-  // trace(view, motion) on the segment of the ray's time.
+  void setSegments(const WideView<N>& view, BlurredPart& part, std::vector<WideKey<N>> BlurredPart::*keys,
+                   std::vector<WideSegment<N>> BlurredPart::*segments);
+  // trace(view, motion) on the segment of the ray's time in the part.
   template <uint32_t N, class Trace>
-  auto traceSegment(const std::vector<WideSegment<N>>& segments, float time, const Trace& trace) const;
+  auto traceSegment(const BlurredPart& part, const std::vector<WideSegment<N>>& segments, float time,
+                    const Trace& trace) const;
 };
 
 }  // namespace tsah
