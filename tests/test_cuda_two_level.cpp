@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cstring>
 #include <random>
+#include <span>
 #include <sstream>
 
 #include "anim/tanim.hpp"
@@ -173,28 +174,21 @@ TEST_F(CudaTwoLevel, TlasBoxesContainEveryInstanceAfterEachUpdate) {
   }
 }
 
-// The block refits (shared memory: blocks per part of each pose's tree, one for the TLAS) against
-// the global walk: the same boxes, so the same TLAS bit for bit and the same hits exactly. Parts of
-// at most 2, 5 and 16 leaves split each pose into many subtrees and a top; 512: one part.
-void expectBlockRefitsEqualTheGlobalWalk(const tsah::TwoLevelScene& twoLevel, uint32_t partLeaves) {
-  SCOPED_TRACE("refitPartLeaves " + std::to_string(partLeaves));
-  tsah::cuda::GpuTwoLevelRuntime::Config parts;
-  parts.refitPartLeaves = partLeaves;
-  tsah::cuda::GpuTwoLevelRuntime block(twoLevel, parts);
-  tsah::cuda::GpuTwoLevelRuntime::Config reference;
-  reference.blockRefits = false;
-  tsah::cuda::GpuTwoLevelRuntime global(twoLevel, reference);
-  for (const double t : {0.0, 2.0, 3.25, 7.5, 12.0, 3.25}) {
-    block.updateAt(t);
-    global.updateAt(t);
-    const tsah::FlatBvh a = block.downloadTlas(), b = global.downloadTlas();
-    ASSERT_EQ(a.nodes.size(), b.nodes.size());
-    EXPECT_EQ(std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(a.nodes[0])), 0) << "t " << t;
-    EXPECT_EQ(std::memcmp(&a.rootBoxes[0], &b.rootBoxes[0], sizeof(tsah::Aabb)), 0) << "t " << t;
-    const std::vector<tsah::Aabb> boxesA = block.downloadInstanceBoxes(), boxesB = global.downloadInstanceBoxes();
+// Updates both runtimes at each time and expects the same TLAS, instance boxes and hits exactly;
+// check(a's timings, b's timings) sees each update.
+template <class Check>
+void expectSameUpdates(tsah::cuda::GpuTwoLevelRuntime& a, tsah::cuda::GpuTwoLevelRuntime& b,
+                       std::span<const double> times, const Check& check) {
+  for (const double t : times) {
+    check(a.updateAt(t), b.updateAt(t));
+    const tsah::FlatBvh ta = a.downloadTlas(), tb = b.downloadTlas();
+    ASSERT_EQ(ta.nodes.size(), tb.nodes.size());
+    EXPECT_EQ(std::memcmp(ta.nodes.data(), tb.nodes.data(), ta.nodes.size() * sizeof(ta.nodes[0])), 0) << "t " << t;
+    EXPECT_EQ(std::memcmp(&ta.rootBoxes[0], &tb.rootBoxes[0], sizeof(tsah::Aabb)), 0) << "t " << t;
+    const std::vector<tsah::Aabb> boxesA = a.downloadInstanceBoxes(), boxesB = b.downloadInstanceBoxes();
     EXPECT_EQ(std::memcmp(boxesA.data(), boxesB.data(), boxesA.size() * sizeof(tsah::Aabb)), 0) << "t " << t;
     const std::vector<tsah::Ray> rays = tsah::test::raysThroughBox(tsah::test::unionOf(boxesA), 2000, uint32_t(t * 8) + 3);
-    const std::vector<tsah::TwoLevelHit> hitsA = block.closestHits(rays), hitsB = global.closestHits(rays);
+    const std::vector<tsah::TwoLevelHit> hitsA = a.closestHits(rays), hitsB = b.closestHits(rays);
     uint32_t hits = 0;
     for (std::size_t r = 0; r < rays.size(); ++r) {
       ASSERT_EQ(hitsA[r].valid(), hitsB[r].valid()) << "t " << t << " ray " << r;
@@ -209,8 +203,41 @@ void expectBlockRefitsEqualTheGlobalWalk(const tsah::TwoLevelScene& twoLevel, ui
   }
 }
 
+// The block refits (shared memory: blocks per part of each pose's tree, one for the TLAS) against
+// the global walk: the same boxes, so the same TLAS bit for bit and the same hits exactly. Parts of
+// at most 2, 5 and 16 leaves split each pose into many subtrees and a top; 512: one part.
+void expectBlockRefitsEqualTheGlobalWalk(const tsah::TwoLevelScene& twoLevel, uint32_t partLeaves) {
+  SCOPED_TRACE("refitPartLeaves " + std::to_string(partLeaves));
+  tsah::cuda::GpuTwoLevelRuntime::Config parts;
+  parts.refitPartLeaves = partLeaves;
+  tsah::cuda::GpuTwoLevelRuntime block(twoLevel, parts);
+  tsah::cuda::GpuTwoLevelRuntime::Config reference;
+  reference.blockRefits = false;
+  tsah::cuda::GpuTwoLevelRuntime global(twoLevel, reference);
+  const double times[] = {0.0, 2.0, 3.25, 7.5, 12.0, 3.25};
+  expectSameUpdates(block, global, times, [](const auto&, const auto&) {});
+}
+
 TEST_F(CudaTwoLevel, BlockRefitsEqualTheGlobalWalk) {
   for (const uint32_t partLeaves : {512u, 16u, 5u, 2u}) expectBlockRefitsEqualTheGlobalWalk(*scene, partLeaves);
+}
+
+// Config::phaseTimings = false times the update by its start and end only (the whole update in
+// blasMs, no upload or TLAS phase) and updates as the timed runtime does.
+TEST_F(CudaTwoLevel, UpdatesWithoutPhaseTimingsAreTheSame) {
+  tsah::cuda::GpuTwoLevelRuntime::Config quiet;
+  quiet.phaseTimings = false;
+  tsah::cuda::GpuTwoLevelRuntime timed(*scene), untimed(*scene, quiet);
+  const double times[] = {0.0, 2.0, 3.25, 7.5, 7.5};
+  expectSameUpdates(timed, untimed, times, [](const tsah::cuda::TwoLevelUpdateTimings& a,
+                                              const tsah::cuda::TwoLevelUpdateTimings& b) {
+    EXPECT_EQ(b.uploadMs, 0.0);
+    EXPECT_EQ(b.tlasMs, 0.0);
+    EXPECT_GT(b.blasMs, 0.0);
+    EXPECT_GT(a.tlasMs, 0.0);  // the timed runtime's phases
+    EXPECT_EQ(a.blasRefits, b.blasRefits);
+    EXPECT_EQ(a.tlasNodes, b.tlasNodes);
+  });
 }
 
 TEST_F(CudaTwoLevel, AFrameWithOnlyRigidMotionRefitsNoBlas) {

@@ -40,6 +40,21 @@ struct BlurredLayout {
   uint32_t rootCount = 0;
 };
 
+// A blurred frame's parts (a tree set's shutter that crosses switch times, one part per tree, as
+// CpuRuntime::updateShutter(parts)): per part its layout, the key arrays a primary hit's surface
+// reads, and its first key time (a shutter fraction). A ray at time t takes the last part that
+// starts at or before t. One part: `first` alone, and nothing is read to pick it.
+struct BlurredPart {
+  BlurredLayout layout;
+  MotionBvhView view;
+  float start = 0.0f;
+};
+struct BlurredShutter {
+  BlurredPart first;
+  const BlurredPart* later = nullptr;  // device memory: parts 1, 2, ...
+  uint32_t laterCount = 0;
+};
+
 // What the layout is built from: keyNodes (keyCount blocks of nodeCount nodes), keyPositions
 // (keyCount blocks of keyStride floats, xyz per vertex), slotVertices (3 vertex ids per slot). With
 // keyRoots (the batch refit's roots, per key) it also writes the keys' root boxes into keyRootBoxes
@@ -64,9 +79,9 @@ struct BlurredLayoutSources {
 void launchBuildBlurredLayout(const BlurredLayoutSources& from, motion::BlurredNodeSegment* nodes, KeyTriangle* triangles,
                               cudaStream_t stream);
 
-// Traces rays[i] at shutter fraction times[i]: closest hits into `hits`, or (occluded non-null)
-// any hits into `occluded`.
-void launchBlurredTrace(const BlurredLayout& frame, const Ray* rays, const float* times, uint32_t count, Hit* hits,
+// Traces rays[i] at shutter fraction times[i], each in its part: closest hits into `hits`, or
+// (occluded non-null) any hits into `occluded`.
+void launchBlurredTrace(const BlurredShutter& frame, const Ray* rays, const float* times, uint32_t count, Hit* hits,
                         uint8_t* occluded, cudaStream_t stream);
 
 }  // namespace tsah::cuda::detail

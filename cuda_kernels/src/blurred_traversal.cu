@@ -110,7 +110,7 @@ __global__ void buildBlurredLayoutKernel(BlurredLayoutSources from, motion::Blur
 }
 
 template <bool AnyHit>
-__global__ void __launch_bounds__(128) blurredTraceKernel(BlurredLayout frame, const Ray* __restrict__ rays,
+__global__ void __launch_bounds__(128) blurredTraceKernel(BlurredShutter frame, const Ray* __restrict__ rays,
                                                           const float* __restrict__ times, uint32_t count,
                                                           Hit* __restrict__ hits, uint8_t* __restrict__ occluded) {
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
@@ -133,7 +133,7 @@ void launchBuildBlurredLayout(const BlurredLayoutSources& from, motion::BlurredN
   CUDA_CHECK_LAUNCH("buildBlurredLayoutKernel");
 }
 
-void launchBlurredTrace(const BlurredLayout& frame, const Ray* rays, const float* times, uint32_t count, Hit* hits,
+void launchBlurredTrace(const BlurredShutter& frame, const Ray* rays, const float* times, uint32_t count, Hit* hits,
                         uint8_t* occluded, cudaStream_t stream) {
   if (count == 0) return;
   const unsigned block = 128;

@@ -304,4 +304,27 @@ __device__ __forceinline__ bool bvh2BlurredAnyHit(const BlurredLayout& layout, c
   return walk.occluded();
 }
 
+// The part of a blurred frame that traces a ray at `time` (blurred_trace.hpp): `first` unless a
+// later part starts at or before it.
+__device__ __forceinline__ int laterPartAt(const BlurredShutter& s, float time) {
+  if (s.laterCount == 0 || time < s.later[0].start) return -1;
+  uint32_t p = 0;
+  while (p + 1 < s.laterCount && s.later[p + 1].start <= time) ++p;
+  return int(p);
+}
+__device__ __forceinline__ BlurredLayout layoutAt(const BlurredShutter& s, float time) {
+  const int p = laterPartAt(s, time);
+  return p < 0 ? s.first.layout : s.later[p].layout;
+}
+__device__ __forceinline__ MotionBvhView viewAt(const BlurredShutter& s, float time) {
+  const int p = laterPartAt(s, time);
+  return p < 0 ? s.first.view : s.later[p].view;
+}
+__device__ __forceinline__ Hit bvh2BlurredClosestHit(const BlurredShutter& s, const Ray& ray, float time) {
+  return bvh2BlurredClosestHit(layoutAt(s, time), ray, time);
+}
+__device__ __forceinline__ bool bvh2BlurredAnyHit(const BlurredShutter& s, const Ray& ray, float time) {
+  return bvh2BlurredAnyHit(layoutAt(s, time), ray, time);
+}
+
 }  // namespace tsah::cuda::detail

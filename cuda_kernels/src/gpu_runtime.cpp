@@ -345,6 +345,7 @@ void GpuRuntime::Impl::markUpdated() {
   frameTree = int(current);
   woopValid = true;
   shutterKeys = 0;  // an update ends a blurred frame (updateShutter sets its keys after its updates)
+  storedPartCount = 0;
 }
 
 namespace {

@@ -11,6 +11,7 @@
 #include "cwbvh_kernels.hpp"
 #include "kernels.hpp"
 #include "tsah/layout/motion_blur.hpp"
+#include "tsah/pipeline.hpp"
 #include "runtime_impl.hpp"
 
 namespace tsah::cuda {
@@ -108,13 +109,46 @@ UpdateTimings GpuRuntime::updateShutterAt(double open, double close) {
   if (!(open <= close))
     throw tsah::ConfigError("GPU runtime: updateShutterAt: the shutter opens at " + std::to_string(open) +
                             ", after it closes at " + std::to_string(close));
-  // One tree for the whole shutter: the one of its middle (the frame's time for a centered shutter).
-  m.current = treeIndexAt(m.ranges, 0.5 * (open + close));
-  const std::vector<double> times = motion::shutterKeys(m.times, open, close);
-  if (times.size() == 1) return m.refitAt(times[0]);
-  const std::vector<float> fractions = motion::keyFractions(times);
+  // A tree set: each ray by the tree of its time, one part per tree the shutter crosses.
+  const std::vector<ShutterStretch> parts = shutterStretches(m.times, open, close, m.ranges);
+  m.current = parts[0].tree;
+  if (parts[0].keys.size() == 1) return m.refitAt(open);
   m.requireBinaryLayout();
-  return m.refitAnimationKeys(times, fractions);
+  UpdateTimings total;
+  for (std::size_t p = 0; p < parts.size(); ++p) {
+    m.current = parts[p].tree;
+    const UpdateTimings t = m.refitAnimationKeys(parts[p].keys, parts[p].fractions);
+    total.interpolateMs += t.interpolateMs;
+    total.refitMs += t.refitMs;
+    total.woopMs += t.woopMs;
+    total.slotsUpdated = t.slotsUpdated;
+    if (p + 1 < parts.size()) m.storePart(uint32_t(p));
+  }
+  m.storedPartCount = uint32_t(parts.size() - 1);
+  if (m.storedPartCount > 0) {
+    std::vector<detail::BlurredPart> later;
+    for (uint32_t p = 1; p < parts.size(); ++p) later.push_back(m.blurredShutterPart(p));
+    m.laterParts.reserve(later.size());
+    m.laterParts.upload(later, m.stream);
+    CUDA_CHECK(cudaStreamSynchronize(m.stream));  // `later` is pageable host memory
+  }
+  return total;
+}
+
+void GpuRuntime::Impl::storePart(uint32_t p) {
+  if (storedParts.size() <= p) storedParts.resize(p + 1);
+  StoredPart& s = storedParts[p];
+  s.tree = current;
+  s.keys = shutterKeys;
+  s.start = shutterKeyTimes.front();
+  std::swap(s.keyNodes, keyNodes);
+  std::swap(s.keyRootBoxes, keyRootBoxes);
+  std::swap(s.keyPositions, keyPositions);
+  std::swap(s.keyFractions, keyFractions);
+  std::swap(s.blurNodes, blurNodes);
+  std::swap(s.blurTriangles, blurTriangles);
+  keySlotsReady = 0;  // the slots now hold another part's buffers
+  keySlotsTree = -1;
 }
 
 UpdateTimings GpuRuntime::Impl::refitAnimationKeys(std::span<const double> keyTimes, std::span<const float> fractions) {
@@ -220,7 +254,12 @@ void GpuRuntime::Impl::enqueueShutterRefit(uint32_t keys) {
 }
 
 bool GpuRuntime::blurred() const { return impl_->shutterKeys >= 2; }
-uint32_t GpuRuntime::shutterKeyCount() const { return impl_->shutterKeys; }
+uint32_t GpuRuntime::shutterKeyCount() const {
+  const Impl& m = *impl_;
+  uint32_t keys = m.shutterKeys;
+  for (uint32_t p = 0; p < m.storedPartCount; ++p) keys += m.storedParts[p].keys;
+  return keys;
+}
 
 FlatBvh GpuRuntime::downloadKeyTree(uint32_t key) const {
   const Impl& m = *impl_;
@@ -249,35 +288,77 @@ std::vector<float> GpuRuntime::downloadKeyPositions(uint32_t key) const {
   return out;
 }
 
-MotionBvhView GpuRuntime::Impl::motionView() const {
-  const FlatBvh& topology = tree().topology;
-  MotionBvhView view;
-  view.keyNodes = keyNodes.data();
-  view.keyRootBoxes = keyRootBoxes.data();
-  view.keyPositions = keyPositions.data();
-  view.keyTimes = keyFractions.data();
-  view.keyCount = shutterKeys;
+namespace {
+
+// A part's key arrays and layout (the last part's are the runtime's members, the others stored).
+struct PartArrays {
+  const GpuRuntime::Impl::DeviceTree& tree;
+  uint32_t keys;
+  const GpuBvhNode* keyNodes;
+  const Aabb* keyRootBoxes;
+  const float *keyPositions, *keyFractions;
+  const motion::BlurredNodeSegment* blurNodes;
+  const detail::KeyTriangle* blurTriangles;
+};
+
+detail::BlurredPart partView(const PartArrays& a, const GpuRuntime::Impl& m) {
+  const FlatBvh& topology = a.tree.topology;
+  detail::BlurredPart part;
+  MotionBvhView& view = part.view;
+  view.keyNodes = a.keyNodes;
+  view.keyRootBoxes = a.keyRootBoxes;
+  view.keyPositions = a.keyPositions;
+  view.keyTimes = a.keyFractions;
+  view.keyCount = a.keys;
   view.nodeCount = topology.interiorCount;
-  view.vertexCount = vertices;
-  view.triIndex = tree().triIndex.data();
-  view.indices = indices.data();
+  view.vertexCount = m.vertices;
+  view.triIndex = a.tree.triIndex.data();
+  view.indices = m.indices.data();
   view.rootRef = topology.rootRef;
   view.rootCount = topology.rootCount;
-  return view;
-}
-
-detail::BlurredLayout GpuRuntime::Impl::blurredLayout() const {
-  const FlatBvh& topology = tree().topology;
-  detail::BlurredLayout l;
-  l.nodes = blurNodes.data();
-  l.triangles = blurTriangles.data();
-  l.keyRootBoxes = keyRootBoxes.data();
-  l.keyTimes = keyFractions.data();
-  l.triIndex = tree().triIndex.data();
-  l.keyCount = shutterKeys;
+  detail::BlurredLayout& l = part.layout;
+  l.nodes = a.blurNodes;
+  l.triangles = a.blurTriangles;
+  l.keyRootBoxes = a.keyRootBoxes;
+  l.keyTimes = a.keyFractions;
+  l.triIndex = a.tree.triIndex.data();
+  l.keyCount = a.keys;
   l.rootRef = topology.rootRef;
   l.rootCount = topology.rootCount;
-  return l;
+  return part;
+}
+
+}  // namespace
+
+detail::BlurredPart GpuRuntime::Impl::blurredShutterPart(uint32_t p) const {
+  if (p < storedPartCount) {
+    const StoredPart& s = storedParts[p];
+    detail::BlurredPart part = partView({trees[s.tree], s.keys, s.keyNodes.data(), s.keyRootBoxes.data(),
+                                         s.keyPositions.data(), s.keyFractions.data(), s.blurNodes.data(),
+                                         s.blurTriangles.data()},
+                                        *this);
+    part.start = s.start;
+    return part;
+  }
+  detail::BlurredPart last = partView({tree(), shutterKeys, keyNodes.data(), keyRootBoxes.data(), keyPositions.data(),
+                                       keyFractions.data(), blurNodes.data(), blurTriangles.data()},
+                                      *this);
+  last.start = shutterKeyTimes.empty() ? 0.0f : shutterKeyTimes.front();
+  return last;
+}
+
+MotionBvhView GpuRuntime::Impl::motionView() const { return blurredShutterPart(storedPartCount).view; }
+
+detail::BlurredLayout GpuRuntime::Impl::blurredLayout() const { return blurredShutterPart(storedPartCount).layout; }
+
+detail::BlurredShutter GpuRuntime::Impl::blurredShutter() const {
+  detail::BlurredShutter s;
+  s.first = blurredShutterPart(0);
+  if (storedPartCount > 0) {
+    s.later = laterParts.data();
+    s.laterCount = storedPartCount;
+  }
+  return s;
 }
 
 GpuRuntime::BlurredLayoutCopy GpuRuntime::downloadBlurredLayout() const {
@@ -300,12 +381,18 @@ GpuRuntime::FrameBytes GpuRuntime::frameBytes() const {
   const std::size_t positions = std::size_t(m.vertices) * 3 * sizeof(float);
   FrameBytes b;
   b.instant = nodes + sizeof(detail::RootInfo) + positions + std::size_t(m.triangles) * sizeof(WoopTriangle);
-  const std::size_t keys = m.shutterKeys;
-  // The key arrays and the blurred layout built from them.
-  if (keys >= 2)
-    b.blurred = keys * (nodes + sizeof(Aabb) + positions + sizeof(float)) +
-                (keys - 1) * std::size_t(topology.interiorCount) * sizeof(motion::BlurredNodeSegment) +
-                keys * std::size_t(m.triangles) * sizeof(detail::KeyTriangle);
+  // The key arrays and the blurred layout built from them, of every part.
+  const auto partBytes = [&](std::size_t keys, const FlatBvh& tree) {
+    const std::size_t interior = tree.interiorCount;
+    return keys * (interior * sizeof(GpuBvhNode) + sizeof(Aabb) + positions + sizeof(float)) +
+           (keys - 1) * interior * sizeof(motion::BlurredNodeSegment) +
+           keys * std::size_t(m.triangles) * sizeof(detail::KeyTriangle);
+  };
+  if (m.shutterKeys >= 2) {
+    b.blurred = partBytes(m.shutterKeys, topology);
+    for (uint32_t p = 0; p < m.storedPartCount; ++p)
+      b.blurred += partBytes(m.storedParts[p].keys, m.trees[m.storedParts[p].tree].topology) + sizeof(detail::BlurredPart);
+  }
   return b;
 }
 
@@ -314,7 +401,7 @@ namespace {
 template <typename Result>
 std::vector<Result> traceBlurred(GpuRuntime::Impl& m, std::span<const Ray> rays, std::span<const float> times,
                                  RayPassStats* stats) {
-  const detail::BlurredLayout frame = m.blurredLayout();
+  const detail::BlurredShutter frame = m.blurredShutter();
   return traceHostRays<Result>(
       m, rays, stats,
       [&](uint32_t count) {

@@ -31,8 +31,8 @@ namespace {
 
 using namespace detail;  // the shared passes (render_passes.cuh)
 
-// A blurred frame: the view of its keys (keyCount >= 2); an instant frame has keyCount 0.
-__device__ __forceinline__ bool isBlurred(const MotionBvhView& view) { return view.keyCount >= 2; }
+// A blurred frame: its first part's keys (keyCount >= 2); an instant frame has keyCount 0.
+__device__ __forceinline__ bool isBlurred(const BlurredShutter& shutter) { return shutter.first.view.keyCount >= 2; }
 
 __device__ __forceinline__ Ray noRay() {
   Ray r;
@@ -59,17 +59,21 @@ __global__ void primaryRaysKernel(Frame f, Ray* __restrict__ rays, float* __rest
 }
 
 // The primary pass's surface: mesh hit or the analytic ground, offset along the normal. A blurred
-// frame (view): the hit triangle at the pixel's time.
+// frame (shutter): the hit triangle at the pixel's time, in the part of that time.
 __global__ void surfaceKernel(Frame f, const Hit* __restrict__ hits, const uint32_t* __restrict__ indices,
-                              const float* __restrict__ positions, MotionBvhView view, float4* __restrict__ surfaces) {
+                              const float* __restrict__ positions, BlurredShutter shutter, float4* __restrict__ surfaces) {
   const uint32_t j = blockIdx.x * blockDim.x + threadIdx.x;
   if (j >= f.padded) return;
   uint32_t x, y;
   Surface s;
-  if (pixelOf(f, j, x, y))
-    s = isBlurred(view) ? blurredPrimarySurface(cameraRay(f, x, y), hits[j], view, pixelShutterTime(pixelKey(f, j)),
-                                                f.light)
-                        : primarySurface(cameraRay(f, x, y), hits[j], indices, positions, f.light);
+  if (pixelOf(f, j, x, y)) {
+    if (isBlurred(shutter)) {
+      const float time = pixelShutterTime(pixelKey(f, j));
+      s = blurredPrimarySurface(cameraRay(f, x, y), hits[j], viewAt(shutter, time), time, f.light);
+    } else {
+      s = primarySurface(cameraRay(f, x, y), hits[j], indices, positions, f.light);
+    }
+  }
   storeSurface(surfaces, j, s);
 }
 
@@ -145,20 +149,19 @@ struct CwbvhTracer {
   __device__ __forceinline__ bool anyHit(const Ray& ray, float) const { return cwbvhAnyHit(withRootBox(), ray); }
 };
 
-// A blurred frame: the traversal of the blurred batch queries at the ray's time.
-// The surface of a primary hit lerps the hit triangle through the key arrays (view).
+// A blurred frame: the traversal of the blurred batch queries at the ray's time, in its part.
+// The surface of a primary hit lerps the hit triangle through the part's key arrays.
 struct BlurredTracer {
   static constexpr bool kTimed = true, kOwnSurface = true;
-  detail::BlurredLayout layout;
-  MotionBvhView view;
+  detail::BlurredShutter shutter;
   __device__ __forceinline__ Surface surface(const Ray& ray, float time, const SceneLighting& light) const {
-    return blurredPrimarySurface(ray, closestHit(ray, time), view, time, light);
+    return blurredPrimarySurface(ray, closestHit(ray, time), viewAt(shutter, time), time, light);
   }
   __device__ __forceinline__ Hit closestHit(const Ray& ray, float time) const {
-    return detail::bvh2BlurredClosestHit(layout, ray, time);
+    return detail::bvh2BlurredClosestHit(shutter, ray, time);
   }
   __device__ __forceinline__ bool anyHit(const Ray& ray, float time) const {
-    return detail::bvh2BlurredAnyHit(layout, ray, time);
+    return detail::bvh2BlurredAnyHit(shutter, ray, time);
   }
 };
 
@@ -213,8 +216,7 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   const bool fused = m.config.fusePasses;
   // A blurred frame traces its key arrays (keyCount 0: the instant frame).
   const bool blurred = runtime.blurred();
-  const MotionBvhView blur = blurred ? m.motionView() : MotionBvhView{};
-  const detail::BlurredLayout blurLayout = blurred ? m.blurredLayout() : detail::BlurredLayout{};
+  const detail::BlurredShutter blur = blurred ? m.blurredShutter() : detail::BlurredShutter{};
   float* times = nullptr;  // separate passes of a blurred frame: each ray's shutter time
   if (blurred && !fused) {
     m.rayTimes.reserve(std::max({padded, aoRays, shadowRays}));
@@ -223,7 +225,7 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
   // The separate passes' trace: the instant frame's kernel, or the blurred traversal at each ray's time.
   auto trace = [&](const Ray* rays, uint32_t count, Hit* hits, uint8_t* occluded, uint32_t* counter) {
     if (blurred)
-      detail::launchBlurredTrace(blurLayout, rays, times, count, hits, occluded, m.stream);
+      detail::launchBlurredTrace(blur, rays, times, count, hits, occluded, m.stream);
     else
       detail::launchTrace(scene, rays, count, hits, occluded, counter, m.traceLaunch(), m.stream);
   };
@@ -244,7 +246,7 @@ RenderStats renderFrameGpu(GpuRuntime& runtime, const Camera& camera, const Scen
     const uint32_t* indices = m.indices.data();
     const float* positions = m.positions.data();
     if (blurred)
-      enqueueFusedPasses(buffers, f, BlurredTracer{blurLayout, blur}, indices, positions, aoRays, shadowRays, normals);
+      enqueueFusedPasses(buffers, f, BlurredTracer{blur}, indices, positions, aoRays, shadowRays, normals);
     else if (scene.cwbvhNodes)
       enqueueFusedPasses(buffers, f, CwbvhTracer{detail::cwbvhView(scene), scene.root}, indices, positions, aoRays,
                          shadowRays, normals);

@@ -212,10 +212,30 @@ struct GpuRuntime::Impl {
   void requireBinaryLayout() const;
   // Throws tsah::ConfigError unless the frame is blurred and key < shutterKeys.
   void requireKey(uint32_t key) const;
+  // A tree set's shutter that crosses switch times (updateShutterAt): one part per tree. The parts
+  // before the last keep their key arrays and blurred layout here (the last part's are the members
+  // above: what downloadKeyTree and the other key accessors read); laterParts holds the views of
+  // parts 1, 2, ... on the device (detail::BlurredShutter::later).
+  struct StoredPart {
+    uint32_t tree = 0, keys = 0;
+    float start = 0.0f;  // its first key time
+    DeviceBuffer<GpuBvhNode> keyNodes;
+    DeviceBuffer<Aabb> keyRootBoxes;
+    DeviceBuffer<float> keyPositions, keyFractions;
+    DeviceBuffer<motion::BlurredNodeSegment> blurNodes;
+    DeviceBuffer<detail::KeyTriangle> blurTriangles;
+  };
+  std::vector<StoredPart> storedParts;
+  uint32_t storedPartCount = 0;  // of the current blurred frame (0: one part)
+  DeviceBuffer<detail::BlurredPart> laterParts;
+  // Moves the last part's key arrays and layout into storedParts[p] (taking that slot's buffers).
+  void storePart(uint32_t p);
   // The blurred frame's device arrays as the traversal reads them (the batch queries and the
-  // renderer); only while blurred.
+  // renderer); only while blurred. motionView and blurredLayout: the last part's.
   MotionBvhView motionView() const;
   detail::BlurredLayout blurredLayout() const;
+  detail::BlurredShutter blurredShutter() const;
+  detail::BlurredPart blurredShutterPart(uint32_t p) const;  // p <= storedPartCount (the last)
 
   // Scratch of the ray queries (rays and hits also the renderer's separate passes), grown on demand.
   DeviceBuffer<uint32_t> words;          // the queries' ray counter

@@ -130,17 +130,20 @@ class GpuRuntime {
   // open, every keyframe strictly inside and close; each key is interpolated and refitted on the
   // device in one batch, once per key (the instant state, what tracing without times sees, is the
   // last key's, taken from the batch), captured in a graph replayed while the key count and the tree
-  // stay. The tree of a set is the one of the shutter's middle. open == close is updateAt(open).
-  // Throws tsah::ConfigError for open > close.
+  // stay. A tree set traces each ray by the tree of its time, as the CPU runtime (docs/motion-blur.md):
+  // the shutter is cut where the set hands over (tsah::shutterStretches), each part is its tree's
+  // refit at the part's keys, and the last part's tree becomes the current one. open == close is
+  // updateAt(open). Throws tsah::ConfigError for open > close.
   UpdateTimings updateShutterAt(double open, double close);
   // true after updateShutter(At) with two keys or more, until the next update, updateAt or rebuild.
   bool blurred() const;
-  uint32_t shutterKeyCount() const;  // keys of the last updateShutter while blurred, else 0
-  // Host copies of key k of a blurred frame (throws tsah::ConfigError when not blurred or k is out
-  // of range): the refitted tree as downloadTree gives it, and the positions.
+  // Keys of the last updateShutter while blurred (all parts', a switch counted in each), else 0.
+  uint32_t shutterKeyCount() const;
+  // Host copies of key k of a blurred frame's last part (throws tsah::ConfigError when not blurred
+  // or k is out of range): the refitted tree as downloadTree gives it, and the positions.
   FlatBvh downloadKeyTree(uint32_t key) const;
   std::vector<float> downloadKeyPositions(uint32_t key) const;
-  // Host copy of the layout a blurred frame is traced from (docs/motion-blur.md#memory), derived
+  // Host copy of the layout a blurred frame's last part is traced from (docs/motion-blur.md#memory), derived
   // from the key arrays: nodes[n * (keys - 1) + s] is node n's record of segment s
   // (motion::encodeNodeSegment of key s's and key s + 1's nodes, child boxes pre-padded over all
   // keys by motion::prepadBox, alike when they are the same at every key); triangles holds 12 floats
@@ -155,9 +158,9 @@ class GpuRuntime {
   BlurredLayoutCopy downloadBlurredLayout() const;
   // Device bytes of the geometry a frame's tracing reads, the triangle indices and slot order
   // (which both read) left out. instant: the current tree's nodes and root, the positions and the
-  // Woop triangles; blurred (0 unless blurred): per key one node set, root box, position set and
-  // shutter fraction, and the blurred layout (per segment a 96-byte record per node, per key a
-  // 48-byte triangle per slot).
+  // Woop triangles; blurred (0 unless blurred): per key of every part one node set, root box,
+  // position set and shutter fraction, and the blurred layout (per segment a 96-byte record per
+  // node, per key a 48-byte triangle per slot).
   struct FrameBytes {
     std::size_t instant = 0, blurred = 0;
   };
