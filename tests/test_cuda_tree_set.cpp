@@ -21,6 +21,7 @@
 #include "tsah_cuda/device.hpp"
 #include "tsah_cuda/gpu_runtime.hpp"
 #include "cuda_test_support.hpp"
+#include "shutter_checks.hpp"
 #include "test_support.hpp"
 
 namespace {
@@ -108,10 +109,7 @@ TEST(CudaTreeSet, BlurredFramesTraceEachRayByTheTreeOfItsTime) {
     EXPECT_EQ(fused.currentTree(), cpu.currentTree()) << what;
     EXPECT_EQ(fused.shutterKeyCount(), cpu.shutterKeyCount()) << what;
 
-    tsah::BvhView mesh;
-    mesh.indices = cpu.indices().data();
-    mesh.positions = cpu.positions().data();
-    const std::vector<tsah::Ray> rays = tsah::test::randomRays(mesh, cpu.triangleCount(), cpu.bounds(), 3000, rng);
+    const std::vector<tsah::Ray> rays = tsah::test::raysAtRuntime(cpu, 3000, uint32_t(s) + 11);
     std::vector<float> times(rays.size());
     for (std::size_t i = 0; i < times.size(); ++i) {
       const uint32_t p = uint32_t(i % cpu.shutterPartCount());

@@ -54,14 +54,7 @@ std::unique_ptr<CpuRuntime> makeRuntime(const Scene& s, Case c = {}) {
 
 double keyframeTime(const anim::Animation& a, uint32_t k) { return a.times()[k]; }
 
-// Rays aimed at the scene as the runtime's positions place it (any layout).
-std::vector<Ray> raysFor(const CpuRuntime& rt, uint32_t count, uint32_t seed) {
-  std::mt19937 rng(seed);
-  tsah::BvhView v;
-  v.indices = rt.indices().data();
-  v.positions = rt.positions().data();
-  return tsah::test::randomRays(v, rt.triangleCount(), rt.bounds(), count, rng);
-}
+using tsah::test::raysAtRuntime;
 
 // The triangles of a shutter at a time: the animation's positions at the shutter's keys, lerped.
 struct ShutterGeometry : tsah::test::KeyedGeometry {
@@ -132,7 +125,7 @@ TEST(MotionBlurRuntime, ClosestHitMatchesBruteForceAtEachRaysTime) {
   SCOPED_TRACE(describe(c));
   Blurred b(c);
   const ShutterGeometry geometry(b.scene.animation, b.open, b.close);
-  const std::vector<Ray> rays = raysFor(*b.rt, 1500, 11);
+  const std::vector<Ray> rays = raysAtRuntime(*b.rt, 1500, 11);
   std::mt19937 rng(12);
   std::uniform_real_distribution<float> u01(0, 1);
   std::vector<float> times(rays.size());
@@ -162,7 +155,7 @@ TEST(MotionBlurRuntime, ClosestHitMatchesBruteForceAtEachRaysTime) {
 // Blurred results differ from the instant ones: the time is used.
 TEST(MotionBlurRuntime, HitsFollowTheRaysTime) {
   Blurred b;
-  const std::vector<Ray> rays = raysFor(*b.rt, 600, 21);
+  const std::vector<Ray> rays = raysAtRuntime(*b.rt, 600, 21);
   const std::vector<float> open(rays.size(), 0.0f), close(rays.size(), 1.0f);
   const std::vector<Hit> a = tsah::closestHits(*b.rt, rays, open), c = tsah::closestHits(*b.rt, rays, close);
   uint32_t differ = 0;
@@ -186,7 +179,7 @@ TEST(MotionBlurRuntime, ClosedShutterIsTheInstant) {
   EXPECT_EQ(close, t);
   tsah::updateShutter(*shutter, s.animation, open, close);
   EXPECT_FALSE(shutter->blurred());
-  const std::vector<Ray> rays = raysFor(*instant, 800, 31);
+  const std::vector<Ray> rays = raysAtRuntime(*instant, 800, 31);
   for (const Ray& ray : rays) {
     const Hit want = instant->closestHit(ray);
     ASSERT_TRUE(sameBits(shutter->closestHit(ray, 0.7f), want));
@@ -210,7 +203,7 @@ TEST(MotionBlurRuntime, ShutterEndsAreTheKeyframes) {
   ASSERT_EQ(blurred->keyTimes().size(), 2u);
   for (const auto& [time, at] : {std::pair{0.0f, t1}, std::pair{1.0f, t2}}) {
     instant->update(s.animation.positionsAt(at));
-    const std::vector<Ray> rays = raysFor(*instant, 800, 41);
+    const std::vector<Ray> rays = raysAtRuntime(*instant, 800, 41);
     uint32_t hits = 0;
     for (const Ray& ray : rays) {
       const Hit want = instant->closestHit(ray), got = blurred->closestHit(ray, time);
@@ -413,7 +406,7 @@ TEST(MotionBlurRuntime, UntimedQueriesTraceTheLastKeyWhileBlurred) {
     const Aabb bounds = b.rt->bounds();
     EXPECT_EQ(std::memcmp(&bounds, &view.keyRootBoxes[keys - 1], sizeof(Aabb)), 0);
     uint32_t hits = 0;
-    for (const Ray& ray : raysFor(*b.rt, 600, 61)) {
+    for (const Ray& ray : raysAtRuntime(*b.rt, 600, 61)) {
       const Hit atClose = b.rt->closestHit(ray, 1.0f);
       ASSERT_TRUE(sameBits(b.rt->closestHit(ray), atClose));
       ASSERT_EQ(b.rt->anyHit(ray), atClose.valid());
@@ -438,7 +431,7 @@ TEST(MotionBlurRuntime, ABadKeyLeavesTheRuntimeAsItWas) {
     SCOPED_TRACE(describe(c));
     auto rt = makeRuntime(s, c);
     rt->updateShutter(times, good);
-    const std::vector<Ray> rays = raysFor(*rt, 400, 51);
+    const std::vector<Ray> rays = raysAtRuntime(*rt, 400, 51);
     std::vector<Hit> instant, blurred;
     for (const Ray& ray : rays) instant.push_back(rt->closestHit(ray)), blurred.push_back(rt->closestHit(ray, 0.25f));
     EXPECT_THROW(rt->updateShutter(times, badKeys), tsah::DataError);

@@ -55,14 +55,6 @@ struct SetScene {
   float cutFraction() const { return static_cast<float>((cut - open) / (close - open)); }
 };
 
-std::vector<Ray> raysThrough(const CpuRuntime& rt, uint32_t count, uint32_t seed) {
-  std::mt19937 rng(seed);
-  tsah::BvhView v;
-  v.indices = rt.indices().data();
-  v.positions = rt.positions().data();
-  return tsah::test::randomRays(v, rt.triangleCount(), rt.bounds(), count, rng);
-}
-
 bool sameBits(const Hit& a, const Hit& b) { return std::memcmp(&a, &b, sizeof(Hit)) == 0; }
 
 TEST(MotionBlurTreeSet, StretchesCutTheShutterAtTheSwitch) {
@@ -145,7 +137,7 @@ TEST(MotionBlurTreeSet, EachRayIsTracedByTheTreeOfItsTime) {
     ASSERT_EQ(geometry.fractions.size(), 5u);
     EXPECT_EQ(geometry.positions[2], s.animation.positionsAt(s.cut));
 
-    const std::vector<Ray> rays = raysThrough(*mixed, 1200, 5);
+    const std::vector<Ray> rays = tsah::test::raysAtRuntime(*mixed, 1200, 5);
     std::mt19937 rng(6);
     std::uniform_real_distribution<float> u01(0, 1);
     uint32_t hits = 0, late = 0;
@@ -199,7 +191,7 @@ TEST(MotionBlurTreeSet, BadPartsAreRefusedAndLeaveTheFrame) {
   const SetScene s;
   auto rt = s.runtime(s.set(s.first, s.last), {});
   tsah::updateShutter(*rt, s.animation, s.open, s.close);
-  const std::vector<Ray> rays = raysThrough(*rt, 200, 8);
+  const std::vector<Ray> rays = tsah::test::raysAtRuntime(*rt, 200, 8);
   std::vector<Hit> before;
   for (const Ray& ray : rays) before.push_back(rt->closestHit(ray, 0.25f));
 

@@ -109,16 +109,32 @@ __global__ void buildBlurredLayoutKernel(BlurredLayoutSources from, motion::Blur
   }
 }
 
-template <bool AnyHit>
+// Parts: the frame has later parts; without, the first part's layout alone (no part lookup).
+template <bool AnyHit, bool Parts>
 __global__ void __launch_bounds__(128) blurredTraceKernel(BlurredShutter frame, const Ray* __restrict__ rays,
                                                           const float* __restrict__ times, uint32_t count,
                                                           Hit* __restrict__ hits, uint8_t* __restrict__ occluded) {
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= count) return;
-  if constexpr (AnyHit)
-    occluded[i] = bvh2BlurredAnyHit(frame, rays[i], times[i]) ? 1 : 0;
-  else
-    hits[i] = bvh2BlurredClosestHit(frame, rays[i], times[i]);
+  if constexpr (AnyHit) {
+    if constexpr (Parts)
+      occluded[i] = bvh2BlurredAnyHit(frame, rays[i], times[i]) ? 1 : 0;
+    else
+      occluded[i] = bvh2BlurredAnyHit(frame.first.layout, rays[i], times[i]) ? 1 : 0;
+  } else {
+    if constexpr (Parts)
+      hits[i] = bvh2BlurredClosestHit(frame, rays[i], times[i]);
+    else
+      hits[i] = bvh2BlurredClosestHit(frame.first.layout, rays[i], times[i]);
+  }
+}
+
+template <bool AnyHit, bool Parts>
+void launchBlurredTraceKernel(const BlurredShutter& frame, const Ray* rays, const float* times, uint32_t count,
+                              Hit* hits, uint8_t* occluded, cudaStream_t stream) {
+  const unsigned block = 128;
+  blurredTraceKernel<AnyHit, Parts><<<gridFor(count, block), block, 0, stream>>>(frame, rays, times, count, hits,
+                                                                                 occluded);
 }
 
 }  // namespace
@@ -136,11 +152,13 @@ void launchBuildBlurredLayout(const BlurredLayoutSources& from, motion::BlurredN
 void launchBlurredTrace(const BlurredShutter& frame, const Ray* rays, const float* times, uint32_t count, Hit* hits,
                         uint8_t* occluded, cudaStream_t stream) {
   if (count == 0) return;
-  const unsigned block = 128;
+  const bool parts = frame.laterCount > 0;
   if (occluded)
-    blurredTraceKernel<true><<<gridFor(count, block), block, 0, stream>>>(frame, rays, times, count, hits, occluded);
+    parts ? launchBlurredTraceKernel<true, true>(frame, rays, times, count, hits, occluded, stream)
+          : launchBlurredTraceKernel<true, false>(frame, rays, times, count, hits, occluded, stream);
   else
-    blurredTraceKernel<false><<<gridFor(count, block), block, 0, stream>>>(frame, rays, times, count, hits, occluded);
+    parts ? launchBlurredTraceKernel<false, true>(frame, rays, times, count, hits, occluded, stream)
+          : launchBlurredTraceKernel<false, false>(frame, rays, times, count, hits, occluded, stream);
   CUDA_CHECK_LAUNCH("blurredTraceKernel");
 }
 

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cstring>
+#include <random>
 #include <span>
 #include <string>
 #include <vector>
@@ -12,8 +13,18 @@
 #include "tsah/layout/motion_blur.hpp"
 #include "tsah/layout/woop.hpp"
 #include "tsah/runtime/cpu_runtime.hpp"
+#include "test_support.hpp"
 
 namespace tsah::test {
+
+// Rays aimed at the scene as the runtime's positions place it (any layout).
+inline std::vector<Ray> raysAtRuntime(const CpuRuntime& rt, uint32_t count, uint32_t seed) {
+  std::mt19937 rng(seed);
+  BvhView v;
+  v.indices = rt.indices().data();
+  v.positions = rt.positions().data();
+  return randomRays(v, rt.triangleCount(), rt.bounds(), count, rng);
+}
 
 // A layout and, for the wide ones, the kernels' instruction set.
 struct LayoutCase {
