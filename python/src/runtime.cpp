@@ -244,15 +244,19 @@ class CpuTracer {
   CpuTracer(const Tree& tree, py::object animation, unsigned threads, const std::string& layout)
       : owner_(std::move(animation)), animation_(owner_.cast<const anim::Animation&>()) {
     checkTreeMatchesAnimation(tree.file.info, "the tree", animation_, "'" + animation_.name() + "'");
-    const Layout chosen = parse<Layout>(layout);
-    if (chosen == Layout::Cwbvh) throw tsah::ConfigError("layout: cwbvh is a GPU layout (the CPU's are bvh2, bvh4, bvh8)");
-    CpuRuntime::Config config;
-    config.threads = threads;
-    config.layout = chosen == Layout::Auto ? fastestLayout() : chosen;
-    config.collapse = wideCollapseConfig(tree.file.info.objective);
-    runtime_ = std::make_unique<CpuRuntime>(flattenBvh(tree.file.bvh),
-                                            std::vector<uint32_t>(animation_.indices().begin(), animation_.indices().end()),
-                                            animation_.vertexCount(), config);
+    const CpuRuntime::Config config = runtimeConfig(threads, layout, tree.file.info.objective);
+    runtime_ = std::make_unique<CpuRuntime>(flattenBvh(tree.file.bvh), indices(), animation_.vertexCount(), config);
+    refitTime(animation_.startTime());
+  }
+  // A tree set: refit(time) refits and traces the tree of the time's part (TreeSet.tree_at), as
+  // `tsah trace` does; each tree collapsed with its own objective in a wide layout.
+  CpuTracer(const TreeSetObject& trees, py::object animation, unsigned threads, const std::string& layout)
+      : owner_(std::move(animation)), animation_(owner_.cast<const anim::Animation&>()) {
+    for (uint32_t i = 0; i < trees.set.size(); ++i)
+      checkTreeMatchesAnimation(trees.set.builds.at(i), "tree " + std::to_string(i) + " of the set", animation_,
+                                "'" + animation_.name() + "'");
+    const CpuRuntime::Config config = runtimeConfig(threads, layout, trees.set.builds.front().objective);
+    runtime_ = std::make_unique<CpuRuntime>(trees.set, indices(), animation_.vertexCount(), config);
     refitTime(animation_.startTime());
   }
   void refit(py::handle timeOrPositions) {
@@ -262,6 +266,7 @@ class CpuTracer {
   void refitTime(double time) {
     checkedTime(time, "time");
     py::gil_scoped_release release;
+    runtime_->selectTreeAt(time);  // a tree set: the tree of the time's part
     runtime_->update(animation_.positionsAt(time));
   }
   void refitPositions(py::handle vertices) {
@@ -317,6 +322,7 @@ class CpuTracer {
     return py::make_tuple(hitArray(hits, py::array(hitDtype(), batch)), ms);
   }
   std::string layout() const { return name(runtime_->layoutInfo().layout); }
+  uint32_t treeIndex() const { return runtime_->currentTree(); }
   py::dict lastRayPass() const { return rayPassDict(lastPass_); }
   const CpuRuntime& runtime() const { return *runtime_; }
   py::array_t<float> bounds() const {
@@ -330,6 +336,17 @@ class CpuTracer {
   }
 
  private:
+  std::vector<uint32_t> indices() const { return {animation_.indices().begin(), animation_.indices().end()}; }
+  static CpuRuntime::Config runtimeConfig(unsigned threads, const std::string& layout, const Objective& objective) {
+    const Layout chosen = parse<Layout>(layout);
+    if (chosen == Layout::Cwbvh) throw tsah::ConfigError("layout: cwbvh is a GPU layout (the CPU's are bvh2, bvh4, bvh8)");
+    CpuRuntime::Config config;
+    config.threads = threads;
+    config.layout = chosen == Layout::Auto ? fastestLayout() : chosen;
+    config.collapse = wideCollapseConfig(objective);
+    return config;
+  }
+
   py::object owner_;  // the tsah.Animation animation_ refers to
   const anim::Animation& animation_;
   std::unique_ptr<CpuRuntime> runtime_;
@@ -346,6 +363,16 @@ class GpuTracer {
     config.device = device;
     config.wideObjective = tree.file.info.objective;
     runtime_ = std::make_unique<cuda::GpuRuntime>(flattenBvh(tree.file.bvh), animation, config);
+    refitTime(animation.startTime());
+  }
+  // A tree set: refit(time) refits and traces the tree of the time's part, as CpuRuntime.
+  GpuTracer(const TreeSetObject& trees, const anim::Animation& animation, int device) {
+    for (uint32_t i = 0; i < trees.set.size(); ++i)
+      checkTreeMatchesAnimation(trees.set.builds.at(i), "tree " + std::to_string(i) + " of the set", animation,
+                                "'" + animation.name() + "'");
+    cuda::GpuRuntime::Config config;
+    config.device = device;
+    runtime_ = std::make_unique<cuda::GpuRuntime>(trees.set, animation, config);
     refitTime(animation.startTime());
   }
   void refit(py::handle timeOrPositions, py::handle stream, bool wait) {
@@ -395,6 +422,7 @@ class GpuTracer {
     runtime_->checkDeviceUpdate();
   }
   std::string deviceName() const { return runtime_->device().name; }
+  uint32_t treeIndex() const { return runtime_->currentTree(); }
   cuda::GpuRuntime& runtime() { return *runtime_; }
   py::dict lastUpdate() const {
     return py::dict("interpolate_ms"_a = lastUpdate_.interpolateMs, "refit_ms"_a = lastUpdate_.refitMs,
@@ -496,12 +524,21 @@ CpuRuntime(tree, animation, threads=0, layout="auto"): the tree refitted to a fr
 it was built for (checked: triangle count, vertex count, topology), traced on the CPU. Starts at the
 first frame. layout: "auto" (the widest layout this processor's SIMD kernels support, as `tsah
 trace`), "bvh2", "bvh4" or "bvh8"; a wide layout is the tree collapsed with its own objective.
+tree may be a tsah.TreeSet: refit(time) then refits and traces the tree of the time's part
+(TreeSet.tree_at; tree_index says which), refit(positions) the tree of the last refit(time).
 )doc")
       .def(py::init([](const Tree& tree, py::object animation, py::handle threads, const std::string& layout) {
              return std::make_unique<CpuTracer>(tree, std::move(animation), checkedInteger<unsigned>(threads, "threads"),
                                                 layout);
            }),
            "tree"_a, "animation"_a, "threads"_a = 0, "layout"_a = "auto")
+      .def(py::init([](const TreeSetObject& trees, py::object animation, py::handle threads, const std::string& layout) {
+             return std::make_unique<CpuTracer>(trees, std::move(animation), checkedInteger<unsigned>(threads, "threads"),
+                                                layout);
+           }),
+           "tree"_a, "animation"_a, "threads"_a = 0, "layout"_a = "auto")
+      .def_property_readonly("tree_index", &CpuTracer::treeIndex,
+                             "The index of the tree traced in a tree set (chosen by the last refit(time)); 0 for a tree.")
       .def("refit", &CpuTracer::refit, "time"_a, kRefitDoc)
       .def("refit_positions", &CpuTracer::refitPositions, "positions"_a, "The same as refit(positions) (vertex positions only).")
       .def("trace", &CpuTracer::trace, "origins"_a, "directions"_a, "tmin"_a = 0.0f, "tmax"_a = inf,
@@ -527,6 +564,12 @@ uploaded once; refit and traversal run on the GPU). Raises tsah.Failure when no 
              return std::make_unique<GpuTracer>(tree, animation, checkedInteger<int>(device, "device", 0));
            }),
            "tree"_a, "animation"_a, "device"_a = 0)
+      .def(py::init([](const TreeSetObject& trees, const anim::Animation& animation, py::handle device) {
+             return std::make_unique<GpuTracer>(trees, animation, checkedInteger<int>(device, "device", 0));
+           }),
+           "tree"_a, "animation"_a, "device"_a = 0)
+      .def_property_readonly("tree_index", &GpuTracer::treeIndex,
+                             "The index of the tree traced in a tree set (chosen by the last refit(time)); 0 for a tree.")
       .def("refit", &GpuTracer::refit, "time"_a, py::kw_only(), "stream"_a = py::none(), "wait"_a = true,
            (std::string(kRefitDoc) + kDeviceDoc).c_str())
       .def("refit_positions", &GpuTracer::refitPositions, "positions"_a, py::kw_only(), "stream"_a = py::none(),

@@ -128,6 +128,63 @@ def test_tree_of_another_animation_is_refused(wave, sample):
         tsah.CpuRuntime(tree, sample)
 
 
+@pytest.fixture(scope="module")
+def wave_set():
+    animation = tsah.generate("wave", triangles=600, frames=9, seed=4)
+    return animation, tsah.optimize(animation, method="sah0", segments=3, eval_frames=9)
+
+
+def set_times(animation, trees):
+    """The start, each switch time and a hair before it, the middle of each part, the end."""
+    times = [animation.start_time, animation.end_time]
+    for s in trees.switch_times:
+        times += [s, float(np.nextafter(s, -np.inf))]
+    times += [0.5 * (r[0] + r[1]) for r in trees.ranges]
+    return times
+
+
+@pytest.mark.parametrize("layout", ["bvh2", "auto"])
+def test_a_tree_set_traces_the_tree_of_each_time(wave_set, layout):
+    """refit(time) picks the tree of the time's part: the same hits, bit for bit, as a runtime of that
+    tree alone refitted to the same time; refit(positions) keeps the tree."""
+    animation, trees = wave_set
+    assert len(trees) == 3
+    runtime = tsah.CpuRuntime(trees, animation, layout=layout)
+    assert runtime.tree_index == 0
+    for i, time in enumerate(set_times(animation, trees)):
+        runtime.refit(time)
+        assert runtime.tree_index == trees.tree_at(time), time
+        alone = tsah.CpuRuntime(trees[trees.tree_at(time)], animation, layout=layout)
+        alone.refit(time)
+        origins, directions = random_rays(animation, time, 500, seed=20 + i)
+        np.testing.assert_array_equal(runtime.trace(origins, directions), alone.trace(origins, directions))
+        np.testing.assert_array_equal(runtime.occluded(origins, directions), alone.occluded(origins, directions))
+    kept = runtime.tree_index
+    runtime.refit(animation.positions_at(animation.start_time))
+    assert runtime.tree_index == kept
+
+
+def test_a_tree_set_of_another_animation_is_refused(wave_set, sample):
+    _, trees = wave_set
+    with pytest.raises(tsah.Error, match="tree 0 of the set was not built for 'explode'"):
+        tsah.CpuRuntime(trees, sample)
+
+
+@pytest.mark.skipif(not tsah.cuda_available(), reason="no CUDA device (or the CUDA runtime was not built)")
+def test_a_tree_set_on_the_gpu_traces_as_on_the_cpu(wave_set):
+    animation, trees = wave_set
+    cpu, gpu = tsah.CpuRuntime(trees, animation, layout="bvh2"), tsah.GpuRuntime(trees, animation)
+    for i, time in enumerate(set_times(animation, trees)):
+        cpu.refit(time)
+        gpu.refit(time)
+        assert gpu.tree_index == cpu.tree_index == trees.tree_at(time), time
+        origins, directions = random_rays(animation, time, 2000, seed=40 + i)
+        a, b = cpu.trace(origins, directions), gpu.trace(origins, directions)
+        assert (a["triangle"] == b["triangle"]).mean() > 0.999  # up to ties at equal distance
+        np.testing.assert_allclose(a["t"], b["t"], rtol=1e-5)
+        np.testing.assert_array_equal(cpu.occluded(origins, directions), gpu.occluded(origins, directions))
+
+
 def test_wrong_ray_arrays_raise_clear_errors(wave):
     animation, tree = wave
     runtime = tsah.CpuRuntime(tree, animation)

@@ -39,8 +39,12 @@ def stub_members(node):
 
 
 def module_parameters(function):
-    """Parameter names from pybind11's signature line ('name(a: T, b: T = 1) -> R')."""
-    signature = function.__doc__.splitlines()[0]
+    """Parameter names from pybind11's signature line ('name(a: T, b: T = 1) -> R'); of an overloaded
+    function ('name(*args, **kwargs)', then '1. name(...)' per overload) the first overload's, whose
+    names the others share."""
+    lines = function.__doc__.splitlines()
+    signature = next((line[3:] for line in lines if line.startswith("1. ")), lines[0]) \
+        if lines[0].endswith("(*args, **kwargs)") else lines[0]
     return [name for name in re.findall(r"(?:\(|, )(\w+): ", signature) if name != "self"]
 
 

@@ -177,8 +177,9 @@ class TreeSet:
 class CpuRuntime:
     """A tree refitted to a frame of the animation it was built for, traced on the CPU."""
 
-    def __init__(self, tree: Tree, animation: Animation, threads: _Integer = 0, layout: str = "auto") -> None:
-        """layout: 'auto' (the widest SIMD layout of this processor), 'bvh2', 'bvh4' or 'bvh8'."""
+    def __init__(self, tree: Tree | TreeSet, animation: Animation, threads: _Integer = 0, layout: str = "auto") -> None:
+        """layout: 'auto' (the widest SIMD layout of this processor), 'bvh2', 'bvh4' or 'bvh8'. A TreeSet:
+        refit(time) refits and traces the tree of the time's part (tree_index)."""
     def refit(self, time: _Number | _ArrayLike) -> None:
         """Refits to the animation at this time (interpolated, clamped), or to vertex positions, a float array (V, 3)."""
     def refit_positions(self, positions: _ArrayLike) -> None:
@@ -201,6 +202,9 @@ class CpuRuntime:
     @property
     def layout(self) -> str:
         """The layout traced: bvh2, bvh4 or bvh8."""
+    @property
+    def tree_index(self) -> int:
+        """The index of the tree traced in a tree set (chosen by the last refit(time)); 0 for a tree."""
     @property
     def last_ray_pass(self) -> dict[str, Any]:
         """The last trace/occluded: rays and the wall time (ms) of the C++ batch call alone."""
@@ -241,8 +245,9 @@ class GpuRuntime:
     """The same as CpuRuntime on a CUDA device (only when cuda_built). Also takes CUDA device arrays
     (__cuda_array_interface__ or DLPack: torch, CuPy) in place, on the caller's stream."""
 
-    def __init__(self, tree: Tree, animation: Animation, device: _Integer = 0) -> None:
-        """device: the CUDA device index. Raises tsah.Failure when no device is usable."""
+    def __init__(self, tree: Tree | TreeSet, animation: Animation, device: _Integer = 0) -> None:
+        """device: the CUDA device index. Raises tsah.Failure when no device is usable. A TreeSet: as
+        CpuRuntime."""
     def refit(self, time: _Number | _ArrayLike | Any, *, stream: _Stream = None, wait: bool = True) -> None:
         """Refits on the device to the animation at this time, or to vertex positions (V, 3): host
         arrays, or a float32 device array used in place (checked on the device; wait=False: the
@@ -269,6 +274,9 @@ class GpuRuntime:
     @property
     def device_name(self) -> str:
         """The name of the CUDA device."""
+    @property
+    def tree_index(self) -> int:
+        """The index of the tree traced in a tree set (chosen by the last refit(time)); 0 for a tree."""
     @property
     def last_ray_pass(self) -> dict[str, Any]:
         """The last host-array trace/occluded: rays and the traversal kernel's device time (ms)."""
