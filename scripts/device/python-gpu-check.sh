@@ -39,7 +39,7 @@ fi
 if has pytest; then
   start=$SECONDS
   PYTHONPATH=$module timeout 400 "$python" -m pytest -q -rs -p no:cacheprovider python/tests/test_gpu_arrays.py \
-    python/tests/test_dlpack.py python/tests/test_stubs.py python/tests/test_construction.py python/tests/test_two_level.py python/tests/test_cpu_batch.py > "$out/pytest.log" 2>&1
+    python/tests/test_dlpack.py python/tests/test_stubs.py python/tests/test_construction.py python/tests/test_two_level.py python/tests/test_cpu_batch.py python/tests/test_runtime.py > "$out/pytest.log" 2>&1
   rc=$?; status=$((status | rc))
   echo "pytest: rc=$rc in $((SECONDS - start)) s"; tail -15 "$out/pytest.log"
 fi
