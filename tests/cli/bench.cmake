@@ -173,6 +173,14 @@ add_test(NAME cli.segments.trace
          COMMAND tsah trace ${W}/bench_explode.tanim ${W}/seg.tbvh --frames 2 --width 16 --height 12 --no-images --json)
 set_tests_properties(cli.segments.trace PROPERTIES FIXTURES_REQUIRED bench_segments
   PASS_REGULAR_EXPRESSION "\"time\":0\\.0,\"total_ms\":[-0-9.e]+,\"trace_ms\":[-0-9.e]+,\"trace_ms_by_type\":\\{[^}]*\\},\"tree\":0,.*\"time\":5\\.0,\"total_ms\":[-0-9.e]+,\"trace_ms\":[-0-9.e]+,\"trace_ms_by_type\":\\{[^}]*\\},\"tree\":2,.*\"trees\":3")
+# Blurred frames of the set (shutter 1: every switch lies strictly inside one frame's shutter): that
+# frame is traced in two parts, each pixel by the tree of its time, and counts both parts' keys (the
+# switch in each): 4 or 5 where a one-tree frame has 2 or 3.
+add_test(NAME cli.segments.trace_shutter
+         COMMAND tsah trace ${W}/bench_explode.tanim ${W}/seg.tbvh --frames 6 --width 16 --height 12 --no-images
+                 --shutter 1 --json)
+set_tests_properties(cli.segments.trace_shutter PROPERTIES FIXTURES_REQUIRED bench_segments
+  PASS_REGULAR_EXPRESSION "\"keys\":[45],.*\"trees\":3")
 add_test(NAME cli.segments.export COMMAND tsah export ${W}/seg.tbvh ${W}/bench_explode.tanim --time 5 -o ${W}/seg_export)
 set_tests_properties(cli.segments.export PROPERTIES FIXTURES_REQUIRED bench_segments
   PASS_REGULAR_EXPRESSION "tree 2 of the set's 3: the tree of this time's part \\(t [0-9.]+ \\.\\. 5\\)\n")
