@@ -357,22 +357,21 @@ class CpuTracer {
 // The same on the GPU: all keyframes uploaded once, refit and traversal on the device.
 class GpuTracer {
  public:
-  GpuTracer(const Tree& tree, const anim::Animation& animation, int device) {
+  // layout: "auto" (the binary one: tsah::gpuLayout), "bvh2" or "cwbvh" (the compressed 8-wide
+  // layout, collapsed with the tree's own objective).
+  GpuTracer(const Tree& tree, const anim::Animation& animation, int device, const std::string& layout) {
     checkTreeMatchesAnimation(tree.file.info, "the tree", animation, "'" + animation.name() + "'");
-    cuda::GpuRuntime::Config config;
-    config.device = device;
+    cuda::GpuRuntime::Config config = runtimeConfig(device, layout);
     config.wideObjective = tree.file.info.objective;
     runtime_ = std::make_unique<cuda::GpuRuntime>(flattenBvh(tree.file.bvh), animation, config);
     refitTime(animation.startTime());
   }
   // A tree set: refit(time) refits and traces the tree of the time's part, as CpuRuntime.
-  GpuTracer(const TreeSetObject& trees, const anim::Animation& animation, int device) {
+  GpuTracer(const TreeSetObject& trees, const anim::Animation& animation, int device, const std::string& layout) {
     for (uint32_t i = 0; i < trees.set.size(); ++i)
       checkTreeMatchesAnimation(trees.set.builds.at(i), "tree " + std::to_string(i) + " of the set", animation,
                                 "'" + animation.name() + "'");
-    cuda::GpuRuntime::Config config;
-    config.device = device;
-    runtime_ = std::make_unique<cuda::GpuRuntime>(trees.set, animation, config);
+    runtime_ = std::make_unique<cuda::GpuRuntime>(trees.set, animation, runtimeConfig(device, layout));
     refitTime(animation.startTime());
   }
   void refit(py::handle timeOrPositions, py::handle stream, bool wait) {
@@ -422,6 +421,7 @@ class GpuTracer {
     runtime_->checkDeviceUpdate();
   }
   std::string deviceName() const { return runtime_->device().name; }
+  std::string layout() const { return name(runtime_->config().layout); }
   uint32_t treeIndex() const { return runtime_->currentTree(); }
   cuda::GpuRuntime& runtime() { return *runtime_; }
   py::dict lastUpdate() const {
@@ -432,6 +432,15 @@ class GpuTracer {
 
  private:
   int device() const { return runtime_->config().device; }
+  static cuda::GpuRuntime::Config runtimeConfig(int device, const std::string& layout) {
+    const Layout chosen = gpuLayout(parse<Layout>(layout));
+    if (chosen != Layout::Bvh2 && chosen != Layout::Cwbvh)
+      throw tsah::ConfigError("layout: " + layout + " is a CPU layout (the GPU's are bvh2 and cwbvh)");
+    cuda::GpuRuntime::Config config;
+    config.device = device;
+    config.layout = chosen;
+    return config;
+  }
   void refitDevice(py::handle vertices, std::uintptr_t stream, bool wait) {
     DeviceArguments args(device(), stream);
     const uint32_t v = runtime_->vertexCount();
@@ -557,17 +566,21 @@ tree may be a tsah.TreeSet: refit(time) then refits and traces the tree of the t
   m.attr("cuda_built") = true;
   m.def("cuda_available", &cuda::deviceAvailable, "True when the CUDA runtime was built and a GPU is present.");
   py::class_<GpuTracer>(m, "GpuRuntime", R"doc(
-GpuRuntime(tree, animation, device=0): the same as CpuRuntime on a CUDA device (all keyframes are
-uploaded once; refit and traversal run on the GPU). Raises tsah.Failure when no device is usable.
+GpuRuntime(tree, animation, device=0, layout="auto"): the same as CpuRuntime on a CUDA device (all
+keyframes are uploaded once; refit and traversal run on the GPU). layout: "auto" (the binary layout,
+the faster GPU layout on the data scenes), "bvh2" or "cwbvh" (compressed 8-wide nodes). Raises
+tsah.Failure when no device is usable.
 )doc")
-      .def(py::init([](const Tree& tree, const anim::Animation& animation, py::handle device) {
-             return std::make_unique<GpuTracer>(tree, animation, checkedInteger<int>(device, "device", 0));
+      .def(py::init([](const Tree& tree, const anim::Animation& animation, py::handle device, const std::string& layout) {
+             return std::make_unique<GpuTracer>(tree, animation, checkedInteger<int>(device, "device", 0), layout);
            }),
-           "tree"_a, "animation"_a, "device"_a = 0)
-      .def(py::init([](const TreeSetObject& trees, const anim::Animation& animation, py::handle device) {
-             return std::make_unique<GpuTracer>(trees, animation, checkedInteger<int>(device, "device", 0));
+           "tree"_a, "animation"_a, "device"_a = 0, "layout"_a = "auto")
+      .def(py::init([](const TreeSetObject& trees, const anim::Animation& animation, py::handle device,
+                       const std::string& layout) {
+             return std::make_unique<GpuTracer>(trees, animation, checkedInteger<int>(device, "device", 0), layout);
            }),
-           "tree"_a, "animation"_a, "device"_a = 0)
+           "tree"_a, "animation"_a, "device"_a = 0, "layout"_a = "auto")
+      .def_property_readonly("layout", &GpuTracer::layout, "The layout traced: bvh2 or cwbvh.")
       .def_property_readonly("tree_index", &GpuTracer::treeIndex,
                              "The index of the tree traced in a tree set (chosen by the last refit(time)); 0 for a tree.")
       .def("refit", &GpuTracer::refit, "time"_a, py::kw_only(), "stream"_a = py::none(), "wait"_a = true,

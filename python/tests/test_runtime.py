@@ -228,6 +228,31 @@ def test_gpu_matches_cpu(wave):
         np.testing.assert_array_equal(cpu.occluded(origins, directions), gpu.occluded(origins, directions))
 
 
+@pytest.mark.skipif(not tsah.cuda_built, reason="the CUDA runtime was not built")
+def test_gpu_layout_names_a_gpu_layout(wave):
+    animation, tree = wave
+    with pytest.raises(tsah.ConfigError, match="layout: bvh8 is a CPU layout \\(the GPU's are bvh2 and cwbvh\\)"):
+        tsah.GpuRuntime(tree, animation, layout="bvh8")
+    with pytest.raises(tsah.ConfigError, match="layout"):
+        tsah.GpuRuntime(tree, animation, layout="bvh16")
+
+
+@pytest.mark.skipif(not tsah.cuda_available(), reason="no CUDA device (or the CUDA runtime was not built)")
+@pytest.mark.parametrize("layout", ["auto", "bvh2", "cwbvh"])
+def test_every_gpu_layout_traces_as_the_cpu(wave, layout):
+    animation, tree = wave
+    cpu, gpu = tsah.CpuRuntime(tree, animation, layout="bvh2"), tsah.GpuRuntime(tree, animation, layout=layout)
+    assert gpu.layout == ("bvh2" if layout == "auto" else layout)
+    for time in [0.0, 2.2]:
+        cpu.refit(time)
+        gpu.refit(time)
+        origins, directions = random_rays(animation, time, 2000, seed=31)
+        a, b = cpu.trace(origins, directions), gpu.trace(origins, directions)
+        assert (a["triangle"] == b["triangle"]).mean() > 0.999  # up to ties at equal distance
+        np.testing.assert_allclose(a["t"], b["t"], rtol=1e-5)
+        np.testing.assert_array_equal(cpu.occluded(origins, directions), gpu.occluded(origins, directions))
+
+
 def test_rejected_calls_do_not_leak(wave):
     """Thousands of rejected calls leave the process's peak memory where it was."""
     import resource

@@ -245,9 +245,9 @@ class GpuRuntime:
     """The same as CpuRuntime on a CUDA device (only when cuda_built). Also takes CUDA device arrays
     (__cuda_array_interface__ or DLPack: torch, CuPy) in place, on the caller's stream."""
 
-    def __init__(self, tree: Tree | TreeSet, animation: Animation, device: _Integer = 0) -> None:
-        """device: the CUDA device index. Raises tsah.Failure when no device is usable. A TreeSet: as
-        CpuRuntime."""
+    def __init__(self, tree: Tree | TreeSet, animation: Animation, device: _Integer = 0, layout: str = "auto") -> None:
+        """device: the CUDA device index; layout: 'auto' (the binary layout), 'bvh2' or 'cwbvh'. Raises
+        tsah.Failure when no device is usable. A TreeSet: as CpuRuntime."""
     def refit(self, time: _Number | _ArrayLike | Any, *, stream: _Stream = None, wait: bool = True) -> None:
         """Refits on the device to the animation at this time, or to vertex positions (V, 3): host
         arrays, or a float32 device array used in place (checked on the device; wait=False: the
@@ -274,6 +274,9 @@ class GpuRuntime:
     @property
     def device_name(self) -> str:
         """The name of the CUDA device."""
+    @property
+    def layout(self) -> str:
+        """The layout traced: bvh2 or cwbvh."""
     @property
     def tree_index(self) -> int:
         """The index of the tree traced in a tree set (chosen by the last refit(time)); 0 for a tree."""
