@@ -5,6 +5,8 @@ import pytest
 
 import tsah
 
+import device_lib
+
 
 @pytest.fixture(scope="module")
 def wave():
@@ -251,6 +253,10 @@ def test_every_gpu_layout_traces_as_the_cpu(wave, layout):
         assert (a["triangle"] == b["triangle"]).mean() > 0.999  # up to ties at equal distance
         np.testing.assert_allclose(a["t"], b["t"], rtol=1e-5)
         np.testing.assert_array_equal(cpu.occluded(origins, directions), gpu.occluded(origins, directions))
+        if device_lib.LIB is not None:  # device rays: the host batch's hits on the same layout
+            hits = gpu.trace(device_lib.to_device(origins), device_lib.to_device(directions))
+            np.testing.assert_array_equal(device_lib.to_host(hits["triangle"]), b["triangle"])
+            np.testing.assert_array_equal(device_lib.to_host(hits["t"]), b["t"])
 
 
 def test_rejected_calls_do_not_leak(wave):
