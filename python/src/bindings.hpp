@@ -68,6 +68,9 @@ class TwoLevelTracer;  // tsah.TwoLevelRuntime (two_level.cpp)
 class GpuTwoLevelTracer;  // tsah.GpuTwoLevelRuntime (two_level.cpp, CUDA builds)
 // The C++ runtime of a tsah.CpuRuntime / tsah.GpuRuntime object (checked as every bound argument).
 const CpuRuntime& cpuRuntimeOf(py::handle self);
+// A CPU runtime's layout argument: "auto" (the widest the processor's SIMD kernels support),
+// "bvh2", "bvh4" or "bvh8"; cwbvh is refused as a GPU layout (runtime.cpp).
+Layout cpuLayoutArgument(const std::string& layout);
 #if defined(TSAH_HAVE_CUDA)
 cuda::GpuRuntime& gpuRuntimeOf(py::handle self);
 #endif

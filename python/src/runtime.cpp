@@ -338,11 +338,9 @@ class CpuTracer {
  private:
   std::vector<uint32_t> indices() const { return {animation_.indices().begin(), animation_.indices().end()}; }
   static CpuRuntime::Config runtimeConfig(unsigned threads, const std::string& layout, const Objective& objective) {
-    const Layout chosen = parse<Layout>(layout);
-    if (chosen == Layout::Cwbvh) throw tsah::ConfigError("layout: cwbvh is a GPU layout (the CPU's are bvh2, bvh4, bvh8)");
     CpuRuntime::Config config;
     config.threads = threads;
-    config.layout = chosen == Layout::Auto ? fastestLayout() : chosen;
+    config.layout = cpuLayoutArgument(layout);
     config.collapse = wideCollapseConfig(objective);
     return config;
   }
@@ -603,6 +601,12 @@ tsah.Failure when no device is usable.
   m.attr("cuda_built") = false;
   m.def("cuda_available", [] { return false; }, "True when the CUDA runtime was built and a GPU is present.");
 #endif
+}
+
+Layout cpuLayoutArgument(const std::string& layout) {
+  const Layout chosen = parse<Layout>(layout);
+  if (chosen == Layout::Cwbvh) throw tsah::ConfigError("layout: cwbvh is a GPU layout (the CPU's are bvh2, bvh4, bvh8)");
+  return chosen == Layout::Auto ? fastestLayout() : chosen;
 }
 
 const CpuRuntime& cpuRuntimeOf(py::handle self) { return self.cast<const CpuTracer&>().runtime(); }

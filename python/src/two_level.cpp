@@ -202,13 +202,12 @@ class TwoLevelTracer {
  public:
   TwoLevelTracer(py::object scene, unsigned threads, const std::string& layout, const std::string& tlas)
       : owner_(std::move(scene)), scene_(sceneArgument(owner_).scene) {
-    const Layout chosen = parse<Layout>(layout);
-    if (chosen == Layout::Cwbvh) throw tsah::ConfigError("layout: cwbvh is a GPU layout (the CPU's are bvh2, bvh4, bvh8)");
+    const Layout chosen = cpuLayoutArgument(layout);
     if (tlas != "refit" && tlas != "rebuild")
       throw tsah::ConfigError("tlas: expected 'refit' or 'rebuild', got '" + tlas + "'");
     TwoLevelRuntime::Config config;
     config.threads = threads;
-    config.layout = chosen == Layout::Auto ? fastestLayout() : chosen;
+    config.layout = chosen;
     config.tlas = tlas == "refit" ? TwoLevelRuntime::TlasUpdate::Refit : TwoLevelRuntime::TlasUpdate::Rebuild;
     py::gil_scoped_release release;
     runtime_ = std::make_unique<TwoLevelRuntime>(scene_, config);

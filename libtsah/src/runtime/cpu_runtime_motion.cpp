@@ -213,15 +213,16 @@ void CpuRuntime::updateShutter(std::span<const ShutterPart> parts) {
         throw tsah::DataError("runtime: key " + std::to_string(k) + (parts.size() > 1 ? " of part " + std::to_string(p) : "") +
                               " has " + std::to_string(part.keyPositions[k].size()) + " coordinates, expected " +
                               std::to_string(floats));
-    const uint32_t t = part.tree;
+    // Per key of the part's tree: its node set and (wide) vertex packets.
     const bool set = !setTrees_.empty();
-    const std::size_t nodeBytes = wide4_   ? (set ? setWide4_[t] : wide4_)->nodes().size() * sizeof(WideSoaNode<4>)
-                                  : wide8_ ? (set ? setWide8_[t] : wide8_)->nodes().size() * sizeof(WideSoaNode<8>)
-                                           : (set ? setTrees_[t] : tree_).interiorCount * sizeof(GpuBvhNode);
-    const std::size_t vertexBytes = wide4_   ? (set ? setWide4_[t] : wide4_)->packets().size() * sizeof(KeyVertexPacket<4>)
-                                    : wide8_ ? (set ? setWide8_[t] : wide8_)->packets().size() * sizeof(KeyVertexPacket<8>)
-                                             : 0;
-    bytes += part.keyTimes.size() * (nodeBytes + vertexBytes + floats * sizeof(float) + sizeof(Aabb));
+    std::size_t keyBytes = floats * sizeof(float) + sizeof(Aabb);
+    if (const WideTree<4>* w = set && wide4_ ? setWide4_[part.tree].get() : wide4_.get())
+      keyBytes += w->nodes().size() * sizeof(WideSoaNode<4>) + w->packets().size() * sizeof(KeyVertexPacket<4>);
+    else if (const WideTree<8>* w8 = set && wide8_ ? setWide8_[part.tree].get() : wide8_.get())
+      keyBytes += w8->nodes().size() * sizeof(WideSoaNode<8>) + w8->packets().size() * sizeof(KeyVertexPacket<8>);
+    else
+      keyBytes += (set ? setTrees_[part.tree] : tree_).interiorCount * sizeof(GpuBvhNode);
+    bytes += part.keyTimes.size() * keyBytes;
   }
   checkFitsInMemory(bytes, "runtime", "a shutter of " + std::to_string(allTimes.size()) + " keys");
   // A key whose positions equal, bit for bit, a key of the previous shutter's part of the same tree
