@@ -12,9 +12,8 @@
 
 namespace tsah::cuda::detail {
 
-// One slot's triangle at one key: its three vertices' positions at that key (v0 xyz, v1 xyz, v2 xyz),
-// v[9] = 1 when they are the same at every key of the frame (else 0; a ray then reads one key) and
-// two zeros, 48 bytes, so that a 16-byte aligned record is three vector loads.
+// One slot's triangle at one key: its three vertices' positions at that key (v0 xyz, v1 xyz, v2 xyz)
+// and three zeros, 48 bytes, so that a 16-byte aligned record is three vector loads.
 struct alignas(16) KeyTriangle {
   float v[12];
 };
@@ -27,7 +26,8 @@ static_assert(sizeof(KeyTriangle) == 48);
 //   s + 1 in binary16 rounded outward; count0's motion::kKeysAlikeBit set when the node's child
 //   boxes are the same at every key: a ray then reads the key-s rows alone);
 // - triangles[s * keyCount + k]: slot s's triangle at key k (the key-k positions of its vertices,
-//   in slot order), so a leaf slot's two keys are 96 contiguous bytes and no index is read.
+//   in slot order), so a leaf slot's two keys are 96 contiguous bytes and no index is read; a ray
+//   reads both keys of every slot (a still triangle's are the same bits).
 // keyCount >= 2 (a blurred frame).
 struct BlurredLayout {
   const motion::BlurredNodeSegment* nodes = nullptr;

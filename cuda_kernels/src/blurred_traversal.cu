@@ -39,8 +39,7 @@ __device__ __forceinline__ bool sameBoxes(const GpuBvhNode& a, const GpuBvhNode&
 // Items, in a grid-stride loop: i < nodeCount writes node n = i's record of every segment
 // (motion::encodeNodeSegment of its key records, child boxes pre-padded over all keys by
 // motion::prepadBox, alike when they are the same at every key; the last key's record, unpadded,
-// also to the instant nodes); then slot s's triangle at every key, v[9] = 1 when its vertices are
-// the same at every key; then, with keyRoots, the last key's positions one float each and the keys'
+// also to the instant nodes); then slot s's triangle at every key; then, with keyRoots, the last key's positions one float each and the keys'
 // root boxes. Each record is whole 16-byte rows.
 __global__ void buildBlurredLayoutKernel(BlurredLayoutSources from, motion::BlurredNodeSegment* __restrict__ nodes,
                                          KeyTriangle* __restrict__ triangles) {
@@ -81,23 +80,14 @@ __global__ void buildBlurredLayoutKernel(BlurredLayoutSources from, motion::Blur
       const uint64_t s = i - nodeItems;
       const uint32_t* ids = from.slotVertices + 3 * s;
       const uint64_t a = 3 * uint64_t(__ldg(ids)), b = 3 * uint64_t(__ldg(ids + 1)), c = 3 * uint64_t(__ldg(ids + 2));
-      float4 first[3];
-      bool alike = true;
       for (uint32_t k = 0; k < keys; ++k) {
         const float* p = from.keyPositions + k * from.keyStride;
         const float4 r0 = make_float4(__ldg(p + a), __ldg(p + a + 1), __ldg(p + a + 2), __ldg(p + b));
         const float4 r1 = make_float4(__ldg(p + b + 1), __ldg(p + b + 2), __ldg(p + c), __ldg(p + c + 1));
         const float4 r2 = make_float4(__ldg(p + c + 2), 0.0f, 0.0f, 0.0f);
-        if (k == 0) {
-          first[0] = r0, first[1] = r1, first[2] = r2;
-        } else {
-          alike &= sameBits(r0, first[0]) && sameBits(r1, first[1]) && sameBits(r2, first[2]);
-        }
         float4* to = reinterpret_cast<float4*>(triangles + s * keys + k);
         to[0] = r0, to[1] = r1, to[2] = r2;
       }
-      if (alike)
-        for (uint32_t k = 0; k < keys; ++k) triangles[s * keys + k].v[9] = 1.0f;
     } else if (const uint64_t c = i - nodeItems - slotItems; c < from.keyStride) {
       from.lastPositions[c] = __ldg(from.keyPositions + last * from.keyStride + c);
     } else {
