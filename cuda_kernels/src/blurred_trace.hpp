@@ -24,7 +24,7 @@ static_assert(sizeof(KeyTriangle) == 48);
 // - nodes[n * (keyCount - 1) + s]: node n's record for segment s (motion::BlurredNodeSegment, 96
 //   bytes: its key-s refit with pre-padded child boxes and its references, and the changes to key
 //   s + 1 in binary16 rounded outward; count0's motion::kKeysAlikeBit set when the node's child
-//   boxes are the same at every key: a ray then reads the key-s rows alone);
+//   boxes are the same at every key: a ray then takes the key-s boxes as they are, unmoved);
 // - triangles[s * keyCount + k]: slot s's triangle at key k (the key-k positions of its vertices,
 //   in slot order), so a leaf slot's two keys are 96 contiguous bytes and no index is read; a ray
 //   reads both keys of every slot (a still triangle's are the same bits).

@@ -39,8 +39,8 @@ __device__ __forceinline__ bool sameBoxes(const GpuBvhNode& a, const GpuBvhNode&
 // Items, in a grid-stride loop: i < nodeCount writes node n = i's record of every segment
 // (motion::encodeNodeSegment of its key records, child boxes pre-padded over all keys by
 // motion::prepadBox, alike when they are the same at every key; the last key's record, unpadded,
-// also to the instant nodes); then slot s's triangle at every key; then, with keyRoots, the last key's positions one float each and the keys'
-// root boxes. Each record is whole 16-byte rows.
+// also to the instant nodes); then slot s's triangle at every key; then, with keyRoots, the last
+// key's positions one float each and the keys' root boxes. Each record is whole 16-byte rows.
 __global__ void buildBlurredLayoutKernel(BlurredLayoutSources from, motion::BlurredNodeSegment* __restrict__ nodes,
                                          KeyTriangle* __restrict__ triangles) {
   const uint32_t keys = from.keyCount, last = keys - 1;

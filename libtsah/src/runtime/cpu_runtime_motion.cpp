@@ -213,15 +213,18 @@ void CpuRuntime::updateShutter(std::span<const ShutterPart> parts) {
         throw tsah::DataError("runtime: key " + std::to_string(k) + (parts.size() > 1 ? " of part " + std::to_string(p) : "") +
                               " has " + std::to_string(part.keyPositions[k].size()) + " coordinates, expected " +
                               std::to_string(floats));
-    // Per key of the part's tree: its node set and (wide) vertex packets.
-    const bool set = !setTrees_.empty();
+    // Per key of the part's tree (a set keeps each tree's own copies): its node set and (wide)
+    // vertex packets.
+    const uint32_t t = part.tree;
+    const WideTree<4>* w4 = setWide4_.empty() ? wide4_.get() : setWide4_[t].get();
+    const WideTree<8>* w8 = setWide8_.empty() ? wide8_.get() : setWide8_[t].get();
     std::size_t keyBytes = floats * sizeof(float) + sizeof(Aabb);
-    if (const WideTree<4>* w = set && wide4_ ? setWide4_[part.tree].get() : wide4_.get())
-      keyBytes += w->nodes().size() * sizeof(WideSoaNode<4>) + w->packets().size() * sizeof(KeyVertexPacket<4>);
-    else if (const WideTree<8>* w8 = set && wide8_ ? setWide8_[part.tree].get() : wide8_.get())
+    if (w4)
+      keyBytes += w4->nodes().size() * sizeof(WideSoaNode<4>) + w4->packets().size() * sizeof(KeyVertexPacket<4>);
+    else if (w8)
       keyBytes += w8->nodes().size() * sizeof(WideSoaNode<8>) + w8->packets().size() * sizeof(KeyVertexPacket<8>);
     else
-      keyBytes += (set ? setTrees_[part.tree] : tree_).interiorCount * sizeof(GpuBvhNode);
+      keyBytes += (setTrees_.empty() ? tree_ : setTrees_[t]).interiorCount * sizeof(GpuBvhNode);
     bytes += part.keyTimes.size() * keyBytes;
   }
   checkFitsInMemory(bytes, "runtime", "a shutter of " + std::to_string(allTimes.size()) + " keys");
