@@ -101,7 +101,7 @@ struct BlurredFrame {
 // key s + 1, in one fused multiply-add: 96 bytes read where two whole key records took 112. All six
 // rows are loaded before the alike bit is looked at, as both keys of a slot are below: with rows 4
 // and 5 (and a slot's second key) asked for only after the first rows came back, every moving
-// node and triangle cost a second memory round trip, and the blurred frame took 1-7% longer on
+// node and triangle cost a second memory round trip, and the blurred frame took up to 7% longer on
 // the eight data scenes (H100 and H200).
 __device__ __forceinline__ float moved(float a, float fs, uint32_t halves, bool high) {
   return fmaf(fs, motion::halfValue(uint16_t(high ? halves >> 16 : halves & 0xffffu)), a);
