@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <string>
 
 #include "tsah/base/binary_io.hpp"
 #include "tsah/base/error.hpp"
@@ -41,6 +42,15 @@ TEST(Crc32, KnownValue) {
   EXPECT_EQ(tsah::crc32("123456789", 9), 0xCBF43926u);
   // Continuing a CRC over two pieces equals the CRC of the whole.
   EXPECT_EQ(tsah::crc32("6789", 4, tsah::crc32("12345", 5)), 0xCBF43926u);
+  // An empty piece (a null pointer, as an empty vector's data()) leaves the CRC as it was.
+  EXPECT_EQ(tsah::crc32(nullptr, 0, tsah::crc32("123456789", 9)), 0xCBF43926u);
+  EXPECT_EQ(tsah::crc32(nullptr, 0), 0u);
+  // Two pieces' CRCs computed apart combine into the whole's.
+  EXPECT_EQ(tsah::crc32Combine(tsah::crc32("123", 3), tsah::crc32("456789", 6), 6), 0xCBF43926u);
+  EXPECT_EQ(tsah::crc32Combine(tsah::crc32("123456789", 9), 0u, 0), 0xCBF43926u);
+  const std::string big(1 << 20, 'x');
+  EXPECT_EQ(tsah::crc32Combine(tsah::crc32("12", 2), tsah::crc32(big.data(), big.size()), big.size()),
+            tsah::crc32(big.data(), big.size(), tsah::crc32("12", 2)));
 }
 
 TEST(Tanim, RoundTripInMemoryAndOnDisk) {

@@ -58,27 +58,29 @@ uint32_t topologyHash(std::span<const uint32_t> indices) {
 
 namespace {
 
-// A .tbvh file as its parts in file order: header, node blocks, root boxes, triangle indices,
-// checksum. saveBvhFile writes them one after the other, never assembling the whole file in memory.
-struct EncodedBvh {
-  FlatBvh flat;
-  std::vector<uint8_t> header;
-  uint32_t crc = 0;
+template <typename T>
+std::span<const uint8_t> bytesOf(const std::vector<T>& v) {
+  return {reinterpret_cast<const uint8_t*>(v.data()), v.size() * sizeof(T)};
+}
 
-  template <typename T>
-  static std::span<const uint8_t> bytesOf(const std::vector<T>& v) {
-    return {reinterpret_cast<const uint8_t*>(v.data()), v.size() * sizeof(T)};
-  }
-  std::array<std::span<const uint8_t>, 5> parts() const {
-    return {std::span<const uint8_t>(header), bytesOf(flat.nodes), bytesOf(flat.rootBoxes), bytesOf(flat.triIndex),
-            std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(&crc), sizeof crc)};
-  }
-};
+}  // namespace
 
-EncodedBvh encodeParts(const Bvh& bvh, const BvhBuildInfo& info) {
-  EncodedBvh out;
-  out.flat = flattenBvh(bvh);
-  const FlatBvh& flat = out.flat;
+std::array<std::span<const uint8_t>, 5> BvhFileParts::parts() const {
+  return {std::span<const uint8_t>(header), bytesOf(flat->nodes), bytesOf(flat->rootBoxes), bytesOf(flat->triIndex),
+          std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(&crc), sizeof crc)};
+}
+
+uint64_t BvhFileParts::size() const {
+  uint64_t bytes = 0;
+  for (const auto& part : parts()) bytes += part.size();
+  return bytes;
+}
+
+uint32_t BvhFileParts::wholeCrc() const { return tsah::crc32(&crc, sizeof crc, crc); }
+
+BvhFileParts bvhFileParts(const FlatBvh& flat, const BvhBuildInfo& info) {
+  BvhFileParts out;
+  out.flat = &flat;
   if (info.triangleCount != 0 && info.triangleCount != flat.triangleCount())
     throw tsah::DataError(".tbvh build info says " + std::to_string(info.triangleCount) +
                           " triangles, the tree holds " + std::to_string(flat.triangleCount()));
@@ -118,17 +120,9 @@ EncodedBvh encodeParts(const Bvh& bvh, const BvhBuildInfo& info) {
   return out;
 }
 
-}  // namespace
-
 std::vector<uint8_t> encodeBvhFile(const Bvh& bvh, const BvhBuildInfo& info) {
-  const EncodedBvh encoded = encodeParts(bvh, info);
-  std::vector<uint8_t> bytes;
-  const auto parts = encoded.parts();
-  std::size_t size = 0;
-  for (const auto& part : parts) size += part.size();
-  bytes.reserve(size);
-  for (const auto& part : parts) bytes.insert(bytes.end(), part.begin(), part.end());
-  return bytes;
+  const FlatBvh flat = flattenBvh(bvh);
+  return joinedBytes(bvhFileParts(flat, info).parts());
 }
 
 FlatBvh decodeFlatBvhFile(std::span<const uint8_t> bytes, const std::string& file, BvhBuildInfo* infoOut) {
@@ -218,7 +212,8 @@ BvhFile decodeBvhFile(std::span<const uint8_t> bytes, const std::string& file) {
 
 void saveBvhFile(const std::string& path, const Bvh& bvh, const BvhBuildInfo& info) {
   tsah::requireExtension(path, ".tbvh", "tree");
-  const EncodedBvh encoded = encodeParts(bvh, info);
+  const FlatBvh flat = flattenBvh(bvh);
+  const BvhFileParts encoded = bvhFileParts(flat, info);
   const auto parts = encoded.parts();
   tsah::writeFileAtomically(path, std::span<const std::span<const uint8_t>>(parts));
 }

@@ -1,5 +1,6 @@
 #include "tsah/io/two_level_file.hpp"
 
+#include <array>
 #include <cmath>
 #include <cstring>
 
@@ -86,6 +87,40 @@ std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh* const> blases, std:
                                         std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
                                         std::span<const TwoLevelPoseRecord> poses,
                                         std::span<const uint32_t> flattenedObjects) {
+  std::vector<FlatBvh> flat(blases.size() + 1);
+  forEachConcurrently(flat.size(), [&](std::size_t b) { flat[b] = flattenBvh(b < blases.size() ? *blases[b] : tlas); });
+  std::vector<const FlatBvh*> flatBlases;
+  for (std::size_t b = 0; b < blases.size(); ++b) flatBlases.push_back(&flat[b]);
+  return twoLevelFileParts(flatBlases, blasBuilds, flat.back(), tlasBuild, instanceBlas, instancePose, poses,
+                           flattenedObjects)
+      .bytes();
+}
+
+namespace {
+
+constexpr std::array<uint8_t, 16> kZeros{};  // the padding before each tree image
+
+}  // namespace
+
+std::vector<std::span<const uint8_t>> TwoLevelFileParts::parts() const {
+  std::vector<std::span<const uint8_t>> out{std::span<const uint8_t>(tables)};
+  uint64_t offset = tables.size();
+  for (const BvhFileParts& image : images) {
+    out.push_back(std::span<const uint8_t>(kZeros.data(), align16(offset) - offset));
+    for (const std::span<const uint8_t> part : image.parts()) out.push_back(part);
+    offset = align16(offset) + image.size();
+  }
+  out.push_back(std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(&crc), sizeof crc));
+  return out;
+}
+
+std::vector<uint8_t> TwoLevelFileParts::bytes() const { return joinedBytes(parts()); }
+
+TwoLevelFileParts twoLevelFileParts(std::span<const FlatBvh* const> blases, std::span<const BvhBuildInfo> blasBuilds,
+                                    const FlatBvh& tlas, const BvhBuildInfo& tlasBuild,
+                                    std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
+                                    std::span<const TwoLevelPoseRecord> poses,
+                                    std::span<const uint32_t> flattenedObjects) {
   if (blases.size() != blasBuilds.size() || blases.size() > kTbvhTwoLevelMaxBlas)
     throw DataError(".tbvh two-level: " + std::to_string(blases.size()) + " BLAS and " +
                     std::to_string(blasBuilds.size()) + " build records");
@@ -94,18 +129,18 @@ std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh* const> blases, std:
   if (auto problem = validateFlattenedObjects(flattenedObjects)) throw DataError(".tbvh two-level: " + *problem);
   if (flattenedObjects.size() > kTbvhTwoLevelMaxFlattened)
     throw DataError(".tbvh two-level: " + std::to_string(flattenedObjects.size()) + " flattened objects");
-  if (tlas.primCount() != instanceBlas.size())
-    throw DataError(".tbvh two-level: the TLAS holds " + std::to_string(tlas.primCount()) + " instances, the table " +
+  if (tlas.triangleCount() != instanceBlas.size())
+    throw DataError(".tbvh two-level: the TLAS holds " + std::to_string(tlas.triangleCount()) + " instances, the table " +
                     std::to_string(instanceBlas.size()));
-  std::vector<std::vector<uint8_t>> images(blases.size() + 1);
-  forEachConcurrently(images.size(), [&](std::size_t b) {
-    images[b] = b < blases.size() ? encodeBvhFile(*blases[b], blasBuilds[b]) : encodeBvhFile(tlas, tlasBuild);
+  TwoLevelFileParts out;
+  // Each image with its own checksums, concurrently (the largest trees take the longest).
+  out.images.resize(blases.size() + 1);
+  forEachConcurrently(out.images.size(), [&](std::size_t b) {
+    out.images[b] = b < blases.size() ? bvhFileParts(*blases[b], blasBuilds[b]) : bvhFileParts(tlas, tlasBuild);
   });
 
   ByteWriter w;
-  uint64_t fileBytes = align16(tablesEnd(blases.size(), instanceBlas.size(), poses.size(), flattenedObjects.size()));
-  for (const std::vector<uint8_t>& image : images) fileBytes = align16(fileBytes + image.size());
-  w.buffer().reserve(fileBytes + sizeof(uint32_t));  // the checksum
+  w.buffer().reserve(align16(tablesEnd(blases.size(), instanceBlas.size(), poses.size(), flattenedObjects.size())));
   w.write(detail::kTbvhMagic);
   w.write(kTbvhTwoLevelVersion);
   w.write(kTbvhTwoLevelHeaderBytes);
@@ -129,17 +164,23 @@ std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh* const> blases, std:
   }
   for (uint32_t o : flattenedObjects) w.write(o);
   uint64_t offset = align16(tablesEnd(blases.size(), instanceBlas.size(), poses.size(), flattenedObjects.size()));
-  for (const std::vector<uint8_t>& image : images) {
+  for (const BvhFileParts& image : out.images) {
     w.write(offset);
-    w.write(uint64_t(image.size()));
+    w.write(image.size());
     offset = align16(offset + image.size());
   }
-  for (const std::vector<uint8_t>& image : images) {
-    while (w.buffer().size() % 16 != 0) w.write(uint8_t{0});
-    w.writeArray(std::span<const uint8_t>(image));
+  out.tables = std::move(w.buffer());
+  // The file's checksum from the tables', the padding's and each image's own (crc32Combine): no
+  // byte of a tree is read twice.
+  uint32_t crc = crc32(out.tables.data(), out.tables.size());
+  offset = out.tables.size();
+  for (const BvhFileParts& image : out.images) {
+    crc = crc32(kZeros.data(), align16(offset) - offset, crc);
+    crc = crc32Combine(crc, image.wholeCrc(), image.size());
+    offset = align16(offset) + image.size();
   }
-  w.write(crc32(w.buffer().data(), w.buffer().size()));
-  return std::move(w.buffer());
+  out.crc = crc;
+  return out;
 }
 
 TwoLevelFile decodeTwoLevelFile(std::span<const uint8_t> bytes, const std::string& file) {

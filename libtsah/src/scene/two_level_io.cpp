@@ -36,19 +36,32 @@ std::vector<uint32_t> instancePoses(const TwoLevelScene& twoLevel) {
 
 }  // namespace
 
-std::vector<uint8_t> encodeTwoLevelScene(const TwoLevelScene& twoLevel) {
-  std::vector<const Bvh*> trees;
+namespace {
+
+// The file's parts over the BLAS's canonical forms the structure keeps (Blas::flat, flattenBvh of
+// its tree) and the flattened TLAS (tlasFlat, the caller's).
+TwoLevelFileParts fileParts(const TwoLevelScene& twoLevel, const FlatBvh& tlasFlat) {
+  std::vector<const FlatBvh*> trees;
   std::vector<BvhBuildInfo> builds;
   for (const Blas& b : twoLevel.blases) {
-    trees.push_back(&b.bvh);
+    trees.push_back(&b.flat);
     builds.push_back(b.info);
   }
-  return encodeTwoLevelFile(std::span<const Bvh* const>(trees), builds, twoLevel.tlas, twoLevel.tlasInfo, instanceBlas(twoLevel.scene),
-                            instancePoses(twoLevel), poseRecords(twoLevel), twoLevel.scene.flattenedObjects);
+  return twoLevelFileParts(trees, builds, tlasFlat, twoLevel.tlasInfo, instanceBlas(twoLevel.scene),
+                           instancePoses(twoLevel), poseRecords(twoLevel), twoLevel.scene.flattenedObjects);
+}
+
+}  // namespace
+
+std::vector<uint8_t> encodeTwoLevelScene(const TwoLevelScene& twoLevel) {
+  const FlatBvh tlas = flattenBvh(twoLevel.tlas);
+  return fileParts(twoLevel, tlas).bytes();
 }
 
 void saveTwoLevelScene(const std::string& path, const TwoLevelScene& twoLevel) {
-  writeFileAtomically(path, encodeTwoLevelScene(twoLevel));
+  const FlatBvh tlas = flattenBvh(twoLevel.tlas);
+  const TwoLevelFileParts file = fileParts(twoLevel, tlas);
+  writeFileAtomically(path, file.parts());
 }
 
 TwoLevelScene loadTwoLevelSceneFile(const std::string& treePath, anim::SceneSources scene) {

@@ -19,6 +19,12 @@ static_assert(std::endian::native == std::endian::little,
 
 // CRC-32 (IEEE 802.3, the zlib polynomial). Pass a previous result as `crc` to continue.
 uint32_t crc32(const void* data, std::size_t size, uint32_t crc = 0);
+// The CRC-32 of A followed by B from crc32(A), crc32(B) and B's length: checksums of parts
+// computed apart (concurrently, or kept from before) make the whole's.
+uint32_t crc32Combine(uint32_t first, uint32_t second, uint64_t secondBytes);
+
+// Parts of a file (written one after the other by writeFileAtomically) joined into one buffer.
+std::vector<uint8_t> joinedBytes(std::span<const std::span<const uint8_t>> parts);
 
 // Reads fixed-width values from a byte buffer; every read is bounds-checked and a short buffer
 // throws FileError naming the file, the byte offset and what was being read.

@@ -1,6 +1,7 @@
 #pragma once
 // The .tbvh file: an optimized BVH in a GPU-ready layout plus how it was built.
 // Specified in docs/tbvh-format.md (byte layout, validation rules, checksum).
+#include <array>
 #include <cstdint>
 #include <span>
 #include <string>
@@ -44,6 +45,18 @@ uint32_t topologyHash(std::span<const uint32_t> indices);
 // empty or invalid or info.triangleCount disagrees with the tree, tsah::ConfigError when a name
 // does not fit.
 std::vector<uint8_t> encodeBvhFile(const Bvh& bvh, const BvhBuildInfo& info);
+// The same file as its parts in file order (header, node blocks, root boxes, triangle indices,
+// checksum) over a flattened tree (flattenBvh's) that the caller keeps: written one after the
+// other they are encodeBvhFile's bytes, never assembled in memory. Throws as encodeBvhFile.
+struct BvhFileParts {
+  const FlatBvh* flat = nullptr;
+  std::vector<uint8_t> header;
+  uint32_t crc = 0;  // the file's checksum: over every part before it
+  std::array<std::span<const uint8_t>, 5> parts() const;
+  uint64_t size() const;
+  uint32_t wholeCrc() const;  // crc32 of the whole file, its checksum included
+};
+BvhFileParts bvhFileParts(const FlatBvh& flat, const BvhBuildInfo& info);
 // Validates everything before use (magic, version, layout, sizes vs byte count, checksum, indices in
 // range, each triangle referenced exactly once, the node graph a tree); throws tsah::FileError
 // naming `file`. Allocates only after the counts have been checked against the byte count.
