@@ -152,28 +152,26 @@ TwoLevelScene buildTwoLevelScene(anim::SceneSources scene, const TreeOptions& op
   TwoLevelScene out;
   out.objective = options.objective;
 
-  // One BLAS per source, in the source's own time. On the CPU the sources are built concurrently
-  // (each tree is the same however the threads are shared); the GPU optimizer takes one at a time.
+  // One BLAS per source, in the source's own time, the sources concurrently (each tree is the same
+  // however the threads are shared). With the GPU optimizer too: a source's host work (its initial
+  // tree, the collapse after the optimizer) overlaps the others' device work, which the device
+  // runs one launch after another.
   auto phase = std::chrono::steady_clock::now();
   out.blases.resize(scene.sources.size());
-  if (options.device == Device::Cuda) {
-    for (uint32_t s = 0; s < scene.sources.size(); ++s) out.blases[s] = buildBlas(scene, s, options);
-  } else {
-    // The callbacks see one message at a time, as from one build.
-    TreeOptions shared = options;
-    std::mutex callbackMutex;
-    if (options.progress)
-      shared.progress = [&](const std::string& message) {
-        const std::lock_guard<std::mutex> lock(callbackMutex);
-        options.progress(message);
-      };
-    if (options.batchProgress)
-      shared.batchProgress = [&](const InsertionOptimizer::BatchRecord& record) {
-        const std::lock_guard<std::mutex> lock(callbackMutex);
-        options.batchProgress(record);
-      };
-    forEachConcurrently(scene.sources.size(), [&](std::size_t s) { out.blases[s] = buildBlas(scene, uint32_t(s), shared); });
-  }
+  // The callbacks see one message at a time, as from one build.
+  TreeOptions shared = options;
+  std::mutex callbackMutex;
+  if (options.progress)
+    shared.progress = [&](const std::string& message) {
+      const std::lock_guard<std::mutex> lock(callbackMutex);
+      options.progress(message);
+    };
+  if (options.batchProgress)
+    shared.batchProgress = [&](const InsertionOptimizer::BatchRecord& record) {
+      const std::lock_guard<std::mutex> lock(callbackMutex);
+      options.batchProgress(record);
+    };
+  forEachConcurrently(scene.sources.size(), [&](std::size_t s) { out.blases[s] = buildBlas(scene, uint32_t(s), shared); });
   out.buildPhases.push_back({"blas", secondsSince(phase)});
 
   // Each BLAS checked against its source's boxes and flattened: independent, so concurrently.
