@@ -89,9 +89,10 @@ struct RefitPartsView {
 };
 
 // Shared-memory bytes of a part's block refit (refit_walk.cuh's partRefit) of nodeCount local
-// nodes: an arrival counter, the parent's local slot and the node's 12 box floats per node; with
-// slots, 6 box floats per triangle slot of the part (the pose kernel's triangle boxes).
-TSAH_HD constexpr uint32_t partWalkWords(uint32_t nodeCount) { return 14u * nodeCount; }
+// nodes: an arrival counter, the parent's local slot, the node's index in the tree and its 12 box
+// floats per node; with slots, 6 box floats per triangle slot of the part (the pose kernel's
+// triangle boxes).
+TSAH_HD constexpr uint32_t partWalkWords(uint32_t nodeCount) { return 15u * nodeCount; }
 constexpr uint64_t partRefitBytes(uint32_t nodeCount, uint32_t slotCount = 0) {
   return (uint64_t(partWalkWords(nodeCount)) + uint64_t(slotCount) * 6u) * 4u;
 }

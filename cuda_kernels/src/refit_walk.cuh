@@ -75,10 +75,13 @@ __device__ void partRefit(GpuBvhNode* __restrict__ nodes, const RefitPartsView& 
                           Prologue prologue, ItemBoxOf boxOf, Aabb* exitBox, uint32_t* shared) {
   uint32_t* counters = shared;
   uint32_t* parents = shared + part.nodeCount;
-  volatile float* boxes = reinterpret_cast<volatile float*>(shared + 2 * std::size_t(part.nodeCount));
+  uint32_t* globals = shared + 2 * std::size_t(part.nodeCount);
+  volatile float* boxes = reinterpret_cast<volatile float*>(shared + 3 * std::size_t(part.nodeCount));
+  // The node indices too: read here beside the parents, not one dependent load per float at the end.
   for (uint32_t n = threadIdx.x; n < part.nodeCount; n += blockDim.x) {
     counters[n] = 0;
     parents[n] = __ldg(view.parentSlot + part.firstNode + n);
+    globals[n] = __ldg(view.globalNode + part.firstNode + n);
   }
   prologue();
   __syncthreads();
@@ -103,10 +106,8 @@ __device__ void partRefit(GpuBvhNode* __restrict__ nodes, const RefitPartsView& 
     if (reachedExit) *exitBox = box;
   }
   __syncthreads();
-  for (uint32_t k = threadIdx.x; k < 12 * part.nodeCount; k += blockDim.x) {
-    const uint32_t node = __ldg(view.globalNode + part.firstNode + k / 12);
-    reinterpret_cast<float*>(nodes + node)[k % 12] = boxes[k];
-  }
+  for (uint32_t k = threadIdx.x; k < 12 * part.nodeCount; k += blockDim.x)
+    reinterpret_cast<float*>(nodes + globals[k / 12])[k % 12] = boxes[k];
 }
 
 }  // namespace tsah::cuda::detail

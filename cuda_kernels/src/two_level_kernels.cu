@@ -21,6 +21,17 @@ __global__ void instanceBoxesKernel(const InstanceState* __restrict__ instances,
   boxes[i] = transformBoxRows(views[inst.view].root->box, inst.world);
 }
 
+// 16 bytes a thread when both ends are 16-byte aligned, and what is left (the last bytes, or all of
+// them when unaligned) a byte a thread.
+__global__ void copyFromHostKernel(uint8_t* __restrict__ device, const uint8_t* __restrict__ host, std::size_t bytes) {
+  const std::size_t i = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  const bool aligned = (reinterpret_cast<uintptr_t>(device) | reinterpret_cast<uintptr_t>(host)) % 16 == 0;
+  const std::size_t words = aligned ? bytes / 16 : 0;
+  if (i < words) reinterpret_cast<uint4*>(device)[i] = reinterpret_cast<const uint4*>(host)[i];
+  const std::size_t first = 16 * words, threads = std::size_t(gridDim.x) * blockDim.x;
+  for (std::size_t b = first + i; b < bytes; b += threads) device[b] = host[b];
+}
+
 // The flat runtime's refit walk with instance boxes as the leaves' content.
 __global__ void tlasRefitKernel(GpuBvhNode* __restrict__ nodes, const uint32_t* __restrict__ nodeParent,
                                 const LeafRecord* __restrict__ leaves, uint32_t leafCount,
@@ -164,6 +175,15 @@ void launchTraceOf(const TlasScene& scene, const Rays& rays, uint32_t count, con
 }
 
 }  // namespace
+
+void launchCopyFromHost(void* device, const void* mappedHost, std::size_t bytes, cudaStream_t stream) {
+  if (bytes == 0) return;
+  const unsigned block = 256;
+  const std::size_t threads = std::max<std::size_t>(16, (bytes + 15) / 16);
+  copyFromHostKernel<<<unsigned((threads + block - 1) / block), block, 0, stream>>>(
+      static_cast<uint8_t*>(device), static_cast<const uint8_t*>(mappedHost), bytes);
+  CUDA_CHECK_LAUNCH("copyFromHostKernel");
+}
 
 void launchInstanceBoxes(const InstanceState* instances, const BlasView* views, uint32_t count, Aabb* boxes,
                          cudaStream_t stream) {
