@@ -64,7 +64,7 @@ class GpuTwoLevelRuntime {
     // Refit the poses' BLAS and the TLAS by blocks walking in shared memory: each pose's tree split
     // into subtrees of at most refitPartLeaves leaves (one block each) and the top above them
     // (tsah::splitForBlockRefit), the TLAS as one part when it fits the device's opt-in shared
-    // memory per block (14 * 4 bytes per interior node); false: the global-memory walk for every
+    // memory per block (15 * 4 bytes per interior node); false: the global-memory walk for every
     // tree (the reference; the boxes are the same bit for bit).
     bool blockRefits = true;
     uint32_t refitPartLeaves = 512;
