@@ -94,7 +94,7 @@ struct TwoLevelTraceAccess {
 void launchInstanceBoxes(const InstanceState* instances, const BlasView* views, uint32_t count, Aabb* boxes,
                          cudaStream_t stream);
 // `bytes` from pinned host memory (its device pointer, mapped) to device memory, by a kernel: in a
-// CUDA graph a copy node costs about 10 us whatever its size, a kernel's reads over the bus about 2.
+// CUDA graph a copy node costs about 10 us whatever its size, a kernel reading it over the bus about 3.
 void launchCopyFromHost(void* device, const void* mappedHost, std::size_t bytes, cudaStream_t stream);
 // Bottom-up refit of the TLAS from the instance boxes (counters zero on entry), root->box included.
 void launchTlasRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
