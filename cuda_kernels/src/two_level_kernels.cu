@@ -179,7 +179,7 @@ void launchTraceOf(const TlasScene& scene, const Rays& rays, uint32_t count, con
 void launchCopyFromHost(void* device, const void* mappedHost, std::size_t bytes, cudaStream_t stream) {
   if (bytes == 0) return;
   const unsigned block = 256;
-  const std::size_t threads = std::max<std::size_t>(16, (bytes + 15) / 16);
+  const std::size_t threads = (bytes + 15) / 16;  // the kernel's byte loop strides over the grid
   copyFromHostKernel<<<unsigned((threads + block - 1) / block), block, 0, stream>>>(
       static_cast<uint8_t*>(device), static_cast<const uint8_t*>(mappedHost), bytes);
   CUDA_CHECK_LAUNCH("copyFromHostKernel");

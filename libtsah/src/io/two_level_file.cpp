@@ -37,6 +37,81 @@ std::optional<std::string> validateFlattenedObjects(std::span<const uint32_t> ob
   return std::nullopt;
 }
 
+constexpr std::array<uint8_t, 16> kZeros{};  // the padding before each tree image
+
+// The encoders' checks of their arguments, before any tree is flattened or encoded.
+void requireEncodable(std::size_t blasCount, std::size_t buildCount, uint32_t tlasInstances,
+                      std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
+                      std::span<const TwoLevelPoseRecord> poses, std::span<const uint32_t> flattenedObjects) {
+  if (blasCount != buildCount || blasCount > kTbvhTwoLevelMaxBlas)
+    throw DataError(".tbvh two-level: " + std::to_string(blasCount) + " BLAS and " + std::to_string(buildCount) +
+                    " build records");
+  if (auto problem = validateTwoLevelTables(uint32_t(blasCount), instanceBlas, instancePose, poses))
+    throw DataError(".tbvh two-level: " + *problem);
+  if (auto problem = validateFlattenedObjects(flattenedObjects)) throw DataError(".tbvh two-level: " + *problem);
+  if (flattenedObjects.size() > kTbvhTwoLevelMaxFlattened)
+    throw DataError(".tbvh two-level: " + std::to_string(flattenedObjects.size()) + " flattened objects");
+  if (tlasInstances != instanceBlas.size())
+    throw DataError(".tbvh two-level: the TLAS holds " + std::to_string(tlasInstances) + " instances, the table " +
+                    std::to_string(instanceBlas.size()));
+}
+
+// twoLevelFileParts' work once its arguments passed requireEncodable.
+TwoLevelFileParts encodedParts(std::span<const FlatBvh* const> blases, std::span<const BvhBuildInfo> blasBuilds,
+                               const FlatBvh& tlas, const BvhBuildInfo& tlasBuild,
+                               std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
+                               std::span<const TwoLevelPoseRecord> poses, std::span<const uint32_t> flattenedObjects) {
+  TwoLevelFileParts out;
+  // Each image with its own checksums, concurrently (the largest trees take the longest).
+  out.images.resize(blases.size() + 1);
+  forEachConcurrently(out.images.size(), [&](std::size_t b) {
+    out.images[b] = b < blases.size() ? bvhFileParts(*blases[b], blasBuilds[b]) : bvhFileParts(tlas, tlasBuild);
+  });
+
+  ByteWriter w;
+  w.buffer().reserve(align16(tablesEnd(blases.size(), instanceBlas.size(), poses.size(), flattenedObjects.size())));
+  w.write(detail::kTbvhMagic);
+  w.write(kTbvhTwoLevelVersion);
+  w.write(kTbvhTwoLevelHeaderBytes);
+  w.write(uint32_t(blases.size()));
+  w.write(uint32_t(instanceBlas.size()));
+  w.write(uint32_t(poses.size()));
+  w.write(uint32_t(flattenedObjects.size()));
+  w.write(tlasBuild.timeStart);
+  w.write(tlasBuild.timeEnd);
+  for (int i = 0; i < 4; ++i) w.write(uint32_t{0});
+  TSAH_ASSERT(w.buffer().size() == kTbvhTwoLevelHeaderBytes, ".tbvh two-level header size mismatch");
+  for (std::size_t i = 0; i < instanceBlas.size(); ++i) {
+    w.write(instanceBlas[i]);
+    w.write(instancePose[i]);
+  }
+  for (const TwoLevelPoseRecord& p : poses) {
+    w.write(p.blas);
+    w.write(p.outside);
+    w.write(p.offset);
+    w.write(p.speed);
+  }
+  for (uint32_t o : flattenedObjects) w.write(o);
+  uint64_t offset = align16(tablesEnd(blases.size(), instanceBlas.size(), poses.size(), flattenedObjects.size()));
+  for (const BvhFileParts& image : out.images) {
+    w.write(offset);
+    w.write(image.size());
+    offset = align16(offset + image.size());
+  }
+  out.tables = std::move(w.buffer());
+  // The file's checksum from the tables', the padding's and each image's own (crc32Combine): no
+  // byte of a tree is read twice.
+  uint32_t crc = crc32(out.tables.data(), out.tables.size());
+  offset = out.tables.size();
+  for (const BvhFileParts& image : out.images) {
+    crc = crc32(kZeros.data(), align16(offset) - offset, crc);
+    crc = crc32Combine(crc, image.wholeCrc(), image.size());
+    offset = align16(offset) + image.size();
+  }
+  out.crc = crc;
+  return out;
+}
+
 }  // namespace
 
 std::optional<std::string> validateTwoLevelTables(uint32_t blasCount, std::span<const uint32_t> instanceBlas,
@@ -87,20 +162,16 @@ std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh* const> blases, std:
                                         std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
                                         std::span<const TwoLevelPoseRecord> poses,
                                         std::span<const uint32_t> flattenedObjects) {
+  requireEncodable(blases.size(), blasBuilds.size(), tlas.primCount(), instanceBlas, instancePose, poses,
+                   flattenedObjects);
   std::vector<FlatBvh> flat(blases.size() + 1);
   forEachConcurrently(flat.size(), [&](std::size_t b) { flat[b] = flattenBvh(b < blases.size() ? *blases[b] : tlas); });
   std::vector<const FlatBvh*> flatBlases;
   for (std::size_t b = 0; b < blases.size(); ++b) flatBlases.push_back(&flat[b]);
-  return twoLevelFileParts(flatBlases, blasBuilds, flat.back(), tlasBuild, instanceBlas, instancePose, poses,
-                           flattenedObjects)
+  return encodedParts(flatBlases, blasBuilds, flat.back(), tlasBuild, instanceBlas, instancePose, poses,
+                      flattenedObjects)
       .bytes();
 }
-
-namespace {
-
-constexpr std::array<uint8_t, 16> kZeros{};  // the padding before each tree image
-
-}  // namespace
 
 std::vector<std::span<const uint8_t>> TwoLevelFileParts::parts() const {
   std::vector<std::span<const uint8_t>> out{std::span<const uint8_t>(tables)};
@@ -121,66 +192,9 @@ TwoLevelFileParts twoLevelFileParts(std::span<const FlatBvh* const> blases, std:
                                     std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
                                     std::span<const TwoLevelPoseRecord> poses,
                                     std::span<const uint32_t> flattenedObjects) {
-  if (blases.size() != blasBuilds.size() || blases.size() > kTbvhTwoLevelMaxBlas)
-    throw DataError(".tbvh two-level: " + std::to_string(blases.size()) + " BLAS and " +
-                    std::to_string(blasBuilds.size()) + " build records");
-  if (auto problem = validateTwoLevelTables(uint32_t(blases.size()), instanceBlas, instancePose, poses))
-    throw DataError(".tbvh two-level: " + *problem);
-  if (auto problem = validateFlattenedObjects(flattenedObjects)) throw DataError(".tbvh two-level: " + *problem);
-  if (flattenedObjects.size() > kTbvhTwoLevelMaxFlattened)
-    throw DataError(".tbvh two-level: " + std::to_string(flattenedObjects.size()) + " flattened objects");
-  if (tlas.triangleCount() != instanceBlas.size())
-    throw DataError(".tbvh two-level: the TLAS holds " + std::to_string(tlas.triangleCount()) + " instances, the table " +
-                    std::to_string(instanceBlas.size()));
-  TwoLevelFileParts out;
-  // Each image with its own checksums, concurrently (the largest trees take the longest).
-  out.images.resize(blases.size() + 1);
-  forEachConcurrently(out.images.size(), [&](std::size_t b) {
-    out.images[b] = b < blases.size() ? bvhFileParts(*blases[b], blasBuilds[b]) : bvhFileParts(tlas, tlasBuild);
-  });
-
-  ByteWriter w;
-  w.buffer().reserve(align16(tablesEnd(blases.size(), instanceBlas.size(), poses.size(), flattenedObjects.size())));
-  w.write(detail::kTbvhMagic);
-  w.write(kTbvhTwoLevelVersion);
-  w.write(kTbvhTwoLevelHeaderBytes);
-  w.write(uint32_t(blases.size()));
-  w.write(uint32_t(instanceBlas.size()));
-  w.write(uint32_t(poses.size()));
-  w.write(uint32_t(flattenedObjects.size()));
-  w.write(tlasBuild.timeStart);
-  w.write(tlasBuild.timeEnd);
-  for (int i = 0; i < 4; ++i) w.write(uint32_t{0});
-  TSAH_ASSERT(w.buffer().size() == kTbvhTwoLevelHeaderBytes, ".tbvh two-level header size mismatch");
-  for (std::size_t i = 0; i < instanceBlas.size(); ++i) {
-    w.write(instanceBlas[i]);
-    w.write(instancePose[i]);
-  }
-  for (const TwoLevelPoseRecord& p : poses) {
-    w.write(p.blas);
-    w.write(p.outside);
-    w.write(p.offset);
-    w.write(p.speed);
-  }
-  for (uint32_t o : flattenedObjects) w.write(o);
-  uint64_t offset = align16(tablesEnd(blases.size(), instanceBlas.size(), poses.size(), flattenedObjects.size()));
-  for (const BvhFileParts& image : out.images) {
-    w.write(offset);
-    w.write(image.size());
-    offset = align16(offset + image.size());
-  }
-  out.tables = std::move(w.buffer());
-  // The file's checksum from the tables', the padding's and each image's own (crc32Combine): no
-  // byte of a tree is read twice.
-  uint32_t crc = crc32(out.tables.data(), out.tables.size());
-  offset = out.tables.size();
-  for (const BvhFileParts& image : out.images) {
-    crc = crc32(kZeros.data(), align16(offset) - offset, crc);
-    crc = crc32Combine(crc, image.wholeCrc(), image.size());
-    offset = align16(offset) + image.size();
-  }
-  out.crc = crc;
-  return out;
+  requireEncodable(blases.size(), blasBuilds.size(), tlas.triangleCount(), instanceBlas, instancePose, poses,
+                   flattenedObjects);
+  return encodedParts(blases, blasBuilds, tlas, tlasBuild, instanceBlas, instancePose, poses, flattenedObjects);
 }
 
 TwoLevelFile decodeTwoLevelFile(std::span<const uint8_t> bytes, const std::string& file) {

@@ -34,10 +34,6 @@ std::vector<uint32_t> instancePoses(const TwoLevelScene& twoLevel) {
   return out;
 }
 
-}  // namespace
-
-namespace {
-
 // The file's parts over the BLAS's canonical forms the structure keeps (Blas::flat, flattenBvh of
 // its tree) and the flattened TLAS (tlasFlat, the caller's).
 TwoLevelFileParts fileParts(const TwoLevelScene& twoLevel, const FlatBvh& tlasFlat) {
