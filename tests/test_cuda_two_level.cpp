@@ -13,6 +13,7 @@
 #include <span>
 #include <sstream>
 
+#include "anim/animation.hpp"
 #include "anim/tanim.hpp"
 #include "tsah/base/error.hpp"
 #include "tsah/layout/flat_bvh.hpp"
@@ -209,9 +210,11 @@ void expectSameUpdates(tsah::cuda::GpuTwoLevelRuntime& a, tsah::cuda::GpuTwoLeve
 void expectBlockRefitsEqualTheGlobalWalk(const tsah::TwoLevelScene& twoLevel, uint32_t partLeaves) {
   SCOPED_TRACE("refitPartLeaves " + std::to_string(partLeaves));
   tsah::cuda::GpuTwoLevelRuntime::Config parts;
+  parts.keyedPoses = false;
   parts.refitPartLeaves = partLeaves;
   tsah::cuda::GpuTwoLevelRuntime block(twoLevel, parts);
   tsah::cuda::GpuTwoLevelRuntime::Config reference;
+  reference.keyedPoses = false;
   reference.blockRefits = false;
   tsah::cuda::GpuTwoLevelRuntime global(twoLevel, reference);
   const double times[] = {0.0, 2.0, 3.25, 7.5, 12.0, 3.25};
@@ -220,6 +223,46 @@ void expectBlockRefitsEqualTheGlobalWalk(const tsah::TwoLevelScene& twoLevel, ui
 
 TEST_F(CudaTwoLevel, BlockRefitsEqualTheGlobalWalk) {
   for (const uint32_t partLeaves : {512u, 16u, 5u, 2u}) expectBlockRefitsEqualTheGlobalWalk(*scene, partLeaves);
+}
+
+// Keyed poses (the default) against refitted ones: a pose whose time falls on a keyframe has the
+// refit's tree bit for bit; between keyframes each of its child boxes and its root box holds the
+// refit's, and some are larger (the lerp of the keyframes' boxes is looser than a refit). Their
+// hits: HitsEqualTheCpuRuntimeAtSeveralTimes.
+TEST_F(CudaTwoLevel, KeyedPosesHoldTheRefitsBoxes) {
+  tsah::cuda::GpuTwoLevelRuntime::Config refitted;
+  refitted.keyedPoses = false;
+  tsah::cuda::GpuTwoLevelRuntime keyed(*scene), refit(*scene, refitted);
+  const anim::SceneSources& src = scene->scene;
+  uint32_t onKeys = 0, between = 0, looser = 0;
+  for (const double t : {0.0, 2.0, 3.25, 7.5, 10.0, 12.0}) {
+    keyed.updateAt(t);
+    refit.updateAt(t);
+    for (uint32_t i = 0; i < scene->instanceCount(); ++i) {
+      const uint32_t p = scene->instancePose[i];
+      if (p == tsah::kInvalidIndex) continue;
+      const anim::Animation& a = *src.sources[scene->poses[p].blas];
+      const bool onKey = anim::keyframeBlend(a.times(), src.instances[i].localTime(t, a)).alpha == 0.0f;
+      const tsah::FlatBvh k = keyed.downloadPoseTree(p), r = refit.downloadPoseTree(p);
+      ASSERT_EQ(k.nodes.size(), r.nodes.size());
+      if (onKey) {
+        ++onKeys;
+        EXPECT_EQ(std::memcmp(k.nodes.data(), r.nodes.data(), k.nodes.size() * sizeof(k.nodes[0])), 0) << "t " << t;
+        EXPECT_EQ(std::memcmp(&k.rootBoxes[0], &r.rootBoxes[0], sizeof(tsah::Aabb)), 0) << "t " << t;
+        continue;
+      }
+      ++between;
+      EXPECT_TRUE(k.rootBoxes[0].contains(r.rootBoxes[0])) << "t " << t << " pose " << p;
+      for (std::size_t n = 0; n < k.nodes.size(); ++n)
+        for (int c = 0; c < 2; ++c) {
+          ASSERT_TRUE(k.nodes[n].childBox(c).contains(r.nodes[n].childBox(c))) << "t " << t << " node " << n;
+          looser += std::memcmp(&k.nodes[n], &r.nodes[n], 12 * sizeof(float)) != 0;
+        }
+    }
+  }
+  EXPECT_GT(onKeys, 0u);
+  EXPECT_GT(between, 0u);
+  EXPECT_GT(looser, 0u);
 }
 
 // Config::phaseTimings = false times the update by its start and end only (the whole update in

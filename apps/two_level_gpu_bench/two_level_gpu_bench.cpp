@@ -48,6 +48,7 @@ struct Options {
   int k = 2;
   bool rebuildReference = true;
   bool buildOnly = false;  // build and save (--save-tree), no device needed
+  bool keyedPoses = true;   // GpuTwoLevelRuntime::Config::keyedPoses
   bool blockRefits = true;  // GpuTwoLevelRuntime::Config::blockRefits
   uint32_t refitPartLeaves = tsah::cuda::GpuTwoLevelRuntime::Config{}.refitPartLeaves;
   bool phaseTimings = true;  // GpuTwoLevelRuntime::Config::phaseTimings
@@ -129,6 +130,7 @@ int run(const Options& opt) {
   std::vector<TlasRun> runs;
   for (tsah::cuda::TlasUpdate update : tlasUpdates(opt.tlas)) {
     tsah::cuda::GpuTwoLevelRuntime::Config config;
+    config.keyedPoses = opt.keyedPoses;
     config.blockRefits = opt.blockRefits;
     config.refitPartLeaves = opt.refitPartLeaves;
     config.phaseTimings = opt.phaseTimings;
@@ -231,6 +233,7 @@ int run(const Options& opt) {
   j["tlas_interior_nodes"] = runs.front().tlasNodes;
   j["image"] = {opt.width, opt.height};
   j["ao_per_hit"] = opt.ao;
+  j["keyed_poses"] = opt.keyedPoses;
   j["block_refits"] = opt.blockRefits;
   j["refit_part_leaves"] = opt.refitPartLeaves;
   j["phase_timings"] = opt.phaseTimings;
@@ -295,6 +298,9 @@ int main(int argc, char** argv) {
   app.add_option("--refit-part-leaves", opt.refitPartLeaves,
                  "Block refits: each pose's tree split into subtrees of at most this many leaves (default 512)")
       ->check(CLI::Range(2u, 1u << 30));
+  bool refitPoses = false;
+  app.add_flag("--refit-poses", refitPoses,
+               "Refit every pose's BLAS from its positions, not lerp its boxes from its source's key boxes");
   bool noPhaseTimings = false;
   app.add_flag("--no-phase-timings", noPhaseTimings,
                "Time the update by its start and end only (no event nodes between its phases in the graph: "
@@ -303,6 +309,7 @@ int main(int argc, char** argv) {
   opt.phaseTimings = !noPhaseTimings;
   opt.rebuildReference = !noRebuild;
   opt.blockRefits = !globalRefits;
+  opt.keyedPoses = !refitPoses;
   try {
     return run(opt);
   } catch (const tsah::ConfigError& e) {

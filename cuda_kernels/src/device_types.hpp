@@ -51,11 +51,12 @@ struct LeafRecord {
 
 // Which keyframes the interpolation blends: a kernel argument, which the runtime sets in its
 // captured graphs before each launch (setInterpolationParams), so one graph serves every frame.
-// Offsets are in floats.
+// Offsets are in floats; keyA and keyB are the keyframes' indices (the keyed pose update's boxes).
 struct alignas(16) FrameParams {
   uint64_t a = 0, b = 0;
   float alpha = 0.0f;
-  uint32_t pad[3] = {0, 0, 0};
+  uint32_t keyA = 0, keyB = 0;
+  uint32_t pad = 0;
 };
 
 // The frame blending keyframe k towards k + 1 by alpha (anim::keyframeBlend) of an animation with
@@ -63,8 +64,10 @@ struct alignas(16) FrameParams {
 inline FrameParams blendFrame(uint32_t k, float alpha, uint32_t movingVertices) {
   const uint64_t perFrame = uint64_t(movingVertices) * 3;
   FrameParams frame;
-  frame.a = k * perFrame;
-  frame.b = (alpha == 0.0f ? k : k + 1) * perFrame;
+  frame.keyA = k;
+  frame.keyB = alpha == 0.0f ? k : k + 1;
+  frame.a = frame.keyA * perFrame;
+  frame.b = frame.keyB * perFrame;
   frame.alpha = alpha;
   return frame;
 }

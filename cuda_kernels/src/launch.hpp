@@ -16,6 +16,13 @@ inline unsigned gridFor(std::size_t n, unsigned block) {
   return static_cast<unsigned>(blocks == 0 ? 1 : (blocks > 0x7fffffffu ? 0x7fffffffu : blocks));
 }
 
+// A launch's grid has at most 65535 rows: a larger batch goes in chunks of rows, f(first, count).
+template <class F>
+void forEachBatchChunk(uint32_t batchCount, F&& f) {
+  constexpr uint32_t kMaxRows = 65535;
+  for (uint32_t first = 0; first < batchCount; first += kMaxRows) f(first, std::min(kMaxRows, batchCount - first));
+}
+
 // Blocks of a persistent kernel that are all resident at once on the current device (the
 // occupancy calculator's blocks per multiprocessor, at most maxPerSm): kernels that wait for each
 // other's blocks (work queues, grid barriers) must never launch more.

@@ -6,6 +6,7 @@
 #include "refit_walk.cuh"
 #include "triangle_boxes.cuh"
 #include "two_level_traversal.cuh"
+#include "woop_block.cuh"
 #include "tsah/core/instance_transform.hpp"
 #include "two_level_kernels.hpp"
 
@@ -149,6 +150,79 @@ __global__ void __launch_bounds__(kTlasBlockThreads)
   partRefit(nodes, tlasParts, tlasParts.parts[0], [] {}, boxOf, &root->box, shared);
 }
 
+// anim::Animation::positionsAt's blend of one coordinate (and the interpolation kernels'): beta * a +
+// alpha * b with both weights >= 0, so the result never decreases when a or b grows (each rounded
+// product and the rounded sum are monotone): a bound blended like a coordinate bounds it.
+__device__ __forceinline__ float blendKeys(float a, float b, const FrameParams& f, float beta) {
+  // alpha == 0: positionsAt copies the keyframe (1 * x + 0 * y would turn -0 into +0).
+  return f.alpha == 0.0f ? a : __fadd_rn(__fmul_rn(beta, a), __fmul_rn(f.alpha, b));
+}
+
+__device__ __forceinline__ float4 blendKeys(const float4& a, const float4& b, const FrameParams& f, float beta) {
+  return make_float4(blendKeys(a.x, b.x, f, beta), blendKeys(a.y, b.y, f, beta), blendKeys(a.z, b.z, f, beta),
+                     blendKeys(a.w, b.w, f, beta));
+}
+
+// Pose b = blockIdx.y; the blocks along x do, in this order, the interpolation of its moving
+// coordinates (one a thread), its Woop triangles (woopBlock, each vertex blended from the
+// keyframes as the interpolation blends it: no wait for the interpolation's stores) and its boxes
+// (a third of a node's twelve box floats a thread, then the root box).
+__global__ void __launch_bounds__(kWoopBlock)
+    keyedPoseKernel(KeyedSource src, const FrameParams* __restrict__ frames, float* positions,
+                    GpuBvhNode* __restrict__ nodes, WoopTriangle* __restrict__ woop, RootInfo* __restrict__ roots,
+                    BatchStrides batch, uint32_t interpolationBlocks, uint32_t woopBlocks) {
+  const uint32_t b = blockIdx.y;
+  const FrameParams f = frames[b];
+  const float beta = 1.0f - f.alpha;
+  const float* keyA = src.keyframes + f.a;
+  const float* keyB = src.keyframes + f.b;
+  float* own = positions + b * batch.positions;
+  uint32_t block = blockIdx.x;
+  if (block < interpolationBlocks) {
+    const std::size_t i = std::size_t(block) * kWoopBlock + threadIdx.x;
+    if (i >= 3 * std::size_t(src.movingCount)) return;
+    const std::size_t dst = src.movingIds ? 3 * std::size_t(__ldg(src.movingIds + i / 3)) + i % 3 : i;
+    own[dst] = blendKeys(__ldg(keyA + i), __ldg(keyB + i), f, beta);
+    return;
+  }
+  block -= interpolationBlocks;
+  if (block < woopBlocks) {
+    const auto vertices = [&](uint32_t s, Vec3* v) {
+      const uint32_t* tri = src.slotVertices + 3 * std::size_t(s);
+#pragma unroll
+      for (int k = 0; k < 3; ++k) {
+        const uint32_t id = __ldg(tri + k);
+        const uint32_t m = src.movingIndex ? __ldg(src.movingIndex + id) : id;
+        if (m == kStaticVertex) {  // its rest position, which no frame writes
+          const float* p = own + 3 * std::size_t(id);
+          v[k] = {p[0], p[1], p[2]};
+          continue;
+        }
+        const std::size_t c = 3 * std::size_t(m);
+        v[k] = {blendKeys(__ldg(keyA + c), __ldg(keyB + c), f, beta),
+                blendKeys(__ldg(keyA + c + 1), __ldg(keyB + c + 1), f, beta),
+                blendKeys(__ldg(keyA + c + 2), __ldg(keyB + c + 2), f, beta)};
+      }
+    };
+    woopBlock(block * kWoopBlock, src.slots, vertices, woop + b * batch.woop);
+    return;
+  }
+  block -= woopBlocks;
+  const uint32_t j = block * kWoopBlock + threadIdx.x;
+  const uint32_t n = src.nodeCount;
+  if (j < 3 * n) {  // float4 j % 3 of node j / 3: its twelve box floats, each a lower or an upper bound
+    const float4 a = reinterpret_cast<const float4*>(src.keyNodes + std::size_t(f.keyA) * n + j / 3)[j % 3];
+    const float4 c = reinterpret_cast<const float4*>(src.keyNodes + std::size_t(f.keyB) * n + j / 3)[j % 3];
+    reinterpret_cast<float4*>(nodes + b * batch.nodes + j / 3)[j % 3] = blendKeys(a, c, f, beta);
+  } else if (j == 3 * n) {
+    const Aabb a = src.keyRoots[f.keyA].box, c = src.keyRoots[f.keyB].box;
+    roots[b].box = Aabb{{blendKeys(a.lo.x, c.lo.x, f, beta), blendKeys(a.lo.y, c.lo.y, f, beta),
+                         blendKeys(a.lo.z, c.lo.z, f, beta)},
+                        {blendKeys(a.hi.x, c.hi.x, f, beta), blendKeys(a.hi.y, c.hi.y, f, beta),
+                         blendKeys(a.hi.z, c.hi.z, f, beta)}};
+  }
+}
+
 // Rays: const Ray* or ArrayRays; Hits: InstanceHit* or ArrayInstanceHits (ray_arrays.cuh).
 template <bool AnyHit, class Rays, class Hits>
 __global__ void __launch_bounds__(128) twoLevelTraceKernel(TlasScene scene, Rays rays, uint32_t count, Hits hits,
@@ -223,6 +297,21 @@ void launchPoseBlasParts(GpuBvhNode* nodes, const RefitPartsView& parts, uint64_
   posePartsKernel<<<grid, kPartThreads, sharedBytes, stream>>>(
       nodes, parts, slotVertices, positions, woop, roots, partBoxes, tickets, batch);
   CUDA_CHECK_LAUNCH("posePartsKernel");
+}
+
+void launchKeyedPoses(const KeyedSource& source, const FrameParams* frames, float* positions, GpuBvhNode* nodes,
+                      WoopTriangle* woop, RootInfo* roots, uint32_t poseCount, const BatchStrides& batch,
+                      cudaStream_t stream) {
+  const auto blocksFor = [](std::size_t n) { return uint32_t((n + kWoopBlock - 1) / kWoopBlock); };
+  const uint32_t interpolationBlocks = blocksFor(3 * std::size_t(source.movingCount));
+  const uint32_t woopBlocks = blocksFor(source.slots);
+  const uint32_t blocks = interpolationBlocks + woopBlocks + blocksFor(3 * std::size_t(source.nodeCount) + 1);
+  forEachBatchChunk(poseCount, [&](uint32_t first, uint32_t count) {
+    keyedPoseKernel<<<dim3(blocks, count), kWoopBlock, 0, stream>>>(
+        source, frames + first, positions + first * batch.positions, nodes + first * batch.nodes,
+        woop + first * batch.woop, roots + first, batch, interpolationBlocks, woopBlocks);
+    CUDA_CHECK_LAUNCH("keyedPoseKernel");
+  });
 }
 
 void launchTlasBlock(const InstanceState* instances, const BlasView* views, uint32_t count, Aabb* instanceBoxes,

@@ -112,6 +112,31 @@ void launchPoseBlasParts(GpuBvhNode* nodes, const RefitPartsView& parts, uint64_
                          const uint32_t* slotVertices, const float* positions, WoopTriangle* woop, RootInfo* roots,
                          Aabb* partBoxes, uint32_t* tickets, uint32_t poseCount, const BatchStrides& batch,
                          cudaStream_t stream);
+// An animated source as the keyed pose update reads it: its keyframes (moving vertices only,
+// keyframe-major), where each vertex's coordinates lie in a keyframe (movingIndex: per vertex, its
+// rank among the moving ones or kStaticVertex; null when every vertex moves), its slots' vertex ids,
+// and its tree refitted at every keyframe (keyNodes: nodeCount nodes per keyframe; keyRoots: one per
+// keyframe).
+inline constexpr uint32_t kStaticVertex = 0xffffffffu;
+struct KeyedSource {
+  const float* keyframes = nullptr;
+  const uint32_t* movingIds = nullptr;
+  const uint32_t* movingIndex = nullptr;
+  uint32_t movingCount = 0;
+  const uint32_t* slotVertices = nullptr;
+  uint32_t slots = 0;
+  const GpuBvhNode* keyNodes = nullptr;
+  const RootInfo* keyRoots = nullptr;
+  uint32_t nodeCount = 0;
+};
+// Every pose of a group (BatchStrides; pose b blends frames[b]) in one launch, without a refit: its
+// moving vertices interpolated into its positions, its Woop triangles from the same interpolation
+// (bit for bit the positions'), and every child box and the root box lerped from the two keyframes'
+// boxes with the interpolation's weights and rounding. Each lerped bound is a monotone function of
+// the two keyframes' bounds, so the lerped box holds the lerped vertices (docs/two-level.md).
+void launchKeyedPoses(const KeyedSource& source, const FrameParams* frames, float* positions, GpuBvhNode* nodes,
+                      WoopTriangle* woop, RootInfo* roots, uint32_t poseCount, const BatchStrides& batch,
+                      cudaStream_t stream);
 // launchInstanceBoxes and the TLAS refit in one block (tlasParts: the TLAS as one part of
 // tlasNodeCount nodes).
 void launchTlasBlock(const InstanceState* instances, const BlasView* views, uint32_t count, Aabb* instanceBoxes,

@@ -101,6 +101,16 @@ struct GpuTwoLevelRuntime::Impl {
     DeviceBuffer<float> keyframes;  // every keyframe of the moving vertices (animated sources)
     uint32_t movingCount = 0;
     DeviceRefitParts parts;  // animated sources with Config::blockRefits: the poses' block refit
+    // Config::keyedPoses (uploadKeyBoxes): the tree refitted at every keyframe, and per vertex its
+    // rank among the moving ones (empty when every vertex moves).
+    DeviceBuffer<GpuBvhNode> keyNodes;
+    DeviceBuffer<detail::RootInfo> keyRoots;
+    DeviceBuffer<uint32_t> movingIndex;
+    detail::KeyedSource keyed() const {
+      return {keyframes.data(), movingIds.empty() ? nullptr : movingIds.data(),
+              movingIndex.empty() ? nullptr : movingIndex.data(), movingCount, slotVertices.data(),
+              topology.triangleCount(), keyNodes.data(), keyRoots.data(), uint32_t(topology.nodes.size())};
+    }
   };
   // A static source's BLAS: its boxes, positions and Woop triangles, refitted once.
   struct StaticBlas {
@@ -118,7 +128,8 @@ struct GpuTwoLevelRuntime::Impl {
     std::vector<uint32_t> poses;  // the scene's pose ids, in batch order
     uint32_t firstFrame = 0;      // its poses' frames in poseFrames / devicePoseFrames
     detail::BatchStrides strides;
-    bool blockRefit = false;  // its BLAS's parts fit one block's shared memory (launchPoseBlasParts)
+    bool keyed = false;       // its boxes lerped from its source's key boxes (launchKeyedPoses)
+    bool blockRefit = false;  // else: its BLAS's parts fit one block's shared memory (launchPoseBlasParts)
     DeviceBuffer<GpuBvhNode> nodes;
     DeviceBuffer<float> positions;
     DeviceBuffer<WoopTriangle> woop;
@@ -133,6 +144,7 @@ struct GpuTwoLevelRuntime::Impl {
   };
 
   Impl(const TwoLevelScene& s, Config c);
+  void uploadKeyBoxes(Source& d, const anim::Animation& a, std::span<const float> restPositions);
   ~Impl();
   void enqueueFrame(bool refitPoses);
   Graph capture(bool refitPoses);
@@ -253,15 +265,19 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
   uint32_t frameCount = 0;
   for (PoseGroup& g : groups) {
     const anim::Animation& a = *src.sources[g.source];
-    const Source& d = sources[g.source];
+    Source& d = sources[g.source];
     const auto members = uint32_t(g.poses.size());
     const std::vector<float> start = a.positionsAt(a.startTime());
+    const uint64_t keyBytes = uint64_t(a.keyframeCount()) * (d.topology.nodes.size() * sizeof(GpuBvhNode) +
+                                                             sizeof(detail::RootInfo));
+    g.keyed = config.keyedPoses && keyBytes <= config.keyedPoseBytes;
+    if (g.keyed) uploadKeyBoxes(d, a, start);
     g.strides.positions = start.size();
     g.strides.nodes = d.topology.nodes.size();
     g.strides.woop = d.topology.triangleCount();
     g.strides.counters = d.topology.interiorCount;
     // Blocks per pose: one per subtree part (a grid's y dimension).
-    g.blockRefit = config.blockRefits && d.parts.poseSharedBytes <= blockRefitLimit &&
+    g.blockRefit = !g.keyed && config.blockRefits && d.parts.poseSharedBytes <= blockRefitLimit &&
                    d.parts.subtreeCount <= 65535;
     g.firstFrame = frameCount;
     std::vector<float> positions;
@@ -278,7 +294,7 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
     if (g.blockRefit) {
       g.partBoxes.resize(std::size_t(d.parts.subtreeCount) * members);
       g.tickets = toDevice(std::vector<uint32_t>(members, 0u), stream);
-    } else {
+    } else if (!g.keyed) {
       g.counters.resize(g.strides.counters * members);
     }
     g.roots = toDevice(std::vector<detail::RootInfo>(members, rootOf(d.topology)), stream);
@@ -325,6 +341,51 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
   CUDA_CHECK(cudaStreamSynchronize(stream));
 }
 
+void GpuTwoLevelRuntime::Impl::uploadKeyBoxes(Source& d, const anim::Animation& a,
+                                              std::span<const float> restPositions) {
+  const uint32_t keys = a.keyframeCount();
+  const std::size_t nodeCount = d.topology.nodes.size();
+  if (!a.movingVertices().empty()) {
+    std::vector<uint32_t> rank(a.vertexCount(), detail::kStaticVertex);
+    for (uint32_t r = 0; r < a.movingVertices().size(); ++r) rank[a.movingVertices()[r]] = r;
+    d.movingIndex = toDevice(rank, stream);
+  }
+  std::vector<GpuBvhNode> nodes;
+  nodes.reserve(nodeCount * keys);
+  std::vector<detail::FrameParams> frames;
+  for (uint32_t k = 0; k < keys; ++k) {
+    nodes.insert(nodes.end(), d.topology.nodes.begin(), d.topology.nodes.end());
+    frames.push_back(detail::blendFrame(k, 0.0f, a.movingVertexCount()));
+  }
+  d.keyNodes = toDevice(nodes, stream);
+  d.keyRoots = toDevice(std::vector<detail::RootInfo>(keys, rootOf(d.topology)), stream);
+  const DeviceBuffer<detail::FrameParams> deviceFrames = toDevice(frames, stream);
+  // The keyframes refitted as a batch of trees, a few at a time (their positions are temporary).
+  constexpr std::size_t kChunkBytes = std::size_t(64) << 20;
+  const auto chunk = uint32_t(std::clamp<std::size_t>(kChunkBytes / std::max<std::size_t>(1, restPositions.size_bytes()),
+                                                       1, keys));
+  std::vector<float> rest;
+  for (uint32_t i = 0; i < chunk; ++i) rest.insert(rest.end(), restPositions.begin(), restPositions.end());
+  DeviceBuffer<float> positions = toDevice(rest, stream);
+  DeviceBuffer<uint32_t> counters(std::max<std::size_t>(1, std::size_t(d.topology.interiorCount) * chunk));
+  detail::BatchStrides strides;
+  strides.positions = restPositions.size();
+  strides.nodes = nodeCount;
+  strides.counters = d.topology.interiorCount;
+  for (uint32_t first = 0; first < keys; first += chunk) {
+    const uint32_t count = std::min(chunk, keys - first);
+    detail::launchBatchInterpolate(d.keyframes.data(), d.movingIds.empty() ? nullptr : d.movingIds.data(),
+                                   deviceFrames.data() + first, positions.data(), d.movingCount, count,
+                                   strides.positions, stream);
+    CUDA_CHECK(cudaMemsetAsync(counters.data(), 0, counters.bytes(), stream));
+    detail::launchBatchRefit(d.keyNodes.data() + first * nodeCount, d.nodeParent.data(), d.leaves.data(), d.leafCount,
+                             d.slotVertices.data(), positions.data(), counters.data(), d.keyRoots.data() + first,
+                             count, strides, stream);
+  }
+  // The temporaries are freed when this returns: the refits must be done with them.
+  CUDA_CHECK(cudaStreamSynchronize(stream));
+}
+
 void GpuTwoLevelRuntime::Impl::uploadRefitTlas() {
   const RefitTopology r = refitTopology(tlasTopology);
   tlasLeafCount = uint32_t(r.leaves.size());
@@ -363,6 +424,11 @@ void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
     for (PoseGroup& g : groups) {
       const Source& d = sources[g.source];
       const auto members = uint32_t(g.poses.size());
+      if (g.keyed) {
+        detail::launchKeyedPoses(d.keyed(), devicePoseFrames + g.firstFrame, g.positions.data(), g.nodes.data(),
+                                 g.woop.data(), g.roots.data(), members, g.strides, stream);
+        continue;
+      }
       detail::launchBatchInterpolate(d.keyframes.data(), d.movingIds.size() ? d.movingIds.data() : nullptr,
                                      devicePoseFrames + g.firstFrame, g.positions.data(), d.movingCount,
                                      members, g.strides.positions, stream);
@@ -527,6 +593,25 @@ FlatBvh GpuTwoLevelRuntime::downloadTlas() const {
                           cudaMemcpyDeviceToHost));
   detail::RootInfo root;
   CUDA_CHECK(cudaMemcpy(&root, impl_->tlasRoot.data(), sizeof(root), cudaMemcpyDeviceToHost));
+  tree.rootBoxes.assign(1, root.box);
+  return tree;
+}
+
+FlatBvh GpuTwoLevelRuntime::downloadPoseTree(uint32_t pose) const {
+  const Impl& m = *impl_;
+  if (pose >= m.scene.poses.size())
+    throw ConfigError("downloadPoseTree: pose " + std::to_string(pose) + " of " + std::to_string(m.scene.poses.size()));
+  const uint32_t frame = m.poseFrameIndex[pose];
+  const auto group = std::find_if(m.groups.begin(), m.groups.end(), [&](const Impl::PoseGroup& g) {
+    return frame >= g.firstFrame && frame < g.firstFrame + g.poses.size();
+  });
+  const uint32_t member = frame - group->firstFrame;
+  FlatBvh tree = m.sources[group->source].topology;
+  if (!tree.nodes.empty())
+    CUDA_CHECK(cudaMemcpy(tree.nodes.data(), group->nodes.data() + member * group->strides.nodes,
+                          tree.nodes.size() * sizeof(GpuBvhNode), cudaMemcpyDeviceToHost));
+  detail::RootInfo root;
+  CUDA_CHECK(cudaMemcpy(&root, group->roots.data() + member, sizeof(root), cudaMemcpyDeviceToHost));
   tree.rootBoxes.assign(1, root.box);
   return tree;
 }

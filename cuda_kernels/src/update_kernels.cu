@@ -7,17 +7,11 @@
 #include "launch.hpp"
 #include "refit_walk.cuh"
 #include "triangle_boxes.cuh"
+#include "woop_block.cuh"
 
 namespace tsah::cuda::detail {
 
 namespace {
-
-// A launch's grid has at most 65535 rows: a larger batch goes in chunks of rows, f(first, count).
-template <class F>
-void forEachBatchChunk(uint32_t batchCount, F&& f) {
-  constexpr uint32_t kMaxRows = 65535;
-  for (uint32_t first = 0; first < batchCount; first += kMaxRows) f(first, std::min(kMaxRows, batchCount - first));
-}
 
 // Same operations and rounding as anim::Animation::positionsAt: beta * a + alpha * b. Scalar
 // accesses: a keyframe starts wherever movingCount * 3 floats put it, not on a 16-byte boundary.
@@ -72,30 +66,17 @@ struct GatheredIds {
   __device__ const uint32_t* operator()(uint32_t s) const { return indices + 3 * std::size_t(__ldg(triIndex + s)); }
 };
 
-// One thread per slot. The rows go out through shared memory, so that each store instruction of a
-// warp writes 512 contiguous bytes (a thread's three 16-byte rows, stored directly, left each
-// instruction a third of every sector it touched).
-constexpr uint32_t kWoopBlock = 128;
+// One thread per slot (woop_block.cuh).
 template <class VertexIds>
 __global__ void __launch_bounds__(kWoopBlock) woopKernel(VertexIds ids, uint32_t slots,
                                                          const float* __restrict__ positions,
                                                          WoopTriangle* __restrict__ woop, BatchStrides batch) {
-  __shared__ float4 rows[3 * kWoopBlock];
   positions += blockIdx.y * batch.positions;
   woop += blockIdx.y * batch.woop;
-  const uint32_t first = blockIdx.x * kWoopBlock, s = first + threadIdx.x;
-  if (s < slots) {
+  woopBlock(blockIdx.x * kWoopBlock, slots, [&](uint32_t s, Vec3* v) {
     const uint32_t* tri = ids(s);
-    const WoopTriangle w = makeWoopTriangle(loadVertex(positions, __ldg(tri)), loadVertex(positions, __ldg(tri + 1)),
-                                            loadVertex(positions, __ldg(tri + 2)));
-    rows[3 * threadIdx.x] = make_float4(w.r0.x, w.r0.y, w.r0.z, w.r0.w);
-    rows[3 * threadIdx.x + 1] = make_float4(w.r1.x, w.r1.y, w.r1.z, w.r1.w);
-    rows[3 * threadIdx.x + 2] = make_float4(w.r2.x, w.r2.y, w.r2.z, w.r2.w);
-  }
-  __syncthreads();
-  const uint32_t rowCount = 3 * (slots - first < kWoopBlock ? slots - first : kWoopBlock);
-  float4* out = reinterpret_cast<float4*>(woop + first);
-  for (uint32_t r = threadIdx.x; r < rowCount; r += kWoopBlock) out[r] = rows[r];
+    for (int k = 0; k < 3; ++k) v[k] = loadVertex(positions, __ldg(tri + k));
+  }, woop);
 }
 
 template <class VertexIds>

@@ -68,6 +68,13 @@ class GpuTwoLevelRuntime {
     // tree (the reference; the boxes are the same bit for bit).
     bool blockRefits = true;
     uint32_t refitPartLeaves = 512;
+    // Update the poses without a refit: each pose's boxes are lerped from its source's tree refitted
+    // once at every keyframe, with the weights and rounding that lerp its vertices, so they hold
+    // them (looser than a refit between keyframes, equal at a keyframe); one launch per source for
+    // all its poses. Used for a source whose key boxes take at most keyedPoseBytes of device
+    // memory (64 bytes per node and keyframe); the others, and every source when false, refit.
+    bool keyedPoses = true;
+    uint64_t keyedPoseBytes = uint64_t(256) << 20;
     TlasUpdate tlas = TlasUpdate::Refit;  // how each update brings the TLAS to the frame (above)
     // Time the update's phases (TwoLevelUpdateTimings' upload, BLAS and TLAS parts) by events
     // inside the frame's graph; false: only its start and end (two nodes fewer in the graph; the
@@ -147,9 +154,11 @@ class GpuTwoLevelRuntime {
 
   // Host copies of the current state: the instances' world boxes, and the TLAS traced now (the
   // refitted one or this frame's rebuilt one) in canonical form with this frame's node boxes
-  // (frameCount 1; triIndex: slot -> instance).
+  // (frameCount 1; triIndex: slot -> instance); a pose's BLAS (scene().poses[pose]) with the node and
+  // root boxes of this instant frame.
   std::vector<Aabb> downloadInstanceBoxes() const;
   FlatBvh downloadTlas() const;
+  FlatBvh downloadPoseTree(uint32_t pose) const;
   const DeviceInfo& device() const;
   const TwoLevelScene& scene() const;
 
