@@ -63,6 +63,8 @@ std::span<const uint8_t> bytesOf(const std::vector<T>& v) {
   return {reinterpret_cast<const uint8_t*>(v.data()), v.size() * sizeof(T)};
 }
 
+constexpr std::array<uint8_t, 16> kZeros{};  // the padding before each tree image of a container
+
 }  // namespace
 
 std::array<std::span<const uint8_t>, 5> BvhFileParts::parts() const {
@@ -77,6 +79,30 @@ uint64_t BvhFileParts::size() const {
 }
 
 uint32_t BvhFileParts::wholeCrc() const { return tsah::crc32(&crc, sizeof crc, crc); }
+
+void TreeImagesFileParts::seal() {
+  crc = tsah::crc32(tables.data(), tables.size());
+  uint64_t offset = tables.size();
+  for (const BvhFileParts& image : images) {
+    crc = tsah::crc32(kZeros.data(), detail::align16(offset) - offset, crc);
+    crc = tsah::crc32Combine(crc, image.wholeCrc(), image.size());
+    offset = detail::align16(offset) + image.size();
+  }
+}
+
+std::vector<std::span<const uint8_t>> TreeImagesFileParts::parts() const {
+  std::vector<std::span<const uint8_t>> out{std::span<const uint8_t>(tables)};
+  uint64_t offset = tables.size();
+  for (const BvhFileParts& image : images) {
+    out.push_back(std::span<const uint8_t>(kZeros.data(), detail::align16(offset) - offset));
+    for (const std::span<const uint8_t> part : image.parts()) out.push_back(part);
+    offset = detail::align16(offset) + image.size();
+  }
+  out.push_back(std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(&crc), sizeof crc));
+  return out;
+}
+
+std::vector<uint8_t> TreeImagesFileParts::bytes() const { return joinedBytes(parts()); }
 
 BvhFileParts bvhFileParts(const FlatBvh& flat, const BvhBuildInfo& info) {
   BvhFileParts out;

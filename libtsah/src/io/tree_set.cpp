@@ -8,6 +8,8 @@
 #include "tsah/base/binary_io.hpp"
 #include "tsah/base/error.hpp"
 #include "tsah/base/files.hpp"
+#include "tsah/io/bvh_file.hpp"
+#include "tsah/layout/flat_bvh.hpp"
 #include "io/tbvh_io.hpp"
 
 namespace tsah {
@@ -19,7 +21,7 @@ constexpr std::size_t kReservedWords = 2;  // header padding up to kTbvhSetHeade
 // The smallest valid version 1 file: header, no interior node, one root box, one slot, checksum.
 constexpr uint64_t kMinTreeBytes = kTbvhHeaderBytes + sizeof(Aabb) + 4 + 4;
 
-uint64_t align16(uint64_t x) { return (x + 15) & ~uint64_t(15); }
+using detail::align16;
 
 std::string describeRange(const TimeRange& r) {
   char buf[64];
@@ -68,8 +70,13 @@ std::optional<std::string> validateTimeRanges(std::span<const TimeRange> ranges)
   return std::nullopt;
 }
 
-std::vector<uint8_t> encodeTreeSetFile(std::span<const Bvh> trees, std::span<const BvhBuildInfo> builds,
-                                       std::span<const TimeRange> ranges, const TreeSetInfo& info) {
+namespace {
+
+// encodeTreeSetFile's file as its parts (TreeImagesFileParts) over `flats`, which it fills with the
+// trees flattened (the images point into them: the caller keeps them while it writes the parts).
+TreeImagesFileParts treeSetParts(std::span<const Bvh> trees, std::span<const BvhBuildInfo> builds,
+                                 std::span<const TimeRange> ranges, const TreeSetInfo& info,
+                                 std::vector<FlatBvh>& flats) {
   if (trees.size() != builds.size() || trees.size() != ranges.size())
     throw tsah::DataError(".tbvh set: " + std::to_string(trees.size()) + " trees, " + std::to_string(builds.size()) +
                           " build records and " + std::to_string(ranges.size()) + " time ranges");
@@ -80,16 +87,20 @@ std::vector<uint8_t> encodeTreeSetFile(std::span<const Bvh> trees, std::span<con
     throw tsah::ConfigError(".tbvh set: overlap and budget must be finite and >= 0");
 
   const uint32_t triangleCount = trees[0].primCount();
-  std::vector<std::vector<uint8_t>> images;
-  for (std::size_t s = 0; s < trees.size(); ++s) {
+  for (std::size_t s = 0; s < trees.size(); ++s)
     if (trees[s].primCount() != triangleCount || builds[s].vertexCount != builds[0].vertexCount ||
         builds[s].topologyHash != builds[0].topologyHash)
       throw tsah::DataError(".tbvh set: tree " + std::to_string(s) +
                             " was built for a different animation than tree 0");
+  TreeImagesFileParts out;
+  flats.assign(trees.size(), FlatBvh{});
+  out.images.resize(trees.size());
+  for (std::size_t s = 0; s < trees.size(); ++s) {  // in order: the first tree that cannot be encoded throws
     BvhBuildInfo b = builds[s];
     b.timeStart = ranges[s].start;
     b.timeEnd = ranges[s].end;
-    images.push_back(encodeBvhFile(trees[s], b));
+    flats[s] = flattenBvh(trees[s]);
+    out.images[s] = bvhFileParts(flats[s], b);
   }
 
   tsah::ByteWriter w;
@@ -114,15 +125,20 @@ std::vector<uint8_t> encodeTreeSetFile(std::span<const Bvh> trees, std::span<con
     w.write(ranges[s].start);
     w.write(ranges[s].end);
     w.write(offset);
-    w.write(uint64_t(images[s].size()));
-    offset = align16(offset + images[s].size());
+    w.write(out.images[s].size());
+    offset = align16(offset + out.images[s].size());
   }
-  for (const std::vector<uint8_t>& image : images) {
-    while (w.buffer().size() % 16 != 0) w.write(uint8_t{0});
-    w.writeArray(std::span<const uint8_t>(image));
-  }
-  w.write(tsah::crc32(w.buffer().data(), w.buffer().size()));
-  return std::move(w.buffer());
+  out.tables = std::move(w.buffer());
+  out.seal();
+  return out;
+}
+
+}  // namespace
+
+std::vector<uint8_t> encodeTreeSetFile(std::span<const Bvh> trees, std::span<const BvhBuildInfo> builds,
+                                       std::span<const TimeRange> ranges, const TreeSetInfo& info) {
+  std::vector<FlatBvh> flats;
+  return treeSetParts(trees, builds, ranges, info, flats).bytes();
 }
 
 namespace {
@@ -233,7 +249,9 @@ TreeSet decodeTreeSetFile(std::span<const uint8_t> bytes, const std::string& fil
 
 void saveTreeSetFile(const std::string& path, std::span<const Bvh> trees, std::span<const BvhBuildInfo> builds,
                      std::span<const TimeRange> ranges, const TreeSetInfo& info) {
-  tsah::writeFileAtomically(path, encodeTreeSetFile(trees, builds, ranges, info));
+  std::vector<FlatBvh> flats;
+  const TreeImagesFileParts file = treeSetParts(trees, builds, ranges, info, flats);
+  tsah::writeFileAtomically(path, file.parts());
 }
 
 TreeSet loadTreeSetFile(const std::string& path) { return decodeTreeSetFile(tsah::readFile(path), path); }

@@ -14,14 +14,14 @@ namespace tsah {
 
 namespace {
 
+using detail::align16;
+
 constexpr uint32_t kInstanceEntryBytes = 8;   // u32 blas, u32 pose
 constexpr uint32_t kPoseEntryBytes = 24;      // u32 blas, u32 outside, f64 offset, f64 speed
 constexpr uint32_t kTreeEntryBytes = 16;      // u64 offset, u64 size
 constexpr uint32_t kFlattenedEntryBytes = 4;  // u32 object id
 // The smallest valid version 1 file: header, no interior node, one root box, one slot, checksum.
 constexpr uint64_t kMinTreeBytes = kTbvhHeaderBytes + sizeof(Aabb) + 4 + 4;
-
-uint64_t align16(uint64_t x) { return (x + 15) & ~uint64_t(15); }
 
 uint64_t tablesEnd(uint64_t blasCount, uint64_t instances, uint64_t poses, uint64_t flattened) {
   return kTbvhTwoLevelHeaderBytes + kInstanceEntryBytes * instances + kPoseEntryBytes * poses +
@@ -36,8 +36,6 @@ std::optional<std::string> validateFlattenedObjects(std::span<const uint32_t> ob
              " (the ids must be increasing, without duplicates)";
   return std::nullopt;
 }
-
-constexpr std::array<uint8_t, 16> kZeros{};  // the padding before each tree image
 
 // The encoders' checks of their arguments, before any tree is flattened or encoded.
 void requireEncodable(std::size_t blasCount, std::size_t buildCount, uint32_t tlasInstances,
@@ -99,16 +97,7 @@ TwoLevelFileParts encodedParts(std::span<const FlatBvh* const> blases, std::span
     offset = align16(offset + image.size());
   }
   out.tables = std::move(w.buffer());
-  // The file's checksum from the tables', the padding's and each image's own (crc32Combine): no
-  // byte of a tree is read twice.
-  uint32_t crc = crc32(out.tables.data(), out.tables.size());
-  offset = out.tables.size();
-  for (const BvhFileParts& image : out.images) {
-    crc = crc32(kZeros.data(), align16(offset) - offset, crc);
-    crc = crc32Combine(crc, image.wholeCrc(), image.size());
-    offset = align16(offset) + image.size();
-  }
-  out.crc = crc;
+  out.seal();
   return out;
 }
 
@@ -172,20 +161,6 @@ std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh* const> blases, std:
                       flattenedObjects)
       .bytes();
 }
-
-std::vector<std::span<const uint8_t>> TwoLevelFileParts::parts() const {
-  std::vector<std::span<const uint8_t>> out{std::span<const uint8_t>(tables)};
-  uint64_t offset = tables.size();
-  for (const BvhFileParts& image : images) {
-    out.push_back(std::span<const uint8_t>(kZeros.data(), align16(offset) - offset));
-    for (const std::span<const uint8_t> part : image.parts()) out.push_back(part);
-    offset = align16(offset) + image.size();
-  }
-  out.push_back(std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(&crc), sizeof crc));
-  return out;
-}
-
-std::vector<uint8_t> TwoLevelFileParts::bytes() const { return joinedBytes(parts()); }
 
 TwoLevelFileParts twoLevelFileParts(std::span<const FlatBvh* const> blases, std::span<const BvhBuildInfo> blasBuilds,
                                     const FlatBvh& tlas, const BvhBuildInfo& tlasBuild,

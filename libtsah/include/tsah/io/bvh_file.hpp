@@ -57,6 +57,18 @@ struct BvhFileParts {
   uint32_t wholeCrc() const;  // crc32 of the whole file, its checksum included
 };
 BvhFileParts bvhFileParts(const FlatBvh& flat, const BvhBuildInfo& info);
+// A container of tree images (the tree set's and the two-level file's) as its parts in file order:
+// its header and tables, then each image at the next multiple of 16 bytes (zero padding before
+// it), then the checksum over everything before it. seal() computes that checksum from the tables'
+// and each image's own (crc32Combine): no byte of a tree is read twice.
+struct TreeImagesFileParts {
+  std::vector<uint8_t> tables;
+  std::vector<BvhFileParts> images;
+  uint32_t crc = 0;
+  void seal();
+  std::vector<std::span<const uint8_t>> parts() const;
+  std::vector<uint8_t> bytes() const;  // the parts joined: the whole file
+};
 // Validates everything before use (magic, version, layout, sizes vs byte count, checksum, indices in
 // range, each triangle referenced exactly once, the node graph a tree); throws tsah::FileError
 // naming `file`. Allocates only after the counts have been checked against the byte count.

@@ -65,14 +65,9 @@ std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh* const> blases, std:
                                         std::span<const uint32_t> flattenedObjects = {});
 // The same file as its parts in file order (the header and tables, then each tree image after its
 // padding, then the checksum) over flattened trees (flattenBvh's) that the caller keeps: written
-// one after the other they are encodeTwoLevelFile's bytes, never assembled in memory.
-struct TwoLevelFileParts {
-  std::vector<uint8_t> tables;
-  std::vector<BvhFileParts> images;  // every BLAS, then the TLAS
-  uint32_t crc = 0;
-  std::vector<std::span<const uint8_t>> parts() const;
-  std::vector<uint8_t> bytes() const;  // the parts joined: the whole file
-};
+// one after the other they are encodeTwoLevelFile's bytes, never assembled in memory. Its images:
+// every BLAS, then the TLAS.
+using TwoLevelFileParts = TreeImagesFileParts;
 TwoLevelFileParts twoLevelFileParts(std::span<const FlatBvh* const> blases, std::span<const BvhBuildInfo> blasBuilds,
                                     const FlatBvh& tlas, const BvhBuildInfo& tlasBuild,
                                     std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
