@@ -234,6 +234,7 @@ int run(const Options& opt) {
   j["image"] = {opt.width, opt.height};
   j["ao_per_hit"] = opt.ao;
   j["keyed_poses"] = opt.keyedPoses;
+  j["key_box_bytes"] = gpu.keyBoxBytes();
   j["block_refits"] = opt.blockRefits;
   j["refit_part_leaves"] = opt.refitPartLeaves;
   j["phase_timings"] = opt.phaseTimings;

@@ -618,6 +618,11 @@ FlatBvh GpuTwoLevelRuntime::downloadPoseTree(uint32_t pose) const {
 
 double GpuTwoLevelRuntime::time() const { return impl_->time; }
 uint64_t GpuTwoLevelRuntime::blasRefits() const { return impl_->refits; }
+uint64_t GpuTwoLevelRuntime::keyBoxBytes() const {
+  uint64_t bytes = 0;
+  for (const Impl::Source& d : impl_->sources) bytes += d.keyNodes.bytes() + d.keyRoots.bytes() + d.movingIndex.bytes();
+  return bytes;
+}
 const DeviceInfo& GpuTwoLevelRuntime::device() const { return impl_->device; }
 const TwoLevelScene& GpuTwoLevelRuntime::scene() const { return impl_->scene; }
 detail::TwoLevelTraceAccess GpuTwoLevelRuntime::traceAccess() const {

@@ -95,6 +95,7 @@ class GpuTwoLevelRuntime {
   TwoLevelUpdateTimings updateAt(double sceneTime);
   double time() const;
   uint64_t blasRefits() const;  // in all, the static BLAS' refits at construction included
+  uint64_t keyBoxBytes() const;  // device memory of the keyed poses' key boxes (Config::keyedPoses)
 
   // Batch queries of host rays (closest hit: instance, triangle of its source, t; any hit).
   std::vector<TwoLevelHit> closestHits(std::span<const Ray> rays, RayPassStats* stats = nullptr);
