@@ -225,44 +225,94 @@ TEST_F(CudaTwoLevel, BlockRefitsEqualTheGlobalWalk) {
   for (const uint32_t partLeaves : {512u, 16u, 5u, 2u}) expectBlockRefitsEqualTheGlobalWalk(*scene, partLeaves);
 }
 
-// Keyed poses (the default) against refitted ones: a pose whose time falls on a keyframe has the
-// refit's tree bit for bit; between keyframes each of its child boxes and its root box holds the
-// refit's, and some are larger (the lerp of the keyframes' boxes is looser than a refit). Their
-// hits: HitsEqualTheCpuRuntimeAtSeveralTimes.
-TEST_F(CudaTwoLevel, KeyedPosesHoldTheRefitsBoxes) {
+// Keyed poses (the default) against refitted ones at `times`: a pose whose local time falls on a
+// keyframe has the refit's tree bit for bit; between keyframes each of its child boxes and its root
+// box holds the refit's. Returns how many poses fell on keyframes, between them, and how many child
+// boxes were larger than the refit's (the lerp of the keyframes' boxes is looser than a refit).
+struct KeyedCounts {
+  uint32_t onKeys = 0, between = 0, looser = 0;
+};
+KeyedCounts expectKeyedPosesHoldTheRefitsBoxes(const tsah::TwoLevelScene& scene, std::span<const double> times) {
   tsah::cuda::GpuTwoLevelRuntime::Config refitted;
   refitted.keyedPoses = false;
-  tsah::cuda::GpuTwoLevelRuntime keyed(*scene), refit(*scene, refitted);
-  const anim::SceneSources& src = scene->scene;
-  uint32_t onKeys = 0, between = 0, looser = 0;
-  for (const double t : {0.0, 2.0, 3.25, 7.5, 10.0, 12.0}) {
+  tsah::cuda::GpuTwoLevelRuntime keyed(scene), refit(scene, refitted);
+  EXPECT_GT(keyed.keyBoxBytes(), 0u);
+  EXPECT_EQ(refit.keyBoxBytes(), 0u);
+  const anim::SceneSources& src = scene.scene;
+  KeyedCounts counts;
+  for (const double t : times) {
     keyed.updateAt(t);
     refit.updateAt(t);
-    for (uint32_t i = 0; i < scene->instanceCount(); ++i) {
-      const uint32_t p = scene->instancePose[i];
+    for (uint32_t i = 0; i < scene.instanceCount(); ++i) {
+      const uint32_t p = scene.instancePose[i];
       if (p == tsah::kInvalidIndex) continue;
-      const anim::Animation& a = *src.sources[scene->poses[p].blas];
+      const anim::Animation& a = *src.sources[scene.poses[p].blas];
       const bool onKey = anim::keyframeBlend(a.times(), src.instances[i].localTime(t, a)).alpha == 0.0f;
       const tsah::FlatBvh k = keyed.downloadPoseTree(p), r = refit.downloadPoseTree(p);
-      ASSERT_EQ(k.nodes.size(), r.nodes.size());
+      EXPECT_EQ(tsah::validateFlatBvh(k), std::nullopt) << "t " << t << " pose " << p;
+      EXPECT_EQ(k.nodes.size(), r.nodes.size());
+      if (k.nodes.size() != r.nodes.size()) return counts;
       if (onKey) {
-        ++onKeys;
+        ++counts.onKeys;
         EXPECT_EQ(std::memcmp(k.nodes.data(), r.nodes.data(), k.nodes.size() * sizeof(k.nodes[0])), 0) << "t " << t;
         EXPECT_EQ(std::memcmp(&k.rootBoxes[0], &r.rootBoxes[0], sizeof(tsah::Aabb)), 0) << "t " << t;
         continue;
       }
-      ++between;
+      ++counts.between;
       EXPECT_TRUE(k.rootBoxes[0].contains(r.rootBoxes[0])) << "t " << t << " pose " << p;
       for (std::size_t n = 0; n < k.nodes.size(); ++n)
         for (int c = 0; c < 2; ++c) {
-          ASSERT_TRUE(k.nodes[n].childBox(c).contains(r.nodes[n].childBox(c))) << "t " << t << " node " << n;
-          looser += std::memcmp(&k.nodes[n], &r.nodes[n], 12 * sizeof(float)) != 0;
+          EXPECT_TRUE(k.nodes[n].childBox(c).contains(r.nodes[n].childBox(c))) << "t " << t << " node " << n;
+          counts.looser += std::memcmp(&k.nodes[n], &r.nodes[n], 12 * sizeof(float)) != 0;
         }
     }
   }
-  EXPECT_GT(onKeys, 0u);
-  EXPECT_GT(between, 0u);
-  EXPECT_GT(looser, 0u);
+  return counts;
+}
+
+// Their hits: HitsEqualTheCpuRuntimeAtSeveralTimes.
+TEST_F(CudaTwoLevel, KeyedPosesHoldTheRefitsBoxes) {
+  const KeyedCounts counts = expectKeyedPosesHoldTheRefitsBoxes(*scene, std::vector<double>{0.0, 2.0, 3.25, 7.5, 10.0, 12.0});
+  EXPECT_GT(counts.onKeys, 0u);
+  EXPECT_GT(counts.between, 0u);
+  EXPECT_GT(counts.looser, 0u);
+}
+
+// Sources with static vertices: a wave whose first half holds still (its keyframes store the
+// moving half only) and one whose keyframes are all the same (animated, no vertex moving). The keyed
+// update reads a static vertex at its rest position.
+TEST(CudaTwoLevelKeyed, SourcesWithStaticVerticesHitAsTheCpuRuntime) {
+  REQUIRE_GPU();
+  const fs::path dir = tsah::test::scratchDir();
+  const anim::Animation wave = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 300, 9, 3);
+  const std::vector<uint32_t> indices(wave.indices().begin(), wave.indices().end());
+  const std::vector<double> times(wave.times().begin(), wave.times().end());
+  const std::vector<float> first = wave.keyframe(0);
+  std::vector<float> half, held;
+  for (uint32_t k = 0; k < wave.keyframeCount(); ++k) {
+    std::vector<float> f = wave.keyframe(k);
+    std::copy_n(first.begin(), 3 * std::size_t(wave.vertexCount() / 2), f.begin());
+    half.insert(half.end(), f.begin(), f.end());
+    held.insert(held.end(), first.begin(), first.end());
+  }
+  const anim::Animation halfMoving(indices, wave.vertexCount(), half, times, "half");
+  const anim::Animation still(indices, wave.vertexCount(), held, times, "held");
+  ASSERT_GT(halfMoving.movingVertexCount(), 0u);
+  ASSERT_LT(halfMoving.movingVertexCount(), wave.vertexCount());
+  ASSERT_EQ(still.movingVertexCount(), 0u);
+  anim::saveTanim(halfMoving, (dir / "half.tanim").string());
+  anim::saveTanim(still, (dir / "held.tanim").string());
+  tsah::test::writeText(dir / "s.json", R"({"fps": 2, "objects": [
+    {"file": "half.tanim", "instances": [{}, {"offset": 0.75, "transform": {"translate": [0, 0, 3]}},
+                                         {"offset": 2.25, "transform": {"translate": [3, 0, 0], "rotate": [0, 30, 0]}}]},
+    {"file": "held.tanim", "instances": [{"transform": {"translate": [0, 2, 0]}},
+                                         {"offset": 1.25, "transform": {"translate": [0, -2, 0], "scale": [1, 1, -1]}}]}]})");
+  const tsah::TwoLevelScene scene = tsah::loadTwoLevelScene((dir / "s.json").string(), {}, tsah::test::smallTwoLevelOptions());
+  ASSERT_EQ(scene.poses.size(), 5u);
+  const KeyedCounts counts = expectKeyedPosesHoldTheRefitsBoxes(scene, std::vector<double>{0.0, 1.0, 2.6, 5.3});
+  EXPECT_GT(counts.onKeys, 0u);
+  EXPECT_GT(counts.between, 0u);
+  expectCpuHits(scene);
 }
 
 // Config::phaseTimings = false times the update by its start and end only (the whole update in

@@ -345,7 +345,7 @@ void GpuTwoLevelRuntime::Impl::uploadKeyBoxes(Source& d, const anim::Animation& 
                                               std::span<const float> restPositions) {
   const uint32_t keys = a.keyframeCount();
   const std::size_t nodeCount = d.topology.nodes.size();
-  if (!a.movingVertices().empty()) {
+  if (!a.allMoving()) {  // some vertices (or all, when none moves) hold their rest positions
     std::vector<uint32_t> rank(a.vertexCount(), detail::kStaticVertex);
     for (uint32_t r = 0; r < a.movingVertices().size(); ++r) rank[a.movingVertices()[r]] = r;
     d.movingIndex = toDevice(rank, stream);
