@@ -158,9 +158,30 @@ __device__ __forceinline__ float blendKeys(float a, float b, const FrameParams& 
   return f.alpha == 0.0f ? a : __fadd_rn(__fmul_rn(beta, a), __fmul_rn(f.alpha, b));
 }
 
-__device__ __forceinline__ float4 blendKeys(const float4& a, const float4& b, const FrameParams& f, float beta) {
-  return make_float4(blendKeys(a.x, b.x, f, beta), blendKeys(a.y, b.y, f, beta), blendKeys(a.z, b.z, f, beta),
-                     blendKeys(a.w, b.w, f, beta));
+// One axis of a box, [lo, hi], blended from two keyframes' bounds. A source with static vertices
+// (padStatic) pads it: a static vertex keeps its rest coordinate s exactly, while the blend of two
+// bounds equal to s may round up to 3 * 2^-24 * |s| away from it (beta = 1 - alpha rounds, then
+// two products and a sum). |s| <= m, the largest bound's magnitude, so 2^-22 * m (plus the
+// smallest normal for underflowing products) covers it. At a keyframe (alpha = 0) the blend copies
+// the bounds: no pad. An empty axis (lo > hi) stays as it is.
+__device__ __forceinline__ float2 blendAxis(float loA, float hiA, float loB, float hiB, const FrameParams& f,
+                                            float beta, bool padStatic) {
+  float lo = blendKeys(loA, loB, f, beta), hi = blendKeys(hiA, hiB, f, beta);
+  if (padStatic && f.alpha != 0.0f && lo <= hi) {
+    const float m = fmaxf(fmaxf(fabsf(loA), fabsf(hiA)), fmaxf(fabsf(loB), fabsf(hiB)));
+    const float pad = __fadd_ru(__fmul_ru(m, 0x1p-22f), 0x1p-126f);
+    lo = __fsub_rd(lo, pad);
+    hi = __fadd_ru(hi, pad);
+  }
+  return make_float2(lo, hi);
+}
+
+// Four box floats of a node, two axes' (lo, hi) pairs (gpu_layout.hpp: n0xy, n1xy, nz).
+__device__ __forceinline__ float4 blendNodeFloats(const float4& a, const float4& b, const FrameParams& f, float beta,
+                                                  bool padStatic) {
+  const float2 first = blendAxis(a.x, a.y, b.x, b.y, f, beta, padStatic);
+  const float2 second = blendAxis(a.z, a.w, b.z, b.w, f, beta, padStatic);
+  return make_float4(first.x, first.y, second.x, second.y);
 }
 
 // Pose b = blockIdx.y; the blocks along x do, in this order, the interpolation of its moving
@@ -213,13 +234,14 @@ __global__ void __launch_bounds__(kWoopBlock)
   if (j < 3 * n) {  // float4 j % 3 of node j / 3: its twelve box floats, each a lower or an upper bound
     const float4 a = reinterpret_cast<const float4*>(src.keyNodes + std::size_t(f.keyA) * n + j / 3)[j % 3];
     const float4 c = reinterpret_cast<const float4*>(src.keyNodes + std::size_t(f.keyB) * n + j / 3)[j % 3];
-    reinterpret_cast<float4*>(nodes + b * batch.nodes + j / 3)[j % 3] = blendKeys(a, c, f, beta);
+    reinterpret_cast<float4*>(nodes + b * batch.nodes + j / 3)[j % 3] =
+        blendNodeFloats(a, c, f, beta, src.padStatic != 0);
   } else if (j == 3 * n) {
     const Aabb a = src.keyRoots[f.keyA].box, c = src.keyRoots[f.keyB].box;
-    roots[b].box = Aabb{{blendKeys(a.lo.x, c.lo.x, f, beta), blendKeys(a.lo.y, c.lo.y, f, beta),
-                         blendKeys(a.lo.z, c.lo.z, f, beta)},
-                        {blendKeys(a.hi.x, c.hi.x, f, beta), blendKeys(a.hi.y, c.hi.y, f, beta),
-                         blendKeys(a.hi.z, c.hi.z, f, beta)}};
+    const float2 x = blendAxis(a.lo.x, a.hi.x, c.lo.x, c.hi.x, f, beta, src.padStatic != 0);
+    const float2 y = blendAxis(a.lo.y, a.hi.y, c.lo.y, c.hi.y, f, beta, src.padStatic != 0);
+    const float2 z = blendAxis(a.lo.z, a.hi.z, c.lo.z, c.hi.z, f, beta, src.padStatic != 0);
+    roots[b].box = Aabb{{x.x, y.x, z.x}, {x.y, y.y, z.y}};
   }
 }
 

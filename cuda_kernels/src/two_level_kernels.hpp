@@ -128,12 +128,14 @@ struct KeyedSource {
   const GpuBvhNode* keyNodes = nullptr;
   const RootInfo* keyRoots = nullptr;
   uint32_t nodeCount = 0;
+  uint32_t padStatic = 0;  // 1 when some vertex is static (movingIndex set): the blended boxes are padded
 };
 // Every pose of a group (BatchStrides; pose b blends frames[b]) in one launch, without a refit: its
 // moving vertices interpolated into its positions, its Woop triangles from the same interpolation
 // (bit for bit the positions'), and every child box and the root box lerped from the two keyframes'
 // boxes with the interpolation's weights and rounding. Each lerped bound is a monotone function of
-// the two keyframes' bounds, so the lerped box holds the lerped vertices (docs/two-level.md).
+// the two keyframes' bounds, so the lerped box holds the lerped vertices; a source with static
+// vertices pads its lerped boxes by the blend's rounding of a static coordinate (docs/two-level.md).
 void launchKeyedPoses(const KeyedSource& source, const FrameParams* frames, float* positions, GpuBvhNode* nodes,
                       WoopTriangle* woop, RootInfo* roots, uint32_t poseCount, const BatchStrides& batch,
                       cudaStream_t stream);

@@ -109,7 +109,8 @@ struct GpuTwoLevelRuntime::Impl {
     detail::KeyedSource keyed() const {
       return {keyframes.data(), movingIds.empty() ? nullptr : movingIds.data(),
               movingIndex.empty() ? nullptr : movingIndex.data(), movingCount, slotVertices.data(),
-              topology.triangleCount(), keyNodes.data(), keyRoots.data(), uint32_t(topology.nodes.size())};
+              topology.triangleCount(), keyNodes.data(), keyRoots.data(), uint32_t(topology.nodes.size()),
+              movingIndex.empty() ? 0u : 1u};
     }
   };
   // A static source's BLAS: its boxes, positions and Woop triangles, refitted once.
