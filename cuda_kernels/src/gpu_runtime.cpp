@@ -9,6 +9,7 @@
 #include "tsah/base/error.hpp"
 #include "cwbvh_kernels.hpp"
 #include "kernels.hpp"
+#include "refit_topology.hpp"
 #include "runtime_impl.hpp"
 #include "tsah/layout/moving_parts.hpp"
 
@@ -92,25 +93,9 @@ void GpuRuntime::Impl::uploadTree(const FlatBvh& tree, FlatBvh topologyOfTree, c
   d.topology = std::move(topologyOfTree);
   const FlatBvh& topology = d.topology;
 
-  // Parents of interior nodes and the leaves, for the bottom-up refit.
-  std::vector<uint32_t> parent(topology.interiorCount, detail::kNoParent);
-  std::vector<detail::LeafRecord> leafRecords;
-  leafRecords.reserve(topology.leafCount);
-  if (topology.interiorCount == 0) {
-    leafRecords.push_back({detail::kNoParent, 0, topology.rootCount});
-  } else {
-    for (uint32_t i = 0; i < topology.interiorCount; ++i) {
-      const GpuBvhNode& n = topology.nodes[i];
-      for (int c = 0; c < 2; ++c) {
-        const int32_t ref = n.childRef(c);
-        const uint32_t slot = (i << 1) | uint32_t(c);
-        if (isLeafRef(ref))
-          leafRecords.push_back({slot, leafFirstSlot(ref), n.childCount(c)});
-        else
-          parent[uint32_t(ref)] = slot;
-      }
-    }
-  }
+  const detail::RefitTopology refit = detail::refitTopology(topology);
+  const std::vector<uint32_t>& parent = refit.parent;
+  const std::vector<detail::LeafRecord>& leafRecords = refit.leaves;
   d.nodes = DeviceBuffer<GpuBvhNode>(std::span<const GpuBvhNode>(topology.nodes), stream);
   d.nodeParent = DeviceBuffer<uint32_t>(std::span<const uint32_t>(parent), stream);
   d.counters.resize(topology.interiorCount);

@@ -16,80 +16,10 @@
 #include "tsah_cuda/device_buffer.hpp"
 #include "tsah_cuda/gpu_two_level.hpp"
 #include "two_level_blur.hpp"
+#include "two_level_device_data.hpp"
 #include "two_level_kernels.hpp"
 
 namespace tsah::cuda {
-
-namespace {
-
-// A tree's refit data: parents of interior nodes and one record per leaf (the flat runtime's
-// bottom-up refit reads them).
-struct RefitTopology {
-  std::vector<uint32_t> parent;
-  std::vector<detail::LeafRecord> leaves;
-};
-
-RefitTopology refitTopology(const FlatBvh& tree) {
-  RefitTopology r;
-  r.parent.assign(tree.interiorCount, detail::kNoParent);
-  if (tree.interiorCount == 0) {
-    r.leaves.push_back({detail::kNoParent, 0, tree.rootCount});
-    return r;
-  }
-  for (uint32_t i = 0; i < tree.interiorCount; ++i) {
-    const GpuBvhNode& n = tree.nodes[i];
-    for (int c = 0; c < 2; ++c) {
-      const int32_t ref = n.childRef(c);
-      const uint32_t slot = (i << 1) | uint32_t(c);
-      if (isLeafRef(ref))
-        r.leaves.push_back({slot, leafFirstSlot(ref), n.childCount(c)});
-      else
-        r.parent[uint32_t(ref)] = slot;
-    }
-  }
-  return r;
-}
-
-detail::RootInfo rootOf(const FlatBvh& tree) {
-  detail::RootInfo root;
-  root.ref = tree.rootRef;
-  root.count = tree.rootCount;
-  root.box = tree.rootBoxes.empty() ? Aabb{} : tree.rootBoxes[0];
-  return root;
-}
-
-template <typename T>
-DeviceBuffer<T> toDevice(const std::vector<T>& host, cudaStream_t stream) {
-  return DeviceBuffer<T>(std::span<const T>(host), stream);
-}
-
-// A tree split for block refits (tsah::splitForBlockRefit), on the device.
-struct DeviceRefitParts {
-  DeviceBuffer<RefitPart> parts;
-  DeviceBuffer<uint32_t> parentSlot, globalNode;
-  DeviceBuffer<RefitPartItem> items;
-  uint32_t subtreeCount = 0, maxNodeCount = 0;
-  uint64_t poseSharedBytes = 0;  // the pose kernel's: the most partRefitBytes(nodes, slots) of a part
-  bool hasTop = false;
-
-  DeviceRefitParts() = default;
-  DeviceRefitParts(const RefitParts& host, cudaStream_t stream)
-      : parts(toDevice(host.parts, stream)),
-        parentSlot(toDevice(host.parentSlot, stream)),
-        globalNode(toDevice(host.globalNode, stream)),
-        items(toDevice(host.items, stream)),
-        subtreeCount(host.subtreeCount()),
-        maxNodeCount(host.maxNodeCount()),
-        hasTop(host.hasTop) {
-    for (const RefitPart& p : host.parts)
-      poseSharedBytes = std::max(poseSharedBytes, detail::partRefitBytes(p.nodeCount, p.slotCount));
-  }
-  detail::RefitPartsView view() const {
-    return {parts.data(), parentSlot.data(), globalNode.data(), items.data(), subtreeCount, hasTop ? 1u : 0u};
-  }
-};
-
-}  // namespace
 
 struct GpuTwoLevelRuntime::Impl {
   // A source's shared data: topology, indices, keyframes of its moving vertices.
@@ -101,16 +31,12 @@ struct GpuTwoLevelRuntime::Impl {
     DeviceBuffer<float> keyframes;  // every keyframe of the moving vertices (animated sources)
     uint32_t movingCount = 0;
     DeviceRefitParts parts;  // animated sources with Config::blockRefits: the poses' block refit
-    // Config::keyedPoses (uploadKeyBoxes): the tree refitted at every keyframe, and per vertex its
-    // rank among the moving ones (empty when every vertex moves).
-    DeviceBuffer<GpuBvhNode> keyNodes;
-    DeviceBuffer<detail::RootInfo> keyRoots;
-    DeviceBuffer<uint32_t> movingIndex;
+    KeyBoxes keyBoxes;  // Config::keyedPoses: the tree refitted at every keyframe
     detail::KeyedSource keyed() const {
       return {keyframes.data(), movingIds.empty() ? nullptr : movingIds.data(),
-              movingIndex.empty() ? nullptr : movingIndex.data(), movingCount, slotVertices.data(),
-              topology.triangleCount(), keyNodes.data(), keyRoots.data(), uint32_t(topology.nodes.size()),
-              movingIndex.empty() ? 0u : 1u};
+              keyBoxes.movingIndex.empty() ? nullptr : keyBoxes.movingIndex.data(), movingCount,
+              slotVertices.data(), topology.triangleCount(), keyBoxes.nodes.data(), keyBoxes.roots.data(),
+              uint32_t(topology.nodes.size()), keyBoxes.movingIndex.empty() ? 0u : 1u};
     }
   };
   // A static source's BLAS: its boxes, positions and Woop triangles, refitted once.
@@ -145,7 +71,6 @@ struct GpuTwoLevelRuntime::Impl {
   };
 
   Impl(const TwoLevelScene& s, Config c);
-  void uploadKeyBoxes(Source& d, const anim::Animation& a, std::span<const float> restPositions);
   ~Impl();
   void enqueueFrame(bool refitPoses);
   Graph capture(bool refitPoses);
@@ -210,7 +135,7 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
     if (a.keyframeCount() == 0) throw DataError("GPU two-level runtime: a source has no keyframes");
     Source& d = sources.emplace_back();
     d.topology = runtimeTopology(blas.flat, a.triangleCount(), kTraversalStackSize, "GPU two-level runtime: BLAS");
-    const RefitTopology r = refitTopology(d.topology);
+    const detail::RefitTopology r = detail::refitTopology(d.topology);
     d.leafCount = uint32_t(r.leaves.size());
     d.indices = DeviceBuffer<uint32_t>(a.indices(), stream);
     d.triIndex = toDevice(d.topology.triIndex, stream);
@@ -272,7 +197,12 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
     const uint64_t keyBytes = uint64_t(a.keyframeCount()) * (d.topology.nodes.size() * sizeof(GpuBvhNode) +
                                                              sizeof(detail::RootInfo));
     g.keyed = config.keyedPoses && keyBytes <= config.keyedPoseBytes;
-    if (g.keyed) uploadKeyBoxes(d, a, start);
+    if (g.keyed)
+      d.keyBoxes = refitAtKeyframes(d.topology, a, start,
+                                    {d.keyframes.data(), d.movingIds.empty() ? nullptr : d.movingIds.data(),
+                                     d.movingCount, d.nodeParent.data(), d.leaves.data(), d.leafCount,
+                                     d.slotVertices.data()},
+                                    stream);
     g.strides.positions = start.size();
     g.strides.nodes = d.topology.nodes.size();
     g.strides.woop = d.topology.triangleCount();
@@ -342,53 +272,8 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
   CUDA_CHECK(cudaStreamSynchronize(stream));
 }
 
-void GpuTwoLevelRuntime::Impl::uploadKeyBoxes(Source& d, const anim::Animation& a,
-                                              std::span<const float> restPositions) {
-  const uint32_t keys = a.keyframeCount();
-  const std::size_t nodeCount = d.topology.nodes.size();
-  if (!a.allMoving()) {  // some vertices (or all, when none moves) hold their rest positions
-    std::vector<uint32_t> rank(a.vertexCount(), detail::kStaticVertex);
-    for (uint32_t r = 0; r < a.movingVertices().size(); ++r) rank[a.movingVertices()[r]] = r;
-    d.movingIndex = toDevice(rank, stream);
-  }
-  std::vector<GpuBvhNode> nodes;
-  nodes.reserve(nodeCount * keys);
-  std::vector<detail::FrameParams> frames;
-  for (uint32_t k = 0; k < keys; ++k) {
-    nodes.insert(nodes.end(), d.topology.nodes.begin(), d.topology.nodes.end());
-    frames.push_back(detail::blendFrame(k, 0.0f, a.movingVertexCount()));
-  }
-  d.keyNodes = toDevice(nodes, stream);
-  d.keyRoots = toDevice(std::vector<detail::RootInfo>(keys, rootOf(d.topology)), stream);
-  const DeviceBuffer<detail::FrameParams> deviceFrames = toDevice(frames, stream);
-  // The keyframes refitted as a batch of trees, a few at a time (their positions are temporary).
-  constexpr std::size_t kChunkBytes = std::size_t(64) << 20;
-  const auto chunk = uint32_t(std::clamp<std::size_t>(kChunkBytes / std::max<std::size_t>(1, restPositions.size_bytes()),
-                                                       1, keys));
-  std::vector<float> rest;
-  for (uint32_t i = 0; i < chunk; ++i) rest.insert(rest.end(), restPositions.begin(), restPositions.end());
-  DeviceBuffer<float> positions = toDevice(rest, stream);
-  DeviceBuffer<uint32_t> counters(std::max<std::size_t>(1, std::size_t(d.topology.interiorCount) * chunk));
-  detail::BatchStrides strides;
-  strides.positions = restPositions.size();
-  strides.nodes = nodeCount;
-  strides.counters = d.topology.interiorCount;
-  for (uint32_t first = 0; first < keys; first += chunk) {
-    const uint32_t count = std::min(chunk, keys - first);
-    detail::launchBatchInterpolate(d.keyframes.data(), d.movingIds.empty() ? nullptr : d.movingIds.data(),
-                                   deviceFrames.data() + first, positions.data(), d.movingCount, count,
-                                   strides.positions, stream);
-    CUDA_CHECK(cudaMemsetAsync(counters.data(), 0, counters.bytes(), stream));
-    detail::launchBatchRefit(d.keyNodes.data() + first * nodeCount, d.nodeParent.data(), d.leaves.data(), d.leafCount,
-                             d.slotVertices.data(), positions.data(), counters.data(), d.keyRoots.data() + first,
-                             count, strides, stream);
-  }
-  // The temporaries are freed when this returns: the refits must be done with them.
-  CUDA_CHECK(cudaStreamSynchronize(stream));
-}
-
 void GpuTwoLevelRuntime::Impl::uploadRefitTlas() {
-  const RefitTopology r = refitTopology(tlasTopology);
+  const detail::RefitTopology r = detail::refitTopology(tlasTopology);
   tlasLeafCount = uint32_t(r.leaves.size());
   tlasNodes = toDevice(tlasTopology.nodes, stream);
   tlasParent = toDevice(r.parent, stream);
@@ -621,7 +506,7 @@ double GpuTwoLevelRuntime::time() const { return impl_->time; }
 uint64_t GpuTwoLevelRuntime::blasRefits() const { return impl_->refits; }
 uint64_t GpuTwoLevelRuntime::keyBoxBytes() const {
   uint64_t bytes = 0;
-  for (const Impl::Source& d : impl_->sources) bytes += d.keyNodes.bytes() + d.keyRoots.bytes() + d.movingIndex.bytes();
+  for (const Impl::Source& d : impl_->sources) bytes += d.keyBoxes.bytes();
   return bytes;
 }
 const DeviceInfo& GpuTwoLevelRuntime::device() const { return impl_->device; }
