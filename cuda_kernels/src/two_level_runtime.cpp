@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <utility>
 
 #include "event_timer.hpp"
 #include "kernels.hpp"
@@ -71,7 +72,9 @@ struct GpuTwoLevelRuntime::Impl {
   };
 
   Impl(const TwoLevelScene& s, Config c);
-  ~Impl();
+  ~Impl() { releaseDevice(); }
+  void create();  // the constructor's work
+  void releaseDevice() noexcept;
   void enqueueFrame(bool refitPoses);
   Graph capture(bool refitPoses);
   detail::TlasScene tlasScene() const;
@@ -125,6 +128,17 @@ struct GpuTwoLevelRuntime::Impl {
 };
 
 GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), config(c) {
+  // The destructor never runs for a throwing constructor (a tree too deep, bad indices, a TLAS
+  // missing an instance): the stream and the pinned block are released here.
+  try {
+    create();
+  } catch (...) {
+    releaseDevice();
+    throw;
+  }
+}
+
+void GpuTwoLevelRuntime::Impl::create() {
   device = describeDevice(config.device);
   CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
   events.create(4);
@@ -289,14 +303,14 @@ void GpuTwoLevelRuntime::Impl::uploadRefitTlas() {
   tlasRoot = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&root, 1), stream);
 }
 
-GpuTwoLevelRuntime::Impl::~Impl() {
+void GpuTwoLevelRuntime::Impl::releaseDevice() noexcept {
   for (Graph* g : {&fullGraph, &rigidGraph}) {
-    if (g->exec) cudaGraphExecDestroy(g->exec);
-    if (g->graph) cudaGraphDestroy(g->graph);
+    if (g->exec) cudaGraphExecDestroy(std::exchange(g->exec, nullptr));
+    if (g->graph) cudaGraphDestroy(std::exchange(g->graph, nullptr));
   }
   if (stream) cudaStreamSynchronize(stream);
-  if (hostUpload) cudaFreeHost(hostUpload);
-  if (stream) cudaStreamDestroy(stream);
+  if (hostUpload) cudaFreeHost(std::exchange(hostUpload, nullptr));
+  if (stream) cudaStreamDestroy(std::exchange(stream, nullptr));
 }
 
 void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
