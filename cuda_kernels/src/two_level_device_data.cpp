@@ -39,15 +39,11 @@ KeyBoxes refitAtKeyframes(const FlatBvh& topology, const anim::Animation& a, std
     for (uint32_t r = 0; r < a.movingVertices().size(); ++r) rank[a.movingVertices()[r]] = r;
     out.movingIndex = toDevice(rank, stream);
   }
-  std::vector<GpuBvhNode> nodes;
-  nodes.reserve(nodeCount * keys);
+  // The refit writes every child box of every node and each root's box, all the keyed update reads.
+  out.nodes = DeviceBuffer<GpuBvhNode>(nodeCount * keys);
+  out.roots = DeviceBuffer<detail::RootInfo>(keys);
   std::vector<detail::FrameParams> frames;
-  for (uint32_t k = 0; k < keys; ++k) {
-    nodes.insert(nodes.end(), topology.nodes.begin(), topology.nodes.end());
-    frames.push_back(detail::blendFrame(k, 0.0f, a.movingVertexCount()));
-  }
-  out.nodes = toDevice(nodes, stream);
-  out.roots = toDevice(std::vector<detail::RootInfo>(keys, rootOf(topology)), stream);
+  for (uint32_t k = 0; k < keys; ++k) frames.push_back(detail::blendFrame(k, 0.0f, a.movingVertexCount()));
   const DeviceBuffer<detail::FrameParams> deviceFrames = toDevice(frames, stream);
   // The keyframes refitted as a batch of trees, a few at a time (their positions are temporary).
   constexpr std::size_t kChunkBytes = std::size_t(64) << 20;

@@ -49,6 +49,10 @@ struct KeyBoxes {
   DeviceBuffer<detail::RootInfo> roots;
   DeviceBuffer<uint32_t> movingIndex;
   uint64_t bytes() const { return nodes.bytes() + roots.bytes() + movingIndex.bytes(); }
+  // The nodes' and roots' bytes for `keys` keyframes of `topology` (what Config::keyedPoseBytes bounds).
+  static uint64_t bytesFor(const FlatBvh& topology, uint32_t keys) {
+    return uint64_t(keys) * (topology.nodes.size() * sizeof(GpuBvhNode) + sizeof(detail::RootInfo));
+  }
 };
 
 // What the refit of a source's tree reads on the device: its keyframes and moving vertices, the

@@ -229,18 +229,19 @@ __global__ void __launch_bounds__(kWoopBlock)
     return;
   }
   block -= woopBlocks;
+  const bool padStatic = src.movingIndex != nullptr;  // some vertex is static
   const uint32_t j = block * kWoopBlock + threadIdx.x;
   const uint32_t n = src.nodeCount;
   if (j < 3 * n) {  // float4 j % 3 of node j / 3: its twelve box floats, each a lower or an upper bound
     const float4 a = reinterpret_cast<const float4*>(src.keyNodes + std::size_t(f.keyA) * n + j / 3)[j % 3];
     const float4 c = reinterpret_cast<const float4*>(src.keyNodes + std::size_t(f.keyB) * n + j / 3)[j % 3];
     reinterpret_cast<float4*>(nodes + b * batch.nodes + j / 3)[j % 3] =
-        blendNodeFloats(a, c, f, beta, src.padStatic != 0);
+        blendNodeFloats(a, c, f, beta, padStatic);
   } else if (j == 3 * n) {
     const Aabb a = src.keyRoots[f.keyA].box, c = src.keyRoots[f.keyB].box;
-    const float2 x = blendAxis(a.lo.x, a.hi.x, c.lo.x, c.hi.x, f, beta, src.padStatic != 0);
-    const float2 y = blendAxis(a.lo.y, a.hi.y, c.lo.y, c.hi.y, f, beta, src.padStatic != 0);
-    const float2 z = blendAxis(a.lo.z, a.hi.z, c.lo.z, c.hi.z, f, beta, src.padStatic != 0);
+    const float2 x = blendAxis(a.lo.x, a.hi.x, c.lo.x, c.hi.x, f, beta, padStatic);
+    const float2 y = blendAxis(a.lo.y, a.hi.y, c.lo.y, c.hi.y, f, beta, padStatic);
+    const float2 z = blendAxis(a.lo.z, a.hi.z, c.lo.z, c.hi.z, f, beta, padStatic);
     roots[b].box = Aabb{{x.x, y.x, z.x}, {x.y, y.y, z.y}};
   }
 }

@@ -128,7 +128,6 @@ struct KeyedSource {
   const GpuBvhNode* keyNodes = nullptr;
   const RootInfo* keyRoots = nullptr;
   uint32_t nodeCount = 0;
-  uint32_t padStatic = 0;  // 1 when some vertex is static (movingIndex set): the blended boxes are padded
 };
 // Every pose of a group (BatchStrides; pose b blends frames[b]) in one launch, without a refit: its
 // moving vertices interpolated into its positions, its Woop triangles from the same interpolation

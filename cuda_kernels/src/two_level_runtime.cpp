@@ -31,13 +31,16 @@ struct GpuTwoLevelRuntime::Impl {
     DeviceBuffer<detail::LeafRecord> leaves;
     DeviceBuffer<float> keyframes;  // every keyframe of the moving vertices (animated sources)
     uint32_t movingCount = 0;
-    DeviceRefitParts parts;  // animated sources with Config::blockRefits: the poses' block refit
-    KeyBoxes keyBoxes;  // Config::keyedPoses: the tree refitted at every keyframe
-    detail::KeyedSource keyed() const {
+    // Animated sources: keyed (Config::keyedPoses within its byte bound), its tree refitted at
+    // every keyframe; else with Config::blockRefits, its split for the poses' block refit.
+    bool keyed = false;
+    KeyBoxes keyBoxes;
+    DeviceRefitParts parts;
+    detail::KeyedSource keyedView() const {
       return {keyframes.data(), movingIds.empty() ? nullptr : movingIds.data(),
               keyBoxes.movingIndex.empty() ? nullptr : keyBoxes.movingIndex.data(), movingCount,
               slotVertices.data(), topology.triangleCount(), keyBoxes.nodes.data(), keyBoxes.roots.data(),
-              uint32_t(topology.nodes.size()), keyBoxes.movingIndex.empty() ? 0u : 1u};
+              uint32_t(topology.nodes.size())};
     }
   };
   // A static source's BLAS: its boxes, positions and Woop triangles, refitted once.
@@ -56,8 +59,7 @@ struct GpuTwoLevelRuntime::Impl {
     std::vector<uint32_t> poses;  // the scene's pose ids, in batch order
     uint32_t firstFrame = 0;      // its poses' frames in poseFrames / devicePoseFrames
     detail::BatchStrides strides;
-    bool keyed = false;       // its boxes lerped from its source's key boxes (launchKeyedPoses)
-    bool blockRefit = false;  // else: its BLAS's parts fit one block's shared memory (launchPoseBlasParts)
+    bool blockRefit = false;  // not keyed: its BLAS's parts fit one block's shared memory (launchPoseBlasParts)
     DeviceBuffer<GpuBvhNode> nodes;
     DeviceBuffer<float> positions;
     DeviceBuffer<WoopTriangle> woop;
@@ -160,7 +162,9 @@ void GpuTwoLevelRuntime::Impl::create() {
       d.keyframes = DeviceBuffer<float>(a.motion(), stream);
       d.movingIds = DeviceBuffer<uint32_t>(a.movingVertices(), stream);
       d.movingCount = a.movingVertexCount();
-      if (config.blockRefits) d.parts = DeviceRefitParts(splitForBlockRefit(d.topology, config.refitPartLeaves), stream);
+      d.keyed = config.keyedPoses && KeyBoxes::bytesFor(d.topology, a.keyframeCount()) <= config.keyedPoseBytes;
+      if (!d.keyed && config.blockRefits)
+        d.parts = DeviceRefitParts(splitForBlockRefit(d.topology, config.refitPartLeaves), stream);
     }
   }
   // A BLAS starts from its source's positions at its start time (the rest positions of the static
@@ -208,10 +212,7 @@ void GpuTwoLevelRuntime::Impl::create() {
     Source& d = sources[g.source];
     const auto members = uint32_t(g.poses.size());
     const std::vector<float> start = a.positionsAt(a.startTime());
-    const uint64_t keyBytes = uint64_t(a.keyframeCount()) * (d.topology.nodes.size() * sizeof(GpuBvhNode) +
-                                                             sizeof(detail::RootInfo));
-    g.keyed = config.keyedPoses && keyBytes <= config.keyedPoseBytes;
-    if (g.keyed)
+    if (d.keyed)
       d.keyBoxes = refitAtKeyframes(d.topology, a, start,
                                     {d.keyframes.data(), d.movingIds.empty() ? nullptr : d.movingIds.data(),
                                      d.movingCount, d.nodeParent.data(), d.leaves.data(), d.leafCount,
@@ -222,7 +223,7 @@ void GpuTwoLevelRuntime::Impl::create() {
     g.strides.woop = d.topology.triangleCount();
     g.strides.counters = d.topology.interiorCount;
     // Blocks per pose: one per subtree part (a grid's y dimension).
-    g.blockRefit = !g.keyed && config.blockRefits && d.parts.poseSharedBytes <= blockRefitLimit &&
+    g.blockRefit = !d.keyed && config.blockRefits && d.parts.poseSharedBytes <= blockRefitLimit &&
                    d.parts.subtreeCount <= 65535;
     g.firstFrame = frameCount;
     std::vector<float> positions;
@@ -239,7 +240,7 @@ void GpuTwoLevelRuntime::Impl::create() {
     if (g.blockRefit) {
       g.partBoxes.resize(std::size_t(d.parts.subtreeCount) * members);
       g.tickets = toDevice(std::vector<uint32_t>(members, 0u), stream);
-    } else if (!g.keyed) {
+    } else if (!d.keyed) {
       g.counters.resize(g.strides.counters * members);
     }
     g.roots = toDevice(std::vector<detail::RootInfo>(members, rootOf(d.topology)), stream);
@@ -324,8 +325,8 @@ void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
     for (PoseGroup& g : groups) {
       const Source& d = sources[g.source];
       const auto members = uint32_t(g.poses.size());
-      if (g.keyed) {
-        detail::launchKeyedPoses(d.keyed(), devicePoseFrames + g.firstFrame, g.positions.data(), g.nodes.data(),
+      if (d.keyed) {
+        detail::launchKeyedPoses(d.keyedView(), devicePoseFrames + g.firstFrame, g.positions.data(), g.nodes.data(),
                                  g.woop.data(), g.roots.data(), members, g.strides, stream);
         continue;
       }
