@@ -44,11 +44,14 @@ nlohmann::json describeStructureChoice(const StructureChoice& choice) {
     objects.push_back(std::move(o));
   }
   const bool flat = choice.allFlattened();
-  return {{"structure", flat ? "flat" : "two-level"},
-          {"flattened_objects", choice.flattenedObjects},
-          {"representative_frames", choice.frames},
-          {"seconds", choice.seconds},
-          {"objects", objects}};
+  nlohmann::json out = {{"structure", flat ? "flat" : "two-level"},
+                        {"flattened_objects", choice.flattenedObjects},
+                        {"representative_frames", choice.frames},
+                        {"seconds", choice.seconds},
+                        {"objects", objects}};
+  if (choice.decidedCost >= 0.0)
+    out["whole_scene_cost"] = {{"flattened", choice.wholeFlattenedCost}, {"decided", choice.decidedCost}};
+  return out;
 }
 
 void printStructureChoice(const nlohmann::json& j) {

@@ -174,10 +174,41 @@ TEST(StructureChoice, OverlappingInstancesAreFlattenedByTheirCost) {
   EXPECT_GT(walkers.instancedCost, 0.0);
   EXPECT_LT(walkers.flattenedCost, 0.9 * walkers.instancedCost) << walkers.reason;
   EXPECT_TRUE(walkers.flatten) << walkers.reason;
-  // A moving object is flattened: the static ground stays instanced (it would be refitted with it).
+  EXPECT_EQ(walkers.reason.rfind("flattened: ", 0), 0u) << walkers.reason;
+  // The static ground is not estimated alone once a moving object is flattened. The walkers'
+  // flattened source lies on it, so the whole scene weighed as one tree costs less than the two
+  // levels: every object is flattened (a flat tree).
+  EXPECT_GT(choice.decidedCost, 0.0);
+  EXPECT_GT(choice.wholeFlattenedCost, 0.0);
+  EXPECT_LE(choice.wholeFlattenedCost, choice.decidedCost);
+  EXPECT_EQ(choice.objects[0].reason.rfind("flattened with the whole scene: ", 0), 0u) << choice.objects[0].reason;
+  EXPECT_EQ(choice.flattenedObjects, (std::vector<uint32_t>{0, 1}));
+  EXPECT_TRUE(choice.allFlattened());
+}
+
+TEST(StructureChoice, TheWholeSceneIsWeighedWithinItsBounds) {
+  const anim::SceneSources scene = anim::loadSceneSources(writeManyInstances(tsah::test::scratchDir(), true).string());
+  uint64_t structure = 0, walkers = 0;
+  for (const auto& source : scene.sources) structure += source->triangleCount();
+  for (const anim::SceneSourceInstance& i : scene.instances)
+    if (i.object == 1) walkers += scene.sourceOf(i).triangleCount();
+  const uint64_t whole = walkers + scene.sources[scene.instances[0].source]->triangleCount();
+  // The walkers' copies fit the bound, the whole scene's do not.
+  tsah::StructureChoiceOptions options;
+  options.memoryFactor = (double(walkers) + 0.5 * double(whole - walkers)) / double(structure);
+  const tsah::StructureChoice choice = tsah::chooseObjectStructure(scene, options);
+  EXPECT_TRUE(choice.objects[1].flatten) << choice.objects[1].reason;
   EXPECT_FALSE(choice.objects[0].flatten) << choice.objects[0].reason;
+  EXPECT_LT(choice.decidedCost, 0.0);
+  EXPECT_LT(choice.wholeFlattenedCost, 0.0);
   EXPECT_EQ(choice.flattenedObjects, (std::vector<uint32_t>{1}));
-  EXPECT_FALSE(choice.allFlattened());
+  // The kept ground's triangles past wholeSceneFactor times the walkers': not weighed either.
+  tsah::StructureChoiceOptions small;
+  small.wholeSceneFactor = 0.5 * double(whole - walkers) / double(walkers);
+  const tsah::StructureChoice kept = tsah::chooseObjectStructure(scene, small);
+  EXPECT_FALSE(kept.objects[0].flatten) << kept.objects[0].reason;
+  EXPECT_LT(kept.decidedCost, 0.0);
+  EXPECT_EQ(kept.flattenedObjects, (std::vector<uint32_t>{1}));
 }
 
 TEST(StructureChoice, SpreadOutInstancesStayInstances) {

@@ -111,8 +111,11 @@ py::dict choiceDict(const StructureChoice& choice) {
     if (c.instancedCost >= 0.0) o["cost"] = py::dict("instanced"_a = c.instancedCost, "flattened"_a = c.flattenedCost);
     objects.append(o);
   }
-  return py::dict("flattened_objects"_a = choice.flattenedObjects, "representative_frames"_a = choice.frames,
-                  "seconds"_a = choice.seconds, "objects"_a = objects);
+  py::dict out("flattened_objects"_a = choice.flattenedObjects, "representative_frames"_a = choice.frames,
+               "seconds"_a = choice.seconds, "objects"_a = objects);
+  if (choice.decidedCost >= 0.0)
+    out["whole_scene_cost"] = py::dict("flattened"_a = choice.wholeFlattenedCost, "decided"_a = choice.decidedCost);
+  return out;
 }
 
 // The fields of `tsah info TREE SCENE --json` for a two-level tree, plus the TLAS header's options.

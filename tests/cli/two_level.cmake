@@ -25,6 +25,22 @@ file(WRITE ${W}/tl_single.json "{\"fps\": 10, \"time\": [0, 1], \"objects\": [
 add_test(NAME cli.two_level.optimize.auto_flat COMMAND tsah optimize ${W}/tl_single.json -o ${W}/tl_single.tbvh --frames 3)
 set_tests_properties(cli.two_level.optimize.auto_flat PROPERTIES PASS_REGULAR_EXPRESSION
   "auto +flat: 2 of 2 objects flattened.*object 0 +'ground' +1 instance\\(s\\), static: flattened: one instance without a keyed path.*tl_single.tbvh: tsah[0-9]* tree, [0-9]+ triangles")
+# Rule 5: three overlapping bursts are flattened, and the two small blocks kept beside them cost
+# more as a second level than in one tree with them: the whole scene is flattened (a flat tree).
+file(WRITE ${W}/tl_whole.json "{\"fps\": 5, \"time\": [0, 2], \"objects\": [
+ {\"name\": \"burst\", \"file\": \"${CMAKE_SOURCE_DIR}/samples/explode/explode_%04d.obj\", \"time\": {\"speed\": 4, \"outside\": \"loop\"},
+  \"instances\": [{\"transform\": {\"scale\": [1, 1, -1]}},
+   {\"offset\": 0.3, \"path\": [{\"time\": 0, \"translate\": [-3, 0, 0]}, {\"time\": 2, \"translate\": [3, 0, 0]}]},
+   {\"offset\": 0.3, \"transform\": {\"translate\": [0, 3, 0], \"rotate\": [30, 0, 0]}}]},
+ {\"name\": \"block\", \"file\": \"${CMAKE_SOURCE_DIR}/samples/explode/explode_0001.obj\", \"instances\": [
+   {\"transform\": {\"translate\": [0, -2, 0], \"scale\": [4, 0.3, 4]}},
+   {\"transform\": {\"translate\": [4, 0, 0], \"rotate\": [0, 30, 0]}}]}]}")
+add_test(NAME cli.two_level.info.structure_whole COMMAND tsah info ${W}/tl_whole.json --structure)
+set_tests_properties(cli.two_level.info.structure_whole PROPERTIES PASS_REGULAR_EXPRESSION
+  "^auto +flat: 2 of 2 objects flattened.*object 0 +'burst' +3 instance\\(s\\), moving: flattened: flattened cost.*object 1 +'block' +2 instance\\(s\\), static: flattened with the whole scene: the whole scene flattened costs [0-9.]+ against [0-9.]+ for the two levels decided per object")
+add_test(NAME cli.two_level.info.structure_whole_json COMMAND tsah info ${W}/tl_whole.json --structure --json)
+set_tests_properties(cli.two_level.info.structure_whole_json PROPERTIES PASS_REGULAR_EXPRESSION
+  "\"structure\":\"flat\",\"whole_scene_cost\":\\{\"decided\":[0-9.]+,\"flattened\":[0-9.]+\\}")
 add_test(NAME cli.two_level.optimize.json
          COMMAND tsah optimize ${SCENE} -o ${W}/tl_asked.tbvh --frames 3 --structure two-level --json)
 set_tests_properties(cli.two_level.optimize.json PROPERTIES FIXTURES_SETUP tl_asked PASS_REGULAR_EXPRESSION

@@ -25,6 +25,11 @@ struct StructureChoiceOptions {
   // Flatten no more triangles than this many times the triangles of the structure kept instanced
   // (every source once): the memory bound.
   double memoryFactor = 16.0;
+  // When moving objects are flattened, the kept objects join them in one tree (the whole scene
+  // flattened) only if their triangles, once per instance, are at most this many times the
+  // flattened ones and the estimate favours it: that tree is optimized over every frame, where a
+  // static BLAS is built once, so a large static environment stays instanced.
+  double wholeSceneFactor = 1.0;
 };
 
 // The estimate's options for trees built with `objective`: its cT, cI and largest leaf.
@@ -61,6 +66,12 @@ struct StructureChoice {
   std::vector<ObjectStructureChoice> objects;  // in the scene's object order
   std::vector<uint32_t> flattenedObjects;      // increasing
   uint32_t frames = 0;                          // representative frames used
+  // When a moving object is flattened and others stay instanced: the estimated cost of the two
+  // levels so decided (a tree over the kept instances and the flattened source, with their BLAS
+  // costs) and of every object flattened into one tree, in the objects' scale. Negative when not
+  // weighed (no moving object flattened, nothing kept instanced, the whole scene past the memory
+  // bound, or the kept triangles past wholeSceneFactor).
+  double decidedCost = -1.0, wholeFlattenedCost = -1.0;
   double seconds = 0.0;                         // time of the estimate
   bool allFlattened() const { return flattenedObjects.size() == objects.size(); }
 };
@@ -69,8 +80,10 @@ struct StructureChoice {
 // keyed path are flattened; the others by the estimate. Objects that move are decided
 // first; static objects are flattened only when no moving one is (the flattened objects share one
 // source, and a moving one would refit the static triangles every frame). Among the objects the
-// cost favours, the memory bound takes them by decreasing saving. Throws tsah::ConfigError for a
-// scene flattened already.
+// cost favours, the memory bound takes them by decreasing saving. When moving objects are
+// flattened and others kept (within wholeSceneFactor), every object is flattened (one tree) if its
+// estimate is not above the two levels so decided. Throws tsah::ConfigError for a scene flattened
+// already.
 StructureChoice chooseObjectStructure(const anim::SceneSources& scene, const StructureChoiceOptions& options = {});
 
 }  // namespace tsah
