@@ -1,10 +1,22 @@
 #include "tsah/core/bvh.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cstring>
 #include <functional>
 
+#include "core/parallel_tree.hpp"
+
 namespace tsah {
+
+namespace {
+
+detail::TreeNodeShape shapeOf(const Bvh& bvh, uint32_t n) {
+  const BvhNode& node = bvh.nodes[n];
+  return {node.isLeaf(), node.left, node.right};
+}
+
+}  // namespace
 
 void triangleBoxes(std::span<const uint32_t> indices, std::span<const float> positions,
                    std::span<Aabb> out) {
@@ -74,22 +86,29 @@ std::vector<uint32_t> childrenFirstOrder(const Bvh& bvh) {
 
 void refitInto(const Bvh& bvh, const PrimitiveBoxes& prims, const std::function<Aabb*(uint32_t node)>& boxesOf) {
   if (bvh.nodes.empty()) return;
-  for (uint32_t n : childrenFirstOrder(bvh)) {
-    const BvhNode& node = bvh.nodes[n];
-    Aabb* out = boxesOf(n);
-    const Aabb* left = node.isLeaf() ? nullptr : boxesOf(node.left);
-    const Aabb* right = node.isLeaf() ? nullptr : boxesOf(node.right);
-    for (uint32_t f = 0; f < prims.frameCount; ++f) {
-      Aabb b;
-      if (node.isLeaf()) {
-        for (uint32_t i = 0; i < node.primCount; ++i)
-          b.extend(prims.at(f, bvh.primIds[node.primBegin + i]));
-      } else {
-        b = merge(left[f], right[f]);
-      }
-      out[f] = b;
-    }
-  }
+  // Subtrees in parallel: each node's boxes come from its own subtree alone.
+  struct None {};
+  detail::reduceTree<None>(
+      bvh.root, [&](uint32_t n) { return shapeOf(bvh, n); },
+      [&](uint32_t n) {
+        const BvhNode& node = bvh.nodes[n];
+        Aabb* out = boxesOf(n);
+        for (uint32_t f = 0; f < prims.frameCount; ++f) {
+          Aabb b;
+          for (uint32_t i = 0; i < node.primCount; ++i) b.extend(prims.at(f, bvh.primIds[node.primBegin + i]));
+          out[f] = b;
+        }
+        return None{};
+      },
+      [&](uint32_t n, None, None) {
+        const BvhNode& node = bvh.nodes[n];
+        Aabb* out = boxesOf(n);
+        const Aabb* left = boxesOf(node.left);
+        const Aabb* right = boxesOf(node.right);
+        for (uint32_t f = 0; f < prims.frameCount; ++f) out[f] = merge(left[f], right[f]);
+        return None{};
+      },
+      detail::parallelTreeLevels(bvh.nodes.size()));
 }
 
 void refit(Bvh& bvh, const PrimitiveBoxes& prims) {
@@ -99,6 +118,79 @@ void refit(Bvh& bvh, const PrimitiveBoxes& prims) {
   refitInto(bvh, prims, [&bvh](uint32_t n) { return &bvh.box(n, 0); });
 }
 
+namespace {
+
+// Whether the tree passes every check of validate()'s walk, the subtrees of the top levels
+// checked in parallel (the root and the array sizes are checked already). It names no problem:
+// validate() walks a failing tree again in order for the first one.
+bool passesInParallel(const Bvh& bvh, const PrimitiveBoxes* prims) {
+  const std::size_t nodeCount = bvh.nodes.size();
+  std::vector<std::atomic<uint8_t>> seen(nodeCount), primSeen(bvh.primIds.size());
+  std::atomic<bool> failed{false};
+  const auto claim = [](std::atomic<uint8_t>& flag) { return flag.exchange(1, std::memory_order_relaxed) == 0; };
+  struct Reached {
+    uint64_t nodes = 0, prims = 0;
+  };
+  // Checks node n (claimed already) and claims its children; false at a problem.
+  const auto check = [&](uint32_t n, Reached& reached) {
+    const BvhNode& node = bvh.nodes[n];
+    ++reached.nodes;
+    if (node.isLeaf()) {
+      if (std::size_t(node.primBegin) + node.primCount > bvh.primIds.size()) return false;
+      for (uint32_t i = 0; i < node.primCount; ++i) {
+        const uint32_t p = bvh.primIds[node.primBegin + i];
+        if (p >= primSeen.size() || !claim(primSeen[p])) return false;
+        ++reached.prims;
+        if (prims)
+          for (uint32_t f = 0; f < bvh.frameCount && f < prims->frameCount; ++f)
+            if (!bvh.box(n, f).contains(prims->at(f, p))) return false;
+      }
+      return true;
+    }
+    for (uint32_t c : {node.left, node.right}) {
+      if (c >= nodeCount || bvh.nodes[c].parent != n) return false;
+      for (uint32_t f = 0; f < bvh.frameCount; ++f)
+        if (!bvh.box(n, f).contains(bvh.box(c, f))) return false;
+      if (!claim(seen[c])) return false;
+    }
+    return true;
+  };
+  const auto walk = [&](auto& self, uint32_t n, int levels) -> Reached {
+    Reached reached;
+    if (levels > 0) {
+      if (!check(n, reached)) {
+        failed = true;
+        return reached;
+      }
+      if (bvh.nodes[n].isLeaf()) return reached;
+      Reached left, right;
+      tbb::parallel_invoke([&] { left = self(self, bvh.nodes[n].left, levels - 1); },
+                           [&] { right = self(self, bvh.nodes[n].right, levels - 1); });
+      return {reached.nodes + left.nodes + right.nodes, reached.prims + left.prims + right.prims};
+    }
+    std::vector<uint32_t> stack{n};
+    while (!stack.empty() && !failed.load(std::memory_order_relaxed)) {
+      const uint32_t m = stack.back();
+      stack.pop_back();
+      if (!check(m, reached)) {
+        failed = true;
+        break;
+      }
+      if (!bvh.nodes[m].isLeaf()) {
+        stack.push_back(bvh.nodes[m].right);
+        stack.push_back(bvh.nodes[m].left);
+      }
+    }
+    return reached;
+  };
+  claim(seen[bvh.root]);
+  const Reached reached = walk(walk, bvh.root, detail::parallelTreeLevels(nodeCount));
+  return !failed && reached.nodes == nodeCount && reached.prims == primSeen.size() &&
+         (!prims || prims->primCount == bvh.primIds.size());
+}
+
+}  // namespace
+
 std::optional<std::string> validate(const Bvh& bvh, const PrimitiveBoxes* prims) {
   const auto nodeCount = bvh.nodes.size();
   if (nodeCount == 0) return bvh.primIds.empty() ? std::nullopt : std::optional<std::string>("no nodes");
@@ -106,6 +198,7 @@ std::optional<std::string> validate(const Bvh& bvh, const PrimitiveBoxes* prims)
   if (bvh.nodes[bvh.root].parent != kInvalidIndex) return "root has a parent";
   if (bvh.boxes.size() != nodeCount * std::size_t(bvh.frameCount))
     return "box array size does not match nodes x frames";
+  if (detail::parallelTreeLevels(nodeCount) > 0 && passesInParallel(bvh, prims)) return std::nullopt;
   std::vector<uint8_t> seen(nodeCount, 0);
   std::vector<uint32_t> primSeen(bvh.primIds.size(), 0);
   std::vector<uint32_t> stack{bvh.root};

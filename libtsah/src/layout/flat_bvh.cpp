@@ -1,7 +1,11 @@
 #include "tsah/layout/flat_bvh.hpp"
 
+#include <tbb/parallel_invoke.h>
+
+#include <algorithm>
 #include <cmath>
 
+#include "core/parallel_tree.hpp"
 #include "tsah/base/error.hpp"
 
 namespace tsah {
@@ -19,6 +23,122 @@ std::string str(uint64_t v) { return std::to_string(v); }
 
 }  // namespace
 
+namespace {
+
+// The flat layout's pre-order walk, left first: an interior node takes the next interior index
+// when it is reached, a leaf the next primitives. So a subtree's place follows from the sizes of
+// the subtrees before it, and the top levels' subtrees are measured, then written, in parallel.
+class Flattening {
+ public:
+  Flattening(const Bvh& bvh, FlatBvh& flat)
+      : bvh_(bvh), flat_(flat), levels_(detail::parallelTreeLevels(bvh.nodes.size())), sizes_(std::size_t(2) << levels_) {}
+
+  void run() {
+    measure(bvh_.root, levels_, 1);
+    flat_.depth = place({bvh_.root, kInvalidIndex, 0, 0}, 0, 0, levels_, 1);
+  }
+
+ private:
+  // Each walk entry names a Bvh node and where its reference goes: the parent's flat index and
+  // child slot (parent kInvalidIndex for the root).
+  struct Item {
+    uint32_t node, parent, depth;
+    int side;
+  };
+  struct Size {
+    uint32_t interiors = 0, prims = 0;
+  };
+
+  // The subtree's interior nodes and primitives; the top levels' kept at their heap position
+  // (root 1, children 2p and 2p + 1).
+  Size measure(uint32_t n, int levels, std::size_t position) {
+    Size size;
+    const BvhNode& node = bvh_.nodes[n];
+    if (node.isLeaf()) {
+      size.prims = node.primCount;
+    } else if (levels > 0) {
+      Size left, right;
+      tbb::parallel_invoke([&] { left = measure(node.left, levels - 1, 2 * position); },
+                           [&] { right = measure(node.right, levels - 1, 2 * position + 1); });
+      size = {1 + left.interiors + right.interiors, left.prims + right.prims};
+    } else {
+      std::vector<uint32_t> stack{n};
+      while (!stack.empty()) {
+        const BvhNode& g = bvh_.nodes[stack.back()];
+        stack.pop_back();
+        if (g.isLeaf()) {
+          size.prims += g.primCount;
+        } else {
+          ++size.interiors;
+          stack.push_back(g.left);
+          stack.push_back(g.right);
+        }
+      }
+    }
+    if (position < sizes_.size()) sizes_[position] = size;
+    return size;
+  }
+
+  // Writes `item`'s subtree with its interior nodes from index nextInterior and its primitives
+  // from nextPrim; returns the subtree's deepest depth.
+  uint32_t place(const Item& item, uint32_t nextInterior, uint32_t nextPrim, int levels, std::size_t position) {
+    const BvhNode& node = bvh_.nodes[item.node];
+    if (!node.isLeaf() && levels > 0) {
+      const uint32_t index = nextInterior;
+      reference(item, int32_t(index), 0);
+      const Size left = sizes_[2 * position];
+      uint32_t leftDepth = 0, rightDepth = 0;
+      tbb::parallel_invoke(
+          [&] { leftDepth = place({node.left, index, item.depth + 1, 0}, index + 1, nextPrim, levels - 1, 2 * position); },
+          [&] {
+            rightDepth = place({node.right, index, item.depth + 1, 1}, index + 1 + left.interiors, nextPrim + left.prims,
+                               levels - 1, 2 * position + 1);
+          });
+      return std::max(leftDepth, rightDepth);
+    }
+    uint32_t depth = 0;
+    std::vector<Item> stack{item};
+    while (!stack.empty()) {
+      const Item top = stack.back();
+      stack.pop_back();
+      const BvhNode& n = bvh_.nodes[top.node];
+      depth = std::max(depth, top.depth);
+      if (n.isLeaf()) {
+        reference(top, makeLeafRef(nextPrim), n.primCount);
+        for (uint32_t i = 0; i < n.primCount; ++i) flat_.triIndex[nextPrim++] = bvh_.primIds[n.primBegin + i];
+      } else {
+        const uint32_t index = nextInterior++;
+        reference(top, int32_t(index), 0);
+        stack.push_back({n.right, index, top.depth + 1, 1});
+        stack.push_back({n.left, index, top.depth + 1, 0});
+      }
+    }
+    return depth;
+  }
+
+  // The reference to `item`'s node (and its box) in its parent, in every frame.
+  void reference(const Item& item, int32_t ref, uint32_t count) {
+    if (item.parent == kInvalidIndex) {
+      flat_.rootRef = ref;
+      flat_.rootCount = count;
+      return;
+    }
+    for (uint32_t f = 0; f < flat_.frameCount; ++f) {
+      GpuBvhNode& parent = flat_.frameNodes(f)[item.parent];
+      parent.setChildBox(item.side, bvh_.box(item.node, f));
+      (item.side == 0 ? parent.ref0 : parent.ref1) = ref;
+      (item.side == 0 ? parent.count0 : parent.count1) = count;
+    }
+  }
+
+  const Bvh& bvh_;
+  FlatBvh& flat_;
+  int levels_;
+  std::vector<Size> sizes_;
+};
+
+}  // namespace
+
 FlatBvh flattenBvh(const Bvh& bvh) {
   if (bvh.nodes.empty() || bvh.primIds.empty()) throw tsah::DataError("cannot flatten an empty BVH");
   if (auto problem = validate(bvh)) throw tsah::DataError("cannot flatten an invalid BVH: " + *problem);
@@ -31,47 +151,9 @@ FlatBvh flattenBvh(const Bvh& bvh) {
   flat.interiorCount = bvh.nodeCount() - leafCount;
   flat.nodes.resize(std::size_t(flat.frameCount) * flat.interiorCount);
   flat.rootBoxes.resize(flat.frameCount);
-  flat.triIndex.reserve(bvh.primIds.size());
+  flat.triIndex.resize(bvh.primIds.size());
   for (uint32_t f = 0; f < flat.frameCount; ++f) flat.rootBoxes[f] = bvh.box(bvh.root, f);
-
-  // Pre-order walk, left first. Each stack entry names a Bvh node and where its reference goes:
-  // the parent's flat index and child slot (parent kInvalidIndex for the root).
-  struct Item {
-    uint32_t node, parent, depth;
-    int side;
-  };
-  std::vector<Item> stack{{bvh.root, kInvalidIndex, 0, 0}};
-  uint32_t nextInterior = 0;
-  while (!stack.empty()) {
-    const Item item = stack.back();
-    stack.pop_back();
-    const BvhNode& node = bvh.nodes[item.node];
-    flat.depth = std::max(flat.depth, item.depth);
-    int32_t ref;
-    uint32_t count;
-    if (node.isLeaf()) {
-      ref = makeLeafRef(static_cast<uint32_t>(flat.triIndex.size()));
-      count = node.primCount;
-      for (uint32_t i = 0; i < node.primCount; ++i) flat.triIndex.push_back(bvh.primIds[node.primBegin + i]);
-    } else {
-      const uint32_t index = nextInterior++;
-      ref = static_cast<int32_t>(index);
-      count = 0;
-      stack.push_back({node.right, index, item.depth + 1, 1});
-      stack.push_back({node.left, index, item.depth + 1, 0});
-    }
-    if (item.parent == kInvalidIndex) {
-      flat.rootRef = ref;
-      flat.rootCount = count;
-      continue;
-    }
-    for (uint32_t f = 0; f < flat.frameCount; ++f) {
-      GpuBvhNode& parent = flat.frameNodes(f)[item.parent];
-      parent.setChildBox(item.side, bvh.box(item.node, f));
-      (item.side == 0 ? parent.ref0 : parent.ref1) = ref;
-      (item.side == 0 ? parent.count0 : parent.count1) = count;
-    }
-  }
+  Flattening(bvh, flat).run();
   return flat;
 }
 

@@ -1,7 +1,12 @@
 #include "tsah/optimize/leaf_collapser.hpp"
 
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
+
 #include <algorithm>
 #include <vector>
+
+#include "core/parallel_tree.hpp"
 
 #include "tsah/base/assert.hpp"
 #include "tsah/base/error.hpp"
@@ -52,74 +57,148 @@ std::vector<double> costsInOrder(const CollapseSource& source, uint32_t count, u
 }
 
 // The tree of `source` renumbered depth-first (see LeafCollapser::compact), nodes flagged in asLeaf
-// becoming leaves, without boxes; origin[i] is the source node of output node i.
+// becoming leaves, without boxes; origin[i] is the source node of output node i. The numbering is
+// that of one walk with a stack: a node's two children get the next two indices when it is
+// expanded, then the left child's subtree is numbered, then the right's, and each leaf's
+// primitives follow the previous leaf's. So a subtree's place is known from the sizes of the
+// subtrees before it: the top levels are measured, then placed, in parallel.
+class Compaction {
+ public:
+  Compaction(const CollapseSource& source, std::span<const uint8_t> asLeaf, Bvh& out, std::vector<uint32_t>& origin)
+      : source_(source), asLeaf_(asLeaf), out_(out), origin_(origin), levels_(detail::parallelTreeLevels(source.nodeCount)),
+        sizes_(std::size_t(2) << levels_) {}
+
+  void run() {
+    const Size whole = measure(source_.root, levels_, 1);
+    out_.nodes.assign(1 + whole.below, BvhNode{});
+    origin_.assign(out_.nodes.size(), 0);
+    out_.primIds.resize(whole.prims);
+    origin_[0] = source_.root;
+    place(source_.root, 0, 1, 0, levels_, 1);
+  }
+
+ private:
+  // A compacted subtree: its nodes below its root, and its primitives.
+  struct Size {
+    uint64_t below = 0, prims = 0;
+  };
+
+  BvhNode node(uint32_t n) const { return source_.node(n); }
+  bool becomesLeaf(uint32_t n, const BvhNode& node) const { return node.isLeaf() || (!asLeaf_.empty() && asLeaf_[n]); }
+
+  // Calls visit(leaf node) for every source leaf below n, left to right.
+  template <class Visit>
+  void forEachLeaf(uint32_t n, const Visit& visit) const {
+    std::vector<uint32_t> stack{n};
+    while (!stack.empty()) {
+      const BvhNode g = node(stack.back());
+      stack.pop_back();
+      if (g.isLeaf()) {
+        visit(g);
+      } else {
+        stack.push_back(g.right);
+        stack.push_back(g.left);
+      }
+    }
+  }
+
+  // The compacted size of n's subtree; the top levels' sizes are kept at their heap position
+  // (root 1, children 2p and 2p + 1) for place().
+  Size measure(uint32_t n, int levels, std::size_t position) {
+    Size size;
+    const BvhNode top = node(n);
+    if (becomesLeaf(n, top)) {
+      forEachLeaf(n, [&](const BvhNode& leaf) { size.prims += leaf.primCount; });
+    } else if (levels > 0) {
+      Size left, right;
+      tbb::parallel_invoke([&] { left = measure(top.left, levels - 1, 2 * position); },
+                           [&] { right = measure(top.right, levels - 1, 2 * position + 1); });
+      size = {2 + left.below + right.below, left.prims + right.prims};
+    } else {
+      std::vector<uint32_t> stack{n};
+      while (!stack.empty()) {
+        const uint32_t m = stack.back();
+        stack.pop_back();
+        const BvhNode g = node(m);
+        if (becomesLeaf(m, g)) {
+          forEachLeaf(m, [&](const BvhNode& leaf) { size.prims += leaf.primCount; });
+          continue;
+        }
+        size.below += 2;
+        stack.push_back(g.right);
+        stack.push_back(g.left);
+      }
+    }
+    if (position < sizes_.size()) sizes_[position] = size;
+    return size;
+  }
+
+  // Source node `from` at output index `index`; its descendants go from `base`, its primitives
+  // from `primBase`.
+  void place(uint32_t from, uint32_t index, uint64_t base, uint64_t primBase, int levels, std::size_t position) {
+    const BvhNode top = node(from);
+    if (!becomesLeaf(from, top) && levels > 0) {
+      const auto left = uint32_t(base), right = uint32_t(base + 1);
+      link(index, top, left, right);
+      const Size leftSize = sizes_[2 * position];
+      tbb::parallel_invoke(
+          [&] { place(top.left, left, base + 2, primBase, levels - 1, 2 * position); },
+          [&] { place(top.right, right, base + 2 + leftSize.below, primBase + leftSize.prims, levels - 1, 2 * position + 1); });
+      return;
+    }
+    // One task: pairs (source node, output index), the left child on top of the stack.
+    std::vector<std::pair<uint32_t, uint32_t>> open{{from, index}};
+    while (!open.empty()) {
+      const auto [m, at] = open.back();
+      open.pop_back();
+      const BvhNode g = node(m);
+      if (becomesLeaf(m, g)) {
+        out_.nodes[at].primBegin = uint32_t(primBase);
+        forEachLeaf(m, [&](const BvhNode& leaf) {
+          for (uint32_t i = 0; i < leaf.primCount; ++i) out_.primIds[primBase++] = source_.primIds[leaf.primBegin + i];
+        });
+        out_.nodes[at].primCount = uint32_t(primBase) - out_.nodes[at].primBegin;
+        continue;
+      }
+      const auto left = uint32_t(base), right = uint32_t(base + 1);
+      base += 2;
+      link(at, g, left, right);
+      open.push_back({g.right, right});
+      open.push_back({g.left, left});
+    }
+  }
+
+  void link(uint32_t index, const BvhNode& from, uint32_t left, uint32_t right) {
+    out_.nodes[index].left = left;
+    out_.nodes[index].right = right;
+    out_.nodes[left].parent = out_.nodes[right].parent = index;
+    origin_[left] = from.left;
+    origin_[right] = from.right;
+  }
+
+  const CollapseSource& source_;
+  std::span<const uint8_t> asLeaf_;
+  Bvh& out_;
+  std::vector<uint32_t>& origin_;
+  int levels_;
+  std::vector<Size> sizes_;
+};
+
 Bvh compactTopology(const CollapseSource& source, std::span<const uint8_t> asLeaf, std::vector<uint32_t>& origin) {
   Bvh out;
   out.frameCount = source.frameCount;
   origin.clear();
   if (source.nodeCount == 0) return out;
-  const auto becomesLeaf = [&](uint32_t n, const BvhNode& node) {
-    return node.isLeaf() || (!asLeaf.empty() && asLeaf[n]);
-  };
-  // Exact sizes first: vectors grown by doubling would hold up to twice the tree for a moment.
-  std::size_t count = 0;
-  std::vector<uint32_t> stack{source.root};
-  while (!stack.empty()) {
-    const uint32_t n = stack.back();
-    stack.pop_back();
-    ++count;
-    const BvhNode node = source.node(n);
-    if (becomesLeaf(n, node)) continue;
-    stack.push_back(node.left);
-    stack.push_back(node.right);
-  }
-  out.nodes.reserve(count);
-  origin.reserve(count);
-  out.primIds.reserve(source.primIds.size());
-  const auto addNode = [&](uint32_t from, uint32_t parent) {
-    const auto index = static_cast<uint32_t>(out.nodes.size());
-    out.nodes.emplace_back().parent = parent;
-    origin.push_back(from);
-    return index;
-  };
-  // Pairs (source node, new index); the stack gives a depth-first order with the left child first.
-  std::vector<std::pair<uint32_t, uint32_t>> open{{source.root, addNode(source.root, kInvalidIndex)}};
-  std::vector<uint32_t> gather;
-  while (!open.empty()) {
-    const auto [from, index] = open.back();
-    open.pop_back();
-    const BvhNode node = source.node(from);
-    if (becomesLeaf(from, node)) {
-      // Every primitive below `from`, leaves in depth-first order.
-      out.nodes[index].primBegin = static_cast<uint32_t>(out.primIds.size());
-      gather.assign(1, from);
-      while (!gather.empty()) {
-        const BvhNode g = source.node(gather.back());
-        gather.pop_back();
-        if (g.isLeaf()) {
-          for (uint32_t i = 0; i < g.primCount; ++i) out.primIds.push_back(source.primIds[g.primBegin + i]);
-        } else {
-          gather.push_back(g.right);
-          gather.push_back(g.left);
-        }
-      }
-      out.nodes[index].primCount = static_cast<uint32_t>(out.primIds.size()) - out.nodes[index].primBegin;
-      continue;
-    }
-    const uint32_t left = addNode(node.left, index);
-    const uint32_t right = addNode(node.right, index);
-    out.nodes[index].left = left;
-    out.nodes[index].right = right;
-    open.push_back({node.right, right});
-    open.push_back({node.left, left});
-  }
+  Compaction(source, asLeaf, out, origin).run();
   return out;
 }
 
 // The boxes of a compacted tree copied from the source through origin.
 void copyBoxes(const CollapseSource& source, std::span<const uint32_t> origin, Bvh& out) {
   out.boxes.resize(origin.size() * std::size_t(source.frameCount));
-  for (std::size_t i = 0; i < origin.size(); ++i) source.boxes(origin[i], out.boxes.data() + i * source.frameCount);
+  tbb::parallel_for(std::size_t(0), origin.size(), [&](std::size_t i) {
+    source.boxes(origin[i], out.boxes.data() + i * source.frameCount);
+  });
 }
 
 }  // namespace
@@ -150,54 +229,47 @@ Bvh LeafCollapser::compact(const Bvh& bvh, std::span<const uint8_t> asLeaf) {
 
 std::vector<uint8_t> LeafCollapser::leafFlags(const CollapseSource& source, std::span<const double> weights) const {
   const uint32_t frames = source.frameCount;
-  std::vector<Aabb> boxes(frames);
-  source.boxes(source.root, boxes.data());
+  std::vector<Aabb> rootBoxes(frames);
+  source.boxes(source.root, rootBoxes.data());
   std::vector<double> factor(frames, 0.0);
   for (uint32_t f = 0; f < frames; ++f) {
-    const double rootArea = boxes[f].area();
+    const double rootArea = rootBoxes[f].area();
     factor[f] = rootArea > 0.0 ? weights[f] / rootArea : 0.0;
   }
   const double ct = config_.cost.ct, ci = config_.cost.ci;
   std::vector<uint8_t> asLeaf(source.nodeCount, 0);
-  // Post-order with an explicit stack; `done` holds (primitives, cost as kept) of finished
-  // subtrees whose parent is still open, so the extra memory follows the depth, not the size.
-  struct Open {
-    uint32_t node;
-    bool expanded;
-  };
-  std::vector<Open> stack{{source.root, false}};
-  std::vector<std::pair<uint32_t, double>> done;
-  while (!stack.empty()) {
-    const uint32_t n = stack.back().node;
-    const BvhNode node = source.node(n);
-    if (!node.isLeaf() && !stack.back().expanded) {
-      stack.back().expanded = true;
-      stack.push_back({node.right, false});
-      stack.push_back({node.left, false});
-      continue;
-    }
-    stack.pop_back();
+  const auto weightedArea = [&](uint32_t n) {
+    thread_local std::vector<Aabb> boxes;
+    boxes.resize(frames);
     source.boxes(n, boxes.data());
     double area = 0.0;
     for (uint32_t f = 0; f < frames; ++f) area += factor[f] * boxes[f].area();
-    if (node.isLeaf()) {
-      done.push_back({node.primCount, ci * node.primCount * area});
-      continue;
-    }
-    const auto right = done.back();
-    done.pop_back();
-    const auto left = done.back();
-    done.pop_back();
-    const uint32_t count = left.first + right.first;
-    const double keep = ct * area + left.second + right.second;
-    const double leaf = ci * count * area;
-    if (count <= config_.maxLeafSize && leaf <= keep) {
-      asLeaf[n] = 1;
-      done.push_back({count, leaf});
-    } else {
-      done.push_back({count, keep});
-    }
-  }
+    return area;
+  };
+  // Children first, subtrees in parallel: (primitives, cost as kept) of each subtree.
+  using Kept = std::pair<uint32_t, double>;
+  detail::reduceTree<Kept>(
+      source.root,
+      [&](uint32_t n) {
+        const BvhNode node = source.node(n);
+        return detail::TreeNodeShape{node.isLeaf(), node.left, node.right};
+      },
+      [&](uint32_t n) {
+        const uint32_t count = source.node(n).primCount;
+        return Kept{count, ci * count * weightedArea(n)};
+      },
+      [&](uint32_t n, Kept left, Kept right) {
+        const double area = weightedArea(n);
+        const uint32_t count = left.first + right.first;
+        const double keep = ct * area + left.second + right.second;
+        const double leaf = ci * count * area;
+        if (count <= config_.maxLeafSize && leaf <= keep) {
+          asLeaf[n] = 1;
+          return Kept{count, leaf};
+        }
+        return Kept{count, keep};
+      },
+      detail::parallelTreeLevels(source.nodeCount));
   return asLeaf;
 }
 

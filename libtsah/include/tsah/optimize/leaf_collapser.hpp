@@ -15,7 +15,8 @@ namespace tsah {
 // A binary tree with boxes of every frame, as the collapser reads it: a Bvh (CollapseSource::of),
 // or an optimizer's own storage, so that collapsing an optimized tree needs no second copy of every
 // node's boxes. Node ids are [0, nodeCount); nodes not reachable from the root count in the cost of
-// the uncollapsed tree as they do in frameCosts(Bvh).
+// the uncollapsed tree as they do in frameCosts(Bvh). Both functions are called from several
+// threads at once (subtrees of a large tree are collapsed in parallel): they must only read.
 struct CollapseSource {
   uint32_t frameCount = 0;
   uint32_t nodeCount = 0;
