@@ -62,6 +62,31 @@ def test_auto_flattens_what_the_command_line_flattens(cli, tmp_path):
     assert scene.instance_count == expected["instances"]
 
 
+def test_auto_weighs_the_whole_scene_as_the_command_line_does(cli, tmp_path):
+    # Three overlapping bursts flattened by their own estimate, two small blocks beside them: the
+    # whole scene as one tree costs less than the two levels (docs/two-level.md, rule 5).
+    burst = str(EXPLODE / "explode_%04d.obj")
+    block = str(EXPLODE / "explode_0001.obj")
+    path = tmp_path / "whole.json"
+    path.write_text(json.dumps({"fps": 5, "time": [0, 2], "objects": [
+        {"name": "burst", "file": burst, "time": {"speed": 4, "outside": "loop"}, "instances": [
+            {"transform": {"scale": [1, 1, -1]}},
+            {"offset": 0.3, "path": [{"time": 0, "translate": [-3, 0, 0]}, {"time": 2, "translate": [3, 0, 0]}]},
+            {"offset": 0.3, "transform": {"translate": [0, 3, 0], "rotate": [30, 0, 0]}}]},
+        {"name": "block", "file": block, "instances": [
+            {"transform": {"translate": [0, -2, 0], "scale": [4, 0.3, 4]}},
+            {"transform": {"translate": [4, 0, 0], "rotate": [0, 30, 0]}}]}]}))
+    scene = tsah.build_two_level(path)
+    choice = scene.info["structure_choice"]
+    whole = choice["whole_scene_cost"]
+    assert 0 < whole["flattened"] <= whole["decided"]
+    assert [o["flatten"] for o in choice["objects"]] == [True, True]
+    assert scene.instance_count == 1 and scene.flattened_objects == ["burst", "block"]
+    expected = cli.json("info", path, "--structure")
+    assert expected["structure"] == "flat"
+    assert expected["whole_scene_cost"] == pytest.approx(whole)
+
+
 def test_save_and_load_round_trip(scene, tmp_path):
     path = tmp_path / "demo.tbvh"
     scene.save(path)
