@@ -149,19 +149,24 @@ TEST(FlattenObjects, TwoLevelHitsOfAFlattenedSceneEqualTheFlatBakedScene) {
 }
 
 // 16 instances of an animated wave of 3,000 triangles, each turned and phased: crowded
-// (overlapping) or spread out on a grid far apart; and a ground shown once.
-fs::path writeManyInstances(const fs::path& dir, bool crowded) {
+// (overlapping) or spread out on a grid far apart; and a ground shown once. With `spreadToo`, a
+// third object: 16 more instances of the wave spread out beside them.
+fs::path writeManyInstances(const fs::path& dir, bool crowded, bool spreadToo = false) {
   tsah::test::writeTwoLevelScene(dir);
   anim::saveTanim(tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 3000, 9, 3), (dir / "big.tanim").string());
-  const std::string many = instances(16, [crowded](uint32_t i) {
-    const double spacing = crowded ? 0.25 : 12.0;
-    const double x = spacing * (i % 4), z = spacing * (i / 4);
-    return R"({"time": {"offset": )" + std::to_string(0.37 * i) + R"(, "outside": "loop"}, "transform": {"translate": [)" +
-           std::to_string(x) + ", 0, " + std::to_string(z) + R"(], "rotate": [0, )" + std::to_string(23.0 * i) + R"(, 0]}})";
-  });
+  const auto many = [](bool close, double shift) {
+    return instances(16, [close, shift](uint32_t i) {
+      const double spacing = close ? 0.25 : 12.0;
+      const double x = shift + spacing * (i % 4), z = spacing * (i / 4);
+      return R"({"time": {"offset": )" + std::to_string(0.37 * i) + R"(, "outside": "loop"}, "transform": {"translate": [)" +
+             std::to_string(x) + ", 0, " + std::to_string(z) + R"(], "rotate": [0, )" + std::to_string(23.0 * i) + R"(, 0]}})";
+    });
+  };
+  const std::string strollers =
+      spreadToo ? R"(, {"name": "strollers", "file": "big.tanim", "instances": [)" + many(false, 60.0) + "]}" : "";
   writeText(dir / "many.json", R"({"fps": 2, "objects": [
     {"name": "ground", "file": "ground.tanim", "instances": [{"transform": {"translate": [0, -2, 0], "scale": [20, 1, 20]}}]},
-    {"name": "walkers", "file": "big.tanim", "instances": [)" + many + R"(]}]})");
+    {"name": "walkers", "file": "big.tanim", "instances": [)" + many(crowded, 0.0) + "]}" + strollers + "]}");
   return dir / "many.json";
 }
 
@@ -209,6 +214,24 @@ TEST(StructureChoice, TheWholeSceneIsWeighedWithinItsBounds) {
   EXPECT_FALSE(kept.objects[0].flatten) << kept.objects[0].reason;
   EXPECT_LT(kept.decidedCost, 0.0);
   EXPECT_EQ(kept.flattenedObjects, (std::vector<uint32_t>{1}));
+}
+
+TEST(StructureChoice, AKeptMovingObjectKeepsTheTwoLevels) {
+  // The crowded walkers are flattened, the spread-out strollers (moving too) stay instances: one
+  // tree would refit each of their copies, so the whole scene is not weighed.
+  const anim::SceneSources scene =
+      anim::loadSceneSources(writeManyInstances(tsah::test::scratchDir(), true, true).string());
+  tsah::StructureChoiceOptions options;
+  options.memoryFactor = 100.0;
+  options.wholeSceneFactor = 100.0;
+  const tsah::StructureChoice choice = tsah::chooseObjectStructure(scene, options);
+  ASSERT_EQ(choice.objects.size(), 3u);
+  EXPECT_TRUE(choice.objects[1].flatten) << choice.objects[1].reason;
+  EXPECT_FALSE(choice.objects[2].flatten) << choice.objects[2].reason;
+  EXPECT_TRUE(choice.objects[2].moves);
+  EXPECT_FALSE(choice.objects[0].flatten) << choice.objects[0].reason;
+  EXPECT_LT(choice.decidedCost, 0.0);
+  EXPECT_EQ(choice.flattenedObjects, (std::vector<uint32_t>{1}));
 }
 
 TEST(StructureChoice, SpreadOutInstancesStayInstances) {

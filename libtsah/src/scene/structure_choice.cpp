@@ -334,10 +334,16 @@ StructureChoice chooseObjectStructure(const anim::SceneSources& scene, const Str
       all[i] = i;
       (out.objects[scene.instances[i].object].flatten ? flattened : kept).push_back(i);
     }
+    // Only static kept objects: their copies in one tree are never refitted (a kept moving object
+    // would refit every copy, where its instances share their poses' refits).
     double keptTriangles = 0.0;
+    bool keptMoves = false;
     for (const ObjectStructureChoice& c : out.objects)
-      if (!c.flatten) keptTriangles += double(c.flattenedTriangles);
-    if (!kept.empty() && double(sceneTriangles) <= memoryBudget &&
+      if (!c.flatten) {
+        keptTriangles += double(c.flattenedTriangles);
+        keptMoves = keptMoves || c.moves;
+      }
+    if (!kept.empty() && !keptMoves && double(sceneTriangles) <= memoryBudget &&
         keptTriangles <= options.wholeSceneFactor * flattenedTriangles) {
       out.decidedCost = estimator.twoLevelCost(kept, flattened, true);
       out.wholeFlattenedCost = estimator.flattenedCost(all, true);

@@ -69,8 +69,8 @@ struct StructureChoice {
   // When a moving object is flattened and others stay instanced: the estimated cost of the two
   // levels so decided (a tree over the kept instances and the flattened source, with their BLAS
   // costs) and of every object flattened into one tree, in the objects' scale. Negative when not
-  // weighed (no moving object flattened, nothing kept instanced, the whole scene past the memory
-  // bound, or the kept triangles past wholeSceneFactor).
+  // weighed (no moving object flattened, nothing or a moving object kept instanced, the whole
+  // scene past the memory bound, or the kept triangles past wholeSceneFactor).
   double decidedCost = -1.0, wholeFlattenedCost = -1.0;
   double seconds = 0.0;                         // time of the estimate
   bool allFlattened() const { return flattenedObjects.size() == objects.size(); }
@@ -81,8 +81,8 @@ struct StructureChoice {
 // first; static objects are flattened only when no moving one is (the flattened objects share one
 // source, and a moving one would refit the static triangles every frame). Among the objects the
 // cost favours, the memory bound takes them by decreasing saving. When moving objects are
-// flattened and others kept (within wholeSceneFactor), every object is flattened (one tree) if its
-// estimate is not above the two levels so decided. Throws tsah::ConfigError for a scene flattened
+// flattened and only static ones kept (within wholeSceneFactor), every object is flattened (one
+// tree) if its estimate is not above the two levels so decided. Throws tsah::ConfigError for a scene flattened
 // already.
 StructureChoice chooseObjectStructure(const anim::SceneSources& scene, const StructureChoiceOptions& options = {});
 
