@@ -9,14 +9,6 @@
 
 namespace tsah {
 
-namespace {
-
-detail::TreeNodeShape shapeOf(const Bvh& bvh, uint32_t n) {
-  const BvhNode& node = bvh.nodes[n];
-  return {node.isLeaf(), node.left, node.right};
-}
-
-}  // namespace
 
 void triangleBoxes(std::span<const uint32_t> indices, std::span<const float> positions,
                    std::span<Aabb> out) {
@@ -89,7 +81,7 @@ void refitInto(const Bvh& bvh, const PrimitiveBoxes& prims, const std::function<
   // Subtrees in parallel: each node's boxes come from its own subtree alone.
   struct None {};
   detail::reduceTree<None>(
-      bvh.root, [&](uint32_t n) { return shapeOf(bvh, n); },
+      bvh.root, [&](uint32_t n) { return detail::shapeOf(bvh, n); },
       [&](uint32_t n) {
         const BvhNode& node = bvh.nodes[n];
         Aabb* out = boxesOf(n);

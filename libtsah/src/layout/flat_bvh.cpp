@@ -21,20 +21,17 @@ bool finiteNonEmpty(const Aabb& b) {
 
 std::string str(uint64_t v) { return std::to_string(v); }
 
-}  // namespace
-
-namespace {
-
 // The flat layout's pre-order walk, left first: an interior node takes the next interior index
 // when it is reached, a leaf the next primitives. So a subtree's place follows from the sizes of
 // the subtrees before it, and the top levels' subtrees are measured, then written, in parallel.
 class Flattening {
  public:
   Flattening(const Bvh& bvh, FlatBvh& flat)
-      : bvh_(bvh), flat_(flat), levels_(detail::parallelTreeLevels(bvh.nodes.size())), sizes_(std::size_t(2) << levels_) {}
+      : bvh_(bvh), flat_(flat), levels_(detail::parallelTreeLevels(bvh.nodes.size())),
+        sizes_(detail::topLevelSlots(levels_)) {}
 
   void run() {
-    measure(bvh_.root, levels_, 1);
+    measure();
     flat_.depth = place({bvh_.root, kInvalidIndex, 0, 0}, 0, 0, levels_, 1);
   }
 
@@ -49,34 +46,16 @@ class Flattening {
     uint32_t interiors = 0, prims = 0;
   };
 
-  // The subtree's interior nodes and primitives; the top levels' kept at their heap position
-  // (root 1, children 2p and 2p + 1).
-  Size measure(uint32_t n, int levels, std::size_t position) {
-    Size size;
-    const BvhNode& node = bvh_.nodes[n];
-    if (node.isLeaf()) {
-      size.prims = node.primCount;
-    } else if (levels > 0) {
-      Size left, right;
-      tbb::parallel_invoke([&] { left = measure(node.left, levels - 1, 2 * position); },
-                           [&] { right = measure(node.right, levels - 1, 2 * position + 1); });
-      size = {1 + left.interiors + right.interiors, left.prims + right.prims};
-    } else {
-      std::vector<uint32_t> stack{n};
-      while (!stack.empty()) {
-        const BvhNode& g = bvh_.nodes[stack.back()];
-        stack.pop_back();
-        if (g.isLeaf()) {
-          size.prims += g.primCount;
-        } else {
-          ++size.interiors;
-          stack.push_back(g.left);
-          stack.push_back(g.right);
-        }
-      }
-    }
-    if (position < sizes_.size()) sizes_[position] = size;
-    return size;
+  // The subtree's interior nodes and primitives; the top levels' kept in sizes_ at their heap
+  // position (root 1, children 2p and 2p + 1).
+  void measure() {
+    detail::reduceTree<Size>(
+        bvh_.root, [&](uint32_t n) { return detail::shapeOf(bvh_, n); },
+        [&](uint32_t n) { return Size{0, bvh_.nodes[n].primCount}; },
+        [](uint32_t, Size left, Size right) {
+          return Size{1 + left.interiors + right.interiors, left.prims + right.prims};
+        },
+        levels_, &sizes_);
   }
 
   // Writes `item`'s subtree with its interior nodes from index nextInterior and its primitives

@@ -66,10 +66,10 @@ class Compaction {
  public:
   Compaction(const CollapseSource& source, std::span<const uint8_t> asLeaf, Bvh& out, std::vector<uint32_t>& origin)
       : source_(source), asLeaf_(asLeaf), out_(out), origin_(origin), levels_(detail::parallelTreeLevels(source.nodeCount)),
-        sizes_(std::size_t(2) << levels_) {}
+        sizes_(detail::topLevelSlots(levels_)) {}
 
   void run() {
-    const Size whole = measure(source_.root, levels_, 1);
+    const Size whole = measure();
     out_.nodes.assign(1 + whole.below, BvhNode{});
     origin_.assign(out_.nodes.size(), 0);
     out_.primIds.resize(whole.prims);
@@ -102,35 +102,22 @@ class Compaction {
     }
   }
 
-  // The compacted size of n's subtree; the top levels' sizes are kept at their heap position
+  // The compacted size of the tree; the top levels' sizes are kept in sizes_ at their heap position
   // (root 1, children 2p and 2p + 1) for place().
-  Size measure(uint32_t n, int levels, std::size_t position) {
-    Size size;
-    const BvhNode top = node(n);
-    if (becomesLeaf(n, top)) {
-      forEachLeaf(n, [&](const BvhNode& leaf) { size.prims += leaf.primCount; });
-    } else if (levels > 0) {
-      Size left, right;
-      tbb::parallel_invoke([&] { left = measure(top.left, levels - 1, 2 * position); },
-                           [&] { right = measure(top.right, levels - 1, 2 * position + 1); });
-      size = {2 + left.below + right.below, left.prims + right.prims};
-    } else {
-      std::vector<uint32_t> stack{n};
-      while (!stack.empty()) {
-        const uint32_t m = stack.back();
-        stack.pop_back();
-        const BvhNode g = node(m);
-        if (becomesLeaf(m, g)) {
-          forEachLeaf(m, [&](const BvhNode& leaf) { size.prims += leaf.primCount; });
-          continue;
-        }
-        size.below += 2;
-        stack.push_back(g.right);
-        stack.push_back(g.left);
-      }
-    }
-    if (position < sizes_.size()) sizes_[position] = size;
-    return size;
+  Size measure() {
+    return detail::reduceTree<Size>(
+        source_.root,
+        [&](uint32_t n) {
+          const BvhNode g = node(n);
+          return detail::TreeNodeShape{becomesLeaf(n, g), g.left, g.right};
+        },
+        [&](uint32_t n) {
+          Size size;
+          forEachLeaf(n, [&](const BvhNode& leaf) { size.prims += leaf.primCount; });
+          return size;
+        },
+        [](uint32_t, Size left, Size right) { return Size{2 + left.below + right.below, left.prims + right.prims}; },
+        levels_, &sizes_);
   }
 
   // Source node `from` at output index `index`; its descendants go from `base`, its primitives

@@ -128,13 +128,13 @@ class Estimator {
       std::vector<Aabb> boxes;
       double blasArea = 0.0;
       for (uint32_t i : kept) {
-        boxes.push_back(worldBox(uint32_t(f), i));
+        boxes.push_back(worldBox(i, uint32_t(f)));
         blasArea += blasCosts_.at(poseKey(i, uint32_t(f))) *
                     transformedArea(localBox(i, uint32_t(f)), scene_.instances[i].worldAt(times_[f]));
       }
       if (!flattened.empty()) {
         Aabb group;
-        for (uint32_t i : flattened) group.extend(worldBox(uint32_t(f), i));
+        for (uint32_t i : flattened) group.extend(worldBox(i, uint32_t(f)));
         boxes.push_back(group);
         blasArea += flattenedArea[f];
       }
@@ -144,7 +144,7 @@ class Estimator {
       const double tlasArea = sahArea(boxes, options_, 1) + (instanceCost_ - options_.cost.ci) * boxArea;
       cost[f] = (tlasArea + blasArea) / sceneArea_[f];
     });
-    return average(cost);
+    return temporalCost(cost, 0);  // the mean over the frames
   }
 
   // The BLAS estimates of the poses `instances` show at the representative times, concurrently:
@@ -164,7 +164,7 @@ class Estimator {
     const std::vector<double> area = flattenedAreas(instances, moves);
     std::vector<double> cost(frames());
     for (uint32_t f = 0; f < frames(); ++f) cost[f] = area[f] / sceneArea_[f];
-    return average(cost);
+    return temporalCost(cost, 0);  // the mean over the frames
   }
 
  private:
@@ -181,13 +181,8 @@ class Estimator {
     return keys;
   }
   const Aabb& localBox(uint32_t instance, uint32_t f) const { return localBoxes_.at(poseKey(instance, f)); }
-  const Aabb& worldBox(uint32_t f, uint32_t instance) const {
+  const Aabb& worldBox(uint32_t instance, uint32_t f) const {
     return worldBoxes_[std::size_t(f) * scene_.instances.size() + instance];
-  }
-  double average(const std::vector<double>& perFrame) const {
-    double sum = 0.0;
-    for (double c : perFrame) sum += c;
-    return sum / double(perFrame.size());
   }
 
   // Eq. 1's numerator of a binned SAH tree over the world triangles of `instances` at every frame.
@@ -322,13 +317,10 @@ StructureChoice chooseObjectStructure(const anim::SceneSources& scene, const Str
     }
     return any;
   };
-  if (decide(true)) {
-    for (ObjectStructureChoice& c : out.objects)
-      if (!c.moves)
-        c.reason = "instanced: moving objects are flattened (a static one in their source would be refitted every frame)";
-    // The per-object estimates do not see the kept instances overlapping the flattened source
-    // (walkers among buildings): rays then enter both. Weigh the structure so decided against every
-    // object flattened into one tree.
+  // Rule 5, after moving objects were flattened: the per-object estimates do not see the kept
+  // instances overlapping the flattened source (walkers among buildings: rays then enter both).
+  // Weigh the structure so decided against every object flattened into one tree.
+  const auto weighWholeScene = [&] {
     std::vector<uint32_t> kept, flattened, all(count);
     for (uint32_t i = 0; i < count; ++i) {
       all[i] = i;
@@ -343,24 +335,31 @@ StructureChoice chooseObjectStructure(const anim::SceneSources& scene, const Str
         keptTriangles += double(c.flattenedTriangles);
         keptMoves = keptMoves || c.moves;
       }
-    if (!kept.empty() && !keptMoves && double(sceneTriangles) <= memoryBudget &&
-        keptTriangles <= options.wholeSceneFactor * flattenedTriangles) {
-      out.decidedCost = estimator.twoLevelCost(kept, flattened, true);
-      out.wholeFlattenedCost = estimator.flattenedCost(all, true);
-      const std::string costs = "the whole scene flattened costs " + costText(out.wholeFlattenedCost) + " against " +
-                                costText(out.decidedCost) + " for the two levels decided per object";
-      // No margin: the moving triangles are copies refitted every frame in either structure, and
-      // a flat tree's refit skips its static subtrees; a tie keeps no instances.
-      const bool whole = out.wholeFlattenedCost <= out.decidedCost;
-      for (ObjectStructureChoice& c : out.objects) {
-        if (whole && !c.flatten) {
-          c.flatten = true;
-          c.reason = "flattened with the whole scene: " + costs;
-        } else if (!whole && !c.flatten) {
-          c.reason += "; " + costs;
-        }
+    if (kept.empty() || keptMoves || double(sceneTriangles) > memoryBudget ||
+        keptTriangles > options.wholeSceneFactor * flattenedTriangles)
+      return;
+    out.decidedCost = estimator.twoLevelCost(kept, flattened, true);
+    out.wholeFlattenedCost = estimator.flattenedCost(all, true);
+    const std::string costs = "the whole scene flattened costs " + costText(out.wholeFlattenedCost) + " against " +
+                              costText(out.decidedCost) + " for the two levels decided per object";
+    // No margin: the moving triangles are copies refitted every frame in either structure, and a
+    // flat tree's refit skips its static subtrees; a tie keeps no instances.
+    const bool whole = out.wholeFlattenedCost <= out.decidedCost;
+    for (ObjectStructureChoice& c : out.objects) {
+      if (c.flatten) continue;
+      if (whole) {
+        c.flatten = true;
+        c.reason = "flattened with the whole scene: " + costs;
+      } else {
+        c.reason += "; " + costs;
       }
     }
+  };
+  if (decide(true)) {
+    for (ObjectStructureChoice& c : out.objects)
+      if (!c.moves)
+        c.reason = "instanced: moving objects are flattened (a static one in their source would be refitted every frame)";
+    weighWholeScene();
   } else {
     decide(false);
   }
