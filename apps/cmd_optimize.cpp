@@ -1,7 +1,8 @@
 // tsah optimize INPUT -o OUT.tbvh [--method tsah|sah0|sahstar] [--k K] [--frames N]
 //   [--eval-frames M] [--selection mh|random|batch] [--seed S] [--ct 3] [--ci 2] [--max-leaf 8]
 //   [--time-limit SEC] [--threads T] [--segments K|auto] [--budget X | --budget-cost C]
-//   [--overlap S] [--reference-frames N] [--max-trees N] [--structure flat|two-level|auto] [--json]
+//   [--overlap S] [--reference-frames N] [--max-trees N] [--structure flat|two-level|auto]
+//   [--tlas-trees K|auto] [--tlas-budget X] [--json]
 // Builds one tree for the whole animation, writes it as .tbvh and reports its cost over the
 // evaluation frames. With --segments K > 1 (count mode) or --segments auto (budget mode), a tree
 // set instead (docs/segmentation.md): K trees, or the fewest trees that keep every evaluation frame
@@ -48,7 +49,22 @@ struct Options {
   bool reproducible = false;  // build times written as 0
   std::string devices;        // --devices all|0,2,...
   std::string structure;      // flat, two-level, auto; empty: auto for scene files, flat otherwise
+  std::string tlasTrees = "auto";  // two levels: K top-level trees or auto (tsah::TlasOptions)
+  double tlasBudget = tsah::TlasOptions{}.budget;
 };
+
+tsah::TlasOptions tlasOptions(const Options& opt) {
+  tsah::TlasOptions tlas;
+  tlas.budget = opt.tlasBudget;
+  if (opt.tlasTrees == "auto") return tlas;
+  const std::string& k = opt.tlasTrees;
+  const bool number = !k.empty() && k.size() < 5 && k.find_first_not_of("0123456789") == std::string::npos;
+  if (!number || std::stoul(k) < 1 || std::stoul(k) > tsah::TlasOptions::kMaxTrees)
+    throw tsah::cli::UsageError("--tlas-trees expects a number of trees (1.." +
+                                std::to_string(tsah::TlasOptions::kMaxTrees) + ") or auto, got '" + k + "'");
+  tlas.trees = uint32_t(std::stoul(k));
+  return tlas;
+}
 
 
 
@@ -223,13 +239,14 @@ bool runTwoLevel(const Options& opt, nlohmann::json& flatChoice) {
     throw UsageError("--structure two-level builds one T-SAH tree per source and the top level: it does not go "
                      "with --segments, --devices or --method other than tsah");
   if (!scene || flatOnly) return false;
+  const tsah::TlasOptions tlas = tlasOptions(opt);
   const auto loadStart = std::chrono::steady_clock::now();
   anim::SceneSources sources = tsah::cli::loadSceneSourcesForCli(opt.input);
   const double loadSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - loadStart).count();
   if (asked) {
     if (tsah::cli::job::leader())
-      tsah::cli::optimizeTwoLevel(std::move(sources), opt.input, opt.output, opt.tree, nullptr, opt.json, loadSeconds,
-                                  opt.reproducible);
+      tsah::cli::optimizeTwoLevel(std::move(sources), opt.input, opt.output, opt.tree, tlas, nullptr, opt.json,
+                                  loadSeconds, opt.reproducible);
     return true;
   }
   const tsah::StructureChoice choice = tsah::cli::chooseStructure(sources, opt.tree);
@@ -238,8 +255,8 @@ bool runTwoLevel(const Options& opt, nlohmann::json& flatChoice) {
     return false;
   }
   if (tsah::cli::job::leader())
-    tsah::cli::optimizeTwoLevel(std::move(sources), opt.input, opt.output, opt.tree, &choice, opt.json, loadSeconds,
-                                opt.reproducible);
+    tsah::cli::optimizeTwoLevel(std::move(sources), opt.input, opt.output, opt.tree, tlas, &choice, opt.json,
+                                loadSeconds, opt.reproducible);
   return true;
 }
 
@@ -375,6 +392,15 @@ TSAH_REGISTER_COMMAND(40, [](CLI::App& app) {
                   "flattened into the parent level when that makes its estimated cost 10% lower (or it is one "
                   "instance without a path), else kept as instances; every object flattened: flat")
       ->check(CLI::IsMember({"flat", "two-level", "auto"}));
+  auto* tlasTrees = sub->add_option("--tlas-trees", opt->tlasTrees,
+                  "Two levels: this many top-level trees, each optimized over its part of the scene's time (equal "
+                  "frame counts), or auto: the fewest of 1, 2, 4 ... 32 whose average cost is within --tlas-budget "
+                  "of a TLAS rebuilt at every frame")
+      ->capture_default_str();
+  auto* tlasBudget = sub->add_option("--tlas-budget", opt->tlasBudget,
+                  "--tlas-trees auto: the factor of the per-frame rebuilt TLAS's average cost to reach")
+      ->check(CLI::Range(1.0, 100.0))
+      ->capture_default_str();
   sub->add_flag("--json", opt->json, "Print one JSON object");
   sub->add_flag("--reproducible", opt->reproducible,
                 "Write 0 as every tree's build time: the same inputs give the same file bytes, however the work "
@@ -383,8 +409,12 @@ TSAH_REGISTER_COMMAND(40, [](CLI::App& app) {
                   "--segments with --device cuda: all, or GPU indices such as 0,2: candidate trees optimized on "
                   "these GPUs at once");
   // Options that only a tree set (or only the budget search) reads are refused elsewhere, not ignored.
-  sub->callback([opt, overlap, referenceFrames, maxTrees] {
+  sub->callback([opt, overlap, referenceFrames, maxTrees, tlasTrees, tlasBudget] {
     using tsah::cli::UsageError;
+    if ((tlasTrees->count() || tlasBudget->count()) && opt->structure == "flat")
+      throw UsageError("--tlas-trees and --tlas-budget shape the top level of two levels: not with --structure flat");
+    if (tlasBudget->count() && opt->tlasTrees != "auto") throw UsageError("--tlas-budget goes with --tlas-trees auto");
+    tlasOptions(*opt);  // a bad --tlas-trees is refused before anything is loaded
     if (overlap->count() && opt->segments == "1") throw UsageError("--overlap goes with --segments (a tree set)");
     if (maxTrees->count() && opt->segments != "auto") throw UsageError("--max-trees goes with --segments auto");
     if (referenceFrames->count() && (opt->segments != "auto" || opt->budgetCost > 0.0))

@@ -160,7 +160,7 @@ void runTrace(const TraceOptions& opt) {
       throw UsageError("--tlas goes with a two-level tree (.tbvh version 3); " + opt.bvh + " is a flat tree");
     trees = tsah::decodeTreeSetFile(tsah::readFile(opt.bvh), opt.bvh);
   }
-  const tsah::BvhBuildInfo& info = twoLevel ? twoLevelScene->tlasInfo : trees.builds.front();
+  const tsah::BvhBuildInfo& info = twoLevel ? twoLevelScene->tlases.front().info : trees.builds.front();
   const anim::Animation a = tsah::cli::loadInput(opt.input);
   if (!twoLevel) tsah::cli::checkTreeMatchesAnimation(info, opt.bvh, a, opt.input);
   runtimeOptions.objective = info.objective;

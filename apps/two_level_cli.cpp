@@ -85,6 +85,12 @@ nlohmann::json describeTwoLevel(const TwoLevelScene& s) {
     average += c / double(s.tlasFrameCosts.size());
     maximum = std::max(maximum, c);
   }
+  uint64_t nodes = 0;
+  nlohmann::json ranges = nlohmann::json::array();
+  for (const TlasTree& t : s.tlases) {
+    nodes += t.bvh.nodeCount();
+    ranges.push_back({t.range.start, t.range.end});
+  }
   nlohmann::json flattened = nlohmann::json::array();
   for (uint32_t o : s.scene.flattenedObjects) flattened.push_back(s.scene.description.objects[o].name);
   return {{"structure", "two-level"},
@@ -94,7 +100,9 @@ nlohmann::json describeTwoLevel(const TwoLevelScene& s) {
           {"poses", s.poses.size()},
           {"scene_frames", s.frameTimes.size()},
           {"k", s.objective.k},
-          {"tlas", {{"nodes", s.tlas.nodeCount()},
+          {"tlas", {{"trees", s.tlases.size()},
+                    {"nodes", nodes},
+                    {"ranges", ranges},
                     {"cost", s.tlasCost},
                     {"frame_cost", {{"average", average}, {"maximum", maximum}}}}},
           {"blases", blases},
@@ -116,8 +124,10 @@ void printTwoLevel(const nlohmann::json& j) {
     std::printf("flattened   objects %s: one source, shown by one instance\n", names.c_str());
   }
   const auto& t = j["tlas"];
-  std::printf("TLAS        %u nodes; T-SAH cost (k=%d) %.3f over %u scene frames (per frame: average %.3f, maximum %.3f)\n",
-              t["nodes"].get<unsigned>(), j["k"].get<int>(), t["cost"].get<double>(), j["scene_frames"].get<unsigned>(),
+  const auto trees = t["trees"].get<unsigned>();
+  std::printf("TLAS        %u tree%s, %u nodes; T-SAH cost (k=%d) %.3f over %u scene frames (per frame: average %.3f, "
+              "maximum %.3f)\n",
+              trees, trees == 1 ? "" : "s (one per part of the scene's time)", t["nodes"].get<unsigned>(), j["k"].get<int>(), t["cost"].get<double>(), j["scene_frames"].get<unsigned>(),
               t["frame_cost"]["average"].get<double>(), t["frame_cost"]["maximum"].get<double>());
   for (const auto& blas : j["blases"])
     std::printf("BLAS %-6u %-8s %u triangles, %u keyframes, %u nodes, cost %.3f over %u build frames, built in %.2f s  %s\n",
@@ -133,16 +143,16 @@ void printTwoLevel(const nlohmann::json& j) {
 }  // namespace
 
 void optimizeTwoLevel(anim::SceneSources scene, const std::string& input, const std::string& output,
-                      const TreeOptions& options, const StructureChoice* choice, bool json, double loadSeconds,
-                      bool reproducible) {
+                      const TreeOptions& options, const TlasOptions& tlas, const StructureChoice* choice, bool json,
+                      double loadSeconds, bool reproducible) {
   const auto start = std::chrono::steady_clock::now();
   if (choice) scene = anim::flattenObjects(std::move(scene), choice->flattenedObjects);
-  TwoLevelScene twoLevel = buildTwoLevelScene(std::move(scene), options);
+  TwoLevelScene twoLevel = buildTwoLevelScene(std::move(scene), options, tlas);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   nlohmann::json j = describeTwoLevel(twoLevel);  // with the build times, whatever the file holds
   if (reproducible) {
     for (Blas& blas : twoLevel.blases) blas.info.buildSeconds = 0.0;
-    twoLevel.tlasInfo.buildSeconds = 0.0;
+    for (TlasTree& t : twoLevel.tlases) t.info.buildSeconds = 0.0;
   }
   const auto saveStart = std::chrono::steady_clock::now();
   saveTwoLevelScene(output, twoLevel);

@@ -31,11 +31,11 @@ void printStructureChoice(const nlohmann::json& j);
 
 // `tsah optimize SCENE --structure two-level|auto`: flattens the objects `choice` chose (none when
 // asked for two levels: choice null), builds and writes the version 3 file and prints the structure
-// (text, or one JSON object) with the decision and the wall time of every phase (loadSeconds: the
+// (text, or one JSON object) with the decision, the top-level trees as `tlas` asks, and the wall time of every phase (loadSeconds: the
 // caller's loading of the scene's sources). reproducible: every tree's build time written as 0.
 void optimizeTwoLevel(anim::SceneSources scene, const std::string& input, const std::string& output,
-                      const TreeOptions& options, const StructureChoice* choice, bool json, double loadSeconds,
-                      bool reproducible);
+                      const TreeOptions& options, const TlasOptions& tlas, const StructureChoice* choice, bool json,
+                      double loadSeconds, bool reproducible);
 
 // The structure as JSON: BLAS (static / animated, each one's cost and bytes), instances, poses, the
 // TLAS cost over the scene frames, the bytes of each level.

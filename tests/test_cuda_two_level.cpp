@@ -175,6 +175,45 @@ TEST_F(CudaTwoLevel, TlasBoxesContainEveryInstanceAfterEachUpdate) {
   }
 }
 
+// TLAS trees per part of the scene's time: at every frame the device refits and traces the tree of
+// the frame's part (the CPU's topology, boxes holding every instance), its hits are the CPU's, and
+// a shutter across a boundary blurs with the close's tree as the CPU does.
+TEST_F(CudaTwoLevel, TlasTreesPerTimePartSwitchAsOnTheCpu) {
+  tsah::TlasOptions parts;
+  parts.trees = 4;
+  const tsah::TwoLevelScene split =
+      tsah::loadTwoLevelScene((dir / "scene.json").string(), {}, tsah::test::smallTwoLevelOptions(), parts);
+  ASSERT_EQ(split.tlases.size(), 4u);
+  tsah::TwoLevelRuntime cpu(split, {2, tsah::TwoLevelRuntime::TlasUpdate::Refit, tsah::Layout::Bvh2});
+  tsah::cuda::GpuTwoLevelRuntime gpu(split);
+  for (const double t : split.frameTimes) {
+    cpu.update(t);
+    gpu.updateAt(t);
+    const tsah::FlatBvh tlas = gpu.downloadTlas();
+    EXPECT_EQ(tlas.triIndex, cpu.tlas().triIndex) << "t " << t;
+    EXPECT_EQ(tlas.interiorCount, tsah::flattenBvh(split.tlases[split.tlasAt(t)].bvh).interiorCount) << "t " << t;
+    const std::vector<tsah::Aabb> leafBoxes = tsah::test::tlasLeafBoxes(tlas), boxes = gpu.downloadInstanceBoxes();
+    for (uint32_t i = 0; i < split.instanceCount(); ++i)
+      EXPECT_TRUE(leafBoxes[i].contains(boxes[i])) << "t " << t << " instance " << i;
+    EXPECT_EQ(tsah::validateFlatBvh(tlas), std::nullopt) << "t " << t;
+  }
+  expectCpuHits(split);
+  cpu.updateShutter(2.75, 3.25);  // the boundary at 3 (frame 6 of 24)
+  gpu.updateShutter(2.75, 3.25);
+  ASSERT_TRUE(cpu.blurred() && gpu.blurred());
+  const std::vector<tsah::Ray> rays = tsah::test::raysThroughBox(tsah::test::unionOf(cpu.instanceBoxes()), 1000, 5);
+  std::vector<float> times(rays.size());
+  for (std::size_t r = 0; r < rays.size(); ++r) times[r] = float(r % 11) / 10.0f;
+  const std::vector<tsah::TwoLevelHit> got = gpu.closestHits(rays, times);
+  for (std::size_t r = 0; r < rays.size(); ++r) {
+    const tsah::TwoLevelHit expected = cpu.closestHit(rays[r], times[r]);
+    ASSERT_EQ(got[r].valid(), expected.valid()) << "ray " << r;
+    if (!expected.valid()) continue;
+    EXPECT_EQ(got[r].instance, expected.instance) << "ray " << r;
+    EXPECT_EQ(got[r].prim, expected.prim) << "ray " << r;
+  }
+}
+
 // Updates both runtimes at each time and expects the same TLAS, instance boxes and hits exactly;
 // check(a's timings, b's timings) sees each update.
 template <class Check>
@@ -339,7 +378,7 @@ TEST_F(CudaTwoLevel, AFrameWithOnlyRigidMotionRefitsNoBlas) {
   const tsah::cuda::TwoLevelUpdateTimings moving = gpu.updateAt(2.0);
   EXPECT_EQ(moving.blasRefits, 3u);
   EXPECT_EQ(moving.instances, scene->instanceCount());
-  EXPECT_EQ(moving.tlasNodes, tsah::flattenBvh(scene->tlas).interiorCount);
+  EXPECT_EQ(moving.tlasNodes, tsah::flattenBvh(scene->tlases[scene->tlasAt(2.0)].bvh).interiorCount);
   EXPECT_EQ(moving.tlasRebuildMs, 0.0);  // the refit rebuilds nothing
   const tsah::cuda::TwoLevelUpdateTimings same = gpu.updateAt(2.0);
   EXPECT_EQ(same.blasRefits, 0u);
@@ -367,7 +406,9 @@ TEST_F(CudaTwoLevel, EveryTlasUpdateRefusesATlasMissingAnInstance) {
   for (uint32_t i = 0; i + 1 < broken.instanceCount(); ++i)
     boxes.push_back(tsah::instanceWorldBox(broken.scene, i, broken.frameTimes.front()));
   ASSERT_FALSE(boxes.empty());
-  broken.tlas = tsah::rebuildTlas(boxes, broken.objective);
+  broken.tlases.resize(1);
+  broken.tlases[0].range = {broken.scene.start, broken.scene.end};
+  broken.tlases[0].bvh = tsah::rebuildTlas(boxes, broken.objective);
   using tsah::cuda::TlasUpdate;
   for (const TlasUpdate update : {TlasUpdate::Refit, TlasUpdate::Lbvh, TlasUpdate::HlbvhSah}) {
     SCOPED_TRACE(tsah::cuda::tlasUpdateName(update));
@@ -377,7 +418,7 @@ TEST_F(CudaTwoLevel, EveryTlasUpdateRefusesATlasMissingAnInstance) {
       tsah::cuda::GpuTwoLevelRuntime gpu(broken, config);
       ADD_FAILURE() << "a TLAS of " << boxes.size() << " instances accepted for " << broken.instanceCount();
     } catch (const tsah::DataError& e) {
-      EXPECT_NE(std::string(e.what()).find("GPU two-level runtime: TLAS:"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("GPU two-level runtime: TLAS 0:"), std::string::npos) << e.what();
     }
   }
 }

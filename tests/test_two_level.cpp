@@ -61,6 +61,16 @@ bool containsPoint(const tsah::Aabb& b, const tsah::Vec3& p) {
   return p.x >= b.lo.x && p.x <= b.hi.x && p.y >= b.lo.y && p.y <= b.hi.y && p.z >= b.lo.z && p.z <= b.hi.z;
 }
 
+// The instance boxes at the scene frames a TLAS holds.
+tsah::PrimitiveBoxes framesOf(const tsah::TwoLevelScene& scene, const tsah::TlasTree& tree) {
+  tsah::PrimitiveBoxes boxes;
+  boxes.frameCount = tree.frameCount;
+  boxes.primCount = scene.instanceCount();
+  for (uint32_t f = tree.firstFrame; f < tree.firstFrame + tree.frameCount; ++f)
+    for (uint32_t i = 0; i < scene.instanceCount(); ++i) boxes.boxes.push_back(scene.instanceBoxes.at(f, i));
+  return boxes;
+}
+
 class TwoLevel : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -89,8 +99,17 @@ TEST_F(TwoLevel, StructureOneBlasPerSourcePosesPerTimeMappingValidTrees) {
     EXPECT_EQ(tsah::validate(b.bvh, &rep), std::nullopt);
     EXPECT_GT(b.cost, 0.0);
   }
-  EXPECT_EQ(tsah::validate(scene->tlas, &scene->instanceBoxes), std::nullopt);
-  EXPECT_EQ(scene->tlas.frameCount, scene->frameTimes.size());
+  // The TLAS trees cover the scene's frames, consecutive ones sharing their boundary frame.
+  ASSERT_FALSE(scene->tlases.empty());
+  EXPECT_EQ(scene->tlases.front().firstFrame, 0u);
+  EXPECT_EQ(scene->tlases.back().firstFrame + scene->tlases.back().frameCount, scene->frameTimes.size());
+  for (std::size_t t = 0; t < scene->tlases.size(); ++t) {
+    const tsah::TlasTree& tree = scene->tlases[t];
+    const tsah::PrimitiveBoxes boxes = framesOf(*scene, tree);
+    EXPECT_EQ(tsah::validate(tree.bvh, &boxes), std::nullopt) << "TLAS " << t;
+    EXPECT_EQ(tree.bvh.frameCount, tree.frameCount);
+    if (t > 0) EXPECT_EQ(tree.firstFrame, scene->tlases[t - 1].firstFrame + scene->tlases[t - 1].frameCount - 1);
+  }
   EXPECT_EQ(scene->frameTimes.size(), 25u);  // [0, 12] at 2 fps
   EXPECT_EQ(scene->tlasFrameCosts.size(), scene->frameTimes.size());
   EXPECT_GT(scene->tlasCost, 0.0);
@@ -197,6 +216,98 @@ TEST_F(TwoLevel, TlasBoxesContainEveryInstanceAtEveryFrameAfterRefit) {
     }
     EXPECT_EQ(tsah::validateFlatBvh(runtime.tlas()), std::nullopt) << "t " << t;
   }
+}
+
+// Top-level trees per part of the scene's time (TlasOptions::trees): consecutive parts with
+// boundaries at scene frames, each tree over the frames of its part; the runtime switches at the
+// boundaries (a boundary frame takes the later tree), refits the part's tree and traces as the
+// flat scene does.
+TEST_F(TwoLevel, TlasTreesPerTimePartSwitchAtTheirBoundariesAndTraceAsTheFlatScene) {
+  tsah::TlasOptions tlas;
+  tlas.trees = 4;
+  const tsah::TwoLevelScene parts =
+      tsah::loadTwoLevelScene(scenePath.string(), {}, tsah::test::smallTwoLevelOptions(), tlas);
+  ASSERT_EQ(parts.tlases.size(), 4u);
+  ASSERT_EQ(parts.frameTimes.size(), 25u);  // 0..12 s at 2 fps: the parts hold frames 0-6, 6-12, 12-18, 18-24
+  EXPECT_EQ(parts.tlases.front().range.start, parts.scene.start);
+  EXPECT_EQ(parts.tlases.back().range.end, parts.scene.end);
+  for (uint32_t s = 0; s < 4; ++s) {
+    const tsah::TlasTree& tree = parts.tlases[s];
+    EXPECT_EQ(tree.firstFrame, 6 * s);
+    EXPECT_EQ(tree.frameCount, 7u);
+    EXPECT_EQ(tree.bvh.frameCount, 7u);
+    EXPECT_EQ(tree.info.timeStart, tree.range.start);
+    EXPECT_EQ(tree.info.timeEnd, tree.range.end);
+    if (s > 0) EXPECT_EQ(tree.range.start, parts.tlases[s - 1].range.end);
+    const tsah::PrimitiveBoxes boxes = framesOf(parts, tree);
+    EXPECT_EQ(tsah::validate(tree.bvh, &boxes), std::nullopt) << "TLAS " << s;
+    // Each frame's cost is that of the tree used there, the later one on a boundary.
+    const std::vector<double> costs = tsah::frameCosts(tree.bvh, parts.objective.cost);
+    for (uint32_t f = tree.firstFrame; f < tree.firstFrame + tree.frameCount; ++f)
+      if (parts.tlasAt(parts.frameTimes[f]) == s) EXPECT_DOUBLE_EQ(parts.tlasFrameCosts[f], costs[f - tree.firstFrame]);
+  }
+  EXPECT_EQ(parts.tlasAt(parts.frameTimes[5]), 0u);
+  EXPECT_EQ(parts.tlasAt(parts.frameTimes[6]), 1u);
+  EXPECT_EQ(parts.tlasAt(parts.frameTimes[24]), 3u);
+  EXPECT_EQ(parts.tlasAt(-100.0), 0u);
+  EXPECT_EQ(parts.tlasAt(100.0), 3u);
+
+  tsah::TwoLevelRuntime runtime(parts, {2, tsah::TwoLevelRuntime::TlasUpdate::Refit});
+  for (uint32_t f = 0; f < parts.frameTimes.size(); ++f) {
+    runtime.update(parts.frameTimes[f]);
+    const uint32_t s = parts.tlasAt(parts.frameTimes[f]);
+    EXPECT_EQ(runtime.tlas().triIndex, tsah::flattenBvh(parts.tlases[s].bvh).triIndex) << "frame " << f;
+    const std::vector<tsah::Aabb> leafBoxes = tsah::test::tlasLeafBoxes(runtime.tlas());
+    for (uint32_t i = 0; i < parts.instanceCount(); ++i)
+      EXPECT_TRUE(leafBoxes[i].contains(runtime.instanceBoxes()[i])) << "frame " << f << " instance " << i;
+  }
+  expectFlatHits(parts, scenePath, tsah::Layout::Bvh2);
+  expectFlatHits(parts, scenePath, tsah::Layout::Bvh4);
+}
+
+// Auto (TlasOptions::trees 0): one tree when it is within the budget of a TLAS rebuilt every
+// frame; for instances that cross the whole scene (the ground mesh, 12 times, on paths through
+// the middle) more parts, each doubling, until the budget is met or maxTrees reached.
+TEST_F(TwoLevel, AutoTlasTreesStopAtTheBudget) {
+  tsah::TlasOptions loose;
+  loose.budget = 100.0;
+  EXPECT_EQ(tsah::loadTwoLevelScene(scenePath.string(), {}, tsah::test::smallTwoLevelOptions(), loose).tlases.size(), 1u);
+
+  std::string instances;
+  for (int i = 0; i < 12; ++i) {
+    const double a = 0.5236 * i, x = 20.0 * std::cos(a), z = 20.0 * std::sin(a);
+    instances += std::string(i ? ",\n" : "") + R"({"path": [{"time": 0, "translate": [)" + std::to_string(x) + ", 0, " +
+                 std::to_string(z) + R"(]}, {"time": 8, "translate": [)" + std::to_string(-x) + ", 0, " +
+                 std::to_string(-z) + "]}]}";
+  }
+  tsah::test::writeText(dir / "crossing.json", R"({"fps": 4, "objects": [{"file": "ground.tanim", "instances": [)" +
+                                                   instances + "]}]}");
+  tsah::TlasOptions one, automatic;
+  one.trees = 1;
+  const std::string crossing = (dir / "crossing.json").string();
+  const tsah::TwoLevelScene single = tsah::loadTwoLevelScene(crossing, {}, tsah::test::smallTwoLevelOptions(), one);
+  const tsah::TwoLevelScene parts = tsah::loadTwoLevelScene(crossing, {}, tsah::test::smallTwoLevelOptions(), automatic);
+  const uint32_t trees = uint32_t(parts.tlases.size());
+  EXPECT_GT(trees, 1u);
+  EXPECT_EQ(trees & (trees - 1), 0u) << trees << " is not a power of 2";
+  EXPECT_LT(tsah::temporalCost(parts.tlasFrameCosts, 0), tsah::temporalCost(single.tlasFrameCosts, 0));
+  // Within the budget, or maxTrees reached.
+  double rebuilt = 0.0;
+  for (uint32_t f = 0; f < parts.frameTimes.size(); ++f) {
+    std::vector<tsah::Aabb> frame;
+    for (uint32_t i = 0; i < parts.instanceCount(); ++i) frame.push_back(parts.instanceBoxes.at(f, i));
+    rebuilt += tsah::frameCosts(tsah::rebuildTlas(frame, parts.objective), parts.objective.cost)[0];
+  }
+  rebuilt /= double(parts.frameTimes.size());
+  EXPECT_TRUE(tsah::temporalCost(parts.tlasFrameCosts, 0) <= automatic.budget * rebuilt ||
+              trees == automatic.maxTrees);
+
+  tsah::TlasOptions bad;
+  bad.budget = 0.5;
+  EXPECT_THROW(tsah::loadTwoLevelScene(scenePath.string(), {}, tsah::test::smallTwoLevelOptions(), bad), tsah::ConfigError);
+  bad = {};
+  bad.maxTrees = 0;
+  EXPECT_THROW(bad.validate(), tsah::ConfigError);
 }
 
 TEST_F(TwoLevel, InstancesOfOneBlasWithDifferentOffsetsTraceTheirOwnPoses) {

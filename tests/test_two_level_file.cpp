@@ -109,8 +109,13 @@ TEST_F(TwoLevelFile, RoundTripKeepsEveryTreeAndTracesTheSame) {
     EXPECT_DOUBLE_EQ(read.blases[b].cost, built->blases[b].cost);
     EXPECT_EQ(read.blases[b].animated, built->blases[b].animated);
   }
-  EXPECT_EQ(read.tlas.primIds, built->tlas.primIds);
-  EXPECT_EQ(read.tlas.frameCount, built->tlas.frameCount);
+  ASSERT_EQ(read.tlases.size(), built->tlases.size());
+  for (std::size_t t = 0; t < read.tlases.size(); ++t) {
+    EXPECT_EQ(read.tlases[t].bvh.primIds, built->tlases[t].bvh.primIds);
+    EXPECT_EQ(read.tlases[t].bvh.frameCount, built->tlases[t].bvh.frameCount);
+    EXPECT_EQ(read.tlases[t].range, built->tlases[t].range);
+    EXPECT_EQ(read.tlases[t].firstFrame, built->tlases[t].firstFrame);
+  }
   EXPECT_DOUBLE_EQ(read.tlasCost, built->tlasCost);
   EXPECT_EQ(read.objective, built->objective);
   EXPECT_EQ(read.instancePose, built->instancePose);
@@ -172,6 +177,85 @@ TEST_F(TwoLevelFile, CorruptFilesAreRefusedWithOneLine) {
   std::vector<uint8_t> badTree = bytes;
   badTree[firstTree + 170] ^= 1;
   EXPECT_NE(decodeError(withCrc(badTree)).find("(BLAS 0)"), std::string::npos) << decodeError(withCrc(badTree));
+}
+
+// A structure of several TLAS trees (one per part of the scene's time): the header's TLAS count,
+// every tree round-tripped, and broken counts and ranges refused.
+TEST_F(TwoLevelFile, TlasTreesPerTimePartRoundTripAndBrokenRangesAreRefused) {
+  tsah::TlasOptions tlas;
+  tlas.trees = 3;
+  const tsah::TwoLevelScene parts = tsah::loadTwoLevelScene(scenePath.string(), {}, options(), tlas);
+  ASSERT_EQ(parts.tlases.size(), 3u);
+  const std::vector<uint8_t> file = tsah::encodeTwoLevelScene(parts);
+  uint32_t word;
+  std::memcpy(&word, file.data() + 48, 4);
+  EXPECT_EQ(word, 3u);
+  std::memcpy(&word, bytes.data() + 48, 4);  // one TLAS: written 0, as before the count existed
+  EXPECT_EQ(word, built->tlases.size() == 1 ? 0u : uint32_t(built->tlases.size()));
+  const fs::path tree = dir / "parts.tbvh";
+  tsah::saveTwoLevelScene(tree.string(), parts);
+  const tsah::TwoLevelScene read = tsah::loadTwoLevelSceneFile(tree.string(), anim::loadSceneSources(scenePath.string()));
+  ASSERT_EQ(read.tlases.size(), 3u);
+  for (std::size_t t = 0; t < 3; ++t) {
+    EXPECT_EQ(read.tlases[t].range, parts.tlases[t].range);
+    EXPECT_EQ(read.tlases[t].firstFrame, parts.tlases[t].firstFrame);
+    EXPECT_EQ(read.tlases[t].frameCount, parts.tlases[t].frameCount);
+    EXPECT_EQ(read.tlases[t].bvh.primIds, parts.tlases[t].bvh.primIds);
+  }
+  EXPECT_EQ(read.tlasFrameCosts, parts.tlasFrameCosts);
+  EXPECT_EQ(tsah::encodeTwoLevelScene(read), file);
+  for (const double t : {0.0, 1.0, 2.0, 2.5, 4.0, 6.0})  // the parts switch at scene frames 2 and 4
+    expectSameHits(parts, read, t);
+
+  for (const auto& [value, expected] : std::vector<std::pair<uint32_t, std::string>>{
+           {1, "TLAS count 1 is written 0"}, {5000, "TLAS count 5000 exceeds 4096"}, {2, "starts at byte"}}) {
+    std::vector<uint8_t> bad = file;
+    put(bad, 48, value);
+    EXPECT_NE(decodeError(withCrc(bad)).find(expected), std::string::npos) << value << ": " << decodeError(withCrc(bad));
+  }
+  // The parts' ranges: touching, in order, covering the header's range.
+  std::vector<tsah::BvhBuildInfo> builds;
+  for (const tsah::TlasTree& t : parts.tlases) builds.push_back(t.info);
+  EXPECT_EQ(tsah::validateTlasRanges(builds, parts.scene.start, parts.scene.end), std::nullopt);
+  auto gap = builds;
+  gap[1].timeStart += 0.25;
+  EXPECT_NE(tsah::validateTlasRanges(gap, parts.scene.start, parts.scene.end)->find("TLAS 1 does not start where TLAS 0 ends"),
+            std::string::npos);
+  EXPECT_NE(tsah::validateTlasRanges(builds, parts.scene.start - 1.0, parts.scene.end)->find("TLAS 0 does not start"),
+            std::string::npos);
+  EXPECT_NE(tsah::validateTlasRanges(builds, parts.scene.start, parts.scene.end + 1.0)->find("the last TLAS does not end"),
+            std::string::npos);
+  auto empty = builds;
+  empty[2].timeStart = empty[2].timeEnd = empty[1].timeEnd;
+  EXPECT_NE(tsah::validateTlasRanges(empty, parts.scene.start, parts.scene.end)->find("TLAS 2's time range"),
+            std::string::npos);
+  std::vector<tsah::Bvh> blasTrees, tlasTrees;
+  for (const tsah::Blas& b : parts.blases) blasTrees.push_back(b.bvh);
+  std::vector<tsah::BvhBuildInfo> blasBuilds;
+  for (const tsah::Blas& b : parts.blases) blasBuilds.push_back(b.info);
+  for (const tsah::TlasTree& t : parts.tlases) tlasTrees.push_back(t.bvh);
+  std::vector<uint32_t> instanceBlas, instancePose;
+  for (uint32_t i = 0; i < parts.instanceCount(); ++i) {
+    instanceBlas.push_back(parts.scene.instances[i].source);
+    instancePose.push_back(parts.instancePose[i] == tsah::kInvalidIndex ? tsah::kTbvhNoPose : parts.instancePose[i]);
+  }
+  std::vector<tsah::TwoLevelPoseRecord> poses;
+  for (const tsah::Pose& p : parts.poses) poses.push_back({p.blas, 0, p.time.offset, p.time.speed});
+  EXPECT_THROW(tsah::encodeTwoLevelFile(blasTrees, blasBuilds, tlasTrees, gap, instanceBlas, instancePose, poses),
+               tsah::DataError);
+  EXPECT_EQ(tsah::encodeTwoLevelFile(blasTrees, blasBuilds, tlasTrees, builds, instanceBlas, instancePose, poses), file);
+  // A file whose parts another scene's frames do not fill as stored is refused against that scene.
+  const fs::path slower = dir / "slower.json";
+  const std::vector<uint8_t> sceneBytes = tsah::readFile(scenePath.string());
+  std::string text(sceneBytes.begin(), sceneBytes.end());
+  text.replace(text.find("\"fps\": 2"), 8, "\"fps\": 4");
+  tsah::test::writeText(slower, text);
+  try {
+    tsah::loadTwoLevelSceneFile(tree.string(), anim::loadSceneSources(slower.string()));
+    ADD_FAILURE() << "a file read with a scene of other frames";
+  } catch (const tsah::DataError& e) {
+    EXPECT_NE(std::string(e.what()).find("TLAS 0 holds boxes for"), std::string::npos) << e.what();
+  }
 }
 
 TEST_F(TwoLevelFile, OtherVersionsReadersPointToEachOther) {
@@ -268,7 +352,9 @@ TEST_F(TwoLevelFile, FlattenedObjectsRoundTripAndAreChecked) {
   // The encoder refuses what the reader would.
   std::vector<tsah::Bvh> trees{mixed.blases[0].bvh, mixed.blases[1].bvh};
   std::vector<tsah::BvhBuildInfo> builds{mixed.blases[0].info, mixed.blases[1].info};
-  EXPECT_THROW(tsah::encodeTwoLevelFile(trees, builds, mixed.tlas, mixed.tlasInfo, std::vector<uint32_t>{0, 0, 1},
+  std::vector<tsah::Bvh> tlases{mixed.tlases[0].bvh};
+  std::vector<tsah::BvhBuildInfo> tlasBuilds{mixed.tlases[0].info};
+  EXPECT_THROW(tsah::encodeTwoLevelFile(trees, builds, tlases, tlasBuilds, std::vector<uint32_t>{0, 0, 1},
                                         std::vector<uint32_t>{tsah::kTbvhNoPose, tsah::kTbvhNoPose, 0},
                                         std::vector<tsah::TwoLevelPoseRecord>{{1, 0, 0.0, 1.0}}, std::vector<uint32_t>{1, 1}),
                tsah::DataError);

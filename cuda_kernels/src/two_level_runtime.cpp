@@ -109,21 +109,28 @@ struct GpuTwoLevelRuntime::Impl {
   detail::InstanceState* hostInstances = nullptr;  // in hostUpload
   detail::InstanceState* instances = nullptr;      // in deviceUpload
   DeviceBuffer<Aabb> instanceBoxes;
-  FlatBvh tlasTopology;  // the T-SAH TLAS, checked against the instances
-  // Config::tlas Refit: the T-SAH TLAS's nodes and refit data on the device (uploadRefitTlas).
-  void uploadRefitTlas();
-  uint32_t tlasLeafCount = 0;
-  DeviceBuffer<GpuBvhNode> tlasNodes;
-  DeviceBuffer<uint32_t> tlasParent, tlasCounters, tlasTriIndex;
-  DeviceRefitParts tlasParts;  // the TLAS as one part, for its block refit
-  DeviceBuffer<detail::LeafRecord> tlasLeaves;
-  DeviceBuffer<detail::RootInfo> tlasRoot;
+  // The T-SAH TLAS trees (TwoLevelScene::tlases), checked against the instances. Config::tlas
+  // Refit: each one's nodes and refit data on the device (uploadRefitTlas) and its own graphs (they
+  // hold its pointers); a rebuild uses the first one's graphs.
+  struct DeviceTlas {
+    FlatBvh topology;
+    uint32_t leafCount = 0;
+    DeviceBuffer<GpuBvhNode> nodes;
+    DeviceBuffer<uint32_t> parent, counters, triIndex;
+    DeviceRefitParts parts;  // the TLAS as one part, for its block refit
+    DeviceBuffer<detail::LeafRecord> leaves;
+    DeviceBuffer<detail::RootInfo> root;
+    bool blockRefit = false;
+    Graph fullGraph, rigidGraph;  // with and without the poses' BLAS refits
+  };
+  std::vector<DeviceTlas> tlases;
+  uint32_t tlasPart = 0;  // the TLAS of the last update's time (TwoLevelScene::tlasAt)
+  void uploadRefitTlas(DeviceTlas& t);
   uint64_t blockRefitLimit = 0;  // shared bytes a block refit may use (prepareBlockRefits)
   bool tlasBlockRefit = false;
   // Config::tlas a rebuild: the per-frame TLAS over instanceBoxes (its triIndex: slot -> instance).
   std::unique_ptr<detail::GpuRebuilder> tlasRebuilder;
   RebuildOptions tlasRebuild;
-  Graph fullGraph, rigidGraph;  // with and without the poses' BLAS refits
   double time = 0.0;
   uint64_t refits = 0;
   detail::TwoLevelQuery query;
@@ -273,10 +280,13 @@ void GpuTwoLevelRuntime::Impl::create() {
   instances = reinterpret_cast<detail::InstanceState*>(deviceUpload.data() + instancesOffset);
   poseLocalTime.assign(scene.poses.size(), std::numeric_limits<double>::quiet_NaN());
   instanceBoxes.resize(count);
-  // The T-SAH TLAS is checked whatever the update; only its refit reads it on the device.
-  tlasTopology = runtimeTopology(flattenBvh(scene.tlas), count, kTraversalStackSize, "GPU two-level runtime: TLAS");
+  // The T-SAH TLAS trees are checked whatever the update; only their refit reads them on the device.
+  tlases.resize(scene.tlases.size());
+  for (std::size_t t = 0; t < tlases.size(); ++t)
+    tlases[t].topology = runtimeTopology(flattenBvh(scene.tlases[t].bvh), count, kTraversalStackSize,
+                                         "GPU two-level runtime: TLAS " + std::to_string(t));
   if (config.tlas == TlasUpdate::Refit) {
-    uploadRefitTlas();
+    for (DeviceTlas& t : tlases) uploadRefitTlas(t);
   } else {
     tlasRebuild.method = config.tlas == TlasUpdate::Lbvh ? RebuildMethod::Lbvh : RebuildMethod::HlbvhSah;
     tlasRebuild.maxLeafSize = scene.objective.maxLeafSize;
@@ -287,28 +297,28 @@ void GpuTwoLevelRuntime::Impl::create() {
   CUDA_CHECK(cudaStreamSynchronize(stream));
 }
 
-void GpuTwoLevelRuntime::Impl::uploadRefitTlas() {
-  const detail::RefitTopology r = detail::refitTopology(tlasTopology);
-  tlasLeafCount = uint32_t(r.leaves.size());
-  tlasNodes = toDevice(tlasTopology.nodes, stream);
-  tlasParent = toDevice(r.parent, stream);
-  tlasBlockRefit =
-      config.blockRefits && detail::partRefitBytes(tlasTopology.interiorCount) <= blockRefitLimit;
-  if (tlasBlockRefit)
-    tlasParts = DeviceRefitParts(splitForBlockRefit(tlasTopology, std::numeric_limits<uint32_t>::max()), stream);
+void GpuTwoLevelRuntime::Impl::uploadRefitTlas(DeviceTlas& t) {
+  const detail::RefitTopology r = detail::refitTopology(t.topology);
+  t.leafCount = uint32_t(r.leaves.size());
+  t.nodes = toDevice(t.topology.nodes, stream);
+  t.parent = toDevice(r.parent, stream);
+  t.blockRefit = config.blockRefits && detail::partRefitBytes(t.topology.interiorCount) <= blockRefitLimit;
+  if (t.blockRefit)
+    t.parts = DeviceRefitParts(splitForBlockRefit(t.topology, std::numeric_limits<uint32_t>::max()), stream);
   else
-    tlasCounters.resize(tlasTopology.interiorCount);
-  tlasTriIndex = toDevice(tlasTopology.triIndex, stream);
-  tlasLeaves = toDevice(r.leaves, stream);
-  const detail::RootInfo root = rootOf(tlasTopology);
-  tlasRoot = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&root, 1), stream);
+    t.counters.resize(t.topology.interiorCount);
+  t.triIndex = toDevice(t.topology.triIndex, stream);
+  t.leaves = toDevice(r.leaves, stream);
+  const detail::RootInfo root = rootOf(t.topology);
+  t.root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&root, 1), stream);
 }
 
 void GpuTwoLevelRuntime::Impl::releaseDevice() noexcept {
-  for (Graph* g : {&fullGraph, &rigidGraph}) {
-    if (g->exec) cudaGraphExecDestroy(std::exchange(g->exec, nullptr));
-    if (g->graph) cudaGraphDestroy(std::exchange(g->graph, nullptr));
-  }
+  for (DeviceTlas& t : tlases)
+    for (Graph* g : {&t.fullGraph, &t.rigidGraph}) {
+      if (g->exec) cudaGraphExecDestroy(std::exchange(g->exec, nullptr));
+      if (g->graph) cudaGraphDestroy(std::exchange(g->graph, nullptr));
+    }
   if (stream) cudaStreamSynchronize(stream);
   if (hostUpload) cudaFreeHost(std::exchange(hostUpload, nullptr));
   if (stream) cudaStreamDestroy(std::exchange(stream, nullptr));
@@ -350,15 +360,15 @@ void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
   if (tlasRebuilder) {
     detail::launchInstanceBoxes(instances, views.data(), count, instanceBoxes.data(), stream);
     tlasRebuilder->enqueueBoxes(instanceBoxes.data(), tlasRebuild, stream);
-  } else if (tlasBlockRefit) {
-    detail::launchTlasBlock(instances, views.data(), count, instanceBoxes.data(), tlasNodes.data(),
-                            tlasParts.view(), tlasParts.maxNodeCount, tlasTriIndex.data(), tlasRoot.data(), stream);
+  } else if (DeviceTlas& t = tlases[tlasPart]; t.blockRefit) {
+    detail::launchTlasBlock(instances, views.data(), count, instanceBoxes.data(), t.nodes.data(), t.parts.view(),
+                            t.parts.maxNodeCount, t.triIndex.data(), t.root.data(), stream);
   } else {
     detail::launchInstanceBoxes(instances, views.data(), count, instanceBoxes.data(), stream);
-    if (tlasCounters.size())
-      CUDA_CHECK(cudaMemsetAsync(tlasCounters.data(), 0, tlasCounters.size() * sizeof(uint32_t), stream));
-    detail::launchTlasRefit(tlasNodes.data(), tlasParent.data(), tlasLeaves.data(), tlasLeafCount,
-                            tlasTriIndex.data(), instanceBoxes.data(), tlasCounters.data(), tlasRoot.data(), stream);
+    if (t.counters.size())
+      CUDA_CHECK(cudaMemsetAsync(t.counters.data(), 0, t.counters.size() * sizeof(uint32_t), stream));
+    detail::launchTlasRefit(t.nodes.data(), t.parent.data(), t.leaves.data(), t.leafCount, t.triIndex.data(),
+                            instanceBoxes.data(), t.counters.data(), t.root.data(), stream);
   }
   events.record(3, stream);
 }
@@ -383,7 +393,8 @@ detail::TlasScene GpuTwoLevelRuntime::Impl::tlasScene() const {
   if (tlasRebuilder)
     return {tlasRebuilder->nodes(), tlasRebuilder->triIndex(), tlasRebuilder->root(), instances, views.data(),
             instanceBoxes.data()};
-  return {tlasNodes.data(), tlasTriIndex.data(), tlasRoot.data(), instances, views.data(), instanceBoxes.data()};
+  const DeviceTlas& t = tlases[tlasPart];
+  return {t.nodes.data(), t.triIndex.data(), t.root.data(), instances, views.data(), instanceBoxes.data()};
 }
 
 const char* tlasUpdateName(TlasUpdate update) {
@@ -438,7 +449,9 @@ TwoLevelUpdateTimings GpuTwoLevelRuntime::updateAt(double sceneTime) {
     s.toInstance = space.value_or(Affine3x4{});
     std::copy_n(world.begin(), 12, s.world);
   }
-  Impl::Graph& g = posesMove ? m.fullGraph : m.rigidGraph;
+  m.tlasPart = m.tlasRebuilder ? 0 : scene.tlasAt(sceneTime);  // a rebuild's graphs: the first TLAS's
+  Impl::DeviceTlas& tlas = m.tlases[m.tlasPart];
+  Impl::Graph& g = posesMove ? tlas.fullGraph : tlas.rigidGraph;
   if (!g.exec) g = m.capture(posesMove);
   CUDA_CHECK(cudaGraphLaunch(g.exec, m.stream));
   m.events.wait(3);
@@ -452,7 +465,7 @@ TwoLevelUpdateTimings GpuTwoLevelRuntime::updateAt(double sceneTime) {
   }
   t.blasRefits = posesMove ? uint32_t(scene.poses.size()) : 0u;
   t.instances = scene.instanceCount();
-  t.tlasNodes = m.tlasTopology.interiorCount;
+  t.tlasNodes = tlas.topology.interiorCount;
   if (m.tlasRebuilder) {  // its own events, in the same graph; throws for a tree deeper than the stack
     const RebuildTimings rebuilt = m.tlasRebuilder->collect(m.tlasRebuild);
     t.tlasRebuildMs = rebuilt.buildMs();
@@ -488,12 +501,13 @@ std::vector<Aabb> GpuTwoLevelRuntime::downloadInstanceBoxes() const {
 
 FlatBvh GpuTwoLevelRuntime::downloadTlas() const {
   if (impl_->tlasRebuilder) return flattenBvh(impl_->tlasRebuilder->download(impl_->stream));
-  FlatBvh tree = impl_->tlasTopology;
+  const Impl::DeviceTlas& t = impl_->tlases[impl_->tlasPart];
+  FlatBvh tree = t.topology;
   if (!tree.nodes.empty())
-    CUDA_CHECK(cudaMemcpy(tree.nodes.data(), impl_->tlasNodes.data(), tree.nodes.size() * sizeof(GpuBvhNode),
+    CUDA_CHECK(cudaMemcpy(tree.nodes.data(), t.nodes.data(), tree.nodes.size() * sizeof(GpuBvhNode),
                           cudaMemcpyDeviceToHost));
   detail::RootInfo root;
-  CUDA_CHECK(cudaMemcpy(&root, impl_->tlasRoot.data(), sizeof(root), cudaMemcpyDeviceToHost));
+  CUDA_CHECK(cudaMemcpy(&root, t.root.data(), sizeof(root), cudaMemcpyDeviceToHost));
   tree.rootBoxes.assign(1, root.box);
   return tree;
 }
@@ -532,9 +546,11 @@ detail::TwoLevelTraceAccess GpuTwoLevelRuntime::traceAccess() const {
 
 detail::TwoLevelBlurAccess GpuTwoLevelRuntime::blurAccess() {
   Impl& m = *impl_;
-  // A blurred frame refits the T-SAH TLAS at every key; with a rebuilt TLAS its refit data is
-  // uploaded at the first shutter.
-  if (m.tlasLeaves.empty()) m.uploadRefitTlas();
+  // A blurred frame refits the T-SAH TLAS of the close's part (the last update's) at every key;
+  // with a rebuilt TLAS its refit data is uploaded at the first shutter that needs it.
+  if (m.tlasRebuilder) m.tlasPart = m.scene.tlasAt(m.time);
+  Impl::DeviceTlas& t = m.tlases[m.tlasPart];
+  if (t.leaves.empty()) m.uploadRefitTlas(t);
   detail::TwoLevelBlurAccess a;
   a.scene = &m.scene;
   a.stream = m.stream;
@@ -542,11 +558,11 @@ detail::TwoLevelBlurAccess GpuTwoLevelRuntime::blurAccess() {
     a.sources.push_back({&d.topology, d.keyframes.data(), d.movingIds.empty() ? nullptr : d.movingIds.data(),
                          d.movingCount, d.nodeParent.data(), d.leaves.data(), d.leafCount, d.slotVertices.data(),
                          d.triIndex.data()});
-  a.tlas = &m.tlasTopology;
-  a.tlasParent = m.tlasParent.data();
-  a.tlasLeaves = m.tlasLeaves.data();
-  a.tlasLeafCount = m.tlasLeafCount;
-  a.tlasTriIndex = m.tlasTriIndex.data();
+  a.tlas = &t.topology;
+  a.tlasParent = t.parent.data();
+  a.tlasLeaves = t.leaves.data();
+  a.tlasLeafCount = t.leafCount;
+  a.tlasTriIndex = t.triIndex.data();
   a.instances = m.instances;
   a.views = m.views.data();
   return a;

@@ -70,8 +70,22 @@ TwoLevelSceneObject loadTwoLevel(py::handle treeArg, py::handle sceneArg) {
 TwoLevelSceneObject buildTwoLevel(py::handle sceneArg, const std::string& structure, py::handle k, py::handle frames,
                                   const std::string& selection, py::handle seed, float ct, float ci,
                                   py::handle maxLeaf, double timeLimit, double minImprovement, py::handle threads,
-                                  const std::string& optimizer, py::object progress) {
+                                  const std::string& optimizer, py::handle tlasTrees, double tlasBudget,
+                                  py::object progress) {
   const std::string path = pathArgument(sceneArg, "scene_path");
+  TlasOptions tlas;
+  tlas.budget = tlasBudget;
+  if (!(py::isinstance<py::str>(tlasTrees) && tlasTrees.cast<std::string>() == "auto")) {
+    if (!py::isinstance<py::int_>(tlasTrees) || py::isinstance<py::bool_>(tlasTrees) || tlasTrees.cast<long long>() < 1)
+      throw tsah::ConfigError("tlas_trees: expected 'auto' or a number of trees >= 1, got " +
+                              py::repr(tlasTrees).cast<std::string>());
+    const long long trees = tlasTrees.cast<long long>();
+    if (trees > TlasOptions::kMaxTrees)
+      throw tsah::ConfigError("tlas_trees: " + std::to_string(trees) + " is more than " +
+                              std::to_string(TlasOptions::kMaxTrees));
+    tlas.trees = uint32_t(trees);
+  }
+  tlas.validate();
   if (structure != "auto" && structure != "two-level")
     throw tsah::ConfigError("structure: expected 'auto' or 'two-level', got '" + structure +
                             "' (a flat tree of a scene file: tsah.optimize(tsah.load(scene_path)))");
@@ -90,7 +104,7 @@ TwoLevelSceneObject buildTwoLevel(py::handle sceneArg, const std::string& struct
       choice = chooseObjectStructure(sources, structureChoiceOptions(options.objective));
       sources = anim::flattenObjects(std::move(sources), choice->flattenedObjects);
     }
-    return TwoLevelSceneObject{buildTwoLevelScene(std::move(sources), options), std::move(choice),
+    return TwoLevelSceneObject{buildTwoLevelScene(std::move(sources), options, tlas), std::move(choice),
                                std::filesystem::absolute(path).string()};
   });
   warnAll(warnings);
@@ -128,10 +142,17 @@ py::dict infoDict(const TwoLevelSceneObject& object) {
                            "triangles"_a = source.triangleCount(), "keyframes"_a = source.keyframeCount(),
                            "nodes"_a = b.bvh.nodeCount(), "build_frames"_a = b.frameCosts.size(), "cost"_a = b.cost));
   }
+  py::list tlasRanges;
+  uint64_t tlasNodes = 0;
+  for (const TlasTree& t : s.tlases) {
+    tlasRanges.append(py::make_tuple(t.range.start, t.range.end));
+    tlasNodes += t.bvh.nodeCount();
+  }
   py::dict info("flattened_objects"_a = flattenedNames(s), "instances"_a = s.instanceCount(),
                 "poses"_a = s.poses.size(), "scene_frames"_a = s.frameTimes.size(), "k"_a = s.objective.k,
                 "ct"_a = s.objective.cost.ct, "ci"_a = s.objective.cost.ci, "max_leaf_size"_a = s.objective.maxLeafSize,
-                "tlas"_a = py::dict("nodes"_a = s.tlas.nodeCount(), "cost"_a = s.tlasCost,
+                "tlas"_a = py::dict("trees"_a = s.tlases.size(), "nodes"_a = tlasNodes, "ranges"_a = tlasRanges,
+                                    "cost"_a = s.tlasCost,
                                     "frame_costs"_a = doubleArray(s.tlasFrameCosts)),
                 "blases"_a = blases,
                 "bytes"_a = py::dict("blas"_a = s.blasBytes(), "tlas"_a = s.tlasBytes(), "total"_a = s.memoryBytes()));
@@ -530,14 +551,17 @@ scene, and the scene's own load errors.
   m.def("build_two_level", &buildTwoLevel, "scene_path"_a, "structure"_a = "auto", "k"_a = 0, "frames"_a = 5,
         "selection"_a = "mh", "seed"_a = 1, "ct"_a = 3.0f, "ci"_a = 2.0f, "max_leaf"_a = 8, "time_limit"_a = 0.0,
         "min_improvement"_a = InsertionOptimizer::Config{}.minImprovement, "threads"_a = 0,
-        "optimizer"_a = "sequential", "progress"_a = py::none(), R"doc(
+        "optimizer"_a = "sequential", "tlas_trees"_a = "auto", "tlas_budget"_a = TlasOptions{}.budget,
+        "progress"_a = py::none(), R"doc(
 Builds the two-level structure of a scene file as `tsah optimize SCENE --structure STRUCTURE` does:
 structure "auto" flattens the objects whose estimated cost is lower flattened (info's
 structure_choice; when it flattens every object the scene is one instance of them all, where the
 command line writes a flat tree), "two-level" keeps every object instanced. The other arguments
 are tsah.optimize's (T-SAH trees: k for animated sources and the TLAS; optimizer "sequential" or
-"parallel"). The GIL is released and Ctrl-C stops the optimizers (KeyboardInterrupt); progress: a
-callable receiving {"message": str} events, or None.
+"parallel"). tlas_trees and tlas_budget are the command line's --tlas-trees and --tlas-budget: a
+number of top-level trees, each over its part of the scene's time, or "auto". The GIL is released
+and Ctrl-C stops the optimizers (KeyboardInterrupt); progress: a callable receiving
+{"message": str} events, or None.
 )doc");
 
   py::class_<TwoLevelTracer>(m, "TwoLevelRuntime", R"doc(

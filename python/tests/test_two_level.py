@@ -87,6 +87,35 @@ def test_auto_weighs_the_whole_scene_as_the_command_line_does(cli, tmp_path):
     assert expected["whole_scene_cost"] == pytest.approx(whole)
 
 
+@pytest.fixture(scope="module")
+def parts():
+    return tsah.build_two_level(DEMO, structure="two-level", tlas_trees=4)
+
+
+def test_tlas_trees(scene, parts, tmp_path):
+    tlas = parts.info["tlas"]
+    assert tlas["trees"] == 4 and len(tlas["frame_costs"]) == 21
+    assert tlas["ranges"] == [(0.0, 0.5), (0.5, 1.0), (1.0, 1.5), (1.5, 2.0)]
+    path = tmp_path / "parts.tbvh"
+    parts.save(path)
+    assert tsah.load_two_level(path, DEMO).info["tlas"]["ranges"] == tlas["ranges"]
+    # The same hits as the scene's own TLAS, on a boundary and inside a part.
+    baked = tsah.load(DEMO)
+    a, b = tsah.TwoLevelRuntime(scene), tsah.TwoLevelRuntime(parts)
+    for time in (0.5, 1.2, 2.0):
+        a.update(time)
+        b.update(time)
+        origins, directions = rays_to_triangles(baked, time)
+        assert np.array_equal(a.trace(origins, directions), b.trace(origins, directions))
+    for bad, message in ((0, "tlas_trees: expected 'auto' or a number of trees >= 1, got 0"),
+                         ("many", "tlas_trees: expected 'auto'"), (True, "got True"),
+                         (5000, "tlas_trees: 5000 is more than 4096")):
+        with pytest.raises(tsah.ConfigError, match=message):
+            tsah.build_two_level(DEMO, tlas_trees=bad)
+    with pytest.raises(tsah.ConfigError, match="tlas_budget: 0.5"):
+        tsah.build_two_level(DEMO, tlas_budget=0.5)
+
+
 def test_save_and_load_round_trip(scene, tmp_path):
     path = tmp_path / "demo.tbvh"
     scene.save(path)
@@ -283,11 +312,13 @@ def test_instance_boxes_and_memory(scene):
 
 
 @needs_gpu
-@pytest.mark.parametrize("tlas", ["refit", "lbvh", "hlbvh-sah"])
-def test_gpu_two_level_runtime_matches_the_cpu(scene, baked, tlas):
+@pytest.mark.parametrize("tlas", ["refit", "lbvh", "hlbvh-sah", "refit-parts"])
+def test_gpu_two_level_runtime_matches_the_cpu(scene, parts, baked, tlas):
+    if tlas == "refit-parts":  # a TLAS per part of the time: each refitted in its part
+        scene, tlas = parts, "refit"
     gpu = tsah.GpuTwoLevelRuntime(scene, tlas=tlas)
     cpu = tsah.TwoLevelRuntime(scene, layout="bvh2")
-    for time in (0.0, 0.75, 2.0):
+    for time in (0.0, 0.75, 1.0, 2.0):
         gpu.update(time)
         cpu.update(time)
         assert gpu.time == time and gpu.last_update["instances"] == 7

@@ -452,5 +452,6 @@ def build_two_level(scene_path: _PathLike, structure: str = "auto", k: _Integer 
                     selection: str = "mh", seed: _Integer = 1, ct: _Number = 3.0, ci: _Number = 2.0,
                     max_leaf: _Integer = 8, time_limit: _Number = 0.0, min_improvement: _Number = 1e-05,
                     threads: _Integer = 0, optimizer: str = "sequential",
+                    tlas_trees: str | _Integer = "auto", tlas_budget: _Number = 1.1,
                     progress: _ProgressCallback | None = None) -> TwoLevelScene:
     """The two-level structure of a scene file, as `tsah optimize SCENE --structure auto|two-level`."""

@@ -135,6 +135,31 @@ tl_error(cli.two_level.error.info_structure 2 "--structure goes with a scene fil
 tl_error(cli.two_level.error.segments 2 "--structure two-level builds one T-SAH tree per source and the top level: it does not go with --segments"
          optimize ${SCENE} -o ${W}/tl_bad.tbvh --structure two-level --segments 2)
 
+tl_error(cli.two_level.error.tlas_trees 2 "--tlas-trees expects a number of trees \\(1..4096\\) or auto, got 'many'"
+         optimize ${SCENE} -o ${W}/tl_bad.tbvh --tlas-trees many)
+tl_error(cli.two_level.error.tlas_trees_flat 2 "--tlas-trees and --tlas-budget shape the top level of two levels: not with --structure flat"
+         optimize ${SCENE} -o ${W}/tl_bad.tbvh --structure flat --tlas-trees 2)
+tl_error(cli.two_level.error.tlas_budget 2 "--tlas-budget goes with --tlas-trees auto"
+         optimize ${SCENE} -o ${W}/tl_bad.tbvh --tlas-trees 2 --tlas-budget 1.2)
+# TLAS trees per part of the scene's time: 4 parts of demo.json's 21 frames, written, described by
+# tsah info and traced to the flat tree's images (the TLAS switches at frames 5, 10 and 15).
+add_test(NAME cli.two_level.optimize.tlas_trees
+         COMMAND tsah optimize ${SCENE} -o ${W}/tl_parts.tbvh --frames 3 --structure two-level --tlas-trees 4 --json)
+set_tests_properties(cli.two_level.optimize.tlas_trees PROPERTIES FIXTURES_SETUP tl_parts PASS_REGULAR_EXPRESSION
+  "\"tlas\":\\{\"cost\":[0-9.]+,\"frame_cost\":\\{[^}]*\\},\"nodes\":[0-9]+,\"ranges\":\\[\\[0\\.0,0\\.5\\],\\[0\\.5,1\\.0\\],\\[1\\.0,1\\.5\\],\\[1\\.5,2\\.0\\]\\],\"trees\":4\\}")
+add_test(NAME cli.two_level.info.tlas_trees COMMAND tsah info ${W}/tl_parts.tbvh ${SCENE})
+set_tests_properties(cli.two_level.info.tlas_trees PROPERTIES FIXTURES_REQUIRED tl_parts PASS_REGULAR_EXPRESSION
+  "TLAS +4 trees \\(one per part of the scene's time\\), [0-9]+ nodes; T-SAH cost")
+add_test(NAME cli.two_level.trace.tlas_trees
+         COMMAND tsah trace ${SCENE} ${W}/tl_parts.tbvh ${TL_TRACE} --out ${W}/tl_img_parts)
+set_tests_properties(cli.two_level.trace.tlas_trees PROPERTIES FIXTURES_REQUIRED tl_parts FIXTURES_SETUP tl_parts_images)
+foreach(frame 0000 0005 0013 0020)
+  add_test(NAME cli.two_level.trace.tlas_trees.same_image.${frame}
+           COMMAND ${CMAKE_COMMAND} -E compare_files ${W}/tl_img_flat/frame_${frame}.png ${W}/tl_img_parts/frame_${frame}.png)
+  set_tests_properties(cli.two_level.trace.tlas_trees.same_image.${frame} PROPERTIES
+    FIXTURES_REQUIRED "tl_img_flat;tl_parts_images")
+endforeach()
+
 # --device cuda: the GPU two-level runtime and renderer (docs/two-level.md). What it does not serve
 # is refused before the device is looked for, so the message is the same on every machine: the
 # TLAS rebuilt every frame (a CPU reference) and the compressed layout.

@@ -105,10 +105,14 @@ void twolevel(std::span<const uint8_t> data) {
       if (const auto problem = validateFlatBvh(tree)) throw std::logic_error("twolevel: accepted a broken BLAS: " + *problem);
       blases.push_back(unflattenBvh(tree));
     }
-    if (const auto problem = validateFlatBvh(file.tlas)) throw std::logic_error("twolevel: accepted a broken TLAS: " + *problem);
+    std::vector<Bvh> tlases;
+    for (const FlatBvh& tree : file.tlases) {
+      if (const auto problem = validateFlatBvh(tree)) throw std::logic_error("twolevel: accepted a broken TLAS: " + *problem);
+      tlases.push_back(unflattenBvh(tree));
+    }
     // An accepted file is canonical: the encoder writes the same bytes.
-    if (encodeTwoLevelFile(blases, file.blasBuilds, unflattenBvh(file.tlas), file.tlasBuild, file.instanceBlas,
-                           file.instancePose, file.poses, file.flattenedObjects) != bytes)
+    if (encodeTwoLevelFile(blases, file.blasBuilds, tlases, file.tlasBuilds, file.instanceBlas, file.instancePose,
+                           file.poses, file.flattenedObjects) != bytes)
       throw std::logic_error("twolevel: accepted file does not re-encode");
   });
 }

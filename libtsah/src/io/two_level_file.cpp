@@ -23,9 +23,9 @@ constexpr uint32_t kFlattenedEntryBytes = 4;  // u32 object id
 // The smallest valid version 1 file: header, no interior node, one root box, one slot, checksum.
 constexpr uint64_t kMinTreeBytes = kTbvhHeaderBytes + sizeof(Aabb) + 4 + 4;
 
-uint64_t tablesEnd(uint64_t blasCount, uint64_t instances, uint64_t poses, uint64_t flattened) {
+uint64_t tablesEnd(uint64_t trees, uint64_t instances, uint64_t poses, uint64_t flattened) {
   return kTbvhTwoLevelHeaderBytes + kInstanceEntryBytes * instances + kPoseEntryBytes * poses +
-         kFlattenedEntryBytes * flattened + kTreeEntryBytes * (blasCount + 1);
+         kFlattenedEntryBytes * flattened + kTreeEntryBytes * trees;
 }
 
 // Flattened object ids: strictly increasing (no duplicates).
@@ -38,36 +38,46 @@ std::optional<std::string> validateFlattenedObjects(std::span<const uint32_t> ob
 }
 
 // The encoders' checks of their arguments, before any tree is flattened or encoded.
-void requireEncodable(std::size_t blasCount, std::size_t buildCount, uint32_t tlasInstances,
-                      std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
-                      std::span<const TwoLevelPoseRecord> poses, std::span<const uint32_t> flattenedObjects) {
+void requireEncodable(std::size_t blasCount, std::size_t buildCount, std::span<const uint32_t> tlasInstances,
+                      std::span<const BvhBuildInfo> tlasBuilds, std::span<const uint32_t> instanceBlas,
+                      std::span<const uint32_t> instancePose, std::span<const TwoLevelPoseRecord> poses,
+                      std::span<const uint32_t> flattenedObjects) {
   if (blasCount != buildCount || blasCount > kTbvhTwoLevelMaxBlas)
     throw DataError(".tbvh two-level: " + std::to_string(blasCount) + " BLAS and " + std::to_string(buildCount) +
                     " build records");
+  if (tlasInstances.size() != tlasBuilds.size())
+    throw DataError(".tbvh two-level: " + std::to_string(tlasInstances.size()) + " TLAS and " +
+                    std::to_string(tlasBuilds.size()) + " TLAS build records");
+  if (!tlasBuilds.empty())
+    if (auto problem = validateTlasRanges(tlasBuilds, tlasBuilds.front().timeStart, tlasBuilds.back().timeEnd))
+      throw DataError(".tbvh two-level: " + *problem);
   if (auto problem = validateTwoLevelTables(uint32_t(blasCount), instanceBlas, instancePose, poses))
     throw DataError(".tbvh two-level: " + *problem);
   if (auto problem = validateFlattenedObjects(flattenedObjects)) throw DataError(".tbvh two-level: " + *problem);
   if (flattenedObjects.size() > kTbvhTwoLevelMaxFlattened)
     throw DataError(".tbvh two-level: " + std::to_string(flattenedObjects.size()) + " flattened objects");
-  if (tlasInstances != instanceBlas.size())
-    throw DataError(".tbvh two-level: the TLAS holds " + std::to_string(tlasInstances) + " instances, the table " +
-                    std::to_string(instanceBlas.size()));
+  for (std::size_t t = 0; t < tlasInstances.size(); ++t)
+    if (tlasInstances[t] != instanceBlas.size())
+      throw DataError(".tbvh two-level: TLAS " + std::to_string(t) + " holds " + std::to_string(tlasInstances[t]) +
+                      " instances, the table " + std::to_string(instanceBlas.size()));
 }
 
 // twoLevelFileParts' work once its arguments passed requireEncodable.
 TwoLevelFileParts encodedParts(std::span<const FlatBvh* const> blases, std::span<const BvhBuildInfo> blasBuilds,
-                               const FlatBvh& tlas, const BvhBuildInfo& tlasBuild,
+                               std::span<const FlatBvh* const> tlases, std::span<const BvhBuildInfo> tlasBuilds,
                                std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
                                std::span<const TwoLevelPoseRecord> poses, std::span<const uint32_t> flattenedObjects) {
   TwoLevelFileParts out;
   // Each image with its own checksums, concurrently (the largest trees take the longest).
-  out.images.resize(blases.size() + 1);
-  forEachConcurrently(out.images.size(), [&](std::size_t b) {
-    out.images[b] = b < blases.size() ? bvhFileParts(*blases[b], blasBuilds[b]) : bvhFileParts(tlas, tlasBuild);
+  const std::size_t trees = blases.size() + tlases.size();
+  out.images.resize(trees);
+  forEachConcurrently(trees, [&](std::size_t b) {
+    const std::size_t t = b - blases.size();
+    out.images[b] = b < blases.size() ? bvhFileParts(*blases[b], blasBuilds[b]) : bvhFileParts(*tlases[t], tlasBuilds[t]);
   });
 
   ByteWriter w;
-  w.buffer().reserve(align16(tablesEnd(blases.size(), instanceBlas.size(), poses.size(), flattenedObjects.size())));
+  w.buffer().reserve(align16(tablesEnd(trees, instanceBlas.size(), poses.size(), flattenedObjects.size())));
   w.write(detail::kTbvhMagic);
   w.write(kTbvhTwoLevelVersion);
   w.write(kTbvhTwoLevelHeaderBytes);
@@ -75,9 +85,11 @@ TwoLevelFileParts encodedParts(std::span<const FlatBvh* const> blases, std::span
   w.write(uint32_t(instanceBlas.size()));
   w.write(uint32_t(poses.size()));
   w.write(uint32_t(flattenedObjects.size()));
-  w.write(tlasBuild.timeStart);
-  w.write(tlasBuild.timeEnd);
-  for (int i = 0; i < 4; ++i) w.write(uint32_t{0});
+  w.write(tlasBuilds.front().timeStart);
+  w.write(tlasBuilds.back().timeEnd);
+  // The TLAS count; 0 for one, so that files of one TLAS keep their bytes.
+  w.write(tlases.size() == 1 ? uint32_t{0} : uint32_t(tlases.size()));
+  for (int i = 0; i < 3; ++i) w.write(uint32_t{0});
   TSAH_ASSERT(w.buffer().size() == kTbvhTwoLevelHeaderBytes, ".tbvh two-level header size mismatch");
   for (std::size_t i = 0; i < instanceBlas.size(); ++i) {
     w.write(instanceBlas[i]);
@@ -90,7 +102,7 @@ TwoLevelFileParts encodedParts(std::span<const FlatBvh* const> blases, std::span
     w.write(p.speed);
   }
   for (uint32_t o : flattenedObjects) w.write(o);
-  uint64_t offset = align16(tablesEnd(blases.size(), instanceBlas.size(), poses.size(), flattenedObjects.size()));
+  uint64_t offset = align16(tablesEnd(trees, instanceBlas.size(), poses.size(), flattenedObjects.size()));
   for (const BvhFileParts& image : out.images) {
     w.write(offset);
     w.write(image.size());
@@ -135,41 +147,64 @@ std::optional<std::string> validateTwoLevelTables(uint32_t blasCount, std::span<
   return std::nullopt;
 }
 
+std::optional<std::string> validateTlasRanges(std::span<const BvhBuildInfo> tlasBuilds, double start, double end) {
+  if (tlasBuilds.empty() || tlasBuilds.size() > kTbvhTwoLevelMaxTlas)
+    return "TLAS count " + std::to_string(tlasBuilds.size()) + " is not in 1.." + std::to_string(kTbvhTwoLevelMaxTlas);
+  const bool single = tlasBuilds.size() == 1;
+  for (std::size_t t = 0; t < tlasBuilds.size(); ++t) {
+    const BvhBuildInfo& b = tlasBuilds[t];
+    const std::string which = "TLAS " + std::to_string(t);
+    if (!std::isfinite(b.timeStart) || !std::isfinite(b.timeEnd) || b.timeEnd < b.timeStart ||
+        (!single && b.timeEnd == b.timeStart))
+      return which + "'s time range is not finite and ordered" + (single ? "" : " with start < end");
+    if (t == 0 && b.timeStart != start) return "TLAS 0 does not start where the header's time range does";
+    if (t > 0 && b.timeStart != tlasBuilds[t - 1].timeEnd) return which + " does not start where TLAS " + std::to_string(t - 1) + " ends";
+  }
+  if (tlasBuilds.back().timeEnd != end) return "the last TLAS does not end where the header's time range does";
+  return std::nullopt;
+}
+
 std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh> blases, std::span<const BvhBuildInfo> blasBuilds,
-                                        const Bvh& tlas, const BvhBuildInfo& tlasBuild,
+                                        std::span<const Bvh> tlases, std::span<const BvhBuildInfo> tlasBuilds,
                                         std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
                                         std::span<const TwoLevelPoseRecord> poses,
                                         std::span<const uint32_t> flattenedObjects) {
   std::vector<const Bvh*> trees;
   for (const Bvh& b : blases) trees.push_back(&b);
-  return encodeTwoLevelFile(std::span<const Bvh* const>(trees), blasBuilds, tlas, tlasBuild, instanceBlas, instancePose,
-                            poses, flattenedObjects);
+  return encodeTwoLevelFile(std::span<const Bvh* const>(trees), blasBuilds, tlases, tlasBuilds, instanceBlas,
+                            instancePose, poses, flattenedObjects);
 }
 
 std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh* const> blases, std::span<const BvhBuildInfo> blasBuilds,
-                                        const Bvh& tlas, const BvhBuildInfo& tlasBuild,
+                                        std::span<const Bvh> tlases, std::span<const BvhBuildInfo> tlasBuilds,
                                         std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
                                         std::span<const TwoLevelPoseRecord> poses,
                                         std::span<const uint32_t> flattenedObjects) {
-  requireEncodable(blases.size(), blasBuilds.size(), tlas.primCount(), instanceBlas, instancePose, poses,
+  std::vector<uint32_t> tlasInstances;
+  for (const Bvh& t : tlases) tlasInstances.push_back(t.primCount());
+  requireEncodable(blases.size(), blasBuilds.size(), tlasInstances, tlasBuilds, instanceBlas, instancePose, poses,
                    flattenedObjects);
-  std::vector<FlatBvh> flat(blases.size() + 1);
-  forEachConcurrently(flat.size(), [&](std::size_t b) { flat[b] = flattenBvh(b < blases.size() ? *blases[b] : tlas); });
-  std::vector<const FlatBvh*> flatBlases;
-  for (std::size_t b = 0; b < blases.size(); ++b) flatBlases.push_back(&flat[b]);
-  return encodedParts(flatBlases, blasBuilds, flat.back(), tlasBuild, instanceBlas, instancePose, poses,
+  std::vector<FlatBvh> flat(blases.size() + tlases.size());
+  forEachConcurrently(flat.size(), [&](std::size_t b) {
+    flat[b] = flattenBvh(b < blases.size() ? *blases[b] : tlases[b - blases.size()]);
+  });
+  std::vector<const FlatBvh*> flatBlases, flatTlases;
+  for (std::size_t b = 0; b < flat.size(); ++b) (b < blases.size() ? flatBlases : flatTlases).push_back(&flat[b]);
+  return encodedParts(flatBlases, blasBuilds, flatTlases, tlasBuilds, instanceBlas, instancePose, poses,
                       flattenedObjects)
       .bytes();
 }
 
 TwoLevelFileParts twoLevelFileParts(std::span<const FlatBvh* const> blases, std::span<const BvhBuildInfo> blasBuilds,
-                                    const FlatBvh& tlas, const BvhBuildInfo& tlasBuild,
+                                    std::span<const FlatBvh* const> tlases, std::span<const BvhBuildInfo> tlasBuilds,
                                     std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
                                     std::span<const TwoLevelPoseRecord> poses,
                                     std::span<const uint32_t> flattenedObjects) {
-  requireEncodable(blases.size(), blasBuilds.size(), tlas.triangleCount(), instanceBlas, instancePose, poses,
+  std::vector<uint32_t> tlasInstances;
+  for (const FlatBvh* t : tlases) tlasInstances.push_back(t->triangleCount());
+  requireEncodable(blases.size(), blasBuilds.size(), tlasInstances, tlasBuilds, instanceBlas, instancePose, poses,
                    flattenedObjects);
-  return encodedParts(blases, blasBuilds, tlas, tlasBuild, instanceBlas, instancePose, poses, flattenedObjects);
+  return encodedParts(blases, blasBuilds, tlases, tlasBuilds, instanceBlas, instancePose, poses, flattenedObjects);
 }
 
 TwoLevelFile decodeTwoLevelFile(std::span<const uint8_t> bytes, const std::string& file) {
@@ -187,8 +222,13 @@ TwoLevelFile decodeTwoLevelFile(std::span<const uint8_t> bytes, const std::strin
   bool reservedZero = true;
   const auto timeStart = r.read<double>("time start");
   const auto timeEnd = r.read<double>("time end");
-  for (int i = 0; i < 4; ++i) reservedZero = r.read<uint32_t>("reserved") == 0 && reservedZero;
+  const auto tlasWord = r.read<uint32_t>("TLAS count");
+  for (int i = 0; i < 3; ++i) reservedZero = r.read<uint32_t>("reserved") == 0 && reservedZero;
   if (!reservedZero) r.fail("reserved header words must be 0");
+  if (tlasWord == 1) r.fail("TLAS count 1 is written 0");
+  if (tlasWord > kTbvhTwoLevelMaxTlas)
+    r.fail("TLAS count " + std::to_string(tlasWord) + " exceeds " + std::to_string(kTbvhTwoLevelMaxTlas));
+  const uint32_t tlasCount = tlasWord == 0 ? 1 : tlasWord;
 
   // Counts against the byte count before any allocation.
   if (blasCount == 0 || blasCount > kTbvhTwoLevelMaxBlas)
@@ -200,11 +240,12 @@ TwoLevelFile decodeTwoLevelFile(std::span<const uint8_t> bytes, const std::strin
   if (flattenedCount > kTbvhTwoLevelMaxFlattened)
     r.fail("flattened object count " + std::to_string(flattenedCount) + " exceeds " +
            std::to_string(kTbvhTwoLevelMaxFlattened));
-  const uint64_t tables = tablesEnd(blasCount, instanceCount, poseCount, flattenedCount);
-  if (bytes.size() < tables + (uint64_t(blasCount) + 1) * kMinTreeBytes + 4)
+  const uint32_t trees = blasCount + tlasCount;
+  const uint64_t tables = tablesEnd(trees, instanceCount, poseCount, flattenedCount);
+  if (bytes.size() < tables + uint64_t(trees) * kMinTreeBytes + 4)
     r.fail("file size " + std::to_string(bytes.size()) + " is too small for " + std::to_string(blasCount) +
-           " BLAS, " + std::to_string(instanceCount) + " instances, " + std::to_string(poseCount) + " poses and " +
-           std::to_string(flattenedCount) + " flattened objects");
+           " BLAS, " + std::to_string(tlasCount) + " TLAS, " + std::to_string(instanceCount) + " instances, " +
+           std::to_string(poseCount) + " poses and " + std::to_string(flattenedCount) + " flattened objects");
   const std::size_t crcOffset = bytes.size() - 4;
   uint32_t storedCrc;
   std::memcpy(&storedCrc, bytes.data() + crcOffset, 4);
@@ -231,21 +272,21 @@ TwoLevelFile decodeTwoLevelFile(std::span<const uint8_t> bytes, const std::strin
   for (uint32_t& o : out.flattenedObjects) o = r.read<uint32_t>("flattened object");
   if (auto problem = validateFlattenedObjects(out.flattenedObjects)) r.fail(*problem);
 
-  const uint32_t trees = blasCount + 1;
   std::vector<std::pair<uint64_t, uint64_t>> entries(trees);
   uint64_t expected = align16(tables);
   for (uint32_t s = 0; s < trees; ++s) {
     auto& [offset, size] = entries[s];
     offset = r.read<uint64_t>("tree offset");
     size = r.read<uint64_t>("tree size");
-    const std::string which = s == blasCount ? std::string("the TLAS") : "BLAS " + std::to_string(s);
+    const std::string which = s >= blasCount ? "TLAS " + std::to_string(s - blasCount) : "BLAS " + std::to_string(s);
     if (offset != expected)
       r.fail(which + " starts at byte " + std::to_string(offset) + ", expected " + std::to_string(expected));
     if (size < kMinTreeBytes || size > crcOffset - std::min<uint64_t>(expected, crcOffset))
       r.fail(which + " size " + std::to_string(size) + " does not fit the file");
     expected = align16(offset + size);
   }
-  if (entries.back().first + entries.back().second != crcOffset) r.fail("the TLAS does not end where the checksum starts");
+  if (entries.back().first + entries.back().second != crcOffset)
+    r.fail("the last TLAS does not end where the checksum starts");
   for (uint64_t b = tables; b < entries[0].first; ++b)
     if (bytes[b] != 0) r.fail("padding before BLAS 0 must be 0");
   for (uint32_t s = 0; s + 1 < trees; ++s)
@@ -253,8 +294,8 @@ TwoLevelFile decodeTwoLevelFile(std::span<const uint8_t> bytes, const std::strin
       if (bytes[b] != 0) r.fail("padding after tree " + std::to_string(s) + " must be 0");
 
   for (uint32_t s = 0; s < trees; ++s) {
-    const bool isTlas = s == blasCount;
-    const std::string which = isTlas ? std::string("TLAS") : "BLAS " + std::to_string(s);
+    const bool isTlas = s >= blasCount;
+    const std::string which = isTlas ? "TLAS " + std::to_string(s - blasCount) : "BLAS " + std::to_string(s);
     const auto image = bytes.subspan(entries[s].first, entries[s].second);
     uint32_t innerVersion;
     std::memcpy(&innerVersion, image.data() + 8, 4);
@@ -263,15 +304,15 @@ TwoLevelFile decodeTwoLevelFile(std::span<const uint8_t> bytes, const std::strin
     FlatBvh tree = decodeFlatBvhFile(image, file + " (" + which + ")", &build);
     if (isTlas) {
       if (build.triangleCount != instanceCount)
-        r.fail("the TLAS holds " + std::to_string(build.triangleCount) + " instances, the table " + std::to_string(instanceCount));
-      if (build.timeStart != timeStart || build.timeEnd != timeEnd) r.fail("the TLAS's time range differs from the header's");
-      out.tlas = std::move(tree);
-      out.tlasBuild = std::move(build);
+        r.fail(which + " holds " + std::to_string(build.triangleCount) + " instances, the table " + std::to_string(instanceCount));
+      out.tlases.push_back(std::move(tree));
+      out.tlasBuilds.push_back(std::move(build));
     } else {
       out.blases.push_back(std::move(tree));
       out.blasBuilds.push_back(std::move(build));
     }
   }
+  if (auto problem = validateTlasRanges(out.tlasBuilds, timeStart, timeEnd)) r.fail(*problem);
   return out;
 }
 

@@ -86,7 +86,7 @@ void computeLevelCosts(TwoLevelScene& out) {
     blas.frameCosts = frameCosts(blas.bvh, out.objective.cost);
     blas.cost = temporalCost(blas.frameCosts, blas.animated ? out.objective.k : 0);
   }
-  out.tlasFrameCosts = frameCosts(out.tlas, out.objective.cost);
+  out.tlasFrameCosts = tlasFrameCosts(out);
   out.tlasCost = temporalCost(out.tlasFrameCosts, out.objective.k);
 }
 
@@ -108,7 +108,11 @@ uint64_t TwoLevelScene::blasBytes() const {
   return bytes;
 }
 
-uint64_t TwoLevelScene::tlasBytes() const { return bvhBytes(tlas); }
+uint64_t TwoLevelScene::tlasBytes() const {
+  uint64_t bytes = 0;
+  for (const TlasTree& t : tlases) bytes += bvhBytes(t.bvh);
+  return bytes;
+}
 
 uint64_t TwoLevelScene::memoryBytes() const {
   return blasBytes() + tlasBytes() + instanceBoxes.boxes.size() * sizeof(Aabb) +
@@ -144,8 +148,9 @@ Blas buildBlas(const anim::SceneSources& scene, uint32_t s, const TreeOptions& o
 
 }  // namespace
 
-TwoLevelScene buildTwoLevelScene(anim::SceneSources scene, const TreeOptions& options) {
+TwoLevelScene buildTwoLevelScene(anim::SceneSources scene, const TreeOptions& options, const TlasOptions& tlas) {
   options.validate();
+  tlas.validate();
   if (options.method != Method::TSah)
     throw ConfigError(std::string("method: a two-level scene builds T-SAH trees, not ") + name(options.method));
   if (scene.instances.empty()) throw DataError(scene.description.file + ": the scene has no instances");
@@ -190,21 +195,9 @@ TwoLevelScene buildTwoLevelScene(anim::SceneSources scene, const TreeOptions& op
   out.frameTimes = scene.frameTimes();
   out.instanceBoxes = instanceBoxesOverFrames(scene, out);
   out.buildPhases.push_back({"instances", secondsSince(phase)});
-  // The TLAS is optimized on the CPU whatever the device: it has one leaf per instance, and its
-  // objective covers every scene frame (the GPU optimizer takes at most 16 representative frames).
-  BaselineConfig config = options.baselineConfig();
-  config.deviceOptimizer = nullptr;
   phase = std::chrono::steady_clock::now();
-  out.tlas = buildTSah(out.instanceBoxes, options.objective.k, config);
-  const double seconds = secondsSince(phase);
-  requireValid(out.tlas, out.instanceBoxes, scene.description.file + ": TLAS");
+  buildTlasTrees(scene, out, options, tlas);
   out.buildPhases.push_back({"tlas", secondsSince(phase)});
-  // The TLAS's header: the options of the first source's, counts and hash of the instance table.
-  out.tlasInfo = treeBuildInfo(options, *scene.sources[0], uint32_t(out.frameTimes.size()), seconds, scene.start, scene.end);
-  out.tlasInfo.representativeFrames = uint32_t(out.frameTimes.size());
-  out.tlasInfo.triangleCount = uint32_t(scene.instances.size());
-  out.tlasInfo.vertexCount = 0;
-  out.tlasInfo.topologyHash = instanceTableHash(scene);
   phase = std::chrono::steady_clock::now();
   computeLevelCosts(out);
   out.buildPhases.push_back({"costs", secondsSince(phase)});
@@ -212,9 +205,11 @@ TwoLevelScene buildTwoLevelScene(anim::SceneSources scene, const TreeOptions& op
   return out;
 }
 
-TwoLevelScene loadTwoLevelScene(const std::string& path, const anim::LoadOptions& load, const TreeOptions& options) {
+TwoLevelScene loadTwoLevelScene(const std::string& path, const anim::LoadOptions& load, const TreeOptions& options,
+                                const TlasOptions& tlas) {
   options.validate();
-  return buildTwoLevelScene(anim::loadSceneSources(path, load), options);
+  tlas.validate();
+  return buildTwoLevelScene(anim::loadSceneSources(path, load), options, tlas);
 }
 
 }  // namespace tsah

@@ -35,29 +35,37 @@ std::vector<uint32_t> instancePoses(const TwoLevelScene& twoLevel) {
 }
 
 // The file's parts over the BLAS's canonical forms the structure keeps (Blas::flat, flattenBvh of
-// its tree) and the flattened TLAS (tlasFlat, the caller's).
-TwoLevelFileParts fileParts(const TwoLevelScene& twoLevel, const FlatBvh& tlasFlat) {
-  std::vector<const FlatBvh*> trees;
-  std::vector<BvhBuildInfo> builds;
+// its tree) and the flattened TLAS trees (tlasFlat, the caller's).
+TwoLevelFileParts fileParts(const TwoLevelScene& twoLevel, const std::vector<FlatBvh>& tlasFlat) {
+  std::vector<const FlatBvh*> trees, tlases;
+  std::vector<BvhBuildInfo> builds, tlasBuilds;
   for (const Blas& b : twoLevel.blases) {
     trees.push_back(&b.flat);
     builds.push_back(b.info);
   }
-  return twoLevelFileParts(trees, builds, tlasFlat, twoLevel.tlasInfo, instanceBlas(twoLevel.scene),
-                           instancePoses(twoLevel), poseRecords(twoLevel), twoLevel.scene.flattenedObjects);
+  for (std::size_t t = 0; t < tlasFlat.size(); ++t) {
+    tlases.push_back(&tlasFlat[t]);
+    tlasBuilds.push_back(twoLevel.tlases[t].info);
+  }
+  return twoLevelFileParts(trees, builds, tlases, tlasBuilds, instanceBlas(twoLevel.scene), instancePoses(twoLevel),
+                           poseRecords(twoLevel), twoLevel.scene.flattenedObjects);
+}
+
+std::vector<FlatBvh> flatTlases(const TwoLevelScene& twoLevel) {
+  std::vector<FlatBvh> flat;
+  for (const TlasTree& t : twoLevel.tlases) flat.push_back(flattenBvh(t.bvh));
+  return flat;
 }
 
 }  // namespace
 
 std::vector<uint8_t> encodeTwoLevelScene(const TwoLevelScene& twoLevel) {
-  const FlatBvh tlas = flattenBvh(twoLevel.tlas);
-  return fileParts(twoLevel, tlas).bytes();
+  return fileParts(twoLevel, flatTlases(twoLevel)).bytes();
 }
 
 void saveTwoLevelScene(const std::string& path, const TwoLevelScene& twoLevel) {
-  const FlatBvh tlas = flattenBvh(twoLevel.tlas);
-  const TwoLevelFileParts file = fileParts(twoLevel, tlas);
-  writeFileAtomically(path, file.parts());
+  const std::vector<FlatBvh> tlases = flatTlases(twoLevel);
+  writeFileAtomically(path, fileParts(twoLevel, tlases).parts());
 }
 
 TwoLevelScene loadTwoLevelSceneFile(const std::string& treePath, anim::SceneSources scene) {
@@ -83,7 +91,7 @@ TwoLevelScene decodeTwoLevelScene(std::span<const uint8_t> bytes, const std::str
     fail("the file holds " + std::to_string(file.blases.size()) + " BLAS, the scene has " +
          std::to_string(scene.sources.size()) + " sources");
   TwoLevelScene out;
-  out.objective = file.tlasBuild.objective;
+  out.objective = file.tlasBuilds.front().objective;
   for (uint32_t s = 0; s < scene.sources.size(); ++s) {
     const anim::Animation& source = *scene.sources[s];
     checkTreeMatchesAnimation(file.blasBuilds[s], treePath, source,
@@ -101,17 +109,25 @@ TwoLevelScene decodeTwoLevelScene(std::span<const uint8_t> bytes, const std::str
   if (file.instancePose != instancePoses(out) || file.poses != poseRecords(out))
     fail("its poses differ from the scene's (sources and time mappings)");
   out.frameTimes = scene.frameTimes();
-  if (file.tlas.frameCount != out.frameTimes.size())
-    fail("the TLAS holds boxes for " + std::to_string(file.tlas.frameCount) + " frames, the scene has " +
-         std::to_string(out.frameTimes.size()));
-  if (file.tlasBuild.topologyHash != instanceTableHash(scene) || file.tlasBuild.timeStart != scene.start ||
-      file.tlasBuild.timeEnd != scene.end)
-    fail("the TLAS was built for other instances or another time range");
+  if (file.tlasBuilds.front().timeStart != scene.start || file.tlasBuilds.back().timeEnd != scene.end)
+    fail("the TLAS was built for another time range");
   out.instanceBoxes = instanceBoxesOverFrames(scene, out);
-  out.tlas = unflattenBvh(file.tlas);
-  out.tlasInfo = file.tlasBuild;
-  if (const auto problem = validate(out.tlas, &out.instanceBoxes))
-    fail("the TLAS boxes do not hold the scene's instances (" + *problem + ")");
+  for (std::size_t t = 0; t < file.tlases.size(); ++t) {
+    const std::string which = file.tlases.size() == 1 ? std::string("the TLAS") : "TLAS " + std::to_string(t);
+    TlasTree tree;
+    tree.info = file.tlasBuilds[t];
+    tree.range = {tree.info.timeStart, tree.info.timeEnd};
+    std::tie(tree.firstFrame, tree.frameCount) = framesInside(out.frameTimes, tree.range);
+    if (file.tlases[t].frameCount != tree.frameCount)
+      fail(which + " holds boxes for " + std::to_string(file.tlases[t].frameCount) + " frames, the scene has " +
+           std::to_string(tree.frameCount) + " in its time range");
+    if (tree.info.topologyHash != instanceTableHash(scene)) fail(which + " was built for other instances");
+    tree.bvh = unflattenBvh(file.tlases[t]);
+    const PrimitiveBoxes boxes = frameSlice(out.instanceBoxes, tree.firstFrame, tree.frameCount);
+    if (const auto problem = validate(tree.bvh, &boxes))
+      fail(which + " boxes do not hold the scene's instances (" + *problem + ")");
+    out.tlases.push_back(std::move(tree));
+  }
   computeLevelCosts(out);
   out.scene = std::move(scene);
   return out;

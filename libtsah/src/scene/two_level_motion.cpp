@@ -158,6 +158,8 @@ void TwoLevelRuntime::updateShutter(double openTime, double closeTime) {
   if (config_.tlas == TlasUpdate::Rebuild)
     tlas_ = runtimeTopology(flattenBvh(rebuildTlas(boxesOf(0), scene_.objective)), count, kTraversalStackSize,
                             "two-level runtime: TLAS");
+  else
+    selectTlas(closeTime);  // the part of the instant state at the close
   keyTlasNodes_.resize(keyCount * tlas_.interiorCount);
   keyTlasRootBoxes_.resize(keyCount);
   for (std::size_t k = 0; k < keyCount; ++k) {

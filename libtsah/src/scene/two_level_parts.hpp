@@ -2,6 +2,9 @@
 // Private to libtsah: the steps of a two-level structure that building it and reading it from a
 // file share.
 #include <cstdint>
+#include <span>
+#include <utility>
+#include <vector>
 
 #include "tsah/scene/two_level.hpp"
 
@@ -15,5 +18,18 @@ PrimitiveBoxes instanceBoxesOverFrames(const anim::SceneSources& scene, const Tw
 void computeLevelCosts(TwoLevelScene& out);
 // The TLAS header's topology hash: CRC-32 of the instances' source ids.
 uint32_t instanceTableHash(const anim::SceneSources& scene);
+
+// The scene frames inside `range`, both ends included: (first, count).
+std::pair<uint32_t, uint32_t> framesInside(std::span<const double> frameTimes, const TimeRange& range);
+// Frames first .. first + count - 1 of `boxes`.
+PrimitiveBoxes frameSlice(const PrimitiveBoxes& boxes, uint32_t first, uint32_t count);
+// `parts` consecutive ranges covering [start, end] with boundaries at scene frames, the intervals
+// between frames shared as evenly as they divide; at most one part per interval.
+std::vector<TimeRange> tlasPartRanges(std::span<const double> frameTimes, double start, double end, uint32_t parts);
+// out.tlases built as `tlas` asks over out.instanceBoxes (out.frameTimes and objective set).
+void buildTlasTrees(const anim::SceneSources& scene, TwoLevelScene& out, const TreeOptions& options,
+                    const TlasOptions& tlas);
+// Eq. 1 at each scene frame of the TLAS used there (TwoLevelScene::tlasAt).
+std::vector<double> tlasFrameCosts(const TwoLevelScene& out);
 
 }  // namespace tsah

@@ -93,7 +93,9 @@ TwoLevelRuntime::TwoLevelRuntime(const TwoLevelScene& scene, Config config) : sc
   instanceBoxes_.resize(count);
   blas_.resize(count);
   visible_.resize(count);
-  tlas_ = runtimeTopology(flattenBvh(scene.tlas), count, kTraversalStackSize, "two-level runtime: TLAS");
+  for (std::size_t t = 0; t < scene.tlases.size(); ++t)
+    tlasTrees_.push_back(runtimeTopology(flattenBvh(scene.tlases[t].bvh), count, kTraversalStackSize,
+                                         "two-level runtime: TLAS " + std::to_string(t)));
   update(scene.frameTimes.empty() ? sources.start : scene.frameTimes.front());
 }
 
@@ -159,6 +161,8 @@ void TwoLevelRuntime::update(double sceneTime) {
   if (rebuilt)
     tlas_ = runtimeTopology(flattenBvh(rebuildTlas(instanceBoxes_, scene_.objective)), scene_.instanceCount(),
                             kTraversalStackSize, "two-level runtime: TLAS");
+  else
+    selectTlas(sceneTime);
   refitTlas();
   if (config_.layout != Layout::Bvh2 && (rebuilt || !wideTop_)) {  // a new topology: collapsed again
     auto top = std::make_unique<WideTop>();
@@ -170,6 +174,14 @@ void TwoLevelRuntime::update(double sceneTime) {
     wideTop_ = std::move(top);
   }
   refitWideTlas();
+}
+
+void TwoLevelRuntime::selectTlas(double sceneTime) {
+  const uint32_t part = scene_.tlasAt(sceneTime);
+  if (part == tlasPart_) return;
+  tlas_ = tlasTrees_[part];
+  tlasPart_ = part;
+  wideTop_.reset();  // collapsed again from the new topology by update()
 }
 
 void TwoLevelRuntime::refitWideTlas() {
@@ -231,6 +243,7 @@ uint64_t TwoLevelRuntime::memoryBytes() const {
   for (const auto& r : poses_) bytes += runtimeBytes(*r);
   for (const auto& s : poseScratch_) bytes += s.size() * sizeof(float);
   bytes += tlas_.nodes.size() * sizeof(GpuBvhNode) + tlas_.triIndex.size() * sizeof(uint32_t);
+  for (const FlatBvh& t : tlasTrees_) bytes += t.nodes.size() * sizeof(GpuBvhNode) + t.triIndex.size() * sizeof(uint32_t);
   if (wideTop_) bytes += wideTop_->tlas4 ? wideTop_->tlas4->bytes() : wideTop_->tlas8->bytes();
   bytes += toInstance_.size() * sizeof(Affine3x4) + instanceBoxes_.size() * sizeof(Aabb) + blas_.size() * sizeof(const CpuRuntime*);
   bytes += keyToWorld_.size() * sizeof(Affine3x4) + keyInstanceBoxes_.size() * sizeof(Aabb) +

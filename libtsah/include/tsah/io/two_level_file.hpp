@@ -1,6 +1,6 @@
 #pragma once
-// The two-level .tbvh file (version 3, docs/tbvh-format.md): every BLAS and the TLAS of a
-// two-level scene as complete version 1 images, the instance table (each instance's BLAS and pose)
+// The two-level .tbvh file (version 3, docs/tbvh-format.md): every BLAS and the TLAS trees of a
+// two-level scene (one, or one per consecutive part of its time) as complete version 1 images, the instance table (each instance's BLAS and pose)
 // and the pose table, and the scene objects flattened into one source. The placements, paths and sources themselves stay in the scene file; the
 // scene room (tsah/scene/two_level.hpp) checks a file against its scene.
 #include <cstdint>
@@ -20,6 +20,7 @@ inline constexpr uint32_t kTbvhTwoLevelHeaderBytes = 64;
 inline constexpr uint32_t kTbvhTwoLevelMaxBlas = 1u << 20;
 inline constexpr uint32_t kTbvhNoPose = 0xffffffffu;
 inline constexpr uint32_t kTbvhTwoLevelMaxFlattened = 0x7fffffffu;
+inline constexpr uint32_t kTbvhTwoLevelMaxTlas = 4096;
 
 // A pose as stored: the BLAS and the time mapping (offset, speed >= 0, outside 0 = hold, 1 = loop).
 struct TwoLevelPoseRecord {
@@ -32,8 +33,10 @@ struct TwoLevelPoseRecord {
 struct TwoLevelFile {
   std::vector<FlatBvh> blases;            // canonical trees with their stored box sets
   std::vector<BvhBuildInfo> blasBuilds;   // one per BLAS
-  FlatBvh tlas;                           // slots hold instance ids
-  BvhBuildInfo tlasBuild;                 // triangleCount = instances, its time range the scene's
+  // The TLAS trees in time order (slots hold instance ids), each with its header: triangleCount =
+  // instances, its time range the part where it is used (one tree: the scene's). Parts touch.
+  std::vector<FlatBvh> tlases;
+  std::vector<BvhBuildInfo> tlasBuilds;
   std::vector<uint32_t> instanceBlas;     // per instance
   std::vector<uint32_t> instancePose;     // per instance: a pose, or kTbvhNoPose (static BLAS)
   std::vector<TwoLevelPoseRecord> poses;
@@ -48,28 +51,33 @@ struct TwoLevelFile {
 std::optional<std::string> validateTwoLevelTables(uint32_t blasCount, std::span<const uint32_t> instanceBlas,
                                                   std::span<const uint32_t> instancePose,
                                                   std::span<const TwoLevelPoseRecord> poses);
+// Checks the TLAS trees' time ranges: 1..kTbvhTwoLevelMaxTlas of them, finite, each start < end
+// (a single one: start <= end), each part starting where the one before ends, the first at
+// `start` and the last at `end` (the header's). Returns the first violation.
+std::optional<std::string> validateTlasRanges(std::span<const BvhBuildInfo> tlasBuilds, double start, double end);
 
 // Writes the version 3 file. Throws tsah::DataError when the tables break the rules above, the
-// flattened object ids are not increasing, the TLAS does not hold one primitive per instance, or a
-// tree cannot be encoded (encodeBvhFile).
+// flattened object ids are not increasing, a TLAS does not hold one primitive per instance, the
+// TLAS trees' time ranges are not consecutive touching parts (validateTlasRanges), or a tree cannot
+// be encoded (encodeBvhFile).
 std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh> blases, std::span<const BvhBuildInfo> blasBuilds,
-                                        const Bvh& tlas, const BvhBuildInfo& tlasBuild,
+                                        std::span<const Bvh> tlases, std::span<const BvhBuildInfo> tlasBuilds,
                                         std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
                                         std::span<const TwoLevelPoseRecord> poses,
                                         std::span<const uint32_t> flattenedObjects = {});
 // The same over trees held elsewhere (no copy of them); the trees are encoded concurrently.
 std::vector<uint8_t> encodeTwoLevelFile(std::span<const Bvh* const> blases, std::span<const BvhBuildInfo> blasBuilds,
-                                        const Bvh& tlas, const BvhBuildInfo& tlasBuild,
+                                        std::span<const Bvh> tlases, std::span<const BvhBuildInfo> tlasBuilds,
                                         std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
                                         std::span<const TwoLevelPoseRecord> poses,
                                         std::span<const uint32_t> flattenedObjects = {});
 // The same file as its parts in file order (the header and tables, then each tree image after its
 // padding, then the checksum) over flattened trees (flattenBvh's) that the caller keeps: written
 // one after the other they are encodeTwoLevelFile's bytes, never assembled in memory. Its images:
-// every BLAS, then the TLAS.
+// every BLAS, then the TLAS trees.
 using TwoLevelFileParts = TreeImagesFileParts;
 TwoLevelFileParts twoLevelFileParts(std::span<const FlatBvh* const> blases, std::span<const BvhBuildInfo> blasBuilds,
-                                    const FlatBvh& tlas, const BvhBuildInfo& tlasBuild,
+                                    std::span<const FlatBvh* const> tlases, std::span<const BvhBuildInfo> tlasBuilds,
                                     std::span<const uint32_t> instanceBlas, std::span<const uint32_t> instancePose,
                                     std::span<const TwoLevelPoseRecord> poses,
                                     std::span<const uint32_t> flattenedObjects = {});

@@ -11,6 +11,7 @@
 #include "anim/scene.hpp"
 #include "tsah/core/bvh.hpp"
 #include "tsah/io/bvh_file.hpp"
+#include "tsah/io/tree_set.hpp"
 #include "tsah/layout/flat_bvh.hpp"
 #include "tsah/pipeline.hpp"
 
@@ -35,6 +36,33 @@ struct Pose {
   anim::TimeMapping time;
 };
 
+// One top-level tree: the TLAS the runtimes refit and trace over `range` of the scene's time. A
+// structure has one over the whole scene, or one per consecutive part (TlasOptions): the instances
+// move, and a tree optimized for a shorter time keeps tighter boxes.
+struct TlasTree {
+  TimeRange range;          // where it is used (its info's time range); parts touch, no overlap
+  uint32_t firstFrame = 0;  // its box sets: the scene frames firstFrame .. firstFrame + frameCount - 1,
+  uint32_t frameCount = 0;  // those inside range, both ends included
+  Bvh bvh;                  // over the instances' world boxes at those frames
+  // Its .tbvh header: the build options, triangleCount = instances, vertexCount 0, topologyHash the
+  // CRC-32 of the instances' source ids (u32 each), representativeFrames = frameCount.
+  BvhBuildInfo info;
+};
+
+// How many top-level trees: `trees` of them over parts of equal frame counts, or with trees = 0
+// (auto) the fewest of 1, 2, 4, ... maxTrees whose average cost over the scene's frames is at most
+// `budget` times that of a sweep-SAH TLAS rebuilt at each frame (rebuildTlas); past maxTrees, the
+// cheapest built. At most one part per interval between scene frames.
+struct TlasOptions {
+  uint32_t trees = 0;
+  double budget = 1.1;
+  uint32_t maxTrees = 32;
+  static constexpr uint32_t kMaxTrees = 4096;
+  // Throws tsah::ConfigError naming the field unless trees <= kMaxTrees, 1 <= maxTrees <= kMaxTrees
+  // and budget is finite and >= 1.
+  void validate() const;
+};
+
 // One step of buildTwoLevelScene and its wall time.
 struct BuildPhase {
   std::string name;
@@ -49,21 +77,22 @@ struct TwoLevelScene {
   std::vector<uint32_t> instancePose; // per instance: its pose, kInvalidIndex for a static source
   std::vector<double> frameTimes;     // the scene's frames (SceneSources::frameTimes)
   PrimitiveBoxes instanceBoxes;       // world box of every instance at every scene frame
-  Bvh tlas;                           // over instanceBoxes, boxes for every scene frame
-  // Its .tbvh header: the build options, triangleCount = instances, vertexCount 0, topologyHash the
-  // CRC-32 of the instances' source ids (u32 each), representativeFrames = the scene's frames.
-  BvhBuildInfo tlasInfo;
-  std::vector<double> tlasFrameCosts; // Eq. 1 of the TLAS at each scene frame
+  std::vector<TlasTree> tlases;       // in time order, covering [scene.start, scene.end]
+  std::vector<double> tlasFrameCosts; // Eq. 1 at each scene frame, of the TLAS used there (tlasAt)
   double tlasCost = 0.0;              // C~^k over the scene frames
+  // The rule of the trees of a tree set (treeIndexAt): a time on a boundary takes the later TLAS,
+  // times outside the scene the first or the last.
+  uint32_t tlasAt(double sceneTime) const;
+  std::vector<TimeRange> tlasRanges() const;
   // Wall seconds of the build's steps in order: "blas" (every BLAS: initial tree and optimization;
   // each one's own time is its info.buildSeconds), "check" (validation and flattening of the BLAS),
-  // "instances" (the instance boxes over the scene frames), "tlas", "costs".
+  // "instances" (the instance boxes over the scene frames), "tlas" (every TLAS tried), "costs".
   std::vector<BuildPhase> buildPhases;
 
   uint32_t instanceCount() const { return static_cast<uint32_t>(scene.instances.size()); }
   const Blas& blasOf(uint32_t instance) const { return blases[scene.instances[instance].source]; }
-  // Bytes of the trees: every BLAS (nodes, boxes of its build frames, primitive ids), the TLAS
-  // (the same over the scene frames), and the instance table with its per-frame boxes.
+  // Bytes of the trees: every BLAS (nodes, boxes of its build frames, primitive ids), the TLAS trees
+  // (the same over their frames), and the instance table with its per-frame boxes.
   uint64_t blasBytes() const;
   uint64_t tlasBytes() const;
   uint64_t memoryBytes() const;
@@ -81,12 +110,13 @@ Aabb instanceWorldBox(const anim::SceneSources& scene, uint32_t instance, double
 
 // Builds the two-level structure: options.method must be tsah (the BLAS of animated sources and
 // the TLAS use options.objective's k; static BLAS use k = 0 on their single frame); options.frames
-// representative frames per animated source. Every tree is checked with tsah::validate. Throws
-// tsah::ConfigError for other methods or invalid options, tsah::DataError for a source without
-// triangles, tsah::Failure when a built tree is invalid.
-TwoLevelScene buildTwoLevelScene(anim::SceneSources scene, const TreeOptions& options);
+// representative frames per animated source; `tlas` how many top-level trees. Every tree is
+// checked with tsah::validate. Throws tsah::ConfigError for other methods or invalid options,
+// tsah::DataError for a source without triangles, tsah::Failure when a built tree is invalid.
+TwoLevelScene buildTwoLevelScene(anim::SceneSources scene, const TreeOptions& options, const TlasOptions& tlas = {});
 // loadSceneSources(path, load) then buildTwoLevelScene.
-TwoLevelScene loadTwoLevelScene(const std::string& path, const anim::LoadOptions& load, const TreeOptions& options);
+TwoLevelScene loadTwoLevelScene(const std::string& path, const anim::LoadOptions& load, const TreeOptions& options,
+                                const TlasOptions& tlas = {});
 
 // The two-level .tbvh file (version 3, docs/tbvh-format.md) of a structure: every BLAS, the TLAS
 // and the instance and pose tables. save is atomic. Throws as encodeTwoLevelFile.

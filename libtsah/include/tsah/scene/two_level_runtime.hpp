@@ -92,8 +92,8 @@ class TwoLevelRuntime {
   TwoLevelRuntime(const TwoLevelRuntime&) = delete;
   TwoLevelRuntime& operator=(const TwoLevelRuntime&) = delete;
 
-  // The scene at time t: poses whose local time changed refitted, world transforms, TLAS. Ends a
-  // blurred frame.
+  // The scene at time t: poses whose local time changed refitted, world transforms, the TLAS of
+  // the time's part (TwoLevelScene::tlasAt) refitted. Ends a blurred frame.
   void update(double sceneTime);
 
   // Motion blur over the shutter [open, close] (scene times; docs/motion-blur.md, "Two-level
@@ -102,7 +102,8 @@ class TwoLevelRuntime {
   // (the pose's CpuRuntime::updateShutter with the same key fractions; a pose whose local time is
   // the same at every key is refitted once, instant); per key the instances' boxes (each key's
   // matrix applied to the union of the BLAS's root boxes over all keys, widened for rounding) and
-  // the TLAS refitted from them (TlasUpdate::Rebuild: rebuilt from the open's boxes first). One key
+  // the TLAS of the close's part refitted from them (TlasUpdate::Rebuild: rebuilt from the open's
+  // boxes first). One key
   // (open == close), or a shutter in which no instance's matrix and no pose's local time changes,
   // is update(open): not blurred. Throws tsah::ConfigError for an open or close that is not finite
   // or open > close; CpuRuntime::updateShutter's errors otherwise. time() is then close, and
@@ -135,8 +136,8 @@ class TwoLevelRuntime {
   // Runs body over [0, n) in chunks of at least `grain` on the runtime's threads (the renderer's passes).
   void parallelFor(std::size_t n, std::size_t grain, const std::function<void(std::size_t, std::size_t)>& body) const;
 
-  // The instances' world boxes at the current time, and the TLAS in canonical form (its node boxes
-  // those of the current time; slots hold instance ids). An instance whose world transform is
+  // The instances' world boxes at the current time, and the TLAS in canonical form (the current
+  // part's, its node boxes those of the current time; slots hold instance ids). An instance whose world transform is
   // singular (a path scale passing through 0) has no area at that time and is never hit.
   std::span<const Aabb> instanceBoxes() const { return instanceBoxes_; }
   const FlatBvh& tlas() const { return tlas_; }
@@ -149,6 +150,7 @@ class TwoLevelRuntime {
  private:
   void refitTlas();
   void refitWideTlas();
+  void selectTlas(double sceneTime);  // Refit: the TLAS of the time's part (TwoLevelScene::tlasAt) as tlas_
   const CpuRuntime& runtimeOf(uint32_t instance) const;
   void clearShutter();
   detail::TlasKeys keysAt(float time) const;  // the blurred frame's keys of the time's segment
@@ -167,7 +169,9 @@ class TwoLevelRuntime {
   std::vector<uint8_t> visible_;                         // per instance: world transform invertible now
   std::vector<Aabb> instanceBoxes_;
   std::vector<const CpuRuntime*> blas_;                  // per instance: the BLAS runtime it traces
-  FlatBvh tlas_;
+  FlatBvh tlas_;                  // the TLAS traced now: a copy of the current part's, or rebuilt
+  std::vector<FlatBvh> tlasTrees_;  // Refit: every part's TLAS topology (TwoLevelScene::tlases)
+  uint32_t tlasPart_ = kInvalidIndex;
   // Wide BLAS layouts: tlas_'s topology in the BLAS's width, the instant frame's trace (wide_tlas.hpp).
   struct WideTop;
   std::unique_ptr<WideTop> wideTop_;
