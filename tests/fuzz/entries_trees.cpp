@@ -86,7 +86,8 @@ void twolevel(std::span<const uint8_t> data) {
   std::vector<uint8_t> bytes(data.begin() + 1, data.end());
   // Bit 1: repair each tree's own CRC as the tree table places it; bit 0: then the file's CRC.
   if ((data[0] & 2) && bytes.size() >= kTbvhTwoLevelHeaderBytes && readU32(bytes, 8) == kTbvhTwoLevelVersion) {
-    const uint64_t trees = uint64_t(readU32(bytes, 16)) + 1;
+    const uint32_t tlasCount = readU32(bytes, 48);  // 0: one TLAS
+    const uint64_t trees = uint64_t(readU32(bytes, 16)) + (tlasCount == 0 ? 1 : tlasCount);
     const uint64_t table = kTbvhTwoLevelHeaderBytes + 8 * uint64_t(readU32(bytes, 20)) + 24 * uint64_t(readU32(bytes, 24)) +
                            4 * uint64_t(readU32(bytes, 28));
     for (uint64_t s = 0; s < trees && table + (s + 1) * 16 <= bytes.size(); ++s)
@@ -100,6 +101,11 @@ void twolevel(std::span<const uint8_t> data) {
     for (std::size_t k = 1; k < file.flattenedObjects.size(); ++k)
       if (file.flattenedObjects[k] <= file.flattenedObjects[k - 1])
         throw std::logic_error("twolevel: accepted flattened objects out of order");
+    if (file.tlases.size() != file.tlasBuilds.size() || file.tlasBuilds.empty())
+      throw std::logic_error("twolevel: accepted a file without one build record per TLAS");
+    if (const auto problem = validateTlasRanges(file.tlasBuilds, file.tlasBuilds.front().timeStart,
+                                                file.tlasBuilds.back().timeEnd))
+      throw std::logic_error("twolevel: accepted TLAS ranges: " + *problem);
     std::vector<Bvh> blases;
     for (const FlatBvh& tree : file.blases) {
       if (const auto problem = validateFlatBvh(tree)) throw std::logic_error("twolevel: accepted a broken BLAS: " + *problem);
