@@ -121,7 +121,7 @@ TEST(BenchTwoLevelReport, TablesOfThePartAndASkippedPart) {
   };
   json two = method("two-level", "two-level (TLAS refit)", 8.0);
   two["extra"] = {{"agreement_with_flat", agreement}};
-  const json part = {{"instances", 7}, {"sources", 3}, {"static_sources", 2}, {"poses", 2}, {"frames", 5},
+  const json part = {{"instances", 7}, {"sources", 3}, {"static_sources", 2}, {"poses", 2}, {"tlas_trees", 4}, {"frames", 5},
                      {"width", 64}, {"height", 48}, {"ao_rays", 8}, {"shadow_rays", 2}, {"layout", "bvh8"},
                      {"threads", 2}, {"embree_status", "3.13.5"},
                      {"optimize", {{"flat", {{"wall_s", 2.0}, {"peak_rss_bytes", 3.0 * 1048576}}},
@@ -160,7 +160,7 @@ TEST(BenchTwoLevelReport, TablesOfThePartAndASkippedPart) {
       << rebuilt;
   const json scene = {{"name", "town"}, {"two_level", part}};
   const std::string section = tsah::bench::twoLevelSection(scene);
-  EXPECT_NE(section.find("**Two-level part** (7 instances of 3 sources (2 static), 2 poses"), std::string::npos) << section;
+  EXPECT_NE(section.find("**Two-level part** (7 instances of 3 sources (2 static), 2 poses, 4 TLAS tree(s) over the scene's time; 5"), std::string::npos) << section;
   EXPECT_NE(section.find("flat 2.00 s, 3.00 MiB; two-level 1.00 s, 2.00 MiB"), std::string::npos) << section;
   EXPECT_NE(section.find("| two-level (TLAS refit) | 1.00 | 3.00 | 8.00 | 2.00 / 3.00 / 4.00 | 99.000% (1 of 100"),
             std::string::npos)

@@ -72,7 +72,9 @@ std::string twoLevelSection(const json& scene) {
   }
   if (!hasTwoLevel(scene)) return {};
   md << "**Two-level part** (" << numberField(p, "instances") << " instances of " << numberField(p, "sources") << " sources ("
-     << numberField(p, "static_sources") << " static), " << numberField(p, "poses") << " poses; " << numberField(p, "frames")
+     << numberField(p, "static_sources") << " static), " << numberField(p, "poses") << " poses";
+  if (p.contains("tlas_trees")) md << ", " << numberField(p, "tlas_trees") << " TLAS tree(s) over the scene's time";
+  md << "; " << numberField(p, "frames")
      << " scene frames at " << numberField(p, "width") << "x" << numberField(p, "height") << ", 1 primary + "
      << numberField(p, "ao_rays") << " AO + " << numberField(p, "shadow_rays") << " shadow rays per pixel, the same rays for "
      << "every tracer; " << p.value("layout", "") << ", " << numberField(p, "threads") << " threads; Embree "

@@ -167,6 +167,7 @@ json runTwoLevelComparison(const SceneSource& scene, const anim::Animation& bake
   j["sources"] = twoLevel.blases.size();
   j["static_sources"] = staticBlas;
   j["poses"] = twoLevel.poses.size();
+  j["tlas_trees"] = twoLevel.tlases.size();
   j["triangles"] = baked.triangleCount();
   j["structure_bytes"] = twoLevel.memoryBytes();
 
