@@ -56,6 +56,21 @@ set(TLE_SUMMARY "3 BLAS in 3 views .*6 instances")
 tle_export(auto tle_auto --time 0.37)
 tle_check(auto tle_auto 0.37 "rays, [0-9]+ hits, [0-9]+ differ: ok")
 
+# TLAS trees per part of the time (fixture tl_parts: 4 parts, switching at 0.5, 1 and 1.5): the
+# export holds the TLAS of the time's part, on a boundary the later one.
+set(TLE_FILE tl_parts.tbvh)
+set(TLE_FIXTURE tl_parts)
+set(TLE_SUMMARY "3 BLAS in 4 views .*7 instances")
+foreach(time 0.3 1.0 1.2)
+  tle_export(parts_${time} tle_parts_${time} --time ${time})
+  tle_check(parts_${time} tle_parts_${time} ${time} "rays, [0-9]+ hits, [0-9]+ differ: ok")
+endforeach()
+# The first part's TLAS (exported at 0.3, with its header) given for time 1.2 fails the check.
+tle_check(parts_other_tlas tle_parts_1.2 1.2 "two-level export: ([0-9]+ of [0-9]+ rays hit otherwise than the runtime|the TLAS is not the runtime's at time 1.2)"
+          tlas_nodes.bin=${W}/tle_parts_0.3 tlas_index.bin=${W}/tle_parts_0.3 tsah_scene.h=${W}/tle_parts_0.3)
+set_tests_properties(cli.two_level.export.check.parts_other_tlas PROPERTIES
+  FIXTURES_REQUIRED "tl_parts;tle_tle_parts_1.2;tle_tle_parts_0.3")
+
 # Bad inputs: one line naming the file or option (tsah_expect_error: tests/cli/hardening.cmake).
 function(tle_error name code regex)
   tsah_expect_error(cli.two_level.export.error.${name} ${code} "${regex}" ${ARGN})

@@ -372,6 +372,9 @@ int main(int argc, char** argv) {
     require(mismatches * 200 <= rays, std::to_string(mismatches) + " of " + std::to_string(rays) +
                                           " rays hit otherwise than the runtime");
     checkInstances(e, scene, time);  // after the rays: a wrong table must show in the hits first
+    // The TLAS of the time's part (a structure of several TLAS trees): the runtime's at that time.
+    require(e.tlasIndex == reference.tlas().triIndex && e.tlas.size() == reference.tlas().nodes.size(),
+            "the TLAS is not the runtime's at time " + std::string(argv[4]));
     std::printf("two-level export (%u-wide BLAS, %zu views, %zu instances): %u rays, %u hits, %u differ: ok\n", e.width,
                 e.views.size(), e.instances.size(), rays, hits, mismatches);
     return 0;
