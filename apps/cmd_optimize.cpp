@@ -51,6 +51,7 @@ struct Options {
   std::string structure;      // flat, two-level, auto; empty: auto for scene files, flat otherwise
   std::string tlasTrees = "auto";  // two levels: K top-level trees or auto (tsah::TlasOptions)
   double tlasBudget = tsah::TlasOptions{}.budget;
+  bool tlasGiven = false;          // --tlas-trees or --tlas-budget on the command line
 };
 
 tsah::TlasOptions tlasOptions(const Options& opt) {
@@ -229,6 +230,9 @@ bool runTwoLevel(const Options& opt, nlohmann::json& flatChoice) {
   using tsah::cli::UsageError;
   const bool scene = anim::isSceneFile(opt.input);
   const std::string structure = opt.structure.empty() ? (scene ? "auto" : "flat") : opt.structure;
+  if (opt.tlasGiven && !scene)
+    throw UsageError("--tlas-trees and --tlas-budget shape the top level of two levels: " + opt.input +
+                     " is one animation, not a scene file");
   if (structure == "flat") return false;
   const bool asked = structure == "two-level";
   if (asked && !scene)
@@ -238,6 +242,9 @@ bool runTwoLevel(const Options& opt, nlohmann::json& flatChoice) {
   if (asked && flatOnly)
     throw UsageError("--structure two-level builds one T-SAH tree per source and the top level: it does not go "
                      "with --segments, --devices or --method other than tsah");
+  if (opt.tlasGiven && flatOnly)
+    throw UsageError("--tlas-trees and --tlas-budget shape the top level of two levels: not with --segments, --devices "
+                     "or --method other than tsah");
   if (!scene || flatOnly) return false;
   const tsah::TlasOptions tlas = tlasOptions(opt);
   const auto loadStart = std::chrono::steady_clock::now();
@@ -414,6 +421,7 @@ TSAH_REGISTER_COMMAND(40, [](CLI::App& app) {
     if ((tlasTrees->count() || tlasBudget->count()) && opt->structure == "flat")
       throw UsageError("--tlas-trees and --tlas-budget shape the top level of two levels: not with --structure flat");
     if (tlasBudget->count() && opt->tlasTrees != "auto") throw UsageError("--tlas-budget goes with --tlas-trees auto");
+    opt->tlasGiven = tlasTrees->count() || tlasBudget->count();
     tlasOptions(*opt);  // a bad --tlas-trees is refused before anything is loaded
     if (overlap->count() && opt->segments == "1") throw UsageError("--overlap goes with --segments (a tree set)");
     if (maxTrees->count() && opt->segments != "auto") throw UsageError("--max-trees goes with --segments auto");

@@ -141,6 +141,10 @@ tl_error(cli.two_level.error.tlas_trees_flat 2 "--tlas-trees and --tlas-budget s
          optimize ${SCENE} -o ${W}/tl_bad.tbvh --structure flat --tlas-trees 2)
 tl_error(cli.two_level.error.tlas_budget 2 "--tlas-budget goes with --tlas-trees auto"
          optimize ${SCENE} -o ${W}/tl_bad.tbvh --tlas-trees 2 --tlas-budget 1.2)
+tl_error(cli.two_level.error.tlas_trees_animation 2 "--tlas-trees and --tlas-budget shape the top level of two levels: [^\n]*explode is one animation, not a scene file"
+         optimize ${CMAKE_SOURCE_DIR}/samples/explode -o ${W}/tl_bad.tbvh --tlas-trees 3)
+tl_error(cli.two_level.error.tlas_trees_segments 2 "--tlas-trees and --tlas-budget shape the top level of two levels: not with --segments"
+         optimize ${SCENE} -o ${W}/tl_bad.tbvh --segments 2 --tlas-budget 1.2)
 # TLAS trees per part of the scene's time: 4 parts of demo.json's 21 frames, written, described by
 # tsah info and traced to the flat tree's images (the TLAS switches at frames 5, 10 and 15).
 add_test(NAME cli.two_level.optimize.tlas_trees
