@@ -52,6 +52,7 @@ struct Options {
   std::string tlasTrees = "auto";  // two levels: K top-level trees or auto (tsah::TlasOptions)
   double tlasBudget = tsah::TlasOptions{}.budget;
   bool tlasGiven = false;          // --tlas-trees or --tlas-budget on the command line
+  tsah::TlasOptions tlas;          // the two, parsed before anything is loaded
 };
 
 tsah::TlasOptions tlasOptions(const Options& opt) {
@@ -246,13 +247,12 @@ bool runTwoLevel(const Options& opt, nlohmann::json& flatChoice) {
     throw UsageError("--tlas-trees and --tlas-budget shape the top level of two levels: not with --segments, --devices "
                      "or --method other than tsah");
   if (!scene || flatOnly) return false;
-  const tsah::TlasOptions tlas = tlasOptions(opt);
   const auto loadStart = std::chrono::steady_clock::now();
   anim::SceneSources sources = tsah::cli::loadSceneSourcesForCli(opt.input);
   const double loadSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - loadStart).count();
   if (asked) {
     if (tsah::cli::job::leader())
-      tsah::cli::optimizeTwoLevel(std::move(sources), opt.input, opt.output, opt.tree, tlas, nullptr, opt.json,
+      tsah::cli::optimizeTwoLevel(std::move(sources), opt.input, opt.output, opt.tree, opt.tlas, nullptr, opt.json,
                                   loadSeconds, opt.reproducible);
     return true;
   }
@@ -262,7 +262,7 @@ bool runTwoLevel(const Options& opt, nlohmann::json& flatChoice) {
     return false;
   }
   if (tsah::cli::job::leader())
-    tsah::cli::optimizeTwoLevel(std::move(sources), opt.input, opt.output, opt.tree, tlas, &choice, opt.json,
+    tsah::cli::optimizeTwoLevel(std::move(sources), opt.input, opt.output, opt.tree, opt.tlas, &choice, opt.json,
                                 loadSeconds, opt.reproducible);
   return true;
 }
@@ -422,7 +422,7 @@ TSAH_REGISTER_COMMAND(40, [](CLI::App& app) {
       throw UsageError("--tlas-trees and --tlas-budget shape the top level of two levels: not with --structure flat");
     if (tlasBudget->count() && opt->tlasTrees != "auto") throw UsageError("--tlas-budget goes with --tlas-trees auto");
     opt->tlasGiven = tlasTrees->count() || tlasBudget->count();
-    tlasOptions(*opt);  // a bad --tlas-trees is refused before anything is loaded
+    opt->tlas = tlasOptions(*opt);
     if (overlap->count() && opt->segments == "1") throw UsageError("--overlap goes with --segments (a tree set)");
     if (maxTrees->count() && opt->segments != "auto") throw UsageError("--max-trees goes with --segments auto");
     if (referenceFrames->count() && (opt->segments != "auto" || opt->budgetCost > 0.0))

@@ -244,6 +244,14 @@ TEST_F(TwoLevelFile, TlasTreesPerTimePartRoundTripAndBrokenRangesAreRefused) {
   EXPECT_THROW(tsah::encodeTwoLevelFile(blasTrees, blasBuilds, tlasTrees, gap, instanceBlas, instancePose, poses),
                tsah::DataError);
   EXPECT_EQ(tsah::encodeTwoLevelFile(blasTrees, blasBuilds, tlasTrees, builds, instanceBlas, instancePose, poses), file);
+  // No TLAS at all: refused before the header is written.
+  try {
+    tsah::encodeTwoLevelFile(blasTrees, blasBuilds, std::span<const tsah::Bvh>(), std::span<const tsah::BvhBuildInfo>(),
+                             instanceBlas, instancePose, poses);
+    ADD_FAILURE() << "a structure without a TLAS encoded";
+  } catch (const tsah::DataError& e) {
+    EXPECT_NE(std::string(e.what()).find("TLAS count 0 is not in 1..4096"), std::string::npos) << e.what();
+  }
   // A file whose parts another scene's frames do not fill as stored is refused against that scene.
   const fs::path slower = dir / "slower.json";
   const std::vector<uint8_t> sceneBytes = tsah::readFile(scenePath.string());

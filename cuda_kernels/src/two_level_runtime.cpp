@@ -546,10 +546,9 @@ detail::TwoLevelTraceAccess GpuTwoLevelRuntime::traceAccess() const {
 
 detail::TwoLevelBlurAccess GpuTwoLevelRuntime::blurAccess() {
   Impl& m = *impl_;
-  // A blurred frame refits the T-SAH TLAS of the close's part (the last update's) at every key;
-  // with a rebuilt TLAS its refit data is uploaded at the first shutter that needs it.
-  if (m.tlasRebuilder) m.tlasPart = m.scene.tlasAt(m.time);
-  Impl::DeviceTlas& t = m.tlases[m.tlasPart];
+  // A blurred frame refits the T-SAH TLAS of the close's part (the last update's time) at every
+  // key; with a rebuilt TLAS its refit data is uploaded at the first shutter that needs it.
+  Impl::DeviceTlas& t = m.tlases[m.scene.tlasAt(m.time)];
   if (t.leaves.empty()) m.uploadRefitTlas(t);
   detail::TwoLevelBlurAccess a;
   a.scene = &m.scene;

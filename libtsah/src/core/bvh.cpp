@@ -9,7 +9,6 @@
 
 namespace tsah {
 
-
 void triangleBoxes(std::span<const uint32_t> indices, std::span<const float> positions,
                    std::span<Aabb> out) {
   const std::size_t triangles = indices.size() / 3;

@@ -62,7 +62,8 @@ bool limitDepth(Bvh& bvh, uint32_t maxDepth) {
   if (bvh.nodes.empty()) return false;
   // Most trees are shallow enough: their height alone, subtrees in parallel, without the arrays.
   const uint32_t treeHeight = detail::reduceTree<uint32_t>(
-      bvh.root, [&](uint32_t n) { return detail::shapeOf(bvh, n); }, [](uint32_t) { return 0u; }, [](uint32_t, uint32_t left, uint32_t right) { return 1 + std::max(left, right); },
+      bvh.root, [&](uint32_t n) { return detail::shapeOf(bvh, n); }, [](uint32_t) { return 0u; },
+      [](uint32_t, uint32_t left, uint32_t right) { return 1 + std::max(left, right); },
       detail::parallelTreeLevels(bvh.nodes.size()));
   if (treeHeight <= maxDepth) return false;
   // Height (levels below) and leaf count of every subtree, bottom-up.

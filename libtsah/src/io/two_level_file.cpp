@@ -48,9 +48,10 @@ void requireEncodable(std::size_t blasCount, std::size_t buildCount, std::span<c
   if (tlasInstances.size() != tlasBuilds.size())
     throw DataError(".tbvh two-level: " + std::to_string(tlasInstances.size()) + " TLAS and " +
                     std::to_string(tlasBuilds.size()) + " TLAS build records");
-  if (!tlasBuilds.empty())
-    if (auto problem = validateTlasRanges(tlasBuilds, tlasBuilds.front().timeStart, tlasBuilds.back().timeEnd))
-      throw DataError(".tbvh two-level: " + *problem);
+  // The header's range is the trees' together: checked against itself, the rules of their parts.
+  const double start = tlasBuilds.empty() ? 0.0 : tlasBuilds.front().timeStart;
+  const double end = tlasBuilds.empty() ? 0.0 : tlasBuilds.back().timeEnd;
+  if (auto problem = validateTlasRanges(tlasBuilds, start, end)) throw DataError(".tbvh two-level: " + *problem);
   if (auto problem = validateTwoLevelTables(uint32_t(blasCount), instanceBlas, instancePose, poses))
     throw DataError(".tbvh two-level: " + *problem);
   if (auto problem = validateFlattenedObjects(flattenedObjects)) throw DataError(".tbvh two-level: " + *problem);
@@ -272,13 +273,16 @@ TwoLevelFile decodeTwoLevelFile(std::span<const uint8_t> bytes, const std::strin
   for (uint32_t& o : out.flattenedObjects) o = r.read<uint32_t>("flattened object");
   if (auto problem = validateFlattenedObjects(out.flattenedObjects)) r.fail(*problem);
 
+  const auto treeName = [&](uint32_t s) {
+    return s >= blasCount ? "TLAS " + std::to_string(s - blasCount) : "BLAS " + std::to_string(s);
+  };
   std::vector<std::pair<uint64_t, uint64_t>> entries(trees);
   uint64_t expected = align16(tables);
   for (uint32_t s = 0; s < trees; ++s) {
     auto& [offset, size] = entries[s];
     offset = r.read<uint64_t>("tree offset");
     size = r.read<uint64_t>("tree size");
-    const std::string which = s >= blasCount ? "TLAS " + std::to_string(s - blasCount) : "BLAS " + std::to_string(s);
+    const std::string which = treeName(s);
     if (offset != expected)
       r.fail(which + " starts at byte " + std::to_string(offset) + ", expected " + std::to_string(expected));
     if (size < kMinTreeBytes || size > crcOffset - std::min<uint64_t>(expected, crcOffset))
@@ -295,7 +299,7 @@ TwoLevelFile decodeTwoLevelFile(std::span<const uint8_t> bytes, const std::strin
 
   for (uint32_t s = 0; s < trees; ++s) {
     const bool isTlas = s >= blasCount;
-    const std::string which = isTlas ? "TLAS " + std::to_string(s - blasCount) : "BLAS " + std::to_string(s);
+    const std::string which = treeName(s);
     const auto image = bytes.subspan(entries[s].first, entries[s].second);
     uint32_t innerVersion;
     std::memcpy(&innerVersion, image.data() + 8, 4);

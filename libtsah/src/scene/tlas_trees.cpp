@@ -2,6 +2,7 @@
 // part of its time (TlasOptions), and the cost of the TLAS used at each scene frame.
 #include <algorithm>
 #include <chrono>
+#include <span>
 #include <cmath>
 #include <limits>
 
@@ -22,16 +23,32 @@ void TlasOptions::validate() const {
     throw ConfigError("tlas_budget: " + std::to_string(budget) + " is not a finite factor >= 1");
 }
 
-std::vector<TimeRange> TwoLevelScene::tlasRanges() const {
+namespace {
+
+// The tree of `sceneTime` among `trees` (treeIndexAt's rule).
+uint32_t treeAt(std::span<const TlasTree> trees, double sceneTime) {
+  if (trees.size() == 1) return 0;
   std::vector<TimeRange> ranges;
-  for (const TlasTree& t : tlases) ranges.push_back(t.range);
-  return ranges;
+  for (const TlasTree& t : trees) ranges.push_back(t.range);
+  return treeIndexAt(ranges, sceneTime);
 }
 
-uint32_t TwoLevelScene::tlasAt(double sceneTime) const {
-  if (tlases.size() == 1) return 0;
-  return treeIndexAt(tlasRanges(), sceneTime);
+// Eq. 1 at each of `frameTimes` of the tree used there.
+std::vector<double> frameCostsOf(std::span<const TlasTree> trees, std::span<const double> frameTimes,
+                                 const CostModel& model) {
+  std::vector<std::vector<double>> perTree(trees.size());
+  forEachConcurrently(perTree.size(), [&](std::size_t s) { perTree[s] = frameCosts(trees[s].bvh, model); });
+  std::vector<double> costs(frameTimes.size());
+  for (std::size_t f = 0; f < costs.size(); ++f) {
+    const uint32_t s = treeAt(trees, frameTimes[f]);
+    costs[f] = perTree[s][f - trees[s].firstFrame];
+  }
+  return costs;
 }
+
+}  // namespace
+
+uint32_t TwoLevelScene::tlasAt(double sceneTime) const { return treeAt(tlases, sceneTime); }
 
 std::pair<uint32_t, uint32_t> framesInside(std::span<const double> frameTimes, const TimeRange& range) {
   const auto first = std::lower_bound(frameTimes.begin(), frameTimes.end(), range.start);
@@ -63,10 +80,6 @@ PrimitiveBoxes frameSlice(const PrimitiveBoxes& boxes, uint32_t first, uint32_t 
 
 namespace {
 
-double secondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
 // One TLAS per range, concurrently (each the same however the threads are shared).
 std::vector<TlasTree> buildTrees(const anim::SceneSources& scene, const TwoLevelScene& out,
                                  std::span<const TimeRange> ranges, const TreeOptions& options,
@@ -80,8 +93,7 @@ std::vector<TlasTree> buildTrees(const anim::SceneSources& scene, const TwoLevel
     const auto start = std::chrono::steady_clock::now();
     tree.bvh = buildTSah(boxes, options.objective.k, config);
     const double seconds = secondsSince(start);
-    if (const auto problem = validate(tree.bvh, &boxes))
-      throw Failure(scene.description.file + ": TLAS " + std::to_string(s) + ": invalid tree: " + *problem);
+    requireValid(tree.bvh, boxes, scene.description.file + ": TLAS " + std::to_string(s));
     // Its header: the options of the first source's, counts and hash of the instance table.
     tree.info = treeBuildInfo(options, *scene.sources[0], tree.frameCount, seconds, tree.range.start, tree.range.end);
     tree.info.representativeFrames = tree.frameCount;
@@ -106,15 +118,7 @@ double rebuiltTlasCost(const TwoLevelScene& out) {
 }  // namespace
 
 std::vector<double> tlasFrameCosts(const TwoLevelScene& out) {
-  std::vector<std::vector<double>> perTree(out.tlases.size());
-  forEachConcurrently(perTree.size(),
-                      [&](std::size_t s) { perTree[s] = frameCosts(out.tlases[s].bvh, out.objective.cost); });
-  std::vector<double> costs(out.frameTimes.size());
-  for (std::size_t f = 0; f < costs.size(); ++f) {
-    const uint32_t s = out.tlasAt(out.frameTimes[f]);
-    costs[f] = perTree[s][f - out.tlases[s].firstFrame];
-  }
-  return costs;
+  return frameCostsOf(out.tlases, out.frameTimes, out.objective.cost);
 }
 
 void buildTlasTrees(const anim::SceneSources& scene, TwoLevelScene& out, const TreeOptions& options,
@@ -132,14 +136,11 @@ void buildTlasTrees(const anim::SceneSources& scene, TwoLevelScene& out, const T
   double best = std::numeric_limits<double>::infinity();
   for (uint32_t parts = 1;; parts *= 2) {
     const std::vector<TimeRange> ranges = rangesFor(parts);
-    TwoLevelScene trial;
-    trial.objective = out.objective;
-    trial.frameTimes = out.frameTimes;
-    trial.tlases = buildTrees(scene, out, ranges, options, config);
-    const double cost = temporalCost(tlasFrameCosts(trial), 0);
+    std::vector<TlasTree> trial = buildTrees(scene, out, ranges, options, config);
+    const double cost = temporalCost(frameCostsOf(trial, out.frameTimes, out.objective.cost), 0);
     if (cost < best) {
       best = cost;
-      out.tlases = std::move(trial.tlases);
+      out.tlases = std::move(trial);
     }
     // Fewer parts than asked: every interval between frames has its tree already.
     if (cost <= bound || ranges.size() < parts || parts * 2 > tlas.maxTrees) return;

@@ -22,10 +22,6 @@ uint64_t bvhBytes(const Bvh& bvh) {
   return bvh.nodes.size() * sizeof(BvhNode) + bvh.boxes.size() * sizeof(Aabb) + bvh.primIds.size() * sizeof(uint32_t);
 }
 
-void requireValid(const Bvh& bvh, const PrimitiveBoxes& prims, const std::string& what) {
-  if (const auto problem = validate(bvh, &prims)) throw Failure(what + ": invalid tree: " + *problem);
-}
-
 // The objective's settings for one tree of the structure.
 TreeOptions treeOptionsWithK(const TreeOptions& options, int k) {
   TreeOptions own = options;
@@ -126,11 +122,15 @@ Bvh rebuildTlas(std::span<const Aabb> instanceBoxes, const Objective& objective)
   return SweepSahBuilder(config).build(instanceBoxes);
 }
 
-namespace {
-
 double secondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
+
+void requireValid(const Bvh& bvh, const PrimitiveBoxes& prims, const std::string& what) {
+  if (const auto problem = validate(bvh, &prims)) throw Failure(what + ": invalid tree: " + *problem);
+}
+
+namespace {
 
 // Source s's BLAS: its tree only (validated and flattened by the caller).
 Blas buildBlas(const anim::SceneSources& scene, uint32_t s, const TreeOptions& options) {

@@ -1,8 +1,10 @@
 #pragma once
 // Private to libtsah: the steps of a two-level structure that building it and reading it from a
 // file share.
+#include <chrono>
 #include <cstdint>
 #include <span>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -10,6 +12,10 @@
 
 namespace tsah {
 
+// Wall seconds since `start` (the build's phases and trees).
+double secondsSince(std::chrono::steady_clock::time_point start);
+// Throws tsah::Failure ("WHAT: invalid tree: ...") unless tsah::validate accepts the tree over `prims`.
+void requireValid(const Bvh& bvh, const PrimitiveBoxes& prims, const std::string& what);
 // Poses and instancePose from the scene's time mappings (out.blases must be set).
 void assignPoses(const anim::SceneSources& scene, TwoLevelScene& out);
 // Every instance's world box at every frame of out.frameTimes (out.blases must be set).

@@ -1,8 +1,9 @@
 #pragma once
 // The two-level .tbvh file (version 3, docs/tbvh-format.md): every BLAS and the TLAS trees of a
-// two-level scene (one, or one per consecutive part of its time) as complete version 1 images, the instance table (each instance's BLAS and pose)
-// and the pose table, and the scene objects flattened into one source. The placements, paths and sources themselves stay in the scene file; the
-// scene room (tsah/scene/two_level.hpp) checks a file against its scene.
+// two-level scene (one, or one per consecutive part of its time) as complete version 1 images, the
+// instance table (each instance's BLAS and pose), the pose table, and the scene objects flattened
+// into one source. The placements, paths and sources themselves stay in the scene file; the scene
+// room (tsah/scene/two_level.hpp) checks a file against its scene.
 #include <cstdint>
 #include <optional>
 #include <span>

@@ -83,7 +83,6 @@ struct TwoLevelScene {
   // The rule of the trees of a tree set (treeIndexAt): a time on a boundary takes the later TLAS,
   // times outside the scene the first or the last.
   uint32_t tlasAt(double sceneTime) const;
-  std::vector<TimeRange> tlasRanges() const;
   // Wall seconds of the build's steps in order: "blas" (every BLAS: initial tree and optimization;
   // each one's own time is its info.buildSeconds), "check" (validation and flattening of the BLAS),
   // "instances" (the instance boxes over the scene frames), "tlas" (every TLAS tried), "costs".

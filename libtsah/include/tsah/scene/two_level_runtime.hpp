@@ -103,9 +103,8 @@ class TwoLevelRuntime {
   // the same at every key is refitted once, instant); per key the instances' boxes (each key's
   // matrix applied to the union of the BLAS's root boxes over all keys, widened for rounding) and
   // the TLAS of the close's part refitted from them (TlasUpdate::Rebuild: rebuilt from the open's
-  // boxes first). One key
-  // (open == close), or a shutter in which no instance's matrix and no pose's local time changes,
-  // is update(open): not blurred. Throws tsah::ConfigError for an open or close that is not finite
+  // boxes first). One key (open == close), or a shutter in which no instance's matrix and no
+  // pose's local time changes, is update(open): not blurred. Throws tsah::ConfigError for an open or close that is not finite
   // or open > close; CpuRuntime::updateShutter's errors otherwise. time() is then close, and
   // instanceBoxes() and tlas() hold the last key's boxes.
   void updateShutter(double openTime, double closeTime);
@@ -137,8 +136,9 @@ class TwoLevelRuntime {
   void parallelFor(std::size_t n, std::size_t grain, const std::function<void(std::size_t, std::size_t)>& body) const;
 
   // The instances' world boxes at the current time, and the TLAS in canonical form (the current
-  // part's, its node boxes those of the current time; slots hold instance ids). An instance whose world transform is
-  // singular (a path scale passing through 0) has no area at that time and is never hit.
+  // part's, its node boxes those of the current time; slots hold instance ids). An instance whose
+  // world transform is singular (a path scale passing through 0) has no area at that time and is
+  // never hit.
   std::span<const Aabb> instanceBoxes() const { return instanceBoxes_; }
   const FlatBvh& tlas() const { return tlas_; }
   // The BLAS runtime an instance traces (its pose's, or its static source's).
