@@ -219,6 +219,7 @@ void exportTwoLevel(const TwoLevelExport& request) {
   TwoLevelRuntime::Config config;
   config.threads = request.threads;
   config.layout = request.layout;
+  config.poseTriangles = TriangleForm::Woop;  // the exported layout's packets (docs/wide-bvh.md)
   TwoLevelRuntime rt(scene, config);
   rt.update(time);
 

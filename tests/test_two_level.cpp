@@ -129,10 +129,18 @@ TEST_F(TwoLevel, StructureOneBlasPerSourcePosesPerTimeMappingValidTrees) {
 // centroid of a random triangle, so no ray is aimed at an edge. Hits agree when they name the same
 // triangle of the same instance with t within kRelativeT; a different triangle at the same t
 // (within the tolerance) is a tie between coincident surfaces, allowed for at most 2% of the hits.
-void expectFlatHits(const tsah::TwoLevelScene& scene, const fs::path& scenePath, tsah::Layout layout) {
+void expectFlatHits(const tsah::TwoLevelScene& scene, const fs::path& scenePath, tsah::Layout layout,
+                    tsah::TriangleForm poseTriangles = tsah::TriangleForm::Vertices) {
   const FlatScene flat(scenePath, scene.scene);
-  tsah::TwoLevelRuntime runtime(scene, {2, tsah::TwoLevelRuntime::TlasUpdate::Refit, layout});
-  tsah::TwoLevelRuntime rebuilt(scene, {2, tsah::TwoLevelRuntime::TlasUpdate::Rebuild, layout});
+  tsah::TwoLevelRuntime runtime(scene, {2, tsah::TwoLevelRuntime::TlasUpdate::Refit, layout, poseTriangles});
+  tsah::TwoLevelRuntime rebuilt(scene, {2, tsah::TwoLevelRuntime::TlasUpdate::Rebuild, layout, poseTriangles});
+  if (layout != tsah::Layout::Bvh2)  // the poses in the form asked for, the static BLAS in the Woop form
+    for (uint32_t i = 0; i < scene.instanceCount(); ++i) {
+      const tsah::CpuRuntime& blas = runtime.blasOf(i);
+      const tsah::TriangleForm form = blas.wide8() ? blas.wide8()->form() : blas.wide4()->form();
+      const bool posed = scene.instancePose[i] != tsah::kInvalidIndex;
+      EXPECT_EQ(form, posed ? poseTriangles : tsah::TriangleForm::Woop) << "instance " << i;
+    }
   std::mt19937 rng(7);
   uint32_t rays = 0, hits = 0, ties = 0;
   for (uint32_t f = 0; f < scene.frameTimes.size(); f += 3) {
@@ -194,7 +202,8 @@ TEST_F(TwoLevel, WideBlasHitsEqualTheFlatBakedScene) {
   uint32_t traced = 0;
   for (const tsah::Layout layout : {tsah::Layout::Bvh4, tsah::Layout::Bvh8}) {
     if (!tsah::layoutSupported(layout)) continue;  // bvh8 needs AVX2
-    expectFlatHits(*scene, scenePath, layout);
+    for (const tsah::TriangleForm form : {tsah::TriangleForm::Vertices, tsah::TriangleForm::Woop})
+      expectFlatHits(*scene, scenePath, layout, form);
     ++traced;
   }
   ASSERT_GT(traced, 0u);  // bvh4 runs on every x86-64 (SSE)

@@ -1,11 +1,13 @@
-// The wide layouts (bvh4, bvh8) against the binary traversal, for every instruction set this machine
-// runs, each dispatch target tested explicitly: closest hit (same triangle, or a triangle at the same
-// distance when two tie; distances equal to within 1e-6 relative, in fact bit-identical) and any hit
+// The wide layouts (bvh4, bvh8), with their triangles as Woop packets and as vertex packets
+// (TriangleForm), against the binary traversal, for every instruction set this machine runs, each
+// dispatch target tested explicitly: closest hit (same triangle, or a triangle at the same
+// distance when two tie; distances equal to within 1e-6 relative, in fact bit-identical for Woop packets) and any hit
 // (the same answer, in both child orders) on random and real scenes, plus the refit's boxes in every
 // frame. A tie's triangle must lie on the ray at the hit's distance.
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <random>
 
 #include "tsah/base/error.hpp"
@@ -45,12 +47,24 @@ tsah::FlatBvh multiFrameTree(const anim::Animation& a, uint32_t maxLeaf, uint32_
   return tsah::flattenBvh(bvh);
 }
 
+using tsah::TriangleForm;
+constexpr TriangleForm kForms[] = {TriangleForm::Woop, TriangleForm::Vertices};
+const char* formName(TriangleForm form) { return form == TriangleForm::Woop ? "woop" : "vertices"; }
+// Tolerances against the binary traversal's Woop test: the Woop form gives its distances bit for
+// bit; the vertex form's watertight test rounds differently, most where a ray grazes its triangle
+// (the distance is then ill-conditioned in both tests; seen: 8e-6 at t = 0.0098), and its weights
+// lose digits to the origin's distance from a small triangle (edge functions of vertices relative
+// to the origin; seen: 1.4e-4).
+float relativeT(TriangleForm form) { return form == TriangleForm::Woop ? 1e-6f : 1e-4f; }
+float barycentricTolerance(TriangleForm form) { return form == TriangleForm::Woop ? 1e-6f : 1e-3f; }
+
 tsah::CpuRuntime runtime(const anim::Animation& a, const tsah::FlatBvh& tree, Layout layout,
-                         std::optional<SimdIsa> isa = std::nullopt) {
+                         std::optional<SimdIsa> isa = std::nullopt, TriangleForm form = TriangleForm::Woop) {
   tsah::CpuRuntime::Config c;
   c.threads = 2;
   c.layout = layout;
   c.isa = isa;
+  c.triangles = form;
   return tsah::CpuRuntime(tree, {a.indices().begin(), a.indices().end()}, a.vertexCount(), c);
 }
 
@@ -109,7 +123,7 @@ std::vector<std::pair<Layout, SimdIsa>> wideTargets() {
 
 // True when the hit's triangle lies on the ray at the hit's distance: a closest hit that names
 // another triangle than the binary traversal's is a tie, never a triangle off the ray.
-bool triangleOnRayAt(const tsah::CpuRuntime& rt, const tsah::Ray& ray, const tsah::Hit& h) {
+bool triangleOnRayAt(const tsah::CpuRuntime& rt, const tsah::Ray& ray, const tsah::Hit& h, float relative) {
   if (h.tri >= rt.triangleCount()) return false;
   const uint32_t* tri = rt.indices().data() + 3 * std::size_t(h.tri);
   const auto vertex = [&](uint32_t v) {
@@ -119,7 +133,7 @@ bool triangleOnRayAt(const tsah::CpuRuntime& rt, const tsah::Ray& ray, const tsa
   tsah::prepareShear(ray, prep);
   float t = 0.0f, u = 0.0f, v = 0.0f;
   return tsah::intersectWatertight(prep, vertex(tri[0]), vertex(tri[1]), vertex(tri[2]), ray.tmin, ray.tmax, t, u, v) &&
-         std::abs(t - h.t) <= 1e-6f * std::max(1.0f, h.t);
+         std::abs(t - h.t) <= relative * std::max(1.0f, h.t);
 }
 
 // Traces the rays with the binary runtime and every wide target at times ts; counts the hits.
@@ -127,8 +141,9 @@ void checkSameHits(const anim::Animation& a, const tsah::FlatBvh& tree, std::spa
                    uint32_t rayCount, uint32_t seed, uint64_t& hits) {
   tsah::CpuRuntime binary = runtime(a, tree, Layout::Bvh2);
   hits = 0;
-  for (const auto& [layout, isa] : wideTargets()) {
-    tsah::CpuRuntime wide = runtime(a, tree, layout, isa);
+  for (const auto& [layout, isa] : wideTargets())
+    for (TriangleForm form : kForms) {
+    tsah::CpuRuntime wide = runtime(a, tree, layout, isa, form);
     EXPECT_EQ(wide.layoutInfo().isa, isa);
     for (double t : ts) {
       const auto positions = a.positionsAt(t);
@@ -140,7 +155,7 @@ void checkSameHits(const anim::Animation& a, const tsah::FlatBvh& tree, std::spa
       for (std::size_t i = 0; i < rays.size(); ++i) {
         const tsah::Hit expect = binary.closestHit(rays[i]);
         const tsah::Hit got = wide.closestHit(rays[i]);
-        const std::string where = std::string(tsah::name(layout)) + "/" + tsah::name(isa) + " ray " +
+        const std::string where = std::string(tsah::name(layout)) + "/" + tsah::name(isa) + "/" + formName(form) + " ray " +
                                   std::to_string(i) + " t=" + std::to_string(t);
         ASSERT_EQ(expect.valid(), got.valid()) << where;
         ASSERT_EQ(binary.anyHit(rays[i]), wide.anyHit(rays[i])) << where;
@@ -148,16 +163,17 @@ void checkSameHits(const anim::Animation& a, const tsah::FlatBvh& tree, std::spa
         ASSERT_EQ(wide.anyHit(rays[i], tsah::AnyHitOrder::TreeOrder), got.valid()) << where;
         if (!expect.valid()) continue;
         ++hits;
-        ASSERT_NEAR(expect.t, got.t, 1e-6f * std::max(1.0f, expect.t)) << where;
+        ASSERT_NEAR(expect.t, got.t, relativeT(form) * std::max(1.0f, expect.t)) << where;
         if (expect.tri == got.tri) {
-          ASSERT_NEAR(expect.u, got.u, 1e-6f) << where;
-          ASSERT_NEAR(expect.v, got.v, 1e-6f) << where;
+          ASSERT_NEAR(expect.u, got.u, barycentricTolerance(form)) << where;
+          ASSERT_NEAR(expect.v, got.v, barycentricTolerance(form)) << where;
         } else {
-          ASSERT_TRUE(triangleOnRayAt(binary, rays[i], got)) << where << ": triangle " << got.tri << " is not on the ray";
+          ASSERT_TRUE(triangleOnRayAt(binary, rays[i], got, relativeT(form)))
+              << where << ": triangle " << got.tri << " is not on the ray";
         }
       }
     }
-  }
+    }
 }
 
 uint64_t expectSameHits(const anim::Animation& a, const tsah::FlatBvh& tree, std::span<const double> ts,
@@ -209,8 +225,9 @@ TEST(WideTraversal, SameAnswersThroughEdgesAndVertices) {
   const tsah::FlatBvh tree = multiFrameTree(a, 4, 2);
   tsah::CpuRuntime binary = runtime(a, tree, Layout::Bvh2);
   binary.update(a.positionsAt(a.startTime()));
-  for (const auto& [layout, isa] : wideTargets()) {
-    tsah::CpuRuntime rt = runtime(a, tree, layout, isa);
+  for (const auto& [layout, isa] : wideTargets())
+    for (TriangleForm form : kForms) {
+    tsah::CpuRuntime rt = runtime(a, tree, layout, isa, form);
     rt.update(a.positionsAt(a.startTime()));
     const float* p = rt.positions().data();
     auto vertex = [&](uint32_t i) { return Vec3{p[3 * i], p[3 * i + 1], p[3 * i + 2]}; };
@@ -223,17 +240,17 @@ TEST(WideTraversal, SameAnswersThroughEdgesAndVertices) {
           const Vec3 target = vertex(tri[e]) * (1 - s) + vertex(tri[(e + 1) % 3]) * s;
           const tsah::Ray ray{eye, 0.0f, target - eye, 1.5f};
           const tsah::Hit expect = binary.closestHit(ray), got = rt.closestHit(ray);
-          ASSERT_EQ(expect.valid(), got.valid()) << tsah::name(isa) << " triangle " << t << " edge " << e;
+          ASSERT_EQ(expect.valid(), got.valid()) << tsah::name(isa) << "/" << formName(form) << " triangle " << t << " edge " << e;
           ASSERT_EQ(binary.anyHit(ray), rt.anyHit(ray));
           ASSERT_EQ(binary.anyHit(ray), rt.anyHit(ray, tsah::AnyHitOrder::TreeOrder));
           if (expect.valid()) {
-            ASSERT_NEAR(expect.t, got.t, 1e-6f * expect.t);  // a tie may pick a neighbour through the vertex
+            ASSERT_NEAR(expect.t, got.t, relativeT(form) * expect.t);  // a tie may pick a neighbour through the vertex
           }
           hits += got.valid() ? 1 : 0;
         }
       }
     EXPECT_GT(hits, rt.triangleCount() * 6);
-  }
+    }
 }
 
 // Every used child box of every node contains what is below it, after each update.
@@ -251,12 +268,18 @@ void expectBoxesContainChildren(const tsah::WideTree<N>& w, const tsah::CpuRunti
         continue;
       }
       for (uint32_t i = 0; i < node.count[c]; ++i) {
-        const auto& pk = w.packets()[tsah::leafFirstSlot(node.ref[c]) + i / N];
-        const uint32_t* tri = rt.indices().data() + 3 * std::size_t(w.triIndex()[pk.slot[i % N]]);
+        const uint32_t packet = tsah::leafFirstSlot(node.ref[c]) + i / N, lane = i % N;
+        const uint32_t slot = w.packetSlots()[packet] + lane;
+        if (w.form() == TriangleForm::Woop) ASSERT_EQ(w.packets()[packet].slot[lane], slot);
+        const uint32_t* tri = rt.indices().data() + 3 * std::size_t(w.triIndex()[slot]);
         for (int k = 0; k < 3; ++k) {
           const Vec3 v{p[3 * tri[k]], p[3 * tri[k] + 1], p[3 * tri[k] + 2]};
           ASSERT_TRUE(v.x >= box.lo.x && v.x <= box.hi.x && v.y >= box.lo.y && v.y <= box.hi.y && v.z >= box.lo.z &&
                       v.z <= box.hi.z);
+          if (w.form() == TriangleForm::Vertices) {  // the packet holds this frame's vertices exactly
+            const Vec3 held = w.vertexPackets()[packet].get(uint32_t(k), lane);
+            ASSERT_TRUE(held.x == v.x && held.y == v.y && held.z == v.z) << "packet " << packet << " lane " << lane;
+          }
         }
       }
     }
@@ -265,9 +288,16 @@ void expectBoxesContainChildren(const tsah::WideTree<N>& w, const tsah::CpuRunti
 TEST(WideTraversal, RefitBoxesContainChildrenInEveryFrameAndCostsAreReported) {
   const auto a = generatedAnimation(anim::GeneratorKind::Explode, 3000, 10);
   const tsah::FlatBvh tree = multiFrameTree(a, 4, 4);
-  for (Layout layout : {Layout::Bvh4, Layout::Bvh8}) {
+  for (Layout layout : {Layout::Bvh4, Layout::Bvh8})
+    for (TriangleForm form : kForms) {
     if (!tsah::layoutSupported(layout)) continue;
-    tsah::CpuRuntime rt = runtime(a, tree, layout);
+    tsah::CpuRuntime rt = runtime(a, tree, layout, std::nullopt, form);
+    const auto* w4 = rt.wide4();
+    const auto* w8 = rt.wide8();
+    EXPECT_EQ(w4 ? w4->form() : w8->form(), form);
+    EXPECT_EQ(w4 ? w4->packets().empty() : w8->packets().empty(), form == TriangleForm::Vertices);
+    EXPECT_EQ(w4 ? w4->vertexPackets().size() : w8->vertexPackets().size(),
+              form == TriangleForm::Vertices ? (w4 ? w4->packetCount() : w8->packetCount()) : 0u);
     EXPECT_GT(rt.layoutInfo().binaryCost, 0.0);
     EXPECT_LE(rt.layoutInfo().layoutCost, rt.layoutInfo().binaryCost);
     EXPECT_THROW(rt.view(), tsah::ConfigError);  // the binary tree is not refitted in a wide layout
@@ -278,7 +308,7 @@ TEST(WideTraversal, RefitBoxesContainChildrenInEveryFrameAndCostsAreReported) {
       else
         expectBoxesContainChildren(*rt.wide8(), rt);
     }
-  }
+    }
 }
 
 TEST(WideTraversal, RebuildKeepsTheLayout) {
@@ -300,6 +330,55 @@ TEST(WideTraversal, RebuildKeepsTheLayout) {
 TEST(WideTraversal, RejectsUnsupportedKernels) {
   const auto a = generatedAnimation(anim::GeneratorKind::Swap, 100, 2);
   EXPECT_THROW(runtime(a, multiFrameTree(a, 4, 1), Layout::Bvh8, SimdIsa::Sse), tsah::ConfigError);  // sse: 4-wide only
+  // The binary layout has only Woop triangles.
+  EXPECT_THROW(runtime(a, multiFrameTree(a, 4, 1), Layout::Bvh2, std::nullopt, TriangleForm::Vertices),
+               tsah::ConfigError);
+}
+
+// A tree of vertex packets refitted only where its vertices move equals a full refit, packets
+// included, and traces as the Woop form.
+TEST(WideTraversal, VertexPacketsRefitOnlyWhatMoves) {
+  const auto a = generatedAnimation(anim::GeneratorKind::Wave, 2000, 6);
+  const tsah::FlatBvh tree = multiFrameTree(a, 4, 3);
+  std::vector<uint32_t> moving;  // half of the vertices move; the others stay at their frame-0 place
+  for (uint32_t v = 0; v < a.vertexCount(); v += 2) moving.push_back(v);
+  const auto frame0 = a.positionsAt(a.startTime());
+  for (Layout layout : {Layout::Bvh4, Layout::Bvh8}) {
+    if (!tsah::layoutSupported(layout)) continue;
+    tsah::CpuRuntime::Config c(2);
+    c.layout = layout;
+    c.triangles = TriangleForm::Vertices;
+    tsah::CpuRuntime full(tree, {a.indices().begin(), a.indices().end()}, a.vertexCount(), c);
+    c.movingVertices = moving;
+    tsah::CpuRuntime part(tree, {a.indices().begin(), a.indices().end()}, a.vertexCount(), c);
+    tsah::CpuRuntime woop = runtime(a, tree, layout);
+    for (double t : {a.startTime(), 0.4 * a.endTime(), a.endTime()}) {
+      std::vector<float> p = a.positionsAt(t);
+      for (uint32_t v = 1; v < a.vertexCount(); v += 2)
+        for (int k = 0; k < 3; ++k) p[3 * v + k] = frame0[3 * v + k];
+      full.update(p);
+      part.update(p);
+      woop.update(p);
+      const auto bytes = [](const auto* w) {
+        const auto nodes = w->nodes();
+        const auto packets = w->vertexPackets();
+        std::vector<uint8_t> out(nodes.size_bytes() + packets.size_bytes());
+        std::memcpy(out.data(), nodes.data(), nodes.size_bytes());
+        std::memcpy(out.data() + nodes.size_bytes(), packets.data(), packets.size_bytes());
+        return out;
+      };
+      if (layout == Layout::Bvh4)
+        EXPECT_EQ(bytes(full.wide4()), bytes(part.wide4())) << "t " << t;
+      else
+        EXPECT_EQ(bytes(full.wide8()), bytes(part.wide8())) << "t " << t;
+      for (const tsah::Ray& ray : randomRays(woop, 400, 21)) {
+        const tsah::Hit expect = woop.closestHit(ray), got = part.closestHit(ray);
+        ASSERT_EQ(expect.valid(), got.valid());
+        ASSERT_EQ(woop.anyHit(ray), part.anyHit(ray));
+        if (expect.valid()) ASSERT_NEAR(expect.t, got.t, relativeT(TriangleForm::Vertices) * std::max(1.0f, expect.t));
+      }
+    }
+  }
 }
 
 TEST(WideTraversal, SameHitsAsBinaryOnRealScenes) {

@@ -151,16 +151,16 @@ inline bool intersectLeaf(const WideView<V::N>& bvh, const Ray& ray, LazyPrep& p
   return found;
 }
 
-// A blurred leaf: each slot's triangle lerped at f between the two keys' vertex packets
-// (motion::lerpVertex's operations lane by lane) and tested with intersectWatertight's operations
-// lane by lane. A lane whose U, V or W is not clearly nonzero in float takes the scalar test (its
-// edge decision in double) on the same lerped vertices. Of the lanes that hit, the nearest wins
-// and the first lane among equal distances: what testing the slots one by one, each against the
-// nearest hit so far, returns. hit.tri is the hit's slot, as in intersectLeaf.
-template <class V, bool AnyHit>
-inline bool intersectMotionLeaf(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, const Ray& ray,
-                                LazyPrep& lazy, const RayLanes<V>& r, uint32_t first, uint32_t count, float& tmax,
-                                Hit& hit) {
+// The watertight test (intersectWatertight's operations lane by lane) on the leaf's packets of
+// vertices: coordinates(p, c) fills c[3 * k + a] with coordinate a of vertex k of packet p's lanes,
+// vertex(p, k, lane) gives one lane's vertex k for the scalar test. A lane whose U, V or W is not
+// clearly nonzero in float takes the scalar test (its edge decision in double) on the same
+// vertices. Of the lanes that hit, the nearest wins and the first lane among equal distances:
+// what testing the slots one by one, each against the nearest hit so far, returns. hit.tri is the
+// hit's slot, as in intersectLeaf.
+template <class V, bool AnyHit, class Coordinates, class Vertex>
+inline bool intersectVertexPackets(const uint32_t* packetSlots, const Ray& ray, LazyPrep& lazy, uint32_t first,
+                                   uint32_t count, float& tmax, Hit& hit, Coordinates coordinates, Vertex vertex) {
   constexpr uint32_t N = V::N;
   const RayPrep& prep = lazy.watertight(ray);
   const V zero = V::set1(0.0f);
@@ -171,18 +171,15 @@ inline bool intersectMotionLeaf(const WideView<V::N>& bvh, const WideMotionFrame
   const auto nonzero = [&](V x) { return V::lt(x, zero) | V::gt(x, zero); };
   bool found = false;
   for (uint32_t p = 0; p < packetCount<N>(count); ++p) {
-    const KeyVertexPacket<N>& k0 = m.vertices0[first + p];
-    const KeyVertexPacket<N>& k1 = m.vertices1[first + p];
     const uint32_t lanes = count - p * N < N ? count - p * N : N;
     const uint32_t used = (1u << lanes) - 1u;
+    V c[9];
+    coordinates(first + p, c);
     // Vertex k relative to the origin in the ray's axes, then sheared (x, y) and scaled (z).
     V x[3], y[3], z[3];
     for (int k = 0; k < 3; ++k) {
       V rel[3];
-      for (int i = 0; i < 3; ++i) {
-        const int row = 3 * k + axis[i];
-        rel[i] = motion::lerpOf(V::load(k0.vertex[row]), V::load(k1.vertex[row]), r.f, r.g) - org[i];
-      }
+      for (int i = 0; i < 3; ++i) rel[i] = c[3 * k + axis[i]] - org[i];
       x[k] = rel[0] - sx * rel[2];
       y[k] = rel[1] - sy * rel[2];
       z[k] = sz * rel[2];
@@ -200,9 +197,10 @@ inline bool intersectMotionLeaf(const WideView<V::N>& bvh, const WideMotionFrame
     const auto inRange = V::gt(tt, V::set1(ray.tmin)) & V::lt(tt, V::set1(tmax));
     uint32_t hits = V::bits(V::andNot(negative & positive, nonzero(det) & inRange)) & used & ~fallback;
     if (!(hits | fallback)) continue;
+    const uint32_t slot0 = packetSlots[first + p];  // lane l holds slot slot0 + l
     if (AnyHit && hits) {
       hit.t = 0.0f;
-      hit.tri = bvh.packets[first + p].slot[__builtin_ctz(hits)];
+      hit.tri = slot0 + uint32_t(__builtin_ctz(hits));
       return true;
     }
     alignas(32) float t[N], u[N], v[N];
@@ -211,11 +209,11 @@ inline bool intersectMotionLeaf(const WideView<V::N>& bvh, const WideMotionFrame
     V::store(v, W * rcp);
     for (uint32_t rest = fallback; rest; rest &= rest - 1) {
       const uint32_t lane = uint32_t(__builtin_ctz(rest));
-      const auto vertex = [&](uint32_t k) { return motion::lerpVertex(k0.get(k, lane), k1.get(k, lane), m.f); };
-      if (intersectWatertight(prep, vertex(0), vertex(1), vertex(2), ray.tmin, tmax, t[lane], u[lane], v[lane])) {
+      const auto at = [&](uint32_t k) { return vertex(first + p, k, lane); };
+      if (intersectWatertight(prep, at(0), at(1), at(2), ray.tmin, tmax, t[lane], u[lane], v[lane])) {
         if (AnyHit) {
           hit.t = 0.0f;
-          hit.tri = bvh.packets[first + p].slot[lane];
+          hit.tri = slot0 + lane;
           return true;
         }
         hits |= 1u << lane;
@@ -228,10 +226,39 @@ inline bool intersectMotionLeaf(const WideView<V::N>& bvh, const WideMotionFrame
       if (t[lane] < t[best]) best = lane;
     }
     tmax = t[best];
-    hit = {t[best], u[best], v[best], bvh.packets[first + p].slot[best]};
+    hit = {t[best], u[best], v[best], slot0 + best};
     found = true;
   }
   return found;
+}
+
+// A leaf of a tree in the Vertices form (TriangleForm): the view's vertex packets of this frame.
+template <class V, bool AnyHit>
+inline bool intersectVertexLeaf(const WideView<V::N>& bvh, const Ray& ray, LazyPrep& lazy, uint32_t first,
+                                uint32_t count, float& tmax, Hit& hit) {
+  return intersectVertexPackets<V, AnyHit>(
+      bvh.packetSlots, ray, lazy, first, count, tmax, hit,
+      [&](uint32_t p, V c[9]) {
+        for (int row = 0; row < 9; ++row) c[row] = V::load(bvh.vertexPackets[p].vertex[row]);
+      },
+      [&](uint32_t p, uint32_t k, uint32_t lane) { return bvh.vertexPackets[p].get(k, lane); });
+}
+
+// A blurred leaf: each slot's triangle lerped at f between the two keys' vertex packets
+// (motion::lerpVertex's operations lane by lane), then the vertex packets' test.
+template <class V, bool AnyHit>
+inline bool intersectMotionLeaf(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, const Ray& ray,
+                                LazyPrep& lazy, const RayLanes<V>& r, uint32_t first, uint32_t count, float& tmax,
+                                Hit& hit) {
+  return intersectVertexPackets<V, AnyHit>(
+      bvh.packetSlots, ray, lazy, first, count, tmax, hit,
+      [&](uint32_t p, V c[9]) {
+        for (int row = 0; row < 9; ++row)
+          c[row] = motion::lerpOf(V::load(m.vertices0[p].vertex[row]), V::load(m.vertices1[p].vertex[row]), r.f, r.g);
+      },
+      [&](uint32_t p, uint32_t k, uint32_t lane) {
+        return motion::lerpVertex(m.vertices0[p].get(k, lane), m.vertices1[p].get(k, lane), m.f);
+      });
 }
 
 // A node's entry and exit distances on each axis, (plane - org) * inv for the near and the far
@@ -496,7 +523,7 @@ TSAH_KERNEL void keyVerticesKernel(const float* positions, const uint32_t* verti
 // The triangle traversals: the leaf tests of the instant frame or of a blurred one. The leaf tests
 // report slots; a closest hit's slot becomes its triangle here (an any hit's is only tested for
 // validity by the entry points).
-template <class V, Query Q, bool Blurred>
+template <class V, Query Q, bool Blurred, bool VertexLeaves = false>
 inline Hit traverseTriangles(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, const Ray& ray) {
   constexpr bool AnyHit = Q != Query::Closest;
   Hit found = traverse<V, Q, Blurred>(bvh, m, ray,
@@ -504,6 +531,8 @@ inline Hit traverseTriangles(const WideView<V::N>& bvh, const WideMotionFrame<V:
                                      Hit& hit) {
                                    if constexpr (Blurred)
                                      return intersectMotionLeaf<V, AnyHit>(bvh, m, ray, prep, r, first, count, tmax, hit);
+                                   else if constexpr (VertexLeaves)
+                                     return intersectVertexLeaf<V, AnyHit>(bvh, ray, prep, first, count, tmax, hit);
                                    else
                                      return intersectLeaf<V, AnyHit>(bvh, ray, prep, r, first, count, tmax, hit);
                                  },
@@ -512,12 +541,18 @@ inline Hit traverseTriangles(const WideView<V::N>& bvh, const WideMotionFrame<V:
   return found;
 }
 
+// The instant kernels of either triangle form (the view's: vertex packets or Woop packets).
 template <class V>
 TSAH_KERNEL Hit closestKernel(const WideView<V::N>& bvh, const Ray& ray) {
-  return traverseTriangles<V, Query::Closest, false>(bvh, {}, ray);
+  return bvh.vertexPackets ? traverseTriangles<V, Query::Closest, false, true>(bvh, {}, ray)
+                           : traverseTriangles<V, Query::Closest, false>(bvh, {}, ray);
 }
 template <class V>
 TSAH_KERNEL bool anyKernel(const WideView<V::N>& bvh, const Ray& ray, AnyHitOrder order) {
+  if (bvh.vertexPackets)
+    return order == AnyHitOrder::TreeOrder
+               ? traverseTriangles<V, Query::AnyTreeOrder, false, true>(bvh, {}, ray).valid()
+               : traverseTriangles<V, Query::AnyFarthestFirst, false, true>(bvh, {}, ray).valid();
   return order == AnyHitOrder::TreeOrder ? traverseTriangles<V, Query::AnyTreeOrder, false>(bvh, {}, ray).valid()
                                          : traverseTriangles<V, Query::AnyFarthestFirst, false>(bvh, {}, ray).valid();
 }

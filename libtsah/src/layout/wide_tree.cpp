@@ -37,7 +37,9 @@ auto interiorChildrenOf(const std::vector<WideSoaNode<N>>& nodes) {
 }  // namespace
 
 template <uint32_t N>
-WideTree<N>::WideTree(const WideBvh& w, std::span<const uint32_t> indices, uint32_t threads, SimdIsa isa) {
+WideTree<N>::WideTree(const WideBvh& w, std::span<const uint32_t> indices, uint32_t threads, SimdIsa isa,
+                      TriangleForm form)
+    : form_(form) {
   if constexpr (N == 4) {
     woopRows_ = wideKernels(isa).woopRows4;
     keyVertexRows_ = wideKernels(isa).keyVertices4;
@@ -56,19 +58,21 @@ WideTree<N>::WideTree(const WideBvh& w, std::span<const uint32_t> indices, uint3
   slotVertices_ = slotVertexIndices(triIndex_, indices, "wide tree");
   // Packets of a leaf over slots [first, first + count): lane l of packet p holds slot first + p*N + l.
   auto addLeaf = [&](uint32_t first, uint32_t count) {
-    const auto packet = static_cast<uint32_t>(packets_.size());
-    for (uint32_t p = 0; p < packetCount<N>(count); ++p) {
+    const auto packet = static_cast<uint32_t>(packetSlots_.size());
+    for (uint32_t p = 0; p < tsah::packetCount<N>(count); ++p) {
+      packetSlots_.push_back(first + p * N);
+      if (form_ == TriangleForm::Vertices) continue;
       WoopPacket<N> pk;
       std::memset(&pk, 0, sizeof pk);
       for (uint32_t lane = 0; lane < N; ++lane) pk.slot[lane] = p * N + lane < count ? first + p * N + lane : first;
       packets_.push_back(pk);
-      packetSlots_.push_back(first + p * N);
     }
     return makeLeafRef(packet);
   };
   if (isLeafRef(w.rootRef)) {
     rootRef_ = addLeaf(0, w.rootCount);
     rootCount_ = w.rootCount;
+    if (form_ == TriangleForm::Vertices) vertexPackets_.resize(packetSlots_.size());
     return;
   }
   rootRef_ = 0;
@@ -82,6 +86,7 @@ WideTree<N>::WideTree(const WideBvh& w, std::span<const uint32_t> indices, uint3
       node.count[c] = child.isLeaf() ? child.count : 0;
     }
   }
+  if (form_ == TriangleForm::Vertices) vertexPackets_.resize(packetSlots_.size());
   threads_ = threads;
   subtreeEnds_ = wideSubtreeEnds(w);
   detail::planParallelRefit(subtreeEnds_, threads, interiorChildrenOf(nodes_), subtreeTasks_, topNodes_,
@@ -141,13 +146,19 @@ void WideTree<N>::refitInterior(uint32_t i, WideSoaNode<N>* nodes) {
 }
 
 template <uint32_t N>
+typename WideTree<N>::Target WideTree<N>::ownTarget(const float* positions) {
+  const bool woop = form_ == TriangleForm::Woop;
+  return {positions, nodes_.data(), woop, woop ? nullptr : vertexPackets_.data()};
+}
+
+template <uint32_t N>
 void WideTree<N>::refit(const float* positions, const ParallelFor& parallelFor) {
-  rootBox_ = refitTo({positions, nodes_.data(), true, nullptr}, false, parallelFor);
+  rootBox_ = refitTo(ownTarget(positions), false, parallelFor);
 }
 
 template <uint32_t N>
 void WideTree<N>::refitMoving(const float* positions, const ParallelFor& parallelFor) {
-  rootBox_ = refitTo({positions, nodes_.data(), true, nullptr}, true, parallelFor);
+  rootBox_ = refitTo(ownTarget(positions), true, parallelFor);
 }
 
 template <uint32_t N>
@@ -215,7 +226,9 @@ template <uint32_t N>
 WideView<N> WideTree<N>::view(const uint32_t* indices, const float* positions) const {
   WideView<N> v;
   v.nodes = nodes_.data();
-  v.packets = packets_.data();
+  v.packets = form_ == TriangleForm::Woop ? packets_.data() : nullptr;
+  v.vertexPackets = form_ == TriangleForm::Vertices ? vertexPackets_.data() : nullptr;
+  v.packetSlots = packetSlots_.data();
   v.triIndex = triIndex_.data();
   v.indices = indices;
   v.slotVertices = slotVertices_.data();

@@ -82,6 +82,9 @@ CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint3
   setTree(topologyOf(tree));
   positions_.assign(std::size_t(vertexCount_) * 3, 0.0f);
   info_.layout = config.layout;
+  if (config.layout == Layout::Bvh2 && config.triangles != TriangleForm::Woop)
+    throw tsah::ConfigError("runtime: the bvh2 layout holds its triangles only as Woop triangles");
+  triangles_ = config.triangles;
   if (config.layout == Layout::Bvh2) {
     info_.interiorNodes = tree_.interiorCount;
     info_.leaves = tree_.leafCount;
@@ -111,10 +114,10 @@ void CpuRuntime::setWideTree(const Bvh& binary, bool reportCosts) {
   info_.leaves = w.leafCount();
   info_.depth = w.depth();
   if (info_.layout == Layout::Bvh4) {
-    wide4_ = std::make_shared<WideTree<4>>(w, indices_, threads_->count, info_.isa);
+    wide4_ = std::make_shared<WideTree<4>>(w, indices_, threads_->count, info_.isa, triangles_);
     if (movingVertices_) wide4_->setMovingVertices(*movingVertices_, vertexCount_);
   } else {
-    wide8_ = std::make_shared<WideTree<8>>(w, indices_, threads_->count, info_.isa);
+    wide8_ = std::make_shared<WideTree<8>>(w, indices_, threads_->count, info_.isa, triangles_);
     if (movingVertices_) wide8_->setMovingVertices(*movingVertices_, vertexCount_);
   }
   staticRefitted_ = false;

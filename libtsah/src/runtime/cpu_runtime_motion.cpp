@@ -133,7 +133,7 @@ void CpuRuntime::refitShutterKey(std::span<const float> positions, bool readMovi
     const bool movingOnly = set.refitted && movingVertices_.has_value();
     if (!set.refitted) {  // a new key set, or a dropped one of another size: the tree's refs and counts
       set.nodes.assign(tree.nodes().begin(), tree.nodes().end());
-      set.vertices.resize(tree.packets().size());
+      set.vertices.resize(tree.packetCount());
     }
     out.keyRootBoxes[key] = tree.refitKey(block.data(), set.nodes.data(), set.vertices.data(), movingOnly, parallel);
     set.refitted = true;
@@ -220,9 +220,9 @@ void CpuRuntime::updateShutter(std::span<const ShutterPart> parts) {
     const WideTree<8>* w8 = setWide8_.empty() ? wide8_.get() : setWide8_[t].get();
     std::size_t keyBytes = floats * sizeof(float) + sizeof(Aabb);
     if (w4)
-      keyBytes += w4->nodes().size() * sizeof(WideSoaNode<4>) + w4->packets().size() * sizeof(KeyVertexPacket<4>);
+      keyBytes += w4->nodes().size() * sizeof(WideSoaNode<4>) + w4->packetCount() * sizeof(KeyVertexPacket<4>);
     else if (w8)
-      keyBytes += w8->nodes().size() * sizeof(WideSoaNode<8>) + w8->packets().size() * sizeof(KeyVertexPacket<8>);
+      keyBytes += w8->nodes().size() * sizeof(WideSoaNode<8>) + w8->packetCount() * sizeof(KeyVertexPacket<8>);
     else
       keyBytes += (setTrees_.empty() ? tree_ : setTrees_[t]).interiorCount * sizeof(GpuBvhNode);
     bytes += part.keyTimes.size() * keyBytes;

@@ -66,6 +66,7 @@ TwoLevelRuntime::TwoLevelRuntime(const TwoLevelScene& scene, Config config) : sc
     Objective objective = scene.objective;
     objective.k = blas.animated ? objective.k : 0;  // the objective the BLAS was built with
     own.collapse = wideCollapseConfig(objective);
+    if (blas.animated && config.layout != Layout::Bvh2) own.triangles = config.poseTriangles;
     // A pose is refitted from its source's frames, whose static vertices stay at rest.
     if (!source.allMoving())
       own.movingVertices.emplace(source.movingVertices().begin(), source.movingVertices().end());
@@ -224,10 +225,14 @@ uint64_t TwoLevelRuntime::memoryBytes() const {
   uint64_t bytes = 0;
   const auto runtimeBytes = [](const CpuRuntime& r) {
     uint64_t tree = 0;
+    const auto wideBytes = [](const auto& w) {
+      return w.nodes().size_bytes() + w.packets().size_bytes() + w.vertexPackets().size_bytes() +
+             w.packetSlots().size_bytes() + w.triIndex().size_bytes();
+    };
     if (const WideTree<4>* w = r.wide4())
-      tree = w->nodes().size_bytes() + w->packets().size_bytes() + w->triIndex().size_bytes();
+      tree = wideBytes(*w);
     else if (const WideTree<8>* w8 = r.wide8())
-      tree = w8->nodes().size_bytes() + w8->packets().size_bytes() + w8->triIndex().size_bytes();
+      tree = wideBytes(*w8);
     else
       tree = uint64_t(r.tree().nodes.size()) * sizeof(GpuBvhNode) + r.tree().triIndex.size() * sizeof(uint32_t) +
              r.woop().size() * sizeof(WoopTriangle);

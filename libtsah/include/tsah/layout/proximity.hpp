@@ -102,7 +102,7 @@ struct WideQueryTree {
   TSAH_HD int32_t childRef(int32_t ref, uint32_t c) const { return view.nodes[ref].ref[c]; }
   TSAH_HD uint32_t childCount(int32_t ref, uint32_t c) const { return view.nodes[ref].count[c]; }
   TSAH_HD uint32_t leafTriangle(int32_t ref, uint32_t i) const {
-    return view.triIndex[view.packets[leafFirstSlot(ref) + i / N].slot[i % N]];
+    return view.triIndex[view.packetSlots[leafFirstSlot(ref) + i / N] + i % N];
   }
   TSAH_HD const uint32_t* indices() const { return view.indices; }
   TSAH_HD Vec3 vertex(uint32_t i) const { return view.vertex(i); }

@@ -16,6 +16,9 @@
 // animation's triangle ids, as in the binary layout). Lanes past a leaf's count are padding: zero
 // rows (which never hit) and the slot of the leaf's first triangle.
 //
+// A tree in the Vertices form (TriangleForm) has no Woop packets: its leaf references index its
+// KeyVertexPackets (one per would-be Woop packet, the same lanes) and packetSlots instead.
+//
 // Traversals pick each axis's near plane by the sign of the ray direction (box[a] for a positive
 // inverse direction, box[3 + a] otherwise); with the empty box the entry distance is then +inf or
 // the exit distance -inf, so empty slots are never entered.
@@ -107,11 +110,20 @@ TSAH_HD uint32_t packetCount(uint32_t count) {
   return (count + N - 1) / N;
 }
 
+// How a wide tree holds this frame's triangles. Woop: WoopPackets, the fastest test, whose rows a
+// refit computes in double precision per triangle. Vertices: one KeyVertexPacket per packet, the
+// watertight test on the vertices themselves, and a refit that only gathers them (about a quarter
+// of a Woop refit's work): the form for trees refitted every frame and traced by few rays each,
+// such as the poses of a two-level scene.
+enum class TriangleForm : uint8_t { Woop, Vertices };
+
 // Everything a wide traversal reads for one frame. Raw pointers and counts only: pass by value.
 template <uint32_t N>
 struct WideView {
   const WideSoaNode<N>* nodes = nullptr;  // node 0 is the root when rootRef >= 0
-  const WoopPacket<N>* packets = nullptr;
+  const WoopPacket<N>* packets = nullptr;  // TriangleForm::Woop; null in the Vertices form
+  const KeyVertexPacket<N>* vertexPackets = nullptr;  // TriangleForm::Vertices: this frame's, else null
+  const uint32_t* packetSlots = nullptr;  // per packet the slot of lane 0 (lane l: packetSlots[p] + l)
   const uint32_t* triIndex = nullptr;     // slot -> triangle id
   const uint32_t* indices = nullptr;      // 3 vertex indices per triangle id
   const uint32_t* slotVertices = nullptr; // 3 vertex indices per slot (those of triIndex[slot]): the
@@ -127,8 +139,8 @@ struct WideView {
 // What a blurred frame (docs/motion-blur.md) adds to the WideView of key s for one ray: the nodes
 // of key s + 1, the triangles' vertices at both keys (one KeyVertexPacket per Woop packet) and the
 // ray's place f between them. The view's nodes and positions are then key s's, and its root box
-// lerped at f when the root is a leaf (an interior root's box is not read); the Woop packets are
-// not read, only their slots.
+// lerped at f when the root is a leaf (an interior root's box is not read); neither the Woop
+// packets nor the view's vertex packets are read, only packetSlots.
 template <uint32_t N>
 struct WideMotionFrame {
   const WideSoaNode<N>* nodes1 = nullptr;

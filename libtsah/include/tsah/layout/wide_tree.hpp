@@ -1,7 +1,7 @@
 #pragma once
 // A wide tree in the CPU SIMD layout (wide_layout.hpp) with its per-frame refit: the nodes and
-// Woop packets of one frame, built from a WideBvh topology (wide_bvh.hpp). refit() recomputes
-// every child box and Woop packet from this frame's vertices in one parallel pass over disjoint
+// Woop packets (or vertex packets: TriangleForm) of one frame, built from a WideBvh topology
+// (wide_bvh.hpp). refit() recomputes every child box and packet from this frame's vertices in one parallel pass over disjoint
 // subtrees (then the few nodes above them), as CpuRuntime does for the binary tree.
 #include <cstdint>
 #include <functional>
@@ -33,8 +33,9 @@ class WideTree {
   // workers refit() will run on (it plans about 8 subtrees per thread). isa: whose SIMD code
   // computes the Woop rows (the results are the same for every one). Throws tsah::ConfigError when
   // the isa is not supported, tsah::DataError when the topology is invalid, too wide or too deep, or a
-  // triangle id is past the index array.
-  WideTree(const WideBvh& topology, std::span<const uint32_t> indices, uint32_t threads, SimdIsa isa = bestIsa());
+  // triangle id is past the index array. form: how refit() stores the triangles (TriangleForm).
+  WideTree(const WideBvh& topology, std::span<const uint32_t> indices, uint32_t threads, SimdIsa isa = bestIsa(),
+           TriangleForm form = TriangleForm::Woop);
 
   // This frame's vertices (xyz per vertex; every vertex index of the triangles must be in range).
   void refit(const float* positions, const ParallelFor& parallelFor);
@@ -60,7 +61,11 @@ class WideTree {
   Aabb bounds() const { return rootBox_; }
   uint32_t depth() const { return depth_; }
   std::span<const WideSoaNode<N>> nodes() const { return nodes_; }
-  std::span<const WoopPacket<N>> packets() const { return packets_; }
+  TriangleForm form() const { return form_; }
+  std::span<const WoopPacket<N>> packets() const { return packets_; }  // empty in the Vertices form
+  std::span<const KeyVertexPacket<N>> vertexPackets() const { return vertexPackets_; }  // empty in the Woop form
+  std::span<const uint32_t> packetSlots() const { return packetSlots_; }
+  uint32_t packetCount() const { return uint32_t(packetSlots_.size()); }
   std::span<const uint32_t> triIndex() const { return triIndex_; }
   int32_t rootRef() const { return rootRef_; }
   uint32_t rootCount() const { return rootCount_; }
@@ -74,6 +79,7 @@ class WideTree {
     bool woop;
     KeyVertexPacket<N>* keyVertices;
   };
+  Target ownTarget(const float* positions);  // the tree's own nodes and packets of its form
   // movingOnly (after setMovingVertices): the moving plan's nodes only. Returns the root box.
   Aabb refitTo(const Target& target, bool movingOnly, const ParallelFor& parallelFor);
   Aabb refitLeaf(uint32_t firstPacket, uint32_t count, const Target& target);
@@ -87,9 +93,12 @@ class WideTree {
   void (*keyVertexRows_)(const float* positions, const uint32_t* vertices, uint32_t lanes, KeyVertexPacket<N>& out,
                          Aabb& bounds) = nullptr;
   std::vector<WideSoaNode<N>> nodes_;
-  std::vector<WoopPacket<N>> packets_;
-  // The slot of each packet's lane 0 (its lanes hold consecutive slots): the refit reads this
-  // instead of the packet's own slot array, whose cache line would be a cold miss per packet.
+  TriangleForm form_ = TriangleForm::Woop;
+  std::vector<WoopPacket<N>> packets_;               // the Woop form's
+  std::vector<KeyVertexPacket<N>> vertexPackets_;    // the Vertices form's
+  // The slot of each packet's lane 0 (its lanes hold consecutive slots): the refit and the vertex
+  // leaf test read this instead of a Woop packet's own slot array, whose cache line would be a
+  // cold miss per packet.
   std::vector<uint32_t> packetSlots_;
   std::vector<uint32_t> triIndex_;
   // The vertex indices of each slot's triangle (3 per slot): the refit reads them in slot order, a

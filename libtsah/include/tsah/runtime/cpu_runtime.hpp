@@ -53,6 +53,10 @@ class CpuRuntime {
     Layout layout = Layout::Bvh2;
     std::optional<SimdIsa> isa;  // wide layouts: the kernels to use (default: the best supported)
     WideCollapser::Config collapse;  // wide layouts: cost constants, k, leaf size (width, leafPacket: the layout's)
+    // Wide layouts: how the tree holds each frame's triangles (TriangleForm, wide_layout.hpp). Woop
+    // traces fastest; Vertices refits several times faster (no Woop rows), for trees refitted every
+    // frame and traced by few rays. The binary layout has only the Woop form.
+    TriangleForm triangles = TriangleForm::Woop;
     // The vertices that may move between updates (ascending ids below the vertex count; an
     // animation's anim::Animation::movingVertices()). When set, an update() that follows another
     // (not a blurred frame, a rebuild or a switch to another tree of a set) reads only these
@@ -248,6 +252,7 @@ class CpuRuntime {
   LayoutInfo info_;
   const WideKernels* kernels_ = nullptr;
   WideCollapser::Config collapse_;
+  TriangleForm triangles_ = TriangleForm::Woop;
   std::shared_ptr<WideTree<4>> wide4_;
   std::shared_ptr<WideTree<8>> wide8_;
   WideView<4> view4_;

@@ -81,6 +81,11 @@ class TwoLevelRuntime {
     // wide BLAS layout the instant frame traces it collapsed to the same width, each instance a leaf
     // child of its own, with the same SIMD node test (docs/two-level.md).
     Layout layout = Layout::Bvh2;
+    // With a wide layout, how the poses' BLAS hold their triangles (TriangleForm): Vertices, the
+    // default, refits a pose without computing Woop rows, the bulk of a pose's refit, and traces
+    // its triangles with the watertight test on their vertices; Woop traces them a little faster.
+    // Static BLAS, refitted once, always hold Woop packets.
+    TriangleForm poseTriangles = TriangleForm::Vertices;
   };
 
   // Keeps a reference to `scene` (it must outlive the runtime). Refits every static BLAS once and
