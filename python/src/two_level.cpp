@@ -224,14 +224,18 @@ const TwoLevelSceneObject& sceneArgument(py::handle scene) {
 // The CPU runtime of a scene (kept alive through its Python object).
 class TwoLevelTracer {
  public:
-  TwoLevelTracer(py::object scene, unsigned threads, const std::string& layout, const std::string& tlas)
+  TwoLevelTracer(py::object scene, unsigned threads, const std::string& layout, const std::string& tlas,
+                 const std::string& poseTriangles)
       : owner_(std::move(scene)), scene_(sceneArgument(owner_).scene) {
     const Layout chosen = cpuLayoutArgument(layout);
     if (tlas != "refit" && tlas != "rebuild")
       throw tsah::ConfigError("tlas: expected 'refit' or 'rebuild', got '" + tlas + "'");
+    if (poseTriangles != "vertices" && poseTriangles != "woop")
+      throw tsah::ConfigError("pose_triangles: expected 'vertices' or 'woop', got '" + poseTriangles + "'");
     TwoLevelRuntime::Config config;
     config.threads = threads;
     config.layout = chosen;
+    config.poseTriangles = poseTriangles == "woop" ? TriangleForm::Woop : TriangleForm::Vertices;
     config.tlas = tlas == "refit" ? TwoLevelRuntime::TlasUpdate::Refit : TwoLevelRuntime::TlasUpdate::Rebuild;
     py::gil_scoped_release release;
     runtime_ = std::make_unique<TwoLevelRuntime>(scene_, config);
@@ -565,18 +569,22 @@ and Ctrl-C stops the optimizers (KeyboardInterrupt); progress: a callable receiv
 )doc");
 
   py::class_<TwoLevelTracer>(m, "TwoLevelRuntime", R"doc(
-TwoLevelRuntime(scene, threads=0, layout="auto", tlas="refit"): a two-level scene traced on the CPU
-(tsah::TwoLevelRuntime): per update the animated sources' trees refitted at their local times, the
-instances' transforms, and the TLAS refitted ("rebuild": rebuilt per frame, the reference). layout:
-the BLAS layout, "auto" (the widest this processor's SIMD kernels support), "bvh2", "bvh4" or
-"bvh8"; the TLAS is binary. threads: 0 for one per hardware thread. Starts at the first frame.
+TwoLevelRuntime(scene, threads=0, layout="auto", tlas="refit", pose_triangles="vertices"): a
+two-level scene traced on the CPU (tsah::TwoLevelRuntime): per update the animated sources' trees
+refitted at their local times, the instances' transforms, and the TLAS refitted ("rebuild": rebuilt
+per frame, the reference). layout: the BLAS layout, "auto" (the widest this processor's SIMD kernels
+support), "bvh2", "bvh4" or "bvh8"; the TLAS is binary. pose_triangles: with bvh4 / bvh8, how the
+animated sources' trees hold their triangles: "vertices" (their refit computes no Woop rows) or
+"woop" (a little faster to trace); bvh2 holds Woop triangles. threads: 0 for one per hardware
+thread. Starts at the first frame.
 )doc")
-      .def(py::init([](py::object scene, py::handle threads, const std::string& layout, const std::string& tlas) {
+      .def(py::init([](py::object scene, py::handle threads, const std::string& layout, const std::string& tlas,
+                       const std::string& poseTriangles) {
              sceneArgument(scene);  // checked before the other arguments
              return std::make_unique<TwoLevelTracer>(std::move(scene), checkedInteger<unsigned>(threads, "threads"),
-                                                     layout, tlas);
+                                                     layout, tlas, poseTriangles);
            }),
-           "scene"_a, "threads"_a = 0, "layout"_a = "auto", "tlas"_a = "refit")
+           "scene"_a, "threads"_a = 0, "layout"_a = "auto", "tlas"_a = "refit", "pose_triangles"_a = "vertices")
       .def("update", &TwoLevelTracer::update, "time"_a,
            "The scene at this time (a float; clamped to the scene's range); ends a blurred frame.")
       .def("update_shutter", &TwoLevelTracer::updateShutter, "open"_a, "close"_a, R"doc(

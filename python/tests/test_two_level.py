@@ -203,6 +203,24 @@ def test_trace_matches_a_flat_tree_of_the_baked_scene(scene, baked, layout):
     assert np.array_equal(runtime.occluded(origins, directions), hit)
 
 
+@pytest.mark.parametrize("layout", ["bvh4", "auto"])
+def test_pose_triangles_as_woop_or_vertices_find_the_same_hits(scene, baked, layout):
+    woop = tsah.TwoLevelRuntime(scene, layout=layout, pose_triangles="woop")
+    vertices = tsah.TwoLevelRuntime(scene, layout=layout)  # the default: vertex packets
+    for time in (scene.start_time, float(scene.frame_times[5]), 1.3):
+        woop.update(time)
+        vertices.update(time)
+        origins, directions = rays_to_triangles(baked, time)
+        a, b = woop.trace(origins, directions), vertices.trace(origins, directions)
+        assert np.isfinite(a["t"]).mean() > 0.9
+        assert np.array_equal(np.isfinite(a["t"]), np.isfinite(b["t"]))
+        same = (a["instance"] == b["instance"]) & (a["triangle"] == b["triangle"])
+        assert same.mean() > 0.99
+        np.testing.assert_allclose(b["t"][same], a["t"][same], rtol=1e-4)
+        assert np.array_equal(woop.occluded(origins, directions), vertices.occluded(origins, directions))
+    assert vertices.memory_bytes < woop.memory_bytes  # vertex packets are smaller than Woop packets
+
+
 def test_misses_are_inf_and_minus_one(scene):
     runtime = tsah.TwoLevelRuntime(scene)
     origins = np.array([[0, 50, 0], [0, 0, 0]], np.float32)
@@ -246,6 +264,8 @@ def test_bad_arguments(scene, tmp_path):
         tsah.TwoLevelRuntime(scene, layout="cwbvh")
     with pytest.raises(tsah.ConfigError, match="tlas: expected 'refit' or 'rebuild', got 'lbvh'"):
         tsah.TwoLevelRuntime(scene, tlas="lbvh")
+    with pytest.raises(tsah.ConfigError, match="pose_triangles: expected 'vertices' or 'woop', got 'quads'"):
+        tsah.TwoLevelRuntime(scene, pose_triangles="quads")
     with pytest.raises(tsah.ArgumentTypeError, match="scene: expected a tsah.TwoLevelScene, got str"):
         tsah.TwoLevelRuntime("demo.json")
     with pytest.raises(tsah.ConfigError, match="structure: expected 'auto' or 'two-level', got 'flat'"):

@@ -324,8 +324,9 @@ class TwoLevelRuntime:
     """A two-level scene traced on the CPU (BLAS refits per pose, instance transforms, TLAS refit)."""
 
     def __init__(self, scene: TwoLevelScene, threads: _Integer = 0, layout: str = "auto",
-                 tlas: str = "refit") -> None:
-        """layout: the BLAS layout ('auto', 'bvh2', 'bvh4', 'bvh8'); tlas: 'refit' or 'rebuild'."""
+                 tlas: str = "refit", pose_triangles: str = "vertices") -> None:
+        """layout: the BLAS layout ('auto', 'bvh2', 'bvh4', 'bvh8'); tlas: 'refit' or 'rebuild';
+        pose_triangles: 'vertices' or 'woop', how bvh4 / bvh8 poses hold their triangles."""
     def update(self, time: _Number) -> None:
         """The scene at this time; ends a blurred frame."""
     def update_shutter(self, open: _Number, close: _Number) -> None:
