@@ -127,7 +127,7 @@ void printTraceSummary(const nlohmann::json& run) {
   const double update = av.at("update_ms").get<double>(), interpolate = av.at("interpolate_ms").get<double>();
   std::printf("update = interpolate %.3f + %s %.3f ms per frame; total = update + the whole frame %.3f ms "
               "(shading %.3f ms%s)\n",
-              interpolate, run.at("rebuild").get<std::string>() != "none" ? "rebuild" : "refit+Woop",
+              interpolate, run.at("rebuild").get<std::string>() != "none" ? "rebuild" : "refit",
               update - interpolate, av.at("frame_ms").get<double>(), av.at("shade_ms").get<double>(),
               run.contains("gpu")
                   ? " and the download in it; trace_ms sums the ray passes, which overlap"
