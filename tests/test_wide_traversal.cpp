@@ -143,36 +143,36 @@ void checkSameHits(const anim::Animation& a, const tsah::FlatBvh& tree, std::spa
   hits = 0;
   for (const auto& [layout, isa] : wideTargets())
     for (TriangleForm form : kForms) {
-    tsah::CpuRuntime wide = runtime(a, tree, layout, isa, form);
-    EXPECT_EQ(wide.layoutInfo().isa, isa);
-    for (double t : ts) {
-      const auto positions = a.positionsAt(t);
-      binary.update(positions);
-      wide.update(positions);
-      const tsah::Aabb bb = binary.bounds(), wb = wide.bounds();
-      EXPECT_TRUE(bb.lo.x == wb.lo.x && bb.hi.y == wb.hi.y && bb.hi.z == wb.hi.z);
-      const auto rays = randomRays(binary, rayCount, seed);
-      for (std::size_t i = 0; i < rays.size(); ++i) {
-        const tsah::Hit expect = binary.closestHit(rays[i]);
-        const tsah::Hit got = wide.closestHit(rays[i]);
-        const std::string where = std::string(tsah::name(layout)) + "/" + tsah::name(isa) + "/" + formName(form) + " ray " +
-                                  std::to_string(i) + " t=" + std::to_string(t);
-        ASSERT_EQ(expect.valid(), got.valid()) << where;
-        ASSERT_EQ(binary.anyHit(rays[i]), wide.anyHit(rays[i])) << where;
-        ASSERT_EQ(wide.anyHit(rays[i]), got.valid()) << where;
-        ASSERT_EQ(wide.anyHit(rays[i], tsah::AnyHitOrder::TreeOrder), got.valid()) << where;
-        if (!expect.valid()) continue;
-        ++hits;
-        ASSERT_NEAR(expect.t, got.t, relativeT(form) * std::max(1.0f, expect.t)) << where;
-        if (expect.tri == got.tri) {
-          ASSERT_NEAR(expect.u, got.u, barycentricTolerance(form)) << where;
-          ASSERT_NEAR(expect.v, got.v, barycentricTolerance(form)) << where;
-        } else {
-          ASSERT_TRUE(triangleOnRayAt(binary, rays[i], got, relativeT(form)))
-              << where << ": triangle " << got.tri << " is not on the ray";
+      tsah::CpuRuntime wide = runtime(a, tree, layout, isa, form);
+      EXPECT_EQ(wide.layoutInfo().isa, isa);
+      for (double t : ts) {
+        const auto positions = a.positionsAt(t);
+        binary.update(positions);
+        wide.update(positions);
+        const tsah::Aabb bb = binary.bounds(), wb = wide.bounds();
+        EXPECT_TRUE(bb.lo.x == wb.lo.x && bb.hi.y == wb.hi.y && bb.hi.z == wb.hi.z);
+        const auto rays = randomRays(binary, rayCount, seed);
+        for (std::size_t i = 0; i < rays.size(); ++i) {
+          const tsah::Hit expect = binary.closestHit(rays[i]);
+          const tsah::Hit got = wide.closestHit(rays[i]);
+          const std::string where = std::string(tsah::name(layout)) + "/" + tsah::name(isa) + "/" + formName(form) +
+                                    " ray " + std::to_string(i) + " t=" + std::to_string(t);
+          ASSERT_EQ(expect.valid(), got.valid()) << where;
+          ASSERT_EQ(binary.anyHit(rays[i]), wide.anyHit(rays[i])) << where;
+          ASSERT_EQ(wide.anyHit(rays[i]), got.valid()) << where;
+          ASSERT_EQ(wide.anyHit(rays[i], tsah::AnyHitOrder::TreeOrder), got.valid()) << where;
+          if (!expect.valid()) continue;
+          ++hits;
+          ASSERT_NEAR(expect.t, got.t, relativeT(form) * std::max(1.0f, expect.t)) << where;
+          if (expect.tri == got.tri) {
+            ASSERT_NEAR(expect.u, got.u, barycentricTolerance(form)) << where;
+            ASSERT_NEAR(expect.v, got.v, barycentricTolerance(form)) << where;
+          } else {
+            ASSERT_TRUE(triangleOnRayAt(binary, rays[i], got, relativeT(form)))
+                << where << ": triangle " << got.tri << " is not on the ray";
+          }
         }
       }
-    }
     }
 }
 
@@ -227,29 +227,31 @@ TEST(WideTraversal, SameAnswersThroughEdgesAndVertices) {
   binary.update(a.positionsAt(a.startTime()));
   for (const auto& [layout, isa] : wideTargets())
     for (TriangleForm form : kForms) {
-    tsah::CpuRuntime rt = runtime(a, tree, layout, isa, form);
-    rt.update(a.positionsAt(a.startTime()));
-    const float* p = rt.positions().data();
-    auto vertex = [&](uint32_t i) { return Vec3{p[3 * i], p[3 * i + 1], p[3 * i + 2]}; };
-    const Vec3 eye = rt.bounds().center() + Vec3{0.3f, 3.0f, 0.5f};
-    uint32_t hits = 0;
-    for (uint32_t t = 0; t < rt.triangleCount(); ++t)
-      for (int e = 0; e < 3; ++e) {
-        const uint32_t* tri = rt.indices().data() + 3 * t;
-        for (float s : {0.0f, 0.5f, 0.3f}) {
-          const Vec3 target = vertex(tri[e]) * (1 - s) + vertex(tri[(e + 1) % 3]) * s;
-          const tsah::Ray ray{eye, 0.0f, target - eye, 1.5f};
-          const tsah::Hit expect = binary.closestHit(ray), got = rt.closestHit(ray);
-          ASSERT_EQ(expect.valid(), got.valid()) << tsah::name(isa) << "/" << formName(form) << " triangle " << t << " edge " << e;
-          ASSERT_EQ(binary.anyHit(ray), rt.anyHit(ray));
-          ASSERT_EQ(binary.anyHit(ray), rt.anyHit(ray, tsah::AnyHitOrder::TreeOrder));
-          if (expect.valid()) {
-            ASSERT_NEAR(expect.t, got.t, relativeT(form) * expect.t);  // a tie may pick a neighbour through the vertex
+      tsah::CpuRuntime rt = runtime(a, tree, layout, isa, form);
+      rt.update(a.positionsAt(a.startTime()));
+      const float* p = rt.positions().data();
+      auto vertex = [&](uint32_t i) { return Vec3{p[3 * i], p[3 * i + 1], p[3 * i + 2]}; };
+      const Vec3 eye = rt.bounds().center() + Vec3{0.3f, 3.0f, 0.5f};
+      uint32_t hits = 0;
+      for (uint32_t t = 0; t < rt.triangleCount(); ++t)
+        for (int e = 0; e < 3; ++e) {
+          const uint32_t* tri = rt.indices().data() + 3 * t;
+          for (float s : {0.0f, 0.5f, 0.3f}) {
+            const Vec3 target = vertex(tri[e]) * (1 - s) + vertex(tri[(e + 1) % 3]) * s;
+            const tsah::Ray ray{eye, 0.0f, target - eye, 1.5f};
+            const tsah::Hit expect = binary.closestHit(ray), got = rt.closestHit(ray);
+            ASSERT_EQ(expect.valid(), got.valid())
+                << tsah::name(isa) << "/" << formName(form) << " triangle " << t << " edge " << e;
+            ASSERT_EQ(binary.anyHit(ray), rt.anyHit(ray));
+            ASSERT_EQ(binary.anyHit(ray), rt.anyHit(ray, tsah::AnyHitOrder::TreeOrder));
+            if (expect.valid()) {
+              // A tie may pick a neighbour through the vertex.
+              ASSERT_NEAR(expect.t, got.t, relativeT(form) * expect.t);
+            }
+            hits += got.valid() ? 1 : 0;
           }
-          hits += got.valid() ? 1 : 0;
         }
-      }
-    EXPECT_GT(hits, rt.triangleCount() * 6);
+      EXPECT_GT(hits, rt.triangleCount() * 6);
     }
 }
 
@@ -290,24 +292,24 @@ TEST(WideTraversal, RefitBoxesContainChildrenInEveryFrameAndCostsAreReported) {
   const tsah::FlatBvh tree = multiFrameTree(a, 4, 4);
   for (Layout layout : {Layout::Bvh4, Layout::Bvh8})
     for (TriangleForm form : kForms) {
-    if (!tsah::layoutSupported(layout)) continue;
-    tsah::CpuRuntime rt = runtime(a, tree, layout, std::nullopt, form);
-    const auto* w4 = rt.wide4();
-    const auto* w8 = rt.wide8();
-    EXPECT_EQ(w4 ? w4->form() : w8->form(), form);
-    EXPECT_EQ(w4 ? w4->packets().empty() : w8->packets().empty(), form == TriangleForm::Vertices);
-    EXPECT_EQ(w4 ? w4->vertexPackets().size() : w8->vertexPackets().size(),
-              form == TriangleForm::Vertices ? (w4 ? w4->packetCount() : w8->packetCount()) : 0u);
-    EXPECT_GT(rt.layoutInfo().binaryCost, 0.0);
-    EXPECT_LE(rt.layoutInfo().layoutCost, rt.layoutInfo().binaryCost);
-    EXPECT_THROW(rt.view(), tsah::ConfigError);  // the binary tree is not refitted in a wide layout
-    for (uint32_t f = 0; f < 10; ++f) {
-      rt.update(a.positionsAt(a.startTime() + (a.endTime() - a.startTime()) * f / 9.0));
-      if (layout == Layout::Bvh4)
-        expectBoxesContainChildren(*rt.wide4(), rt);
-      else
-        expectBoxesContainChildren(*rt.wide8(), rt);
-    }
+      if (!tsah::layoutSupported(layout)) continue;
+      tsah::CpuRuntime rt = runtime(a, tree, layout, std::nullopt, form);
+      const auto* w4 = rt.wide4();
+      const auto* w8 = rt.wide8();
+      EXPECT_EQ(w4 ? w4->form() : w8->form(), form);
+      EXPECT_EQ(w4 ? w4->packets().empty() : w8->packets().empty(), form == TriangleForm::Vertices);
+      EXPECT_EQ(w4 ? w4->vertexPackets().size() : w8->vertexPackets().size(),
+                form == TriangleForm::Vertices ? (w4 ? w4->packetCount() : w8->packetCount()) : 0u);
+      EXPECT_GT(rt.layoutInfo().binaryCost, 0.0);
+      EXPECT_LE(rt.layoutInfo().layoutCost, rt.layoutInfo().binaryCost);
+      EXPECT_THROW(rt.view(), tsah::ConfigError);  // the binary tree is not refitted in a wide layout
+      for (uint32_t f = 0; f < 10; ++f) {
+        rt.update(a.positionsAt(a.startTime() + (a.endTime() - a.startTime()) * f / 9.0));
+        if (layout == Layout::Bvh4)
+          expectBoxesContainChildren(*rt.wide4(), rt);
+        else
+          expectBoxesContainChildren(*rt.wide8(), rt);
+      }
     }
 }
 
@@ -375,7 +377,8 @@ TEST(WideTraversal, VertexPacketsRefitOnlyWhatMoves) {
         const tsah::Hit expect = woop.closestHit(ray), got = part.closestHit(ray);
         ASSERT_EQ(expect.valid(), got.valid());
         ASSERT_EQ(woop.anyHit(ray), part.anyHit(ray));
-        if (expect.valid()) ASSERT_NEAR(expect.t, got.t, relativeT(TriangleForm::Vertices) * std::max(1.0f, expect.t));
+        if (expect.valid())
+          ASSERT_NEAR(expect.t, got.t, relativeT(TriangleForm::Vertices) * std::max(1.0f, expect.t));
       }
     }
   }

@@ -1,8 +1,9 @@
 #pragma once
 // A wide tree in the CPU SIMD layout (wide_layout.hpp) with its per-frame refit: the nodes and
 // Woop packets (or vertex packets: TriangleForm) of one frame, built from a WideBvh topology
-// (wide_bvh.hpp). refit() recomputes every child box and packet from this frame's vertices in one parallel pass over disjoint
-// subtrees (then the few nodes above them), as CpuRuntime does for the binary tree.
+// (wide_bvh.hpp). refit() recomputes every child box and packet from this frame's vertices in one
+// parallel pass over disjoint subtrees (then the few nodes above them), as CpuRuntime does for the
+// binary tree.
 #include <cstdint>
 #include <functional>
 #include <memory>
