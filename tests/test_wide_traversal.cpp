@@ -272,7 +272,9 @@ void expectBoxesContainChildren(const tsah::WideTree<N>& w, const tsah::CpuRunti
       for (uint32_t i = 0; i < node.count[c]; ++i) {
         const uint32_t packet = tsah::leafFirstSlot(node.ref[c]) + i / N, lane = i % N;
         const uint32_t slot = w.packetSlots()[packet] + lane;
-        if (w.form() == TriangleForm::Woop) ASSERT_EQ(w.packets()[packet].slot[lane], slot);
+        if (w.form() == TriangleForm::Woop) {
+          ASSERT_EQ(w.packets()[packet].slot[lane], slot);
+        }
         const uint32_t* tri = rt.indices().data() + 3 * std::size_t(w.triIndex()[slot]);
         for (int k = 0; k < 3; ++k) {
           const Vec3 v{p[3 * tri[k]], p[3 * tri[k] + 1], p[3 * tri[k] + 2]};
@@ -377,8 +379,9 @@ TEST(WideTraversal, VertexPacketsRefitOnlyWhatMoves) {
         const tsah::Hit expect = woop.closestHit(ray), got = part.closestHit(ray);
         ASSERT_EQ(expect.valid(), got.valid());
         ASSERT_EQ(woop.anyHit(ray), part.anyHit(ray));
-        if (expect.valid())
+        if (expect.valid()) {
           ASSERT_NEAR(expect.t, got.t, relativeT(TriangleForm::Vertices) * std::max(1.0f, expect.t));
+        }
       }
     }
   }
