@@ -61,7 +61,10 @@ WideTree<N>::WideTree(const WideBvh& w, std::span<const uint32_t> indices, uint3
     const auto packet = static_cast<uint32_t>(packetSlots_.size());
     for (uint32_t p = 0; p < tsah::packetCount<N>(count); ++p) {
       packetSlots_.push_back(first + p * N);
-      if (form_ == TriangleForm::Vertices) continue;
+      if (form_ == TriangleForm::Vertices) {
+        vertexPackets_.emplace_back();  // filled by every refit
+        continue;
+      }
       WoopPacket<N> pk;
       std::memset(&pk, 0, sizeof pk);
       for (uint32_t lane = 0; lane < N; ++lane) pk.slot[lane] = p * N + lane < count ? first + p * N + lane : first;
@@ -72,7 +75,6 @@ WideTree<N>::WideTree(const WideBvh& w, std::span<const uint32_t> indices, uint3
   if (isLeafRef(w.rootRef)) {
     rootRef_ = addLeaf(0, w.rootCount);
     rootCount_ = w.rootCount;
-    if (form_ == TriangleForm::Vertices) vertexPackets_.resize(packetSlots_.size());
     return;
   }
   rootRef_ = 0;
@@ -86,7 +88,6 @@ WideTree<N>::WideTree(const WideBvh& w, std::span<const uint32_t> indices, uint3
       node.count[c] = child.isLeaf() ? child.count : 0;
     }
   }
-  if (form_ == TriangleForm::Vertices) vertexPackets_.resize(packetSlots_.size());
   threads_ = threads;
   subtreeEnds_ = wideSubtreeEnds(w);
   detail::planParallelRefit(subtreeEnds_, threads, interiorChildrenOf(nodes_), subtreeTasks_, topNodes_,
@@ -101,8 +102,10 @@ Aabb WideTree<N>::refitLeaf(uint32_t firstPacket, uint32_t count, const Target& 
     const uint32_t lanes = count - first < N ? count - first : N;
     const uint32_t* vertices = slotVertices_.data() + 3 * std::size_t(packetSlots_[packet]);
     Aabb packetBox;  // rows and box of all lanes at once, in SIMD (both kernels give the same box)
-    if (target.woop) woopRows_(target.positions, vertices, lanes, packets_[packet], packetBox);
-    if (target.keyVertices) keyVertexRows_(target.positions, vertices, lanes, target.keyVertices[packet], packetBox);
+    if (target.vertices)
+      keyVertexRows_(target.positions, vertices, lanes, target.vertices[packet], packetBox);
+    else
+      woopRows_(target.positions, vertices, lanes, packets_[packet], packetBox);
     box.extend(packetBox);
   }
   return box;
@@ -147,8 +150,7 @@ void WideTree<N>::refitInterior(uint32_t i, WideSoaNode<N>* nodes) {
 
 template <uint32_t N>
 typename WideTree<N>::Target WideTree<N>::ownTarget(const float* positions) {
-  const bool woop = form_ == TriangleForm::Woop;
-  return {positions, nodes_.data(), woop, woop ? nullptr : vertexPackets_.data()};
+  return {positions, nodes_.data(), form_ == TriangleForm::Vertices ? vertexPackets_.data() : nullptr};
 }
 
 template <uint32_t N>
@@ -164,7 +166,7 @@ void WideTree<N>::refitMoving(const float* positions, const ParallelFor& paralle
 template <uint32_t N>
 Aabb WideTree<N>::refitKey(const float* positions, WideSoaNode<N>* keyNodes, KeyVertexPacket<N>* keyVertices,
                            bool movingOnly, const ParallelFor& parallelFor) {
-  return refitTo({positions, keyNodes, false, keyVertices}, movingOnly, parallelFor);
+  return refitTo({positions, keyNodes, keyVertices}, movingOnly, parallelFor);
 }
 
 template <uint32_t N>

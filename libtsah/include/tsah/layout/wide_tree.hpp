@@ -72,13 +72,13 @@ class WideTree {
   uint32_t rootCount() const { return rootCount_; }
 
  private:
-  // Where a refit writes: the boxes into `nodes` (the tree's own, or a key's), and the Woop packets
-  // or a key's vertex packets.
+  // Where a refit writes: the boxes into `nodes` (the tree's own, or a key's), and the triangles
+  // into `vertices` (a key's vertex packets, or the tree's own in the Vertices form), or into the
+  // tree's Woop packets when `vertices` is null.
   struct Target {
     const float* positions;
     WideSoaNode<N>* nodes;
-    bool woop;
-    KeyVertexPacket<N>* keyVertices;
+    KeyVertexPacket<N>* vertices;
   };
   Target ownTarget(const float* positions);  // the tree's own nodes and packets of its form
   // movingOnly (after setMovingVertices): the moving plan's nodes only. Returns the root box.
