@@ -575,7 +575,7 @@ refitted at their local times, the instances' transforms, and the TLAS refitted 
 per frame, the reference). layout: the BLAS layout, "auto" (the widest this processor's SIMD kernels
 support), "bvh2", "bvh4" or "bvh8"; the TLAS is binary. pose_triangles: with bvh4 / bvh8, how the
 animated sources' trees hold their triangles: "vertices" (their refit computes no Woop rows) or
-"woop" (a little faster to trace); bvh2 holds Woop triangles. threads: 0 for one per hardware
+"woop" (Woop packets); bvh2 holds Woop triangles. threads: 0 for one per hardware
 thread. Starts at the first frame.
 )doc")
       .def(py::init([](py::object scene, py::handle threads, const std::string& layout, const std::string& tlas,

@@ -54,8 +54,8 @@ class CpuRuntime {
     std::optional<SimdIsa> isa;  // wide layouts: the kernels to use (default: the best supported)
     WideCollapser::Config collapse;  // wide layouts: cost constants, k, leaf size (width, leafPacket: the layout's)
     // Wide layouts: how the tree holds each frame's triangles (TriangleForm, wide_layout.hpp). Woop
-    // traces fastest; Vertices refits several times faster (no Woop rows), for trees refitted every
-    // frame and traced by few rays. The binary layout has only the Woop form.
+    // (the default, what `tsah export` writes); Vertices computes no Woop rows in its refits, for
+    // trees refitted every frame. The binary layout has only the Woop form.
     TriangleForm triangles = TriangleForm::Woop;
     // The vertices that may move between updates (ascending ids below the vertex count; an
     // animation's anim::Animation::movingVertices()). When set, an update() that follows another

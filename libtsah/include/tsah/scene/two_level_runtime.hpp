@@ -83,8 +83,8 @@ class TwoLevelRuntime {
     Layout layout = Layout::Bvh2;
     // With a wide layout, how the poses' BLAS hold their triangles (TriangleForm): Vertices, the
     // default, refits a pose without computing Woop rows, the bulk of a pose's refit, and traces
-    // its triangles with the watertight test on their vertices; Woop traces them a little faster.
-    // Static BLAS, refitted once, always hold Woop packets.
+    // its triangles with the watertight test on their vertices; Woop keeps Woop packets (what
+    // `tsah export` writes). Static BLAS, refitted once, always hold Woop packets.
     TriangleForm poseTriangles = TriangleForm::Vertices;
   };
 
