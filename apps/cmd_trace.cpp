@@ -54,6 +54,7 @@ struct TraceOptions {
   tsah::Device device = tsah::Device::Cpu;
   tsah::Layout layout = tsah::Layout::Auto;  // tree layout (CPU or GPU)
   std::string isa = "auto";                  // the CPU's SIMD kernels
+  std::string triangles = "auto";            // how the CPU's wide trees hold triangles (auto: the runtime's)
   uint32_t frames = 0, width = 1024, height = 768, ao = 8, shadow = 2, threads = 0, seed = 1;
   float fov = 45.0f, aoDistance = 0.0f, aoFraction = 0.1f;
   bool json = false, noImages = false, noGround = false;
@@ -124,6 +125,11 @@ void runTrace(const TraceOptions& opt) {
   if (opt.isa != "auto") runtimeOptions.isa = tsah::parse<tsah::SimdIsa>(opt.isa);
   if (runtimeOptions.isa && opt.device == tsah::Device::Cuda)
     throw UsageError("--isa chooses the CPU's kernels; it does not go with --device cuda");
+  if (opt.triangles != "auto") runtimeOptions.triangles = tsah::parse<tsah::TriangleForm>(opt.triangles);
+  if (runtimeOptions.triangles && opt.device == tsah::Device::Cuda)
+    throw UsageError("--triangles chooses how the CPU's wide trees hold triangles; it does not go with --device cuda");
+  if (runtimeOptions.triangles == tsah::TriangleForm::Vertices && opt.layout == tsah::Layout::Bvh2)
+    throw UsageError("--triangles vertices needs a wide layout (--layout bvh4, bvh8 or auto); bvh2 holds Woop triangles");
   runtimeOptions.threads = opt.threads;
   runtimeOptions.rebuild = tsah::cli::parseRebuild(opt.rebuild);
   tsah::cli::checkRebuildForDevice(runtimeOptions.rebuild, opt.device);
@@ -188,7 +194,7 @@ void runTrace(const TraceOptions& opt) {
                                                              opt.tlas == "rebuild"
                                                                  ? tsah::TwoLevelRuntime::TlasUpdate::Rebuild
                                                                  : tsah::TwoLevelRuntime::TlasUpdate::Refit,
-                                                             runtimeOptions.shutter, runtimeOptions.frameInterval));
+                                                             runtimeOptions.triangles, runtimeOptions.shutter, runtimeOptions.frameInterval));
   }
   const tsah::cli::FrameRuntime& rt = *runtimes.front();
 
@@ -387,6 +393,11 @@ TSAH_REGISTER_COMMAND(70, [](CLI::App& app) {
                        {tsah::Layout::Auto, tsah::Layout::Bvh2, tsah::Layout::Bvh4, tsah::Layout::Bvh8, tsah::Layout::Cwbvh});
   sub->add_option("--isa", opt->isa, "CPU SIMD kernels of a wide layout: sse, avx2 or avx512 (default auto: the best)")
       ->check(CLI::IsMember({"auto", "sse", "avx2", "avx512"}));
+  sub->add_option("--triangles", opt->triangles,
+                  "CPU bvh4/bvh8: how the tree holds each frame's triangles, woop (Woop packets) or vertices "
+                  "(vertex packets, no Woop rows to compute per refit); default auto: woop, and for a two-level "
+                  "tree its poses as vertices (its static objects always woop)")
+      ->check(CLI::IsMember({"auto", "woop", "vertices"}));
   sub->add_option("--seed", opt->seed, "Seed of the per-pixel random numbers (default 1)");
   opt->shutter.add(*sub,
                    "Motion blur: the shutter's length as a fraction of the time between traced frames, "

@@ -102,6 +102,7 @@ class CpuFrameRuntime final : public FrameRuntime {
     const LayoutInfo& l = runtime_.layoutInfo();
     std::string s = std::to_string(runtime_.threadCount()) + " CPU threads, " + name(l.layout);
     if (l.layout != Layout::Bvh2) s += std::string(" (") + name(l.isa) + ")";
+    if (l.triangles == TriangleForm::Vertices) s += ", triangles as vertex packets";
     char cost[96];
     std::snprintf(cost, sizeof cost, ", T-SAH cost %.2f (binary %.2f)", l.layoutCost, l.binaryCost);
     return s + cost;
@@ -114,6 +115,7 @@ class CpuFrameRuntime final : public FrameRuntime {
     out["timer"] = "host steady clock";
     out["layout"] = name(l.layout);
     if (l.layout != Layout::Bvh2) out["isa"] = name(l.isa);
+    out["triangle_form"] = name(l.triangles);
     out["tree"] = {{"interior_nodes", l.interiorNodes}, {"leaves", l.leaves}, {"depth", l.depth},
                    {"tsah_cost", l.layoutCost}, {"binary_tsah_cost", l.binaryCost}};
   }
@@ -268,6 +270,7 @@ std::unique_ptr<FrameRuntime> makeFrameRuntime(const TreeSet& trees, const anim:
   CpuRuntime::Config config(options.threads);
   config.layout = options.layout == Layout::Auto ? fastestLayout(options.isa) : options.layout;
   config.isa = options.isa;
+  if (options.triangles) config.triangles = *options.triangles;
   config.collapse = wideCollapseConfig(options.objective);
   // The frames come from the animation, whose static vertices stay at rest: refit what moves.
   if (!animation.allMoving())

@@ -73,6 +73,9 @@ struct FrameRuntimeOptions {
   int gpu = 0;                       // the GPU of Device::Cuda
   Layout layout = Layout::Auto;      // Auto: the device's fastest
   std::optional<SimdIsa> isa;        // CPU wide layouts: the kernels (default: the best the processor runs)
+  // CPU wide layouts: how the tree holds each frame's triangles (default: the runtime's, Woop; of a
+  // two-level scene, its poses' form, vertex packets).
+  std::optional<TriangleForm> triangles;
   unsigned threads = 0;              // CPU worker threads (0: all cores)
   Rebuild rebuild = Rebuild::None;   // a new tree every frame instead of the refit
   // The tree's objective: cT, cI and the largest leaf of the rebuilds; with k, the collapse into the

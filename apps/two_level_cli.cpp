@@ -217,6 +217,7 @@ class TwoLevelFrameRuntime final : public FrameRuntime {
         runtime_(*scene_, config),
         view_(runtime_),
         layout_(config.layout),
+        poseTriangles_(config.layout == Layout::Bvh2 ? TriangleForm::Woop : config.poseTriangles),
         tlas_(config.tlas),
         shutter_(shutter),
         frameInterval_(frameInterval) {}
@@ -255,7 +256,8 @@ class TwoLevelFrameRuntime final : public FrameRuntime {
   uint32_t currentTree() const override { return 0; }
 
   std::string summary() const override {
-    return "CPU, two-level: " + std::to_string(scene_->blases.size()) + " BLAS in " + name(layout_) + ", " +
+    return "CPU, two-level: " + std::to_string(scene_->blases.size()) + " BLAS in " + name(layout_) +
+           (poseTriangles_ == TriangleForm::Vertices ? " (poses as vertex packets)" : "") + ", " +
            std::to_string(scene_->instanceCount()) + " instances, TLAS " +
            (tlas_ == TwoLevelRuntime::TlasUpdate::Refit ? "refitted" : "rebuilt") + " per frame";
   }
@@ -264,6 +266,7 @@ class TwoLevelFrameRuntime final : public FrameRuntime {
     out["device"] = "cpu";
     out["timer"] = "host steady clock";
     out["layout"] = name(layout_);
+    out["pose_triangle_form"] = name(poseTriangles_);
     out["two_level"] = describeTwoLevel(*scene_);
     out["two_level"].erase("blases");
     out["two_level"]["tlas_update"] = tlas_ == TwoLevelRuntime::TlasUpdate::Refit ? "refit" : "rebuild";
@@ -276,6 +279,7 @@ class TwoLevelFrameRuntime final : public FrameRuntime {
   TwoLevelRuntime runtime_;
   TwoLevelRenderView view_;
   Layout layout_;
+  TriangleForm poseTriangles_;  // the animated sources' BLAS (static ones: Woop)
   TwoLevelRuntime::TlasUpdate tlas_;
   Shutter shutter_;
   double frameInterval_ = 0.0;
@@ -287,11 +291,13 @@ class TwoLevelFrameRuntime final : public FrameRuntime {
 
 std::unique_ptr<FrameRuntime> makeTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, Layout layout,
                                                        unsigned threads, TwoLevelRuntime::TlasUpdate tlas,
-                                                       Shutter shutter, double frameInterval) {
+                                                       std::optional<TriangleForm> poseTriangles, Shutter shutter,
+                                                       double frameInterval) {
   TwoLevelRuntime::Config config;
   config.threads = threads;
   config.tlas = tlas;
   config.layout = layout == Layout::Auto ? fastestLayout() : layout;
+  if (poseTriangles) config.poseTriangles = *poseTriangles;
   return std::make_unique<TwoLevelFrameRuntime>(std::move(scene), config, shutter, frameInterval);
 }
 

@@ -49,6 +49,7 @@ void describeTwoLevelFile(const std::string& treePath, const std::string& sceneP
 // over shutterInterval of the scene's time range with frameInterval, the time between traced frames.
 std::unique_ptr<FrameRuntime> makeTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, Layout layout,
                                                        unsigned threads, TwoLevelRuntime::TlasUpdate tlas,
+                                                       std::optional<TriangleForm> poseTriangles = {},
                                                        Shutter shutter = {}, double frameInterval = 0.0);
 
 // The frame runtime of a two-level scene on GPU `gpu` (GpuTwoLevelRuntime + GpuTwoLevelRenderer,

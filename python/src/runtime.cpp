@@ -240,22 +240,25 @@ class CpuTracer {
  public:
   // layout: "auto" (the widest this processor's SIMD kernels support, as `tsah trace`), "bvh2",
   // "bvh4" or "bvh8"; a wide layout is collapsed with the tree's own objective (its .tbvh header).
+  // triangles: how a wide layout holds the frame's triangles, "woop" or "vertices" (TriangleForm).
   // Shares the caller's Animation (kept alive by holding its Python object) instead of copying it.
-  CpuTracer(const Tree& tree, py::object animation, unsigned threads, const std::string& layout)
+  CpuTracer(const Tree& tree, py::object animation, unsigned threads, const std::string& layout,
+            const std::string& triangles)
       : owner_(std::move(animation)), animation_(owner_.cast<const anim::Animation&>()) {
     checkTreeMatchesAnimation(tree.file.info, "the tree", animation_, "'" + animation_.name() + "'");
-    const CpuRuntime::Config config = runtimeConfig(threads, layout, tree.file.info.objective);
+    const CpuRuntime::Config config = runtimeConfig(threads, layout, triangles, tree.file.info.objective);
     runtime_ = std::make_unique<CpuRuntime>(flattenBvh(tree.file.bvh), indices(), animation_.vertexCount(), config);
     refitTime(animation_.startTime());
   }
   // A tree set: refit(time) refits and traces the tree of the time's part (TreeSet.tree_at), as
   // `tsah trace` does; each tree collapsed with its own objective in a wide layout.
-  CpuTracer(const TreeSetObject& trees, py::object animation, unsigned threads, const std::string& layout)
+  CpuTracer(const TreeSetObject& trees, py::object animation, unsigned threads, const std::string& layout,
+            const std::string& triangles)
       : owner_(std::move(animation)), animation_(owner_.cast<const anim::Animation&>()) {
     for (uint32_t i = 0; i < trees.set.size(); ++i)
       checkTreeMatchesAnimation(trees.set.builds.at(i), "tree " + std::to_string(i) + " of the set", animation_,
                                 "'" + animation_.name() + "'");
-    const CpuRuntime::Config config = runtimeConfig(threads, layout, trees.set.builds.front().objective);
+    const CpuRuntime::Config config = runtimeConfig(threads, layout, triangles, trees.set.builds.front().objective);
     runtime_ = std::make_unique<CpuRuntime>(trees.set, indices(), animation_.vertexCount(), config);
     refitTime(animation_.startTime());
   }
@@ -322,6 +325,7 @@ class CpuTracer {
     return py::make_tuple(hitArray(hits, py::array(hitDtype(), batch)), ms);
   }
   std::string layout() const { return name(runtime_->layoutInfo().layout); }
+  std::string triangles() const { return name(runtime_->layoutInfo().triangles); }
   uint32_t treeIndex() const { return runtime_->currentTree(); }
   py::dict lastRayPass() const { return rayPassDict(lastPass_); }
   const CpuRuntime& runtime() const { return *runtime_; }
@@ -337,10 +341,12 @@ class CpuTracer {
 
  private:
   std::vector<uint32_t> indices() const { return {animation_.indices().begin(), animation_.indices().end()}; }
-  static CpuRuntime::Config runtimeConfig(unsigned threads, const std::string& layout, const Objective& objective) {
+  static CpuRuntime::Config runtimeConfig(unsigned threads, const std::string& layout, const std::string& triangles,
+                                          const Objective& objective) {
     CpuRuntime::Config config;
     config.threads = threads;
     config.layout = cpuLayoutArgument(layout);
+    config.triangles = triangleFormArgument(triangles, "triangles");
     config.collapse = wideCollapseConfig(objective);
     return config;
   }
@@ -527,23 +533,28 @@ constexpr const char* kLastRayPassDoc =
 void bindRuntimes(py::module_& m) {
   const float inf = std::numeric_limits<float>::infinity();
   py::class_<CpuTracer>(m, "CpuRuntime", R"doc(
-CpuRuntime(tree, animation, threads=0, layout="auto"): the tree refitted to a frame of the animation
-it was built for (checked: triangle count, vertex count, topology), traced on the CPU. Starts at the
-first frame. layout: "auto" (the widest layout this processor's SIMD kernels support, as `tsah
-trace`), "bvh2", "bvh4" or "bvh8"; a wide layout is the tree collapsed with its own objective.
+CpuRuntime(tree, animation, threads=0, layout="auto", triangles="woop"): the tree refitted to a
+frame of the animation it was built for (checked: triangle count, vertex count, topology), traced on
+the CPU. Starts at the first frame. layout: "auto" (the widest layout this processor's SIMD kernels
+support, as `tsah trace`), "bvh2", "bvh4" or "bvh8"; a wide layout is the tree collapsed with its
+own objective. triangles: how a wide layout holds each frame's triangles, "woop" (Woop packets) or
+"vertices" (vertex packets: the refit computes no Woop rows; docs/wide-bvh.md); bvh2 holds Woop
+triangles only.
 tree may be a tsah.TreeSet: refit(time) then refits and traces the tree of the time's part
 (TreeSet.tree_at; tree_index says which), refit(positions) the tree of the last refit(time).
 )doc")
-      .def(py::init([](const Tree& tree, py::object animation, py::handle threads, const std::string& layout) {
+      .def(py::init([](const Tree& tree, py::object animation, py::handle threads, const std::string& layout,
+                       const std::string& triangles) {
              return std::make_unique<CpuTracer>(tree, std::move(animation), checkedInteger<unsigned>(threads, "threads"),
-                                                layout);
+                                                layout, triangles);
            }),
-           "tree"_a, "animation"_a, "threads"_a = 0, "layout"_a = "auto")
-      .def(py::init([](const TreeSetObject& trees, py::object animation, py::handle threads, const std::string& layout) {
+           "tree"_a, "animation"_a, "threads"_a = 0, "layout"_a = "auto", "triangles"_a = "woop")
+      .def(py::init([](const TreeSetObject& trees, py::object animation, py::handle threads, const std::string& layout,
+                       const std::string& triangles) {
              return std::make_unique<CpuTracer>(trees, std::move(animation), checkedInteger<unsigned>(threads, "threads"),
-                                                layout);
+                                                layout, triangles);
            }),
-           "tree"_a, "animation"_a, "threads"_a = 0, "layout"_a = "auto")
+           "tree"_a, "animation"_a, "threads"_a = 0, "layout"_a = "auto", "triangles"_a = "woop")
       .def_property_readonly("tree_index", &CpuTracer::treeIndex,
                              "The index of the tree traced in a tree set (chosen by the last refit(time)); 0 for a tree.")
       .def("refit", &CpuTracer::refit, "time"_a, kRefitDoc)
@@ -554,6 +565,8 @@ tree may be a tsah.TreeSet: refit(time) then refits and traces the tree of the t
            "out"_a = py::none(), kOccludedDoc)
       .def_property_readonly("bounds", &CpuTracer::bounds, "Bounds of the current frame, float32 (2, 3).")
       .def_property_readonly("layout", &CpuTracer::layout, "The layout traced: bvh2, bvh4 or bvh8.")
+      .def_property_readonly("triangles", &CpuTracer::triangles,
+                             "How the traced tree holds the frame's triangles: woop or vertices.")
       .def_property_readonly("last_ray_pass", &CpuTracer::lastRayPass, kLastRayPassDoc)
       .def("_ray_struct_batch", &CpuTracer::rayStructBatch, "origins"_a, "directions"_a, "tmin"_a = 0.0f,
            "tmax"_a = inf, "occluded"_a = false,
@@ -607,6 +620,14 @@ Layout cpuLayoutArgument(const std::string& layout) {
   const Layout chosen = parse<Layout>(layout);
   if (chosen == Layout::Cwbvh) throw tsah::ConfigError("layout: cwbvh is a GPU layout (the CPU's are bvh2, bvh4, bvh8)");
   return chosen == Layout::Auto ? fastestLayout() : chosen;
+}
+
+TriangleForm triangleFormArgument(const std::string& form, const char* argument) {
+  try {
+    return parse<TriangleForm>(form);
+  } catch (const tsah::ConfigError& e) {
+    throw tsah::ConfigError(std::string(argument) + ": " + e.what());
+  }
 }
 
 const CpuRuntime& cpuRuntimeOf(py::handle self) { return self.cast<const CpuTracer&>().runtime(); }

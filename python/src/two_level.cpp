@@ -230,12 +230,10 @@ class TwoLevelTracer {
     const Layout chosen = cpuLayoutArgument(layout);
     if (tlas != "refit" && tlas != "rebuild")
       throw tsah::ConfigError("tlas: expected 'refit' or 'rebuild', got '" + tlas + "'");
-    if (poseTriangles != "vertices" && poseTriangles != "woop")
-      throw tsah::ConfigError("pose_triangles: expected 'vertices' or 'woop', got '" + poseTriangles + "'");
     TwoLevelRuntime::Config config;
     config.threads = threads;
     config.layout = chosen;
-    config.poseTriangles = poseTriangles == "woop" ? TriangleForm::Woop : TriangleForm::Vertices;
+    config.poseTriangles = triangleFormArgument(poseTriangles, "pose_triangles");
     config.tlas = tlas == "refit" ? TwoLevelRuntime::TlasUpdate::Refit : TwoLevelRuntime::TlasUpdate::Rebuild;
     py::gil_scoped_release release;
     runtime_ = std::make_unique<TwoLevelRuntime>(scene_, config);

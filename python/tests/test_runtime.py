@@ -53,15 +53,18 @@ def brute_force(points, triangles, origins, directions):
     return nearest, triangle, margin
 
 
-@pytest.mark.parametrize("layout", ["auto", "bvh2", "bvh4", "bvh8"])
-def test_trace_matches_brute_force(wave, layout):
+# Every layout with the Woop triangles, and the wide layouts with vertex packets (bvh2 has no other form).
+@pytest.mark.parametrize("layout,triangles", [("auto", "woop"), ("bvh2", "woop"), ("bvh4", "woop"), ("bvh8", "woop"),
+                                              ("auto", "vertices"), ("bvh4", "vertices"), ("bvh8", "vertices")])
+def test_trace_matches_brute_force(wave, layout, triangles):
     animation, tree = wave
     try:
-        runtime = tsah.CpuRuntime(tree, animation, layout=layout)
+        runtime = tsah.CpuRuntime(tree, animation, layout=layout, triangles=triangles)
     except tsah.ConfigError as e:  # bvh8 needs AVX2: a processor without it refuses that layout
         assert layout == "bvh8" and "AVX2" in str(e)
         pytest.skip(str(e))
     assert runtime.layout == layout or (layout == "auto" and runtime.layout in ("bvh4", "bvh8"))
+    assert runtime.triangles == triangles
     for time in [animation.start_time, 2.3, animation.end_time]:
         runtime.refit(time)
         origins, directions = random_rays(animation, time, 400, seed=int(time * 10))
@@ -95,6 +98,15 @@ def test_cpu_layout_is_checked(wave):
         tsah.CpuRuntime(tree, animation, layout="cwbvh")
     with pytest.raises(tsah.ConfigError, match="bvh8"):  # the message lists the choices
         tsah.CpuRuntime(tree, animation, layout="bvh16")
+
+
+def test_triangle_form_is_checked(wave):
+    animation, tree = wave
+    assert tsah.CpuRuntime(tree, animation).triangles == "woop"  # the default
+    with pytest.raises(tsah.ConfigError, match="the bvh2 layout holds its triangles only as Woop triangles"):
+        tsah.CpuRuntime(tree, animation, layout="bvh2", triangles="vertices")
+    with pytest.raises(tsah.ConfigError, match="triangles: unknown triangle form 'quads' \\(expected woop or vertices\\)"):
+        tsah.CpuRuntime(tree, animation, triangles="quads")
 
 
 def test_tmax_and_refit_positions(wave):

@@ -177,8 +177,10 @@ class TreeSet:
 class CpuRuntime:
     """A tree refitted to a frame of the animation it was built for, traced on the CPU."""
 
-    def __init__(self, tree: Tree | TreeSet, animation: Animation, threads: _Integer = 0, layout: str = "auto") -> None:
-        """layout: 'auto' (the widest SIMD layout of this processor), 'bvh2', 'bvh4' or 'bvh8'. A TreeSet:
+    def __init__(self, tree: Tree | TreeSet, animation: Animation, threads: _Integer = 0, layout: str = "auto",
+                 triangles: str = "woop") -> None:
+        """layout: 'auto' (the widest SIMD layout of this processor), 'bvh2', 'bvh4' or 'bvh8'; triangles:
+        'woop' or 'vertices', how bvh4 / bvh8 hold each frame's triangles (bvh2: 'woop' only). A TreeSet:
         refit(time) refits and traces the tree of the time's part (tree_index)."""
     def refit(self, time: _Number | _ArrayLike) -> None:
         """Refits to the animation at this time (interpolated, clamped), or to vertex positions, a float array (V, 3)."""
@@ -202,6 +204,9 @@ class CpuRuntime:
     @property
     def layout(self) -> str:
         """The layout traced: bvh2, bvh4 or bvh8."""
+    @property
+    def triangles(self) -> str:
+        """How the traced tree holds the frame's triangles: woop or vertices."""
     @property
     def tree_index(self) -> int:
         """The index of the tree traced in a tree set (chosen by the last refit(time)); 0 for a tree."""

@@ -67,9 +67,13 @@ tsah_expect_error(hard.opt.reference_frames_with_cost 2 "--reference-frames goes
 tsah_expect_error(hard.trace.out_no_images 2 "--out excludes --no-images" trace ${A} ${H}/a.tbvh --no-images --out ${H}/t)
 tsah_expect_error(hard.trace.ao_both 2 "--ao-distance excludes --ao-fraction" trace ${A} ${H}/a.tbvh --ao-distance 1 --ao-fraction 0.2)
 tsah_expect_error(hard.trace.isa_cuda 2 "--isa chooses the CPU's kernels; it does not go with --device cuda" trace ${A} ${H}/a.tbvh --isa sse --device cuda --no-images)
+tsah_expect_error(hard.trace.triangles_cuda 2 "--triangles chooses how the CPU's wide trees hold triangles; it does not go with --device cuda" trace ${A} ${H}/a.tbvh --triangles woop --device cuda --no-images)
+tsah_expect_error(hard.trace.triangles_bvh2 2 "--triangles vertices needs a wide layout \\(--layout bvh4, bvh8 or auto\\); bvh2 holds Woop triangles" trace ${A} ${H}/a.tbvh --triangles vertices --layout bvh2 --no-images)
+tsah_expect_error(hard.trace.triangles_name 2 "--triangles: quads not in" trace ${A} ${H}/a.tbvh --triangles quads --no-images)
 tsah_expect_error(hard.trace.frames_range 2 "--frames: Value 100001 not in range 1 to 100000" trace ${A} ${H}/a.tbvh --frames 100001 --no-images)
 foreach(t hard.export.boxes_layout hard.export.style_without_boxes hard.trace.out_no_images hard.trace.ao_both
-          hard.trace.isa_cuda hard.trace.frames_range)
+          hard.trace.isa_cuda hard.trace.triangles_cuda hard.trace.triangles_bvh2 hard.trace.triangles_name
+          hard.trace.frames_range)
   tsah_hard_fixture(${t} hard_tree)
 endforeach()
 foreach(t hard.opt.overlap_without_segments hard.opt.max_trees_without_auto hard.opt.reference_frames_with_cost)

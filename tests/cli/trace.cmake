@@ -73,6 +73,13 @@ foreach(layout bvh2 bvh4)
                 --frames 1 --width 32 --height 24 --no-images --layout ${layout} --json)
 endforeach()
 trace_on_tree(cli.trace.layout.default "CPU threads, bvh[248]" --frames 1 --width 32 --height 24 --no-images)
+# --triangles: the wide trees' triangle form, in the first line and the JSON.
+trace_on_tree(cli.trace.triangles.vertices "bvh[48] \\([a-z0-9]+\\), triangles as vertex packets"
+              --frames 2 --width 32 --height 24 --no-images --triangles vertices)
+foreach(form woop vertices)
+  trace_on_tree(cli.trace.triangles.${form}.json "\"layout\":\"bvh4\".*\"triangle_form\":\"${form}\""
+                --frames 1 --width 32 --height 24 --no-images --layout bvh4 --triangles ${form} --json)
+endforeach()
 file(WRITE ${W}/trace_camera.json
   "{\"keys\": [{\"time\": 0, \"eye\": [0, 1, 6], \"look_at\": [0, 0, 0], \"fov\": 50},\n"
   "           {\"time\": 5, \"eye\": [6, 1, 0], \"look_at\": [0, 0, 0], \"up\": [0, 1, 0]}]}\n")

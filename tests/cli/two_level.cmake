@@ -73,7 +73,8 @@ set_tests_properties(cli.two_level.info.json PROPERTIES FIXTURES_REQUIRED tl_tre
 
 # The two-level trace (TLAS refitted, and rebuilt every frame) gives the flat tree's images, byte for
 # byte, at the scene's 21 frames (the library allows ties between coincident surfaces; this scene
-# has none).
+# has none). So do the other triangle forms (--triangles): the flat tree as vertex packets, the
+# two-level poses as Woop packets.
 add_test(NAME cli.two_level.trace.flat COMMAND tsah trace ${SCENE} ${W}/tl_flat.tbvh ${TL_TRACE} --out ${W}/tl_img_flat)
 set_tests_properties(cli.two_level.trace.flat PROPERTIES FIXTURES_REQUIRED tl_flat FIXTURES_SETUP tl_img_flat)
 foreach(tlas refit rebuild)
@@ -81,11 +82,21 @@ foreach(tlas refit rebuild)
            COMMAND tsah trace ${SCENE} ${W}/tl_auto.tbvh ${TL_TRACE} --tlas ${tlas} --out ${W}/tl_img_${tlas} --json)
   set_tests_properties(cli.two_level.trace.${tlas} PROPERTIES FIXTURES_REQUIRED tl_tree FIXTURES_SETUP tl_img_${tlas}
     PASS_REGULAR_EXPRESSION "\"structure\":\"two-level\".*\"tlas_update\":\"${tlas}\"")
+endforeach()
+add_test(NAME cli.two_level.trace.flat_vertices
+         COMMAND tsah trace ${SCENE} ${W}/tl_flat.tbvh ${TL_TRACE} --triangles vertices --out ${W}/tl_img_flat_vertices --json)
+set_tests_properties(cli.two_level.trace.flat_vertices PROPERTIES FIXTURES_REQUIRED tl_flat
+  FIXTURES_SETUP tl_img_flat_vertices PASS_REGULAR_EXPRESSION "\"triangle_form\":\"vertices\"")
+add_test(NAME cli.two_level.trace.poses_woop
+         COMMAND tsah trace ${SCENE} ${W}/tl_auto.tbvh ${TL_TRACE} --triangles woop --out ${W}/tl_img_poses_woop --json)
+set_tests_properties(cli.two_level.trace.poses_woop PROPERTIES FIXTURES_REQUIRED tl_tree
+  FIXTURES_SETUP tl_img_poses_woop PASS_REGULAR_EXPRESSION "\"pose_triangle_form\":\"woop\"")
+foreach(run refit rebuild flat_vertices poses_woop)
   foreach(frame 0000 0007 0013 0020)
-    add_test(NAME cli.two_level.trace.${tlas}.same_image.${frame}
-             COMMAND ${CMAKE_COMMAND} -E compare_files ${W}/tl_img_flat/frame_${frame}.png ${W}/tl_img_${tlas}/frame_${frame}.png)
-    set_tests_properties(cli.two_level.trace.${tlas}.same_image.${frame} PROPERTIES
-      FIXTURES_REQUIRED "tl_img_flat;tl_img_${tlas}")
+    add_test(NAME cli.two_level.trace.${run}.same_image.${frame}
+             COMMAND ${CMAKE_COMMAND} -E compare_files ${W}/tl_img_flat/frame_${frame}.png ${W}/tl_img_${run}/frame_${frame}.png)
+    set_tests_properties(cli.two_level.trace.${run}.same_image.${frame} PROPERTIES
+      FIXTURES_REQUIRED "tl_img_flat;tl_img_${run}")
   endforeach()
 endforeach()
 

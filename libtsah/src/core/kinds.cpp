@@ -25,6 +25,7 @@ constexpr Named<Selection> kSelections[] = {
     {Selection::MetropolisHastings, "mh"}, {Selection::Uniform, "random"}, {Selection::BatchSort, "batch"}};
 constexpr Named<Device> kDevices[] = {{Device::Cpu, "cpu"}, {Device::Cuda, "cuda"}};
 constexpr Named<SimdIsa> kIsas[] = {{SimdIsa::Sse, "sse"}, {SimdIsa::Avx2, "avx2"}, {SimdIsa::Avx512, "avx512"}};
+constexpr Named<TriangleForm> kTriangleForms[] = {{TriangleForm::Woop, "woop"}, {TriangleForm::Vertices, "vertices"}};
 
 // The table of E and the word for E in messages.
 template <typename E>
@@ -34,7 +35,8 @@ constexpr std::span<const Named<E>> rowsOf() {
   else if constexpr (std::is_same_v<E, OptimizerKind>) return kOptimizers;
   else if constexpr (std::is_same_v<E, Selection>) return kSelections;
   else if constexpr (std::is_same_v<E, Device>) return kDevices;
-  else return kIsas;
+  else if constexpr (std::is_same_v<E, SimdIsa>) return kIsas;
+  else return kTriangleForms;
 }
 
 template <typename E>
@@ -44,7 +46,8 @@ constexpr const char* kindOf() {
   else if constexpr (std::is_same_v<E, OptimizerKind>) return "optimizer";
   else if constexpr (std::is_same_v<E, Selection>) return "node selection";
   else if constexpr (std::is_same_v<E, Device>) return "device";
-  else return "instruction set";
+  else if constexpr (std::is_same_v<E, SimdIsa>) return "instruction set";
+  else return "triangle form";
 }
 
 template <typename E>
@@ -62,6 +65,7 @@ const char* name(OptimizerKind value) { return nameOf(value); }
 const char* name(Selection value) { return nameOf(value); }
 const char* name(Device value) { return nameOf(value); }
 const char* name(SimdIsa value) { return nameOf(value); }
+const char* name(TriangleForm value) { return nameOf(value); }
 
 template <typename E>
 std::string choices() {
@@ -88,11 +92,13 @@ template OptimizerKind parse<OptimizerKind>(std::string_view);
 template Selection parse<Selection>(std::string_view);
 template Device parse<Device>(std::string_view);
 template SimdIsa parse<SimdIsa>(std::string_view);
+template TriangleForm parse<TriangleForm>(std::string_view);
 template std::string choices<Layout>();
 template std::string choices<Method>();
 template std::string choices<OptimizerKind>();
 template std::string choices<Selection>();
 template std::string choices<Device>();
 template std::string choices<SimdIsa>();
+template std::string choices<TriangleForm>();
 
 }  // namespace tsah

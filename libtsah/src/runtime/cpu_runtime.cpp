@@ -85,6 +85,7 @@ CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint3
   if (config.layout == Layout::Bvh2 && config.triangles != TriangleForm::Woop)
     throw tsah::ConfigError("runtime: the bvh2 layout holds its triangles only as Woop triangles");
   triangles_ = config.triangles;
+  info_.triangles = config.triangles;
   if (config.layout == Layout::Bvh2) {
     info_.interiorNodes = tree_.interiorCount;
     info_.leaves = tree_.leafCount;

@@ -35,18 +35,27 @@ enum class Device : uint8_t { Cpu, Cuda };
 // The CPU instruction set of the wide layouts' SIMD kernels (the value indexes their tables).
 enum class SimdIsa : uint8_t { Sse = 0, Avx2 = 1, Avx512 = 2 };
 
+// How a wide CPU tree holds a frame's triangles (tsah/layout/wide_layout.hpp). Woop: WoopPackets,
+// whose rows a refit computes in double precision per triangle. Vertices: one KeyVertexPacket per
+// packet, the watertight test on the vertices themselves, and a refit that only gathers them and
+// their boxes: the form for trees refitted every frame, such as the poses of a two-level scene (the
+// figures of both are in the results log, 2026-11-28).
+enum class TriangleForm : uint8_t { Woop, Vertices };
+
 // Names: "auto", "bvh2", "bvh4", "bvh8", "cwbvh"; "sah0", "sahstar", "rebuild", "tsah";
-// "sequential", "parallel"; "mh", "random", "batch"; "cpu", "cuda"; "sse", "avx2", "avx512".
+// "sequential", "parallel"; "mh", "random", "batch"; "cpu", "cuda"; "sse", "avx2", "avx512";
+// "woop", "vertices".
 const char* name(Layout value);
 const char* name(Method value);
 const char* name(OptimizerKind value);
 const char* name(Selection value);
 const char* name(Device value);
 const char* name(SimdIsa value);
+const char* name(TriangleForm value);
 
 // The value named `text`; anything else throws tsah::ConfigError "unknown KIND 'text' (expected
-// a, b or c)", KIND being "layout", "method", "optimizer", "node selection", "device" or
-// "instruction set".
+// a, b or c)", KIND being "layout", "method", "optimizer", "node selection", "device",
+// "instruction set" or "triangle form".
 template <typename E>
 E parse(std::string_view text);
 

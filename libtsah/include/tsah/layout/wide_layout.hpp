@@ -28,6 +28,7 @@
 #include "tsah/core/aabb.hpp"
 #include "tsah/layout/gpu_layout.hpp"  // child reference helpers: isLeafRef, leafFirstSlot, makeLeafRef
 #include "tsah/core/hd.hpp"
+#include "tsah/core/kinds.hpp"  // TriangleForm
 #include "tsah/layout/woop.hpp"
 
 namespace tsah {
@@ -109,13 +110,6 @@ template <uint32_t N>
 TSAH_HD uint32_t packetCount(uint32_t count) {
   return (count + N - 1) / N;
 }
-
-// How a wide tree holds this frame's triangles. Woop: WoopPackets, whose rows a refit computes in
-// double precision per triangle. Vertices: one KeyVertexPacket per packet, the watertight test on
-// the vertices themselves, and a refit that only gathers them and their boxes: the form for trees
-// refitted every frame, such as the poses of a two-level scene (the figures of both are in the
-// results log, 2026-11-28).
-enum class TriangleForm : uint8_t { Woop, Vertices };
 
 // Everything a wide traversal reads for one frame. Raw pointers and counts only: pass by value.
 template <uint32_t N>

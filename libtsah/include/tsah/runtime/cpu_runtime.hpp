@@ -39,6 +39,7 @@ bool layoutSupported(Layout layout);
 struct LayoutInfo {
   Layout layout = Layout::Bvh2;
   SimdIsa isa = SimdIsa::Sse;    // wide layouts: the kernels' instruction set
+  TriangleForm triangles = TriangleForm::Woop;  // how the tree holds the frame's triangles (Config::triangles)
   uint32_t interiorNodes = 0, leaves = 0, depth = 0;
   // T-SAH cost C~^k (Eq. 3, the collapse's cT, cI, k) over the frames of the tree given to the
   // constructor: of that binary tree, and of the traced layout (equal for bvh2). 0 after rebuild().
