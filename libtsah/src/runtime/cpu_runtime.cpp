@@ -84,7 +84,6 @@ CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint3
   info_.layout = config.layout;
   if (config.layout == Layout::Bvh2 && config.triangles != TriangleForm::Woop)
     throw tsah::ConfigError("runtime: the bvh2 layout holds its triangles only as Woop triangles");
-  triangles_ = config.triangles;
   info_.triangles = config.triangles;
   if (config.layout == Layout::Bvh2) {
     info_.interiorNodes = tree_.interiorCount;
@@ -115,10 +114,10 @@ void CpuRuntime::setWideTree(const Bvh& binary, bool reportCosts) {
   info_.leaves = w.leafCount();
   info_.depth = w.depth();
   if (info_.layout == Layout::Bvh4) {
-    wide4_ = std::make_shared<WideTree<4>>(w, indices_, threads_->count, info_.isa, triangles_);
+    wide4_ = std::make_shared<WideTree<4>>(w, indices_, threads_->count, info_.isa, info_.triangles);
     if (movingVertices_) wide4_->setMovingVertices(*movingVertices_, vertexCount_);
   } else {
-    wide8_ = std::make_shared<WideTree<8>>(w, indices_, threads_->count, info_.isa, triangles_);
+    wide8_ = std::make_shared<WideTree<8>>(w, indices_, threads_->count, info_.isa, info_.triangles);
     if (movingVertices_) wide8_->setMovingVertices(*movingVertices_, vertexCount_);
   }
   staticRefitted_ = false;

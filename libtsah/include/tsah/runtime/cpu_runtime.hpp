@@ -253,7 +253,6 @@ class CpuRuntime {
   LayoutInfo info_;
   const WideKernels* kernels_ = nullptr;
   WideCollapser::Config collapse_;
-  TriangleForm triangles_ = TriangleForm::Woop;
   std::shared_ptr<WideTree<4>> wide4_;
   std::shared_ptr<WideTree<8>> wide8_;
   WideView<4> view4_;
