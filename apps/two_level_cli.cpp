@@ -217,7 +217,6 @@ class TwoLevelFrameRuntime final : public FrameRuntime {
         runtime_(*scene_, config),
         view_(runtime_),
         layout_(config.layout),
-        poseTriangles_(config.layout == Layout::Bvh2 ? TriangleForm::Woop : config.poseTriangles),
         tlas_(config.tlas),
         shutter_(shutter),
         frameInterval_(frameInterval) {}
@@ -257,7 +256,7 @@ class TwoLevelFrameRuntime final : public FrameRuntime {
 
   std::string summary() const override {
     return "CPU, two-level: " + std::to_string(scene_->blases.size()) + " BLAS in " + name(layout_) +
-           (poseTriangles_ == TriangleForm::Vertices ? " (poses as vertex packets)" : "") + ", " +
+           (runtime_.poseTriangles() == TriangleForm::Vertices ? " (poses as vertex packets)" : "") + ", " +
            std::to_string(scene_->instanceCount()) + " instances, TLAS " +
            (tlas_ == TwoLevelRuntime::TlasUpdate::Refit ? "refitted" : "rebuilt") + " per frame";
   }
@@ -266,7 +265,7 @@ class TwoLevelFrameRuntime final : public FrameRuntime {
     out["device"] = "cpu";
     out["timer"] = "host steady clock";
     out["layout"] = name(layout_);
-    out["pose_triangle_form"] = name(poseTriangles_);
+    out["pose_triangle_form"] = name(runtime_.poseTriangles());
     out["two_level"] = describeTwoLevel(*scene_);
     out["two_level"].erase("blases");
     out["two_level"]["tlas_update"] = tlas_ == TwoLevelRuntime::TlasUpdate::Refit ? "refit" : "rebuild";
@@ -279,7 +278,6 @@ class TwoLevelFrameRuntime final : public FrameRuntime {
   TwoLevelRuntime runtime_;
   TwoLevelRenderView view_;
   Layout layout_;
-  TriangleForm poseTriangles_;  // the animated sources' BLAS (static ones: Woop)
   TwoLevelRuntime::TlasUpdate tlas_;
   Shutter shutter_;
   double frameInterval_ = 0.0;

@@ -66,7 +66,7 @@ TwoLevelRuntime::TwoLevelRuntime(const TwoLevelScene& scene, Config config) : sc
     Objective objective = scene.objective;
     objective.k = blas.animated ? objective.k : 0;  // the objective the BLAS was built with
     own.collapse = wideCollapseConfig(objective);
-    if (blas.animated && config.layout != Layout::Bvh2) own.triangles = config.poseTriangles;
+    if (blas.animated) own.triangles = poseTriangles();
     // A pose is refitted from its source's frames, whose static vertices stay at rest.
     if (!source.allMoving())
       own.movingVertices.emplace(source.movingVertices().begin(), source.movingVertices().end());

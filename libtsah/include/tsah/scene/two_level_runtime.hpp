@@ -97,6 +97,12 @@ class TwoLevelRuntime {
   TwoLevelRuntime(const TwoLevelRuntime&) = delete;
   TwoLevelRuntime& operator=(const TwoLevelRuntime&) = delete;
 
+  // The form the poses' BLAS hold their triangles in: Config::poseTriangles in bvh4 / bvh8, Woop
+  // in bvh2 (its only form). Static BLAS are always Woop.
+  TriangleForm poseTriangles() const {
+    return config_.layout == Layout::Bvh2 ? TriangleForm::Woop : config_.poseTriangles;
+  }
+
   // The scene at time t: poses whose local time changed refitted, world transforms, the TLAS of
   // the time's part (TwoLevelScene::tlasAt) refitted. Ends a blurred frame.
   void update(double sceneTime);
