@@ -73,6 +73,11 @@ void checkLayoutForDevice(Layout layout, Device device);
 // True when stderr is a terminal: progress output is shown only then.
 bool progressEnabled();
 
+// This process's peak resident memory so far (VmHWM of /proc/self/status), in bytes; 0 when unknown.
+// Unlike getrusage's ru_maxrss of a child, it counts this program only: a child started by
+// posix_spawn shares its parent's memory until exec, and its ru_maxrss includes the parent's.
+double peakResidentBytes();
+
 // Prints a rewriting progress line on stderr ("label: done/total  elapsed"), at most ~10 times/s.
 class Progress {
  public:

@@ -85,18 +85,6 @@ nlohmann::json optimizationJson(const tsah::InsertionOptimizer::Result& details)
           {"history", history}};
 }
 
-// This process's peak resident memory so far (VmHWM of /proc/self/status), in bytes; 0 when unknown.
-// Unlike getrusage's ru_maxrss it counts this program only, not the parent it was started from.
-double peakResidentBytes() {
-  std::FILE* f = std::fopen("/proc/self/status", "r");
-  if (!f) return 0.0;
-  char line[256];
-  double kib = 0.0;
-  while (std::fgets(line, sizeof line, f))
-    if (std::sscanf(line, "VmHWM: %lf kB", &kib) == 1) break;
-  std::fclose(f);
-  return kib * 1024.0;
-}
 
 std::pair<double, double> averageAndMaximum(const std::vector<double>& costs) {
   double average = 0.0, maximum = 0.0;
@@ -339,7 +327,7 @@ void run(const Options& opt) {
   if (method.method == tsah::Method::TSah) {
     j["optimization"] = optimizationJson(details);
   }
-  j["peak_rss_bytes"] = peakResidentBytes();
+  j["peak_rss_bytes"] = tsah::cli::peakResidentBytes();
   if (!structureChoice.is_null()) j["structure_choice"] = structureChoice;
   progress.message("done");
   if (opt.json) {

@@ -170,6 +170,7 @@ void optimizeTwoLevel(anim::SceneSources scene, const std::string& input, const 
   for (const BuildPhase& p : twoLevel.buildPhases) phases.push_back({{"name", p.name}, {"seconds", p.seconds}});
   phases.push_back({{"name", "save"}, {"seconds", saveSeconds}});
   j["phases"] = phases;
+  j["peak_rss_bytes"] = peakResidentBytes();  // after the save: the whole command's
   if (json) {
     std::printf("%s\n", j.dump().c_str());
     return;

@@ -39,7 +39,8 @@ std::string exactText(double value) {
 }
 
 // One `tsah optimize SCENE --structure STRUCTURE --json` child: wall time, its build time, peak
-// resident memory (the child's VmHWM when it reports one, else its ru_maxrss).
+// resident memory (the child's VmHWM when it reports one; else its ru_maxrss, which also counts
+// this process: a posix_spawn child shares its parent's memory until exec).
 json optimizeChild(const SceneSource& scene, const std::string& structure, const fs::path& tree, const BenchOptions& o) {
   const bool gpu = o.optimizer == "cuda";
   std::vector<std::string> argv = {o.program, "optimize", scene.input, "-o", tree.string(), "--structure", structure,
@@ -69,7 +70,7 @@ json optimizeChild(const SceneSource& scene, const std::string& structure, const
           {"build_s", j["build_s"]},
           {"cpu_s", r.cpuSeconds},
           {"peak_rss_bytes", ownPeak ? j["peak_rss_bytes"].get<double>() : double(r.maxRssKb) * 1024.0},
-          {"peak_source", ownPeak ? "VmHWM of tsah optimize" : "ru_maxrss of the tsah optimize process"}};
+          {"peak_source", ownPeak ? "VmHWM of tsah optimize" : "ru_maxrss of the tsah optimize child, the bench process included"}};
 }
 
 // traceFrames scene frames spread evenly over the scene's frames (all of them when fewer).
