@@ -389,8 +389,8 @@ TSAH_REGISTER_COMMAND(40, [](CLI::App& app) {
       ->check(CLI::IsMember({"flat", "two-level", "auto"}));
   auto* tlasTrees = sub->add_option("--tlas-trees", opt->tlasTrees,
                   "Two levels: this many top-level trees, each optimized over its part of the scene's time (equal "
-                  "frame counts), or auto: the fewest of 1, 2, 4 ... 32 whose average cost is within --tlas-budget "
-                  "of a TLAS rebuilt at every frame")
+                  "frame counts, then the boundaries moved where that lowers the average cost), or auto: the fewest "
+                  "of 1, 2, 4 ... 32 whose average cost is within --tlas-budget of a TLAS rebuilt at every frame")
       ->capture_default_str();
   auto* tlasBudget = sub->add_option("--tlas-budget", opt->tlasBudget,
                   "--tlas-trees auto: the factor of the per-frame rebuilt TLAS's average cost to reach")

@@ -230,10 +230,11 @@ TEST_F(TwoLevel, TlasBoxesContainEveryInstanceAtEveryFrameAfterRefit) {
 // Top-level trees per part of the scene's time (TlasOptions::trees): consecutive parts with
 // boundaries at scene frames, each tree over the frames of its part; the runtime switches at the
 // boundaries (a boundary frame takes the later tree), refits the part's tree and traces as the
-// flat scene does.
+// flat scene does. Equal parts here (no boundary search), so the boundaries are known.
 TEST_F(TwoLevel, TlasTreesPerTimePartSwitchAtTheirBoundariesAndTraceAsTheFlatScene) {
   tsah::TlasOptions tlas;
   tlas.trees = 4;
+  tlas.searchBoundaries = false;
   const tsah::TwoLevelScene parts =
       tsah::loadTwoLevelScene(scenePath.string(), {}, tsah::test::smallTwoLevelOptions(), tlas);
   ASSERT_EQ(parts.tlases.size(), 4u);
@@ -317,6 +318,62 @@ TEST_F(TwoLevel, AutoTlasTreesStopAtTheBudget) {
   bad = {};
   bad.maxTrees = 0;
   EXPECT_THROW(bad.validate(), tsah::ConfigError);
+}
+
+// The parts' boundaries searched (TlasOptions::searchBoundaries, the default): instances that stand
+// still for 6 s and cross the scene in the last 2 s. Equal parts put the still frames 4 to 6 s in
+// the second part with the crossing; the search moves the boundary towards the crossing and the set
+// costs less. The parts still touch, cover the scene and hold valid trees over their frames, and on
+// the fixture's scene the search never costs more than equal parts.
+TEST_F(TwoLevel, TlasPartBoundariesMoveToWhereTheInstancesMove) {
+  std::string instances;
+  for (int i = 0; i < 12; ++i) {
+    const double a = 0.5236 * i, x = 20.0 * std::cos(a), z = 20.0 * std::sin(a);
+    const std::string from = std::to_string(x) + ", 0, " + std::to_string(z);
+    instances += std::string(i ? ",\n" : "") + R"({"path": [{"time": 0, "translate": [)" + from +
+                 R"(]}, {"time": 6, "translate": [)" + from + R"(]}, {"time": 8, "translate": [)" + std::to_string(-x) +
+                 ", 0, " + std::to_string(-z) + "]}]}";
+  }
+  tsah::test::writeText(dir / "late.json", R"({"fps": 4, "objects": [{"file": "ground.tanim", "instances": [)" +
+                                               instances + "]}]}");
+  const auto build = [&](const std::string& path, uint32_t trees, bool search) {
+    tsah::TlasOptions tlas;
+    tlas.trees = trees;
+    tlas.searchBoundaries = search;
+    return tsah::loadTwoLevelScene(path, {}, tsah::test::smallTwoLevelOptions(), tlas);
+  };
+  const std::string late = (dir / "late.json").string();
+  const tsah::TwoLevelScene even = build(late, 2, false), searched = build(late, 2, true);
+  ASSERT_EQ(even.frameTimes.size(), 33u);
+  ASSERT_EQ(searched.tlases.size(), 2u);
+  EXPECT_EQ(even.tlases[1].firstFrame, 16u);
+  EXPECT_GT(searched.tlases[1].firstFrame, 16u);
+  EXPECT_LT(tsah::temporalCost(searched.tlasFrameCosts, 0), tsah::temporalCost(even.tlasFrameCosts, 0));
+
+  const tsah::TwoLevelScene fixtureEven = build(scenePath.string(), 4, false);
+  const tsah::TwoLevelScene fixtureSearched = build(scenePath.string(), 4, true);
+  EXPECT_LE(tsah::temporalCost(fixtureSearched.tlasFrameCosts, 0), tsah::temporalCost(fixtureEven.tlasFrameCosts, 0));
+  for (const tsah::TwoLevelScene* parts : {&searched, &fixtureSearched}) {
+    EXPECT_EQ(parts->tlases.front().range.start, parts->scene.start);
+    EXPECT_EQ(parts->tlases.back().range.end, parts->scene.end);
+    for (uint32_t s = 0; s < parts->tlases.size(); ++s) {
+      const tsah::TlasTree& tree = parts->tlases[s];
+      if (s > 0) {
+        EXPECT_EQ(tree.range.start, parts->tlases[s - 1].range.end);
+      }
+      EXPECT_LT(tree.range.start, tree.range.end);
+      EXPECT_EQ(tree.bvh.frameCount, tree.frameCount);
+      const tsah::PrimitiveBoxes boxes = framesOf(*parts, tree);
+      EXPECT_EQ(tsah::validate(tree.bvh, &boxes), std::nullopt) << "TLAS " << s;
+      const std::vector<double> costs = tsah::frameCosts(tree.bvh, parts->objective.cost);
+      for (uint32_t f = tree.firstFrame; f < tree.firstFrame + tree.frameCount; ++f) {
+        if (parts->tlasAt(parts->frameTimes[f]) == s) {
+          EXPECT_DOUBLE_EQ(parts->tlasFrameCosts[f], costs[f - tree.firstFrame]);
+        }
+      }
+    }
+  }
+  expectFlatHits(fixtureSearched, scenePath, tsah::Layout::Bvh2);
 }
 
 TEST_F(TwoLevel, InstancesOfOneBlasWithDifferentOffsetsTraceTheirOwnPoses) {

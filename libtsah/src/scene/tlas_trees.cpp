@@ -5,6 +5,7 @@
 #include <span>
 #include <cmath>
 #include <limits>
+#include <map>
 
 #include "tsah/base/error.hpp"
 #include "tsah/base/parallel_each.hpp"
@@ -56,17 +57,32 @@ std::pair<uint32_t, uint32_t> framesInside(std::span<const double> frameTimes, c
   return {uint32_t(first - frameTimes.begin()), uint32_t(std::max(end, first) - first)};
 }
 
-std::vector<TimeRange> tlasPartRanges(std::span<const double> frameTimes, double start, double end, uint32_t parts) {
-  const auto frames = uint32_t(frameTimes.size());
+namespace {
+
+// Part boundaries as scene-frame indices: bounds[0] = 0 < bounds[1] < ... < bounds[parts] = the last
+// frame; part s holds the frames bounds[s] .. bounds[s + 1].
+std::vector<uint32_t> evenBoundaries(uint32_t frames, uint32_t parts) {
   parts = std::max(1u, std::min(parts, frames > 1 ? frames - 1 : 1u));
-  std::vector<TimeRange> ranges(parts);
-  // Boundaries at scene frames, the intervals between frames shared as evenly as they divide.
-  for (uint32_t s = 0; s < parts; ++s) {
-    const auto boundary = [&](uint32_t b) { return frameTimes[std::size_t(b) * (frames - 1) / parts]; };
-    ranges[s].start = s == 0 ? start : boundary(s);
-    ranges[s].end = s + 1 == parts ? end : boundary(s + 1);
-  }
+  std::vector<uint32_t> bounds(parts + 1);
+  // The intervals between frames shared as evenly as they divide.
+  for (uint32_t b = 0; b <= parts; ++b) bounds[b] = uint32_t(std::size_t(b) * (frames > 1 ? frames - 1 : 0) / parts);
+  return bounds;
+}
+
+// The time ranges of the parts between `bounds`: from a part's first frame to its last, the
+// scene's start and end at the ends.
+std::vector<TimeRange> rangesOf(std::span<const uint32_t> bounds, std::span<const double> frameTimes, double start,
+                                double end) {
+  std::vector<TimeRange> ranges;
+  for (std::size_t s = 0; s + 1 < bounds.size(); ++s)
+    ranges.push_back({s == 0 ? start : frameTimes[bounds[s]], s + 2 == bounds.size() ? end : frameTimes[bounds[s + 1]]});
   return ranges;
+}
+
+}  // namespace
+
+std::vector<TimeRange> tlasPartRanges(std::span<const double> frameTimes, double start, double end, uint32_t parts) {
+  return rangesOf(evenBoundaries(uint32_t(frameTimes.size()), parts), frameTimes, start, end);
 }
 
 PrimitiveBoxes frameSlice(const PrimitiveBoxes& boxes, uint32_t first, uint32_t count) {
@@ -80,29 +96,112 @@ PrimitiveBoxes frameSlice(const PrimitiveBoxes& boxes, uint32_t first, uint32_t 
 
 namespace {
 
+// The TLAS of one time range: T-SAH over the scene frames inside it, with its header.
+TlasTree buildTree(const anim::SceneSources& scene, const TwoLevelScene& out, const TimeRange& range,
+                   const TreeOptions& options, const BaselineConfig& config) {
+  TlasTree tree;
+  tree.range = range;
+  std::tie(tree.firstFrame, tree.frameCount) = framesInside(out.frameTimes, tree.range);
+  const PrimitiveBoxes boxes = frameSlice(out.instanceBoxes, tree.firstFrame, tree.frameCount);
+  const auto start = std::chrono::steady_clock::now();
+  tree.bvh = buildTSah(boxes, options.objective.k, config);
+  const double seconds = secondsSince(start);
+  requireValid(tree.bvh, boxes,
+               scene.description.file + ": TLAS of frames " + std::to_string(tree.firstFrame) + " to " +
+                   std::to_string(tree.firstFrame + tree.frameCount - 1));
+  // Its header: the options of the first source's, counts and hash of the instance table.
+  tree.info = treeBuildInfo(options, *scene.sources[0], tree.frameCount, seconds, tree.range.start, tree.range.end);
+  tree.info.representativeFrames = tree.frameCount;
+  tree.info.triangleCount = uint32_t(scene.instances.size());
+  tree.info.vertexCount = 0;
+  tree.info.topologyHash = instanceTableHash(scene);
+  return tree;
+}
+
 // One TLAS per range, concurrently (each the same however the threads are shared).
 std::vector<TlasTree> buildTrees(const anim::SceneSources& scene, const TwoLevelScene& out,
                                  std::span<const TimeRange> ranges, const TreeOptions& options,
                                  const BaselineConfig& config) {
   std::vector<TlasTree> trees(ranges.size());
-  forEachConcurrently(trees.size(), [&](std::size_t s) {
-    TlasTree& tree = trees[s];
-    tree.range = ranges[s];
-    std::tie(tree.firstFrame, tree.frameCount) = framesInside(out.frameTimes, tree.range);
-    const PrimitiveBoxes boxes = frameSlice(out.instanceBoxes, tree.firstFrame, tree.frameCount);
-    const auto start = std::chrono::steady_clock::now();
-    tree.bvh = buildTSah(boxes, options.objective.k, config);
-    const double seconds = secondsSince(start);
-    requireValid(tree.bvh, boxes, scene.description.file + ": TLAS " + std::to_string(s));
-    // Its header: the options of the first source's, counts and hash of the instance table.
-    tree.info = treeBuildInfo(options, *scene.sources[0], tree.frameCount, seconds, tree.range.start, tree.range.end);
-    tree.info.representativeFrames = tree.frameCount;
-    tree.info.triangleCount = uint32_t(scene.instances.size());
-    tree.info.vertexCount = 0;
-    tree.info.topologyHash = instanceTableHash(scene);
-  });
+  forEachConcurrently(trees.size(), [&](std::size_t s) { trees[s] = buildTree(scene, out, ranges[s], options, config); });
   return trees;
 }
+
+// Moves the inner boundaries of a TLAS set's parts (evenBoundaries' form) to lower the average
+// Eq. 1 cost over the scene frames. A part is judged by a stand-in for its T-SAH tree, cheap enough
+// to try many: a sweep-SAH TLAS over the instance boxes of its middle frame, refitted to each of
+// its frames. Each boundary in turn, between its neighbours: a step of a quarter of its room is
+// tried both ways and halved when neither move lowers the summed cost of the frames the two parts
+// own (a frame on a boundary belongs to the later part, tlasAt's rule), down to one frame; a
+// lowering move is kept and tried again. At most kPasses passes over the boundaries, fewer when one
+// moves nothing. Each part's stand-in is built once, however often the search looks at it.
+class BoundarySearch {
+ public:
+  static constexpr int kPasses = 3;
+
+  explicit BoundarySearch(const TwoLevelScene& out) : out_(out), last_(uint32_t(out.frameTimes.size()) - 1) {}
+
+  // The searched boundaries, or `bounds` itself when they lower the stand-ins' cost by less than
+  // kMinGain (a smaller gain is not worth building the moved parts' trees for).
+  static constexpr double kMinGain = 0.01;
+  std::vector<uint32_t> run(std::vector<uint32_t> bounds) {
+    const std::vector<uint32_t> from = bounds;
+    for (int pass = 0; pass < kPasses; ++pass) {
+      bool moved = false;
+      for (std::size_t b = 1; b + 1 < bounds.size(); ++b) moved |= moveBoundary(bounds[b - 1], bounds[b], bounds[b + 1]);
+      if (!moved) break;
+    }
+    return total(bounds) < (1.0 - kMinGain) * total(from) ? bounds : from;
+  }
+
+ private:
+  // Eq. 1 of the stand-in summed over the frames the part first .. last owns: its last frame is the
+  // next part's first, except at the scene's end.
+  double owned(uint32_t first, uint32_t last) {
+    const auto [it, fresh] = owned_.try_emplace({first, last}, 0.0);
+    if (!fresh) return it->second;
+    const uint32_t count = last - first + 1, instances = out_.instanceBoxes.primCount;
+    const std::span<const Aabb> middle(out_.instanceBoxes.boxes.data() + std::size_t(first + count / 2) * instances,
+                                       instances);
+    Bvh tree = rebuildTlas(middle, out_.objective);
+    refit(tree, frameSlice(out_.instanceBoxes, first, count));
+    const std::vector<double> costs = frameCosts(tree, out_.objective.cost);
+    const uint32_t ownedEnd = last == last_ ? last + 1 : last;
+    for (uint32_t f = first; f < ownedEnd; ++f) it->second += costs[f - first];
+    return it->second;
+  }
+
+  double total(std::span<const uint32_t> bounds) {
+    double sum = 0.0;
+    for (std::size_t s = 0; s + 1 < bounds.size(); ++s) sum += owned(bounds[s], bounds[s + 1]);
+    return sum;
+  }
+
+  // The boundary `at` between `before` and `after`; true when it moved.
+  bool moveBoundary(uint32_t before, uint32_t& at, uint32_t after) {
+    double current = owned(before, at) + owned(at, after);
+    bool moved = false;
+    for (uint32_t step = std::max(1u, (after - before) / 4); step >= 1;) {
+      uint32_t best = at;
+      for (const uint32_t c : {at - std::min(step, at - before), at + std::min(step, after - at)}) {
+        if (c == before || c == after) continue;
+        if (const double cost = owned(before, c) + owned(c, after); cost < current) current = cost, best = c;
+      }
+      if (best != at) {
+        at = best;
+        moved = true;
+      } else {
+        step /= 2;
+      }
+    }
+    return moved;
+  }
+
+  const TwoLevelScene& out_;
+  uint32_t last_;  // the scene's last frame
+  std::map<std::pair<uint32_t, uint32_t>, double> owned_;
+};
+
 
 // The mean Eq. 1 cost over the scene's frames of a sweep-SAH TLAS rebuilt at each.
 double rebuiltTlasCost(const TwoLevelScene& out) {
@@ -128,8 +227,20 @@ void buildTlasTrees(const anim::SceneSources& scene, TwoLevelScene& out, const T
   BaselineConfig config = options.baselineConfig();
   config.deviceOptimizer = nullptr;
   const auto rangesFor = [&](uint32_t parts) { return tlasPartRanges(out.frameTimes, scene.start, scene.end, parts); };
+  const auto frames = uint32_t(out.frameTimes.size());
+  // The even parts' trees against those of the searched boundaries, built side by side: the
+  // cheaper set over the scene's frames (the search judges parts by stand-ins, not these trees).
+  const auto searched = [&](std::vector<TlasTree> even) {
+    const std::vector<uint32_t> from = evenBoundaries(frames, uint32_t(even.size()));
+    const std::vector<uint32_t> to = BoundarySearch(out).run(from);
+    if (to == from) return even;
+    std::vector<TlasTree> moved = buildTrees(scene, out, rangesOf(to, out.frameTimes, scene.start, scene.end), options, config);
+    const auto mean = [&](std::span<const TlasTree> t) { return temporalCost(frameCostsOf(t, out.frameTimes, out.objective.cost), 0); };
+    return mean(moved) < mean(even) ? moved : even;
+  };
   if (tlas.trees != 0) {
     out.tlases = buildTrees(scene, out, rangesFor(tlas.trees), options, config);
+    if (tlas.searchBoundaries && out.tlases.size() > 1) out.tlases = searched(std::move(out.tlases));
     return;
   }
   const double bound = tlas.budget * rebuiltTlasCost(out);
@@ -143,8 +254,9 @@ void buildTlasTrees(const anim::SceneSources& scene, TwoLevelScene& out, const T
       out.tlases = std::move(trial);
     }
     // Fewer parts than asked: every interval between frames has its tree already.
-    if (cost <= bound || ranges.size() < parts || parts * 2 > tlas.maxTrees) return;
+    if (cost <= bound || ranges.size() < parts || parts * 2 > tlas.maxTrees) break;
   }
+  if (tlas.searchBoundaries && out.tlases.size() > 1) out.tlases = searched(std::move(out.tlases));
 }
 
 }  // namespace tsah

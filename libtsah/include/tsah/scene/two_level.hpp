@@ -49,14 +49,18 @@ struct TlasTree {
   BvhBuildInfo info;
 };
 
-// How many top-level trees: `trees` of them over parts of equal frame counts, or with trees = 0
-// (auto) the fewest of 1, 2, 4, ... maxTrees whose average cost over the scene's frames is at most
+// How many top-level trees: `trees` of them, or with trees = 0 (auto) the fewest of 1, 2, 4, ...
+// maxTrees over parts of equal frame counts whose average cost over the scene's frames is at most
 // `budget` times that of a sweep-SAH TLAS rebuilt at each frame (rebuildTlas); past maxTrees, the
-// cheapest built. At most one part per interval between scene frames.
+// cheapest built. At most one part per interval between scene frames. The parts start with equal
+// frame counts; with searchBoundaries their boundaries are then searched with cheap stand-in trees
+// and the searched parts' trees kept where they cost less on average than the even parts'
+// (docs/two-level.md), so the result never costs more.
 struct TlasOptions {
   uint32_t trees = 0;
   double budget = 1.1;
   uint32_t maxTrees = 32;
+  bool searchBoundaries = true;
   static constexpr uint32_t kMaxTrees = 4096;
   // Throws tsah::ConfigError naming the field unless trees <= kMaxTrees, 1 <= maxTrees <= kMaxTrees
   // and budget is finite and >= 1.
