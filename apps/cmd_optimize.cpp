@@ -85,7 +85,6 @@ nlohmann::json optimizationJson(const tsah::InsertionOptimizer::Result& details)
           {"history", history}};
 }
 
-
 std::pair<double, double> averageAndMaximum(const std::vector<double>& costs) {
   double average = 0.0, maximum = 0.0;
   for (double c : costs) {

@@ -71,6 +71,20 @@ tsah::PrimitiveBoxes framesOf(const tsah::TwoLevelScene& scene, const tsah::Tlas
   return boxes;
 }
 
+// A scene file at 4 fps: the ground mesh 12 times on a circle of radius 20, each instance crossing
+// to the opposite side by 8 s, after standing still until `still` seconds (0: moving from the start).
+void writeCrossingScene(const fs::path& path, double still) {
+  std::string instances;
+  for (int i = 0; i < 12; ++i) {
+    const double a = 0.5236 * i, x = 20.0 * std::cos(a), z = 20.0 * std::sin(a);
+    const std::string from = std::to_string(x) + ", 0, " + std::to_string(z);
+    const std::string hold = still > 0.0 ? R"(]}, {"time": )" + std::to_string(still) + R"(, "translate": [)" + from : "";
+    instances += std::string(i ? ",\n" : "") + R"({"path": [{"time": 0, "translate": [)" + from + hold +
+                 R"(]}, {"time": 8, "translate": [)" + std::to_string(-x) + ", 0, " + std::to_string(-z) + "]}]}";
+  }
+  tsah::test::writeText(path, R"({"fps": 4, "objects": [{"file": "ground.tanim", "instances": [)" + instances + "]}]}");
+}
+
 class TwoLevel : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -283,15 +297,7 @@ TEST_F(TwoLevel, AutoTlasTreesStopAtTheBudget) {
   loose.budget = 100.0;
   EXPECT_EQ(tsah::loadTwoLevelScene(scenePath.string(), {}, tsah::test::smallTwoLevelOptions(), loose).tlases.size(), 1u);
 
-  std::string instances;
-  for (int i = 0; i < 12; ++i) {
-    const double a = 0.5236 * i, x = 20.0 * std::cos(a), z = 20.0 * std::sin(a);
-    instances += std::string(i ? ",\n" : "") + R"({"path": [{"time": 0, "translate": [)" + std::to_string(x) + ", 0, " +
-                 std::to_string(z) + R"(]}, {"time": 8, "translate": [)" + std::to_string(-x) + ", 0, " +
-                 std::to_string(-z) + "]}]}";
-  }
-  tsah::test::writeText(dir / "crossing.json", R"({"fps": 4, "objects": [{"file": "ground.tanim", "instances": [)" +
-                                                   instances + "]}]}");
+  writeCrossingScene(dir / "crossing.json", 0.0);
   tsah::TlasOptions one, automatic;
   one.trees = 1;
   const std::string crossing = (dir / "crossing.json").string();
@@ -326,16 +332,7 @@ TEST_F(TwoLevel, AutoTlasTreesStopAtTheBudget) {
 // costs less. The parts still touch, cover the scene and hold valid trees over their frames, and on
 // the fixture's scene the search never costs more than equal parts.
 TEST_F(TwoLevel, TlasPartBoundariesMoveToWhereTheInstancesMove) {
-  std::string instances;
-  for (int i = 0; i < 12; ++i) {
-    const double a = 0.5236 * i, x = 20.0 * std::cos(a), z = 20.0 * std::sin(a);
-    const std::string from = std::to_string(x) + ", 0, " + std::to_string(z);
-    instances += std::string(i ? ",\n" : "") + R"({"path": [{"time": 0, "translate": [)" + from +
-                 R"(]}, {"time": 6, "translate": [)" + from + R"(]}, {"time": 8, "translate": [)" + std::to_string(-x) +
-                 ", 0, " + std::to_string(-z) + "]}]}";
-  }
-  tsah::test::writeText(dir / "late.json", R"({"fps": 4, "objects": [{"file": "ground.tanim", "instances": [)" +
-                                               instances + "]}]}");
+  writeCrossingScene(dir / "late.json", 6.0);
   const auto build = [&](const std::string& path, uint32_t trees, bool search) {
     tsah::TlasOptions tlas;
     tlas.trees = trees;

@@ -81,10 +81,6 @@ std::vector<TimeRange> rangesOf(std::span<const uint32_t> bounds, std::span<cons
 
 }  // namespace
 
-std::vector<TimeRange> tlasPartRanges(std::span<const double> frameTimes, double start, double end, uint32_t parts) {
-  return rangesOf(evenBoundaries(uint32_t(frameTimes.size()), parts), frameTimes, start, end);
-}
-
 PrimitiveBoxes frameSlice(const PrimitiveBoxes& boxes, uint32_t first, uint32_t count) {
   PrimitiveBoxes out;
   out.frameCount = count;
@@ -138,12 +134,13 @@ std::vector<TlasTree> buildTrees(const anim::SceneSources& scene, const TwoLevel
 class BoundarySearch {
  public:
   static constexpr int kPasses = 3;
+  // Less gain on the stand-ins is not worth building the moved parts' trees for.
+  static constexpr double kMinGain = 0.01;
 
   explicit BoundarySearch(const TwoLevelScene& out) : out_(out), last_(uint32_t(out.frameTimes.size()) - 1) {}
 
   // The searched boundaries, or `bounds` itself when they lower the stand-ins' cost by less than
-  // kMinGain (a smaller gain is not worth building the moved parts' trees for).
-  static constexpr double kMinGain = 0.01;
+  // kMinGain.
   std::vector<uint32_t> run(std::vector<uint32_t> bounds) {
     const std::vector<uint32_t> from = bounds;
     for (int pass = 0; pass < kPasses; ++pass) {
@@ -202,7 +199,6 @@ class BoundarySearch {
   std::map<std::pair<uint32_t, uint32_t>, double> owned_;
 };
 
-
 // The mean Eq. 1 cost over the scene's frames of a sweep-SAH TLAS rebuilt at each.
 double rebuiltTlasCost(const TwoLevelScene& out) {
   const uint32_t count = out.instanceBoxes.primCount;
@@ -226,37 +222,42 @@ void buildTlasTrees(const anim::SceneSources& scene, TwoLevelScene& out, const T
   // objective covers every frame of its part (the GPU optimizer takes at most 16 representative frames).
   BaselineConfig config = options.baselineConfig();
   config.deviceOptimizer = nullptr;
-  const auto rangesFor = [&](uint32_t parts) { return tlasPartRanges(out.frameTimes, scene.start, scene.end, parts); };
   const auto frames = uint32_t(out.frameTimes.size());
-  // The even parts' trees against those of the searched boundaries, built side by side: the
-  // cheaper set over the scene's frames (the search judges parts by stand-ins, not these trees).
-  const auto searched = [&](std::vector<TlasTree> even) {
-    const std::vector<uint32_t> from = evenBoundaries(frames, uint32_t(even.size()));
-    const std::vector<uint32_t> to = BoundarySearch(out).run(from);
-    if (to == from) return even;
-    std::vector<TlasTree> moved = buildTrees(scene, out, rangesOf(to, out.frameTimes, scene.start, scene.end), options, config);
-    const auto mean = [&](std::span<const TlasTree> t) { return temporalCost(frameCostsOf(t, out.frameTimes, out.objective.cost), 0); };
-    return mean(moved) < mean(even) ? moved : even;
+  const auto treesBetween = [&](std::span<const uint32_t> bounds) {
+    return buildTrees(scene, out, rangesOf(bounds, out.frameTimes, scene.start, scene.end), options, config);
   };
+  const auto meanCost = [&](std::span<const TlasTree> trees) {
+    return temporalCost(frameCostsOf(trees, out.frameTimes, out.objective.cost), 0);
+  };
+  std::vector<uint32_t> bounds;  // out.tlases's parts
+  double cost = std::numeric_limits<double>::infinity();
   if (tlas.trees != 0) {
-    out.tlases = buildTrees(scene, out, rangesFor(tlas.trees), options, config);
-    if (tlas.searchBoundaries && out.tlases.size() > 1) out.tlases = searched(std::move(out.tlases));
-    return;
-  }
-  const double bound = tlas.budget * rebuiltTlasCost(out);
-  double best = std::numeric_limits<double>::infinity();
-  for (uint32_t parts = 1;; parts *= 2) {
-    const std::vector<TimeRange> ranges = rangesFor(parts);
-    std::vector<TlasTree> trial = buildTrees(scene, out, ranges, options, config);
-    const double cost = temporalCost(frameCostsOf(trial, out.frameTimes, out.objective.cost), 0);
-    if (cost < best) {
-      best = cost;
-      out.tlases = std::move(trial);
+    bounds = evenBoundaries(frames, tlas.trees);
+    out.tlases = treesBetween(bounds);
+  } else {
+    const double bound = tlas.budget * rebuiltTlasCost(out);
+    for (uint32_t parts = 1;; parts *= 2) {
+      std::vector<uint32_t> trialBounds = evenBoundaries(frames, parts);
+      std::vector<TlasTree> trial = treesBetween(trialBounds);
+      const std::size_t trialParts = trial.size();
+      const double trialCost = meanCost(trial);
+      if (trialCost < cost) {
+        cost = trialCost;
+        bounds = std::move(trialBounds);
+        out.tlases = std::move(trial);
+      }
+      // Fewer parts than asked: every interval between frames has its tree already.
+      if (trialCost <= bound || trialParts < parts || parts * 2 > tlas.maxTrees) break;
     }
-    // Fewer parts than asked: every interval between frames has its tree already.
-    if (cost <= bound || ranges.size() < parts || parts * 2 > tlas.maxTrees) break;
   }
-  if (tlas.searchBoundaries && out.tlases.size() > 1) out.tlases = searched(std::move(out.tlases));
+  if (!tlas.searchBoundaries || out.tlases.size() < 2) return;
+  // The search judges parts by stand-ins: the searched parts' own trees are kept only where they
+  // cost less than the even parts' trees.
+  const std::vector<uint32_t> searched = BoundarySearch(out).run(bounds);
+  if (searched == bounds) return;
+  std::vector<TlasTree> moved = treesBetween(searched);
+  if (tlas.trees != 0) cost = meanCost(out.tlases);
+  if (meanCost(moved) < cost) out.tlases = std::move(moved);
 }
 
 }  // namespace tsah

@@ -29,9 +29,6 @@ uint32_t instanceTableHash(const anim::SceneSources& scene);
 std::pair<uint32_t, uint32_t> framesInside(std::span<const double> frameTimes, const TimeRange& range);
 // Frames first .. first + count - 1 of `boxes`.
 PrimitiveBoxes frameSlice(const PrimitiveBoxes& boxes, uint32_t first, uint32_t count);
-// `parts` consecutive ranges covering [start, end] with boundaries at scene frames, the intervals
-// between frames shared as evenly as they divide; at most one part per interval.
-std::vector<TimeRange> tlasPartRanges(std::span<const double> frameTimes, double start, double end, uint32_t parts);
 // out.tlases built as `tlas` asks over out.instanceBoxes (out.frameTimes and objective set).
 void buildTlasTrees(const anim::SceneSources& scene, TwoLevelScene& out, const TreeOptions& options,
                     const TlasOptions& tlas);
