@@ -35,6 +35,8 @@ struct LazyPrep {
 template <class V>
 struct RayLanes {
   V org[3], dir[3], inv[3];
+  V negOrg[3];                         // -org: plane + (-org) rounds as plane - org, and the sum takes
+                                       // the plane straight from memory (a difference cannot)
   uint32_t nearPlane[3], farPlane[3];  // rows of WideSoaNode::box holding each axis's near/far plane
   V nearPadSign[3];                    // blurred boxes: -1 where the near plane is lo, else +1 (slabDistances)
   V f, g;                              // blurred: the ray's place between the keys, and 1 - f
@@ -47,6 +49,7 @@ inline RayLanes<V> rayLanes(const Ray& ray, const RayPrep& prep, float f) {
   r.g = V::set1(1.0f) - r.f;
   for (int a = 0; a < 3; ++a) {
     r.org[a] = V::set1(ray.org[a]);
+    r.negOrg[a] = V::set1(-ray.org[a]);
     r.dir[a] = V::set1(ray.dir[a]);
     r.inv[a] = V::set1(prep.invDir[a]);
     r.nearPlane[a] = prep.invDir[a] >= 0.0f ? uint32_t(a) : uint32_t(a + 3);
@@ -261,9 +264,9 @@ inline bool intersectMotionLeaf(const WideView<V::N>& bvh, const WideMotionFrame
       });
 }
 
-// A node's entry and exit distances on each axis, (plane - org) * inv for the near and the far
-// plane as the ray's sign picks them (RayLanes): the planes loaded, or (blurred) lerped between the
-// two keys and padded outward, motion::lerpBox's operations lane by lane in its order. The planes
+// A node's entry and exit distances on each axis, (plane - org) * inv (as plane + (-org), the same
+// rounding) for the near and the far plane as the ray's sign picks them (RayLanes): the planes
+// loaded, or (blurred) lerped between the two keys and padded outward, motion::lerpBox's operations lane by lane in its order. The planes
 // are loaded by the ray's plane index straight from the nodes and used axis by axis, so the lerped
 // values stay in registers (a six-row array indexed by plane would live on the stack). The pad is
 // subtracted from a lo plane and added to a hi plane: the ray's signed pad (RayLanes::nearPadSign,
@@ -287,10 +290,40 @@ inline void slabDistances(const WideSoaNode<V::N>& node, const WideMotionFrame<V
       nearPlane = motion::lerpOf(near0, near1, r.f, r.g) + signedPad;
       farPlane = motion::lerpOf(far0, far1, r.f, r.g) - signedPad;
     }
-    tNear[a] = (nearPlane - r.org[a]) * r.inv[a];
-    tFar[a] = (farPlane - r.org[a]) * r.inv[a];
+    tNear[a] = (nearPlane + r.negOrg[a]) * r.inv[a];
+    tFar[a] = (farPlane + r.negOrg[a]) * r.inv[a];
   }
 }
+
+// Starts loading an entered child that goes on the stack, so that its lines are on their way while
+// the nodes above it in the stack are traversed (a pushed child is read later, often after its
+// lines would have missed the cache): an interior child's node, a leaf's first packet (its first
+// lines: the Woop packet's rows the early exit reads and the next ones). Only a hint: the results
+// do not depend on it. The address is chosen without a branch; blurred leaves (two keys' packets)
+// are not prefetched (their "leaf" lines are the root node's, in cache). A visitor's traversal
+// (the TLAS, small enough to stay in cache) prefetches nothing.
+template <uint32_t N>
+struct ChildPrefetch {
+  const char* nodes;
+  const char* leaves;
+  std::size_t leafStride;
+
+  ChildPrefetch(const WideView<N>& bvh, bool blurred) : nodes(reinterpret_cast<const char*>(bvh.nodes)) {
+    if (!blurred && bvh.packets != nullptr)
+      leaves = reinterpret_cast<const char*>(bvh.packets), leafStride = sizeof(WoopPacket<N>);
+    else if (!blurred && bvh.vertexPackets != nullptr)
+      leaves = reinterpret_cast<const char*>(bvh.vertexPackets), leafStride = sizeof(KeyVertexPacket<N>);
+    else
+      leaves = nodes, leafStride = 0;
+  }
+  // Always inlined: as a call of its own GCC finds it free of side effects and drops it.
+  [[gnu::always_inline]] void operator()(int32_t ref) const {
+    const char* at = isLeafRef(ref) ? leaves + std::size_t(leafFirstSlot(ref)) * leafStride
+                                    : nodes + std::size_t(uint32_t(ref)) * sizeof(WideSoaNode<N>);
+    constexpr uint32_t kLines = N >= 8 ? 4 : 2;  // a node: 256 or 128 bytes
+    for (uint32_t line = 0; line < kLines; ++line) __builtin_prefetch(at + 64 * line);
+  }
+};
 
 // What a traversal looks for, and for any hit in which order it visits the entered children.
 enum class Query { Closest, AnyFarthestFirst, AnyTreeOrder };
@@ -303,8 +336,8 @@ enum class Query { Closest, AnyFarthestFirst, AnyTreeOrder };
 // ray missing it misses every child box the loop would test: the slab test is monotone in the
 // planes). For closest hit only: the camera's rays, many of which miss a small scene; an any-hit
 // ray (a shadow or ambient-occlusion ray) leaves a surface inside that box, so the test would only
-// cost it time.
-template <class V, Query Q, bool Blurred = false, class LeafTest>
+// cost it time. Prefetch: pushed children are prefetched (ChildPrefetch).
+template <class V, Query Q, bool Blurred = false, bool Prefetch = true, class LeafTest>
 inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, const Ray& ray, LeafTest&& leafTest,
                     const Aabb* rootFirst = nullptr) {
   constexpr uint32_t N = V::N;
@@ -338,6 +371,7 @@ inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, c
   uint32_t count = 0;
   const V vtmin = V::set1(ray.tmin);
   const V farScale = V::set1(kSlabFarScale);
+  const ChildPrefetch<N> prefetchChild(bvh, Blurred);
   for (;;) {
     if (!isLeafRef(ref)) {
       const WideSoaNode<N>& node = bvh.nodes[ref];
@@ -356,6 +390,7 @@ inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, c
         }
         if constexpr (Q == Query::AnyTreeOrder) {  // every entered child in slot order; the last one next
           for (uint32_t c = c0;;) {
+            if constexpr (Prefetch) prefetchChild(node.ref[c]);
             stack[sp++] = Entry{node.ref[c], node.count[c], 0.0f};
             if (!mask) break;
             c = uint32_t(__builtin_ctz(mask));
@@ -378,6 +413,7 @@ inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, c
           const uint32_t c1 = uint32_t(__builtin_ctz(mask));
           const bool swap = key[c0] < key[c1];
           const uint32_t below = swap ? c1 : c0, first = swap ? c0 : c1;
+          if constexpr (Prefetch) prefetchChild(node.ref[below]);
           stack[sp++] = Entry{node.ref[below], node.count[below], key[below]};
           ref = node.ref[first];
           count = node.count[first];
@@ -385,6 +421,7 @@ inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, c
         }
         const uint32_t base = sp;
         for (uint32_t c = c0;;) {
+          if constexpr (Prefetch) prefetchChild(node.ref[c]);
           const Entry e{node.ref[c], node.count[c], key[c]};
           uint32_t i = sp++;
           while (i > base && stack[i - 1].t < e.t) {
@@ -571,7 +608,7 @@ TSAH_KERNEL bool anyMotionKernel(const WideView<V::N>& bvh, const WideMotionFram
 // and at each entered leaf the visitor (not inlined: an instance's own traversal).
 template <class V, Query Q>
 inline Hit traverseVisited(const WideView<V::N>& bvh, const Ray& ray, const WideLeafVisitor& visitor) {
-  return traverse<V, Q>(bvh, {}, ray,
+  return traverse<V, Q, false, false>(bvh, {}, ray,
                         [&](LazyPrep&, const RayLanes<V>&, uint32_t item, uint32_t, float& tmax, Hit& hit) {
                           return visitor.visit(visitor.context, item, ray, tmax, hit);
                         },
