@@ -38,6 +38,9 @@ struct TwoLevelRuntime::WideTop {
   const WideVisitKernels* kernels = nullptr;
   std::optional<detail::WideTlas<4>> tlas4;
   std::optional<detail::WideTlas<8>> tlas8;
+  // The views the kernels read, taken after each refit rather than built again for every ray.
+  WideView<4> view4;
+  WideView<8> view8;
 };
 
 struct TwoLevelRuntime::Pool {
@@ -187,8 +190,14 @@ void TwoLevelRuntime::selectTlas(double sceneTime) {
 
 void TwoLevelRuntime::refitWideTlas() {
   if (!wideTop_) return;
-  if (wideTop_->tlas4) wideTop_->tlas4->refit(instanceBoxes_);
-  if (wideTop_->tlas8) wideTop_->tlas8->refit(instanceBoxes_);
+  if (wideTop_->tlas4) {
+    wideTop_->tlas4->refit(instanceBoxes_);
+    wideTop_->view4 = wideTop_->tlas4->view();
+  }
+  if (wideTop_->tlas8) {
+    wideTop_->tlas8->refit(instanceBoxes_);
+    wideTop_->view8 = wideTop_->tlas8->view();
+  }
 }
 
 void TwoLevelRuntime::refitTlas() {
@@ -202,8 +211,8 @@ void TwoLevelRuntime::refitTlas() {
 TwoLevelHit TwoLevelRuntime::closestHit(const Ray& ray) const {
   if (wideTop_ && !blurred()) {  // blurred: the instant trace at the close takes the binary TLAS's keys
     const detail::InstanceVisit<false> visit{toInstance_.data(), visible_.data(), blas_.data()};
-    const Hit h = wideTop_->tlas8 ? wideTop_->kernels->closest8(wideTop_->tlas8->view(), ray, visit.visitor())
-                                  : wideTop_->kernels->closest4(wideTop_->tlas4->view(), ray, visit.visitor());
+    const Hit h = wideTop_->tlas8 ? wideTop_->kernels->closest8(wideTop_->view8, ray, visit.visitor())
+                                  : wideTop_->kernels->closest4(wideTop_->view4, ray, visit.visitor());
     return detail::twoLevelHit(h, visit);
   }
   const auto frame = detail::tlasFrame<false, false>(tlas_, toInstance_, instanceBoxes_, visible_, blas_);
@@ -213,8 +222,8 @@ TwoLevelHit TwoLevelRuntime::closestHit(const Ray& ray) const {
 bool TwoLevelRuntime::anyHit(const Ray& ray, AnyHitOrder order) const {
   if (wideTop_ && !blurred()) {
     const detail::InstanceVisit<true> visit{toInstance_.data(), visible_.data(), blas_.data(), order};
-    return wideTop_->tlas8 ? wideTop_->kernels->any8(wideTop_->tlas8->view(), ray, order, visit.visitor())
-                           : wideTop_->kernels->any4(wideTop_->tlas4->view(), ray, order, visit.visitor());
+    return wideTop_->tlas8 ? wideTop_->kernels->any8(wideTop_->view8, ray, order, visit.visitor())
+                           : wideTop_->kernels->any4(wideTop_->view4, ray, order, visit.visitor());
   }
   auto frame = detail::tlasFrame<true, false>(tlas_, toInstance_, instanceBoxes_, visible_, blas_);
   frame.order = order;
