@@ -430,6 +430,21 @@ TEST(CudaTwoLevelNames, TlasUpdateNamesRoundTrip) {
   EXPECT_THROW(tsah::cuda::parseTlasUpdate("sah"), tsah::ConfigError);
 }
 
+// The GPU runtime's closest hits of rays through the instances' boxes against the CPU runtime's,
+// both updated to time t: the same instance and triangle.
+void expectClosestHitsAsTheCpu(tsah::cuda::GpuTwoLevelRuntime& gpu, const tsah::TwoLevelRuntime& cpu, double t) {
+  const std::vector<tsah::Ray> rays = tsah::test::raysThroughBox(tsah::test::unionOf(cpu.instanceBoxes()), 500, 3);
+  const std::vector<tsah::TwoLevelHit> got = gpu.closestHits(rays);
+  for (std::size_t r = 0; r < rays.size(); ++r) {
+    const tsah::TwoLevelHit expected = cpu.closestHit(rays[r]);
+    ASSERT_EQ(got[r].valid(), expected.valid()) << "t " << t << " ray " << r;
+    if (expected.valid()) {
+      EXPECT_EQ(got[r].instance, expected.instance) << "t " << t << " ray " << r;
+      EXPECT_EQ(got[r].prim, expected.prim) << "t " << t << " ray " << r;
+    }
+  }
+}
+
 TEST(CudaTwoLevelRigid, OnlyPathsAndHeldPosesRefitNothing) {
   REQUIRE_GPU();
   const fs::path dir = tsah::test::scratchDir();
@@ -442,16 +457,34 @@ TEST(CudaTwoLevelRigid, OnlyPathsAndHeldPosesRefitNothing) {
   for (const double t : {6.0, 6.25, 7.0, 8.0}) {  // and hold it while the path moves on
     EXPECT_EQ(gpu.updateAt(t).blasRefits, 0u) << "t " << t;
     cpu.update(t);
-    // The rigid graph still moved the instances: the hits follow the path.
-    const std::vector<tsah::Ray> rays = tsah::test::raysThroughBox(tsah::test::unionOf(cpu.instanceBoxes()), 500, 3);
-    const std::vector<tsah::TwoLevelHit> got = gpu.closestHits(rays);
-    for (std::size_t r = 0; r < rays.size(); ++r) {
-      const tsah::TwoLevelHit expected = cpu.closestHit(rays[r]);
-      ASSERT_EQ(got[r].valid(), expected.valid()) << "t " << t << " ray " << r;
-      if (expected.valid()) {
-        EXPECT_EQ(got[r].instance, expected.instance) << "t " << t << " ray " << r;
-        EXPECT_EQ(got[r].prim, expected.prim) << "t " << t << " ray " << r;
-      }
+    expectClosestHitsAsTheCpu(gpu, cpu, t);  // the rigid graph still moved the instances along the path
+  }
+}
+
+// From t = 4 the pose without an offset holds its last frame while the offset one moves on until
+// t = 5: only the moving pose is updated (as on the CPU), and the held one keeps its last frame's
+// positions, boxes and triangles (the hits equal the CPU runtime's, which refits only what moved).
+// Each way the GPU updates a pose: keyed, the block refit and the global walk.
+TEST(CudaTwoLevelRigid, AHeldPoseIsLeftAsItIsWhileAnotherMoves) {
+  REQUIRE_GPU();
+  const fs::path dir = tsah::test::scratchDir();
+  const tsah::TwoLevelScene s =
+      tsah::loadTwoLevelScene(tsah::test::writeRigidPathScene(dir).string(), {}, tsah::test::smallTwoLevelOptions());
+  for (const int way : {0, 1, 2}) {
+    SCOPED_TRACE(way == 0 ? "keyed" : way == 1 ? "block refit" : "global walk");
+    tsah::cuda::GpuTwoLevelRuntime::Config config;
+    config.keyedPoses = way == 0;
+    config.blockRefits = way != 2;
+    tsah::TwoLevelRuntime cpu(s);
+    tsah::cuda::GpuTwoLevelRuntime gpu(s, config);
+    gpu.updateAt(3.0);
+    cpu.update(3.0);
+    const std::pair<double, uint32_t> steps[] = {{4.25, 2u}, {4.5, 1u}, {4.75, 1u}, {5.0, 1u}, {5.5, 0u}};
+    for (const auto& [t, refits] : steps) {
+      EXPECT_EQ(gpu.updateAt(t).blasRefits, refits) << "t " << t;
+      cpu.update(t);
+      EXPECT_EQ(cpu.lastUpdateBlasRefits(), refits) << "t " << t;
+      expectClosestHitsAsTheCpu(gpu, cpu, t);
     }
   }
 }

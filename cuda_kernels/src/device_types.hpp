@@ -52,11 +52,13 @@ struct LeafRecord {
 // Which keyframes the interpolation blends: a kernel argument, which the runtime sets in its
 // captured graphs before each launch (setInterpolationParams), so one graph serves every frame.
 // Offsets are in floats; keyA and keyB are the keyframes' indices (the keyed pose update's boxes).
+// held: a two-level pose whose local time is the last update's; the pose kernels skip it (its
+// positions, boxes and Woop triangles are already this frame's).
 struct alignas(16) FrameParams {
   uint64_t a = 0, b = 0;
   float alpha = 0.0f;
   uint32_t keyA = 0, keyB = 0;
-  uint32_t pad = 0;
+  uint32_t held = 0;
 };
 
 // The frame blending keyframe k towards k + 1 by alpha (anim::keyframeBlend) of an animation with

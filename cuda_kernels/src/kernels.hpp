@@ -47,14 +47,18 @@ void launchRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord
 
 // The same three steps for a batch of trees of one topology (BatchStrides): member b interpolates
 // frames[b] into out + b * outStride, refits its nodes into roots[b], recomputes its Woop triangles.
-// Counters of every member zero on entry, as for launchRefit.
+// Counters of every member zero on entry, as for launchRefit. A member whose frame is held
+// (FrameParams::held) is left as it is by all three; the refit and the Woop pass read that from
+// `frames` when given (null: every member is updated).
 void launchBatchInterpolate(const float* keyframes, const uint32_t* movingIds, const FrameParams* frames, float* out,
                             uint32_t movingCount, uint32_t batchCount, uint64_t outStride, cudaStream_t stream);
 void launchBatchRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
                       const uint32_t* slotVertices, const float* positions, uint32_t* counters, RootInfo* roots,
-                      uint32_t batchCount, const BatchStrides& batch, cudaStream_t stream);
+                      uint32_t batchCount, const BatchStrides& batch, cudaStream_t stream,
+                      const FrameParams* frames = nullptr);
 void launchBatchSlotWoop(const uint32_t* slotVertices, uint32_t slots, const float* positions, WoopTriangle* woop,
-                         uint32_t batchCount, const BatchStrides& batch, cudaStream_t stream);
+                         uint32_t batchCount, const BatchStrides& batch, cudaStream_t stream,
+                         const FrameParams* frames = nullptr);
 
 // Woop triangle of every slot, the vertex ids found through the slot's triangle id (the rebuilds)
 // or in slot order (launchSlotWoop: the refits' slotVertices).

@@ -93,10 +93,12 @@ __device__ void partTriangles(const RefitPart& part, const uint32_t* __restrict_
 __global__ void __launch_bounds__(kPartThreads, 4)
     posePartsKernel(GpuBvhNode* __restrict__ nodes, RefitPartsView view, const uint32_t* __restrict__ slotVertices,
                     const float* __restrict__ positions, WoopTriangle* __restrict__ woop,
-                    RootInfo* __restrict__ roots, Aabb* partBoxes, uint32_t* tickets, BatchStrides batch) {
+                    RootInfo* __restrict__ roots, Aabb* partBoxes, uint32_t* tickets, BatchStrides batch,
+                    const FrameParams* __restrict__ frames) {
   extern __shared__ uint32_t shared[];
   __shared__ bool lastBlock;
   const uint32_t b = blockIdx.x;
+  if (frames[b].held) return;  // every block of a held pose: its tickets stay zero
   const float* own = positions + b * batch.positions;
   GpuBvhNode* ownNodes = nodes + b * batch.nodes;
   WoopTriangle* ownWoop = woop + b * batch.woop;
@@ -194,6 +196,7 @@ __global__ void __launch_bounds__(kWoopBlock)
                     BatchStrides batch, uint32_t interpolationBlocks, uint32_t woopBlocks) {
   const uint32_t b = blockIdx.y;
   const FrameParams f = frames[b];
+  if (f.held) return;
   const float beta = 1.0f - f.alpha;
   const float* keyA = src.keyframes + f.a;
   const float* keyB = src.keyframes + f.b;
@@ -314,11 +317,11 @@ uint64_t prepareBlockRefits() {
 void launchPoseBlasParts(GpuBvhNode* nodes, const RefitPartsView& parts, uint64_t sharedBytes,
                          const uint32_t* slotVertices, const float* positions, WoopTriangle* woop, RootInfo* roots,
                          Aabb* partBoxes, uint32_t* tickets, uint32_t poseCount, const BatchStrides& batch,
-                         cudaStream_t stream) {
+                         const FrameParams* frames, cudaStream_t stream) {
   if (poseCount == 0) return;
   const dim3 grid(poseCount, parts.subtreeCount);
   posePartsKernel<<<grid, kPartThreads, sharedBytes, stream>>>(
-      nodes, parts, slotVertices, positions, woop, roots, partBoxes, tickets, batch);
+      nodes, parts, slotVertices, positions, woop, roots, partBoxes, tickets, batch, frames);
   CUDA_CHECK_LAUNCH("posePartsKernel");
 }
 

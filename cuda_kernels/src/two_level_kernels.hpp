@@ -107,11 +107,12 @@ uint64_t prepareBlockRefits();
 // Every pose of a group (BatchStrides) refitted from its positions by the parts of its source's
 // tree (one block per pose and subtree part; the top by the last of them), with its Woop
 // triangles. sharedBytes: the most partRefitBytes(nodeCount, slotCount) of a part. partBoxes:
-// subtreeCount boxes per pose; tickets: one per pose, zero on entry (and left zero).
+// subtreeCount boxes per pose; tickets: one per pose, zero on entry (and left zero). frames: per
+// pose its frame; a held one (FrameParams::held) is left as it is.
 void launchPoseBlasParts(GpuBvhNode* nodes, const RefitPartsView& parts, uint64_t sharedBytes,
                          const uint32_t* slotVertices, const float* positions, WoopTriangle* woop, RootInfo* roots,
                          Aabb* partBoxes, uint32_t* tickets, uint32_t poseCount, const BatchStrides& batch,
-                         cudaStream_t stream);
+                         const FrameParams* frames, cudaStream_t stream);
 // An animated source as the keyed pose update reads it: its keyframes (moving vertices only,
 // keyframe-major), where each vertex's coordinates lie in a keyframe (movingIndex: per vertex, its
 // rank among the moving ones or kStaticVertex; null when every vertex moves), its slots' vertex ids,
@@ -129,12 +130,13 @@ struct KeyedSource {
   const RootInfo* keyRoots = nullptr;
   uint32_t nodeCount = 0;
 };
-// Every pose of a group (BatchStrides; pose b blends frames[b]) in one launch, without a refit: its
-// moving vertices interpolated into its positions, its Woop triangles from the same interpolation
-// (bit for bit the positions'), and every child box and the root box lerped from the two keyframes'
-// boxes with the interpolation's weights and rounding. Each lerped bound is a monotone function of
-// the two keyframes' bounds, so the lerped box holds the lerped vertices; a source with static
-// vertices pads its lerped boxes by the blend's rounding of a static coordinate (docs/two-level.md).
+// Every pose of a group (BatchStrides; pose b blends frames[b], a held one is left as it is) in one
+// launch, without a refit: its moving vertices interpolated into its positions, its Woop triangles
+// from the same interpolation (bit for bit the positions'), and every child box and the root box
+// lerped from the two keyframes' boxes with the interpolation's weights and rounding. Each lerped
+// bound is a monotone function of the two keyframes' bounds, so the lerped box holds the lerped
+// vertices; a source with static vertices pads its lerped boxes by the blend's rounding of a static
+// coordinate (docs/two-level.md).
 void launchKeyedPoses(const KeyedSource& source, const FrameParams* frames, float* positions, GpuBvhNode* nodes,
                       WoopTriangle* woop, RootInfo* roots, uint32_t poseCount, const BatchStrides& batch,
                       cudaStream_t stream);

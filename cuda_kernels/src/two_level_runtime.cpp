@@ -331,30 +331,30 @@ void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
   if (uploadBytes > first)
     detail::launchCopyFromHost(deviceUpload.data() + first, mappedUpload + first, uploadBytes - first, stream);
   if (config.phaseTimings) events.record(1, stream);
-  if (refitPoses)
+  if (refitPoses)  // the poses whose frame is held (FrameParams::held) are skipped by every launch
     for (PoseGroup& g : groups) {
       const Source& d = sources[g.source];
       const auto members = uint32_t(g.poses.size());
+      const detail::FrameParams* frames = devicePoseFrames + g.firstFrame;
       if (d.keyed) {
-        detail::launchKeyedPoses(d.keyedView(), devicePoseFrames + g.firstFrame, g.positions.data(), g.nodes.data(),
-                                 g.woop.data(), g.roots.data(), members, g.strides, stream);
+        detail::launchKeyedPoses(d.keyedView(), frames, g.positions.data(), g.nodes.data(), g.woop.data(),
+                                 g.roots.data(), members, g.strides, stream);
         continue;
       }
-      detail::launchBatchInterpolate(d.keyframes.data(), d.movingIds.size() ? d.movingIds.data() : nullptr,
-                                     devicePoseFrames + g.firstFrame, g.positions.data(), d.movingCount,
-                                     members, g.strides.positions, stream);
+      detail::launchBatchInterpolate(d.keyframes.data(), d.movingIds.size() ? d.movingIds.data() : nullptr, frames,
+                                     g.positions.data(), d.movingCount, members, g.strides.positions, stream);
       if (g.blockRefit) {
         detail::launchPoseBlasParts(g.nodes.data(), d.parts.view(), d.parts.poseSharedBytes, d.slotVertices.data(),
                                     g.positions.data(), g.woop.data(), g.roots.data(), g.partBoxes.data(),
-                                    g.tickets.data(), members, g.strides, stream);
+                                    g.tickets.data(), members, g.strides, frames, stream);
         continue;
       }
       if (g.counters.size()) CUDA_CHECK(cudaMemsetAsync(g.counters.data(), 0, g.counters.bytes(), stream));
       detail::launchBatchRefit(g.nodes.data(), d.nodeParent.data(), d.leaves.data(), d.leafCount,
                                d.slotVertices.data(), g.positions.data(), g.counters.data(), g.roots.data(), members,
-                               g.strides, stream);
+                               g.strides, stream, frames);
       detail::launchBatchSlotWoop(d.slotVertices.data(), d.topology.triangleCount(), g.positions.data(),
-                                  g.woop.data(), members, g.strides, stream);
+                                  g.woop.data(), members, g.strides, stream, frames);
     }
   if (config.phaseTimings) events.record(2, stream);
   if (tlasRebuilder) {
@@ -431,13 +431,18 @@ TwoLevelUpdateTimings GpuTwoLevelRuntime::updateAt(double sceneTime) {
     const uint32_t p = scene.instancePose[i];
     if (p != kInvalidIndex) local[p] = src.instances[i].localTime(sceneTime, *src.sources[scene.poses[p].blas]);
   }
-  bool posesMove = false;
+  // A pose whose local time is the last update's is held: the graph's pose launches skip it.
+  uint32_t movedPoses = 0;
   for (uint32_t p = 0; p < scene.poses.size(); ++p) {
-    posesMove = posesMove || !(local[p] == m.poseLocalTime[p]);
+    const bool held = local[p] == m.poseLocalTime[p];
+    movedPoses += held ? 0u : 1u;
     const anim::Animation& a = *src.sources[scene.poses[p].blas];
     const auto [k, alpha] = anim::keyframeBlend(a.times(), local[p]);
-    m.poseFrames[m.poseFrameIndex[p]] = detail::blendFrame(k, alpha, a.movingVertexCount());
+    detail::FrameParams& frame = m.poseFrames[m.poseFrameIndex[p]];
+    frame = detail::blendFrame(k, alpha, a.movingVertexCount());
+    frame.held = held ? 1u : 0u;
   }
+  const bool posesMove = movedPoses > 0;
   // The instances' transforms (tsah::TwoLevelRuntime::update's): world(t), its inverse, the view.
   for (uint32_t i = 0; i < scene.instanceCount(); ++i) {
     const anim::Matrix4 world = src.instances[i].worldAt(sceneTime);
@@ -463,7 +468,7 @@ TwoLevelUpdateTimings GpuTwoLevelRuntime::updateAt(double sceneTime) {
   } else {
     t.blasMs = m.events.ms(0, 3);
   }
-  t.blasRefits = posesMove ? uint32_t(scene.poses.size()) : 0u;
+  t.blasRefits = movedPoses;
   t.instances = scene.instanceCount();
   t.tlasNodes = tlas.topology.interiorCount;
   if (m.tlasRebuilder) {  // its own events, in the same graph; throws for a tree deeper than the stack

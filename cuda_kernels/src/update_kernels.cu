@@ -35,20 +35,24 @@ __global__ void interpolateFrameKernel(const float* __restrict__ keyframes, cons
   interpolateCoordinates(keyframes, movingIds, p, out, count);
 }
 
-// A batch: member blockIdx.y blends its own frame into its own positions.
+// A batch: member blockIdx.y blends its own frame into its own positions (none for a held frame).
 __global__ void interpolateBatchKernel(const float* __restrict__ keyframes, const uint32_t* __restrict__ movingIds,
                                        const FrameParams* __restrict__ frames, float* __restrict__ out,
                                        std::size_t count, uint64_t outStride) {
-  interpolateCoordinates(keyframes, movingIds, frames[blockIdx.y], out + blockIdx.y * outStride, count);
+  const FrameParams frame = frames[blockIdx.y];
+  if (frame.held) return;
+  interpolateCoordinates(keyframes, movingIds, frame, out + blockIdx.y * outStride, count);
 }
 
 __global__ void refitKernel(GpuBvhNode* __restrict__ nodes, const uint32_t* __restrict__ nodeParent,
                             const LeafRecord* __restrict__ leaves, uint32_t leafCount,
                             const uint32_t* __restrict__ slotVertices, const float* __restrict__ positions,
-                            uint32_t* __restrict__ counters, RootInfo* __restrict__ root, BatchStrides batch) {
+                            uint32_t* __restrict__ counters, RootInfo* __restrict__ root, BatchStrides batch,
+                            const FrameParams* __restrict__ frames) {
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= leafCount) return;
   const uint32_t b = blockIdx.y;
+  if (frames != nullptr && frames[b].held) return;
   const LeafRecord leaf = leaves[i];
   const Aabb box = leafBox(leaf.first, leaf.count, slotVertices, positions + b * batch.positions);
   refitUpwards(nodes + b * batch.nodes, nodeParent, leaf.parentSlot, box, counters + b * batch.counters, root + b);
@@ -70,7 +74,9 @@ struct GatheredIds {
 template <class VertexIds>
 __global__ void __launch_bounds__(kWoopBlock) woopKernel(VertexIds ids, uint32_t slots,
                                                          const float* __restrict__ positions,
-                                                         WoopTriangle* __restrict__ woop, BatchStrides batch) {
+                                                         WoopTriangle* __restrict__ woop, BatchStrides batch,
+                                                         const FrameParams* __restrict__ frames) {
+  if (frames != nullptr && frames[blockIdx.y].held) return;  // the whole block: no barrier is left waiting
   positions += blockIdx.y * batch.positions;
   woop += blockIdx.y * batch.woop;
   woopBlock(blockIdx.x * kWoopBlock, slots, [&](uint32_t s, Vec3* v) {
@@ -81,12 +87,12 @@ __global__ void __launch_bounds__(kWoopBlock) woopKernel(VertexIds ids, uint32_t
 
 template <class VertexIds>
 void launchWoopKernel(VertexIds ids, uint32_t slots, const float* positions, WoopTriangle* woop, uint32_t batchCount,
-                      const BatchStrides& batch, cudaStream_t stream) {
+                      const BatchStrides& batch, const FrameParams* frames, cudaStream_t stream) {
   if (slots == 0) return;
   forEachBatchChunk(batchCount, [&](uint32_t first, uint32_t count) {
     const dim3 grid(gridFor(slots, kWoopBlock), count);
     woopKernel<<<grid, kWoopBlock, 0, stream>>>(ids, slots, positions + first * batch.positions,
-                                                woop + first * batch.woop, batch);
+                                                woop + first * batch.woop, batch, frames ? frames + first : nullptr);
     CUDA_CHECK_LAUNCH("woopKernel");
   });
 }
@@ -150,14 +156,15 @@ void launchRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord
 
 void launchBatchRefit(GpuBvhNode* nodes, const uint32_t* nodeParent, const LeafRecord* leaves, uint32_t leafCount,
                       const uint32_t* slotVertices, const float* positions, uint32_t* counters, RootInfo* roots,
-                      uint32_t batchCount, const BatchStrides& batch, cudaStream_t stream) {
+                      uint32_t batchCount, const BatchStrides& batch, cudaStream_t stream,
+                      const FrameParams* frames) {
   if (leafCount == 0) return;
   const uint32_t block = 128;
   forEachBatchChunk(batchCount, [&](uint32_t first, uint32_t count) {
     const dim3 grid(gridFor(leafCount, block), count);
     refitKernel<<<grid, block, 0, stream>>>(nodes + first * batch.nodes, nodeParent, leaves, leafCount, slotVertices,
                                             positions + first * batch.positions, counters + first * batch.counters,
-                                            roots + first, batch);
+                                            roots + first, batch, frames ? frames + first : nullptr);
     CUDA_CHECK_LAUNCH("refitKernel");
   });
 }
@@ -177,17 +184,18 @@ void launchBatchInterpolate(const float* keyframes, const uint32_t* movingIds, c
 
 void launchWoop(const uint32_t* triIndex, uint32_t slots, const uint32_t* indices, const float* positions,
                 WoopTriangle* woop, cudaStream_t stream) {
-  launchWoopKernel(GatheredIds{triIndex, indices}, slots, positions, woop, 1, BatchStrides{}, stream);
+  launchWoopKernel(GatheredIds{triIndex, indices}, slots, positions, woop, 1, BatchStrides{}, nullptr, stream);
 }
 
 void launchSlotWoop(const uint32_t* slotVertices, uint32_t slots, const float* positions, WoopTriangle* woop,
                     cudaStream_t stream) {
-  launchWoopKernel(SlotOrderedIds{slotVertices}, slots, positions, woop, 1, BatchStrides{}, stream);
+  launchWoopKernel(SlotOrderedIds{slotVertices}, slots, positions, woop, 1, BatchStrides{}, nullptr, stream);
 }
 
 void launchBatchSlotWoop(const uint32_t* slotVertices, uint32_t slots, const float* positions, WoopTriangle* woop,
-                         uint32_t batchCount, const BatchStrides& batch, cudaStream_t stream) {
-  launchWoopKernel(SlotOrderedIds{slotVertices}, slots, positions, woop, batchCount, batch, stream);
+                         uint32_t batchCount, const BatchStrides& batch, cudaStream_t stream,
+                         const FrameParams* frames) {
+  launchWoopKernel(SlotOrderedIds{slotVertices}, slots, positions, woop, batchCount, batch, frames, stream);
 }
 
 void launchMovingSlotWoop(const uint32_t* movingSlots, uint32_t count, const uint32_t* slotVertices,

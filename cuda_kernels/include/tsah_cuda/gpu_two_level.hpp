@@ -48,10 +48,10 @@ class TwoLevelBlur;
 // Device time of one updateAt (CUDA events, milliseconds) and what it did.
 struct TwoLevelUpdateTimings {
   double uploadMs = 0.0;  // the instance transforms and pose frames, host to device
-  double blasMs = 0.0;    // every pose's interpolation, refit and Woop pass
+  double blasMs = 0.0;    // the moved poses' interpolation, refit and Woop pass
   double tlasMs = 0.0;    // instance world boxes and the TLAS refit or rebuild
   double tlasRebuildMs = 0.0;  // the rebuild's part of tlasMs (its steps' events; 0 with a refit)
-  uint32_t blasRefits = 0;  // poses refitted (0 when no pose's local time changed)
+  uint32_t blasRefits = 0;  // poses refitted: those whose local time changed since the last update
   uint32_t instances = 0;
   uint32_t tlasNodes = 0;   // interior nodes of the TLAS (a rebuilt one: those reachable)
   double totalMs() const { return uploadMs + blasMs + tlasMs; }
