@@ -299,25 +299,24 @@ inline void slabDistances(const WideSoaNode<V::N>& node, const WideMotionFrame<V
 // the nodes above it in the stack are traversed (a pushed child is read later, often after its
 // lines would have missed the cache): an interior child's node, a leaf's first packet (its first
 // lines: the Woop packet's rows the early exit reads and the next ones). Only a hint: the results
-// do not depend on it. The address is chosen without a branch; blurred leaves (two keys' packets)
-// are not prefetched (their "leaf" lines are the root node's, in cache). A visitor's traversal
-// (the TLAS, small enough to stay in cache) prefetches nothing.
-template <uint32_t N>
+// do not depend on it. A blurred leaf (two keys' packets) is not prefetched. A visitor's traversal
+// (the TLAS, small enough to stay in cache) prefetches nothing (traverse's Prefetch).
+template <uint32_t N, bool Blurred>
 struct ChildPrefetch {
   const char* nodes;
-  const char* leaves;
+  const char* leaves;  // the view's packets in its triangle form
   std::size_t leafStride;
 
-  ChildPrefetch(const WideView<N>& bvh, bool blurred) : nodes(reinterpret_cast<const char*>(bvh.nodes)) {
-    if (!blurred && bvh.packets != nullptr)
-      leaves = reinterpret_cast<const char*>(bvh.packets), leafStride = sizeof(WoopPacket<N>);
-    else if (!blurred && bvh.vertexPackets != nullptr)
-      leaves = reinterpret_cast<const char*>(bvh.vertexPackets), leafStride = sizeof(KeyVertexPacket<N>);
-    else
-      leaves = nodes, leafStride = 0;
-  }
+  explicit ChildPrefetch(const WideView<N>& bvh)
+      : nodes(reinterpret_cast<const char*>(bvh.nodes)),
+        leaves(bvh.packets != nullptr ? reinterpret_cast<const char*>(bvh.packets)
+                                      : reinterpret_cast<const char*>(bvh.vertexPackets)),
+        leafStride(bvh.packets != nullptr ? sizeof(WoopPacket<N>) : sizeof(KeyVertexPacket<N>)) {}
   // Always inlined: as a call of its own GCC finds it free of side effects and drops it.
   [[gnu::always_inline]] void operator()(int32_t ref) const {
+    if constexpr (Blurred)
+      if (isLeafRef(ref)) return;
+    // The address is chosen without a branch (a leaf or a node, unpredictable).
     const char* at = isLeafRef(ref) ? leaves + std::size_t(leafFirstSlot(ref)) * leafStride
                                     : nodes + std::size_t(uint32_t(ref)) * sizeof(WideSoaNode<N>);
     constexpr uint32_t kLines = N >= 8 ? 4 : 2;  // a node: 256 or 128 bytes
@@ -371,7 +370,7 @@ inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, c
   uint32_t count = 0;
   const V vtmin = V::set1(ray.tmin);
   const V farScale = V::set1(kSlabFarScale);
-  const ChildPrefetch<N> prefetchChild(bvh, Blurred);
+  const ChildPrefetch<N, Blurred> prefetchChild(bvh);
   for (;;) {
     if (!isLeafRef(ref)) {
       const WideSoaNode<N>& node = bvh.nodes[ref];
