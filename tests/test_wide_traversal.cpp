@@ -255,6 +255,54 @@ TEST(WideTraversal, SameAnswersThroughEdgesAndVertices) {
     }
 }
 
+TEST(WideTraversal, AxisParallelRaysFarFromTheOriginHitAsTheBinaryTraversal) {
+  // Axis-parallel rays have inv = +-1e30 on two axes (prepareSlabs's floor on tiny components), so
+  // their slab distances on those axes are huge or infinite, and with the scene scaled to 1e9
+  // org * inv leaves the float range; at 1e-3 and 1 it does not. Every box the binary traversal
+  // enters must still be entered.
+  const auto a = generatedAnimation(anim::GeneratorKind::Wave, 400, 2);
+  const tsah::FlatBvh tree = multiFrameTree(a, 4, 2);
+  for (float scale : {1e9f, 1e-3f, 1.0f}) {
+    std::vector<float> positions = a.positionsAt(a.startTime());
+    for (float& x : positions) x = x * scale + 3.0f * scale;  // away from the origin on every axis
+    tsah::CpuRuntime binary = runtime(a, tree, Layout::Bvh2);
+    binary.update(positions);
+    for (const auto& [layout, isa] : wideTargets()) {
+      tsah::CpuRuntime rt = runtime(a, tree, layout, isa);
+      rt.update(positions);
+      const Vec3 extent = rt.bounds().hi - rt.bounds().lo;
+      const float diag = std::sqrt(tsah::dot(extent, extent));
+      uint32_t hits = 0;
+      for (uint32_t t = 0; t < rt.triangleCount(); ++t) {
+        const uint32_t* tri = rt.indices().data() + 3 * t;
+        Vec3 c{0, 0, 0};
+        for (int k = 0; k < 3; ++k)
+          c = c + Vec3{positions[3 * tri[k]], positions[3 * tri[k] + 1], positions[3 * tri[k] + 2]} * (1.0f / 3.0f);
+        for (int axis = 0; axis < 3; ++axis)
+          for (float sign : {1.0f, -1.0f}) {
+            Vec3 dir{0, 0, 0};
+            dir[axis] = sign;
+            Vec3 org = c;
+            org[axis] -= sign * diag;  // outside the scene, looking through the centroid
+            const tsah::Ray ray{org, 0.0f, dir, 3.0f * diag};
+            const tsah::Hit expect = binary.closestHit(ray), got = rt.closestHit(ray);
+            const std::string where = std::string(tsah::name(layout)) + "/" + tsah::name(isa) + " scale " +
+                                      std::to_string(scale) + " triangle " + std::to_string(t) + " axis " +
+                                      std::to_string(axis);
+            ASSERT_EQ(expect.valid(), got.valid()) << where;
+            ASSERT_EQ(binary.anyHit(ray), rt.anyHit(ray)) << where;
+            ASSERT_EQ(binary.anyHit(ray), rt.anyHit(ray, tsah::AnyHitOrder::TreeOrder)) << where;
+            if (expect.valid()) {
+              ASSERT_NEAR(expect.t, got.t, 1e-6f * expect.t) << where;
+            }
+            hits += got.valid() ? 1 : 0;
+          }
+      }
+      EXPECT_GT(hits, rt.triangleCount());  // most centroid rays hit something
+    }
+  }
+}
+
 // Every used child box of every node contains what is below it, after each update.
 template <uint32_t N>
 void expectBoxesContainChildren(const tsah::WideTree<N>& w, const tsah::CpuRuntime& rt) {
@@ -401,3 +449,37 @@ TEST(WideTraversal, SameHitsAsBinaryOnRealScenes) {
 }
 
 }  // namespace
+TEST(WideTraversal, RaysWithNanOrInfiniteValuesHitNothing) {
+  // Their slab distances are NaN, which the node test's max and min drop: the wide kernels must
+  // refuse them up front, or they enter unused child slots (a NaN origin walked off the stack).
+  const auto a = generatedAnimation(anim::GeneratorKind::Wave, 400, 2);
+  const tsah::FlatBvh tree = multiFrameTree(a, 4, 2);
+  tsah::CpuRuntime binary = runtime(a, tree, Layout::Bvh2);
+  binary.update(a.positionsAt(a.startTime()));
+  const Vec3 inside = binary.bounds().center(), down{0.1f, -1.0f, 0.2f};
+  const float nan = std::nanf(""), inf = std::numeric_limits<float>::infinity();
+  std::vector<tsah::Ray> rays;
+  for (int axis = 0; axis < 3; ++axis)
+    for (float bad : {nan, inf, -inf}) {
+      tsah::Ray fromBad{inside, 0.0f, down, 1e30f}, towardsBad{inside, 0.0f, down, 1e30f};
+      fromBad.org[axis] = bad;
+      towardsBad.dir[axis] = bad;
+      rays.push_back(fromBad);
+      rays.push_back(towardsBad);
+    }
+  rays.push_back({{nan, nan, nan}, 0.0f, down, 1e30f});
+  rays.push_back({inside, nan, down, 1e30f});
+  rays.push_back({inside, 0.0f, down, nan});
+  for (const auto& [layout, isa] : wideTargets()) {
+    tsah::CpuRuntime rt = runtime(a, tree, layout, isa);
+    rt.update(a.positionsAt(a.startTime()));
+    ASSERT_TRUE(rt.anyHit({inside, 0.0f, down, 1e30f}));  // the finite ray does hit
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+      const std::string where = std::string(tsah::name(layout)) + "/" + tsah::name(isa) + " ray " + std::to_string(i);
+      EXPECT_FALSE(rt.closestHit(rays[i]).valid()) << where;
+      EXPECT_FALSE(rt.anyHit(rays[i])) << where;
+      EXPECT_FALSE(rt.anyHit(rays[i], tsah::AnyHitOrder::TreeOrder)) << where;
+      EXPECT_FALSE(binary.closestHit(rays[i]).valid()) << where;
+    }
+  }
+}

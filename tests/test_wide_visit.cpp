@@ -6,6 +6,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -135,6 +137,21 @@ void expectBruteForce(Closest closest, Any any, const char* what) {
       ASSERT_EQ(hit.valid(), nearestItem != tsah::kNoHit) << where;
       if (hit.valid()) {
         EXPECT_EQ(hit.t, nearest) << where;
+      }
+    }
+    // A NaN or infinite origin or direction enters nothing (its NaN slab distances would be
+    // dropped by the node test's max and min, entering unused slots).
+    const float nan = std::nanf(""), inf = std::numeric_limits<float>::infinity();
+    for (const float bad : {nan, inf}) {
+      for (int axis = 0; axis < 6; ++axis) {
+        tsah::Ray ray{{5, 5, 5}, 0.0f, {0.3f, -1.0f, 0.2f}, 1e30f};
+        (axis < 3 ? ray.org : ray.dir)[axis % 3] = bad;
+        const std::string where = std::string(what) + " N " + std::to_string(N) + " items " + std::to_string(count) +
+                                  " bad component " + std::to_string(axis);
+        BoxVisit all{&boxes, true, {}};
+        EXPECT_FALSE(closest(view, ray, all.visitor()).valid()) << where;
+        EXPECT_FALSE(any(view, ray, tsah::AnyHitOrder::TreeOrder, all.visitor())) << where;
+        EXPECT_TRUE(all.visited.empty()) << where;
       }
     }
   }

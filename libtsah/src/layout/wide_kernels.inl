@@ -31,6 +31,16 @@ struct LazyPrep {
   }
 };
 
+// False for a ray with a NaN or infinite origin or direction component (or components beyond
+// +-1e38, whose sum leaves the float range): such a ray hits nothing. Its slab distances would be
+// NaN, which the node test's max and min drop, so it would enter unused child slots (a NaN origin
+// walked off the stack). x - x is 0 for a finite x and NaN otherwise. A NaN tmin or tmax needs no
+// test: traverse takes them as the max's and min's second operand, which a NaN wins, and culls.
+inline bool traceable(const Ray& ray) {
+  const float sum = ((ray.org.x + ray.org.y) + ray.org.z) + ((ray.dir.x + ray.dir.y) + ray.dir.z);
+  return sum - sum == 0.0f;
+}
+
 // Per-ray values broadcast to all lanes.
 template <class V>
 struct RayLanes {
@@ -342,7 +352,7 @@ inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, c
   constexpr uint32_t N = V::N;
   constexpr bool AnyHit = Q != Query::Closest;
   Hit hit;
-  if (bvh.rootCount == 0 && isLeafRef(bvh.rootRef)) return hit;  // empty tree
+  if ((bvh.rootCount == 0 && isLeafRef(bvh.rootRef)) || !traceable(ray)) return hit;  // empty tree
   LazyPrep prep(ray);
   float tmax = ray.tmax;
   if (rootFirst != nullptr) {  // a constant once inlined: no branch where it is null
@@ -376,6 +386,7 @@ inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, c
       const WideSoaNode<N>& node = bvh.nodes[ref];
       V tNear[3], tFar[3];
       slabDistances<V, Blurred>(node, m, ref, r, tNear, tFar);
+      // The limits as second operands: a NaN tmin or tmax wins (a > b ? a : b) and culls (traceable).
       const V tn = V::max(V::max(tNear[0], tNear[1]), V::max(tNear[2], vtmin));
       const V tf = V::min(V::min(tFar[0], tFar[1]), V::min(tFar[2], V::set1(tmax))) * farScale;
       uint32_t mask = V::bits(V::le(tn, tf));
