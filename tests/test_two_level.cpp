@@ -4,12 +4,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <random>
 
 #include "anim/scene.hpp"
 #include "anim/tanim.hpp"
 #include "tsah/base/error.hpp"
 #include "tsah/core/cost.hpp"
+#include "tsah/core/instance_transform.hpp"
 #include "tsah/layout/flat_bvh.hpp"
 #include "tsah/pipeline.hpp"
 #include "tsah/scene/two_level.hpp"
@@ -475,6 +477,34 @@ TEST(TwoLevelAffine, InverseOfAMirroredScaledRotation) {
   anim::Matrix4 singular = anim::identityMatrix();
   singular[5] = 0.0;
   EXPECT_THROW(tsah::inverseAffine(singular), tsah::DataError);
+}
+
+TEST(TwoLevelAffine, RaysMovedIntoInstanceSpaceOnTheHostAreRayInInstancesBits) {
+  // The CPU runtime moves rays with rayInInstanceHost (SSE on x86-64); the GPU with rayInInstance.
+  // Their hits must agree, so the two must give the same bits: random maps (mirrored, scales from
+  // 1e-3 to 1e3, translations to 1e4) and rays.
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
+  const auto bits = [](float x) {
+    uint32_t b;
+    std::memcpy(&b, &x, 4);
+    return b;
+  };
+  for (int i = 0; i < 20000; ++i) {
+    tsah::Affine3x4 map;
+    const float scale = std::pow(10.0f, 3.0f * unit(rng));
+    for (int k = 0; k < 12; ++k) map.m[k] = (k % 4 == 3 ? 1e4f : scale) * unit(rng);
+    const tsah::Ray ray{{100 * unit(rng), 100 * unit(rng), 100 * unit(rng)}, std::abs(unit(rng)),
+                        {unit(rng), unit(rng), unit(rng)}, 50.0f};
+    const float tmax = 10.0f * std::abs(unit(rng));
+    const tsah::Ray a = tsah::rayInInstance(map, ray, tmax), b = tsah::rayInInstanceHost(map, ray, tmax);
+    for (int k = 0; k < 3; ++k) {
+      ASSERT_EQ(bits(a.org[k]), bits(b.org[k])) << i << " org " << k;
+      ASSERT_EQ(bits(a.dir[k]), bits(b.dir[k])) << i << " dir " << k;
+    }
+    ASSERT_EQ(bits(a.tmin), bits(b.tmin));
+    ASSERT_EQ(bits(a.tmax), bits(b.tmax));
+  }
 }
 
 TEST_F(TwoLevel, AStructureWithoutInstancesIsRefused) {

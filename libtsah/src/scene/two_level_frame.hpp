@@ -29,7 +29,7 @@ inline std::optional<Affine3x4> instanceSpaceOf(const Affine3x4& toWorld) {
 template <bool AnyHit, bool Blurred>
 inline bool traceInstance(const CpuRuntime& blas, const Affine3x4& space, const Ray& ray, float tmax, float time,
                           AnyHitOrder order, float& t, float& u, float& v, uint32_t& prim) {
-  const Ray local = rayInInstance(space, ray, tmax);
+  const Ray local = rayInInstanceHost(space, ray, tmax);
   if constexpr (AnyHit) {  // the caller stops at the first hit: no distance needed
     return Blurred ? blas.anyHit(local, time, order) : blas.anyHit(local, order);
   } else {

@@ -3,6 +3,12 @@
 // device's boxes and hits must be equal bit for bit): a ray moved into instance space, and the box
 // of an affine image of a box.
 #include <cmath>
+#include <cstddef>
+
+#if !defined(__CUDACC__) && (defined(__SSE2__) || defined(_M_X64))
+#include <emmintrin.h>
+#define TSAH_INSTANCE_SSE 1
+#endif
 
 #include "tsah/core/aabb.hpp"
 #include "tsah/core/ray.hpp"
@@ -30,6 +36,42 @@ TSAH_HD Ray rayInInstance(const Affine3x4& toInstance, const Ray& ray, float tma
   local.dir = toInstance.vector(ray.dir);
   local.tmax = tmax;
   return local;
+}
+
+#ifdef TSAH_INSTANCE_SSE
+// rayInInstance on the CPU with SSE: the map's columns scaled by the origin's and the direction's
+// coordinates, lane by lane in rayInInstance's order ((c0 x + c1 y) + c2 z) + c3, so bit-identical
+// to it, in about a third of the instructions of the scalar form (compiled for baseline x86-64 it
+// shuffles lanes to and fro). A two-level trace runs it at every instance it enters.
+inline Ray rayInInstanceSse(const Affine3x4& toInstance, const Ray& ray, float tmax) {
+  static_assert(offsetof(Ray, tmin) == 12 && offsetof(Ray, dir) == 16 && offsetof(Ray, tmax) == 28);
+  __m128 c0 = _mm_loadu_ps(toInstance.m), c1 = _mm_loadu_ps(toInstance.m + 4), c2 = _mm_loadu_ps(toInstance.m + 8);
+  __m128 c3 = _mm_setzero_ps();
+  _MM_TRANSPOSE4_PS(c0, c1, c2, c3);  // the rows become the columns: c3 is the translation
+  const float* r = reinterpret_cast<const float*>(&ray);  // org x y z, tmin, dir x y z, tmax
+  const __m128 org = _mm_add_ps(
+      _mm_add_ps(_mm_add_ps(_mm_mul_ps(c0, _mm_set1_ps(r[0])), _mm_mul_ps(c1, _mm_set1_ps(r[1]))),
+                 _mm_mul_ps(c2, _mm_set1_ps(r[2]))),
+      c3);
+  const __m128 dir = _mm_add_ps(_mm_add_ps(_mm_mul_ps(c0, _mm_set1_ps(r[4])), _mm_mul_ps(c1, _mm_set1_ps(r[5]))),
+                                _mm_mul_ps(c2, _mm_set1_ps(r[6])));
+  Ray local;  // stored as two vectors, then the limits over their fourth lanes
+  float* out = reinterpret_cast<float*>(&local);
+  _mm_storeu_ps(out, org);
+  _mm_storeu_ps(out + 4, dir);
+  local.tmin = ray.tmin;
+  local.tmax = tmax;
+  return local;
+}
+#endif
+
+// rayInInstance as the host runs it fastest (the same bits).
+inline Ray rayInInstanceHost(const Affine3x4& toInstance, const Ray& ray, float tmax) {
+#ifdef TSAH_INSTANCE_SSE
+  return rayInInstanceSse(toInstance, ray, tmax);
+#else
+  return rayInInstance(toInstance, ray, tmax);
+#endif
 }
 
 // A point moved by rows (the 3x4 affine map, row-major, in double) and rounded to float: what
