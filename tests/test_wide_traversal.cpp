@@ -3,11 +3,13 @@
 // dispatch target tested explicitly: closest hit (same triangle, or a triangle at the same
 // distance when two tie; distances equal to within 1e-6 relative, in fact bit-identical for Woop packets) and any hit
 // (the same answer, in both child orders) on random and real scenes, plus the refit's boxes in every
-// frame. A tie's triangle must lie on the ray at the hit's distance.
+// frame. A tie's triangle must lie on the ray at the hit's distance. Rays with a NaN or infinite
+// component hit nothing.
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <random>
 
 #include "tsah/base/error.hpp"
@@ -303,6 +305,41 @@ TEST(WideTraversal, AxisParallelRaysFarFromTheOriginHitAsTheBinaryTraversal) {
   }
 }
 
+TEST(WideTraversal, RaysWithNanOrInfiniteValuesHitNothing) {
+  // Their slab distances are NaN, which the node test's max and min drop: the wide kernels must
+  // refuse them up front, or they enter unused child slots (a NaN origin walked off the stack).
+  const auto a = generatedAnimation(anim::GeneratorKind::Wave, 400, 2);
+  const tsah::FlatBvh tree = multiFrameTree(a, 4, 2);
+  tsah::CpuRuntime binary = runtime(a, tree, Layout::Bvh2);
+  binary.update(a.positionsAt(a.startTime()));
+  const Vec3 inside = binary.bounds().center(), down{0.1f, -1.0f, 0.2f};
+  const float nan = std::nanf(""), inf = std::numeric_limits<float>::infinity();
+  std::vector<tsah::Ray> rays;
+  for (int axis = 0; axis < 3; ++axis)
+    for (float bad : {nan, inf, -inf}) {
+      tsah::Ray fromBad{inside, 0.0f, down, 1e30f}, towardsBad{inside, 0.0f, down, 1e30f};
+      fromBad.org[axis] = bad;
+      towardsBad.dir[axis] = bad;
+      rays.push_back(fromBad);
+      rays.push_back(towardsBad);
+    }
+  rays.push_back({{nan, nan, nan}, 0.0f, down, 1e30f});
+  rays.push_back({inside, nan, down, 1e30f});
+  rays.push_back({inside, 0.0f, down, nan});
+  for (const auto& [layout, isa] : wideTargets()) {
+    tsah::CpuRuntime rt = runtime(a, tree, layout, isa);
+    rt.update(a.positionsAt(a.startTime()));
+    ASSERT_TRUE(rt.anyHit({inside, 0.0f, down, 1e30f}));  // the finite ray does hit
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+      const std::string where = std::string(tsah::name(layout)) + "/" + tsah::name(isa) + " ray " + std::to_string(i);
+      EXPECT_FALSE(rt.closestHit(rays[i]).valid()) << where;
+      EXPECT_FALSE(rt.anyHit(rays[i])) << where;
+      EXPECT_FALSE(rt.anyHit(rays[i], tsah::AnyHitOrder::TreeOrder)) << where;
+      EXPECT_FALSE(binary.closestHit(rays[i]).valid()) << where;
+    }
+  }
+}
+
 // Every used child box of every node contains what is below it, after each update.
 template <uint32_t N>
 void expectBoxesContainChildren(const tsah::WideTree<N>& w, const tsah::CpuRuntime& rt) {
@@ -449,37 +486,3 @@ TEST(WideTraversal, SameHitsAsBinaryOnRealScenes) {
 }
 
 }  // namespace
-TEST(WideTraversal, RaysWithNanOrInfiniteValuesHitNothing) {
-  // Their slab distances are NaN, which the node test's max and min drop: the wide kernels must
-  // refuse them up front, or they enter unused child slots (a NaN origin walked off the stack).
-  const auto a = generatedAnimation(anim::GeneratorKind::Wave, 400, 2);
-  const tsah::FlatBvh tree = multiFrameTree(a, 4, 2);
-  tsah::CpuRuntime binary = runtime(a, tree, Layout::Bvh2);
-  binary.update(a.positionsAt(a.startTime()));
-  const Vec3 inside = binary.bounds().center(), down{0.1f, -1.0f, 0.2f};
-  const float nan = std::nanf(""), inf = std::numeric_limits<float>::infinity();
-  std::vector<tsah::Ray> rays;
-  for (int axis = 0; axis < 3; ++axis)
-    for (float bad : {nan, inf, -inf}) {
-      tsah::Ray fromBad{inside, 0.0f, down, 1e30f}, towardsBad{inside, 0.0f, down, 1e30f};
-      fromBad.org[axis] = bad;
-      towardsBad.dir[axis] = bad;
-      rays.push_back(fromBad);
-      rays.push_back(towardsBad);
-    }
-  rays.push_back({{nan, nan, nan}, 0.0f, down, 1e30f});
-  rays.push_back({inside, nan, down, 1e30f});
-  rays.push_back({inside, 0.0f, down, nan});
-  for (const auto& [layout, isa] : wideTargets()) {
-    tsah::CpuRuntime rt = runtime(a, tree, layout, isa);
-    rt.update(a.positionsAt(a.startTime()));
-    ASSERT_TRUE(rt.anyHit({inside, 0.0f, down, 1e30f}));  // the finite ray does hit
-    for (std::size_t i = 0; i < rays.size(); ++i) {
-      const std::string where = std::string(tsah::name(layout)) + "/" + tsah::name(isa) + " ray " + std::to_string(i);
-      EXPECT_FALSE(rt.closestHit(rays[i]).valid()) << where;
-      EXPECT_FALSE(rt.anyHit(rays[i])) << where;
-      EXPECT_FALSE(rt.anyHit(rays[i], tsah::AnyHitOrder::TreeOrder)) << where;
-      EXPECT_FALSE(binary.closestHit(rays[i]).valid()) << where;
-    }
-  }
-}

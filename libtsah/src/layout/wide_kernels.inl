@@ -352,7 +352,8 @@ inline Hit traverse(const WideView<V::N>& bvh, const WideMotionFrame<V::N>& m, c
   constexpr uint32_t N = V::N;
   constexpr bool AnyHit = Q != Query::Closest;
   Hit hit;
-  if ((bvh.rootCount == 0 && isLeafRef(bvh.rootRef)) || !traceable(ray)) return hit;  // empty tree
+  if (bvh.rootCount == 0 && isLeafRef(bvh.rootRef)) return hit;  // empty tree
+  if (!traceable(ray)) return hit;
   LazyPrep prep(ray);
   float tmax = ray.tmax;
   if (rootFirst != nullptr) {  // a constant once inlined: no branch where it is null

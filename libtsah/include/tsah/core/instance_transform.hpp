@@ -38,12 +38,12 @@ TSAH_HD Ray rayInInstance(const Affine3x4& toInstance, const Ray& ray, float tma
   return local;
 }
 
+// rayInInstance as the CPU runs it: on x86-64 with SSE, the map's columns scaled by the origin's
+// and the direction's coordinates, lane by lane in rayInInstance's order ((c0 x + c1 y) + c2 z) + c3,
+// so the same bits (the GPU's hits must equal the CPU's). The scalar form, compiled for baseline
+// x86-64, shuffled lanes to and fro: 26 instructions more per instance a two-level trace enters.
+inline Ray rayInInstanceHost(const Affine3x4& toInstance, const Ray& ray, float tmax) {
 #ifdef TSAH_INSTANCE_SSE
-// rayInInstance on the CPU with SSE: the map's columns scaled by the origin's and the direction's
-// coordinates, lane by lane in rayInInstance's order ((c0 x + c1 y) + c2 z) + c3, so bit-identical
-// to it, in about a third of the instructions of the scalar form (compiled for baseline x86-64 it
-// shuffles lanes to and fro). A two-level trace runs it at every instance it enters.
-inline Ray rayInInstanceSse(const Affine3x4& toInstance, const Ray& ray, float tmax) {
   static_assert(offsetof(Ray, tmin) == 12 && offsetof(Ray, dir) == 16 && offsetof(Ray, tmax) == 28);
   __m128 c0 = _mm_loadu_ps(toInstance.m), c1 = _mm_loadu_ps(toInstance.m + 4), c2 = _mm_loadu_ps(toInstance.m + 8);
   __m128 c3 = _mm_setzero_ps();
@@ -62,13 +62,6 @@ inline Ray rayInInstanceSse(const Affine3x4& toInstance, const Ray& ray, float t
   local.tmin = ray.tmin;
   local.tmax = tmax;
   return local;
-}
-#endif
-
-// rayInInstance as the host runs it fastest (the same bits).
-inline Ray rayInInstanceHost(const Affine3x4& toInstance, const Ray& ray, float tmax) {
-#ifdef TSAH_INSTANCE_SSE
-  return rayInInstanceSse(toInstance, ray, tmax);
 #else
   return rayInInstance(toInstance, ray, tmax);
 #endif
