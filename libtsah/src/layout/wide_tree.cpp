@@ -27,8 +27,8 @@ bool usedSlot(const WideSoaNode<N>& node, uint32_t c) {
 
 // The refit planners' view of the tree: push(c) for every interior child c of node i.
 template <uint32_t N>
-auto interiorChildrenOf(const std::vector<WideSoaNode<N>>& nodes) {
-  return [&nodes](uint32_t i, auto push) {
+auto interiorChildrenOf(std::span<const WideSoaNode<N>> nodes) {
+  return [nodes](uint32_t i, auto push) {
     for (uint32_t c = 0; c < N; ++c)
       if (usedSlot(nodes[i], c) && !isLeafRef(nodes[i].ref[c])) push(static_cast<uint32_t>(nodes[i].ref[c]));
   };
@@ -90,7 +90,7 @@ WideTree<N>::WideTree(const WideBvh& w, std::span<const uint32_t> indices, uint3
   }
   threads_ = threads;
   subtreeEnds_ = wideSubtreeEnds(w);
-  detail::planParallelRefit(subtreeEnds_, threads, interiorChildrenOf(nodes_), subtreeTasks_, topNodes_,
+  detail::planParallelRefit(subtreeEnds_, threads, interiorChildrenOf<N>(nodes_), subtreeTasks_, topNodes_,
                             64 / N);  // a wide node: about N / 2 binary nodes' triangles and boxes
 }
 
@@ -221,7 +221,7 @@ void WideTree<N>::setMovingVertices(std::span<const uint32_t> movingVertices, ui
                                             : nodeMoves[static_cast<uint32_t>(node.ref[c])];
   }
   moving_ = std::make_shared<const detail::MovingRefitPlan>(
-      detail::planMovingRefit(subtreeEnds_, threads_, interiorChildrenOf(nodes_), nodeMoves, 16 / N));
+      detail::planMovingRefit(subtreeEnds_, threads_, interiorChildrenOf<N>(nodes_), nodeMoves, 16 / N));
 }
 
 template <uint32_t N>

@@ -11,6 +11,7 @@
 #include <utility>
 #include <vector>
 
+#include "tsah/base/huge_pages.hpp"
 #include "tsah/layout/wide_bvh.hpp"
 #include "tsah/layout/wide_layout.hpp"
 #include "tsah/layout/wide_traversal.hpp"
@@ -93,10 +94,11 @@ class WideTree {
                     Aabb& bounds) = nullptr;
   void (*keyVertexRows_)(const float* positions, const uint32_t* vertices, uint32_t lanes, KeyVertexPacket<N>& out,
                          Aabb& bounds) = nullptr;
-  std::vector<WideSoaNode<N>> nodes_;
+  // What a ray reads at every step in huge pages (TraversalVector).
+  TraversalVector<WideSoaNode<N>> nodes_;
   TriangleForm form_ = TriangleForm::Woop;
-  std::vector<WoopPacket<N>> packets_;               // the Woop form's
-  std::vector<KeyVertexPacket<N>> vertexPackets_;    // the Vertices form's
+  TraversalVector<WoopPacket<N>> packets_;             // the Woop form's
+  TraversalVector<KeyVertexPacket<N>> vertexPackets_;  // the Vertices form's
   // The slot of each packet's lane 0 (its lanes hold consecutive slots): the refit and the vertex
   // leaf test read this instead of a Woop packet's own slot array, whose cache line would be a
   // cold miss per packet.
