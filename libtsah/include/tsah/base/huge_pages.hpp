@@ -1,13 +1,13 @@
 #pragma once
 // Storage for the arrays a traversal reads at random: wide nodes and triangle packets. A ray
 // through a large tree touches a new page at almost every node, and with 4 KiB pages the
-// translation lookaside buffer covers a few MiB: the walks to the page tables become a large part
-// of an incoherent ray's time. Large arrays therefore ask the kernel for transparent huge pages
-// (2 MiB): they are allocated 2 MiB-aligned, rounded up to whole 2 MiB pages, and advised with
-// madvise(MADV_HUGEPAGE) before their first touch, so that the pages are huge from the first
-// fault on machines whose transparent huge pages are set to "madvise" (the usual default). Only a
-// hint: where the kernel gives small pages the arrays work the same. Smaller arrays are ordinary
-// aligned allocations.
+// translation lookaside buffer covers a few MiB: the walks to the page tables add to an incoherent
+// ray's every step (docs/wide-bvh.md gives the measured gain). Large arrays therefore ask the
+// kernel for transparent huge pages (2 MiB): they are allocated 2 MiB-aligned, rounded up to whole
+// 2 MiB pages, and advised with madvise(MADV_HUGEPAGE) before their first touch, so that the pages
+// are huge from the first fault on machines whose transparent huge pages are set to "madvise" (the
+// usual default). Only a hint: where the kernel gives small pages the arrays work the same.
+// Smaller arrays are ordinary aligned allocations.
 #include <cstddef>
 #include <new>
 #include <vector>
