@@ -5,9 +5,9 @@
 // ray's every step (docs/wide-bvh.md gives the measured gain). Large arrays therefore ask the
 // kernel for transparent huge pages (2 MiB): they are allocated 2 MiB-aligned, rounded up to whole
 // 2 MiB pages, and advised with madvise(MADV_HUGEPAGE) before their first touch, so that the pages
-// are huge from the first fault on machines whose transparent huge pages are set to "madvise" (the
-// usual default). Only a hint: where the kernel gives small pages the arrays work the same.
-// Smaller arrays are ordinary aligned allocations.
+// are huge from the first fault on machines whose transparent huge pages are set to "madvise" (as
+// on the bench's GPU host and the development VM). Only a hint: where the kernel gives small pages
+// the arrays work the same. Smaller arrays are ordinary aligned allocations.
 #include <cstddef>
 #include <new>
 #include <vector>
