@@ -85,7 +85,7 @@ TEST(HugePages, GrowingAcrossTheThresholdKeepsTheContents) {
 }
 
 TEST(HugePages, AWideTreesPacketsAreInHugePageStorage) {
-  // About 7,000 eight-lane Woop packets of 416 bytes: 2.8 MiB.
+  // About 7,500 eight-lane Woop packets of 416 bytes: 3 MiB (0.3 MB of nodes, under the threshold).
   const auto a = tsah::test::generatedAnimation(anim::GeneratorKind::Wave, 40000, 1);
   const auto positions = a.positionsAt(a.startTime());
   const tsah::PrimitiveBoxes boxes = tsah::triangleBoxes(a.indices(), positions, 1);
