@@ -104,9 +104,6 @@ void checkTwoLevelOptions(const TraceOptions& opt, const tsah::cli::FrameRuntime
                        "--tlas rebuild)");
     return;
   }
-  if (opt.layout == tsah::Layout::Cwbvh)
-    throw UsageError(opt.bvh + " holds a two-level scene: the GPU traces its BLAS and TLAS in the bvh2 layout "
-                     "(--layout bvh2 or auto), not cwbvh");
   if (opt.tlas == "rebuild")
     throw UsageError("--tlas rebuild builds a sweep-SAH TLAS on the CPU: with --device cuda use --tlas lbvh or "
                      "hlbvh-sah (or trace with --device cpu)");
@@ -187,7 +184,8 @@ void runTrace(const TraceOptions& opt) {
     if (!twoLevel)
       runtimes.push_back(tsah::cli::makeFrameRuntime(trees, a, runtimeOptions));
     else if (opt.device == tsah::Device::Cuda)
-      runtimes.push_back(tsah::cli::makeGpuTwoLevelFrameRuntime(twoLevelScene, gpu, opt.tlas.empty() ? "refit" : opt.tlas,
+      runtimes.push_back(tsah::cli::makeGpuTwoLevelFrameRuntime(twoLevelScene, gpu, opt.layout,
+                                                                opt.tlas.empty() ? "refit" : opt.tlas,
                                                                 runtimeOptions.shutter, runtimeOptions.frameInterval));
     else
       runtimes.push_back(tsah::cli::makeTwoLevelFrameRuntime(twoLevelScene, runtimeOptions.layout, runtimeOptions.threads,

@@ -53,12 +53,12 @@ std::unique_ptr<FrameRuntime> makeTwoLevelFrameRuntime(std::shared_ptr<const Two
                                                        Shutter shutter = {}, double frameInterval = 0.0);
 
 // The frame runtime of a two-level scene on GPU `gpu` (GpuTwoLevelRuntime + GpuTwoLevelRenderer,
-// two_level_gpu_frame.cpp): BLAS and TLAS in bvh2, the TLAS refitted. Owns the scene. Throws
-// tsah::ConfigError in a build without CUDA, tsah::Failure on a machine without a GPU.
+// two_level_gpu_frame.cpp): BLAS in `layout` (bvh2 or cwbvh; auto: bvh2), the TLAS in bvh2. Owns the
+// scene. Throws tsah::ConfigError in a build without CUDA, tsah::Failure on a machine without a GPU.
 // tlas: "refit" (the T-SAH TLAS refitted), "lbvh" or "hlbvh-sah" (a TLAS built every frame on the GPU).
 // A shutter fraction above 0 blurs every frame as the CPU's runtime does (updateShutter).
 std::unique_ptr<FrameRuntime> makeGpuTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, int gpu,
-                                                          const std::string& tlas, Shutter shutter = {},
+                                                          Layout layout, const std::string& tlas, Shutter shutter = {},
                                                           double frameInterval = 0.0);
 
 }  // namespace tsah::cli

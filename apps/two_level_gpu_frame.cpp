@@ -22,24 +22,26 @@ namespace tsah::cli {
 namespace {
 
 // The scene's runtime on GPU `gpu` (made current first: the runtime allocates on the current device).
-cuda::GpuTwoLevelRuntime::Config onDevice(int gpu, cuda::TlasUpdate tlas) {
+cuda::GpuTwoLevelRuntime::Config onDevice(int gpu, Layout layout, cuda::TlasUpdate tlas) {
   cuda::useDevice(gpu);
   cuda::GpuTwoLevelRuntime::Config config;
   config.device = gpu;
+  config.layout = gpuLayout(layout);
   config.tlas = tlas;
   return config;
 }
 
 class GpuTwoLevelFrameRuntime final : public FrameRuntime {
  public:
-  GpuTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, int gpu, cuda::TlasUpdate tlas, Shutter shutter,
-                          double frameInterval)
+  GpuTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, int gpu, Layout layout, cuda::TlasUpdate tlas,
+                          Shutter shutter, double frameInterval)
       : scene_(std::move(scene)),
         gpu_(gpu),
+        layout_(gpuLayout(layout)),
         tlas_(tlas),
         shutter_(shutter),
         frameInterval_(frameInterval),
-        runtime_(*scene_, onDevice(gpu, tlas)),
+        runtime_(*scene_, onDevice(gpu, layout, tlas)),
         renderer_(runtime_) {}
 
   // The runtime's GPU current while it is released.
@@ -92,7 +94,7 @@ class GpuTwoLevelFrameRuntime final : public FrameRuntime {
 
   std::string summary() const override {
     return "GPU " + runtime_.device().name + ", two-level: " + std::to_string(scene_->blases.size()) +
-           " BLAS in bvh2, " + std::to_string(scene_->instanceCount()) + " instances, TLAS " +
+           " BLAS in " + name(layout_) + ", " + std::to_string(scene_->instanceCount()) + " instances, TLAS " +
            (tlas_ == cuda::TlasUpdate::Refit ? std::string("refitted") : std::string("rebuilt (") + cuda::tlasUpdateName(tlas_) + ")") +
            " per frame";
   }
@@ -102,7 +104,7 @@ class GpuTwoLevelFrameRuntime final : public FrameRuntime {
     out["gpu"] = deviceJson(gpu_);
     out["timer"] = shutter_.fraction > 0.0 ? "CUDA events (device time); updates: host wall time"
                                            : "CUDA events (device time)";
-    out["layout"] = "bvh2";
+    out["layout"] = name(layout_);
     out["two_level"] = describeTwoLevel(*scene_);
     out["two_level"].erase("blases");
     out["two_level"]["tlas_update"] = cuda::tlasUpdateName(tlas_);
@@ -112,6 +114,7 @@ class GpuTwoLevelFrameRuntime final : public FrameRuntime {
  private:
   std::shared_ptr<const TwoLevelScene> scene_;
   int gpu_;
+  Layout layout_;
   cuda::TlasUpdate tlas_;
   Shutter shutter_;
   double frameInterval_ = 0.0;
@@ -124,14 +127,14 @@ class GpuTwoLevelFrameRuntime final : public FrameRuntime {
 #endif
 
 std::unique_ptr<FrameRuntime> makeGpuTwoLevelFrameRuntime(std::shared_ptr<const TwoLevelScene> scene, int gpu,
-                                                          const std::string& tlas, Shutter shutter,
+                                                          Layout layout, const std::string& tlas, Shutter shutter,
                                                           double frameInterval) {
   requireGpuRuntime();
 #if TSAH_HAVE_CUDA
-  return std::make_unique<GpuTwoLevelFrameRuntime>(std::move(scene), gpu, cuda::parseTlasUpdate(tlas), shutter,
+  return std::make_unique<GpuTwoLevelFrameRuntime>(std::move(scene), gpu, layout, cuda::parseTlasUpdate(tlas), shutter,
                                                    frameInterval);
 #else
-  (void)scene, (void)gpu, (void)tlas, (void)shutter, (void)frameInterval;
+  (void)scene, (void)gpu, (void)layout, (void)tlas, (void)shutter, (void)frameInterval;
   return nullptr;  // requireGpuRuntime threw
 #endif
 }

@@ -11,7 +11,6 @@
 #include <cstring>
 #include <random>
 #include <span>
-#include <sstream>
 
 #include "anim/animation.hpp"
 #include "anim/tanim.hpp"
@@ -21,6 +20,7 @@
 #include "tsah/scene/two_level_runtime.hpp"
 #include "tsah_cuda/gpu_two_level.hpp"
 #include "cuda_test_support.hpp"
+#include "cuda_two_level_fixture.hpp"
 #include "test_support.hpp"
 #include "two_level_scene.hpp"
 
@@ -31,27 +31,6 @@ namespace {
 // Relative tolerance on t: both runtimes move the ray into instance space with the same float
 // operations and run the same traversal; only the compilers' rounding of the transform may differ.
 constexpr float kRelativeT = 1e-5f;
-
-// A crowd beside the small scene's sources (writeTwoLevelScene's wave.tanim and ground.tanim in
-// `dir`): 48 waves, each with its own time offset (a pose each), every third walking a path, and 16
-// static grounds, on a grid.
-fs::path writeCrowdScene(const fs::path& dir) {
-  std::ostringstream cloth, ground;
-  for (uint32_t i = 0; i < 48; ++i) {
-    const float x = 3.0f * float(i % 8), z = 3.0f * float(i / 8);
-    cloth << (i ? ",\n" : "") << R"({"offset": )" << 0.25 * i << R"(, "transform": {"translate": [)" << x << ", 0, " << z
-          << "]}";
-    if (i % 3 == 0) cloth << R"(, "path": [{"time": 0}, {"time": 12, "translate": [)" << (i % 2 ? 6 : -6) << ", 0, 4]}]";
-    cloth << "}";
-  }
-  for (uint32_t i = 0; i < 16; ++i)
-    ground << (i ? ",\n" : "") << R"({"transform": {"translate": [)" << 6.0f * float(i % 4) << ", -1, "
-           << 6.0f * float(i / 4) << "]}}";
-  tsah::test::writeText(dir / "crowd.json", R"({"fps": 2, "objects": [
-    {"name": "ground", "file": "ground.tanim", "instances": [)" + ground.str() + R"(]},
-    {"name": "cloth", "file": "wave.tanim", "instances": [)" + cloth.str() + "]}]}");
-  return dir / "crowd.json";
-}
 
 // The TLAS rebuilt at every update (LBVH and HLBVH-SAH) against the refitted T-SAH TLAS of the same
 // scene, at `times` (a time twice in a row: the second update moves no pose): the same instance
@@ -106,16 +85,7 @@ void expectRebuiltTlasTracesLikeTheRefit(const tsah::TwoLevelScene& scene, std::
   }
 }
 
-class CudaTwoLevel : public ::testing::Test {
- protected:
-  void SetUp() override {
-    REQUIRE_GPU();
-    dir = tsah::test::scratchDir();
-    scene = std::make_unique<tsah::TwoLevelScene>(tsah::loadTwoLevelScene(tsah::test::writeTwoLevelScene(dir).string(), {}, tsah::test::smallTwoLevelOptions()));
-  }
-  fs::path dir;
-  std::unique_ptr<tsah::TwoLevelScene> scene;
-};
+using CudaTwoLevel = tsah::test::GpuTwoLevelSceneTest;
 
 // Closest hits (instance, triangle, t) and any hits of the GPU runtime equal the CPU runtime's at
 // several scene times.
@@ -392,7 +362,7 @@ TEST_F(CudaTwoLevel, RebuiltTlasTracesLikeTheRefit) {
 
 TEST_F(CudaTwoLevel, RebuiltTlasOfACrowdTracesLikeTheRefit) {
   const tsah::TwoLevelScene crowd =
-      tsah::loadTwoLevelScene(writeCrowdScene(dir).string(), {}, tsah::test::smallTwoLevelOptions());
+      tsah::loadTwoLevelScene(tsah::test::writeCrowdScene(dir).string(), {}, tsah::test::smallTwoLevelOptions());
   ASSERT_EQ(crowd.instanceCount(), 64u);
   const double times[] = {0.0, 1.5, 1.5, 6.0, 9.75, 12.0};
   expectRebuiltTlasTracesLikeTheRefit(crowd, times, 101);

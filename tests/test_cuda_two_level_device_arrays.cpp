@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "cuda_test_support.hpp"
+#include "cuda_two_level_fixture.hpp"
 #include "test_support.hpp"
 #include "tsah/base/error.hpp"
 #include "tsah/scene/two_level.hpp"
@@ -137,17 +138,7 @@ std::vector<tsah::Ray> raysFor(Runtime& gpu, uint32_t count, uint32_t seed) {
   return rays;
 }
 
-class CudaTwoLevelDeviceArrays : public ::testing::Test {
- protected:
-  void SetUp() override {
-    REQUIRE_GPU();
-    dir = tsah::test::scratchDir();
-    scene = std::make_unique<tsah::TwoLevelScene>(tsah::loadTwoLevelScene(
-        tsah::test::writeTwoLevelScene(dir).string(), {}, tsah::test::smallTwoLevelOptions()));
-  }
-  fs::path dir;
-  std::unique_ptr<tsah::TwoLevelScene> scene;
-};
+using CudaTwoLevelDeviceArrays = tsah::test::GpuTwoLevelSceneTest;
 
 TEST_F(CudaTwoLevelDeviceArrays, InstantFramesGetTheHostBatchsHits) {
   for (const tc::TlasUpdate tlas : {tc::TlasUpdate::Refit, tc::TlasUpdate::Lbvh}) {

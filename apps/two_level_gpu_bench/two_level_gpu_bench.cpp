@@ -3,7 +3,7 @@
 //                            [--frames 50] [--width 1024] [--height 768]
 //                            [--ao 4] [--k 2] [--build-frames 5] [--no-rebuild-reference]
 //                            [--global-refits] [--refit-part-leaves 512] [--no-phase-timings]
-//                            [--flat-tree FLAT.tbvh] [--tlas refit|lbvh|hlbvh-sah|all]
+//                            [--flat-tree FLAT.tbvh] [--tlas refit|lbvh|hlbvh-sah|all] [--layout bvh2|cwbvh]
 // Builds the two-level structure (or loads a version 3 .tbvh built for the scene), then for each of
 // --frames times spread over the scene's time range: updateAt (upload of the instance transforms,
 // BLAS refits, TLAS refit: CUDA events), then primary rays (a camera fitted to the instances' boxes,
@@ -16,8 +16,10 @@
 // HLBVH-SAH; per update its TLAS time, update, primary and AO times and the frame total, and the
 // hits that differ from the refit's. The scene's data: paths resolve as `tsah` resolves them ($TSAH_DATA_DIR, archives
 // and .xz files unpacked into the cache). --flat-tree: a flat tree of the same scene (tsah optimize --structure flat), whose
-// GPU runtime (binary layout, the baked scene) updates at the same times and traces the same rays
-// (the trace-rate comparison). Prints one JSON object (per-frame values and medians).
+// GPU runtime (the baked scene, in the same layout) updates at the same times and traces the same rays
+// (the trace-rate comparison). --layout: the BLAS layout (GpuTwoLevelRuntime::Config::layout) and
+// the flat runtime's (cwbvh: collapsed with the flat tree's objective). Prints one JSON object
+// (per-frame values and medians).
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
@@ -53,6 +55,7 @@ struct Options {
   uint32_t refitPartLeaves = tsah::cuda::GpuTwoLevelRuntime::Config{}.refitPartLeaves;
   bool phaseTimings = true;  // GpuTwoLevelRuntime::Config::phaseTimings
   std::string tlas = "all";  // refit, lbvh, hlbvh-sah or all
+  std::string layout = "bvh2";  // bvh2 or cwbvh
 };
 
 // One TLAS update compared (--tlas): its runtime and per-frame figures.
@@ -135,6 +138,7 @@ int run(const Options& opt) {
     config.refitPartLeaves = opt.refitPartLeaves;
     config.phaseTimings = opt.phaseTimings;
     config.tlas = update;
+    config.layout = tsah::parse<tsah::Layout>(opt.layout);
     TlasRun& r = runs.emplace_back();
     r.update = update;
     r.gpu = std::make_unique<tsah::cuda::GpuTwoLevelRuntime>(scene, config);
@@ -145,7 +149,11 @@ int run(const Options& opt) {
   std::unique_ptr<tsah::cuda::GpuRuntime> flat;
   if (!opt.flatTree.empty()) {
     baked = std::make_unique<anim::Animation>(anim::loadScene(opt.scene, load));
-    flat = std::make_unique<tsah::cuda::GpuRuntime>(tsah::flattenBvh(tsah::loadBvhFile(opt.flatTree).bvh), *baked);
+    const tsah::BvhFile flatFile = tsah::loadBvhFile(opt.flatTree);
+    tsah::cuda::GpuRuntime::Config config;
+    config.layout = tsah::parse<tsah::Layout>(opt.layout);
+    config.wideObjective = flatFile.info.objective;
+    flat = std::make_unique<tsah::cuda::GpuRuntime>(tsah::flattenBvh(flatFile.bvh), *baked, config);
   }
   const double start = scene.frameTimes.empty() ? scene.scene.start : scene.frameTimes.front();
   const double end = scene.frameTimes.empty() ? start : scene.frameTimes.back();
@@ -227,6 +235,7 @@ int run(const Options& opt) {
   j["scene"] = opt.scene;
   j["tree"] = opt.tree;
   j["device"] = gpu.device().name;
+  j["layout"] = opt.layout;
   j["instances"] = scene.instanceCount();
   j["blas"] = scene.blases.size();
   j["poses"] = scene.poses.size();
@@ -258,7 +267,7 @@ int run(const Options& opt) {
   if (flat) {
     const double flatTrace = median(flatPrimary) + median(flatAo), twoLevelTrace = median(primaryMs) + median(aoMs);
     j["flat"] = {{"tree", opt.flatTree},
-                 {"layout", "bvh2"},
+                 {"layout", opt.layout},
                  {"median", {{"update_ms", median(flatUpdate)}, {"primary_ms", median(flatPrimary)}, {"ao_ms", median(flatAo)}}},
                  {"primary_hits", flatHitCount},
                  {"two_level_primary_hits", hitCount},
@@ -294,6 +303,8 @@ int main(int argc, char** argv) {
                  "TLAS updates compared on the same rays: refit, lbvh, hlbvh-sah (each with the refit) or all "
                  "(default)")
       ->check(CLI::IsMember({"refit", "lbvh", "hlbvh-sah", "all"}));
+  app.add_option("--layout", opt.layout, "BLAS layout, and the flat tree's: bvh2 (default) or cwbvh")
+      ->check(CLI::IsMember({"bvh2", "cwbvh"}));
   app.add_flag("--global-refits", globalRefits,
                "Refit every tree by the global-memory walk, not by blocks in shared memory (the reference)");
   app.add_option("--refit-part-leaves", opt.refitPartLeaves,

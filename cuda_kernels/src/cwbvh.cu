@@ -78,6 +78,28 @@ __device__ __forceinline__ void refitNodeLanes(CwbvhNode* __restrict__ nodes, Aa
   }
 }
 
+// Which tree of a batch a block refits (blockIdx.y: member first + y of a batch of trees of one
+// topology, BatchStrides apart, each with its own root); a member whose frame is held
+// (FrameParams::held) is left as it is. One tree: the default, every stride 0.
+struct CwbvhBatchMember {
+  uint32_t first = 0;
+  uint64_t nodeStride = 0, positionStride = 0, topLeafStride = 0;  // nodes (and node boxes), floats, top leaf boxes
+  const FrameParams* frames = nullptr;  // per member (null: none held)
+
+  __device__ __forceinline__ uint32_t index() const { return first + blockIdx.y; }
+  // Moves the block's pointers to its member; false for a held member.
+  __device__ __forceinline__ bool select(CwbvhNode* __restrict__& nodes, Aabb* __restrict__& nodeBoxes,
+                                         const float* __restrict__& positions, RootInfo* __restrict__& root) const {
+    const uint32_t b = index();
+    if (frames && frames[b].held) return false;
+    if (nodes) nodes += b * nodeStride;
+    if (nodeBoxes) nodeBoxes += b * nodeStride;
+    positions += b * positionStride;
+    root += b;
+    return true;
+  }
+};
+
 // One group of nodes of equal height (cwbvhLevels), 8 lanes per node. Each group is one launch:
 // no atomics, and a node's interior children were finished by an earlier launch. (The previous
 // refit climbed from every leaf with an arrival counter per node and re-quantized in a second
@@ -86,7 +108,8 @@ constexpr uint32_t kLevelBlock = 128;  // whole warps: every lane takes part in 
 __global__ void __launch_bounds__(kLevelBlock)
     cwbvhLevelKernel(CwbvhNode* __restrict__ nodes, Aabb* __restrict__ nodeBoxes, const uint32_t* __restrict__ group,
                      uint32_t count, const uint32_t* __restrict__ slotVertices, const float* __restrict__ positions,
-                     RootInfo* __restrict__ root) {
+                     RootInfo* __restrict__ root, CwbvhBatchMember member) {
+  if (!member.select(nodes, nodeBoxes, positions, root)) return;
   const uint32_t item = (blockIdx.x * blockDim.x + threadIdx.x) / kCwbvhWidth;
   const bool valid = item < count;
   const uint32_t slot = threadIdx.x % kCwbvhWidth;
@@ -107,7 +130,9 @@ __global__ void __launch_bounds__(kTopBlock)
                          const uint32_t* __restrict__ levelNodes, const uint32_t* __restrict__ starts,
                          uint32_t firstGroup, uint32_t groupCount, Aabb* __restrict__ leafBoxes,
                          const uint32_t* __restrict__ slotVertices, const float* __restrict__ positions,
-                         RootInfo* __restrict__ root) {
+                         RootInfo* __restrict__ root, CwbvhBatchMember member) {
+  if (!member.select(nodes, nodeBoxes, positions, root)) return;
+  leafBoxes += member.index() * member.topLeafStride;
   constexpr uint32_t kNodesPerPass = kTopBlock / kCwbvhWidth;
   const uint32_t slot = threadIdx.x % kCwbvhWidth;
   const uint32_t topBegin = __ldg(starts + firstGroup), topEnd = __ldg(starts + groupCount);
@@ -138,7 +163,11 @@ __global__ void __launch_bounds__(kTopBlock)
 
 // A tree that is one leaf: its box is the root box.
 __global__ void cwbvhRootLeafKernel(uint32_t first, uint32_t count, const uint32_t* __restrict__ slotVertices,
-                                    const float* __restrict__ positions, RootInfo* __restrict__ root) {
+                                    const float* __restrict__ positions, RootInfo* __restrict__ root,
+                                    CwbvhBatchMember member) {
+  CwbvhNode* __restrict__ nodes = nullptr;
+  Aabb* __restrict__ nodeBoxes = nullptr;
+  if (!member.select(nodes, nodeBoxes, positions, root)) return;
   root->box = leafBox(first, count, slotVertices, positions);
 }
 
@@ -217,6 +246,16 @@ void launchWideTyped(const CwbvhView& view, const RootInfo* root, const Ray* ray
 
 }  // namespace
 
+RootInfo cwbvhRoot(const CwbvhTree& tree) {
+  RootInfo r;
+  r.box = tree.rootBox;
+  r.ref = tree.rootRef;
+  r.count = tree.rootCount;
+  r.interiorCount = tree.nodeCount();
+  r.depth = tree.depth;
+  return r;
+}
+
 CwbvhRefitPlan makeCwbvhRefitPlan(const CwbvhTree& tree, cudaStream_t stream) {
   CwbvhRefitPlan plan;
   if (isLeafRef(tree.rootRef)) {
@@ -233,32 +272,56 @@ CwbvhRefitPlan makeCwbvhRefitPlan(const CwbvhTree& tree, cudaStream_t stream) {
   uint32_t top = uint32_t(plan.starts.size()) - 1;
   while (top > 0 && plan.starts[top] - plan.starts[top - 1] <= kTopGroupNodes) --top;
   plan.firstTopGroup = top;
-  plan.topLeafBoxes.resize(std::size_t(plan.starts.back() - plan.starts[top]) * kCwbvhWidth);
+  plan.topLeafBoxes.resize(plan.topLeafBoxCount());
   CUDA_CHECK(cudaStreamSynchronize(stream));  // before `levels` goes
   return plan;
 }
 
-void launchCwbvhRefit(CwbvhRefitPlan& plan, CwbvhNode* nodes, Aabb* nodeBoxes, const uint32_t* slotVertices,
-                      const float* positions, RootInfo* root, cudaStream_t stream) {
+namespace {
+
+// The refit's launches for `count` trees from member.first on (a grid row each).
+void launchRefitRows(const CwbvhRefitPlan& plan, CwbvhNode* nodes, Aabb* nodeBoxes, Aabb* topLeafBoxes,
+                     const uint32_t* slotVertices, const float* positions, RootInfo* roots, uint32_t count,
+                     const CwbvhBatchMember& member, cudaStream_t stream) {
   if (plan.rootLeafCount > 0) {  // one leaf, no nodes
-    cwbvhRootLeafKernel<<<1, 1, 0, stream>>>(plan.rootLeafFirst, plan.rootLeafCount, slotVertices, positions, root);
+    cwbvhRootLeafKernel<<<dim3(1, count), 1, 0, stream>>>(plan.rootLeafFirst, plan.rootLeafCount, slotVertices,
+                                                          positions, roots, member);
     CUDA_CHECK_LAUNCH("cwbvhRootLeafKernel");
     return;
   }
   const uint32_t groups = uint32_t(plan.starts.size()) - 1;
   uint32_t h = 0;
   for (; h < groups && h < plan.firstTopGroup; ++h) {
-    const uint32_t count = plan.starts[h + 1] - plan.starts[h];
-    cwbvhLevelKernel<<<gridFor(std::size_t(count) * kCwbvhWidth, kLevelBlock), kLevelBlock, 0, stream>>>(
-        nodes, nodeBoxes, plan.levelNodes.data() + plan.starts[h], count, slotVertices, positions, root);
+    const uint32_t nodesOfGroup = plan.starts[h + 1] - plan.starts[h];
+    const dim3 grid(gridFor(std::size_t(nodesOfGroup) * kCwbvhWidth, kLevelBlock), count);
+    cwbvhLevelKernel<<<grid, kLevelBlock, 0, stream>>>(nodes, nodeBoxes, plan.levelNodes.data() + plan.starts[h],
+                                                       nodesOfGroup, slotVertices, positions, roots, member);
     CUDA_CHECK_LAUNCH("cwbvhLevelKernel");
   }
   if (h < groups) {
-    cwbvhTopLevelsKernel<<<1, kTopBlock, 0, stream>>>(nodes, nodeBoxes, plan.levelNodes.data(),
-                                                      plan.levelStarts.data(), h, groups, plan.topLeafBoxes.data(),
-                                                      slotVertices, positions, root);
+    cwbvhTopLevelsKernel<<<dim3(1, count), kTopBlock, 0, stream>>>(nodes, nodeBoxes, plan.levelNodes.data(),
+                                                                   plan.levelStarts.data(), h, groups, topLeafBoxes,
+                                                                   slotVertices, positions, roots, member);
     CUDA_CHECK_LAUNCH("cwbvhTopLevelsKernel");
   }
+}
+
+}  // namespace
+
+void launchCwbvhRefit(CwbvhRefitPlan& plan, CwbvhNode* nodes, Aabb* nodeBoxes, const uint32_t* slotVertices,
+                      const float* positions, RootInfo* root, cudaStream_t stream) {
+  launchRefitRows(plan, nodes, nodeBoxes, plan.topLeafBoxes.data(), slotVertices, positions, root, 1,
+                  CwbvhBatchMember{}, stream);
+}
+
+void launchBatchCwbvhRefit(const CwbvhRefitPlan& plan, CwbvhNode* nodes, Aabb* nodeBoxes, Aabb* topLeafBoxes,
+                           const uint32_t* slotVertices, const float* positions, RootInfo* roots,
+                           uint32_t batchCount, const BatchStrides& batch, const FrameParams* frames,
+                           cudaStream_t stream) {
+  forEachBatchChunk(batchCount, [&](uint32_t first, uint32_t count) {
+    const CwbvhBatchMember member{first, batch.nodes, batch.positions, plan.topLeafBoxCount(), frames};
+    launchRefitRows(plan, nodes, nodeBoxes, topLeafBoxes, slotVertices, positions, roots, count, member, stream);
+  });
 }
 
 void launchCwbvhTrace(const TraceScene& scene, const Ray* rays, uint32_t count, Hit* hits, uint8_t* occluded,

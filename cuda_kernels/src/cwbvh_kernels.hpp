@@ -21,7 +21,14 @@ struct CwbvhRefitPlan {
   uint32_t firstTopGroup = 0;                      // the groups from here on run in one block
   DeviceBuffer<Aabb> topLeafBoxes;                 // scratch: 8 boxes per node of those groups
   uint32_t rootLeafFirst = 0, rootLeafCount = 0;   // a tree without nodes: its leaf's slots
+  // The scratch boxes one tree's refit uses (a batch: that many per member).
+  uint64_t topLeafBoxCount() const {
+    return starts.empty() ? 0 : uint64_t(starts.back() - starts[firstTopGroup]) * kCwbvhWidth;
+  }
 };
+
+// The root of `tree` as the device keeps it (box, reference, count, nodes, depth).
+RootInfo cwbvhRoot(const CwbvhTree& tree);
 
 // The plan of `tree` (uploads on `stream` and waits for them).
 CwbvhRefitPlan makeCwbvhRefitPlan(const CwbvhTree& tree, cudaStream_t stream);
@@ -33,6 +40,15 @@ CwbvhRefitPlan makeCwbvhRefitPlan(const CwbvhTree& tree, cudaStream_t stream);
 // non-const for its scratch boxes.
 void launchCwbvhRefit(CwbvhRefitPlan& plan, CwbvhNode* nodes, Aabb* nodeBoxes, const uint32_t* slotVertices,
                       const float* positions, RootInfo* root, cudaStream_t stream);
+
+// launchCwbvhRefit for a batch of trees of one topology (the two-level runtime's poses): member b
+// refits nodes + b * batch.nodes (and as many node boxes) from positions + b * batch.positions into
+// roots[b]; topLeafBoxes: plan.topLeafBoxCount() scratch boxes per member. A member whose frame is
+// held (FrameParams::held) is left as it is (frames null: every member is refitted).
+void launchBatchCwbvhRefit(const CwbvhRefitPlan& plan, CwbvhNode* nodes, Aabb* nodeBoxes, Aabb* topLeafBoxes,
+                           const uint32_t* slotVertices, const float* positions, RootInfo* roots,
+                           uint32_t batchCount, const BatchStrides& batch, const FrameParams* frames,
+                           cudaStream_t stream);
 
 // The traversal's view of a scene in the compressed layout (rootBox is read on the device from
 // scene.root).

@@ -227,12 +227,7 @@ std::unique_ptr<GpuRuntime::Impl::Cwbvh> GpuRuntime::Impl::uploadCwbvh(const Fla
   const std::vector<uint32_t> slotVertices = slotVertexIndices(c.host.triIndex, indices, "GPU runtime");
   c.slotVertices = DeviceBuffer<uint32_t>(std::span<const uint32_t>(slotVertices), stream);
   c.refit = detail::makeCwbvhRefitPlan(c.host, stream);
-  detail::RootInfo r;
-  r.box = c.host.rootBox;
-  r.ref = c.host.rootRef;
-  r.count = c.host.rootCount;
-  r.interiorCount = c.host.nodeCount();
-  r.depth = c.host.depth;
+  const detail::RootInfo r = detail::cwbvhRoot(c.host);
   c.root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&r, 1), stream);
   CUDA_CHECK(cudaStreamSynchronize(stream));  // before slotVertices and r go
   return cwbvh;

@@ -13,21 +13,13 @@
 #include "tsah_cuda/cuda_check.hpp"
 #include "tsah_cuda/gpu_two_level.hpp"
 #include "two_level_blur.hpp"
+#include "two_level_device_data.hpp"
 
 namespace tsah::cuda {
 
 namespace detail {
 
 namespace {
-
-// `count` copies of `one` after each other.
-template <typename T>
-std::vector<T> repeated(std::span<const T> one, std::size_t count) {
-  std::vector<T> out;
-  out.reserve(one.size() * count);
-  for (std::size_t i = 0; i < count; ++i) out.insert(out.end(), one.begin(), one.end());
-  return out;
-}
 
 // dst[0, count * one.size()) = `count` copies of `one` (device memory), by copies on the device that
 // double the filled part: a blurred frame's items start from one state without a host copy of each.

@@ -12,6 +12,7 @@
 #include "tsah/layout/motion_blur.hpp"
 #include "tsah/layout/traversal.hpp"
 #include "two_level_blur.hpp"
+#include "two_level_traversal.cuh"
 
 namespace tsah::cuda::detail {
 
@@ -97,12 +98,10 @@ __device__ __forceinline__ bool intersectBvh2Slot(const BlurredTlasFrame<AnyHit>
     }
   } else {
     const BlasView& view = m.views[inst.view];
-    const TraceScene blas = blasTraceScene(view);
-    const RootInfo root = *view.root;
     if constexpr (AnyHit) {
-      if (!bvh2AnyHit(blas, root, local)) return false;
+      if (!blasAnyHit<BlasForm::Either>(view, local)) return false;
     } else {
-      h = bvh2ClosestHit(blas, root, local);
+      h = blasClosestHit<BlasForm::Either>(view, local);
     }
   }
   if constexpr (AnyHit) {

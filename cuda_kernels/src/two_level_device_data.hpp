@@ -22,6 +22,15 @@ DeviceBuffer<T> toDevice(const std::vector<T>& host, cudaStream_t stream) {
   return DeviceBuffer<T>(std::span<const T>(host), stream);
 }
 
+// `count` copies of `one` after each other (a batch's arrays, before their first update).
+template <typename T>
+std::vector<T> repeated(std::span<const T> one, std::size_t count) {
+  std::vector<T> out;
+  out.reserve(one.size() * count);
+  for (std::size_t i = 0; i < count; ++i) out.insert(out.end(), one.begin(), one.end());
+  return out;
+}
+
 // The tree's root as the device keeps it (reference, count, box).
 detail::RootInfo rootOf(const FlatBvh& tree);
 

@@ -249,29 +249,41 @@ __global__ void __launch_bounds__(kWoopBlock)
   }
 }
 
-// Rays: const Ray* or ArrayRays; Hits: InstanceHit* or ArrayInstanceHits (ray_arrays.cuh).
-template <bool AnyHit, class Rays, class Hits>
+// Rays: const Ray* or ArrayRays; Hits: InstanceHit* or ArrayInstanceHits (ray_arrays.cuh). One
+// kernel per BLAS layout: each is compiled for its own BLAS loop.
+template <bool AnyHit, BlasForm Form, class Rays, class Hits>
 __global__ void __launch_bounds__(128) twoLevelTraceKernel(TlasScene scene, Rays rays, uint32_t count, Hits hits,
                                                            uint8_t* __restrict__ occluded) {
   const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= count) return;
   const Ray ray = loadRay(rays, i);
   if constexpr (AnyHit)
-    occluded[i] = twoLevelAnyHit(scene, ray) ? 1 : 0;
+    occluded[i] = twoLevelAnyHit<Form>(scene, ray) ? 1 : 0;
   else
-    storeInstanceHit(hits, i, twoLevelClosestHit(scene, ray));
+    storeInstanceHit(hits, i, twoLevelClosestHit<Form>(scene, ray));
+}
+
+template <BlasForm Form, class Rays, class Hits>
+void launchTraceOfForm(const TlasScene& scene, const Rays& rays, uint32_t count, const Hits& hits, uint8_t* occluded,
+                       cudaStream_t stream) {
+  const unsigned block = 128;  // fixed by __launch_bounds__
+  if (occluded)
+    twoLevelTraceKernel<true, Form, Rays, Hits>
+        <<<gridFor(count, block), block, 0, stream>>>(scene, rays, count, hits, occluded);
+  else
+    twoLevelTraceKernel<false, Form, Rays, Hits>
+        <<<gridFor(count, block), block, 0, stream>>>(scene, rays, count, hits, occluded);
+  CUDA_CHECK_LAUNCH("twoLevelTraceKernel");
 }
 
 template <class Rays, class Hits>
 void launchTraceOf(const TlasScene& scene, const Rays& rays, uint32_t count, const Hits& hits, uint8_t* occluded,
                    cudaStream_t stream) {
   if (count == 0) return;
-  const unsigned block = 128;  // fixed by __launch_bounds__
-  if (occluded)
-    twoLevelTraceKernel<true, Rays, Hits><<<gridFor(count, block), block, 0, stream>>>(scene, rays, count, hits, occluded);
+  if (scene.compressedBlas)
+    launchTraceOfForm<BlasForm::Compressed>(scene, rays, count, hits, occluded, stream);
   else
-    twoLevelTraceKernel<false, Rays, Hits><<<gridFor(count, block), block, 0, stream>>>(scene, rays, count, hits, occluded);
-  CUDA_CHECK_LAUNCH("twoLevelTraceKernel");
+    launchTraceOfForm<BlasForm::Binary>(scene, rays, count, hits, occluded, stream);
 }
 
 }  // namespace

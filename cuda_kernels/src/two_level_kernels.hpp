@@ -11,6 +11,7 @@
 #include "tsah/core/aabb.hpp"
 #include "tsah/core/instance_transform.hpp"
 #include "tsah/core/ray.hpp"
+#include "tsah/layout/cwbvh_layout.hpp"
 #include "tsah/layout/gpu_layout.hpp"
 #include "tsah/layout/woop.hpp"
 
@@ -18,7 +19,9 @@ namespace tsah::cuda::detail {
 
 // One traceable BLAS on the device: a static source's, or a pose's (its own nodes, positions and
 // Woop triangles; triIndex and indices are its source's, shared). root holds ref, count and the
-// box of this frame (written by the refit).
+// box of this frame (written by the refit). In the compressed layout (GpuTwoLevelRuntime::Config::
+// layout cwbvh) cwbvhNodes is set and nodes is null: woop and triIndex are per slot of that layout,
+// root's ref and count its root's.
 struct BlasView {
   const GpuBvhNode* nodes = nullptr;
   const WoopTriangle* woop = nullptr;
@@ -26,7 +29,22 @@ struct BlasView {
   const uint32_t* indices = nullptr;
   const float* positions = nullptr;
   const RootInfo* root = nullptr;
+  const CwbvhNode* cwbvhNodes = nullptr;
 };
+
+// A BLAS view in the compressed layout as its traversal reads it (root: *view.root).
+TSAH_HD CwbvhView blasCwbvhView(const BlasView& view, const RootInfo& root) {
+  CwbvhView v;
+  v.nodes = view.cwbvhNodes;
+  v.woop = view.woop;
+  v.triIndex = view.triIndex;
+  v.indices = view.indices;
+  v.positions = view.positions;
+  v.rootRef = root.ref;
+  v.rootCount = root.count;
+  v.rootBox = root.box;
+  return v;
+}
 
 // A BLAS view as the binary traversal reads a tree.
 TSAH_HD TraceScene blasTraceScene(const BlasView& view) {
@@ -75,6 +93,7 @@ struct TlasScene {
   const InstanceState* instances = nullptr;
   const BlasView* views = nullptr;
   const Aabb* instanceBoxes = nullptr;  // per instance: its world box this frame
+  bool compressedBlas = false;          // every view in the compressed layout (the trace kernels' choice)
 };
 
 struct BlurredTlasScene;  // two_level_blur.hpp

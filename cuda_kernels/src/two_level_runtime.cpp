@@ -7,6 +7,7 @@
 #include <string>
 #include <utility>
 
+#include "cwbvh_kernels.hpp"
 #include "event_timer.hpp"
 #include "kernels.hpp"
 #include "rebuild.hpp"
@@ -36,6 +37,14 @@ struct GpuTwoLevelRuntime::Impl {
     bool keyed = false;
     KeyBoxes keyBoxes;
     DeviceRefitParts parts;
+    // Config::layout cwbvh: the tree in the compressed layout (collapsed over the source's
+    // keyframes), its slots' triangle and vertex ids, and its refit's launches.
+    struct Compressed {
+      CwbvhTree host;
+      DeviceBuffer<uint32_t> triIndex, slotVertices;
+      detail::CwbvhRefitPlan plan;
+    };
+    std::unique_ptr<Compressed> cwbvh;
     detail::KeyedSource keyedView() const {
       return {keyframes.data(), movingIds.empty() ? nullptr : movingIds.data(),
               keyBoxes.movingIndex.empty() ? nullptr : keyBoxes.movingIndex.data(), movingCount,
@@ -51,6 +60,8 @@ struct GpuTwoLevelRuntime::Impl {
     DeviceBuffer<WoopTriangle> woop;
     DeviceBuffer<uint32_t> counters;
     DeviceBuffer<detail::RootInfo> root;
+    DeviceBuffer<CwbvhNode> cwbvhNodes;  // the compressed layout's (nodes then stays empty)
+    DeviceBuffer<Aabb> nodeBoxes;        // its refit's scratch
   };
   // The poses of one animated source, updated together: one launch per step for all of them
   // (detail::BatchStrides); pose i of the group has its arrays at i times the strides.
@@ -67,6 +78,9 @@ struct GpuTwoLevelRuntime::Impl {
     DeviceBuffer<Aabb> partBoxes;     // the block refit's: the subtree parts' root boxes per pose
     DeviceBuffer<uint32_t> tickets;   // the block refit's: finished subtree blocks per pose
     DeviceBuffer<detail::RootInfo> roots;
+    // The compressed layout's nodes (nodes then stays empty) and its refit's scratch, per pose.
+    DeviceBuffer<CwbvhNode> cwbvhNodes;
+    DeviceBuffer<Aabb> nodeBoxes, topLeafBoxes;
   };
   struct Graph {
     cudaGraph_t graph = nullptr;
@@ -76,6 +90,9 @@ struct GpuTwoLevelRuntime::Impl {
   Impl(const TwoLevelScene& s, Config c);
   ~Impl() { releaseDevice(); }
   void create();  // the constructor's work
+  // The group holding a pose and the pose's place in it (tsah::ConfigError for a pose out of range).
+  std::pair<const PoseGroup*, uint32_t> memberOf(uint32_t pose) const;
+  void uploadCompressed(Source& d, const Blas& blas, std::span<const uint32_t> indices);
   void releaseDevice() noexcept;
   void enqueueFrame(bool refitPoses);
   Graph capture(bool refitPoses);
@@ -148,6 +165,11 @@ GpuTwoLevelRuntime::Impl::Impl(const TwoLevelScene& s, Config c) : scene(s), con
 }
 
 void GpuTwoLevelRuntime::Impl::create() {
+  config.layout = gpuLayout(config.layout);
+  if (config.layout != Layout::Bvh2 && config.layout != Layout::Cwbvh)
+    throw ConfigError(std::string("GPU two-level runtime: ") + name(config.layout) +
+                      " is no GPU layout (bvh2 or cwbvh)");
+  const bool compressed = config.layout == Layout::Cwbvh;
   device = describeDevice(config.device);
   CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
   events.create(4);
@@ -165,12 +187,14 @@ void GpuTwoLevelRuntime::Impl::create() {
     d.slotVertices = toDevice(slotVertexIndices(d.topology.triIndex, a.indices(), "GPU two-level runtime"), stream);
     d.nodeParent = toDevice(r.parent, stream);
     d.leaves = toDevice(r.leaves, stream);
+    if (compressed) uploadCompressed(d, blas, a.indices());
     if (blas.animated) {
       d.keyframes = DeviceBuffer<float>(a.motion(), stream);
       d.movingIds = DeviceBuffer<uint32_t>(a.movingVertices(), stream);
       d.movingCount = a.movingVertexCount();
-      d.keyed = config.keyedPoses && KeyBoxes::bytesFor(d.topology, a.keyframeCount()) <= config.keyedPoseBytes;
-      if (!d.keyed && config.blockRefits)
+      d.keyed = !compressed && config.keyedPoses &&
+                KeyBoxes::bytesFor(d.topology, a.keyframeCount()) <= config.keyedPoseBytes;
+      if (!compressed && !d.keyed && config.blockRefits)
         d.parts = DeviceRefitParts(splitForBlockRefit(d.topology, config.refitPartLeaves), stream);
     }
   }
@@ -183,22 +207,33 @@ void GpuTwoLevelRuntime::Impl::create() {
     const Source& d = sources[b];
     StaticBlas& t = statics.emplace_back();
     t.source = b;
-    t.nodes = toDevice(d.topology.nodes, stream);
     t.positions = toDevice(src.sources[b]->positionsAt(src.sources[b]->startTime()), stream);
     t.woop.resize(d.topology.triangleCount());
-    t.counters.resize(d.topology.interiorCount);
-    const detail::RootInfo root = rootOf(d.topology);
+    const detail::RootInfo root = d.cwbvh ? detail::cwbvhRoot(d.cwbvh->host) : rootOf(d.topology);
     t.root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&root, 1), stream);
-    // Refitted once: static BLAS never change.
-    if (t.counters.size()) CUDA_CHECK(cudaMemsetAsync(t.counters.data(), 0, t.counters.bytes(), stream));
-    detail::launchRefit(t.nodes.data(), d.nodeParent.data(), d.leaves.data(), d.leafCount, d.slotVertices.data(),
-                        t.positions.data(), t.counters.data(), t.root.data(), stream);
-    detail::launchSlotWoop(d.slotVertices.data(), d.topology.triangleCount(), t.positions.data(), t.woop.data(),
-                           stream);
-    ++refits;
     staticView[b] = uint32_t(hostViews.size());
-    hostViews.push_back({t.nodes.data(), t.woop.data(), d.triIndex.data(), d.indices.data(), t.positions.data(),
-                         t.root.data()});
+    // Refitted once: static BLAS never change.
+    if (Source::Compressed* c = d.cwbvh.get()) {
+      t.cwbvhNodes = toDevice(c->host.nodes, stream);
+      t.nodeBoxes.resize(c->host.nodes.size());
+      detail::launchCwbvhRefit(c->plan, t.cwbvhNodes.data(), t.nodeBoxes.data(), c->slotVertices.data(),
+                               t.positions.data(), t.root.data(), stream);
+      detail::launchSlotWoop(c->slotVertices.data(), d.topology.triangleCount(), t.positions.data(), t.woop.data(),
+                             stream);
+      hostViews.push_back({nullptr, t.woop.data(), c->triIndex.data(), d.indices.data(), t.positions.data(),
+                           t.root.data(), t.cwbvhNodes.data()});
+    } else {
+      t.nodes = toDevice(d.topology.nodes, stream);
+      t.counters.resize(d.topology.interiorCount);
+      if (t.counters.size()) CUDA_CHECK(cudaMemsetAsync(t.counters.data(), 0, t.counters.bytes(), stream));
+      detail::launchRefit(t.nodes.data(), d.nodeParent.data(), d.leaves.data(), d.leafCount, d.slotVertices.data(),
+                          t.positions.data(), t.counters.data(), t.root.data(), stream);
+      detail::launchSlotWoop(d.slotVertices.data(), d.topology.triangleCount(), t.positions.data(), t.woop.data(),
+                             stream);
+      hostViews.push_back({t.nodes.data(), t.woop.data(), d.triIndex.data(), d.indices.data(), t.positions.data(),
+                           t.root.data()});
+    }
+    ++refits;
   }
   // The poses, grouped by source; each group's arrays hold its poses one after another.
   std::vector<uint32_t> groupOfSource(scene.blases.size(), kInvalidIndex);
@@ -225,41 +260,43 @@ void GpuTwoLevelRuntime::Impl::create() {
                                      d.movingCount, d.nodeParent.data(), d.leaves.data(), d.leafCount,
                                      d.slotVertices.data()},
                                     stream);
+    const Source::Compressed* c = d.cwbvh.get();
     g.strides.positions = start.size();
-    g.strides.nodes = d.topology.nodes.size();
+    g.strides.nodes = c ? c->host.nodes.size() : d.topology.nodes.size();
     g.strides.woop = d.topology.triangleCount();
     g.strides.counters = d.topology.interiorCount;
     // Blocks per pose: one per subtree part (a grid's y dimension).
-    g.blockRefit = !d.keyed && config.blockRefits && d.parts.poseSharedBytes <= blockRefitLimit &&
+    g.blockRefit = !c && !d.keyed && config.blockRefits && d.parts.poseSharedBytes <= blockRefitLimit &&
                    d.parts.subtreeCount <= 65535;
     g.firstFrame = frameCount;
-    std::vector<float> positions;
-    positions.reserve(start.size() * members);
-    std::vector<GpuBvhNode> nodes;
-    nodes.reserve(d.topology.nodes.size() * members);
-    for (uint32_t i = 0; i < members; ++i) {
-      positions.insert(positions.end(), start.begin(), start.end());
-      nodes.insert(nodes.end(), d.topology.nodes.begin(), d.topology.nodes.end());
+    g.positions = toDevice(repeated(std::span<const float>(start), members), stream);
+    if (c) {
+      g.cwbvhNodes = toDevice(repeated(std::span<const CwbvhNode>(c->host.nodes), members), stream);
+      g.nodeBoxes.resize(c->host.nodes.size() * members);
+      g.topLeafBoxes.resize(c->plan.topLeafBoxCount() * members);
+    } else {
+      g.nodes = toDevice(repeated(std::span<const GpuBvhNode>(d.topology.nodes), members), stream);
     }
-    g.positions = toDevice(positions, stream);
-    g.nodes = toDevice(nodes, stream);
     g.woop.resize(g.strides.woop * members);
     if (g.blockRefit) {
       g.partBoxes.resize(std::size_t(d.parts.subtreeCount) * members);
       g.tickets = toDevice(std::vector<uint32_t>(members, 0u), stream);
-    } else if (!d.keyed) {
+    } else if (!d.keyed && !c) {
       g.counters.resize(g.strides.counters * members);
     }
-    g.roots = toDevice(std::vector<detail::RootInfo>(members, rootOf(d.topology)), stream);
+    g.roots = toDevice(std::vector<detail::RootInfo>(members, c ? detail::cwbvhRoot(c->host) : rootOf(d.topology)), stream);
     for (uint32_t i = 0; i < members; ++i) {
       const uint32_t p = g.poses[i];
       poseFrameIndex[p] = frameCount++;
-      hostViews[firstPoseView + p] = {g.nodes.data() + i * g.strides.nodes,
-                                      g.woop.data() + i * g.strides.woop,
-                                      d.triIndex.data(),
-                                      d.indices.data(),
-                                      g.positions.data() + i * g.strides.positions,
-                                      g.roots.data() + i};
+      detail::BlasView& view = hostViews[firstPoseView + p];
+      view = {nullptr, g.woop.data() + i * g.strides.woop, d.triIndex.data(), d.indices.data(),
+              g.positions.data() + i * g.strides.positions, g.roots.data() + i};
+      if (c) {
+        view.cwbvhNodes = g.cwbvhNodes.data() + i * g.strides.nodes;
+        view.triIndex = c->triIndex.data();
+      } else {
+        view.nodes = g.nodes.data() + i * g.strides.nodes;
+      }
     }
   }
   views = toDevice(hostViews, stream);
@@ -313,6 +350,18 @@ void GpuTwoLevelRuntime::Impl::uploadRefitTlas(DeviceTlas& t) {
   t.root = DeviceBuffer<detail::RootInfo>(std::span<const detail::RootInfo>(&root, 1), stream);
 }
 
+void GpuTwoLevelRuntime::Impl::uploadCompressed(Source& d, const Blas& blas, std::span<const uint32_t> indices) {
+  // The collapse weighs the frames the BLAS was built over, with its build's objective.
+  Objective objective = scene.objective;
+  objective.k = blas.animated ? objective.k : 0;
+  auto c = std::make_unique<Source::Compressed>();
+  c->host = buildCwbvh(blas.flat, objective);
+  c->triIndex = toDevice(c->host.triIndex, stream);
+  c->slotVertices = toDevice(slotVertexIndices(c->host.triIndex, indices, "GPU two-level runtime"), stream);
+  c->plan = detail::makeCwbvhRefitPlan(c->host, stream);
+  d.cwbvh = std::move(c);
+}
+
 void GpuTwoLevelRuntime::Impl::releaseDevice() noexcept {
   for (DeviceTlas& t : tlases)
     for (Graph* g : {&t.fullGraph, &t.rigidGraph}) {
@@ -343,6 +392,14 @@ void GpuTwoLevelRuntime::Impl::enqueueFrame(bool refitPoses) {
       }
       detail::launchBatchInterpolate(d.keyframes.data(), d.movingIds.size() ? d.movingIds.data() : nullptr, frames,
                                      g.positions.data(), d.movingCount, members, g.strides.positions, stream);
+      if (const Source::Compressed* c = d.cwbvh.get()) {
+        detail::launchBatchCwbvhRefit(c->plan, g.cwbvhNodes.data(), g.nodeBoxes.data(), g.topLeafBoxes.data(),
+                                      c->slotVertices.data(), g.positions.data(), g.roots.data(), members, g.strides,
+                                      frames, stream);
+        detail::launchBatchSlotWoop(c->slotVertices.data(), d.topology.triangleCount(), g.positions.data(),
+                                    g.woop.data(), members, g.strides, stream, frames);
+        continue;
+      }
       if (g.blockRefit) {
         detail::launchPoseBlasParts(g.nodes.data(), d.parts.view(), d.parts.poseSharedBytes, d.slotVertices.data(),
                                     g.positions.data(), g.woop.data(), g.roots.data(), g.partBoxes.data(),
@@ -390,11 +447,12 @@ GpuTwoLevelRuntime::Impl::Graph GpuTwoLevelRuntime::Impl::capture(bool refitPose
 }
 
 detail::TlasScene GpuTwoLevelRuntime::Impl::tlasScene() const {
+  const bool compressed = config.layout == Layout::Cwbvh;
   if (tlasRebuilder)
     return {tlasRebuilder->nodes(), tlasRebuilder->triIndex(), tlasRebuilder->root(), instances, views.data(),
-            instanceBoxes.data()};
+            instanceBoxes.data(), compressed};
   const DeviceTlas& t = tlases[tlasPart];
-  return {t.nodes.data(), t.triIndex.data(), t.root.data(), instances, views.data(), instanceBoxes.data()};
+  return {t.nodes.data(), t.triIndex.data(), t.root.data(), instances, views.data(), instanceBoxes.data(), compressed};
 }
 
 const char* tlasUpdateName(TlasUpdate update) {
@@ -517,15 +575,21 @@ FlatBvh GpuTwoLevelRuntime::downloadTlas() const {
   return tree;
 }
 
-FlatBvh GpuTwoLevelRuntime::downloadPoseTree(uint32_t pose) const {
-  const Impl& m = *impl_;
-  if (pose >= m.scene.poses.size())
-    throw ConfigError("downloadPoseTree: pose " + std::to_string(pose) + " of " + std::to_string(m.scene.poses.size()));
-  const uint32_t frame = m.poseFrameIndex[pose];
-  const auto group = std::find_if(m.groups.begin(), m.groups.end(), [&](const Impl::PoseGroup& g) {
+std::pair<const GpuTwoLevelRuntime::Impl::PoseGroup*, uint32_t> GpuTwoLevelRuntime::Impl::memberOf(uint32_t pose) const {
+  if (pose >= scene.poses.size())
+    throw ConfigError("downloadPoseTree: pose " + std::to_string(pose) + " of " + std::to_string(scene.poses.size()));
+  const uint32_t frame = poseFrameIndex[pose];
+  const auto group = std::find_if(groups.begin(), groups.end(), [&](const PoseGroup& g) {
     return frame >= g.firstFrame && frame < g.firstFrame + g.poses.size();
   });
-  const uint32_t member = frame - group->firstFrame;
+  return {&*group, frame - group->firstFrame};
+}
+
+FlatBvh GpuTwoLevelRuntime::downloadPoseTree(uint32_t pose) const {
+  const Impl& m = *impl_;
+  if (m.config.layout != Layout::Bvh2)
+    throw ConfigError("downloadPoseTree: the BLAS are in the compressed layout (downloadPoseCwbvh)");
+  const auto [group, member] = m.memberOf(pose);
   FlatBvh tree = m.sources[group->source].topology;
   if (!tree.nodes.empty())
     CUDA_CHECK(cudaMemcpy(tree.nodes.data(), group->nodes.data() + member * group->strides.nodes,
@@ -533,6 +597,21 @@ FlatBvh GpuTwoLevelRuntime::downloadPoseTree(uint32_t pose) const {
   detail::RootInfo root;
   CUDA_CHECK(cudaMemcpy(&root, group->roots.data() + member, sizeof(root), cudaMemcpyDeviceToHost));
   tree.rootBoxes.assign(1, root.box);
+  return tree;
+}
+
+CwbvhTree GpuTwoLevelRuntime::downloadPoseCwbvh(uint32_t pose) const {
+  const Impl& m = *impl_;
+  if (m.config.layout != Layout::Cwbvh)
+    throw ConfigError("downloadPoseCwbvh: the BLAS are in the binary layout (downloadPoseTree)");
+  const auto [group, member] = m.memberOf(pose);
+  CwbvhTree tree = m.sources[group->source].cwbvh->host;
+  if (!tree.nodes.empty())
+    CUDA_CHECK(cudaMemcpy(tree.nodes.data(), group->cwbvhNodes.data() + member * group->strides.nodes,
+                          tree.nodes.size() * sizeof(CwbvhNode), cudaMemcpyDeviceToHost));
+  detail::RootInfo root;
+  CUDA_CHECK(cudaMemcpy(&root, group->roots.data() + member, sizeof(root), cudaMemcpyDeviceToHost));
+  tree.rootBox = root.box;
   return tree;
 }
 

@@ -71,6 +71,9 @@ const CpuRuntime& cpuRuntimeOf(py::handle self);
 // A CPU runtime's layout argument: "auto" (the widest the processor's SIMD kernels support),
 // "bvh2", "bvh4" or "bvh8"; cwbvh is refused as a GPU layout (runtime.cpp).
 Layout cpuLayoutArgument(const std::string& layout);
+// A GPU runtime's: "auto" (the binary layout, tsah::gpuLayout), "bvh2" or "cwbvh"; the CPU's wide
+// layouts are refused (runtime.cpp).
+Layout gpuLayoutArgument(const std::string& layout);
 // A wide CPU layout's triangle form argument, "woop" or "vertices"; anything else is refused as
 // "ARGUMENT: unknown triangle form ..." (runtime.cpp).
 TriangleForm triangleFormArgument(const std::string& form, const char* argument);

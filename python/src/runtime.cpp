@@ -437,12 +437,9 @@ class GpuTracer {
  private:
   int device() const { return runtime_->config().device; }
   static cuda::GpuRuntime::Config runtimeConfig(int device, const std::string& layout) {
-    const Layout chosen = gpuLayout(parse<Layout>(layout));
-    if (chosen != Layout::Bvh2 && chosen != Layout::Cwbvh)
-      throw tsah::ConfigError("layout: " + layout + " is a CPU layout (the GPU's are bvh2 and cwbvh)");
     cuda::GpuRuntime::Config config;
     config.device = device;
-    config.layout = chosen;
+    config.layout = gpuLayoutArgument(layout);
     return config;
   }
   void refitDevice(py::handle vertices, std::uintptr_t stream, bool wait) {
@@ -620,6 +617,13 @@ Layout cpuLayoutArgument(const std::string& layout) {
   const Layout chosen = parse<Layout>(layout);
   if (chosen == Layout::Cwbvh) throw tsah::ConfigError("layout: cwbvh is a GPU layout (the CPU's are bvh2, bvh4, bvh8)");
   return chosen == Layout::Auto ? fastestLayout() : chosen;
+}
+
+Layout gpuLayoutArgument(const std::string& layout) {
+  const Layout chosen = gpuLayout(parse<Layout>(layout));
+  if (chosen != Layout::Bvh2 && chosen != Layout::Cwbvh)
+    throw tsah::ConfigError("layout: " + layout + " is a CPU layout (the GPU's are bvh2 and cwbvh)");
+  return chosen;
 }
 
 TriangleForm triangleFormArgument(const std::string& form, const char* argument) {

@@ -294,10 +294,11 @@ class TwoLevelTracer {
 // The same on the GPU, from host rays.
 class GpuTwoLevelTracer {
  public:
-  GpuTwoLevelTracer(py::object scene, int device, const std::string& tlas)
+  GpuTwoLevelTracer(py::object scene, int device, const std::string& layout, const std::string& tlas)
       : owner_(std::move(scene)), scene_(sceneArgument(owner_).scene) {
     cuda::GpuTwoLevelRuntime::Config config;
     config.device = device;
+    config.layout = gpuLayoutArgument(layout);
     try {
       config.tlas = cuda::parseTlasUpdate(tlas);
     } catch (const tsah::ConfigError& e) {
@@ -610,17 +611,19 @@ which nothing moves is update(open): not blurred.
 
 #if defined(TSAH_HAVE_CUDA)
   py::class_<GpuTwoLevelTracer>(m, "GpuTwoLevelRuntime", R"doc(
-GpuTwoLevelRuntime(scene, device=0, tlas="refit"): the same on a CUDA device
-(tsah::cuda::GpuTwoLevelRuntime), tracing host (numpy) rays or device arrays in place. tlas: "refit" (the T-SAH TLAS
-refitted), "lbvh" or "hlbvh-sah" (rebuilt on the GPU every update). Motion blur as
+GpuTwoLevelRuntime(scene, device=0, layout="auto", tlas="refit"): the same on a CUDA device
+(tsah::cuda::GpuTwoLevelRuntime), tracing host (numpy) rays or device arrays in place. layout: the
+BLAS layout, "auto" (bvh2), "bvh2" or "cwbvh" (compressed 8-wide nodes); the TLAS is binary.
+tlas: "refit" (the T-SAH TLAS refitted), "lbvh" or "hlbvh-sah" (rebuilt on the GPU every update). Motion blur as
 TwoLevelRuntime's (update_shutter, times=; the blurred frame refits the T-SAH TLAS at every key
 whatever tlas). Raises tsah.Failure when no device is usable.
 )doc")
-      .def(py::init([](py::object scene, py::handle device, const std::string& tlas) {
+      .def(py::init([](py::object scene, py::handle device, const std::string& layout, const std::string& tlas) {
              sceneArgument(scene);
-             return std::make_unique<GpuTwoLevelTracer>(std::move(scene), checkedInteger<int>(device, "device", 0), tlas);
+             return std::make_unique<GpuTwoLevelTracer>(std::move(scene), checkedInteger<int>(device, "device", 0),
+                                                        layout, tlas);
            }),
-           "scene"_a, "device"_a = 0, "tlas"_a = "refit")
+           "scene"_a, "device"_a = 0, "layout"_a = "auto", "tlas"_a = "refit")
       .def("update", &GpuTwoLevelTracer::update, "time"_a, "The scene at this time, on the device; ends a blurred frame.")
       .def("update_shutter", &GpuTwoLevelTracer::updateShutter, "open"_a, "close"_a,
            "A blurred frame over the shutter [open, close] on the device, as TwoLevelRuntime.update_shutter.")

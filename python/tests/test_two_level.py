@@ -332,11 +332,12 @@ def test_instance_boxes_and_memory(scene):
 
 
 @needs_gpu
+@pytest.mark.parametrize("layout", ["bvh2", "cwbvh"])
 @pytest.mark.parametrize("tlas", ["refit", "lbvh", "hlbvh-sah", "refit-parts"])
-def test_gpu_two_level_runtime_matches_the_cpu(scene, parts, baked, tlas):
+def test_gpu_two_level_runtime_matches_the_cpu(scene, parts, baked, tlas, layout):
     if tlas == "refit-parts":  # a TLAS per part of the time: each refitted in its part
         scene, tlas = parts, "refit"
-    gpu = tsah.GpuTwoLevelRuntime(scene, tlas=tlas)
+    gpu = tsah.GpuTwoLevelRuntime(scene, layout=layout, tlas=tlas)
     cpu = tsah.TwoLevelRuntime(scene, layout="bvh2")
     for time in (0.0, 0.75, 1.0, 2.0):
         gpu.update(time)
@@ -353,8 +354,9 @@ def test_gpu_two_level_runtime_matches_the_cpu(scene, parts, baked, tlas):
 
 
 @needs_gpu
-def test_gpu_blurred_frame_matches_the_cpu(scene, baked):
-    gpu = tsah.GpuTwoLevelRuntime(scene)
+@pytest.mark.parametrize("layout", ["bvh2", "cwbvh"])
+def test_gpu_blurred_frame_matches_the_cpu(scene, baked, layout):
+    gpu = tsah.GpuTwoLevelRuntime(scene, layout=layout)
     cpu = tsah.TwoLevelRuntime(scene, layout="bvh2")
     gpu.update_shutter(0.5, 0.7)
     cpu.update_shutter(0.5, 0.7)
@@ -415,9 +417,11 @@ def test_gpu_device_arrays_equal_the_host_path(scene, baked):
 
 
 @pytest.mark.skipif(not tsah.cuda_built, reason="a build without CUDA has no GpuTwoLevelRuntime")
-def test_gpu_two_level_runtime_refuses_an_unknown_tlas_update(scene):
+def test_gpu_two_level_runtime_refuses_an_unknown_tlas_update_or_a_cpu_layout(scene):
     with pytest.raises(tsah.ConfigError, match="tlas: unknown TLAS update 'bvh' .refit, lbvh or hlbvh-sah."):
         tsah.GpuTwoLevelRuntime(scene, tlas="bvh")
+    with pytest.raises(tsah.ConfigError, match="layout: bvh8 is a CPU layout .the GPU's are bvh2 and cwbvh."):
+        tsah.GpuTwoLevelRuntime(scene, layout="bvh8")
 
 
 def test_an_uninitialised_scene_is_refused(scene):

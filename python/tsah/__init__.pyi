@@ -363,8 +363,9 @@ class GpuTwoLevelRuntime:
     """A two-level scene traced on a CUDA device from host rays or device arrays in place (only when
     cuda_built)."""
 
-    def __init__(self, scene: TwoLevelScene, device: _Integer = 0, tlas: str = "refit") -> None:
-        """tlas: 'refit', 'lbvh' or 'hlbvh-sah'. Raises tsah.Failure when no device is usable."""
+    def __init__(self, scene: TwoLevelScene, device: _Integer = 0, layout: str = "auto", tlas: str = "refit") -> None:
+        """layout: the BLAS layout, 'auto' (bvh2), 'bvh2' or 'cwbvh'; tlas: 'refit', 'lbvh' or 'hlbvh-sah'.
+        Raises tsah.Failure when no device is usable."""
     def update(self, time: _Number) -> None:
         """The scene at this time, on the device; ends a blurred frame."""
     def update_shutter(self, open: _Number, close: _Number) -> None:

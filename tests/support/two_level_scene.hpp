@@ -5,6 +5,7 @@
 // instance.
 #include <filesystem>
 #include <random>
+#include <sstream>
 #include <span>
 #include <vector>
 
@@ -39,6 +40,27 @@ inline std::filesystem::path writeTwoLevelScene(const std::filesystem::path& dir
       {"transform": {"translate": [5, 2, 0], "scale": [1, 1.5, 1]}}]}
   ]})");
   return dir / "scene.json";
+}
+
+// A crowd beside the small scene's sources (writeTwoLevelScene's wave.tanim and ground.tanim in
+// `dir`): 48 waves, each with its own time offset (a pose each), every third walking a path, and 16
+// static grounds, on a grid.
+inline std::filesystem::path writeCrowdScene(const std::filesystem::path& dir) {
+  std::ostringstream cloth, ground;
+  for (uint32_t i = 0; i < 48; ++i) {
+    const float x = 3.0f * float(i % 8), z = 3.0f * float(i / 8);
+    cloth << (i ? ",\n" : "") << R"({"offset": )" << 0.25 * i << R"(, "transform": {"translate": [)" << x << ", 0, " << z
+          << "]}";
+    if (i % 3 == 0) cloth << R"(, "path": [{"time": 0}, {"time": 12, "translate": [)" << (i % 2 ? 6 : -6) << ", 0, 4]}]";
+    cloth << "}";
+  }
+  for (uint32_t i = 0; i < 16; ++i)
+    ground << (i ? ",\n" : "") << R"({"transform": {"translate": [)" << 6.0f * float(i % 4) << ", -1, "
+           << 6.0f * float(i / 4) << "]}}";
+  tsah::test::writeText(dir / "crowd.json", R"({"fps": 2, "objects": [
+    {"name": "ground", "file": "ground.tanim", "instances": [)" + ground.str() + R"(]},
+    {"name": "cloth", "file": "wave.tanim", "instances": [)" + cloth.str() + "]}]}");
+  return dir / "crowd.json";
 }
 
 inline tsah::TreeOptions smallTwoLevelOptions() {

@@ -10,8 +10,11 @@
 // BLAS root boxes, and the TLAS refit (or, with Config::tlas a rebuild, a new TLAS built over those
 // boxes). A frame whose poses all keep their local time replays a second graph without the BLAS
 // work. Rays traverse the TLAS with the binary layout's device loop (Bvh2Traversal,
-// bvh2_traversal.cuh); at a TLAS leaf the ray is moved into the instance's space and traced by the
-// same loop through the instance's BLAS, as the CPU does. updateShutter blurs a frame as
+// bvh2_traversal.cuh); at a TLAS leaf the ray is moved into the instance's space and traced
+// through the instance's BLAS by the same loop, as the CPU does, or (Config::layout cwbvh) by the
+// compressed 8-wide layout's traversal (docs/cwbvh.md), each BLAS collapsed once at upload and
+// refitted and re-quantized by the flat runtime's level kernels, all poses of a source in one
+// launch per level. updateShutter blurs a frame as
 // TwoLevelRuntime::updateShutter does, and the queries with per-ray times trace it
 // (two_level_blur.hpp).
 #include <cstdint>
@@ -22,6 +25,8 @@
 
 #include "tsah/core/aabb.hpp"
 #include "tsah/core/ray.hpp"
+#include "tsah/layout/cwbvh_build.hpp"
+#include "tsah/core/kinds.hpp"
 #include "tsah/render/renderer.hpp"
 #include "tsah/scene/two_level.hpp"
 #include "tsah/scene/two_level_runtime.hpp"
@@ -61,6 +66,11 @@ class GpuTwoLevelRuntime {
  public:
   struct Config {
     int device = 0;
+    // The BLAS layout: bvh2 (the binary layout) or cwbvh (compressed 8-wide; each source's tree
+    // collapsed with the scene's objective, k 0 for a static one, as the CPU's wide BLAS). The
+    // TLAS is binary in both. With cwbvh every pose is interpolated and refitted (blockRefits and
+    // keyedPoses apply to bvh2 BLAS only). Anything else: tsah::ConfigError.
+    Layout layout = Layout::Bvh2;
     // Refit the poses' BLAS and the TLAS by blocks walking in shared memory: each pose's tree split
     // into subtrees of at most refitPartLeaves leaves (one block each) and the top above them
     // (tsah::splitForBlockRefit), the TLAS as one part when it fits the device's opt-in shared
@@ -159,7 +169,10 @@ class GpuTwoLevelRuntime {
   // root boxes of this instant frame.
   std::vector<Aabb> downloadInstanceBoxes() const;
   FlatBvh downloadTlas() const;
-  FlatBvh downloadPoseTree(uint32_t pose) const;
+  FlatBvh downloadPoseTree(uint32_t pose) const;  // bvh2 BLAS (tsah::ConfigError for cwbvh)
+  // Config::layout cwbvh: a pose's BLAS in the compressed layout with this frame's nodes and root
+  // box (tsah::ConfigError for bvh2).
+  CwbvhTree downloadPoseCwbvh(uint32_t pose) const;
   const DeviceInfo& device() const;
   const TwoLevelScene& scene() const;
 
