@@ -67,12 +67,14 @@ struct TraceOptions {
 
 // --shutter: the shutter of each frame; usage errors for values and combinations it cannot serve
 // (checked before the device is looked for). The frame count is checked once the input is read.
-tsah::Shutter parseShutter(const TraceOptions& opt) {
+// twoLevel: the tree is a two-level scene, which the GPU blurs with its BLAS in either layout.
+tsah::Shutter parseShutter(const TraceOptions& opt, bool twoLevel) {
   const tsah::Shutter shutter = opt.shutter.checked("the time between frames");
   if (shutter.fraction == 0.0) return shutter;
   if (opt.rebuild != "none") throw UsageError("--shutter refits the given tree; it does not go with --rebuild");
-  // The CPU traces blurred frames in every layout it has; the GPU in the binary one.
-  if (opt.device == tsah::Device::Cuda && opt.layout != tsah::Layout::Auto && opt.layout != tsah::Layout::Bvh2)
+  // The CPU traces blurred frames in every layout it has; the GPU a flat tree in the binary one.
+  if (!twoLevel && opt.device == tsah::Device::Cuda && opt.layout != tsah::Layout::Auto &&
+      opt.layout != tsah::Layout::Bvh2)
     throw UsageError("--shutter traces the bvh2 layout on the GPU (--layout bvh2 or auto)");
   return shutter;
 }
@@ -134,10 +136,10 @@ void runTrace(const TraceOptions& opt) {
     throw UsageError("--devices chooses GPUs: use it with --device cuda");
   const std::vector<int> devices = !opt.devices.empty() ? tsah::cli::parseDevices(opt.devices)
                                    : std::vector<int>{opt.device == tsah::Device::Cuda ? tsah::cli::rankDevice() : 0};
-  runtimeOptions.shutter = parseShutter(opt);
   // A two-level tree (version 3) is refused the options it cannot serve before the device is looked
   // for, so the message is the same on every machine.
   const bool twoLevel = tsah::cli::isTwoLevelTreeFile(opt.bvh);
+  runtimeOptions.shutter = parseShutter(opt, twoLevel);
   if (twoLevel) checkTwoLevelOptions(opt, runtimeOptions);
   checkDeviceAndLayout(opt);
   if (opt.eye.empty() != opt.lookAt.empty()) throw UsageError("--eye and --look-at go together");

@@ -199,6 +199,12 @@ add_test(NAME cli.two_level.trace.cuda_shutter
 set_tests_properties(cli.two_level.trace.cuda_shutter PROPERTIES FIXTURES_REQUIRED tl_tree
   PASS_REGULAR_EXPRESSION "\"keys\":[2-9].*\"shutter\":\\{\"fraction\":0.5,\"mode\":\"centered\"\\}.*\"structure\":\"two-level\".*\"timer\":\"CUDA events \\(device time\\); updates: host wall time\""
   SKIP_REGULAR_EXPRESSION "no CUDA device found|GPU runtime is not built")
+# Blurred frames with the BLAS in the compressed layout (the held poses and static BLAS traced in it).
+add_test(NAME cli.two_level.trace.cuda_cwbvh_shutter
+         COMMAND tsah trace ${SCENE} ${W}/tl_auto.tbvh ${TL_TRACE} --device cuda --layout cwbvh --shutter 0.5 --no-images --json)
+set_tests_properties(cli.two_level.trace.cuda_cwbvh_shutter PROPERTIES FIXTURES_REQUIRED tl_tree
+  PASS_REGULAR_EXPRESSION "\"keys\":[2-9].*\"layout\":\"cwbvh\".*\"shutter\":\\{\"fraction\":0.5,"
+  SKIP_REGULAR_EXPRESSION "no CUDA device found|GPU runtime is not built")
 # The TLAS built every frame on the GPU (LBVH), traced and rendered on the device; refused on the CPU.
 add_test(NAME cli.two_level.trace.cuda_tlas_lbvh
          COMMAND tsah trace ${SCENE} ${W}/tl_auto.tbvh ${TL_TRACE} --device cuda --tlas lbvh --no-images --json)
