@@ -224,6 +224,7 @@ TEST(CudaTwoLevelCwbvhConfig, EachPoseDownloadServesItsLayout) {
   tsah::cuda::GpuTwoLevelRuntime wide(s, compressed());
   EXPECT_THROW(wide.downloadPoseTree(0), tsah::ConfigError);
   EXPECT_NO_THROW(wide.downloadPoseCwbvh(0));
+  EXPECT_THROW(wide.downloadPoseCwbvh(uint32_t(s.poses.size())), tsah::ConfigError);
   tsah::cuda::GpuTwoLevelRuntime binary(s);
   EXPECT_THROW(binary.downloadPoseCwbvh(0), tsah::ConfigError);
   EXPECT_NO_THROW(binary.downloadPoseTree(0));

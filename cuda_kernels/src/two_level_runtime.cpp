@@ -90,8 +90,9 @@ struct GpuTwoLevelRuntime::Impl {
   Impl(const TwoLevelScene& s, Config c);
   ~Impl() { releaseDevice(); }
   void create();  // the constructor's work
-  // The group holding a pose and the pose's place in it (tsah::ConfigError for a pose out of range).
-  std::pair<const PoseGroup*, uint32_t> memberOf(uint32_t pose) const;
+  // The group holding a pose and the pose's place in it (tsah::ConfigError naming `who` for a pose
+  // out of range).
+  std::pair<const PoseGroup*, uint32_t> memberOf(uint32_t pose, const char* who) const;
   void uploadCompressed(Source& d, const Blas& blas, std::span<const uint32_t> indices);
   void releaseDevice() noexcept;
   void enqueueFrame(bool refitPoses);
@@ -284,7 +285,8 @@ void GpuTwoLevelRuntime::Impl::create() {
     } else if (!d.keyed && !c) {
       g.counters.resize(g.strides.counters * members);
     }
-    g.roots = toDevice(std::vector<detail::RootInfo>(members, c ? detail::cwbvhRoot(c->host) : rootOf(d.topology)), stream);
+    const detail::RootInfo root = c ? detail::cwbvhRoot(c->host) : rootOf(d.topology);
+    g.roots = toDevice(std::vector<detail::RootInfo>(members, root), stream);
     for (uint32_t i = 0; i < members; ++i) {
       const uint32_t p = g.poses[i];
       poseFrameIndex[p] = frameCount++;
@@ -575,9 +577,10 @@ FlatBvh GpuTwoLevelRuntime::downloadTlas() const {
   return tree;
 }
 
-std::pair<const GpuTwoLevelRuntime::Impl::PoseGroup*, uint32_t> GpuTwoLevelRuntime::Impl::memberOf(uint32_t pose) const {
+std::pair<const GpuTwoLevelRuntime::Impl::PoseGroup*, uint32_t> GpuTwoLevelRuntime::Impl::memberOf(
+    uint32_t pose, const char* who) const {
   if (pose >= scene.poses.size())
-    throw ConfigError("downloadPoseTree: pose " + std::to_string(pose) + " of " + std::to_string(scene.poses.size()));
+    throw ConfigError(std::string(who) + ": pose " + std::to_string(pose) + " of " + std::to_string(scene.poses.size()));
   const uint32_t frame = poseFrameIndex[pose];
   const auto group = std::find_if(groups.begin(), groups.end(), [&](const PoseGroup& g) {
     return frame >= g.firstFrame && frame < g.firstFrame + g.poses.size();
@@ -589,7 +592,7 @@ FlatBvh GpuTwoLevelRuntime::downloadPoseTree(uint32_t pose) const {
   const Impl& m = *impl_;
   if (m.config.layout != Layout::Bvh2)
     throw ConfigError("downloadPoseTree: the BLAS are in the compressed layout (downloadPoseCwbvh)");
-  const auto [group, member] = m.memberOf(pose);
+  const auto [group, member] = m.memberOf(pose, "downloadPoseTree");
   FlatBvh tree = m.sources[group->source].topology;
   if (!tree.nodes.empty())
     CUDA_CHECK(cudaMemcpy(tree.nodes.data(), group->nodes.data() + member * group->strides.nodes,
@@ -604,7 +607,7 @@ CwbvhTree GpuTwoLevelRuntime::downloadPoseCwbvh(uint32_t pose) const {
   const Impl& m = *impl_;
   if (m.config.layout != Layout::Cwbvh)
     throw ConfigError("downloadPoseCwbvh: the BLAS are in the binary layout (downloadPoseTree)");
-  const auto [group, member] = m.memberOf(pose);
+  const auto [group, member] = m.memberOf(pose, "downloadPoseCwbvh");
   CwbvhTree tree = m.sources[group->source].cwbvh->host;
   if (!tree.nodes.empty())
     CUDA_CHECK(cudaMemcpy(tree.nodes.data(), group->cwbvhNodes.data() + member * group->strides.nodes,
