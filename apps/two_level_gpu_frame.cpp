@@ -26,7 +26,7 @@ cuda::GpuTwoLevelRuntime::Config onDevice(int gpu, Layout layout, cuda::TlasUpda
   cuda::useDevice(gpu);
   cuda::GpuTwoLevelRuntime::Config config;
   config.device = gpu;
-  config.layout = gpuLayout(layout);
+  config.layout = layout;  // the runtime takes auto as bvh2
   config.tlas = tlas;
   return config;
 }

@@ -156,24 +156,34 @@ class CudaTwoLevelRender : public ::testing::Test {
   fs::path dir;
 };
 
+// The GPU runtime's configuration with its BLAS in `layout`.
+tsah::cuda::GpuTwoLevelRuntime::Config blasIn(tsah::Layout layout) {
+  tsah::cuda::GpuTwoLevelRuntime::Config config;
+  config.layout = layout;
+  return config;
+}
+
 // Between frames and at frames, poses moving, paths moving, the loop wrapped: the GPU's frame is
-// the CPU renderer's, and every instance is seen.
+// the CPU renderer's, and every instance is seen, with the BLAS in either GPU layout.
 TEST_F(CudaTwoLevelRender, SurfacesAndImageEqualTheCpuRenderersFrames) {
   const tsah::TwoLevelScene scene = load(tsah::test::writeTwoLevelScene(dir));
   tsah::TwoLevelRuntime cpu(scene, {2, tsah::TwoLevelRuntime::TlasUpdate::Refit, tsah::Layout::Bvh2});
   tsah::TwoLevelRenderView view(cpu);
-  tsah::cuda::GpuTwoLevelRuntime gpu(scene);
-  tsah::cuda::GpuTwoLevelRenderer renderer(gpu);
-  EXPECT_THROW(renderer.downloadSurfaces(), tsah::ConfigError);
-  const std::vector<uint32_t> instanceOf = instanceOfTriangle(scene);
-  std::set<uint32_t> seen;
-  uint32_t index = 0;
-  for (const double t : {0.0, 3.25, 7.5, 12.0}) {
-    const std::set<uint32_t> triangles = expectSameFrame(cpu, view, gpu, renderer, t, index++);
-    EXPECT_GT(triangles.size(), 500u) << "scene time " << t << ": too few triangles in view";
-    for (uint32_t tri : triangles) seen.insert(instanceOf.at(tri));
+  for (const tsah::Layout layout : {tsah::Layout::Bvh2, tsah::Layout::Cwbvh}) {
+    SCOPED_TRACE(tsah::name(layout));
+    tsah::cuda::GpuTwoLevelRuntime gpu(scene, blasIn(layout));
+    tsah::cuda::GpuTwoLevelRenderer renderer(gpu);
+    EXPECT_THROW(renderer.downloadSurfaces(), tsah::ConfigError);
+    const std::vector<uint32_t> instanceOf = instanceOfTriangle(scene);
+    std::set<uint32_t> seen;
+    uint32_t index = 0;
+    for (const double t : {0.0, 3.25, 7.5, 12.0}) {
+      const std::set<uint32_t> triangles = expectSameFrame(cpu, view, gpu, renderer, t, index++);
+      EXPECT_GT(triangles.size(), 500u) << "scene time " << t << ": too few triangles in view";
+      for (uint32_t tri : triangles) seen.insert(instanceOf.at(tri));
+    }
+    EXPECT_EQ(seen.size(), scene.instanceCount()) << "instances seen in the frames";
   }
-  EXPECT_EQ(seen.size(), scene.instanceCount()) << "instances seen in the frames";
 }
 
 // A runtime that rebuilds its TLAS every frame (LBVH, HLBVH-SAH: the T-SAH TLAS never uploaded)
@@ -196,32 +206,36 @@ TEST_F(CudaTwoLevelRender, ARebuiltTlasRendersTheCpuRenderersFrames) {
 
 // Blurred frames (shutters of 2 and 3 keys, one after two poses' clip ends, one over the whole
 // scene): every ray at its pixel's time, the primary surface on the hit triangle where it is then;
-// the GPU's surfaces and image are the CPU renderer's, and differ from the close's instant frame.
+// the GPU's surfaces and image are the CPU renderer's, and differ from the close's instant frame;
+// with the BLAS in either GPU layout.
 TEST_F(CudaTwoLevelRender, BlurredFramesEqualTheCpuRenderersFrames) {
   const tsah::TwoLevelScene scene = load(tsah::test::writeTwoLevelScene(dir));
   tsah::TwoLevelRuntime cpu(scene, {2, tsah::TwoLevelRuntime::TlasUpdate::Refit, tsah::Layout::Bvh2});
   tsah::TwoLevelRenderView view(cpu);
-  tsah::cuda::GpuTwoLevelRuntime gpu(scene);
-  tsah::cuda::GpuTwoLevelRenderer renderer(gpu);
-  uint32_t index = 0;
-  for (const auto& [open, close] : {std::pair{2.1, 2.4}, std::pair{6.2, 6.9}, std::pair{9.2, 9.9}, std::pair{0.0, 12.0}}) {
-    const std::string what = "shutter [" + std::to_string(open) + ", " + std::to_string(close) + "]";
-    cpu.updateShutter(open, close);
-    view.updateMesh();
-    gpu.updateShutter(open, close);
-    ASSERT_TRUE(cpu.blurred() && gpu.blurred()) << what;
-    const std::set<uint32_t> triangles = expectSameRender(cpu, view, renderer, index, what);
-    EXPECT_GT(triangles.size(), 500u) << what << ": too few triangles in view";
-    // The instant frame at the close renders otherwise (the blur is seen).
-    const Frame f = frameFor(cpu, index++);
-    const std::vector<tsah::Surface> blurred = renderer.downloadSurfaces();
-    gpu.updateAt(close);
-    renderer.render(f.camera, f.lighting, f.settings, nullptr);
-    const std::vector<tsah::Surface> instant = renderer.downloadSurfaces();
-    std::size_t moved = 0;
-    for (std::size_t i = 0; i < blurred.size(); ++i)
-      moved += blurred[i].kind != instant[i].kind || !near(blurred[i].position, instant[i].position) ? 1 : 0;
-    EXPECT_GT(moved, 50u) << what << ": blurred pixels";
+  for (const tsah::Layout layout : {tsah::Layout::Bvh2, tsah::Layout::Cwbvh}) {
+    SCOPED_TRACE(tsah::name(layout));
+    tsah::cuda::GpuTwoLevelRuntime gpu(scene, blasIn(layout));
+    tsah::cuda::GpuTwoLevelRenderer renderer(gpu);
+    uint32_t index = 0;
+    for (const auto& [open, close] : {std::pair{2.1, 2.4}, std::pair{6.2, 6.9}, std::pair{9.2, 9.9}, std::pair{0.0, 12.0}}) {
+      const std::string what = "shutter [" + std::to_string(open) + ", " + std::to_string(close) + "]";
+      cpu.updateShutter(open, close);
+      view.updateMesh();
+      gpu.updateShutter(open, close);
+      ASSERT_TRUE(cpu.blurred() && gpu.blurred()) << what;
+      const std::set<uint32_t> triangles = expectSameRender(cpu, view, renderer, index, what);
+      EXPECT_GT(triangles.size(), 500u) << what << ": too few triangles in view";
+      // The instant frame at the close renders otherwise (the blur is seen).
+      const Frame f = frameFor(cpu, index++);
+      const std::vector<tsah::Surface> blurred = renderer.downloadSurfaces();
+      gpu.updateAt(close);
+      renderer.render(f.camera, f.lighting, f.settings, nullptr);
+      const std::vector<tsah::Surface> instant = renderer.downloadSurfaces();
+      std::size_t moved = 0;
+      for (std::size_t i = 0; i < blurred.size(); ++i)
+        moved += blurred[i].kind != instant[i].kind || !near(blurred[i].position, instant[i].position) ? 1 : 0;
+      EXPECT_GT(moved, 50u) << what << ": blurred pixels";
+    }
   }
 }
 

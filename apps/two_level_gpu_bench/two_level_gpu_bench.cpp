@@ -130,6 +130,7 @@ int run(const Options& opt) {
                        : tsah::loadTwoLevelSceneFile(opt.tree, anim::loadSceneSources(opt.scene, load));
   if (!opt.saveTree.empty()) tsah::saveTwoLevelScene(opt.saveTree, scene);
   if (opt.buildOnly) return 0;
+  const tsah::Layout layout = tsah::parse<tsah::Layout>(opt.layout);
   std::vector<TlasRun> runs;
   for (tsah::cuda::TlasUpdate update : tlasUpdates(opt.tlas)) {
     tsah::cuda::GpuTwoLevelRuntime::Config config;
@@ -138,7 +139,7 @@ int run(const Options& opt) {
     config.refitPartLeaves = opt.refitPartLeaves;
     config.phaseTimings = opt.phaseTimings;
     config.tlas = update;
-    config.layout = tsah::parse<tsah::Layout>(opt.layout);
+    config.layout = layout;
     TlasRun& r = runs.emplace_back();
     r.update = update;
     r.gpu = std::make_unique<tsah::cuda::GpuTwoLevelRuntime>(scene, config);
@@ -151,7 +152,7 @@ int run(const Options& opt) {
     baked = std::make_unique<anim::Animation>(anim::loadScene(opt.scene, load));
     const tsah::BvhFile flatFile = tsah::loadBvhFile(opt.flatTree);
     tsah::cuda::GpuRuntime::Config config;
-    config.layout = tsah::parse<tsah::Layout>(opt.layout);
+    config.layout = layout;
     config.wideObjective = flatFile.info.objective;
     flat = std::make_unique<tsah::cuda::GpuRuntime>(tsah::flattenBvh(flatFile.bvh), *baked, config);
   }

@@ -221,6 +221,7 @@ void TwoLevelBlur::build(const TwoLevelBlurAccess& access, std::span<const doubl
   scene_.blurred = instances_.data();
   scene_.instances = access.instances;
   scene_.views = access.views;
+  scene_.compressedBlas = access.compressedBlas;
   scene_.layouts = layouts_.data();
   scene_.posePositions = posePositions_.data();
   stream_ = stream;

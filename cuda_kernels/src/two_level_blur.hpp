@@ -56,6 +56,7 @@ struct TwoLevelBlurAccess {
   const uint32_t* tlasTriIndex = nullptr;
   const InstanceState* instances = nullptr;
   const BlasView* views = nullptr;
+  bool compressedBlas = false;  // the views in the compressed layout (TlasScene::compressedBlas)
 };
 
 // Per instance of a blurred frame: whether its float matrix differs between keys (it is lerped and
@@ -89,6 +90,7 @@ struct BlurredTlasScene {
   const BlurredInstance* blurred = nullptr;
   const InstanceState* instances = nullptr;  // the instant state at the close
   const BlasView* views = nullptr;
+  bool compressedBlas = false;               // the views in the compressed layout (TlasScene::compressedBlas)
   const BlurredLayout* layouts = nullptr;    // the moving poses' blurred BLAS
   const BlurredPosePositions* posePositions = nullptr;  // per layout: its pose's key positions
 };

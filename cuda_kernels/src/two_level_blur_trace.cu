@@ -19,7 +19,7 @@ __global__ void instanceRootBoxesKernel(const InstanceState* __restrict__ instan
 
 // Rays: const Ray* or ArrayRays; Times: const float* or ArrayTimes; Hits: InstanceHit* or
 // ArrayInstanceHits (ray_arrays.cuh).
-template <bool AnyHit, class Rays, class Times, class Hits>
+template <bool AnyHit, BlasForm Form, class Rays, class Times, class Hits>
 __global__ void __launch_bounds__(128) blurredTwoLevelTraceKernel(BlurredTlasScene scene, Rays rays, Times times,
                                                                   uint32_t count, Hits hits,
                                                                   uint8_t* __restrict__ occluded) {
@@ -27,23 +27,32 @@ __global__ void __launch_bounds__(128) blurredTwoLevelTraceKernel(BlurredTlasSce
   if (i >= count) return;
   const Ray ray = loadRay(rays, i);
   if constexpr (AnyHit)
-    occluded[i] = blurredTwoLevelAnyHit(scene, ray, loadTime(times, i)) ? 1 : 0;
+    occluded[i] = blurredTwoLevelAnyHit<Form>(scene, ray, loadTime(times, i)) ? 1 : 0;
   else
-    storeInstanceHit(hits, i, blurredTwoLevelClosestHit(scene, ray, loadTime(times, i)));
+    storeInstanceHit(hits, i, blurredTwoLevelClosestHit<Form>(scene, ray, loadTime(times, i)));
+}
+
+template <BlasForm Form, class Rays, class Times, class Hits>
+void launchBlurredTraceOfForm(const BlurredTlasScene& scene, const Rays& rays, const Times& times, uint32_t count,
+                              const Hits& hits, uint8_t* occluded, cudaStream_t stream) {
+  const unsigned block = 128;  // fixed by __launch_bounds__
+  if (occluded)
+    blurredTwoLevelTraceKernel<true, Form, Rays, Times, Hits>
+        <<<gridFor(count, block), block, 0, stream>>>(scene, rays, times, count, hits, occluded);
+  else
+    blurredTwoLevelTraceKernel<false, Form, Rays, Times, Hits>
+        <<<gridFor(count, block), block, 0, stream>>>(scene, rays, times, count, hits, occluded);
+  CUDA_CHECK_LAUNCH("blurredTwoLevelTraceKernel");
 }
 
 template <class Rays, class Times, class Hits>
 void launchBlurredTraceOf(const BlurredTlasScene& scene, const Rays& rays, const Times& times, uint32_t count,
                           const Hits& hits, uint8_t* occluded, cudaStream_t stream) {
   if (count == 0) return;
-  const unsigned block = 128;  // fixed by __launch_bounds__
-  if (occluded)
-    blurredTwoLevelTraceKernel<true, Rays, Times, Hits>
-        <<<gridFor(count, block), block, 0, stream>>>(scene, rays, times, count, hits, occluded);
+  if (scene.compressedBlas)
+    launchBlurredTraceOfForm<BlasForm::Compressed>(scene, rays, times, count, hits, occluded, stream);
   else
-    blurredTwoLevelTraceKernel<false, Rays, Times, Hits>
-        <<<gridFor(count, block), block, 0, stream>>>(scene, rays, times, count, hits, occluded);
-  CUDA_CHECK_LAUNCH("blurredTwoLevelTraceKernel");
+    launchBlurredTraceOfForm<BlasForm::Binary>(scene, rays, times, count, hits, occluded, stream);
 }
 
 }  // namespace

@@ -3,7 +3,8 @@
 // once for the batch queries (two_level_blur_trace.cu) and the renderer (two_level_render.cu): the
 // TLAS by the binary layout's device loop (bvh2_traversal.cuh) with its key nodes lerped at the
 // ray's time, and at a TLAS leaf the instance moved into instance space at that time and traced
-// through its pose's blurred BLAS (the flat blurred frame's loop) or its instant BLAS, as
+// through its pose's blurred BLAS (the flat blurred frame's loop) or its instant BLAS (in the
+// runtime's BLAS layout, Form), as
 // tsah::TwoLevelRuntime::closestHit(ray, time) does on the CPU. Compile the including file with
 // -fmad=false: the lerps, the inverse and the ray's move into instance space round as on the CPU.
 #include "blurred_trace.hpp"
@@ -18,7 +19,7 @@ namespace tsah::cuda::detail {
 
 // One ray's view of a blurred TLAS: the keys s and s + 1 of its segment and f along it. prim: the
 // BLAS triangle of the last hit the loop accepted (every accepted hit is nearer than the last).
-template <bool AnyHit>
+template <bool AnyHit, BlasForm Form>
 struct BlurredTlasFrame {
   const uint32_t* triIndex;  // the scene's (copied: no pointer to the kernel's parameter)
   const InstanceState* instances;
@@ -52,8 +53,8 @@ struct BlurredTlasFrame {
   }
 };
 
-template <bool AnyHit>
-__device__ __forceinline__ void loadBvh2Node(const BlurredTlasFrame<AnyHit>& m, int32_t ref, float4& n0xy,
+template <bool AnyHit, BlasForm Form>
+__device__ __forceinline__ void loadBvh2Node(const BlurredTlasFrame<AnyHit, Form>& m, int32_t ref, float4& n0xy,
                                              float4& n1xy, float4& nz, int4& refs) {
   const GpuBvhNode node = lerpNode(m.nodes0[ref], m.nodes1[ref], m.f);
   const float4* rows = reinterpret_cast<const float4*>(&node);
@@ -61,16 +62,16 @@ __device__ __forceinline__ void loadBvh2Node(const BlurredTlasFrame<AnyHit>& m, 
   refs = *reinterpret_cast<const int4*>(rows + 3);
 }
 
-template <bool AnyHit>
-__device__ __forceinline__ uint32_t slotTriangle(const BlurredTlasFrame<AnyHit>& m, uint32_t s) {
+template <bool AnyHit, BlasForm Form>
+__device__ __forceinline__ uint32_t slotTriangle(const BlurredTlasFrame<AnyHit, Form>& m, uint32_t s) {
   return __ldg(m.triIndex + s);
 }
 
 // Slot s's instance at the ray's time: its key boxes lerped first (as the CPU's blurred TLAS frame),
 // then the ray in instance space (a moving instance: the lerped map inverted, none when singular;
 // a still one: the instant inverse), then its BLAS at the ray's time.
-template <bool AnyHit>
-__device__ __forceinline__ bool intersectBvh2Slot(const BlurredTlasFrame<AnyHit>& m, const Ray& ray,
+template <bool AnyHit, BlasForm Form>
+__device__ __forceinline__ bool intersectBvh2Slot(const BlurredTlasFrame<AnyHit, Form>& m, const Ray& ray,
                                                   const RayPrep& prep, uint32_t s, float tmax, float& t, float& u,
                                                   float& v) {
   const uint32_t instance = slotTriangle(m, s);
@@ -99,9 +100,9 @@ __device__ __forceinline__ bool intersectBvh2Slot(const BlurredTlasFrame<AnyHit>
   } else {
     const BlasView& view = m.views[inst.view];
     if constexpr (AnyHit) {
-      if (!blasAnyHit<BlasForm::Either>(view, local)) return false;
+      if (!blasAnyHit<Form>(view, local)) return false;
     } else {
-      h = blasClosestHit<BlasForm::Either>(view, local);
+      h = blasClosestHit<Form>(view, local);
     }
   }
   if constexpr (AnyHit) {
@@ -119,9 +120,10 @@ __device__ __forceinline__ bool intersectBvh2Slot(const BlurredTlasFrame<AnyHit>
 }
 
 // The closest hit of a ray at shutter fraction `time` (instance kNoHit: none).
+template <BlasForm Form>
 __device__ __forceinline__ InstanceHit blurredTwoLevelClosestHit(const BlurredTlasScene& scene, const Ray& ray,
                                                                  float time) {
-  BlurredTlasFrame<false> frame(scene, time);
+  BlurredTlasFrame<false, Form> frame(scene, time);
   Bvh2Stack stack;
   Bvh2Traversal<false> walk;
   walk.start(frame.root, ray, stack);
@@ -131,8 +133,9 @@ __device__ __forceinline__ InstanceHit blurredTwoLevelClosestHit(const BlurredTl
 }
 
 // Whether anything is hit within (tmin, tmax) at shutter fraction `time`.
+template <BlasForm Form>
 __device__ __forceinline__ bool blurredTwoLevelAnyHit(const BlurredTlasScene& scene, const Ray& ray, float time) {
-  BlurredTlasFrame<true> frame(scene, time);
+  BlurredTlasFrame<true, Form> frame(scene, time);
   Bvh2Stack stack;
   Bvh2Traversal<true> walk;
   walk.start(frame.root, ray, stack);

@@ -41,18 +41,22 @@ struct ShadingTables : TwoLevelShadingTables {
   }
 };
 
+// Form: the runtime's BLAS layout (each tracer's passes are compiled once per layout).
+template <BlasForm Form>
 struct TwoLevelTracer {
   static constexpr bool kTimed = false, kOwnSurface = true;
   ShadingTables tables;
 
-  __device__ __forceinline__ bool anyHit(const Ray& ray, float) const { return twoLevelAnyHit(tables.scene, ray); }
+  __device__ __forceinline__ bool anyHit(const Ray& ray, float) const {
+    return twoLevelAnyHit<Form>(tables.scene, ray);
+  }
 
   // tsah::primarySurface on the hit triangle in the world: the normal is the cross product of its
   // world-space edges, as the CPU renderer computes it from its world mesh (so the surfaces are
   // equal bit for bit, mirrored instances included; a normal by the inverse transpose of world(t)
   // would round differently).
   __device__ __forceinline__ Surface surface(const Ray& ray, float, const SceneLighting& light) const {
-    const InstanceHit h = twoLevelClosestHit(tables.scene, ray);
+    const InstanceHit h = twoLevelClosestHit<Form>(tables.scene, ray);
     if (h.instance == kNoHit) return primarySurface(ray, Hit{}, nullptr, nullptr, light);
     const InstanceState& inst = tables.scene.instances[h.instance];
     float triangle[9];
@@ -73,17 +77,18 @@ struct TwoLevelTracer {
 // primary surface is on the hit triangle where it is at that time: its pose's key positions lerped
 // (a moving pose; else its instant positions) and moved into the world by the instance's key
 // matrices lerped, as tsah::TwoLevelRenderView::blurredSurface computes it.
+template <BlasForm Form>
 struct BlurredTwoLevelTracer {
   static constexpr bool kTimed = true, kOwnSurface = true;
   ShadingTables tables;
   BlurredTlasScene blur;
 
   __device__ __forceinline__ bool anyHit(const Ray& ray, float time) const {
-    return blurredTwoLevelAnyHit(blur, ray, time);
+    return blurredTwoLevelAnyHit<Form>(blur, ray, time);
   }
 
   __device__ __forceinline__ Surface surface(const Ray& ray, float time, const SceneLighting& light) const {
-    const InstanceHit h = blurredTwoLevelClosestHit(blur, ray, time);
+    const InstanceHit h = blurredTwoLevelClosestHit<Form>(blur, ray, time);
     if (h.instance == kNoHit) return primarySurface(ray, Hit{}, nullptr, nullptr, light);
     const motion::Segment seg = motion::segmentAt(blur.keyTimes, int(blur.keyCount), time);
     const std::size_t key = std::size_t(seg.index) * blur.instanceCount + h.instance;
@@ -166,11 +171,19 @@ RenderStats renderTwoLevelFrame(const PassBuffers& b, const Frame& f, const TwoL
                                 const BlurredTlasScene* blurred, uint64_t aoRays, uint64_t shadowRays, Image* image,
                                 GpuRenderTimings* timings) {
   const ShadingTables t{tables};
-  if (blurred)
-    enqueueFusedPasses(b, f, BlurredTwoLevelTracer{t, *blurred}, nullptr, nullptr, aoRays, shadowRays,
-                       [](cudaStream_t) {});
+  const auto passes = [&](auto tracer) {
+    enqueueFusedPasses(b, f, tracer, nullptr, nullptr, aoRays, shadowRays, [](cudaStream_t) {});
+  };
+  constexpr BlasForm kBinary = BlasForm::Binary, kCompressed = BlasForm::Compressed;
+  const bool compressed = tables.scene.compressedBlas;
+  if (blurred && compressed)
+    passes(BlurredTwoLevelTracer<kCompressed>{t, *blurred});
+  else if (blurred)
+    passes(BlurredTwoLevelTracer<kBinary>{t, *blurred});
+  else if (compressed)
+    passes(TwoLevelTracer<kCompressed>{t});
   else
-    enqueueFusedPasses(b, f, TwoLevelTracer{t}, nullptr, nullptr, aoRays, shadowRays, [](cudaStream_t) {});
+    passes(TwoLevelTracer<kBinary>{t});
   return shadeAndFinish(b, f, TwoLevelShading{t}, true, image, timings);
 }
 

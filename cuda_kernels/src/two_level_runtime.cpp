@@ -651,6 +651,7 @@ detail::TwoLevelBlurAccess GpuTwoLevelRuntime::blurAccess() {
   a.tlasTriIndex = t.triIndex.data();
   a.instances = m.instances;
   a.views = m.views.data();
+  a.compressedBlas = m.config.layout == Layout::Cwbvh;
   return a;
 }
 

@@ -12,9 +12,10 @@
 
 namespace tsah::cuda::detail {
 
-// The BLAS layout a trace is compiled for: binary, compressed, or either (each view says: the
-// renderer's and the blurred frames' loops, which keep one kernel for both).
-enum class BlasForm { Binary, Compressed, Either };
+// The BLAS layout a trace is compiled for: every kernel that traces BLAS is compiled once per
+// layout, launched by the runtime's (TlasScene::compressedBlas); one kernel holding both loops
+// spilled more in each.
+enum class BlasForm { Binary, Compressed };
 
 // A ray in instance space through one BLAS view: the closest hit (tri: the triangle of the
 // source), or whether anything is hit within the ray's interval. Inlined into the TLAS loop: a call
@@ -22,17 +23,19 @@ enum class BlasForm { Binary, Compressed, Either };
 template <BlasForm Form>
 __device__ __forceinline__ Hit blasClosestHit(const BlasView& view, const Ray& local) {
   const RootInfo root = *view.root;
-  if (Form == BlasForm::Compressed || (Form == BlasForm::Either && view.cwbvhNodes))
+  if constexpr (Form == BlasForm::Compressed)
     return cwbvhClosestHit(blasCwbvhView(view, root), local);
-  return bvh2ClosestHit(blasTraceScene(view), root, local);
+  else
+    return bvh2ClosestHit(blasTraceScene(view), root, local);
 }
 
 template <BlasForm Form>
 __device__ __forceinline__ bool blasAnyHit(const BlasView& view, const Ray& local) {
   const RootInfo root = *view.root;
-  if (Form == BlasForm::Compressed || (Form == BlasForm::Either && view.cwbvhNodes))
+  if constexpr (Form == BlasForm::Compressed)
     return cwbvhAnyHit(blasCwbvhView(view, root), local);
-  return bvh2AnyHit(blasTraceScene(view), root, local);
+  else
+    return bvh2AnyHit(blasTraceScene(view), root, local);
 }
 
 // What the binary layout's device loop (bvh2_traversal.cuh) reads of the TLAS: its nodes as a
@@ -87,7 +90,7 @@ __device__ __forceinline__ bool intersectBvh2Slot(const TlasLoopFrame<AnyHit, Fo
 }
 
 // The closest hit of a world ray: instance, triangle of its source, t, u, v (instance kNoHit: none).
-template <BlasForm Form = BlasForm::Either>
+template <BlasForm Form>
 __device__ __forceinline__ InstanceHit twoLevelClosestHit(const TlasScene& scene, const Ray& ray) {
   TlasLoopFrame<false, Form> frame;
   frame.scene = scene;
@@ -100,7 +103,7 @@ __device__ __forceinline__ InstanceHit twoLevelClosestHit(const TlasScene& scene
 }
 
 // Whether anything is hit within the ray's interval.
-template <BlasForm Form = BlasForm::Either>
+template <BlasForm Form>
 __device__ __forceinline__ bool twoLevelAnyHit(const TlasScene& scene, const Ray& ray) {
   TlasLoopFrame<true, Form> frame;
   frame.scene = scene;
