@@ -14,7 +14,7 @@ namespace tsah::cuda::detail {
 
 // The BLAS layout a trace is compiled for: every kernel that traces BLAS is compiled once per
 // layout, launched by the runtime's (TlasScene::compressedBlas); one kernel holding both loops
-// spilled more in each.
+// changed the binary kernels' register allocation (the renderer's primary pass spilled).
 enum class BlasForm { Binary, Compressed };
 
 // A ray in instance space through one BLAS view: the closest hit (tri: the triangle of the
