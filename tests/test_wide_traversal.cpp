@@ -11,6 +11,7 @@
 #include <cstring>
 #include <limits>
 #include <random>
+#include <thread>
 
 #include "tsah/base/error.hpp"
 #include "anim/generators.hpp"
@@ -470,6 +471,48 @@ TEST(WideTraversal, VertexPacketsRefitOnlyWhatMoves) {
       }
     }
   }
+}
+
+// Runtimes whose refits run nested in their callers' threads (Config::nested), three updated at
+// once from their own threads, hold the same trees bit for bit as one with its own arena.
+TEST(WideTraversal, NestedRefitsEqualRefitsInTheRuntimesOwnArena) {
+  const auto a = generatedAnimation(anim::GeneratorKind::Wave, 3000, 6);
+  const tsah::FlatBvh tree = multiFrameTree(a, 4, 3);
+  const std::vector<uint32_t> indices(a.indices().begin(), a.indices().end());
+  for (Layout layout : {Layout::Bvh4, Layout::Bvh8})
+    for (TriangleForm form : kForms) {
+      if (!tsah::layoutSupported(layout)) continue;
+      tsah::CpuRuntime::Config c(4);
+      c.layout = layout;
+      c.triangles = form;
+      tsah::CpuRuntime own(tree, indices, a.vertexCount(), c);
+      c.nested = true;
+      std::vector<std::unique_ptr<tsah::CpuRuntime>> nested;
+      for (int i = 0; i < 3; ++i) nested.push_back(std::make_unique<tsah::CpuRuntime>(tree, indices, a.vertexCount(), c));
+      const auto bytes = [&](const tsah::CpuRuntime& rt) {
+        std::vector<uint8_t> out;
+        const auto append = [&](auto span) {
+          const auto* b = reinterpret_cast<const uint8_t*>(span.data());
+          out.insert(out.end(), b, b + span.size_bytes());
+        };
+        if (layout == Layout::Bvh4) {
+          append(rt.wide4()->nodes()), append(rt.wide4()->packets()), append(rt.wide4()->vertexPackets());
+        } else {
+          append(rt.wide8()->nodes()), append(rt.wide8()->packets()), append(rt.wide8()->vertexPackets());
+        }
+        return out;
+      };
+      for (double t : {a.startTime(), 0.6 * a.endTime()}) {
+        const std::vector<float> p = a.positionsAt(t);
+        own.update(p);
+        std::vector<std::thread> threads;
+        for (auto& rt : nested) threads.emplace_back([&rt, &p] { rt->update(p); });
+        for (std::thread& th : threads) th.join();
+        const std::vector<uint8_t> expect = bytes(own);
+        for (const auto& rt : nested)
+          ASSERT_EQ(bytes(*rt), expect) << tsah::name(layout) << " " << formName(form) << " t " << t;
+      }
+    }
 }
 
 TEST(WideTraversal, SameHitsAsBinaryOnRealScenes) {

@@ -471,34 +471,87 @@ typedef float FloatLanes8 __attribute__((vector_size(8 * sizeof(float))));
 typedef int32_t IntLanes4 __attribute__((vector_size(4 * sizeof(int32_t))));
 typedef int32_t IntLanes8 __attribute__((vector_size(8 * sizeof(int32_t))));
 
-// Coordinate `axis` of vertex k of every lane's triangle, built in registers from scalar loads.
-// (Not through a stack array written lane by lane and read as one vector: that load cannot take
-// its data from the pending narrow stores and waits until they reach the cache, which is behind
-// the previous packet's stores, usually cache misses: the refit then runs one packet at a time.)
-template <class F, std::size_t... Lane>
-inline void coordinateLanes(F& out, const float* positions, const uint32_t (*vertex)[3], int k, int axis,
-                            std::index_sequence<Lane...>) {
-  out = F{positions[3 * std::size_t(vertex[Lane][k]) + axis]...};
+// One vertex's x, y, z (lane 3 zero) in one load. With AVX a masked load: it reads only the three
+// floats, so the last vertex of an array is safe; without it, three scalar loads.
+inline FloatLanes4 loadVertexXyz(const float* p) {
+#if defined(__AVX__)
+  return (FloatLanes4)_mm_maskload_ps(p, _mm_setr_epi32(-1, -1, -1, 0));
+#else
+  return FloatLanes4{p[0], p[1], p[2], 0.0f};
+#endif
 }
 
+// Vertex k of every lane's triangle as three coordinate vectors: one load per lane, then a
+// transpose in registers. (Not lane by lane from scalar loads, 8 loads and 8 inserts per
+// coordinate; and not through a stack array written lane by lane and read as one vector: that load
+// cannot take its data from the pending narrow stores and waits until they reach the cache, which
+// is behind the previous packet's stores, usually cache misses.)
+inline void transposeVertices(const FloatLanes4 (&v)[4], FloatLanes4 f[3]) {
+  const FloatLanes4 xy01 = __builtin_shufflevector(v[0], v[1], 0, 4, 1, 5);  // x0 x1 y0 y1
+  const FloatLanes4 xy23 = __builtin_shufflevector(v[2], v[3], 0, 4, 1, 5);
+  const FloatLanes4 z01 = __builtin_shufflevector(v[0], v[1], 2, 6, 3, 7);  // z0 z1 0 0
+  const FloatLanes4 z23 = __builtin_shufflevector(v[2], v[3], 2, 6, 3, 7);
+  f[0] = __builtin_shufflevector(xy01, xy23, 0, 1, 4, 5);
+  f[1] = __builtin_shufflevector(xy01, xy23, 2, 3, 6, 7);
+  f[2] = __builtin_shufflevector(z01, z23, 0, 1, 4, 5);
+}
+inline void transposeVertices(const FloatLanes4 (&v)[8], FloatLanes8 f[3]) {
+  FloatLanes8 w[4];  // lanes l and l + 4 side by side: the 4-lane transpose in both halves at once
+  for (int l = 0; l < 4; ++l) w[l] = __builtin_shufflevector(v[l], v[l + 4], 0, 1, 2, 3, 4, 5, 6, 7);
+  const FloatLanes8 xy01 = __builtin_shufflevector(w[0], w[1], 0, 8, 1, 9, 4, 12, 5, 13);
+  const FloatLanes8 xy23 = __builtin_shufflevector(w[2], w[3], 0, 8, 1, 9, 4, 12, 5, 13);
+  const FloatLanes8 z01 = __builtin_shufflevector(w[0], w[1], 2, 10, 3, 11, 6, 14, 7, 15);
+  const FloatLanes8 z23 = __builtin_shufflevector(w[2], w[3], 2, 10, 3, 11, 6, 14, 7, 15);
+  f[0] = __builtin_shufflevector(xy01, xy23, 0, 1, 8, 9, 4, 5, 12, 13);
+  f[1] = __builtin_shufflevector(xy01, xy23, 2, 3, 10, 11, 6, 7, 14, 15);
+  f[2] = __builtin_shufflevector(z01, z23, 0, 1, 8, 9, 4, 5, 12, 13);
+}
 
 // The nine coordinate vectors of a packet's lanes (f[3 * k + a]: coordinate a of vertex k); lanes
 // from `lanes` on repeat lane 0's triangle (finite values, masked out by the callers).
 template <uint32_t N, class F>
 inline void gatherPacket(const float* positions, const uint32_t* vertices, uint32_t lanes, F f[9]) {
-  uint32_t vertex[N][3];
-  for (uint32_t lane = 0; lane < N; ++lane)
-    for (int k = 0; k < 3; ++k) vertex[lane][k] = vertices[3 * (lane < lanes ? lane : 0) + k];
-#pragma GCC unroll 9
-  for (int k = 0; k < 3; ++k)
 #pragma GCC unroll 3
-    for (int a = 0; a < 3; ++a) coordinateLanes(f[3 * k + a], positions, vertex, k, a, std::make_index_sequence<N>{});
+  for (int k = 0; k < 3; ++k) {
+    FloatLanes4 v[N];
+#pragma GCC unroll 8
+    for (uint32_t lane = 0; lane < N; ++lane) {
+      const uint32_t source = lane & (0u - uint32_t(lane < lanes));  // lane, or 0 for padding: no branch
+      v[lane] = loadVertexXyz(positions + 3 * std::size_t(vertices[3 * source + k]));
+    }
+    transposeVertices(v, f + 3 * k);
+  }
+}
+
+// The lanes rotated by Half: lane i takes lane (i + Half) mod N (constant shuffles, one instruction).
+// A template on the vector type, so that the 8-lane form exists only where it is used; through
+// references, as a vector returned by value in a file without AVX changes the ABI.
+template <uint32_t Half, class F>
+inline void rotateLanes(const F& x, F& out) {
+  if constexpr (sizeof(F) == 4 * sizeof(float)) {
+    if constexpr (Half == 2) out = __builtin_shufflevector(x, x, 2, 3, 0, 1);
+    else out = __builtin_shufflevector(x, x, 1, 2, 3, 0);
+  } else {
+    if constexpr (Half == 4) out = __builtin_shufflevector(x, x, 4, 5, 6, 7, 0, 1, 2, 3);
+    else if constexpr (Half == 2) out = __builtin_shufflevector(x, x, 2, 3, 4, 5, 6, 7, 0, 1);
+    else out = __builtin_shufflevector(x, x, 1, 2, 3, 4, 5, 6, 7, 0);
+  }
+}
+// Lane 0 of lo / hi becomes the minimum / maximum over all lanes, by halving rotations.
+template <uint32_t Half, class F>
+inline void foldLanes(F& lo, F& hi) {
+  F l, h;
+  rotateLanes<Half>(lo, l);
+  rotateLanes<Half>(hi, h);
+  lo = l < lo ? l : lo;
+  hi = h > hi ? h : hi;
+  if constexpr (Half > 1) foldLanes<Half / 2>(lo, hi);
 }
 
 // The box of a gathered packet's triangles (padding lanes repeat lane 0): lane-wise over the three
 // vertices (x < lo ? x : lo from the empty box, as the scalar refit compared, so a NaN coordinate
 // is skipped), then across the lanes by halving rotations.
-template <uint32_t N, class F, class I>
+template <uint32_t N, class F>
 inline Aabb packetBounds(const F f[9]) {
   Aabb bounds;
 #pragma GCC unroll 3
@@ -510,23 +563,7 @@ inline Aabb packetBounds(const F f[9]) {
       lo = x < lo ? x : lo;
       hi = x > hi ? x : hi;
     }
-#pragma GCC unroll 3
-    for (uint32_t half = N / 2; half > 0; half /= 2) {
-      I rotate;
-      for (uint32_t lane = 0; lane < N; ++lane) rotate[lane] = int32_t((lane + half) % N);
-      // GCC's one-instruction permute; clang (the fuzzing build) has no variable-index form of it.
-#if defined(__clang__)
-      F l = lo, h = hi;
-      for (uint32_t lane = 0; lane < N; ++lane) {
-        l[lane] = lo[rotate[lane]];
-        h[lane] = hi[rotate[lane]];
-      }
-#else
-      const F l = __builtin_shuffle(lo, rotate), h = __builtin_shuffle(hi, rotate);
-#endif
-      lo = l < lo ? l : lo;
-      hi = h > hi ? h : hi;
-    }
+    foldLanes<N / 2>(lo, hi);
     bounds.lo[a] = lo[0];
     bounds.hi[a] = hi[0];
   }
@@ -554,18 +591,19 @@ TSAH_KERNEL void woopRowsKernel(const float* positions, const uint32_t* vertices
     bits &= keep;
     std::memcpy(pk.row[r], &bits, sizeof bits);
   }
-  bounds = packetBounds<N, F, I>(f);
+  bounds = packetBounds<N, F>(f);
 }
 
 // The blurred refit's step at one key: the packet's vertices (KeyVertexPacket) and their box, no
 // Woop rows.
-template <uint32_t N, class F, class I>
+template <uint32_t N, class F>
 TSAH_KERNEL void keyVerticesKernel(const float* positions, const uint32_t* vertices, uint32_t lanes,
                                    KeyVertexPacket<N>& out, Aabb& bounds) {
   F f[9];
   gatherPacket<N>(positions, vertices, lanes, f);
-  for (int r = 0; r < 9; ++r) std::memcpy(out.vertex[r], &f[r], sizeof f[r]);
-  bounds = packetBounds<N, F, I>(f);
+#pragma GCC unroll 9
+  for (int r = 0; r < 9; ++r) std::memcpy(out.vertex[r], &f[r], sizeof f[r]);  // nine vector stores
+  bounds = packetBounds<N, F>(f);
 }
 
 // The triangle traversals: the leaf tests of the instant frame or of a blurred one. The leaf tests
@@ -654,8 +692,8 @@ WideKernels kernelTable(SimdIsa isa) {
   }
   k.woopRows4 = &woopRowsKernel<4, DoubleLanes4, FloatLanes4, IntLanes4>;
   k.woopRows8 = &woopRowsKernel<8, DoubleLanes8, FloatLanes8, IntLanes8>;
-  k.keyVertices4 = &keyVerticesKernel<4, FloatLanes4, IntLanes4>;
-  k.keyVertices8 = &keyVerticesKernel<8, FloatLanes8, IntLanes8>;
+  k.keyVertices4 = &keyVerticesKernel<4, FloatLanes4>;
+  k.keyVertices8 = &keyVerticesKernel<8, FloatLanes8>;
   return k;
 }
 

@@ -53,10 +53,19 @@ Layout fastestLayout(std::optional<SimdIsa> isa) {
 }
 
 struct CpuRuntime::Threads {
-  explicit Threads(uint32_t n) : count(n), arena(static_cast<int>(n)) {}
+  Threads(uint32_t n, bool nestedLoops) : count(n), nested(nestedLoops), arena(static_cast<int>(n)) {}
   uint32_t count;
-  tbb::task_arena arena;
+  bool nested;           // Config::nested: the loops run in the caller's arena, not in `arena`
+  tbb::task_arena arena;  // initialized on its first use only
 };
+
+template <class F>
+void CpuRuntime::inArena(const F& f) const {
+  if (threads_->nested)
+    f();
+  else
+    threads_->arena.execute(f);
+}
 
 CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint32_t vertexCount)
     : CpuRuntime(tree, std::move(indices), vertexCount, Config{}) {}
@@ -67,7 +76,7 @@ CpuRuntime::CpuRuntime(const FlatBvh& tree, std::vector<uint32_t> indices, uint3
   // only oversubscribe, and make TBB warn: cap the count.
   const uint32_t hardware = uint32_t(std::max(1, tbb::info::default_concurrency()));
   const uint32_t threads = config.threads == 0 ? hardware : std::min(config.threads, hardware);
-  threads_ = std::make_unique<Threads>(threads);
+  threads_ = std::make_unique<Threads>(threads, config.nested);
   if (indices_.size() % 3 != 0) throw tsah::DataError("runtime: the index array is not a multiple of 3");
   for (uint32_t v : indices_)
     if (v >= vertexCount_) throw tsah::DataError("runtime: a triangle refers to a vertex out of range");
@@ -207,7 +216,7 @@ uint32_t CpuRuntime::threadCount() const { return threads_->count; }
 void CpuRuntime::parallelFor(std::size_t n, std::size_t grain,
                              const std::function<void(std::size_t, std::size_t)>& body) const {
   if (n == 0) return;
-  threads_->arena.execute([&] {
+  inArena([&] {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, std::max<std::size_t>(1, grain)),
                       [&](const tbb::blocked_range<std::size_t>& r) { body(r.begin(), r.end()); });
   });
@@ -355,7 +364,7 @@ CpuRuntime::RebuildTimings CpuRuntime::rebuild(std::span<const float> positions,
   timings.boxesMs = msSince(start);
   start = std::chrono::steady_clock::now();
   Bvh bvh;
-  threads_->arena.execute([&] { bvh = builder(boxes); });  // a parallel builder uses our threads
+  inArena([&] { bvh = builder(boxes); });  // a parallel builder uses our threads
   timings.buildMs = msSince(start);
   start = std::chrono::steady_clock::now();
   if (bvh.primCount() != triangleCount())

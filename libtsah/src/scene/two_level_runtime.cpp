@@ -44,7 +44,8 @@ struct TwoLevelRuntime::WideTop {
 };
 
 struct TwoLevelRuntime::Pool {
-  explicit Pool(uint32_t n) : arena(static_cast<int>(n)) {}
+  explicit Pool(uint32_t n) : threads(n), arena(static_cast<int>(n)) {}
+  uint32_t threads;
   tbb::task_arena arena;
 };
 
@@ -61,10 +62,15 @@ TwoLevelRuntime::TwoLevelRuntime(const TwoLevelScene& scene, Config config) : sc
   const uint32_t hardware = uint32_t(std::max(1, tbb::info::default_concurrency()));
   pool_ = std::make_unique<Pool>(config.threads == 0 ? hardware : std::min(config.threads, hardware));
   const anim::SceneSources& sources = scene.scene;
-  // Each BLAS runtime refits on one thread: the poses are refitted side by side.
+  // The BLAS runtimes' refits run nested in the pool's arena: the poses are refitted side by side
+  // (refitPoses), and the pool's threads share out the parts of their trees. A pose's tree is split
+  // for its share of the threads; a static BLAS, refitted alone, for all of them.
+  const uint32_t poseShare = std::max<uint32_t>(
+      1, uint32_t((pool_->threads + scene.poses.size() - 1) / std::max<std::size_t>(1, scene.poses.size())));
   auto blasRuntime = [&](const Blas& blas) {
     const anim::Animation& source = *sources.sources[blas.source];
-    CpuRuntime::Config own(1);
+    CpuRuntime::Config own(blas.animated ? poseShare : pool_->threads);
+    own.nested = true;
     own.layout = config.layout;
     Objective objective = scene.objective;
     objective.k = blas.animated ? objective.k : 0;  // the objective the BLAS was built with
@@ -83,7 +89,7 @@ TwoLevelRuntime::TwoLevelRuntime(const TwoLevelScene& scene, Config config) : sc
     }
     auto runtime = blasRuntime(blas);
     const anim::Animation& source = *sources.sources[blas.source];
-    runtime->update(source.positionsAt(source.startTime()));
+    pool_->arena.execute([&] { runtime->update(source.positionsAt(source.startTime())); });
     ++totalRefits_;
     staticBlas_.push_back(std::move(runtime));
   }

@@ -66,6 +66,12 @@ class CpuRuntime {
     // (the tree equals a full refit's bit for bit when they did not change). Likewise the keys of
     // a blurred frame (updateShutter) once positions were read in full. Unset: all may move.
     std::optional<std::vector<uint32_t>> movingVertices;
+    // The runtime's parallel loops (its refits) run as nested loops in the task arena of the
+    // thread that calls it, not in an arena of `threads` workers of its own; they are still split
+    // for `threads` workers. For runtimes updated side by side inside the caller's own parallel
+    // loop (TwoLevelRuntime's BLAS): the caller's threads then share out the parts of every tree,
+    // where each tree on one thread would leave threads idle behind the last trees.
+    bool nested = false;
   };
 
   // Builds a tree over one frame of triangle boxes (indexed by triangle id); used by rebuild().
@@ -230,6 +236,8 @@ class CpuRuntime {
 
   struct Threads;
   std::unique_ptr<Threads> threads_;
+  template <class F>
+  void inArena(const F& f) const;  // runs f where the runtime's loops run (Config::nested)
   FlatBvh tree_;
   std::vector<uint32_t> indices_;
   uint32_t vertexCount_ = 0;
