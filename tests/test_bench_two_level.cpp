@@ -158,6 +158,19 @@ TEST(BenchTwoLevelReport, TablesOfThePartAndASkippedPart) {
                          "(TLAS 0.0700 ms, trace 3.00 ms, primary hits unlike the refit's 2).\n\n"),
             std::string::npos)
       << rebuilt;
+  // The compressed layout's run follows in the same paragraph; without it the paragraph ends above.
+  EXPECT_EQ(rebuilt.find("compressed layout"), std::string::npos) << rebuilt;
+  withGpu["gpu_cwbvh"] = {{"median", {{"update_ms", 0.7}, {"blas_refit_ms", 0.5}, {"tlas_update_ms", 0.1},
+                                      {"primary_ms", 1.2}, {"ao_ms", 1.8}}},
+                          {"flat", {{"median", {{"update_ms", 5.0}, {"primary_ms", 1.0}, {"ao_ms", 2.0}}},
+                                    {"trace_rate_two_level_over_flat", 0.9}}}};
+  const std::string compressed = tsah::bench::twoLevelSection({{"name", "town"}, {"two_level", withGpu}});
+  EXPECT_NE(compressed.find("(TLAS 0.0700 ms, trace 3.00 ms, primary hits unlike the refit's 2). BLAS and flat tree in "
+                            "the compressed layout (cwbvh): two-level update 0.700 ms (BLAS refits 0.500, TLAS 0.100), "
+                            "primary + AO 3.00 ms; flat update 5.00 ms, primary + AO 3.00 ms; trace rate two-level / "
+                            "flat 0.90.\n\n"),
+            std::string::npos)
+      << compressed;
   const json scene = {{"name", "town"}, {"two_level", part}};
   const std::string section = tsah::bench::twoLevelSection(scene);
   EXPECT_NE(section.find("**Two-level part** (7 instances of 3 sources (2 static), 2 poses, 4 TLAS tree(s) over the scene's time; 5"), std::string::npos) << section;

@@ -42,21 +42,31 @@ std::string gpuTlasText(const json& g) {
   return md.str();
 }
 
-// The GPU figures (tsah_two_level_gpu_bench's medians) in one paragraph.
-std::string gpuText(const json& g) {
+// The medians of one tsah_two_level_gpu_bench run: the two-level update and trace, the flat tree's,
+// and the trace rate of one over the other.
+std::string gpuMediansText(const json& g) {
   const json& m = g["median"];
   const json& f = g["flat"]["median"];
   std::ostringstream md;
-  md << "GPU (" << g.value("device", "") << ", tsah_two_level_gpu_bench: its own rays, one primary per pixel and "
-     << numberField(g, "ao_per_hit") << " AO per hit; medians): two-level update " << formatSignificant(numberField(m, "update_ms"))
-     << " ms (BLAS refits " << formatSignificant(numberField(m, "blas_refit_ms")) << ", TLAS "
-     << formatSignificant(numberField(m, "tlas_update_ms")) << "), primary + AO "
-     << formatSignificant(numberField(m, "primary_ms") + numberField(m, "ao_ms")) << " ms; flat update "
-     << formatSignificant(numberField(f, "update_ms")) << " ms, primary + AO "
+  md << "two-level update " << formatSignificant(numberField(m, "update_ms")) << " ms (BLAS refits "
+     << formatSignificant(numberField(m, "blas_refit_ms")) << ", TLAS " << formatSignificant(numberField(m, "tlas_update_ms"))
+     << "), primary + AO " << formatSignificant(numberField(m, "primary_ms") + numberField(m, "ao_ms"))
+     << " ms; flat update " << formatSignificant(numberField(f, "update_ms")) << " ms, primary + AO "
      << formatSignificant(numberField(f, "primary_ms") + numberField(f, "ao_ms")) << " ms; trace rate two-level / flat "
-     << formatFixed(numberField(g["flat"], "trace_rate_two_level_over_flat"), 2) << "; host TLAS rebuild "
-     << formatSignificant(numberField(m, "tlas_rebuild_cpu_ms")) << " ms per frame.";
-  md << gpuTlasText(g) << "\n\n";
+     << formatFixed(numberField(g["flat"], "trace_rate_two_level_over_flat"), 2);
+  return md.str();
+}
+
+// The GPU figures (tsah_two_level_gpu_bench's medians) in one paragraph: the binary layout's run
+// (`gpu`), then the compressed layout's (`gpu_cwbvh`) when there is one.
+std::string gpuText(const json& g, const json* compressed) {
+  std::ostringstream md;
+  md << "GPU (" << g.value("device", "") << ", tsah_two_level_gpu_bench: its own rays, one primary per pixel and "
+     << numberField(g, "ao_per_hit") << " AO per hit; medians): " << gpuMediansText(g) << "; host TLAS rebuild "
+     << formatSignificant(numberField(g["median"], "tlas_rebuild_cpu_ms")) << " ms per frame.";
+  md << gpuTlasText(g);
+  if (compressed) md << " BLAS and flat tree in the compressed layout (cwbvh): " << gpuMediansText(*compressed) << ".";
+  md << "\n\n";
   return md.str();
 }
 
@@ -107,7 +117,7 @@ std::string twoLevelSection(const json& scene) {
        << formatFixed(numberField(q, "two_level_total_over_embree_total"), 2);
   md << ". The per-frame TLAS rebuild (host sweep SAH over the instance boxes, the reference of the refit) is in "
         "`two_level.methods[1].extra.tlas_rebuild_ms_per_frame`.\n\n";
-  if (p.contains("gpu")) md << gpuText(p["gpu"]);
+  if (p.contains("gpu")) md << gpuText(p["gpu"], p.contains("gpu_cwbvh") ? &p["gpu_cwbvh"] : nullptr);
   return md.str();
 }
 

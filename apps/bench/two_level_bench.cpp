@@ -102,14 +102,19 @@ BatchTracer twoLevelTracer(const TwoLevelRuntime& rt) {
 double ratio(double a, double b) { return a / std::max(b, 1e-12); }
 
 // The GPU figures: tsah_two_level_gpu_bench (GpuTwoLevelRuntime against GpuRuntime over the flat
-// tree, the host TLAS rebuild as the reference) on the two trees just optimized; its JSON as it is.
-json gpuFigures(const SceneSource& scene, const json& optimize, std::size_t frames, const BenchOptions& o) {
-  const fs::path report = fs::path(optimize["two_level"]["tree"].get<std::string>()).replace_extension(".gpu.json");
-  const std::vector<std::string> argv = {o.gpuTwoLevelProgram, scene.input, "--tree",
-                                         optimize["two_level"]["tree"].get<std::string>(), "--flat-tree",
-                                         optimize["flat"]["tree"].get<std::string>(), "--frames",
-                                         std::to_string(frames), "--width", std::to_string(o.width), "--height",
-                                         std::to_string(o.height), "--ao", std::to_string(o.aoRays)};
+// tree) on the two trees just optimized, with BLAS and flat tree in `layout`; its JSON as it is.
+// The binary layout's run also compares the TLAS updates and times the host TLAS rebuild (the
+// reference); the compressed layout's has the same binary TLAS, so it refits it only.
+json gpuFigures(const SceneSource& scene, const json& optimize, std::size_t frames, const BenchOptions& o,
+                const std::string& layout) {
+  const fs::path report =
+      fs::path(optimize["two_level"]["tree"].get<std::string>()).replace_extension("." + layout + ".gpu.json");
+  std::vector<std::string> argv = {o.gpuTwoLevelProgram, scene.input, "--tree",
+                                   optimize["two_level"]["tree"].get<std::string>(), "--flat-tree",
+                                   optimize["flat"]["tree"].get<std::string>(), "--frames",
+                                   std::to_string(frames), "--width", std::to_string(o.width), "--height",
+                                   std::to_string(o.height), "--ao", std::to_string(o.aoRays), "--layout", layout};
+  if (layout != "bvh2") argv.insert(argv.end(), {"--tlas", "refit", "--no-rebuild-reference"});
   const ProcessResult r = runProcess(argv, report.string());
   if (!r.ok())
     throw tsah::Failure(scene.input + ": " + o.gpuTwoLevelProgram + " failed" +
@@ -271,7 +276,8 @@ json runTwoLevelComparison(const SceneSource& scene, const anim::Animation& bake
   for (const RuntimeMethod& m : methods) j["methods"].push_back(toJson(m));
   if (!o.gpuTwoLevelProgram.empty()) {
     say("GPU: " + fs::path(o.gpuTwoLevelProgram).filename().string());
-    j["gpu"] = gpuFigures(scene, j["optimize"], setup.times.size(), o);
+    j["gpu"] = gpuFigures(scene, j["optimize"], setup.times.size(), o, "bvh2");
+    j["gpu_cwbvh"] = gpuFigures(scene, j["optimize"], setup.times.size(), o, "cwbvh");
   }
   return j;
 }
