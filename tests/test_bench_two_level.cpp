@@ -4,6 +4,7 @@
 // instance whose path flattens it; the report renders the part.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <random>
 
 #include "bench/embree_instanced.hpp"
@@ -130,12 +131,20 @@ TEST(BenchTwoLevelReport, TablesOfThePartAndASkippedPart) {
                                               method("embree-instanced", "Embree instancing", 16.0)})},
                      {"ratios", {{"two_level_rate_over_flat_rate", 1.0}, {"two_level_total_over_flat_total", 0.8},
                                  {"two_level_total_over_embree_total", 0.5}}}};
+  // One tsah_two_level_gpu_bench report: the two-level medians {update, BLAS, TLAS, primary, AO}, the
+  // flat tree's {update, primary, AO} and the trace rate.
+  auto gpuRun = [](std::array<double, 5> medians, std::array<double, 3> flatMedians, double rate) {
+    return json{{"median", {{"update_ms", medians[0]}, {"blas_refit_ms", medians[1]}, {"tlas_update_ms", medians[2]},
+                            {"primary_ms", medians[3]}, {"ao_ms", medians[4]}}},
+                {"flat",
+                 {{"median", {{"update_ms", flatMedians[0]}, {"primary_ms", flatMedians[1]}, {"ao_ms", flatMedians[2]}}},
+                  {"trace_rate_two_level_over_flat", rate}}}};
+  };
   json withGpu = part;
-  withGpu["gpu"] = {{"device", "NVIDIA H100"}, {"ao_per_hit", 8},
-                    {"median", {{"update_ms", 0.5}, {"blas_refit_ms", 0.3}, {"tlas_update_ms", 0.1}, {"primary_ms", 1.0},
-                                {"ao_ms", 2.0}, {"tlas_rebuild_cpu_ms", 4.0}}},
-                    {"flat", {{"median", {{"update_ms", 6.0}, {"primary_ms", 1.5}, {"ao_ms", 2.5}}},
-                              {"trace_rate_two_level_over_flat", 1.25}}}};
+  withGpu["gpu"] = gpuRun({0.5, 0.3, 0.1, 1.0, 2.0}, {6.0, 1.5, 2.5}, 1.25);
+  withGpu["gpu"]["device"] = "NVIDIA H100";
+  withGpu["gpu"]["ao_per_hit"] = 8;
+  withGpu["gpu"]["median"]["tlas_rebuild_cpu_ms"] = 4.0;
   const std::string gpu = tsah::bench::twoLevelSection({{"name", "town"}, {"two_level", withGpu}});
   EXPECT_NE(gpu.find("GPU (NVIDIA H100, tsah_two_level_gpu_bench: its own rays, one primary per pixel and 8 AO per hit; "
                      "medians): two-level update 0.500 ms (BLAS refits 0.300, TLAS 0.100), primary + AO 3.00 ms; flat "
@@ -160,10 +169,7 @@ TEST(BenchTwoLevelReport, TablesOfThePartAndASkippedPart) {
       << rebuilt;
   // The compressed layout's run follows in the same paragraph; without it the paragraph ends above.
   EXPECT_EQ(rebuilt.find("compressed layout"), std::string::npos) << rebuilt;
-  withGpu["gpu_cwbvh"] = {{"median", {{"update_ms", 0.7}, {"blas_refit_ms", 0.5}, {"tlas_update_ms", 0.1},
-                                      {"primary_ms", 1.2}, {"ao_ms", 1.8}}},
-                          {"flat", {{"median", {{"update_ms", 5.0}, {"primary_ms", 1.0}, {"ao_ms", 2.0}}},
-                                    {"trace_rate_two_level_over_flat", 0.9}}}};
+  withGpu["gpu_cwbvh"] = gpuRun({0.7, 0.5, 0.1, 1.2, 1.8}, {5.0, 1.0, 2.0}, 0.9);
   const std::string compressed = tsah::bench::twoLevelSection({{"name", "town"}, {"two_level", withGpu}});
   EXPECT_NE(compressed.find("(TLAS 0.0700 ms, trace 3.00 ms, primary hits unlike the refit's 2). BLAS and flat tree in "
                             "the compressed layout (cwbvh): two-level update 0.700 ms (BLAS refits 0.500, TLAS 0.100), "

@@ -164,8 +164,32 @@ void checkRefit(const tsah::WideTree<N>& tree, const float* p, const uint32_t* i
   }
 }
 
+// A tree in the Vertices form against the Woop-form tree of the same frame (checked by checkRefit):
+// the same nodes bit for bit, and every lane of every vertex packet its triangle's vertices exactly
+// (padding lanes lane 0's).
+template <uint32_t N>
+void checkVertexRefit(const tsah::WideTree<N>& tree, const tsah::WideTree<N>& woop, const float* p,
+                      const uint32_t* indices) {
+  const auto nodes = tree.nodes(), woopNodes = woop.nodes();
+  ASSERT_EQ(nodes.size(), woopNodes.size());
+  ASSERT_EQ(std::memcmp(nodes.data(), woopNodes.data(), nodes.size_bytes()), 0);
+  const auto packets = tree.vertexPackets();
+  ASSERT_EQ(packets.size(), woop.packets().size());
+  for (std::size_t pk = 0; pk < packets.size(); ++pk)
+    for (uint32_t lane = 0; lane < N; ++lane) {
+      const uint32_t slot = woop.packets()[pk].slot[lane];  // padding lanes: the packet's first slot
+      const uint32_t* tri = indices + 3 * std::size_t(tree.triIndex()[slot]);
+      for (uint32_t k = 0; k < 3; ++k) {
+        const Vec3 got = packets[pk].get(k, lane);
+        const float* v = p + 3 * std::size_t(tri[k]);
+        ASSERT_TRUE(sameBits(got.x, v[0]) && sameBits(got.y, v[1]) && sameBits(got.z, v[2]))
+            << "packet " << pk << " lane " << lane << " vertex " << k;
+      }
+    }
+}
+
 // Refits one tree frame after frame (so stale values of the previous frame would show), with a
-// degenerate triangle and a NaN coordinate in the middle frame.
+// degenerate triangle and a NaN coordinate in the middle frame; in both triangle forms.
 template <uint32_t N>
 void refitWithEveryThreadCountAndIsa(const anim::Animation& a, const tsah::WideBvh& w) {
   const std::vector<uint32_t> indices(a.indices().begin(), a.indices().end());
@@ -177,13 +201,17 @@ void refitWithEveryThreadCountAndIsa(const anim::Animation& a, const tsah::WideB
   for (SimdIsa isa : tsah::supportedIsas())
     for (uint32_t threads : {1u, 3u, 16u}) {
       tsah::WideTree<N> tree(w, indices, threads, isa);
+      tsah::WideTree<N> vertexTree(w, indices, threads, isa, tsah::TriangleForm::Vertices);
+      const auto lastFirst = [](std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) {
+        for (std::size_t i = n; i-- > 0;) body(i, i + 1);  // tasks one by one, last first
+      };
       for (std::size_t f = 0; f < frames.size(); ++f) {
-        tree.refit(frames[f].data(), [](std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) {
-          for (std::size_t i = n; i-- > 0;) body(i, i + 1);  // tasks one by one, last first
-        });
+        tree.refit(frames[f].data(), lastFirst);
+        vertexTree.refit(frames[f].data(), lastFirst);
         SCOPED_TRACE(std::string(tsah::name(isa)) + " threads " + std::to_string(threads) + " frame " +
                      std::to_string(f));
         checkRefit(tree, frames[f].data(), indices.data());
+        checkVertexRefit(vertexTree, tree, frames[f].data(), indices.data());
       }
     }
 }

@@ -6,6 +6,7 @@
 // frame. A tie's triangle must lie on the ray at the hit's distance. Rays with a NaN or infinite
 // component hit nothing.
 #include <gtest/gtest.h>
+#include <tbb/task_arena.h>
 
 #include <cmath>
 #include <cstring>
@@ -471,6 +472,27 @@ TEST(WideTraversal, VertexPacketsRefitOnlyWhatMoves) {
       }
     }
   }
+}
+
+// A nested runtime's loops run in the arena of its caller, the others' in their own.
+TEST(WideTraversal, NestedLoopsRunInTheCallersArena) {
+  const auto a = generatedAnimation(anim::GeneratorKind::Wave, 200, 2);
+  const tsah::FlatBvh tree = multiFrameTree(a, 4, 2);
+  const std::vector<uint32_t> indices(a.indices().begin(), a.indices().end());
+  tsah::CpuRuntime::Config c(1);
+  tsah::CpuRuntime own(tree, indices, a.vertexCount(), c);
+  c.nested = true;
+  tsah::CpuRuntime nested(tree, indices, a.vertexCount(), c);
+  const auto arenaSize = [](const tsah::CpuRuntime& rt) {
+    int size = 0;
+    rt.parallelFor(1, 1, [&](std::size_t, std::size_t) { size = tbb::this_task_arena::max_concurrency(); });
+    return size;
+  };
+  tbb::task_arena caller(3);
+  caller.execute([&] {
+    EXPECT_EQ(arenaSize(nested), 3);
+    EXPECT_EQ(arenaSize(own), 1);
+  });
 }
 
 // Runtimes whose refits run nested in their callers' threads (Config::nested), three updated at

@@ -65,8 +65,8 @@ TwoLevelRuntime::TwoLevelRuntime(const TwoLevelScene& scene, Config config) : sc
   // The BLAS runtimes' refits run nested in the pool's arena: the poses are refitted side by side
   // (refitPoses), and the pool's threads share out the parts of their trees. A pose's tree is split
   // for its share of the threads; a static BLAS, refitted alone, for all of them.
-  const uint32_t poseShare = std::max<uint32_t>(
-      1, uint32_t((pool_->threads + scene.poses.size() - 1) / std::max<std::size_t>(1, scene.poses.size())));
+  const std::size_t poses = std::max<std::size_t>(1, scene.poses.size());
+  const uint32_t poseShare = uint32_t((pool_->threads + poses - 1) / poses);  // at least 1
   auto blasRuntime = [&](const Blas& blas) {
     const anim::Animation& source = *sources.sources[blas.source];
     CpuRuntime::Config own(blas.animated ? poseShare : pool_->threads);
