@@ -166,7 +166,7 @@ void checkRefit(const tsah::WideTree<N>& tree, const float* p, const uint32_t* i
 
 // A tree in the Vertices form against the Woop-form tree of the same frame (checked by checkRefit):
 // the same nodes bit for bit, and every lane of every vertex packet its triangle's vertices exactly
-// (padding lanes lane 0's).
+// (padding lanes those of the packet's lane 0).
 template <uint32_t N>
 void checkVertexRefit(const tsah::WideTree<N>& tree, const tsah::WideTree<N>& woop, const float* p,
                       const uint32_t* indices) {
@@ -177,7 +177,10 @@ void checkVertexRefit(const tsah::WideTree<N>& tree, const tsah::WideTree<N>& wo
   ASSERT_EQ(packets.size(), woop.packets().size());
   for (std::size_t pk = 0; pk < packets.size(); ++pk)
     for (uint32_t lane = 0; lane < N; ++lane) {
-      const uint32_t slot = woop.packets()[pk].slot[lane];  // padding lanes: the packet's first slot
+      // A used lane holds slot packetSlots[pk] + lane (the Woop packet names it); a padding lane
+      // repeats lane 0 (its Woop slot is the leaf's first slot instead).
+      const uint32_t first = tree.packetSlots()[pk];
+      const uint32_t slot = woop.packets()[pk].slot[lane] == first + lane ? first + lane : first;
       const uint32_t* tri = indices + 3 * std::size_t(tree.triIndex()[slot]);
       for (uint32_t k = 0; k < 3; ++k) {
         const Vec3 got = packets[pk].get(k, lane);
