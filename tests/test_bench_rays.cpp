@@ -48,6 +48,14 @@ tsah::RenderSettings smallSettings(uint32_t frame) {
   return s;
 }
 
+TEST(BenchRays, SmallPassesRunInEnoughTasksForEveryThread) {
+  using tsah::bench::raysPerTask;
+  EXPECT_EQ(raysPerTask(786432), 4096u);                          // a 1024x768 primary pass
+  EXPECT_EQ((21390 + raysPerTask(21390) - 1) / raysPerTask(21390), 128u);  // horses8m's shadow pass
+  EXPECT_EQ(raysPerTask(8192), 64u);
+  EXPECT_EQ(raysPerTask(100), 64u);  // a tiny pass: tasks of at least 64 rays
+}
+
 TEST(BenchRays, TheBatchHoldsTheRenderersRaysAndTracesLikeOneLoop) {
   const Scene scene(anim::GeneratorKind::Wave);
   tsah::CpuRuntime rt = scene.runtime();

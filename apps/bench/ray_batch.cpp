@@ -81,6 +81,12 @@ RayTimes mapTimes(const RayTimes& times, const std::function<float(float)>& f) {
   return out;
 }
 
+std::size_t raysPerTask(std::size_t rays) {
+  // A frame's shadow pass can hold about 20,000 rays, which in tasks of 4096 ran on 6 threads of 16.
+  constexpr std::size_t kMaxChunk = 4096, kMinChunk = 64, kMinTasks = 128;
+  return std::clamp((rays + kMinTasks - 1) / kMinTasks, kMinChunk, kMaxChunk);
+}
+
 namespace {
 
 // Traces rays [first, first + count) per task with trace(rays, times, count, results); times and
@@ -88,11 +94,7 @@ namespace {
 template <typename Result, typename Trace>
 RayPassStats timedPass(const CpuRuntime& runtime, const std::vector<Ray>& rays, const std::vector<float>& times,
                        std::vector<Result>& results, Trace trace) {
-  // Rays per task: up to 4096, and at least 128 tasks when the pass has rays enough for them, so
-  // that a small pass also keeps every thread busy (a frame's shadow pass can hold about 20,000
-  // rays, which in tasks of 4096 ran on 6 threads of 16).
-  constexpr std::size_t kMaxChunk = 4096, kMinChunk = 64, kMinTasks = 128;
-  const std::size_t chunk = std::clamp((rays.size() + kMinTasks - 1) / kMinTasks, kMinChunk, kMaxChunk);
+  const std::size_t chunk = raysPerTask(rays.size());
   results.assign(rays.size(), Result{});
   const auto start = std::chrono::steady_clock::now();
   const std::size_t chunks = (rays.size() + chunk - 1) / chunk;

@@ -62,6 +62,10 @@ struct BatchTracer {
       occluded;
 };
 
+// Rays per task of a pass of `rays` rays: at most 4096, and at least 128 tasks when the pass has
+// 8192 rays or more, so that a small pass (a frame's shadow rays) also keeps every thread busy.
+std::size_t raysPerTask(std::size_t rays);
+
 // Traces every pass of the batch with `tracer`, spread over the runtime's threads, each pass timed
 // alone (wall clock). times: the batch's own (null) or the same times in the tracer's convention
 // (mapTimes).
