@@ -5,6 +5,9 @@
 
 #include <algorithm>
 #include <cstring>
+#include <mutex>
+#include <set>
+#include <thread>
 
 #include "tsah/base/error.hpp"
 #include "anim/generators.hpp"
@@ -54,6 +57,33 @@ TEST(BenchRays, SmallPassesRunInEnoughTasksForEveryThread) {
   EXPECT_EQ((21390 + raysPerTask(21390) - 1) / raysPerTask(21390), 128u);  // horses8m's shadow pass
   EXPECT_EQ(raysPerTask(8192), 64u);
   EXPECT_EQ(raysPerTask(100), 64u);  // a tiny pass: tasks of at least 64 rays
+}
+
+TEST(BenchRays, StartWorkersReturnsOnceEveryThreadRanATask) {
+  const Scene scene(anim::GeneratorKind::Wave);
+  const tsah::CpuRuntime rt = scene.runtime();
+  const tsah::bench::Workers own = tsah::bench::workersOf(rt);
+  std::mutex mutex;
+  std::set<std::thread::id> ran;  // the threads that ran a task of the last call
+  const tsah::bench::Workers recorded{
+      [&](std::size_t n, std::size_t grain, const std::function<void(std::size_t, std::size_t)>& body) {
+        own.parallelFor(n, grain, [&](std::size_t begin, std::size_t end) {
+          {
+            const std::lock_guard<std::mutex> lock(mutex);
+            ran.insert(std::this_thread::get_id());
+          }
+          body(begin, end);
+        });
+      },
+      own.threads};
+  // A worker may miss the wait's 20 ms on a busy machine (the call then says so): a few tries.
+  bool awake = false;
+  for (int attempt = 0; attempt < 20 && !awake; ++attempt) {
+    ran.clear();
+    awake = tsah::bench::startWorkers(recorded);
+  }
+  ASSERT_TRUE(awake);
+  EXPECT_EQ(ran.size(), rt.threadCount());
 }
 
 TEST(BenchRays, TheBatchHoldsTheRenderersRaysAndTracesLikeOneLoop) {

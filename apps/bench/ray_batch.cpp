@@ -1,7 +1,9 @@
 #include "bench/ray_batch.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
+#include <thread>
 
 #include "tsah/base/error.hpp"
 #include "tsah/render/sampling.hpp"
@@ -92,13 +94,13 @@ namespace {
 // Traces rays [first, first + count) per task with trace(rays, times, count, results); times and
 // results are parallel to the rays (times empty: the instant).
 template <typename Result, typename Trace>
-RayPassStats timedPass(const CpuRuntime& runtime, const std::vector<Ray>& rays, const std::vector<float>& times,
+RayPassStats timedPass(const Workers& workers, const std::vector<Ray>& rays, const std::vector<float>& times,
                        std::vector<Result>& results, Trace trace) {
   const std::size_t chunk = raysPerTask(rays.size());
   results.assign(rays.size(), Result{});
   const auto start = std::chrono::steady_clock::now();
   const std::size_t chunks = (rays.size() + chunk - 1) / chunk;
-  runtime.parallelFor(chunks, 1, [&](std::size_t c0, std::size_t c1) {
+  workers.parallelFor(chunks, 1, [&](std::size_t c0, std::size_t c1) {
     for (std::size_t c = c0; c < c1; ++c) {
       const std::size_t first = c * chunk;
       trace(rays.data() + first, times.empty() ? nullptr : times.data() + first, std::min(chunk, rays.size() - first),
@@ -117,14 +119,47 @@ uint64_t countSet(const std::vector<uint8_t>& flags) {
 
 }  // namespace
 
+Workers workersOf(const CpuRuntime& runtime) {
+  return {[&runtime](std::size_t n, std::size_t grain, const std::function<void(std::size_t, std::size_t)>& body) {
+            runtime.parallelFor(n, grain, body);
+          },
+          runtime.threadCount()};
+}
+
+bool startWorkers(const Workers& workers) {
+  // Each thread counts itself once per call (its first task of this generation); every task then
+  // waits for the others, so no thread runs two and all of them are up when it returns.
+  static std::atomic<uint64_t> generations{0};
+  const uint64_t generation = ++generations;
+  std::atomic<uint32_t> started{0};
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(20);
+  workers.parallelFor(std::size_t(workers.threads) * 4, 1, [&](std::size_t, std::size_t) {
+    thread_local uint64_t joined = 0;
+    if (joined != generation) {
+      joined = generation;
+      started.fetch_add(1, std::memory_order_relaxed);
+    }
+    while (started.load(std::memory_order_relaxed) < workers.threads && std::chrono::steady_clock::now() < deadline)
+      std::this_thread::yield();
+  });
+  return started.load() >= workers.threads;
+}
+
+bool startWorkers(const CpuRuntime& runtime) { return startWorkers(workersOf(runtime)); }
+
 BatchTrace traceBatch(const CpuRuntime& runtime, const RayBatch& batch, const BatchTracer& tracer,
+                      const RayTimes* times) {
+  return traceBatch(workersOf(runtime), batch, tracer, times);
+}
+
+BatchTrace traceBatch(const Workers& workers, const RayBatch& batch, const BatchTracer& tracer,
                       const RayTimes* times) {
   const RayTimes& at = times ? *times : batch.times;
   if (!at.empty() && (at.primary.size() != batch.primary.size() || at.ao.size() != batch.ao.size() ||
                       at.shadow.size() != batch.shadow.size()))
     throw tsah::ConfigError("bench: the ray times do not match the batch's rays");
   BatchTrace t;
-  t.primary = timedPass(runtime, batch.primary, at.primary, t.closest, tracer.closest);
+  t.primary = timedPass(workers, batch.primary, at.primary, t.closest, tracer.closest);
   // The renderer's any-hit orders (renderer.cpp): tree order for the short AO rays, farthest
   // first for the shadow rays.
   auto occluded = [&tracer](AnyHitOrder order) {
@@ -132,8 +167,8 @@ BatchTrace traceBatch(const CpuRuntime& runtime, const RayBatch& batch, const Ba
       tracer.occluded(rays, rayTimes, count, order, out);
     };
   };
-  t.ao = timedPass(runtime, batch.ao, at.ao, t.aoResults, occluded(AnyHitOrder::TreeOrder));
-  t.shadow = timedPass(runtime, batch.shadow, at.shadow, t.shadowResults, occluded(AnyHitOrder::FarthestFirst));
+  t.ao = timedPass(workers, batch.ao, at.ao, t.aoResults, occluded(AnyHitOrder::TreeOrder));
+  t.shadow = timedPass(workers, batch.shadow, at.shadow, t.shadowResults, occluded(AnyHitOrder::FarthestFirst));
   for (const Hit& h : t.closest) t.primaryHits += h.valid() ? 1u : 0u;
   t.aoOccluded = countSet(t.aoResults);
   t.shadowOccluded = countSet(t.shadowResults);

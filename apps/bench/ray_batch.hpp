@@ -66,9 +66,28 @@ struct BatchTracer {
 // 8192 rays or more, so that a small pass (a frame's shadow rays) also keeps every thread busy.
 std::size_t raysPerTask(std::size_t rays);
 
-// Traces every pass of the batch with `tracer`, spread over the runtime's threads, each pass timed
+// The threads a tracer's update and passes run on: a runtime's parallelFor(n, grain, body) (over
+// [0, n) in chunks of at least grain) and how many threads it has.
+struct Workers {
+  std::function<void(std::size_t n, std::size_t grain, const std::function<void(std::size_t, std::size_t)>& body)>
+      parallelFor;
+  uint32_t threads = 1;
+};
+Workers workersOf(const CpuRuntime& runtime);
+
+// Wakes the workers and returns once every one of them has started a task, so that what is timed
+// next starts on awake threads; false when some had not after 20 ms (a busy machine). (A loop of
+// empty tasks may end before sleeping workers join it, and they are then still waking during the
+// timed work: an update after a frame's idle threads took about half as long again on the
+// 16-core host.)
+bool startWorkers(const Workers& workers);
+bool startWorkers(const CpuRuntime& runtime);
+
+// Traces every pass of the batch with `tracer`, spread over the workers' threads, each pass timed
 // alone (wall clock). times: the batch's own (null) or the same times in the tracer's convention
 // (mapTimes).
+BatchTrace traceBatch(const Workers& workers, const RayBatch& batch, const BatchTracer& tracer,
+                      const RayTimes* times = nullptr);
 BatchTrace traceBatch(const CpuRuntime& runtime, const RayBatch& batch, const BatchTracer& tracer,
                       const RayTimes* times = nullptr);
 

@@ -99,8 +99,6 @@ std::vector<RuntimeMethod> runCpuMethods(const anim::Animation& animation, const
 // and collapse).
 std::unique_ptr<CpuRuntime> makeRuntime(const anim::Animation& animation, const Bvh& tree, const RuntimeSetup& setup,
                                         Layout layout);
-// Wakes the runtime's worker threads, so that what is timed next does not pay for it.
-void startWorkers(const CpuRuntime& runtime);
 
 // CPU peer: the toolkit's CPU runtime refitting `tree`, in every layout the processor supports
 // (setup.layout first, then bvh8, bvh4, bvh2: methods NAME-bvhN, extra.layout describing the tree

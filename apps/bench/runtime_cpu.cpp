@@ -61,10 +61,6 @@ nlohmann::json layoutJson(const CpuRuntime& rt) {
 
 }  // namespace
 
-void startWorkers(const CpuRuntime& rt) {
-  rt.parallelFor(rt.threadCount() * 4, 1, [](std::size_t, std::size_t) {});  // before anything is timed
-}
-
 std::unique_ptr<CpuRuntime> makeRuntime(const anim::Animation& a, const Bvh& tree, const RuntimeSetup& setup,
                                         Layout layout) {
   return std::make_unique<CpuRuntime>(flattenBvh(tree), std::vector<uint32_t>(a.indices().begin(), a.indices().end()),

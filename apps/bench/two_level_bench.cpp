@@ -182,6 +182,12 @@ json runTwoLevelComparison(const SceneSource& scene, const anim::Animation& bake
                                        [&](const std::string& m) { progress(scene.name + ": " + m, true); });
   const std::unique_ptr<CpuRuntime> flat = makeRuntime(baked, flatTree, setup, setup.layout);
   TwoLevelRuntime two(twoLevel, {o.threads, TwoLevelRuntime::TlasUpdate::Refit, setup.layout});
+  const Workers flatWorkers = workersOf(*flat);
+  const Workers twoWorkers{[&two](std::size_t n, std::size_t grain,
+                                  const std::function<void(std::size_t, std::size_t)>& body) {
+                             two.parallelFor(n, grain, body);
+                           },
+                           two.threadCount()};
   j["frames"] = setup.times.size();
   j["frame_times"] = setup.times;
   j["width"] = o.width;
@@ -198,6 +204,7 @@ json runTwoLevelComparison(const SceneSource& scene, const anim::Animation& bake
                      "pose refits, transforms, TLAS refit", {}, json::object()});
   std::array<Agreement, 3> agreement;  // two-level vs flat, Embree vs flat, Embree vs two-level
   json tlasRebuildMs = json::array(), blasRefits = json::array(), embreeRefits = json::array();
+  json workersNotAwake = json::array();  // per frame: timed updates whose pool was not all awake (startWorkers)
 #if TSAH_HAVE_EMBREE
   auto parallelFor = [&flat](std::size_t n, const std::function<void(std::size_t, std::size_t)>& body) {
     flat->parallelFor(n, 1, body);
@@ -219,35 +226,40 @@ json runTwoLevelComparison(const SceneSource& scene, const anim::Animation& bake
     reportFrame(setup, "flat, two-level, Embree instancing", f);
     const double t = setup.times[f];
     settings.frame = static_cast<uint32_t>(f);
-    startWorkers(*flat);
+    uint32_t wakesMissed = startWorkers(flatWorkers) ? 0 : 1;
     auto start = std::chrono::steady_clock::now();
     baked.movingPositionsAt(t, positions);
     flat->update(positions);
     const double flatUpdateMs = msSince(start);
     const RayBatch batch = makeRayBatch(*flat, setup.camera(t), setup.lighting, settings);  // untimed
     std::array<BatchTrace, 3> traces;
-    // The methods in an order rotated every frame: none always runs first or last.
+    // The methods in an order rotated every frame: none always runs first or last. Each updates
+    // and traces on one pool of threads, as an engine would: the flat tree and Embree on the flat
+    // runtime's, the two-level runtime on its own (it updates there). Every timed update starts
+    // with that pool's threads awake.
     for (std::size_t k = 0; k < methods.size(); ++k) {
       const std::size_t m = (k + f) % methods.size();
-      startWorkers(*flat);
+      const Workers& workers = m == 1 ? twoWorkers : flatWorkers;
+      wakesMissed += startWorkers(workers) ? 0 : 1;
       double updateMs = flatUpdateMs;
       if (m == 0) {
-        traces[m] = traceBatch(*flat, batch, toolkitTracer(*flat));
+        traces[m] = traceBatch(workers, batch, toolkitTracer(*flat));
       } else if (m == 1) {
         start = std::chrono::steady_clock::now();
         two.update(t);
         updateMs = msSince(start);
-        traces[m] = traceBatch(*flat, batch, twoLevelTracer(two));
+        traces[m] = traceBatch(workers, batch, twoLevelTracer(two));
       } else {
 #if TSAH_HAVE_EMBREE
         updateMs = embree.update(t);
-        traces[m] = traceBatch(*flat, batch, embree.tracer());
+        traces[m] = traceBatch(workers, batch, embree.tracer());
 #endif
       }
       methods[m].frames.push_back(frameOf(t, updateMs, traces[m]));
     }
     agreement[0].add(traces[0], traces[1]);
     blasRefits.push_back(two.lastUpdateBlasRefits());
+    workersNotAwake.push_back(wakesMissed);
 #if TSAH_HAVE_EMBREE
     agreement[1].add(traces[0], traces[2]);
     agreement[2].add(traces[1], traces[2]);
@@ -272,6 +284,7 @@ json runTwoLevelComparison(const SceneSource& scene, const anim::Animation& bake
   ratios["two_level_rate_over_embree_rate"] = ratio(traceRate(methods[1]), traceRate(methods[2]));
 #endif
   j["ratios"] = ratios;
+  j["wakes_missed_per_frame"] = workersNotAwake;
   j["methods"] = json::array();
   for (const RuntimeMethod& m : methods) j["methods"].push_back(toJson(m));
   if (!o.gpuTwoLevelProgram.empty()) {

@@ -49,6 +49,8 @@ struct TwoLevelRuntime::Pool {
   tbb::task_arena arena;
 };
 
+uint32_t TwoLevelRuntime::threadCount() const { return pool_->threads; }
+
 void TwoLevelRuntime::parallelFor(std::size_t n, std::size_t grain,
                                   const std::function<void(std::size_t, std::size_t)>& body) const {
   if (n == 0) return;

@@ -143,6 +143,8 @@ class TwoLevelRuntime {
   uint64_t blasRefits() const { return totalRefits_; }
   double time() const { return time_; }
   const TwoLevelScene& scene() const { return scene_; }
+  // The threads its updates and parallelFor run on (Config::threads, capped at the hardware's).
+  uint32_t threadCount() const;
   // Runs body over [0, n) in chunks of at least `grain` on the runtime's threads (the renderer's passes).
   void parallelFor(std::size_t n, std::size_t grain, const std::function<void(std::size_t, std::size_t)>& body) const;
 
