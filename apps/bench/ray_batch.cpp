@@ -126,13 +126,13 @@ Workers workersOf(const CpuRuntime& runtime) {
           runtime.threadCount()};
 }
 
-bool startWorkers(const Workers& workers) {
+bool startWorkers(const Workers& workers, std::chrono::milliseconds wait) {
   // Each thread counts itself once per call (its first task of this generation); every task then
   // waits for the others, so no thread runs two and all of them are up when it returns.
   static std::atomic<uint64_t> generations{0};
   const uint64_t generation = ++generations;
   std::atomic<uint32_t> started{0};
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(20);
+  const auto deadline = std::chrono::steady_clock::now() + wait;
   workers.parallelFor(std::size_t(workers.threads) * 4, 1, [&](std::size_t, std::size_t) {
     thread_local uint64_t joined = 0;
     if (joined != generation) {

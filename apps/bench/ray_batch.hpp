@@ -2,6 +2,7 @@
 // The rays of one rendered frame, made once so that several ray tracers (the toolkit's CPU runtime,
 // Embree) trace exactly the same rays: the renderer's three passes (tsah::renderFrame) with its
 // camera rays and its per-pixel surface, ambient-occlusion and shadow rays (tsah/shading.hpp).
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <vector>
@@ -76,11 +77,11 @@ struct Workers {
 Workers workersOf(const CpuRuntime& runtime);
 
 // Wakes the workers and returns once every one of them has started a task, so that what is timed
-// next starts on awake threads; false when some had not after 20 ms (a busy machine). (A loop of
+// next starts on awake threads; false when some had not within `wait` (a busy machine). (A loop of
 // empty tasks may end before sleeping workers join it, and they are then still waking during the
 // timed work: an update after a frame's idle threads took about half as long again on the
 // 16-core host.)
-bool startWorkers(const Workers& workers);
+bool startWorkers(const Workers& workers, std::chrono::milliseconds wait = std::chrono::milliseconds(20));
 bool startWorkers(const CpuRuntime& runtime);
 
 // Traces every pass of the batch with `tracer`, spread over the workers' threads, each pass timed
