@@ -119,13 +119,6 @@ uint64_t countSet(const std::vector<uint8_t>& flags) {
 
 }  // namespace
 
-Workers workersOf(const CpuRuntime& runtime) {
-  return {[&runtime](std::size_t n, std::size_t grain, const std::function<void(std::size_t, std::size_t)>& body) {
-            runtime.parallelFor(n, grain, body);
-          },
-          runtime.threadCount()};
-}
-
 bool startWorkers(const Workers& workers, std::chrono::milliseconds wait) {
   // Each thread counts itself once per call (its first task of this generation); every task then
   // waits for the others, so no thread runs two and all of them are up when it returns.

@@ -74,7 +74,14 @@ struct Workers {
       parallelFor;
   uint32_t threads = 1;
 };
-Workers workersOf(const CpuRuntime& runtime);
+// A runtime's threads (CpuRuntime, TwoLevelRuntime: anything with parallelFor and threadCount).
+template <class Runtime>
+Workers workersOf(const Runtime& runtime) {
+  return {[&runtime](std::size_t n, std::size_t grain, const std::function<void(std::size_t, std::size_t)>& body) {
+            runtime.parallelFor(n, grain, body);
+          },
+          runtime.threadCount()};
+}
 
 // Wakes the workers and returns once every one of them has started a task, so that what is timed
 // next starts on awake threads; false when some had not within `wait` (a busy machine). (A loop of

@@ -183,11 +183,7 @@ json runTwoLevelComparison(const SceneSource& scene, const anim::Animation& bake
   const std::unique_ptr<CpuRuntime> flat = makeRuntime(baked, flatTree, setup, setup.layout);
   TwoLevelRuntime two(twoLevel, {o.threads, TwoLevelRuntime::TlasUpdate::Refit, setup.layout});
   const Workers flatWorkers = workersOf(*flat);
-  const Workers twoWorkers{[&two](std::size_t n, std::size_t grain,
-                                  const std::function<void(std::size_t, std::size_t)>& body) {
-                             two.parallelFor(n, grain, body);
-                           },
-                           two.threadCount()};
+  const Workers twoWorkers = workersOf(two);
   j["frames"] = setup.times.size();
   j["frame_times"] = setup.times;
   j["width"] = o.width;
